@@ -1,0 +1,209 @@
+"""The pipeline: Spec -> Design -> solids -> meshes -> checks -> artifacts, written atomically.
+
+:func:`plan` is pure (returns artifacts as bytes); :func:`write` is the only code that touches the
+output directory. It writes into a temporary folder beside the target and renames it into place only
+when everything succeeded, so an error or an interrupt never leaves half an output and never clobbers
+the previous good one.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path, PurePosixPath
+from typing import Callable
+
+from . import __version__
+from .check import design_findings, errors_in, mesh_findings
+from .design import Design, derive
+from .errors import BuildError, Finding
+from .spec import Spec
+
+__all__ = ["Artifact", "BuildResult", "OutputError", "plan", "write", "build", "PARTS", "default_out_dir"]
+
+#: Solid parts: file stem, builder (module, function), whether it is printed, what it is for.
+PARTS = (
+    ("elastomer", "magfab.elastomer", "elastomer_solid", False, "the cast silicone part, with its magnet pocket (reference)"),
+    ("mould_cup", "magfab.mould", "cup_solid", True, "mould cup with the cavities, print pose"),
+    ("mould_lid", "magfab.mould", "lid_solid", True, "mould lid with the pocket cores, fill and vent holes, print pose"),
+    ("pad", "magfab.pad", "pad_solid", True, "mounting pad: chip recess below, centring lip above, print pose"),
+)
+
+Progress = Callable[[str], None]
+
+
+class OutputError(ValueError):
+    """The output directory cannot be used (exit 2): e.g. it exists and is not a previous magfab build."""
+
+
+@dataclass(frozen=True)
+class Artifact:
+    path: str  # relative, POSIX separators
+    data: bytes
+    description: str
+
+
+@dataclass
+class BuildResult:
+    spec: Spec
+    design: Design
+    artifacts: list[Artifact]
+    findings: list[Finding]
+    timings_s: dict[str, float] = field(default_factory=dict)
+    out_dir: Path | None = None
+
+    def summary(self) -> dict[str, object]:
+        """What ``magfab build --json`` prints."""
+        from .recipes import catalogue
+
+        d = self.design
+        material = catalogue("materials")[self.spec.elastomer.material]
+        return {
+            "spec": self.spec.name,
+            "out_dir": str(self.out_dir) if self.out_dir else None,
+            "artifacts": [a.path for a in self.artifacts],
+            "figures": {
+                "d_rest_mm": round(d.d_rest_mm, 4),
+                "cover_mm": round(d.cover_mm, 4),
+                "skin_mm": round(d.skin_mm, 4),
+                "cavity_volume_mL": round(d.elastomer_volume_mm3 / 1000.0, 4),
+                "silicone_per_part_g": round(d.elastomer_volume_mm3 / 1000.0 * material["density_g_cm3"].nominal, 3),
+                "cavities": self.spec.mould.cavities,
+            },
+            "findings": [f.as_dict() for f in self.findings],
+            "timings_s": {k: round(v, 3) for k, v in self.timings_s.items()},
+        }
+
+
+def _json_bytes(obj: object) -> bytes:
+    return (json.dumps(obj, indent=2, sort_keys=True) + "\n").encode()
+
+
+def _solid(module: str, func: str, design: Design):
+    import importlib
+
+    return getattr(importlib.import_module(module), func)(design)
+
+
+def plan(spec: Spec, progress: Progress | None = None) -> BuildResult:
+    """Everything a build would write, as bytes, with its findings; raises on an error-level finding."""
+    say = progress or (lambda _stage: None)
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    say("deriving the design")
+    design = derive(spec)
+    findings = design_findings(design)
+    timings["derive"] = time.perf_counter() - t0
+    stop = errors_in(findings, spec.build.strict)
+    if stop:
+        raise BuildError(stop)
+
+    from .export import step_bytes, stl_bytes, tessellate
+
+    artifacts: list[Artifact] = []
+    tol, ang = spec.mould.tessellation_tolerance_mm, spec.mould.angular_tolerance_deg
+    for stem, module, func, _printed, description in PARTS:
+        say(f"modelling {stem}")
+        t = time.perf_counter()
+        solid = _solid(module, func, design)
+        timings[f"solid:{stem}"] = time.perf_counter() - t
+        t = time.perf_counter()
+        mesh = tessellate(solid, tol, ang)
+        findings += mesh_findings(stem, mesh, solid.val().Volume(), tol)
+        artifacts.append(Artifact(f"{stem}.stl", stl_bytes(mesh, f"{spec.name} {stem}"), description + ", STL"))
+        if spec.build.step:
+            artifacts.append(Artifact(f"{stem}.step", step_bytes(solid, f"{spec.name}-{stem}"), description + ", STEP"))
+        timings[f"export:{stem}"] = time.perf_counter() - t
+    stop = errors_in(findings, spec.build.strict)
+    if stop:
+        raise BuildError(stop)
+
+    say("writing reports")
+    artifacts.append(Artifact("design.json", _json_bytes(design.as_dict()), "every derived dimension, mm and mm^3"))
+    artifacts.append(Artifact("spec.json", _json_bytes(spec.model_dump(mode="json")), "the spec with every default filled in"))
+    artifacts.append(Artifact("findings.json", _json_bytes([f.as_dict() for f in findings]), "design and mesh checks"))
+    artifacts.append(Artifact("manifest.json", _manifest(spec, design, artifacts), "what made what: hashes, versions"))
+    timings["total"] = time.perf_counter() - t0
+    return BuildResult(spec, design, artifacts, findings, timings)
+
+
+def _manifest(spec: Spec, design: Design, artifacts: list[Artifact]) -> bytes:
+    return _json_bytes({
+        "magfab_version": __version__,
+        "spec_name": spec.name,
+        "spec_sha256": spec.sha256(),
+        "printer": design.printer.key,
+        "models": {"geometry": "cadquery-occt"},
+        "artifacts": [
+            {"path": a.path, "sha256": hashlib.sha256(a.data).hexdigest(), "bytes": len(a.data), "description": a.description}
+            for a in artifacts
+        ],
+    })
+
+
+def default_out_dir(spec: Spec) -> Path:
+    return Path("build") / spec.name
+
+
+def _safe_relative(path: str) -> PurePosixPath:
+    p = PurePosixPath(path)
+    if p.is_absolute() or not p.parts or any(part in {"", ".", ".."} for part in p.parts):
+        raise OutputError(f"artifact path {path!r} would leave the output directory")
+    return p
+
+
+def _is_previous_build(path: Path) -> bool:
+    manifest = path / "manifest.json"
+    try:
+        return "magfab_version" in json.loads(manifest.read_text(encoding="utf-8"))
+    except (OSError, ValueError, TypeError):
+        return False
+
+
+def write(out_dir: Path, artifacts: list[Artifact]) -> Path:
+    """Put the artifacts into ``out_dir`` atomically; an existing ``out_dir`` must be an earlier magfab build."""
+    out_dir = Path(out_dir).absolute()
+    if out_dir.exists() and not (out_dir.is_dir() and (_is_previous_build(out_dir) or not any(out_dir.iterdir()))):
+        raise OutputError(f"--out {out_dir} exists and is not an earlier magfab build (no manifest.json); "
+                          "refusing to replace it: choose another directory")
+    for a in artifacts:
+        _safe_relative(a.path)
+    parent = out_dir.parent
+    parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.tmp-", dir=parent))
+    old: Path | None = None
+    try:
+        for a in artifacts:
+            target = tmp.joinpath(*_safe_relative(a.path).parts)
+            target.parent.mkdir(parents=True, exist_ok=True)
+            target.write_bytes(a.data)
+        os.chmod(tmp, 0o755)
+        if out_dir.exists():
+            old = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.old-", dir=parent))
+            os.rename(out_dir, old / "previous")
+        os.rename(tmp, out_dir)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        if old is not None and (old / "previous").exists() and not out_dir.exists():
+            os.rename(old / "previous", out_dir)
+        raise
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+    return out_dir
+
+
+def build(spec: Spec, out_dir: Path | None = None, progress: Progress | None = None) -> BuildResult:
+    """Plan and write a build; returns what was written where."""
+    result = plan(spec, progress)
+    target = Path(out_dir) if out_dir is not None else default_out_dir(spec)
+    if progress:
+        progress("writing files")
+    t = time.perf_counter()
+    result.out_dir = write(target, result.artifacts)
+    result.timings_s["write"] = time.perf_counter() - t
+    return result

@@ -1,0 +1,154 @@
+"""Command line: the only module that parses arguments and prints.
+
+Exit codes: 0 success; 2 invalid or infeasible spec, or unusable output directory (one message on
+stderr, nothing written); 1 internal error.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Iterator
+
+import click
+
+from . import __version__
+
+EXIT_BAD_INPUT = 2
+EXIT_INTERNAL = 1
+
+
+def _fail(message: str, code: int) -> None:
+    click.echo(f"magfab: error: {message}", err=True)
+    sys.exit(code)
+
+
+@contextmanager
+def _handled() -> Iterator[None]:
+    """Turn our errors into one line and an exit code; never a traceback (unless MAGFAB_DEBUG is set)."""
+    from .build import OutputError
+    from .errors import BuildError, SpecError
+
+    try:
+        yield
+    except (SpecError, BuildError, OutputError) as exc:
+        _fail(str(exc), EXIT_BAD_INPUT)
+    except KeyboardInterrupt:
+        _fail("interrupted; nothing was written and any previous output is untouched", 130)
+    except Exception as exc:  # noqa: BLE001 - the last line of defence: one message, exit 1
+        if os.environ.get("MAGFAB_DEBUG"):
+            raise
+        _fail(f"internal error: {type(exc).__name__}: {exc} (set MAGFAB_DEBUG=1 for a traceback)", EXIT_INTERNAL)
+
+
+@contextmanager
+def _progress(enabled: bool) -> Iterator[object]:
+    """A spinner with the current build stage on a terminal; silent otherwise."""
+    if not enabled:
+        yield None
+        return
+    from rich.console import Console
+
+    console = Console(stderr=True)
+    with console.status("starting") as status:
+        yield lambda stage: status.update(stage)
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="magfab")
+def main() -> None:
+    """Turn one design spec into the files to make a magnetic soft tactile sensor."""
+
+
+@main.command()
+@click.argument("spec", required=False, type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
+              help="Output directory (default: ./build/<spec name>).")
+@click.option("--json", "as_json", is_flag=True, help="Print a machine-readable summary on stdout.")
+def build(spec: Path | None, out_dir: Path | None, as_json: bool) -> None:
+    """Build SPEC (default: the embedded MagOne reference design)."""
+    from .build import build as run_build
+    from .spec import load_spec
+
+    with _handled():
+        loaded = load_spec(spec)
+        with _progress(sys.stderr.isatty() and not as_json) as progress:
+            result = run_build(loaded, out_dir, progress)  # type: ignore[arg-type]
+        summary = result.summary()
+        if as_json:
+            click.echo(json.dumps(summary, indent=2, sort_keys=True))
+            return
+        _print_findings(result.findings)
+        fig = summary["figures"]
+        click.echo(f"built {loaded.name} into {result.out_dir} ({len(result.artifacts)} files, "
+                   f"{result.timings_s['total']:.2f} s)")
+        click.echo(f"  rest distance {fig['d_rest_mm']} mm, cover {fig['cover_mm']} mm, "
+                   f"silicone {fig['cavity_volume_mL']} mL ({fig['silicone_per_part_g']} g) per part")
+
+
+def _print_findings(findings: list) -> None:
+    for f in findings:
+        if f.severity.value != "info":
+            where = f" [{f.key}]" if f.key else ""
+            click.echo(f"{f.severity.value}: {f.message}{where}", err=True)
+
+
+@main.command()
+@click.argument("spec", required=False, type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--json", "as_json", is_flag=True, help="Print the findings as JSON on stdout.")
+def check(spec: Path | None, as_json: bool) -> None:
+    """Validate SPEC and run the design checks; writes nothing."""
+    from .check import design_findings, errors_in
+    from .design import derive
+    from .errors import BuildError
+    from .spec import load_spec
+
+    with _handled():
+        loaded = load_spec(spec)
+        design = derive(loaded)
+        findings = design_findings(design)
+        if as_json:
+            click.echo(json.dumps([f.as_dict() for f in findings], indent=2))
+        else:
+            for f in findings:
+                where = f" [{f.key}]" if f.key else ""
+                click.echo(f"{f.severity.value}: {f.message}{where}")
+        stop = errors_in(findings, loaded.build.strict)
+        if stop:
+            raise BuildError(stop)
+        if not as_json:
+            click.echo(f"{loaded.name}: ok")
+
+
+@main.command()
+@click.argument("path", required=False, default="spec.toml", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--force", is_flag=True, help="Overwrite PATH if it exists.")
+def init(path: Path, force: bool) -> None:
+    """Write a commented copy of the default (MagOne) spec to PATH (default: spec.toml)."""
+    import re
+
+    from .spec import NAME_PATTERN, default_spec_text
+
+    with _handled():
+        if path.exists() and not force:
+            _fail(f"{path} exists; use --force to overwrite it", EXIT_BAD_INPUT)
+        text = default_spec_text()
+        if re.match(NAME_PATTERN, path.stem):  # name the design after its file
+            text = text.replace('name = "magone"', f'name = "{path.stem}"', 1)
+        path.write_text(text, encoding="utf-8")
+        click.echo(f"wrote {path}; edit it, then: magfab build {path}")
+
+
+@main.command()
+def schema() -> None:
+    """Print the spec's JSON Schema (the shipped magfab/spec.schema.json)."""
+    from .spec import spec_schema
+
+    click.echo(json.dumps(spec_schema(), indent=2, sort_keys=True))
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()

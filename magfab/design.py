@@ -1,0 +1,318 @@
+"""Spec -> Design: every derived dimension and distance, in one place.
+
+Coordinates, all in millimetres:
+
+* **board**: z = 0 on the top face of the PCB, the chip's centre on the z axis. The stack-up
+  (chip, sensing point, pad, glue, elastomer, magnet) is given in this frame.
+* **elastomer**: z = 0 on the elastomer's flat base (the glued face), the axis on z. Profiles are
+  (r, z) pairs in this frame; the elastomer's base sits at ``z_elastomer_base_mm`` in the board frame.
+
+The magnet rests against the pocket's roof (it is pushed up the insertion channel until it stops),
+so the rest distance is fixed by the roof: d = z_magnet_low - z_sense.
+
+Geometric impossibilities raise :class:`SpecError` naming the key to change; rules that depend on the
+printer or on robustness are left to :mod:`magfab.check` as findings.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import cached_property
+
+from .errors import SpecError
+from .recipes import Recipe, catalogue
+from .spec import Spec, Tip
+
+__all__ = ["Design", "derive", "DISTANCE_TOLERANCE_MM"]
+
+#: How closely an explicit ``elastomer.cover_mm`` must reproduce ``sensor.d_max_mm``.
+DISTANCE_TOLERANCE_MM = 1e-3
+
+#: Fixed mould features (not spec keys; each is checked against the printer's minimums).
+REGISTRATION_PIN_MM = 3.0  # diameter of the cup's registration pins
+PRY_LIP_MM = 3.0  # lid overhang at each end of the cup, to lever the lid off
+SPRUE_MAX_MM = 3.0  # fill/overflow hole per cavity
+VENT_MIN_MM = 1.0  # vent hole per cavity at the rim, at least this or the printer's minimum hole
+SECOND_HOLE_EXTRA_MM = 0.5  # the pad's second alignment hole is larger by this: one way round only
+
+
+def _fmt(x: float) -> str:
+    return f"{x:.3f}".rstrip("0").rstrip(".")
+
+
+@dataclass(frozen=True)
+class Design:
+    """All derived geometry. Lengths in mm, volumes in mm^3, positions in the frame their name says."""
+
+    spec: Spec
+    printer: Recipe
+    chip: Recipe
+    # magnet
+    magnet_radius_mm: float
+    magnet_height_mm: float
+    # elastomer (elastomer frame)
+    elastomer_radius_mm: float
+    elastomer_height_mm: float
+    base_height_mm: float  # height of the cylindrical part; equals the total height for a flat tip
+    tip: Tip
+    pocket_radius_mm: float
+    pocket_height_mm: float
+    pocket_roof_z_mm: float
+    pocket_floor_z_mm: float
+    channel_radius_mm: float
+    funnel_bottom_z_mm: float  # where the 45-degree funnel from the channel meets the pocket's floor
+    core_base_radius_mm: float  # radius of the channel (or clipped funnel) at the base, z = 0
+    cover_mm: float
+    skin_mm: float  # thinnest silicone between the pocket and the outer surface
+    # stack-up (board frame)
+    chip_body_max_mm: float
+    chip_height_nominal_mm: float
+    chip_height_max_mm: float
+    sensing_depth_mm: float
+    z_sense_mm: float
+    z_pad_top_mm: float
+    z_elastomer_base_mm: float
+    z_magnet_low_mm: float
+    z_magnet_top_mm: float
+    d_rest_mm: float
+    d_rest_range_mm: tuple[float, float]  # what d_max could be with this elastomer, pad and chip
+    # pad (board frame)
+    pad_radius_mm: float
+    pad_thickness_mm: float
+    recess_side_mm: float
+    recess_depth_mm: float
+    pad_roof_mm: float
+    lip_inner_radius_mm: float
+    lip_outer_radius_mm: float
+    lip_height_mm: float
+    alignment_holes: tuple[tuple[float, float, float], ...]  # (x, y, diameter)
+    # mould (cup print frame: bottom on the bed at z = 0, cavities open upwards)
+    cavity_centres_x_mm: tuple[float, ...]
+    cavity_pitch_mm: float
+    wall_mm: float
+    cup_size_mm: tuple[float, float, float]
+    lid_thickness_mm: float
+    lid_size_mm: tuple[float, float, float]
+    pin_diameter_mm: float
+    pin_hole_diameter_mm: float
+    pin_positions_x_mm: tuple[float, float]
+    sprue_diameter_mm: float
+    sprue_offset_mm: float  # radial distance of the sprue from the cavity axis (+y in the assembled mould)
+    vent_diameter_mm: float
+    vent_offset_mm: float
+    vent_angles_deg: tuple[float, ...]
+
+    # ---- profiles (r, z) in the elastomer frame ----------------------------------------------
+
+    @property
+    def envelope_profile(self) -> list[tuple[float, float]]:
+        """Outer outline from the axis at the base, round the tip, back to the axis (arc given by 3 points)."""
+        R, hb, H = self.elastomer_radius_mm, self.base_height_mm, self.elastomer_height_mm
+        if self.tip is Tip.FLAT:
+            return [(0.0, 0.0), (R, 0.0), (R, H), (0.0, H)]
+        return [(0.0, 0.0), (R, 0.0), (R, hb), (R * math.sqrt(0.5), hb + R * math.sqrt(0.5)), (0.0, H)]
+
+    @property
+    def core_profile(self) -> list[tuple[float, float]]:
+        """The pocket, funnel and insertion channel: what the mould's core occupies (z from 0 to the roof)."""
+        pts = [(0.0, 0.0), (self.core_base_radius_mm, 0.0)]
+        if self.funnel_bottom_z_mm > 0.0:
+            pts.append((self.channel_radius_mm, self.funnel_bottom_z_mm))
+        if self.pocket_floor_z_mm > pts[-1][1]:
+            pts.append((self.pocket_radius_mm, self.pocket_floor_z_mm))
+        pts += [(self.pocket_radius_mm, self.pocket_roof_z_mm), (0.0, self.pocket_roof_z_mm)]
+        return pts
+
+    # ---- closed-form volumes -----------------------------------------------------------------
+
+    @cached_property
+    def envelope_volume_mm3(self) -> float:
+        R, hb = self.elastomer_radius_mm, self.base_height_mm
+        v = math.pi * R * R * hb
+        return v + (2.0 / 3.0) * math.pi * R**3 if self.tip is Tip.HEMISPHERE else v
+
+    @cached_property
+    def core_volume_mm3(self) -> float:
+        """Volume of pocket + funnel + channel, by Pappus over the polygonal core profile."""
+        return _revolved_polygon_volume(self.core_profile)
+
+    @cached_property
+    def elastomer_volume_mm3(self) -> float:
+        """Silicone in one cast part: the mould cavity less the core."""
+        return self.envelope_volume_mm3 - self.core_volume_mm3
+
+    @property
+    def magnet_volume_mm3(self) -> float:
+        return math.pi * self.magnet_radius_mm**2 * self.magnet_height_mm
+
+    def as_dict(self) -> dict[str, object]:
+        """Every derived number (for design.json), rounded to 1 nm so the text is stable."""
+        out: dict[str, object] = {}
+        for name in self.__dataclass_fields__:
+            if name in {"spec", "printer", "chip"}:
+                continue
+            out[name] = _rounded(getattr(self, name))
+        out["tip"] = self.tip.value
+        out["printer"] = self.printer.key
+        out["chip"] = self.chip.key
+        for name in ("envelope_volume_mm3", "core_volume_mm3", "elastomer_volume_mm3", "magnet_volume_mm3"):
+            out[name] = _rounded(getattr(self, name))
+        return out
+
+
+def _rounded(value: object) -> object:
+    if isinstance(value, float):
+        return round(value, 6) + 0.0
+    if isinstance(value, tuple):
+        return [_rounded(v) for v in value]
+    return value
+
+
+def _revolved_polygon_volume(profile: list[tuple[float, float]]) -> float:
+    """Volume swept by a closed (r, z) polygon revolved about the z axis (Pappus, via the shoelace sum)."""
+    v = 0.0
+    n = len(profile)
+    for i in range(n):
+        r1, z1 = profile[i]
+        r2, z2 = profile[(i + 1) % n]
+        v += (r1 * z2 - r2 * z1) * (r1 + r2)
+    return abs(v) * math.pi / 3.0
+
+
+def derive(spec: Spec) -> Design:
+    """Compute the whole design from a validated spec, or raise :class:`SpecError` if it cannot exist."""
+    chip = catalogue("chips")[spec.sensor.chip]
+    printer = catalogue("printers")[spec.mould.printer.value]
+    mag, el, sen, pad, mould = spec.magnet, spec.elastomer, spec.sensor, spec.pad, spec.mould
+
+    R_m, H_m = mag.diameter_mm / 2.0, mag.height_mm
+    R_e, H_e = el.diameter_mm / 2.0, el.height_mm
+    c, skin_min = el.pocket_clearance_mm, el.min_skin_mm
+    R_p, h_p = R_m + c, H_m + c
+    r_ch = el.insert_channel_diameter_mm / 2.0
+
+    if el.tip is Tip.HEMISPHERE and H_e < R_e:
+        raise SpecError("elastomer.height_mm", H_e, f"must be at least the tip radius {_fmt(R_e)} mm for a hemisphere tip",
+                        "or use tip = \"flat\"")
+    base_h = H_e - R_e if el.tip is Tip.HEMISPHERE else H_e
+    if R_p + skin_min > R_e:
+        limit = 2.0 * (R_e - skin_min - c)
+        raise SpecError("magnet.diameter_mm", mag.diameter_mm,
+                        f"must be at most {_fmt(limit)} mm so the pocket keeps {_fmt(skin_min)} mm of silicone "
+                        f"inside the {_fmt(el.diameter_mm)} mm elastomer")
+    if r_ch > R_p:
+        raise SpecError("elastomer.insert_channel_diameter_mm", el.insert_channel_diameter_mm,
+                        f"must be at most the pocket diameter {_fmt(2 * R_p)} mm")
+
+    # Stack-up in the board frame.
+    body_max, h_nom, h_max = chip["body_mm"].high, chip["height_mm"].nominal, chip["height_mm"].high
+    depth = sen.sensing_depth_mm if sen.sensing_depth_mm is not None else chip["sensing_depth_mm"].nominal
+    if depth > h_nom:
+        raise SpecError("sensor.sensing_depth_mm", depth, f"must be at most the package height {_fmt(h_nom)} mm")
+    z_sense = h_nom - depth
+    recess_side = body_max + 2.0 * pad.recess_clearance_mm
+    recess_depth = h_max + pad.recess_clearance_mm
+    if recess_depth >= pad.thickness_mm:
+        raise SpecError("pad.thickness_mm", pad.thickness_mm,
+                        f"must exceed the chip recess depth {_fmt(recess_depth)} mm (package height max "
+                        f"{_fmt(h_max)} mm + recess clearance)")
+    z_pad_top = pad.thickness_mm
+    z_base = z_pad_top + pad.glue_thickness_mm
+
+    # The magnet's roof-limited position: roof z in the elastomer frame sets d.
+    roof_max = base_h + math.sqrt((R_e - skin_min) ** 2 - R_p**2) if el.tip is Tip.HEMISPHERE else H_e - skin_min
+    roof_max = min(roof_max, H_e - skin_min)
+    roof_min = skin_min + h_p
+    def d_of_roof(roof: float) -> float:  # the magnet's top is at the roof
+        return z_base + roof - H_m - z_sense
+
+    d_lo, d_hi = d_of_roof(roof_min), d_of_roof(roof_max)
+    if d_hi < d_lo:
+        raise SpecError("elastomer.height_mm", H_e, f"is too short to hold the {_fmt(H_m)} mm magnet with "
+                        f"{_fmt(skin_min)} mm of silicone around its pocket")
+    if el.cover_mm is not None:
+        roof = H_e - el.cover_mm
+        if abs(d_of_roof(roof) - sen.d_max_mm) > DISTANCE_TOLERANCE_MM:
+            want = H_e - (sen.d_max_mm - d_of_roof(0.0))
+            raise SpecError("elastomer.cover_mm", el.cover_mm,
+                            f"gives a rest distance of {_fmt(d_of_roof(roof))} mm, not sensor.d_max_mm = "
+                            f"{_fmt(sen.d_max_mm)} mm", f"omit cover_mm to derive it, or set it to {_fmt(want)}")
+    else:
+        roof = sen.d_max_mm - d_of_roof(0.0)
+    if not roof_min - 1e-9 <= roof <= roof_max + 1e-9:
+        raise SpecError("sensor.d_max_mm", sen.d_max_mm,
+                        f"must be between {_fmt(d_lo)} and {_fmt(d_hi)} mm for this stack (pad top + glue at "
+                        f"{_fmt(z_base - z_sense)} mm above the sensing point, a {_fmt(H_e)} mm elastomer, "
+                        f"{_fmt(skin_min)} mm minimum skin)")
+    d_rest = d_of_roof(roof)
+    if sen.d_min_mm >= sen.d_max_mm:
+        raise SpecError("sensor.d_min_mm", sen.d_min_mm, f"must be less than sensor.d_max_mm = {_fmt(sen.d_max_mm)} mm")
+    if sen.d_min_mm <= z_base - z_sense:
+        raise SpecError("sensor.d_min_mm", sen.d_min_mm,
+                        f"must exceed {_fmt(z_base - z_sense)} mm: the elastomer's base (pad + glue) is that far "
+                        "above the sensing point")
+    floor = roof - h_p
+    funnel_bottom = floor - (R_p - r_ch)
+    core_base_r = r_ch if funnel_bottom >= 0.0 else R_p - floor
+    if el.tip is Tip.HEMISPHERE:
+        skin = min(R_e - R_p, R_e - math.hypot(R_p, max(0.0, roof - base_h)))
+    else:
+        skin = min(R_e - R_p, H_e - roof)
+
+    # Pad.
+    lip_inner = R_e + pad.lip_clearance_mm
+    lip_outer = lip_inner + pad.lip_width_mm if pad.lip_height_mm > 0 else lip_inner
+    R_pad = pad.diameter_mm / 2.0
+    if lip_outer > R_pad:
+        raise SpecError("pad.diameter_mm", pad.diameter_mm,
+                        f"must be at least {_fmt(2 * lip_outer)} mm to hold the elastomer and its centring lip")
+    d1 = pad.alignment_hole_diameter_mm
+    d2 = d1 + SECOND_HOLE_EXTRA_MM
+    sx = pad.alignment_hole_spacing_mm / 2.0
+    if sx - d1 / 2.0 <= lip_outer or sx + d2 / 2.0 >= R_pad:
+        raise SpecError("pad.alignment_hole_spacing_mm", pad.alignment_hole_spacing_mm,
+                        f"must place both holes (diameters {_fmt(d1)} and {_fmt(d2)} mm) between the lip "
+                        f"(radius {_fmt(lip_outer)} mm) and the pad's edge (radius {_fmt(R_pad)} mm)")
+
+    # Mould: a cup holding N inverted cavities in a row along x, and a lid carrying the cores.
+    wall = mould.wall_mm
+    n = mould.cavities
+    pitch = 2.0 * R_e + wall
+    centres = tuple((i - (n - 1) / 2.0) * pitch for i in range(n))
+    span = (n - 1) * pitch
+    pin_d = REGISTRATION_PIN_MM
+    clearance = printer["fit_clearance_mm"].nominal
+    pin_x = span / 2.0 + R_e + wall + pin_d / 2.0
+    cup = (2.0 * (pin_x + pin_d / 2.0 + wall), 2.0 * (R_e + wall), H_e + wall)
+    lid_t = max(wall, 2.5)
+    lid = (cup[0] + 2.0 * PRY_LIP_MM, cup[1], lid_t)
+    annulus = R_e - core_base_r
+    sprue_d = min(SPRUE_MAX_MM, annulus - 1.0)
+    vent_d = max(VENT_MIN_MM, printer["min_hole_mm"].nominal)
+    if sprue_d <= 0.0 or vent_d > annulus - 0.6:
+        raise SpecError("elastomer.diameter_mm", el.diameter_mm,
+                        "leaves no room between the insertion channel and the cavity wall for the fill and vent "
+                        "holes", "use a larger elastomer or a narrower insert channel")
+
+    return Design(
+        spec=spec, printer=printer, chip=chip,
+        magnet_radius_mm=R_m, magnet_height_mm=H_m,
+        elastomer_radius_mm=R_e, elastomer_height_mm=H_e, base_height_mm=base_h, tip=el.tip,
+        pocket_radius_mm=R_p, pocket_height_mm=h_p, pocket_roof_z_mm=roof, pocket_floor_z_mm=floor,
+        channel_radius_mm=r_ch, funnel_bottom_z_mm=max(funnel_bottom, 0.0), core_base_radius_mm=core_base_r,
+        cover_mm=H_e - roof, skin_mm=skin,
+        chip_body_max_mm=body_max, chip_height_nominal_mm=h_nom, chip_height_max_mm=h_max,
+        sensing_depth_mm=depth, z_sense_mm=z_sense, z_pad_top_mm=z_pad_top, z_elastomer_base_mm=z_base,
+        z_magnet_low_mm=z_base + roof - H_m, z_magnet_top_mm=z_base + roof, d_rest_mm=d_rest,
+        d_rest_range_mm=(d_lo, d_hi),
+        pad_radius_mm=R_pad, pad_thickness_mm=pad.thickness_mm, recess_side_mm=recess_side,
+        recess_depth_mm=recess_depth, pad_roof_mm=pad.thickness_mm - recess_depth,
+        lip_inner_radius_mm=lip_inner, lip_outer_radius_mm=lip_outer, lip_height_mm=pad.lip_height_mm,
+        alignment_holes=((-sx, 0.0, d1), (sx, 0.0, d2)),
+        cavity_centres_x_mm=centres, cavity_pitch_mm=pitch, wall_mm=wall, cup_size_mm=cup,
+        lid_thickness_mm=lid_t, lid_size_mm=lid, pin_diameter_mm=pin_d, pin_hole_diameter_mm=pin_d + 2 * clearance,
+        pin_positions_x_mm=(-pin_x, pin_x),
+        sprue_diameter_mm=sprue_d, sprue_offset_mm=(core_base_r + R_e) / 2.0,
+        vent_diameter_mm=vent_d, vent_offset_mm=R_e - vent_d / 2.0 - 0.3, vent_angles_deg=(210.0, 330.0),
+    )

@@ -1,0 +1,68 @@
+"""Exporters, kept apart from modelling: STEP bytes, tessellated meshes, binary STL bytes.
+
+Everything returns bytes or values and is deterministic: the STEP header's timestamp is pinned and its
+name set to the part's, STL headers carry only the part's name.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import tempfile
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    import cadquery as cq
+    import trimesh
+
+__all__ = ["step_bytes", "tessellate", "stl_bytes", "FIXED_STEP_TIME"]
+
+#: STEP requires a time stamp; ours is fixed so the same spec gives the same bytes.
+FIXED_STEP_TIME = "2000-01-01T00:00:00"
+_FILE_NAME = re.compile(rb"FILE_NAME\('[^']*','[^']*'")
+
+
+def step_bytes(solid: "cq.Workplane", name: str) -> bytes:
+    """The solid as an AP214 STEP file whose header names the part and carries a fixed time stamp."""
+    import cadquery as cq
+
+    if not re.fullmatch(r"[A-Za-z0-9_.-]+", name):
+        raise ValueError(f"STEP part name must be plain ASCII letters, digits, '.', '_' or '-'; got {name!r}")
+    with tempfile.TemporaryDirectory(prefix="magfab-step-") as tmp:
+        path = Path(tmp) / "part.step"
+        cq.exporters.export(solid, str(path), exportType="STEP")
+        data = path.read_bytes()
+    data, count = _FILE_NAME.subn(f"FILE_NAME('{name}','{FIXED_STEP_TIME}'".encode(), data, count=1)
+    if count != 1:
+        raise RuntimeError("unexpected STEP header from the CAD kernel: FILE_NAME not found")
+    return data
+
+
+def tessellate(solid: "cq.Workplane", tolerance_mm: float, angular_tolerance_deg: float) -> "trimesh.Trimesh":
+    """Triangulate a solid within ``tolerance_mm`` of its exact surface, merging shared vertices."""
+    import trimesh
+
+    shape = solid.val()
+    verts, tris = shape.tessellate(tolerance_mm, math.radians(angular_tolerance_deg))
+    v = np.array([(p.x, p.y, p.z) for p in verts], dtype=np.float64)
+    f = np.array(tris, dtype=np.int64).reshape(-1, 3)
+    mesh = trimesh.Trimesh(vertices=v, faces=f, process=True, validate=False)
+    # Revolved surfaces close at a pole where the kernel emits zero-area triangles; after merging their
+    # repeated vertex they are edges, not faces, and would break the watertight check and the slicer.
+    mesh.update_faces(mesh.nondegenerate_faces(height=1e-9))
+    mesh.remove_unreferenced_vertices()
+    return mesh
+
+
+def stl_bytes(mesh: "trimesh.Trimesh", name: str) -> bytes:
+    """Binary STL: 80-byte header with the part's name, then one 50-byte record per triangle."""
+    header = f"magfab {name}".encode("ascii", "replace")[:80].ljust(80, b" ")
+    tri = mesh.triangles.astype("<f4")
+    normals = mesh.face_normals.astype("<f4")
+    record = np.zeros(len(tri), dtype=[("n", "<f4", 3), ("v", "<f4", (3, 3)), ("attr", "<u2")])
+    record["n"] = normals
+    record["v"] = tri
+    return header + np.uint32(len(tri)).astype("<u4").tobytes() + record.tobytes()

@@ -1,0 +1,85 @@
+"""The inverse casting mould: a cup with the cavities and a lid that carries the pocket cores.
+
+How it is used (the fabrication checklist says the same): spray release agent, fill each cavity of the
+cup to the brim, lower the lid onto the registration pins so each core sinks into its cavity; the excess
+silicone and the air escape through the fill (sprue) and vent holes. After curing, lever the lid off at
+its overhanging ends: each core's pocket is wider than its channel, so the part comes out of the cup on
+the lid, and is then peeled off the core (the silicone stretches over it).
+
+The elastomer is cast upside down (tip at the bottom of the cup), so its flat, glued base is moulded
+against the lid and the only trapped air collects under the lid, where the vents are.
+
+Print poses: the cup stands on its bottom; the lid lies on its top face with the cores pointing up, so
+the cores' 45-degree funnels print without support.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+from .design import Design
+from .elastomer import core_solid, revolve_profile
+
+if TYPE_CHECKING:
+    import cadquery as cq
+
+__all__ = ["cup_solid", "lid_solid", "COUNTERSINK_MM"]
+
+#: Depth of the pouring countersink on top of each sprue.
+COUNTERSINK_MM = 1.0
+_OVERLAP_MM = 0.5  # tools reach this far past a face they open, so no faces are coplanar
+
+
+def _cavity_tool(design: Design) -> "cq.Workplane":
+    """The envelope, extended past its base so the cut opens cleanly through the cup's top face."""
+    profile = [(r, -_OVERLAP_MM if i < 2 else z) for i, (r, z) in enumerate(design.envelope_profile)]
+    return revolve_profile(profile, arc_at=3 if len(profile) == 5 else None)
+
+
+def _flip_to(solid: "cq.Workplane", x: float, z: float) -> "cq.Workplane":
+    """Turn an elastomer-frame solid upside down and put its base plane at height z over (x, 0)."""
+    return solid.rotate((0, 0, 0), (1, 0, 0), 180).translate((x, 0, z))
+
+
+def cup_solid(design: Design) -> "cq.Workplane":
+    import cadquery as cq
+
+    lx, ly, h = design.cup_size_mm
+    cup = cq.Workplane("XY").box(lx, ly, h, centered=(True, True, False))
+    tool = _cavity_tool(design)
+    for x in design.cavity_centres_x_mm:
+        cup = cup.cut(_flip_to(tool, x, h))
+    pin_h = 0.8 * design.lid_thickness_mm
+    for x in design.pin_positions_x_mm:
+        pin = cq.Workplane("XY", origin=(x, 0, h - _OVERLAP_MM)).circle(design.pin_diameter_mm / 2).extrude(pin_h + _OVERLAP_MM)
+        cup = cup.union(pin)
+    return cup
+
+
+def lid_solid(design: Design) -> "cq.Workplane":
+    """The lid in its print pose (top face on the bed, cores up)."""
+    import cadquery as cq
+
+    h = design.cup_size_mm[2]
+    t = design.lid_thickness_mm
+    lx, ly, _ = design.lid_size_mm
+    lid = cq.Workplane("XY", origin=(0, 0, h)).box(lx, ly, t, centered=(True, True, False))
+    core = core_solid(design, extend_below_mm=t / 2.0)
+    for x in design.cavity_centres_x_mm:
+        lid = lid.union(_flip_to(core, x, h))
+    holes = [(x, 0.0, design.pin_hole_diameter_mm) for x in design.pin_positions_x_mm]
+    for x in design.cavity_centres_x_mm:
+        holes.append((x, design.sprue_offset_mm, design.sprue_diameter_mm))
+        for a in design.vent_angles_deg:
+            ang = math.radians(a)
+            holes.append((x + design.vent_offset_mm * math.cos(ang), design.vent_offset_mm * math.sin(ang),
+                          design.vent_diameter_mm))
+    for x, y, d in holes:
+        lid = lid.cut(cq.Workplane("XY", origin=(x, y, h - _OVERLAP_MM)).circle(d / 2).extrude(t + 2 * _OVERLAP_MM))
+    r = design.sprue_diameter_mm / 2.0
+    for x in design.cavity_centres_x_mm:
+        cone = cq.Solid.makeCone(r, r + COUNTERSINK_MM + _OVERLAP_MM, COUNTERSINK_MM + _OVERLAP_MM,
+                                 pnt=cq.Vector(x, design.sprue_offset_mm, h + t - COUNTERSINK_MM))
+        lid = lid.cut(cq.Workplane("XY").add(cone))
+    return lid.rotate((0, 0, 0), (1, 0, 0), 180).translate((0, 0, h + t))

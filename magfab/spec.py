@@ -1,0 +1,269 @@
+"""The design spec: TOML in, a frozen and validated :class:`Spec` out.
+
+Every problem is raised as one :class:`~magfab.errors.SpecError` that names the dotted key path, the
+value and what is allowed. Units are in the key names; geometry is in millimetres.
+
+The JSON Schema shipped beside this module (``spec.schema.json``) is generated from these models:
+``magfab schema > magfab/spec.schema.json`` regenerates it, and a test keeps it in step.
+"""
+
+from __future__ import annotations
+
+import difflib
+import hashlib
+import json
+import re
+import tomllib
+from enum import Enum
+from importlib import resources
+from pathlib import Path
+from typing import Any, Optional
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from .errors import SpecError
+from .recipes import catalogue
+
+__all__ = ["Spec", "Tip", "load_spec", "parse_spec", "default_spec_text", "spec_schema", "NAME_PATTERN"]
+
+NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
+
+
+class Tip(str, Enum):
+    """Shape of the elastomer's top."""
+
+    HEMISPHERE = "hemisphere"
+    FLAT = "flat"
+
+
+class Printer(str, Enum):
+    """Printer kind for the mould and pad; selects a recipe in ``recipes/printers.toml``."""
+
+    SLA = "sla"
+    FDM = "fdm"
+
+
+def _mm(default: float, description: str, *, gt: float | None = 0.0, ge: float | None = None, le: float = 100.0) -> Any:
+    if ge is not None:
+        gt = None
+    return Field(default, gt=gt, ge=ge, le=le, description=description)
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True, allow_inf_nan=False)
+
+
+class Magnet(_Section):
+    """The permanent magnet: an axially magnetised cylinder."""
+
+    diameter_mm: float = _mm(5.0, "Magnet diameter D_m, mm.", le=50.0)
+    height_mm: float = _mm(2.0, "Magnet height H_m along its magnetisation axis, mm.", le=50.0)
+    grade: str = Field("N35", description="NdFeB grade, a key of recipes/magnets.toml (N35, N42, N45, N52).")
+
+
+class Elastomer(_Section):
+    """The cast silicone body: a cylindrical base with a hemispherical or flat top, magnet pocket inside."""
+
+    material: str = Field("ecoflex-00-30", description="Silicone, a key of recipes/materials.toml.")
+    diameter_mm: float = _mm(12.0, "Elastomer diameter D_e, mm.")
+    height_mm: float = _mm(7.9, "Total elastomer height H_e, base to the top of the tip on the axis, mm.")
+    tip: Tip = Field(Tip.HEMISPHERE, strict=False, description="Top shape: 'hemisphere' (radius D_e/2) or 'flat'.")
+    pocket_clearance_mm: float = _mm(0.05, "Clearance between magnet and pocket, on the radius and the height, mm.", ge=0.0, le=1.0)
+    cover_mm: Optional[float] = Field(
+        None,
+        gt=0.0,
+        le=100.0,
+        description="Silicone above the magnet on the axis, mm. Omit to derive it from sensor.d_max_mm; "
+        "if given, it must reproduce d_max_mm.",
+    )
+    insert_channel_diameter_mm: float = _mm(
+        2.0, "Diameter of the channel from the base to the pocket through which the magnet is pushed in "
+        "(silicone stretches), mm. Sealed by the glue to the pad.", le=50.0
+    )
+    min_skin_mm: float = _mm(0.4, "Thinnest silicone allowed between the pocket and the outer surface, mm.", le=10.0)
+
+
+class Sensor(_Section):
+    """The Hall chip and where the magnet sits above it."""
+
+    chip: str = Field("mlx90393", description="Chip, a key of recipes/chips.toml.")
+    sensing_depth_mm: Optional[float] = Field(
+        None,
+        ge=0.0,
+        le=5.0,
+        description="Depth of the Hall sensing point below the top of the chip package, mm. "
+        "Omit to use the chip recipe's value.",
+    )
+    d_max_mm: float = _mm(6.0, "Rest distance from the magnet's lower face to the sensing point, mm.", le=100.0)
+    d_min_mm: float = _mm(2.0, "Closest allowed magnet-to-sensing-point distance under load, mm.", le=100.0)
+
+
+class Pad(_Section):
+    """The rigid mounting pad: a disc with a chip recess below, a centring lip above, alignment holes."""
+
+    diameter_mm: float = _mm(20.0, "Pad diameter, mm.")
+    thickness_mm: float = _mm(2.0, "Pad thickness from the board to the glue face, mm.", le=20.0)
+    recess_clearance_mm: float = _mm(
+        0.1, "Clearance around and above the chip package in the recess, mm.", ge=0.0, le=2.0
+    )
+    glue_thickness_mm: float = _mm(0.1, "Sil-Poxy layer between pad and elastomer, mm.", ge=0.0, le=2.0)
+    lip_height_mm: float = _mm(0.6, "Height of the centring lip around the elastomer (0: no lip), mm.", ge=0.0, le=10.0)
+    lip_width_mm: float = _mm(0.8, "Radial width of the centring lip, mm.", le=10.0)
+    lip_clearance_mm: float = _mm(0.1, "Radial clearance between elastomer and lip, mm.", ge=0.0, le=2.0)
+    alignment_hole_diameter_mm: float = _mm(
+        1.0, "Diameter of the first alignment hole (dowel pin into the board); the second is 0.5 mm larger "
+        "so the pad only fits one way round, mm.", le=10.0
+    )
+    alignment_hole_spacing_mm: float = _mm(16.5, "Centre-to-centre spacing of the two alignment holes, on the x axis, mm.")
+
+
+class Mould(_Section):
+    """The printed casting mould: a cup with the cavities and a lid that carries the pocket cores."""
+
+    printer: Printer = Field(Printer.SLA, strict=False, description="Printer kind: 'sla' or 'fdm' (recipes/printers.toml).")
+    wall_mm: float = _mm(2.0, "Wall around and below each cavity and between cavities, mm.", le=50.0)
+    cavities: int = Field(1, ge=1, le=16, description="Cavities per mould, in a row.")
+    tessellation_tolerance_mm: float = _mm(
+        0.01, "Largest distance between an STL and the exact surface, mm.", le=1.0
+    )
+    angular_tolerance_deg: float = Field(
+        10.0, gt=0.5, le=45.0, description="Largest angle between neighbouring STL facet normals on curved faces, degrees."
+    )
+
+
+class Build(_Section):
+    """Build options."""
+
+    step: bool = Field(True, description="Also write STEP files (exact solids) next to the STLs.")
+    strict: bool = Field(False, description="Treat warning-level findings as errors.")
+
+
+class Spec(_Section):
+    """A whole design: what ``magfab build`` turns into files. Frozen; make variants with ``model_copy(update=...)``."""
+
+    name: str = Field("magone", pattern=NAME_PATTERN, description="Design name: letters, digits, '.', '_', '-'; names the output folder.")
+    magnet: Magnet = Field(default_factory=Magnet)
+    elastomer: Elastomer = Field(default_factory=Elastomer)
+    sensor: Sensor = Field(default_factory=Sensor)
+    pad: Pad = Field(default_factory=Pad)
+    mould: Mould = Field(default_factory=Mould)
+    build: Build = Field(default_factory=Build)
+
+    def canonical_json(self) -> str:
+        """Every key, defaults included, as sorted JSON: the basis of the spec hash."""
+        return json.dumps(self.model_dump(mode="json"), sort_keys=True, separators=(",", ":"))
+
+    def sha256(self) -> str:
+        return hashlib.sha256(self.canonical_json().encode()).hexdigest()
+
+
+_CATALOGUE_KEYS = {
+    ("magnet", "grade"): "magnets",
+    ("elastomer", "material"): "materials",
+    ("sensor", "chip"): "chips",
+}
+
+
+def default_spec_text() -> str:
+    """The embedded MagOne spec, with its comments."""
+    return resources.files("magfab.examples").joinpath("magone.toml").read_text(encoding="utf-8")
+
+
+def load_spec(path: str | Path | None = None) -> Spec:
+    """Read and validate a spec file; ``None`` gives the embedded MagOne reference design."""
+    if path is None:
+        return parse_spec(default_spec_text(), default_name="magone")
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise SpecError("spec", str(path), "file not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SpecError("spec", str(path), f"cannot read it as UTF-8 text: {exc}") from None
+    return parse_spec(text, default_name=path.stem)
+
+
+def parse_spec(text: str, default_name: str = "magone") -> Spec:
+    """Validate TOML text. A missing ``name`` is taken from ``default_name`` (the file's stem)."""
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SpecError("spec", "<TOML>", f"not valid TOML: {exc}") from None
+    if "name" not in raw:
+        raw["name"] = default_name
+        if not re.match(NAME_PATTERN, default_name):
+            raise SpecError(
+                "name", default_name, "taken from the file name, must match " + NAME_PATTERN,
+                hint="add name = \"...\" to the spec",
+            )
+    try:
+        spec = Spec.model_validate(raw)
+    except ValidationError as exc:
+        raise _translate(exc, raw) from None
+    for (section, key), kind in _CATALOGUE_KEYS.items():
+        value = getattr(getattr(spec, section), key)
+        known = sorted(catalogue(kind))
+        if value not in known:
+            raise SpecError(f"{section}.{key}", value, "must be one of " + ", ".join(known), _did_you_mean(value, known))
+    return spec
+
+
+def _model_at(loc: tuple[Any, ...]) -> type[BaseModel] | None:
+    model: type[BaseModel] = Spec
+    for part in loc:
+        field = model.model_fields.get(str(part))
+        if field is None or not (isinstance(field.annotation, type) and issubclass(field.annotation, BaseModel)):
+            return None
+        model = field.annotation
+    return model
+
+
+def _did_you_mean(word: str, choices: list[str]) -> str:
+    close = difflib.get_close_matches(word, choices, n=1, cutoff=0.6)
+    return f"did you mean {close[0]!r}?" if close else ""
+
+
+def _lookup(raw: dict[str, Any], loc: tuple[Any, ...]) -> Any:
+    value: Any = raw
+    for part in loc:
+        if isinstance(value, dict) and part in value:
+            value = value[part]
+        else:
+            return "<missing>"
+    return value
+
+
+def _translate(exc: ValidationError, raw: dict[str, Any]) -> SpecError:
+    """Turn pydantic's first error into our one-line message."""
+    err = exc.errors(include_url=False)[0]
+    loc = tuple(err["loc"])
+    key = ".".join(str(p) for p in loc)
+    value = err.get("input", _lookup(raw, loc))
+    kind = err["type"]
+    if kind == "extra_forbidden":
+        parent = _model_at(loc[:-1])
+        allowed = sorted(parent.model_fields) if parent else []
+        what = "unknown section" if len(loc) == 1 and isinstance(value, dict) else "unknown key"
+        return SpecError(key, value if not isinstance(value, dict) else "{...}", f"{what}; allowed: {', '.join(allowed)}",
+                         _did_you_mean(str(loc[-1]), allowed))
+    if kind == "missing":
+        return SpecError(key, "<missing>", "required key is missing")
+    if kind == "model_type":
+        return SpecError(key, value, "must be a table (a [section])")
+    msg = err["msg"].replace("Input should be", "must be").replace("String should", "must")
+    unit = " " + loc[-1].rsplit("_", 1)[-1] if str(loc[-1]).endswith(("_mm", "_deg")) else ""
+    if kind in {"greater_than", "greater_than_equal", "less_than", "less_than_equal"}:
+        msg += unit
+    if kind == "float_type":
+        msg = "must be a number" + (unit and f" (in{unit})")
+    if isinstance(value, dict):
+        value = "{...}"
+    return SpecError(key, value, msg)
+
+
+def spec_schema() -> dict[str, Any]:
+    """JSON Schema of the spec, generated from the models (what ``spec.schema.json`` holds)."""
+    schema = Spec.model_json_schema()
+    schema["$schema"] = "https://json-schema.org/draft/2020-12/schema"
+    schema["title"] = "magfab design spec"
+    return schema
