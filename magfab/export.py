@@ -23,6 +23,8 @@ __all__ = ["step_bytes", "tessellate", "stl_bytes", "FIXED_STEP_TIME"]
 #: STEP requires a time stamp; ours is fixed so the same spec gives the same bytes.
 FIXED_STEP_TIME = "2000-01-01T00:00:00"
 _FILE_NAME = re.compile(rb"FILE_NAME\('[^']*','[^']*'")
+# The kernel names the product with a per-process counter ("... translator 7.9 5"): name it after the part.
+_PRODUCT = re.compile(rb"PRODUCT\('[^']*',\s*'[^']*'")
 
 
 def step_bytes(solid: "cq.Workplane", name: str) -> bytes:
@@ -35,9 +37,10 @@ def step_bytes(solid: "cq.Workplane", name: str) -> bytes:
         path = Path(tmp) / "part.step"
         cq.exporters.export(solid, str(path), exportType="STEP")
         data = path.read_bytes()
-    data, count = _FILE_NAME.subn(f"FILE_NAME('{name}','{FIXED_STEP_TIME}'".encode(), data, count=1)
-    if count != 1:
-        raise RuntimeError("unexpected STEP header from the CAD kernel: FILE_NAME not found")
+    data, n_file = _FILE_NAME.subn(f"FILE_NAME('{name}','{FIXED_STEP_TIME}'".encode(), data, count=1)
+    data, n_product = _PRODUCT.subn(f"PRODUCT('{name}','{name}'".encode(), data, count=1)
+    if (n_file, n_product) != (1, 1):
+        raise RuntimeError("unexpected STEP from the CAD kernel: FILE_NAME or PRODUCT not found")
     return data
 
 

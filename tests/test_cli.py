@@ -1,0 +1,153 @@
+"""The command contract: exit codes, --json, init/check, and that bad input or an interrupt writes nothing."""
+
+from __future__ import annotations
+
+import hashlib
+import importlib
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+from click.testing import CliRunner
+
+from magfab.cli import main
+
+
+def run(*args: str, cwd=None):
+    """The console script as a user runs it: a fresh process."""
+    return subprocess.run([sys.executable, "-m", "magfab.cli", *args], capture_output=True, text=True, cwd=cwd,
+                          timeout=300)
+
+
+def _snapshot(path):
+    return {p.relative_to(path): p.read_bytes() for p in sorted(path.rglob("*")) if p.is_file()}
+
+
+def test_build_default_writes_parts_and_a_true_manifest(tmp_path):
+    proc = run("build", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    out = tmp_path / "build" / "magone"
+    manifest = json.loads((out / "manifest.json").read_text())
+    listed = {a["path"] for a in manifest["artifacts"]}
+    for stem in ("elastomer", "mould_cup", "mould_lid", "pad"):
+        assert {f"{stem}.stl", f"{stem}.step"} <= listed
+    for a in manifest["artifacts"]:
+        assert hashlib.sha256((out / a["path"]).read_bytes()).hexdigest() == a["sha256"]
+    assert manifest["spec_sha256"] and manifest["magfab_version"]
+    assert sorted(p.name for p in (tmp_path / "build").iterdir()) == ["magone"]  # no temp folders left
+
+
+def test_build_json_summary(tmp_path):
+    proc = run("build", "--out", str(tmp_path / "o"), "--json")
+    assert proc.returncode == 0, proc.stderr
+    summary = json.loads(proc.stdout)
+    assert summary["figures"]["d_rest_mm"] == pytest.approx(6.0)
+    assert "mould_cup.stl" in summary["artifacts"] and isinstance(summary["findings"], list)
+    assert proc.stderr == ""  # quiet: no progress when not a terminal
+
+
+@pytest.mark.parametrize(
+    "text, key",
+    [
+        ("[magnet]\ndiameter_mm = -2", "magnet.diameter_mm"),
+        ("[magnet]\ndiameter_mm = 11.5", "magnet.diameter_mm"),
+        ("[sensor]\nd_max_mm = 1.2", "sensor.d_max_mm"),
+        ('[mould]\nprinter = "fdm"\nwall_mm = 0.5', "mould.wall_mm"),
+        ("[elastomr]\n", "elastomr"),
+    ],
+)
+def test_bad_spec_exits_2_names_the_key_and_keeps_the_previous_output(tmp_path, text, key):
+    out = tmp_path / "out"
+    assert run("build", "--out", str(out)).returncode == 0
+    before = _snapshot(out)
+    spec = tmp_path / "bad.toml"
+    spec.write_text(text)
+    proc = run("build", str(spec), "--out", str(out))
+    assert proc.returncode == 2
+    assert key in proc.stderr and "Traceback" not in proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1
+    assert _snapshot(out) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.toml", "out"]
+
+
+def test_interrupt_mid_build_leaves_the_previous_output(tmp_path, monkeypatch):
+    import magfab.export
+
+    out = tmp_path / "out"
+    assert CliRunner().invoke(main, ["build", "--out", str(out)]).exit_code == 0
+    before = _snapshot(out)
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(magfab.export, "stl_bytes", interrupted)
+    result = CliRunner().invoke(main, ["build", "--out", str(out)])
+    assert result.exit_code == 130
+    assert _snapshot(out) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+
+
+def test_interrupt_while_writing_restores_the_previous_output(tmp_path, monkeypatch):
+    from magfab import load_spec
+
+    build_mod = importlib.import_module("magfab.build")  # the module, not the function magfab.build
+    out = tmp_path / "out"
+    build_mod.build(load_spec(None), out)
+    before = _snapshot(out)
+    real_rename = os.rename
+    calls = []
+
+    def rename(src, dst):
+        calls.append(src)
+        if len(calls) == 2:  # the old output has been moved aside; now the new one fails to land
+            raise KeyboardInterrupt
+        return real_rename(src, dst)
+
+    monkeypatch.setattr(build_mod.os, "rename", rename)
+    with pytest.raises(KeyboardInterrupt):
+        build_mod.build(load_spec(None), out)
+    monkeypatch.setattr(build_mod.os, "rename", real_rename)
+    assert _snapshot(out) == before
+
+
+def test_refuses_to_replace_a_directory_that_is_not_a_build(tmp_path):
+    precious = tmp_path / "thesis"
+    precious.mkdir()
+    (precious / "chapter1.tex").write_text("do not delete")
+    proc = run("build", "--out", str(precious))
+    assert proc.returncode == 2 and "not an earlier magfab build" in proc.stderr
+    assert (precious / "chapter1.tex").read_text() == "do not delete"
+
+
+def test_init_then_check_then_build(tmp_path, monkeypatch):
+    runner = CliRunner()
+    monkeypatch.chdir(tmp_path)
+    assert runner.invoke(main, ["init", "finger.toml"]).exit_code == 0
+    again = runner.invoke(main, ["init", "finger.toml"])
+    assert again.exit_code == 2 and "exists" in again.output
+    checked = runner.invoke(main, ["check", "finger.toml"])
+    assert checked.exit_code == 0 and "finger: ok" in checked.output
+    assert sorted(os.listdir(".")) == ["finger.toml"]  # check writes nothing
+    built = runner.invoke(main, ["build", "finger.toml"])
+    assert built.exit_code == 0, built.output
+    assert (tmp_path / "build" / "finger" / "mould_cup.stl").is_file()
+
+
+def test_internal_error_is_one_line_exit_1(tmp_path, monkeypatch):
+    build_mod = importlib.import_module("magfab.build")
+
+    def broken(*args, **kwargs):
+        raise ZeroDivisionError("boom")
+
+    monkeypatch.setattr(build_mod, "derive", broken)
+    result = CliRunner().invoke(main, ["build", "--out", str(tmp_path / "o")])
+    assert result.exit_code == 1 and "internal error: ZeroDivisionError: boom" in result.output
+    assert not (tmp_path / "o").exists()
+
+
+def test_help_is_fast_to_import():
+    # `magfab --help` must not pull in the CAD kernel.
+    code = "import sys, magfab.cli; assert 'cadquery' not in sys.modules and 'OCP' not in sys.modules"
+    assert subprocess.run([sys.executable, "-c", code]).returncode == 0
