@@ -233,11 +233,17 @@ def _lookup(raw: dict[str, Any], loc: tuple[Any, ...]) -> Any:
     return value
 
 
+def _key_part(part: object) -> str:
+    """A key as TOML would write it: bare when it can be, else quoted with escapes (one line, always)."""
+    text = str(part)
+    return text if re.fullmatch(r"[A-Za-z0-9_-]+", text) else json.dumps(text)
+
+
 def _translate(exc: ValidationError, raw: dict[str, Any]) -> SpecError:
     """Turn pydantic's first error into our one-line message."""
     err = exc.errors(include_url=False)[0]
     loc = tuple(err["loc"])
-    key = ".".join(str(p) for p in loc)
+    key = ".".join(_key_part(p) for p in loc)
     value = err.get("input", _lookup(raw, loc))
     kind = err["type"]
     if kind == "extra_forbidden":

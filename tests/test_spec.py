@@ -80,3 +80,16 @@ def test_spec_is_frozen_and_hash_follows_content():
         spec.name = "other"  # type: ignore[misc]
     variant = spec.model_copy(update={"name": "other"})
     assert variant.sha256() != spec.sha256() and load_spec(None).sha256() == spec.sha256()
+
+
+def test_readme_documents_every_key():
+    from pathlib import Path
+
+    from pydantic import BaseModel
+
+    readme = (Path(__file__).parents[1] / "README.md").read_text()
+    for section, field in Spec.model_fields.items():
+        model = field.annotation
+        keys = [f"{section}.{k}" for k in model.model_fields] if isinstance(model, type) and issubclass(model, BaseModel) else [section]
+        for key in keys:
+            assert f"`{key}`" in readme, f"README's spec reference lacks {key}"
