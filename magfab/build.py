@@ -103,8 +103,14 @@ def plan(spec: Spec, progress: Progress | None = None) -> BuildResult:
     if stop:
         raise BuildError(stop)
 
+    say("loading the CAD kernel")
+    t = time.perf_counter()
+    import cadquery  # noqa: F401  - timed on its own, not charged to the first part
+    import trimesh  # noqa: F401
+
     from .export import step_bytes, stl_bytes, tessellate
 
+    timings["import"] = time.perf_counter() - t
     artifacts: list[Artifact] = []
     tol, ang = spec.mould.tessellation_tolerance_mm, spec.mould.angular_tolerance_deg
     for stem, module, func, _printed, description in PARTS:

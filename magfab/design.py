@@ -97,6 +97,8 @@ class Design:
     pin_diameter_mm: float
     pin_hole_diameter_mm: float
     pin_positions_x_mm: tuple[float, float]
+    pin_height_mm: float  # how far the cup's pins stand into the lid's holes
+    core_root_mm: float  # how far each core reaches into the lid plate, so the two fuse solidly
     sprue_diameter_mm: float
     sprue_offset_mm: float  # radial distance of the sprue from the cavity axis (+y in the assembled mould)
     vent_diameter_mm: float
@@ -123,6 +125,18 @@ class Design:
             pts.append((self.pocket_radius_mm, self.pocket_floor_z_mm))
         pts += [(self.pocket_radius_mm, self.pocket_roof_z_mm), (0.0, self.pocket_roof_z_mm)]
         return pts
+
+    @property
+    def lid_holes(self) -> list[tuple[float, float, float]]:
+        """(x, y, diameter) of every through hole in the lid, assembled frame: pin holes, sprues, vents."""
+        holes = [(x, 0.0, self.pin_hole_diameter_mm) for x in self.pin_positions_x_mm]
+        for x in self.cavity_centres_x_mm:
+            holes.append((x, self.sprue_offset_mm, self.sprue_diameter_mm))
+            for a in self.vent_angles_deg:
+                ang = math.radians(a)
+                holes.append((x + self.vent_offset_mm * math.cos(ang), self.vent_offset_mm * math.sin(ang),
+                              self.vent_diameter_mm))
+        return holes
 
     # ---- closed-form volumes -----------------------------------------------------------------
 
@@ -312,7 +326,7 @@ def derive(spec: Spec) -> Design:
         alignment_holes=((-sx, 0.0, d1), (sx, 0.0, d2)),
         cavity_centres_x_mm=centres, cavity_pitch_mm=pitch, wall_mm=wall, cup_size_mm=cup,
         lid_thickness_mm=lid_t, lid_size_mm=lid, pin_diameter_mm=pin_d, pin_hole_diameter_mm=pin_d + 2 * clearance,
-        pin_positions_x_mm=(-pin_x, pin_x),
+        pin_positions_x_mm=(-pin_x, pin_x), pin_height_mm=0.8 * lid_t, core_root_mm=lid_t / 2.0,
         sprue_diameter_mm=sprue_d, sprue_offset_mm=(core_base_r + R_e) / 2.0,
         vent_diameter_mm=vent_d, vent_offset_mm=R_e - vent_d / 2.0 - 0.3, vent_angles_deg=(210.0, 330.0),
     )

@@ -45,14 +45,41 @@ def step_bytes(solid: "cq.Workplane", name: str) -> bytes:
 
 
 def tessellate(solid: "cq.Workplane", tolerance_mm: float, angular_tolerance_deg: float) -> "trimesh.Trimesh":
-    """Triangulate a solid within ``tolerance_mm`` of its exact surface, merging shared vertices."""
-    import trimesh
+    """Triangulate a solid within ``tolerance_mm`` of its exact surface, merging shared vertices.
 
-    shape = solid.val()
-    verts, tris = shape.tessellate(tolerance_mm, math.radians(angular_tolerance_deg))
-    v = np.array([(p.x, p.y, p.z) for p in verts], dtype=np.float64)
-    f = np.array(tris, dtype=np.int64).reshape(-1, 3)
-    mesh = trimesh.Trimesh(vertices=v, faces=f, process=True, validate=False)
+    The deflection is absolute (mm). CadQuery's own ``tessellate`` asks the kernel for a deflection
+    *relative* to each edge's size, which on a 12 mm cavity let facets stray ~2x further than asked.
+    """
+    import trimesh
+    from OCP.BRep import BRep_Tool
+    from OCP.BRepMesh import BRepMesh_IncrementalMesh
+    from OCP.TopAbs import TopAbs_FACE, TopAbs_REVERSED
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopLoc import TopLoc_Location
+    from OCP.TopoDS import TopoDS
+
+    shape = solid.val().wrapped
+    BRepMesh_IncrementalMesh(shape, tolerance_mm, False, math.radians(angular_tolerance_deg), False)
+    vertices: list[np.ndarray] = []
+    faces: list[np.ndarray] = []
+    offset = 0
+    explorer = TopExp_Explorer(shape, TopAbs_FACE)
+    while explorer.More():
+        face = TopoDS.Face_s(explorer.Current())
+        explorer.Next()
+        loc = TopLoc_Location()
+        tri = BRep_Tool.Triangulation_s(face, loc)
+        if tri is None:
+            raise RuntimeError("the CAD kernel left a face untriangulated")
+        trsf = loc.Transformation()
+        pts = [tri.Node(i).Transformed(trsf) for i in range(1, tri.NbNodes() + 1)]
+        vertices.append(np.array([(p.X(), p.Y(), p.Z()) for p in pts], dtype=np.float64))
+        idx = np.array([tri.Triangle(i).Get() for i in range(1, tri.NbTriangles() + 1)], dtype=np.int64) - 1
+        if face.Orientation() == TopAbs_REVERSED:
+            idx = idx[:, ::-1]
+        faces.append(idx + offset)
+        offset += len(pts)
+    mesh = trimesh.Trimesh(vertices=np.vstack(vertices), faces=np.vstack(faces), process=True, validate=False)
     # Revolved surfaces close at a pole where the kernel emits zero-area triangles; after merging their
     # repeated vertex they are edges, not faces, and would break the watertight check and the slicer.
     mesh.update_faces(mesh.nondegenerate_faces(height=1e-9))

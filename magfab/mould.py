@@ -15,7 +15,6 @@ the cores' 45-degree funnels print without support.
 
 from __future__ import annotations
 
-import math
 from typing import TYPE_CHECKING
 
 from .design import Design
@@ -24,16 +23,17 @@ from .elastomer import core_solid, revolve_profile
 if TYPE_CHECKING:
     import cadquery as cq
 
-__all__ = ["cup_solid", "lid_solid", "COUNTERSINK_MM"]
+__all__ = ["cup_solid", "lid_solid", "COUNTERSINK_MM", "OVERLAP_MM"]
 
 #: Depth of the pouring countersink on top of each sprue.
 COUNTERSINK_MM = 1.0
-_OVERLAP_MM = 0.5  # tools reach this far past a face they open, so no faces are coplanar
+#: Cutting tools reach this far past a face they open, so no faces are coplanar.
+OVERLAP_MM = 0.5
 
 
 def _cavity_tool(design: Design) -> "cq.Workplane":
     """The envelope, extended past its base so the cut opens cleanly through the cup's top face."""
-    profile = [(r, -_OVERLAP_MM if i < 2 else z) for i, (r, z) in enumerate(design.envelope_profile)]
+    profile = [(r, -OVERLAP_MM if i < 2 else z) for i, (r, z) in enumerate(design.envelope_profile)]
     return revolve_profile(profile, arc_at=3 if len(profile) == 5 else None)
 
 
@@ -50,9 +50,9 @@ def cup_solid(design: Design) -> "cq.Workplane":
     tool = _cavity_tool(design)
     for x in design.cavity_centres_x_mm:
         cup = cup.cut(_flip_to(tool, x, h))
-    pin_h = 0.8 * design.lid_thickness_mm
+    pin_h = design.pin_height_mm
     for x in design.pin_positions_x_mm:
-        pin = cq.Workplane("XY", origin=(x, 0, h - _OVERLAP_MM)).circle(design.pin_diameter_mm / 2).extrude(pin_h + _OVERLAP_MM)
+        pin = cq.Workplane("XY", origin=(x, 0, h - OVERLAP_MM)).circle(design.pin_diameter_mm / 2).extrude(pin_h + OVERLAP_MM)
         cup = cup.union(pin)
     return cup
 
@@ -65,21 +65,14 @@ def lid_solid(design: Design) -> "cq.Workplane":
     t = design.lid_thickness_mm
     lx, ly, _ = design.lid_size_mm
     lid = cq.Workplane("XY", origin=(0, 0, h)).box(lx, ly, t, centered=(True, True, False))
-    core = core_solid(design, extend_below_mm=t / 2.0)
+    core = core_solid(design, extend_below_mm=design.core_root_mm)
     for x in design.cavity_centres_x_mm:
         lid = lid.union(_flip_to(core, x, h))
-    holes = [(x, 0.0, design.pin_hole_diameter_mm) for x in design.pin_positions_x_mm]
-    for x in design.cavity_centres_x_mm:
-        holes.append((x, design.sprue_offset_mm, design.sprue_diameter_mm))
-        for a in design.vent_angles_deg:
-            ang = math.radians(a)
-            holes.append((x + design.vent_offset_mm * math.cos(ang), design.vent_offset_mm * math.sin(ang),
-                          design.vent_diameter_mm))
-    for x, y, d in holes:
-        lid = lid.cut(cq.Workplane("XY", origin=(x, y, h - _OVERLAP_MM)).circle(d / 2).extrude(t + 2 * _OVERLAP_MM))
+    for x, y, d in design.lid_holes:
+        lid = lid.cut(cq.Workplane("XY", origin=(x, y, h - OVERLAP_MM)).circle(d / 2).extrude(t + 2 * OVERLAP_MM))
     r = design.sprue_diameter_mm / 2.0
     for x in design.cavity_centres_x_mm:
-        cone = cq.Solid.makeCone(r, r + COUNTERSINK_MM + _OVERLAP_MM, COUNTERSINK_MM + _OVERLAP_MM,
+        cone = cq.Solid.makeCone(r, r + COUNTERSINK_MM + OVERLAP_MM, COUNTERSINK_MM + OVERLAP_MM,
                                  pnt=cq.Vector(x, design.sprue_offset_mm, h + t - COUNTERSINK_MM))
         lid = lid.cut(cq.Workplane("XY").add(cone))
     return lid.rotate((0, 0, 0), (1, 0, 0), 180).translate((0, 0, h + t))

@@ -45,7 +45,7 @@ def test_cup_and_lid_boxes_and_volumes():
     d = derive(parse_spec("[mould]\ncavities = 3"))
     cup = cup_solid(d).val()
     lx, ly, h = d.cup_size_mm
-    pin_h = 0.8 * d.lid_thickness_mm
+    pin_h = d.pin_height_mm
     pins = 2 * math.pi * (d.pin_diameter_mm / 2) ** 2 * pin_h
     assert cup.Volume() == pytest.approx(lx * ly * h - 3 * d.envelope_volume_mm3 + pins, rel=1e-6)
     lid = lid_solid(d).val()
@@ -114,3 +114,18 @@ def test_same_spec_same_bytes():
 def test_variants_build_clean(text):
     result = plan(parse_spec(text))
     assert not [f for f in result.findings if f.severity.value == "error"]
+
+
+@pytest.mark.parametrize("tol", [0.05, 0.01, 0.002])
+def test_tessellation_tolerance_is_absolute_mm(tol):
+    import numpy as np
+
+    from magfab.export import tessellate
+
+    d = derive(load_spec(None))
+    mesh = tessellate(envelope_solid(d), tol, 10.0)
+    centres = mesh.triangles_center
+    cap = centres[:, 2] > d.base_height_mm + 1e-3
+    deviation = d.elastomer_radius_mm - np.linalg.norm(centres[cap] - [0, 0, d.base_height_mm], axis=1)
+    assert deviation.max() <= tol and deviation.min() >= -1e-9  # facets lie inside the sphere, within tol
+    assert mesh.is_watertight
