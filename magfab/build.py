@@ -21,7 +21,7 @@ from typing import Callable
 from . import __version__
 from .check import design_findings, errors_in, mesh_findings
 from .design import Design, derive
-from .errors import BuildError, Finding
+from .errors import BuildError, Finding, Severity
 from .spec import Spec
 
 __all__ = ["Artifact", "BuildResult", "OutputError", "plan", "write", "build", "PARTS", "default_out_dir"]
@@ -90,6 +90,38 @@ def _solid(module: str, func: str, design: Design):
     return getattr(importlib.import_module(module), func)(design)
 
 
+def _board(design: Design, say: Progress, timings: dict[str, float]) -> tuple[list[Artifact], list[Finding]]:
+    """The footprint library, the routed breakout board and, where KiCad is installed, its Gerbers."""
+    from . import kicad, pcb
+
+    say("placing and routing the board")
+    t = time.perf_counter()
+    board = pcb.board(design)
+    found = pcb.findings(board)
+    files = pcb.files(board)
+    timings["pcb"] = time.perf_counter() - t
+    what = {".kicad_mod": "footprint (KiCad 6 library)", ".kicad_pcb": "breakout board (KiCad 6)",
+            ".kicad_pro": "KiCad project: the design rules the board was routed to",
+            "fp-lib-table": "KiCad library table for the footprints"}
+    out = [Artifact(f"pcb/{rel}", data, next(v for k, v in what.items() if rel.endswith(k)))
+           for rel, data in sorted(files.items())]
+    if errors_in(found, strict=False):
+        return out, found
+    if kicad.kicad_python() is None:
+        found.append(Finding(Severity.INFO, "pcb-gerbers-skipped",
+                             "KiCad (Debian package 'kicad') is not installed, so no Gerbers were plotted: open "
+                             f"pcb/{design.spec.name}.kicad_pcb in KiCad and plot them, or install KiCad and rebuild",
+                             "pcb"))
+        return out, found
+    say("plotting Gerbers with KiCad")
+    t = time.perf_counter()
+    for name, data in sorted(kicad.plot_gerbers(files, design.spec.name).items()):
+        kind = "drill file (Excellon)" if name.endswith(".drl") else "Gerber (plotted by KiCad)"
+        out.append(Artifact(f"pcb/gerbers/{name}", data, kind))
+    timings["gerbers"] = time.perf_counter() - t
+    return out, found
+
+
 def plan(spec: Spec, progress: Progress | None = None) -> BuildResult:
     """Everything a build would write, as bytes, with its findings; raises on an error-level finding."""
     say = progress or (lambda _stage: None)
@@ -129,6 +161,13 @@ def plan(spec: Spec, progress: Progress | None = None) -> BuildResult:
     if stop:
         raise BuildError(stop)
 
+    board_artifacts, board_findings = _board(design, say, timings)
+    findings += board_findings
+    stop = errors_in(findings, spec.build.strict)
+    if stop:
+        raise BuildError(stop)
+    artifacts += board_artifacts
+
     say("writing reports")
     artifacts.append(Artifact("design.json", _json_bytes(design.as_dict()), "every derived dimension, mm and mm^3"))
     artifacts.append(Artifact("spec.json", _json_bytes(spec.model_dump(mode="json")), "the spec with every default filled in"))
@@ -144,7 +183,8 @@ def _manifest(spec: Spec, design: Design, artifacts: list[Artifact]) -> bytes:
         "spec_name": spec.name,
         "spec_sha256": spec.sha256(),
         "printer": design.printer.key,
-        "models": {"geometry": "cadquery-occt"},
+        "models": {"geometry": "cadquery-occt", "land_patterns": f"IPC-7351B {spec.pcb.density.value}",
+                   "board": "magfab grid router", "gerbers": _kicad_version(artifacts)},
         "artifacts": [
             {"path": a.path, "sha256": hashlib.sha256(a.data).hexdigest(), "bytes": len(a.data), "description": a.description}
             for a in artifacts
@@ -213,3 +253,15 @@ def build(spec: Spec, out_dir: Path | None = None, progress: Progress | None = N
     result.out_dir = write(target, result.artifacts)
     result.timings_s["write"] = time.perf_counter() - t
     return result
+
+
+def _kicad_version(artifacts: list[Artifact]) -> str | None:
+    """The KiCad that plotted the Gerbers, as it signs them (None when no Gerbers were plotted)."""
+    import re
+
+    for a in artifacts:
+        if a.path.endswith(".gbr"):
+            m = re.search(rb"%TF\.GenerationSoftware,KiCad,Pcbnew,([^*]*)\*%", a.data)
+            if m:
+                return "KiCad " + m.group(1).decode("ascii", "replace")
+    return None

@@ -87,6 +87,8 @@ class Design:
     lip_outer_radius_mm: float
     lip_height_mm: float
     alignment_holes: tuple[tuple[float, float, float], ...]  # (x, y, diameter)
+    i2c_address: int  # 7-bit
+    address_straps: tuple[int, int]  # (A1, A0) pin levels the board wires: 0 = GND, 1 = supply
     # mould (cup print frame: bottom on the bed at z = 0, cavities open upwards)
     cavity_centres_x_mm: tuple[float, ...]
     cavity_pitch_mm: float
@@ -289,6 +291,19 @@ def derive(spec: Spec) -> Design:
                         f"must place both holes (diameters {_fmt(d1)} and {_fmt(d2)} mm) between the lip "
                         f"(radius {_fmt(lip_outer)} mm) and the pad's edge (radius {_fmt(R_pad)} mm)")
 
+    # I2C address: the option code's base address plus the A1/A0 straps.
+    codes = sorted(k.rsplit("_", 1)[1] for k in chip.quantities if k.startswith("i2c_base_address_"))
+    if sen.option_code not in codes:
+        raise SpecError("sensor.option_code", sen.option_code, "must be one of " + ", ".join(repr(c) for c in codes)
+                        + f" for {chip.key}")
+    base = int(chip[f"i2c_base_address_{sen.option_code}"].nominal)
+    if not base <= sen.i2c_address <= base + 3:
+        allowed = ", ".join(f"0x{a:02X}" for a in range(base, base + 4))
+        raise SpecError("sensor.i2c_address", f"0x{sen.i2c_address:02X}",
+                        f"must be one of {allowed} for option code {sen.option_code} (base plus the A1/A0 straps)",
+                        "or change sensor.option_code")
+    straps = ((sen.i2c_address - base) >> 1 & 1, (sen.i2c_address - base) & 1)
+
     # Mould: a cup holding N inverted cavities in a row along x, and a lid carrying the cores.
     wall = mould.wall_mm
     n = mould.cavities
@@ -324,6 +339,7 @@ def derive(spec: Spec) -> Design:
         recess_depth_mm=recess_depth, pad_roof_mm=pad.thickness_mm - recess_depth,
         lip_inner_radius_mm=lip_inner, lip_outer_radius_mm=lip_outer, lip_height_mm=pad.lip_height_mm,
         alignment_holes=((-sx, 0.0, d1), (sx, 0.0, d2)),
+        i2c_address=sen.i2c_address, address_straps=straps,
         cavity_centres_x_mm=centres, cavity_pitch_mm=pitch, wall_mm=wall, cup_size_mm=cup,
         lid_thickness_mm=lid_t, lid_size_mm=lid, pin_diameter_mm=pin_d, pin_hole_diameter_mm=pin_d + 2 * clearance,
         pin_positions_x_mm=(-pin_x, pin_x), pin_height_mm=0.8 * lid_t, core_root_mm=lid_t / 2.0,

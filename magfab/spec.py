@@ -24,7 +24,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from .errors import SpecError
 from .recipes import catalogue
 
-__all__ = ["Spec", "Tip", "load_spec", "parse_spec", "default_spec_text", "spec_schema", "NAME_PATTERN"]
+__all__ = ["Spec", "Tip", "Density", "Printer", "load_spec", "parse_spec", "default_spec_text", "spec_schema", "NAME_PATTERN"]
 
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
 
@@ -34,6 +34,14 @@ class Tip(str, Enum):
 
     HEMISPHERE = "hemisphere"
     FLAT = "flat"
+
+
+class Density(str, Enum):
+    """IPC-7351B land-pattern density level: 'most' (largest lands, easiest to hand-solder), 'nominal', 'least'."""
+
+    LEAST = "least"
+    NOMINAL = "nominal"
+    MOST = "most"
 
 
 class Printer(str, Enum):
@@ -96,6 +104,14 @@ class Sensor(_Section):
     )
     d_max_mm: float = _mm(6.0, "Rest distance from the magnet's lower face to the sensing point, mm.", le=100.0)
     d_min_mm: float = _mm(2.0, "Closest allowed magnet-to-sensing-point distance under load, mm.", le=100.0)
+    option_code: str = Field(
+        "011", pattern=r"^[0-9]{3}$",
+        description="Chip option code (the -0xx of the order number); sets the I2C base address.",
+    )
+    i2c_address: int = Field(
+        0x0C, ge=0, le=0x7F,
+        description="7-bit I2C address: the option code's base plus the A1/A0 pin straps the board wires.",
+    )
 
 
 class Pad(_Section):
@@ -115,6 +131,29 @@ class Pad(_Section):
         "so the pad only fits one way round, mm.", le=10.0
     )
     alignment_hole_spacing_mm: float = _mm(16.5, "Centre-to-centre spacing of the two alignment holes, on the x axis, mm.")
+
+
+class Pcb(_Section):
+    """The breakout board: outline, design rules and options. The chip sits at the board's centre."""
+
+    width_mm: float = _mm(30.0, "Board width (x), mm.", le=200.0)
+    height_mm: float = _mm(30.0, "Board height (y), mm.", le=200.0)
+    thickness_mm: float = Field(1.6, ge=0.4, le=3.2, description="Board thickness, mm.")
+    clearance_mm: float = Field(0.15, ge=0.1, le=1.0, description="Minimum copper clearance between nets, mm.")
+    track_width_mm: float = Field(0.25, ge=0.1, le=1.0, description="Track width, mm.")
+    via_drill_mm: float = Field(0.3, ge=0.2, le=1.0, description="Via drill, mm.")
+    via_diameter_mm: float = Field(0.6, ge=0.4, le=2.0, description="Via pad diameter, mm.")
+    edge_clearance_mm: float = Field(0.3, ge=0.1, le=2.0, description="Copper to board edge, mm.")
+    density: Density = Field(
+        Density.NOMINAL, strict=False,
+        description="IPC-7351B density level of the land patterns: 'least', 'nominal' or 'most'.",
+    )
+    pullups: bool = Field(True, description="Fit 2.2 kOhm I2C pull-ups to 3.3 V (as on Qwiic boards).")
+    mounting_hole_diameter_mm: float = Field(
+        2.2, ge=0.0, le=5.0,
+        description="Two screw holes at the corners away from the connector (0: none), mm.",
+    )
+    mounting_hole_inset_mm: float = _mm(3.0, "Mounting-hole centre to the board edges, mm.", le=50.0)
 
 
 class Mould(_Section):
@@ -146,6 +185,7 @@ class Spec(_Section):
     elastomer: Elastomer = Field(default_factory=Elastomer)
     sensor: Sensor = Field(default_factory=Sensor)
     pad: Pad = Field(default_factory=Pad)
+    pcb: Pcb = Field(default_factory=Pcb)
     mould: Mould = Field(default_factory=Mould)
     build: Build = Field(default_factory=Build)
 

@@ -1,0 +1,511 @@
+"""The MLX90393 footprint and the breakout board, as KiCad 6 files.
+
+The board is laid out in KiCad's frame (mm, y down) with the chip's centre at :data:`ORIGIN`; the
+design frame (y up, chip centre at 0) maps to it by ``X = ORIGIN_x + x``, ``Y = ORIGIN_y - y``. The
+rigid pad (:mod:`magfab.pad`) sits on the top face centred on the chip, so nothing but the chip may
+stand on the top side inside the pad's disc: the decoupling capacitors and the pull-ups go on the
+bottom, right under the chip and behind the connector; the Qwiic connector sits on the bottom edge,
+outside the disc; the two alignment holes match the pad's; two screw holes sit in the far corners.
+
+:func:`board` places, wires and routes everything; :func:`findings` measures the result (clearances,
+pad overlaps, outline, courtyards, the pad's keep-out, connectivity); :func:`files` renders the
+footprint library, the board, its project file (design rules) and a library table.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from typing import Mapping
+
+from . import __version__
+from .design import Design
+from .errors import Finding, Severity, SpecError
+from .footprint import Footprint, Pad, chip_footprint, connector_footprint, hole_footprint, qfn_footprint
+from .recipes import catalogue
+from .route import LAYERS, Copper, Router, RouteError, clearance_violations, connected
+from .sexpr import Sym, at, render, xy
+
+__all__ = ["Board", "Placed", "board", "findings", "files", "ORIGIN", "LIBRARY"]
+
+ORIGIN = (100.0, 100.0)  # chip centre on the KiCad sheet, mm
+LIBRARY = "magfab"
+ROUTE_GRID_MM = 0.125  # divides the 0.5 mm pitch and the 0.25 mm pad offsets of the QFN
+PAD_KEEPOUT_MARGIN_MM = 0.25  # beyond the pad's radius, no top-side part may stand
+HOLE_CLEARANCE_MM = 0.25  # copper to a drilled hole (KiCad 6 default min_hole_clearance)
+BOARD_VERSION = 20211014
+NETS_ROUTED = ("SCL", "SDA", "+3V3", "GND")  # routing order: the fine-pitch signals first
+SUPPLY, GROUND = "+3V3", "GND"
+
+
+@dataclass(frozen=True)
+class Placed:
+    """A footprint on the board: absolute position (KiCad frame), angle (0 or 180), side, pad nets."""
+
+    ref: str
+    value: str
+    footprint: Footprint
+    x: float
+    y: float
+    angle: float = 0.0
+    bottom: bool = False
+    nets: Mapping[str, str] = field(default_factory=dict)
+
+    def to_board(self, px: float, py: float) -> tuple[float, float]:
+        """A footprint-local point in the board frame (flip for the bottom side, then rotate)."""
+        if self.bottom:
+            py = -py
+        c, s = round(math.cos(math.radians(self.angle)), 12), round(math.sin(math.radians(self.angle)), 12)
+        return (round(self.x + px * c + py * s, 6), round(self.y - px * s + py * c, 6))
+
+    def box(self, box: tuple[float, float, float, float]) -> tuple[float, float, float, float]:
+        (ax, ay), (bx, by) = self.to_board(box[0], box[1]), self.to_board(box[2], box[3])
+        return (min(ax, bx), min(ay, by), max(ax, bx), max(ay, by))
+
+    @property
+    def side(self) -> str:
+        return "B" if self.bottom else "F"
+
+    def copper(self) -> list[Copper]:
+        out = []
+        for p in self.footprint.pads:
+            layers = [_side_layer(layer, self.bottom) for layer in p.layers]
+            if p.kind == "np_thru_hole":
+                x, y = self.to_board(p.x, p.y)
+                out.append(Copper.point(x, y, p.drill / 2, LAYERS, None, self.ref, hole=True))
+                continue
+            cu = [layer for layer in layers if layer in LAYERS]
+            if not cu:
+                continue
+            x0, y0, x1, y1 = self.box(p.box())
+            out.append(Copper.rect(x0, y0, x1, y1, cu, self.nets.get(p.number), f"{self.ref}.{p.number}"))
+        return out
+
+
+def _side_layer(layer: str, bottom: bool) -> str:
+    if bottom and layer.startswith("F."):
+        return "B." + layer[2:]
+    return layer
+
+
+@dataclass(frozen=True)
+class Board:
+    """A placed, wired and routed board, ready to render and check."""
+
+    name: str
+    outline: tuple[float, float, float, float]  # x0, y0, x1, y1 in the KiCad frame
+    parts: tuple[Placed, ...]
+    tracks: tuple[Copper, ...]
+    pad_circle: tuple[float, float, float]  # the rigid pad's disc: x, y, r
+    label: tuple[str, ...]
+    rules: Mapping[str, float]
+    thickness_mm: float
+    address: int
+    unrouted: tuple[str, ...] = ()
+
+    def nets(self) -> list[str]:
+        names = {n for p in self.parts for n in p.nets.values()}
+        return sorted(names, key=lambda n: (n.startswith("unconnected"), n))
+
+    def copper(self) -> list[Copper]:
+        items = [c for p in self.parts for c in p.copper()]
+        return items + list(self.tracks)
+
+    def footprints(self) -> dict[str, Footprint]:
+        return {p.footprint.name: p.footprint for p in self.parts}
+
+
+# ---------------------------------------------------------------------------------------------------
+# Placement and netlist
+
+
+def _chip_nets(design: Design, fp: Footprint) -> dict[str, str]:
+    chip = design.chip
+    a1, a0 = design.address_straps
+    by_name = {"VSS": GROUND, "EP": GROUND, "VDD": SUPPLY, "VDDIO": SUPPLY, "CS": SUPPLY, "SCL": "SCL", "SDA": "SDA",
+               "A1": SUPPLY if a1 else GROUND, "A0": SUPPLY if a0 else GROUND}
+    nets = {}
+    ep_number = str(max(int(p.number) for p in fp.copper_pads()))
+    for p in fp.copper_pads():
+        pin = chip.texts["pin_EP" if p.number == ep_number else f"pin_{p.number}"]
+        nets[p.number] = by_name.get(pin, f"unconnected-(U1-{pin}-Pad{p.number})")
+    return nets
+
+
+def _disc_clear(box, cx: float, cy: float, r: float) -> bool:
+    """Whether an axis-aligned box lies wholly outside the disc."""
+    dx = max(box[0] - cx, 0.0, cx - box[2])
+    dy = max(box[1] - cy, 0.0, cy - box[3])
+    return math.hypot(dx, dy) >= r
+
+
+def _overlap(a, b) -> bool:
+    return a[0] < b[2] and b[0] < a[2] and a[1] < b[3] and b[1] < a[3]
+
+
+def _place(design: Design) -> tuple[list[Placed], tuple[float, float, float, float], tuple[float, float, float]]:
+    spec = design.spec
+    pcb = spec.pcb
+    ox, oy = ORIGIN
+    hw, hh = pcb.width_mm / 2, pcb.height_mm / 2
+    outline = (ox - hw, oy - hh, ox + hw, oy + hh)
+    for key, half in (("pcb.width_mm", hw), ("pcb.height_mm", hh)):
+        if half < design.pad_radius_mm + PAD_KEEPOUT_MARGIN_MM:
+            raise SpecError(key, 2 * half, f"must be at least {2 * (design.pad_radius_mm + PAD_KEEPOUT_MARGIN_MM):g} mm "
+                            f"so the {2 * design.pad_radius_mm:g} mm mounting pad fits on the board")
+    keep_r = design.pad_radius_mm + PAD_KEEPOUT_MARGIN_MM
+    parts = catalogue("parts")
+    qfn = qfn_footprint(design.chip, pcb.density)
+    cap = chip_footprint(parts["chip-0603"], pcb.density, prefix="C")
+    res = chip_footprint(parts["chip-0603"], pcb.density, prefix="R")
+    jst = connector_footprint(parts["jst-sh-4"])
+    placed = [Placed("U1", f"MLX90393SLW-ABA-{spec.sensor.option_code}", qfn, ox, oy, nets=_chip_nets(design, qfn))]
+
+    # The pad's alignment holes (dowel pins), at the pad's own positions.
+    for k, (x, y, d) in enumerate(design.alignment_holes):
+        fp = hole_footprint(d, f"AlignmentHole_{d:g}mm", keepout=HOLE_CLEARANCE_MM)
+        placed.append(Placed(f"H{k + 1}", f"dowel {d:g} mm", fp, round(ox + x, 6), round(oy - y, 6)))
+    holes: list[Placed] = []
+    if pcb.mounting_hole_diameter_mm > 0:
+        head = parts["npth"]["m2_head_diameter_mm"].nominal
+        d = pcb.mounting_hole_diameter_mm
+        fp = hole_footprint(d, f"MountingHole_{d:g}mm", keepout=max(head / 2 - d / 2, 0.0) + 0.25)
+        inset = pcb.mounting_hole_inset_mm
+        for k, sx in enumerate((-1, 1)):
+            holes.append(Placed(f"H{k + 3}", f"M2 screw", fp, round(ox + sx * (hw - inset), 6), round(oy - hh + inset, 6)))
+    placed.extend(holes)
+
+    # Qwiic connector on the bottom edge, mating face flush with it, as near the centre line as the
+    # pad's keep-out and the holes allow.
+    reach = max(jst.body[3], max(p.y + p.h / 2 for p in jst.pads) + pcb.edge_clearance_mm)
+    jy = round(oy + hh - reach, 6)
+    j1 = None
+    for k in range(int(hw / 0.25) * 2 + 1):
+        dx = (k + 1) // 2 * 0.25 * (1 if k % 2 else -1)
+        cand = Placed("J1", "Qwiic JST-SH 4", jst, round(ox + dx, 6), jy,
+                      nets={"1": GROUND, "2": SUPPLY, "3": "SDA", "4": "SCL", "MP": GROUND})
+        cy = cand.box(jst.courtyard)
+        body = cand.box(jst.body)
+        if body[0] < outline[0] or body[2] > outline[2]:
+            continue
+        if not _disc_clear(cy, ox, oy, keep_r):
+            continue
+        if any(_overlap(cy, h.box(h.footprint.courtyard)) for h in placed[1:]):
+            continue
+        j1 = cand
+        break
+    if j1 is None:
+        raise SpecError("pcb.width_mm", pcb.width_mm,
+                        f"leaves no room for the Qwiic connector on the bottom edge outside the mounting pad's "
+                        f"{2 * keep_r:g} mm keep-out and clear of the screw holes",
+                        "make the board larger, or set pcb.mounting_hole_diameter_mm = 0")
+    placed.append(j1)
+
+    # Decoupling right under the chip (bottom side): C1 by VDD (top row), C2 by VDDIO (bottom row).
+    off = round(qfn.body[3] + cap.courtyard[3] + 0.1, 2)
+    placed.append(Placed("C1", "100nF", cap, ox, round(oy - off, 6), 0.0, True, {"1": SUPPLY, "2": GROUND}))
+    placed.append(Placed("C2", "100nF", cap, ox, round(oy + off, 6), 180.0, True, {"1": SUPPLY, "2": GROUND}))
+    if pcb.pullups:
+        ohm = parts["jst-sh-4"]["pullup_ohm"].nominal
+        value = f"{ohm / 1000:g}k"
+        ry = round(jy + jst.courtyard[1] - res.courtyard[3] - 0.4, 2)
+        placed.append(Placed("R1", value, res, j1.x, ry, 0.0, True, {"1": SUPPLY, "2": "SDA"}))
+        # R2 above R1, far enough that R2's silk reference clears R1's pads.
+        pitch = (res.courtyard[3] - res.courtyard[1]) + 1.3
+        placed.append(Placed("R2", value, res, j1.x, round(ry - pitch, 2), 0.0,
+                             True, {"1": SUPPLY, "2": "SCL"}))
+    return placed, outline, (ox, oy, design.pad_radius_mm)
+
+
+def _label(design: Design) -> tuple[str, ...]:
+    return (design.spec.name, f"MLX90393 I2C 0x{design.i2c_address:02X}")
+
+
+# ---------------------------------------------------------------------------------------------------
+# Routing
+
+
+def _mst(pads: list[Copper]) -> list[tuple[Copper, Copper]]:
+    """Prim's tree over pad centres: (new pad, pad already in the tree), deterministic."""
+    def centre(c: Copper) -> tuple[float, float]:
+        return ((c.a[0] + c.b[0]) / 2, (c.a[1] + c.b[1]) / 2)
+
+    tree = [pads[0]]
+    rest = pads[1:]
+    edges = []
+    while rest:
+        best = min(((math.dist(centre(p), centre(t)), i, j) for i, p in enumerate(rest) for j, t in enumerate(tree)))
+        _, i, j = best
+        edges.append((rest[i], tree[j]))
+        tree.append(rest.pop(i))
+    return edges
+
+
+FANOUT_MM = 0.5  # straight escape beyond a QFN land's outer end, so no route can box a pin in
+
+
+def _fanout(u1: Placed, width: float) -> tuple[list[Copper], list[Copper]]:
+    """Escape stubs for the chip: every routed pin gets a straight stub outwards; ground pins also
+    run inwards onto the exposed pad. Returns (stub tracks, terminals at the outer stub ends)."""
+    pads = {c.owner.split(".")[1]: c for c in u1.copper()}
+    ep = max(pads, key=lambda n: int(n))
+    epc = pads[ep]
+    stubs, terminals = [], []
+    for number, c in sorted(pads.items(), key=lambda kv: int(kv[0])):
+        if number == ep or c.net not in NETS_ROUTED:
+            continue
+        cx, cy = (c.a[0] + c.b[0]) / 2, (c.a[1] + c.b[1]) / 2
+        horizontal = (c.b[0] - c.a[0]) > (c.b[1] - c.a[1])
+        if horizontal:
+            sgn = 1 if cx > u1.x else -1
+            outer = (round((c.b[0] if sgn > 0 else c.a[0]) + sgn * FANOUT_MM, 6), cy)
+            inner = (round((epc.b[0] - 0.1) if sgn > 0 else (epc.a[0] + 0.1), 6), cy)
+        else:
+            sgn = 1 if cy > u1.y else -1
+            outer = (cx, round((c.b[1] if sgn > 0 else c.a[1]) + sgn * FANOUT_MM, 6))
+            inner = (cx, round((epc.b[1] - 0.1) if sgn > 0 else (epc.a[1] + 0.1), 6))
+        pin = u1.footprint.name
+        if c.net == GROUND:
+            stubs.append(Copper.seg(cx, cy, *inner, width, "F.Cu", c.net, f"U1.{number} stub"))
+        if c.net != GROUND or number == _vss(u1):
+            stubs.append(Copper.seg(cx, cy, *outer, width, "F.Cu", c.net, f"U1.{number} stub"))
+            h = width / 2
+            terminals.append(Copper.rect(outer[0] - h, outer[1] - h, outer[0] + h, outer[1] + h, ["F.Cu"], c.net,
+                                         f"U1.{number}"))
+        del pin
+    return stubs, terminals
+
+
+def _vss(u1: Placed) -> str:
+    return next(n for n, net in sorted(u1.nets.items(), key=lambda kv: int(kv[0])) if net == GROUND)
+
+
+def _route_all(router: Router, parts: list[Placed], order: tuple[str, ...], width: float):
+    items = [c for p in parts for c in p.copper()]
+    stubs, terminals = _fanout(parts[0], width)
+    tracks: list[Copper] = list(stubs)
+    unrouted = []
+    for net in order:
+        ends = [c for c in items if c.net == net and c.kind == "rect" and not c.owner.startswith("U1.")]
+        ends += [t for t in terminals if t.net == net]
+        ends.sort(key=lambda c: (not c.owner.startswith("U1"), c.owner))
+        for new, old in _mst(ends):
+            if _touching(new, old):
+                continue
+            try:
+                tracks.extend(router.route(items + tracks, net, new, old))
+            except RouteError as exc:
+                unrouted.append(str(exc))
+    return tracks, unrouted
+
+
+def board(design: Design) -> Board:
+    """Place, wire and route the breakout board for a design.
+
+    Net orders are tried in a fixed sequence until one routes completely (the first complete one wins),
+    so the result is deterministic.
+    """
+    pcb = design.spec.pcb
+    parts, outline, circle = _place(design)
+    router = Router(outline, ROUTE_GRID_MM, pcb.track_width_mm, pcb.via_diameter_mm, pcb.via_drill_mm,
+                    pcb.clearance_mm, HOLE_CLEARANCE_MM, pcb.edge_clearance_mm)
+    orders = [NETS_ROUTED, ("SDA", "SCL", "+3V3", "GND"), ("+3V3", "SCL", "SDA", "GND"), ("GND", "+3V3", "SDA", "SCL")]
+    attempts = [_route_all(router, parts, order, pcb.track_width_mm) for order in orders[:1]]
+    for order in orders[1:]:
+        if not attempts[-1][1]:
+            break
+        attempts.append(_route_all(router, parts, order, pcb.track_width_mm))
+    tracks, unrouted = min(attempts, key=lambda a: len(a[1]))
+    rules = {"clearance": pcb.clearance_mm, "track_width": pcb.track_width_mm, "via_diameter": pcb.via_diameter_mm,
+             "via_drill": pcb.via_drill_mm, "edge_clearance": pcb.edge_clearance_mm, "hole_clearance": HOLE_CLEARANCE_MM}
+    return Board(design.spec.name, outline, tuple(parts), tuple(tracks), circle, _label(design), rules,
+                 pcb.thickness_mm, design.i2c_address, tuple(unrouted))
+
+
+def _touching(a: Copper, b: Copper) -> bool:
+    from .route import distance
+
+    return bool(a.layers & b.layers) and distance(a, b) <= 0.0
+
+
+# ---------------------------------------------------------------------------------------------------
+# Checks
+
+
+def findings(b: Board) -> list[Finding]:
+    """Measure the board: every rule the build promises, as findings (errors stop the build)."""
+    out: list[Finding] = []
+    err = lambda code, msg: out.append(Finding(Severity.ERROR, code, msg, "pcb"))  # noqa: E731
+    for msg in b.unrouted:
+        err("pcb-unrouted", msg)
+    items = b.copper()
+    bad = clearance_violations(items, b.rules["clearance"], b.rules["hole_clearance"])
+    for p, q, d, need in bad[:5]:
+        err("pcb-clearance", f"{p.owner} ({p.net}) and {q.owner} ({q.net}) are {d:.3f} mm apart; need {need:g} mm")
+    if len(bad) > 5:
+        err("pcb-clearance", f"... and {len(bad) - 5} more clearance violations")
+    pads = [c for c in items if c.kind == "rect"]
+    for i, p in enumerate(pads):
+        for q in pads[i + 1:]:
+            if p.owner.split(".")[0] != q.owner.split(".")[0] and p.layers & q.layers and _touching(p, q):
+                err("pcb-pad-overlap", f"pads {p.owner} and {q.owner} overlap")
+    x0, y0, x1, y1 = b.outline
+    e = b.rules["edge_clearance"]
+    for c in items:
+        if c.hole:
+            continue
+        bx = c.bbox()
+        if bx[0] < x0 + e - 1e-6 or bx[1] < y0 + e - 1e-6 or bx[2] > x1 - e + 1e-6 or bx[3] > y1 - e + 1e-6:
+            err("pcb-edge", f"copper of {c.owner} ({c.net}) is closer than {e:g} mm to the board edge")
+    for p in b.parts:
+        body = p.box(p.footprint.body)
+        if body[0] < x0 - 1e-6 or body[1] < y0 - 1e-6 or body[2] > x1 + 1e-6 or body[3] > y1 + 1e-6:
+            err("pcb-outline", f"{p.ref} ({p.footprint.name}) sticks out of the board outline")
+    for i, p in enumerate(b.parts):
+        for q in b.parts[i + 1:]:
+            holes = p.ref.startswith("H") or q.ref.startswith("H")
+            if (p.bottom == q.bottom or holes) and _overlap(p.box(p.footprint.courtyard), q.box(q.footprint.courtyard)):
+                err("pcb-courtyard", f"courtyards of {p.ref} and {q.ref} overlap")
+    cx, cy, r = b.pad_circle
+    for p in b.parts:
+        if p.bottom or p.ref == "U1" or p.ref in {"H1", "H2"}:
+            continue
+        if not _disc_clear(p.box(p.footprint.courtyard), cx, cy, r + PAD_KEEPOUT_MARGIN_MM):
+            err("pcb-pad-keepout", f"{p.ref} stands inside the mounting pad's disc (radius {r:g} mm): the pad would "
+                                   "not sit flat")
+    islands = connected(items)
+    for net, n in islands.items():
+        if n > 1 and not net.startswith("unconnected"):
+            err("pcb-unconnected", f"net {net} is in {n} separate pieces")
+    if not out:
+        n_tracks = sum(1 for c in b.tracks if c.kind == "seg")
+        n_vias = sum(1 for c in b.tracks if c.kind == "point")
+        margin = min((distance_margin(items, b.rules)), default=0.0)
+        out.append(Finding(Severity.INFO, "pcb-ok",
+                           f"board routed: {n_tracks} track segments, {n_vias} vias, every net connected, "
+                           f"smallest clearance margin {margin:.3f} mm above the {b.rules['clearance']:g} mm rule", "pcb"))
+    return out
+
+
+def distance_margin(items: list[Copper], rules: Mapping[str, float]) -> list[float]:
+    """Smallest clearance margin (distance - rule) per copper pair that is within 1 mm, for the report."""
+    from .route import _near, distance
+
+    out = []
+    for i, p in enumerate(items):
+        for q in items[i + 1:]:
+            if p.hole or q.hole or p.net == q.net or not (p.layers & q.layers) or not _near(p, q, 1.0):
+                continue
+            out.append(distance(p, q) - rules["clearance"])
+    return out
+
+
+# ---------------------------------------------------------------------------------------------------
+# Rendering
+
+
+_LAYER_TABLE = (
+    (0, "F.Cu", "signal"), (31, "B.Cu", "signal"), (32, "B.Adhes", "user", "B.Adhesive"),
+    (33, "F.Adhes", "user", "F.Adhesive"), (34, "B.Paste", "user"), (35, "F.Paste", "user"),
+    (36, "B.SilkS", "user", "B.Silkscreen"), (37, "F.SilkS", "user", "F.Silkscreen"), (38, "B.Mask", "user"),
+    (39, "F.Mask", "user"), (40, "Dwgs.User", "user", "User.Drawings"), (41, "Cmts.User", "user", "User.Comments"),
+    (44, "Edge.Cuts", "user"), (45, "Margin", "user"), (46, "B.CrtYd", "user", "B.Courtyard"),
+    (47, "F.CrtYd", "user", "F.Courtyard"), (48, "B.Fab", "user"), (49, "F.Fab", "user"),
+)
+
+
+def _board_text(b: Board) -> str:
+    nets = b.nets()
+    code = {n: i + 1 for i, n in enumerate(nets)}
+    layers = tuple((row[0], row[1], Sym(row[2]), *row[3:]) for row in _LAYER_TABLE)
+    x0, y0, x1, y1 = b.outline
+    cx, cy, r = b.pad_circle
+    node: list = [
+        "kicad_pcb", ("version", BOARD_VERSION), ("generator", Sym("magfab")),
+        ("general", ("thickness", b.thickness_mm)), ("paper", "A4"),
+        ("title_block", ("title", f"{b.name}: MLX90393 breakout"), ("rev", __version__),
+         ("comment", 1, f"I2C address 0x{b.address:02X}; generated by magfab {__version__}")),
+        ("layers", *layers),
+        ("setup", ("pad_to_mask_clearance", 0)),
+        ("net", 0, ""), *(("net", code[n], n) for n in nets),
+    ]
+    for p in b.parts:
+        fp = p.footprint
+        pad_nets = {num: (code[n], n) for num, n in p.nets.items()}
+        node.append(("footprint", f"{LIBRARY}:{fp.name}", ("layer", "B.Cu" if p.bottom else "F.Cu"),
+                     at(p.x, p.y, p.angle), ("descr", fp.descr), ("tags", fp.tags), ("attr", Sym(fp.attr)),
+                     *_with_value(fp.nodes(reference=p.ref, angle=p.angle, nets=pad_nets, bottom=p.bottom), p.value)))
+    node.append(("gr_rect", ("start", x0, y0), ("end", x1, y1), ("layer", "Edge.Cuts"), ("width", 0.1), ("fill", Sym("none"))))
+    node.append(("gr_circle", ("center", cx, cy), ("end", cx + r, cy), ("layer", "Dwgs.User"), ("width", 0.1),
+                 ("fill", Sym("none"))))
+    node.append(("gr_text", "rigid pad outline", at(cx, cy - r - 0.8), ("layer", "Dwgs.User"),
+                 ("effects", ("font", ("size", 0.8, 0.8), ("thickness", 0.12)))))
+    node.extend(_label_nodes(b))
+    for t in b.tracks:
+        net = (("net", code[t.net]),) if t.net else ()
+        if t.kind == "seg":
+            node.append(("segment", ("start", *t.a), ("end", *t.b), ("width", 2 * t.r), ("layer", next(iter(t.layers))), *net))
+        else:
+            node.append(("via", at(*t.a), ("size", 2 * t.r), ("drill", b.rules["via_drill"]), ("layers", "F.Cu", "B.Cu"), *net))
+    pts = ("pts", xy(x0, y0), xy(x1, y0), xy(x1, y1), xy(x0, y1))
+    for layer in LAYERS:
+        node.append(("zone", ("net", code[GROUND]), ("net_name", GROUND), ("layer", layer), ("hatch", Sym("edge"), 0.508),
+                     ("connect_pads", ("clearance", b.rules["clearance"])), ("min_thickness", 0.2),
+                     ("filled_areas_thickness", Sym("no")),
+                     ("fill", ("thermal_gap", 0.3), ("thermal_bridge_width", 0.3)), ("polygon", pts)))
+    return render(tuple(node), wrap=("kicad_pcb", "footprint", "layers")) + "\n"
+
+
+def _with_value(nodes: list[tuple], value: str) -> list[tuple]:
+    out = []
+    for n in nodes:
+        if n[0] == "fp_text" and n[1] == "value":
+            n = (n[0], n[1], value, *n[3:])
+        out.append(n)
+    return out
+
+
+def _label_nodes(b: Board) -> list[tuple]:
+    """The design name and I2C address in silk along the top edge, between the screw holes."""
+    x0, y0, x1, _ = b.outline
+    free = (x1 - x0) - 2 * 7.0
+    out = []
+    for k, text in enumerate(b.label):
+        size = max(0.6, min(1.0, free / max(1, len(text)) / 0.9))
+        out.append(("gr_text", text, at((x0 + x1) / 2, y0 + 1.4 + k * 1.5), ("layer", "F.SilkS"),
+                    ("effects", ("font", ("size", size, size), ("thickness", round(0.15 * size, 3))))))
+    return out
+
+
+def _project_text(b: Board) -> str:
+    """The .kicad_pro: KiCad 6 keeps the design rules here, so DRC checks the rules we routed to."""
+    r = b.rules
+    project = {
+        "board": {"design_settings": {
+            "defaults": {"board_outline_line_width": 0.1, "copper_line_width": 0.2},
+            "rules": {"min_clearance": r["clearance"], "min_track_width": r["track_width"],
+                      "min_via_diameter": r["via_diameter"], "min_through_hole_diameter": r["via_drill"],
+                      "min_hole_clearance": r["hole_clearance"], "min_copper_edge_clearance": r["edge_clearance"],
+                      "min_hole_to_hole": 0.25, "min_via_annular_width": 0.1, "solder_mask_clearance": 0.0,
+                      "min_silk_clearance": 0.0},
+            "track_widths": [], "via_dimensions": []}},
+        "meta": {"filename": f"{b.name}.kicad_pro", "version": 1},
+        "net_settings": {"classes": [{
+            "name": "Default", "clearance": r["clearance"], "track_width": r["track_width"],
+            "via_diameter": r["via_diameter"], "via_drill": r["via_drill"], "microvia_diameter": 0.3,
+            "microvia_drill": 0.1, "diff_pair_gap": 0.25, "diff_pair_via_gap": 0.25, "diff_pair_width": 0.2,
+            "line_style": 0, "wire_width": 6, "bus_width": 12}], "meta": {"version": 2}},
+    }
+    return json.dumps(project, indent=2, sort_keys=True) + "\n"
+
+
+def files(b: Board) -> dict[str, bytes]:
+    """Relative path -> bytes: the footprint library, the board, its project file and a library table."""
+    out = {f"{LIBRARY}.pretty/{name}.kicad_mod": fp.library_text().encode()
+           for name, fp in sorted(b.footprints().items())}
+    out[f"{b.name}.kicad_pcb"] = _board_text(b).encode()
+    out[f"{b.name}.kicad_pro"] = _project_text(b).encode()
+    out["fp-lib-table"] = (f'(fp_lib_table\n  (lib (name "{LIBRARY}")(type "KiCad")(uri "${{KIPRJMOD}}/{LIBRARY}.pretty")'
+                           f'(options "")(descr "footprints generated by magfab"))\n)\n').encode()
+    return out

@@ -1,0 +1,403 @@
+"""Copper geometry, clearance measurement and a small deterministic two-layer grid router.
+
+Everything is in millimetres in the board's KiCad frame (y down). Copper items are :class:`Copper`:
+an axis-aligned rectangle (pads, conservatively: a roundrect lies inside its rectangle), a segment
+with a half-width (tracks), or a point with a radius (vias, round pads, holes). Distances are edge to
+edge; two items touch when the distance is <= 0.
+
+The router is a Lee/A* maze router on a square grid over both copper layers: eight directions per
+layer, a via between layers, a penalty per bend so tracks come out straight. Obstacles are the copper of
+other nets, holes and the board edge, each grown by the clearance plus the track's (or via's) half
+width plus a small margin that covers the corner a grid step can cut. The result is re-measured
+exactly by :func:`clearance_violations`, which is what the build trusts.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+from dataclasses import dataclass
+from typing import Iterable, Sequence
+
+import numpy as np
+
+__all__ = ["Copper", "distance", "clearance_violations", "connected", "Router", "RouteError"]
+
+LAYERS = ("F.Cu", "B.Cu")
+GRID_MARGIN_MM = 0.02  # > the sagitta a 0.125 mm grid step can cut from a 0.25 mm-radius obstacle
+
+
+@dataclass(frozen=True)
+class Copper:
+    """One piece of copper (or a hole when ``net`` is None and ``hole`` is set)."""
+
+    kind: str  # "rect" | "seg" | "point"
+    a: tuple[float, float]
+    b: tuple[float, float]  # rect: opposite corner; seg: end; point: same as a
+    r: float  # half-width / radius (0 for rect)
+    layers: frozenset[str]
+    net: str | None
+    owner: str = ""  # "U1.15", "track", "via", "H1"
+    hole: bool = False
+
+    @staticmethod
+    def rect(x0: float, y0: float, x1: float, y1: float, layers: Iterable[str], net: str | None, owner: str = "") -> "Copper":
+        return Copper("rect", (min(x0, x1), min(y0, y1)), (max(x0, x1), max(y0, y1)), 0.0, frozenset(layers), net, owner)
+
+    @staticmethod
+    def seg(x0: float, y0: float, x1: float, y1: float, width: float, layer: str, net: str | None, owner: str = "track") -> "Copper":
+        return Copper("seg", (x0, y0), (x1, y1), width / 2, frozenset({layer}), net, owner)
+
+    @staticmethod
+    def point(x: float, y: float, radius: float, layers: Iterable[str], net: str | None, owner: str = "", hole: bool = False) -> "Copper":
+        return Copper("point", (x, y), (x, y), radius, frozenset(layers), net, owner, hole)
+
+    def bbox(self) -> tuple[float, float, float, float]:
+        return (min(self.a[0], self.b[0]) - self.r, min(self.a[1], self.b[1]) - self.r,
+                max(self.a[0], self.b[0]) + self.r, max(self.a[1], self.b[1]) + self.r)
+
+
+# ---------------------------------------------------------------------------------------------------
+# Exact distances between cores (segments and rectangles; a point is a zero-length segment)
+
+
+def _pt_seg(px: float, py: float, ax: float, ay: float, bx: float, by: float) -> float:
+    dx, dy = bx - ax, by - ay
+    L2 = dx * dx + dy * dy
+    t = 0.0 if L2 == 0 else max(0.0, min(1.0, ((px - ax) * dx + (py - ay) * dy) / L2))
+    return math.hypot(px - ax - t * dx, py - ay - t * dy)
+
+
+def _cross(ox, oy, ax, ay, bx, by) -> float:
+    return (ax - ox) * (by - oy) - (ay - oy) * (bx - ox)
+
+
+def _segs_cross(a, b, c, d) -> bool:
+    d1, d2 = _cross(*c, *d, *a), _cross(*c, *d, *b)
+    d3, d4 = _cross(*a, *b, *c), _cross(*a, *b, *d)
+    return d1 * d2 < 0 and d3 * d4 < 0
+
+
+def _seg_seg(a, b, c, d) -> float:
+    if _segs_cross(a, b, c, d):
+        return 0.0
+    return min(_pt_seg(*a, *c, *d), _pt_seg(*b, *c, *d), _pt_seg(*c, *a, *b), _pt_seg(*d, *a, *b))
+
+
+def _pt_rect(px: float, py: float, lo, hi) -> float:
+    dx = max(lo[0] - px, 0.0, px - hi[0])
+    dy = max(lo[1] - py, 0.0, py - hi[1])
+    return math.hypot(dx, dy)
+
+
+def _seg_rect(a, b, lo, hi) -> float:
+    if _pt_rect(*a, lo, hi) == 0.0 or _pt_rect(*b, lo, hi) == 0.0:
+        return 0.0
+    corners = [lo, (hi[0], lo[1]), hi, (lo[0], hi[1])]
+    edges = list(zip(corners, corners[1:] + corners[:1]))
+    return min(_seg_seg(a, b, c, d) for c, d in edges)
+
+
+def _rect_rect(lo1, hi1, lo2, hi2) -> float:
+    dx = max(lo2[0] - hi1[0], 0.0, lo1[0] - hi2[0])
+    dy = max(lo2[1] - hi1[1], 0.0, lo1[1] - hi2[1])
+    return math.hypot(dx, dy)
+
+
+def distance(p: Copper, q: Copper) -> float:
+    """Edge-to-edge distance in the plane, mm (<= 0: touching or overlapping)."""
+    if p.kind == "rect" and q.kind == "rect":
+        core = _rect_rect(p.a, p.b, q.a, q.b)
+    elif p.kind == "rect":
+        core = _seg_rect(q.a, q.b, p.a, p.b)
+    elif q.kind == "rect":
+        core = _seg_rect(p.a, p.b, q.a, q.b)
+    else:
+        core = _seg_seg(p.a, p.b, q.a, q.b)
+    return core - p.r - q.r
+
+
+def _near(p: Copper, q: Copper, gap: float) -> bool:
+    a, b = p.bbox(), q.bbox()
+    return not (a[2] + gap < b[0] or b[2] + gap < a[0] or a[3] + gap < b[1] or b[3] + gap < a[1])
+
+
+def clearance_violations(items: Sequence[Copper], clearance: float, hole_clearance: float):
+    """Pairs of copper of different nets (or copper and a hole) on a shared layer closer than allowed.
+
+    Returns ``[(item, item, distance, required)]``, smallest margin first.
+    """
+    out = []
+    for i, p in enumerate(items):
+        for q in items[i + 1:]:
+            if p.hole and q.hole:
+                continue
+            if not p.hole and not q.hole and (p.net == q.net or not (p.layers & q.layers)):
+                continue
+            need = hole_clearance if (p.hole or q.hole) else clearance
+            if not _near(p, q, need):
+                continue
+            d = distance(p, q)
+            if d < need - 1e-6:
+                out.append((p, q, d, need))
+    out.sort(key=lambda t: t[2] - t[3])
+    return out
+
+
+def connected(items: Sequence[Copper]) -> dict[str, int]:
+    """Number of separate copper islands per net (1 means the net is fully connected)."""
+    parent = list(range(len(items)))
+
+    def find(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    for i, p in enumerate(items):
+        for j in range(i + 1, len(items)):
+            q = items[j]
+            if p.net is None or p.net != q.net or not (p.layers & q.layers) or not _near(p, q, 0.0):
+                continue
+            if distance(p, q) <= 1e-9:
+                parent[find(i)] = find(j)
+    roots: dict[str, set[int]] = {}
+    for i, p in enumerate(items):
+        if p.net is not None:
+            roots.setdefault(p.net, set()).add(find(i))
+    return {net: len(r) for net, r in sorted(roots.items())}
+
+
+# ---------------------------------------------------------------------------------------------------
+# Router
+
+
+class RouteError(RuntimeError):
+    """No path: the board is too crowded for the given rules."""
+
+
+_DIRS = ((1, 0), (1, 1), (0, 1), (-1, 1), (-1, 0), (-1, -1), (0, -1), (1, -1))
+
+
+@dataclass
+class Router:
+    """Grid router over the rectangle ``bounds`` = (x0, y0, x1, y1) with grid ``step`` (mm)."""
+
+    bounds: tuple[float, float, float, float]
+    step: float
+    width: float
+    via_diameter: float
+    via_drill: float
+    clearance: float
+    hole_clearance: float
+    edge_clearance: float
+    via_cost: float = 8.0
+    bend_cost: float = 0.6
+    bottom_cost: float = 1.3
+
+    def __post_init__(self) -> None:
+        x0, y0, x1, y1 = self.bounds
+        self.nx = int(round((x1 - x0) / self.step)) + 1
+        self.ny = int(round((y1 - y0) / self.step)) + 1
+        self.xs = x0 + self.step * np.arange(self.nx)
+        self.ys = y0 + self.step * np.arange(self.ny)
+
+    def node_xy(self, ix: int, iy: int) -> tuple[float, float]:
+        return (round(float(self.xs[ix]), 6), round(float(self.ys[iy]), 6))
+
+    # -- rasterising obstacles --------------------------------------------------------------------
+
+    def _blocked(self, items: Sequence[Copper], net: str, grow: float) -> np.ndarray:
+        """Boolean [layer, y, x]: nodes where copper of half-width ``grow`` would violate a rule."""
+        out = np.zeros((2, self.ny, self.nx), dtype=bool)
+        x0, y0, x1, y1 = self.bounds
+        edge = self.edge_clearance + grow + GRID_MARGIN_MM
+        ex = (self.xs < x0 + edge) | (self.xs > x1 - edge)
+        ey = (self.ys < y0 + edge) | (self.ys > y1 - edge)
+        out[:, ey, :] = True
+        out[:, :, ex] = True
+        for it in items:
+            if it.net == net and not it.hole:
+                continue
+            need = (self.hole_clearance if it.hole else self.clearance) + grow + GRID_MARGIN_MM
+            bx0, by0, bx1, by1 = it.bbox()
+            i0 = max(0, int(math.floor((bx0 - need - x0) / self.step)))
+            i1 = min(self.nx, int(math.ceil((bx1 + need - x0) / self.step)) + 1)
+            j0 = max(0, int(math.floor((by0 - need - y0) / self.step)))
+            j1 = min(self.ny, int(math.ceil((by1 + need - y0) / self.step)) + 1)
+            if i0 >= i1 or j0 >= j1:
+                continue
+            X, Y = np.meshgrid(self.xs[i0:i1], self.ys[j0:j1])
+            d = _field(it, X, Y)
+            mask = d < need
+            for li, layer in enumerate(LAYERS):
+                if it.hole or layer in it.layers or "*.Cu" in it.layers:
+                    out[li, j0:j1, i0:i1] |= mask
+        return out
+
+    def _inside(self, item: Copper, layer_index: int) -> list[int]:
+        """Grid nodes (flat ids) inside a pad's copper on one layer."""
+        bx0, by0, bx1, by1 = item.bbox()
+        x0, y0 = self.bounds[0], self.bounds[1]
+        ids = []
+        for j in range(max(0, int(math.ceil((by0 - y0) / self.step))), min(self.ny, int(math.floor((by1 - y0) / self.step)) + 1)):
+            for i in range(max(0, int(math.ceil((bx0 - x0) / self.step))), min(self.nx, int(math.floor((bx1 - x0) / self.step)) + 1)):
+                if _field(item, np.array(self.xs[i]), np.array(self.ys[j])) <= 1e-9:
+                    ids.append((layer_index * self.ny + j) * self.nx + i)
+        return ids
+
+    # -- search -----------------------------------------------------------------------------------
+
+    def route(self, items: list[Copper], net: str, source: Copper, target: Copper) -> list[Copper]:
+        """Tracks and vias joining ``source`` to ``target`` (pads of ``net``) around ``items``.
+
+        The search first stays within a window around the two pads (fast), then tries the whole board.
+        """
+        try:
+            return self._route(items, net, source, target, window_mm=4.0)
+        except RouteError:
+            return self._route(items, net, source, target, window_mm=None)
+
+    def _route(self, items: list[Copper], net: str, source: Copper, target: Copper, window_mm: float | None) -> list[Copper]:
+        track = self._blocked(items, net, self.width / 2).ravel()
+        via = self._blocked(items, net, self.via_diameter / 2)
+        # No vias inside any pad (solder would wick into them).
+        pads = [it for it in items if it.kind == "rect"]
+        for it in pads:
+            grow = self.via_diameter / 2 + self.clearance
+            padded = Copper.rect(it.a[0] - grow, it.a[1] - grow, it.b[0] + grow, it.b[1] + grow, LAYERS, None)
+            for li in range(2):
+                for n in self._inside(padded, li):
+                    via.ravel()[n] = True
+        via_ok = ~(via[0] | via[1])
+        plane = self.nx * self.ny
+        starts = [n for li, layer in enumerate(LAYERS) if layer in source.layers for n in self._inside(source, li)]
+        goals = {n for li, layer in enumerate(LAYERS) if layer in target.layers for n in self._inside(target, li)}
+        starts = [n for n in starts if not track[n]] or starts
+        if not starts or not goals:
+            raise RouteError(f"net {net}: pad {source.owner} or {target.owner} has no grid node inside it")
+        tx0, ty0, tx1, ty1 = target.bbox()
+        gx0 = (tx0 - self.bounds[0]) / self.step
+        gx1 = (tx1 - self.bounds[0]) / self.step
+        gy0 = (ty0 - self.bounds[1]) / self.step
+        gy1 = (ty1 - self.bounds[1]) / self.step
+
+        if window_mm is None:
+            wi0, wj0, wi1, wj1 = 0, 0, self.nx - 1, self.ny - 1
+        else:
+            sx0, sy0, sx1, sy1 = source.bbox()
+            m = window_mm
+            wi0 = max(0, int((min(sx0, tx0) - m - self.bounds[0]) / self.step))
+            wi1 = min(self.nx - 1, int((max(sx1, tx1) + m - self.bounds[0]) / self.step) + 1)
+            wj0 = max(0, int((min(sy0, ty0) - m - self.bounds[1]) / self.step))
+            wj1 = min(self.ny - 1, int((max(sy1, ty1) + m - self.bounds[1]) / self.step) + 1)
+
+        def h(n: int) -> float:
+            r = n % plane
+            i, j = r % self.nx, r // self.nx
+            dx = max(gx0 - i, 0.0, i - gx1)
+            dy = max(gy0 - j, 0.0, j - gy1)
+            return max(dx, dy) + (math.sqrt(2) - 1) * min(dx, dy)
+
+        # State = node * 9 + direction (8: none yet / just changed layer).
+        best: dict[int, float] = {}
+        came: dict[int, int] = {}
+        heap: list[tuple[float, float, int]] = []
+        for n in sorted(starts):
+            s = n * 9 + 8
+            best[s] = 0.0
+            heapq.heappush(heap, (h(n), 0.0, s))
+        end = -1
+        while heap:
+            f, g, s = heapq.heappop(heap)
+            if g > best.get(s, math.inf):
+                continue
+            n, d = divmod(s, 9)
+            if n in goals:
+                end = s
+                break
+            r = n % plane
+            layer = n // plane
+            i, j = r % self.nx, r // self.nx
+            layer_cost = self.bottom_cost if layer == 1 else 1.0
+            for k, (di, dj) in enumerate(_DIRS):
+                ii, jj = i + di, j + dj
+                if not (wi0 <= ii <= wi1 and wj0 <= jj <= wj1):
+                    continue
+                m = layer * plane + jj * self.nx + ii
+                if track[m]:
+                    continue
+                cost = (math.sqrt(2) if di and dj else 1.0) * layer_cost
+                if d != 8 and d != k:
+                    cost += self.bend_cost
+                ng = g + cost
+                ns = m * 9 + k
+                if ng < best.get(ns, math.inf):
+                    best[ns] = ng
+                    came[ns] = s
+                    heapq.heappush(heap, (ng + h(m), ng, ns))
+            if via_ok[j, i]:
+                m = (1 - layer) * plane + r
+                ns = m * 9 + 8
+                ng = g + self.via_cost
+                if not track[m] and ng < best.get(ns, math.inf):
+                    best[ns] = ng
+                    came[ns] = s
+                    heapq.heappush(heap, (ng + h(m), ng, ns))
+        if end < 0:
+            raise RouteError(f"net {net}: no path from {source.owner} to {target.owner} with these rules")
+        path = [end // 9]
+        s = end
+        while s in came:
+            s = came[s]
+            path.append(s // 9)
+        path.reverse()
+        return self._to_copper(path, net)
+
+    def _to_copper(self, path: list[int], net: str) -> list[Copper]:
+        plane = self.nx * self.ny
+        out: list[Copper] = []
+        run: list[tuple[int, int]] = []
+        layer = path[0] // plane
+
+        def flush() -> None:
+            if len(run) < 2:
+                return
+            # Merge collinear steps into single segments.
+            pts = [run[0]]
+            for k in range(1, len(run) - 1):
+                a, b, c = pts[-1], run[k], run[k + 1]
+                if (b[0] - a[0]) * (c[1] - b[1]) != (b[1] - a[1]) * (c[0] - b[0]):
+                    pts.append(b)
+            pts.append(run[-1])
+            for (i0, j0), (i1, j1) in zip(pts, pts[1:]):
+                (xa, ya), (xb, yb) = self.node_xy(i0, j0), self.node_xy(i1, j1)
+                out.append(Copper.seg(xa, ya, xb, yb, self.width, LAYERS[layer], net))
+
+        for n in path:
+            nl, r = divmod(n, plane)
+            ij = (r % self.nx, r // self.nx)
+            if nl != layer:
+                flush()
+                x, y = self.node_xy(*ij)
+                out.append(Copper.point(x, y, self.via_diameter / 2, LAYERS, net, "via"))
+                run = []
+                layer = nl
+            run.append(ij)
+        flush()
+        return out
+
+
+def _field(it: Copper, X: np.ndarray, Y: np.ndarray) -> np.ndarray:
+    """Distance from grid points to an item's edge (negative inside), vectorised."""
+    if it.kind == "rect":
+        dx = np.maximum(np.maximum(it.a[0] - X, 0.0), X - it.b[0])
+        dy = np.maximum(np.maximum(it.a[1] - Y, 0.0), Y - it.b[1])
+        inside = (X >= it.a[0]) & (X <= it.b[0]) & (Y >= it.a[1]) & (Y <= it.b[1])
+        return np.where(inside, -1e-3, np.hypot(dx, dy))
+    ax, ay = it.a
+    bx, by = it.b
+    vx, vy = bx - ax, by - ay
+    L2 = vx * vx + vy * vy
+    t = np.zeros_like(X, dtype=float) if L2 == 0 else np.clip(((X - ax) * vx + (Y - ay) * vy) / L2, 0.0, 1.0)
+    return np.hypot(X - ax - t * vx, Y - ay - t * vy) - it.r
