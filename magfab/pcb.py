@@ -24,7 +24,7 @@ from .design import Design
 from .errors import Finding, Severity, SpecError
 from .footprint import Footprint, Pad, chip_footprint, connector_footprint, hole_footprint, qfn_footprint
 from .recipes import catalogue
-from .route import LAYERS, Copper, Router, RouteError, clearance_violations, connected
+from .route import HOLE_TO_HOLE_MM, LAYERS, Copper, Router, RouteError, clearance_violations, connected, distance
 from .sexpr import Sym, at, render, xy
 
 __all__ = ["Board", "Placed", "board", "findings", "files", "ORIGIN", "LIBRARY"]
@@ -189,6 +189,9 @@ def _place(design: Design) -> tuple[list[Placed], tuple[float, float, float, flo
         body = cand.box(jst.body)
         if body[0] < outline[0] or body[2] > outline[2]:
             continue
+        e = pcb.edge_clearance_mm
+        if any(c.bbox()[0] < outline[0] + e or c.bbox()[2] > outline[2] - e for c in cand.copper()):
+            continue
         if not _disc_clear(cy, ox, oy, keep_r):
             continue
         if any(_overlap(cy, h.box(h.footprint.courtyard)) for h in placed[1:]):
@@ -242,16 +245,23 @@ def _mst(pads: list[Copper]) -> list[tuple[Copper, Copper]]:
     return edges
 
 
+RIP_UP_ROUNDS = 6
 FANOUT_MM = 0.5  # straight escape beyond a QFN land's outer end, so no route can box a pin in
 
 
-def _fanout(u1: Placed, width: float) -> tuple[list[Copper], list[Copper]]:
-    """Escape stubs for the chip: every routed pin gets a straight stub outwards; ground pins also
-    run inwards onto the exposed pad. Returns (stub tracks, terminals at the outer stub ends)."""
+def _fanout(u1: Placed, width: float, clearance: float, via_diameter: float) -> tuple[list[Copper], list[Copper]]:
+    """Escape stubs for the chip, so no route can box a pin in: every routed pin gets a straight stub
+    outwards; ground pins also run from their inner end diagonally onto the exposed pad. Where such an
+    inner stub would come too close to a neighbouring pin of another net (a corner pin next to a
+    supply-strapped address pin, or a wide clearance rule), the pin fans out like the others and the
+    exposed pad is tied to ground by a via at its centre instead. Returns (stubs and vias, terminals)."""
     pads = {c.owner.split(".")[1]: c for c in u1.copper()}
     ep = max(pads, key=lambda n: int(n))
     epc = pads[ep]
+    others = [c for c in pads.values() if c.net != GROUND]
     stubs, terminals = [], []
+    ep_tied = False
+    h = width / 2
     for number, c in sorted(pads.items(), key=lambda kv: int(kv[0])):
         if number == ep or c.net not in NETS_ROUTED:
             continue
@@ -260,20 +270,34 @@ def _fanout(u1: Placed, width: float) -> tuple[list[Copper], list[Copper]]:
         if horizontal:
             sgn = 1 if cx > u1.x else -1
             outer = (round((c.b[0] if sgn > 0 else c.a[0]) + sgn * FANOUT_MM, 6), cy)
-            inner = (round((epc.b[0] - 0.1) if sgn > 0 else (epc.a[0] + 0.1), 6), cy)
+            start = (round(c.a[0] + h if sgn > 0 else c.b[0] - h, 6), cy)
+            inner = (round(start[0] - sgn * (start[0] - (epc.b[0] if sgn > 0 else epc.a[0]) + 0.3), 6),
+                     round(u1.y + (cy - u1.y) * 0.6, 6))
         else:
             sgn = 1 if cy > u1.y else -1
             outer = (cx, round((c.b[1] if sgn > 0 else c.a[1]) + sgn * FANOUT_MM, 6))
-            inner = (cx, round((epc.b[1] - 0.1) if sgn > 0 else (epc.a[1] + 0.1), 6))
-        pin = u1.footprint.name
+            start = (cx, round(c.a[1] + h if sgn > 0 else c.b[1] - h, 6))
+            inner = (round(u1.x + (cx - u1.x) * 0.6, 6),
+                     round(start[1] - sgn * (start[1] - (epc.b[1] if sgn > 0 else epc.a[1]) + 0.3), 6))
+        fan_out = c.net != GROUND or number == _vss(u1)
         if c.net == GROUND:
-            stubs.append(Copper.seg(cx, cy, *inner, width, "F.Cu", c.net, f"U1.{number} stub"))
-        if c.net != GROUND or number == _vss(u1):
+            stub = Copper.seg(*start, *inner, width, "F.Cu", c.net, f"U1.{number} stub")
+            if all(distance(stub, o) >= clearance for o in others):
+                stubs.append(stub)
+                ep_tied = True
+            else:
+                fan_out = True
+        if fan_out:
             stubs.append(Copper.seg(cx, cy, *outer, width, "F.Cu", c.net, f"U1.{number} stub"))
-            h = width / 2
             terminals.append(Copper.rect(outer[0] - h, outer[1] - h, outer[0] + h, outer[1] + h, ["F.Cu"], c.net,
                                          f"U1.{number}"))
-        del pin
+    if not ep_tied:
+        ex, ey = (epc.a[0] + epc.b[0]) / 2, (epc.a[1] + epc.b[1]) / 2
+        stubs.append(Copper.point(ex, ey, via_diameter / 2, LAYERS, GROUND, "U1.EP via"))
+        # Escape on the bottom towards -x, between the decoupling capacitors above and below the chip.
+        tx = round(ex - (u1.footprint.courtyard[2] - u1.footprint.courtyard[0]) / 2 - FANOUT_MM, 6)
+        stubs.append(Copper.seg(ex, ey, tx, ey, width, "B.Cu", GROUND, "U1.EP stub"))
+        terminals.append(Copper.rect(tx - h, ey - h, tx + h, ey + h, ["B.Cu"], GROUND, "U1.EP"))
     return stubs, terminals
 
 
@@ -281,42 +305,50 @@ def _vss(u1: Placed) -> str:
     return next(n for n, net in sorted(u1.nets.items(), key=lambda kv: int(kv[0])) if net == GROUND)
 
 
-def _route_all(router: Router, parts: list[Placed], order: tuple[str, ...], width: float):
+def _route_all(router: Router, parts: list[Placed], order: tuple[str, ...]):
+    """Route every connection in turn. A connection that fails moves to the front and the board is
+    routed again from scratch (at most ``RIP_UP_ROUNDS`` times): a plain sequential router with
+    rip-up, deterministic because the order of retries depends only on the board."""
     items = [c for p in parts for c in p.copper()]
-    stubs, terminals = _fanout(parts[0], width)
-    tracks: list[Copper] = list(stubs)
-    unrouted = []
+    stubs, terminals = _fanout(parts[0], router.width, router.clearance, router.via_diameter)
+    connections = []
     for net in order:
         ends = [c for c in items if c.net == net and c.kind == "rect" and not c.owner.startswith("U1.")]
         ends += [t for t in terminals if t.net == net]
         ends.sort(key=lambda c: (not c.owner.startswith("U1"), c.owner))
-        for new, old in _mst(ends):
-            if _touching(new, old):
-                continue
+        connections += [(net, new, old) for new, old in _mst(ends) if not _touching(new, old)]
+    best: tuple[list[Copper], list[str]] | None = None
+    for k in range(RIP_UP_ROUNDS):
+        # Each round also shifts the cost of the bottom layer, so a retry is not the same search again.
+        router.bottom_cost = (1.3, 1.0, 2.0)[k % 3]
+        tracks: list[Copper] = list(stubs)
+        failed = []
+        for conn in connections:
+            net, new, old = conn
             try:
                 tracks.extend(router.route(items + tracks, net, new, old))
             except RouteError as exc:
-                unrouted.append(str(exc))
-    return tracks, unrouted
+                failed.append((conn, str(exc)))
+        if best is None or len(failed) < len(best[1]):
+            best = (tracks, [msg for _, msg in failed])
+        if not failed:
+            break
+        first = [c for c, _ in failed]
+        connections = first + [c for c in connections if c not in first]
+    assert best is not None
+    return best
 
 
 def board(design: Design) -> Board:
     """Place, wire and route the breakout board for a design.
 
-    Net orders are tried in a fixed sequence until one routes completely (the first complete one wins),
-    so the result is deterministic.
+    Connections are routed fine-pitch signals first; see :func:`_route_all` for the rip-up rounds.
     """
     pcb = design.spec.pcb
     parts, outline, circle = _place(design)
     router = Router(outline, ROUTE_GRID_MM, pcb.track_width_mm, pcb.via_diameter_mm, pcb.via_drill_mm,
                     pcb.clearance_mm, HOLE_CLEARANCE_MM, pcb.edge_clearance_mm)
-    orders = [NETS_ROUTED, ("SDA", "SCL", "+3V3", "GND"), ("+3V3", "SCL", "SDA", "GND"), ("GND", "+3V3", "SDA", "SCL")]
-    attempts = [_route_all(router, parts, order, pcb.track_width_mm) for order in orders[:1]]
-    for order in orders[1:]:
-        if not attempts[-1][1]:
-            break
-        attempts.append(_route_all(router, parts, order, pcb.track_width_mm))
-    tracks, unrouted = min(attempts, key=lambda a: len(a[1]))
+    tracks, unrouted = _route_all(router, parts, NETS_ROUTED)
     rules = {"clearance": pcb.clearance_mm, "track_width": pcb.track_width_mm, "via_diameter": pcb.via_diameter_mm,
              "via_drill": pcb.via_drill_mm, "edge_clearance": pcb.edge_clearance_mm, "hole_clearance": HOLE_CLEARANCE_MM}
     return Board(design.spec.name, outline, tuple(parts), tuple(tracks), circle, _label(design), rules,
@@ -324,8 +356,6 @@ def board(design: Design) -> Board:
 
 
 def _touching(a: Copper, b: Copper) -> bool:
-    from .route import distance
-
     return bool(a.layers & b.layers) and distance(a, b) <= 0.0
 
 
@@ -345,6 +375,14 @@ def findings(b: Board) -> list[Finding]:
         err("pcb-clearance", f"{p.owner} ({p.net}) and {q.owner} ({q.net}) are {d:.3f} mm apart; need {need:g} mm")
     if len(bad) > 5:
         err("pcb-clearance", f"... and {len(bad) - 5} more clearance violations")
+    drills = [(c.a, c.r if c.hole else b.rules["via_drill"] / 2, c.owner) for c in items
+              if c.kind == "point" and (c.hole or len(c.layers) == 2)]
+    for i, (pa, ra, oa) in enumerate(drills):
+        for pb, rb, ob in drills[i + 1:]:
+            gap = math.dist(pa, pb) - ra - rb
+            if gap < HOLE_TO_HOLE_MM - 1e-6:
+                err("pcb-hole-spacing", f"drilled holes of {oa} at {pa} and {ob} at {pb} are {gap:.3f} mm apart; "
+                                        f"need {HOLE_TO_HOLE_MM:g} mm")
     pads = [c for c in items if c.kind == "rect"]
     for i, p in enumerate(pads):
         for q in pads[i + 1:]:
@@ -390,7 +428,7 @@ def findings(b: Board) -> list[Finding]:
 
 def distance_margin(items: list[Copper], rules: Mapping[str, float]) -> list[float]:
     """Smallest clearance margin (distance - rule) per copper pair that is within 1 mm, for the report."""
-    from .route import _near, distance
+    from .route import _near
 
     out = []
     for i, p in enumerate(items):
@@ -487,7 +525,7 @@ def _project_text(b: Board) -> str:
             "rules": {"min_clearance": r["clearance"], "min_track_width": r["track_width"],
                       "min_via_diameter": r["via_diameter"], "min_through_hole_diameter": r["via_drill"],
                       "min_hole_clearance": r["hole_clearance"], "min_copper_edge_clearance": r["edge_clearance"],
-                      "min_hole_to_hole": 0.25, "min_via_annular_width": 0.1, "solder_mask_clearance": 0.0,
+                      "min_hole_to_hole": HOLE_TO_HOLE_MM, "min_via_annular_width": 0.1, "solder_mask_clearance": 0.0,
                       "min_silk_clearance": 0.0},
             "track_widths": [], "via_dimensions": []}},
         "meta": {"filename": f"{b.name}.kicad_pro", "version": 1},

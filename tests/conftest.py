@@ -11,14 +11,38 @@ import pytest
 from magfab import build, load_spec
 
 
+def _missing(reason: str):
+    if os.environ.get("MAGFAB_REQUIRE_TOOLS") == "1":
+        pytest.fail(f"MAGFAB_REQUIRE_TOOLS=1 but {reason}")
+    pytest.skip(reason)
+
+
 def require_tool(name: str) -> str:
     path = shutil.which(name)
     if path:
         return path
-    reason = f"{name} is not installed (Debian package; .ci/run installs it)"
-    if os.environ.get("MAGFAB_REQUIRE_TOOLS") == "1":
-        pytest.fail(f"MAGFAB_REQUIRE_TOOLS=1 but {reason}")
-    pytest.skip(reason)
+    _missing(f"{name} is not installed (Debian package; .ci/run installs it)")
+
+
+def require_kicad() -> str:
+    """The interpreter that imports KiCad's pcbnew (skip, or fail under MAGFAB_REQUIRE_TOOLS=1)."""
+    from magfab.kicad import kicad_python
+
+    exe = kicad_python()
+    if exe:
+        return exe
+    _missing("KiCad's pcbnew Python module is not available (Debian package 'kicad'; .ci/run installs it)")
+
+
+def require_kicad_library(relative: str) -> str:
+    """A file of KiCad's footprint library (Debian package 'kicad-footprints')."""
+    path = os.path.join(KICAD_FOOTPRINTS, relative)
+    if os.path.exists(path):
+        return path
+    _missing(f"KiCad's footprint library is not installed (Debian package 'kicad-footprints'): no {relative}")
+
+
+KICAD_FOOTPRINTS = os.environ.get("KICAD6_FOOTPRINT_DIR", "/usr/share/kicad/footprints")
 
 
 @pytest.fixture(scope="session")

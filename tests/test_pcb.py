@@ -1,0 +1,230 @@
+"""The breakout board: our own checks (and that they catch what they claim), the fit with the pad, and
+KiCad itself loading the board, running its DRC and plotting Gerbers."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import re
+
+import pytest
+
+from conftest import require_kicad
+from magfab import SpecError, derive, load_spec, parse_spec
+from magfab import pcb
+from magfab.errors import Severity
+from magfab.kicad import run_tool
+from magfab.route import Copper
+
+
+@pytest.fixture(scope="module")
+def design():
+    return derive(load_spec(None))
+
+
+@pytest.fixture(scope="module")
+def board(design):
+    return pcb.board(design)
+
+
+def _codes(found):
+    return {f.code for f in found if f.severity is Severity.ERROR}
+
+
+def test_default_board_passes_our_checks(board):
+    found = pcb.findings(board)
+    assert not _codes(found), found
+    assert any(f.code == "pcb-ok" for f in found)
+    assert not board.unrouted
+
+
+def test_chip_sits_under_the_pad_and_holes_match_it(board, design):
+    u1 = next(p for p in board.parts if p.ref == "U1")
+    cx, cy, r = board.pad_circle
+    assert (u1.x, u1.y) == (cx, cy) == pcb.ORIGIN
+    assert r == design.pad_radius_mm
+    x0, y0, x1, y1 = board.outline
+    assert ((x0 + x1) / 2, (y0 + y1) / 2) == (cx, cy)
+    holes = {(round(p.x - cx, 6), round(cy - p.y, 6), p.footprint.pads[0].drill)
+             for p in board.parts if p.ref in {"H1", "H2"}}
+    assert holes == set(design.alignment_holes)
+
+
+def test_top_side_keeps_clear_of_the_pad(board):
+    cx, cy, r = board.pad_circle
+    for p in board.parts:
+        if p.bottom or p.ref in {"U1", "H1", "H2"}:
+            continue
+        box = p.box(p.footprint.courtyard)
+        dx = max(box[0] - cx, 0.0, cx - box[2])
+        dy = max(box[1] - cy, 0.0, cy - box[3])
+        assert (dx * dx + dy * dy) ** 0.5 >= r, p.ref
+
+
+def test_nets_follow_the_chip_recipe(board):
+    u1 = next(p for p in board.parts if p.ref == "U1")
+    assert u1.nets["15"] == u1.nets["8"] == u1.nets["2"] == "+3V3"  # VDD, VDDIO, CS high for I2C
+    assert u1.nets["13"] == u1.nets["17"] == "GND"
+    assert (u1.nets["3"], u1.nets["5"]) == ("SCL", "SDA")
+    assert u1.nets["4"].startswith("unconnected-(U1-NC")
+    j1 = next(p for p in board.parts if p.ref == "J1")
+    assert [j1.nets[n] for n in "1234"] == ["GND", "+3V3", "SDA", "SCL"]  # Qwiic order
+    caps = [p for p in board.parts if p.ref.startswith("C")]
+    assert len(caps) == 2 and all(p.bottom and p.value == "100nF" for p in caps)
+
+
+@pytest.mark.parametrize("address, a1, a0", [(0x0C, "GND", "GND"), (0x0D, "GND", "+3V3"), (0x0E, "+3V3", "GND"),
+                                             (0x0F, "+3V3", "+3V3")])
+def test_address_straps(address, a1, a0):
+    d = derive(parse_spec(f"[sensor]\ni2c_address = {address}\n"))
+    parts, _, _ = pcb._place(d)
+    u1 = parts[0]
+    assert (u1.nets["11"], u1.nets["12"]) == (a1, a0)
+    assert pcb._label(d)[1] == f"MLX90393 I2C 0x{address:02X}"
+
+
+def test_bad_addresses_and_option_codes_name_the_key():
+    with pytest.raises(SpecError) as e:
+        derive(parse_spec("[sensor]\ni2c_address = 0x20\n"))
+    assert e.value.key == "sensor.i2c_address" and "0x0C" in str(e.value)
+    with pytest.raises(SpecError) as e:
+        derive(parse_spec('[sensor]\noption_code = "099"\n'))
+    assert e.value.key == "sensor.option_code"
+    assert derive(parse_spec('[sensor]\noption_code = "012"\ni2c_address = 0x13\n')).address_straps == (1, 1)
+
+
+def test_too_small_board_is_a_spec_error():
+    with pytest.raises(SpecError) as e:
+        pcb.board(derive(parse_spec("[pcb]\nwidth_mm = 18\nheight_mm = 18\n")))
+    assert e.value.key in {"pcb.width_mm", "pcb.height_mm"}
+
+
+# -- the checks catch what they claim ---------------------------------------------------------------
+
+
+def test_check_catches_a_clearance_violation(board):
+    gnd = next(c for c in board.copper() if c.net == "GND" and c.owner == "U1.13")
+    x = (gnd.a[0] + gnd.b[0]) / 2
+    bad = Copper.seg(x, gnd.a[1] - 0.2, x, gnd.a[1] - 1.0, 0.25, "F.Cu", "SDA")
+    assert "pcb-clearance" in _codes(pcb.findings(dataclasses.replace(board, tracks=board.tracks + (bad,))))
+
+
+def test_check_catches_a_missing_track(board):
+    sda = [t for t in board.tracks if t.net == "SDA" and t.kind == "seg" and "stub" not in t.owner]
+    tracks = tuple(t for t in board.tracks if t is not sda[len(sda) // 2])
+    assert "pcb-unconnected" in _codes(pcb.findings(dataclasses.replace(board, tracks=tracks)))
+
+
+def test_check_catches_a_part_under_the_pad(board):
+    parts = tuple(dataclasses.replace(p, y=pcb.ORIGIN[1] + 6.0) if p.ref == "J1" else p for p in board.parts)
+    codes = _codes(pcb.findings(dataclasses.replace(board, parts=parts)))
+    assert "pcb-pad-keepout" in codes
+
+
+def test_check_catches_overlapping_courtyards(board):
+    c1 = next(p for p in board.parts if p.ref == "C1")
+    parts = tuple(dataclasses.replace(p, y=c1.y + 0.5) if p.ref == "C2" else p for p in board.parts)
+    codes = _codes(pcb.findings(dataclasses.replace(board, parts=parts)))
+    assert {"pcb-courtyard", "pcb-pad-overlap"} <= codes
+
+
+def test_board_files_are_deterministic(board, design):
+    again = pcb.files(pcb.board(design))
+    assert again == pcb.files(board)
+    text = again["magone.kicad_pcb"].decode()
+    assert "tstamp" not in text and "(version 20211014)" in text
+
+
+# -- KiCad itself -----------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def written(board, tmp_path_factory):
+    root = tmp_path_factory.mktemp("pcb")
+    for rel, data in pcb.files(board).items():
+        (root / rel).parent.mkdir(parents=True, exist_ok=True)
+        (root / rel).write_bytes(data)
+    return root
+
+
+def test_kicad_loads_the_board_with_our_pads_and_nets(board, written):
+    require_kicad()
+    info = json.loads(run_tool("inspect", str(written / "magone.kicad_pcb")))
+    assert info["clearance"] == 0.15  # the design rules of our .kicad_pro were read
+    assert set(info["nets"]) == set(board.nets())
+    ours = {p.ref: p for p in board.parts}
+    assert {f["ref"] for f in info["footprints"]} == set(ours)
+    for f in info["footprints"]:
+        part = ours[f["ref"]]
+        assert (f["x"], f["y"], f["bottom"]) == (part.x, part.y, part.bottom)
+        copper = [c for c in part.copper() if not c.hole]
+        kicad = [p for p in f["pads"] if p["number"] or p["net"]]
+        if part.ref == "U1":
+            assert len(f["pads"]) == 21 and len(kicad) == 17  # 16 lands + exposed pad, 4 paste apertures
+        for c in copper:
+            number = c.owner.split(".", 1)[1]
+            cx, cy = (c.a[0] + c.b[0]) / 2, (c.a[1] + c.b[1]) / 2
+            match = [p for p in kicad if p["number"] == number and abs(p["x"] - cx) < 1e-4 and abs(p["y"] - cy) < 1e-4]
+            assert match, (part.ref, number)
+            p = match[0]
+            size = sorted((p["w"], p["h"]))
+            assert size == pytest.approx(sorted((c.b[0] - c.a[0], c.b[1] - c.a[1])), abs=1e-4)
+            assert p["net"] == c.net
+    assert info["tracks"] == sum(1 for t in board.tracks if t.kind == "seg")
+    assert info["vias"] == sum(1 for t in board.tracks if t.kind == "point")
+    assert {(z["net"], z["layer"]) for z in info["zones"]} == {("GND", "F.Cu"), ("GND", "B.Cu")}
+
+
+def _drc(path, tmp_path):
+    return json.loads(run_tool("drc", str(path), str(tmp_path / "drc.rpt")))["counts"]
+
+
+def test_kicad_drc_finds_nothing(written, tmp_path):
+    require_kicad()
+    counts = _drc(written / "magone.kicad_pcb", tmp_path)
+    report = (tmp_path / "drc.rpt").read_text()
+    assert counts["violations"] == 0, report
+    assert counts["unconnected pads"] == 0, report
+
+
+def test_kicad_drc_is_not_blind(written, tmp_path):
+    """Control: the same board under a 0.4 mm clearance rule must show violations."""
+    require_kicad()
+    for f in written.iterdir():
+        if f.is_file():
+            (tmp_path / f.name).write_bytes(f.read_bytes())
+    pro = json.loads((tmp_path / "magone.kicad_pro").read_text())
+    pro["net_settings"]["classes"][0]["clearance"] = 0.4
+    (tmp_path / "magone.kicad_pro").write_text(json.dumps(pro))
+    assert _drc(tmp_path / "magone.kicad_pcb", tmp_path)["violations"] > 0
+
+
+def test_variant_board_passes_kicad_drc(tmp_path):
+    require_kicad()
+    spec = parse_spec('[sensor]\ni2c_address = 0x0F\n[pcb]\npullups = false\ndensity = "most"\n'
+                      "width_mm = 34\nheight_mm = 31\nclearance_mm = 0.2\n", "variant")
+    b = pcb.board(derive(spec))
+    assert not _codes(pcb.findings(b))
+    for rel, data in pcb.files(b).items():
+        (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / rel).write_bytes(data)
+    counts = _drc(tmp_path / "variant.kicad_pcb", tmp_path)
+    assert counts["violations"] == 0 and counts["unconnected pads"] == 0, (tmp_path / "drc.rpt").read_text()
+
+
+def test_build_writes_library_board_and_gerbers(default_build):
+    require_kicad()
+    out = default_build.out_dir / "pcb"
+    assert (out / "magfab.pretty" / "QFN-16-1EP_3x3mm_P0.5mm_EP1.7x1.7mm.kicad_mod").exists()
+    assert (out / "magone.kicad_pcb").exists() and (out / "magone.kicad_pro").exists()
+    gerbers = sorted(p.name for p in (out / "gerbers").iterdir())
+    layers = ["B_Cu", "B_Mask", "B_Paste", "B_Silkscreen", "Edge_Cuts", "F_Cu", "F_Mask", "F_Paste", "F_Silkscreen"]
+    assert gerbers == sorted([f"magone-{x}.gbr" for x in layers] + ["magone-NPTH.drl", "magone-PTH.drl"])
+    top = (out / "gerbers" / "magone-F_Cu.gbr").read_text()
+    assert "%TF.FileFunction,Copper,L1,Top*%" in top and top.rstrip().endswith("M02*")
+    assert "2000-01-01" in top  # creation date pinned for reproducible builds
+    npth = (out / "gerbers" / "magone-NPTH.drl").read_text()
+    tools = {round(float(d), 3) for d in re.findall(r"^T\d+C([0-9.]+)", npth, re.M)}
+    assert tools == {1.0, 1.5, 2.2}  # the pad's two dowel holes and the M2 holes
+    manifest = json.loads((default_build.out_dir / "manifest.json").read_text())
+    assert manifest["models"]["gerbers"].startswith("KiCad 6")
