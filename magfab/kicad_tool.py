@@ -95,7 +95,8 @@ def drc(board_path, report):
     text = open(report, encoding="utf-8").read()
     counts = {}
     for key in ("violations", "unconnected pads", "footprint errors"):
-        m = re.search(r"\*\* Found (\d+) DRC " + key if key == "violations" else r"\*\* Found (\d+) " + key, text)
+        pattern = r"\*\* Found (\d+) DRC " + key if key == "violations" else r"\*\* Found (\d+) " + key
+        m = re.search(pattern, text, re.IGNORECASE)
         counts[key] = int(m.group(1)) if m else None
     print(json.dumps({"ok": bool(ok), "counts": counts}))
 

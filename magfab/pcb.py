@@ -202,7 +202,7 @@ def _place(design: Design) -> tuple[list[Placed], tuple[float, float, float, flo
         raise SpecError("pcb.width_mm", pcb.width_mm,
                         f"leaves no room for the Qwiic connector on the bottom edge outside the mounting pad's "
                         f"{2 * keep_r:g} mm keep-out and clear of the screw holes",
-                        "make the board larger, or set pcb.mounting_hole_diameter_mm = 0")
+                        "make the board larger (usually pcb.height_mm: 30 x 28 fits the default pad, 28 x 28 does not)")
     placed.append(j1)
 
     # Decoupling right under the chip (bottom side): C1 by VDD (top row), C2 by VDDIO (bottom row).
