@@ -33,6 +33,9 @@ ORIGIN = (100.0, 100.0)  # chip centre on the KiCad sheet, mm
 LIBRARY = "magfab"
 ROUTE_GRID_MM = 0.125  # divides the 0.5 mm pitch and the 0.25 mm pad offsets of the QFN
 PAD_KEEPOUT_MARGIN_MM = 0.25  # beyond the pad's radius, no top-side part may stand
+SILK_STROKE_MM = 0.15  # the usual fab minimum silk line width
+SILK_MIN_TEXT_MM = 0.8  # smallest silk text we write (with a 0.15 mm stroke it stays legible)
+SILK_ADVANCE = 0.9  # assumed glyph advance per mm of text size; KiCad's stroke font measures ~0.77
 HOLE_CLEARANCE_MM = 0.25  # copper to a drilled hole (KiCad 6 default min_hole_clearance)
 BOARD_VERSION = 20211014
 NETS_ROUTED = ("SCL", "SDA", "+3V3", "GND")  # routing order: the fine-pitch signals first
@@ -98,7 +101,7 @@ class Board:
     parts: tuple[Placed, ...]
     tracks: tuple[Copper, ...]
     pad_circle: tuple[float, float, float]  # the rigid pad's disc: x, y, r
-    label: tuple[str, ...]
+    label: tuple[SilkText, ...]
     rules: Mapping[str, float]
     thickness_mm: float
     address: int
@@ -133,6 +136,13 @@ def _chip_nets(design: Design, fp: Footprint) -> dict[str, str]:
     return nets
 
 
+def _land_gap(part: "Placed") -> float:
+    """The smallest copper gap between two of a part's pads on different nets (mm)."""
+    pads = part.copper()
+    gap = min(distance(a, b) for i, a in enumerate(pads) for b in pads[i + 1:] if a.net != b.net)
+    return math.floor(gap * 1000 + 1e-6) / 1000
+
+
 def _disc_clear(box, cx: float, cy: float, r: float) -> bool:
     """Whether an axis-aligned box lies wholly outside the disc."""
     dx = max(box[0] - cx, 0.0, cx - box[2])
@@ -156,11 +166,16 @@ def _place(design: Design) -> tuple[list[Placed], tuple[float, float, float, flo
                             f"so the {2 * design.pad_radius_mm:g} mm mounting pad fits on the board")
     keep_r = design.pad_radius_mm + PAD_KEEPOUT_MARGIN_MM
     parts = catalogue("parts")
-    qfn = qfn_footprint(design.chip, pcb.density)
+    qfn = qfn_footprint(design.chip, pcb.density, clearance=pcb.clearance_mm)
     cap = chip_footprint(parts["chip-0603"], pcb.density, prefix="C")
     res = chip_footprint(parts["chip-0603"], pcb.density, prefix="R")
     jst = connector_footprint(parts["jst-sh-4"])
     placed = [Placed("U1", f"MLX90393SLW-ABA-{spec.sensor.option_code}", qfn, ox, oy, nets=_chip_nets(design, qfn))]
+    gap = _land_gap(placed[0])
+    if pcb.clearance_mm > gap + 1e-9:
+        raise SpecError("pcb.clearance_mm", pcb.clearance_mm,
+                        f"must be at most {gap:g} mm: the MLX90393's lands at density {pcb.density.value} are "
+                        f"{gap:g} mm apart, so no board could meet a larger clearance")
 
     # The pad's alignment holes (dowel pins), at the pad's own positions.
     for k, (x, y, d) in enumerate(design.alignment_holes):
@@ -207,8 +222,10 @@ def _place(design: Design) -> tuple[list[Placed], tuple[float, float, float, flo
 
     # Decoupling right under the chip (bottom side): C1 by VDD (top row), C2 by VDDIO (bottom row).
     off = round(qfn.body[3] + cap.courtyard[3] + 0.1, 2)
-    placed.append(Placed("C1", "100nF", cap, ox, round(oy - off, 6), 0.0, True, {"1": SUPPLY, "2": GROUND}))
-    placed.append(Placed("C2", "100nF", cap, ox, round(oy + off, 6), 180.0, True, {"1": SUPPLY, "2": GROUND}))
+    # On the bottom side KiCad mirrors a footprint top to bottom, so the angles below put each
+    # reference text on the side away from its neighbour.
+    placed.append(Placed("C1", "100nF", cap, ox, round(oy - off, 6), 180.0, True, {"1": SUPPLY, "2": GROUND}))
+    placed.append(Placed("C2", "100nF", cap, ox, round(oy + off, 6), 0.0, True, {"1": SUPPLY, "2": GROUND}))
     if pcb.pullups:
         ohm = parts["jst-sh-4"]["pullup_ohm"].nominal
         value = f"{ohm / 1000:g}k"
@@ -216,13 +233,74 @@ def _place(design: Design) -> tuple[list[Placed], tuple[float, float, float, flo
         placed.append(Placed("R1", value, res, j1.x, ry, 0.0, True, {"1": SUPPLY, "2": "SDA"}))
         # R2 above R1, far enough that R2's silk reference clears R1's pads.
         pitch = (res.courtyard[3] - res.courtyard[1]) + 1.3
-        placed.append(Placed("R2", value, res, j1.x, round(ry - pitch, 2), 0.0,
+        placed.append(Placed("R2", value, res, j1.x, round(ry - pitch, 2), 180.0,
                              True, {"1": SUPPLY, "2": "SCL"}))
     return placed, outline, (ox, oy, design.pad_radius_mm)
 
 
-def _label(design: Design) -> tuple[str, ...]:
-    return (design.spec.name, f"MLX90393 I2C 0x{design.i2c_address:02X}")
+@dataclass(frozen=True)
+class SilkText:
+    """A line of board silk: centred at (x, y), ``size`` the glyph height (mm)."""
+
+    text: str
+    x: float
+    y: float
+    size: float
+    thickness: float = SILK_STROKE_MM
+
+    def box(self) -> tuple[float, float, float, float]:
+        """Conservative extent: KiCad's stroke font advances about 0.77 x size per glyph (measured on
+        the plotted F.SilkS of the default board); we allow SILK_ADVANCE."""
+        hw = SILK_ADVANCE * self.size * len(self.text) / 2 + self.thickness / 2
+        hh = 0.7 * self.size + self.thickness / 2  # KiCad's box also holds the descenders
+        return (self.x - hw, self.y - hh, self.x + hw, self.y + hh)
+
+
+def _wrap(name: str, chars: int) -> list[str]:
+    """The name on as few lines as fit ``chars`` glyphs, broken after '.', '_' or '-' where possible."""
+    lines: list[str] = []
+    rest = name
+    while len(rest) > chars:
+        cut = max((i + 1 for i, ch in enumerate(rest[:chars]) if ch in "._-" and i + 1 >= chars // 2), default=chars)
+        lines.append(rest[:cut])
+        rest = rest[cut:]
+    return lines + [rest]
+
+
+def _label(design: Design, outline: tuple[float, float, float, float], parts: list[Placed],
+           circle: tuple[float, float, float]) -> tuple[SilkText, ...]:
+    """The design name and I2C address in silk along the top edge, between the screw holes and above
+    the pad's disc: the largest text from 1.0 down to SILK_MIN_TEXT_MM mm that fits, the name wrapped
+    onto at most two lines (cut short with '..' only if even that does not fit)."""
+    x0, y0, x1, _ = outline
+    edge = design.spec.pcb.edge_clearance_mm
+    left, right = x0 + edge, x1 - edge
+    for p in parts:
+        if p.ref in ("H3", "H4"):
+            cy = p.box(p.footprint.courtyard)
+            if cy[2] < (x0 + x1) / 2:
+                left = max(left, cy[2])
+            else:
+                right = min(right, cy[0])
+    width = right - left - 0.2
+    address = f"MLX90393 I2C 0x{design.i2c_address:02X}"
+    name = design.spec.name
+    room = circle[1] - circle[2] - (y0 + edge + 0.5)  # fabs clip silk within ~0.5 mm of the edge
+
+    def height(n: int, size: float) -> float:
+        return (n - 1) * 1.6 * size + 2 * (0.7 * size + SILK_STROKE_MM / 2)
+
+    for size in (1.0, 0.9, 0.8):
+        chars = int(width / (SILK_ADVANCE * size))
+        lines = _wrap(name, chars)
+        if len(lines) <= 2 and len(address) <= chars and height(len(lines) + 1, size) <= room:
+            break
+    else:
+        lines = lines[:2]
+        lines[-1] = lines[-1][: max(chars - 2, 1)] + ".." if len(_wrap(name, chars)) > 2 else lines[-1]
+    top = y0 + edge + 0.5 + 0.7 * size + SILK_STROKE_MM / 2
+    return tuple(SilkText(t, round((x0 + x1) / 2, 6), round(top + k * 1.6 * size, 6), size)
+                 for k, t in enumerate([*lines, address]))
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -245,7 +323,7 @@ def _mst(pads: list[Copper]) -> list[tuple[Copper, Copper]]:
     return edges
 
 
-RIP_UP_ROUNDS = 6
+RIP_UP_LIMIT = 8  # times one connection may be ripped up to make way for another
 FANOUT_MM = 0.5  # straight escape beyond a QFN land's outer end, so no route can box a pin in
 
 
@@ -267,6 +345,9 @@ def _fanout(u1: Placed, width: float, clearance: float, via_diameter: float) -> 
             continue
         cx, cy = (c.a[0] + c.b[0]) / 2, (c.a[1] + c.b[1]) / 2
         horizontal = (c.b[0] - c.a[0]) > (c.b[1] - c.a[1])
+        # Necked down to the land's width: a wider track would break the rule between neighbours.
+        w = min(width, c.b[1] - c.a[1] if horizontal else c.b[0] - c.a[0])
+        h = w / 2
         if horizontal:
             sgn = 1 if cx > u1.x else -1
             outer = (round((c.b[0] if sgn > 0 else c.a[0]) + sgn * FANOUT_MM, 6), cy)
@@ -281,17 +362,20 @@ def _fanout(u1: Placed, width: float, clearance: float, via_diameter: float) -> 
                      round(start[1] - sgn * (start[1] - (epc.b[1] if sgn > 0 else epc.a[1]) + 0.3), 6))
         fan_out = c.net != GROUND or number == _vss(u1)
         if c.net == GROUND:
-            stub = Copper.seg(*start, *inner, width, "F.Cu", c.net, f"U1.{number} stub")
+            stub = Copper.seg(*start, *inner, w, "F.Cu", c.net, f"U1.{number} stub")
             if all(distance(stub, o) >= clearance for o in others):
                 stubs.append(stub)
-                ep_tied = True
+                # Only the fanned-out VSS pin gives the pad's group a way out; a strap pin tied to the
+                # pad alone would leave pad and strap as an island.
+                ep_tied = ep_tied or number == _vss(u1)
             else:
                 fan_out = True
         if fan_out:
-            stubs.append(Copper.seg(cx, cy, *outer, width, "F.Cu", c.net, f"U1.{number} stub"))
+            stubs.append(Copper.seg(cx, cy, *outer, w, "F.Cu", c.net, f"U1.{number} stub"))
             terminals.append(Copper.rect(outer[0] - h, outer[1] - h, outer[0] + h, outer[1] + h, ["F.Cu"], c.net,
                                          f"U1.{number}"))
     if not ep_tied:
+        h = width / 2
         ex, ey = (epc.a[0] + epc.b[0]) / 2, (epc.a[1] + epc.b[1]) / 2
         stubs.append(Copper.point(ex, ey, via_diameter / 2, LAYERS, GROUND, "U1.EP via"))
         # Escape on the bottom towards -x, between the decoupling capacitors above and below the chip.
@@ -305,10 +389,22 @@ def _vss(u1: Placed) -> str:
     return next(n for n, net in sorted(u1.nets.items(), key=lambda kv: int(kv[0])) if net == GROUND)
 
 
+def _clash(a: Copper, b: Copper, clearance: float, via_drill: float) -> bool:
+    """Would two pieces of routed copper of different nets break a rule (clearance, hole spacing)?"""
+    if a.kind == "point" and b.kind == "point" and len(a.layers) == 2 == len(b.layers):
+        if math.dist(a.a, b.a) - via_drill < HOLE_TO_HOLE_MM - 1e-6:
+            return True
+    return bool(a.layers & b.layers) and distance(a, b) < clearance - 1e-6
+
+
 def _route_all(router: Router, parts: list[Placed], order: tuple[str, ...]):
-    """Route every connection in turn. A connection that fails moves to the front and the board is
-    routed again from scratch (at most ``RIP_UP_ROUNDS`` times): a plain sequential router with
-    rip-up, deterministic because the order of retries depends only on the board."""
+    """Route every connection, with targeted rip-up and re-route.
+
+    Connections go in order (fine-pitch signals first). When one finds no path, it is routed again
+    with the other nets' tracks ignored (pads, holes and stubs still count); the connections whose
+    tracks that path would clash with are ripped up and queued again. Each connection may be ripped
+    up at most ``RIP_UP_LIMIT`` times, so the loop ends; the order of events depends only on the board,
+    so the result is deterministic. Returns (tracks, messages for connections left unrouted)."""
     items = [c for p in parts for c in p.copper()]
     stubs, terminals = _fanout(parts[0], router.width, router.clearance, router.via_diameter)
     connections = []
@@ -317,26 +413,40 @@ def _route_all(router: Router, parts: list[Placed], order: tuple[str, ...]):
         ends += [t for t in terminals if t.net == net]
         ends.sort(key=lambda c: (not c.owner.startswith("U1"), c.owner))
         connections += [(net, new, old) for new, old in _mst(ends) if not _touching(new, old)]
-    best: tuple[list[Copper], list[str]] | None = None
-    for k in range(RIP_UP_ROUNDS):
-        # Each round also shifts the cost of the bottom layer, so a retry is not the same search again.
-        router.bottom_cost = (1.3, 1.0, 2.0)[k % 3]
-        tracks: list[Copper] = list(stubs)
-        failed = []
-        for conn in connections:
-            net, new, old = conn
-            try:
-                tracks.extend(router.route(items + tracks, net, new, old))
-            except RouteError as exc:
-                failed.append((conn, str(exc)))
-        if best is None or len(failed) < len(best[1]):
-            best = (tracks, [msg for _, msg in failed])
-        if not failed:
-            break
-        first = [c for c, _ in failed]
-        connections = first + [c for c in connections if c not in first]
-    assert best is not None
-    return best
+    routes: dict[int, list[Copper]] = {}
+    ripped = [0] * len(connections)
+    queue = list(range(len(connections)))
+    failed: dict[int, str] = {}
+    fixed = items + stubs
+    while queue:
+        k = queue.pop(0)
+        net, new, old = connections[k]
+        placed = [c for path in routes.values() for c in path]
+        try:
+            routes[k] = router.route(fixed + placed, net, new, old)
+            continue
+        except RouteError as exc:
+            reason = str(exc)
+        own = [c for j, path in routes.items() if connections[j][0] == net for c in path]
+        others = [c for j, path in routes.items() if connections[j][0] != net for c in path]
+        try:
+            path = router.route(fixed + own, net, new, old, soft=others)
+        except RouteError:
+            failed[k] = reason  # blocked by pads, holes or the edge: no rip-up can help
+            continue
+        victims = sorted(j for j, other in routes.items() if connections[j][0] != net
+                         and any(_clash(a, b, router.clearance, router.via_drill) for a in path for b in other))
+        if any(ripped[j] >= RIP_UP_LIMIT for j in victims):
+            failed[k] = reason
+            continue
+        router.congest(path)
+        for j in victims:
+            ripped[j] += 1
+            del routes[j]
+            queue.append(j)
+        routes[k] = path
+    tracks = list(stubs) + [c for k in sorted(routes) for c in routes[k]]
+    return tracks, [failed[k] for k in sorted(failed)]
 
 
 def board(design: Design) -> Board:
@@ -351,7 +461,7 @@ def board(design: Design) -> Board:
     tracks, unrouted = _route_all(router, parts, NETS_ROUTED)
     rules = {"clearance": pcb.clearance_mm, "track_width": pcb.track_width_mm, "via_diameter": pcb.via_diameter_mm,
              "via_drill": pcb.via_drill_mm, "edge_clearance": pcb.edge_clearance_mm, "hole_clearance": HOLE_CLEARANCE_MM}
-    return Board(design.spec.name, outline, tuple(parts), tuple(tracks), circle, _label(design), rules,
+    return Board(design.spec.name, outline, tuple(parts), tuple(tracks), circle, _label(design, outline, parts, circle), rules,
                  pcb.thickness_mm, design.i2c_address, tuple(unrouted))
 
 
@@ -412,6 +522,16 @@ def findings(b: Board) -> list[Finding]:
         if not _disc_clear(p.box(p.footprint.courtyard), cx, cy, r + PAD_KEEPOUT_MARGIN_MM):
             err("pcb-pad-keepout", f"{p.ref} stands inside the mounting pad's disc (radius {r:g} mm): the pad would "
                                    "not sit flat")
+    for t in b.label:
+        box = t.box()
+        inside = box[0] >= x0 + e and box[1] >= y0 + e and box[2] <= x1 - e and box[3] <= y1 - e
+        clear = _disc_clear(box, cx, cy, r) and not any(
+            _overlap(box, p.box(p.footprint.courtyard)) for p in b.parts if p.ref.startswith("H"))
+        clear = clear and not any(_overlap(box, o.box()) for o in b.label if o is not t)
+        if not inside or not clear:
+            err("pcb-silk", f"the silk label {t.text!r} ({box[2] - box[0]:.1f} mm wide) does not fit between the "
+                            "screw holes, inside the edge, clear of the pad's disc and the other lines: make pcb.width_mm larger or "
+                            "the name shorter")
     islands = connected(items)
     for net, n in islands.items():
         if n > 1 and not net.startswith("unconnected"):
@@ -419,7 +539,7 @@ def findings(b: Board) -> list[Finding]:
     if not out:
         n_tracks = sum(1 for c in b.tracks if c.kind == "seg")
         n_vias = sum(1 for c in b.tracks if c.kind == "point")
-        margin = min((distance_margin(items, b.rules)), default=0.0)
+        margin = max(min(distance_margin(items, b.rules), default=0.0), 0.0)  # no "-0.000"
         out.append(Finding(Severity.INFO, "pcb-ok",
                            f"board routed: {n_tracks} track segments, {n_vias} vias, every net connected, "
                            f"smallest clearance margin {margin:.3f} mm above the {b.rules['clearance']:g} mm rule", "pcb"))
@@ -505,15 +625,9 @@ def _with_value(nodes: list[tuple], value: str) -> list[tuple]:
 
 
 def _label_nodes(b: Board) -> list[tuple]:
-    """The design name and I2C address in silk along the top edge, between the screw holes."""
-    x0, y0, x1, _ = b.outline
-    free = (x1 - x0) - 2 * 7.0
-    out = []
-    for k, text in enumerate(b.label):
-        size = max(0.6, min(1.0, free / max(1, len(text)) / 0.9))
-        out.append(("gr_text", text, at((x0 + x1) / 2, y0 + 1.4 + k * 1.5), ("layer", "F.SilkS"),
-                    ("effects", ("font", ("size", size, size), ("thickness", round(0.15 * size, 3))))))
-    return out
+    """The label lines (see :func:`_label`) as board silk."""
+    return [("gr_text", t.text, at(t.x, t.y), ("layer", "F.SilkS"),
+             ("effects", ("font", ("size", t.size, t.size), ("thickness", t.thickness)))) for t in b.label]
 
 
 def _project_text(b: Board) -> str:

@@ -26,6 +26,7 @@ __all__ = ["HOLE_TO_HOLE_MM", "Copper", "distance", "clearance_violations", "con
 LAYERS = ("F.Cu", "B.Cu")
 HOLE_TO_HOLE_MM = 0.25  # drill wall to drill wall (KiCad 6 default min_hole_to_hole)
 GRID_MARGIN_MM = 0.02
+SOFT_COST = 2.0  # per grid step through another connection's track, in a rip-up search
 MAX_EXPANSIONS = 80_000  # a search that needs more is treated as blocked (fails in well under 1 s)
 HEURISTIC_WEIGHT = 1.5  # weighted A*: paths within 1.5x of the cheapest, an order of magnitude fewer nodes  # > the sagitta a 0.125 mm grid step can cut from a 0.25 mm-radius obstacle
 
@@ -197,6 +198,7 @@ class Router:
     via_cost: float = 8.0
     bend_cost: float = 0.6
     bottom_cost: float = 1.3
+    history: np.ndarray | None = None  # congestion cost per grid node, raised by :meth:`congest`
 
     def __post_init__(self) -> None:
         x0, y0, x1, y1 = self.bounds
@@ -254,18 +256,37 @@ class Router:
 
     # -- search -----------------------------------------------------------------------------------
 
-    def route(self, items: list[Copper], net: str, source: Copper, target: Copper) -> list[Copper]:
+    def route(self, items: list[Copper], net: str, source: Copper, target: Copper,
+              soft: Sequence[Copper] = ()) -> list[Copper]:
         """Tracks and vias joining ``source`` to ``target`` (pads of ``net``) around ``items``.
 
-        The search first stays within a window around the two pads (fast), then tries the whole board.
+        ``soft`` copper (other connections' tracks, in a rip-up search) may be crossed at a cost of
+        SOFT_COST per grid step, plus the congestion history of the nodes (see :meth:`congest`). The
+        search first stays within a window around the two pads (fast), then tries the whole board.
         """
         try:
-            return self._route(items, net, source, target, window_mm=4.0)
+            return self._route(items, net, source, target, 4.0, soft)
         except RouteError:
-            return self._route(items, net, source, target, window_mm=None)
+            return self._route(items, net, source, target, None, soft)
 
-    def _route(self, items: list[Copper], net: str, source: Copper, target: Copper, window_mm: float | None) -> list[Copper]:
+    def congest(self, path: Sequence[Copper], amount: float = 1.0) -> None:
+        """Raise the cost of the grid nodes under ``path`` (negotiated congestion, as in PathFinder):
+        where two connections keep wanting the same place, each rip-up makes it dearer for both."""
+        if self.history is None:
+            self.history = np.zeros(2 * self.nx * self.ny)
+        for c in path:
+            for li, layer in enumerate(LAYERS):
+                if layer in c.layers:
+                    self.history[self._inside(c, li)] += amount
+
+    def _route(self, items: list[Copper], net: str, source: Copper, target: Copper, window_mm: float | None,
+               soft: Sequence[Copper] = ()) -> list[Copper]:
         track = self._blocked(items, net, self.width / 2).ravel()
+        extra = None
+        if soft:
+            extra = np.where(self._blocked(soft, net, self.width / 2).ravel(), SOFT_COST, 0.0)
+        if self.history is not None:
+            extra = self.history if extra is None else extra + self.history
         via = self._blocked(items, net, self.via_diameter / 2)
         # No vias inside any pad (solder would wick into them).
         pads = [it for it in items if it.kind == "rect"]
@@ -320,7 +341,7 @@ class Router:
             best[s] = 0.0
             heapq.heappush(heap, (h(n), 0.0, s))
         end = -1
-        budget = MAX_EXPANSIONS
+        budget = MAX_EXPANSIONS * (4 if soft else 1)  # crossing soft copper widens the search
         while heap and budget:
             budget -= 1
             f, g, s = heapq.heappop(heap)
@@ -342,6 +363,8 @@ class Router:
                 if track[m]:
                     continue
                 cost = (math.sqrt(2) if di and dj else 1.0) * layer_cost
+                if extra is not None:
+                    cost += extra[m]
                 if d != 8 and d != k:
                     cost += self.bend_cost
                 ng = g + cost
@@ -353,7 +376,7 @@ class Router:
             if via_ok[j, i]:
                 m = (1 - layer) * plane + r
                 ns = m * 9 + 8
-                ng = g + self.via_cost
+                ng = g + self.via_cost + (extra[m] if extra is not None else 0.0)
                 if not track[m] and ng < best.get(ns, math.inf):
                     best[ns] = ng
                     came[ns] = s

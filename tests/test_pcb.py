@@ -77,10 +77,10 @@ def test_nets_follow_the_chip_recipe(board):
                                              (0x0F, "+3V3", "+3V3")])
 def test_address_straps(address, a1, a0):
     d = derive(parse_spec(f"[sensor]\ni2c_address = {address}\n"))
-    parts, _, _ = pcb._place(d)
+    parts, outline, circle = pcb._place(d)
     u1 = parts[0]
     assert (u1.nets["11"], u1.nets["12"]) == (a1, a0)
-    assert pcb._label(d)[1] == f"MLX90393 I2C 0x{address:02X}"
+    assert pcb._label(d, outline, parts, circle)[-1].text == f"MLX90393 I2C 0x{address:02X}"
 
 
 def test_bad_addresses_and_option_codes_name_the_key():
@@ -228,3 +228,65 @@ def test_build_writes_library_board_and_gerbers(default_build):
     assert tools == {1.0, 1.5, 2.2}  # the pad's two dowel holes and the M2 holes
     manifest = json.loads((default_build.out_dir / "manifest.json").read_text())
     assert manifest["models"]["gerbers"].startswith("KiCad 6")
+
+
+def test_wide_clearance_shrinks_the_exposed_pad_land_and_is_capped():
+    """The lands sit 0.2 mm from the exposed pad: a wider rule shrinks the EP land to suit; past the
+    gap between neighbouring lands no board can pass, and the spec is refused naming the limit."""
+    b = pcb.board(derive(parse_spec("[pcb]\nclearance_mm = 0.22\n", "wide")))
+    assert not _codes(pcb.findings(b))
+    u1 = next(p for p in b.parts if p.ref == "U1")
+    ep = u1.footprint.pads[16]
+    assert ep.number == "17" and ep.w == pytest.approx(2.1 - 2 * 0.22, abs=0.01)
+    with pytest.raises(SpecError) as err:
+        pcb.board(derive(parse_spec("[pcb]\nclearance_mm = 0.25\n", "wider")))
+    assert err.value.key == "pcb.clearance_mm" and "at most 0.247 mm" in str(err.value)
+
+
+@pytest.mark.parametrize("name", ["m", "fingertip_v2-soft", "x" * 40, "lab-" + "very_long_design_name." * 2 + "x" * 16])
+def test_long_names_wrap_and_stay_on_the_board(name):
+    d = derive(parse_spec("", name))
+    parts, outline, circle = pcb._place(d)
+    label = pcb._label(d, outline, parts, circle)
+    assert 2 <= len(label) <= 3
+    text = "".join(t.text for t in label[:-1])
+    assert text == name or (text.endswith("..") and name.startswith(text[:-2]))
+    for t in label:
+        assert t.size >= pcb.SILK_MIN_TEXT_MM and t.thickness >= 0.15
+    b = dataclasses.replace(pcb.board(d), tracks=())
+    assert "pcb-silk" not in _codes(pcb.findings(b))
+    # the check measures: the same label moved onto the edge is caught
+    moved = dataclasses.replace(b, label=(dataclasses.replace(label[0], y=outline[1]),))
+    assert "pcb-silk" in _codes(pcb.findings(moved))
+
+
+# Combinations that the greedy router (before targeted rip-up with negotiated congestion) left unrouted.
+HARD_VARIANTS = [
+    '[sensor]\ni2c_address = 0x0D\n[pcb]\ndensity = "least"\nmounting_hole_diameter_mm = 0\n'
+    "via_diameter_mm = 0.8\nvia_drill_mm = 0.4\n",
+    "[pcb]\nclearance_mm = 0.2\npullups = false\ntrack_width_mm = 0.3\n",
+    "[pcb]\nclearance_mm = 0.24\npullups = false\ntrack_width_mm = 0.3\n",
+    '[pcb]\ndensity = "most"\npullups = false\ntrack_width_mm = 0.2\n[pad]\ndiameter_mm = 18\n'
+    "alignment_hole_spacing_mm = 15\n",
+]
+
+
+@pytest.mark.parametrize("text", HARD_VARIANTS)
+def test_hard_variants_route_and_pass_our_checks(text):
+    b = pcb.board(derive(parse_spec(text, "hard")))
+    assert not b.unrouted and not _codes(pcb.findings(b)), pcb.findings(b)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_random_variants_route(seed):
+    """Exhaustive: 30 seeded variants per seed (bench/route.py's generator) all route cleanly."""
+    import importlib.util
+    from pathlib import Path
+    path = Path(__file__).parents[1] / "bench" / "route.py"
+    spec = importlib.util.spec_from_file_location("bench_route", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    rows = bench.run(bench.variants(30, seed))
+    bad = [r for r in rows if "refused" not in r and not r["ok"]]
+    assert not bad, bad
