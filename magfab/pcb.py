@@ -24,7 +24,8 @@ from .design import Design
 from .errors import Finding, Severity, SpecError
 from .footprint import Footprint, Pad, chip_footprint, connector_footprint, hole_footprint, qfn_footprint
 from .recipes import catalogue
-from .route import HOLE_TO_HOLE_MM, LAYERS, Copper, Router, RouteError, clearance_violations, connected, distance
+from .route import (HOLE_TO_HOLE_MM, LAYERS, Copper, Router, RouteError, clearance_violations, connected, distance,
+                    is_via, via_clearance)
 from .sexpr import Sym, at, render, xy
 
 __all__ = ["Board", "Placed", "board", "findings", "files", "ORIGIN", "LIBRARY"]
@@ -480,7 +481,7 @@ def findings(b: Board) -> list[Finding]:
     for msg in b.unrouted:
         err("pcb-unrouted", msg)
     items = b.copper()
-    bad = clearance_violations(items, b.rules["clearance"], b.rules["hole_clearance"])
+    bad = clearance_violations(items, b.rules["clearance"], b.rules["hole_clearance"], b.rules["via_drill"])
     for p, q, d, need in bad[:5]:
         err("pcb-clearance", f"{p.owner} ({p.net}) and {q.owner} ({q.net}) are {d:.3f} mm apart; need {need:g} mm")
     if len(bad) > 5:
@@ -542,7 +543,8 @@ def findings(b: Board) -> list[Finding]:
         margin = max(min(distance_margin(items, b.rules), default=0.0), 0.0)  # no "-0.000"
         out.append(Finding(Severity.INFO, "pcb-ok",
                            f"board routed: {n_tracks} track segments, {n_vias} vias, every net connected, "
-                           f"smallest clearance margin {margin:.3f} mm above the {b.rules['clearance']:g} mm rule", "pcb"))
+                           f"smallest clearance margin {margin:.3f} mm above the rules ({b.rules['clearance']:g} mm "
+                           f"between copper, {b.rules['hole_clearance']:g} mm from a drill)", "pcb"))
     return out
 
 
@@ -555,7 +557,11 @@ def distance_margin(items: list[Copper], rules: Mapping[str, float]) -> list[flo
         for q in items[i + 1:]:
             if p.hole or q.hole or p.net == q.net or not (p.layers & q.layers) or not _near(p, q, 1.0):
                 continue
-            out.append(distance(p, q) - rules["clearance"])
+            need = rules["clearance"]
+            for v in (p, q):
+                if is_via(v):
+                    need = max(need, via_clearance(rules["clearance"], rules["hole_clearance"], v.r, rules["via_drill"]))
+            out.append(distance(p, q) - need)
     return out
 
 
@@ -630,13 +636,18 @@ def _label_nodes(b: Board) -> list[tuple]:
              ("effects", ("font", ("size", t.size, t.size), ("thickness", t.thickness)))) for t in b.label]
 
 
+def _narrowest(b: Board) -> float:
+    """The narrowest track on the board (QFN stubs neck down to the land width)."""
+    return round(min([b.rules["track_width"]] + [2 * c.r for c in b.tracks if c.kind == "seg"]), 6)
+
+
 def _project_text(b: Board) -> str:
     """The .kicad_pro: KiCad 6 keeps the design rules here, so DRC checks the rules we routed to."""
     r = b.rules
     project = {
         "board": {"design_settings": {
             "defaults": {"board_outline_line_width": 0.1, "copper_line_width": 0.2},
-            "rules": {"min_clearance": r["clearance"], "min_track_width": r["track_width"],
+            "rules": {"min_clearance": r["clearance"], "min_track_width": _narrowest(b),
                       "min_via_diameter": r["via_diameter"], "min_through_hole_diameter": r["via_drill"],
                       "min_hole_clearance": r["hole_clearance"], "min_copper_edge_clearance": r["edge_clearance"],
                       "min_hole_to_hole": HOLE_TO_HOLE_MM, "min_via_annular_width": 0.1, "solder_mask_clearance": 0.0,

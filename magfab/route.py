@@ -126,8 +126,20 @@ def _near(p: Copper, q: Copper, gap: float) -> bool:
     return not (a[2] + gap < b[0] or b[2] + gap < a[0] or a[3] + gap < b[1] or b[3] + gap < a[1])
 
 
-def clearance_violations(items: Sequence[Copper], clearance: float, hole_clearance: float):
+def is_via(c: Copper) -> bool:
+    return c.kind == "point" and not c.hole and len(c.layers) == 2
+
+
+def via_clearance(clearance: float, hole_clearance: float, via_radius: float, via_drill: float) -> float:
+    """Copper clearance a via's pad needs: its drill must also keep ``hole_clearance`` from other nets'
+    copper (KiCad checks both), which binds when the annular ring is narrow."""
+    return max(clearance, hole_clearance - (via_radius - via_drill / 2))
+
+
+def clearance_violations(items: Sequence[Copper], clearance: float, hole_clearance: float,
+                         via_drill: float | None = None):
     """Pairs of copper of different nets (or copper and a hole) on a shared layer closer than allowed.
+    With ``via_drill``, a via's drill is held to ``hole_clearance`` as well (see :func:`via_clearance`).
 
     Returns ``[(item, item, distance, required)]``, smallest margin first.
     """
@@ -139,6 +151,10 @@ def clearance_violations(items: Sequence[Copper], clearance: float, hole_clearan
             if not p.hole and not q.hole and (p.net == q.net or not (p.layers & q.layers)):
                 continue
             need = hole_clearance if (p.hole or q.hole) else clearance
+            if via_drill is not None and not (p.hole or q.hole):
+                for v in (p, q):
+                    if is_via(v):
+                        need = max(need, via_clearance(clearance, hole_clearance, v.r, via_drill))
             if not _near(p, q, need):
                 continue
             d = distance(p, q)
@@ -212,8 +228,10 @@ class Router:
 
     # -- rasterising obstacles --------------------------------------------------------------------
 
-    def _blocked(self, items: Sequence[Copper], net: str, grow: float) -> np.ndarray:
-        """Boolean [layer, y, x]: nodes where copper of half-width ``grow`` would violate a rule."""
+    def _blocked(self, items: Sequence[Copper], net: str, grow: float, via: bool = False) -> np.ndarray:
+        """Boolean [layer, y, x]: nodes where copper of half-width ``grow`` (a via's pad if ``via``)
+        would violate a rule."""
+        via_need = via_clearance(self.clearance, self.hole_clearance, self.via_diameter / 2, self.via_drill)
         out = np.zeros((2, self.ny, self.nx), dtype=bool)
         x0, y0, x1, y1 = self.bounds
         edge = self.edge_clearance + grow + GRID_MARGIN_MM
@@ -224,7 +242,11 @@ class Router:
         for it in items:
             if it.net == net and not it.hole:
                 continue
-            need = (self.hole_clearance if it.hole else self.clearance) + grow + GRID_MARGIN_MM
+            if it.hole:
+                need = self.hole_clearance
+            else:
+                need = via_need if (via or is_via(it)) else self.clearance
+            need += grow + GRID_MARGIN_MM
             bx0, by0, bx1, by1 = it.bbox()
             i0 = max(0, int(math.floor((bx0 - need - x0) / self.step)))
             i1 = min(self.nx, int(math.ceil((bx1 + need - x0) / self.step)) + 1)
@@ -287,7 +309,7 @@ class Router:
             extra = np.where(self._blocked(soft, net, self.width / 2).ravel(), SOFT_COST, 0.0)
         if self.history is not None:
             extra = self.history if extra is None else extra + self.history
-        via = self._blocked(items, net, self.via_diameter / 2)
+        via = self._blocked(items, net, self.via_diameter / 2, via=True)
         # No vias inside any pad (solder would wick into them).
         pads = [it for it in items if it.kind == "rect"]
         for it in pads:

@@ -199,11 +199,21 @@ def test_kicad_drc_is_not_blind(written, tmp_path):
     assert _drc(tmp_path / "magone.kicad_pcb", tmp_path)["violations"] > 0
 
 
-def test_variant_board_passes_kicad_drc(tmp_path):
+DRC_VARIANTS = [
+    '[sensor]\ni2c_address = 0x0F\n[pcb]\npullups = false\ndensity = "most"\nwidth_mm = 34\nheight_mm = 31\n'
+    "clearance_mm = 0.2\n",
+    # narrow annular ring: KiCad's hole clearance binds, not the copper clearance (found by KiCad's DRC)
+    "[pcb]\nclearance_mm = 0.1\ntrack_width_mm = 0.15\nvia_diameter_mm = 0.5\nvia_drill_mm = 0.25\nwidth_mm = 32\n",
+    # tracks wider than the QFN lands neck down at the chip; the project's minimum width must allow it
+    '[pcb]\ndensity = "least"\nclearance_mm = 0.24\ntrack_width_mm = 0.3\nmounting_hole_diameter_mm = 0\n'
+    "via_diameter_mm = 0.5\nvia_drill_mm = 0.25\nheight_mm = 28\n",
+]
+
+
+@pytest.mark.parametrize("text", DRC_VARIANTS)
+def test_variant_board_passes_kicad_drc(tmp_path, text):
     require_kicad()
-    spec = parse_spec('[sensor]\ni2c_address = 0x0F\n[pcb]\npullups = false\ndensity = "most"\n'
-                      "width_mm = 34\nheight_mm = 31\nclearance_mm = 0.2\n", "variant")
-    b = pcb.board(derive(spec))
+    b = pcb.board(derive(parse_spec(text, "variant")))
     assert not _codes(pcb.findings(b))
     for rel, data in pcb.files(b).items():
         (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
@@ -290,3 +300,15 @@ def test_random_variants_route(seed):
     rows = bench.run(bench.variants(30, seed))
     bad = [r for r in rows if "refused" not in r and not r["ok"]]
     assert not bad, bad
+
+
+def test_via_drill_keeps_the_hole_clearance(board):
+    """A via's pad may meet the copper rule while its drill breaks the hole rule (narrow ring)."""
+    from magfab.route import LAYERS, clearance_violations
+    rules = board.rules
+    track = Copper.seg(0.0, 0.0, 5.0, 0.0, 0.2, "F.Cu", "A")
+    # via pad 0.5 mm, drill 0.25 mm: 0.1 mm copper gap leaves 0.225 mm from the drill to the track
+    via = Copper.point(2.0, 0.1 + 0.25 + 0.1 + 0.001, 0.25, LAYERS, "B", "via")
+    assert not clearance_violations([track, via], 0.1, rules["hole_clearance"])
+    found = clearance_violations([track, via], 0.1, rules["hole_clearance"], via_drill=0.25)
+    assert found and found[0][3] == pytest.approx(0.125)
