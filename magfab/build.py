@@ -56,6 +56,7 @@ class BuildResult:
     findings: list[Finding]
     timings_s: dict[str, float] = field(default_factory=dict)
     out_dir: Path | None = None
+    prediction: object | None = None  # magfab.predict.Prediction
 
     def summary(self) -> dict[str, object]:
         """What ``magfab build --json`` prints."""
@@ -75,8 +76,29 @@ class BuildResult:
                 "silicone_per_part_g": round(d.elastomer_volume_mm3 / 1000.0 * material["density_g_cm3"].nominal, 3),
                 "cavities": self.spec.mould.cavities,
             },
+            "predictions": self._prediction_summary(),
             "findings": [f.as_dict() for f in self.findings],
             "timings_s": {k: round(v, 3) for k, v in self.timings_s.items()},
+        }
+
+
+    def _prediction_summary(self) -> dict[str, object] | None:
+        if self.prediction is None:
+            return None
+        d = self.prediction.data  # type: ignore[attr-defined]
+        n, s = d["normal"], d["shear"]
+        return {
+            "Bz_rest_G": round(d["field"]["Bz_rest_G"], 1),
+            "dBz_dz_rest_G_per_mm": round(d["field"]["dBz_dz_rest_G_per_mm"], 1),
+            "normal_sensitivity_G_per_N": [round(x, 1) for x in n["sensitivity_G_per_N"]],
+            "normal_resolution_mN": round(n["resolution_mN"], 2),
+            "normal_range_N": round(n["range_N"], 3),
+            "normal_range_limit": n["range_limit"],
+            "shear_sensitivity_G_per_N": [round(x, 1) for x in s["sensitivity_G_per_N"]],
+            "shear_resolution_mN": round(s["resolution_mN"], 2),
+            "shear_range_N": round(s["range_N"], 3),
+            "noise_G": round(d["noise_G"]["total_z_G"], 3),
+            "models": {k: v["model"] for k, v in d["models"].items()},
         }
 
 
@@ -120,6 +142,43 @@ def _board(design: Design, say: Progress, timings: dict[str, float]) -> tuple[li
         out.append(Artifact(f"pcb/gerbers/{name}", data, kind))
     timings["gerbers"] = time.perf_counter() - t
     return out, found
+
+
+def _predictions(design: Design, say: Progress, timings: dict[str, float]):
+    """predictions.json and its plots, and the prediction's design checks (eq. 9 and the guidelines)."""
+    from . import plots
+    from .check import prediction_findings
+    from .predict import predict
+
+    say("predicting sensitivity, resolution and range")
+    t = time.perf_counter()
+    pred = predict(design)
+    timings["predict"] = time.perf_counter() - t
+    found = prediction_findings(design, pred)
+    t = time.perf_counter()
+    out = [Artifact("predictions.json", _json_bytes(pred.data), "predicted field, force curve, sensitivity, "
+                    "resolution, range and noise, with the models used")]
+    what = {"field_axis": "Bz and dBz/dz on the axis, d_min and d_max marked",
+            "field_contours": "Bz and Br contours in the z-r plane with the magnet's travel envelope",
+            "force": "force and stiffness against indentation, soft / nominal / stiff material",
+            "sensitivity": "sensitivity and resolution against deformation, normal and shear",
+            "speed_accuracy": "every model's error against its time (bench/models.py figures)"}
+    for name, data in sorted(plots.figures(design, pred, model_bench()).items()):
+        stem = name.rsplit(".", 1)[0]
+        out.append(Artifact(f"plots/{name}", data, what[stem] + ", " + name.rsplit(".", 1)[1].upper()))
+    timings["plots"] = time.perf_counter() - t
+    return out, found, pred
+
+
+def model_bench() -> list[dict[str, object]]:
+    """The speed-accuracy table bench/models.py last measured (shipped with the package), or []."""
+    from importlib.resources import files
+
+    try:
+        text = files("magfab").joinpath("model_bench.json").read_text()
+    except FileNotFoundError:
+        return []
+    return list(json.loads(text)["rows"])
 
 
 def plan(spec: Spec, progress: Progress | None = None) -> BuildResult:
@@ -168,23 +227,31 @@ def plan(spec: Spec, progress: Progress | None = None) -> BuildResult:
         raise BuildError(stop)
     artifacts += board_artifacts
 
+    predict_artifacts, predict_findings, prediction = _predictions(design, say, timings)
+    findings += predict_findings
+    stop = errors_in(findings, spec.build.strict)
+    if stop:
+        raise BuildError(stop)
+    artifacts += predict_artifacts
+
     say("writing reports")
     artifacts.append(Artifact("design.json", _json_bytes(design.as_dict()), "every derived dimension, mm and mm^3"))
     artifacts.append(Artifact("spec.json", _json_bytes(spec.model_dump(mode="json")), "the spec with every default filled in"))
     artifacts.append(Artifact("findings.json", _json_bytes([f.as_dict() for f in findings]), "design and mesh checks"))
-    artifacts.append(Artifact("manifest.json", _manifest(spec, design, artifacts), "what made what: hashes, versions"))
+    models = {f"{m.family}_model": m.as_dict() for m in prediction.models}
+    artifacts.append(Artifact("manifest.json", _manifest(spec, design, artifacts, models), "what made what: hashes, versions"))
     timings["total"] = time.perf_counter() - t0
-    return BuildResult(spec, design, artifacts, findings, timings)
+    return BuildResult(spec, design, artifacts, findings, timings, prediction=prediction)
 
 
-def _manifest(spec: Spec, design: Design, artifacts: list[Artifact]) -> bytes:
+def _manifest(spec: Spec, design: Design, artifacts: list[Artifact], models: dict[str, object]) -> bytes:
     return _json_bytes({
         "magfab_version": __version__,
         "spec_name": spec.name,
         "spec_sha256": spec.sha256(),
         "printer": design.printer.key,
         "models": {"geometry": "cadquery-occt", "land_patterns": f"IPC-7351B {spec.pcb.density.value}",
-                   "board": "magfab grid router", "gerbers": _kicad_version(artifacts)},
+                   "board": "magfab grid router", "gerbers": _kicad_version(artifacts), **models},
         "artifacts": [
             {"path": a.path, "sha256": hashlib.sha256(a.data).hexdigest(), "bytes": len(a.data), "description": a.description}
             for a in artifacts

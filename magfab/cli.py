@@ -87,6 +87,17 @@ def build(spec: Path | None, out_dir: Path | None, as_json: bool) -> None:
                    f"{result.timings_s['total']:.2f} s)")
         click.echo(f"  rest distance {fig['d_rest_mm']} mm, cover {fig['cover_mm']} mm, "
                    f"silicone {fig['cavity_volume_mL']} mL ({fig['silicone_per_part_g']} g) per part")
+        pred = summary.get("predictions")
+        if pred:
+            n0, n1 = pred["normal_sensitivity_G_per_N"]
+            s0, s1 = pred["shear_sensitivity_G_per_N"]
+            click.echo(f"  field at rest {pred['Bz_rest_G']} G, gradient {pred['dBz_dz_rest_G_per_mm']} G/mm; "
+                       f"noise {pred['noise_G']} G RMS")
+            click.echo(f"  normal: {n0:g}-{n1:g} G/N, resolution {pred['normal_resolution_mN']:g} mN, range "
+                       f"{pred['normal_range_N']:g} N (ends at: {pred['normal_range_limit']})")
+            click.echo(f"  shear:  {s0:g}-{s1:g} G/N, resolution {pred['shear_resolution_mN']:g} mN, range "
+                       f"{pred['shear_range_N']:g} N  (worst case over material and magnet bands; models: "
+                       + ", ".join(f"{k} {v}" for k, v in sorted(pred["models"].items())) + ")")
 
 
 def _print_findings(findings: list) -> None:

@@ -302,6 +302,12 @@ def derive(spec: Spec) -> Design:
         raise SpecError("sensor.i2c_address", f"0x{sen.i2c_address:02X}",
                         f"must be one of {allowed} for option code {sen.option_code} (base plus the A1/A0 straps)",
                         "or change sensor.option_code")
+    forbidden = {tuple(int(v) for v in pair.split("/")) for pair in chip.texts.get("forbidden_osr_dig_filt", "").split()}
+    if (sen.osr, sen.dig_filt) in forbidden:
+        raise SpecError("sensor.dig_filt", sen.dig_filt,
+                        f"is not allowed with sensor.osr = {sen.osr} (the chip refuses OSR/DIG_FILT pairs "
+                        + ", ".join(f"{a}/{b}" for a, b in sorted(forbidden)) + ")",
+                        "raise sensor.dig_filt or sensor.osr")
     straps = ((sen.i2c_address - base) >> 1 & 1, (sen.i2c_address - base) & 1)
 
     # Mould: a cup holding N inverted cavities in a row along x, and a lid carrying the cores.

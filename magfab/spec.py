@@ -103,7 +103,7 @@ class Sensor(_Section):
         "Omit to use the chip recipe's value.",
     )
     d_max_mm: float = _mm(6.0, "Rest distance from the magnet's lower face to the sensing point, mm.", le=100.0)
-    d_min_mm: float = _mm(2.0, "Closest allowed magnet-to-sensing-point distance under load, mm.", le=100.0)
+    d_min_mm: float = _mm(2.5, "Closest allowed magnet-to-sensing-point distance under load, mm.", le=100.0)
     option_code: str = Field(
         "011", pattern=r"^[0-9]{3}$",
         description="Chip option code (the -0xx of the order number); sets the I2C base address.",
@@ -112,6 +112,10 @@ class Sensor(_Section):
         0x0C, ge=0, le=0x7F,
         description="7-bit I2C address: the option code's base plus the A1/A0 pin straps the board wires.",
     )
+    gain_sel: int = Field(0, ge=0, le=7, description="GAIN_SEL register field, 0 (least sensitive, widest range) to 7.")
+    resolution: int = Field(2, ge=0, le=3, description="RES_XYZ register field (all axes), 0-3: each step doubles the uT per LSB.")
+    osr: int = Field(0, ge=0, le=3, description="OSR register field (ADC oversampling 2^OSR), 0-3.")
+    dig_filt: int = Field(2, ge=0, le=7, description="DIG_FILT register field (averaging 2^DIG_FILT), 0-7.")
 
 
 class Pad(_Section):
@@ -170,6 +174,42 @@ class Mould(_Section):
     )
 
 
+class FieldModel(str, Enum):
+    """Magnet-field model: 'auto' picks the cheapest whose error fits predict.tolerance_pct."""
+
+    AUTO = "auto"
+    EXACT = "exact"
+    SURROGATE = "surrogate"
+    DIPOLE = "dipole"
+    ON_AXIS = "on_axis"
+
+
+class MechanicsModel(str, Enum):
+    """Elastomer model: 'auto' uses the finite-element model on the coarsest mesh whose estimated
+    discretisation error fits predict.tolerance_pct."""
+
+    AUTO = "auto"
+    FE = "fe"
+    HERTZ_COLUMN = "hertz_column"
+    COLUMN = "column"
+
+
+class Predict(_Section):
+    """Predicted sensitivity, resolution and range, and the models behind them."""
+
+    tolerance_pct: float = Field(1.0, gt=0.0, le=50.0, description="Model error the predictions may carry, % of the value.")
+    field_model: FieldModel = Field(FieldModel.AUTO, strict=False, description="'auto', 'exact', 'surrogate', 'dipole' or 'on_axis'.")
+    mechanics_model: MechanicsModel = Field(
+        MechanicsModel.AUTO, strict=False, description="'auto', 'fe', 'hertz_column' or 'column'.")
+    noise_G: float = Field(0.1, ge=0.0, le=100.0, description="RMS field noise of the environment at the sensor, gauss.")
+    required_resolution_mN: Optional[float] = Field(
+        None, gt=0.0, le=1.0e4,
+        description="Worst-case normal force resolution the application needs, mN (omit: no requirement).")
+    max_stretch: float = Field(
+        2.0, gt=1.0, le=10.0,
+        description="Largest principal stretch allowed anywhere in the elastomer under load (limits the force range).")
+
+
 class Build(_Section):
     """Build options."""
 
@@ -187,6 +227,7 @@ class Spec(_Section):
     pad: Pad = Field(default_factory=Pad)
     pcb: Pcb = Field(default_factory=Pcb)
     mould: Mould = Field(default_factory=Mould)
+    predict: Predict = Field(default_factory=Predict)
     build: Build = Field(default_factory=Build)
 
     def canonical_json(self) -> str:

@@ -1,0 +1,356 @@
+"""What the sensor will do: sensitivity, resolution and range, normal and shear (BRIEF eq. 5-11).
+
+The chain, for a force on the tip:
+
+    indentation --(elastomer model)--> force F and magnet displacement u
+    u --------------------------------> gap d = d_rest - u (normal) or lateral offset r (shear)
+    (d, r) ----(field model)----------> (Bz, Br) at the Hall point
+
+    S_B = dB/du          field change per mm of magnet travel             (eq. 5)
+    K_e = dF/du          elastomer stiffness at the magnet                 (eq. 7)
+    S_F = S_B / K_e      field change per newton                           (eq. 10)
+    R   = N_B / S_F      force resolution: field noise over sensitivity    (eq. 11)
+
+The material is a band (soft / nominal / stiff shear modulus from the recipe) and the magnet's remanence a
+band (the grade's min / nominal / max); every figure is given over the band, and the worst case is the
+combination that makes it worst (resolution: stiff material, weakest magnet, at rest). Noise N_B is the
+environment's (``predict.noise_G``) and the chip's own (at its OSR/DIG_FILT) and quantisation, in quadrature.
+
+The force range ends at the first of: the magnet reaching d_min, the chip's output reaching full scale at its
+configured gain and resolution, and the silicone reaching ``predict.max_stretch`` anywhere.
+
+Models: ``predict.field_model`` and ``predict.mechanics_model``; ``auto`` takes the cheapest field model whose
+error over the working volume fits ``predict.tolerance_pct`` (measured against the exact field, per build), and
+the finite-element model on the coarsest mesh whose estimated discretisation error fits it (two meshes,
+Richardson). :class:`Prediction` records which models were used and their errors.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Mapping
+
+import numpy as np
+
+from . import field as fieldmod
+from . import mechanics as mech
+from .errors import Finding, Severity
+
+if TYPE_CHECKING:
+    from .design import Design
+
+G_PER_UT = 0.01
+N_INDENT = 21  # indentation steps along the normal curve
+#: Mesh sizes (mm) the automatic FE choice tries, coarse to fine; each is checked against the next finer.
+FE_MESHES_MM = (0.75, 0.5, 0.35, 0.25)
+#: Observed convergence order of the FE force under refinement (bench/mechanics.py measures it).
+FE_ORDER = 1.0
+SHEAR_STEP_MM = 0.01  # finite-difference step for dBr/dr at the axis
+
+
+# ---------------------------------------------------------------------------------------------------
+# The chip
+
+
+@dataclass(frozen=True)
+class ChipSetting:
+    """The MLX90393 at the spec's GAIN_SEL / RES / OSR / DIG_FILT: scale, full scale, noise, timing."""
+
+    gain_sel: int
+    resolution: int
+    osr: int
+    dig_filt: int
+    lsb_xy_uT: float
+    lsb_z_uT: float
+    full_scale_xy_G: float
+    full_scale_z_G: float
+    saturation_onset_G: float
+    noise_xy_G: float  # chip's own RMS noise (upper bound, see recipe), without quantisation
+    noise_z_G: float
+    conversion_ms: float  # one T+X+Y+Z measurement
+
+    @property
+    def rate_Hz(self) -> float:
+        return 1000.0 / self.conversion_ms
+
+
+def chip_setting(design: "Design") -> ChipSetting:
+    """Scale, range, noise and conversion time from the chip recipe and the spec's register fields.
+
+    Noise: the datasheet gives RMS noise only as curves against conversion time; the recipe holds the plot's
+    axis end at the shortest conversion as an upper bound, and white noise averaged over a longer conversion
+    falls as 1/sqrt(conversion time).
+    """
+    chip = design.chip
+    s = design.spec.sensor
+    scale = 2 ** s.resolution
+    lsb_xy = chip[f"sensitivity_xy_gain{s.gain_sel}_uT_per_lsb"].nominal * scale
+    lsb_z = chip[f"sensitivity_z_gain{s.gain_sel}_uT_per_lsb"].nominal * scale
+    limit = chip[f"output_limit_res{s.resolution}_lsb"].nominal
+    t_axis = chip["tconvm_offset_us"].nominal + chip["tconvm_step_us"].nominal * 2 ** s.osr * (2 + 2 ** s.dig_filt)
+    t_temp = chip["tconvm_offset_us"].nominal + chip["tconvt_step_us"].nominal  # OSR2 = 0
+    conversion_us = 3 * t_axis + t_temp + chip["tconv_end_us"].nominal
+    averaging = math.sqrt(chip["noise_reference_conversion_us"].nominal / t_axis)
+    return ChipSetting(
+        s.gain_sel, s.resolution, s.osr, s.dig_filt, lsb_xy, lsb_z,
+        full_scale_xy_G=limit * lsb_xy * G_PER_UT, full_scale_z_G=limit * lsb_z * G_PER_UT,
+        saturation_onset_G=chip["saturation_onset_mT"].nominal * 10.0,
+        noise_xy_G=chip["noise_xy_bound_uT"].nominal * G_PER_UT * averaging,
+        noise_z_G=chip["noise_z_bound_uT"].nominal * G_PER_UT * averaging,
+        conversion_ms=conversion_us / 1000.0,
+    )
+
+
+def noise(design: "Design", chip: ChipSetting) -> dict[str, float]:
+    """RMS field noise at the sensor, G: environment, chip, quantisation (LSB / sqrt 12), and the totals."""
+    env = design.spec.predict.noise_G
+    q_xy, q_z = chip.lsb_xy_uT * G_PER_UT / math.sqrt(12), chip.lsb_z_uT * G_PER_UT / math.sqrt(12)
+    return {
+        "environment_G": env, "chip_xy_G": chip.noise_xy_G, "chip_z_G": chip.noise_z_G,
+        "quantisation_xy_G": q_xy, "quantisation_z_G": q_z,
+        "total_xy_G": math.sqrt(env**2 + chip.noise_xy_G**2 + q_xy**2),
+        "total_z_G": math.sqrt(env**2 + chip.noise_z_G**2 + q_z**2),
+    }
+
+
+# ---------------------------------------------------------------------------------------------------
+# Model choice
+
+
+@dataclass(frozen=True)
+class ModelUse:
+    """Which model a prediction used, and what it is known to cost in error."""
+
+    family: str  # "field", "mechanics", "shear"
+    name: str
+    error: float  # relative, against the family's reference (nan: not measured)
+    detail: str
+    chosen_by: str  # "auto" or "spec"
+
+    def as_dict(self) -> dict[str, object]:
+        return {"model": self.name, "relative_error": _finite(self.error), "detail": self.detail,
+                "chosen_by": self.chosen_by}
+
+
+def _finite(x: float) -> float | None:
+    return None if not math.isfinite(x) else float(x)
+
+
+def choose_field(design: "Design", magnet: fieldmod.Magnet) -> ModelUse:
+    """The field model: measured against the exact field over this design's working volume (d_min..d_max,
+    r 0..R_m) -- cheapest within tolerance for ``auto``, or the spec's choice with its error."""
+    p = design.spec.predict
+    sen = design.spec.sensor
+    points = fieldmod.working_volume(magnet, sen.d_min_mm, design.d_rest_mm, n=16)
+    tol = p.tolerance_pct / 100.0
+    if p.field_model.value == "auto":
+        c = fieldmod.choose(magnet, points, tol)
+        tried = ", ".join(f"{n} {e:.2g}" if math.isfinite(e) else f"{n} refused" for n, e in c.tried)
+        return ModelUse("field", c.model, c.error, f"errors over the working volume: {tried}", "auto")
+    name = p.field_model.value
+    try:
+        err = fieldmod.model_error(name, magnet, points).relative
+    except fieldmod.FieldModelError:
+        err = math.inf
+    return ModelUse("field", name, err, "error over the working volume, measured against the exact field", "spec")
+
+
+def _fe_curve(body: mech.Body, mu: float, indentation: np.ndarray, mesh: float) -> mech.Curve:
+    """The FE curve, truncated where the model fails (element inversion, non-convergence, stretch beyond the
+    material's elongation at break): the singular stress at the magnet's sharp edge stops it earlier the finer
+    the mesh, so the prediction keeps what the model reached and says where it stopped."""
+    return mech.fe(body, mu, indentation, mesh_mm=mesh, on_failure="truncate")
+
+
+def normal_curve(design: "Design", body: mech.Body, mu: float, indentation: np.ndarray) -> tuple[mech.Curve, ModelUse]:
+    """The normal curve at the nominal modulus with the model the spec asks for (see module doc)."""
+    p = design.spec.predict
+    tol = p.tolerance_pct / 100.0
+    name = p.mechanics_model.value
+    if name in ("column", "hertz_column"):
+        curve = mech.MODELS[name](body, mu, indentation)
+        return curve, ModelUse("mechanics", name, math.nan,
+                               "closed form; its error against the FE model is charted by bench/mechanics.py", "spec")
+    previous = None
+    chosen = None
+    for mesh in FE_MESHES_MM:
+        curve = _fe_curve(body, mu, indentation, mesh)
+        if previous is not None:
+            n = min(len(curve.force_N), len(previous.force_N))
+            if n < 2:
+                raise mech.MechanicsError(f"fe (mesh {mesh:g} mm): {curve.info.get('failure', 'no steps')}")
+            ratio = previous.mesh_mm / curve.mesh_mm
+            fine, coarse = curve.force_N[:n], previous.force_N[:n]
+            diff = float(np.max(np.abs(fine - coarse)) / np.max(np.abs(fine)))
+            err = diff / (ratio**FE_ORDER - 1.0)  # Richardson estimate of the finer mesh's error
+            chosen = (curve, err, previous.mesh_mm)
+            if err <= tol:
+                break
+        previous = curve
+    assert chosen is not None
+    curve, err, coarse = chosen
+    how = "auto" if name == "auto" else "spec"
+    return curve, ModelUse("mechanics", "fe", err,
+                           f"axisymmetric neo-Hookean FE, mesh {curve.mesh_mm:g} mm; error estimated against mesh "
+                           f"{coarse:g} mm (Richardson, order {FE_ORDER:g})", how)
+
+
+# ---------------------------------------------------------------------------------------------------
+# The prediction
+
+
+@dataclass(frozen=True)
+class Prediction:
+    """Everything predictions.json holds, plus the arrays the plots need."""
+
+    data: Mapping[str, object]
+    models: tuple[ModelUse, ...]
+    curves: Mapping[str, mech.Curve]  # soft / nominal / stiff
+    arrays: Mapping[str, np.ndarray] = field(default_factory=dict)
+    timings_s: Mapping[str, float] = field(default_factory=dict)
+
+    def findings(self) -> list[Finding]:
+        return list(self.data.get("_findings", ()))  # type: ignore[arg-type]
+
+
+def _derivative(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    return np.gradient(y, x, edge_order=2)
+
+
+def predict(design: "Design") -> Prediction:
+    """Sensitivity, resolution and range for ``design`` (module doc). Deterministic."""
+    t0 = time.perf_counter()
+    spec = design.spec
+    sen, p = spec.sensor, spec.predict
+    chip = chip_setting(design)
+    nz = noise(design, chip)
+    magnets = {band: fieldmod.Magnet.from_spec(spec, band) for band in ("low", "nominal", "high")}
+    fuse = choose_field(design, magnets["nominal"])
+    fmodel = fuse.name
+    t_field = time.perf_counter()
+
+    body = mech.Body.from_design(design)
+    mus = dict(zip(("soft", "nominal", "stiff"), mech.band(spec.elastomer.material)))
+    travel = design.d_rest_mm - sen.d_min_mm
+    # Indent a little past the travel to d_min: the magnet lags the surface, and the curve must reach d_min.
+    # Steps graded finer near zero, where a rounded tip's force rises as indentation^1.5.
+    indentation = 1.25 * travel * np.linspace(0.0, 1.0, N_INDENT) ** 1.5
+    nominal, muse = normal_curve(design, body, mus["nominal"], indentation)
+    limit_note = str(nominal.info.get("failure", "")) if len(nominal.force_N) < len(indentation) else ""
+    indentation = nominal.indentation_mm
+    curves = {k: nominal.scaled(mu) if k != "nominal" else nominal for k, mu in mus.items()}
+    t_mech = time.perf_counter()
+
+    # --- normal load -------------------------------------------------------------------------------------
+    u = nominal.magnet_displacement_mm  # axial magnet travel, + towards the chip; independent of mu
+    gap = design.d_rest_mm - u
+    keep = gap >= sen.d_min_mm - 1e-9
+    bz = {b: np.asarray(fieldmod.bz_br(m, np.maximum(gap, 1e-3), 0.0, model=fmodel, rtol=None)[0])
+          for b, m in magnets.items()}
+    s_b = {b: _derivative(u, v) for b, v in bz.items()}  # G per mm of magnet travel
+    k_e = {k: _derivative(u, c.force_N) for k, c in curves.items()}  # N per mm of magnet travel
+    # Range limits, as magnet travel u: d_min, full scale (strongest magnet), stretch.
+    limits = {"d_min": travel}
+    over = np.nonzero(bz["high"] > chip.full_scale_z_G)[0]
+    if over.size:
+        limits["chip full scale"] = _crossing(u, bz["high"], chip.full_scale_z_G, over[0])
+    stretched = np.nonzero(nominal.max_stretch > p.max_stretch)[0]
+    if stretched.size:
+        limits["stretch"] = _crossing(u, nominal.max_stretch, p.max_stretch, stretched[0])
+    if limit_note:
+        limits["model"] = float(u[-1])
+    binding = min(limits, key=limits.get)
+    u_max = limits[binding]
+    in_range = (u <= u_max + 1e-9) & keep
+    f_range = {k: float(np.interp(u_max, u, c.force_N)) for k, c in curves.items()}
+    s_f = {(k, b): s_b[b] / k_e[k] for k in curves for b in magnets}
+    sens_in = np.array([s_f[kb][in_range] for kb in s_f])
+    res_mN = {kb: 1000.0 * nz["total_z_G"] / v for kb, v in s_f.items()}
+    worst_res = max(float(np.max(v[in_range])) for v in res_mN.values())
+
+    # --- shear ---------------------------------------------------------------------------------------------
+    r = np.linspace(0.0, design.magnet_radius_mm, 21)
+    ks_nominal = mech.shear_stiffness(body, mus["nominal"], "fe")  # linear in mu: one solve for the band
+    ks = {k: ks_nominal * mu / mus["nominal"] for k, mu in mus.items()}
+    br = {b: np.asarray(fieldmod.bz_br(m, design.d_rest_mm, r, model=fmodel, rtol=None)[1]) for b, m in magnets.items()}
+    dbr = {b: _derivative(r, v) for b, v in br.items()}
+    s_fs = {(k, b): dbr[b] / ks[k] for k in ks for b in magnets}
+    s_fs_all = np.array(list(s_fs.values()))
+    res_s_mN = {kb: 1000.0 * nz["total_xy_G"] / np.maximum(v, 1e-300) for kb, v in s_fs.items()}
+    shear_limits = {"lateral travel = magnet radius": design.magnet_radius_mm}
+    over_xy = np.nonzero(br["high"] > chip.full_scale_xy_G)[0]
+    if over_xy.size:
+        shear_limits["chip full scale"] = _crossing(r, br["high"], chip.full_scale_xy_G, over_xy[0])
+    shear_binding = min(shear_limits, key=shear_limits.get)
+    shear_range = {k: float(v * shear_limits[shear_binding]) for k, v in ks.items()}
+    t_end = time.perf_counter()
+
+    nominal_bz_rest = float(bz["nominal"][0])
+    data: dict[str, object] = {
+        "field": {
+            "Bz_rest_G": nominal_bz_rest,
+            "dBz_dz_rest_G_per_mm": float(fieldmod.dbz_dz(magnets["nominal"], design.d_rest_mm, 0.0, model="exact")),
+            "Bz_d_min_G": float(fieldmod.bz_br(magnets["nominal"], sen.d_min_mm, 0.0, model="exact")[0]),
+            "Bz_d_min_strongest_G": float(fieldmod.bz_br(magnets["high"], sen.d_min_mm, 0.0, model="exact")[0]),
+            "dBr_dr_rest_G_per_mm": float(dbr["nominal"][0]),
+            "Bz_range_end_strongest_G": float(np.interp(u_max, u, bz["high"])),
+            "remanence_T": {b: m.remanence_T for b, m in magnets.items()},
+        },
+        "chip": {
+            "gain_sel": chip.gain_sel, "resolution": chip.resolution, "osr": chip.osr, "dig_filt": chip.dig_filt,
+            "lsb_xy_uT": chip.lsb_xy_uT, "lsb_z_uT": chip.lsb_z_uT, "full_scale_xy_G": chip.full_scale_xy_G,
+            "full_scale_z_G": chip.full_scale_z_G, "saturation_onset_G": chip.saturation_onset_G,
+            "conversion_ms": chip.conversion_ms, "rate_Hz": chip.rate_Hz,
+        },
+        "material_mu_kPa": mus,
+        "normal": {
+            "curve": {k: [[float(d), float(f)] for d, f in zip(c.indentation_mm, c.force_N)] for k, c in curves.items()},
+            "curve_columns": ["indentation_mm", "force_N"],
+            "magnet_displacement_mm": [float(x) for x in u],
+            "sensitivity_G_per_N": [float(sens_in.min()), float(sens_in.max())],
+            "resolution_mN": worst_res,
+            "resolution_at_rest_mN": {k: float(res_mN[(k, "low")][0]) for k in curves},
+            "range_N": min(f_range.values()),
+            "range_by_material_N": f_range,
+            "range_limit": binding,
+            "range_limits_travel_mm": limits,
+            "travel_mm": u_max,
+            "stiffness_at_rest_N_per_mm": {k: float(v[0]) for k, v in k_e.items()},
+        },
+        "shear": {
+            "stiffness_N_per_mm": ks,
+            "sensitivity_G_per_N": [float(s_fs_all.min()), float(s_fs_all.max())],
+            "resolution_mN": max(float(v[0]) for v in res_s_mN.values()),
+            "range_N": min(shear_range.values()),
+            "range_by_material_N": shear_range,
+            "range_limit": shear_binding,
+        },
+        "noise_G": nz,
+        "models": {m.family: m.as_dict() for m in (fuse, muse)},
+    }
+    data["models"]["shear"] = ModelUse("shear", "fe", math.nan,
+                                       "small-strain Fourier mode-1 FE, lateral force on the magnet, magnet free to "
+                                       "tilt (Timoshenko's column overestimates it by ~34 % for an embedded magnet)",
+                                       "auto").as_dict()
+    if limit_note:
+        data["normal"]["model_limit"] = limit_note
+    arrays = {"u": u, "indentation": indentation, "r": r, "in_range": in_range,
+              **{f"bz_{b}": v for b, v in bz.items()}, **{f"sb_{b}": v for b, v in s_b.items()},
+              **{f"ke_{k}": v for k, v in k_e.items()}, **{f"br_{b}": v for b, v in br.items()},
+              **{f"sf_{k}_{b}": v for (k, b), v in s_f.items()}, **{f"res_{k}_{b}": v for (k, b), v in res_mN.items()},
+              **{f"sfs_{k}_{b}": v for (k, b), v in s_fs.items()}}
+    timings = {"field_choice": t_field - t0, "mechanics": t_mech - t_field, "chain": t_end - t_mech,
+               "total": t_end - t0}
+    return Prediction(data, (fuse, muse), curves, arrays, timings)
+
+
+def _crossing(x: np.ndarray, y: np.ndarray, level: float, k: int) -> float:
+    """Where y first reaches ``level`` (y[k] is the first sample beyond it), by linear interpolation."""
+    if k == 0:
+        return float(x[0])
+    x0, x1, y0, y1 = x[k - 1], x[k], y[k - 1], y[k]
+    return float(x0 + (level - y0) * (x1 - x0) / (y1 - y0))
+
+
