@@ -111,16 +111,18 @@ def _print_findings(findings: list) -> None:
 @click.argument("spec", required=False, type=click.Path(dir_okay=False, path_type=Path))
 @click.option("--json", "as_json", is_flag=True, help="Print the findings as JSON on stdout.")
 def check(spec: Path | None, as_json: bool) -> None:
-    """Validate SPEC and run the design checks; writes nothing."""
-    from .check import design_findings, errors_in
+    """Validate SPEC and run the design checks, predictions included; writes nothing."""
+    from .check import design_findings, errors_in, prediction_findings
     from .design import derive
     from .errors import BuildError
+    from .predict import predict
     from .spec import load_spec
 
     with _handled():
         loaded = load_spec(spec)
         design = derive(loaded)
         findings = design_findings(design)
+        findings += prediction_findings(design, predict(design))
         if as_json:
             click.echo(json.dumps([f.as_dict() for f in findings], indent=2))
         else:

@@ -120,11 +120,21 @@ def _sensitivity(plt, design: "Design", pred: "Prediction"):
 def _speed_accuracy(plt, design: "Design", pred: "Prediction", table: Sequence[Mapping[str, object]]):
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
     markers = {"field": "o", "mechanics": "s", "shear": "^"}
-    chosen = {(m["family"], m["model"]) for m in pred.data.get("models_chosen", [])}
+    used = pred.data["models"]
+    mesh = pred.curves["nominal"].mesh_mm
+
+    def chosen(row: Mapping[str, object]) -> bool:
+        m = used.get(str(row["family"]))
+        if m is None or m["model"] != row["model"]:
+            return False
+        if row["family"] == "mechanics":
+            return row.get("mesh_mm") in (None, mesh)
+        return row["family"] != "shear" or row.get("mesh_mm") is None  # the build's shear FE: default mesh
+
     for row in table:
         err = max(float(row["error"]), 1e-16)
         ax.scatter(float(row["time_s"]), err, marker=markers.get(str(row["family"]), "x"),
-                   edgecolors="k" if (row["family"], row["model"]) in chosen else "none", s=36)
+                   edgecolors="k" if chosen(row) else "none", linewidths=1.5, s=40)
         ax.annotate(str(row["label"]), (float(row["time_s"]), err), fontsize=6, xytext=(3, 3),
                     textcoords="offset points")
     tol = design.spec.predict.tolerance_pct / 100.0
@@ -134,7 +144,7 @@ def _speed_accuracy(plt, design: "Design", pred: "Prediction", table: Sequence[M
     ax.set_yscale("log")
     ax.set_xlabel("time, s (field: per 10^5 points; elastomer: per curve)")
     ax.set_ylabel("max relative error against the reference")
-    ax.set_title("Speed against accuracy (bench/models.py, MagOne)", fontsize=10)
+    ax.set_title("Speed against accuracy (bench/models.py on MagOne; ringed: used in this build)", fontsize=9)
     fig.tight_layout()
     return fig
 

@@ -1,0 +1,193 @@
+"""Predictions: the chain field x elastomer -> sensitivity, resolution, range; the checks on them; the
+model choice; and what a build writes."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from magfab import SpecError, derive, load_spec, parse_spec
+from magfab import field as F
+from magfab import mechanics as M
+from magfab.check import prediction_findings
+from magfab.errors import Severity
+from magfab.predict import chip_setting, noise, predict
+
+
+@pytest.fixture(scope="module")
+def design():
+    return derive(load_spec(None))
+
+
+@pytest.fixture(scope="module")
+def pred(design):
+    return predict(design)
+
+
+def _codes(found, severity=Severity.ERROR):
+    return {f.code for f in found if f.severity is severity}
+
+
+def test_keys_the_issue_names(pred):
+    d = pred.data
+    assert d["field"]["Bz_rest_G"] > 0 and d["field"]["dBz_dz_rest_G_per_mm"] > 0
+    assert set(d["normal"]["curve"]) == {"soft", "nominal", "stiff"}
+    lo, hi = d["normal"]["sensitivity_G_per_N"]
+    assert 0 < lo <= hi
+    assert d["normal"]["resolution_mN"] > 0 and d["normal"]["range_N"] > 0
+    assert d["shear"]["sensitivity_G_per_N"][0] > 0 and d["shear"]["resolution_mN"] > 0
+    assert d["noise_G"]["environment_G"] == 0.1
+    assert set(d["models"]) == {"field", "mechanics", "shear"}
+    json.dumps(d)  # everything is plain JSON
+
+
+def test_field_at_rest_is_eq6_and_gradient_its_derivative(pred, design):
+    """On the axis the prediction's field is BRIEF eq. 6 with the nominal remanence."""
+    m = F.Magnet.from_spec(design.spec)
+    d, R, H, br = design.d_rest_mm, m.radius_mm, m.height_mm, m.remanence_T * 1e4
+    eq6 = br / 2 * ((d + H) / math.hypot(d + H, R) - d / math.hypot(d, R))
+    assert pred.data["field"]["Bz_rest_G"] == pytest.approx(eq6, rel=1e-4)
+    h = 1e-4
+    slope = br / 2 * (((d + h + H) / math.hypot(d + h + H, R) - (d + h) / math.hypot(d + h, R))
+                      - ((d - h + H) / math.hypot(d - h + H, R) - (d - h) / math.hypot(d - h, R))) / (2 * h)
+    assert pred.data["field"]["dBz_dz_rest_G_per_mm"] == pytest.approx(-slope, rel=1e-5)
+
+
+def test_band_orders_as_physics_says(pred):
+    """Softer silicone: more sensitive and finer resolution, smaller force range; stiffness scales with mu."""
+    n = pred.data["normal"]
+    at_rest = n["resolution_at_rest_mN"]
+    assert at_rest["soft"] < at_rest["nominal"] < at_rest["stiff"]
+    r = n["range_by_material_N"]
+    assert r["soft"] < r["nominal"] < r["stiff"]
+    mus = pred.data["material_mu_kPa"]
+    k = n["stiffness_at_rest_N_per_mm"]
+    assert k["stiff"] / k["soft"] == pytest.approx(mus["stiff"] / mus["soft"], rel=1e-9)
+    # the worst case is the stiff material with the weakest magnet, at rest (BRIEF sec. 3)
+    assert n["resolution_mN"] == pytest.approx(at_rest["stiff"], rel=1e-9)
+
+
+def test_sensitivity_is_field_gradient_over_stiffness(pred, design):
+    """S_F = S_B / K_e (eq. 10) and R = N_B / S_F (eq. 11), recomputed from the arrays."""
+    a = pred.arrays
+    u = a["u"]
+    s_b = np.gradient(a["bz_low"], u, edge_order=2)
+    k_e = np.gradient(pred.curves["stiff"].force_N, u, edge_order=2)
+    s_f = s_b / k_e
+    assert np.allclose(a["sf_stiff_low"], s_f)
+    n_b = pred.data["noise_G"]["total_z_G"]
+    assert pred.data["normal"]["resolution_at_rest_mN"]["stiff"] == pytest.approx(1000 * n_b / s_f[0])
+
+
+def test_noise_combines_environment_chip_and_quantisation(design):
+    chip = chip_setting(design)
+    nz = noise(design, chip)
+    assert nz["total_z_G"] == pytest.approx(math.sqrt(0.1**2 + chip.noise_z_G**2 + (chip.lsb_z_uT / 100) ** 2 / 12))
+    assert chip.lsb_z_uT == pytest.approx(1.210 * 4)  # GAIN_SEL 0, RES 2 (datasheet Table 17)
+    assert chip.full_scale_z_G == pytest.approx(22000 * 4.84 / 100)
+    # BRIEF sec. 4: T+X+Y+Z at OSR 0, DIG_FILT 2 takes ~1.84 ms (datasheet Table 19); ours omits the wake-up
+    assert chip.conversion_ms == pytest.approx(1.84, abs=0.15)
+    quiet = derive(parse_spec("[sensor]\nosr = 3\ndig_filt = 7\n"))
+    assert chip_setting(quiet).noise_z_G < chip.noise_z_G / 5  # longer averaging, less noise
+
+
+def test_range_limits_are_reported_and_consistent(pred, design):
+    n = pred.data["normal"]
+    limits = n["range_limits_travel_mm"]
+    assert limits["d_min"] == pytest.approx(design.d_rest_mm - design.spec.sensor.d_min_mm)
+    assert n["travel_mm"] == pytest.approx(min(limits.values()))
+    assert n["range_limit"] == min(limits, key=limits.get)
+    u, f = pred.arrays["u"], pred.curves["soft"].force_N
+    assert n["range_N"] == pytest.approx(float(np.interp(n["travel_mm"], u, f)))
+
+
+def test_shear_uses_the_fe_and_its_range_is_the_magnet_radius(pred, design):
+    s = pred.data["shear"]
+    body = M.Body.from_design(design)
+    k = M.shear_stiffness(body, pred.data["material_mu_kPa"]["soft"], "fe")
+    assert s["stiffness_N_per_mm"]["soft"] == pytest.approx(k, rel=1e-9)
+    assert s["range_N"] == pytest.approx(k * design.magnet_radius_mm)
+
+
+def test_saturating_design_is_refused_with_the_distance_to_use():
+    """eq. 9: B(d_min) <= the chip's full scale. The paper's 2 mm (to the package top) is 1.5 mm too close
+    when measured to the sensing point."""
+    d = derive(parse_spec("[sensor]\nd_min_mm = 2.0\n"))
+    found = prediction_findings(d, predict(d))
+    err = [f for f in found if f.code == "chip-saturates"]
+    assert err and err[0].severity is Severity.ERROR and err[0].key == "sensor.d_min_mm"
+    assert "at least 2.43 mm" in err[0].message
+
+
+def test_required_resolution_is_checked():
+    d = derive(parse_spec("[predict]\nrequired_resolution_mN = 1.0\n"))
+    assert "resolution-short" in _codes(prediction_findings(d, predict(d)))
+    d = derive(parse_spec("[predict]\nrequired_resolution_mN = 10.0\n"))
+    assert "resolution-short" not in _codes(prediction_findings(d, predict(d)))
+
+
+def test_default_design_passes_its_checks(design, pred):
+    found = prediction_findings(design, pred)
+    assert not _codes(found), found
+    assert not _codes(found, Severity.WARNING), found
+    assert any(f.code == "prediction" for f in found)
+
+
+def test_guidelines_warn(design):
+    d = derive(parse_spec("[magnet]\nheight_mm = 4.0\n[sensor]\nd_max_mm = 10.5\nd_min_mm = 6\n"
+                          "[elastomer]\nheight_mm = 14.0\n", "tall"))
+    warned = _codes(prediction_findings(d, predict(d)), Severity.WARNING)
+    assert {"magnet-aspect", "rest-distance"} <= warned
+
+
+def test_auto_picks_the_cheapest_field_model_within_tolerance(design):
+    """The working volume runs to r = R_m: eq. 6 and the dipole fail there, the surrogate fits 1 %; a tolerance
+    tighter than the surrogate's own error takes the exact field."""
+    assert predict(design).data["models"]["field"]["model"] == "surrogate"
+    tight = derive(parse_spec("[predict]\ntolerance_pct = 0.0001\nmechanics_model = \"column\"\n"))
+    assert predict(tight).data["models"]["field"]["model"] == "exact"
+
+
+def test_a_chosen_model_outside_tolerance_is_a_warning():
+    d = derive(parse_spec('[predict]\nfield_model = "dipole"\nmechanics_model = "column"\n'))
+    p = predict(d)
+    assert p.data["models"]["field"]["model"] == "dipole" and p.data["models"]["field"]["chosen_by"] == "spec"
+    assert "model-error" in _codes(prediction_findings(d, p), Severity.WARNING)
+
+
+def test_fe_mesh_choice_meets_the_tolerance_by_its_estimate(pred):
+    m = pred.data["models"]["mechanics"]
+    assert m["model"] == "fe" and m["relative_error"] <= 0.01
+
+
+def test_bad_register_pairs_are_refused():
+    with pytest.raises(SpecError) as e:
+        derive(parse_spec("[sensor]\nosr = 1\ndig_filt = 0\n"))
+    assert e.value.key == "sensor.dig_filt" and "0/0, 0/1, 1/0" in str(e.value)
+
+
+def test_prediction_is_deterministic(design, pred):
+    again = predict(design)
+    assert json.dumps(again.data, sort_keys=True) == json.dumps(pred.data, sort_keys=True)
+
+
+def test_build_writes_predictions_plots_and_records_models(default_build):
+    out = default_build.out_dir
+    data = json.loads((out / "predictions.json").read_text())
+    for key in ("Bz_rest_G", "dBz_dz_rest_G_per_mm"):
+        assert key in data["field"]
+    for key in ("curve", "sensitivity_G_per_N", "resolution_mN", "range_N"):
+        assert key in data["normal"]
+    for key in ("sensitivity_G_per_N", "resolution_mN"):
+        assert key in data["shear"]
+    assert "noise_G" in data and "models" in data
+    for stem in ("field_axis", "field_contours", "force", "sensitivity", "speed_accuracy"):
+        svg = (out / "plots" / f"{stem}.svg").read_text()
+        assert svg.lstrip().startswith("<?xml") and "<svg" in svg
+        assert (out / "plots" / f"{stem}.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["models"]["field_model"]["model"] == data["models"]["field"]["model"]
+    assert manifest["models"]["mechanics_model"]["model"] == "fe"
