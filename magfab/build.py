@@ -147,14 +147,14 @@ def _board(design: Design, say: Progress, timings: dict[str, float]) -> tuple[li
 def _predictions(design: Design, say: Progress, timings: dict[str, float]):
     """predictions.json and its plots, and the prediction's design checks (eq. 9 and the guidelines)."""
     from . import plots
-    from .check import prediction_findings
-    from .predict import predict
+    from .predict import predict_with_findings
 
     say("predicting sensitivity, resolution and range")
     t = time.perf_counter()
-    pred = predict(design)
+    pred, found = predict_with_findings(design)
     timings["predict"] = time.perf_counter() - t
-    found = prediction_findings(design, pred)
+    if pred is None:
+        raise BuildError(found)
     t = time.perf_counter()
     out = [Artifact("predictions.json", _json_bytes(pred.data), "predicted field, force curve, sensitivity, "
                     "resolution, range and noise, with the models used")]

@@ -112,17 +112,17 @@ def _print_findings(findings: list) -> None:
 @click.option("--json", "as_json", is_flag=True, help="Print the findings as JSON on stdout.")
 def check(spec: Path | None, as_json: bool) -> None:
     """Validate SPEC and run the design checks, predictions included; writes nothing."""
-    from .check import design_findings, errors_in, prediction_findings
+    from .check import design_findings, errors_in
     from .design import derive
     from .errors import BuildError
-    from .predict import predict
+    from .predict import predict_with_findings
     from .spec import load_spec
 
     with _handled():
         loaded = load_spec(spec)
         design = derive(loaded)
         findings = design_findings(design)
-        findings += prediction_findings(design, predict(design))
+        findings += predict_with_findings(design)[1]
         if as_json:
             click.echo(json.dumps([f.as_dict() for f in findings], indent=2))
         else:

@@ -354,3 +354,15 @@ def _crossing(x: np.ndarray, y: np.ndarray, level: float, k: int) -> float:
     return float(x0 + (level - y0) * (x1 - x0) / (y1 - y0))
 
 
+def predict_with_findings(design: "Design") -> tuple[Prediction | None, list[Finding]]:
+    """:func:`predict` and its design checks; a model that cannot give an answer for this design (the FE
+    failing at its first step, a field model refusing every point) is an error finding, not a traceback."""
+    from .check import prediction_findings
+
+    try:
+        pred = predict(design)
+    except (mech.MechanicsError, fieldmod.FieldModelError) as exc:
+        return None, [Finding(Severity.ERROR, "prediction-failed", f"no prediction for this design: {exc}",
+                              "predict.mechanics_model" if isinstance(exc, mech.MechanicsError) else "predict.field_model")]
+    return pred, prediction_findings(design, pred)
+

@@ -191,3 +191,17 @@ def test_build_writes_predictions_plots_and_records_models(default_build):
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["models"]["field_model"]["model"] == data["models"]["field"]["model"]
     assert manifest["models"]["mechanics_model"]["model"] == "fe"
+
+
+def test_a_model_that_cannot_answer_is_a_finding_not_a_traceback(design, monkeypatch):
+    from magfab import predict as P
+
+    def broken(*args, **kwargs):
+        raise M.MechanicsError("fe (mesh 0.75 mm): element inversion at indentation 0.01 mm")
+
+    monkeypatch.setattr(P.mech, "fe", broken)
+    pred, found = P.predict_with_findings(design)
+    assert pred is None
+    assert [(f.code, f.severity, f.key) for f in found] == [
+        ("prediction-failed", Severity.ERROR, "predict.mechanics_model")]
+    assert "element inversion" in found[0].message
