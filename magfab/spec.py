@@ -210,6 +210,54 @@ class Predict(_Section):
         description="Largest principal stretch allowed anywhere in the elastomer under load (limits the force range).")
 
 
+class CalibrationMethod(str, Enum):
+    """Calibration fit: 'poly' (global least squares), 'mls' (moving least squares, host only) or 'auto'."""
+
+    AUTO = "auto"
+    POLY = "poly"
+    MLS = "mls"
+
+
+class Calibration(_Section):
+    """The force calibration (eq. 12-14) and the simulated scan every build ships before a real one exists."""
+
+    method: CalibrationMethod = Field(CalibrationMethod.AUTO, strict=False,
+                                      description="'auto' (cheapest fit within tolerance_mN), 'poly' or 'mls'.")
+    order: int = Field(4, ge=1, le=8, description="Polynomial order n in (Bz, Br); 'auto' may pick a lower one.")
+    tolerance_mN: float = Field(20.0, gt=0.0, le=1.0e4, description="Held-out RMS force error the fit must reach, mN.")
+    folds: int = Field(5, ge=2, le=20, description="Folds of the k-fold cross-validation behind the held-out errors.")
+    scan_y_mm: float = _mm(4.0, "Lateral (y) extent of the simulated scan track, centred on the axis, mm.", le=50.0)
+    scan_z_mm: float = _mm(3.0, "Indentation (z) extent of the simulated scan track, mm (capped at the predicted range).", le=50.0)
+    scan_step_mm: float = _mm(0.05, "Step of the simulated scan in y and z, mm.", le=5.0)
+    reference_resolution_mN: float = Field(
+        6.25, ge=0.0, le=1.0e4, description="Resolution of the reference force sensor (ATI Nano17: 6.25 mN), mN.")
+    seed: int = Field(0, ge=0, le=2**31 - 1, description="Seed of the simulated scan's noise.")
+
+
+class Transport(str, Enum):
+    """Serial output of the firmware at start-up (the host can switch it)."""
+
+    BINARY = "binary"
+    TEXT = "text"
+
+
+class Acquisition(str, Enum):
+    """How the firmware drives the chip: 'burst' (the chip converts continuously) or 'single' measurements."""
+
+    BURST = "burst"
+    SINGLE = "single"
+
+
+class Firmware(_Section):
+    """The readout firmware for an ATmega328P board (Arduino Uno / Nano, 16 MHz)."""
+
+    baud: int = Field(250000, ge=9600, le=2000000, description="Serial baud rate.")
+    output: Transport = Field(Transport.BINARY, strict=False, description="'binary' frames (with CRC) or 'text' lines at start-up.")
+    acquisition: Acquisition = Field(Acquisition.BURST, strict=False, description="'burst' or 'single' measurement mode.")
+    i2c_hz: int = Field(400000, ge=10000, le=1000000, description="I2C clock, Hz (the MLX90393 allows up to 400 kHz fast mode).")
+    temperature: bool = Field(True, description="Also convert and report the chip temperature.")
+
+
 class Build(_Section):
     """Build options."""
 
@@ -228,6 +276,8 @@ class Spec(_Section):
     pcb: Pcb = Field(default_factory=Pcb)
     mould: Mould = Field(default_factory=Mould)
     predict: Predict = Field(default_factory=Predict)
+    calibration: Calibration = Field(default_factory=Calibration)
+    firmware: Firmware = Field(default_factory=Firmware)
     build: Build = Field(default_factory=Build)
 
     def canonical_json(self) -> str:
