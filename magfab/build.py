@@ -57,6 +57,7 @@ class BuildResult:
     timings_s: dict[str, float] = field(default_factory=dict)
     out_dir: Path | None = None
     prediction: object | None = None  # magfab.predict.Prediction
+    calibration: dict[str, object] | None = None  # what the CLI summary says of the bundle
 
     def summary(self) -> dict[str, object]:
         """What ``magfab build --json`` prints."""
@@ -77,6 +78,7 @@ class BuildResult:
                 "cavities": self.spec.mould.cavities,
             },
             "predictions": self._prediction_summary(),
+            "calibration": self.calibration,
             "findings": [f.as_dict() for f in self.findings],
             "timings_s": {k: round(v, 3) for k, v in self.timings_s.items()},
         }
@@ -170,6 +172,58 @@ def _predictions(design: Design, say: Progress, timings: dict[str, float]):
     return out, found, pred
 
 
+def _bundle(design: Design, prediction, scan, say: Progress, timings: dict[str, float]):
+    """The firmware-plus-calibration bundle: calibration.json (from ``scan``, or a simulated scan when there
+    is none yet), its chart, the firmware sources, the AVR image where avr-gcc exists, the flash scripts and
+    the readout package."""
+    from . import calibrate, firmware, readout
+
+    out: list[Artifact] = []
+    found: list[Finding] = []
+    t = time.perf_counter()
+    if scan is None:
+        say("simulating a calibration scan")
+        scan = calibrate.simulate_scan(design, prediction)
+        out.append(Artifact("calibration/scan_simulated.csv", calibrate.scan_csv(scan).encode(),
+                            "the simulated y-z scan behind the provisional calibration (scan CSV format)"))
+    say("fitting the calibration")
+    # Moving least squares costs seconds; only fit it when the spec may use it.
+    result = calibrate.fit(scan, design, mls=design.spec.calibration.method.value != "poly")
+    cal = result.calibration.to_json()
+    timings["calibrate"] = time.perf_counter() - t
+    err = cal["errors"]
+    found.append(Finding(Severity.INFO if result.meets_tolerance else Severity.WARNING, "calibration",
+                         f"calibration from the {cal['scan']['source']} scan ({cal['scan']['rows']} rows): "
+                         f"{result.chosen}, held-out RMS Fz {1000 * err['Fz_N']['rms_holdout']:.2f} mN, "
+                         f"Fr {1000 * err['Fr_N']['rms_holdout']:.2f} mN ({err['folds']}-fold)"
+                         + ("" if result.meets_tolerance else f"; {result.message}"), "calibration.tolerance_mN"))
+    out.append(Artifact("calibration/calibration.json", _json_bytes(cal),
+                        "force calibration (eq. 12-14): coefficients, scaling, valid region, held-out errors, scan hash"))
+    for name, data in sorted(calibrate.chart(result).items()):
+        out.append(Artifact(f"calibration/{name}", data, "held-out force error against evaluation cost, per order and MLS"))
+    say("rendering the firmware and the readout package")
+    t = time.perf_counter()
+    fw = firmware.render(design, cal)
+    out += [Artifact(f"firmware/{rel}", data, "firmware source") for rel, data in sorted(fw.items())]
+    rd = readout.render(design, cal)
+    out += [Artifact(rel, data, "readout package (pip install ./readout)") for rel, data in sorted(rd.items())]
+    timings["render"] = time.perf_counter() - t
+    t = time.perf_counter()
+    image = firmware.build_hex(fw)
+    if image is None:
+        found.append(Finding(Severity.INFO, "firmware-hex-skipped",
+                             "avr-gcc (Debian packages gcc-avr and avr-libc) is not installed, so no ready-to-flash "
+                             "image was built: build it with 'make' in firmware/avr, or install the toolchain and rebuild",
+                             "firmware"))
+    else:
+        hex_bytes, sizes = image
+        out.append(Artifact("firmware/magfab-atmega328p.hex", hex_bytes,
+                            f"ready-to-flash image for Arduino Uno/Nano (ATmega328P, 16 MHz): flash "
+                            f"{sizes.get('flash_bytes')} B, RAM {sizes.get('ram_bytes')} B"))
+        timings["avr-gcc"] = time.perf_counter() - t
+    return out, found, result
+
+
 def model_bench() -> list[dict[str, object]]:
     """The speed-accuracy table bench/models.py last measured (shipped with the package), or []."""
     from importlib.resources import files
@@ -181,8 +235,11 @@ def model_bench() -> list[dict[str, object]]:
     return list(json.loads(text)["rows"])
 
 
-def plan(spec: Spec, progress: Progress | None = None) -> BuildResult:
-    """Everything a build would write, as bytes, with its findings; raises on an error-level finding."""
+def plan(spec: Spec, progress: Progress | None = None, scan=None) -> BuildResult:
+    """Everything a build would write, as bytes, with its findings; raises on an error-level finding.
+
+    ``scan`` (a :class:`magfab.calibrate.Scan`) calibrates the firmware and readout from real data; without
+    it the bundle carries a provisional calibration fitted to a simulated scan."""
     say = progress or (lambda _stage: None)
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
@@ -234,6 +291,13 @@ def plan(spec: Spec, progress: Progress | None = None) -> BuildResult:
         raise BuildError(stop)
     artifacts += predict_artifacts
 
+    bundle_artifacts, bundle_findings, fitted = _bundle(design, prediction, scan, say, timings)
+    findings += bundle_findings
+    stop = errors_in(findings, spec.build.strict)
+    if stop:
+        raise BuildError(stop)
+    artifacts += bundle_artifacts
+
     say("writing reports")
     artifacts.append(Artifact("design.json", _json_bytes(design.as_dict()), "every derived dimension, mm and mm^3"))
     artifacts.append(Artifact("spec.json", _json_bytes(spec.model_dump(mode="json")), "the spec with every default filled in"))
@@ -241,7 +305,12 @@ def plan(spec: Spec, progress: Progress | None = None) -> BuildResult:
     models = {f"{m.family}_model": m.as_dict() for m in prediction.models}
     artifacts.append(Artifact("manifest.json", _manifest(spec, design, artifacts, models), "what made what: hashes, versions"))
     timings["total"] = time.perf_counter() - t0
-    return BuildResult(spec, design, artifacts, findings, timings, prediction=prediction)
+    cal = fitted.calibration.to_json()
+    image = next((a.path for a in artifacts if a.path.endswith(".hex")), None)
+    calibration = {"source": cal["scan"]["source"], "method": cal["method"], "order": cal["order"],
+                   "rms_holdout_Fz_mN": round(1000 * cal["errors"]["Fz_N"]["rms_holdout"], 2),
+                   "rms_holdout_Fr_mN": round(1000 * cal["errors"]["Fr_N"]["rms_holdout"], 2), "image": image}
+    return BuildResult(spec, design, artifacts, findings, timings, prediction=prediction, calibration=calibration)
 
 
 def _manifest(spec: Spec, design: Design, artifacts: list[Artifact], models: dict[str, object]) -> bytes:
@@ -310,9 +379,9 @@ def write(out_dir: Path, artifacts: list[Artifact]) -> Path:
     return out_dir
 
 
-def build(spec: Spec, out_dir: Path | None = None, progress: Progress | None = None) -> BuildResult:
-    """Plan and write a build; returns what was written where."""
-    result = plan(spec, progress)
+def build(spec: Spec, out_dir: Path | None = None, progress: Progress | None = None, scan=None) -> BuildResult:
+    """Plan and write a build (calibrated from ``scan`` if given); returns what was written where."""
+    result = plan(spec, progress, scan)
     target = Path(out_dir) if out_dir is not None else default_out_dir(spec)
     if progress:
         progress("writing files")

@@ -39,6 +39,10 @@ def _handled() -> Iterator[None]:
     except KeyboardInterrupt:
         _fail("interrupted; nothing was written and any previous output is untouched", 130)
     except Exception as exc:  # noqa: BLE001 - the last line of defence: one message, exit 1
+        if type(exc).__name__ == "ScanError":  # a malformed scan CSV (magfab.calibrate): bad input
+            _fail(str(exc), EXIT_BAD_INPUT)
+        if isinstance(exc, (FileNotFoundError, IsADirectoryError, PermissionError)) and exc.filename:
+            _fail(f"{exc.filename}: {exc.strerror}", EXIT_BAD_INPUT)
         if os.environ.get("MAGFAB_DEBUG"):
             raise
         _fail(f"internal error: {type(exc).__name__}: {exc} (set MAGFAB_DEBUG=1 for a traceback)", EXIT_INTERNAL)
@@ -70,13 +74,35 @@ def main() -> None:
 @click.option("--json", "as_json", is_flag=True, help="Print a machine-readable summary on stdout.")
 def build(spec: Path | None, out_dir: Path | None, as_json: bool) -> None:
     """Build SPEC (default: the embedded MagOne reference design)."""
+    _run_build(spec, out_dir, as_json, None)
+
+
+@main.command()
+@click.argument("scan", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--spec", "spec", type=click.Path(dir_okay=False, path_type=Path),
+              help="The spec the sensor was built from (default: the embedded MagOne design).")
+@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
+              help="Output directory (default: ./build/<spec name>).")
+@click.option("--json", "as_json", is_flag=True, help="Print a machine-readable summary on stdout.")
+def calibrate(scan: Path, spec: Path | None, out_dir: Path | None, as_json: bool) -> None:
+    """Fit the force calibration to SCAN (a CSV, see docs/bundle.md) and rebuild with it: calibration.json,
+    the firmware, its image and the readout package carry the new coefficients."""
+    _run_build(spec, out_dir, as_json, scan)
+
+
+def _run_build(spec: Path | None, out_dir: Path | None, as_json: bool, scan_path: Path | None) -> None:
     from .build import build as run_build
     from .spec import load_spec
 
     with _handled():
         loaded = load_spec(spec)
+        scan = None
+        if scan_path is not None:
+            from .calibrate import read_scan_csv
+
+            scan = read_scan_csv(scan_path)
         with _progress(sys.stderr.isatty() and not as_json) as progress:
-            result = run_build(loaded, out_dir, progress)  # type: ignore[arg-type]
+            result = run_build(loaded, out_dir, progress, scan)  # type: ignore[arg-type]
         summary = result.summary()
         if as_json:
             click.echo(json.dumps(summary, indent=2, sort_keys=True))
@@ -98,6 +124,11 @@ def build(spec: Path | None, out_dir: Path | None, as_json: bool) -> None:
             click.echo(f"  shear:  {s0:g}-{s1:g} G/N, resolution {pred['shear_resolution_mN']:g} mN, range "
                        f"{pred['shear_range_N']:g} N  (worst case over material and magnet bands; models: "
                        + ", ".join(f"{k} {v}" for k, v in sorted(pred["models"].items())) + ")")
+        cal = summary.get("calibration")
+        if cal:
+            click.echo(f"  calibration ({cal['source']}): {cal['method']} order {cal['order']}, held-out RMS "
+                       f"Fz {cal['rms_holdout_Fz_mN']:g} mN, Fr {cal['rms_holdout_Fr_mN']:g} mN; firmware image: "
+                       f"{cal['image'] or 'not built (no avr-gcc)'}")
 
 
 def _print_findings(findings: list) -> None:

@@ -221,10 +221,10 @@ class CalibrationMethod(str, Enum):
 class Calibration(_Section):
     """The force calibration (eq. 12-14) and the simulated scan every build ships before a real one exists."""
 
-    method: CalibrationMethod = Field(CalibrationMethod.AUTO, strict=False,
-                                      description="'auto' (cheapest fit within tolerance_mN), 'poly' or 'mls'.")
+    method: CalibrationMethod = Field(CalibrationMethod.POLY, strict=False,
+                                      description="'poly' (order n), 'auto' (cheapest fit within tolerance_mN) or 'mls'.")
     order: int = Field(4, ge=1, le=8, description="Polynomial order n in (Bz, Br); 'auto' may pick a lower one.")
-    tolerance_mN: float = Field(20.0, gt=0.0, le=1.0e4, description="Held-out RMS force error the fit must reach, mN.")
+    tolerance_mN: float = Field(5.0, gt=0.0, le=1.0e4, description="Held-out RMS force error the fit must reach, mN (a warning if not).")
     folds: int = Field(5, ge=2, le=20, description="Folds of the k-fold cross-validation behind the held-out errors.")
     scan_y_mm: float = _mm(4.0, "Lateral (y) extent of the simulated scan track, centred on the axis, mm.", le=50.0)
     scan_z_mm: float = _mm(3.0, "Indentation (z) extent of the simulated scan track, mm (capped at the predicted range).", le=50.0)

@@ -50,3 +50,14 @@ def default_build(tmp_path_factory):
     """The default (MagOne) build, written once per session."""
     out = tmp_path_factory.mktemp("default") / "magone"
     return build(load_spec(None), out)
+
+
+def ref_crc16(data: bytes) -> int:
+    """CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF), bit by bit: the tests' own reference for the frames."""
+    crc = 0xFFFF
+    for byte in data:
+        crc ^= byte << 8
+        for _ in range(8):
+            crc = ((crc << 1) ^ 0x1021) & 0xFFFF if crc & 0x8000 else (crc << 1) & 0xFFFF
+    return crc
+

@@ -1,0 +1,156 @@
+"""Per-sample cost of the readout firmware on the ATmega328P (Arduino Uno / Nano, 16 MHz), from simavr.
+
+Run from anywhere::
+
+    python bench/firmware.py [--spec SPEC] [--calibration calibration.json] [--orders 1,2,3,4,5,6]
+                             [--hull N] [--out DIR]
+
+What it measures:
+
+1. **Cycles**, counted by the CPU itself: the bundle's ``avr/bench.c`` (built with the same flags as the image)
+   times each stage with Timer1 running at the CPU clock and prints the counts on its UART; simavr runs it
+   cycle-accurately. Stages: raw words -> counts and microtesla (``convert``), forces with the direction split
+   and the region test (``calibrate``), the binary frame with its CRC and the text line, and the whole
+   per-sample path (``sample_binary`` = convert + calibrate + binary frame). Four field points: the hull's
+   centre (accepted by the inner rectangle), near a hull vertex (the full O(log N) hull test), on the axis
+   (no shear direction) and outside the box.
+2. **Budget per sample** on the chip's clock: the worst ``sample_binary`` plus the RM transfer on the I2C bus
+   at the spec's clock (computed from the bit count) plus the UART interrupts that drain one 31-byte frame
+   (an estimate: cycles per interrupt below), against the conversion wait the firmware paces itself by.
+3. **Flash and RAM** of the real image (avr-size: text + data, data + bss).
+
+A synthetic calibration per order (random coefficients, an elliptical hull of N points) stands in unless
+``--calibration`` gives a real one. Prints a table and writes ``<out>/firmware_bench.json``. Nothing here
+asserts on a time: the figures are for reading.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import re
+import sys
+import tempfile
+from pathlib import Path
+
+BENCH_DIR = Path(__file__).resolve().parent
+sys.path.insert(0, str(BENCH_DIR.parent))
+
+from magfab import derive, load_spec  # noqa: E402
+from magfab import firmware  # noqa: E402
+
+DEFAULT_OUT = BENCH_DIR / "out"
+JSON_NAME = "firmware_bench.json"
+#: Cycles per UDRE interrupt that moves one byte from the ring buffer to the UART (prologue, 8-bit index
+#: arithmetic, epilogue), estimated from the ISR's size; 31 per binary frame.
+UART_ISR_CYCLES = 60
+#: The MLX90393's XYZ conversion the issue quotes (T + X + Y + Z at OSR 0, DIG_FILT 2), microseconds.
+QUOTED_CONVERSION_US = 1800.0
+
+
+def synthetic_calibration(order: int, hull_points: int, seed: int = 0) -> dict:
+    """A calibration.json dict of the documented shape with random coefficients and an elliptical hull."""
+    import random
+
+    rng = random.Random(seed)
+    monomials = [[i, k - i] for k in range(order + 1) for i in range(k, -1, -1)]
+    hull = [[-3000.0 + 2400.0 * math.cos(2 * math.pi * k / hull_points),
+             2000.0 + 1700.0 * math.sin(2 * math.pi * k / hull_points)] for k in range(hull_points)]
+    return {
+        "format": "magfab-calibration/1", "method": "poly", "order": order, "monomials": monomials,
+        "scaling": {"Bz_uT": {"center": -3000.0, "scale": 2400.0}, "Br_uT": {"center": 2000.0, "scale": 1700.0}},
+        "coefficients": {"Fz_N": [rng.gauss(0.0, 1.0) for _ in monomials],
+                         "Fr_N": [rng.gauss(0.0, 0.5) for _ in monomials]},
+        "shear_sign": -1, "direction_min_uT": 5.0, "tare_N": {"Fz_N": 0.0, "Fr_N": 0.0},
+        "valid_region": {"Bz_uT": [-5400.0, -600.0], "Br_uT": [300.0, 3700.0], "hull": hull},
+    }
+
+
+def rm_transfer_us(i2c_hz: float, words: int) -> float:
+    """RM on the bus: START, address + command, repeated START, address + status + 2 bytes per word, STOP
+    (9 clocks per byte, about one clock each for START, repeated START and STOP)."""
+    bits = 9 * 2 + 9 * (2 + 2 * words) + 3
+    return bits * 1e6 / i2c_hz
+
+
+def measure(design, calibration: dict) -> dict:
+    files = firmware.render(design, calibration)
+    image = firmware.build_hex(files)
+    with tempfile.TemporaryDirectory(prefix="magfab-fw-bench-") as tmp:
+        elf, _ = firmware.build_avr_elf(files, tmp, "bench")
+        uart = firmware.run_simavr(elf)
+    if uart is None:
+        raise SystemExit("simavr is not installed (Debian package simavr)")
+    cycles: dict[str, dict[str, int]] = {}
+    for m in re.finditer(r"BENCH,(\w+),(\w+),(\d+)", uart):
+        cycles.setdefault(m.group(1), {})[m.group(2)] = int(m.group(3))
+    if "sample_binary" not in cycles:
+        raise SystemExit(f"the bench image printed no cycle counts:\n{uart[-2000:]}")
+    flags = {m.group(1): int(m.group(2)) for m in re.finditer(r"FLAGS,(\w+),(\d+)", uart)}
+    return {"cycles": cycles, "flags": flags, "sizes": image[1] if image else None,
+            "hull_points": len(calibration["valid_region"]["hull"])}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--spec", type=Path, help="spec TOML (default: the embedded MagOne design)")
+    parser.add_argument("--calibration", type=Path, help="a calibration.json to time instead of synthetic ones")
+    parser.add_argument("--orders", default="1,2,3,4,5,6", help="polynomial orders of the synthetic calibrations")
+    parser.add_argument("--hull", type=int, default=64, help="points on the synthetic hull")
+    parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
+    args = parser.parse_args(argv)
+
+    design = derive(load_spec(args.spec))
+    chip = firmware.chip_config(design)
+    f_mhz = firmware.F_CPU_HZ / 1e6
+    _, _, i2c_hz = firmware.twi_settings(design.spec.firmware.i2c_hz)
+    bus_us = rm_transfer_us(i2c_hz, 4 if chip.temperature else 3)
+    uart_us = 31 * UART_ISR_CYCLES / f_mhz
+    if args.calibration:
+        calibrations = [json.loads(args.calibration.read_text())]
+    else:
+        calibrations = [synthetic_calibration(int(n), args.hull) for n in args.orders.split(",")]
+
+    print(f"ATmega328P at {f_mhz:g} MHz, simavr cycle counts; chip: GAIN_SEL {chip.gain_sel} RES {chip.resolution} "
+          f"OSR {chip.osr} DIG_FILT {chip.dig_filt}, {'T+' if chip.temperature else ''}XYZ conversion "
+          f"{chip.tconv_us} us nominal, paced at {chip.tconv_wait_us} us ({chip.sample_rate_Hz:.0f} Hz)")
+    print(f"per sample besides the computation: RM on the bus {bus_us:.0f} us at {i2c_hz / 1e3:.0f} kHz, "
+          f"UART interrupts ~{uart_us:.0f} us (estimate, {UART_ISR_CYCLES} cycles x 31 bytes)")
+    header = (f"{'order':>5} {'hull':>4} {'convert':>8} {'calib ctr':>9} {'calib edge':>10} {'frame bin':>9} "
+              f"{'frame txt':>9} {'sample':>7} {'sample us':>9} {'+bus+uart':>9} {'CPU Hz':>7} {'rate Hz':>7} "
+              f"{'flash B':>7} {'RAM B':>5}")
+    print(header)
+    rows = []
+    for cal in calibrations:
+        r = measure(design, cal)
+        c = r["cycles"]
+        worst = max(c["sample_binary"].values())
+        sample_us = worst / f_mhz
+        busy_us = sample_us + bus_us + uart_us
+        rate = 1e6 / max(busy_us, chip.tconv_wait_us)
+        sizes = r["sizes"] or {}
+        row = {
+            "order": cal["order"], "hull_points": r["hull_points"], "cycles": c, "flags": r["flags"],
+            "sample_cycles_worst": worst, "sample_us": sample_us, "bus_us": bus_us, "uart_us_estimate": uart_us,
+            "busy_us": busy_us, "cpu_bound_rate_Hz": 1e6 / busy_us, "calibrated_rate_Hz": rate,
+            "conversion_us": chip.tconv_us, "paced_us": chip.tconv_wait_us,
+            "share_of_quoted_1p8ms": busy_us / QUOTED_CONVERSION_US,
+            "flash_bytes": sizes.get("flash_bytes"), "ram_bytes": sizes.get("ram_bytes"),
+        }
+        rows.append(row)
+        print(f"{cal['order']:>5} {r['hull_points']:>4} {max(c['convert'].values()):>8} "
+              f"{c['calibrate']['centre']:>9} {c['calibrate']['edge']:>10} {max(c['frame_binary'].values()):>9} "
+              f"{max(c['frame_text'].values()):>9} {worst:>7} {sample_us:>9.0f} {busy_us:>9.0f} "
+              f"{1e6 / busy_us:>7.0f} {rate:>7.0f} {sizes.get('flash_bytes', '-'):>7} {sizes.get('ram_bytes', '-'):>5}")
+    print("cycles are per call (best of 4 repeats; the run is deterministic); 'sample' is the worst point; "
+          "'rate' = 1 / max(busy time, the paced conversion).")
+    args.out.mkdir(parents=True, exist_ok=True)
+    result = {"f_cpu_Hz": firmware.F_CPU_HZ, "spec": design.spec.name, "i2c_Hz": i2c_hz, "rows": rows}
+    (args.out / JSON_NAME).write_text(json.dumps(result, indent=2, sort_keys=True) + "\n")
+    print(f"wrote {args.out / JSON_NAME}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,637 @@
+"""The readout firmware: C sources rendered from the spec and the calibration, compiled where a toolchain exists.
+
+Three entry points (every subprocess magfab runs for the firmware is in this module):
+
+* :func:`render` -- ``(design, calibration) -> {relative path: bytes}``: the portable C core
+  (``magfab_readout/src``: MLX90393 protocol, conversion, calibration, frames, the loop), the Arduino sketch
+  and ``platformio.ini``, the bare-metal ATmega328P main and its Makefile, the cycle benchmark, the host
+  simulator with its harness, and the avrdude flash scripts. Deterministic: the same inputs give the same bytes.
+* :func:`build_hex` -- the ATmega328P image with avr-gcc (``None`` without avr-gcc), and its flash/RAM size.
+* :func:`build_host` -- the core and the simulated MLX90393 compiled for the host with
+  ``gcc -std=c99 -Wall -Wextra -Werror -pedantic``, for the tests.
+
+Every chip number comes from the recipe (``magfab/recipes/chips.toml``); the few the recipe does not carry are
+the named constants below, each with its source or marked as an assumption. The serial formats are those of
+``docs/bundle.md``; :func:`calibration_sha256` is the hash the firmware's info line reports.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import re
+import shutil
+import signal
+import struct
+import subprocess
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path, PurePosixPath
+from typing import TYPE_CHECKING, Any, Mapping
+
+from .errors import SpecError
+
+if TYPE_CHECKING:
+    from .design import Design
+
+__all__ = [
+    "AVR_CFLAGS",
+    "HEX_NAME",
+    "HOST_CFLAGS",
+    "ChipConfig",
+    "CompileError",
+    "FirmwareError",
+    "build_avr_elf",
+    "build_hex",
+    "build_host",
+    "calibration_sha256",
+    "chip_config",
+    "raw_words",
+    "render",
+    "run_simavr",
+    "twi_settings",
+    "write_tree",
+]
+
+# ---- the target -------------------------------------------------------------------------------------------
+
+F_CPU_HZ = 16_000_000
+MCU = "atmega328p"
+HEX_NAME = "magfab-atmega328p.hex"
+#: Flash left for the application under the 2 KB bootloader of older Nanos (Optiboot on the Uno takes 512 B).
+FLASH_LIMIT_BYTES = 32 * 1024 - 2048
+#: Static RAM allowed, leaving 512 of the 2048 bytes for the stack (float routines, frame buffers).
+RAM_LIMIT_BYTES = 2048 - 512
+#: Largest UART rate error accepted (the receiver samples mid-bit; 2 to 2.5 % is the usual 8N1 budget).
+BAUD_ERROR_LIMIT = 0.025
+
+CORE_SOURCES = ("mlx90393.c", "mf_sample.c", "mf_calib.c", "mf_frame.c", "mf_app.c")
+CORE_DIR = "magfab_readout/src"
+AVR_CFLAGS = ("-mmcu=" + MCU, f"-DF_CPU={F_CPU_HZ}UL", "-Os", "-std=gnu99", "-Wall", "-Wextra",
+              "-ffunction-sections", "-fdata-sections")
+AVR_LDFLAGS = ("-Wl,--gc-sections", "-lm")
+HOST_CFLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-Wshadow", "-Wstrict-prototypes",
+               "-Wdouble-promotion", "-O1")
+HOST_PROGRAM = "host/magfab_host"
+
+# ---- chip facts the recipe does not carry -----------------------------------------------------------------
+
+#: HALLCONF the firmware programs: the setting the datasheet's sensitivity table (recipe) is given for.
+HALLCONF = 0xC
+#: Temperature channel, TCMP off: T = 25 C + (raw - 46244) / 45.2 (BRIEF section 4, from the datasheet and the
+#: public drivers; not in the recipe).
+TEMPERATURE_RAW_25C = 46244
+TEMPERATURE_LSB_PER_C = 45.2
+#: Allowance on the datasheet's conversion time for the chip's internal oscillator. Assumption: the recipe gives
+#: the typical TCONV only. Every read waits this much longer than the nominal conversion.
+TCONV_MARGIN = 0.10
+#: Wait after RT before the next command. Assumption: the recipe has no start-up time; public drivers wait 1 to
+#: 10 ms. Only recovery pays it.
+RESET_WAIT_US = 5000
+#: A read the chip rejects while it is still in its measuring mode (burst, or a single measurement not done) is
+#: tried once more after this fraction of the conversion wait: a slow oscillator, not a fault, until it fails
+#: twice.
+RETRY_FRACTION = 0.25
+START_TRIES = 3
+#: While the chip does not answer: one error frame and one recovery attempt per interval.
+LOST_RETRY_US = 100_000
+#: I2C timeout per bus step: this many byte times at the bus clock, and never under the minimum.
+I2C_TIMEOUT_BYTES = 10
+I2C_TIMEOUT_MIN_US = 1000
+#: Power-on register words of the simulated chip: HALLCONF 0xC, GAIN_SEL 7 (the datasheet default) plus a
+#: reserved bit in reg 0, and COMM_MODE = I2C only in reg 1, so the tests catch a driver that overwrites bits
+#: it does not own. Simulator only.
+SIM_REGISTER_DEFAULTS = (0x047C, 0x6000, 0x0000)
+
+FLOAT32_MAX = 3.4028234663852886e38
+CALIBRATION_FORMAT = "magfab-calibration/1"
+MAX_ORDER = 8
+MAX_HULL_POINTS = 1000
+
+
+class FirmwareError(ValueError):
+    """A calibration the firmware cannot carry: names the key path, the value and what is allowed."""
+
+    def __init__(self, key: str, value: object, allowed: str) -> None:
+        shown = repr(value)
+        if len(shown) > 80:
+            shown = shown[:77] + "..."
+        super().__init__(f"calibration.{key} = {shown}: {allowed}")
+
+
+class CompileError(RuntimeError):
+    """The C compiler (or another tool of the toolchain) failed; the message carries its command and output."""
+
+    def __init__(self, command: list[str], output: str) -> None:
+        self.command = command
+        self.output = output
+        tail = "\n".join(output.strip().splitlines()[-40:])
+        super().__init__(f"{Path(command[0]).name} failed ({' '.join(command[1:6])} ...):\n{tail}")
+
+
+# ---- chip configuration -----------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ChipConfig:
+    """What the firmware programs into the MLX90393 and what follows from it. Times in microseconds."""
+
+    gain_sel: int
+    resolution: int
+    osr: int
+    dig_filt: int
+    zyxt: int  # channel bits: z 8, y 4, x 2, t 1
+    burst: bool
+    temperature: bool
+    registers: tuple[tuple[int, int, int], ...]  # (address, mask, value) for registers 0, 1, 2
+    lsb_xy_uT: float
+    lsb_z_uT: float
+    raw_signed: bool  # RES 0/1: two's complement words
+    raw_zero: int  # word at zero field (RES 2: 32768, RES 3: 16384, else 0)
+    raw_limit: int  # |counts| at the output limit: the saturation flag
+    tconv_us: int  # one measurement of the zyxt channels, nominal (datasheet formula), rounded up
+    tconv_wait_us: int  # the same with TCONV_MARGIN: the wait before every read
+
+    @property
+    def sample_rate_Hz(self) -> float:
+        """Frames per second in burst mode (one per conversion wait); single mode adds the bus time."""
+        return 1e6 / self.tconv_wait_us
+
+
+def _value(option: object) -> str:
+    """An option's text, whether the spec holds the Enum or (a copy made without validation) the string."""
+    return str(getattr(option, "value", option))
+
+
+def chip_config(design: "Design") -> ChipConfig:
+    """The register words, scale and timing for the spec's sensor and firmware sections."""
+    chip, s, fw = design.chip, design.spec.sensor, design.spec.firmware
+    temperature = bool(fw.temperature)
+    zyxt = 0x0E | (0x01 if temperature else 0)
+    res = s.resolution
+    registers = (
+        (0x00, 0x01FF, HALLCONF | s.gain_sel << 4),  # Z_SERIES = 0, BIST = 0
+        (0x01, 0x1FFF, zyxt << 6),  # BURST_DATA_RATE 0, BURST_SEL, TCMP_EN 0, EXT_TRG 0, WOC_DIFF 0
+        (0x02, 0x1FFF, s.osr | s.dig_filt << 2 | res << 5 | res << 7 | res << 9),  # OSR2 = 0
+    )
+    axis = chip["tconvm_offset_us"].nominal + chip["tconvm_step_us"].nominal * 2**s.osr * (2 + 2**s.dig_filt)
+    temp = chip["tconvm_offset_us"].nominal + chip["tconvt_step_us"].nominal  # OSR2 = 0
+    tconv = 3 * axis + (temp if temperature else 0.0) + chip["tconv_end_us"].nominal
+    zero = int(chip[f"output_zero_res{res}_lsb"].nominal) if res >= 2 else 0
+    return ChipConfig(
+        gain_sel=s.gain_sel, resolution=res, osr=s.osr, dig_filt=s.dig_filt, zyxt=zyxt,
+        burst=_value(fw.acquisition) == "burst", temperature=temperature, registers=registers,
+        lsb_xy_uT=chip[f"sensitivity_xy_gain{s.gain_sel}_uT_per_lsb"].nominal * 2**res,
+        lsb_z_uT=chip[f"sensitivity_z_gain{s.gain_sel}_uT_per_lsb"].nominal * 2**res,
+        raw_signed=res < 2, raw_zero=zero, raw_limit=int(chip[f"output_limit_res{res}_lsb"].nominal),
+        tconv_us=math.ceil(tconv), tconv_wait_us=math.ceil(tconv * (1.0 + TCONV_MARGIN)),
+    )
+
+
+def raw_words(chip: ChipConfig, b_uT: tuple[float, float, float], t_C: float = 25.0) -> tuple[int, int, int, int]:
+    """(T, X, Y, Z) words the chip would send for a field in microtesla (rounded, clipped at the output limit)."""
+    words = []
+    for value, lsb in zip(b_uT, (chip.lsb_xy_uT, chip.lsb_xy_uT, chip.lsb_z_uT)):
+        c = max(-chip.raw_limit, min(chip.raw_limit, round(value / lsb)))
+        words.append(c & 0xFFFF if chip.raw_signed else chip.raw_zero + c)
+    t = min(0xFFFF, max(0, round(TEMPERATURE_RAW_25C + (t_C - 25.0) * TEMPERATURE_LSB_PER_C)))
+    return (t if chip.temperature else 0, *words)  # type: ignore[return-value]
+
+
+def _uart(baud: int) -> tuple[int, float]:
+    """UBRR with U2X for the spec's baud, and the rate error; SpecError past BAUD_ERROR_LIMIT."""
+    ubrr = max(0, round(F_CPU_HZ / (8 * baud)) - 1)
+    error = F_CPU_HZ / (8 * (ubrr + 1)) / baud - 1.0
+    if ubrr > 4095 or abs(error) > BAUD_ERROR_LIMIT:
+        good = [b for b in (57600, 76800, 115200, 250000, 500000, 1000000)
+                if abs(F_CPU_HZ / (8 * round(F_CPU_HZ / (8 * b))) / b - 1) <= BAUD_ERROR_LIMIT]
+        raise SpecError("firmware.baud", baud,
+                        f"is {error * 100:+.1f} % off on a 16 MHz ATmega328P with U2X (UBRR {ubrr}); the UART "
+                        f"allows {BAUD_ERROR_LIMIT * 100:g} %", "use one of " + ", ".join(map(str, good)))
+    return ubrr, error
+
+
+def twi_settings(hz: int) -> tuple[int, int, int]:
+    """(TWBR, prescaler bits, actual Hz): the fastest TWI clock not above the spec's."""
+    for bits, div in enumerate((1, 4, 16, 64)):
+        twbr = max(0, math.ceil((F_CPU_HZ / hz - 16) / (2 * div)))
+        if twbr <= 255:
+            return twbr, bits, round(F_CPU_HZ / (16 + 2 * twbr * div))
+    raise SpecError("firmware.i2c_hz", hz, "is below what the ATmega328P's TWI can divide 16 MHz down to (~490 Hz)")
+
+
+# ---- calibration ------------------------------------------------------------------------------------------
+
+
+def calibration_sha256(calibration: Mapping[str, Any]) -> str:
+    """SHA-256 (hex) of the calibration as canonical JSON (sorted keys, no spaces, ASCII, finite numbers):
+    the firmware's info line reports its first 16 digits, the readout package computes the same."""
+    text = json.dumps(calibration, sort_keys=True, separators=(",", ":"), ensure_ascii=True, allow_nan=False)
+    return hashlib.sha256(text.encode("ascii")).hexdigest()
+
+
+def _number(key: str, value: object, *, positive: bool = False, nonnegative: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise FirmwareError(key, value, "must be a number")
+    x = float(value)
+    if not math.isfinite(x) or abs(x) > FLOAT32_MAX:
+        raise FirmwareError(key, value, "must be finite and within float32 range")
+    if positive and not x > 0:
+        raise FirmwareError(key, value, "must be greater than 0")
+    if nonnegative and x < 0:
+        raise FirmwareError(key, value, "must be at least 0")
+    return x
+
+
+def _get(cal: Mapping[str, Any], path: str) -> object:
+    node: object = cal
+    for part in path.split("."):
+        if not isinstance(node, Mapping) or part not in node:
+            raise FirmwareError(path, "<missing>", "is required (docs/bundle.md, calibration.json)")
+        node = node[part]
+    return node
+
+
+def _cross(o: tuple[float, float], a: tuple[float, float], b: tuple[float, float]) -> float:
+    return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+
+
+def _hull(raw: object) -> list[tuple[float, float]]:
+    """The hull as a strictly convex, counter-clockwise polygon: a repeated closing point and collinear (or
+    numerically flat) vertices removed. Raises for fewer than 3 points, clockwise or non-convex outlines."""
+    key = "valid_region.hull"
+    if not isinstance(raw, list) or not all(isinstance(p, list) and len(p) == 2 for p in raw):
+        raise FirmwareError(key, raw, "must be a list of [Bz_uT, Br_uT] points")
+    pts = [(_number(f"{key}[{n}][0]", p[0]), _number(f"{key}[{n}][1]", p[1])) for n, p in enumerate(raw)]
+    while len(pts) > 1 and pts[0] == pts[-1]:
+        pts.pop()
+    if len(pts) < 3:
+        raise FirmwareError(key, raw, "must have at least 3 distinct points")
+    span = max(max(p[0] for p in pts) - min(p[0] for p in pts), max(p[1] for p in pts) - min(p[1] for p in pts))
+    tol = 1e-9 * span * span
+    area2 = sum(pts[k - 1][0] * pts[k][1] - pts[k][0] * pts[k - 1][1] for k in range(len(pts)))
+    if not area2 > tol:
+        raise FirmwareError(key, raw, "must enclose a positive area counter-clockwise (it is clockwise or flat)")
+    for k in range(len(pts)):
+        if _cross(pts[k - 2], pts[k - 1], pts[k]) < -tol:
+            raise FirmwareError(key, raw, f"must be convex (it turns clockwise at point {(k - 1) % len(pts)})")
+    changed = True
+    while changed and len(pts) > 3:
+        changed = False
+        for k in range(len(pts)):
+            if _cross(pts[k - 1], pts[k], pts[(k + 1) % len(pts)]) <= tol or pts[k] == pts[k - 1]:
+                del pts[k]
+                changed = True
+                break
+    if len(pts) > MAX_HULL_POINTS:
+        raise FirmwareError(key, f"{len(pts)} points", f"must have at most {MAX_HULL_POINTS} points for the firmware")
+    return pts
+
+
+def _calibration_context(cal: Mapping[str, Any]) -> dict[str, Any]:
+    """Validate a calibration.json dict and lay it out for the C tables (Horner order, clean hull)."""
+    if not isinstance(cal, Mapping):
+        raise FirmwareError("", type(cal).__name__, "must be a JSON object (dict)")
+    if cal.get("format") != CALIBRATION_FORMAT:
+        raise FirmwareError("format", cal.get("format"), f"must be {CALIBRATION_FORMAT!r}")
+    order = _get(cal, "order")
+    if isinstance(order, bool) or not isinstance(order, int) or not 0 <= order <= MAX_ORDER:
+        raise FirmwareError("order", order, f"must be an integer from 0 to {MAX_ORDER}")
+    monomials = _get(cal, "monomials")
+    if not isinstance(monomials, list):
+        raise FirmwareError("monomials", monomials, "must be a list of [i, j] exponents")
+    index: dict[tuple[int, int], int] = {}
+    for m, pair in enumerate(monomials):
+        if (not isinstance(pair, list) or len(pair) != 2
+                or not all(isinstance(e, int) and not isinstance(e, bool) and e >= 0 for e in pair)
+                or pair[0] + pair[1] > order or tuple(pair) in index):
+            raise FirmwareError(f"monomials[{m}]", pair, f"must be a new [i, j] with i, j >= 0 and i + j <= {order}")
+        index[(pair[0], pair[1])] = m
+    # Horner rows: for i = n down to 0, the coefficients of u^i v^j for j = n - i down to 0 (absent: 0).
+    rows: list[dict[str, Any]] = [{"i": i, "fz": [], "fr": []} for i in range(order, -1, -1)]
+    for force, name in (("Fz_N", "fz"), ("Fr_N", "fr")):
+        coefs = _get(cal, f"coefficients.{force}")
+        if not isinstance(coefs, list) or len(coefs) != len(monomials):
+            raise FirmwareError(f"coefficients.{force}", coefs, f"must be a list of {len(monomials)} numbers")
+        values = [_number(f"coefficients.{force}[{m}]", c) for m, c in enumerate(coefs)]
+        for row in rows:
+            i = row["i"]
+            row[name] = [values[index[(i, j)]] if (i, j) in index else 0.0 for j in range(order - i, -1, -1)]
+    scale = {}
+    for name in ("Bz_uT", "Br_uT"):
+        center = _number(f"scaling.{name}.center", _get(cal, f"scaling.{name}.center"))
+        s = _number(f"scaling.{name}.scale", _get(cal, f"scaling.{name}.scale"), positive=True)
+        if not 1e-30 < s < 1e30:
+            raise FirmwareError(f"scaling.{name}.scale", s, "must be between 1e-30 and 1e30 (float32 reciprocal)")
+        scale[name] = (center, s)
+    sign = _get(cal, "shear_sign")
+    if sign not in (1, -1) or isinstance(sign, bool):
+        raise FirmwareError("shear_sign", sign, "must be +1 or -1")
+    box = {}
+    for name in ("Bz_uT", "Br_uT"):
+        pair = _get(cal, f"valid_region.{name}")
+        if not isinstance(pair, list) or len(pair) != 2:
+            raise FirmwareError(f"valid_region.{name}", pair, "must be [lo, hi]")
+        lo, hi = (_number(f"valid_region.{name}[{k}]", v) for k, v in enumerate(pair))
+        if not lo <= hi:
+            raise FirmwareError(f"valid_region.{name}", pair, "must have lo <= hi")
+        box[name] = (lo, hi)
+    hull = _hull(_get(cal, "valid_region.hull"))
+    n = len(hull)
+    edges = []
+    for k in range(n):
+        (x0, y0), (x1, y1) = hull[k], hull[(k + 1) % n]
+        ex, ey = -(y1 - y0), x1 - x0
+        edges.append((ex, ey, ex * x0 + ey * y0))
+    return {
+        "order": order,
+        "n_coef": (order + 1) * (order + 2) // 2,
+        "rows": rows,
+        "bz_center": scale["Bz_uT"][0], "bz_scale": scale["Bz_uT"][1], "bz_inv_scale": 1.0 / scale["Bz_uT"][1],
+        "br_center": scale["Br_uT"][0], "br_scale": scale["Br_uT"][1], "br_inv_scale": 1.0 / scale["Br_uT"][1],
+        "shear_sign": float(sign),
+        "direction_min_uT": _number("direction_min_uT", _get(cal, "direction_min_uT"), nonnegative=True),
+        "tare_fz": _number("tare_N.Fz_N", _get(cal, "tare_N.Fz_N")),
+        "tare_fr": _number("tare_N.Fr_N", _get(cal, "tare_N.Fr_N")),
+        "bz_lo": box["Bz_uT"][0], "bz_hi": box["Bz_uT"][1], "br_lo": box["Br_uT"][0], "br_hi": box["Br_uT"][1],
+        "hull": hull,
+        "fan": [(x - hull[0][0], y - hull[0][1]) for x, y in hull],
+        "edges": edges,
+        "inner": _inner_box(hull),
+    }
+
+
+def _inside_convex(hull: list[tuple[float, float]], q: tuple[float, float]) -> bool:
+    return all(_cross(hull[k - 1], hull[k], q) >= 0.0 for k in range(len(hull)))
+
+
+def _inner_box(hull: list[tuple[float, float]]) -> tuple[float, float, float, float]:
+    """(Bz lo, Bz hi, Br lo, Br hi) of a rectangle inside the convex hull: centred on the vertices' mean, with the
+    hull's aspect, as large as keeps all four corners inside (so the whole rectangle is), shrunk by a float32
+    step at each side. Readings in it skip the hull test; an empty box (lo > hi) when none fits."""
+    cz = sum(p[0] for p in hull) / len(hull)
+    cr = sum(p[1] for p in hull) / len(hull)
+    hz = (max(p[0] for p in hull) - min(p[0] for p in hull)) / 2.0
+    hr = (max(p[1] for p in hull) - min(p[1] for p in hull)) / 2.0
+
+    def fits(t: float) -> bool:
+        return all(_inside_convex(hull, (cz + a * t * hz, cr + b * t * hr)) for a in (-1, 1) for b in (-1, 1))
+
+    lo, hi = 0.0, 1.0
+    if not fits(0.0):
+        return (1.0, -1.0, 1.0, -1.0)
+    for _ in range(60):
+        mid = (lo + hi) / 2.0
+        lo, hi = (mid, hi) if fits(mid) else (lo, mid)
+    t = lo * (1.0 - 1e-6)
+    box = [cz - t * hz, cz + t * hz, cr - t * hr, cr + t * hr]
+    # float32 literals rounded inwards, so the C rectangle is never larger than this one
+    out = []
+    for k, x in enumerate(box):
+        f = struct.unpack("<f", struct.pack("<f", x))[0]
+        if (k % 2 == 0 and f < x) or (k % 2 == 1 and f > x):
+            f = _f32_step(f, towards=x)
+        out.append(f)
+    return (out[0], out[1], out[2], out[3])
+
+
+def _f32_step(f: float, towards: float) -> float:
+    """The next float32 after f in the direction of ``towards``."""
+    bits = struct.unpack("<I", struct.pack("<f", f))[0]
+    up = towards > f
+    if f == 0.0:
+        return struct.unpack("<f", struct.pack("<I", 1 if up else 0x80000001))[0]
+    bits += 1 if (f > 0) == up else -1
+    return struct.unpack("<f", struct.pack("<I", bits))[0]
+
+
+# ---- rendering --------------------------------------------------------------------------------------------
+
+
+def _bench_points(chip: ChipConfig, cal: dict[str, Any]) -> list[dict[str, Any]]:
+    """Raw words for the cycle benchmark: the hull's centre (the quick inner-box accept), near a vertex (inside,
+    the full hull test), on the axis (no direction split), outside the box."""
+    hull = cal["hull"]
+    bz = sum(p[0] for p in hull) / len(hull)
+    br = sum(p[1] for p in hull) / len(hull)
+    vz, vr = max(hull, key=lambda p: (p[0] - bz) ** 2 / (1e-9 + (cal["bz_hi"] - cal["bz_lo"]) ** 2)
+                 + (p[1] - br) ** 2 / (1e-9 + (cal["br_hi"] - cal["br_lo"]) ** 2))
+    edge = (bz + 0.97 * (vz - bz), br + 0.97 * (vr - br))
+    far = (cal["bz_hi"] + (cal["bz_hi"] - cal["bz_lo"]) + 1.0, cal["br_hi"] * 2.0 + 1.0)
+    out = []
+    for name, (z, r) in (("centre", (bz, br)), ("edge", edge), ("axis", (bz, 0.0)), ("outside", far)):
+        t, x, y, zz = raw_words(chip, (r / math.sqrt(2.0), r / math.sqrt(2.0), z), 31.0)
+        out.append({"name": name, "t": t, "x": x, "y": y, "z": zz})
+    return out
+
+
+def _context(design: "Design", calibration: Mapping[str, Any]) -> dict[str, Any]:
+    spec, recipe = design.spec, design.chip
+    fw = spec.firmware
+    chip = chip_config(design)
+    cal = _calibration_context(calibration)
+    ubrr, baud_error = _uart(fw.baud)
+    twbr, twps, i2c_actual = twi_settings(fw.i2c_hz)
+    sha16 = calibration_sha256(calibration)[:16]
+    info = f"I,magfab,{spec.name},{sha16},{chip.gain_sel},{chip.resolution},{chip.osr},{chip.dig_filt}\n"
+    forbidden = []
+    for pair in recipe.texts.get("forbidden_osr_dig_filt", "").split():
+        osr, dig_filt = (int(v) for v in pair.split("/"))
+        forbidden.append(osr << 3 | dig_filt)
+    regs = {reg: (mask, value) for reg, mask, value in chip.registers}
+    return {
+        **cal,
+        "info_line": info,
+        "i2c_address": design.i2c_address,
+        "sim_address": design.i2c_address,
+        "i2c_hz": fw.i2c_hz,
+        "i2c_actual_hz": i2c_actual,
+        "twbr": twbr, "twps_bits": twps, "twps_div": 4**twps,
+        "i2c_timeout_us": max(I2C_TIMEOUT_MIN_US, math.ceil(I2C_TIMEOUT_BYTES * 9 * 1e6 / i2c_actual)),
+        "i2c_timeout_bytes": I2C_TIMEOUT_BYTES, "i2c_timeout_min_us": I2C_TIMEOUT_MIN_US,
+        "baud": fw.baud, "ubrr": ubrr, "baud_error_pct": f"{baud_error * 100:+.2f}",
+        "text_output": int(_value(fw.output) == "text"),
+        "burst": int(chip.burst), "temperature": int(chip.temperature), "zyxt": chip.zyxt, "axes": 3,
+        "gain_sel": chip.gain_sel, "resolution": chip.resolution, "osr": chip.osr, "dig_filt": chip.dig_filt,
+        "hallconf": HALLCONF,
+        "reg0_mask": regs[0][0], "reg0_value": regs[0][1], "reg1_mask": regs[1][0], "reg1_value": regs[1][1],
+        "reg2_mask": regs[2][0], "reg2_value": regs[2][1],
+        "lsb_xy_uT": chip.lsb_xy_uT, "lsb_z_uT": chip.lsb_z_uT,
+        "raw_signed": int(chip.raw_signed), "raw_zero": chip.raw_zero, "raw_limit": chip.raw_limit,
+        "t_raw_25c": TEMPERATURE_RAW_25C, "t_lsb_per_c": TEMPERATURE_LSB_PER_C,
+        "t_c_per_lsb": 1.0 / TEMPERATURE_LSB_PER_C,
+        "tconv_us": chip.tconv_us, "tconv_wait_us": chip.tconv_wait_us, "margin_pct": round(TCONV_MARGIN * 100),
+        "first_wait_us": 2 * chip.tconv_wait_us,
+        "retry_us": math.ceil(chip.tconv_wait_us * RETRY_FRACTION),
+        "exit_wait_us": chip.tconv_wait_us,
+        "reset_wait_us": RESET_WAIT_US, "start_tries": START_TRIES, "lost_retry_us": LOST_RETRY_US,
+        "board_pullups": bool(spec.pcb.pullups),
+        "hex_name": HEX_NAME,
+        "avr_cflags": " ".join(AVR_CFLAGS), "avr_ldflags": " ".join(AVR_LDFLAGS),
+        "host_cflags": " ".join(HOST_CFLAGS),
+        "core_src_make": " ".join(f"$(CORE)/{s}" for s in CORE_SOURCES),
+        "bench_points": _bench_points(chip, cal),
+        # the simulator's own tables: every gain and resolution, straight from the recipe
+        "sens_xy": [recipe[f"sensitivity_xy_gain{g}_uT_per_lsb"].nominal for g in range(8)],
+        "sens_z": [recipe[f"sensitivity_z_gain{g}_uT_per_lsb"].nominal for g in range(8)],
+        "out_limit": [int(recipe[f"output_limit_res{r}_lsb"].nominal) for r in range(4)],
+        "out_zero": [0, 0, int(recipe["output_zero_res2_lsb"].nominal), int(recipe["output_zero_res3_lsb"].nominal)],
+        "tconvm_offset": recipe["tconvm_offset_us"].nominal, "tconvm_step": recipe["tconvm_step_us"].nominal,
+        "tconvt_step": recipe["tconvt_step_us"].nominal, "tconv_end": recipe["tconv_end_us"].nominal,
+        "forbidden": forbidden,
+        "reg_default": list(SIM_REGISTER_DEFAULTS),
+    }
+
+
+def render(design: "Design", calibration: Mapping[str, Any]) -> dict[str, bytes]:
+    """Every firmware file, keyed by its path relative to the bundle's firmware folder.
+
+    ``calibration`` is a calibration.json dict (docs/bundle.md); :class:`FirmwareError` names the key of
+    anything the firmware cannot carry, :class:`~magfab.errors.SpecError` a spec the board cannot run
+    (a baud rate the 16 MHz UART cannot make). ``*.j2`` templates are rendered (stripped of the suffix), other
+    files copied; ``.bat`` files get CRLF line ends."""
+    from .templating import render as render_template, templates_dir
+
+    context = _context(design, calibration)
+    root = templates_dir() / "firmware"
+    out: dict[str, bytes] = {}
+    for path in sorted(p for p in root.rglob("*") if p.is_file() and "__pycache__" not in p.parts):
+        rel = path.relative_to(root).as_posix()
+        if rel.endswith(".j2"):
+            text = render_template(f"firmware/{rel}", **context)
+            rel = rel[:-3]
+        else:
+            text = path.read_text(encoding="utf-8")
+        if rel.endswith(".bat"):
+            text = text.replace("\r\n", "\n").replace("\n", "\r\n")
+        out[rel] = text.encode("utf-8")
+    return out
+
+
+# ---- compiling --------------------------------------------------------------------------------------------
+
+
+def write_tree(files: Mapping[str, bytes], root: Path) -> None:
+    """Write rendered files under root (paths must stay inside it)."""
+    for rel, data in files.items():
+        parts = PurePosixPath(rel).parts
+        if not parts or PurePosixPath(rel).is_absolute() or ".." in parts:
+            raise ValueError(f"firmware file path {rel!r} must be relative and stay inside the folder")
+        target = root.joinpath(*parts)
+        target.parent.mkdir(parents=True, exist_ok=True)
+        target.write_bytes(data)
+
+
+def _run(command: list[str], cwd: Path, timeout: float = 300.0) -> str:
+    try:
+        done = subprocess.run(command, cwd=cwd, capture_output=True, text=True, timeout=timeout)
+    except subprocess.TimeoutExpired as exc:
+        raise CompileError(command, f"timed out after {timeout:g} s") from exc
+    output = (done.stdout or "") + (done.stderr or "")
+    if done.returncode != 0:
+        raise CompileError(command, output)
+    return output
+
+
+def build_avr_elf(files: Mapping[str, bytes], workdir: str | Path, program: str = "main") -> tuple[Path, str]:
+    """Compile ``avr/<program>.c`` (``main``: the firmware, ``bench``: the cycle benchmark) with the core into
+    ``workdir/avr/build/<program>.elf``, with the flags of the bundle's Makefile. Returns the ELF and the
+    compiler's warnings (empty when clean). Raises FileNotFoundError without avr-gcc, CompileError on failure."""
+    cc = shutil.which("avr-gcc")
+    if cc is None:
+        raise FileNotFoundError("avr-gcc is not installed (Debian packages gcc-avr and avr-libc)")
+    root = Path(workdir)
+    write_tree(files, root)
+    avr = root / "avr"
+    (avr / "build").mkdir(parents=True, exist_ok=True)
+    elf = avr / "build" / f"{program}.elf"
+    core = [f"../{CORE_DIR}/{s}" for s in CORE_SOURCES]
+    warnings = _run([cc, *AVR_CFLAGS, f"-I../{CORE_DIR}", "-o", str(elf), f"{program}.c", *core, *AVR_LDFLAGS], avr)
+    return elf, warnings.strip()
+
+
+def _avr_size(elf: Path) -> dict[str, int]:
+    size = shutil.which("avr-size")
+    if size is None:
+        raise FileNotFoundError("avr-size is not installed (Debian package binutils-avr)")
+    text = _run([size, "--format=berkeley", str(elf)], elf.parent)
+    row = text.strip().splitlines()[-1].split()
+    text_b, data_b, bss_b = (int(v) for v in row[:3])
+    return {"flash_bytes": text_b + data_b, "ram_bytes": data_b + bss_b,
+            "text_bytes": text_b, "data_bytes": data_b, "bss_bytes": bss_b}
+
+
+def build_hex(files: Mapping[str, bytes]) -> tuple[bytes, dict[str, Any]] | None:
+    """The ATmega328P image (Intel HEX bytes) and its sizes, or None when avr-gcc is not installed.
+
+    The dict holds ``flash_bytes`` (text + data), ``ram_bytes`` (static: data + bss), their limits, and
+    ``warnings`` (the compiler's, empty when clean). Raises CompileError if a tool fails, FirmwareError if the
+    image does not fit (flash under a 2 KB bootloader, or static RAM leaving less than 512 B of stack)."""
+    if shutil.which("avr-gcc") is None or shutil.which("avr-objcopy") is None:
+        return None
+    with tempfile.TemporaryDirectory(prefix="magfab-avr-") as tmp:
+        elf, warnings = build_avr_elf(files, tmp, "main")
+        sizes = _avr_size(elf)
+        hex_path = elf.with_suffix(".hex")
+        _run([shutil.which("avr-objcopy") or "avr-objcopy", "-O", "ihex", "-R", ".eeprom", str(elf), str(hex_path)],
+             elf.parent)
+        image = hex_path.read_bytes()
+    if sizes["flash_bytes"] > FLASH_LIMIT_BYTES:
+        raise FirmwareError("valid_region.hull", f"{sizes['flash_bytes']} B of flash",
+                            f"the image must fit {FLASH_LIMIT_BYTES} B (use a shorter hull or a lower order)")
+    if sizes["ram_bytes"] > RAM_LIMIT_BYTES:
+        raise FirmwareError("", f"{sizes['ram_bytes']} B of static RAM", f"must be at most {RAM_LIMIT_BYTES} B")
+    info: dict[str, Any] = {**sizes, "flash_limit_bytes": FLASH_LIMIT_BYTES, "ram_limit_bytes": RAM_LIMIT_BYTES,
+                            "warnings": warnings}
+    return image, info
+
+
+def build_host(files: Mapping[str, bytes], workdir: str | Path) -> Path:
+    """Compile the core, the simulated MLX90393 and the harness for this machine with ``gcc`` and
+    :data:`HOST_CFLAGS` (warnings are errors) into ``workdir/host/magfab_host``; returns its path."""
+    cc = shutil.which("gcc") or shutil.which("cc")
+    if cc is None:
+        raise FileNotFoundError("gcc is not installed (Debian packages gcc and libc6-dev)")
+    root = Path(workdir)
+    write_tree(files, root)
+    host = root / "host"
+    exe = root / HOST_PROGRAM
+    core = [f"../{CORE_DIR}/{s}" for s in CORE_SOURCES]
+    _run([cc, *HOST_CFLAGS, f"-I../{CORE_DIR}", "-I.", "-o", str(exe), "host_main.c", "sim_mlx90393.c", *core, "-lm"],
+         host)
+    return exe
+
+
+_ANSI = re.compile(r"\x1b\[[0-9;]*m")
+
+
+def run_simavr(elf: str | Path, timeout_s: float = 120.0, *, stop_after_s: float | None = None) -> str | None:
+    """Run an ATmega328P ELF under simavr at 16 MHz and return what it wrote on USART0 (simavr prints it line
+    by line; colour codes are removed here), or None when simavr is not installed.
+
+    Without ``stop_after_s`` the program must end by itself (sleep with interrupts off) within ``timeout_s``.
+    With it, simavr is interrupted (SIGINT, which it handles by flushing and exiting) after that many seconds of
+    wall time: for firmware that loops forever."""
+    simavr = shutil.which("simavr")
+    if simavr is None:
+        return None
+    command = [simavr, "-m", MCU, "-f", str(F_CPU_HZ), str(elf)]
+    proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    try:
+        out, err = proc.communicate(timeout=stop_after_s if stop_after_s is not None else timeout_s)
+    except subprocess.TimeoutExpired:
+        if stop_after_s is None:
+            proc.kill()
+            proc.communicate()
+            raise CompileError(command, f"simavr did not finish in {timeout_s:g} s") from None
+        proc.send_signal(signal.SIGINT)
+        try:
+            out, err = proc.communicate(timeout=30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            out, err = proc.communicate()
+    else:
+        if proc.returncode != 0:
+            raise CompileError(command, out.decode(errors="replace") + err.decode(errors="replace"))
+    return _ANSI.sub("", err.decode("ascii", errors="replace"))  # simavr logs the UART on stderr

@@ -1,0 +1,134 @@
+"""The host readout package of a build: ``magfab_readout``, pip-installable, rendered from ``templates/readout/``.
+
+The package embeds the build's calibration.json and the firmware's settings (spec name, baud rate, chip
+register fields, microtesla per count); it decodes the firmware's frames (docs/bundle.md), evaluates the
+calibration in Python, and has a ``magfab-readout`` command with a simulated device.
+
+The calibration is validated by the package's own ``calibration`` module, rendered and run here, so the
+build and the host refuse exactly the same files; its errors come out as :class:`~magfab.errors.SpecError`
+with the key path inside calibration.json.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import types
+from functools import lru_cache
+from typing import Any, Mapping
+
+from . import __version__
+from .errors import SpecError
+from .templating import render as render_template
+from .templating import templates_dir
+
+__all__ = ["PACKAGE", "TEMPLATES", "render", "calibration_sha256", "validate_calibration",
+           "TEMPERATURE_RAW_25C", "TEMPERATURE_LSB_PER_C"]
+
+PACKAGE = "magfab_readout"
+TEMPLATES = "readout"  # folder under templates/; every file in it ends in .j2 and renders to readout/<path>
+# MLX90393 temperature (TCMP off): T = 25 C + (raw - 46244) / 45.2 C; ../shared/design/BRIEF.md sec. 4,
+# after the Melexis datasheet. The chip recipe has no entry for it yet.
+TEMPERATURE_RAW_25C = 46244
+TEMPERATURE_LSB_PER_C = 45.2
+
+
+@lru_cache(maxsize=1)
+def _calibration_module() -> types.ModuleType:
+    """The package's calibration module (standard library only), rendered and loaded under a private name."""
+    name = f"{TEMPLATES}/src/{PACKAGE}/calibration.py.j2"
+    source = render_template(name)
+    module = types.ModuleType("_magfab_readout_calibration")
+    module.__file__ = str(templates_dir() / name)
+    exec(compile(source, module.__file__, "exec"), module.__dict__)  # our own template, no spec values in it
+    return module
+
+
+def _plain(value: object) -> object:
+    """numpy scalars and arrays as Python numbers and lists (what calibration.json holds)."""
+    if hasattr(value, "tolist"):
+        return value.tolist()
+    raise TypeError(f"{type(value).__name__} is not a JSON value")
+
+
+def validate_calibration(calibration: Mapping[str, Any]):
+    """The calibration as the package's ``Calibration`` object; :class:`SpecError` naming the key path in
+    calibration.json when the readout could not evaluate it."""
+    module = _calibration_module()
+    if not isinstance(calibration, Mapping):
+        raise SpecError("calibration.json", type(calibration).__name__, "must be a JSON object (a dict)")
+    try:
+        plain = json.loads(json.dumps(dict(calibration), allow_nan=True, default=_plain))
+        return module.Calibration(plain)
+    except module.CalibrationError as exc:
+        raise SpecError(f"calibration.json:{exc.key or '(top level)'}", exc.value, exc.allowed) from None
+    except (TypeError, ValueError) as exc:  # not JSON-serialisable, NaN somewhere outside the checked keys
+        raise SpecError("calibration.json", "(contents)", f"must be plain JSON with finite numbers ({exc})") from None
+
+
+def calibration_sha256(calibration: Mapping[str, Any]) -> str:
+    """SHA-256 (hex) of the calibration's canonical JSON (sorted keys, no spaces, ASCII, finite numbers).
+
+    The firmware's info line carries its first 16 hex digits; the readout package compares them with its own.
+    """
+    return validate_calibration(calibration).sha256
+
+
+def _context(design, calibration_object) -> dict[str, object]:
+    from .predict import chip_setting  # numpy; kept out of 'import magfab'
+
+    spec = design.spec
+    chip = chip_setting(design)
+    limit = design.chip[f"output_limit_res{spec.sensor.resolution}_lsb"].nominal
+    numbers = {"lsb_xy_uT": chip.lsb_xy_uT, "lsb_z_uT": chip.lsb_z_uT, "sample_rate_Hz": chip.rate_Hz}
+    for key, value in numbers.items():
+        if not (math.isfinite(value) and value > 0):
+            raise SpecError("sensor", value, f"gives a {key} that is not a positive number")
+    sha = calibration_object.sha256
+    return {
+        "spec_name": spec.name,
+        "spec_sha256": spec.sha256(),
+        "magfab_version": __version__,
+        "version": f"{__version__}+cal.{sha[:12]}",
+        "description": f"Host readout for the magfab tactile sensor {spec.name}",
+        "baud": int(spec.firmware.baud),
+        "output": spec.firmware.output.value,
+        "temperature": bool(spec.firmware.temperature),
+        "gain_sel": int(chip.gain_sel),
+        "resolution": int(chip.resolution),
+        "osr": int(chip.osr),
+        "dig_filt": int(chip.dig_filt),
+        "lsb_xy_uT": float(chip.lsb_xy_uT),
+        "lsb_z_uT": float(chip.lsb_z_uT),
+        "full_scale_counts": int(round(limit)),
+        "sample_rate_Hz": round(float(chip.rate_Hz), 6),
+        "temperature_raw_25C": TEMPERATURE_RAW_25C,
+        "temperature_lsb_per_C": TEMPERATURE_LSB_PER_C,
+        "calibration_sha256": sha,
+    }
+
+
+def render(design, calibration: Mapping[str, Any]) -> dict[str, bytes]:
+    """Every file of the readout package: ``{"readout/<relative path>": bytes}``, sorted, deterministic.
+
+    ``design`` is a :class:`~magfab.design.Design` (from :func:`magfab.derive`); ``calibration`` is the parsed
+    calibration.json (docs/bundle.md), which the package embeds (sorted keys, one-space indent). Raises
+    :class:`SpecError` for a calibration the readout cannot evaluate, TypeError for a ``design`` of the wrong type.
+    """
+    from .design import Design
+
+    if not isinstance(design, Design):
+        raise TypeError(f"design must be a magfab Design (from magfab.derive); instead received {type(design).__name__}")
+    calibration_object = validate_calibration(calibration)
+    context = _context(design, calibration_object)
+    root = templates_dir() / TEMPLATES
+    files: dict[str, bytes] = {}
+    for path in sorted(root.rglob("*.j2")):
+        relative = path.relative_to(root).as_posix()
+        text = render_template(f"{TEMPLATES}/{relative}", **context)
+        files[f"readout/{relative[:-len('.j2')]}"] = text.encode("utf-8")
+    data = calibration_object.to_dict()
+    # the layout of the bundle's own calibration/calibration.json, so the two files are byte for byte the same
+    files[f"readout/src/{PACKAGE}/calibration.json"] = (json.dumps(data, indent=1, sort_keys=True, allow_nan=False)
+                                                       + "\n").encode("ascii")
+    return dict(sorted(files.items()))

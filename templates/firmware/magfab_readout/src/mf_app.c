@@ -1,0 +1,240 @@
+/* The readout loop: see mf_app.h. Timing comes from the datasheet's conversion-time formula (mf_config.h),
+ * never from fixed generous delays: in burst mode each read is scheduled one conversion (plus the oscillator
+ * margin) after the previous one, so every read finds a fresh conversion. */
+#include "mf_app.h"
+
+#include "mf_calib.h"
+#include "mf_config.h"
+#include "mf_frame.h"
+#include "mf_rom.h"
+
+static const char mf_info_line[] MF_ROM = MF_INFO_LINE;
+
+static uint32_t now(const mf_app_t *a)
+{
+    return a->hal->micros(a->hal->ctx);
+}
+
+static void wait_until(const mf_app_t *a, uint32_t t)
+{
+    int32_t dt = (int32_t)(t - now(a));
+    if (dt > 0) {
+        a->hal->delay_us(a->hal->ctx, (uint32_t)dt);
+    }
+}
+
+static void send_info(const mf_app_t *a)
+{
+    uint8_t chunk[16];
+    uint8_t n = 0;
+    const char *p = mf_info_line;
+    char c;
+    while ((c = (char)mf_rom_byte(p++)) != '\0') {
+        chunk[n++] = (uint8_t)c;
+        if (n == sizeof chunk) {
+            a->hal->serial_write(a->hal->ctx, chunk, n);
+            n = 0;
+        }
+    }
+    if (n > 0) {
+        a->hal->serial_write(a->hal->ctx, chunk, n);
+    }
+}
+
+void mf_app_commands(mf_app_t *a)
+{
+    int c;
+    while ((c = a->hal->serial_read(a->hal->ctx)) >= 0) {
+        if (c == 'b') {
+            a->text_mode = 0;
+        } else if (c == 't') {
+            a->text_mode = 1;
+        } else if (c == 'i') {
+            send_info(a);
+        }
+    }
+}
+
+static int start_once(mf_app_t *a)
+{
+    int rc;
+    (void)mlx_command(&a->chip, MLX_CMD_EX); /* from any mode back to idle; rejected when already idle */
+    a->hal->delay_us(a->hal->ctx, MF_EXIT_WAIT_US);
+    rc = mlx_command(&a->chip, MLX_CMD_RT);
+    if (rc != MF_OK && rc != MF_E_CHIP) {
+        return rc; /* the bus failed; an ERROR bit here is judged by the NOP below, after the reset */
+    }
+    a->hal->delay_us(a->hal->ctx, MF_RESET_WAIT_US);
+    rc = mlx_command(&a->chip, MLX_CMD_NOP); /* reads out (and so clears) the RS bit of the reset */
+    if (rc != MF_OK) {
+        return rc;
+    }
+    rc = mlx_update_register(&a->chip, 0x00, MF_REG0_MASK, MF_REG0_VALUE);
+    if (rc != MF_OK) {
+        return rc;
+    }
+    rc = mlx_update_register(&a->chip, 0x01, MF_REG1_MASK, MF_REG1_VALUE);
+    if (rc != MF_OK) {
+        return rc;
+    }
+    rc = mlx_update_register(&a->chip, 0x02, MF_REG2_MASK, MF_REG2_VALUE);
+    if (rc != MF_OK) {
+        return rc;
+    }
+#if MF_BURST
+    rc = mlx_command(&a->chip, (uint8_t)(MLX_CMD_SB | MF_ZYXT));
+    if (rc != MF_OK) {
+        return rc;
+    }
+    a->t_next = now(a) + MF_FIRST_WAIT_US;
+#else
+    a->t_next = now(a);
+#endif
+    return MF_OK;
+}
+
+int mf_app_start_chip(mf_app_t *a)
+{
+    int rc = MF_E_ARG;
+    uint8_t attempt;
+    for (attempt = 0; attempt < MF_START_TRIES; ++attempt) {
+        rc = start_once(a);
+        if (rc == MF_OK) {
+            return MF_OK;
+        }
+        a->start_error = (int8_t)rc;
+    }
+    return rc;
+}
+
+/* RM, once more after MF_RETRY_US if the chip rejects it while still in the measuring mode: the conversion
+ * ran late (the chip's oscillator is slower than the margin allows). A second rejection is an error.
+ * *t_us is when the last attempt started. */
+static int read_measurement(mf_app_t *a, mlx_raw_t *raw, uint8_t mode_bit, uint32_t *t_us)
+{
+    int rc;
+    *t_us = now(a);
+    rc = mlx_read_measurement(&a->chip, MF_ZYXT, raw);
+    if (rc == MF_E_CHIP && (a->chip.status & mode_bit)) {
+        a->hal->delay_us(a->hal->ctx, MF_RETRY_US);
+        *t_us = now(a);
+        rc = mlx_read_measurement(&a->chip, MF_ZYXT, raw);
+    }
+    return rc;
+}
+
+/* One measurement of the MF_ZYXT channels; *t_us is when it was read. */
+static int acquire(mf_app_t *a, mlx_raw_t *raw, uint32_t *t_us)
+{
+    int rc;
+#if MF_BURST
+    wait_until(a, a->t_next);
+    rc = read_measurement(a, raw, MLX_ST_BURST, t_us);
+    a->t_next = *t_us + MF_TCONV_WAIT_US; /* paced from the read that found the conversion */
+    if (rc == MF_OK && !(a->chip.status & MLX_ST_BURST)) {
+        rc = MF_E_MODE;
+    }
+#else
+    rc = mlx_command(&a->chip, (uint8_t)(MLX_CMD_SM | MF_ZYXT));
+    if (rc == MF_OK && (a->chip.status & MLX_ST_RS)) {
+        rc = MF_E_RESET;
+    }
+    if (rc != MF_OK) {
+        *t_us = now(a);
+        return rc;
+    }
+    a->hal->delay_us(a->hal->ctx, MF_TCONV_WAIT_US);
+    rc = read_measurement(a, raw, MLX_ST_SM, t_us);
+#endif
+    return rc;
+}
+
+void mf_app_process(const mlx_raw_t *raw, mf_sample_t *s)
+{
+    mf_sample_convert(raw, s);
+    mf_calib_forces(s);
+}
+
+void mf_app_emit(mf_app_t *a, const mf_sample_t *s, uint32_t t_us)
+{
+    if (a->text_mode) {
+        char line[MF_TEXT_MAX];
+        uint8_t n = mf_frame_text(line, a->seq, t_us - a->t0, s);
+        a->hal->serial_write(a->hal->ctx, (const uint8_t *)line, n);
+    } else {
+        uint8_t frame[MF_FRAME_LEN];
+        uint8_t n = mf_frame_binary(frame, a->seq, t_us - a->t0, s);
+        a->hal->serial_write(a->hal->ctx, frame, n);
+    }
+    a->seq = (uint8_t)(a->seq + 1);
+}
+
+void mf_app_init(mf_app_t *a, const mf_hal_t *hal)
+{
+    a->hal = hal;
+    mlx_init(&a->chip, hal, MF_I2C_ADDR);
+    a->text_mode = MF_OUTPUT_TEXT;
+    a->seq = 0;
+    a->lost = 0;
+    a->recovered_pending = 0;
+    a->poll_error = MF_OK;
+    a->last_error = MF_OK;
+    a->start_error = MF_OK;
+    a->errors = 0;
+    a->recoveries = 0;
+    a->t0 = now(a);
+    a->t_next = a->t0;
+    if (mf_app_start_chip(a) != MF_OK) {
+        a->lost = 1;
+        a->t_next = now(a);
+    }
+}
+
+void mf_app_poll(mf_app_t *a)
+{
+    mf_sample_t s;
+    mlx_raw_t raw;
+    uint32_t t;
+    int rc;
+    mf_app_commands(a);
+    if (a->lost) {
+        wait_until(a, a->t_next);
+        rc = mf_app_start_chip(a);
+        if (rc != MF_OK) {
+            mf_sample_fail(&s);
+            a->poll_error = (int8_t)rc;
+            a->last_error = (int8_t)rc;
+            ++a->errors;
+            t = now(a);
+            mf_app_emit(a, &s, t);
+            a->t_next = t + MF_LOST_RETRY_US;
+            return;
+        }
+        a->lost = 0;
+        a->recovered_pending = 1;
+        ++a->recoveries;
+    }
+    rc = acquire(a, &raw, &t);
+    if (rc == MF_OK) {
+        mf_app_process(&raw, &s);
+    } else {
+        mf_sample_fail(&s);
+        a->last_error = (int8_t)rc;
+        ++a->errors;
+    }
+    a->poll_error = (int8_t)rc;
+    if (a->recovered_pending) {
+        s.flags |= MF_FLAG_RECOVERED;
+        a->recovered_pending = 0;
+    }
+    mf_app_emit(a, &s, t);
+    if (rc != MF_OK) {
+        if (mf_app_start_chip(a) == MF_OK) {
+            a->recovered_pending = 1;
+            ++a->recoveries;
+        } else {
+            a->lost = 1;
+            a->t_next = now(a) + MF_LOST_RETRY_US;
+        }
+    }
+}

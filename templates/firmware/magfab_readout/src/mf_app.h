@@ -1,0 +1,48 @@
+/* The readout loop: chip start-up and recovery, paced acquisition, calibration, frames, host commands.
+ * One call of mf_app_poll() emits exactly one frame (binary or text). */
+#ifndef MF_APP_H
+#define MF_APP_H
+
+#include <stdint.h>
+
+#include "mf_errors.h"
+#include "mf_hal.h"
+#include "mf_sample.h"
+#include "mlx90393.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef struct mf_app {
+    const mf_hal_t *hal;
+    mlx_t chip;
+    uint8_t text_mode;         /* 0 binary frames, 1 text lines ('b' / 't' from the host) */
+    uint8_t seq;               /* sequence number of the next frame */
+    uint8_t lost;              /* the last recovery failed: retrying every MF_LOST_RETRY_US */
+    uint8_t recovered_pending; /* the chip was reset since the last frame */
+    int8_t poll_error;         /* error of the latest sample (MF_OK when it was good) */
+    int8_t last_error;         /* latest sample error, kept */
+    int8_t start_error;        /* latest failed start-up / recovery attempt, kept */
+    uint32_t t0;               /* micros() at mf_app_init: frame time zero */
+    uint32_t t_next;           /* earliest micros() for the next read (burst) or start attempt (lost) */
+    uint32_t errors;           /* samples that failed */
+    uint32_t recoveries;       /* successful recoveries after a failed sample */
+} mf_app_t;
+
+void mf_app_init(mf_app_t *a, const mf_hal_t *hal);
+void mf_app_poll(mf_app_t *a);
+/* Exit, reset, configure and (burst) start the chip, up to MF_START_TRIES times. */
+int mf_app_start_chip(mf_app_t *a);
+/* Act on every byte the host has sent: 'b' binary, 't' text, 'i' the info line. */
+void mf_app_commands(mf_app_t *a);
+/* Sample processing without the bus: counts -> microtesla -> forces, flags. */
+void mf_app_process(const mlx_raw_t *raw, mf_sample_t *s);
+/* Encode and send one frame in the current mode. */
+void mf_app_emit(mf_app_t *a, const mf_sample_t *s, uint32_t t_us);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif

@@ -1,0 +1,31 @@
+/* The hardware the core needs, as function pointers, so that the same core runs on bare-metal AVR, on the
+ * Arduino core and in the host simulator. */
+#ifndef MF_HAL_H
+#define MF_HAL_H
+
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef struct mf_hal {
+    void *ctx; /* handed back to every function */
+    /* Write len bytes to the 7-bit address. stop = 0 leaves the bus claimed so that the next i2c_read
+     * starts with a repeated START; on any failure the function releases the bus itself.
+     * Returns MF_OK, MF_E_NACK, MF_E_BUS, MF_E_TIMEOUT or MF_E_ARG. */
+    int (*i2c_write)(void *ctx, uint8_t addr7, const uint8_t *data, uint8_t len, uint8_t stop);
+    /* Read exactly len bytes (ACK all but the last), then STOP. Returns MF_OK, MF_E_NACK, MF_E_BUS,
+     * MF_E_TIMEOUT, or MF_E_COUNT when fewer than len bytes arrived. */
+    int (*i2c_read)(void *ctx, uint8_t addr7, uint8_t *data, uint8_t len);
+    uint32_t (*micros)(void *ctx);               /* microseconds, free running, wraps at 2^32 */
+    void (*delay_us)(void *ctx, uint32_t us);    /* busy wait at least us microseconds */
+    int (*serial_read)(void *ctx);               /* next byte from the host, or -1 when none is waiting */
+    void (*serial_write)(void *ctx, const uint8_t *data, uint8_t len); /* blocks until buffered */
+} mf_hal_t;
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif

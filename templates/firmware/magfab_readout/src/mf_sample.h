@@ -1,0 +1,37 @@
+/* One sample: raw counts to microtesla (with the RES 2/3 offsets), the saturation flag, and the forces. */
+#ifndef MF_SAMPLE_H
+#define MF_SAMPLE_H
+
+#include <stdint.h>
+
+#include "mlx90393.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* Status flags of a frame (docs/bundle.md section 3). */
+#define MF_FLAG_OUTSIDE 0x01    /* the reading lies outside the calibrated region */
+#define MF_FLAG_CHIP_ERROR 0x02 /* NACK, ERROR bit, wrong byte count or timeout: the forces are NaN */
+#define MF_FLAG_SATURATED 0x04  /* a field axis at the chip's output limit */
+#define MF_FLAG_RECOVERED 0x08  /* the chip was reset since the last frame */
+
+typedef struct mf_sample {
+    uint8_t flags;
+    int16_t b_counts[3]; /* X, Y, Z counts, RES offsets removed (0 on a chip error) */
+    uint16_t t_raw;      /* raw temperature word (0 when not converted or on a chip error) */
+    float b_uT[3];       /* X, Y, Z field, microtesla (NaN on a chip error) */
+    float t_C;           /* chip temperature, degC (NaN when not converted or on a chip error) */
+    float f_N[3];        /* Fx, Fy, Fz, newton (NaN on a chip error) */
+} mf_sample_t;
+
+/* Counts and microtesla from the raw words; sets MF_FLAG_SATURATED, clears the other flags and the forces. */
+void mf_sample_convert(const mlx_raw_t *raw, mf_sample_t *s);
+/* A sample that failed: chip-error flag, zero counts, NaN everywhere else. */
+void mf_sample_fail(mf_sample_t *s);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif

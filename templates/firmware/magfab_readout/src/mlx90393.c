@@ -1,0 +1,153 @@
+/* MLX90393 command protocol: see mlx90393.h. No floating point here. */
+#include "mlx90393.h"
+
+#include "mf_errors.h"
+
+#define MLX_REPLY_MAX 9 /* status + T, X, Y, Z */
+
+void mlx_init(mlx_t *m, const mf_hal_t *hal, uint8_t addr7)
+{
+    m->hal = hal;
+    m->addr = addr7;
+    m->status = 0;
+}
+
+uint8_t mlx_words(uint8_t zyxt)
+{
+    uint8_t n = 0;
+    uint8_t bit;
+    for (bit = 1; bit <= MLX_Z; bit = (uint8_t)(bit << 1)) {
+        if (zyxt & bit) {
+            ++n;
+        }
+    }
+    return n;
+}
+
+/* Command out, repeated START, reply in; the reply's first byte is the status. */
+static int transfer(mlx_t *m, const uint8_t *tx, uint8_t ntx, uint8_t *rx, uint8_t nrx)
+{
+    int rc = m->hal->i2c_write(m->hal->ctx, m->addr, tx, ntx, 0);
+    if (rc != MF_OK) {
+        return rc;
+    }
+    rc = m->hal->i2c_read(m->hal->ctx, m->addr, rx, nrx);
+    if (rc != MF_OK) {
+        return rc;
+    }
+    m->status = rx[0];
+    return MF_OK;
+}
+
+/* D1:D0 against the words expected: 2 + 2 * D bytes follow the status. */
+static int check_count(uint8_t status, uint8_t words)
+{
+    return ((status & MLX_ST_D) + 1U == words) ? MF_OK : MF_E_COUNT;
+}
+
+int mlx_command(mlx_t *m, uint8_t cmd)
+{
+    uint8_t status;
+    int rc = transfer(m, &cmd, 1, &status, 1);
+    if (rc != MF_OK) {
+        return rc;
+    }
+    return (status & MLX_ST_ERROR) ? MF_E_CHIP : MF_OK;
+}
+
+int mlx_read_register(mlx_t *m, uint8_t reg, uint16_t *value)
+{
+    uint8_t tx[2];
+    uint8_t rx[3];
+    int rc;
+    tx[0] = MLX_CMD_RR;
+    tx[1] = (uint8_t)((reg & 0x3F) << 2);
+    rc = transfer(m, tx, 2, rx, 3);
+    if (rc != MF_OK) {
+        return rc;
+    }
+    if (rx[0] & MLX_ST_ERROR) {
+        return MF_E_CHIP;
+    }
+    if (check_count(rx[0], 1) != MF_OK) {
+        return MF_E_COUNT;
+    }
+    *value = (uint16_t)(((uint16_t)rx[1] << 8) | rx[2]);
+    return MF_OK;
+}
+
+int mlx_write_register(mlx_t *m, uint8_t reg, uint16_t value)
+{
+    uint8_t tx[4];
+    uint8_t status;
+    int rc;
+    tx[0] = MLX_CMD_WR;
+    tx[1] = (uint8_t)(value >> 8);
+    tx[2] = (uint8_t)(value & 0xFF);
+    tx[3] = (uint8_t)((reg & 0x3F) << 2);
+    rc = transfer(m, tx, 4, &status, 1);
+    if (rc != MF_OK) {
+        return rc;
+    }
+    return (status & MLX_ST_ERROR) ? MF_E_CHIP : MF_OK;
+}
+
+int mlx_update_register(mlx_t *m, uint8_t reg, uint16_t mask, uint16_t value)
+{
+    uint16_t old;
+    uint16_t want;
+    uint16_t back;
+    int rc = mlx_read_register(m, reg, &old);
+    if (rc != MF_OK) {
+        return rc;
+    }
+    want = (uint16_t)((old & (uint16_t)~mask) | (value & mask));
+    rc = mlx_write_register(m, reg, want);
+    if (rc != MF_OK) {
+        return rc;
+    }
+    rc = mlx_read_register(m, reg, &back);
+    if (rc != MF_OK) {
+        return rc;
+    }
+    return back == want ? MF_OK : MF_E_VERIFY;
+}
+
+int mlx_read_measurement(mlx_t *m, uint8_t zyxt, mlx_raw_t *raw)
+{
+    uint8_t rx[MLX_REPLY_MAX];
+    uint16_t words[4] = {0, 0, 0, 0};
+    uint8_t cmd = (uint8_t)(MLX_CMD_RM | (zyxt & 0x0F));
+    uint8_t n = mlx_words(zyxt);
+    uint8_t bit;
+    uint8_t k = 0;
+    uint8_t i = 1;
+    int rc;
+    if (n == 0) {
+        return MF_E_ARG;
+    }
+    rc = transfer(m, &cmd, 1, rx, (uint8_t)(1 + 2 * n));
+    if (rc != MF_OK) {
+        return rc;
+    }
+    if (rx[0] & MLX_ST_RS) {
+        return MF_E_RESET;
+    }
+    if (rx[0] & MLX_ST_ERROR) {
+        return MF_E_CHIP;
+    }
+    if (check_count(rx[0], n) != MF_OK) {
+        return MF_E_COUNT;
+    }
+    for (bit = MLX_T; bit <= MLX_Z; bit = (uint8_t)(bit << 1), ++k) {
+        if (zyxt & bit) {
+            words[k] = (uint16_t)(((uint16_t)rx[i] << 8) | rx[i + 1]);
+            i = (uint8_t)(i + 2);
+        }
+    }
+    raw->t = words[0];
+    raw->x = words[1];
+    raw->y = words[2];
+    raw->z = words[3];
+    return MF_OK;
+}

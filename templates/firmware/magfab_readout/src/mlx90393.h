@@ -1,0 +1,70 @@
+/* Melexis MLX90393 command protocol over I2C (integers only).
+ *
+ * Every command is one I2C write followed, after a repeated START, by a read whose first byte is the status:
+ *   bit 7 BURST_MODE, 6 WOC_MODE, 5 SM_MODE, 4 ERROR, 3 SED (corrected memory error), 2 RS (the chip has
+ *   reset; shown once, in the first status byte read after it), 1:0 D: 2 + 2 * D data bytes follow (RR, RM).
+ * RM returns the selected channels in the order T, X, Y, Z, each 16 bits big-endian. */
+#ifndef MLX90393_H
+#define MLX90393_H
+
+#include <stdint.h>
+
+#include "mf_hal.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#define MLX_CMD_NOP 0x00
+#define MLX_CMD_SB 0x10
+#define MLX_CMD_SWOC 0x20
+#define MLX_CMD_SM 0x30
+#define MLX_CMD_RM 0x40
+#define MLX_CMD_RR 0x50
+#define MLX_CMD_WR 0x60
+#define MLX_CMD_EX 0x80
+#define MLX_CMD_HR 0xD0
+#define MLX_CMD_HS 0xE0
+#define MLX_CMD_RT 0xF0
+
+#define MLX_T 0x01
+#define MLX_X 0x02
+#define MLX_Y 0x04
+#define MLX_Z 0x08
+
+#define MLX_ST_BURST 0x80
+#define MLX_ST_WOC 0x40
+#define MLX_ST_SM 0x20
+#define MLX_ST_ERROR 0x10
+#define MLX_ST_SED 0x08
+#define MLX_ST_RS 0x04
+#define MLX_ST_D 0x03
+
+typedef struct mlx {
+    const mf_hal_t *hal;
+    uint8_t addr;   /* 7-bit I2C address */
+    uint8_t status; /* status byte of the last reply */
+} mlx_t;
+
+typedef struct mlx_raw {
+    uint16_t t, x, y, z; /* raw words as the chip sends them; channels not selected are 0 */
+} mlx_raw_t;
+
+void mlx_init(mlx_t *m, const mf_hal_t *hal, uint8_t addr7);
+/* Channels selected by zyxt bits: the number of 16-bit words RM returns. */
+uint8_t mlx_words(uint8_t zyxt);
+/* A one-byte command (SB, SM, EX, RT, NOP, ...): MF_OK, a bus error, or MF_E_CHIP on the ERROR bit. */
+int mlx_command(mlx_t *m, uint8_t cmd);
+/* RR / WR of a 16-bit register (address 0..31). RR also checks the byte count (D = 0). */
+int mlx_read_register(mlx_t *m, uint8_t reg, uint16_t *value);
+int mlx_write_register(mlx_t *m, uint8_t reg, uint16_t value);
+/* Read-modify-write of the bits in mask, then read back: MF_E_VERIFY if the chip holds something else. */
+int mlx_update_register(mlx_t *m, uint8_t reg, uint16_t mask, uint16_t value);
+/* RM of the zyxt channels, checked in this order: RS (MF_E_RESET), ERROR (MF_E_CHIP), D (MF_E_COUNT). */
+int mlx_read_measurement(mlx_t *m, uint8_t zyxt, mlx_raw_t *raw);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif

@@ -1,0 +1,427 @@
+"""Calibration (BRIEF eq. 12-14, docs/bundle.md): the scan CSV, the simulated scan's physics, the fit's
+errors against the injected noise, conditioning, the guard, calibration.json round trips and eq. 14's
+direction split (a law: rotating the scan rotates the forces)."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from magfab import derive, load_spec, parse_spec
+from magfab import calibrate as C
+from magfab import field as F
+from magfab.predict import chip_setting, noise, predict
+
+
+@pytest.fixture(scope="module")
+def design():
+    return derive(load_spec(None))
+
+
+@pytest.fixture(scope="module")
+def pred(design):
+    return predict(design)
+
+
+@pytest.fixture(scope="module")
+def scan(design, pred):
+    return C.simulate_scan(design, pred)
+
+
+@pytest.fixture(scope="module")
+def ideal(design, pred):
+    return C.simulate_scan(design, pred, ideal=True)
+
+
+@pytest.fixture(scope="module")
+def result(design, scan):
+    """The default (auto) fit, MLS included."""
+    return C.fit(scan, design)
+
+
+@pytest.fixture(scope="module")
+def poly4(pred, scan):
+    """The order-4 polynomial the paper used (method 'poly')."""
+    return C.fit(scan, derive(parse_spec('[calibration]\nmethod = "poly"\norder = 4\n')), mls=False)
+
+
+# ---- the scan CSV ---------------------------------------------------------------------------------
+
+
+def test_csv_round_trip_is_exact(scan):
+    text = C.scan_csv(scan)
+    back = C.read_scan_csv(text)
+    assert np.array_equal(back.time_s, scan.time_s) and np.array_equal(back.B_uT, scan.B_uT)
+    assert np.array_equal(back.F_N, scan.F_N) and back.temperature_C is None
+    assert back.sha256 == scan.sha256  # a simulated scan's hash is its CSV's
+
+
+def test_csv_any_column_order_extra_columns_comments_and_temperature(scan, tmp_path):
+    n = 60
+    t = np.linspace(20.0, 21.0, n)
+    s = C.Scan(scan.time_s[:n], scan.B_uT[:n], scan.F_N[:n], t, "x")
+    lines = C.scan_csv(s, comments=["spec magone", "chip gain 0"]).splitlines()
+    assert lines[0] == "# spec magone" and lines[2].startswith("time_s,Bx_uT")
+    header = lines[2].split(",")
+    order = list(reversed(range(len(header))))
+    shuffled = [",".join([header[i] for i in order] + ["note"])]
+    shuffled += [",".join([row.split(",")[i] for i in order] + ["free text"]) for row in lines[3:]]
+    path = tmp_path / "scan.csv"
+    path.write_text("\n".join(lines[:2] + shuffled) + "\n", encoding="utf-8")
+    back = C.read_scan_csv(path)
+    assert back.source == "scan.csv" and back.rows == n
+    assert np.array_equal(back.temperature_C, t) and np.array_equal(back.B_uT, s.B_uT)
+    assert np.array_equal(back.F_N, s.F_N)
+    rec = C.read_scan_csv(C.scan_csv(C.Scan(s.time_s, s.B_uT, None)), require_force=False)
+    assert rec.F_N is None and rec.rows == n
+
+
+def _good(rows: int = 60) -> list[str]:
+    out = ["time_s,Bx_uT,By_uT,Bz_uT,Fx_N,Fy_N,Fz_N"]
+    out += [f"{0.01 * i:.2f},{i},{-i},{20000 + 10 * i},0,{0.001 * i:.3f},{0.01 * i:.2f}" for i in range(rows)]
+    return out
+
+
+def _edit(line: int, column: int, value: str) -> str:
+    rows = _good()
+    fields = rows[line - 1].split(",")
+    fields[column] = value
+    rows[line - 1] = ",".join(fields)
+    return "\n".join(rows) + "\n"
+
+
+MALFORMED = {
+    "missing column": ("\n".join([_good()[0].replace(",Fz_N", "")] + [r.rsplit(",", 1)[0] for r in _good()[1:]]),
+                       ["line 1", "'Fz_N'", "required columns"]),
+    "not a number": (_edit(5, 2, "abc"), ["line 5", "'By_uT'", "'abc'", "finite"]),
+    "empty field": (_edit(7, 6, ""), ["line 7", "'Fz_N'", "empty field"]),
+    "nan": (_edit(9, 3, "nan"), ["line 9", "'Bz_uT'", "nan is not a finite number"]),
+    "infinity": (_edit(10, 4, "-inf"), ["line 10", "'Fx_N'", "-inf"]),
+    "decreasing time": (_edit(12, 0, "0.05"), ["line 12", "'time_s'", "non-decreasing", "line 11"]),
+    "short row": ("\n".join(_good()[:20] + ["0.5,1,2"] + _good()[20:]), ["line 21", "3 values", "7 columns"]),
+    "duplicate column": ("\n".join([_good()[0] + ",Bz_uT"] + [r + ",1" for r in _good()[1:]]),
+                         ["line 1", "'Bz_uT' appears twice"]),
+    "too few rows": ("\n".join(_good(10)), ["line 11", "10 data rows", f"at least {C.MIN_ROWS}"]),
+    "empty": ("", ["line 1", "no header"]),
+    "only comments": ("# nothing here\n# still nothing\n", ["no header"]),
+}
+
+
+@pytest.mark.parametrize("case", sorted(MALFORMED))
+def test_malformed_csv_gives_one_line_naming_line_and_column(case):
+    text, expected = MALFORMED[case]
+    with pytest.raises(C.ScanError) as info:
+        C.read_scan_csv(text.encode("utf-8"))
+    message = str(info.value)
+    assert "\n" not in message and "Traceback" not in message
+    for part in expected:
+        assert part in message, (part, message)
+    assert isinstance(info.value, ValueError)
+
+
+def test_unreadable_inputs(tmp_path):
+    with pytest.raises(C.ScanError, match="cannot read"):
+        C.read_scan_csv(tmp_path / "absent.csv")
+    with pytest.raises(C.ScanError, match="not UTF-8"):
+        C.read_scan_csv(b"time_s,Bx_uT\n\xff\xfe\n")
+
+
+# ---- the simulated scan ---------------------------------------------------------------------------
+
+
+def test_simulated_track_is_the_papers_y_z_raster(design, pred, scan):
+    y, delta = C.scan_track(design, pred)
+    cal = design.spec.calibration
+    nominal = pred.curves["nominal"]
+    delta_end = np.interp(pred.data["normal"]["travel_mm"], nominal.magnet_displacement_mm, nominal.indentation_mm)
+    ny = round(cal.scan_y_mm / cal.scan_step_mm) + 1  # MagOne: +-2 mm is inside the lateral range (R_m)
+    nz = math.floor(min(cal.scan_z_mm, delta_end) / cal.scan_step_mm + 1e-9) + 1
+    assert scan.rows == len(y) == ny * nz and scan.B_uT.shape == (ny * nz, 3) and scan.F_N.shape == (ny * nz, 3)
+    assert y[:ny] == pytest.approx(np.linspace(-cal.scan_y_mm / 2, cal.scan_y_mm / 2, ny), abs=1e-12)
+    assert np.all(delta[:ny] == 0.0) and delta.max() <= delta_end and delta.max() > delta_end - cal.scan_step_mm
+    assert np.all(np.diff(scan.time_s) > 0)
+
+
+def test_simulated_scan_physics(design, pred, ideal):
+    y, delta = C.scan_track(design, pred)
+    centre = (delta == 0) & (np.abs(y) < 1e-12)
+    # at rest on the axis: the predicted rest field, no lateral field, no force
+    magnet = F.Magnet.from_spec(design.spec)
+    exact_rest = F.bz_br(magnet, design.d_rest_mm, 0.0, model="exact")[0] * C.UT_PER_G
+    assert ideal.B_uT[centre, 2][0] == pytest.approx(exact_rest, rel=1e-12)
+    # the prediction's own figure comes from its chosen (faster) field model
+    assert ideal.B_uT[centre, 2][0] == pytest.approx(pred.data["field"]["Bz_rest_G"] * C.UT_PER_G, rel=1e-3)
+    assert np.abs(ideal.B_uT[centre, :2]).max() < 1e-9 and np.abs(ideal.F_N[centre]).max() == 0.0
+    # below the magnet the radial field points towards the axis: By follows the magnet's offset y
+    off = np.abs(y) > 0.1
+    assert np.all(np.sign(ideal.B_uT[off, 1]) == np.sign(y[off])) and np.abs(ideal.B_uT[:, 0]).max() < 1e-9
+    k_s = pred.data["shear"]["stiffness_N_per_mm"]["nominal"]
+    assert ideal.F_N[:, 1] == pytest.approx(k_s * y, abs=1e-12)
+    # Bz grows with indentation (the gap closes)
+    axis = np.abs(y) < 1e-12
+    assert np.all(np.diff(ideal.B_uT[axis, 2]) > 0) and np.all(np.diff(ideal.F_N[axis, 2]) > 0)
+
+
+def test_simulated_noise_matches_the_prediction_and_is_deterministic(design, pred, scan, ideal):
+    nz = noise(design, chip_setting(design))
+    chip = chip_setting(design)
+    err = scan.B_uT - ideal.B_uT
+    sigma = err.std(axis=0)
+    assert sigma[:2] == pytest.approx([nz["total_xy_G"] * C.UT_PER_G] * 2, rel=0.06)
+    assert sigma[2] == pytest.approx(nz["total_z_G"] * C.UT_PER_G, rel=0.06)
+    counts = scan.B_uT / [chip.lsb_xy_uT, chip.lsb_xy_uT, chip.lsb_z_uT]
+    assert np.abs(counts - np.round(counts)).max() < 1e-6  # on the chip's LSB grid
+    q = design.spec.calibration.reference_resolution_mN / 1000.0
+    assert np.abs(scan.F_N / q - np.round(scan.F_N / q)).max() < 1e-6
+    assert np.sqrt(np.mean((scan.F_N[:, 2] - ideal.F_N[:, 2]) ** 2)) == pytest.approx(q / math.sqrt(12), rel=0.1)
+    again = C.simulate_scan(design, pred)
+    assert again.sha256 == scan.sha256 and np.array_equal(again.B_uT, scan.B_uT)
+    other = C.simulate_scan(derive(parse_spec("[calibration]\nseed = 1\n")), pred)
+    assert other.sha256 != scan.sha256 and np.array_equal(other.F_N, scan.F_N)
+
+
+# ---- the fit ---------------------------------------------------------------------------------------
+
+
+def _noise_floor(design, cal, ideal):
+    """Expected held-out RMS (Fz, Fr) in N: the reference's quantisation (q / sqrt 12) and the field noise
+    carried through the model's gradient, in quadrature."""
+    nz = noise(design, chip_setting(design))
+    sz, sxy = nz["total_z_G"] * C.UT_PER_G, nz["total_xy_G"] * C.UT_PER_G
+    bz, br = ideal.B_uT[:, 2], ideal.Br_uT
+
+    def model(bz, br):
+        return cal.model(np.column_stack([br, np.zeros_like(br), bz]))
+
+    h = 1.0  # uT
+    gz = (model(bz + h, br) - model(bz - h, br)) / (2 * h)
+    gr = (model(bz, br + h) - model(bz, br - h)) / (2 * h)
+    field = np.sqrt(np.mean((gz * sz) ** 2 + (gr * sxy) ** 2, axis=0))
+    q = design.spec.calibration.reference_resolution_mN / 1000.0 / math.sqrt(12)
+    return field, np.sqrt(field**2 + q**2)
+
+
+def test_fit_recovers_the_forces_to_the_injected_noise(design, scan, ideal, poly4):
+    cal = poly4.calibration
+    assert poly4.chosen == "poly 4" and cal.method == "poly" and cal.order == 4
+    field, floor = _noise_floor(design, cal, ideal)
+    c = poly4.candidate("poly 4")
+    held = np.array([c.rms_holdout_N["Fz_N"], c.rms_holdout_N["Fr_N"]])
+    # Fz: the floor within 15 %; Fr: below it (the gradient estimate overstates the noise of Br near Br = 0,
+    # where Br = |B_lateral| is not gaussian), and above the reference quantisation alone
+    assert held[0] == pytest.approx(floor[0], rel=0.15)
+    q = design.spec.calibration.reference_resolution_mN / 1000.0 / math.sqrt(12)
+    assert q < held[1] <= 1.05 * floor[1]
+    # evaluated at the noisy readings, the error against the true force is the field-noise part
+    f, inside = cal.evaluate(scan.B_uT)
+    assert inside.all()
+    err = np.sqrt(np.mean((f - ideal.F_N) ** 2, axis=0))
+    assert err[2] == pytest.approx(field[0], rel=0.2)
+    # at the noise-free readings only the fit's own error is left: well under the noise
+    f0, _ = cal.evaluate(ideal.B_uT)
+    err0 = np.sqrt(np.mean((f0 - ideal.F_N) ** 2, axis=0))
+    assert err0[2] < 0.5 * floor[0] and np.hypot(err0[0], err0[1]) < 0.6 * floor[1]
+
+
+def test_held_out_error_falls_with_order_then_levels_off(result):
+    rms = {c.order: c.rms_holdout_N for c in result.candidates if c.method == "poly"}
+    assert sorted(rms) == list(C.ORDERS)
+    for f in C.FORCES:
+        e = [rms[n][f] for n in C.ORDERS]
+        assert e[0] > 5 * e[3]  # order 1 is far from the data's curvature
+        assert e[0] > e[1] > e[2] > 0.98 * e[3]
+        assert max(e[3:]) < 1.15 * min(e)  # orders 4-6 sit on the noise floor: flat
+    for c in result.candidates:
+        for f in C.FORCES:
+            assert c.rms_fit_N[f] <= c.rms_holdout_N[f] * 1.001 and c.max_holdout_N[f] >= c.rms_holdout_N[f]
+
+
+def test_scaling_keeps_the_least_squares_well_conditioned(result):
+    polys = [c for c in result.candidates if c.method == "poly"]
+    for c in polys:
+        assert c.condition < 1e4
+        if c.order >= 2:
+            assert c.condition_raw / c.condition > 1e8  # unscaled uT inputs: numerically singular by order 4
+    assert [c.condition for c in polys] == sorted(c.condition for c in polys)
+
+
+def test_mls_is_at_least_as_accurate_as_poly_order_4(result):
+    mls, p4 = result.candidate("mls"), result.candidate("poly 4")
+    for f in C.FORCES:
+        assert mls.rms_holdout_N[f] <= p4.rms_holdout_N[f]
+    assert mls.cost_ops > 100 * p4.cost_ops and mls.bandwidth > 0
+
+
+def test_auto_takes_the_cheapest_within_tolerance(design, result):
+    tol = design.spec.calibration.tolerance_mN
+    polys = [c for c in result.candidates if c.method == "poly"]
+    first = next(c for c in polys if c.worst_rms_N * 1000 <= tol)
+    assert C.choose(result.candidates, "auto", design.spec.calibration.order, tol) == (first.label, True)
+    # the spec's default is the paper's: poly, order 4
+    assert result.chosen == f"poly {design.spec.calibration.order}" and result.meets_tolerance and result.message == ""
+    chosen = result.candidate(result.chosen)
+    assert result.calibration.errors["Fz_N"]["rms_holdout"] == chosen.rms_holdout_N["Fz_N"]
+    assert result.calibration.errors["folds"] == design.spec.calibration.folds
+    p4, mls = result.candidate("poly 4"), result.candidate("mls")
+    assert C.choose(result.candidates, "auto", 4, p4.worst_rms_N * 1000 * 1.0001) == ("poly 4", True)
+    assert C.choose(result.candidates, "auto", 3, p4.worst_rms_N * 1000 * 1.0001) == ("mls", True)
+    assert C.choose(result.candidates, "auto", 4, mls.worst_rms_N * 500) == ("mls", False)
+    assert C.choose(result.candidates, "poly", 6, 1e-6) == ("poly 6", False)
+
+
+def test_no_fit_within_tolerance_is_a_flag_not_an_error(design, scan):
+    r = C.fit(scan, derive(parse_spec("[calibration]\ntolerance_mN = 0.5\n")), mls=False)
+    assert not r.meets_tolerance and "0.5 mN" in r.message and "\n" not in r.message
+    assert r.chosen == min((c for c in r.candidates if c.order <= 4), key=lambda c: c.worst_rms_N).label
+
+
+# ---- the guard -------------------------------------------------------------------------------------
+
+
+def test_readings_outside_the_scanned_region_are_flagged(poly4, scan):
+    cal = poly4.calibration
+    reg = cal.region
+    h = np.asarray(reg.hull)
+    assert len(h) >= 3 and np.all(C._cross(h, np.roll(h, -1, 0), np.roll(h, -2, 0)) > 0)  # convex, CCW
+    _, inside = cal.evaluate(scan.B_uT)
+    assert inside.all()
+    (bz0, bz1), (br0, br1) = reg.bz_uT, reg.br_uT
+    corners = [(bz, br) for bz in (bz0, bz1) for br in (br0, br1)]
+    outside_hull = [p for p in corners if not reg.contains(*p)]
+    assert outside_hull  # the hull is tighter than the box: a corner of the box was never scanned
+    beyond = [(1.5 * bz1, 0.5 * (br0 + br1)), (0.5 * bz0, 0.5 * (br0 + br1)), (0.5 * (bz0 + bz1), 1.5 * br1)]
+    b = np.array([[br, 0.0, bz] for bz, br in outside_hull + beyond] + [[np.nan, 0.0, bz1]])
+    f, flags = cal.evaluate(b)
+    assert not flags.any()
+    assert np.isfinite(f[:-1]).all()  # the polynomial's value is still given, flagged
+    single, flag = cal.evaluate(scan.B_uT[0])
+    assert single.shape == (3,) and bool(flag)
+
+
+def _area(polygon):
+    h = np.asarray(polygon)
+    return 0.5 * np.sum(h[:, 0] * np.roll(h[:, 1], -1) - np.roll(h[:, 0], -1) * h[:, 1])
+
+
+def test_region_polygon_is_small_and_holds_the_scan(scan):
+    bz, br = scan.B_uT[:, 2], scan.Br_uT
+    hull = C.ValidRegion.of(bz, br, max_vertices=1000)  # the exact convex hull
+    region = C.ValidRegion.of(bz, br)
+    assert len(hull.hull) > C.HULL_MAX_VERTICES >= len(region.hull) >= 3
+    assert region.contains(bz, br).all() and hull.contains(bz, br).all()
+    assert 1.0 <= _area(region.hull) / _area(hull.hull) < 1.01  # encloses the hull, adds a sliver
+    for k in range(3, 8):
+        smaller = C.ValidRegion.of(bz, br, max_vertices=k)
+        assert len(smaller.hull) == k and smaller.contains(bz, br).all()
+
+
+def test_zeroing_sets_the_tare(poly4, scan, pred, design):
+    y, delta = C.scan_track(design, pred)
+    rest = scan.B_uT[(delta == 0) & (np.abs(y) < 0.3)]
+    cal = poly4.calibration.zeroed(rest)
+    assert cal.tare_N[0] != 0.0
+    f, _ = cal.evaluate(rest)
+    assert abs(f[:, 2].mean()) < 1e-12
+
+
+# ---- calibration.json ------------------------------------------------------------------------------
+
+
+def test_json_round_trip(poly4, result, design, scan):
+    mls_cal = result.calibration_for("mls")
+    for cal in (poly4.calibration, result.calibration, mls_cal):
+        doc = cal.to_json()
+        text = cal.dumps()
+        assert json.loads(text) == doc and text == C.Calibration.from_json(json.loads(text)).dumps()
+        back = C.Calibration.from_json(json.loads(text))
+        assert np.array_equal(back.evaluate(scan.B_uT[:200])[0], cal.evaluate(scan.B_uT[:200])[0])
+    doc = poly4.calibration.to_json()
+    assert doc["format"] == C.FORMAT and doc["monomials"][:6] == [[0, 0], [1, 0], [0, 1], [2, 0], [1, 1], [0, 2]]
+    assert len(doc["coefficients"]["Fz_N"]) == 15 and doc["scan"]["sha256"] == scan.sha256
+    assert set(doc["chip"]) == {"gain_sel", "resolution", "osr", "dig_filt", "lsb_xy_uT", "lsb_z_uT"}
+    mdoc = mls_cal.to_json()
+    assert mdoc["method"] == "mls" and len(mdoc["mls"]["points"]["Fz_N"]) == scan.rows
+    assert mdoc["order"] == result.firmware_order <= design.spec.calibration.order  # the firmware's polynomial
+    assert mdoc["errors"]["Fz_N"]["rms_holdout"] == result.candidate("mls").rms_holdout_N["Fz_N"]
+    assert np.array_equal(result.calibration_for("poly 4").coefficients, poly4.calibration.coefficients)
+    f_mls, _ = mls_cal.evaluate(scan.B_uT[:50])
+    f_poly, _ = mls_cal.evaluate(scan.B_uT[:50], method="poly")
+    assert not np.array_equal(f_mls, f_poly) and np.abs(f_mls - f_poly).max() < 0.02
+
+
+@pytest.mark.parametrize("path, value, match", [
+    ("format", "magfab-calibration/2", "format must be 'magfab-calibration/1'"),
+    ("order", 2, "monomials must be"),
+    ("scaling.Bz_uT.scale", 0.0, "scaling.Bz_uT.scale must be a positive"),
+    ("shear_sign", 0, "shear_sign must be 1 or -1"),
+    ("coefficients.Fz_N", [1.0, 2.0], "coefficients.Fz_N must be a list of 15"),
+    ("valid_region.hull", "reverse", "convex and counter-clockwise"),
+    ("tare_N", None, "'tare_N' is missing"),
+    ("method", "mls", "'mls' is missing"),
+])
+def test_json_validation_names_the_key(poly4, path, value, match):
+    doc = json.loads(poly4.calibration.dumps())
+    *parents, last = path.split(".")
+    node = doc
+    for p in parents:
+        node = node[p]
+    if value == "reverse":
+        node[last] = node[last][::-1]
+    elif value is None:
+        del node[last]
+    else:
+        node[last] = value
+    with pytest.raises(C.CalibrationError, match=match) as info:
+        C.Calibration.from_json(doc)
+    assert "\n" not in str(info.value)
+
+
+# ---- eq. 14: the direction split ---------------------------------------------------------------
+
+
+def _rotated(scan, angle_deg, flip_chip=False):
+    c, s = math.cos(math.radians(angle_deg)), math.sin(math.radians(angle_deg))
+    rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    b, f = scan.B_uT @ rot.T, scan.F_N @ rot.T
+    if flip_chip:  # the chip mounted turned by 180 degrees: its x and y read the opposite way
+        b = b * [-1.0, -1.0, 1.0]
+    return C.Scan(scan.time_s, b, f, None, f"rotated {angle_deg}", "")
+
+
+def test_direction_split_for_plus_and_minus_y(poly4, scan, ideal):
+    cal = poly4.calibration
+    assert cal.shear_sign == 1  # the simulated chip's axes are the sensor frame's
+    f, _ = cal.evaluate(scan.B_uT)
+    fy = ideal.F_N[:, 1]
+    strong = np.abs(fy) > 0.03
+    assert (fy > 0.03).any() and (fy < -0.03).any()
+    assert np.all(np.sign(f[strong, 1]) == np.sign(fy[strong]))
+    assert np.sqrt(np.mean((f[:, 1] - fy) ** 2)) < 0.005 and np.sqrt(np.mean(f[:, 0] ** 2)) < 0.002
+    weak = scan.Br_uT < cal.direction_min_uT
+    assert weak.any() and np.all(f[weak, :2] == 0.0)
+
+
+@pytest.mark.parametrize("angle, flip", [(90.0, False), (-30.0, False), (0.0, True), (45.0, True)])
+def test_rotating_the_scan_rotates_the_forces(poly4, design, scan, angle, flip):
+    """Bz, Br and Fr do not change when the scan is turned about z, so the fitted polynomial is the same and
+    eq. 14 turns the lateral force with the field; a chip mounted the other way round gives shear_sign -1."""
+    turned = _rotated(scan, angle, flip)
+    cal = C.fit(turned, derive(parse_spec('[calibration]\nmethod = "poly"\n')), mls=False).calibration
+    assert cal.shear_sign == (-1 if flip else 1)
+    assert np.allclose(cal.coefficients, poly4.calibration.coefficients, rtol=1e-6, atol=1e-9)
+    f, _ = cal.evaluate(turned.B_uT)
+    expected = _rotated(C.Scan(scan.time_s, scan.B_uT, poly4.calibration.evaluate(scan.B_uT)[0]), angle).F_N
+    assert np.allclose(f, expected, atol=1e-7)
+
+
+# ---- the chart -------------------------------------------------------------------------------------
+
+
+def test_chart_is_deterministic(result):
+    a, b = C.chart(result), C.chart(result)
+    assert set(a) == {"calibration_fit.svg", "calibration_fit.png"} and a == b
+    assert a["calibration_fit.svg"].startswith(b"<?xml") and a["calibration_fit.png"][:8] == b"\x89PNG\r\n\x1a\n"
+    assert b"<dc:date>" not in a["calibration_fit.svg"]

@@ -1,0 +1,646 @@
+"""The readout package (issue 5, item 3): rendered from templates/readout, pip-installed into a fresh venv,
+checked against independent implementations written here (CRC, frame layout, the calibration's evaluation,
+the region test), and its command line run against the simulated board and through a real pseudo-terminal."""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import importlib
+import io
+import json
+import math
+import os
+import random
+import select
+import struct
+import subprocess
+import sys
+import threading
+import tomllib
+from contextlib import contextmanager
+from pathlib import Path
+from types import SimpleNamespace
+
+import pytest
+
+from conftest import ref_crc16
+from magfab import SpecError, derive, load_spec
+from magfab.readout import calibration_sha256, render
+
+PKG = "readout/src/magfab_readout"
+CSV_REQUIRED = ("time_s", "Bx_uT", "By_uT", "Bz_uT", "Fx_N", "Fy_N", "Fz_N")
+
+
+# --- a calibration built here (calibrate.py is not needed) ---------------------------------------------------
+
+def make_calibration(order: int = 4, seed: int = 1, tare=(0.0, 0.0)) -> dict:
+    """A plausible order-n calibration: Fz grows with Bz, Fr with Br, both zero at the region's low corner
+    (where the magnet rests), plus small seeded terms on every monomial so each one is exercised."""
+    monomials = [[i, k - i] for k in range(order + 1) for i in range(k, -1, -1)]
+    rng = random.Random(seed)
+    cz = [0.05 * rng.uniform(-1, 1) / (1 + i + j) for i, j in monomials]
+    cr = [0.05 * rng.uniform(-1, 1) / (1 + i + j) for i, j in monomials]
+    cz[0], cz[1] = 2.0, 2.0  # 2 (u + 1): u = -1 at the low end of Bz
+    cr[0], cr[2] = 1.5, 1.5  # 1.5 (v + 1): v = -1 at Br = 0
+    return {
+        "format": "magfab-calibration/1", "method": "poly", "order": order, "monomials": monomials,
+        "scaling": {"Bz_uT": {"center": 21000.0, "scale": 9000.0}, "Br_uT": {"center": 4000.0, "scale": 4000.0}},
+        "coefficients": {"Fz_N": cz, "Fr_N": cr}, "shear_sign": -1, "direction_min_uT": 30.0,
+        "tare_N": {"Fz_N": tare[0], "Fr_N": tare[1]},
+        "valid_region": {"Bz_uT": [12000.0, 30000.0], "Br_uT": [0.0, 8000.0],
+                         "hull": [[12000.0, 0.0], [30000.0, 0.0], [30000.0, 3000.0], [22000.0, 8000.0],
+                                  [12000.0, 4000.0]]},
+        "errors": {"Fz_N": {"rms_holdout": 0.012, "max_holdout": 0.05, "rms_fit": 0.01},
+                   "Fr_N": {"rms_holdout": 0.011, "max_holdout": 0.04, "rms_fit": 0.009}, "folds": 5},
+        "scan": {"sha256": "ab" * 32, "rows": 4000, "source": "simulated"},
+        "chip": {"gain_sel": 0, "resolution": 2, "osr": 0, "dig_filt": 2, "lsb_xy_uT": 3.004, "lsb_z_uT": 4.84},
+    }
+
+
+# --- independent implementations ------------------------------------------------------------------------------
+
+def ref_forces(cal: dict, Bx: float, By: float, Bz: float) -> tuple:
+    """docs/bundle.md section 2 written out directly, float64."""
+    Br = math.sqrt(Bx**2 + By**2)
+    u = (Bz - cal["scaling"]["Bz_uT"]["center"]) / cal["scaling"]["Bz_uT"]["scale"]
+    v = (Br - cal["scaling"]["Br_uT"]["center"]) / cal["scaling"]["Br_uT"]["scale"]
+    F = {name: sum(c * u**i * v**j for c, (i, j) in zip(cal["coefficients"][name], cal["monomials"]))
+         - cal["tare_N"][name] for name in ("Fz_N", "Fr_N")}
+    if Br < cal["direction_min_uT"] or Br == 0:
+        return 0.0, 0.0, F["Fz_N"]
+    s = cal["shear_sign"]
+    return s * F["Fr_N"] * Bx / Br, s * F["Fr_N"] * By / Br, F["Fz_N"]
+
+
+def ref_inside(cal: dict, Bz: float, Br: float) -> bool:
+    """Box test plus ray casting (a different algorithm from the package's half-plane test)."""
+    region = cal["valid_region"]
+    if not (region["Bz_uT"][0] <= Bz <= region["Bz_uT"][1] and region["Br_uT"][0] <= Br <= region["Br_uT"][1]):
+        return False
+    inside = False
+    hull = region["hull"]
+    for (x1, y1), (x2, y2) in zip(hull, hull[1:] + hull[:1]):
+        if (y1 > Br) != (y2 > Br) and Bz < x1 + (Br - y1) * (x2 - x1) / (y2 - y1):
+            inside = not inside
+    return inside
+
+
+def ref_distance_to_hull(cal: dict, Bz: float, Br: float) -> float:
+    hull = cal["valid_region"]["hull"]
+    best = math.inf
+    for (x1, y1), (x2, y2) in zip(hull, hull[1:] + hull[:1]):
+        dx, dy = x2 - x1, y2 - y1
+        t = max(0.0, min(1.0, ((Bz - x1) * dx + (Br - y1) * dy) / (dx * dx + dy * dy)))
+        best = min(best, math.hypot(Bz - x1 - t * dx, Br - y1 - t * dy))
+    return best
+
+
+ref_crc = ref_crc16
+
+
+def ref_frame(seq, t_us, status, counts, t_raw, forces) -> bytes:
+    """A force frame assembled field by field at the documented offsets."""
+    body = bytearray(27)  # frame bytes 2..28
+    body[0], body[1], body[2] = 0x01, seq, status
+    body[3:7] = t_us.to_bytes(4, "little")
+    for k, c in enumerate(counts):
+        body[7 + 2 * k:9 + 2 * k] = int(c).to_bytes(2, "little", signed=True)
+    body[13:15] = t_raw.to_bytes(2, "little")
+    for k, f in enumerate(forces):
+        body[15 + 4 * k:19 + 4 * k] = struct.pack("<f", f)
+    return b"\xa5\x5a" + bytes(body) + ref_crc(bytes(body)).to_bytes(2, "little")
+
+
+def ref_decode(data: bytes) -> list:
+    """Frames laid back to back (no noise): each one's fields, asserting sync and CRC."""
+    assert len(data) % 31 == 0
+    out = []
+    for k in range(0, len(data), 31):
+        f = data[k:k + 31]
+        assert f[:2] == b"\xa5\x5a" and f[2] == 1
+        assert ref_crc(f[2:29]) == int.from_bytes(f[29:31], "little")
+        counts = tuple(int.from_bytes(f[9 + 2 * a:11 + 2 * a], "little", signed=True) for a in range(3))
+        forces = tuple(struct.unpack("<f", f[17 + 4 * a:21 + 4 * a])[0] for a in range(3))
+        out.append({"seq": f[3], "status": f[4], "t_us": int.from_bytes(f[5:9], "little"), "counts": counts,
+                    "t_raw": int.from_bytes(f[15:17], "little"), "forces": forces})
+    return out
+
+
+def f32(x: float) -> float:
+    return struct.unpack("<f", struct.pack("<f", x))[0]
+
+
+# --- fixtures -------------------------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def design():
+    return derive(load_spec(None))
+
+
+@pytest.fixture(scope="module")
+def calibration():
+    return make_calibration()
+
+
+@pytest.fixture(scope="module")
+def rendered(design, calibration):
+    return render(design, calibration)
+
+
+def write_tree(files: dict, root: Path) -> Path:
+    for relative, data in files.items():
+        path = root / relative
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(data)
+    return root
+
+
+@pytest.fixture(scope="module")
+def pkg(rendered, tmp_path_factory):
+    """The generated package imported in this process from its source tree."""
+    root = write_tree(rendered, tmp_path_factory.mktemp("readout-src"))
+    src = str(root / "readout" / "src")
+    sys.path.insert(0, src)
+    try:
+        module = importlib.import_module("magfab_readout")
+        yield module
+    finally:
+        sys.path.remove(src)
+        for name in [n for n in sys.modules if n == "magfab_readout" or n.startswith("magfab_readout.")]:
+            del sys.modules[name]
+
+
+@pytest.fixture(scope="module")
+def installed(rendered, tmp_path_factory):
+    """The package pip-installed (with its dependencies) into a fresh virtual environment."""
+    root = tmp_path_factory.mktemp("readout-venv")
+    bundle = write_tree(rendered, root / "bundle")
+    venv = root / "venv"
+    made = subprocess.run([sys.executable, "-m", "venv", "--system-site-packages", str(venv)],
+                          capture_output=True, text=True, timeout=120)
+    if made.returncode != 0:
+        pytest.skip(f"cannot create a virtual environment here: {made.stderr.strip()[-500:]}")
+    python = venv / "bin" / "python"
+    log = []
+    # A user's install first (build isolation, pyserial from the index); then, offline, the system setuptools.
+    for extra in ([], ["--no-build-isolation", "--no-deps"]):
+        proc = subprocess.run([str(python), "-m", "pip", "install", "--quiet", *extra, str(bundle / "readout")],
+                              capture_output=True, text=True, timeout=240)
+        if proc.returncode == 0:
+            break
+        log.append(proc.stderr.strip()[-800:])
+    else:
+        pytest.skip("pip cannot install the generated package here: " + " | ".join(log))
+    serial = subprocess.run([str(python), "-c", "import serial"], capture_output=True).returncode == 0
+    return SimpleNamespace(python=python, script=venv / "bin" / "magfab-readout", serial=serial, root=root)
+
+
+def cli(installed, *args, timeout=60):
+    return subprocess.run([str(installed.script), *map(str, args)], capture_output=True, text=True, timeout=timeout)
+
+
+# --- rendering --------------------------------------------------------------------------------------------
+
+def test_render_is_complete_deterministic_and_embeds_the_calibration(design, calibration, rendered):
+    assert render(design, calibration) == rendered
+    assert list(rendered) == sorted(rendered)
+    expected = {"readout/pyproject.toml", "readout/README.md"} | {
+        f"{PKG}/{name}" for name in ("__init__.py", "__main__.py", "_build.py", "calibration.py", "calibration.json",
+                                     "cli.py", "device.py", "frames.py", "simulate.py")}
+    assert set(rendered) == expected
+    for path, data in rendered.items():
+        assert isinstance(data, bytes) and not Path(path).is_absolute()
+        if path.endswith(".py"):
+            compile(data, path, "exec")
+    project = tomllib.loads(rendered["readout/pyproject.toml"].decode())
+    assert project["project"]["name"] == "magfab-readout"
+    assert project["project"]["scripts"] == {"magfab-readout": "magfab_readout.cli:main"}
+    assert [d.split(">")[0] for d in project["project"]["dependencies"]] == ["pyserial"]
+    assert json.loads(rendered[f"{PKG}/calibration.json"]) == calibration
+    sha = hashlib.sha256(json.dumps(calibration, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
+    assert calibration_sha256(calibration) == sha
+    build = {}
+    exec(rendered[f"{PKG}/_build.py"], build)
+    assert build["CALIBRATION_SHA256"] == sha and build["SPEC_NAME"] == "magone"
+    assert (build["GAIN_SEL"], build["RESOLUTION"], build["BAUD"]) == (0, 2, 250000)
+    assert build["LSB_XY_UT"] == pytest.approx(0.751 * 4) and build["LSB_Z_UT"] == pytest.approx(1.21 * 4)
+
+
+def test_spec_name_with_quotes_backslashes_and_newlines_renders_valid_python(design, calibration):
+    name = 'a"b\\c\nd \'e\' """ {{ x }} {% y %} \u00e9\u2028'
+    odd = derive(design.spec.model_copy(update={"name": name}))
+    files = render(odd, calibration)
+    for path, data in files.items():
+        if path.endswith(".py"):
+            compile(data, path, "exec")
+    build = {}
+    exec(files[f"{PKG}/_build.py"], build)
+    assert build["SPEC_NAME"] == name
+    assert name in tomllib.loads(files["readout/pyproject.toml"].decode())["project"]["description"]
+    assert json.dumps(name) in files["readout/README.md"].decode()
+
+
+@pytest.mark.parametrize("change, key", [
+    (lambda c: c.update(format="magfab-calibration/2"), "calibration.json:format"),
+    (lambda c: c.update(method="spline"), "calibration.json:method"),
+    (lambda c: c["monomials"].reverse(), "calibration.json:monomials"),
+    (lambda c: c["coefficients"]["Fz_N"].pop(), "calibration.json:coefficients.Fz_N"),
+    (lambda c: c["coefficients"]["Fr_N"].__setitem__(3, float("nan")), "calibration.json:coefficients.Fr_N[3]"),
+    (lambda c: c["scaling"]["Br_uT"].update(scale=0.0), "calibration.json:scaling.Br_uT.scale"),
+    (lambda c: c.update(shear_sign=0.5), "calibration.json:shear_sign"),
+    (lambda c: c.pop("tare_N"), "calibration.json:tare_N.Fz_N"),
+    (lambda c: c["valid_region"]["hull"].reverse(), "calibration.json:valid_region.hull"),
+    (lambda c: c["valid_region"]["hull"].insert(2, [20000.0, 2000.0]), "calibration.json:valid_region.hull"),
+    (lambda c: c["valid_region"].update(Bz_uT=[3.0, 1.0]), "calibration.json:valid_region.Bz_uT"),
+])
+def test_a_calibration_the_readout_cannot_evaluate_is_refused_by_key(design, change, key):
+    bad = make_calibration()
+    change(bad)
+    with pytest.raises(SpecError) as err:
+        render(design, bad)
+    assert err.value.key == key, err.value.message
+
+
+# --- the calibration in Python ---------------------------------------------------------------------------------
+
+def test_evaluation_equals_an_independent_float64_implementation(pkg):
+    cal = make_calibration(order=5, seed=7, tare=(0.31, -0.12))
+    calibration = pkg.Calibration(cal)
+    rng = random.Random(3)
+    points = [(0.0, 0.0, 15000.0), (10.0, -20.0, 21000.0), (29.9, 0.0, 12000.0), (30.0, 0.0, 12000.0)]
+    points += [(rng.uniform(-6000, 6000), rng.uniform(-6000, 6000), rng.uniform(10000, 32000)) for _ in range(500)]
+    for B in points:
+        got, want = calibration.evaluate(*B), ref_forces(cal, *B)
+        for g, w in zip(got, want):
+            assert abs(g - w) <= 1e-9 * max(1.0, abs(w)), (B, got, want)
+    # the tare is taken off Fz and Fr, so it moves Fx and Fy along the field's direction (shear_sign -1)
+    untared = pkg.Calibration(make_calibration(order=5, seed=7))
+    Fx0, Fy0, Fz0 = untared.evaluate(3000.0, 4000.0, 20000.0)
+    Fx1, Fy1, Fz1 = calibration.evaluate(3000.0, 4000.0, 20000.0)
+    assert (Fx1 - Fx0, Fy1 - Fy0, Fz1 - Fz0) == pytest.approx((-0.12 * 0.6, -0.12 * 0.8, -0.31))
+
+
+def with_mls(cal: dict, order: int = 2, bandwidth: float = 0.15) -> dict:
+    """``cal`` switched to moving least squares over a jittered grid of scan points inside its region."""
+    rng = random.Random(9)
+    bz, br, fz, fr = [], [], [], []
+    for a in range(25):
+        for b in range(15):
+            z, r = 12000 + 18000 * (a + rng.uniform(0, 0.5)) / 25, 8000 * (b + rng.uniform(0, 0.5)) / 15
+            if ref_inside(cal, z, r):
+                bz.append(z)
+                br.append(r)
+                fz.append(2.0 * (z - 12000) / 9000 + 0.01 * math.sin(r / 700) + rng.gauss(0, 0.005))
+                fr.append(1.5 * r / 4000 + 0.02 * math.cos(z / 3000) + rng.gauss(0, 0.005))
+    return dict(cal, method="mls", mls={
+        "order": order, "bandwidth": bandwidth, "units": "bandwidth in the scaled (u, v) of 'scaling'",
+        "weight": "gaussian exp(-d^2 / (2 bandwidth^2)), d the distance in (u, v)",
+        "points": {"Bz_uT": bz, "Br_uT": br, "Fz_N": fz, "Fr_N": fr}})
+
+
+def ref_mls(cal: dict, Bz: float, Br: float) -> tuple:
+    """docs/bundle.md's moving least squares with numpy over every point: untared (Fz, Fr)."""
+    import numpy as np
+
+    sc, m = cal["scaling"], cal["mls"]
+    h, order = m["bandwidth"], m["order"]
+    u = (np.array(m["points"]["Bz_uT"]) - sc["Bz_uT"]["center"]) / sc["Bz_uT"]["scale"]
+    v = (np.array(m["points"]["Br_uT"]) - sc["Br_uT"]["center"]) / sc["Br_uT"]["scale"]
+    uq = (Bz - sc["Bz_uT"]["center"]) / sc["Bz_uT"]["scale"]
+    vq = (Br - sc["Br_uT"]["center"]) / sc["Br_uT"]["scale"]
+    du, dv = (u - uq) / h, (v - vq) / h
+    d2 = du**2 + dv**2
+    w = np.exp(-0.5 * (d2 - d2.min()))
+    P = np.column_stack([du**i * dv**(k - i) for k in range(order + 1) for i in range(k, -1, -1)])
+    A = P.T @ (w[:, None] * P)
+    A += 1e-12 * np.trace(A) * np.eye(len(A))
+    y = np.column_stack([m["points"]["Fz_N"], m["points"]["Fr_N"]])
+    sol = np.linalg.solve(A, P.T @ (w[:, None] * y))
+    return float(sol[0, 0]), float(sol[0, 1])
+
+
+def test_moving_least_squares_equals_an_independent_implementation(pkg):
+    cal = with_mls(make_calibration(tare=(0.05, -0.02)))
+    calibration = pkg.Calibration(cal)
+    assert calibration.method == "mls"
+    rng = random.Random(4)
+    for _ in range(40):
+        Bx, By, Bz = rng.uniform(-5000, 5000), rng.uniform(-5000, 5000), rng.uniform(11000, 31000)
+        Br = math.hypot(Bx, By)
+        Fz, Fr = ref_mls(cal, Bz, Br)
+        Fz, Fr = Fz - 0.05, Fr + 0.02
+        want = (-Fr * Bx / Br, -Fr * By / Br, Fz)  # shear_sign -1
+        for g, w in zip(calibration.evaluate(Bx, By, Bz), want):
+            assert abs(g - w) <= 1e-9 * max(1.0, abs(w))
+        # "poly" is still what the firmware computes
+        assert calibration.evaluate(Bx, By, Bz, method="poly") == pytest.approx(ref_forces(cal, Bx, By, Bz),
+                                                                                 rel=1e-12, abs=1e-12)
+    with pytest.raises(pkg.CalibrationError, match="mls = None: is missing"):
+        pkg.Calibration({k: v for k, v in cal.items() if k != "mls"})
+
+
+def test_region_flag_equals_an_independent_point_in_polygon_test(pkg, calibration):
+    cal = pkg.Calibration(calibration)
+    rng = random.Random(5)
+    checked = 0
+    for _ in range(3000):
+        Bz, Br = rng.uniform(8000, 34000), rng.uniform(-500, 9000)
+        if ref_distance_to_hull(calibration, Bz, Br) < 1e-6:
+            continue
+        assert cal.in_region(Bz, Br) == ref_inside(calibration, Bz, Br), (Bz, Br)
+        checked += 1
+    assert checked > 2900
+    assert all(cal.in_region(*p) for p in calibration["valid_region"]["hull"])  # the boundary belongs to it
+
+
+# --- frames ---------------------------------------------------------------------------------------------------
+
+def test_crc_is_ccitt_false(pkg):
+    assert pkg.crc16_ccitt_false(b"123456789") == ref_crc(b"123456789") == 0x29B1  # the catalogue's check value
+    data = bytes(range(256)) * 3
+    assert pkg.crc16_ccitt_false(data) == ref_crc(data)
+
+
+def _frames(n, start=0):
+    rng = random.Random(11)
+    return [dict(seq=(start + k) & 0xFF, t_us=(4_294_960_000 + 1712 * k) & 0xFFFFFFFF, status=k % 16,
+                 counts=(rng.randint(-32768, 32767), rng.randint(-9000, 9000), rng.randint(0, 22000)),
+                 t_raw=46244 + k, forces=(rng.uniform(-1, 1), rng.uniform(-1, 1), rng.uniform(0, 5)))
+            for k in range(n)]
+
+
+def test_package_frames_are_byte_identical_to_the_documented_layout(pkg):
+    for f in _frames(20):
+        assert pkg.encode_frame(f["seq"], f["t_us"], f["status"], f["counts"], f["t_raw"], f["forces"]) == \
+            ref_frame(**f)
+
+
+def test_decoder_resynchronises_rejects_bad_crcs_and_counts_them(pkg):
+    frames = _frames(12, start=250)
+    wire = [ref_frame(**f) for f in frames]
+    corrupted = bytearray(wire[3])
+    corrupted[20] ^= 0x10  # a flipped bit inside the forces: CRC failure
+    wire[3] = bytes(corrupted)
+    wire[6] = wire[6][:14]  # cut short: the next frame starts inside it
+    noise = b"\x00\xffF,1,2\x13\xa5\x5a\x01\x02garbage" + bytes(40)  # a fake sync and a fake text start
+    info = b"I,magfab,my,name,0123456789ABCDEF,0,2,0,2\n"
+    stream = noise + b"".join(wire[:5]) + info + b"".join(wire[5:]) + b"\xa5"
+    expected = [f["seq"] for k, f in enumerate(frames) if k not in (3, 6)]
+
+    whole = pkg.Decoder(lsb_xy_uT=3.004, lsb_z_uT=4.84)
+    items = whole.feed(stream)
+    pieces = pkg.Decoder(lsb_xy_uT=3.004, lsb_z_uT=4.84)
+    rng = random.Random(2)
+    chunked, k = [], 0
+    while k < len(stream):
+        step = rng.choice([1, 1, 2, 5, 31, 64])
+        chunked += pieces.feed(stream[k:k + step])
+        k += step
+    assert chunked == items and pieces.stats == whole.stats
+
+    samples = [x for x in items if isinstance(x, pkg.Sample)]
+    infos = [x for x in items if isinstance(x, pkg.DeviceInfo)]
+    assert [s.seq for s in samples] == expected
+    assert whole.stats.crc_errors == 3  # the fake sync, the corrupted frame, the truncated one
+    assert whole.stats.lost == 2 and whole.stats.frames == 10
+    assert infos == [pkg.DeviceInfo("my,name", "0123456789abcdef", 0, 2, 0, 2, info.decode().strip())]
+    by_seq = {f["seq"]: f for f in frames}
+    for s in samples:
+        f = by_seq[s.seq]
+        assert (s.t_us, s.status, s.counts, s.temperature_raw) == (f["t_us"], f["status"], f["counts"], f["t_raw"])
+        assert s.force_N == tuple(f32(x) for x in f["forces"])
+        assert s.B_uT == (f["counts"][0] * 3.004, f["counts"][1] * 3.004, f["counts"][2] * 4.84)
+        if s.chip_error:  # no reading from the chip: no temperature either
+            assert s.temperature_C is None
+        else:
+            assert s.temperature_C == pytest.approx(25 + (f["t_raw"] - 46244) / 45.2)
+    assert whole.stats.skipped_bytes == len(stream) - 10 * 31 - len(info) - 1  # the last byte may start a frame
+    assert pkg.decode_frames(stream) == items
+
+
+def test_text_lines_bad_lines_and_chip_errors(pkg):
+    text = (b"F,7,1000,0,0.1234,-0.5000,2.0000,60.08,-3.00,29824.08,25.02\r\n"
+            b"F,8,2712,2,nan,nan,nan,nan,nan,nan,nan\n"
+            b"F,9,4424,1,1.0,2.0\n"  # too few fields
+            b"F,10,6136,0,0.0000,0.0000,1.5000,0.00,0.00,15000.00,24.98\n")
+    decoder = pkg.Decoder()
+    samples = decoder.feed(text)
+    assert [s.seq for s in samples] == [7, 8, 10]
+    assert samples[0].force_N == (0.1234, -0.5, 2.0) and samples[0].B_uT == (60.08, -3.0, 29824.08)
+    assert samples[0].temperature_C == 25.02 and samples[0].source == "text"
+    assert samples[1].chip_error and all(math.isnan(f) for f in samples[1].force_N)
+    assert decoder.stats.bad_lines == 1 and decoder.stats.lost == 1
+    line = pkg.encode_text_line(7, 1000, 0, (0.12344, -0.5, 2.0), (60.08, -3.0, 29824.08), 25.02)
+    assert line == b"F,7,1000,0,0.1234,-0.5000,2.0000,60.08,-3.00,29824.08,25.02\n"
+
+
+# --- the simulated board ------------------------------------------------------------------------------------
+
+def test_simulated_board_sends_the_firmware_format_and_the_embedded_calibration(pkg, calibration):
+    sim = pkg.SimulatedDevice(realtime=False, chunk=300, text=False)
+    frames = []
+    while len(frames) < 3000:
+        frames += ref_decode(sim.read(10**6))
+    build = sys.modules["magfab_readout._build"]
+    lsb = (build.LSB_XY_UT, build.LSB_XY_UT, build.LSB_Z_UT)
+    Fz_seen = []
+    for k, f in enumerate(frames):
+        assert f["seq"] == k & 0xFF and f["t_us"] == k * round(1e6 / build.SAMPLE_RATE_HZ)
+        B = tuple(c * s for c, s in zip(f["counts"], lsb))
+        want = ref_forces(calibration, *B)
+        assert f["forces"] == pytest.approx(tuple(f32(w) for w in want), rel=1.2e-7, abs=1e-12)
+        Br = math.hypot(B[0], B[1])
+        if ref_distance_to_hull(calibration, B[2], Br) > 1.0:
+            assert bool(f["status"] & 1) == (not ref_inside(calibration, B[2], Br))
+        Fz_seen.append(want[2])
+    assert max(Fz_seen) - min(Fz_seen) > 1.0  # it presses
+    assert sum(f["status"] & 1 for f in frames) < 0.05 * len(frames)  # and mostly within the region
+
+
+def test_simulated_text_mode_and_commands(pkg):
+    sim = pkg.SimulatedDevice(realtime=False, chunk=5, text=False)
+    sim.write(b"t")
+    lines = sim.read(10**6).decode().splitlines()
+    assert len(lines) == 5 and all(line.startswith("F,") and line.count(",") == 10 for line in lines)
+    sim.write(b"i")
+    assert sim.read(10**6).startswith(b"I,magfab,magone," + pkg.Calibration.embedded().short_hash.encode())
+    sim.write(b"b")
+    assert len(ref_decode(sim.read(10**6))) == 5
+
+
+def test_zero_subtracts_the_mean_force_at_rest(pkg):
+    reference = pkg.Decoder().feed(pkg.SimulatedDevice(realtime=False, chunk=300, text=False).read(10**6))
+    with pkg.Device(transport=pkg.SimulatedDevice(realtime=False, chunk=300, text=False)) as device:
+        offset = device.zero(100)
+        assert offset == pytest.approx(tuple(sum(s.force_N[a] for s in reference[:100]) / 100 for a in range(3)))
+        later = device.read(50)
+    for sample, ref in zip(later, reference[100:150]):
+        assert sample.device_force_N == ref.force_N
+        assert sample.force_N == tuple(f - o for f, o in zip(ref.force_N, offset))
+    assert max(abs(f) for s in later for f in s.force_N) < 0.05  # still at rest: about zero
+    assert later[1].time_s - later[0].time_s == pytest.approx(1 / 584.1, rel=1e-3)
+
+
+# --- errors a user meets --------------------------------------------------------------------------------------
+
+class Silent:
+    """A port where nothing (or only noise) arrives."""
+
+    port = "the test port"
+
+    def __init__(self, noise=b""):
+        self.noise = noise
+
+    def read(self, size=4096, timeout_s=0.05):
+        import time
+        time.sleep(min(timeout_s, 0.01))
+        return self.noise
+
+    def write(self, data):
+        return len(data)
+
+    def close(self):
+        pass
+
+
+def test_device_errors_say_what_to_do(pkg):
+    with pytest.raises(pkg.NoData, match="no frames from the test port within 0.2 s; nothing arrived"):
+        pkg.Device(transport=Silent(), timeout_s=0.2).read(1)
+    with pytest.raises(pkg.NoData, match="none formed a frame or line: check that the baud rate"):
+        pkg.Device(transport=Silent(bytes(range(0, 200, 7))), timeout_s=0.2).read(1)
+    with pytest.raises(pkg.NoData, match="no info line"):
+        pkg.Device(transport=Silent(), timeout_s=0.2).info()
+    noisy = pkg.SimulatedDevice(realtime=False, corrupt_fraction=0.3, text=False)
+    with pytest.raises(pkg.CrcErrorRate, match=r"failed the CRC \(\d+ %, the limit is 5 %\): check that the baud"):
+        pkg.Device(transport=noisy).read(1000)
+    mild = pkg.SimulatedDevice(realtime=False, corrupt_fraction=0.01, text=False)
+    with pkg.Device(transport=mild) as device:
+        assert len(device.read(1000)) == 1000 and 0 < device.stats.crc_errors < 30
+    other = pkg.SimulatedDevice(realtime=False, calibration_hash="0123456789abcdef")
+    with pkg.Device(transport=other) as device:
+        info = device.info()
+        with pytest.raises(pkg.CalibrationMismatch, match="runs calibration 0123456789abcdef .* embeds "
+                           + pkg.Calibration.embedded().short_hash):
+            device.check_info(info)
+    chip_errors = pkg.SimulatedDevice(realtime=False, chip_error_every=10, text=False)
+    with pkg.Device(transport=chip_errors) as device:
+        samples = device.read(40)
+    assert [s.seq for s in samples if s.chip_error] == [9, 19, 29, 39]
+    assert [s.seq for s in samples if s.recovered] == [10, 20, 30]
+    assert all(math.isnan(f) for s in samples if s.chip_error for f in s.force_N)
+
+
+def test_missing_port_is_named(pkg):
+    try:
+        import serial  # noqa: F401
+    except ImportError:
+        with pytest.raises(pkg.DeviceError, match="pyserial is not installed"):
+            pkg.Device("/dev/does-not-exist")
+        return
+    with pytest.raises(pkg.PortNotFound, match="serial port '/dev/does-not-exist' not found"):
+        pkg.Device("/dev/does-not-exist")
+
+
+# --- the installed command line -----------------------------------------------------------------------------
+
+def _rows(stdout: str) -> list:
+    return [line.split() for line in stdout.splitlines() if line and not line.startswith("#")]
+
+
+def test_installed_cli_streams_zeroes_and_checks(installed):
+    proc = cli(installed, "stream", "--simulate", "--count", "60", "--zero", "100", "--raw", "--check")
+    assert proc.returncode == 0, proc.stderr
+    header = [line for line in proc.stdout.splitlines() if line.startswith("# t_s")]
+    assert header == ["# t_s seq Fx_N Fy_N Fz_N Bx_uT By_uT Bz_uT T_C flags Bx_lsb By_lsb Bz_lsb T_raw dF_N"]
+    rows = _rows(proc.stdout)
+    assert len(rows) == 60 and all(len(r) == 15 for r in rows)
+    assert max(abs(float(x)) for r in rows for x in r[2:5]) < 0.05  # tared at rest
+    assert max(float(r[14]) for r in rows) < 1e-5  # host and "firmware" agree (float32)
+    assert "# zero: offset" in proc.stdout and "0 CRC errors" in proc.stderr
+
+
+def test_installed_cli_records_a_scan_csv(installed, calibration, tmp_path):
+    out = tmp_path / "scan.csv"
+    proc = cli(installed, "record", out, "--seconds", "0.4", "--simulate")
+    assert proc.returncode == 0, proc.stderr
+    text = out.read_text()
+    comments = [line for line in text.splitlines() if line.startswith("#")]
+    assert '# spec: "magone"' in comments
+    assert f"# calibration_sha256: {calibration_sha256(calibration)}" in comments
+    rows = list(csv.DictReader(io.StringIO("\n".join(l for l in text.splitlines() if not l.startswith("#")))))
+    assert set(CSV_REQUIRED) | {"temperature_C"} <= set(rows[0])
+    assert 0.4 * 584 * 0.9 < len(rows) < 0.4 * 584 * 1.1
+    times = [float(r["time_s"]) for r in rows]
+    assert times[0] == 0.0 and all(b >= a for a, b in zip(times, times[1:]))
+    for r in rows:
+        values = [float(r[c]) for c in CSV_REQUIRED + ("temperature_C",)]
+        assert all(math.isfinite(v) for v in values)
+        want = ref_forces(calibration, float(r["Bx_uT"]), float(r["By_uT"]), float(r["Bz_uT"]))
+        got = (float(r["Fx_N"]), float(r["Fy_N"]), float(r["Fz_N"]))
+        assert all(abs(g - w) <= 1e-6 + 1e-6 * abs(w) for g, w in zip(got, want))
+
+
+def test_installed_cli_info_and_errors(installed):
+    proc = cli(installed, "info", "--simulate")
+    assert proc.returncode == 0, proc.stderr
+    assert "I,magfab,magone," in proc.stdout and "calibration: match" in proc.stdout
+    proc = cli(installed, "stream", "--simulate", "--simulate-corrupt", "0.5", "--count", "500")
+    assert proc.returncode == 1 and "failed the CRC" in proc.stderr
+    proc = cli(installed, "stream", "--port", "/dev/does-not-exist", "--count", "1")
+    assert proc.returncode == 1
+    assert ("not found" if installed.serial else "pyserial is not installed") in proc.stderr
+    proc = cli(installed, "stream", "--simulate", "--text", "--raw")
+    assert proc.returncode == 1 and "--raw needs binary frames" in proc.stderr
+
+
+@contextmanager
+def pseudo_terminal(pkg, feed: bool):
+    """A pty whose far end behaves as the board (the simulated device) when ``feed``; yields the port name."""
+    import tty
+
+    master, slave = os.openpty()
+    tty.setraw(master)
+    os.set_blocking(master, False)
+    stop = threading.Event()
+    sim = pkg.SimulatedDevice()
+
+    def run():
+        while not stop.is_set():
+            if select.select([master], [], [], 0.005)[0]:
+                try:
+                    sim.write(os.read(master, 256))
+                except OSError:
+                    pass
+            data = sim.read(4096, 0.005)
+            try:
+                os.write(master, data)
+            except OSError:  # nobody reads: the data is lost, as on a UART
+                pass
+
+    thread = threading.Thread(target=run, daemon=True)
+    if feed:
+        thread.start()
+    try:
+        yield os.ttyname(slave)
+    finally:
+        stop.set()
+        if feed:
+            thread.join(5)
+        os.close(master)
+        os.close(slave)
+
+
+def test_installed_cli_over_a_real_serial_port(installed, pkg):
+    if not installed.serial:
+        pytest.skip("pyserial could not be installed into the test venv (no package index)")
+    with pseudo_terminal(pkg, feed=False) as port:
+        proc = cli(installed, "stream", "--port", port, "--timeout", "0.5", "--count", "1")
+        assert proc.returncode == 1 and f"no frames from {port} within 0.5 s; nothing arrived" in proc.stderr
+    with pseudo_terminal(pkg, feed=True) as port:
+        proc = cli(installed, "info", "--port", port)
+        assert proc.returncode == 0 and "calibration: match" in proc.stdout, proc.stderr
+        proc = cli(installed, "stream", "--port", port, "--count", "30", "--text", "--check")
+        assert proc.returncode == 0, proc.stderr
+        rows = _rows(proc.stdout)
+        assert len(rows) == 30 and max(float(r[10]) for r in rows) < 1e-3  # text rounds the field to 0.01 uT
