@@ -172,7 +172,16 @@ def _predictions(design: Design, say: Progress, timings: dict[str, float]):
     return out, found, pred
 
 
-def _bundle(design: Design, prediction, scan, say: Progress, timings: dict[str, float]):
+def _acceptance(design: Design, prediction) -> dict | None:
+    """The acceptance test's bands (magfab.acceptance), for the readout package and the checklist."""
+    try:
+        from .acceptance import acceptance
+    except ImportError:
+        return None
+    return acceptance(design, prediction)
+
+
+def _bundle(design: Design, prediction, scan, acceptance: dict | None, say: Progress, timings: dict[str, float]):
     """The firmware-plus-calibration bundle: calibration.json (from ``scan``, or a simulated scan when there
     is none yet), its chart, the firmware sources, the AVR image where avr-gcc exists, the flash scripts and
     the readout package."""
@@ -222,6 +231,24 @@ def _bundle(design: Design, prediction, scan, say: Progress, timings: dict[str, 
                             f"{sizes.get('flash_bytes')} B, RAM {sizes.get('ram_bytes')} B"))
         timings["avr-gcc"] = time.perf_counter() - t
     return out, found, result
+
+
+def _fabrication(design: Design, acceptance: dict | None, say: Progress, timings: dict[str, float]):
+    """The bench papers: checklist.md, checklist.html (tick boxes, printable) and bom.csv."""
+    from . import checklist
+
+    say("writing the checklist and the bill of materials")
+    t = time.perf_counter()
+    out = [
+        Artifact("checklist.md", checklist.checklist_md(design, acceptance).encode(),
+                 "fabrication checklist with the quantities filled in (Markdown)"),
+        Artifact("checklist.html", checklist.checklist_html(design, acceptance).encode(),
+                 "the same checklist with tick boxes, to print"),
+        Artifact("bom.csv", checklist.bom_csv(design).encode(),
+                 f"bill of materials for {design.spec.fabrication.sensors} sensor(s)"),
+    ]
+    timings["checklist"] = time.perf_counter() - t
+    return out, checklist.findings(design)
 
 
 def model_bench() -> list[dict[str, object]]:
@@ -291,12 +318,20 @@ def plan(spec: Spec, progress: Progress | None = None, scan=None) -> BuildResult
         raise BuildError(stop)
     artifacts += predict_artifacts
 
-    bundle_artifacts, bundle_findings, fitted = _bundle(design, prediction, scan, say, timings)
+    acceptance = _acceptance(design, prediction)
+    bundle_artifacts, bundle_findings, fitted = _bundle(design, prediction, scan, acceptance, say, timings)
     findings += bundle_findings
     stop = errors_in(findings, spec.build.strict)
     if stop:
         raise BuildError(stop)
     artifacts += bundle_artifacts
+
+    fab_artifacts, fab_findings = _fabrication(design, acceptance, say, timings)
+    findings += fab_findings
+    stop = errors_in(findings, spec.build.strict)
+    if stop:
+        raise BuildError(stop)
+    artifacts += fab_artifacts
 
     say("writing reports")
     artifacts.append(Artifact("design.json", _json_bytes(design.as_dict()), "every derived dimension, mm and mm^3"))

@@ -232,7 +232,7 @@ def predict(design: "Design") -> Prediction:
     t_field = time.perf_counter()
 
     body = mech.Body.from_design(design)
-    mus = dict(zip(("soft", "nominal", "stiff"), mech.band(spec.elastomer.material)))
+    mus = dict(zip(("soft", "nominal", "stiff"), spec.elastomer.shear_modulus_kPa or mech.band(spec.elastomer.material)))
     travel = design.d_rest_mm - sen.d_min_mm
     # Indent a little past the travel to d_min: the magnet lags the surface, and the curve must reach d_min.
     # Steps graded finer near zero, where a rounded tip's force rises as indentation^1.5.

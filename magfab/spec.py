@@ -19,7 +19,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any, Optional
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from .errors import SpecError
 from .recipes import catalogue
@@ -89,6 +89,16 @@ class Elastomer(_Section):
         "(silicone stretches), mm. Sealed by the glue to the pad.", le=50.0
     )
     min_skin_mm: float = _mm(0.4, "Thinnest silicone allowed between the pocket and the outer surface, mm.", le=10.0)
+    shear_modulus_kPa: Optional[tuple[float, float, float]] = Field(
+        None, description="Override the material's neo-Hookean shear modulus band [soft, nominal, stiff], kPa "
+        "(e.g. from your own batch's tensile test); omit to use the recipe's.")
+
+    @field_validator("shear_modulus_kPa")
+    @classmethod
+    def _band(cls, v: Optional[tuple[float, float, float]]) -> Optional[tuple[float, float, float]]:
+        if v is not None and not (0 < v[0] <= v[1] <= v[2] <= 1.0e5):
+            raise ValueError("must be three moduli in kPa with 0 < soft <= nominal <= stiff <= 100000")
+        return v
 
 
 class Sensor(_Section):
@@ -258,6 +268,19 @@ class Firmware(_Section):
     temperature: bool = Field(True, description="Also convert and report the chip temperature.")
 
 
+class Fabrication(_Section):
+    """What the bench needs: how many sensors, silicone quantities, adhesive; recipe overrides."""
+
+    sensors: int = Field(1, ge=1, le=1000, description="Sensors to make: sets the pours and the bill of materials.")
+    waste_pct: float = Field(30.0, ge=0.0, le=300.0, description="Extra silicone mixed beyond what the mould holds, % "
+                             "(left in the cup and on the stirrer, overflow from the fill and vent holes).")
+    adhesive: str = Field("sil-poxy", description="Adhesive for the magnet seal and the pad, a key of recipes/adhesives.toml.")
+    release_agent: str = Field("ease-release-200", description="Mould release, a key of recipes/adhesives.toml.")
+    pot_life_min: Optional[float] = Field(None, gt=0.0, le=10000.0, description="Override the silicone's pot life, min.")
+    cure_time_h: Optional[float] = Field(None, gt=0.0, le=1000.0, description="Override the silicone's cure time, h.")
+    density_g_cm3: Optional[float] = Field(None, gt=0.1, le=10.0, description="Override the silicone's density, g/cm^3.")
+
+
 class Build(_Section):
     """Build options."""
 
@@ -278,6 +301,7 @@ class Spec(_Section):
     predict: Predict = Field(default_factory=Predict)
     calibration: Calibration = Field(default_factory=Calibration)
     firmware: Firmware = Field(default_factory=Firmware)
+    fabrication: Fabrication = Field(default_factory=Fabrication)
     build: Build = Field(default_factory=Build)
 
     def canonical_json(self) -> str:
@@ -292,6 +316,8 @@ _CATALOGUE_KEYS = {
     ("magnet", "grade"): "magnets",
     ("elastomer", "material"): "materials",
     ("sensor", "chip"): "chips",
+    ("fabrication", "adhesive"): "adhesives",
+    ("fabrication", "release_agent"): "adhesives",
 }
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from functools import lru_cache
 from importlib.resources import files
 from pathlib import Path
@@ -65,6 +66,17 @@ def py_string(value: object) -> str:
     return json.dumps(str(value))
 
 
+_MD_SPECIAL = re.compile(r"([\\`*_\[\]|~])")
+
+
+def md(value: object) -> str:
+    """Plain text safe inside a Markdown paragraph or list item: HTML-escaped (renderers pass raw HTML
+    through), the characters that start emphasis, code, links or tables backslash-escaped, newlines folded."""
+    text = " ".join(str(value).split())
+    text = text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
+    return _MD_SPECIAL.sub(lambda m: "\\" + m.group(1), text)
+
+
 @lru_cache(maxsize=4)
 def environment(autoescape: bool = False):
     import jinja2
@@ -77,10 +89,10 @@ def environment(autoescape: bool = False):
         trim_blocks=True,
         lstrip_blocks=True,
     )
-    env.filters.update(c_string=c_string, c_float=c_float, c_int=c_int, py_string=py_string, json=json.dumps)
+    env.filters.update(c_string=c_string, c_float=c_float, c_int=c_int, py_string=py_string, json=json.dumps, md=md)
     return env
 
 
 def render(name: str, **context: object) -> str:
     """Render ``templates/<name>`` with ``context``; HTML templates are autoescaped."""
-    return environment(name.endswith((".html", ".htm"))).get_template(name).render(**context)
+    return environment(name.removesuffix(".j2").endswith((".html", ".htm"))).get_template(name).render(**context)

@@ -15,7 +15,7 @@ from typing import Mapping
 
 __all__ = ["Quantity", "Recipe", "catalogue", "KINDS"]
 
-KINDS = ("materials", "magnets", "printers", "chips", "land", "parts")
+KINDS = ("materials", "magnets", "printers", "chips", "land", "parts", "adhesives", "assembly")
 
 
 @dataclass(frozen=True)
