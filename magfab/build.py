@@ -172,13 +172,15 @@ def _predictions(design: Design, say: Progress, timings: dict[str, float]):
     return out, found, pred
 
 
-def _acceptance(design: Design, prediction) -> dict | None:
+def _acceptance(design: Design, prediction) -> tuple[dict | None, list[Finding]]:
     """The acceptance test's bands (magfab.acceptance), for the readout package and the checklist."""
+    from .acceptance import acceptance
+
     try:
-        from .acceptance import acceptance
-    except ImportError:
-        return None
-    return acceptance(design, prediction)
+        return acceptance(design, prediction), []
+    except ValueError as exc:  # e.g. no weight fits the predicted range: the bundle ships without the check
+        return None, [Finding(Severity.WARNING, "acceptance", f"the readout package has no acceptance test for "
+                              f"this design: {exc}", "predict.max_stretch")]
 
 
 def _bundle(design: Design, prediction, scan, acceptance: dict | None, say: Progress, timings: dict[str, float]):
@@ -210,11 +212,14 @@ def _bundle(design: Design, prediction, scan, acceptance: dict | None, say: Prog
                         "force calibration (eq. 12-14): coefficients, scaling, valid region, held-out errors, scan hash"))
     for name, data in sorted(calibrate.chart(result).items()):
         out.append(Artifact(f"calibration/{name}", data, "held-out force error against evaluation cost, per order and MLS"))
+    if acceptance is not None:
+        out.append(Artifact("calibration/acceptance.json", _json_bytes(acceptance),
+                            "acceptance-test bands: field at rest and the rise under a known weight, with assumptions"))
     say("rendering the firmware and the readout package")
     t = time.perf_counter()
     fw = firmware.render(design, cal)
     out += [Artifact(f"firmware/{rel}", data, "firmware source") for rel, data in sorted(fw.items())]
-    rd = readout.render(design, cal)
+    rd = readout.render(design, cal, acceptance)
     out += [Artifact(rel, data, "readout package (pip install ./readout)") for rel, data in sorted(rd.items())]
     timings["render"] = time.perf_counter() - t
     t = time.perf_counter()
@@ -318,7 +323,8 @@ def plan(spec: Spec, progress: Progress | None = None, scan=None) -> BuildResult
         raise BuildError(stop)
     artifacts += predict_artifacts
 
-    acceptance = _acceptance(design, prediction)
+    acceptance, acceptance_findings = _acceptance(design, prediction)
+    findings += acceptance_findings
     bundle_artifacts, bundle_findings, fitted = _bundle(design, prediction, scan, acceptance, say, timings)
     findings += bundle_findings
     stop = errors_in(findings, spec.build.strict)
