@@ -292,6 +292,7 @@ def plan(spec: Spec, progress: Progress | None = None, scan=None) -> BuildResult
 
     timings["import"] = time.perf_counter() - t
     artifacts: list[Artifact] = []
+    meshes: dict[str, object] = {}
     tol, ang = spec.mould.tessellation_tolerance_mm, spec.mould.angular_tolerance_deg
     for stem, module, func, _printed, description in PARTS:
         say(f"modelling {stem}")
@@ -300,6 +301,7 @@ def plan(spec: Spec, progress: Progress | None = None, scan=None) -> BuildResult
         timings[f"solid:{stem}"] = time.perf_counter() - t
         t = time.perf_counter()
         mesh = tessellate(solid, tol, ang)
+        meshes[stem] = mesh
         findings += mesh_findings(stem, mesh, solid.val().Volume(), tol)
         artifacts.append(Artifact(f"{stem}.stl", stl_bytes(mesh, f"{spec.name} {stem}"), description + ", STL"))
         if spec.build.step:
@@ -343,6 +345,17 @@ def plan(spec: Spec, progress: Progress | None = None, scan=None) -> BuildResult
     artifacts.append(Artifact("design.json", _json_bytes(design.as_dict()), "every derived dimension, mm and mm^3"))
     artifacts.append(Artifact("spec.json", _json_bytes(spec.model_dump(mode="json")), "the spec with every default filled in"))
     artifacts.append(Artifact("findings.json", _json_bytes([f.as_dict() for f in findings]), "design and mesh checks"))
+    say("drawing the report")
+    t = time.perf_counter()
+    from .report import render_report
+
+    report_files = [("report.html", "this page: the whole build on one page"),
+                    ("manifest.json", "what made what: hashes, versions")]
+    artifacts.append(Artifact("report.html", render_report(spec, design, findings, list(artifacts), prediction,
+                                                           fitted.calibration.to_json(), meshes,
+                                                           extra_files=report_files),
+                              "the whole build on one page, for a browser"))
+    timings["report"] = time.perf_counter() - t
     models = {f"{m.family}_model": m.as_dict() for m in prediction.models}
     artifacts.append(Artifact("manifest.json", _manifest(spec, design, artifacts, models), "what made what: hashes, versions"))
     timings["total"] = time.perf_counter() - t0
