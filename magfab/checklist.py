@@ -206,6 +206,7 @@ def sections(design: "Design", acceptance: Mapping[str, object] | None = None) -
         f"Magnet: NdFeB {spec.magnet.grade}, {spec.magnet.diameter_mm:g} mm diameter x {spec.magnet.height_mm:g} mm, "
         "axially magnetised" + (f"; {_t(mag, 'coating', '')}" if mag is not None and _t(mag, 'coating') else "") + ".",
         f"Polarity: {_t(polarity, 'method', 'mark the north pole with a compass')}",
+        f"Heat: {_t(assembly['magnet-handling'], 'heat', 'keep the magnet below its maximum operating temperature')}",
         "Orientation, the same for every sensor: north pole up, away from the chip (towards the fingertip). The chip "
         "then reads a positive Bz at rest; the acceptance test checks the sign.",
         f"Push the magnet up the insertion channel (it stretches) until it stops against the pocket's roof, "
