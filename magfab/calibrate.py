@@ -1040,7 +1040,7 @@ def chart(result: FitResult) -> dict[str, bytes]:
         ax.text(cost.min(), result.tolerance_mN, " tolerance", color="r", fontsize=7, va="bottom")
         ax.set_xscale("log")
         ax.set_yscale("log")
-        ax.set_xlabel("evaluation cost, floating-point operations per reading (numbers: polynomial order)")
+        ax.set_xlabel("evaluation cost, flops per reading (numbers: polynomial order)")
         ax.set_ylabel(f"held-out RMS error ({result.calibration.errors.get('folds')}-fold), mN")
         scan = result.calibration.scan
         ax.set_title(f"Calibration fits on {scan.get('source')} ({scan.get('rows')} rows); ringed: {result.chosen}",
