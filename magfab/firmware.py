@@ -31,6 +31,7 @@ from pathlib import Path, PurePosixPath
 from typing import TYPE_CHECKING, Any, Mapping
 
 from .errors import SpecError
+from .recipes import catalogue
 
 if TYPE_CHECKING:
     from .design import Design
@@ -79,10 +80,9 @@ HOST_PROGRAM = "host/magfab_host"
 
 #: HALLCONF the firmware programs: the setting the datasheet's sensitivity table (recipe) is given for.
 HALLCONF = 0xC
-#: Temperature channel, TCMP off: T = 25 C + (raw - 46244) / 45.2 (BRIEF section 4, from the datasheet and the
-#: public drivers; not in the recipe).
-TEMPERATURE_RAW_25C = 46244
-TEMPERATURE_LSB_PER_C = 45.2
+#: Temperature channel, TCMP off: T = 25 C + (raw - T25) / TRES, both from recipes/chips.toml (datasheet Table 7).
+TEMPERATURE_RAW_25C = int(catalogue("chips")["mlx90393"]["temperature_raw_25C"].nominal)
+TEMPERATURE_LSB_PER_C = catalogue("chips")["mlx90393"]["temperature_lsb_per_C"].nominal
 #: Allowance on the datasheet's conversion time for the chip's internal oscillator. Assumption: the recipe gives
 #: the typical TCONV only. Every read waits this much longer than the nominal conversion.
 TCONV_MARGIN = 0.10

@@ -31,10 +31,8 @@ __all__ = ["PACKAGE", "TEMPLATES", "render", "calibration_sha256", "validate_cal
 
 PACKAGE = "magfab_readout"
 TEMPLATES = "readout"  # folder under templates/; every file in it ends in .j2 and renders to readout/<path>
-# MLX90393 temperature (TCMP off): T = 25 C + (raw - 46244) / 45.2 C; ../shared/design/BRIEF.md sec. 4,
-# after the Melexis datasheet. The chip recipe has no entry for it yet.
-TEMPERATURE_RAW_25C = 46244
-TEMPERATURE_LSB_PER_C = 45.2
+# MLX90393 temperature (TCMP off): T = 25 C + (raw - T25) / TRES, from recipes/chips.toml.
+from .firmware import TEMPERATURE_LSB_PER_C, TEMPERATURE_RAW_25C  # noqa: E402 - from recipes/chips.toml
 
 
 @lru_cache(maxsize=1)
