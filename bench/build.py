@@ -11,7 +11,7 @@ What it measures (all times are wall-clock seconds, from :func:`time.perf_counte
    ``python -m magfab.cli build --out <tmp>``, each N times; median and min.
 2. **Warm**: in one process, after importing magfab and cadquery, ``plan()`` of ``magfab.build`` N times;
    the median of every stage it reports in ``BuildResult.timings_s``.
-3. **Mould only**: the mould cup and lid (``magfab.mould``), tessellated with ``magfab.export`` at the
+3. **Mould only**: the mould cup and lid (``magfab.mould``), tessellated with ``magfab.export.cad`` at the
    spec's tolerances and turned into STL bytes, warm in-process and as a cold process. If ``openscad``
    is on the PATH, the same mould is written as OpenSCAD scripts from the same ``Design`` numbers,
    rendered with ``openscad -o <part>.stl <part>.scad`` (CGAL), checked against magfab's STLs (volume,
@@ -162,7 +162,7 @@ def mould_parts() -> list[tuple[str, Callable]]:
 
 def mould_stls(design: "Design") -> dict[str, bytes]:
     """Build, tessellate (at the spec's tolerances) and encode the mould parts; STL bytes by file stem."""
-    from magfab.export import stl_bytes, tessellate
+    from magfab.export.cad import stl_bytes, tessellate
 
     spec = design.spec
     tol, ang = spec.mould.tessellation_tolerance_mm, spec.mould.angular_tolerance_deg

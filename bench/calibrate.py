@@ -4,7 +4,7 @@ Run from anywhere::
 
     python bench/calibrate.py [--out DIR] [--repeat N]
 
-Simulates the MagOne scan (``magfab.calibrate.simulate_scan``: the paper's y-z track with the chip's noise and
+Simulates the MagOne scan (``magfab.models.calibration.simulate_scan``: the paper's y-z track with the chip's noise and
 the Nano17's 6.25 mN resolution), fits every candidate (polynomials of order 1-6, moving least squares) and
 prints, per candidate: the k-fold held-out RMS and largest error of Fz and Fr (mN), the RMS fit residual, the
 condition number of the scaled (and unscaled) design matrix, the evaluation cost in operations, the measured
@@ -32,8 +32,8 @@ from pathlib import Path
 import numpy as np
 
 from magfab import derive, load_spec
-from magfab import calibrate as C
-from magfab.predict import predict
+from magfab.models import calibration as C
+from magfab.models.predict import predict
 
 BENCH_DIR = Path(__file__).resolve().parent
 

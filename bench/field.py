@@ -8,7 +8,7 @@ What it measures, on the MagOne magnet (D = 5 mm, H = 2 mm, N35 nominal Br from 
 over its working volume (sensing point d = d_min..d_max below the lower face, lateral offset 0..R,
 n x n points, default 317^2 ~ 10^5):
 
-1. For every model in ``magfab.field.MODELS``, via ``magfab.field.measure``: the largest relative
+1. For every model in ``magfab.models.field.MODELS``, via ``magfab.models.field.measure``: the largest relative
    vector error |B - B_ref| / |B_ref| against ``magpylib.magnet.Cylinder(...).getB`` (and the same
    normalised by the largest |B_ref|), the median wall time of N calls scaled to 10^5 points, and the
    speed ratio to magpylib timed in the same run. Approximate models run with ``rtol=None`` so their
@@ -35,7 +35,7 @@ from typing import Sequence
 
 import numpy as np
 
-from magfab import field as F
+from magfab.models import field as F
 from magfab import load_spec
 
 BENCH_DIR = Path(__file__).resolve().parent

@@ -38,7 +38,7 @@ BENCH_DIR = Path(__file__).resolve().parent
 sys.path.insert(0, str(BENCH_DIR.parent))
 
 from magfab import derive, load_spec  # noqa: E402
-from magfab import firmware  # noqa: E402
+from magfab.export import firmware  # noqa: E402
 
 DEFAULT_OUT = BENCH_DIR / "out"
 JSON_NAME = "firmware_bench.json"

@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from magfab import load_spec
-from magfab import mechanics as mech
+from magfab.models import mechanics as mech
 from magfab.design import derive
 
 BENCH_DIR = Path(__file__).resolve().parent

@@ -6,13 +6,13 @@ Run from anywhere::
 
 On the MagOne design (the embedded spec):
 
-1. Field (``magfab.field.measure``): every field model over the working volume (d_min..d_max below the
+1. Field (``magfab.models.field.measure``): every field model over the working volume (d_min..d_max below the
    magnet, lateral offset 0..R, ~10^5 points) against magpylib's ``Cylinder``; median time per 10^5 points.
-2. Elastomer (``magfab.mechanics.measure``): the column and Hertz-plus-column closed forms and the FE model at
+2. Elastomer (``magfab.models.mechanics.measure``): the column and Hertz-plus-column closed forms and the FE model at
    several mesh sizes against the finest FE mesh, over the indentation range the reference reaches;
    time per force curve at the nominal modulus.
 3. Shear: the Timoshenko column against the mode-1 FE at the finest mesh.
-4. The whole MagOne prediction (``magfab.predict.predict``, band included), median of N runs.
+4. The whole MagOne prediction (``magfab.models.predict.predict``, band included), median of N runs.
 
 Prints one table, writes ``<out>/model_bench.json`` and ``<out>/model_bench.svg``/``.png`` (error against
 time, log-log, one point per model and mesh size). With ``--ship`` it also writes the table to
@@ -33,9 +33,9 @@ import time
 from pathlib import Path
 
 from magfab import derive, load_spec
-from magfab import field as F
-from magfab import mechanics as M
-from magfab.predict import predict
+from magfab.models import field as F
+from magfab.models import mechanics as M
+from magfab.models.predict import predict
 
 BENCH_DIR = Path(__file__).resolve().parent
 SHIPPED = BENCH_DIR.parent / "magfab" / "model_bench.json"
@@ -109,8 +109,8 @@ def main(argv: list[str] | None = None) -> int:
         SHIPPED.write_text(json.dumps(doc, indent=1, sort_keys=True) + "\n")
     import matplotlib
     matplotlib.use("Agg")
-    from magfab import plots
-    from magfab.predict import predict as run
+    from magfab.export import figures as plots
+    from magfab.models.predict import predict as run
     design = derive(load_spec(None))
     for name, data in plots.figures(design, run(design), table).items():
         if name.startswith("speed_accuracy"):

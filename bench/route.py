@@ -26,7 +26,8 @@ import time
 from pathlib import Path
 
 from magfab import derive, parse_spec
-from magfab import pcb, route
+from magfab import pcb
+from magfab.board import route
 from magfab.errors import Severity, SpecError
 
 

@@ -56,7 +56,7 @@ class BuildResult:
     findings: list[Finding]
     timings_s: dict[str, float] = field(default_factory=dict)
     out_dir: Path | None = None
-    prediction: object | None = None  # magfab.predict.Prediction
+    prediction: object | None = None  # magfab.models.predict.Prediction
     calibration: dict[str, object] | None = None  # what the CLI summary says of the bundle
 
     def summary(self) -> dict[str, object]:
@@ -116,7 +116,8 @@ def _solid(module: str, func: str, design: Design):
 
 def _board(design: Design, say: Progress, timings: dict[str, float]) -> tuple[list[Artifact], list[Finding]]:
     """The footprint library, the routed breakout board and, where KiCad is installed, its Gerbers."""
-    from . import kicad, pcb
+    from .export import kicad
+    from . import pcb
 
     say("placing and routing the board")
     t = time.perf_counter()
@@ -148,8 +149,8 @@ def _board(design: Design, say: Progress, timings: dict[str, float]) -> tuple[li
 
 def _predictions(design: Design, say: Progress, timings: dict[str, float]):
     """predictions.json and its plots, and the prediction's design checks (eq. 9 and the guidelines)."""
-    from . import plots
-    from .predict import predict_with_findings
+    from .export import figures as plots
+    from .models.predict import predict_with_findings
 
     say("predicting sensitivity, resolution and range")
     t = time.perf_counter()
@@ -173,8 +174,8 @@ def _predictions(design: Design, say: Progress, timings: dict[str, float]):
 
 
 def _acceptance(design: Design, prediction) -> tuple[dict | None, list[Finding]]:
-    """The acceptance test's bands (magfab.acceptance), for the readout package and the checklist."""
-    from .acceptance import acceptance
+    """The acceptance test's bands (magfab.models.acceptance), for the readout package and the checklist."""
+    from .models.acceptance import acceptance
 
     try:
         return acceptance(design, prediction), []
@@ -187,7 +188,8 @@ def _bundle(design: Design, prediction, scan, acceptance: dict | None, say: Prog
     """The firmware-plus-calibration bundle: calibration.json (from ``scan``, or a simulated scan when there
     is none yet), its chart, the firmware sources, the AVR image where avr-gcc exists, the flash scripts and
     the readout package."""
-    from . import calibrate, firmware, readout
+    from .models import calibration as calibrate
+    from .export import firmware, readout
 
     out: list[Artifact] = []
     found: list[Finding] = []
@@ -240,7 +242,7 @@ def _bundle(design: Design, prediction, scan, acceptance: dict | None, say: Prog
 
 def _fabrication(design: Design, acceptance: dict | None, say: Progress, timings: dict[str, float]):
     """The bench papers: checklist.md, checklist.html (tick boxes, printable) and bom.csv."""
-    from . import checklist
+    from .export import checklist
 
     say("writing the checklist and the bill of materials")
     t = time.perf_counter()
@@ -270,7 +272,7 @@ def model_bench() -> list[dict[str, object]]:
 def plan(spec: Spec, progress: Progress | None = None, scan=None) -> BuildResult:
     """Everything a build would write, as bytes, with its findings; raises on an error-level finding.
 
-    ``scan`` (a :class:`magfab.calibrate.Scan`) calibrates the firmware and readout from real data; without
+    ``scan`` (a :class:`magfab.models.calibration.Scan`) calibrates the firmware and readout from real data; without
     it the bundle carries a provisional calibration fitted to a simulated scan."""
     say = progress or (lambda _stage: None)
     timings: dict[str, float] = {}
@@ -288,7 +290,7 @@ def plan(spec: Spec, progress: Progress | None = None, scan=None) -> BuildResult
     import cadquery  # noqa: F401  - timed on its own, not charged to the first part
     import trimesh  # noqa: F401
 
-    from .export import step_bytes, stl_bytes, tessellate
+    from .export.cad import step_bytes, stl_bytes, tessellate
 
     timings["import"] = time.perf_counter() - t
     artifacts: list[Artifact] = []
@@ -347,7 +349,7 @@ def plan(spec: Spec, progress: Progress | None = None, scan=None) -> BuildResult
     artifacts.append(Artifact("findings.json", _json_bytes([f.as_dict() for f in findings]), "design and mesh checks"))
     say("drawing the report")
     t = time.perf_counter()
-    from .report import render_report
+    from .export.report import render_report
 
     report_files = [("report.html", "this page: the whole build on one page"),
                     ("manifest.json", "what made what: hashes, versions")]

@@ -107,8 +107,8 @@ def errors_in(findings: list[Finding], strict: bool = False) -> list[Finding]:
 
 def prediction_findings(design: Design, pred) -> list[Finding]:
     """BRIEF eq. 9 as errors and the paper's section 2.6 guidelines as warnings, from a
-    :class:`magfab.predict.Prediction`; the predicted figures themselves as info."""
-    from . import field as fieldmod
+    :class:`magfab.models.predict.Prediction`; the predicted figures themselves as info."""
+    from .models import field as fieldmod
 
     spec = design.spec
     sen, p = spec.sensor, spec.predict
@@ -185,7 +185,7 @@ def prediction_findings(design: Design, pred) -> list[Finding]:
 
 def _saturation_gap(magnet, full_scale_G: float, lo: float, hi: float) -> float:
     """The gap d (mm) at which Bz on the axis equals ``full_scale_G`` (bisection; Bz falls with d)."""
-    from . import field as fieldmod
+    from .models import field as fieldmod
 
     for _ in range(60):
         mid = 0.5 * (lo + hi)

@@ -39,7 +39,7 @@ def _handled() -> Iterator[None]:
     except KeyboardInterrupt:
         _fail("interrupted; nothing was written and any previous output is untouched", 130)
     except Exception as exc:  # noqa: BLE001 - the last line of defence: one message, exit 1
-        if type(exc).__name__ == "ScanError":  # a malformed scan CSV (magfab.calibrate): bad input
+        if type(exc).__name__ == "ScanError":  # a malformed scan CSV (magfab.models.calibration): bad input
             _fail(str(exc), EXIT_BAD_INPUT)
         if isinstance(exc, (FileNotFoundError, IsADirectoryError, PermissionError)) and exc.filename:
             _fail(f"{exc.filename}: {exc.strerror}", EXIT_BAD_INPUT)
@@ -98,7 +98,7 @@ def _run_build(spec: Path | None, out_dir: Path | None, as_json: bool, scan_path
         loaded = load_spec(spec)
         scan = None
         if scan_path is not None:
-            from .calibrate import read_scan_csv
+            from .models.calibration import read_scan_csv
 
             scan = read_scan_csv(scan_path)
         with _progress(sys.stderr.isatty() and not as_json) as progress:
@@ -146,7 +146,7 @@ def check(spec: Path | None, as_json: bool) -> None:
     from .check import design_findings, errors_in
     from .design import derive
     from .errors import BuildError
-    from .predict import predict_with_findings
+    from .models.predict import predict_with_findings
     from .spec import load_spec
 
     with _handled():

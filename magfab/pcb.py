@@ -22,11 +22,11 @@ from typing import Mapping
 from . import __version__
 from .design import Design
 from .errors import Finding, Severity, SpecError
-from .footprint import Footprint, Pad, chip_footprint, connector_footprint, hole_footprint, qfn_footprint
+from .board.footprint import Footprint, Pad, chip_footprint, connector_footprint, hole_footprint, qfn_footprint
 from .recipes import catalogue
-from .route import (HOLE_TO_HOLE_MM, LAYERS, Copper, Router, RouteError, clearance_violations, connected, distance,
+from .board.route import (HOLE_TO_HOLE_MM, LAYERS, Copper, Router, RouteError, clearance_violations, connected, distance,
                     is_via, via_clearance)
-from .sexpr import Sym, at, render, xy
+from .formats.sexpr import Sym, at, render, xy
 
 __all__ = ["Board", "Placed", "board", "findings", "files", "ORIGIN", "LIBRARY"]
 
@@ -550,7 +550,7 @@ def findings(b: Board) -> list[Finding]:
 
 def distance_margin(items: list[Copper], rules: Mapping[str, float]) -> list[float]:
     """Smallest clearance margin (distance - rule) per copper pair that is within 1 mm, for the report."""
-    from .route import _near
+    from .board.route import _near
 
     out = []
     for i, p in enumerate(items):

@@ -26,7 +26,7 @@ def require_tool(name: str) -> str:
 
 def require_kicad() -> str:
     """The interpreter that imports KiCad's pcbnew (skip, or fail under MAGFAB_REQUIRE_TOOLS=1)."""
-    from magfab.kicad import kicad_python
+    from magfab.export.kicad import kicad_python
 
     exe = kicad_python()
     if exe:

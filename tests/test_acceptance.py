@@ -1,4 +1,4 @@
-"""The acceptance test (issue 6, item 5): magfab.acceptance's bands against an independent evaluation of the
+"""The acceptance test (issue 6, item 5): magfab.models.acceptance's bands against an independent evaluation of the
 field over a denser grid than its corners, their response to the tolerances, and the readout package's
 ``check`` command on the simulated sensor (nominal, wrong magnet, upside-down magnet) through the installed
 command line."""
@@ -17,10 +17,10 @@ import numpy as np
 import pytest
 
 from magfab import SpecError, derive, load_spec, parse_spec
-from magfab.acceptance import FORMAT, G0, Tolerances, acceptance, default_weight_g
-from magfab.field import Magnet, bz_br
-from magfab.predict import predict
-from magfab.readout import render, validate_acceptance
+from magfab.models.acceptance import FORMAT, G0, Tolerances, acceptance, default_weight_g
+from magfab.models.field import Magnet, bz_br
+from magfab.models.predict import predict
+from magfab.export.readout import render, validate_acceptance
 from test_readout import make_calibration, ref_decode, write_tree
 
 PKG = "readout/src/magfab_readout"

@@ -1,7 +1,7 @@
 """The firmware-plus-calibration bundle as a build ships it, end to end:
 
 simulated MLX90393 -> the firmware's C core (host build) -> serial frames -> the generated readout
-package -> forces, equal to what magfab.calibrate computes; and `magfab calibrate` on a scan CSV."""
+package -> forces, equal to what magfab.models.calibration computes; and `magfab calibrate` on a scan CSV."""
 
 from __future__ import annotations
 
@@ -16,8 +16,8 @@ import pytest
 from click.testing import CliRunner
 
 from conftest import require_tool
-from magfab import calibrate as C
-from magfab import firmware
+from magfab.models import calibration as C
+from magfab.export import firmware
 from magfab.cli import main
 
 
@@ -73,7 +73,7 @@ def _decoder(out: Path):
 
 def test_end_to_end_simulated_chip_to_host_forces(bundle, tmp_path):
     """Field -> simulated chip -> firmware core -> frames -> readout decoder: the forces equal
-    magfab.calibrate's polynomial evaluation of the same raw readings (float32 on the device)."""
+    magfab.models.calibration's polynomial evaluation of the same raw readings (float32 on the device)."""
     require_tool("gcc")
     out, cal = bundle
     files = {str(p.relative_to(out / "firmware")): p.read_bytes() for p in (out / "firmware").rglob("*")

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from magfab import derive, load_spec, parse_spec
-from magfab import calibrate as C
-from magfab import field as F
-from magfab.predict import chip_setting, noise, predict
+from magfab.models import calibration as C
+from magfab.models import field as F
+from magfab.models.predict import chip_setting, noise, predict
 
 
 @pytest.fixture(scope="module")

@@ -9,10 +9,10 @@ import math
 
 import pytest
 
-from magfab import checklist as C
+from magfab.export import checklist as C
 from magfab import derive, load_spec, parse_spec
 from magfab.errors import Severity, SpecError
-from magfab.templating import md
+from magfab.export.templating import md
 
 
 @pytest.fixture(scope="module")

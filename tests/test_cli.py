@@ -73,7 +73,7 @@ def test_bad_spec_exits_2_names_the_key_and_keeps_the_previous_output(tmp_path, 
 
 
 def test_interrupt_mid_build_leaves_the_previous_output(tmp_path, monkeypatch):
-    import magfab.export
+    import magfab.export.cad
 
     out = tmp_path / "out"
     assert CliRunner().invoke(main, ["build", "--out", str(out)]).exit_code == 0
@@ -82,7 +82,7 @@ def test_interrupt_mid_build_leaves_the_previous_output(tmp_path, monkeypatch):
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(magfab.export, "stl_bytes", interrupted)
+    monkeypatch.setattr(magfab.export.cad, "stl_bytes", interrupted)
     result = CliRunner().invoke(main, ["build", "--out", str(out)])
     assert result.exit_code == 130
     assert _snapshot(out) == before

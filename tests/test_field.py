@@ -1,7 +1,7 @@
-"""Physics of magfab.field: closed forms, limits and their rates, invariants, and the edges where each
+"""Physics of magfab.models.field: closed forms, limits and their rates, invariants, and the edges where each
 model is known to fail (each must raise FieldModelError, not return a number).
 
-Reference: magpylib's Cylinder class (magfab.field.magpylib_cylinder), MagOne magnet D = 5 mm,
+Reference: magpylib's Cylinder class (magfab.models.field.magpylib_cylinder), MagOne magnet D = 5 mm,
 H = 2 mm, N35 (Br 1.195 T), working volume d = 2..6 mm below the lower face, r = 0..R.
 """
 
@@ -14,7 +14,7 @@ import sys
 import numpy as np
 import pytest
 
-from magfab import field as F
+from magfab.models import field as F
 from magfab import load_spec
 
 MAGONE = F.Magnet.from_spec(load_spec(None))
@@ -370,6 +370,6 @@ def test_measure_reports_every_model():
 
 
 def test_import_is_cheap():
-    code = "import sys, magfab.field; print(sorted(m for m in ('magpylib', 'matplotlib') if m in sys.modules))"
+    code = "import sys, magfab.models.field; print(sorted(m for m in ('magpylib', 'matplotlib') if m in sys.modules))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"

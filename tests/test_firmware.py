@@ -23,9 +23,9 @@ import pytest
 
 from conftest import _missing, ref_crc16, require_tool
 from magfab import derive, load_spec
-from magfab import firmware
+from magfab.export import firmware
 from magfab.errors import SpecError
-from magfab.firmware import FirmwareError
+from magfab.export.firmware import FirmwareError
 from magfab.spec import Acquisition, Transport
 
 STUBS = Path(__file__).parent / "firmware_sim" / "arduino_stub"

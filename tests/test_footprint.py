@@ -16,8 +16,8 @@ from types import MappingProxyType
 import pytest
 
 from conftest import require_kicad, require_kicad_library
-from magfab.footprint import Band, chip_footprint, connector_footprint, ipc_land, qfn_footprint
-from magfab.kicad import run_tool
+from magfab.board.footprint import Band, chip_footprint, connector_footprint, ipc_land, qfn_footprint
+from magfab.export.kicad import run_tool
 from magfab.recipes import Quantity, Recipe, catalogue
 from magfab.spec import Density
 

@@ -120,7 +120,7 @@ def test_variants_build_clean(text):
 def test_tessellation_tolerance_is_absolute_mm(tol):
     import numpy as np
 
-    from magfab.export import tessellate
+    from magfab.export.cad import tessellate
 
     d = derive(load_spec(None))
     mesh = tessellate(envelope_solid(d), tol, 10.0)

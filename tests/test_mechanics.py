@@ -13,8 +13,8 @@ import pytest
 
 from magfab import load_spec
 from magfab.design import derive
-from magfab import mechanics as mech
-from magfab.mechanics import Body, MechanicsError
+from magfab.models import mechanics as mech
+from magfab.models.mechanics import Body, MechanicsError
 
 
 @pytest.fixture(scope="module")

@@ -13,8 +13,8 @@ from conftest import require_kicad
 from magfab import SpecError, derive, load_spec, parse_spec
 from magfab import pcb
 from magfab.errors import Severity
-from magfab.kicad import run_tool
-from magfab.route import Copper
+from magfab.export.kicad import run_tool
+from magfab.board.route import Copper
 
 
 @pytest.fixture(scope="module")
@@ -304,7 +304,7 @@ def test_random_variants_route(seed):
 
 def test_via_drill_keeps_the_hole_clearance(board):
     """A via's pad may meet the copper rule while its drill breaks the hole rule (narrow ring)."""
-    from magfab.route import LAYERS, clearance_violations
+    from magfab.board.route import LAYERS, clearance_violations
     rules = board.rules
     track = Copper.seg(0.0, 0.0, 5.0, 0.0, 0.2, "F.Cu", "A")
     # via pad 0.5 mm, drill 0.25 mm: 0.1 mm copper gap leaves 0.225 mm from the drill to the track

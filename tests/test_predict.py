@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 
 from magfab import SpecError, derive, load_spec, parse_spec
-from magfab import field as F
-from magfab import mechanics as M
+from magfab.models import field as F
+from magfab.models import mechanics as M
 from magfab.check import prediction_findings
 from magfab.errors import Severity
-from magfab.predict import chip_setting, noise, predict
+from magfab.models.predict import chip_setting, noise, predict
 
 
 @pytest.fixture(scope="module")
@@ -194,7 +194,7 @@ def test_build_writes_predictions_plots_and_records_models(default_build):
 
 
 def test_a_model_that_cannot_answer_is_a_finding_not_a_traceback(design, monkeypatch):
-    from magfab import predict as P
+    from magfab.models import predict as P
 
     def broken(*args, **kwargs):
         raise M.MechanicsError("fe (mesh 0.75 mm): element inversion at indentation 0.01 mm")

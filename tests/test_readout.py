@@ -26,7 +26,7 @@ import pytest
 
 from conftest import ref_crc16
 from magfab import SpecError, derive, load_spec
-from magfab.readout import calibration_sha256, render
+from magfab.export.readout import calibration_sha256, render
 
 PKG = "readout/src/magfab_readout"
 CSV_REQUIRED = ("time_s", "Bx_uT", "By_uT", "Bz_uT", "Fx_N", "Fy_N", "Fz_N")

@@ -21,8 +21,8 @@ import pytest
 from conftest import require_tool
 from magfab.build import PARTS, Artifact
 from magfab.errors import Finding, Severity
-from magfab.export import tessellate
-from magfab.report import BENCH_FILES, render_report, section_loops
+from magfab.export.cad import tessellate
+from magfab.export.report import BENCH_FILES, render_report, section_loops
 
 #: Files the build writes with or after the report: listed and linked by it (those the build does not
 #: already list as artifacts are passed as extra_files).

@@ -1,4 +1,4 @@
-"""Calling KiCad itself: find an interpreter that can ``import pcbnew`` and run :mod:`magfab.kicad_tool`
+"""Calling KiCad itself: find an interpreter that can ``import pcbnew`` and run :mod:`magfab.export.kicad_tool`
 in it as a subprocess (KiCad's Python module lives in the system interpreter, not in our venv).
 
 ``MAGFAB_KICAD_PYTHON`` names the interpreter explicitly; otherwise the Debian location of KiCad's

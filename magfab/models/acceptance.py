@@ -16,7 +16,7 @@ every-corner worst case below is also computed and kept (``rest.worst_case_Bz_uT
 wrong grade, and a real build sits near the nominal in most of its tolerances at once.
 
 The worst case, deterministically: every tolerance is an interval, the field is
-evaluated with the exact cylinder model (:func:`magfab.field.bz_br`) at every corner of the box of magnet
+evaluated with the exact cylinder model (:func:`magfab.models.field.bz_br`) at every corner of the box of magnet
 remanence x diameter x height x stack-up (the stack-up's terms enter the distance linearly, so its extremes
 are the sums of their extremes) x magnet seating, and the band is [min, max] over the corners. On the axis
 Bz rises monotonically with remanence, diameter and height and falls with distance over these bands (the
@@ -74,12 +74,12 @@ from typing import TYPE_CHECKING, Any, Mapping
 
 import numpy as np
 
-from . import __version__
+from .. import __version__
 from . import field as fieldmod
-from .recipes import catalogue
+from ..recipes import catalogue
 
 if TYPE_CHECKING:
-    from .design import Design
+    from ..design import Design
     from .predict import Prediction
 
 __all__ = ["FORMAT", "G0", "DEFAULT_WEIGHT_G", "Tolerances", "SOURCES", "acceptance", "default_weight_g"]
@@ -217,7 +217,7 @@ def acceptance(design: "Design", prediction: "Prediction | Mapping[str, Any]", w
                tolerances: Tolerances | None = None) -> dict[str, Any]:
     """The acceptance bands for ``design`` (module doc): a JSON-ready dict, format ``magfab-acceptance/1``.
 
-    ``prediction`` is :func:`magfab.predict.predict`'s result or its ``data`` (predictions.json).
+    ``prediction`` is :func:`magfab.models.predict.predict`'s result or its ``data`` (predictions.json).
     ``weight_g`` is the known weight (default :func:`default_weight_g`: 50 g for MagOne); ``tolerances``
     overrides any of the tolerances. Deterministic. Raises ValueError for a weight outside the predicted range.
     """

@@ -71,7 +71,7 @@ import numpy as np
 from . import field as fieldmod
 
 if TYPE_CHECKING:
-    from .design import Design
+    from ..design import Design
     from .predict import Prediction
 
 __all__ = [
@@ -1015,7 +1015,7 @@ def chart(result: FitResult) -> dict[str, bytes]:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .plots import _render
+    from ..export.figures import _render
 
     with matplotlib.rc_context({"svg.hashsalt": "magfab", "svg.fonttype": "path", "path.simplify": True}):
         fig, ax = plt.subplots(figsize=(6.4, 4.2))

@@ -8,7 +8,7 @@ The calibration is validated by the package's own ``calibration`` module, render
 build and the host refuse exactly the same files; its errors come out as :class:`~magfab.errors.SpecError`
 with the key path inside calibration.json.
 
-With the acceptance bands (:func:`magfab.acceptance.acceptance`) the package also carries ``acceptance.json``
+With the acceptance bands (:func:`magfab.models.acceptance.acceptance`) the package also carries ``acceptance.json``
 next to calibration.json, which its ``magfab-readout check`` command (the acceptance test) compares a sensor
 with; without them the command says the package was built without it.
 """
@@ -21,8 +21,8 @@ import types
 from functools import lru_cache
 from typing import Any, Mapping
 
-from . import __version__
-from .errors import SpecError
+from .. import __version__
+from ..errors import SpecError
 from .templating import render as render_template
 from .templating import templates_dir
 
@@ -90,7 +90,7 @@ def _finite_number(x: object) -> bool:
 def validate_acceptance(acceptance: Mapping[str, Any]) -> dict:
     """The acceptance bands as plain JSON data (what acceptance.json will hold), checked for the format and the
     keys the package's ``check`` reads; :class:`SpecError` naming the key path inside acceptance.json."""
-    from .acceptance import FORMAT
+    from ..models.acceptance import FORMAT
 
     if not isinstance(acceptance, Mapping):
         raise SpecError("acceptance.json", type(acceptance).__name__, "must be a JSON object (a dict)")
@@ -130,7 +130,7 @@ def calibration_sha256(calibration: Mapping[str, Any]) -> str:
 
 
 def _context(design, calibration_object, acceptance: Mapping[str, Any] | None = None) -> dict[str, object]:
-    from .predict import chip_setting  # numpy; kept out of 'import magfab'
+    from ..models.predict import chip_setting  # numpy; kept out of 'import magfab'
 
     spec = design.spec
     chip = chip_setting(design)
@@ -175,12 +175,12 @@ def render(design, calibration: Mapping[str, Any], acceptance: Mapping[str, Any]
 
     ``design`` is a :class:`~magfab.design.Design` (from :func:`magfab.derive`); ``calibration`` is the parsed
     calibration.json (docs/bundle.md), which the package embeds (sorted keys, one-space indent); ``acceptance``
-    is :func:`magfab.acceptance.acceptance`'s result, embedded as acceptance.json for the ``check`` command
+    is :func:`magfab.models.acceptance.acceptance`'s result, embedded as acceptance.json for the ``check`` command
     (None: the package has no acceptance data and ``check`` says so). Raises :class:`SpecError` for a
     calibration the readout cannot evaluate or malformed acceptance data, TypeError for a ``design`` of the
     wrong type.
     """
-    from .design import Design
+    from ..design import Design
 
     if not isinstance(design, Design):
         raise TypeError(f"design must be a magfab Design (from magfab.derive); instead received {type(design).__name__}")

@@ -14,11 +14,11 @@ import re
 from dataclasses import asdict, dataclass
 from typing import TYPE_CHECKING, Mapping
 
-from .errors import Finding, Severity, SpecError
-from .recipes import Recipe, catalogue
+from ..errors import Finding, Severity, SpecError
+from ..recipes import Recipe, catalogue
 
 if TYPE_CHECKING:
-    from .design import Design
+    from ..design import Design
 
 __all__ = ["Quantities", "quantities", "mix_ratio", "sections", "checklist_md", "checklist_html", "bom_rows", "bom_csv", "findings"]
 

@@ -30,11 +30,11 @@ from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 from typing import TYPE_CHECKING, Any, Mapping
 
-from .errors import SpecError
-from .recipes import catalogue
+from ..errors import SpecError
+from ..recipes import catalogue
 
 if TYPE_CHECKING:
-    from .design import Design
+    from ..design import Design
 
 __all__ = [
     "AVR_CFLAGS",

@@ -58,11 +58,11 @@ from typing import TYPE_CHECKING, Callable, Mapping, Sequence
 
 import numpy as np
 
-from .spec import Tip
+from ..spec import Tip
 
 if TYPE_CHECKING:
-    from .design import Design
-    from .recipes import Recipe
+    from ..design import Design
+    from ..recipes import Recipe
 
 __all__ = [
     "MechanicsError",
@@ -278,7 +278,7 @@ def _newton_per_mu_mm2(mu_kPa: float) -> float:
 def band(material_recipe: "Recipe | str") -> tuple[float, float, float]:
     """(soft, nominal, stiff) neo-Hookean shear modulus in kPa from a materials recipe (or its catalogue key)."""
     if isinstance(material_recipe, str):
-        from .recipes import catalogue
+        from ..recipes import catalogue
 
         materials = catalogue("materials")
         if material_recipe not in materials:

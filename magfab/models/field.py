@@ -55,7 +55,7 @@ from typing import TYPE_CHECKING, Callable, Mapping, Sequence
 import numpy as np
 
 if TYPE_CHECKING:
-    from .spec import Spec
+    from ..spec import Spec
 
 __all__ = [
     "FieldModelError", "Magnet", "GAUSS_PER_TESLA", "DEFAULT_RTOL", "EXACT_RTOL", "SURFACE_GAP",
@@ -106,7 +106,7 @@ class Magnet:
     @classmethod
     def from_spec(cls, spec: "Spec", band: str = "nominal") -> "Magnet":
         """The spec's magnet, its remanence from recipes/magnets.toml (``band``: low, nominal or high)."""
-        from .recipes import catalogue
+        from ..recipes import catalogue
 
         br = catalogue("magnets")[spec.magnet.grade]["remanence_T"]
         if band not in ("low", "nominal", "high"):

@@ -10,11 +10,11 @@ from typing import TYPE_CHECKING, Callable, Mapping, Sequence
 
 import numpy as np
 
-from . import field as fieldmod
+from ..models import field as fieldmod
 
 if TYPE_CHECKING:
-    from .design import Design
-    from .predict import Prediction
+    from ..design import Design
+    from ..models.predict import Prediction
 
 BAND_COLOURS = {"soft": "#1f77b4", "nominal": "#2ca02c", "stiff": "#d62728"}
 

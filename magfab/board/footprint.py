@@ -22,9 +22,9 @@ from dataclasses import dataclass, field, replace
 from enum import Enum
 from typing import Iterable, Mapping
 
-from .recipes import Quantity, Recipe, catalogue
-from .sexpr import Sym, at, render, xy
-from .spec import Density
+from ..recipes import Quantity, Recipe, catalogue
+from ..formats.sexpr import Sym, at, render, xy
+from ..spec import Density
 
 __all__ = [
     "Density", "Band", "Land", "Pad", "Line", "Poly", "Text", "Footprint",

@@ -27,7 +27,7 @@ def templates_dir() -> Path:
             return installed
     except (ModuleNotFoundError, TypeError, FileNotFoundError):
         pass
-    return Path(__file__).resolve().parent.parent / "templates"
+    return Path(__file__).resolve().parents[2] / "templates"
 
 
 def c_string(value: object) -> str:

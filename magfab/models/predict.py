@@ -36,10 +36,10 @@ import numpy as np
 
 from . import field as fieldmod
 from . import mechanics as mech
-from .errors import Finding, Severity
+from ..errors import Finding, Severity
 
 if TYPE_CHECKING:
-    from .design import Design
+    from ..design import Design
 
 G_PER_UT = 0.01
 N_INDENT = 21  # indentation steps along the normal curve
@@ -357,7 +357,7 @@ def _crossing(x: np.ndarray, y: np.ndarray, level: float, k: int) -> float:
 def predict_with_findings(design: "Design") -> tuple[Prediction | None, list[Finding]]:
     """:func:`predict` and its design checks; a model that cannot give an answer for this design (the FE
     failing at its first step, a field model refusing every point) is an error finding, not a traceback."""
-    from .check import prediction_findings
+    from ..check import prediction_findings
 
     try:
         pred = predict(design)

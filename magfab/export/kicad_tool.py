@@ -6,7 +6,7 @@
     python3 kicad_tool.py footprint LIB.pretty NAME        a library footprint's pads as JSON
 
 It imports nothing from magfab (KiCad's interpreter need not have magfab installed); magfab runs it
-through :mod:`magfab.kicad`. Lengths in the JSON are millimetres.
+through :mod:`magfab.export.kicad`. Lengths in the JSON are millimetres.
 """
 
 import json

@@ -27,17 +27,17 @@ from xml.sax.saxutils import escape
 
 import numpy as np
 
-from . import __version__
-from .errors import Finding, Severity
+from .. import __version__
+from ..errors import Finding, Severity
 
 if TYPE_CHECKING:
     import trimesh
 
-    from .build import Artifact
-    from .design import Design
-    from .pcb import Board
-    from .predict import Prediction
-    from .spec import Spec
+    from ..build import Artifact
+    from ..design import Design
+    from ..pcb import Board
+    from ..models.predict import Prediction
+    from ..spec import Spec
 
 __all__ = ["render_report", "Figure", "part_figure", "stackup_figure", "board_svg", "section_loops",
            "REPORT_PATH", "BENCH_FILES"]
@@ -531,7 +531,7 @@ def _spec_value(value: object, key: str) -> str:
 
 def _spec_sections(spec: "Spec") -> list[dict[str, object]]:
     """Every section and key of the spec with its value, meaning and whether it differs from the default."""
-    from .spec import Spec
+    from ..spec import Spec
 
     values, defaults = spec.model_dump(mode="json"), Spec().model_dump(mode="json")
     general = {"title": "general", "doc": "", "rows": []}
@@ -777,7 +777,7 @@ def render_report(spec: "Spec", design: "Design", findings: Sequence[Finding], a
     files = _files(artifacts, extra)
     listed = {a.path for a in artifacts} | {p for p, _ in extra}
     if board is None:
-        from .pcb import board as make_board
+        from ..pcb import board as make_board
 
         board = make_board(design)
     data = prediction.data

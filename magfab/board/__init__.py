@@ -1,0 +1,1 @@
+"""The breakout board's parts: IPC-7351B footprints, placement, routing, rule checks, KiCad writing."""

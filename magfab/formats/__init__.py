@@ -1,0 +1,1 @@
+"""One reader/validator per file format magfab writes or reads."""
