@@ -21,7 +21,7 @@ from typing import Callable
 from . import __version__
 from .check import design_findings, errors_in, mesh_findings
 from .design import Design, derive
-from .errors import BuildError, Finding, Severity
+from .errors import BuildError, Finding, OutputError, Severity
 from .spec import Spec
 
 __all__ = ["Artifact", "BuildResult", "OutputError", "plan", "write", "build", "PARTS", "default_out_dir"]
@@ -35,10 +35,6 @@ PARTS = (
 )
 
 Progress = Callable[[str], None]
-
-
-class OutputError(ValueError):
-    """The output directory cannot be used (exit 2): e.g. it exists and is not a previous magfab build."""
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,20 @@
-"""The one error type for bad input, and the finding record for design checks."""
+"""Every error magfab raises, in one tree, and the finding record for design checks.
+
+    MagfabError                    the root: everything magfab raises on purpose derives from it
+    +-- InputError (ValueError)    the user's input or environment is at fault: exit 2, one line
+    |   +-- SpecError              a spec key: its path, value and what is allowed
+    |   +-- BuildError             error-level findings stopped the build
+    |   +-- OutputError            the output folder cannot be used
+    |   +-- ScanError              a scan CSV that cannot be read or calibrated on
+    |   +-- CalibrationFormatError a calibration.json (or acceptance.json) that does not hold what it must
+    +-- ModelLimitError (ValueError)  a model asked where it is known to fail (inside the magnet, past an
+    |                              error estimate, an inverted FE element): predict turns it into a finding
+    +-- ToolError (RuntimeError)   an external tool (KiCad, avr-gcc, gcc, simavr) ran and failed on what we
+                                   gave it: our bug, exit 1
+
+The CLI maps these types to exit codes (InputError 2, anything else 1, an interrupt 130); nothing else
+decides by class name or catches broadly.
+"""
 
 from __future__ import annotations
 
@@ -6,7 +22,23 @@ from dataclasses import dataclass
 from enum import Enum
 
 
-class SpecError(ValueError):
+class MagfabError(Exception):
+    """The root of every error magfab raises on purpose."""
+
+
+class InputError(MagfabError, ValueError):
+    """The user's input or environment is at fault (exit 2): the message names what and what is allowed."""
+
+
+class ModelLimitError(MagfabError, ValueError):
+    """A model was asked for a point or load where it is known to fail; callers turn it into a finding."""
+
+
+class ToolError(MagfabError, RuntimeError):
+    """An external tool ran and failed on what magfab gave it (exit 1: a bug of ours, not of the input)."""
+
+
+class SpecError(InputError):
     """An invalid or infeasible spec.
 
     Carries the dotted key path, the offending value and what is allowed, so the CLI can print
@@ -58,7 +90,7 @@ class Finding:
         return {"severity": self.severity.value, "code": self.code, "message": self.message, "key": self.key}
 
 
-class BuildError(RuntimeError):
+class BuildError(InputError):
     """Error-level findings stopped the build (exit 2: the spec asks for something we will not make)."""
 
     def __init__(self, findings: list[Finding]) -> None:
@@ -67,3 +99,15 @@ class BuildError(RuntimeError):
         where = f"{first.key}: " if first.key else ""
         more = f" (and {len(findings) - 1} more error(s))" if len(findings) > 1 else ""
         super().__init__(f"{where}{first.message}{more}")
+
+
+class OutputError(InputError):
+    """The output directory cannot be used: e.g. it exists and is not a previous magfab build."""
+
+
+class ScanError(InputError):
+    """A scan CSV that cannot be read, or that does not span what a calibration needs."""
+
+
+class CalibrationFormatError(InputError):
+    """A calibration.json or acceptance.json that does not hold what its format requires."""
