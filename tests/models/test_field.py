@@ -1,7 +1,8 @@
 """Physics of magfab.models.field: closed forms, limits and their rates, invariants, and the edges where each
 model is known to fail (each must raise FieldModelError, not return a number).
 
-Reference: magpylib's Cylinder class (magfab.models.field.magpylib_cylinder), MagOne magnet D = 5 mm,
+References: a direct quadrature of the cylinder's surface charges (scipy, written here) for the exact field,
+which is then the reference of the others; magpylib's Cylinder class as a second one. MagOne magnet D = 5 mm,
 H = 2 mm, N35 (Br 1.195 T), working volume d = 2..6 mm below the lower face, r = 0..R.
 """
 
@@ -15,6 +16,7 @@ import numpy as np
 import pytest
 
 from magfab.models import field as F
+from magfab.models.field.surrogate import _build_table
 from magfab import load_spec
 
 MAGONE = F.Magnet.from_spec(load_spec(None))
@@ -65,12 +67,44 @@ def test_eq6_as_printed_in_the_brief():
         assert F.axis_bz(MAGONE, -(H / 2 + zf)) == pytest.approx(printed, rel=1e-12)
 
 
-def test_exact_is_magpylibs_cylinder():
-    rng = np.random.default_rng(1)
-    pts = np.concatenate([F.working_volume(MAGONE, D_MIN, D_MAX, 20),
-                          rng.uniform(-15, 15, (500, 3))])
-    pts = pts[(np.hypot(pts[:, 0], pts[:, 1]) > 2.6) | (np.abs(pts[:, 2]) > 1.1)]
-    assert np.max(rel(F.exact(MAGONE, pts), F.magpylib_cylinder(MAGONE, pts))) < 1e-12
+def charge_sheets(magnet, point):
+    """B in G at ``point`` (mm) by direct quadrature of the equivalent surface charges: an axially magnetised
+    cylinder is a disc of charge +Br/mu0 on its upper face and -Br/mu0 on its lower one, so outside it
+    B = Br/(4 pi) [integral over the upper disc - over the lower] of (x - x') / |x - x'|^3 dA'. Independent of
+    the elliptic-integral form (and of magpylib): only scipy's adaptive quadrature."""
+    from scipy import integrate
+
+    R, h, br = magnet.radius_mm, magnet.height_mm / 2.0, magnet.remanence_T * 1e4
+    x, y, z = point
+    r = math.hypot(x, y)
+    radial = lambda rp, ph, dz: r - rp * math.cos(ph)  # noqa: E731 - the source point's offset, in plane
+    axial = lambda rp, ph, dz: dz  # noqa: E731
+    b = np.zeros(2)
+    for z_face, sign in ((h, 1.0), (-h, -1.0)):
+        dz = z - z_face
+        for k, comp in enumerate((radial, axial)):
+            def f(ph, rp):
+                return rp * comp(rp, ph, dz) / (r * r + rp * rp - 2.0 * r * rp * math.cos(ph) + dz * dz) ** 1.5
+            val, _ = integrate.dblquad(f, 0.0, R, 0.0, math.pi, epsabs=1e-13, epsrel=1e-10)
+            b[k] += sign * 2.0 * val  # the half-disc 0..pi, mirrored
+    brho, bz = b * br / (4.0 * math.pi)
+    q = brho / r if r > 0 else 0.0
+    return np.array([q * x, q * y, bz])
+
+
+@pytest.mark.parametrize("point", [
+    (0.0, 0.0, -3.0),  # on the axis, 2 mm below the face
+    (1.0, 0.5, -4.0),  # the working volume, off the axis
+    (2.0, -1.0, -7.0),  # its far corner, r = 0.9 R
+    (2.5, 0.0, -1.5),  # straight below the rim
+    (3.5, 0.0, 0.0),  # beside the magnet, in the mid-plane (Bz < 0 there)
+    (3.0, 1.0, 2.0),  # above and outside
+    (0.3, 0.2, 1.6),  # above, near the axis
+])
+def test_exact_matches_a_direct_quadrature_of_the_charge_sheets(point):
+    want = charge_sheets(MAGONE, point)
+    assert rel(F.exact(MAGONE, point), want)[0] < 1e-9
+    assert rel(F.magpylib_cylinder(MAGONE, point), want)[0] < 1e-9  # the class interface, too
 
 
 def test_axis_gradient_is_the_derivative_of_eq6():
@@ -293,7 +327,7 @@ def test_surrogate_is_deterministic():
     pts = F.working_volume(MAGONE, D_MIN, D_MAX, 30)
     first = F.surrogate_table(MAGONE.aspect)
     b1 = F.surrogate(MAGONE, pts)
-    F._build_table.cache_clear()
+    _build_table.cache_clear()
     second = F.surrogate_table(MAGONE.aspect)
     assert second is not first
     assert np.array_equal(first.coef, second.coef) and first.max_error == second.max_error
@@ -373,3 +407,18 @@ def test_import_is_cheap():
     code = "import sys, magfab.models.field; print(sorted(m for m in ('magpylib', 'matplotlib') if m in sys.modules))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
+
+
+def test_models_are_named_by_the_spec_enum_and_refusals_are_model_limits():
+    from magfab.errors import ModelLimitError
+    from magfab.spec import FieldModel
+
+    by_enum = F.bz_br(MAGONE, 4.0, 1.0, model=FieldModel.SURROGATE)
+    assert by_enum == F.bz_br(MAGONE, 4.0, 1.0, model="surrogate")
+    assert by_enum[0] != F.bz_br(MAGONE, 4.0, 1.0, model="dipole", rtol=None)[0]
+    assert F.model_error(FieldModel.DIPOLE, MAGONE, [(0.0, 0.0, -30.0)]).relative > 0
+    for bad in ("auto", FieldModel.AUTO, "magic"):
+        with pytest.raises(ValueError, match="model must be one of on_axis, dipole, surrogate, exact"):
+            F.dbz_dz(MAGONE, 4.0, model=bad)
+    with pytest.raises(ModelLimitError):
+        F.exact(MAGONE, (0.0, 0.0, 0.0))
