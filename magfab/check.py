@@ -21,7 +21,7 @@ from .errors import Finding, Severity
 if TYPE_CHECKING:
     import trimesh
 
-__all__ = ["design_findings", "mesh_findings", "prediction_findings", "errors_in"]
+__all__ = ["design_findings", "mesh_findings", "mould_fit_findings", "prediction_findings", "errors_in"]
 
 E, W, I = Severity.ERROR, Severity.WARNING, Severity.INFO
 
@@ -96,6 +96,38 @@ def mesh_findings(name: str, mesh: "trimesh.Trimesh", solid_volume_mm3: float, t
     if diff > allowed:
         out.append(Finding(E, "mesh-deviation", f"{name}.stl volume {volume:.3f} mm^3 differs from the solid's "
                            f"{solid_volume_mm3:.3f} mm^3 by more than area x tolerance ({allowed:.3f} mm^3)"))
+    return out
+
+
+def mould_fit_findings(design: Design, fit) -> list[Finding]:
+    """The closed mould measured on its meshes (:class:`magfab.fit.MouldFit`): no interference, each cavity
+    equal to the cast part, walls no thinner than the printer's minimum."""
+    out: list[Finding] = []
+    allowed = fit.allowed_mm3
+    if fit.cup_lid_interference_mm3 > allowed:
+        out.append(Finding(E, "mould-interference", f"the closed lid overlaps the cup by {fit.cup_lid_interference_mm3:.3f} "
+                           f"mm^3 (more than the {allowed:.3f} mm^3 tessellation allows): it will not close"))
+    for i, (cavity, over, under) in enumerate(zip(fit.cavity_volume_mm3, fit.part_outside_mm3,
+                                                  fit.cavity_outside_mm3), start=1):
+        if over > allowed:
+            out.append(Finding(E, "mould-part-overlap", f"cavity {i}: {over:.3f} mm^3 of the cast part lies outside the "
+                               "closed mould's cavity (the cores or the cup overlap the part)"))
+        if under > allowed:
+            out.append(Finding(E, "mould-cavity", f"cavity {i} of the closed mould holds {cavity:.3f} mm^3, "
+                               f"{under:.3f} mm^3 more than the cast part ({fit.part_volume_mm3:.3f} mm^3)"))
+    min_wall = design.printer["min_wall_mm"].nominal
+    tol = design.spec.mould.tessellation_tolerance_mm
+    for what, value, key in (("cup wall round a cavity", fit.cup_wall_mm, "mould.wall_mm"),
+                             ("web between cavities", fit.cavity_web_mm, "mould.wall_mm")):
+        if value is not None and value + tol < min_wall:
+            out.append(Finding(E, "mould-wall-mesh", f"the printed {what} is {value:.2f} mm on the mesh, below the "
+                               f"{design.printer.key} printer's minimum of {min_wall:.2f} mm", key))
+    worst = max(a + b for a, b in zip(fit.part_outside_mm3, fit.cavity_outside_mm3))
+    web = "" if fit.cavity_web_mm is None else f", {fit.cavity_web_mm:.2f} mm between cavities"
+    out.append(Finding(I, "mould-fit", f"closed mould checked on the STL meshes: {len(fit.cavity_volume_mm3)} "
+                       f"cavit{'y' if len(fit.cavity_volume_mm3) == 1 else 'ies'} equal to the cast part within "
+                       f"{worst:.2g} mm^3 (allowed {allowed:.2g}), interference {fit.cup_lid_interference_mm3:.2g} mm^3, "
+                       f"thinnest cup wall {fit.cup_wall_mm:.2f} mm{web}"))
     return out
 
 
