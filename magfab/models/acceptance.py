@@ -75,8 +75,9 @@ from typing import TYPE_CHECKING, Any, Mapping
 import numpy as np
 
 from .. import __version__
-from . import field as fieldmod
 from ..recipes import catalogue
+from ..units import GAUSS_PER_TESLA, UT_PER_GAUSS
+from . import field as fieldmod
 
 if TYPE_CHECKING:
     from ..design import Design
@@ -86,7 +87,6 @@ __all__ = ["FORMAT", "G0", "DEFAULT_WEIGHT_G", "Tolerances", "SOURCES", "accepta
 
 FORMAT = "magfab-acceptance/1"
 G0 = 9.80665  # m/s^2, standard gravity (CGPM 1901)
-UT_PER_G = 100.0
 DEFAULT_WEIGHT_G = 50.0
 #: The known weight stays at or below this fraction of the softest material's predicted range, so the
 #: magnet stays well inside the range (and the curve) whichever material band the batch turned out in.
@@ -192,7 +192,8 @@ def _bz(radius: float, height: float, br: float, d: np.ndarray) -> np.ndarray:
     d = np.asarray(d, dtype=float)
     if np.any(d <= 0.05):
         raise ValueError(f"the magnet's lower face would reach the Hall point (d = {float(d.min()):.3g} mm)")
-    return np.asarray(fieldmod.bz_br(fieldmod.Magnet(radius, height, br), d, 0.0, model="exact")[0], dtype=float)
+    return np.asarray(fieldmod.bz_br(fieldmod.Magnet(radius, height, br), d, 0.0, model=fieldmod.FieldModel.EXACT)[0],
+                      dtype=float)
 
 
 def _lateral_G(radius: float, height: float, br: float, d: float, offset_mm: float, tilt_deg: float) -> float:
@@ -205,7 +206,7 @@ def _lateral_G(radius: float, height: float, br: float, d: float, offset_mm: flo
                                       dimension=(2e-3 * radius, 1e-3 * height))
     z = -1e-3 * (height / 2.0 + d)
     points = np.array([[1e-3 * offset_mm, 0.0, z], [-1e-3 * offset_mm, 0.0, z]])
-    b = np.asarray(magnet.getB(points)) * fieldmod.GAUSS_PER_TESLA
+    b = np.asarray(magnet.getB(points)) * GAUSS_PER_TESLA
     return float(np.max(np.hypot(b[:, 0], b[:, 1])))
 
 
@@ -213,22 +214,37 @@ def _r(x: float, digits: int = 3) -> float:
     return round(float(x), digits) + 0.0
 
 
-def acceptance(design: "Design", prediction: "Prediction | Mapping[str, Any]", weight_g: float | None = None,
-               tolerances: Tolerances | None = None) -> dict[str, Any]:
-    """The acceptance bands for ``design`` (module doc): a JSON-ready dict, format ``magfab-acceptance/1``.
+@dataclass(frozen=True)
+class _Inputs:
+    """The tolerances resolved against the design, the prediction and the recipes (mm, T, G, fractions)."""
 
-    ``prediction`` is :func:`magfab.models.predict.predict`'s result or its ``data`` (predictions.json).
-    ``weight_g`` is the known weight (default :func:`default_weight_g`: 50 g for MagOne); ``tolerances``
-    overrides any of the tolerances. Deterministic. Raises ValueError for a weight outside the predicted range.
-    """
-    tol = tolerances or Tolerances()
-    data = _data(prediction)
+    br_lo: float
+    br_hi: float
+    br_nom: float
+    t_print: float  # +/- per printed surface, mm
+    depth_dev: tuple[float, float]  # (minus, plus), mm
+    sens: tuple[float, float]  # (minus, plus), %
+    temp: list[float]  # remanence factor at the coldest and the warmest ambient, sorted
+    gain: tuple[float, float]  # lowest and highest multiplicative factor (sensitivity x temperature)
+    earth_G: float
+    glue: float  # glue thickness, mm
+    seating: float  # mm below the pocket roof
+    R: float  # magnet radius, mm
+    H: float  # magnet height, mm
+    dR: float
+    dH: float
+    d_rest: float  # mm
+
+    def seat_max(self, h: float) -> float:
+        """How far below the roof a magnet of height h can sit: above the floor."""
+        return max(0.0, self.seating + (self.H - h))
+
+
+def _resolve(design: "Design", data: Mapping[str, Any], tol: Tolerances) -> _Inputs:
+    """Every tolerance as a number: the override in ``tol`` or the recipe's and the spec's value."""
     spec = design.spec
     chip, printer = design.chip, design.printer
-    grades = catalogue("magnets")
-    grade = grades[spec.magnet.grade]
-
-    # --- the tolerances, resolved ------------------------------------------------------------------------
+    grade = catalogue("magnets")[spec.magnet.grade]
     rem = data["field"]["remanence_T"]
     br_lo, br_hi = tol.remanence_T if tol.remanence_T is not None else (rem["low"], rem["high"])
     br_nom = float(rem["nominal"])
@@ -244,58 +260,86 @@ def acceptance(design: "Design", prediction: "Prediction | Mapping[str, Any]", w
     alpha = grade["br_temperature_coefficient_pct_per_C"].nominal / 100.0
     temp = sorted(1.0 + alpha * (t - BR_REFERENCE_C) for t in tol.ambient_C)
     gain = ((1.0 - sens[0] / 100.0) * temp[0], (1.0 + sens[1] / 100.0) * temp[1])
-    earth_G = tol.earth_field_uT / UT_PER_G
-    glue = spec.pad.glue_thickness_mm
-    seating = tol.seating_mm if tol.seating_mm is not None else spec.elastomer.pocket_clearance_mm
-    R, H = design.magnet_radius_mm, design.magnet_height_mm
-    dR, dH = tol.magnet_diameter_mm / 2.0, tol.magnet_height_mm
-    d_rest = design.d_rest_mm
+    return _Inputs(
+        br_lo=br_lo, br_hi=br_hi, br_nom=br_nom, t_print=t_print, depth_dev=depth_dev, sens=sens, temp=temp,
+        gain=gain, earth_G=tol.earth_field_uT / UT_PER_GAUSS, glue=spec.pad.glue_thickness_mm,
+        seating=tol.seating_mm if tol.seating_mm is not None else spec.elastomer.pocket_clearance_mm,
+        R=design.magnet_radius_mm, H=design.magnet_height_mm, dR=tol.magnet_diameter_mm / 2.0,
+        dH=tol.magnet_height_mm, d_rest=design.d_rest_mm)
 
-    # Stack-up terms: (name, lowest, highest change of d in mm), summed worst case.
-    stack = [
-        ("pad thickness", -t_print, t_print),
-        ("pocket roof (mould core length)", -t_print, t_print),
-        ("glue thickness", -tol.glue_fraction * glue, tol.glue_fraction * glue),
-        ("Hall point: sensing depth", -depth_dev[0], depth_dev[1]),
+
+def _stack(inp: _Inputs, tol: Tolerances) -> list[tuple[str, float, float]]:
+    """Stack-up terms: (name, lowest, highest change of d in mm), summed worst case."""
+    return [
+        ("pad thickness", -inp.t_print, inp.t_print),
+        ("pocket roof (mould core length)", -inp.t_print, inp.t_print),
+        ("glue thickness", -tol.glue_fraction * inp.glue, tol.glue_fraction * inp.glue),
+        ("Hall point: sensing depth", -inp.depth_dev[0], inp.depth_dev[1]),
         ("Hall point: solder joint under the chip", -tol.solder_standoff_mm[1], -tol.solder_standoff_mm[0]),
     ]
+
+
+def _corners(inp: _Inputs, stack: list[tuple[str, float, float]]) -> list[tuple[float, float, float, float]]:
+    """Every corner of remanence x radius x height x stack-up x seating, as (radius, height, br, d)."""
     stack_lo, stack_hi = sum(s[1] for s in stack), sum(s[2] for s in stack)
+    R, H, dR, dH = inp.R, inp.H, inp.dR, inp.dH
+    corners = []
+    for br, r, h, ds in itertools.product((inp.br_lo, inp.br_hi), (R - dR, R + dR), (H - dH, H + dH),
+                                          (stack_lo, stack_hi)):
+        for s in sorted({0.0, inp.seat_max(h)}):
+            corners.append((r, h, br, inp.d_rest + ds - (h - H) - s))
+    return corners
 
-    def seat_max(h: float) -> float:  # how far below the roof a magnet of height h can sit: above the floor
-        return max(0.0, seating + (H - h))
 
-    corners = []  # (radius, height, br, d)
-    for br, r, h, ds in itertools.product((br_lo, br_hi), (R - dR, R + dR), (H - dH, H + dH), (stack_lo, stack_hi)):
-        for s in sorted({0.0, seat_max(h)}):
-            corners.append((r, h, br, d_rest + ds - (h - H) - s))
-
-    # --- at rest -----------------------------------------------------------------------------------------
-    rest_G = np.array([float(_bz(r, h, br, [d])[0]) for r, h, br, d in corners])
-    nominal_G = float(_bz(R, H, br_nom, [d_rest])[0])
-    rest_lo_G = float(rest_G.min()) * gain[0] - earth_G
-    rest_hi_G = float(rest_G.max()) * gain[1] + earth_G
-    d_all = [c[3] for c in corners]
-
-    # Lateral: offsets summed, tilt = magnetisation angle + the magnet's tilt in its pocket.
-    offsets = [("chip placement", tol.chip_placement_mm), ("pad on its dowel pins", t_print),
+def _lateral(design: "Design", inp: _Inputs, tol: Tolerances, strongest: tuple[float, float, float, float]
+             ) -> tuple[list[tuple[str, float]], float, float, float]:
+    """(offsets, their sum in mm, tilt in deg, the |Bxy| bound in G): offsets summed, tilt = magnetisation
+    angle + the magnet's tilt in its pocket, at the strongest corner, plus the Earth's field."""
+    spec = design.spec
+    offsets = [("chip placement", tol.chip_placement_mm), ("pad on its dowel pins", inp.t_print),
                ("fingertip in the pad's lip", spec.pad.lip_clearance_mm),
-               ("magnet in its pocket", spec.elastomer.pocket_clearance_mm), ("core in the mould", t_print)]
+               ("magnet in its pocket", spec.elastomer.pocket_clearance_mm), ("core in the mould", inp.t_print)]
     offset = sum(o[1] for o in offsets)
-    pocket_tilt = math.degrees(math.atan2(2.0 * spec.elastomer.pocket_clearance_mm, 2.0 * R))
+    pocket_tilt = math.degrees(math.atan2(2.0 * spec.elastomer.pocket_clearance_mm, 2.0 * inp.R))
     tilt = tol.magnetisation_angle_deg + pocket_tilt
-    strongest = corners[int(np.argmax(rest_G))]
-    bxy_max_G = _lateral_G(*strongest, offset, tilt) * gain[1] + earth_G
+    bxy_max_G = _lateral_G(*strongest, offset, tilt) * inp.gain[1] + inp.earth_G
+    return offsets, offset, tilt, bxy_max_G
 
-    # --- the known weight ---------------------------------------------------------------------------------
-    normal = data["normal"]
+
+@dataclass(frozen=True)
+class _Weight:
+    """The known weight and the rise it gives: forces in N, travel in mm, fields in G."""
+
+    w: float  # g
+    force: float
+    f_range: float
+    grid: np.ndarray  # forces tabulated
+    at: int  # the weight's index in grid
+    delta_min: np.ndarray
+    delta_max: np.ndarray
+    delta_nom: np.ndarray
+    travel_w: dict[str, float]  # magnet travel under the weight, per material band
+    prediction_delta_G: float  # the prediction's own rise at the nominal travel
+
+
+def _travel_curves(normal: Mapping[str, Any]) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """The prediction's magnet travel u (mm) and, per material band, the force at each u (N)."""
     u = np.asarray(normal["magnet_displacement_mm"], dtype=float)
     curves = {k: np.asarray([p[1] for p in v], dtype=float) for k, v in normal["curve"].items()}
     for k, f in curves.items():
         if len(f) != len(u) or np.any(np.diff(f) <= 0) or np.any(np.diff(u) < 0):
             raise ValueError(f"the prediction's normal curve '{k}' is not increasing: no force -> travel mapping")
+    return u, curves
+
+
+def _weight(data: Mapping[str, Any], inp: _Inputs, corners: list[tuple[float, float, float, float]],
+            weight_g: float | None) -> _Weight:
+    """The weight (chosen or checked against the range) and the rise over every corner and material band."""
+    normal = data["normal"]
+    u, curves = _travel_curves(normal)
     f_range = min(normal["range_by_material_N"].values())
     # Keep every corner's magnet clear of the Hall point (0.1 mm): a closer corner ends the table earlier.
-    u_cap = min(d_all) - 0.1
+    u_cap = min(c[3] for c in corners) - 0.1
     if u_cap < float(u[-1]):
         f_range = min(f_range, min(float(np.interp(u_cap, u, f)) for f in curves.values()))
     w = _weight_for(f_range) if weight_g is None else float(weight_g)
@@ -313,83 +357,152 @@ def acceptance(design: "Design", prediction: "Prediction | Mapping[str, Any]", w
         return b[1:] - b[0]
 
     rises = np.array([rise(*c, k) for c in corners for k in curves])
-    delta_min = rises.min(axis=0) * gain[0]
-    delta_max = rises.max(axis=0) * gain[1]
-    delta_nom = rise(R, H, br_nom, d_rest, "nominal")
     at = int(np.searchsorted(grid, force))
-    bz_pred = np.asarray(fieldmod.bz_br(fieldmod.Magnet(R, H, br_nom), np.maximum(d_rest - u, 1e-3), 0.0,
-                                        model="exact")[0])
+    bz_pred = np.asarray(fieldmod.bz_br(fieldmod.Magnet(inp.R, inp.H, inp.br_nom), np.maximum(inp.d_rest - u, 1e-3),
+                                        0.0, model=fieldmod.FieldModel.EXACT)[0])
     travel_w = {k: float(travel[k][at]) for k in curves}
+    return _Weight(w=w, force=force, f_range=f_range, grid=grid, at=at,
+                   delta_min=rises.min(axis=0) * inp.gain[0], delta_max=rises.max(axis=0) * inp.gain[1],
+                   delta_nom=rise(inp.R, inp.H, inp.br_nom, inp.d_rest, "nominal"), travel_w=travel_w,
+                   prediction_delta_G=float(np.interp(travel_w["nominal"], u, bz_pred)) - float(bz_pred[0]))
 
-    # --- which grades the rest band can tell apart --------------------------------------------------------
-    grade_table = {}
-    for name, g in grades.items():
-        b = g["remanence_T"].nominal
-        bz = nominal_G * b / br_nom
-        grade_table[name] = {"remanence_T": b, "rest_Bz_uT": _r(bz * UT_PER_G),
-                             "inside_rest_band": bool(rest_lo_G <= bz <= rest_hi_G)}
 
-    # --- one tolerance at a time: what each is worth at rest ----------------------------------------------
+def _effects(inp: _Inputs, tol: Tolerances, stack: list[tuple[str, float, float]], nominal_G: float
+             ) -> tuple[dict[str, tuple[float, float]], dict[str, tuple[float, float]]]:
+    """One tolerance at a time: Bz at rest (uT) at each end of each tolerance, then of each stack-up term."""
+    R, H, br_nom, d_rest = inp.R, inp.H, inp.br_nom, inp.d_rest
+
     def alone(r=R, h=H, br=br_nom, ds=0.0) -> float:
-        return float(_bz(r, h, br, [d_rest + ds - (h - H)])[0]) * UT_PER_G
+        return float(_bz(r, h, br, [d_rest + ds - (h - H)])[0]) * UT_PER_GAUSS
 
-    nom_uT = nominal_G * UT_PER_G
+    nom_uT = nominal_G * UT_PER_GAUSS
+    sens, temp = inp.sens, inp.temp
     effects = {
-        "remanence_T": (alone(br=br_lo), alone(br=br_hi)),
-        "magnet_diameter_mm": (alone(r=R - dR), alone(r=R + dR)),
-        "magnet_height_mm": (alone(h=H - dH), alone(h=H + dH)),
-        "seating_mm": (nom_uT, alone(ds=-seating)),
+        "remanence_T": (alone(br=inp.br_lo), alone(br=inp.br_hi)),
+        "magnet_diameter_mm": (alone(r=R - inp.dR), alone(r=R + inp.dR)),
+        "magnet_height_mm": (alone(h=H - inp.dH), alone(h=H + inp.dH)),
+        "seating_mm": (nom_uT, alone(ds=-inp.seating)),
         "sensitivity_pct": (nom_uT * (1 - sens[0] / 100), nom_uT * (1 + sens[1] / 100)),
         "ambient_C": (nom_uT * temp[0], nom_uT * temp[1]),
         "earth_field_uT": (nom_uT - tol.earth_field_uT, nom_uT + tol.earth_field_uT),
     }
     stack_effects = {name: (alone(ds=hi), alone(ds=lo)) for name, lo, hi in stack}
+    return effects, stack_effects
 
-    def item(key: str, band: list, unit: str, effect: tuple[float, float] | None) -> dict[str, Any]:
-        out = {"name": key, "band": [_r(x, 6) for x in band], "unit": unit, "source": SOURCES[key]}
-        if effect is not None:
-            out["rest_Bz_uT"] = [_r(min(effect)), _r(max(effect))]
-        return out
 
-    assumptions = [
-        item("remanence_T", [br_lo, br_hi], "T", effects["remanence_T"]),
-        item("magnet_diameter_mm", [-tol.magnet_diameter_mm, tol.magnet_diameter_mm], "mm",
-             effects["magnet_diameter_mm"]),
-        item("magnet_height_mm", [-dH, dH], "mm", effects["magnet_height_mm"]),
-        item("printer_mm", [-t_print, t_print], "mm (pad thickness; pocket roof)",
-             (stack_effects["pad thickness"][0], stack_effects["pad thickness"][1])),
-        item("glue_fraction", [-tol.glue_fraction, tol.glue_fraction], f"x {glue:g} mm glue",
-             stack_effects["glue thickness"]),
-        item("sensing_depth_mm", [-depth_dev[0], depth_dev[1]], "mm", stack_effects["Hall point: sensing depth"]),
-        item("chip_height_mm", [chip["height_mm"].low, chip["height_mm"].high], "mm", (nom_uT, nom_uT)),
-        item("solder_standoff_mm", list(tol.solder_standoff_mm), "mm",
-             stack_effects["Hall point: solder joint under the chip"]),
-        item("seating_mm", [0.0, seating], "mm below the pocket roof", effects["seating_mm"]),
-        item("sensitivity_pct", [-sens[0], sens[1]], "%", effects["sensitivity_pct"]),
-        item("ambient_C", list(tol.ambient_C), "C", effects["ambient_C"]),
-        item("earth_field_uT", [-tol.earth_field_uT, tol.earth_field_uT], "uT", effects["earth_field_uT"]),
-        item("magnetisation_angle_deg", [0.0, tol.magnetisation_angle_deg], "deg", None),
-        item("chip_placement_mm", [0.0, tol.chip_placement_mm], "mm", None),
-        item("lip_clearance_mm", [0.0, spec.pad.lip_clearance_mm], "mm", None),
-        item("pocket_clearance_mm", [0.0, spec.elastomer.pocket_clearance_mm], "mm", None),
-        item("weight", [w, w], "g", None),
+def _item(key: str, band: list, unit: str, effect: tuple[float, float] | None) -> dict[str, Any]:
+    out = {"name": key, "band": [_r(x, 6) for x in band], "unit": unit, "source": SOURCES[key]}
+    if effect is not None:
+        out["rest_Bz_uT"] = [_r(min(effect)), _r(max(effect))]
+    return out
+
+
+def _assumptions(design: "Design", inp: _Inputs, tol: Tolerances, w: float, nom_uT: float,
+                 effects: dict[str, tuple[float, float]], stack_effects: dict[str, tuple[float, float]]
+                 ) -> list[dict[str, Any]]:
+    """Every tolerance with its band, unit, source and what it alone is worth at rest."""
+    spec, chip = design.spec, design.chip
+    return [
+        _item("remanence_T", [inp.br_lo, inp.br_hi], "T", effects["remanence_T"]),
+        _item("magnet_diameter_mm", [-tol.magnet_diameter_mm, tol.magnet_diameter_mm], "mm",
+              effects["magnet_diameter_mm"]),
+        _item("magnet_height_mm", [-inp.dH, inp.dH], "mm", effects["magnet_height_mm"]),
+        _item("printer_mm", [-inp.t_print, inp.t_print], "mm (pad thickness; pocket roof)",
+              (stack_effects["pad thickness"][0], stack_effects["pad thickness"][1])),
+        _item("glue_fraction", [-tol.glue_fraction, tol.glue_fraction], f"x {inp.glue:g} mm glue",
+              stack_effects["glue thickness"]),
+        _item("sensing_depth_mm", [-inp.depth_dev[0], inp.depth_dev[1]], "mm",
+              stack_effects["Hall point: sensing depth"]),
+        _item("chip_height_mm", [chip["height_mm"].low, chip["height_mm"].high], "mm", (nom_uT, nom_uT)),
+        _item("solder_standoff_mm", list(tol.solder_standoff_mm), "mm",
+              stack_effects["Hall point: solder joint under the chip"]),
+        _item("seating_mm", [0.0, inp.seating], "mm below the pocket roof", effects["seating_mm"]),
+        _item("sensitivity_pct", [-inp.sens[0], inp.sens[1]], "%", effects["sensitivity_pct"]),
+        _item("ambient_C", list(tol.ambient_C), "C", effects["ambient_C"]),
+        _item("earth_field_uT", [-tol.earth_field_uT, tol.earth_field_uT], "uT", effects["earth_field_uT"]),
+        _item("magnetisation_angle_deg", [0.0, tol.magnetisation_angle_deg], "deg", None),
+        _item("chip_placement_mm", [0.0, tol.chip_placement_mm], "mm", None),
+        _item("lip_clearance_mm", [0.0, spec.pad.lip_clearance_mm], "mm", None),
+        _item("pocket_clearance_mm", [0.0, spec.elastomer.pocket_clearance_mm], "mm", None),
+        _item("weight", [w, w], "g", None),
     ]
 
-    # The band the check uses: each tolerance's effect alone, combined root-sum-square on each side (the usual
-    # statistical stack for independent tolerances), then the Earth's field added in full. The worst case of
-    # every corner at once (kept below for reference) is so wide that a grade four steps stronger reads inside it.
+
+def _rss_band(nom_uT: float, tol: Tolerances, effects: dict[str, tuple[float, float]],
+              stack_effects: dict[str, tuple[float, float]]) -> tuple[float, float]:
+    """The rest band the check uses, (low, high) in G: each tolerance's effect alone, combined root-sum-square
+    on each side (the usual statistical stack for independent tolerances), then the Earth's field added in
+    full. The worst case of every corner at once is so wide that a grade four steps stronger reads inside it."""
     rss_effects = [v for k, v in effects.items() if k != "earth_field_uT"] + list(stack_effects.values())
     down = math.sqrt(sum(min(a - nom_uT, b - nom_uT, 0.0) ** 2 for a, b in rss_effects))
     up = math.sqrt(sum(max(a - nom_uT, b - nom_uT, 0.0) ** 2 for a, b in rss_effects))
-    worst_band = [_r(rest_lo_G * UT_PER_G), _r(rest_hi_G * UT_PER_G)]
-    rest_lo_G = (nom_uT - down - tol.earth_field_uT) / UT_PER_G
-    rest_hi_G = (nom_uT + up + tol.earth_field_uT) / UT_PER_G
-    for g in grade_table.values():
-        g["inside_rest_band"] = bool(rest_lo_G * UT_PER_G <= g["rest_Bz_uT"] <= rest_hi_G * UT_PER_G)
-    rest_band = [_r(rest_lo_G * UT_PER_G), _r(rest_hi_G * UT_PER_G)]
-    delta_band = [_r(delta_min[at] * UT_PER_G), _r(delta_max[at] * UT_PER_G)]
+    return (nom_uT - down - tol.earth_field_uT) / UT_PER_GAUSS, (nom_uT + up + tol.earth_field_uT) / UT_PER_GAUSS
+
+
+def _grade_table(nominal_G: float, br_nom: float, rest_lo_G: float, rest_hi_G: float) -> dict[str, dict[str, Any]]:
+    """Every grade of recipes/magnets.toml at the nominal geometry, and whether the rest band holds it."""
+    table = {}
+    for name, g in catalogue("magnets").items():
+        b = g["remanence_T"].nominal
+        rest_uT = _r(nominal_G * b / br_nom * UT_PER_GAUSS)
+        table[name] = {"remanence_T": b, "rest_Bz_uT": rest_uT,
+                       "inside_rest_band": bool(rest_lo_G * UT_PER_GAUSS <= rest_uT <= rest_hi_G * UT_PER_GAUSS)}
+    return table
+
+
+def _weight_section(data: Mapping[str, Any], wt: _Weight) -> dict[str, Any]:
+    """acceptance.json's ``weight``: the rise under the weight and its table over force, in uT."""
+    at = wt.at
+    return {
+        "weight_g": wt.w,
+        "force_N": _r(wt.force, 9),
+        "g0_m_s2": G0,
+        "delta_Bz_uT": {"min": _r(wt.delta_min[at] * UT_PER_GAUSS), "nominal": _r(wt.delta_nom[at] * UT_PER_GAUSS),
+                        "max": _r(wt.delta_max[at] * UT_PER_GAUSS)},
+        "travel_mm": {k: _r(v, 6) for k, v in wt.travel_w.items()},
+        "prediction_delta_Bz_uT": _r(wt.prediction_delta_G * UT_PER_GAUSS),
+        "max_weight_g": _r(wt.f_range / G0 * 1000.0, 2),
+        "table": {
+            "force_N": [_r(f, 9) for f in wt.grid],
+            "delta_Bz_min_uT": [_r(x * UT_PER_GAUSS) for x in wt.delta_min],
+            "delta_Bz_nominal_uT": [_r(x * UT_PER_GAUSS) for x in wt.delta_nom],
+            "delta_Bz_max_uT": [_r(x * UT_PER_GAUSS) for x in wt.delta_max],
+        },
+        "material_mu_kPa": dict(data["material_mu_kPa"]),
+    }
+
+
+# The steps below are the module doc's, in its order; this only wires them and lays out acceptance.json.
+def acceptance(design: "Design", prediction: "Prediction | Mapping[str, Any]", weight_g: float | None = None,
+               tolerances: Tolerances | None = None) -> dict[str, Any]:
+    """The acceptance bands for ``design`` (module doc): a JSON-ready dict, format ``magfab-acceptance/1``.
+
+    ``prediction`` is :func:`magfab.models.predict.predict`'s result or its ``data`` (predictions.json).
+    ``weight_g`` is the known weight (default :func:`default_weight_g`: 50 g for MagOne); ``tolerances``
+    overrides any of the tolerances. Deterministic. Raises ValueError for a weight outside the predicted range.
+    """
+    tol = tolerances or Tolerances()
+    data = _data(prediction)
+    spec = design.spec
+    inp = _resolve(design, data, tol)
+    stack = _stack(inp, tol)
+    corners = _corners(inp, stack)
+
+    # at rest: the every-corner worst case (kept for reference), then the root-sum-square band the check uses
+    rest_G = np.array([float(_bz(r, h, br, [d])[0]) for r, h, br, d in corners])
+    nominal_G = float(_bz(inp.R, inp.H, inp.br_nom, [inp.d_rest])[0])
+    worst_band = [_r((float(rest_G.min()) * inp.gain[0] - inp.earth_G) * UT_PER_GAUSS),
+                  _r((float(rest_G.max()) * inp.gain[1] + inp.earth_G) * UT_PER_GAUSS)]
+    d_all = [c[3] for c in corners]
+    offsets, offset, tilt, bxy_max_G = _lateral(design, inp, tol, corners[int(np.argmax(rest_G))])
+    wt = _weight(data, inp, corners, weight_g)
+    nom_uT = nominal_G * UT_PER_GAUSS
+    effects, stack_effects = _effects(inp, tol, stack, nominal_G)
+    rest_lo_G, rest_hi_G = _rss_band(nom_uT, tol, effects, stack_effects)
+    grade_table = _grade_table(nominal_G, inp.br_nom, rest_lo_G, rest_hi_G)
+    rest_band = [_r(rest_lo_G * UT_PER_GAUSS), _r(rest_hi_G * UT_PER_GAUSS)]
+    weight = _weight_section(data, wt)
     noise = data["noise_G"]
-    inside = [n for n, g in grade_table.items() if g["inside_rest_band"]]
     return {
         "format": FORMAT,
         "magfab_version": __version__,
@@ -397,53 +510,38 @@ def acceptance(design: "Design", prediction: "Prediction | Mapping[str, Any]", w
         "units": "microtesla in the chip's axes (+z out of the package top, towards the magnet); 1 G = 100 uT",
         # The three figures the checklist quotes.
         "rest_Bz_uT": rest_band,
-        "weight_g": w,
-        "delta_Bz_uT": delta_band,
+        "weight_g": wt.w,
+        "delta_Bz_uT": [weight["delta_Bz_uT"]["min"], weight["delta_Bz_uT"]["max"]],
         "rest": {
             "Bz_uT": {"min": rest_band[0], "nominal": _r(nom_uT), "max": rest_band[1]},
             "worst_case_Bz_uT": worst_band,
             "sign": 1,
             "orientation": "north pole up, away from the chip (towards the fingertip): Bz > 0 at rest. A negative "
                            "Bz means the magnet is upside down.",
-            "Bxy_max_uT": _r(bxy_max_G * UT_PER_G),
+            "Bxy_max_uT": _r(bxy_max_G * UT_PER_GAUSS),
             "lateral_offset_mm": _r(offset, 4),
             "lateral_offsets": {name: v for name, v in offsets},
             "tilt_deg": _r(tilt, 3),
-            "distance_mm": {"min": _r(min(d_all), 4), "nominal": _r(d_rest, 4), "max": _r(max(d_all), 4)},
+            "distance_mm": {"min": _r(min(d_all), 4), "nominal": _r(inp.d_rest, 4), "max": _r(max(d_all), 4)},
             "stack_mm": {name: [_r(lo, 4), _r(hi, 4)] for name, lo, hi in stack},
-            "gain": [_r(gain[0], 5), _r(gain[1], 5)],
+            "gain": [_r(inp.gain[0], 5), _r(inp.gain[1], 5)],
             "earth_field_uT": tol.earth_field_uT,
-            "grades_inside_band": inside,
+            "grades_inside_band": [n for n, g in grade_table.items() if g["inside_rest_band"]],
         },
-        "weight": {
-            "weight_g": w,
-            "force_N": _r(force, 9),
-            "g0_m_s2": G0,
-            "delta_Bz_uT": {"min": delta_band[0], "nominal": _r(delta_nom[at] * UT_PER_G), "max": delta_band[1]},
-            "travel_mm": {k: _r(v, 6) for k, v in travel_w.items()},
-            "prediction_delta_Bz_uT": _r((float(np.interp(travel_w["nominal"], u, bz_pred)) - float(bz_pred[0]))
-                                         * UT_PER_G),
-            "max_weight_g": _r(f_range / G0 * 1000.0, 2),
-            "table": {
-                "force_N": [_r(f, 9) for f in grid],
-                "delta_Bz_min_uT": [_r(x * UT_PER_G) for x in delta_min],
-                "delta_Bz_nominal_uT": [_r(x * UT_PER_G) for x in delta_nom],
-                "delta_Bz_max_uT": [_r(x * UT_PER_G) for x in delta_max],
-            },
-            "material_mu_kPa": dict(data["material_mu_kPa"]),
-        },
-        "magnet": {"grade": spec.magnet.grade, "remanence_T": {"low": br_lo, "nominal": br_nom, "high": br_hi},
-                   "diameter_mm": 2 * R, "height_mm": H},
+        "weight": weight,
+        "magnet": {"grade": spec.magnet.grade,
+                   "remanence_T": {"low": inp.br_lo, "nominal": inp.br_nom, "high": inp.br_hi},
+                   "diameter_mm": 2 * inp.R, "height_mm": inp.H},
         "grades": grade_table,
         "measurement": {
-            "noise_z_uT": _r(noise["total_z_G"] * UT_PER_G, 4),
-            "noise_xy_uT": _r(noise["total_xy_G"] * UT_PER_G, 4),
+            "noise_z_uT": _r(noise["total_z_G"] * UT_PER_GAUSS, 4),
+            "noise_xy_uT": _r(noise["total_xy_G"] * UT_PER_GAUSS, 4),
             "allowance_sigmas": 4.0,
             "note": "the check widens each band by allowance_sigmas x the noise of its mean (noise / sqrt(samples), "
                     "x sqrt 2 for a difference) and half a count",
         },
         "tolerances": {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(tol).items()},
-        "assumptions": assumptions,
+        "assumptions": _assumptions(design, inp, tol, wt.w, nom_uT, effects, stack_effects),
         "combination": "rest: each tolerance's effect on the exact field alone, root-sum-square on each side, "
                        "then +/- the Earth's field (rest.worst_case_Bz_uT keeps the every-corner worst case); "
                        "weight: worst case over every corner of the tolerance box and the material band, x the "
