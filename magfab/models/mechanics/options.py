@@ -1,0 +1,42 @@
+"""The option Enums the elastomer models take.
+
+Each is a ``str`` Enum, so a caller passing the old string (``on_failure="truncate"``) still works: the models
+convert with ``Enum(value)`` through :func:`~magfab.models.mechanics.body.check_option`. The normal-force model
+names are :class:`magfab.spec.MechanicsModel`'s (its ``auto`` is the spec's choice among them, not a model).
+"""
+
+from __future__ import annotations
+
+from enum import Enum
+
+from ...spec import MechanicsModel
+
+__all__ = ["MechanicsModel", "OnFailure", "ShearModel", "ShearEnds", "MaterialLaw"]
+
+
+class OnFailure(str, Enum):
+    """What the FE does when it fails part way: raise, or return the curve up to where it failed."""
+
+    RAISE = "raise"
+    TRUNCATE = "truncate"
+
+
+class ShearModel(str, Enum):
+    """Shear-stiffness model: Timoshenko's closed form for the column below the magnet, or the mode-1 FE."""
+
+    TIMOSHENKO = "timoshenko"
+    FE = "fe"
+
+
+class ShearEnds(str, Enum):
+    """How the magnet is held under a lateral load: free to tilt, or guided (kept level)."""
+
+    FREE = "free"
+    GUIDED = "guided"
+
+
+class MaterialLaw(str, Enum):
+    """Incompressible hyperelastic law of the FE: neo-Hookean, or Yeoh (which needs its coefficient ratios)."""
+
+    NEO_HOOKEAN = "neo-hookean"
+    YEOH = "yeoh"
