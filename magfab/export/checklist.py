@@ -1,5 +1,6 @@
 """What a person holds at the bench: silicone quantities, the fabrication checklist (Markdown and printable
-HTML with tick boxes) and the bill of materials, with the spec's and the recipes' numbers filled in.
+HTML with tick boxes), with the spec's and the recipes' numbers filled in; the bill of materials is in
+:mod:`magfab.export.bom` (re-exported here).
 
 Everything here is a pure function of the Design (and the chip's I2C address, the prediction's acceptance
 figures); the templates are in ``templates/checklist/``.
@@ -7,8 +8,6 @@ figures); the templates are in ``templates/checklist/``.
 
 from __future__ import annotations
 
-import csv
-import io
 import math
 import re
 from dataclasses import asdict, dataclass
@@ -16,11 +15,13 @@ from typing import TYPE_CHECKING, Mapping
 
 from ..errors import Finding, Severity, SpecError
 from ..recipes import Recipe, catalogue
+from .bom import bom_csv, bom_rows  # re-exported: build.py writes bom.csv through this module
 
 if TYPE_CHECKING:
     from ..design import Design
 
-__all__ = ["Quantities", "quantities", "mix_ratio", "sections", "checklist_md", "checklist_html", "bom_rows", "bom_csv", "findings"]
+__all__ = ["Quantities", "quantities", "mix_ratio", "sections", "checklist_md", "checklist_html", "bom_rows", "bom_csv",
+           "findings"]
 
 #: Minutes at the bench per pour, before the silicone is in the mould: weigh and mix (3), degas (5), pour
 #: and close the lid (2 per cavity). Our estimate of a careful first-timer; checked against the pot life.
@@ -130,27 +131,14 @@ def _q(recipe: Recipe, key: str) -> float | None:
     return recipe[key].nominal if key in recipe.quantities else None
 
 
-def sections(design: "Design", acceptance: Mapping[str, object] | None = None) -> list[tuple[str, list[str]]]:
-    """The checklist as (section title, steps): plain text with the spec's and the recipes' numbers filled
-    in; the Markdown and HTML templates only lay it out (and escape it)."""
-    from . import firmware
+Section = tuple[str, list[str]]
 
-    spec = design.spec
-    q = quantities(design)
-    rec = _silicone(design)
+
+def _print_section(design: "Design") -> Section:
     printer = design.printer
-    assembly = catalogue("assembly")
-    adhesives = catalogue("adhesives")
-    glue = adhesives[spec.fabrication.adhesive]
-    release = adhesives[spec.fabrication.release_agent]
-    stencil, reflow, polarity = assembly["stencil"], assembly["reflow"], assembly["polarity-check"]
-    cal = spec.calibration
-    n = spec.fabrication.sensors
+    n = design.spec.fabrication.sensors
     layer = _q(printer, "layer_height_mm")
     wash, post, post_t = _q(printer, "wash_time_min"), _q(printer, "post_cure_time_min"), _q(printer, "post_cure_temperature_C")
-    a_name, b_name = ("part A", "part B") if q.ratio[0] == q.ratio[1] else ("base", "curing agent")
-    out: list[tuple[str, list[str]]] = []
-
     prints = [
         f"Print mould_cup.stl and mould_lid.stl once, and pad.stl {n} time(s), on the {printer.name}, in the poses the "
         f"files are saved in (lid cores point up){f', {layer * 1000:g} um layers' if layer else ''}. The walls are at "
@@ -163,8 +151,13 @@ def sections(design: "Design", acceptance: Mapping[str, object] | None = None) -
         prints.append(_t(printer, "post_process"))
     prints.append(f"Check the pad's alignment holes ({', '.join(f'{d:g} mm' for _, _, d in design.alignment_holes)}) "
                   "take their dowel pins; ream them if the printer closed them up.")
-    out.append(("Print the mould and the pad", prints))
+    return "Print the mould and the pad", prints
 
+
+def _prepare_section(design: "Design", q: Quantities) -> Section:
+    printer = design.printer
+    rec = _silicone(design)
+    release = catalogue("adhesives")[design.spec.fabrication.release_agent]
     inhibit = _t(printer, "inhibits_platinum")
     prep = []
     if inhibit and not inhibit.lower().startswith("no"):
@@ -174,8 +167,13 @@ def sections(design: "Design", acceptance: Mapping[str, object] | None = None) -
         prep.append(f"Cure inhibition: {inhibit or 'no data for this printer'}. {_t(printer, 'barrier_coat')}")
     prep.append(f"Release agent ({release.name}): {_t(release, 'application', 'a light, even coat on cup and lid')}")
     prep.append(f"Inhibitors to keep away from the silicone: {_t(rec, 'inhibition', 'see the silicone datasheet')}")
-    out.append(("Prepare the mould", prep))
+    return "Prepare the mould", prep
 
+
+def _mix_section(design: "Design", q: Quantities) -> Section:
+    rec = _silicone(design)
+    n = design.spec.fabrication.sensors
+    a_name, b_name = ("part A", "part B") if q.ratio[0] == q.ratio[1] else ("base", "curing agent")
     mix = [
         f"Per pour ({q.pours} pour(s) for {n} sensor(s), {q.cavities} cavit{'y' if q.cavities == 1 else 'ies'} each): "
         f"weigh {q.part_a_g:.1f} g of {a_name} and {q.part_b_g:.1f} g of {b_name} of {q.material} "
@@ -190,19 +188,27 @@ def sections(design: "Design", acceptance: Mapping[str, object] | None = None) -
         "Mix for 3 min, scraping the sides and the bottom of the cup.",
         f"Degas: {_t(rec, 'degas', 'vacuum-degas until the foam collapses')}",
     ]
-    out.append(("Weigh, mix and degas", mix))
+    return "Weigh, mix and degas", mix
 
+
+def _pour_section(q: Quantities) -> Section:
     cure_at = f" at {q.cure_temperature_C:g} C" if q.cure_temperature_C is not None else ""
-    out.append(("Pour, cure and demould", [
+    return "Pour, cure and demould", [
         "Pour slowly in a thin stream into one side of each cavity, filling it to the brim.",
         "Lower the lid onto its registration pins; the excess rises through the fill hole and the vents.",
         f"Cure for {q.cure_time_h:g} h{cure_at} before opening.",
         "Lever the lid off at the 3 mm overhangs; the part comes out of the cup on its core. Peel it off the core.",
         "Trim the sprue and vent stubs flush with the base.",
-    ]))
+    ]
 
+
+def _magnet_section(design: "Design") -> Section:
+    spec = design.spec
+    assembly = catalogue("assembly")
+    glue = catalogue("adhesives")[spec.fabrication.adhesive]
+    polarity = assembly["polarity-check"]
     mag = assembly.get(f"magnet-{spec.magnet.grade.lower()}")
-    out.append(("Magnet", [
+    return "Magnet", [
         f"Magnet: NdFeB {spec.magnet.grade}, {spec.magnet.diameter_mm:g} mm diameter x {spec.magnet.height_mm:g} mm, "
         "axially magnetised" + (f"; {_t(mag, 'coating', '')}" if mag is not None and _t(mag, 'coating') else "") + ".",
         f"Polarity: {_t(polarity, 'method', 'mark the north pole with a compass')}",
@@ -214,9 +220,14 @@ def sections(design: "Design", acceptance: Mapping[str, object] | None = None) -
         f"Seal the channel with {glue.name}: {_t(glue, 'mix', '')} Handling cure "
         + (f"{glue['cure_time_handling_min'].nominal:g} min" if 'cure_time_handling_min' in glue.quantities else "per the datasheet")
         + (f", full cure {glue['cure_time_full_h'].nominal:g} h." if 'cure_time_full_h' in glue.quantities else "."),
-    ]))
+    ]
 
-    out.append(("Solder the board", [
+
+def _solder_section(design: "Design") -> Section:
+    spec = design.spec
+    assembly = catalogue("assembly")
+    stencil, reflow = assembly["stencil"], assembly["reflow"]
+    return "Solder the board", [
         f"Order the board from pcb/gerbers ({spec.pcb.width_mm:g} x {spec.pcb.height_mm:g} mm, 2 layers, "
         f"{spec.pcb.thickness_mm:g} mm) with a {stencil['thickness_mm'].nominal:g} mm stencil. "
         + _t(stencil, "perimeter_aperture"),
@@ -229,30 +240,44 @@ def sections(design: "Design", acceptance: Mapping[str, object] | None = None) -
         "Place C1, C2 (100 nF) on the bottom, under the chip" + (", R1, R2 (pull-ups) behind J1" if spec.pcb.pullups else "")
         + ", and J1 (Qwiic) on the bottom edge. Inspect the QFN's sides for bridges.",
         f"The board answers at I2C address 0x{design.i2c_address:02X} (A1/A0 strapped on the board).",
-    ]))
+    ]
 
-    out.append(("Assemble", [
+
+def _assemble_section(design: "Design") -> Section:
+    glue = catalogue("adhesives")[design.spec.fabrication.adhesive]
+    return "Assemble", [
         f"Glue the elastomer's flat base to the pad, inside its lip, with a thin even layer of {glue.name}.",
         "Put the dowel pins in the board's two alignment holes and lower the pad over the chip: the square recess "
         "drops over the package and the holes of different sizes let it fit one way round.",
-    ]))
+    ]
 
-    out.append(("Flash and read", [
+
+def _flash_section(design: "Design") -> Section:
+    from . import firmware
+
+    spec = design.spec
+    return "Flash and read", [
         f"Wire the board to an Arduino Uno or Nano through an I2C level shifter (the board is 3.3 V).",
         f"Flash: sh firmware/flash.sh PORT (Windows: firmware\\flash.bat PORT) writes firmware/{firmware.HEX_NAME}.",
         "Install the reader: pip install ./readout; then magfab-readout info (the calibration hash must match) and "
         f"magfab-readout stream --zero 200 (binary frames at {spec.firmware.baud} baud).",
-    ]))
+    ]
 
-    out.append(("Calibrate", [
+
+def _calibrate_section(design: "Design") -> Section:
+    spec = design.spec
+    cal = spec.calibration
+    return "Calibrate", [
         f"Scan against a reference force sensor (resolution {cal.reference_resolution_mN:g} mN): the y-z track, "
         f"{cal.scan_y_mm:g} mm in y centred on the axis and {cal.scan_z_mm:g} mm of indentation, in "
         f"{cal.scan_step_mm * 1000:g} um steps (about {(int(round(cal.scan_y_mm / cal.scan_step_mm)) + 1) * (int(round(cal.scan_z_mm / cal.scan_step_mm)) + 1)} points).",
         "Record with magfab-readout record scan.csv and add the reference's Fx_N, Fy_N, Fz_N columns (docs/bundle.md).",
         f"magfab calibrate scan.csv --spec {spec.name}.toml: order {cal.order} ({cal.method.value}), {cal.folds}-fold "
         f"held-out error, tolerance {cal.tolerance_mN:g} mN; reflash the new image and reinstall the reader.",
-    ]))
+    ]
 
+
+def _acceptance_section(acceptance: Mapping[str, object] | None) -> Section:
     accept = ["With nothing touching the tip: magfab-readout check (it reads the field at rest, then asks for a "
               "known weight on the tip)."]
     if acceptance:
@@ -265,8 +290,16 @@ def sections(design: "Design", acceptance: Mapping[str, object] | None = None) -
     accept.append("A fail names the step and the measured and predicted values: a weak or strong field points at the "
                   "magnet grade or the stack-up, a negative one at an upside-down magnet, a small rise at a stiff "
                   "batch of silicone.")
-    out.append(("Acceptance test", accept))
-    return out
+    return "Acceptance test", accept
+
+
+def sections(design: "Design", acceptance: Mapping[str, object] | None = None) -> list[Section]:
+    """The checklist as (section title, steps): plain text with the spec's and the recipes' numbers filled
+    in; the Markdown and HTML templates only lay it out (and escape it)."""
+    q = quantities(design)
+    return [_print_section(design), _prepare_section(design, q), _mix_section(design, q), _pour_section(q),
+            _magnet_section(design), _solder_section(design), _assemble_section(design), _flash_section(design),
+            _calibrate_section(design), _acceptance_section(acceptance)]
 
 
 def checklist_md(design: "Design", acceptance: Mapping[str, object] | None = None) -> str:
@@ -281,65 +314,3 @@ def checklist_html(design: "Design", acceptance: Mapping[str, object] | None = N
 
     return render("checklist/checklist.html.j2", spec=design.spec, q=quantities(design),
                   sections=sections(design, acceptance))
-
-
-def bom_rows(design: "Design") -> list[dict[str, object]]:
-    """The bill of materials: one row per item, quantities for ``fabrication.sensors``."""
-    spec = design.spec
-    n = spec.fabrication.sensors
-    q = quantities(design)
-    parts = catalogue("parts")
-    pcb = spec.pcb
-    rows = [
-        {"item": "Hall sensor IC", "part": f"MLX90393SLW-ABA-{spec.sensor.option_code}-RE",
-         "description": f"Melexis MLX90393, QFN-16 3x3 mm, option code {spec.sensor.option_code} (I2C base for address "
-                        f"0x{design.i2c_address:02X})", "quantity": n, "unit": "pcs"},
-        {"item": "Magnet", "part": f"NdFeB {spec.magnet.grade} disc {spec.magnet.diameter_mm:g} x {spec.magnet.height_mm:g} mm",
-         "description": "axially magnetised, Ni-Cu-Ni coated", "quantity": n, "unit": "pcs"},
-        {"item": "Silicone", "part": q.material,
-         "description": f"mix {q.ratio[0]:g}:{q.ratio[1]:g} by weight; {q.total_g:.1f} g in {q.pours} pour(s) "
-                        f"including {q.waste_pct:g} % waste", "quantity": round(q.total_g, 1), "unit": "g"},
-        {"item": "Adhesive", "part": catalogue("adhesives")[spec.fabrication.adhesive].name,
-         "description": "seals the magnet in its pocket and glues the elastomer to the pad", "quantity": 1, "unit": "tube"},
-        {"item": "Release agent", "part": catalogue("adhesives")[spec.fabrication.release_agent].name,
-         "description": "on the mould before every pour", "quantity": 1, "unit": "can"},
-        {"item": "PCB", "part": f"{spec.name} breakout {pcb.width_mm:g} x {pcb.height_mm:g} mm",
-         "description": f"2 layers, {pcb.thickness_mm:g} mm FR-4, from pcb/gerbers", "quantity": n, "unit": "pcs"},
-        {"item": "Capacitor", "part": "100 nF 0603 X7R", "description": "C1, C2: VDD and VDDIO decoupling",
-         "quantity": 2 * n, "unit": "pcs"},
-    ]
-    if pcb.pullups:
-        ohm = parts["jst-sh-4"]["pullup_ohm"].nominal
-        rows.append({"item": "Resistor", "part": f"{ohm / 1000:g} kOhm 0603 1 %", "description": "R1, R2: I2C pull-ups",
-                     "quantity": 2 * n, "unit": "pcs"})
-    rows += [
-        {"item": "Connector", "part": "JST SM04B-SRSS-TB", "description": "J1: Qwiic (SH 1.0 mm, 4 pins)",
-         "quantity": n, "unit": "pcs"},
-        {"item": "Cable", "part": "Qwiic cable (JST SH 4-pin, 1.0 mm)", "description": "to the microcontroller board",
-         "quantity": n, "unit": "pcs"},
-        {"item": "Dowel pins", "part": "; ".join(f"{d:g} mm x {pcb.thickness_mm + design.pad_thickness_mm:g} mm"
-                                                 for _, _, d in design.alignment_holes),
-         "description": "align the pad on the board (one hole of each size)", "quantity": n, "unit": "sets"},
-    ]
-    if pcb.mounting_hole_diameter_mm > 0:
-        rows.append({"item": "Screws", "part": f"M2 x 6 mm", "description": "mount the board (H3, H4)",
-                     "quantity": 2 * n, "unit": "pcs"})
-    rows += [
-        {"item": "Printed mould", "part": "mould_cup.stl + mould_lid.stl",
-         "description": f"{design.printer.name}; {spec.mould.cavities} cavit{'y' if spec.mould.cavities == 1 else 'ies'}",
-         "quantity": 1, "unit": "set"},
-        {"item": "Printed pad", "part": "pad.stl", "description": design.printer.name, "quantity": n, "unit": "pcs"},
-        {"item": "Microcontroller", "part": "Arduino Uno or Nano (ATmega328P, 16 MHz)",
-         "description": "runs firmware/magfab-atmega328p.hex; needs an I2C level shifter to the 3.3 V board",
-         "quantity": n, "unit": "pcs"},
-    ]
-    return rows
-
-
-def bom_csv(design: "Design") -> str:
-    out = io.StringIO()
-    w = csv.DictWriter(out, fieldnames=["item", "part", "description", "quantity", "unit"], lineterminator="\n")
-    w.writeheader()
-    for row in bom_rows(design):
-        w.writerow(row)
-    return out.getvalue()

@@ -102,3 +102,20 @@ def test_a_ratio_that_cannot_be_read_is_a_clear_error():
     with pytest.raises(SpecError) as e:
         C.mix_ratio("by eye", "recipes/materials.toml:x.mix_ratio_by_weight")
     assert "1A:1B" in str(e.value)
+
+
+def test_the_build_quotes_its_own_acceptance_bands_and_bom(default_build):
+    """checklist.md's pass line carries acceptance.json's figures, and bom.csv is the BOM of the same design
+    (written through checklist's re-export of magfab.export.bom)."""
+    import json
+
+    from magfab.export import bom
+
+    out = default_build.out_dir
+    acc = json.loads((out / "calibration" / "acceptance.json").read_text())
+    (lo, hi), w, (d_lo, d_hi) = acc["rest_Bz_uT"], acc["weight_g"], acc["delta_Bz_uT"]
+    assert 0 < lo < acc["rest"]["Bz_uT"]["nominal"] < hi and 0 < d_lo < d_hi
+    line = next(s for s in (out / "checklist.md").read_text().splitlines() if "Pass:" in s)
+    assert f"within {lo:.0f} to {hi:.0f} uT" in line and f"a {w:g} g weight raises Bz by {d_lo:.0f} to {d_hi:.0f} uT" in line
+    assert C.bom_csv is bom.bom_csv
+    assert (out / "bom.csv").read_text() == bom.bom_csv(default_build.design)
