@@ -1,7 +1,7 @@
 """Command line: the only module that parses arguments and prints.
 
-Exit codes: 0 success; 2 invalid or infeasible spec, or unusable output directory (one message on
-stderr, nothing written); 1 internal error.
+Exit codes: 0 success; 2 invalid or infeasible spec, scan or output directory (any
+:class:`magfab.errors.InputError`: one message on stderr, nothing written); 1 internal error; 130 interrupted.
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ from . import __version__
 
 EXIT_BAD_INPUT = 2
 EXIT_INTERNAL = 1
+EXIT_INTERRUPTED = 130
 
 
 def _fail(message: str, code: int) -> None:
@@ -28,21 +29,22 @@ def _fail(message: str, code: int) -> None:
 
 @contextmanager
 def _handled() -> Iterator[None]:
-    """Turn our errors into one line and an exit code; never a traceback (unless MAGFAB_DEBUG is set)."""
-    from .build import OutputError
-    from .errors import BuildError, SpecError
+    """Turn errors into one line and an exit code by their type in :mod:`magfab.errors`: the user's input or
+    environment (InputError, a missing or unreadable file) exits 2; anything else is our bug and exits 1;
+    an interrupt exits 130. Never a traceback, unless MAGFAB_DEBUG is set."""
+    from .errors import InputError
 
     try:
         yield
-    except (SpecError, BuildError, OutputError) as exc:
+    except InputError as exc:
         _fail(str(exc), EXIT_BAD_INPUT)
     except KeyboardInterrupt:
-        _fail("interrupted; nothing was written and any previous output is untouched", 130)
+        _fail("interrupted; nothing was written and any previous output is untouched", EXIT_INTERRUPTED)
+    except (FileNotFoundError, IsADirectoryError, NotADirectoryError, PermissionError) as exc:
+        if exc.filename is None or os.environ.get("MAGFAB_DEBUG"):
+            raise
+        _fail(f"{exc.filename}: {exc.strerror}", EXIT_BAD_INPUT)
     except Exception as exc:  # noqa: BLE001 - the last line of defence: one message, exit 1
-        if type(exc).__name__ == "ScanError":  # a malformed scan CSV (magfab.models.calibration): bad input
-            _fail(str(exc), EXIT_BAD_INPUT)
-        if isinstance(exc, (FileNotFoundError, IsADirectoryError, PermissionError)) and exc.filename:
-            _fail(f"{exc.filename}: {exc.strerror}", EXIT_BAD_INPUT)
         if os.environ.get("MAGFAB_DEBUG"):
             raise
         _fail(f"internal error: {type(exc).__name__}: {exc} (set MAGFAB_DEBUG=1 for a traceback)", EXIT_INTERNAL)

@@ -6,6 +6,7 @@ import hashlib
 import importlib
 import json
 import os
+import shutil
 import subprocess
 import sys
 
@@ -25,9 +26,11 @@ def _snapshot(path):
     return {p.relative_to(path): p.read_bytes() for p in sorted(path.rglob("*")) if p.is_file()}
 
 
-def test_build_default_writes_parts_and_a_true_manifest(tmp_path):
-    proc = run("build", cwd=tmp_path)
+def test_build_default_writes_parts_a_true_manifest_and_a_json_summary(tmp_path):
+    """One fresh process, as a user runs it: the default output folder, every hash true, --json quiet."""
+    proc = run("build", "--json", cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
+    assert proc.stderr == ""  # quiet: no progress when not a terminal
     out = tmp_path / "build" / "magone"
     manifest = json.loads((out / "manifest.json").read_text())
     listed = {a["path"] for a in manifest["artifacts"]}
@@ -37,15 +40,17 @@ def test_build_default_writes_parts_and_a_true_manifest(tmp_path):
         assert hashlib.sha256((out / a["path"]).read_bytes()).hexdigest() == a["sha256"]
     assert manifest["spec_sha256"] and manifest["magfab_version"]
     assert sorted(p.name for p in (tmp_path / "build").iterdir()) == ["magone"]  # no temp folders left
-
-
-def test_build_json_summary(tmp_path):
-    proc = run("build", "--out", str(tmp_path / "o"), "--json")
-    assert proc.returncode == 0, proc.stderr
     summary = json.loads(proc.stdout)
     assert summary["figures"]["d_rest_mm"] == pytest.approx(6.0)
-    assert "mould_cup.stl" in summary["artifacts"] and isinstance(summary["findings"], list)
-    assert proc.stderr == ""  # quiet: no progress when not a terminal
+    assert set(summary["artifacts"]) == listed | {"manifest.json"}  # the manifest lists all but itself
+    assert isinstance(summary["findings"], list)
+
+
+def _previous_build(default_build, tmp_path):
+    """A copy of the session's MagOne build, standing in for the output a user already has."""
+    out = tmp_path / "out"
+    shutil.copytree(default_build.out_dir, out)
+    return out
 
 
 @pytest.mark.parametrize(
@@ -58,9 +63,8 @@ def test_build_json_summary(tmp_path):
         ("[elastomr]\n", "elastomr"),
     ],
 )
-def test_bad_spec_exits_2_names_the_key_and_keeps_the_previous_output(tmp_path, text, key):
-    out = tmp_path / "out"
-    assert run("build", "--out", str(out)).returncode == 0
+def test_bad_spec_exits_2_names_the_key_and_keeps_the_previous_output(default_build, tmp_path, text, key):
+    out = _previous_build(default_build, tmp_path)
     before = _snapshot(out)
     spec = tmp_path / "bad.toml"
     spec.write_text(text)
@@ -72,11 +76,10 @@ def test_bad_spec_exits_2_names_the_key_and_keeps_the_previous_output(tmp_path, 
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.toml", "out"]
 
 
-def test_interrupt_mid_build_leaves_the_previous_output(tmp_path, monkeypatch):
+def test_interrupt_mid_build_leaves_the_previous_output(default_build, tmp_path, monkeypatch):
     import magfab.export.cad
 
-    out = tmp_path / "out"
-    assert CliRunner().invoke(main, ["build", "--out", str(out)]).exit_code == 0
+    out = _previous_build(default_build, tmp_path)
     before = _snapshot(out)
 
     def interrupted(*args, **kwargs):
@@ -89,12 +92,18 @@ def test_interrupt_mid_build_leaves_the_previous_output(tmp_path, monkeypatch):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
 
 
-def test_interrupt_while_writing_restores_the_previous_output(tmp_path, monkeypatch):
-    from magfab import load_spec
+def _fake_build(tag: str):
+    """Artifacts standing in for a build: the swap does not care what is in them, only that a manifest is."""
+    from magfab.build import Artifact
 
+    manifest = json.dumps({"magfab_version": "test", "tag": tag}).encode()
+    return [Artifact("manifest.json", manifest, ""), Artifact(f"parts/{tag}.stl", tag.encode() * 100, "")]
+
+
+def test_interrupt_while_writing_restores_the_previous_output(tmp_path, monkeypatch):
     build_mod = importlib.import_module("magfab.build")  # the module, not the function magfab.build
     out = tmp_path / "out"
-    build_mod.build(load_spec(None), out)
+    build_mod.write(out, _fake_build("old"))
     before = _snapshot(out)
     real_rename = os.rename
     calls = []
@@ -107,9 +116,12 @@ def test_interrupt_while_writing_restores_the_previous_output(tmp_path, monkeypa
 
     monkeypatch.setattr(build_mod.os, "rename", rename)
     with pytest.raises(KeyboardInterrupt):
-        build_mod.build(load_spec(None), out)
+        build_mod.write(out, _fake_build("new"))
     monkeypatch.setattr(build_mod.os, "rename", real_rename)
     assert _snapshot(out) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]  # no temporaries left
+    build_mod.write(out, _fake_build("new"))
+    assert sorted(str(p) for p in _snapshot(out)) == ["manifest.json", "parts/new.stl"]
 
 
 def test_refuses_to_replace_a_directory_that_is_not_a_build(tmp_path):

@@ -104,9 +104,7 @@ def test_spec_and_design_never_crash(raw):
     design_findings(design)
 
 
-@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
-@given(raw=raw_specs())
-def test_cli_build_is_all_or_nothing(raw, tmp_path_factory):
+def _cli_build_is_all_or_nothing(raw, tmp_path_factory):
     from click.testing import CliRunner
 
     from magfab.cli import main
@@ -124,3 +122,20 @@ def test_cli_build_is_all_or_nothing(raw, tmp_path_factory):
         assert leftovers == ["spec.toml"]
     else:
         assert leftovers == ["out", "spec.toml"] and (out / "manifest.json").is_file()
+
+
+_CLI = dict(deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+
+
+@settings(max_examples=5, **_CLI)
+@given(raw=raw_specs())
+def test_cli_build_is_all_or_nothing(raw, tmp_path_factory):
+    """A few full builds per run (each feasible one costs a whole build); the slow run tries 60."""
+    _cli_build_is_all_or_nothing(raw, tmp_path_factory)
+
+
+@pytest.mark.slow
+@settings(max_examples=60, **_CLI)
+@given(raw=raw_specs())
+def test_cli_build_is_all_or_nothing_exhaustive(raw, tmp_path_factory):
+    _cli_build_is_all_or_nothing(raw, tmp_path_factory)
