@@ -13,6 +13,7 @@ import pytest
 
 from magfab import load_spec
 from magfab.design import derive
+from magfab.errors import ModelLimitError
 from magfab.models import mechanics as mech
 from magfab.models.mechanics import Body, MechanicsError
 
@@ -240,13 +241,39 @@ def test_fe_is_deterministic(magone):
         np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
 
 
+def _williams_exponent() -> float:
+    """Smallest Williams exponent of a 270-degree wedge of incompressible silicone bonded on both faces.
+
+    The magnet's edges are such wedges (the rigid magnet fills a quarter of the plane around its corner ring, at
+    r = 2.5 mm, so the corner is locally plane strain). For nu = 1/2, Kolosov's kappa = 3 - 4 nu = 1 and the
+    clamped-clamped characteristic equation kappa sin(lam w) = lam |sin w| is the free-free one, sin(lam w) = lam
+    with w = 3 pi / 2: lam = 0.5445, displacements ~ r^lam near the edge.
+    """
+    from scipy.optimize import brentq
+
+    return brentq(lambda lam: math.sin(1.5 * math.pi * lam) - lam, 0.3, 0.9, xtol=1e-12)
+
+
+#: Observed order of the FE force allowed above and below theory (see test_mesh_convergence_rate).
+RATE_SLACK = 0.2
+
+
 def test_mesh_convergence_rate(magone):
-    """Nested meshes (1, 0.5, 0.25 mm): the error falls, at an observed order above 1 (P2 would give 2 on a smooth
-    problem; the magnet's bonded edges and the contact edge are singular)."""
+    """Nested meshes (1, 0.5, 0.25 mm): the error falls, at an observed order within what theory allows.
+
+    The force is a functional of the solution, so it converges at twice the energy-norm order (duality): 2 p = 4
+    for P2 on a smooth problem, but 2 lam = 1.09 once the singular term at the magnet's bonded edges dominates
+    (lam = 0.5445, :func:`_williams_exponent`; the base's bonded outer edge, a 90-degree clamped-free wedge, has
+    lam ~ 0.59 and the contact edge u ~ r^1.5: both weaker). So the Richardson order tends to 2 lam as h -> 0 and
+    lies above it on coarse meshes, where the smooth part of the error still counts, up to 2 p. Band: 2 lam less
+    RATE_SLACK (the polygonal cap and the contact set's jumps perturb the asymptote; the slow test measures 1.01 on
+    0.5 / 0.25 / 0.125 mm) to 2 p. Measured: 1.85 on these meshes (2.9 from a 0.75 mm base, 1.7 from 0.6 mm).
+    An order outside the band means the element or the refinement no longer behaves as analysed here.
+    """
     c = mech.convergence(magone, 23.0, [0.0, 0.5, 1.0], base_mesh_mm=1.0, levels=2)
     np.testing.assert_allclose(c.mesh_mm, [1.0, 0.5, 0.25])
     assert c.error[1] < c.error[0] < 0.05
-    assert c.rate > 1.0
+    assert 2 * _williams_exponent() - RATE_SLACK < c.rate < 2 * 2.0
 
 
 # ---- failure detection ----------------------------------------------------------------------------------------------
@@ -284,6 +311,31 @@ def test_bad_fe_inputs(magone, args, key):
     kw = dict(mu_kPa=23.0, indentation_mm=[0.0, 0.5], mesh_mm=1.0) | args
     with pytest.raises(MechanicsError, match=key):
         mech.fe(magone, **kw)
+
+
+@pytest.mark.parametrize("call, key", [
+    (lambda b: mech.fe(b, 23.0, [0.0, 0.5], mesh_mm=1.0, on_failure="sometimes"), "on_failure"),
+    (lambda b: mech.shear_stiffness(b, 23.0, ends="pinned"), "ends"),
+    (lambda b: mech.shear_stiffness(b, 23.0, model="beam"), "model"),
+    (lambda b: mech.band_curves(b, (15.0, 23.0, 39.0), "auto"), "model"),  # the spec's choice, not a model
+])
+def test_bad_options_name_the_input_and_what_is_allowed(magone, call, key):
+    with pytest.raises(MechanicsError, match=rf"Input {key} must be .*; instead received"):
+        call(magone)
+
+
+def test_options_take_the_enum_or_its_old_string(magone):
+    assert issubclass(MechanicsError, ModelLimitError)
+    for ends in ("free", "guided"):
+        assert mech.shear_stiffness(magone, 23.0, mech.ShearModel.TIMOSHENKO, mech.ShearEnds(ends)) == \
+            mech.shear_stiffness(magone, 23.0, "timoshenko", ends)
+    d = np.linspace(0.0, 3.0, 4)
+    a = mech.fe(magone, 23.0, d, mesh_mm=1.0, stretch_limit=1.5, on_failure=mech.OnFailure.TRUNCATE,
+                material=mech.MaterialLaw.NEO_HOOKEAN)
+    b = mech.fe(magone, 23.0, d, mesh_mm=1.0, stretch_limit=1.5, on_failure="truncate")
+    np.testing.assert_array_equal(a.force_N, b.force_N)
+    assert a.info["material"] == "neo-hookean" and type(a.info["material"]) is str
+    assert mech.MODELS[mech.MechanicsModel.COLUMN] is mech.MODELS["column"] is mech.column
 
 
 # ---- shear ----------------------------------------------------------------------------------------------------------
@@ -354,6 +406,9 @@ def test_measure_rows(magone):
 
 @pytest.mark.slow
 def test_mesh_convergence_deeper(magone):
+    """Four nested meshes (1 to 0.125 mm, 30-60 s): the errors fall, and the finest triple's order is the singular
+    edge's 2 lam = 1.09 within RATE_SLACK (measured 1.01; 1.85 on the coarser triple, see the fast test)."""
     c = mech.convergence(magone, 23.0, [0.0, 0.5, 1.0], base_mesh_mm=1.0, levels=3)
     assert np.all(np.diff(c.error) < 0)
-    assert np.all(c.rates > 0.8)
+    assert abs(c.rates[-1] - 2 * _williams_exponent()) < RATE_SLACK
+    assert c.rates[0] > c.rates[-1]  # the asymptote is approached from above
