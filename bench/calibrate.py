@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from magfab import derive, load_spec
+from magfab.export.calibration_chart import chart
 from magfab.models import calibration as C
 from magfab.models.predict import predict
 
@@ -103,7 +104,7 @@ def main(argv: list[str] | None = None) -> int:
     doc = {"rows": rows, "extra": extra, "design": "MagOne (embedded spec)", "made_by": "bench/calibrate.py",
            "machine": f"{platform.machine()}, {platform.python_implementation()} {platform.python_version()}"}
     (args.out / "calibration_bench.json").write_text(json.dumps(doc, indent=1, sort_keys=True) + "\n")
-    for name, data in C.chart(result).items():
+    for name, data in chart(result).items():
         (args.out / name).write_bytes(data)
     print(f"wrote {args.out / 'calibration_bench.json'} and {args.out / 'calibration_fit.svg'} (.png)")
     return 0

@@ -26,6 +26,7 @@ from magfab import derive, load_spec
 from magfab.export import firmware
 from magfab.errors import SpecError
 from magfab.export.firmware import FirmwareError
+from magfab.formats.calibration_json import CalibrationError
 from magfab.spec import Acquisition, Transport
 
 STUBS = Path(__file__).parent / "firmware_sim" / "arduino_stub"
@@ -497,6 +498,8 @@ def test_spec_strings_are_escaped(build_host):
 
 
 def test_render_rejects_what_the_firmware_cannot_carry():
+    """The format's own rules come from magfab.formats.calibration_json (the one validator); on top, what a
+    float32 table and the C code's order limit cannot hold is a FirmwareError. Both name the key path."""
     design = derive(spec_variant())
     cases = {
         "coefficients.Fz_N[3]": lambda c: c["coefficients"]["Fz_N"].__setitem__(3, float("nan")),
@@ -504,19 +507,25 @@ def test_render_rejects_what_the_firmware_cannot_carry():
         "scaling.Br_uT.scale": lambda c: c["scaling"]["Br_uT"].__setitem__("scale", 0.0),
         "shear_sign": lambda c: c.__setitem__("shear_sign", 0),
         "valid_region.hull": lambda c: c["valid_region"]["hull"].reverse(),
-        "monomials[2]": lambda c: c["monomials"].__setitem__(2, [3, 3]),
+        "monomials": lambda c: c["monomials"].__setitem__(2, [3, 3]),
         "tare_N.Fz_N": lambda c: c["tare_N"].pop("Fz_N"),
         "format": lambda c: c.__setitem__("format", "magfab-calibration/2"),
     }
     for key, spoil in cases.items():
         cal = make_calibration()
         spoil(cal)
-        with pytest.raises(FirmwareError, match=re.escape(f"calibration.{key} ")):
+        with pytest.raises(CalibrationError, match=re.escape(f"calibration.json: {key} = ")) as info:
             firmware.render(design, cal)
+        assert info.value.key == key
     cal = make_calibration()
     hull = cal["valid_region"]["hull"]
     hull.insert(3, [(hull[2][0] + hull[3][0]) / 2 - 400.0, (hull[2][1] + hull[3][1]) / 2 - 400.0])  # a dent
-    with pytest.raises(FirmwareError, match="convex"):
+    with pytest.raises(CalibrationError, match="convex"):
+        firmware.render(design, cal)
+    cal = make_calibration()
+    cal["coefficients"]["Fz_N"][4] = 1e39
+    with pytest.raises(FirmwareError, match=re.escape("calibration.coefficients.Fz_N[4] = 1e+39: must be finite and "
+                                                      "within float32 range")):
         firmware.render(design, cal)
     with pytest.raises(SpecError, match="firmware.baud"):
         firmware.render(derive(spec_variant(firmware_baud=230400)), make_calibration())

@@ -17,8 +17,6 @@ the named constants below, each with its source or marked as an assumption. The 
 
 from __future__ import annotations
 
-import hashlib
-import json
 import math
 import re
 import shutil
@@ -31,6 +29,8 @@ from pathlib import Path, PurePosixPath
 from typing import TYPE_CHECKING, Any, Mapping
 
 from ..errors import SpecError
+from ..formats import calibration_json
+from ..formats.calibration_json import calibration_sha256
 from ..recipes import catalogue
 
 if TYPE_CHECKING:
@@ -105,7 +105,6 @@ I2C_TIMEOUT_MIN_US = 1000
 SIM_REGISTER_DEFAULTS = (0x047C, 0x6000, 0x0000)
 
 FLOAT32_MAX = 3.4028234663852886e38
-CALIBRATION_FORMAT = "magfab-calibration/1"
 MAX_ORDER = 8
 MAX_HULL_POINTS = 1000
 
@@ -224,58 +223,23 @@ def twi_settings(hz: int) -> tuple[int, int, int]:
 # ---- calibration ------------------------------------------------------------------------------------------
 
 
-def calibration_sha256(calibration: Mapping[str, Any]) -> str:
-    """SHA-256 (hex) of the calibration as canonical JSON (sorted keys, no spaces, ASCII, finite numbers):
-    the firmware's info line reports its first 16 digits, the readout package computes the same."""
-    text = json.dumps(calibration, sort_keys=True, separators=(",", ":"), ensure_ascii=True, allow_nan=False)
-    return hashlib.sha256(text.encode("ascii")).hexdigest()
-
-
-def _number(key: str, value: object, *, positive: bool = False, nonnegative: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise FirmwareError(key, value, "must be a number")
-    x = float(value)
-    if not math.isfinite(x) or abs(x) > FLOAT32_MAX:
+def _float32(key: str, value: float) -> float:
+    """``value`` (finite, from the validated file) if a float32 holds it, else :class:`FirmwareError`."""
+    if abs(value) > FLOAT32_MAX:
         raise FirmwareError(key, value, "must be finite and within float32 range")
-    if positive and not x > 0:
-        raise FirmwareError(key, value, "must be greater than 0")
-    if nonnegative and x < 0:
-        raise FirmwareError(key, value, "must be at least 0")
-    return x
-
-
-def _get(cal: Mapping[str, Any], path: str) -> object:
-    node: object = cal
-    for part in path.split("."):
-        if not isinstance(node, Mapping) or part not in node:
-            raise FirmwareError(path, "<missing>", "is required (docs/bundle.md, calibration.json)")
-        node = node[part]
-    return node
+    return value
 
 
 def _cross(o: tuple[float, float], a: tuple[float, float], b: tuple[float, float]) -> float:
     return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
 
 
-def _hull(raw: object) -> list[tuple[float, float]]:
-    """The hull as a strictly convex, counter-clockwise polygon: a repeated closing point and collinear (or
-    numerically flat) vertices removed. Raises for fewer than 3 points, clockwise or non-convex outlines."""
+def _hull(checked: calibration_json.Checked) -> list[tuple[float, float]]:
+    """The validated hull (convex, counter-clockwise, no closing repeat) without its collinear (or numerically
+    flat) vertices: each costs the firmware an edge test on every reading."""
     key = "valid_region.hull"
-    if not isinstance(raw, list) or not all(isinstance(p, list) and len(p) == 2 for p in raw):
-        raise FirmwareError(key, raw, "must be a list of [Bz_uT, Br_uT] points")
-    pts = [(_number(f"{key}[{n}][0]", p[0]), _number(f"{key}[{n}][1]", p[1])) for n, p in enumerate(raw)]
-    while len(pts) > 1 and pts[0] == pts[-1]:
-        pts.pop()
-    if len(pts) < 3:
-        raise FirmwareError(key, raw, "must have at least 3 distinct points")
-    span = max(max(p[0] for p in pts) - min(p[0] for p in pts), max(p[1] for p in pts) - min(p[1] for p in pts))
-    tol = 1e-9 * span * span
-    area2 = sum(pts[k - 1][0] * pts[k][1] - pts[k][0] * pts[k - 1][1] for k in range(len(pts)))
-    if not area2 > tol:
-        raise FirmwareError(key, raw, "must enclose a positive area counter-clockwise (it is clockwise or flat)")
-    for k in range(len(pts)):
-        if _cross(pts[k - 2], pts[k - 1], pts[k]) < -tol:
-            raise FirmwareError(key, raw, f"must be convex (it turns clockwise at point {(k - 1) % len(pts)})")
+    pts = [(_float32(f"{key}[{n}][0]", x), _float32(f"{key}[{n}][1]", y)) for n, (x, y) in enumerate(checked.hull)]
+    tol = 1e-9 * checked.span * checked.span
     changed = True
     while changed and len(pts) > 3:
         changed = False
@@ -290,54 +254,30 @@ def _hull(raw: object) -> list[tuple[float, float]]:
 
 
 def _calibration_context(cal: Mapping[str, Any]) -> dict[str, Any]:
-    """Validate a calibration.json dict and lay it out for the C tables (Horner order, clean hull)."""
-    if not isinstance(cal, Mapping):
-        raise FirmwareError("", type(cal).__name__, "must be a JSON object (dict)")
-    if cal.get("format") != CALIBRATION_FORMAT:
-        raise FirmwareError("format", cal.get("format"), f"must be {CALIBRATION_FORMAT!r}")
-    order = _get(cal, "order")
-    if isinstance(order, bool) or not isinstance(order, int) or not 0 <= order <= MAX_ORDER:
+    """Validate a calibration.json dict (:func:`magfab.formats.calibration_json.validate`), check what the
+    firmware can carry on top (order, float32 range) and lay it out for the C tables (Horner order, clean hull)."""
+    c = calibration_json.validate(dict(cal) if isinstance(cal, Mapping) else cal)
+    order = c.order
+    if order > MAX_ORDER:
         raise FirmwareError("order", order, f"must be an integer from 0 to {MAX_ORDER}")
-    monomials = _get(cal, "monomials")
-    if not isinstance(monomials, list):
-        raise FirmwareError("monomials", monomials, "must be a list of [i, j] exponents")
-    index: dict[tuple[int, int], int] = {}
-    for m, pair in enumerate(monomials):
-        if (not isinstance(pair, list) or len(pair) != 2
-                or not all(isinstance(e, int) and not isinstance(e, bool) and e >= 0 for e in pair)
-                or pair[0] + pair[1] > order or tuple(pair) in index):
-            raise FirmwareError(f"monomials[{m}]", pair, f"must be a new [i, j] with i, j >= 0 and i + j <= {order}")
-        index[(pair[0], pair[1])] = m
-    # Horner rows: for i = n down to 0, the coefficients of u^i v^j for j = n - i down to 0 (absent: 0).
+    index = {m: n for n, m in enumerate(c.monomials)}
+    # Horner rows: for i = n down to 0, the coefficients of u^i v^j for j = n - i down to 0.
     rows: list[dict[str, Any]] = [{"i": i, "fz": [], "fr": []} for i in range(order, -1, -1)]
     for force, name in (("Fz_N", "fz"), ("Fr_N", "fr")):
-        coefs = _get(cal, f"coefficients.{force}")
-        if not isinstance(coefs, list) or len(coefs) != len(monomials):
-            raise FirmwareError(f"coefficients.{force}", coefs, f"must be a list of {len(monomials)} numbers")
-        values = [_number(f"coefficients.{force}[{m}]", c) for m, c in enumerate(coefs)]
+        values = [_float32(f"coefficients.{force}[{m}]", x) for m, x in enumerate(c.coefficients[force])]
         for row in rows:
             i = row["i"]
-            row[name] = [values[index[(i, j)]] if (i, j) in index else 0.0 for j in range(order - i, -1, -1)]
+            row[name] = [values[index[(i, j)]] for j in range(order - i, -1, -1)]
     scale = {}
-    for name in ("Bz_uT", "Br_uT"):
-        center = _number(f"scaling.{name}.center", _get(cal, f"scaling.{name}.center"))
-        s = _number(f"scaling.{name}.scale", _get(cal, f"scaling.{name}.scale"), positive=True)
+    for k, name in enumerate(calibration_json.INPUTS):
+        center = _float32(f"scaling.{name}.center", c.center[k])
+        s = c.scale[k]
         if not 1e-30 < s < 1e30:
             raise FirmwareError(f"scaling.{name}.scale", s, "must be between 1e-30 and 1e30 (float32 reciprocal)")
         scale[name] = (center, s)
-    sign = _get(cal, "shear_sign")
-    if sign not in (1, -1) or isinstance(sign, bool):
-        raise FirmwareError("shear_sign", sign, "must be +1 or -1")
-    box = {}
-    for name in ("Bz_uT", "Br_uT"):
-        pair = _get(cal, f"valid_region.{name}")
-        if not isinstance(pair, list) or len(pair) != 2:
-            raise FirmwareError(f"valid_region.{name}", pair, "must be [lo, hi]")
-        lo, hi = (_number(f"valid_region.{name}[{k}]", v) for k, v in enumerate(pair))
-        if not lo <= hi:
-            raise FirmwareError(f"valid_region.{name}", pair, "must have lo <= hi")
-        box[name] = (lo, hi)
-    hull = _hull(_get(cal, "valid_region.hull"))
+    box = {name: tuple(_float32(f"valid_region.{name}[{k}]", x) for k, x in enumerate(pair))
+           for name, pair in zip(calibration_json.INPUTS, c.box)}
+    hull = _hull(c)
     n = len(hull)
     edges = []
     for k in range(n):
@@ -350,10 +290,10 @@ def _calibration_context(cal: Mapping[str, Any]) -> dict[str, Any]:
         "rows": rows,
         "bz_center": scale["Bz_uT"][0], "bz_scale": scale["Bz_uT"][1], "bz_inv_scale": 1.0 / scale["Bz_uT"][1],
         "br_center": scale["Br_uT"][0], "br_scale": scale["Br_uT"][1], "br_inv_scale": 1.0 / scale["Br_uT"][1],
-        "shear_sign": float(sign),
-        "direction_min_uT": _number("direction_min_uT", _get(cal, "direction_min_uT"), nonnegative=True),
-        "tare_fz": _number("tare_N.Fz_N", _get(cal, "tare_N.Fz_N")),
-        "tare_fr": _number("tare_N.Fr_N", _get(cal, "tare_N.Fr_N")),
+        "shear_sign": float(c.shear_sign),
+        "direction_min_uT": _float32("direction_min_uT", c.direction_min_uT),
+        "tare_fz": _float32("tare_N.Fz_N", c.tare_N[0]),
+        "tare_fr": _float32("tare_N.Fr_N", c.tare_N[1]),
         "bz_lo": box["Bz_uT"][0], "bz_hi": box["Bz_uT"][1], "br_lo": box["Br_uT"][0], "br_hi": box["Br_uT"][1],
         "hull": hull,
         "fan": [(x - hull[0][0], y - hull[0][1]) for x, y in hull],

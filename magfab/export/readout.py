@@ -4,9 +4,9 @@ The package embeds the build's calibration.json and the firmware's settings (spe
 register fields, microtesla per count); it decodes the firmware's frames (docs/bundle.md), evaluates the
 calibration in Python, and has a ``magfab-readout`` command with a simulated device.
 
-The calibration is validated by the package's own ``calibration`` module, rendered and run here, so the
-build and the host refuse exactly the same files; its errors come out as :class:`~magfab.errors.SpecError`
-with the key path inside calibration.json.
+calibration.json and acceptance.json are checked by :mod:`magfab.formats.calibration_json` and
+:mod:`magfab.formats.acceptance_json`, the validators the package itself runs, so the build and the host refuse
+exactly the same files; the errors come out as :class:`~magfab.errors.SpecError` keyed by file and key path.
 
 With the acceptance bands (:func:`magfab.models.acceptance.acceptance`) the package also carries ``acceptance.json``
 next to calibration.json, which its ``magfab-readout check`` command (the acceptance test) compares a sensor
@@ -17,12 +17,12 @@ from __future__ import annotations
 
 import json
 import math
-import types
-from functools import lru_cache
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 from .. import __version__
 from ..errors import SpecError
+from ..formats import acceptance_json, calibration_json
+from ..formats.json_checks import FormatError
 from .templating import render as render_template
 from .templating import templates_dir
 
@@ -35,90 +35,43 @@ TEMPLATES = "readout"  # folder under templates/; every file in it ends in .j2 a
 from .firmware import TEMPERATURE_LSB_PER_C, TEMPERATURE_RAW_25C  # noqa: E402 - from recipes/chips.toml
 
 
-@lru_cache(maxsize=1)
-def _calibration_module() -> types.ModuleType:
-    """The package's calibration module (standard library only), rendered and loaded under a private name."""
-    name = f"{TEMPLATES}/src/{PACKAGE}/calibration.py.j2"
-    source = render_template(name)
-    module = types.ModuleType("_magfab_readout_calibration")
-    module.__file__ = str(templates_dir() / name)
-    exec(compile(source, module.__file__, "exec"), module.__dict__)  # our own template, no spec values in it
-    return module
-
-
 def _plain(value: object) -> object:
-    """numpy scalars and arrays as Python numbers and lists (what calibration.json holds)."""
+    """numpy scalars and arrays as Python numbers and lists (what the JSON files hold)."""
     if hasattr(value, "tolist"):
         return value.tolist()
     raise TypeError(f"{type(value).__name__} is not a JSON value")
 
 
-def validate_calibration(calibration: Mapping[str, Any]):
-    """The calibration as the package's ``Calibration`` object; :class:`SpecError` naming the key path in
-    calibration.json when the readout could not evaluate it."""
-    module = _calibration_module()
-    if not isinstance(calibration, Mapping):
-        raise SpecError("calibration.json", type(calibration).__name__, "must be a JSON object (a dict)")
+def _as_plain_json(data: Mapping[str, Any], error: type[FormatError]) -> object:
     try:
-        plain = json.loads(json.dumps(dict(calibration), allow_nan=True, default=_plain))
-        return module.Calibration(plain)
-    except module.CalibrationError as exc:
-        raise SpecError(f"calibration.json:{exc.key or '(top level)'}", exc.value, exc.allowed) from None
-    except (TypeError, ValueError) as exc:  # not JSON-serialisable, NaN somewhere outside the checked keys
-        raise SpecError("calibration.json", "(contents)", f"must be plain JSON with finite numbers ({exc})") from None
+        return json.loads(json.dumps(dict(data), allow_nan=True, default=_plain))
+    except TypeError as exc:  # not JSON-serialisable
+        raise error("", "(contents)", f"must be plain JSON ({exc})") from None
 
 
-#: What the package's ``check`` command reads from acceptance.json: (key path, kind). "number" is a finite
-#: number, "numbers" a non-empty list of them, "text" a string.
-ACCEPTANCE_KEYS = (
-    ("rest.Bz_uT.min", "number"), ("rest.Bz_uT.nominal", "number"), ("rest.Bz_uT.max", "number"),
-    ("rest.Bxy_max_uT", "number"), ("rest.earth_field_uT", "number"),
-    ("weight.weight_g", "number"), ("weight.max_weight_g", "number"),
-    ("weight.table.force_N", "numbers"), ("weight.table.delta_Bz_min_uT", "numbers"),
-    ("weight.table.delta_Bz_nominal_uT", "numbers"), ("weight.table.delta_Bz_max_uT", "numbers"),
-    ("measurement.noise_z_uT", "number"), ("measurement.noise_xy_uT", "number"),
-    ("measurement.allowance_sigmas", "number"), ("magnet.grade", "text"),
-    ("magnet.remanence_T.low", "number"), ("magnet.remanence_T.nominal", "number"),
-    ("magnet.remanence_T.high", "number"),
-)
+def _validated(data: Mapping[str, Any], validate: Callable[[object], Any], error: type[FormatError]) -> Any:
+    """``validate`` (a magfab.formats validator) of ``data`` made plain JSON; the readout API's error for a
+    bad file is a :class:`SpecError` keyed ``<file>:<key path>``."""
+    if not isinstance(data, Mapping):
+        raise SpecError(error.file, type(data).__name__, "must be a JSON object (a dict)")
+    try:
+        return validate(_as_plain_json(data, error))
+    except error as exc:
+        raise SpecError(f"{exc.file}:{exc.key}" if exc.key else exc.file, exc.value, exc.allowed) from None
 
 
-def _finite_number(x: object) -> bool:
-    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+def validate_calibration(calibration: Mapping[str, Any]) -> calibration_json.Checked:
+    """The calibration's values (:func:`magfab.formats.calibration_json.validate`, the check the readout package
+    itself runs); :class:`SpecError` naming the key path in calibration.json when the readout could not
+    evaluate it."""
+    return _validated(calibration, calibration_json.validate, calibration_json.CalibrationError)
 
 
 def validate_acceptance(acceptance: Mapping[str, Any]) -> dict:
-    """The acceptance bands as plain JSON data (what acceptance.json will hold), checked for the format and the
-    keys the package's ``check`` reads; :class:`SpecError` naming the key path inside acceptance.json."""
-    from ..models.acceptance import FORMAT
-
-    if not isinstance(acceptance, Mapping):
-        raise SpecError("acceptance.json", type(acceptance).__name__, "must be a JSON object (a dict)")
-    try:
-        data = json.loads(json.dumps(dict(acceptance), allow_nan=False, default=_plain))
-    except (TypeError, ValueError) as exc:
-        raise SpecError("acceptance.json", "(contents)", f"must be plain JSON with finite numbers ({exc})") from None
-    if data.get("format") != FORMAT:
-        raise SpecError("acceptance.json:format", data.get("format"), f"must be {FORMAT!r}")
-    for path, kind in ACCEPTANCE_KEYS:
-        node: object = data
-        for part in path.split("."):
-            node = node.get(part) if isinstance(node, dict) else None
-        ok = {"number": _finite_number(node), "text": isinstance(node, str),
-              "numbers": isinstance(node, list) and bool(node) and all(_finite_number(x) for x in node)}[kind]
-        if not ok:
-            what = {"number": "a finite number", "text": "a string", "numbers": "a non-empty list of finite numbers"}
-            raise SpecError(f"acceptance.json:{path}", node, f"must be {what[kind]}")
-    table = data["weight"]["table"]
-    force = table["force_N"]
-    if any(len(table[k]) != len(force) for k in ("delta_Bz_min_uT", "delta_Bz_nominal_uT", "delta_Bz_max_uT")):
-        raise SpecError("acceptance.json:weight.table", "(lengths)", "every column must be as long as force_N")
-    if any(b <= a for a, b in zip(force, force[1:])):
-        raise SpecError("acceptance.json:weight.table.force_N", force[:5], "must be increasing")
-    rest = data["rest"]["Bz_uT"]
-    if not rest["min"] <= rest["nominal"] <= rest["max"]:
-        raise SpecError("acceptance.json:rest.Bz_uT", rest, "must have min <= nominal <= max")
-    return data
+    """The acceptance bands as plain JSON data (what acceptance.json will hold), checked by
+    :func:`magfab.formats.acceptance_json.validate` (the check the package's ``check`` command runs);
+    :class:`SpecError` naming the key path inside acceptance.json."""
+    return _validated(acceptance, acceptance_json.validate, acceptance_json.AcceptanceError)
 
 
 def calibration_sha256(calibration: Mapping[str, Any]) -> str:
@@ -193,7 +146,7 @@ def render(design, calibration: Mapping[str, Any], acceptance: Mapping[str, Any]
         relative = path.relative_to(root).as_posix()
         text = render_template(f"{TEMPLATES}/{relative}", **context)
         files[f"readout/{relative[:-len('.j2')]}"] = text.encode("utf-8")
-    data = calibration_object.to_dict()
+    data = json.loads(calibration_object.canonical)
     # the layout of the bundle's own calibration/calibration.json, so the two files are byte for byte the same
     files[f"readout/src/{PACKAGE}/calibration.json"] = (json.dumps(data, indent=1, sort_keys=True, allow_nan=False)
                                                        + "\n").encode("ascii")

@@ -2,11 +2,12 @@
 
 The pipeline::
 
-    scan = read_scan_csv("scan.csv")          # or simulate_scan(design): the provisional calibration
+    scan = read_scan_csv("scan.csv")          # magfab.formats.scan_csv; or magfab.models.scan.simulate_scan
+                                               # (design): the provisional calibration
     result = fit(scan, design)                 # every candidate, k-fold held-out errors, the choice
     result.calibration.evaluate(B_uT)          # -> forces (N, 3) in N, in-region flags (N,)
     json.dumps(result.calibration.to_json())   # calibration.json, docs/bundle.md section 2
-    chart(result)                              # held-out RMS error against evaluation cost
+    Calibration.from_json(doc)                 # back, through magfab.formats.calibration_json.validate
 
 **The model.** Fz and Fr = sqrt(Fx^2 + Fy^2) are each a full bivariate polynomial of order n in the scaled
 field u = (Bz - c_z) / s_z, v = (Br - c_r) / s_r, Br = sqrt(Bx^2 + By^2), with the centre c and half-width s
@@ -42,49 +43,37 @@ scan points (simplified to the least-area enclosing polygon of at most ``HULL_MA
 the firmware tests every reading against it) -- are flagged ``in_region = False``; the model's value is still
 returned, never silently trusted.
 
-**The simulated scan** (:func:`simulate_scan`) is the published y-z track: the tip is indented by delta
-(0 to ``scan_z_mm``, capped where the predicted normal range ends) and displaced laterally by y (centred on
-the axis, ``scan_y_mm`` wide, capped at the predicted lateral range), in ``scan_step_mm`` steps. Assumptions,
-stated because they are not modelled further: the magnet's lateral offset equals the tip's (the magnet
-sits near the top surface and moves with it), and normal and shear loads superpose (the axial travel and
-Fz come from the nominal FE curve at delta, the lateral force is K_s y with the nominal shear stiffness,
-each independent of the other). The chip's noise and quantisation and the reference sensor's resolution are
-added; the result is deterministic for a given ``calibration.seed``.
-
 Units: field in microtesla (uT; 1 G = 100 uT), force in newton, lengths in mm, time in s.
 """
 
 from __future__ import annotations
 
-import hashlib
-import io
 import json
 import math
-import os
 import time
 from dataclasses import dataclass, field, replace
-from pathlib import Path
 from typing import TYPE_CHECKING, Mapping, Sequence
 
 import numpy as np
 
-from . import field as fieldmod
+from ..errors import InputError, ScanError
+from ..formats import calibration_json
+from ..formats.scan_csv import FORCE_COLUMNS, MIN_ROWS, SCAN_COLUMNS, Scan, read_scan_csv, scan_csv
+from ..units import UT_PER_GAUSS
+from .region import HULL_MAX_VERTICES, Scaling, ValidRegion, guard_ops
+from .scan import scan_track, simulate_scan
 
 if TYPE_CHECKING:
     from ..design import Design
-    from .predict import Prediction
 
 __all__ = [
-    "FORMAT", "UT_PER_G", "MIN_ROWS", "ORDERS", "MLS_ORDER", "SCAN_COLUMNS", "FORCE_COLUMNS", "HULL_MAX_VERTICES",
+    "FORMAT", "MIN_ROWS", "ORDERS", "MLS_ORDER", "SCAN_COLUMNS", "FORCE_COLUMNS", "HULL_MAX_VERTICES",
     "CalibrationError", "ScanError", "Scan", "read_scan_csv", "scan_csv", "scan_track", "simulate_scan",
     "monomials", "Scaling", "ValidRegion", "MLSModel", "Calibration", "Candidate", "FitResult",
     "fit", "choose", "poly_ops", "mls_ops", "guard_ops", "evaluation_time_s", "chart",
 ]
 
-FORMAT = "magfab-calibration/1"
-UT_PER_G = 100.0
-#: Smallest scan a calibration accepts: the order-6 fit has 28 coefficients and is cross-validated.
-MIN_ROWS = 50
+FORMAT = calibration_json.FORMAT
 #: Polynomial orders every fit tries (the table and the chart show them all).
 ORDERS = (1, 2, 3, 4, 5, 6)
 #: Order of the local polynomial of moving least squares.
@@ -93,246 +82,23 @@ MLS_ORDER = 2
 MLS_BANDWIDTHS = tuple(float(x) for x in np.geomspace(1.5, 48.0, 11))
 #: The shear direction is undefined below this many RMS xy field noise (the chip's and the environment's).
 DIRECTION_MIN_SIGMAS = 3.0
-#: Required scan columns; the force columns are required for a calibration (not for a recording).
-SCAN_COLUMNS = ("time_s", "Bx_uT", "By_uT", "Bz_uT")
-FORCE_COLUMNS = ("Fx_N", "Fy_N", "Fz_N")
-TEMPERATURE_COLUMN = "temperature_C"
-FORCES = ("Fz_N", "Fr_N")
+FORCES = calibration_json.FORCES
 
 
-class CalibrationError(ValueError):
-    """Bad calibration input (a calibration.json that is not format ``magfab-calibration/1``, a scan too
-    small to fit): one line naming the key or line, the value and what is allowed."""
+class CalibrationError(InputError):
+    """A calibration asked for what it cannot give (a candidate not fitted, a method it does not carry, readings
+    of the wrong shape): one line naming the value and what is allowed. A scan that cannot be calibrated on
+    raises :class:`~magfab.errors.ScanError`, a malformed calibration.json
+    :class:`magfab.formats.calibration_json.CalibrationError` (a :class:`~magfab.errors.CalibrationFormatError`)."""
 
 
-class ScanError(CalibrationError):
-    """A malformed scan CSV: one line naming the file, the line number, the column and what is allowed."""
-
-
-# ---------------------------------------------------------------------------------------------------
-# Scan data
-
-
-@dataclass(frozen=True)
-class Scan:
-    """A calibration scan, one row per sample.
-
-    ``time_s`` (N,) s, non-decreasing; ``B_uT`` (N, 3) field at the sensor in the chip's axes, uT;
-    ``F_N`` (N, 3) reference force on the tip in the sensor frame (+z presses the tip towards the chip), N,
-    or None for a recording without a reference; ``temperature_C`` (N,) degC or None; ``source`` the file
-    name or "simulated"; ``sha256`` of the CSV bytes as read (simulated: of :func:`scan_csv` of the scan).
-    """
-
-    time_s: np.ndarray
-    B_uT: np.ndarray
-    F_N: np.ndarray | None
-    temperature_C: np.ndarray | None = None
-    source: str = "simulated"
-    sha256: str = ""
-
-    @property
-    def rows(self) -> int:
-        return int(self.time_s.shape[0])
-
-    @property
-    def Br_uT(self) -> np.ndarray:
-        """Lateral field magnitude sqrt(Bx^2 + By^2), uT, (N,)."""
-        return np.hypot(self.B_uT[:, 0], self.B_uT[:, 1])
-
-    @property
-    def Fr_N(self) -> np.ndarray:
-        """Lateral force magnitude sqrt(Fx^2 + Fy^2), N, (N,)."""
-        if self.F_N is None:
-            raise CalibrationError(f"scan {self.source}: no force columns ({', '.join(FORCE_COLUMNS)})")
-        return np.hypot(self.F_N[:, 0], self.F_N[:, 1])
-
-
-def scan_csv(scan: Scan, comments: Sequence[str] = ()) -> str:
-    """The scan as CSV text (docs/bundle.md section 1), every value in Python's round-trip repr, so
-    :func:`read_scan_csv` gives back the same numbers. ``comments`` become leading ``# `` lines."""
-    cols = [scan.time_s, *scan.B_uT.T]
-    names = list(SCAN_COLUMNS)
-    if scan.temperature_C is not None:
-        cols.append(scan.temperature_C)
-        names.append(TEMPERATURE_COLUMN)
-    if scan.F_N is not None:
-        cols.extend(scan.F_N.T)
-        names.extend(FORCE_COLUMNS)
-    out = io.StringIO()
-    for c in comments:
-        out.write("# " + " ".join(str(c).splitlines()) + "\n")
-    out.write(",".join(names) + "\n")
-    for row in zip(*(np.asarray(c, dtype=float).tolist() for c in cols)):
-        out.write(",".join(map(repr, row)) + "\n")
-    return out.getvalue()
-
-
-def _load(source: "str | os.PathLike[str] | bytes") -> tuple[bytes, str]:
-    """(bytes, name) of a scan: a path, CSV text (a str holding a newline, or a comma and naming no file) or
-    CSV bytes."""
-    if isinstance(source, bytes):
-        return source, "scan"
-    if isinstance(source, str) and ("\n" in source or ("," in source and not os.path.exists(source))):
-        return source.encode("utf-8"), "scan"
-    path = Path(source)
-    try:
-        return path.read_bytes(), path.name
-    except OSError as exc:
-        raise ScanError(f"{path}: cannot read the scan file ({exc.strerror or exc})") from None
-
-
-def _number(text: str, name: str, line: int, column: str) -> float:
-    try:
-        x = float(text)
-    except ValueError:
-        x = math.nan
-        shown = repr(text.strip()[:24]) if text.strip() else "an empty field"
-    else:
-        shown = text.strip()
-    if not math.isfinite(x):
-        raise ScanError(f"{name}: line {line}, column {column!r}: {shown} is not a finite number; "
-                        "every value must be a finite decimal number (e.g. 12.5 or -3e-2)")
-    return x
-
-
-def _header(lines: list[tuple[int, str]], name: str, require_force: bool) -> tuple[int, list[str]]:
-    if not lines:
-        raise ScanError(f"{name}: line 1: no header row (the file is empty or holds only comments); expected "
-                        f"a header naming {', '.join(SCAN_COLUMNS + FORCE_COLUMNS)}")
-    number, text = lines[0]
-    names = [c.strip() for c in text.split(",")]
-    seen: set[str] = set()
-    for c in names:
-        if c in seen:
-            raise ScanError(f"{name}: line {number} (header): column {c!r} appears twice; each column once")
-        seen.add(c)
-    with_force = require_force or any(c in seen for c in FORCE_COLUMNS)
-    needed = SCAN_COLUMNS + (FORCE_COLUMNS if with_force else ())
-    missing = [c for c in needed if c not in seen]
-    if missing:
-        raise ScanError(f"{name}: line {number} (header): missing column {missing[0]!r}; required columns are "
-                        f"{', '.join(needed)} (any order; {TEMPERATURE_COLUMN} optional, others ignored)")
-    return number, names
-
-
-def read_scan_csv(source: "str | os.PathLike[str] | bytes", *, require_force: bool = True,
-                  min_rows: int = MIN_ROWS) -> Scan:
-    """A scan from a CSV file (path), CSV text (a str with a newline) or CSV bytes; docs/bundle.md section 1.
-
-    Raises :class:`ScanError` (one line: file, line number, column, what is allowed) for a missing file or
-    column, a non-numeric or non-finite value, a row of the wrong length, decreasing time or fewer than
-    ``min_rows`` rows. ``require_force=False`` accepts a recording without the force columns (``F_N`` None).
-    """
-    raw, name = _load(source)
-    try:
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise ScanError(f"{name}: byte {exc.start} is not UTF-8; the scan must be UTF-8 text") from None
-    lines = [(i, s) for i, s in enumerate(text.splitlines(), 1) if s.strip() and not s.lstrip().startswith("#")]
-    hline, names = _header(lines, name, require_force)
-    wanted = [c for c in SCAN_COLUMNS + (TEMPERATURE_COLUMN,) + FORCE_COLUMNS if c in names]
-    index = {c: names.index(c) for c in wanted}
-    values: dict[str, list[float]] = {c: [] for c in wanted}
-    last_t, last_line = -math.inf, hline
-    for number, s in lines[1:]:
-        fields = s.split(",")
-        if len(fields) != len(names):
-            raise ScanError(f"{name}: line {number}: {len(fields)} values, but the header (line {hline}) names "
-                            f"{len(names)} columns; every row needs one value per column")
-        for c in wanted:
-            values[c].append(_number(fields[index[c]], name, number, c))
-        t = values["time_s"][-1]
-        if t < last_t:
-            raise ScanError(f"{name}: line {number}, column 'time_s': {t!r} is less than {last_t!r} on line "
-                            f"{last_line}; time_s must be non-decreasing")
-        last_t, last_line = t, number
-    rows = len(lines) - 1
-    if rows < min_rows:
-        end = lines[-1][0]
-        raise ScanError(f"{name}: line {end}: the scan ends after {rows} data rows; a calibration needs at "
-                        f"least {min_rows} (the order-{ORDERS[-1]} fit has {len(monomials(ORDERS[-1]))} "
-                        "coefficients and is cross-validated)")
-    arr = {c: np.asarray(v, dtype=float) for c, v in values.items()}
-    forces = np.column_stack([arr[c] for c in FORCE_COLUMNS]) if FORCE_COLUMNS[0] in arr else None
-    return Scan(arr["time_s"], np.column_stack([arr[c] for c in SCAN_COLUMNS[1:]]), forces,
-                arr.get(TEMPERATURE_COLUMN), name, hashlib.sha256(raw).hexdigest())
-
-
-# ---------------------------------------------------------------------------------------------------
-# The simulated scan
-
-
-def scan_track(design: "Design", prediction: "Prediction") -> tuple[np.ndarray, np.ndarray]:
-    """The y-z track of the scan: (y_mm, indentation_mm), each (N,), in raster order (one row of y per
-    indentation step, y increasing along each row, indentation increasing row by row).
-
-    y spans ``scan_y_mm`` centred on the axis, capped at the predicted lateral range (the magnet radius or
-    the chip's xy full scale); the indentation spans 0..``scan_z_mm``, capped at the indentation where the
-    predicted normal range ends (``normal.travel_mm`` of magnet travel, through the nominal FE curve).
-    """
-    cal = design.spec.calibration
-    data = prediction.data
-    nominal = prediction.curves["nominal"]
-    travel_end = float(data["normal"]["travel_mm"])  # type: ignore[index]
-    delta_end = float(np.interp(travel_end, nominal.magnet_displacement_mm, nominal.indentation_mm))
-    k_s = float(data["shear"]["stiffness_N_per_mm"]["nominal"])  # type: ignore[index]
-    lateral_end = float(data["shear"]["range_by_material_N"]["nominal"]) / k_s  # type: ignore[index]
-    step = cal.scan_step_mm
-    half = min(cal.scan_y_mm / 2.0, lateral_end)
-    ny = int(math.floor(2.0 * half / step + 1e-9)) + 1
-    y = (np.arange(ny) - (ny - 1) / 2.0) * step
-    z_end = min(cal.scan_z_mm, delta_end)
-    nz = int(math.floor(z_end / step + 1e-9)) + 1
-    delta = np.arange(nz) * step
-    dd, yy = np.meshgrid(delta, y, indexing="ij")
-    return yy.ravel(), dd.ravel()
-
-
-def _quantise(x: np.ndarray, step: float) -> np.ndarray:
-    return np.round(x / step) * step if step > 0 else x
-
-
-def simulate_scan(design: "Design", prediction: "Prediction | None" = None, *, ideal: bool = False) -> Scan:
-    """The simulated calibration scan of ``design`` (module doc): field in uT at the sensing point and the
-    reference force in N along :func:`scan_track`.
-
-    Noise: gaussian per axis with the predicted RMS (``predict.noise``: environment and chip; the chip's
-    quantisation is then applied by rounding to its LSB, so the total matches ``total_xy_G``/``total_z_G``),
-    clipped at the chip's full scale; the reference forces are rounded to ``reference_resolution_mN``.
-    ``ideal=True``: the same track without noise, quantisation or clipping (the truth a fit should recover).
-    Sample times are one chip conversion apart. Deterministic (``calibration.seed``).
-    """
-    from .predict import chip_setting, noise, predict
-
-    pred = prediction if prediction is not None else predict(design)
-    cal = design.spec.calibration
-    y, delta = scan_track(design, pred)
-    nominal = pred.curves["nominal"]
-    u = np.interp(delta, nominal.indentation_mm, nominal.magnet_displacement_mm)  # axial travel, + down
-    fz = np.interp(delta, nominal.indentation_mm, nominal.force_N)
-    k_s = float(pred.data["shear"]["stiffness_N_per_mm"]["nominal"])  # type: ignore[index]
-    magnet = fieldmod.Magnet.from_spec(design.spec)
-    gap = design.d_rest_mm - u
-    # The sensor at the origin, the magnet's centre at (0, y, gap + H/2): in the magnet's frame the sensing
-    # point is at (0, -y, -(gap + H/2)).
-    points = np.column_stack([np.zeros_like(y), -y, -(gap + magnet.height_mm / 2.0)])
-    b = fieldmod.exact(magnet, points) * UT_PER_G
-    f = np.column_stack([np.zeros_like(y), k_s * y, fz])
-    chip = chip_setting(design)
-    if not ideal:
-        nz = noise(design, chip)
-        sigma = UT_PER_G * np.array([math.sqrt(max(nz[f"total_{a}_G"] ** 2 - nz[f"quantisation_{a}_G"] ** 2, 0.0))
-                                     for a in ("xy", "xy", "z")])
-        rng = np.random.default_rng(cal.seed)
-        b = b + rng.normal(size=b.shape) * sigma
-        lsb = np.array([chip.lsb_xy_uT, chip.lsb_xy_uT, chip.lsb_z_uT])
-        b = np.round(b / lsb) * lsb
-        full = UT_PER_G * np.array([chip.full_scale_xy_G, chip.full_scale_xy_G, chip.full_scale_z_G])
-        b = np.clip(b, -full, full)
-        f = _quantise(f, cal.reference_resolution_mN / 1000.0)
-    t = np.arange(len(y)) * chip.conversion_ms / 1000.0
-    scan = Scan(t, b, f, None, "simulated" if not ideal else "simulated (ideal)", "")
-    return replace(scan, sha256=hashlib.sha256(scan_csv(scan).encode("utf-8")).hexdigest())
+def __getattr__(name: str) -> object:
+    # The chart renders with matplotlib, which belongs to export/; kept reachable here for build.py's
+    # ``calibrate.chart`` until it imports magfab.export.calibration_chart itself.
+    if name == "chart":
+        from ..export.calibration_chart import chart
+        return chart
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -352,28 +118,6 @@ def _basis(u: np.ndarray, v: np.ndarray, order: int) -> np.ndarray:
         pu.append(pu[-1] * u)
         pv.append(pv[-1] * v)
     return np.column_stack([pu[i] * pv[j] for i, j in monomials(order)])
-
-
-@dataclass(frozen=True)
-class Scaling:
-    """u = (Bz - bz_center) / bz_scale, v = (Br - br_center) / br_scale; all in uT."""
-
-    bz_center: float
-    bz_scale: float
-    br_center: float
-    br_scale: float
-
-    @classmethod
-    def of(cls, bz: np.ndarray, br: np.ndarray) -> "Scaling":
-        """Mid-range and half-range of the data (1 uT where the data has no spread), so |u|, |v| <= 1."""
-        def axis(x: np.ndarray) -> tuple[float, float]:
-            lo, hi = float(np.min(x)), float(np.max(x))
-            half = (hi - lo) / 2.0
-            return (lo + hi) / 2.0, half if half > 1e-9 * max(abs(lo), abs(hi), 1.0) else 1.0
-        return cls(*axis(bz), *axis(br))
-
-    def __call__(self, bz: np.ndarray, br: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return (bz - self.bz_center) / self.bz_scale, (br - self.br_center) / self.br_scale
 
 
 def _solve_poly(u: np.ndarray, v: np.ndarray, y: np.ndarray, order: int) -> np.ndarray:
@@ -415,12 +159,6 @@ def _mls(u: np.ndarray, v: np.ndarray, y: np.ndarray, uq: np.ndarray, vq: np.nda
 # Evaluation cost, in floating-point operations (add, multiply, divide, sqrt, exp: one each)
 
 
-def guard_ops(hull_vertices: int) -> int:
-    """Operations of the region guard per reading: the range box (4 compares) and, per hull edge, a cross
-    product and its sign (2 sub, 2 mul, 1 sub, 1 compare). The same for every candidate, so kept apart."""
-    return 4 + 6 * hull_vertices
-
-
 def poly_ops(order: int) -> int:
     """Operations per evaluation of the global polynomial (docs/bundle.md section 2, Horner form):
     Br (2 mul, 1 add, 1 sqrt), scaling (2 sub, 2 mul), 2 forces x terms x (1 mul + 1 add), the shear split
@@ -436,88 +174,6 @@ def mls_ops(points: int, order: int = MLS_ORDER) -> int:
     m = len(monomials(order))
     per_point = 6 + 3 + (m - 1) + m * (m + 1) + 4 * m
     return points * per_point + m**3 // 3 + 4 * m * m + 8 + 5
-
-
-# ---------------------------------------------------------------------------------------------------
-# The guard
-
-
-def _cross(o: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return (a[..., 0] - o[..., 0]) * (b[..., 1] - o[..., 1]) - (a[..., 1] - o[..., 1]) * (b[..., 0] - o[..., 0])
-
-
-def _enclosing(poly: np.ndarray, max_vertices: int) -> np.ndarray:
-    """A convex CCW polygon of at most ``max_vertices`` vertices holding the convex CCW polygon ``poly``
-    (n, 2): greedily drop the edge whose removal -- extending its two neighbours to meet -- adds the least
-    area. Each step keeps convexity and containment (the result is an intersection of ``poly``'s half-planes)."""
-    p = [np.asarray(v, dtype=float) for v in poly]
-    while len(p) > max(3, max_vertices):
-        n = len(p)
-        best: tuple[float, int, np.ndarray] | None = None
-        for i in range(n):
-            a, b, c, d = p[i - 1], p[i], p[(i + 1) % n], p[(i + 2) % n]
-            m = np.column_stack([b - a, d - c])  # b + t (b - a) = c + s (c - d): t (b - a) + s (d - c) = c - b
-            if abs(np.linalg.det(m)) < 1e-300:
-                continue
-            t, s = np.linalg.solve(m, c - b)
-            if t <= 0 or s <= 0:  # the neighbours do not meet beyond the edge
-                continue
-            x = b + t * (b - a)
-            area = 0.5 * abs(float(_cross(b, c, x)))
-            if best is None or area < best[0]:
-                best = (area, i, x)
-        if best is None:
-            break
-        _, i, x = best
-        j = (i + 1) % n
-        p[i] = x
-        del p[j]
-    return np.array(p)
-
-
-#: Most vertices the region's polygon may have. The guard costs 6 operations per vertex on every reading
-#: (MagOne's 32-vertex hull: 196 operations, more than the order-4 polynomial's 73 and ~1.5 ms of soft float
-#: on a 16 MHz AVR), so a hull with more vertices (the noise makes dozens) is replaced by the least-area
-#: enclosing polygon of this many (MagOne: +0.3 % area).
-HULL_MAX_VERTICES = 8
-
-
-@dataclass(frozen=True)
-class ValidRegion:
-    """The scanned region of (Bz, Br), uT: the range box and a convex polygon (counter-clockwise vertices)
-    holding every scan point: the convex hull, or the least-area enclosing polygon of ``HULL_MAX_VERTICES``
-    built from it when the hull has more vertices."""
-
-    bz_uT: tuple[float, float]
-    br_uT: tuple[float, float]
-    hull: tuple[tuple[float, float], ...]
-
-    @classmethod
-    def of(cls, bz: np.ndarray, br: np.ndarray, max_vertices: int = HULL_MAX_VERTICES) -> "ValidRegion":
-        from scipy.spatial import ConvexHull
-
-        sc = Scaling.of(bz, br)
-        scaled = np.column_stack(sc(bz, br))  # the hull in (u, v): both axes of order 1
-        try:
-            idx = ConvexHull(scaled).vertices  # counter-clockwise in 2-D
-        except (RuntimeError, ValueError) as exc:  # QhullError (a RuntimeError): no area, e.g. all on a line
-            raise CalibrationError(f"the scan's (Bz, Br) points span no area ({str(exc).splitlines()[0]}); "
-                                   "a calibration needs a 2-D scan (normal and lateral load)") from None
-        poly = _enclosing(scaled[idx], max_vertices)
-        hull = tuple((sc.bz_center + sc.bz_scale * float(u), sc.br_center + sc.br_scale * float(v)) for u, v in poly)
-        return cls((float(bz.min()), float(bz.max())), (float(br.min()), float(br.max())), hull)
-
-    def contains(self, bz: np.ndarray, br: np.ndarray) -> np.ndarray:
-        """True where (Bz, Br) (uT, any shape) is inside the box and the hull (edges included, to a
-        relative 1e-9 of the region's size); False for NaN."""
-        bz, br = np.asarray(bz, dtype=float), np.asarray(br, dtype=float)
-        ok = (bz >= self.bz_uT[0]) & (bz <= self.bz_uT[1]) & (br >= self.br_uT[0]) & (br <= self.br_uT[1])
-        h = np.asarray(self.hull, dtype=float)
-        tol = 1e-9 * ((self.bz_uT[1] - self.bz_uT[0]) * (self.br_uT[1] - self.br_uT[0]) + 1.0)
-        q = np.stack([bz, br], axis=-1)
-        for k in range(len(h)):
-            ok &= _cross(h[k], h[(k + 1) % len(h)], q) >= -tol
-        return ok
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -641,8 +297,16 @@ class Calibration:
 
     @classmethod
     def from_json(cls, doc: Mapping[str, object]) -> "Calibration":
-        """A calibration from a calibration.json dict; :class:`CalibrationError` naming the first bad key."""
-        return _from_json(doc)
+        """A calibration from a parsed calibration.json; :class:`~magfab.formats.calibration_json.CalibrationError`
+        naming the key path of the first value the format does not allow."""
+        c = calibration_json.validate(dict(doc) if isinstance(doc, Mapping) else doc)
+        mls = None
+        if c.method == "mls" and c.mls is not None:
+            m = c.mls
+            mls = MLSModel(m.order, m.bandwidth, *(np.asarray(x, dtype=float) for x in (m.bz_uT, m.br_uT, m.fz_N, m.fr_N)))
+        return cls(c.method, c.order, Scaling(c.center[0], c.scale[0], c.center[1], c.scale[1]),
+                   np.column_stack([c.coefficients[f] for f in FORCES]), c.shear_sign, c.direction_min_uT,
+                   ValidRegion(c.box[0], c.box[1], c.hull), c.errors, c.scan, c.chip, c.tare_N, mls)
 
 
 def _readings(B_uT: object) -> np.ndarray:
@@ -667,117 +331,6 @@ def _plain(x: object) -> object:
     if isinstance(x, (float, np.floating)):
         return float(x)
     return x
-
-
-# ---- calibration.json validation -----------------------------------------------------------------
-
-
-def _get(doc: Mapping[str, object], path: str) -> object:
-    node: object = doc
-    parts = path.split(".")
-    for k, part in enumerate(parts):
-        if not isinstance(node, Mapping) or part not in node:
-            where = ".".join(parts[:k + 1])
-            need = f" (needed for {path})" if where != path else ""
-            raise CalibrationError(f"calibration.json: key {where!r} is missing{need}")
-        node = node[part]
-    return node
-
-
-def _real(doc: Mapping[str, object], path: str, positive: bool = False) -> float:
-    x = _get(doc, path)
-    ok = isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) and (x > 0 or not positive)
-    if not ok:
-        what = "a positive finite number" if positive else "a finite number"
-        raise CalibrationError(f"calibration.json: {path} must be {what}; instead received {x!r}")
-    return float(x)
-
-
-def _reals(doc: Mapping[str, object], path: str, length: int | None = None) -> np.ndarray:
-    x = _get(doc, path)
-    ok = isinstance(x, list) and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-                                     for v in x) and (length is None or len(x) == length)
-    if not ok:
-        n = f"{length} " if length is not None else ""
-        raise CalibrationError(f"calibration.json: {path} must be a list of {n}finite numbers; instead received "
-                               f"{_short(x)}")
-    return np.asarray(x, dtype=float)
-
-
-def _short(x: object) -> str:
-    s = repr(x)
-    return s if len(s) <= 60 else s[:57] + "..."
-
-
-def _from_json(doc: Mapping[str, object]) -> Calibration:
-    if not isinstance(doc, Mapping):
-        raise CalibrationError(f"calibration.json must hold a JSON object; instead received {type(doc).__name__}")
-    fmt = doc.get("format")
-    if fmt != FORMAT:
-        raise CalibrationError(f"calibration.json: format must be {FORMAT!r}; instead received {fmt!r}")
-    method = _get(doc, "method")
-    if method not in ("poly", "mls"):
-        raise CalibrationError(f"calibration.json: method must be 'poly' or 'mls'; instead received {method!r}")
-    order = _get(doc, "order")
-    if not isinstance(order, int) or isinstance(order, bool) or not 0 <= order <= 12:
-        raise CalibrationError(f"calibration.json: order must be an integer 0..12; instead received {order!r}")
-    mono = _get(doc, "monomials")
-    if mono != [[i, j] for i, j in monomials(order)]:
-        raise CalibrationError(f"calibration.json: monomials must be {monomials(order)!r} for order {order} "
-                               f"(for k = 0..n, for i = k down to 0: [i, k - i]); instead received {_short(mono)}")
-    terms = len(monomials(order))
-    coef = np.column_stack([_reals(doc, f"coefficients.{f}", terms) for f in FORCES])
-    scaling = Scaling(_real(doc, "scaling.Bz_uT.center"), _real(doc, "scaling.Bz_uT.scale", True),
-                      _real(doc, "scaling.Br_uT.center"), _real(doc, "scaling.Br_uT.scale", True))
-    sign = _get(doc, "shear_sign")
-    if sign not in (1, -1) or isinstance(sign, bool):
-        raise CalibrationError(f"calibration.json: shear_sign must be 1 or -1; instead received {sign!r}")
-    dmin = _real(doc, "direction_min_uT")
-    if dmin < 0:
-        raise CalibrationError(f"calibration.json: direction_min_uT must be >= 0; instead received {dmin!r}")
-    tare = (_real(doc, "tare_N.Fz_N"), _real(doc, "tare_N.Fr_N"))
-    return Calibration(method, order, scaling, coef, int(sign), dmin, _region_json(doc),
-                       dict(_mapping(doc, "errors")), dict(_mapping(doc, "scan")), dict(_mapping(doc, "chip")),
-                       tare, _mls_json(doc) if method == "mls" else None)
-
-
-def _mapping(doc: Mapping[str, object], path: str) -> Mapping[str, object]:
-    x = _get(doc, path)
-    if not isinstance(x, Mapping):
-        raise CalibrationError(f"calibration.json: {path} must be an object; instead received {_short(x)}")
-    return x
-
-
-def _region_json(doc: Mapping[str, object]) -> ValidRegion:
-    bz = _reals(doc, "valid_region.Bz_uT", 2)
-    br = _reals(doc, "valid_region.Br_uT", 2)
-    hull = _get(doc, "valid_region.hull")
-    ok = isinstance(hull, list) and len(hull) >= 3 and all(
-        isinstance(p, list) and len(p) == 2 and all(isinstance(x, (int, float)) and not isinstance(x, bool)
-                                                    and math.isfinite(x) for x in p) for p in hull)
-    if not ok:
-        raise CalibrationError("calibration.json: valid_region.hull must be a list of at least 3 [Bz, Br] pairs "
-                               f"of finite numbers; instead received {_short(hull)}")
-    h = np.asarray(hull, dtype=float)
-    turns = _cross(h, np.roll(h, -1, axis=0), np.roll(h, -2, axis=0))
-    if (turns <= 0).any() or bz[0] > bz[1] or br[0] > br[1]:
-        raise CalibrationError("calibration.json: valid_region.hull must be convex and counter-clockwise and "
-                               "its Bz_uT, Br_uT ranges [lo, hi] with lo <= hi")
-    return ValidRegion((float(bz[0]), float(bz[1])), (float(br[0]), float(br[1])),
-                       tuple((float(a), float(b)) for a, b in h))
-
-
-def _mls_json(doc: Mapping[str, object]) -> MLSModel:
-    order = _get(doc, "mls.order")
-    if not isinstance(order, int) or isinstance(order, bool) or not 0 <= order <= 4:
-        raise CalibrationError(f"calibration.json: mls.order must be an integer 0..4; instead received {order!r}")
-    h = _real(doc, "mls.bandwidth", positive=True)
-    cols = [_reals(doc, f"mls.points.{c}") for c in ("Bz_uT", "Br_uT", "Fz_N", "Fr_N")]
-    if len({len(c) for c in cols}) != 1 or len(cols[0]) < len(monomials(order)):
-        raise CalibrationError("calibration.json: mls.points columns Bz_uT, Br_uT, Fz_N, Fr_N must have the same "
-                               f"length, at least {len(monomials(order))}; instead received lengths "
-                               f"{[len(c) for c in cols]}")
-    return MLSModel(order, h, *cols)
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -951,7 +504,7 @@ def _chip_json(design: "Design") -> tuple[dict[str, object], float]:
     chip = chip_setting(design)
     doc = {"gain_sel": chip.gain_sel, "resolution": chip.resolution, "osr": chip.osr, "dig_filt": chip.dig_filt,
            "lsb_xy_uT": chip.lsb_xy_uT, "lsb_z_uT": chip.lsb_z_uT}
-    return doc, noise(design, chip)["total_xy_G"] * UT_PER_G
+    return doc, noise(design, chip)["total_xy_G"] * UT_PER_GAUSS
 
 
 def fit(scan: Scan, design: "Design", *, mls: bool = True) -> FitResult:
@@ -960,10 +513,10 @@ def fit(scan: Scan, design: "Design", *, mls: bool = True) -> FitResult:
     ``calibration.method`` chooses (module doc). The chip settings recorded are the spec's."""
     cal = design.spec.calibration
     if scan.F_N is None:
-        raise CalibrationError(f"scan {scan.source}: no force columns ({', '.join(FORCE_COLUMNS)}); a calibration "
+        raise ScanError(f"scan {scan.source}: no force columns ({', '.join(FORCE_COLUMNS)}); a calibration "
                                "needs the reference force")
     if scan.rows < MIN_ROWS:
-        raise CalibrationError(f"scan {scan.source}: {scan.rows} rows; a calibration needs at least {MIN_ROWS}")
+        raise ScanError(f"scan {scan.source}: {scan.rows} rows; a calibration needs at least {MIN_ROWS}")
     bz, br = scan.B_uT[:, 2], scan.Br_uT
     y = np.column_stack([scan.F_N[:, 2], scan.Fr_N])
     scaling = Scaling.of(bz, br)
@@ -1000,53 +553,3 @@ def evaluation_time_s(calibration: Calibration, B_uT: np.ndarray, method: str | 
         calibration.evaluate(B_uT, method)
         times.append(time.perf_counter() - t)
     return float(np.median(times)) * 1000.0 / len(B_uT)
-
-
-# ---------------------------------------------------------------------------------------------------
-# The chart
-
-
-def chart(result: FitResult) -> dict[str, bytes]:
-    """{"calibration_fit.svg": bytes, "calibration_fit.png": bytes}: held-out RMS error (mN) against
-    evaluation cost (operations per evaluation), one point per polynomial order and one for MLS, per force;
-    the chosen fit ringed. Byte-identical for the same fit (operation counts, not timings)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from ..export.figures import _render
-
-    with matplotlib.rc_context({"svg.hashsalt": "magfab", "svg.fonttype": "path", "path.simplify": True}):
-        fig, ax = plt.subplots(figsize=(6.4, 4.2))
-        for f, marker, colour in (("Fz_N", "o", "#1f77b4"), ("Fr_N", "s", "#ff7f0e")):
-            for method, style in (("poly", "-"), ("mls", "none")):
-                cs = [c for c in result.candidates if c.method == method]
-                if not cs:
-                    continue
-                x = [c.cost_ops for c in cs]
-                e = [1000.0 * c.rms_holdout_N[f] for c in cs]
-                label = f"{f[:2]}, {'polynomial' if method == 'poly' else 'moving least squares'}"
-                ax.plot(x, e, marker=marker if method == "poly" else "*", ms=6 if method == "poly" else 11,
-                        ls=style, color=colour, lw=0.8, label=label)
-                for c, xc, ec in zip(cs, x, e):
-                    if f == "Fz_N":
-                        ax.annotate(str(c.order) if method == "poly" else "MLS", (xc, ec), textcoords="offset points",
-                                    xytext=(0, 6), ha="center", fontsize=7)
-                    if c.label == result.chosen:
-                        ax.plot([xc], [ec], marker="o", ms=14, mfc="none", mec="k", ls="none")
-        cost = np.array([c.cost_ops for c in result.candidates], dtype=float)
-        ax.axhline(result.tolerance_mN, color="r", lw=0.8, ls="--")
-        ax.text(cost.min(), result.tolerance_mN, " tolerance", color="r", fontsize=7, va="bottom")
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.set_xlabel("evaluation cost, flops per reading (numbers: polynomial order)")
-        ax.set_ylabel(f"held-out RMS error ({result.calibration.errors.get('folds')}-fold), mN")
-        scan = result.calibration.scan
-        ax.set_title(f"Calibration fits on {scan.get('source')} ({scan.get('rows')} rows); ringed: {result.chosen}",
-                     fontsize=9)
-        ax.legend(fontsize=8)
-        fig.tight_layout()
-        svg, png = _render(fig)
-        plt.close(fig)
-    return {"calibration_fit.svg": svg, "calibration_fit.png": png}

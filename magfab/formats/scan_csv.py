@@ -1,0 +1,180 @@
+"""The calibration scan CSV (docs/bundle.md section 1): the :class:`Scan` value, reading and writing it.
+
+One row per sample: ``time_s`` and the field ``Bx_uT, By_uT, Bz_uT`` (chip axes), optionally
+``temperature_C``, and for a calibration the reference force ``Fx_N, Fy_N, Fz_N`` (sensor frame); columns in
+any order, others ignored, ``#`` lines are comments. :func:`read_scan_csv` is the one reader: every malformed
+file gives one :class:`~magfab.errors.ScanError` line naming the file, the line number and the column.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from ..errors import ScanError
+
+__all__ = ["SCAN_COLUMNS", "FORCE_COLUMNS", "TEMPERATURE_COLUMN", "MIN_ROWS", "ScanError", "Scan", "scan_csv",
+           "read_scan_csv"]
+
+#: Required scan columns; the force columns are required for a calibration (not for a recording).
+SCAN_COLUMNS = ("time_s", "Bx_uT", "By_uT", "Bz_uT")
+FORCE_COLUMNS = ("Fx_N", "Fy_N", "Fz_N")
+TEMPERATURE_COLUMN = "temperature_C"
+#: Smallest scan a calibration accepts: the order-6 fit has 28 coefficients and is cross-validated.
+MIN_ROWS = 50
+#: The largest polynomial order every fit tries (``magfab.models.calibration.ORDERS[-1]``; a test keeps them
+#: equal), named in the too-few-rows message.
+LARGEST_ORDER = 6
+
+
+
+@dataclass(frozen=True)
+class Scan:
+    """A calibration scan, one row per sample.
+
+    ``time_s`` (N,) s, non-decreasing; ``B_uT`` (N, 3) field at the sensor in the chip's axes, uT;
+    ``F_N`` (N, 3) reference force on the tip in the sensor frame (+z presses the tip towards the chip), N,
+    or None for a recording without a reference; ``temperature_C`` (N,) degC or None; ``source`` the file
+    name or "simulated"; ``sha256`` of the CSV bytes as read (simulated: of :func:`scan_csv` of the scan).
+    """
+
+    time_s: np.ndarray
+    B_uT: np.ndarray
+    F_N: np.ndarray | None
+    temperature_C: np.ndarray | None = None
+    source: str = "simulated"
+    sha256: str = ""
+
+    @property
+    def rows(self) -> int:
+        return int(self.time_s.shape[0])
+
+    @property
+    def Br_uT(self) -> np.ndarray:
+        """Lateral field magnitude sqrt(Bx^2 + By^2), uT, (N,)."""
+        return np.hypot(self.B_uT[:, 0], self.B_uT[:, 1])
+
+    @property
+    def Fr_N(self) -> np.ndarray:
+        """Lateral force magnitude sqrt(Fx^2 + Fy^2), N, (N,)."""
+        if self.F_N is None:
+            raise ScanError(f"scan {self.source}: no force columns ({', '.join(FORCE_COLUMNS)})")
+        return np.hypot(self.F_N[:, 0], self.F_N[:, 1])
+
+
+def scan_csv(scan: Scan, comments: Sequence[str] = ()) -> str:
+    """The scan as CSV text (docs/bundle.md section 1), every value in Python's round-trip repr, so
+    :func:`read_scan_csv` gives back the same numbers. ``comments`` become leading ``# `` lines."""
+    cols = [scan.time_s, *scan.B_uT.T]
+    names = list(SCAN_COLUMNS)
+    if scan.temperature_C is not None:
+        cols.append(scan.temperature_C)
+        names.append(TEMPERATURE_COLUMN)
+    if scan.F_N is not None:
+        cols.extend(scan.F_N.T)
+        names.extend(FORCE_COLUMNS)
+    out = io.StringIO()
+    for c in comments:
+        out.write("# " + " ".join(str(c).splitlines()) + "\n")
+    out.write(",".join(names) + "\n")
+    for row in zip(*(np.asarray(c, dtype=float).tolist() for c in cols)):
+        out.write(",".join(map(repr, row)) + "\n")
+    return out.getvalue()
+
+
+def _load(source: "str | os.PathLike[str] | bytes") -> tuple[bytes, str]:
+    """(bytes, name) of a scan: a path, CSV text (a str holding a newline, or a comma and naming no file) or
+    CSV bytes."""
+    if isinstance(source, bytes):
+        return source, "scan"
+    if isinstance(source, str) and ("\n" in source or ("," in source and not os.path.exists(source))):
+        return source.encode("utf-8"), "scan"
+    path = Path(source)
+    try:
+        return path.read_bytes(), path.name
+    except OSError as exc:
+        raise ScanError(f"{path}: cannot read the scan file ({exc.strerror or exc})") from None
+
+
+def _number(text: str, name: str, line: int, column: str) -> float:
+    try:
+        x = float(text)
+    except ValueError:
+        x = math.nan
+        shown = repr(text.strip()[:24]) if text.strip() else "an empty field"
+    else:
+        shown = text.strip()
+    if not math.isfinite(x):
+        raise ScanError(f"{name}: line {line}, column {column!r}: {shown} is not a finite number; "
+                        "every value must be a finite decimal number (e.g. 12.5 or -3e-2)")
+    return x
+
+
+def _header(lines: list[tuple[int, str]], name: str, require_force: bool) -> tuple[int, list[str]]:
+    if not lines:
+        raise ScanError(f"{name}: line 1: no header row (the file is empty or holds only comments); expected "
+                        f"a header naming {', '.join(SCAN_COLUMNS + FORCE_COLUMNS)}")
+    number, text = lines[0]
+    names = [c.strip() for c in text.split(",")]
+    seen: set[str] = set()
+    for c in names:
+        if c in seen:
+            raise ScanError(f"{name}: line {number} (header): column {c!r} appears twice; each column once")
+        seen.add(c)
+    with_force = require_force or any(c in seen for c in FORCE_COLUMNS)
+    needed = SCAN_COLUMNS + (FORCE_COLUMNS if with_force else ())
+    missing = [c for c in needed if c not in seen]
+    if missing:
+        raise ScanError(f"{name}: line {number} (header): missing column {missing[0]!r}; required columns are "
+                        f"{', '.join(needed)} (any order; {TEMPERATURE_COLUMN} optional, others ignored)")
+    return number, names
+
+
+def read_scan_csv(source: "str | os.PathLike[str] | bytes", *, require_force: bool = True,
+                  min_rows: int = MIN_ROWS) -> Scan:
+    """A scan from a CSV file (path), CSV text (a str with a newline) or CSV bytes; docs/bundle.md section 1.
+
+    Raises :class:`ScanError` (one line: file, line number, column, what is allowed) for a missing file or
+    column, a non-numeric or non-finite value, a row of the wrong length, decreasing time or fewer than
+    ``min_rows`` rows. ``require_force=False`` accepts a recording without the force columns (``F_N`` None).
+    """
+    raw, name = _load(source)
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise ScanError(f"{name}: byte {exc.start} is not UTF-8; the scan must be UTF-8 text") from None
+    lines = [(i, s) for i, s in enumerate(text.splitlines(), 1) if s.strip() and not s.lstrip().startswith("#")]
+    hline, names = _header(lines, name, require_force)
+    wanted = [c for c in SCAN_COLUMNS + (TEMPERATURE_COLUMN,) + FORCE_COLUMNS if c in names]
+    index = {c: names.index(c) for c in wanted}
+    values: dict[str, list[float]] = {c: [] for c in wanted}
+    last_t, last_line = -math.inf, hline
+    for number, s in lines[1:]:
+        fields = s.split(",")
+        if len(fields) != len(names):
+            raise ScanError(f"{name}: line {number}: {len(fields)} values, but the header (line {hline}) names "
+                            f"{len(names)} columns; every row needs one value per column")
+        for c in wanted:
+            values[c].append(_number(fields[index[c]], name, number, c))
+        t = values["time_s"][-1]
+        if t < last_t:
+            raise ScanError(f"{name}: line {number}, column 'time_s': {t!r} is less than {last_t!r} on line "
+                            f"{last_line}; time_s must be non-decreasing")
+        last_t, last_line = t, number
+    rows = len(lines) - 1
+    if rows < min_rows:
+        end = lines[-1][0]
+        raise ScanError(f"{name}: line {end}: the scan ends after {rows} data rows; a calibration needs at "
+                        f"least {min_rows} (the order-{LARGEST_ORDER} fit has {(LARGEST_ORDER + 1) * (LARGEST_ORDER + 2) // 2} "
+                        "coefficients and is cross-validated)")
+    arr = {c: np.asarray(v, dtype=float) for c, v in values.items()}
+    forces = np.column_stack([arr[c] for c in FORCE_COLUMNS]) if FORCE_COLUMNS[0] in arr else None
+    return Scan(arr["time_s"], np.column_stack([arr[c] for c in SCAN_COLUMNS[1:]]), forces,
+                arr.get(TEMPERATURE_COLUMN), name, hashlib.sha256(raw).hexdigest())

@@ -1,0 +1,105 @@
+"""The simulated calibration scan: the published y-z track over the predicted sensor.
+
+The tip is indented by delta (0 to ``scan_z_mm``, capped where the predicted normal range ends) and displaced
+laterally by y (centred on the axis, ``scan_y_mm`` wide, capped at the predicted lateral range), in
+``scan_step_mm`` steps. Assumptions, stated because they are not modelled further: the magnet's lateral
+offset equals the tip's (the magnet sits near the top surface and moves with it), and normal and shear loads
+superpose (the axial travel and Fz come from the nominal FE curve at delta, the lateral force is K_s y with
+the nominal shear stiffness, each independent of the other). The chip's noise and quantisation and the
+reference sensor's resolution are added; the result is deterministic for a given ``calibration.seed``.
+
+Units: field in microtesla (uT), force in newton, lengths in mm, time in s.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from dataclasses import replace
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..formats.scan_csv import Scan, scan_csv
+from ..units import UT_PER_GAUSS
+from . import field as fieldmod
+
+if TYPE_CHECKING:
+    from ..design import Design
+    from .predict import Prediction
+
+__all__ = ["scan_track", "simulate_scan"]
+
+
+
+def scan_track(design: "Design", prediction: "Prediction") -> tuple[np.ndarray, np.ndarray]:
+    """The y-z track of the scan: (y_mm, indentation_mm), each (N,), in raster order (one row of y per
+    indentation step, y increasing along each row, indentation increasing row by row).
+
+    y spans ``scan_y_mm`` centred on the axis, capped at the predicted lateral range (the magnet radius or
+    the chip's xy full scale); the indentation spans 0..``scan_z_mm``, capped at the indentation where the
+    predicted normal range ends (``normal.travel_mm`` of magnet travel, through the nominal FE curve).
+    """
+    cal = design.spec.calibration
+    data = prediction.data
+    nominal = prediction.curves["nominal"]
+    travel_end = float(data["normal"]["travel_mm"])  # type: ignore[index]
+    delta_end = float(np.interp(travel_end, nominal.magnet_displacement_mm, nominal.indentation_mm))
+    k_s = float(data["shear"]["stiffness_N_per_mm"]["nominal"])  # type: ignore[index]
+    lateral_end = float(data["shear"]["range_by_material_N"]["nominal"]) / k_s  # type: ignore[index]
+    step = cal.scan_step_mm
+    half = min(cal.scan_y_mm / 2.0, lateral_end)
+    ny = int(math.floor(2.0 * half / step + 1e-9)) + 1
+    y = (np.arange(ny) - (ny - 1) / 2.0) * step
+    z_end = min(cal.scan_z_mm, delta_end)
+    nz = int(math.floor(z_end / step + 1e-9)) + 1
+    delta = np.arange(nz) * step
+    dd, yy = np.meshgrid(delta, y, indexing="ij")
+    return yy.ravel(), dd.ravel()
+
+
+def _quantise(x: np.ndarray, step: float) -> np.ndarray:
+    return np.round(x / step) * step if step > 0 else x
+
+
+def simulate_scan(design: "Design", prediction: "Prediction | None" = None, *, ideal: bool = False) -> Scan:
+    """The simulated calibration scan of ``design`` (module doc): field in uT at the sensing point and the
+    reference force in N along :func:`scan_track`.
+
+    Noise: gaussian per axis with the predicted RMS (``predict.noise``: environment and chip; the chip's
+    quantisation is then applied by rounding to its LSB, so the total matches ``total_xy_G``/``total_z_G``),
+    clipped at the chip's full scale; the reference forces are rounded to ``reference_resolution_mN``.
+    ``ideal=True``: the same track without noise, quantisation or clipping (the truth a fit should recover).
+    Sample times are one chip conversion apart. Deterministic (``calibration.seed``).
+    """
+    from .predict import chip_setting, noise, predict
+
+    pred = prediction if prediction is not None else predict(design)
+    cal = design.spec.calibration
+    y, delta = scan_track(design, pred)
+    nominal = pred.curves["nominal"]
+    u = np.interp(delta, nominal.indentation_mm, nominal.magnet_displacement_mm)  # axial travel, + down
+    fz = np.interp(delta, nominal.indentation_mm, nominal.force_N)
+    k_s = float(pred.data["shear"]["stiffness_N_per_mm"]["nominal"])  # type: ignore[index]
+    magnet = fieldmod.Magnet.from_spec(design.spec)
+    gap = design.d_rest_mm - u
+    # The sensor at the origin, the magnet's centre at (0, y, gap + H/2): in the magnet's frame the sensing
+    # point is at (0, -y, -(gap + H/2)).
+    points = np.column_stack([np.zeros_like(y), -y, -(gap + magnet.height_mm / 2.0)])
+    b = fieldmod.exact(magnet, points) * UT_PER_GAUSS
+    f = np.column_stack([np.zeros_like(y), k_s * y, fz])
+    chip = chip_setting(design)
+    if not ideal:
+        nz = noise(design, chip)
+        sigma = UT_PER_GAUSS * np.array([math.sqrt(max(nz[f"total_{a}_G"] ** 2 - nz[f"quantisation_{a}_G"] ** 2, 0.0))
+                                     for a in ("xy", "xy", "z")])
+        rng = np.random.default_rng(cal.seed)
+        b = b + rng.normal(size=b.shape) * sigma
+        lsb = np.array([chip.lsb_xy_uT, chip.lsb_xy_uT, chip.lsb_z_uT])
+        b = np.round(b / lsb) * lsb
+        full = UT_PER_GAUSS * np.array([chip.full_scale_xy_G, chip.full_scale_xy_G, chip.full_scale_z_G])
+        b = np.clip(b, -full, full)
+        f = _quantise(f, cal.reference_resolution_mN / 1000.0)
+    t = np.arange(len(y)) * chip.conversion_ms / 1000.0
+    scan = Scan(t, b, f, None, "simulated" if not ideal else "simulated (ideal)", "")
+    return replace(scan, sha256=hashlib.sha256(scan_csv(scan).encode("utf-8")).hexdigest())
