@@ -29,7 +29,8 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
+from functools import cached_property
 from typing import TYPE_CHECKING, Mapping
 
 import numpy as np
@@ -37,11 +38,13 @@ import numpy as np
 from . import field as fieldmod
 from . import mechanics as mech
 from ..errors import Finding, Severity
+from ..spec import FieldModel
+from ..units import GAUSS_PER_MT, MN_PER_N, UT_PER_GAUSS
 
 if TYPE_CHECKING:
     from ..design import Design
 
-G_PER_UT = 0.01
+G_PER_UT = 1.0 / UT_PER_GAUSS
 N_INDENT = 21  # indentation steps along the normal curve
 #: Mesh sizes (mm) the automatic FE choice tries, coarse to fine; each is checked against the next finer.
 FE_MESHES_MM = (0.75, 0.5, 0.35, 0.25)
@@ -96,7 +99,7 @@ def chip_setting(design: "Design") -> ChipSetting:
     return ChipSetting(
         s.gain_sel, s.resolution, s.osr, s.dig_filt, lsb_xy, lsb_z,
         full_scale_xy_G=limit * lsb_xy * G_PER_UT, full_scale_z_G=limit * lsb_z * G_PER_UT,
-        saturation_onset_G=chip["saturation_onset_mT"].nominal * 10.0,
+        saturation_onset_G=chip["saturation_onset_mT"].nominal * GAUSS_PER_MT,
         noise_xy_G=chip["noise_xy_bound_uT"].nominal * G_PER_UT * averaging,
         noise_z_G=chip["noise_z_bound_uT"].nominal * G_PER_UT * averaging,
         conversion_ms=conversion_us / 1000.0,
@@ -161,7 +164,7 @@ def _fe_curve(body: mech.Body, mu: float, indentation: np.ndarray, mesh: float) 
     """The FE curve, truncated where the model fails (element inversion, non-convergence, stretch beyond the
     material's elongation at break): the singular stress at the magnet's sharp edge stops it earlier the finer
     the mesh, so the prediction keeps what the model reached and says where it stopped."""
-    return mech.fe(body, mu, indentation, mesh_mm=mesh, on_failure="truncate")
+    return mech.fe(body, mu, indentation, mesh_mm=mesh, on_failure=mech.OnFailure.TRUNCATE)
 
 
 def normal_curve(design: "Design", body: mech.Body, mu: float, indentation: np.ndarray) -> tuple[mech.Curve, ModelUse]:
@@ -198,52 +201,190 @@ def normal_curve(design: "Design", body: mech.Body, mu: float, indentation: np.n
 
 
 # ---------------------------------------------------------------------------------------------------
-# The prediction
+# The prediction: typed values, turned into predictions.json's dict only by :meth:`Prediction.as_json`
+
+MATERIALS = ("soft", "nominal", "stiff")  # the material band, softest first
+GRADE_BAND = ("low", "nominal", "high")  # the magnet grade's remanence band, weakest first
+
+
+@dataclass(frozen=True)
+class FieldFigures:
+    """The field at the Hall point, G (nominal magnet unless named), and the grade's remanence band, T."""
+
+    Bz_rest_G: float
+    dBz_dz_rest_G_per_mm: float
+    Bz_d_min_G: float
+    Bz_d_min_strongest_G: float
+    dBr_dr_rest_G_per_mm: float
+    Bz_range_end_strongest_G: float
+    remanence_T: Mapping[str, float]  # GRADE_BAND -> T
+
+
+@dataclass(frozen=True)
+class Noise:
+    """RMS field noise at the sensor, G: environment, chip, quantisation (LSB / sqrt 12), totals per axis."""
+
+    environment_G: float
+    chip_xy_G: float
+    chip_z_G: float
+    quantisation_xy_G: float
+    quantisation_z_G: float
+    total_xy_G: float
+    total_z_G: float
+
+
+@dataclass(frozen=True)
+class NormalFigures:
+    """Normal load over the material band (MATERIALS) and the grade's band; forces N, lengths mm."""
+
+    curves: Mapping[str, mech.Curve]  # force against indentation per material
+    magnet_displacement_mm: tuple[float, ...]  # axial magnet travel at each indentation step
+    sensitivity_G_per_N: tuple[float, float]  # over the range, every material and grade
+    resolution_mN: float  # worst case over the range
+    resolution_at_rest_mN: Mapping[str, float]  # per material, weakest magnet
+    range_N: float  # the softest material's
+    range_by_material_N: Mapping[str, float]
+    range_limit: str  # what ends the range: d_min, chip full scale, stretch or model
+    range_limits_travel_mm: Mapping[str, float]  # magnet travel at which each limit would bind
+    travel_mm: float
+    stiffness_at_rest_N_per_mm: Mapping[str, float]
+    model_limit: str = ""  # why the mechanics model stopped early, if it did
+
+
+@dataclass(frozen=True)
+class ShearFigures:
+    """Shear (lateral) load over the material band; forces N."""
+
+    stiffness_N_per_mm: Mapping[str, float]
+    sensitivity_G_per_N: tuple[float, float]
+    resolution_mN: float
+    range_N: float
+    range_by_material_N: Mapping[str, float]
+    range_limit: str
 
 
 @dataclass(frozen=True)
 class Prediction:
-    """Everything predictions.json holds, plus the arrays the plots need."""
+    """What the sensor will do (module doc), plus the arrays the plots need. Frozen values throughout;
+    :meth:`as_json` is the one place they become predictions.json's nested dict."""
 
-    data: Mapping[str, object]
-    models: tuple[ModelUse, ...]
-    curves: Mapping[str, mech.Curve]  # soft / nominal / stiff
+    field: FieldFigures
+    chip: ChipSetting
+    material_mu_kPa: Mapping[str, float]
+    normal: NormalFigures
+    shear: ShearFigures
+    noise: Noise
+    models: tuple[ModelUse, ...]  # field, mechanics, shear
     arrays: Mapping[str, np.ndarray] = field(default_factory=dict)
     timings_s: Mapping[str, float] = field(default_factory=dict)
 
-    def findings(self) -> list[Finding]:
-        return list(self.data.get("_findings", ()))  # type: ignore[arg-type]
+    @property
+    def curves(self) -> Mapping[str, mech.Curve]:
+        return self.normal.curves
+
+    @cached_property
+    def data(self) -> Mapping[str, object]:
+        """predictions.json's dict (:meth:`as_json`), for code that works from the file's contents."""
+        return self.as_json()
+
+    def model(self, family: str) -> ModelUse:
+        return next(m for m in self.models if m.family == family)
+
+    def as_json(self) -> dict[str, object]:
+        """predictions.json: plain numbers, lists and dicts."""
+        n, s, c = self.normal, self.shear, self.chip
+        normal: dict[str, object] = {
+            "curve": {k: [[float(d), float(f)] for d, f in zip(cv.indentation_mm, cv.force_N)] for k, cv in n.curves.items()},
+            "curve_columns": ["indentation_mm", "force_N"],
+            "magnet_displacement_mm": list(n.magnet_displacement_mm),
+            "sensitivity_G_per_N": list(n.sensitivity_G_per_N),
+            "resolution_mN": n.resolution_mN,
+            "resolution_at_rest_mN": dict(n.resolution_at_rest_mN),
+            "range_N": n.range_N,
+            "range_by_material_N": dict(n.range_by_material_N),
+            "range_limit": n.range_limit,
+            "range_limits_travel_mm": dict(n.range_limits_travel_mm),
+            "travel_mm": n.travel_mm,
+            "stiffness_at_rest_N_per_mm": dict(n.stiffness_at_rest_N_per_mm),
+        }
+        if n.model_limit:
+            normal["model_limit"] = n.model_limit
+        return {
+            "field": {**asdict(self.field), "remanence_T": dict(self.field.remanence_T)},
+            "chip": {"gain_sel": c.gain_sel, "resolution": c.resolution, "osr": c.osr, "dig_filt": c.dig_filt,
+                     "lsb_xy_uT": c.lsb_xy_uT, "lsb_z_uT": c.lsb_z_uT, "full_scale_xy_G": c.full_scale_xy_G,
+                     "full_scale_z_G": c.full_scale_z_G, "saturation_onset_G": c.saturation_onset_G,
+                     "conversion_ms": c.conversion_ms, "rate_Hz": c.rate_Hz},
+            "material_mu_kPa": dict(self.material_mu_kPa),
+            "normal": normal,
+            "shear": {"stiffness_N_per_mm": dict(s.stiffness_N_per_mm), "sensitivity_G_per_N": list(s.sensitivity_G_per_N),
+                      "resolution_mN": s.resolution_mN, "range_N": s.range_N,
+                      "range_by_material_N": dict(s.range_by_material_N), "range_limit": s.range_limit},
+            "noise_G": asdict(self.noise),
+            "models": {m.family: m.as_dict() for m in self.models},
+        }
 
 
 def _derivative(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return np.gradient(y, x, edge_order=2)
 
 
+def _band(design: "Design") -> dict[str, float]:
+    spec = design.spec
+    return dict(zip(MATERIALS, spec.elastomer.shear_modulus_kPa or mech.band(spec.elastomer.material)))
+
+
 def predict(design: "Design") -> Prediction:
     """Sensitivity, resolution and range for ``design`` (module doc). Deterministic."""
     t0 = time.perf_counter()
     spec = design.spec
-    sen, p = spec.sensor, spec.predict
+    sen = spec.sensor
     chip = chip_setting(design)
     nz = noise(design, chip)
-    magnets = {band: fieldmod.Magnet.from_spec(spec, band) for band in ("low", "nominal", "high")}
+    magnets = {band: fieldmod.Magnet.from_spec(spec, band) for band in GRADE_BAND}
     fuse = choose_field(design, magnets["nominal"])
-    fmodel = fuse.name
     t_field = time.perf_counter()
 
     body = mech.Body.from_design(design)
-    mus = dict(zip(("soft", "nominal", "stiff"), spec.elastomer.shear_modulus_kPa or mech.band(spec.elastomer.material)))
+    mus = _band(design)
     travel = design.d_rest_mm - sen.d_min_mm
     # Indent a little past the travel to d_min: the magnet lags the surface, and the curve must reach d_min.
     # Steps graded finer near zero, where a rounded tip's force rises as indentation^1.5.
     indentation = 1.25 * travel * np.linspace(0.0, 1.0, N_INDENT) ** 1.5
     nominal, muse = normal_curve(design, body, mus["nominal"], indentation)
     limit_note = str(nominal.info.get("failure", "")) if len(nominal.force_N) < len(indentation) else ""
-    indentation = nominal.indentation_mm
     curves = {k: nominal.scaled(mu) if k != "nominal" else nominal for k, mu in mus.items()}
     t_mech = time.perf_counter()
 
-    # --- normal load -------------------------------------------------------------------------------------
+    normal, normal_arrays = _normal(design, chip, nz, magnets, fuse.name, curves, limit_note)
+    shear, shear_arrays = _shear(design, chip, nz, magnets, fuse.name, body, mus)
+    t_end = time.perf_counter()
+    u = normal_arrays["u"]
+    field_figures = FieldFigures(
+        Bz_rest_G=float(normal_arrays["bz_nominal"][0]),
+        dBz_dz_rest_G_per_mm=float(fieldmod.dbz_dz(magnets["nominal"], design.d_rest_mm, 0.0, model=FieldModel.EXACT)),
+        Bz_d_min_G=float(fieldmod.bz_br(magnets["nominal"], sen.d_min_mm, 0.0, model=FieldModel.EXACT)[0]),
+        Bz_d_min_strongest_G=float(fieldmod.bz_br(magnets["high"], sen.d_min_mm, 0.0, model=FieldModel.EXACT)[0]),
+        dBr_dr_rest_G_per_mm=float(shear_arrays["dbr_nominal"][0]),
+        Bz_range_end_strongest_G=float(np.interp(normal.travel_mm, u, normal_arrays["bz_high"])),
+        remanence_T={b: m.remanence_T for b, m in magnets.items()},
+    )
+    shear_use = ModelUse("shear", "fe", math.nan,
+                         "small-strain Fourier mode-1 FE, lateral force on the magnet, magnet free to "
+                         "tilt (Timoshenko's column overestimates it by ~34 % for an embedded magnet)", "auto")
+    arrays = {**normal_arrays, "indentation": nominal.indentation_mm, **shear_arrays}
+    timings = {"field_choice": t_field - t0, "mechanics": t_mech - t_field, "chain": t_end - t_mech,
+               "total": t_end - t0}
+    return Prediction(field_figures, chip, mus, normal, shear, Noise(**nz), (fuse, muse, shear_use), arrays, timings)
+
+
+def _normal(design: "Design", chip: ChipSetting, nz: Mapping[str, float], magnets: Mapping[str, fieldmod.Magnet],
+            fmodel: str, curves: Mapping[str, mech.Curve], limit_note: str) -> tuple[NormalFigures, dict[str, np.ndarray]]:
+    """Normal load: the chain along the nominal curve (the magnet's travel does not depend on mu), over the
+    material band and the grade's band, and what ends the range."""
+    sen, p = design.spec.sensor, design.spec.predict
+    nominal = curves["nominal"]
+    travel = design.d_rest_mm - sen.d_min_mm
     u = nominal.magnet_displacement_mm  # axial magnet travel, + towards the chip; independent of mu
     gap = design.d_rest_mm - u
     keep = gap >= sen.d_min_mm - 1e-9
@@ -267,83 +408,55 @@ def predict(design: "Design") -> Prediction:
     f_range = {k: float(np.interp(u_max, u, c.force_N)) for k, c in curves.items()}
     s_f = {(k, b): s_b[b] / k_e[k] for k in curves for b in magnets}
     sens_in = np.array([s_f[kb][in_range] for kb in s_f])
-    res_mN = {kb: 1000.0 * nz["total_z_G"] / v for kb, v in s_f.items()}
-    worst_res = max(float(np.max(v[in_range])) for v in res_mN.values())
+    res_mN = {kb: MN_PER_N * nz["total_z_G"] / v for kb, v in s_f.items()}
+    figures = NormalFigures(
+        curves=curves,
+        magnet_displacement_mm=tuple(float(x) for x in u),
+        sensitivity_G_per_N=(float(sens_in.min()), float(sens_in.max())),
+        resolution_mN=max(float(np.max(v[in_range])) for v in res_mN.values()),
+        resolution_at_rest_mN={k: float(res_mN[(k, "low")][0]) for k in curves},
+        range_N=min(f_range.values()),
+        range_by_material_N=f_range,
+        range_limit=binding,
+        range_limits_travel_mm=limits,
+        travel_mm=u_max,
+        stiffness_at_rest_N_per_mm={k: float(v[0]) for k, v in k_e.items()},
+        model_limit=limit_note,
+    )
+    arrays = {"u": u, "in_range": in_range, **{f"bz_{b}": v for b, v in bz.items()},
+              **{f"sb_{b}": v for b, v in s_b.items()}, **{f"ke_{k}": v for k, v in k_e.items()},
+              **{f"sf_{k}_{b}": v for (k, b), v in s_f.items()}, **{f"res_{k}_{b}": v for (k, b), v in res_mN.items()}}
+    return figures, arrays
 
-    # --- shear ---------------------------------------------------------------------------------------------
+
+def _shear(design: "Design", chip: ChipSetting, nz: Mapping[str, float], magnets: Mapping[str, fieldmod.Magnet],
+           fmodel: str, body: mech.Body, mus: Mapping[str, float]) -> tuple[ShearFigures, dict[str, np.ndarray]]:
+    """Shear load: lateral travel up to the magnet's radius (or the XY full scale), over both bands."""
     r = np.linspace(0.0, design.magnet_radius_mm, 21)
-    ks_nominal = mech.shear_stiffness(body, mus["nominal"], "fe")  # linear in mu: one solve for the band
+    ks_nominal = mech.shear_stiffness(body, mus["nominal"], mech.ShearModel.FE)  # linear in mu: one solve
     ks = {k: ks_nominal * mu / mus["nominal"] for k, mu in mus.items()}
     br = {b: np.asarray(fieldmod.bz_br(m, design.d_rest_mm, r, model=fmodel, rtol=None)[1]) for b, m in magnets.items()}
     dbr = {b: _derivative(r, v) for b, v in br.items()}
     s_fs = {(k, b): dbr[b] / ks[k] for k in ks for b in magnets}
     s_fs_all = np.array(list(s_fs.values()))
-    res_s_mN = {kb: 1000.0 * nz["total_xy_G"] / np.maximum(v, 1e-300) for kb, v in s_fs.items()}
-    shear_limits = {"lateral travel = magnet radius": design.magnet_radius_mm}
+    res_s_mN = {kb: MN_PER_N * nz["total_xy_G"] / np.maximum(v, 1e-300) for kb, v in s_fs.items()}
+    limits = {"lateral travel = magnet radius": design.magnet_radius_mm}
     over_xy = np.nonzero(br["high"] > chip.full_scale_xy_G)[0]
     if over_xy.size:
-        shear_limits["chip full scale"] = _crossing(r, br["high"], chip.full_scale_xy_G, over_xy[0])
-    shear_binding = min(shear_limits, key=shear_limits.get)
-    shear_range = {k: float(v * shear_limits[shear_binding]) for k, v in ks.items()}
-    t_end = time.perf_counter()
-
-    nominal_bz_rest = float(bz["nominal"][0])
-    data: dict[str, object] = {
-        "field": {
-            "Bz_rest_G": nominal_bz_rest,
-            "dBz_dz_rest_G_per_mm": float(fieldmod.dbz_dz(magnets["nominal"], design.d_rest_mm, 0.0, model="exact")),
-            "Bz_d_min_G": float(fieldmod.bz_br(magnets["nominal"], sen.d_min_mm, 0.0, model="exact")[0]),
-            "Bz_d_min_strongest_G": float(fieldmod.bz_br(magnets["high"], sen.d_min_mm, 0.0, model="exact")[0]),
-            "dBr_dr_rest_G_per_mm": float(dbr["nominal"][0]),
-            "Bz_range_end_strongest_G": float(np.interp(u_max, u, bz["high"])),
-            "remanence_T": {b: m.remanence_T for b, m in magnets.items()},
-        },
-        "chip": {
-            "gain_sel": chip.gain_sel, "resolution": chip.resolution, "osr": chip.osr, "dig_filt": chip.dig_filt,
-            "lsb_xy_uT": chip.lsb_xy_uT, "lsb_z_uT": chip.lsb_z_uT, "full_scale_xy_G": chip.full_scale_xy_G,
-            "full_scale_z_G": chip.full_scale_z_G, "saturation_onset_G": chip.saturation_onset_G,
-            "conversion_ms": chip.conversion_ms, "rate_Hz": chip.rate_Hz,
-        },
-        "material_mu_kPa": mus,
-        "normal": {
-            "curve": {k: [[float(d), float(f)] for d, f in zip(c.indentation_mm, c.force_N)] for k, c in curves.items()},
-            "curve_columns": ["indentation_mm", "force_N"],
-            "magnet_displacement_mm": [float(x) for x in u],
-            "sensitivity_G_per_N": [float(sens_in.min()), float(sens_in.max())],
-            "resolution_mN": worst_res,
-            "resolution_at_rest_mN": {k: float(res_mN[(k, "low")][0]) for k in curves},
-            "range_N": min(f_range.values()),
-            "range_by_material_N": f_range,
-            "range_limit": binding,
-            "range_limits_travel_mm": limits,
-            "travel_mm": u_max,
-            "stiffness_at_rest_N_per_mm": {k: float(v[0]) for k, v in k_e.items()},
-        },
-        "shear": {
-            "stiffness_N_per_mm": ks,
-            "sensitivity_G_per_N": [float(s_fs_all.min()), float(s_fs_all.max())],
-            "resolution_mN": max(float(v[0]) for v in res_s_mN.values()),
-            "range_N": min(shear_range.values()),
-            "range_by_material_N": shear_range,
-            "range_limit": shear_binding,
-        },
-        "noise_G": nz,
-        "models": {m.family: m.as_dict() for m in (fuse, muse)},
-    }
-    data["models"]["shear"] = ModelUse("shear", "fe", math.nan,
-                                       "small-strain Fourier mode-1 FE, lateral force on the magnet, magnet free to "
-                                       "tilt (Timoshenko's column overestimates it by ~34 % for an embedded magnet)",
-                                       "auto").as_dict()
-    if limit_note:
-        data["normal"]["model_limit"] = limit_note
-    arrays = {"u": u, "indentation": indentation, "r": r, "in_range": in_range,
-              **{f"bz_{b}": v for b, v in bz.items()}, **{f"sb_{b}": v for b, v in s_b.items()},
-              **{f"ke_{k}": v for k, v in k_e.items()}, **{f"br_{b}": v for b, v in br.items()},
-              **{f"sf_{k}_{b}": v for (k, b), v in s_f.items()}, **{f"res_{k}_{b}": v for (k, b), v in res_mN.items()},
+        limits["chip full scale"] = _crossing(r, br["high"], chip.full_scale_xy_G, over_xy[0])
+    binding = min(limits, key=limits.get)
+    shear_range = {k: float(v * limits[binding]) for k, v in ks.items()}
+    figures = ShearFigures(
+        stiffness_N_per_mm=ks,
+        sensitivity_G_per_N=(float(s_fs_all.min()), float(s_fs_all.max())),
+        resolution_mN=max(float(v[0]) for v in res_s_mN.values()),
+        range_N=min(shear_range.values()),
+        range_by_material_N=shear_range,
+        range_limit=binding,
+    )
+    arrays = {"r": r, **{f"br_{b}": v for b, v in br.items()}, **{f"dbr_{b}": v for b, v in dbr.items()},
               **{f"sfs_{k}_{b}": v for (k, b), v in s_fs.items()}}
-    timings = {"field_choice": t_field - t0, "mechanics": t_mech - t_field, "chain": t_end - t_mech,
-               "total": t_end - t0}
-    return Prediction(data, (fuse, muse), curves, arrays, timings)
+    return figures, arrays
 
 
 def _crossing(x: np.ndarray, y: np.ndarray, level: float, k: int) -> float:
