@@ -5,6 +5,7 @@ from __future__ import annotations
 import io
 import math
 
+import numpy as np
 import pytest
 
 cq = pytest.importorskip("cadquery")
@@ -109,17 +110,40 @@ def test_same_spec_same_bytes():
     assert [(x.path, x.data) for x in a.artifacts] == [(x.path, x.data) for x in b.artifacts]
 
 
-@pytest.mark.parametrize("text", ['[elastomer]\ntip = "flat"', "[mould]\ncavities = 2\nprinter = \"fdm\"\n"
-                                  "[pad]\ndiameter_mm = 22.0\nalignment_hole_diameter_mm = 2.0\nalignment_hole_spacing_mm = 17.0"])
-def test_variants_build_clean(text):
-    result = plan(parse_spec(text))
-    assert not [f for f in result.findings if f.severity.value == "error"]
+def _top_flat_area(mesh) -> float:
+    """Area of the upward facets at the mesh's highest point, mm^2: the tip's flat top (0 for a dome)."""
+    top = mesh.bounds[1][2]
+    up = (mesh.face_normals[:, 2] > 1 - 1e-9) & (np.abs(mesh.triangles_center[:, 2] - top) < 1e-6)
+    return float(mesh.area_faces[up].sum())
+
+
+def test_variants_make_closed_solids_of_their_own_shape(default_build):
+    """plan() only promises no error-level finding; here the variants' meshes are closed, match their CAD
+    solids, and carry the variant: a flat tip is flat on top (the default dome is not), two cavities make a
+    cup with two cavities' volume taken out, a wider pad is as wide as asked."""
+    flat = plan(parse_spec('[elastomer]\ntip = "flat"'))
+    wide = plan(parse_spec("[mould]\ncavities = 2\nprinter = \"fdm\"\n[pad]\ndiameter_mm = 22.0\n"
+                           "alignment_hole_diameter_mm = 2.0\nalignment_hole_spacing_mm = 17.0"))
+    solids = {"elastomer": elastomer_solid, "mould_cup": cup_solid, "mould_lid": lid_solid, "pad": pad_solid}
+    for result in (flat, wide):
+        tol = result.spec.mould.tessellation_tolerance_mm
+        for stem, solid in solids.items():
+            mesh = _mesh(result, stem)
+            assert mesh.is_watertight and mesh.is_winding_consistent, stem
+            assert abs(mesh.volume - solid(result.design).val().Volume()) <= mesh.area * tol, stem
+    r = flat.design.elastomer_radius_mm
+    assert _top_flat_area(_mesh(flat, "elastomer")) > 0.25 * math.pi * r * r
+    assert _top_flat_area(_mesh(default_build, "elastomer")) < 0.01 * math.pi * r * r
+    d = wide.design
+    lx, ly, h = d.cup_size_mm
+    pins = 2 * math.pi * (d.pin_diameter_mm / 2) ** 2 * d.pin_height_mm
+    assert _mesh(wide, "mould_cup").volume == pytest.approx(lx * ly * h - 2 * d.envelope_volume_mm3 + pins, rel=1e-3)
+    extent = _mesh(wide, "pad").extents
+    assert min(extent[0], extent[1]) == pytest.approx(22.0, abs=wide.spec.mould.tessellation_tolerance_mm)
 
 
 @pytest.mark.parametrize("tol", [0.05, 0.01, 0.002])
 def test_tessellation_tolerance_is_absolute_mm(tol):
-    import numpy as np
-
     from magfab.export.cad import tessellate
 
     d = derive(load_spec(None))
