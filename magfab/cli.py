@@ -52,15 +52,18 @@ def _handled() -> Iterator[None]:
 
 @contextmanager
 def _progress(enabled: bool) -> Iterator[object]:
-    """A spinner with the current build stage on a terminal; silent otherwise."""
+    """The current build stage on one line of a terminal; silent otherwise. Redrawn only when the stage
+    changes, so no refresh thread runs while the build forks its worker process."""
     if not enabled:
         yield None
         return
     from rich.console import Console
+    from rich.live import Live
+    from rich.text import Text
 
     console = Console(stderr=True)
-    with console.status("starting") as status:
-        yield lambda stage: status.update(stage)
+    with Live(Text("starting"), console=console, auto_refresh=False, transient=True) as live:
+        yield lambda stage: live.update(Text(f"magfab: {stage}..."), refresh=True)
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
