@@ -21,14 +21,17 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-__all__ = ["HOLE_TO_HOLE_MM", "Copper", "distance", "clearance_violations", "connected", "Router", "RouteError"]
+from ..errors import MagfabError
+
+__all__ = ["HOLE_TO_HOLE_MM", "LAYERS", "Copper", "distance", "near", "touching", "is_via", "via_clearance",
+           "clearance_violations", "connected", "Router", "RouteError"]
 
 LAYERS = ("F.Cu", "B.Cu")
 HOLE_TO_HOLE_MM = 0.25  # drill wall to drill wall (KiCad 6 default min_hole_to_hole)
-GRID_MARGIN_MM = 0.02
+GRID_MARGIN_MM = 0.02  # > the sagitta a 0.125 mm grid step can cut from a 0.25 mm-radius obstacle
 SOFT_COST = 2.0  # per grid step through another connection's track, in a rip-up search
 MAX_EXPANSIONS = 80_000  # a search that needs more is treated as blocked (fails in well under 1 s)
-HEURISTIC_WEIGHT = 1.5  # weighted A*: paths within 1.5x of the cheapest, an order of magnitude fewer nodes  # > the sagitta a 0.125 mm grid step can cut from a 0.25 mm-radius obstacle
+HEURISTIC_WEIGHT = 1.5  # weighted A*: paths within 1.5x of the cheapest, an order of magnitude fewer nodes
 
 
 @dataclass(frozen=True)
@@ -121,9 +124,15 @@ def distance(p: Copper, q: Copper) -> float:
     return core - p.r - q.r
 
 
-def _near(p: Copper, q: Copper, gap: float) -> bool:
+def near(p: Copper, q: Copper, gap: float) -> bool:
+    """Whether the bounding boxes come within ``gap`` (mm): the cheap test before :func:`distance`."""
     a, b = p.bbox(), q.bbox()
     return not (a[2] + gap < b[0] or b[2] + gap < a[0] or a[3] + gap < b[1] or b[3] + gap < a[1])
+
+
+def touching(a: Copper, b: Copper) -> bool:
+    """Whether two pieces of copper share a layer and meet (edge distance <= 0)."""
+    return bool(a.layers & b.layers) and distance(a, b) <= 0.0
 
 
 def is_via(c: Copper) -> bool:
@@ -155,7 +164,7 @@ def clearance_violations(items: Sequence[Copper], clearance: float, hole_clearan
                 for v in (p, q):
                     if is_via(v):
                         need = max(need, via_clearance(clearance, hole_clearance, v.r, via_drill))
-            if not _near(p, q, need):
+            if not near(p, q, need):
                 continue
             d = distance(p, q)
             if d < need - 1e-6:
@@ -177,7 +186,7 @@ def connected(items: Sequence[Copper]) -> dict[str, int]:
     for i, p in enumerate(items):
         for j in range(i + 1, len(items)):
             q = items[j]
-            if p.net is None or p.net != q.net or not (p.layers & q.layers) or not _near(p, q, 0.0):
+            if p.net is None or p.net != q.net or not (p.layers & q.layers) or not near(p, q, 0.0):
                 continue
             if distance(p, q) <= 1e-9:
                 parent[find(i)] = find(j)
@@ -192,8 +201,9 @@ def connected(items: Sequence[Copper]) -> dict[str, int]:
 # Router
 
 
-class RouteError(RuntimeError):
-    """No path: the board is too crowded for the given rules."""
+class RouteError(MagfabError):
+    """No path for one connection. The board's rip-up loop catches it and reports what stays unrouted as
+    a finding; should one escape, a feasible spec was routed wrong: our bug (exit 1), not the input's."""
 
 
 _DIRS = ((1, 0), (1, 1), (0, 1), (-1, 1), (-1, 0), (-1, -1), (0, -1), (1, -1))
@@ -303,6 +313,28 @@ class Router:
 
     def _route(self, items: list[Copper], net: str, source: Copper, target: Copper, window_mm: float | None,
                soft: Sequence[Copper] = ()) -> list[Copper]:
+        track, extra, via_ok = self._costs(items, net, soft)
+        starts = [n for li, layer in enumerate(LAYERS) if layer in source.layers for n in self._inside(source, li)]
+        goals = {n for li, layer in enumerate(LAYERS) if layer in target.layers for n in self._inside(target, li)}
+        starts = [n for n in starts if not track[n]] or starts
+        if not starts or not goals:
+            raise RouteError(f"net {net}: pad {source.owner} or {target.owner} has no grid node inside it")
+        window = self._window(source, target, window_mm)
+        budget = MAX_EXPANSIONS * (4 if soft else 1)  # crossing soft copper widens the search
+        end, came = self._search(starts, goals, target.bbox(), window, track, extra, via_ok, budget)
+        if end < 0:
+            raise RouteError(f"net {net}: no path from {source.owner} to {target.owner} with these rules")
+        path = [end // 9]
+        s = end
+        while s in came:
+            s = came[s]
+            path.append(s // 9)
+        path.reverse()
+        return self._to_copper(path, net)
+
+    def _costs(self, items: list[Copper], net: str, soft: Sequence[Copper]):
+        """Per grid node (both layers, flattened): blocked for a track; extra cost (soft copper and
+        congestion history, or None); and per (row, column) where a via may stand."""
         track = self._blocked(items, net, self.width / 2).ravel()
         extra = None
         if soft:
@@ -324,28 +356,33 @@ class Router:
                 keep = Copper.point(it.a[0], it.a[1], self.via_drill / 2 + self.via_drill / 2 + HOLE_TO_HOLE_MM, LAYERS, None)
                 for n in self._inside(keep, 0):
                     via.ravel()[n] = True
-        via_ok = ~(via[0] | via[1])
-        plane = self.nx * self.ny
-        starts = [n for li, layer in enumerate(LAYERS) if layer in source.layers for n in self._inside(source, li)]
-        goals = {n for li, layer in enumerate(LAYERS) if layer in target.layers for n in self._inside(target, li)}
-        starts = [n for n in starts if not track[n]] or starts
-        if not starts or not goals:
-            raise RouteError(f"net {net}: pad {source.owner} or {target.owner} has no grid node inside it")
+        return track, extra, ~(via[0] | via[1])
+
+    def _window(self, source: Copper, target: Copper, window_mm: float | None) -> tuple[int, int, int, int]:
+        """The grid columns and rows (i0, j0, i1, j1) a search may use: the whole grid, or the box round
+        both ends grown by ``window_mm``."""
+        if window_mm is None:
+            return 0, 0, self.nx - 1, self.ny - 1
+        sx0, sy0, sx1, sy1 = source.bbox()
         tx0, ty0, tx1, ty1 = target.bbox()
+        m = window_mm
+        wi0 = max(0, int((min(sx0, tx0) - m - self.bounds[0]) / self.step))
+        wi1 = min(self.nx - 1, int((max(sx1, tx1) + m - self.bounds[0]) / self.step) + 1)
+        wj0 = max(0, int((min(sy0, ty0) - m - self.bounds[1]) / self.step))
+        wj1 = min(self.ny - 1, int((max(sy1, ty1) + m - self.bounds[1]) / self.step) + 1)
+        return wi0, wj0, wi1, wj1
+
+    def _search(self, starts: list[int], goals: set[int], target_box, window, track, extra, via_ok,
+                budget: int) -> tuple[int, dict[int, int]]:
+        """Weighted A* over (node, direction) states: (goal state or -1 when none within ``budget``
+        expansions, predecessor of each state)."""
+        plane = self.nx * self.ny
+        tx0, ty0, tx1, ty1 = target_box
         gx0 = (tx0 - self.bounds[0]) / self.step
         gx1 = (tx1 - self.bounds[0]) / self.step
         gy0 = (ty0 - self.bounds[1]) / self.step
         gy1 = (ty1 - self.bounds[1]) / self.step
-
-        if window_mm is None:
-            wi0, wj0, wi1, wj1 = 0, 0, self.nx - 1, self.ny - 1
-        else:
-            sx0, sy0, sx1, sy1 = source.bbox()
-            m = window_mm
-            wi0 = max(0, int((min(sx0, tx0) - m - self.bounds[0]) / self.step))
-            wi1 = min(self.nx - 1, int((max(sx1, tx1) + m - self.bounds[0]) / self.step) + 1)
-            wj0 = max(0, int((min(sy0, ty0) - m - self.bounds[1]) / self.step))
-            wj1 = min(self.ny - 1, int((max(sy1, ty1) + m - self.bounds[1]) / self.step) + 1)
+        wi0, wj0, wi1, wj1 = window
 
         def h(n: int) -> float:
             r = n % plane
@@ -363,7 +400,6 @@ class Router:
             best[s] = 0.0
             heapq.heappush(heap, (h(n), 0.0, s))
         end = -1
-        budget = MAX_EXPANSIONS * (4 if soft else 1)  # crossing soft copper widens the search
         while heap and budget:
             budget -= 1
             f, g, s = heapq.heappop(heap)
@@ -403,15 +439,7 @@ class Router:
                     best[ns] = ng
                     came[ns] = s
                     heapq.heappush(heap, (ng + HEURISTIC_WEIGHT * h(m), ng, ns))
-        if end < 0:
-            raise RouteError(f"net {net}: no path from {source.owner} to {target.owner} with these rules")
-        path = [end // 9]
-        s = end
-        while s in came:
-            s = came[s]
-            path.append(s // 9)
-        path.reverse()
-        return self._to_copper(path, net)
+        return end, came
 
     def _to_copper(self, path: list[int], net: str) -> list[Copper]:
         plane = self.nx * self.ny

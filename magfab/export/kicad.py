@@ -16,6 +16,8 @@ import tempfile
 from functools import cache
 from pathlib import Path
 
+from ..errors import ToolError
+
 __all__ = ["kicad_python", "run_tool", "plot_gerbers", "KicadError", "normalise_plot"]
 
 TOOL = Path(__file__).with_name("kicad_tool.py")
@@ -23,8 +25,9 @@ TIMEOUT_S = 300
 FIXED_DATE = "2000-01-01T00:00:00+00:00"
 
 
-class KicadError(RuntimeError):
-    """KiCad ran but failed (not: KiCad is missing, which is ``kicad_python() is None``)."""
+class KicadError(ToolError):
+    """KiCad failed on what we gave it (exit 1). Callers test ``kicad_python() is None`` first: a missing
+    KiCad is a skip or a finding, not this error."""
 
 
 @cache

@@ -2,7 +2,7 @@
 
 Regenerate the golden files after an intended change with
 
-    MAGFAB_REGEN_GOLDEN=1 python -m pytest tests/test_footprint.py -k golden
+    MAGFAB_REGEN_GOLDEN=1 python -m pytest tests/board/test_footprint.py -k golden
 """
 
 from __future__ import annotations

@@ -12,6 +12,7 @@ import pytest
 from conftest import require_kicad
 from magfab import SpecError, derive, load_spec, parse_spec
 from magfab import pcb
+from magfab.board.placement import label as place_label, place
 from magfab.errors import Severity
 from magfab.export.kicad import run_tool
 from magfab.board.route import Copper
@@ -77,10 +78,10 @@ def test_nets_follow_the_chip_recipe(board):
                                              (0x0F, "+3V3", "+3V3")])
 def test_address_straps(address, a1, a0):
     d = derive(parse_spec(f"[sensor]\ni2c_address = {address}\n"))
-    parts, outline, circle = pcb._place(d)
+    parts, outline, circle = place(d)
     u1 = parts[0]
     assert (u1.nets["11"], u1.nets["12"]) == (a1, a0)
-    assert pcb._label(d, outline, parts, circle)[-1].text == f"MLX90393 I2C 0x{address:02X}"
+    assert place_label(d, outline, parts, circle)[-1].text == f"MLX90393 I2C 0x{address:02X}"
 
 
 def test_bad_addresses_and_option_codes_name_the_key():
@@ -256,8 +257,8 @@ def test_wide_clearance_shrinks_the_exposed_pad_land_and_is_capped():
 @pytest.mark.parametrize("name", ["m", "fingertip_v2-soft", "x" * 40, "lab-" + "very_long_design_name." * 2 + "x" * 16])
 def test_long_names_wrap_and_stay_on_the_board(name):
     d = derive(parse_spec("", name))
-    parts, outline, circle = pcb._place(d)
-    label = pcb._label(d, outline, parts, circle)
+    parts, outline, circle = place(d)
+    label = place_label(d, outline, parts, circle)
     assert 2 <= len(label) <= 3
     text = "".join(t.text for t in label[:-1])
     assert text == name or (text.endswith("..") and name.startswith(text[:-2]))
@@ -293,7 +294,7 @@ def test_random_variants_route(seed):
     """Exhaustive: 30 seeded variants per seed (bench/route.py's generator) all route cleanly."""
     import importlib.util
     from pathlib import Path
-    path = Path(__file__).parents[1] / "bench" / "route.py"
+    path = Path(__file__).parents[2] / "bench" / "route.py"
     spec = importlib.util.spec_from_file_location("bench_route", path)
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)

@@ -1,0 +1,196 @@
+"""Where each part stands on the breakout board, and the silk label.
+
+The rigid pad (:mod:`magfab.pad`) sits on the top face centred on the chip, so nothing but the chip may
+stand on the top side inside the pad's disc: the decoupling capacitors and the pull-ups go on the
+bottom, right under the chip and behind the connector; the Qwiic connector sits on the bottom edge,
+outside the disc; the two alignment holes match the pad's; two screw holes sit in the far corners.
+Everything is in KiCad's frame (:mod:`magfab.board.layout`).
+"""
+
+from __future__ import annotations
+
+import math
+
+from ..design import Design
+from ..errors import SpecError
+from ..recipes import catalogue
+from .footprint import Footprint, chip_footprint, connector_footprint, hole_footprint, qfn_footprint
+from .layout import (GROUND, HOLE_CLEARANCE_MM, ORIGIN, PAD_KEEPOUT_MARGIN_MM, SILK_ADVANCE, SILK_STROKE_MM, SUPPLY,
+                     Box, Placed, SilkText, disc_clear, overlap)
+from .route import distance
+
+__all__ = ["place", "label", "wrap"]
+
+
+def _chip_nets(design: Design, fp: Footprint) -> dict[str, str]:
+    """Pad number -> net for the MLX90393, from the chip recipe's pin names and the address straps."""
+    chip = design.chip
+    a1, a0 = design.address_straps
+    by_name = {"VSS": GROUND, "EP": GROUND, "VDD": SUPPLY, "VDDIO": SUPPLY, "CS": SUPPLY, "SCL": "SCL", "SDA": "SDA",
+               "A1": SUPPLY if a1 else GROUND, "A0": SUPPLY if a0 else GROUND}
+    nets = {}
+    ep_number = str(max(int(p.number) for p in fp.copper_pads()))
+    for p in fp.copper_pads():
+        pin = chip.texts["pin_EP" if p.number == ep_number else f"pin_{p.number}"]
+        nets[p.number] = by_name.get(pin, f"unconnected-(U1-{pin}-Pad{p.number})")
+    return nets
+
+
+def _land_gap(part: Placed) -> float:
+    """The smallest copper gap between two of a part's pads on different nets (mm)."""
+    pads = part.copper()
+    gap = min(distance(a, b) for i, a in enumerate(pads) for b in pads[i + 1:] if a.net != b.net)
+    return math.floor(gap * 1000 + 1e-6) / 1000
+
+
+def place(design: Design) -> tuple[list[Placed], Box, tuple[float, float, float]]:
+    """Every part on the board: (parts with U1 first, board outline, the pad's disc x, y, r), mm.
+
+    Raises :class:`SpecError` when the board cannot hold the pad, the connector or the clearance asked."""
+    pcb = design.spec.pcb
+    ox, oy = ORIGIN
+    hw, hh = pcb.width_mm / 2, pcb.height_mm / 2
+    outline = (ox - hw, oy - hh, ox + hw, oy + hh)
+    for key, half in (("pcb.width_mm", hw), ("pcb.height_mm", hh)):
+        if half < design.pad_radius_mm + PAD_KEEPOUT_MARGIN_MM:
+            raise SpecError(key, 2 * half, f"must be at least {2 * (design.pad_radius_mm + PAD_KEEPOUT_MARGIN_MM):g} mm "
+                            f"so the {2 * design.pad_radius_mm:g} mm mounting pad fits on the board")
+    qfn = qfn_footprint(design.chip, pcb.density, clearance=pcb.clearance_mm)
+    placed = [Placed("U1", f"MLX90393SLW-ABA-{design.spec.sensor.option_code}", qfn, ox, oy,
+                     nets=_chip_nets(design, qfn))]
+    gap = _land_gap(placed[0])
+    if pcb.clearance_mm > gap + 1e-9:
+        raise SpecError("pcb.clearance_mm", pcb.clearance_mm,
+                        f"must be at most {gap:g} mm: the MLX90393's lands at density {pcb.density.value} are "
+                        f"{gap:g} mm apart, so no board could meet a larger clearance")
+    placed += _holes(design)
+    j1 = _connector(design, outline, placed)
+    placed.append(j1)
+    placed += _passives(design, qfn, j1)
+    return placed, outline, (ox, oy, design.pad_radius_mm)
+
+
+def _holes(design: Design) -> list[Placed]:
+    """The pad's alignment holes (dowel pins) at the pad's own positions, then the screw holes in the
+    corners of the top edge."""
+    pcb = design.spec.pcb
+    ox, oy = ORIGIN
+    out = []
+    for k, (x, y, d) in enumerate(design.alignment_holes):
+        fp = hole_footprint(d, f"AlignmentHole_{d:g}mm", keepout=HOLE_CLEARANCE_MM)
+        out.append(Placed(f"H{k + 1}", f"dowel {d:g} mm", fp, round(ox + x, 6), round(oy - y, 6)))
+    if pcb.mounting_hole_diameter_mm > 0:
+        head = catalogue("parts")["npth"]["m2_head_diameter_mm"].nominal
+        d = pcb.mounting_hole_diameter_mm
+        fp = hole_footprint(d, f"MountingHole_{d:g}mm", keepout=max(head / 2 - d / 2, 0.0) + 0.25)
+        inset = pcb.mounting_hole_inset_mm
+        hw, hh = pcb.width_mm / 2, pcb.height_mm / 2
+        for k, sx in enumerate((-1, 1)):
+            out.append(Placed(f"H{k + 3}", "M2 screw", fp, round(ox + sx * (hw - inset), 6), round(oy - hh + inset, 6)))
+    return out
+
+
+def _connector(design: Design, outline: Box, placed: list[Placed]) -> Placed:
+    """The Qwiic connector on the bottom edge, mating face flush with it, as near the centre line as the
+    pad's keep-out and the holes allow."""
+    pcb = design.spec.pcb
+    ox, oy = ORIGIN
+    hw, hh = pcb.width_mm / 2, pcb.height_mm / 2
+    keep_r = design.pad_radius_mm + PAD_KEEPOUT_MARGIN_MM
+    jst = connector_footprint(catalogue("parts")["jst-sh-4"])
+    reach = max(jst.body[3], max(p.y + p.h / 2 for p in jst.pads) + pcb.edge_clearance_mm)
+    jy = round(oy + hh - reach, 6)
+    e = pcb.edge_clearance_mm
+    for k in range(int(hw / 0.25) * 2 + 1):
+        dx = (k + 1) // 2 * 0.25 * (1 if k % 2 else -1)
+        cand = Placed("J1", "Qwiic JST-SH 4", jst, round(ox + dx, 6), jy,
+                      nets={"1": GROUND, "2": SUPPLY, "3": "SDA", "4": "SCL", "MP": GROUND})
+        cy = cand.box(jst.courtyard)
+        body = cand.box(jst.body)
+        if body[0] < outline[0] or body[2] > outline[2]:
+            continue
+        if any(c.bbox()[0] < outline[0] + e or c.bbox()[2] > outline[2] - e for c in cand.copper()):
+            continue
+        if not disc_clear(cy, ox, oy, keep_r):
+            continue
+        if any(overlap(cy, h.box(h.footprint.courtyard)) for h in placed[1:]):
+            continue
+        return cand
+    raise SpecError("pcb.width_mm", pcb.width_mm,
+                    f"leaves no room for the Qwiic connector on the bottom edge outside the mounting pad's "
+                    f"{2 * keep_r:g} mm keep-out and clear of the screw holes",
+                    "make the board larger (usually pcb.height_mm: 30 x 28 fits the default pad, 28 x 28 does not)")
+
+
+def _passives(design: Design, qfn: Footprint, j1: Placed) -> list[Placed]:
+    """Decoupling right under the chip (bottom side): C1 by VDD (top row), C2 by VDDIO (bottom row); the
+    I2C pull-ups, if asked for, behind the connector."""
+    pcb = design.spec.pcb
+    ox, oy = ORIGIN
+    parts = catalogue("parts")
+    cap = chip_footprint(parts["chip-0603"], pcb.density, prefix="C")
+    off = round(qfn.body[3] + cap.courtyard[3] + 0.1, 2)
+    # On the bottom side KiCad mirrors a footprint top to bottom, so the angles below put each
+    # reference text on the side away from its neighbour.
+    out = [Placed("C1", "100nF", cap, ox, round(oy - off, 6), 180.0, True, {"1": SUPPLY, "2": GROUND}),
+           Placed("C2", "100nF", cap, ox, round(oy + off, 6), 0.0, True, {"1": SUPPLY, "2": GROUND})]
+    if pcb.pullups:
+        res = chip_footprint(parts["chip-0603"], pcb.density, prefix="R")
+        ohm = parts["jst-sh-4"]["pullup_ohm"].nominal
+        value = f"{ohm / 1000:g}k"
+        ry = round(j1.y + j1.footprint.courtyard[1] - res.courtyard[3] - 0.4, 2)
+        out.append(Placed("R1", value, res, j1.x, ry, 0.0, True, {"1": SUPPLY, "2": "SDA"}))
+        # R2 above R1, far enough that R2's silk reference clears R1's pads.
+        pitch = (res.courtyard[3] - res.courtyard[1]) + 1.3
+        out.append(Placed("R2", value, res, j1.x, round(ry - pitch, 2), 180.0, True, {"1": SUPPLY, "2": "SCL"}))
+    return out
+
+
+# ---------------------------------------------------------------------------------------------------
+# The silk label
+
+
+def wrap(name: str, chars: int) -> list[str]:
+    """The name on as few lines as fit ``chars`` glyphs, broken after '.', '_' or '-' where possible."""
+    lines: list[str] = []
+    rest = name
+    while len(rest) > chars:
+        cut = max((i + 1 for i, ch in enumerate(rest[:chars]) if ch in "._-" and i + 1 >= chars // 2), default=chars)
+        lines.append(rest[:cut])
+        rest = rest[cut:]
+    return lines + [rest]
+
+
+def label(design: Design, outline: Box, parts: list[Placed], circle: tuple[float, float, float]) -> tuple[SilkText, ...]:
+    """The design name and I2C address in silk along the top edge, between the screw holes and above
+    the pad's disc: the largest text from 1.0 down to SILK_MIN_TEXT_MM mm that fits, the name wrapped
+    onto at most two lines (cut short with '..' only if even that does not fit)."""
+    x0, y0, x1, _ = outline
+    edge = design.spec.pcb.edge_clearance_mm
+    left, right = x0 + edge, x1 - edge
+    for p in parts:
+        if p.ref in ("H3", "H4"):
+            cy = p.box(p.footprint.courtyard)
+            if cy[2] < (x0 + x1) / 2:
+                left = max(left, cy[2])
+            else:
+                right = min(right, cy[0])
+    width = right - left - 0.2
+    address = f"MLX90393 I2C 0x{design.i2c_address:02X}"
+    name = design.spec.name
+    room = circle[1] - circle[2] - (y0 + edge + 0.5)  # fabs clip silk within ~0.5 mm of the edge
+
+    def height(n: int, size: float) -> float:
+        return (n - 1) * 1.6 * size + 2 * (0.7 * size + SILK_STROKE_MM / 2)
+
+    for size in (1.0, 0.9, 0.8):
+        chars = int(width / (SILK_ADVANCE * size))
+        lines = wrap(name, chars)
+        if len(lines) <= 2 and len(address) <= chars and height(len(lines) + 1, size) <= room:
+            break
+    else:
+        lines = lines[:2]
+        lines[-1] = lines[-1][: max(chars - 2, 1)] + ".." if len(wrap(name, chars)) > 2 else lines[-1]
+    top = y0 + edge + 0.5 + 0.7 * size + SILK_STROKE_MM / 2
+    return tuple(SilkText(t, round((x0 + x1) / 2, 6), round(top + k * 1.6 * size, 6), size)
+                 for k, t in enumerate([*lines, address]))
