@@ -30,8 +30,8 @@ def _axis_field(plt, design: "Design", pred: "Prediction"):
     magnet = fieldmod.Magnet.from_spec(design.spec)
     sen = design.spec.sensor
     d = np.linspace(max(0.3, 0.25 * sen.d_min_mm), 1.5 * design.d_rest_mm, 300)
-    bz = fieldmod.bz_br(magnet, d, 0.0, model="exact")[0]
-    grad = fieldmod.dbz_dz(magnet, d, 0.0, model="exact")
+    bz = fieldmod.bz_br(magnet, d, 0.0, model=fieldmod.FieldModel.EXACT)[0]
+    grad = fieldmod.dbz_dz(magnet, d, 0.0, model=fieldmod.FieldModel.EXACT)
     fig, ax = plt.subplots(figsize=(6.4, 4.0))
     ax.plot(d, bz, color="#1f77b4", label="Bz")
     ax.set_xlabel("magnet lower face to sensing point d, mm")
@@ -60,7 +60,7 @@ def _contours(plt, design: "Design", pred: "Prediction"):
     d = np.linspace(0.5 * sen.d_min_mm, 1.3 * design.d_rest_mm, 90)
     r = np.linspace(0.0, 2.5 * rm, 70)
     D, Rr = np.meshgrid(d, r, indexing="ij")
-    bz, br = fieldmod.bz_br(magnet, D, Rr, model="exact")
+    bz, br = fieldmod.bz_br(magnet, D, Rr, model=fieldmod.FieldModel.EXACT)
     fig, axes = plt.subplots(1, 2, figsize=(9.0, 4.0), sharey=True)
     for ax, values, name in ((axes[0], bz, "Bz"), (axes[1], br, "Br")):
         levels = np.geomspace(max(float(np.abs(values).max()) * 1e-3, 1e-3), float(np.abs(values).max()), 12)
