@@ -206,9 +206,9 @@ def test_render_is_complete_deterministic_and_embeds_the_calibration(design, cal
     assert render(design, calibration) == rendered
     assert list(rendered) == sorted(rendered)
     expected = {"readout/pyproject.toml", "readout/README.md"} | {
-        f"{PKG}/{name}" for name in ("__init__.py", "__main__.py", "_build.py", "calibration.py", "calibration.json",
-                                     "cli.py", "device.py", "frames.py", "simulate.py")}
-    assert set(rendered) == expected
+        f"{PKG}/{name}" for name in ("__init__.py", "__main__.py", "_build.py", "acceptance_json.py", "build.json",
+                                     "calibration.py", "calibration.json", "calibration_json.py", "cli.py",
+                                     "device.py", "frames.py", "json_checks.py", "simulate.py")}
     for path, data in rendered.items():
         assert isinstance(data, bytes) and not Path(path).is_absolute()
         if path.endswith(".py"):
@@ -220,11 +220,10 @@ def test_render_is_complete_deterministic_and_embeds_the_calibration(design, cal
     assert json.loads(rendered[f"{PKG}/calibration.json"]) == calibration
     sha = hashlib.sha256(json.dumps(calibration, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
     assert calibration_sha256(calibration) == sha
-    build = {}
-    exec(rendered[f"{PKG}/_build.py"], build)
-    assert build["CALIBRATION_SHA256"] == sha and build["SPEC_NAME"] == "magone"
-    assert (build["GAIN_SEL"], build["RESOLUTION"], build["BAUD"]) == (0, 2, 250000)
-    assert build["LSB_XY_UT"] == pytest.approx(0.751 * 4) and build["LSB_Z_UT"] == pytest.approx(1.21 * 4)
+    build = json.loads(rendered[f"{PKG}/build.json"])
+    assert build["calibration_sha256"] == sha and build["spec_name"] == "magone"
+    assert (build["gain_sel"], build["resolution"], build["baud"]) == (0, 2, 250000)
+    assert build["lsb_xy_uT"] == pytest.approx(0.751 * 4) and build["lsb_z_uT"] == pytest.approx(1.21 * 4)
 
 
 def test_spec_name_with_quotes_backslashes_and_newlines_renders_valid_python(design, calibration):
@@ -234,9 +233,7 @@ def test_spec_name_with_quotes_backslashes_and_newlines_renders_valid_python(des
     for path, data in files.items():
         if path.endswith(".py"):
             compile(data, path, "exec")
-    build = {}
-    exec(files[f"{PKG}/_build.py"], build)
-    assert build["SPEC_NAME"] == name
+    assert json.loads(files[f"{PKG}/build.json"])["spec_name"] == name
     assert name in tomllib.loads(files["readout/pyproject.toml"].decode())["project"]["description"]
     assert json.dumps(name) in files["readout/README.md"].decode()
 

@@ -1,8 +1,11 @@
-"""The host readout package of a build: ``magfab_readout``, pip-installable, rendered from ``templates/readout/``.
+"""The host readout package of a build: ``magfab_readout``, pip-installable.
 
-The package embeds the build's calibration.json and the firmware's settings (spec name, baud rate, chip
-register fields, microtesla per count); it decodes the firmware's frames (docs/bundle.md), evaluates the
-calibration in Python, and has a ``magfab-readout`` command with a simulated device.
+Its modules are ordinary Python files (``magfab/export/readout_pkg/magfab_readout/`` and the format validators
+of ``magfab/formats/``), copied verbatim into every build; only data is generated: ``build.json`` (spec name,
+baud rate, chip register fields, microtesla per count, the calibration's hash), calibration.json, acceptance.json,
+and from ``templates/readout/`` the package's pyproject.toml and README.md. The package decodes the firmware's
+frames (docs/bundle.md), evaluates the calibration in Python, and has a ``magfab-readout`` command with a
+simulated device.
 
 calibration.json and acceptance.json are checked by :mod:`magfab.formats.calibration_json` and
 :mod:`magfab.formats.acceptance_json`, the validators the package itself runs, so the build and the host refuse
@@ -17,6 +20,7 @@ from __future__ import annotations
 
 import json
 import math
+from importlib import resources
 from typing import Any, Callable, Mapping
 
 from .. import __version__
@@ -26,11 +30,15 @@ from ..formats.json_checks import FormatError
 from .templating import render as render_template
 from .templating import templates_dir
 
-__all__ = ["PACKAGE", "TEMPLATES", "render", "calibration_sha256", "validate_calibration", "validate_acceptance",
-           "TEMPERATURE_RAW_25C", "TEMPERATURE_LSB_PER_C"]
+__all__ = ["PACKAGE", "TEMPLATES", "RUNTIME", "SHARED", "render", "runtime_files", "calibration_sha256",
+           "validate_calibration", "validate_acceptance", "TEMPERATURE_RAW_25C", "TEMPERATURE_LSB_PER_C"]
 
 PACKAGE = "magfab_readout"
 TEMPLATES = "readout"  # folder under templates/; every file in it ends in .j2 and renders to readout/<path>
+#: The package's modules, ordinary Python files under magfab/export/, copied verbatim into readout/src/.
+RUNTIME = ("readout_pkg", PACKAGE)
+#: magfab's format validators the package runs too, copied verbatim from magfab/formats/.
+SHARED = ("json_checks.py", "calibration_json.py", "acceptance_json.py")
 # MLX90393 temperature (TCMP off): T = 25 C + (raw - T25) / TRES, from recipes/chips.toml.
 from .firmware import TEMPERATURE_LSB_PER_C, TEMPERATURE_RAW_25C  # noqa: E402 - from recipes/chips.toml
 
@@ -82,7 +90,8 @@ def calibration_sha256(calibration: Mapping[str, Any]) -> str:
     return validate_calibration(calibration).sha256
 
 
-def _context(design, calibration_object, acceptance: Mapping[str, Any] | None = None) -> dict[str, object]:
+def _build_data(design, checked: calibration_json.Checked) -> dict[str, object]:
+    """build.json: what the package's ``_build`` module reads (the spec, the firmware's settings, the hash)."""
     from ..models.predict import chip_setting  # numpy; kept out of 'import magfab'
 
     spec = design.spec
@@ -92,13 +101,11 @@ def _context(design, calibration_object, acceptance: Mapping[str, Any] | None = 
     for key, value in numbers.items():
         if not (math.isfinite(value) and value > 0):
             raise SpecError("sensor", value, f"gives a {key} that is not a positive number")
-    sha = calibration_object.sha256
     return {
         "spec_name": spec.name,
         "spec_sha256": spec.sha256(),
         "magfab_version": __version__,
-        "version": f"{__version__}+cal.{sha[:12]}",
-        "description": f"Host readout for the magfab tactile sensor {spec.name}",
+        "version": f"{__version__}+cal.{checked.sha256[:12]}",
         "baud": int(spec.firmware.baud),
         "output": spec.firmware.output.value,
         "temperature": bool(spec.firmware.temperature),
@@ -112,7 +119,15 @@ def _context(design, calibration_object, acceptance: Mapping[str, Any] | None = 
         "sample_rate_Hz": round(float(chip.rate_Hz), 6),
         "temperature_raw_25C": TEMPERATURE_RAW_25C,
         "temperature_lsb_per_C": TEMPERATURE_LSB_PER_C,
-        "calibration_sha256": sha,
+        "calibration_sha256": checked.sha256,
+    }
+
+
+def _context(build: Mapping[str, object], acceptance: Mapping[str, Any] | None) -> dict[str, object]:
+    """What templates/readout/ (pyproject.toml, README.md) are rendered with."""
+    return {
+        **build,
+        "description": f"Host readout for the magfab tactile sensor {build['spec_name']}",
         "acceptance": None if acceptance is None else {
             "rest_lo": f"{acceptance['rest']['Bz_uT']['min']:.0f}", "rest_hi": f"{acceptance['rest']['Bz_uT']['max']:.0f}",
             "rest_nominal": f"{acceptance['rest']['Bz_uT']['nominal']:.0f}",
@@ -121,6 +136,21 @@ def _context(design, calibration_object, acceptance: Mapping[str, Any] | None = 
             "delta_hi": f"{acceptance['weight']['delta_Bz_uT']['max']:.0f}",
         },
     }
+
+
+def runtime_files() -> dict[str, bytes]:
+    """The package's modules as every build ships them, ``{file name: bytes}``: the runtime's own
+    (magfab/export/readout_pkg/magfab_readout/) and magfab's format validators, byte for byte."""
+    runtime = resources.files(__package__).joinpath(*RUNTIME)
+    out = {entry.name: entry.read_bytes() for entry in runtime.iterdir() if entry.name.endswith(".py")}
+    formats = resources.files(calibration_json.__package__)
+    out.update({name: formats.joinpath(name).read_bytes() for name in SHARED})
+    return dict(sorted(out.items()))
+
+
+def _json_file(data: object) -> bytes:
+    # the layout of the bundle's own calibration/calibration.json, so the two files are byte for byte the same
+    return (json.dumps(data, indent=1, sort_keys=True, allow_nan=False) + "\n").encode("ascii")
 
 
 def render(design, calibration: Mapping[str, Any], acceptance: Mapping[str, Any] | None = None) -> dict[str, bytes]:
@@ -137,20 +167,20 @@ def render(design, calibration: Mapping[str, Any], acceptance: Mapping[str, Any]
 
     if not isinstance(design, Design):
         raise TypeError(f"design must be a magfab Design (from magfab.derive); instead received {type(design).__name__}")
-    calibration_object = validate_calibration(calibration)
+    checked = validate_calibration(calibration)
     accepted = None if acceptance is None else validate_acceptance(acceptance)
-    context = _context(design, calibration_object, accepted)
+    build = _build_data(design, checked)
+    context = _context(build, accepted)
     root = templates_dir() / TEMPLATES
     files: dict[str, bytes] = {}
     for path in sorted(root.rglob("*.j2")):
         relative = path.relative_to(root).as_posix()
         text = render_template(f"{TEMPLATES}/{relative}", **context)
         files[f"readout/{relative[:-len('.j2')]}"] = text.encode("utf-8")
-    data = json.loads(calibration_object.canonical)
-    # the layout of the bundle's own calibration/calibration.json, so the two files are byte for byte the same
-    files[f"readout/src/{PACKAGE}/calibration.json"] = (json.dumps(data, indent=1, sort_keys=True, allow_nan=False)
-                                                       + "\n").encode("ascii")
+    package = f"readout/src/{PACKAGE}"
+    files.update({f"{package}/{name}": data for name, data in runtime_files().items()})
+    files[f"{package}/build.json"] = _json_file(build)
+    files[f"{package}/calibration.json"] = _json_file(json.loads(checked.canonical))
     if accepted is not None:
-        files[f"readout/src/{PACKAGE}/acceptance.json"] = (json.dumps(accepted, indent=1, sort_keys=True,
-                                                                      allow_nan=False) + "\n").encode("utf-8")
+        files[f"{package}/acceptance.json"] = _json_file(accepted)
     return dict(sorted(files.items()))

@@ -23,7 +23,7 @@ from typing import Dict, Optional, Tuple
 from .json_checks import FormatError, finite, is_number
 
 __all__ = ["FORMAT", "FORCES", "INPUTS", "MAX_ORDER", "MLS_MAX_ORDER", "CalibrationError", "Checked", "MLSPoints",
-           "calibration_sha256", "canonical_json", "loads", "monomials", "validate"]
+           "calibration_sha256", "canonical_json", "cross", "loads", "monomials", "validate"]
 
 FORMAT = "magfab-calibration/1"
 FORCES = ("Fz_N", "Fr_N")
@@ -103,7 +103,8 @@ def _interval(data: dict, name: str) -> Point:
     return float(pair[0]), float(pair[1])
 
 
-def _cross(o: Point, a: Point, b: Point) -> float:
+def cross(o: Point, a: Point, b: Point) -> float:
+    """(a - o) x (b - o): positive where o, a, b turn counter-clockwise."""
     return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
 
 
@@ -126,7 +127,7 @@ def _hull(data: dict) -> Tuple[Tuple[Point, ...], float]:
     if not area2 > 1e-12 * span * span:
         raise CalibrationError(path, raw, "must enclose a positive area counter-clockwise (it is clockwise or flat)")
     for k in range(len(points)):
-        if _cross(points[k - 2], points[k - 1], points[k]) < -1e-9 * span * span:
+        if cross(points[k - 2], points[k - 1], points[k]) < -1e-9 * span * span:
             raise CalibrationError(path, raw, "must be convex (it turns clockwise at point {})".format((k - 1) % len(points)))
     return tuple(points), span
 

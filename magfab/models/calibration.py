@@ -70,7 +70,7 @@ __all__ = [
     "FORMAT", "MIN_ROWS", "ORDERS", "MLS_ORDER", "SCAN_COLUMNS", "FORCE_COLUMNS", "HULL_MAX_VERTICES",
     "CalibrationError", "ScanError", "Scan", "read_scan_csv", "scan_csv", "scan_track", "simulate_scan",
     "monomials", "Scaling", "ValidRegion", "MLSModel", "Calibration", "Candidate", "FitResult",
-    "fit", "choose", "poly_ops", "mls_ops", "guard_ops", "evaluation_time_s", "chart",
+    "fit", "choose", "poly_ops", "mls_ops", "guard_ops", "evaluation_time_s",
 ]
 
 FORMAT = calibration_json.FORMAT

@@ -21,7 +21,7 @@ from .frames import (Decoder, DecoderStats, DeviceInfo, Sample, crc16_ccitt_fals
                      encode_info_line, encode_text_line)
 from .simulate import PressPattern, RestTip, SimulatedDevice
 
-__version__ = {{ version|py_string }}
+__version__ = _build.VERSION
 SPEC_NAME = _build.SPEC_NAME
 
 __all__ = [

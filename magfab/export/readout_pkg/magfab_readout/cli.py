@@ -15,12 +15,11 @@ import pkgutil
 import sys
 from typing import List, Optional, Tuple
 
-from . import __version__, _build
+from . import __version__, _build, acceptance_json
 from .calibration import Calibration, CalibrationError
 from .device import Device, DeviceError, cross_check
 from .simulate import RestTip, SimulatedDevice
 
-ACCEPTANCE_FORMAT = "magfab-acceptance/1"
 G0 = 9.80665  # m/s^2
 
 CSV_COLUMNS = ("time_s", "Bx_uT", "By_uT", "Bz_uT", "temperature_C", "Fx_N", "Fy_N", "Fz_N", "status", "seq")
@@ -223,7 +222,8 @@ class UsageError(ValueError):
 
 
 def load_acceptance() -> Optional[dict]:
-    """The package's acceptance.json (format magfab-acceptance/1), or None when it was built without one."""
+    """The package's acceptance.json, checked by ``acceptance_json`` (the validator magfab ran on it before
+    shipping it), or None when the package was built without one."""
     try:
         raw = pkgutil.get_data("magfab_readout", "acceptance.json")
     except OSError:
@@ -231,18 +231,13 @@ def load_acceptance() -> Optional[dict]:
     if raw is None:
         return None
     try:
-        data = json.loads(raw.decode("utf-8"))
-    except ValueError as exc:
-        raise DeviceError("the package's acceptance.json is not valid JSON ({})".format(exc)) from None
-    if not isinstance(data, dict) or data.get("format") != ACCEPTANCE_FORMAT:
-        raise DeviceError("the package's acceptance.json has format {!r}; this reader knows {!r}: reinstall the "
-                          "readout package from the same magfab build".format(
-                              data.get("format") if isinstance(data, dict) else None, ACCEPTANCE_FORMAT))
-    return data
+        return acceptance_json.loads(raw)
+    except acceptance_json.AcceptanceError as exc:
+        raise DeviceError("the package's {}: reinstall the readout package from the same magfab build".format(exc)) from None
 
 
 class Bands:
-    """The predicted bands of an acceptance.json, checked for the keys and numbers ``check`` needs."""
+    """The predicted bands of a validated acceptance.json (:func:`load_acceptance`)."""
 
     def __init__(self, data: dict) -> None:
         try:
@@ -264,13 +259,9 @@ class Bands:
             self.grade = str(magnet["grade"])
             self.remanence = tuple(float(magnet["remanence_T"][k]) for k in ("low", "nominal", "high"))
             self.grades = {str(k): float(v["remanence_T"]) for k, v in data.get("grades", {}).items()}
-        except (KeyError, TypeError, ValueError) as exc:
-            raise DeviceError("the package's acceptance.json lacks or garbles {}: reinstall the readout package from "
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:  # the optional grade tables
+            raise DeviceError("the package's acceptance.json garbles {}: reinstall the readout package from "
                               "the magfab build".format(exc)) from None
-        numbers = list(self.rest) + [self.bxy_max, self.weight_g] + self.force + sum(self.delta.values(), [])
-        if not all(math.isfinite(x) for x in numbers) or len(set(map(len, self.delta.values()))) != 1 \
-                or len(self.force) != len(self.delta["min"]) or any(b <= a for a, b in zip(self.force, self.force[1:])):
-            raise DeviceError("the package's acceptance.json has a malformed band table: reinstall the readout package")
 
     def rise(self, grams: float) -> Tuple[float, float, float]:
         """(min, nominal, max) predicted rise of Bz in uT under ``grams`` on the tip (linear in the table)."""

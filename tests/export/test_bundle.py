@@ -16,9 +16,11 @@ import pytest
 from click.testing import CliRunner
 
 from conftest import require_tool
-from magfab.models import calibration as C
-from magfab.export import firmware
 from magfab.cli import main
+from magfab.errors import MagfabError
+from magfab.export import firmware, readout
+from magfab.formats import calibration_json
+from magfab.models import calibration as C
 
 
 @pytest.fixture(scope="module")
@@ -69,6 +71,49 @@ def _decoder(out: Path):
         for name in [n for n in sys.modules if ours(n)]:
             del sys.modules[name]
         sys.modules.update(saved)
+
+
+def test_the_readout_runtime_is_shipped_verbatim(bundle):
+    """The package's modules are magfab's files byte for byte (the runtime's own and the format validators):
+    one implementation, no template; only data (build.json, calibration.json, acceptance.json) is generated."""
+    out, _ = bundle
+    package = out / "readout" / "src" / "magfab_readout"
+    shipped = {p.name: p.read_bytes() for p in package.iterdir() if p.is_file()}
+    runtime = Path(readout.__file__).parent.joinpath(*readout.RUNTIME)
+    formats = Path(calibration_json.__file__).parent
+    sources = {p.name: p.read_bytes() for p in runtime.glob("*.py")}
+    sources.update({name: (formats / name).read_bytes() for name in readout.SHARED})
+    assert {n: d for n, d in shipped.items() if n.endswith(".py")} == sources == readout.runtime_files()
+    assert set(shipped) - set(sources) == {"build.json", "calibration.json", "acceptance.json"}
+    assert json.loads(shipped["build.json"])["calibration_sha256"] == calibration_json.calibration_sha256(
+        json.loads(shipped["calibration.json"]))
+
+
+def test_the_readout_runtime_passes_pyflakes(bundle):
+    out, _ = bundle
+    files = sorted(str(p) for p in (out / "readout" / "src" / "magfab_readout").glob("*.py"))
+    try:
+        import pyflakes  # noqa: F401
+    except ImportError:
+        command = [sys.executable, "-m", "py_compile", *files]
+    else:
+        command = [sys.executable, "-m", "pyflakes", *files]
+    run = subprocess.run(command, capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stdout + run.stderr
+
+
+def test_the_packaged_validator_stands_alone(bundle):
+    """Inside the package the validators' errors are plain ValueErrors (magfab is not there to import);
+    inside magfab the same bytes give magfab's CalibrationFormatError, and both refuse the same file."""
+    out, cal = bundle
+    pkg = _decoder(out)
+    assert issubclass(pkg.CalibrationError, ValueError) and not issubclass(pkg.CalibrationError, MagfabError)
+    bad = dict(cal, shear_sign=0)
+    with pytest.raises(pkg.CalibrationError) as host:
+        pkg.Calibration(bad)
+    with pytest.raises(calibration_json.CalibrationError) as ours:
+        calibration_json.validate(bad)
+    assert str(host.value) == str(ours.value) and isinstance(ours.value, MagfabError)
 
 
 def test_end_to_end_simulated_chip_to_host_forces(bundle, tmp_path):
