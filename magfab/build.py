@@ -110,8 +110,9 @@ def _solid(module: str, func: str, design: Design):
     return getattr(importlib.import_module(module), func)(design)
 
 
-def _board(design: Design, say: Progress, timings: dict[str, float]) -> tuple[list[Artifact], list[Finding]]:
-    """The footprint library, the routed breakout board and, where KiCad is installed, its Gerbers."""
+def _board(design: Design, say: Progress, timings: dict[str, float]):
+    """The footprint library, the routed breakout board and, where KiCad is installed, its Gerbers:
+    (artifacts, findings, the :class:`magfab.pcb.Board`, which the report draws rather than routing again)."""
     from .export import kicad
     from . import pcb
 
@@ -127,20 +128,20 @@ def _board(design: Design, say: Progress, timings: dict[str, float]) -> tuple[li
     out = [Artifact(f"pcb/{rel}", data, next(v for k, v in what.items() if rel.endswith(k)))
            for rel, data in sorted(files.items())]
     if errors_in(found, strict=False):
-        return out, found
+        return out, found, board
     if kicad.kicad_python() is None:
         found.append(Finding(Severity.INFO, "pcb-gerbers-skipped",
                              "KiCad (Debian package 'kicad') is not installed, so no Gerbers were plotted: open "
                              f"pcb/{design.spec.name}.kicad_pcb in KiCad and plot them, or install KiCad and rebuild",
                              "pcb"))
-        return out, found
+        return out, found, board
     say("plotting Gerbers with KiCad")
     t = time.perf_counter()
     for name, data in sorted(kicad.plot_gerbers(files, design.spec.name).items()):
         kind = "drill file (Excellon)" if name.endswith(".drl") else "Gerber (plotted by KiCad)"
         out.append(Artifact(f"pcb/gerbers/{name}", data, kind))
     timings["gerbers"] = time.perf_counter() - t
-    return out, found
+    return out, found, board
 
 
 def _predictions(design: Design, say: Progress, timings: dict[str, float]):
@@ -309,7 +310,7 @@ def plan(spec: Spec, progress: Progress | None = None, scan=None) -> BuildResult
     if stop:
         raise BuildError(stop)
 
-    board_artifacts, board_findings = _board(design, say, timings)
+    board_artifacts, board_findings, routed = _board(design, say, timings)
     findings += board_findings
     stop = errors_in(findings, spec.build.strict)
     if stop:
@@ -351,7 +352,7 @@ def plan(spec: Spec, progress: Progress | None = None, scan=None) -> BuildResult
                     ("manifest.json", "what made what: hashes, versions")]
     artifacts.append(Artifact("report.html", render_report(spec, design, findings, list(artifacts), prediction,
                                                            fitted.calibration.to_json(), meshes,
-                                                           extra_files=report_files),
+                                                           extra_files=report_files, board=routed),
                               "the whole build on one page, for a browser"))
     timings["report"] = time.perf_counter() - t
     models = {f"{m.family}_model": m.as_dict() for m in prediction.models}

@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 
 from conftest import require_tool
+from magfab import pcb
 from magfab.build import PARTS, Artifact
 from magfab.errors import Finding, Severity
 from magfab.export.cad import tessellate
@@ -81,7 +82,8 @@ def inputs(default_build):
     calibration = json.loads(next(a.data for a in r.artifacts if a.path == "calibration/calibration.json"))
     return {"spec": spec, "design": design, "findings": list(r.findings), "artifacts": [a for a in r.artifacts
             if a.path != "report.html"], "prediction": r.prediction, "calibration": calibration, "meshes": meshes,
-            "extra_files": [(p, d) for p, d in LATER if p not in paths or p == "report.html"]}
+            "extra_files": [(p, d) for p, d in LATER if p not in paths or p == "report.html"],
+            "board": pcb.board(design)}
 
 
 @pytest.fixture(scope="module")
