@@ -10,21 +10,23 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
-import shutil
-import tempfile
 import time
 from dataclasses import dataclass, field
-from pathlib import Path, PurePosixPath
-from typing import Callable
+from pathlib import Path
+from typing import TYPE_CHECKING, Callable
 
 from . import __version__
-from .check import design_findings, errors_in, mesh_findings
+from .check import design_findings, errors_in, mesh_findings, mould_fit_findings
 from .design import Design, derive
 from .errors import BuildError, Finding, OutputError, Severity
+from .output import Artifact, check_target, write
 from .spec import Spec
 
-__all__ = ["Artifact", "BuildResult", "OutputError", "plan", "write", "build", "PARTS", "default_out_dir"]
+if TYPE_CHECKING:
+    from .models.predict import Prediction
+
+__all__ = ["Artifact", "BuildResult", "OutputError", "plan", "write", "build", "check_target", "PARTS",
+           "default_out_dir"]
 
 #: Solid parts: file stem, builder (module, function), whether it is printed, what it is for.
 PARTS = (
@@ -37,13 +39,6 @@ PARTS = (
 Progress = Callable[[str], None]
 
 
-@dataclass(frozen=True)
-class Artifact:
-    path: str  # relative, POSIX separators
-    data: bytes
-    description: str
-
-
 @dataclass
 class BuildResult:
     spec: Spec
@@ -52,7 +47,7 @@ class BuildResult:
     findings: list[Finding]
     timings_s: dict[str, float] = field(default_factory=dict)
     out_dir: Path | None = None
-    prediction: object | None = None  # magfab.models.predict.Prediction
+    prediction: "Prediction | None" = None
     calibration: dict[str, object] | None = None  # what the CLI summary says of the bundle
 
     def summary(self) -> dict[str, object]:
@@ -81,22 +76,22 @@ class BuildResult:
 
 
     def _prediction_summary(self) -> dict[str, object] | None:
-        if self.prediction is None:
+        p = self.prediction
+        if p is None:
             return None
-        d = self.prediction.data  # type: ignore[attr-defined]
-        n, s = d["normal"], d["shear"]
+        n, s = p.normal, p.shear
         return {
-            "Bz_rest_G": round(d["field"]["Bz_rest_G"], 1),
-            "dBz_dz_rest_G_per_mm": round(d["field"]["dBz_dz_rest_G_per_mm"], 1),
-            "normal_sensitivity_G_per_N": [round(x, 1) for x in n["sensitivity_G_per_N"]],
-            "normal_resolution_mN": round(n["resolution_mN"], 2),
-            "normal_range_N": round(n["range_N"], 3),
-            "normal_range_limit": n["range_limit"],
-            "shear_sensitivity_G_per_N": [round(x, 1) for x in s["sensitivity_G_per_N"]],
-            "shear_resolution_mN": round(s["resolution_mN"], 2),
-            "shear_range_N": round(s["range_N"], 3),
-            "noise_G": round(d["noise_G"]["total_z_G"], 3),
-            "models": {k: v["model"] for k, v in d["models"].items()},
+            "Bz_rest_G": round(p.field.Bz_rest_G, 1),
+            "dBz_dz_rest_G_per_mm": round(p.field.dBz_dz_rest_G_per_mm, 1),
+            "normal_sensitivity_G_per_N": [round(x, 1) for x in n.sensitivity_G_per_N],
+            "normal_resolution_mN": round(n.resolution_mN, 2),
+            "normal_range_N": round(n.range_N, 3),
+            "normal_range_limit": n.range_limit,
+            "shear_sensitivity_G_per_N": [round(x, 1) for x in s.sensitivity_G_per_N],
+            "shear_resolution_mN": round(s.resolution_mN, 2),
+            "shear_range_N": round(s.range_N, 3),
+            "noise_G": round(p.noise.total_z_G, 3),
+            "models": {m.family: m.name for m in p.models},
         }
 
 
@@ -156,7 +151,7 @@ def _predictions(design: Design, say: Progress, timings: dict[str, float]):
     if pred is None:
         raise BuildError(found)
     t = time.perf_counter()
-    out = [Artifact("predictions.json", _json_bytes(pred.data), "predicted field, force curve, sensitivity, "
+    out = [Artifact("predictions.json", _json_bytes(pred.as_json()), "predicted field, force curve, sensitivity, "
                     "resolution, range and noise, with the models used")]
     what = {"field_axis": "Bz and dBz/dz on the axis, d_min and d_max marked",
             "field_contours": "Bz and Br contours in the z-r plane with the magnet's travel envelope",
@@ -288,6 +283,7 @@ def plan(spec: Spec, progress: Progress | None = None, scan=None) -> BuildResult
     import trimesh  # noqa: F401
 
     from .export.cad import step_bytes, stl_bytes, tessellate
+    from .fit import mould_fit
 
     timings["import"] = time.perf_counter() - t
     artifacts: list[Artifact] = []
@@ -306,6 +302,10 @@ def plan(spec: Spec, progress: Progress | None = None, scan=None) -> BuildResult
         if spec.build.step:
             artifacts.append(Artifact(f"{stem}.step", step_bytes(solid, f"{spec.name}-{stem}"), description + ", STEP"))
         timings[f"export:{stem}"] = time.perf_counter() - t
+    if not errors_in(findings, strict=False):  # booleans need sound meshes
+        t = time.perf_counter()
+        findings += mould_fit_findings(design, mould_fit(design, meshes, tol))
+        timings["mould-fit"] = time.perf_counter() - t
     stop = errors_in(findings, spec.build.strict)
     if stop:
         raise BuildError(stop)
@@ -381,67 +381,20 @@ def _manifest(spec: Spec, design: Design, artifacts: list[Artifact], models: dic
     })
 
 
-def default_out_dir(spec: Spec) -> Path:
-    return Path("build") / spec.name
-
-
-def _safe_relative(path: str) -> PurePosixPath:
-    p = PurePosixPath(path)
-    if p.is_absolute() or not p.parts or any(part in {"", ".", ".."} for part in p.parts):
-        raise OutputError(f"artifact path {path!r} would leave the output directory")
-    return p
-
-
-def _is_previous_build(path: Path) -> bool:
-    manifest = path / "manifest.json"
-    try:
-        return "magfab_version" in json.loads(manifest.read_text(encoding="utf-8"))
-    except (OSError, ValueError, TypeError):
-        return False
-
-
-def write(out_dir: Path, artifacts: list[Artifact]) -> Path:
-    """Put the artifacts into ``out_dir`` atomically; an existing ``out_dir`` must be an earlier magfab build."""
-    out_dir = Path(out_dir).absolute()
-    if out_dir.exists() and not (out_dir.is_dir() and (_is_previous_build(out_dir) or not any(out_dir.iterdir()))):
-        raise OutputError(f"--out {out_dir} exists and is not an earlier magfab build (no manifest.json); "
-                          "refusing to replace it: choose another directory")
-    for a in artifacts:
-        _safe_relative(a.path)
-    parent = out_dir.parent
-    parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.tmp-", dir=parent))
-    old: Path | None = None
-    try:
-        for a in artifacts:
-            target = tmp.joinpath(*_safe_relative(a.path).parts)
-            target.parent.mkdir(parents=True, exist_ok=True)
-            target.write_bytes(a.data)
-        os.chmod(tmp, 0o755)
-        if out_dir.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.old-", dir=parent))
-            os.rename(out_dir, old / "previous")
-        os.rename(tmp, out_dir)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        if old is not None and (old / "previous").exists() and not out_dir.exists():
-            os.rename(old / "previous", out_dir)
-        raise
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)
-    return out_dir
-
-
 def build(spec: Spec, out_dir: Path | None = None, progress: Progress | None = None, scan=None) -> BuildResult:
     """Plan and write a build (calibrated from ``scan`` if given); returns what was written where."""
+    target = check_target(Path(out_dir) if out_dir is not None else default_out_dir(spec))
     result = plan(spec, progress, scan)
-    target = Path(out_dir) if out_dir is not None else default_out_dir(spec)
     if progress:
         progress("writing files")
     t = time.perf_counter()
     result.out_dir = write(target, result.artifacts)
     result.timings_s["write"] = time.perf_counter() - t
     return result
+
+
+def default_out_dir(spec: Spec) -> Path:
+    return Path("build") / spec.name
 
 
 def _kicad_version(artifacts: list[Artifact]) -> str | None:

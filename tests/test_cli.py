@@ -94,14 +94,14 @@ def test_interrupt_mid_build_leaves_the_previous_output(default_build, tmp_path,
 
 def _fake_build(tag: str):
     """Artifacts standing in for a build: the swap does not care what is in them, only that a manifest is."""
-    from magfab.build import Artifact
+    from magfab.output import Artifact
 
     manifest = json.dumps({"magfab_version": "test", "tag": tag}).encode()
     return [Artifact("manifest.json", manifest, ""), Artifact(f"parts/{tag}.stl", tag.encode() * 100, "")]
 
 
 def test_interrupt_while_writing_restores_the_previous_output(tmp_path, monkeypatch):
-    build_mod = importlib.import_module("magfab.build")  # the module, not the function magfab.build
+    from magfab import output as build_mod  # the only writer of the output folder
     out = tmp_path / "out"
     build_mod.write(out, _fake_build("old"))
     before = _snapshot(out)
