@@ -38,7 +38,7 @@ BENCH_DIR = Path(__file__).resolve().parent
 sys.path.insert(0, str(BENCH_DIR.parent))
 
 from magfab import derive, load_spec  # noqa: E402
-from magfab.export import firmware  # noqa: E402
+from magfab.export import firmware, toolchain  # noqa: E402
 
 DEFAULT_OUT = BENCH_DIR / "out"
 JSON_NAME = "firmware_bench.json"
@@ -76,10 +76,10 @@ def rm_transfer_us(i2c_hz: float, words: int) -> float:
 
 def measure(design, calibration: dict) -> dict:
     files = firmware.render(design, calibration)
-    image = firmware.build_hex(files)
+    image = toolchain.build_hex(files)
     with tempfile.TemporaryDirectory(prefix="magfab-fw-bench-") as tmp:
-        elf, _ = firmware.build_avr_elf(files, tmp, "bench")
-        uart = firmware.run_simavr(elf)
+        elf, _ = toolchain.build_avr_elf(files, tmp, "bench")
+        uart = toolchain.run_simavr(elf)
     if uart is None:
         raise SystemExit("simavr is not installed (Debian package simavr)")
     cycles: dict[str, dict[str, int]] = {}

@@ -1,14 +1,15 @@
-"""The readout firmware: C sources rendered from the spec and the calibration, compiled where a toolchain exists.
+"""The readout firmware: C sources rendered from the spec and the calibration.
 
-Three entry points (every subprocess magfab runs for the firmware is in this module):
+:func:`render` -- ``(design, calibration) -> {relative path: bytes}``: the portable C core
+(``magfab_readout/src``: MLX90393 protocol, conversion, calibration, frames, the loop), the Arduino sketch
+and ``platformio.ini``, the bare-metal ATmega328P main and its Makefile, the cycle benchmark, the host
+simulator with its harness, and the avrdude flash scripts. Deterministic: the same inputs give the same bytes.
+Compiling them (avr-gcc, gcc, simavr) is :mod:`magfab.export.toolchain`'s job; this module holds the target's
+constants both share.
 
-* :func:`render` -- ``(design, calibration) -> {relative path: bytes}``: the portable C core
-  (``magfab_readout/src``: MLX90393 protocol, conversion, calibration, frames, the loop), the Arduino sketch
-  and ``platformio.ini``, the bare-metal ATmega328P main and its Makefile, the cycle benchmark, the host
-  simulator with its harness, and the avrdude flash scripts. Deterministic: the same inputs give the same bytes.
-* :func:`build_hex` -- the ATmega328P image with avr-gcc (``None`` without avr-gcc), and its flash/RAM size.
-* :func:`build_host` -- the core and the simulated MLX90393 compiled for the host with
-  ``gcc -std=c99 -Wall -Wextra -Werror -pedantic``, for the tests.
+The calibration is checked by :func:`magfab.formats.calibration_json.validate` (the one validator of the file);
+on top, :class:`FirmwareError` refuses what the C tables cannot hold (float32 range, order above
+:data:`MAX_ORDER`, more than :data:`MAX_HULL_POINTS` hull points).
 
 Every chip number comes from the recipe (``magfab/recipes/chips.toml``); the few the recipe does not carry are
 the named constants below, each with its source or marked as an assumption. The serial formats are those of
@@ -18,19 +19,13 @@ the named constants below, each with its source or marked as an assumption. The 
 from __future__ import annotations
 
 import math
-import re
-import shutil
-import signal
 import struct
-import subprocess
-import tempfile
 from dataclasses import dataclass
-from pathlib import Path, PurePosixPath
 from typing import TYPE_CHECKING, Any, Mapping
 
-from ..errors import SpecError
+from ..errors import InputError, SpecError
 from ..formats import calibration_json
-from ..formats.calibration_json import calibration_sha256
+from ..formats.calibration_json import calibration_sha256, cross
 from ..recipes import catalogue
 
 if TYPE_CHECKING:
@@ -41,18 +36,12 @@ __all__ = [
     "HEX_NAME",
     "HOST_CFLAGS",
     "ChipConfig",
-    "CompileError",
     "FirmwareError",
-    "build_avr_elf",
-    "build_hex",
-    "build_host",
     "calibration_sha256",
     "chip_config",
     "raw_words",
     "render",
-    "run_simavr",
     "twi_settings",
-    "write_tree",
 ]
 
 # ---- the target -------------------------------------------------------------------------------------------
@@ -109,8 +98,9 @@ MAX_ORDER = 8
 MAX_HULL_POINTS = 1000
 
 
-class FirmwareError(ValueError):
-    """A calibration the firmware cannot carry: names the key path, the value and what is allowed."""
+class FirmwareError(InputError):
+    """A calibration or spec value the firmware cannot carry (float32 range, the C tables' order, the image
+    size): names the key path, the value and what is allowed. Exit 2."""
 
     def __init__(self, key: str, value: object, allowed: str) -> None:
         shown = repr(value)
@@ -119,14 +109,16 @@ class FirmwareError(ValueError):
         super().__init__(f"calibration.{key} = {shown}: {allowed}")
 
 
-class CompileError(RuntimeError):
-    """The C compiler (or another tool of the toolchain) failed; the message carries its command and output."""
+def __getattr__(name: str) -> object:
+    # The compiler and simulator drivers live in magfab.export.toolchain (which imports this module's target
+    # constants); kept reachable here for build.py's ``firmware.build_hex`` until it imports them from there.
+    if name in _TOOLCHAIN:
+        from . import toolchain
+        return getattr(toolchain, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
-    def __init__(self, command: list[str], output: str) -> None:
-        self.command = command
-        self.output = output
-        tail = "\n".join(output.strip().splitlines()[-40:])
-        super().__init__(f"{Path(command[0]).name} failed ({' '.join(command[1:6])} ...):\n{tail}")
+
+_TOOLCHAIN = ("CompileError", "build_avr_elf", "build_hex", "build_host", "run_simavr", "write_tree")
 
 
 # ---- chip configuration -----------------------------------------------------------------------------------
@@ -230,10 +222,6 @@ def _float32(key: str, value: float) -> float:
     return value
 
 
-def _cross(o: tuple[float, float], a: tuple[float, float], b: tuple[float, float]) -> float:
-    return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
-
-
 def _hull(checked: calibration_json.Checked) -> list[tuple[float, float]]:
     """The validated hull (convex, counter-clockwise, no closing repeat) without its collinear (or numerically
     flat) vertices: each costs the firmware an edge test on every reading."""
@@ -244,7 +232,7 @@ def _hull(checked: calibration_json.Checked) -> list[tuple[float, float]]:
     while changed and len(pts) > 3:
         changed = False
         for k in range(len(pts)):
-            if _cross(pts[k - 1], pts[k], pts[(k + 1) % len(pts)]) <= tol or pts[k] == pts[k - 1]:
+            if cross(pts[k - 1], pts[k], pts[(k + 1) % len(pts)]) <= tol or pts[k] == pts[k - 1]:
                 del pts[k]
                 changed = True
                 break
@@ -303,7 +291,7 @@ def _calibration_context(cal: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def _inside_convex(hull: list[tuple[float, float]], q: tuple[float, float]) -> bool:
-    return all(_cross(hull[k - 1], hull[k], q) >= 0.0 for k in range(len(hull)))
+    return all(cross(hull[k - 1], hull[k], q) >= 0.0 for k in range(len(hull)))
 
 
 def _inner_box(hull: list[tuple[float, float]]) -> tuple[float, float, float, float]:
@@ -447,131 +435,3 @@ def render(design: "Design", calibration: Mapping[str, Any]) -> dict[str, bytes]
             text = text.replace("\r\n", "\n").replace("\n", "\r\n")
         out[rel] = text.encode("utf-8")
     return out
-
-
-# ---- compiling --------------------------------------------------------------------------------------------
-
-
-def write_tree(files: Mapping[str, bytes], root: Path) -> None:
-    """Write rendered files under root (paths must stay inside it)."""
-    for rel, data in files.items():
-        parts = PurePosixPath(rel).parts
-        if not parts or PurePosixPath(rel).is_absolute() or ".." in parts:
-            raise ValueError(f"firmware file path {rel!r} must be relative and stay inside the folder")
-        target = root.joinpath(*parts)
-        target.parent.mkdir(parents=True, exist_ok=True)
-        target.write_bytes(data)
-
-
-def _run(command: list[str], cwd: Path, timeout: float = 300.0) -> str:
-    try:
-        done = subprocess.run(command, cwd=cwd, capture_output=True, text=True, timeout=timeout)
-    except subprocess.TimeoutExpired as exc:
-        raise CompileError(command, f"timed out after {timeout:g} s") from exc
-    output = (done.stdout or "") + (done.stderr or "")
-    if done.returncode != 0:
-        raise CompileError(command, output)
-    return output
-
-
-def build_avr_elf(files: Mapping[str, bytes], workdir: str | Path, program: str = "main") -> tuple[Path, str]:
-    """Compile ``avr/<program>.c`` (``main``: the firmware, ``bench``: the cycle benchmark) with the core into
-    ``workdir/avr/build/<program>.elf``, with the flags of the bundle's Makefile. Returns the ELF and the
-    compiler's warnings (empty when clean). Raises FileNotFoundError without avr-gcc, CompileError on failure."""
-    cc = shutil.which("avr-gcc")
-    if cc is None:
-        raise FileNotFoundError("avr-gcc is not installed (Debian packages gcc-avr and avr-libc)")
-    root = Path(workdir)
-    write_tree(files, root)
-    avr = root / "avr"
-    (avr / "build").mkdir(parents=True, exist_ok=True)
-    elf = avr / "build" / f"{program}.elf"
-    core = [f"../{CORE_DIR}/{s}" for s in CORE_SOURCES]
-    warnings = _run([cc, *AVR_CFLAGS, f"-I../{CORE_DIR}", "-o", str(elf), f"{program}.c", *core, *AVR_LDFLAGS], avr)
-    return elf, warnings.strip()
-
-
-def _avr_size(elf: Path) -> dict[str, int]:
-    size = shutil.which("avr-size")
-    if size is None:
-        raise FileNotFoundError("avr-size is not installed (Debian package binutils-avr)")
-    text = _run([size, "--format=berkeley", str(elf)], elf.parent)
-    row = text.strip().splitlines()[-1].split()
-    text_b, data_b, bss_b = (int(v) for v in row[:3])
-    return {"flash_bytes": text_b + data_b, "ram_bytes": data_b + bss_b,
-            "text_bytes": text_b, "data_bytes": data_b, "bss_bytes": bss_b}
-
-
-def build_hex(files: Mapping[str, bytes]) -> tuple[bytes, dict[str, Any]] | None:
-    """The ATmega328P image (Intel HEX bytes) and its sizes, or None when avr-gcc is not installed.
-
-    The dict holds ``flash_bytes`` (text + data), ``ram_bytes`` (static: data + bss), their limits, and
-    ``warnings`` (the compiler's, empty when clean). Raises CompileError if a tool fails, FirmwareError if the
-    image does not fit (flash under a 2 KB bootloader, or static RAM leaving less than 512 B of stack)."""
-    if shutil.which("avr-gcc") is None or shutil.which("avr-objcopy") is None:
-        return None
-    with tempfile.TemporaryDirectory(prefix="magfab-avr-") as tmp:
-        elf, warnings = build_avr_elf(files, tmp, "main")
-        sizes = _avr_size(elf)
-        hex_path = elf.with_suffix(".hex")
-        _run([shutil.which("avr-objcopy") or "avr-objcopy", "-O", "ihex", "-R", ".eeprom", str(elf), str(hex_path)],
-             elf.parent)
-        image = hex_path.read_bytes()
-    if sizes["flash_bytes"] > FLASH_LIMIT_BYTES:
-        raise FirmwareError("valid_region.hull", f"{sizes['flash_bytes']} B of flash",
-                            f"the image must fit {FLASH_LIMIT_BYTES} B (use a shorter hull or a lower order)")
-    if sizes["ram_bytes"] > RAM_LIMIT_BYTES:
-        raise FirmwareError("", f"{sizes['ram_bytes']} B of static RAM", f"must be at most {RAM_LIMIT_BYTES} B")
-    info: dict[str, Any] = {**sizes, "flash_limit_bytes": FLASH_LIMIT_BYTES, "ram_limit_bytes": RAM_LIMIT_BYTES,
-                            "warnings": warnings}
-    return image, info
-
-
-def build_host(files: Mapping[str, bytes], workdir: str | Path) -> Path:
-    """Compile the core, the simulated MLX90393 and the harness for this machine with ``gcc`` and
-    :data:`HOST_CFLAGS` (warnings are errors) into ``workdir/host/magfab_host``; returns its path."""
-    cc = shutil.which("gcc") or shutil.which("cc")
-    if cc is None:
-        raise FileNotFoundError("gcc is not installed (Debian packages gcc and libc6-dev)")
-    root = Path(workdir)
-    write_tree(files, root)
-    host = root / "host"
-    exe = root / HOST_PROGRAM
-    core = [f"../{CORE_DIR}/{s}" for s in CORE_SOURCES]
-    _run([cc, *HOST_CFLAGS, f"-I../{CORE_DIR}", "-I.", "-o", str(exe), "host_main.c", "sim_mlx90393.c", *core, "-lm"],
-         host)
-    return exe
-
-
-_ANSI = re.compile(r"\x1b\[[0-9;]*m")
-
-
-def run_simavr(elf: str | Path, timeout_s: float = 120.0, *, stop_after_s: float | None = None) -> str | None:
-    """Run an ATmega328P ELF under simavr at 16 MHz and return what it wrote on USART0 (simavr prints it line
-    by line; colour codes are removed here), or None when simavr is not installed.
-
-    Without ``stop_after_s`` the program must end by itself (sleep with interrupts off) within ``timeout_s``.
-    With it, simavr is interrupted (SIGINT, which it handles by flushing and exiting) after that many seconds of
-    wall time: for firmware that loops forever."""
-    simavr = shutil.which("simavr")
-    if simavr is None:
-        return None
-    command = [simavr, "-m", MCU, "-f", str(F_CPU_HZ), str(elf)]
-    proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-    try:
-        out, err = proc.communicate(timeout=stop_after_s if stop_after_s is not None else timeout_s)
-    except subprocess.TimeoutExpired:
-        if stop_after_s is None:
-            proc.kill()
-            proc.communicate()
-            raise CompileError(command, f"simavr did not finish in {timeout_s:g} s") from None
-        proc.send_signal(signal.SIGINT)
-        try:
-            out, err = proc.communicate(timeout=30)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            out, err = proc.communicate()
-    else:
-        if proc.returncode != 0:
-            raise CompileError(command, out.decode(errors="replace") + err.decode(errors="replace"))
-    return _ANSI.sub("", err.decode("ascii", errors="replace"))  # simavr logs the UART on stderr

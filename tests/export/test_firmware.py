@@ -23,13 +23,13 @@ import pytest
 
 from conftest import _missing, ref_crc16, require_tool
 from magfab import derive, load_spec
-from magfab.export import firmware
+from magfab.export import firmware, toolchain
 from magfab.errors import SpecError
 from magfab.export.firmware import FirmwareError
 from magfab.formats.calibration_json import CalibrationError
 from magfab.spec import Acquisition, Transport
 
-STUBS = Path(__file__).parent / "firmware_sim" / "arduino_stub"
+STUBS = Path(__file__).parents[1] / "firmware_sim" / "arduino_stub"
 E_NACK, E_BUS, E_TIMEOUT, E_CHIP, E_COUNT, E_RESET, E_MODE, E_VERIFY = -1, -2, -3, -4, -5, -6, -7, -8
 OUTSIDE, CHIP_ERROR, SATURATED, RECOVERED = 1, 2, 4, 8
 WEIRD_NAME = 'we"ird\\name\nwith?? trigraph??= and é'
@@ -181,7 +181,7 @@ def build_host(tmp_path_factory):
             design = derive(spec if spec is not None else spec_variant())
             cal = cal if cal is not None else make_calibration()
             files = firmware.render(design, cal)
-            exe = firmware.build_host(files, tmp_path_factory.mktemp(f"host-{key}"))
+            exe = toolchain.build_host(files, tmp_path_factory.mktemp(f"host-{key}"))
             cache[key] = Host(design, cal, exe, files)
         return cache[key]
 
@@ -217,7 +217,7 @@ def test_host_makefile_builds_the_same_harness(host, tmp_path):
     make = shutil.which("make")
     if make is None:  # not among the tools .ci/run installs: a plain skip
         pytest.skip("make is not installed")
-    firmware.write_tree(host.files, tmp_path)
+    toolchain.write_tree(host.files, tmp_path)
     proc = subprocess.run([make, "-C", str(tmp_path / "host"), "CC=gcc"], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
     script = "B 900 -400 -2800 25\nS 3\nC i\nS 1\n"
@@ -573,7 +573,7 @@ def require_avr() -> None:
 @pytest.fixture(scope="module")
 def avr_image(host):
     require_avr()
-    result = firmware.build_hex(host.files)
+    result = toolchain.build_hex(host.files)
     assert result is not None
     return result
 
@@ -586,7 +586,7 @@ def test_avr_image_builds_clean_and_fits(avr_image, host, tmp_path):
     assert 2000 < info["flash_bytes"] <= firmware.FLASH_LIMIT_BYTES
     assert 0 < info["ram_bytes"] <= firmware.RAM_LIMIT_BYTES
     if shutil.which("make"):  # the bundle's Makefile makes the same image
-        firmware.write_tree(host.files, tmp_path)
+        toolchain.write_tree(host.files, tmp_path)
         proc = subprocess.run(["make", "-C", str(tmp_path / "avr")], capture_output=True, text=True, timeout=300)
         assert proc.returncode == 0, proc.stderr
         assert (tmp_path / firmware.HEX_NAME).read_bytes() == image
@@ -598,9 +598,9 @@ def test_avr_image_runs_under_simavr(avr_image, host, tmp_path):
     require_tool("simavr")
     text_host = derive(spec_variant(firmware_output=Transport.TEXT))
     files = firmware.render(text_host, host.cal)
-    elf, warnings = firmware.build_avr_elf(files, tmp_path, "main")
+    elf, warnings = toolchain.build_avr_elf(files, tmp_path, "main")
     assert warnings == ""
-    uart = firmware.run_simavr(elf, stop_after_s=1.5)
+    uart = toolchain.run_simavr(elf, stop_after_s=1.5)
     lines = [x for x in uart.splitlines() if x.startswith("F,")]
     assert len(lines) >= 3, uart[-2000:]
     rows = [x.rstrip(".").split(",") for x in lines]
@@ -614,8 +614,8 @@ def test_avr_cycles_per_sample_meet_500_hz(host, tmp_path):
     forces with the full hull test -> binary frame) fits in a 500 Hz period at 16 MHz with room to spare."""
     require_avr()
     require_tool("simavr")
-    elf, _ = firmware.build_avr_elf(host.files, tmp_path, "bench")
-    uart = firmware.run_simavr(elf)
+    elf, _ = toolchain.build_avr_elf(host.files, tmp_path, "bench")
+    uart = toolchain.run_simavr(elf)
     cycles = {(m.group(1), m.group(2)): int(m.group(3)) for m in re.finditer(r"BENCH,(\w+),(\w+),(\d+)", uart)}
     flags = {m.group(1): int(m.group(2)) for m in re.finditer(r"FLAGS,(\w+),(\d+)", uart)}
     assert flags == {"centre": 0, "edge": 0, "axis": OUTSIDE, "outside": OUTSIDE}
@@ -628,7 +628,7 @@ def test_arduino_sketch_compiles_against_the_wire_api(host, tmp_path):
     Arduino.h and Wire.h with the AVR core's signatures."""
     avr = shutil.which("avr-g++")  # part of gcc-avr, so CI has it; the AVR branches of the sketch get compiled
     compiler = [avr, "-mmcu=atmega328p", "-DF_CPU=16000000UL"] if avr else [require_tool("g++")]
-    firmware.write_tree(host.files, tmp_path)
+    toolchain.write_tree(host.files, tmp_path)
     ino = tmp_path / "magfab_readout" / "magfab_readout.ino"
     proc = subprocess.run([*compiler, "-x", "c++", "-std=c++11", "-Wall", "-Wextra", "-Werror", "-fsyntax-only",
                            "-I", str(STUBS), str(ino)], capture_output=True, text=True)
@@ -640,7 +640,7 @@ def test_arduino_sketch_compiles_against_the_wire_api(host, tmp_path):
 @pytest.mark.parametrize("board, baud", [("uno", "115200"), ("nano", "115200"), ("nano-old", "57600")])
 def test_flash_script_calls_avrdude(host, tmp_path, board, baud):
     sh = require_tool("sh")
-    firmware.write_tree(host.files, tmp_path)
+    toolchain.write_tree(host.files, tmp_path)
     bin_dir = tmp_path / "bin"
     bin_dir.mkdir()
     fake = bin_dir / "avrdude"

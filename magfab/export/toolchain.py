@@ -1,0 +1,162 @@
+"""The toolchain drivers: every subprocess magfab runs for the firmware (avr-gcc, avr-size, avr-objcopy, gcc,
+simavr).
+
+* :func:`build_hex` -- the ATmega328P image with avr-gcc (``None`` without avr-gcc), and its flash/RAM size.
+* :func:`build_host` -- the core and the simulated MLX90393 compiled for the host with
+  ``gcc -std=c99 -Wall -Wextra -Werror -pedantic``, for the tests.
+* :func:`build_avr_elf`, :func:`run_simavr` -- an AVR program compiled and run in the simulator.
+
+A tool that fails on what we gave it raises :class:`CompileError` (a :class:`~magfab.errors.ToolError`: our
+bug, exit 1); a missing tool gives None or FileNotFoundError as each function says.
+"""
+
+from __future__ import annotations
+
+import re
+import shutil
+import signal
+import subprocess
+import tempfile
+from pathlib import Path, PurePosixPath
+from typing import Any, Mapping
+
+from ..errors import ToolError
+from .firmware import (AVR_CFLAGS, AVR_LDFLAGS, CORE_DIR, CORE_SOURCES, F_CPU_HZ, FLASH_LIMIT_BYTES, HOST_CFLAGS,
+                       HOST_PROGRAM, MCU, RAM_LIMIT_BYTES, FirmwareError)
+
+__all__ = ["CompileError", "build_avr_elf", "build_hex", "build_host", "run_simavr", "write_tree"]
+
+
+class CompileError(ToolError):
+    """The C compiler (or another tool of the toolchain) failed; the message carries its command and output."""
+
+    def __init__(self, command: list[str], output: str) -> None:
+        self.command = command
+        self.output = output
+        tail = "\n".join(output.strip().splitlines()[-40:])
+        super().__init__(f"{Path(command[0]).name} failed ({' '.join(command[1:6])} ...):\n{tail}")
+
+
+def write_tree(files: Mapping[str, bytes], root: Path) -> None:
+    """Write rendered files under root (paths must stay inside it)."""
+    for rel, data in files.items():
+        parts = PurePosixPath(rel).parts
+        if not parts or PurePosixPath(rel).is_absolute() or ".." in parts:
+            raise ValueError(f"firmware file path {rel!r} must be relative and stay inside the folder")
+        target = root.joinpath(*parts)
+        target.parent.mkdir(parents=True, exist_ok=True)
+        target.write_bytes(data)
+
+
+def _run(command: list[str], cwd: Path, timeout: float = 300.0) -> str:
+    try:
+        done = subprocess.run(command, cwd=cwd, capture_output=True, text=True, timeout=timeout)
+    except subprocess.TimeoutExpired as exc:
+        raise CompileError(command, f"timed out after {timeout:g} s") from exc
+    output = (done.stdout or "") + (done.stderr or "")
+    if done.returncode != 0:
+        raise CompileError(command, output)
+    return output
+
+
+def build_avr_elf(files: Mapping[str, bytes], workdir: str | Path, program: str = "main") -> tuple[Path, str]:
+    """Compile ``avr/<program>.c`` (``main``: the firmware, ``bench``: the cycle benchmark) with the core into
+    ``workdir/avr/build/<program>.elf``, with the flags of the bundle's Makefile. Returns the ELF and the
+    compiler's warnings (empty when clean). Raises FileNotFoundError without avr-gcc, CompileError on failure."""
+    cc = shutil.which("avr-gcc")
+    if cc is None:
+        raise FileNotFoundError("avr-gcc is not installed (Debian packages gcc-avr and avr-libc)")
+    root = Path(workdir)
+    write_tree(files, root)
+    avr = root / "avr"
+    (avr / "build").mkdir(parents=True, exist_ok=True)
+    elf = avr / "build" / f"{program}.elf"
+    core = [f"../{CORE_DIR}/{s}" for s in CORE_SOURCES]
+    warnings = _run([cc, *AVR_CFLAGS, f"-I../{CORE_DIR}", "-o", str(elf), f"{program}.c", *core, *AVR_LDFLAGS], avr)
+    return elf, warnings.strip()
+
+
+def _avr_size(elf: Path) -> dict[str, int]:
+    size = shutil.which("avr-size")
+    if size is None:
+        raise FileNotFoundError("avr-size is not installed (Debian package binutils-avr)")
+    text = _run([size, "--format=berkeley", str(elf)], elf.parent)
+    row = text.strip().splitlines()[-1].split()
+    text_b, data_b, bss_b = (int(v) for v in row[:3])
+    return {"flash_bytes": text_b + data_b, "ram_bytes": data_b + bss_b,
+            "text_bytes": text_b, "data_bytes": data_b, "bss_bytes": bss_b}
+
+
+def build_hex(files: Mapping[str, bytes]) -> tuple[bytes, dict[str, Any]] | None:
+    """The ATmega328P image (Intel HEX bytes) and its sizes, or None when avr-gcc is not installed.
+
+    The dict holds ``flash_bytes`` (text + data), ``ram_bytes`` (static: data + bss), their limits, and
+    ``warnings`` (the compiler's, empty when clean). Raises CompileError if a tool fails, FirmwareError if the
+    image does not fit (flash under a 2 KB bootloader, or static RAM leaving less than 512 B of stack)."""
+    if shutil.which("avr-gcc") is None or shutil.which("avr-objcopy") is None:
+        return None
+    with tempfile.TemporaryDirectory(prefix="magfab-avr-") as tmp:
+        elf, warnings = build_avr_elf(files, tmp, "main")
+        sizes = _avr_size(elf)
+        hex_path = elf.with_suffix(".hex")
+        _run([shutil.which("avr-objcopy") or "avr-objcopy", "-O", "ihex", "-R", ".eeprom", str(elf), str(hex_path)],
+             elf.parent)
+        image = hex_path.read_bytes()
+    if sizes["flash_bytes"] > FLASH_LIMIT_BYTES:
+        raise FirmwareError("valid_region.hull", f"{sizes['flash_bytes']} B of flash",
+                            f"the image must fit {FLASH_LIMIT_BYTES} B (use a shorter hull or a lower order)")
+    if sizes["ram_bytes"] > RAM_LIMIT_BYTES:
+        raise FirmwareError("", f"{sizes['ram_bytes']} B of static RAM", f"must be at most {RAM_LIMIT_BYTES} B")
+    info: dict[str, Any] = {**sizes, "flash_limit_bytes": FLASH_LIMIT_BYTES, "ram_limit_bytes": RAM_LIMIT_BYTES,
+                            "warnings": warnings}
+    return image, info
+
+
+def build_host(files: Mapping[str, bytes], workdir: str | Path) -> Path:
+    """Compile the core, the simulated MLX90393 and the harness for this machine with ``gcc`` and
+    :data:`HOST_CFLAGS` (warnings are errors) into ``workdir/host/magfab_host``; returns its path."""
+    cc = shutil.which("gcc") or shutil.which("cc")
+    if cc is None:
+        raise FileNotFoundError("gcc is not installed (Debian packages gcc and libc6-dev)")
+    root = Path(workdir)
+    write_tree(files, root)
+    host = root / "host"
+    exe = root / HOST_PROGRAM
+    core = [f"../{CORE_DIR}/{s}" for s in CORE_SOURCES]
+    _run([cc, *HOST_CFLAGS, f"-I../{CORE_DIR}", "-I.", "-o", str(exe), "host_main.c", "sim_mlx90393.c", *core, "-lm"],
+         host)
+    return exe
+
+
+_ANSI = re.compile(r"\x1b\[[0-9;]*m")
+
+
+def run_simavr(elf: str | Path, timeout_s: float = 120.0, *, stop_after_s: float | None = None) -> str | None:
+    """Run an ATmega328P ELF under simavr at 16 MHz and return what it wrote on USART0 (simavr prints it line
+    by line; colour codes are removed here), or None when simavr is not installed.
+
+    Without ``stop_after_s`` the program must end by itself (sleep with interrupts off) within ``timeout_s``.
+    With it, simavr is interrupted (SIGINT, which it handles by flushing and exiting) after that many seconds of
+    wall time: for firmware that loops forever."""
+    simavr = shutil.which("simavr")
+    if simavr is None:
+        return None
+    command = [simavr, "-m", MCU, "-f", str(F_CPU_HZ), str(elf)]
+    proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    try:
+        out, err = proc.communicate(timeout=stop_after_s if stop_after_s is not None else timeout_s)
+    except subprocess.TimeoutExpired:
+        if stop_after_s is None:
+            proc.kill()
+            proc.communicate()
+            raise CompileError(command, f"simavr did not finish in {timeout_s:g} s") from None
+        proc.send_signal(signal.SIGINT)
+        try:
+            out, err = proc.communicate(timeout=30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            out, err = proc.communicate()
+    else:
+        if proc.returncode != 0:
+            raise CompileError(command, out.decode(errors="replace") + err.decode(errors="replace"))
+    return _ANSI.sub("", err.decode("ascii", errors="replace"))  # simavr logs the UART on stderr
