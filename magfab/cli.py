@@ -177,16 +177,16 @@ def check(spec: Path | None, as_json: bool) -> None:
 @click.option("--force", is_flag=True, help="Overwrite PATH if it exists.")
 def init(path: Path, force: bool) -> None:
     """Write a commented copy of the default (MagOne) spec to PATH (default: spec.toml)."""
-    import re
-
-    from .spec import NAME_PATTERN, default_spec_text
+    from .errors import SpecError
+    from .spec import NAME_PATTERN, default_spec_text, is_valid_name, shown
 
     with _handled():
+        if not is_valid_name(path.stem):  # the design is named after its file, in a TOML string and a folder
+            raise SpecError("name", shown(path.stem), "the file's name (without .toml) names the design and must "
+                            "match " + NAME_PATTERN, "choose a file name of letters, digits, '.', '_' and '-'")
         if path.exists() and not force:
             _fail(f"{path} exists; use --force to overwrite it", EXIT_BAD_INPUT)
-        text = default_spec_text()
-        if re.match(NAME_PATTERN, path.stem):  # name the design after its file
-            text = text.replace('name = "magone"', f'name = "{path.stem}"', 1)
+        text = default_spec_text().replace('name = "magone"', f'name = "{path.stem}"', 1)
         path.write_text(text, encoding="utf-8")
         click.echo(f"wrote {path}; edit it, then: magfab build {path}")
 

@@ -21,8 +21,9 @@ from dataclasses import dataclass
 from functools import cached_property
 
 from .errors import SpecError
+from .limits import check_limits
 from .recipes import Recipe, catalogue
-from .spec import Spec, Tip
+from .spec import Spec, Tip, shown
 
 __all__ = ["Design", "derive", "DISTANCE_TOLERANCE_MM"]
 
@@ -38,7 +39,9 @@ SECOND_HOLE_EXTRA_MM = 0.5  # the pad's second alignment hole is larger by this:
 
 
 def _fmt(x: float) -> str:
-    return f"{x:.3f}".rstrip("0").rstrip(".")
+    """A derived bound for a message: exact to 1e-9 mm (no '6 mm' for 6.0004), without float noise."""
+    r = round(x, 9) + 0.0
+    return str(int(r)) if r.is_integer() else repr(r)
 
 
 @dataclass(frozen=True)
@@ -209,28 +212,28 @@ def derive(spec: Spec) -> Design:
     r_ch = el.insert_channel_diameter_mm / 2.0
 
     if el.tip is Tip.HEMISPHERE and H_e < R_e:
-        raise SpecError("elastomer.height_mm", H_e, f"must be at least the tip radius {_fmt(R_e)} mm for a hemisphere tip",
+        raise SpecError("elastomer.height_mm", shown(H_e), f"must be at least the tip radius {_fmt(R_e)} mm for a hemisphere tip",
                         "or use tip = \"flat\"")
     base_h = H_e - R_e if el.tip is Tip.HEMISPHERE else H_e
     if R_p + skin_min > R_e:
         limit = 2.0 * (R_e - skin_min - c)
-        raise SpecError("magnet.diameter_mm", mag.diameter_mm,
+        raise SpecError("magnet.diameter_mm", shown(mag.diameter_mm),
                         f"must be at most {_fmt(limit)} mm so the pocket keeps {_fmt(skin_min)} mm of silicone "
                         f"inside the {_fmt(el.diameter_mm)} mm elastomer")
     if r_ch > R_p:
-        raise SpecError("elastomer.insert_channel_diameter_mm", el.insert_channel_diameter_mm,
+        raise SpecError("elastomer.insert_channel_diameter_mm", shown(el.insert_channel_diameter_mm),
                         f"must be at most the pocket diameter {_fmt(2 * R_p)} mm")
 
     # Stack-up in the board frame.
     body_max, h_nom, h_max = chip["body_mm"].high, chip["height_mm"].nominal, chip["height_mm"].high
     depth = sen.sensing_depth_mm if sen.sensing_depth_mm is not None else chip["sensing_depth_mm"].nominal
     if depth > h_nom:
-        raise SpecError("sensor.sensing_depth_mm", depth, f"must be at most the package height {_fmt(h_nom)} mm")
+        raise SpecError("sensor.sensing_depth_mm", shown(depth), f"must be at most the package height {_fmt(h_nom)} mm")
     z_sense = h_nom - depth
     recess_side = body_max + 2.0 * pad.recess_clearance_mm
     recess_depth = h_max + pad.recess_clearance_mm
     if recess_depth >= pad.thickness_mm:
-        raise SpecError("pad.thickness_mm", pad.thickness_mm,
+        raise SpecError("pad.thickness_mm", shown(pad.thickness_mm),
                         f"must exceed the chip recess depth {_fmt(recess_depth)} mm (package height max "
                         f"{_fmt(h_max)} mm + recess clearance)")
     z_pad_top = pad.thickness_mm
@@ -245,27 +248,27 @@ def derive(spec: Spec) -> Design:
 
     d_lo, d_hi = d_of_roof(roof_min), d_of_roof(roof_max)
     if d_hi < d_lo:
-        raise SpecError("elastomer.height_mm", H_e, f"is too short to hold the {_fmt(H_m)} mm magnet with "
+        raise SpecError("elastomer.height_mm", shown(H_e), f"is too short to hold the {_fmt(H_m)} mm magnet with "
                         f"{_fmt(skin_min)} mm of silicone around its pocket")
     if el.cover_mm is not None:
         roof = H_e - el.cover_mm
         if abs(d_of_roof(roof) - sen.d_max_mm) > DISTANCE_TOLERANCE_MM:
             want = H_e - (sen.d_max_mm - d_of_roof(0.0))
-            raise SpecError("elastomer.cover_mm", el.cover_mm,
+            raise SpecError("elastomer.cover_mm", shown(el.cover_mm),
                             f"gives a rest distance of {_fmt(d_of_roof(roof))} mm, not sensor.d_max_mm = "
                             f"{_fmt(sen.d_max_mm)} mm", f"omit cover_mm to derive it, or set it to {_fmt(want)}")
     else:
         roof = sen.d_max_mm - d_of_roof(0.0)
     if not roof_min - 1e-9 <= roof <= roof_max + 1e-9:
-        raise SpecError("sensor.d_max_mm", sen.d_max_mm,
+        raise SpecError("sensor.d_max_mm", shown(sen.d_max_mm),
                         f"must be between {_fmt(d_lo)} and {_fmt(d_hi)} mm for this stack (pad top + glue at "
                         f"{_fmt(z_base - z_sense)} mm above the sensing point, a {_fmt(H_e)} mm elastomer, "
                         f"{_fmt(skin_min)} mm minimum skin)")
     d_rest = d_of_roof(roof)
     if sen.d_min_mm >= sen.d_max_mm:
-        raise SpecError("sensor.d_min_mm", sen.d_min_mm, f"must be less than sensor.d_max_mm = {_fmt(sen.d_max_mm)} mm")
+        raise SpecError("sensor.d_min_mm", shown(sen.d_min_mm), f"must be less than sensor.d_max_mm = {_fmt(sen.d_max_mm)} mm")
     if sen.d_min_mm <= z_base - z_sense:
-        raise SpecError("sensor.d_min_mm", sen.d_min_mm,
+        raise SpecError("sensor.d_min_mm", shown(sen.d_min_mm),
                         f"must exceed {_fmt(z_base - z_sense)} mm: the elastomer's base (pad + glue) is that far "
                         "above the sensing point")
     floor = roof - h_p
@@ -281,30 +284,30 @@ def derive(spec: Spec) -> Design:
     lip_outer = lip_inner + pad.lip_width_mm if pad.lip_height_mm > 0 else lip_inner
     R_pad = pad.diameter_mm / 2.0
     if lip_outer > R_pad:
-        raise SpecError("pad.diameter_mm", pad.diameter_mm,
+        raise SpecError("pad.diameter_mm", shown(pad.diameter_mm),
                         f"must be at least {_fmt(2 * lip_outer)} mm to hold the elastomer and its centring lip")
     d1 = pad.alignment_hole_diameter_mm
     d2 = d1 + SECOND_HOLE_EXTRA_MM
     sx = pad.alignment_hole_spacing_mm / 2.0
     if sx - d1 / 2.0 <= lip_outer or sx + d2 / 2.0 >= R_pad:
-        raise SpecError("pad.alignment_hole_spacing_mm", pad.alignment_hole_spacing_mm,
+        raise SpecError("pad.alignment_hole_spacing_mm", shown(pad.alignment_hole_spacing_mm),
                         f"must place both holes (diameters {_fmt(d1)} and {_fmt(d2)} mm) between the lip "
                         f"(radius {_fmt(lip_outer)} mm) and the pad's edge (radius {_fmt(R_pad)} mm)")
 
     # I2C address: the option code's base address plus the A1/A0 straps.
     codes = sorted(k.rsplit("_", 1)[1] for k in chip.quantities if k.startswith("i2c_base_address_"))
     if sen.option_code not in codes:
-        raise SpecError("sensor.option_code", sen.option_code, "must be one of " + ", ".join(repr(c) for c in codes)
+        raise SpecError("sensor.option_code", shown(sen.option_code), "must be one of " + ", ".join(repr(c) for c in codes)
                         + f" for {chip.key}")
     base = int(chip[f"i2c_base_address_{sen.option_code}"].nominal)
     if not base <= sen.i2c_address <= base + 3:
         allowed = ", ".join(f"0x{a:02X}" for a in range(base, base + 4))
-        raise SpecError("sensor.i2c_address", f"0x{sen.i2c_address:02X}",
+        raise SpecError("sensor.i2c_address", shown(sen.i2c_address),
                         f"must be one of {allowed} for option code {sen.option_code} (base plus the A1/A0 straps)",
                         "or change sensor.option_code")
     forbidden = {tuple(int(v) for v in pair.split("/")) for pair in chip.texts.get("forbidden_osr_dig_filt", "").split()}
     if (sen.osr, sen.dig_filt) in forbidden:
-        raise SpecError("sensor.dig_filt", sen.dig_filt,
+        raise SpecError("sensor.dig_filt", shown(sen.dig_filt),
                         f"is not allowed with sensor.osr = {sen.osr} (the chip refuses OSR/DIG_FILT pairs "
                         + ", ".join(f"{a}/{b}" for a, b in sorted(forbidden)) + ")",
                         "raise sensor.dig_filt or sensor.osr")
@@ -326,11 +329,11 @@ def derive(spec: Spec) -> Design:
     sprue_d = min(SPRUE_MAX_MM, annulus - 1.0)
     vent_d = max(VENT_MIN_MM, printer["min_hole_mm"].nominal)
     if sprue_d <= 0.0 or vent_d > annulus - 0.6:
-        raise SpecError("elastomer.diameter_mm", el.diameter_mm,
+        raise SpecError("elastomer.diameter_mm", shown(el.diameter_mm),
                         "leaves no room between the insertion channel and the cavity wall for the fill and vent "
                         "holes", "use a larger elastomer or a narrower insert channel")
 
-    return Design(
+    design = Design(
         spec=spec, printer=printer, chip=chip,
         magnet_radius_mm=R_m, magnet_height_mm=H_m,
         elastomer_radius_mm=R_e, elastomer_height_mm=H_e, base_height_mm=base_h, tip=el.tip,
@@ -352,3 +355,5 @@ def derive(spec: Spec) -> Design:
         sprue_diameter_mm=sprue_d, sprue_offset_mm=(core_base_r + R_e) / 2.0,
         vent_diameter_mm=vent_d, vent_offset_mm=R_e - vent_d / 2.0 - 0.3, vent_angles_deg=(210.0, 330.0),
     )
+    check_limits(design)  # what the build would cost, before any of it: check and build both refuse
+    return design

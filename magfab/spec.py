@@ -19,14 +19,62 @@ from importlib import resources
 from pathlib import Path
 from typing import Any, Optional
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator
 
 from .errors import SpecError
 from .recipes import catalogue
 
-__all__ = ["Spec", "Tip", "Density", "Printer", "load_spec", "parse_spec", "default_spec_text", "spec_schema", "NAME_PATTERN"]
+__all__ = ["Spec", "Tip", "Density", "Printer", "load_spec", "parse_spec", "default_spec_text", "spec_schema",
+           "NAME_PATTERN", "is_valid_name", "shown"]
 
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
+#: Longest value text an error line shows; a longer one is cut in the middle and its length given.
+SHOWN_MAX_CHARS = 60
+
+
+def is_valid_name(name: str) -> bool:
+    """Whether ``name`` is a design name: the whole string matches :data:`NAME_PATTERN` (Python's ``$`` alone
+    would also accept a trailing newline, which then breaks the TOML that ``init`` writes)."""
+    return re.fullmatch(NAME_PATTERN, name) is not None
+
+
+class _Shown:
+    """A value as an error line shows it: exact (floats by their shortest round-trip repr, so a value just past
+    a bound is not printed as the bound) and bounded in length. ``raw`` is the value itself."""
+
+    def __init__(self, raw: object) -> None:
+        self.raw = raw
+        if isinstance(raw, bool):
+            text = "true" if raw else "false"
+        elif isinstance(raw, float):
+            text = repr(raw)
+        elif isinstance(raw, str):
+            text = repr(raw)
+        else:
+            text = str(raw)
+        self.text = _shorten(text)
+
+    def __str__(self) -> str:
+        return self.text
+
+    __repr__ = __str__
+
+    def __eq__(self, other: object) -> bool:
+        return self.raw == (other.raw if isinstance(other, _Shown) else other)
+
+    __hash__ = None  # type: ignore[assignment]
+
+
+def _shorten(text: str, limit: int = SHOWN_MAX_CHARS) -> str:
+    if len(text) <= limit:
+        return text
+    keep = (limit - 5) // 2
+    return f"{text[:keep]}...{text[-keep:]} ({len(text)} characters)"
+
+
+def shown(value: object) -> _Shown:
+    """``value`` for a :class:`SpecError`: exact and at most about :data:`SHOWN_MAX_CHARS` characters."""
+    return value if isinstance(value, _Shown) else _Shown(value)
 
 
 class Tip(str, Enum):
@@ -60,6 +108,17 @@ def _mm(default: float, description: str, *, gt: float | None = 0.0, ge: float |
 class _Section(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, strict=True, allow_inf_nan=False)
 
+    @field_validator("*", mode="before")
+    @classmethod
+    def _integral_float(cls, value: Any, info: ValidationInfo) -> Any:
+        """An integer key accepts a float with no fractional part (``12.0`` is 12: TOML writes both, and a
+        user converting units gets floats); anything else (2.5, 1e300) still fails as "must be an integer"."""
+        field = cls.model_fields.get(info.field_name or "")
+        if field is not None and field.annotation is int and isinstance(value, float) and value.is_integer() \
+                and abs(value) <= 2.0**53:
+            return int(value)
+        return value
+
 
 class Magnet(_Section):
     """The permanent magnet: an axially magnetised cylinder."""
@@ -92,6 +151,17 @@ class Elastomer(_Section):
     shear_modulus_kPa: Optional[tuple[float, float, float]] = Field(
         None, description="Override the material's neo-Hookean shear modulus band [soft, nominal, stiff], kPa "
         "(e.g. from your own batch's tensile test); omit to use the recipe's.")
+
+    @field_validator("shear_modulus_kPa", mode="before")
+    @classmethod
+    def _array(cls, v: Any) -> Any:
+        """TOML gives an array as a list; strict mode takes only a tuple, so the shipped (commented) line
+        ``shear_modulus_kPa = [15.0, 23.0, 39.0]`` was refused."""
+        if isinstance(v, list):
+            if len(v) != 3 or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
+                raise ValueError("must be an array of three numbers [soft, nominal, stiff], kPa")
+            return tuple(float(x) for x in v)
+        return v
 
     @field_validator("shear_modulus_kPa")
     @classmethod
@@ -346,11 +416,13 @@ def parse_spec(text: str, default_name: str = "magone") -> Spec:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise SpecError("spec", "<TOML>", f"not valid TOML: {exc}") from None
+    except ValueError as exc:  # e.g. an integer of more than 4300 digits (Python's int-from-string limit)
+        raise SpecError("spec", "<TOML>", f"not valid TOML: {_shorten(str(exc), 200)}") from None
     if "name" not in raw:
         raw["name"] = default_name
-        if not re.match(NAME_PATTERN, default_name):
+        if not is_valid_name(default_name):
             raise SpecError(
-                "name", default_name, "taken from the file name, must match " + NAME_PATTERN,
+                "name", shown(default_name), "taken from the file name, must match " + NAME_PATTERN,
                 hint="add name = \"...\" to the spec",
             )
     try:
@@ -361,7 +433,7 @@ def parse_spec(text: str, default_name: str = "magone") -> Spec:
         value = getattr(getattr(spec, section), key)
         known = sorted(catalogue(kind))
         if value not in known:
-            raise SpecError(f"{section}.{key}", value, "must be one of " + ", ".join(known), _did_you_mean(value, known))
+            raise SpecError(f"{section}.{key}", shown(value), "must be one of " + ", ".join(known), _did_you_mean(value, known))
     return spec
 
 
@@ -376,6 +448,8 @@ def _model_at(loc: tuple[Any, ...]) -> type[BaseModel] | None:
 
 
 def _did_you_mean(word: str, choices: list[str]) -> str:
+    if len(word) > 4 * max(map(len, choices), default=0):  # nothing that long is a typo of a choice
+        return ""
     close = difflib.get_close_matches(word, choices, n=1, cutoff=0.6)
     return f"did you mean {close[0]!r}?" if close else ""
 
@@ -385,43 +459,77 @@ def _lookup(raw: dict[str, Any], loc: tuple[Any, ...]) -> Any:
     for part in loc:
         if isinstance(value, dict) and part in value:
             value = value[part]
+        elif isinstance(value, (list, tuple)) and isinstance(part, int) and 0 <= part < len(value):
+            value = value[part]
         else:
             return "<missing>"
     return value
 
 
 def _key_part(part: object) -> str:
-    """A key as TOML would write it: bare when it can be, else quoted with escapes (one line, always)."""
+    """A key as TOML would write it: bare when it can be, else quoted with escapes (one line, always, and
+    shortened like a value when it is long)."""
+    if isinstance(part, int):
+        return f"[{part}]"
     text = str(part)
-    return text if re.fullmatch(r"[A-Za-z0-9_-]+", text) else json.dumps(text)
+    return text if re.fullmatch(r"[A-Za-z0-9_-]+", text) and len(text) <= SHOWN_MAX_CHARS else _shorten(json.dumps(text))
+
+
+def _key(loc: tuple[Any, ...]) -> str:
+    return "".join(p if p.startswith("[") or not i else "." + p for i, p in enumerate(map(_key_part, loc)))
+
+
+#: Unit suffixes of key names, as a message prints them after a bound.
+_UNITS = {"mm": "mm", "deg": "deg", "kPa": "kPa", "pct": "%", "mN": "mN", "G": "G", "h": "h", "min": "min",
+          "hz": "Hz"}
+_BOUNDS = {"greater_than": ("gt", "greater than"), "greater_than_equal": ("ge", "at least"),
+           "less_than": ("lt", "less than"), "less_than_equal": ("le", "at most")}
+
+
+def _number(x: object) -> str:
+    """A bound exactly as the model holds it: 10.0 -> '10', 0.5 -> '0.5', 2147483647 -> '2147483647'."""
+    if isinstance(x, float) and x.is_integer() and abs(x) < 1e16:
+        return str(int(x))
+    return repr(x) if isinstance(x, float) else str(x)
 
 
 def _translate(exc: ValidationError, raw: dict[str, Any]) -> SpecError:
-    """Turn pydantic's first error into our one-line message."""
+    """Turn pydantic's first error into our one-line message: the key, the value exactly and bounded in
+    length (:func:`shown`), and what is allowed with its bound printed as the model holds it."""
     err = exc.errors(include_url=False)[0]
     loc = tuple(err["loc"])
-    key = ".".join(_key_part(p) for p in loc)
+    key = _key(loc)
     value = err.get("input", _lookup(raw, loc))
     kind = err["type"]
+    if isinstance(value, dict):
+        value = "{...}"
     if kind == "extra_forbidden":
         parent = _model_at(loc[:-1])
         allowed = sorted(parent.model_fields) if parent else []
-        what = "unknown section" if len(loc) == 1 and isinstance(value, dict) else "unknown key"
-        return SpecError(key, value if not isinstance(value, dict) else "{...}", f"{what}; allowed: {', '.join(allowed)}",
-                         _did_you_mean(str(loc[-1]), allowed))
+        what = "unknown section" if len(loc) == 1 and value == "{...}" else "unknown key"
+        return SpecError(key, shown(value), f"{what}; allowed: {', '.join(allowed)}", _did_you_mean(str(loc[-1]), allowed))
     if kind == "missing":
         return SpecError(key, "<missing>", "required key is missing")
     if kind == "model_type":
-        return SpecError(key, value, "must be a table (a [section])")
-    msg = err["msg"].replace("Input should be", "must be").replace("String should", "must")
-    unit = " " + loc[-1].rsplit("_", 1)[-1] if str(loc[-1]).endswith(("_mm", "_deg")) else ""
-    if kind in {"greater_than", "greater_than_equal", "less_than", "less_than_equal"}:
-        msg += unit
-    if kind == "float_type":
+        return SpecError(key, shown(value), "must be a table (a [section])")
+    last = next((str(p) for p in reversed(loc) if not isinstance(p, int)), "")
+    suffix = last.rsplit("_", 1)[-1] if "_" in last else ""
+    unit = f" {_UNITS[suffix]}" if suffix in _UNITS else ""
+    ctx = err.get("ctx") or {}
+    if kind in _BOUNDS:
+        name, words = _BOUNDS[kind]
+        msg = f"must be {words} {_number(ctx[name])}{unit}"
+    elif kind == "float_type":
         msg = "must be a number" + (unit and f" (in{unit})")
-    if isinstance(value, dict):
-        value = "{...}"
-    return SpecError(key, value, msg)
+    elif kind in {"int_type", "int_from_float", "int_parsing"}:
+        msg = "must be an integer (a whole number such as 12 or 12.0)"
+    elif kind == "value_error":
+        msg = str(ctx.get("error", err["msg"])).removeprefix("Value error, ")
+    elif kind == "string_pattern_mismatch":
+        msg = f"must match the pattern {ctx.get('pattern', '')}"
+    else:
+        msg = err["msg"].replace("Input should be", "must be").replace("String should", "must")
+    return SpecError(key, shown(value), msg)
 
 
 def spec_schema() -> dict[str, Any]:

@@ -1,0 +1,320 @@
+"""Resource limits: what a build of a design will cost, estimated before any of the work, and the bounds that
+keep every valid spec within the budget (about a minute and a few GB on two cores).
+
+Each key that drives cost feeds one estimate, and each estimate has a limit sized so that the fixed part of a
+build plus every estimate at its limit stays within :data:`BUDGET_S` and :data:`BUDGET_MB`:
+
+=========================  ==================================================  ===================================
+estimate                   driven by                                           grows like
+=========================  ==================================================  ===================================
+surface triangles          mould.tessellation_tolerance_mm,                    (cavities + 1) n(R_e)^2 for a dome,
+                           mould.angular_tolerance_deg, mould.cavities,        n the facets round a circle:
+                           elastomer.diameter_mm                               max(360/angle, pi/acos(1 - tol/r))
+FE work (elements x steps) predict.tolerance_pct (the meshes the auto choice   profile area / h^2 per mesh, summed
+                           runs), elastomer size, predict.mechanics_model      over the meshes tried
+scan rows                  calibration.scan_step_mm, scan_y_mm, scan_z_mm      (y / step) (z / step)
+MLS work                   scan rows, calibration.method ('mls' or 'auto')     rows^2
+=========================  ==================================================  ===================================
+
+The constants were measured on the MagOne design and variants of it, on a shared two-core machine that was
+busy at the time (so ratios more than absolute times), and carry a margin of about 1.5-2x; the figures are in
+the constants' comments. :func:`check_limits` is called by :func:`magfab.design.derive`, so ``magfab check`` and
+``magfab build`` both refuse an over-budget spec with one :class:`~magfab.errors.SpecError` that names the key,
+its value, the estimate and the limit, and the value that would fit.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from .errors import SpecError
+
+if TYPE_CHECKING:
+    from .design import Design
+
+__all__ = ["BUDGET_S", "BUDGET_MB", "Cost", "estimate", "check_limits", "fe_meshes", "scan_rows", "triangles",
+           "MAX_TRIANGLES", "MAX_FE_WORK", "MAX_SCAN_ROWS", "MAX_MLS_ROWS"]
+
+#: What any valid spec may take to build, on two cores.
+BUDGET_S = 60.0
+BUDGET_MB = 4000.0
+
+#: The part of a build that no spec key scales (CAD kernel import, board, firmware, report): the MagOne build
+#: took 16.5 s, of which about 5.4 s FE and 1.3 s tessellation; 10 s kept with a margin.
+FIXED_S = 10.0
+FIXED_MB = 700.0
+
+# ---- surface triangles ----------------------------------------------------------------------------------
+#: Triangles over all four parts per (dome facet count)^2 and per cavity + 1 (the elastomer and each of the
+#: cup's cavities carry the dome). Measured 1.1-1.3 on MagOne from tolerance 0.01 to 0.0003 mm and angles 10-2
+#: degrees; 1.2 with the small-feature term below bounds every measurement from above.
+DOME_TRIANGLES = 1.2
+#: Triangles per facet of a small (1 mm) circle, per (cavity + 1) / 2: holes, pins, cores, the pad's features.
+#: Measured 127-160 (lid + pad at angle 2 degrees: 23,482 triangles over 180 facets).
+SMALL_FEATURE_TRIANGLES = 150.0
+#: Triangles per facet of the elastomer's rim for a flat tip (no dome): the cylinder, its ends and the cup's
+#: cavity; measured 18 (tolerance-bound) to 33 (2 degrees) per facet over the elastomer and the cup.
+RIM_TRIANGLES = 20.0
+#: MagOne at 2 degrees (101,668 triangles) took 41 s of CPU to build (87 s wall on the busy machine) against
+#: the default's 12,172; 233k triangles took 39 s to tessellate alone (the kernel's mesher is superlinear).
+MAX_TRIANGLES = 60_000
+SECONDS_PER_TRIANGLE = 4.0e-4  # tessellation, STL/STEP, mould fit, report pictures: (41 - 16) s / 89k, 1.4x
+MB_PER_TRIANGLE = 0.006  # 233k triangles: 983 MB peak, of which ~550 MB the CAD kernel
+
+# ---- the normal-load FE ---------------------------------------------------------------------------------
+#: Relative FE error per mesh size over the elastomer radius, err ~ C h / R (order 1, as predict.FE_ORDER):
+#: MagOne measured 0.0056 at h = 0.5 mm, R = 6 mm (C = 0.067); 1.5x margin.
+FE_ERROR_PER_H_OVER_R = 0.1
+#: Triangles of the (r, z) profile mesh per (profile area / h^2): the equilateral lattice, 1 / (sqrt(3) / 4)
+#: = 2.31; measured 2.16-2.27 on MagOne and a 20 mm elastomer, 0.75 to 0.25 mm.
+FE_TRIANGLES_PER_AREA_H2 = 2.4
+#: Indentation steps along the normal curve (predict.N_INDENT); the FE may stop earlier.
+FE_STEPS = 21
+#: Seconds per triangle-step of the nonlinear FE, counting all FE_STEPS although a curve often stops earlier:
+#: measured 0.47-0.51 ms (MagOne 0.75-0.25 mm, 2,430 triangles in 24.5 s; a 20 mm elastomer); 1.4x margin.
+SECONDS_PER_FE_WORK = 0.7e-3
+#: FE work (triangles x steps, summed over the meshes tried): 28 s at the rate above. MagOne runs 0.75 and
+#: 0.5 mm at 1 % (476 triangles, 10k triangle-steps, 5.4 s).
+MAX_FE_WORK = 40_000
+MB_PER_FE_TRIANGLE = 0.1  # 1,299 triangles: 221 MB peak, with ~100 MB of Python and numpy
+
+# ---- calibration ----------------------------------------------------------------------------------------
+#: Rows of the simulated scan (field, force, the polynomial fits, the CSV in the build): linear and cheap, but
+#: each row is an exact-field evaluation and a CSV line. MagOne: 2,673 rows (at most 4,941 by the spec's
+#: steps).
+MAX_SCAN_ROWS = 40_000
+SECONDS_PER_SCAN_ROW = 2.5e-4
+#: MLS cross-validation grows with rows^2 (11 bandwidths x the folds): 2.7k rows 8.7 s, 10.6k rows 109 s
+#: measured in the issue (1.0-1.2 us per row^2; 3.7 us here under heavy contention). The row count is an upper
+#: bound (MagOne: 4,941 by its steps, 2,673 in fact), which is the margin; 5,000 rows stay near 30 s.
+SECONDS_PER_MLS_ROW2 = 1.2e-6
+MAX_MLS_ROWS = 5_000
+MB_PER_SCAN_ROW = 0.01
+
+
+@dataclass(frozen=True)
+class Cost:
+    """What a build of a design is estimated to need, before any of the work: counts, and the time (s, two
+    cores) and peak memory (MB) they imply."""
+
+    triangles: int
+    fe_meshes_mm: tuple[float, ...]
+    fe_triangles: int  # summed over the meshes
+    fe_peak_triangles: int  # the finest mesh's
+    scan_rows: int
+    mls: bool
+
+    @property
+    def fe_work(self) -> int:
+        return self.fe_triangles * FE_STEPS
+
+    @property
+    def parts_s(self) -> dict[str, float]:
+        """Estimated seconds per cost driver (the fixed part excluded)."""
+        mls = SECONDS_PER_MLS_ROW2 * self.scan_rows**2 if self.mls else 0.0
+        return {"tessellation": SECONDS_PER_TRIANGLE * self.triangles, "fe": SECONDS_PER_FE_WORK * self.fe_work,
+                "calibration": SECONDS_PER_SCAN_ROW * self.scan_rows + mls}
+
+    @property
+    def seconds(self) -> float:
+        return FIXED_S + sum(self.parts_s.values())
+
+    @property
+    def megabytes(self) -> float:
+        return (FIXED_MB + MB_PER_TRIANGLE * self.triangles + MB_PER_FE_TRIANGLE * self.fe_peak_triangles
+                + MB_PER_SCAN_ROW * self.scan_rows)
+
+
+# ---- the estimates --------------------------------------------------------------------------------------
+
+
+def facets(radius_mm: float, tolerance_mm: float, angle_deg: float) -> float:
+    """Facets round a full circle of ``radius_mm`` meshed within ``tolerance_mm`` of it and ``angle_deg``
+    between neighbouring facets' normals: the kernel honours both, so the finer of the two."""
+    by_angle = 360.0 / angle_deg
+    if tolerance_mm >= radius_mm:
+        return max(by_angle, 3.0)
+    return max(by_angle, math.pi / math.acos(1.0 - tolerance_mm / radius_mm), 3.0)
+
+
+def triangles(design: "Design") -> int:
+    """Surface triangles over the four parts' STLs (model in the module doc; constants above)."""
+    m = design.spec.mould
+    tol, ang = m.tessellation_tolerance_mm, m.angular_tolerance_deg
+    n_dome = facets(design.elastomer_radius_mm, tol, ang)
+    n_small = facets(1.0, tol, ang)
+    copies = m.cavities + 1
+    dome = DOME_TRIANGLES * copies * n_dome**2 if design.tip.value == "hemisphere" else RIM_TRIANGLES * copies * n_dome
+    return int(dome + SMALL_FEATURE_TRIANGLES * n_small * copies / 2.0)
+
+
+def _profile_area_mm2(design: "Design") -> float:
+    """Area of the elastomer's (r, z) half-profile less the magnet's, mm^2: what the axisymmetric FE meshes."""
+    R, hb = design.elastomer_radius_mm, design.base_height_mm
+    area = R * hb + (math.pi * R * R / 4.0 if design.tip.value == "hemisphere" else 0.0)
+    return max(area - design.magnet_radius_mm * design.magnet_height_mm, 0.0)
+
+
+def fe_triangles(design: "Design", mesh_mm: float) -> int:
+    return int(FE_TRIANGLES_PER_AREA_H2 * _profile_area_mm2(design) / (mesh_mm * mesh_mm))
+
+
+def fe_meshes(design: "Design", tolerance_pct: float | None = None) -> tuple[float, ...]:
+    """The FE meshes (mm) the normal curve is expected to run for ``predict.tolerance_pct`` (or the one given):
+    coarse to fine from :data:`magfab.models.predict.FE_MESHES_MM`, at least two, until the estimated error
+    C h / R fits the tolerance; none for a closed-form mechanics model."""
+    from .models.predict import FE_MESHES_MM
+
+    p = design.spec.predict
+    if p.mechanics_model.value in ("column", "hertz_column"):
+        return ()
+    tol = (p.tolerance_pct if tolerance_pct is None else tolerance_pct) / 100.0
+    meshes: list[float] = []
+    for h in FE_MESHES_MM:
+        meshes.append(h)
+        if len(meshes) >= 2 and FE_ERROR_PER_H_OVER_R * h / design.elastomer_radius_mm <= tol:
+            break
+    return tuple(meshes)
+
+
+def scan_rows(design: "Design") -> int:
+    """The most rows the simulated scan can have: the spec's y and z extents over the step, y capped at the
+    magnet's radius each side (the lateral range never exceeds it) and z at 1.25 x the travel to d_min (the
+    end of the predicted normal curve); see :func:`magfab.models.scan.scan_track`."""
+    cal, sen = design.spec.calibration, design.spec.sensor
+    step = cal.scan_step_mm
+    half = min(cal.scan_y_mm / 2.0, design.magnet_radius_mm)
+    z = min(cal.scan_z_mm, 1.25 * max(design.d_rest_mm - sen.d_min_mm, 0.0))
+    return (int(math.floor(2.0 * half / step + 1e-9)) + 1) * (int(math.floor(z / step + 1e-9)) + 1)
+
+
+def estimate(design: "Design") -> Cost:
+    """The cost of building ``design`` (module doc), without doing any of the work."""
+    meshes = fe_meshes(design)
+    return Cost(
+        triangles=triangles(design),
+        fe_meshes_mm=meshes,
+        fe_triangles=sum(fe_triangles(design, h) for h in meshes),
+        fe_peak_triangles=fe_triangles(design, min(meshes)) if meshes else 0,
+        scan_rows=scan_rows(design),
+        mls=design.spec.calibration.method.value in ("mls", "auto"),
+    )
+
+
+# ---- the limits -----------------------------------------------------------------------------------------
+
+
+def _fmt(x: float) -> str:
+    return f"{x:,}" if isinstance(x, int) else (f"{x:.3g}" if x < 1e4 else f"{x:,.0f}")
+
+
+def _round_up(x: float) -> float:
+    """x rounded up to two significant digits (a value a user can type that is on the right side)."""
+    if x <= 0:
+        return x
+    e = math.floor(math.log10(x)) - 1
+    return math.ceil(x / 10**e - 1e-9) * 10**e
+
+
+def check_limits(design: "Design") -> Cost:
+    """Raise :class:`SpecError` for the first estimate past its limit (naming the key to change and the value
+    that would fit); return the estimate otherwise."""
+
+    spec = design.spec
+    cost = estimate(design)
+    m = spec.mould
+    if cost.triangles > MAX_TRIANGLES:
+        knobs = [("mould.angular_tolerance_deg", "angular_tolerance_deg", 0.5, 45.0),
+                 ("mould.tessellation_tolerance_mm", "tessellation_tolerance_mm", 1e-9, 1.0)]
+        if 360.0 / m.angular_tolerance_deg < facets(design.elastomer_radius_mm, m.tessellation_tolerance_mm, 360.0):
+            knobs.reverse()  # blame first the key whose own facet count is the finer
+        what = f"would need about {_fmt(cost.triangles)} triangles (limit {_fmt(MAX_TRIANGLES)})"
+        for key, name, lo, hi in knobs:
+            need = _bisect(lambda x: triangles(_with(design, mould=m.model_copy(update={name: x}))), lo, hi)
+            if need is not None:
+                raise SpecError(key, getattr(m, name), what, f"raise {key} to at least {_fmt(_round_up(need))}")
+        raise SpecError("mould.cavities", m.cavities, what, "use fewer cavities per mould")
+    if cost.fe_work > MAX_FE_WORK:
+        p = spec.predict
+        finest_ok = [h for h in cost.fe_meshes_mm if sum(fe_triangles(design, g) for g in cost.fe_meshes_mm
+                                                         if g >= h) * FE_STEPS <= MAX_FE_WORK]
+        if len(finest_ok) >= 2:
+            need = 100.0 * FE_ERROR_PER_H_OVER_R * min(finest_ok) / design.elastomer_radius_mm
+            raise SpecError("predict.tolerance_pct", p.tolerance_pct,
+                            f"would need FE meshes down to {min(cost.fe_meshes_mm):g} mm on this "
+                            f"{_fmt(design.elastomer_radius_mm * 2)} mm elastomer, about {_fmt(cost.fe_work)} "
+                            f"element-steps (limit {_fmt(MAX_FE_WORK)})",
+                            f"raise predict.tolerance_pct to at least {_fmt(_round_up(need))}")
+        key = "elastomer.height_mm" if design.elastomer_height_mm >= design.elastomer_radius_mm * 2 else "elastomer.diameter_mm"
+        raise SpecError(key, getattr(spec.elastomer, key.split(".")[1]),
+                        f"is too large for the FE model: about {_fmt(cost.fe_work)} element-steps even on the "
+                        f"coarsest meshes (limit {_fmt(MAX_FE_WORK)})",
+                        "use a smaller elastomer, or predict.mechanics_model = \"hertz_column\"")
+    cal = spec.calibration
+    limit_rows = MAX_MLS_ROWS if cost.mls else MAX_SCAN_ROWS
+    if cost.scan_rows > limit_rows:
+        need = _bisect(lambda s: scan_rows(_with(design, calibration=cal.model_copy(update={"scan_step_mm": s}))),
+                       1e-9, 5.0, limit=limit_rows)
+        why = f" with calibration.method = {cal.method.value!r} (moving least squares grows with rows squared)" \
+            if cost.mls else ""
+        fix = f"raise calibration.scan_step_mm to at least {_fmt(_round_up(need))}" if need is not None else \
+            "shrink calibration.scan_y_mm and scan_z_mm"
+        if cost.mls:
+            fix += ", or use calibration.method = \"poly\""
+        raise SpecError("calibration.scan_step_mm", cal.scan_step_mm,
+                        f"would give a scan of up to {_fmt(cost.scan_rows)} rows{why} (limit {_fmt(limit_rows)})", fix)
+    if cost.seconds > BUDGET_S or cost.megabytes > BUDGET_MB:
+        _over_budget(design, cost)
+    return cost
+
+
+#: For the whole-budget check: the key that drives each part, its range and which way is cheaper.
+_KNOBS = {
+    "tessellation": ("mould", "tessellation_tolerance_mm", 1e-9, 1.0),
+    "fe": ("predict", "tolerance_pct", 1e-9, 50.0),
+    "calibration": ("calibration", "scan_step_mm", 1e-9, 5.0),
+}
+
+
+def _over_budget(design: "Design", cost: Cost) -> None:
+    """Each part is within its own limit but together they are not: blame the costliest part's key."""
+    part = max(cost.parts_s, key=cost.parts_s.get)  # type: ignore[arg-type]
+    section, name, lo, hi = _KNOBS[part]
+    current = getattr(getattr(design.spec, section), name)
+
+    def total(x: float) -> float:
+        c = estimate(_with(design, **{section: getattr(design.spec, section).model_copy(update={name: x})}))
+        return max(c.seconds / BUDGET_S, c.megabytes / BUDGET_MB)
+
+    need = None
+    if total(hi) <= 1.0:
+        for _ in range(60):
+            mid = math.sqrt(lo * hi)
+            lo, hi = (lo, mid) if total(mid) <= 1.0 else (mid, hi)
+        need = hi
+    fix = f"raise {section}.{name} to at least {_fmt(_round_up(need))}" if need is not None else \
+        "relax the other cost keys (mould tolerances, predict.tolerance_pct, calibration.scan_step_mm)"
+    raise SpecError(f"{section}.{name}", current,
+                    f"the build would need about {cost.seconds:.0f} s and {cost.megabytes:.0f} MB (budget "
+                    f"{BUDGET_S:g} s, {BUDGET_MB:g} MB), {cost.parts_s[part]:.0f} s of it for the {part}", fix)
+
+
+def _with(design: "Design", **sections: object) -> "Design":
+    from dataclasses import replace
+
+    return replace(design, spec=design.spec.model_copy(update=sections))
+
+
+def _bisect(count, lo: float, hi: float, limit: int = MAX_TRIANGLES) -> float | None:
+    """The smallest x in [lo, hi] with count(x) <= limit (count falls as x grows), or None if even hi is over."""
+    if count(hi) > limit:
+        return None
+    for _ in range(60):
+        mid = math.sqrt(lo * hi) if lo > 0 else (lo + hi) / 2.0
+        if count(mid) <= limit:
+            hi = mid
+        else:
+            lo = mid
+    return hi
