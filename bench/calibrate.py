@@ -34,6 +34,7 @@ import numpy as np
 from magfab import derive, load_spec
 from magfab.export.calibration_chart import chart
 from magfab.models import calibration as C
+from magfab.models.scan import simulate_scan
 from magfab.models.predict import predict
 
 BENCH_DIR = Path(__file__).resolve().parent
@@ -43,12 +44,12 @@ def run(repeat: int) -> tuple[C.FitResult, list[dict], dict]:
     design = derive(load_spec(None))
     pred = predict(design)
     t = time.perf_counter()
-    scan = C.simulate_scan(design, pred)
+    scan = simulate_scan(design, pred)
     t_scan = time.perf_counter() - t
     t = time.perf_counter()
     result = C.fit(scan, design)
     t_fit = time.perf_counter() - t
-    ideal = C.simulate_scan(design, pred, ideal=True)
+    ideal = simulate_scan(design, pred, ideal=True)
     readings = scan.B_uT
     times = {c.label: C.evaluation_time_s(result.calibration_for(c.label), readings, repeat=repeat)
              for c in result.candidates}

@@ -18,7 +18,8 @@ from typing import TYPE_CHECKING, Callable
 from . import __version__
 from .check import design_findings, errors_in, mesh_findings, mould_fit_findings
 from .design import Design, derive
-from .errors import BuildError, Finding, OutputError, Severity
+from .errors import BuildError, Finding, ModelLimitError, OutputError, Severity
+from .fork import side_branch
 from .output import Artifact, check_target, write
 from .spec import Spec
 
@@ -171,7 +172,7 @@ def _acceptance(design: Design, prediction) -> tuple[dict | None, list[Finding]]
 
     try:
         return acceptance(design, prediction), []
-    except ValueError as exc:  # e.g. no weight fits the predicted range: the bundle ships without the check
+    except ModelLimitError as exc:  # e.g. no weight fits the predicted range: the bundle ships without the check
         return None, [Finding(Severity.WARNING, "acceptance", f"the readout package has no acceptance test for "
                               f"this design: {exc}", "predict.max_stretch")]
 
@@ -180,16 +181,18 @@ def _bundle(design: Design, prediction, scan, acceptance: dict | None, say: Prog
     """The firmware-plus-calibration bundle: calibration.json (from ``scan``, or a simulated scan when there
     is none yet), its chart, the firmware sources, the AVR image where avr-gcc exists, the flash scripts and
     the readout package."""
+    from .export import calibration_chart, firmware, readout, toolchain
+    from .formats.scan_csv import scan_csv
     from .models import calibration as calibrate
-    from .export import firmware, readout
+    from .models.scan import simulate_scan
 
     out: list[Artifact] = []
     found: list[Finding] = []
     t = time.perf_counter()
     if scan is None:
         say("simulating a calibration scan")
-        scan = calibrate.simulate_scan(design, prediction)
-        out.append(Artifact("calibration/scan_simulated.csv", calibrate.scan_csv(scan).encode(),
+        scan = simulate_scan(design, prediction)
+        out.append(Artifact("calibration/scan_simulated.csv", scan_csv(scan).encode(),
                             "the simulated y-z scan behind the provisional calibration (scan CSV format)"))
     say("fitting the calibration")
     # Moving least squares costs seconds; only fit it when the spec may use it.
@@ -204,7 +207,7 @@ def _bundle(design: Design, prediction, scan, acceptance: dict | None, say: Prog
                          + ("" if result.meets_tolerance else f"; {result.message}"), "calibration.tolerance_mN"))
     out.append(Artifact("calibration/calibration.json", _json_bytes(cal),
                         "force calibration (eq. 12-14): coefficients, scaling, valid region, held-out errors, scan hash"))
-    for name, data in sorted(calibrate.chart(result).items()):
+    for name, data in sorted(calibration_chart.chart(result).items()):
         out.append(Artifact(f"calibration/{name}", data, "held-out force error against evaluation cost, per order and MLS"))
     if acceptance is not None:
         out.append(Artifact("calibration/acceptance.json", _json_bytes(acceptance),
@@ -217,7 +220,7 @@ def _bundle(design: Design, prediction, scan, acceptance: dict | None, say: Prog
     out += [Artifact(rel, data, "readout package (pip install ./readout)") for rel, data in sorted(rd.items())]
     timings["render"] = time.perf_counter() - t
     t = time.perf_counter()
-    image = firmware.build_hex(fw)
+    image = toolchain.build_hex(fw)
     if image is None:
         found.append(Finding(Severity.INFO, "firmware-hex-skipped",
                              "avr-gcc (Debian packages gcc-avr and avr-libc) is not installed, so no ready-to-flash "
@@ -261,11 +264,13 @@ def model_bench() -> list[dict[str, object]]:
     return list(json.loads(text)["rows"])
 
 
-def plan(spec: Spec, progress: Progress | None = None, scan=None) -> BuildResult:
+def plan(spec: Spec, progress: Progress | None = None, scan=None, parallel: bool | None = None) -> BuildResult:
     """Everything a build would write, as bytes, with its findings; raises on an error-level finding.
 
-    ``scan`` (a :class:`magfab.models.calibration.Scan`) calibrates the firmware and readout from real data; without
-    it the bundle carries a provisional calibration fitted to a simulated scan."""
+    ``scan`` (a :class:`magfab.formats.scan_csv.Scan`) calibrates the firmware and readout from real data;
+    without it the bundle carries a provisional calibration fitted to a simulated scan. The CAD branch runs
+    here while the physics branch runs in a forked worker (:mod:`magfab.fork`; ``parallel=False`` or
+    ``MAGFAB_JOBS=1`` runs both in this process); the result is the same either way."""
     say = progress or (lambda _stage: None)
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
@@ -273,10 +278,59 @@ def plan(spec: Spec, progress: Progress | None = None, scan=None) -> BuildResult
     design = derive(spec)
     findings = design_findings(design)
     timings["derive"] = time.perf_counter() - t0
+    _stop(findings, spec)
+
+    with side_branch(_physics, design, scan, parallel=parallel) as physics:
+        cad_artifacts, cad_findings, meshes, routed = _cad(design, say, timings)
+        _stop(findings + cad_findings, spec)
+        say("waiting for the predictions and the bundle")
+        t = time.perf_counter()
+        branch = physics.result()
+        if physics.forked:  # how long the CAD branch waited for the worker
+            timings["wait-physics"] = time.perf_counter() - t
+    findings += cad_findings
+    artifacts = cad_artifacts
+    for stage in branch.stages:  # predictions, bundle, bench papers: each stops the build in turn
+        findings += stage.findings
+        _stop(findings, spec)
+        artifacts += stage.artifacts
+    timings.update(branch.timings)
+    prediction, cal = branch.prediction, branch.calibration
+
+    say("writing reports")
+    artifacts.append(Artifact("design.json", _json_bytes(design.as_dict()), "every derived dimension, mm and mm^3"))
+    artifacts.append(Artifact("spec.json", _json_bytes(spec.model_dump(mode="json")), "the spec with every default filled in"))
+    artifacts.append(Artifact("findings.json", _json_bytes([f.as_dict() for f in findings]), "design and mesh checks"))
+    say("drawing the report")
+    t = time.perf_counter()
+    from .export.report import render_report
+
+    report_files = [("report.html", "this page: the whole build on one page"),
+                    ("manifest.json", "what made what: hashes, versions")]
+    artifacts.append(Artifact("report.html", render_report(spec, design, findings, list(artifacts), prediction, cal,
+                                                           meshes, extra_files=report_files, board=routed),
+                              "the whole build on one page, for a browser"))
+    timings["report"] = time.perf_counter() - t
+    models = {f"{m.family}_model": m.as_dict() for m in prediction.models}
+    artifacts.append(Artifact("manifest.json", _manifest(spec, design, artifacts, models), "what made what: hashes, versions"))
+    timings["total"] = time.perf_counter() - t0
+    image = next((a.path for a in artifacts if a.path.endswith(".hex")), None)
+    calibration = {"source": cal["scan"]["source"], "method": cal["method"], "order": cal["order"],
+                   "rms_holdout_Fz_mN": round(1000 * cal["errors"]["Fz_N"]["rms_holdout"], 2),
+                   "rms_holdout_Fr_mN": round(1000 * cal["errors"]["Fr_N"]["rms_holdout"], 2), "image": image}
+    return BuildResult(spec, design, artifacts, findings, timings, prediction=prediction, calibration=calibration)
+
+
+def _stop(findings: list[Finding], spec: Spec) -> None:
     stop = errors_in(findings, spec.build.strict)
     if stop:
         raise BuildError(stop)
 
+
+def _cad(design: Design, say: Progress, timings: dict[str, float]):
+    """The CAD branch: every solid as STL (and STEP), the mesh checks, the closed mould's fit, the board.
+    Returns (artifacts, findings, meshes, board); stops at the first stage with an error."""
+    spec = design.spec
     say("loading the CAD kernel")
     t = time.perf_counter()
     import cadquery  # noqa: F401  - timed on its own, not charged to the first part
@@ -287,6 +341,7 @@ def plan(spec: Spec, progress: Progress | None = None, scan=None) -> BuildResult
 
     timings["import"] = time.perf_counter() - t
     artifacts: list[Artifact] = []
+    findings: list[Finding] = []
     meshes: dict[str, object] = {}
     tol, ang = spec.mould.tessellation_tolerance_mm, spec.mould.angular_tolerance_deg
     for stem, module, func, _printed, description in PARTS:
@@ -306,64 +361,40 @@ def plan(spec: Spec, progress: Progress | None = None, scan=None) -> BuildResult
         t = time.perf_counter()
         findings += mould_fit_findings(design, mould_fit(design, meshes, tol))
         timings["mould-fit"] = time.perf_counter() - t
-    stop = errors_in(findings, spec.build.strict)
-    if stop:
-        raise BuildError(stop)
-
+    _stop(findings, spec)
     board_artifacts, board_findings, routed = _board(design, say, timings)
-    findings += board_findings
-    stop = errors_in(findings, spec.build.strict)
-    if stop:
-        raise BuildError(stop)
-    artifacts += board_artifacts
+    return artifacts + board_artifacts, findings + board_findings, meshes, routed
 
+
+@dataclass(frozen=True)
+class _Stage:
+    artifacts: list[Artifact]
+    findings: list[Finding]
+
+
+@dataclass(frozen=True)
+class _PhysicsBranch:
+    """What the physics branch hands back (pickled when it ran in the worker)."""
+
+    stages: tuple[_Stage, ...]  # predictions, bundle, bench papers, in pipeline order
+    prediction: "Prediction"
+    calibration: dict[str, object]  # calibration.json as written
+    timings: dict[str, float]
+
+
+def _physics(design: Design, scan) -> _PhysicsBranch:
+    """The physics branch: predictions and plots, the acceptance bands, the calibration, firmware and readout
+    bundle, and the bench papers. Nothing here needs the CAD kernel."""
+    timings: dict[str, float] = {}
+    say: Progress = lambda _stage: None  # noqa: E731 - the main process reports progress
     predict_artifacts, predict_findings, prediction = _predictions(design, say, timings)
-    findings += predict_findings
-    stop = errors_in(findings, spec.build.strict)
-    if stop:
-        raise BuildError(stop)
-    artifacts += predict_artifacts
-
     acceptance, acceptance_findings = _acceptance(design, prediction)
-    findings += acceptance_findings
     bundle_artifacts, bundle_findings, fitted = _bundle(design, prediction, scan, acceptance, say, timings)
-    findings += bundle_findings
-    stop = errors_in(findings, spec.build.strict)
-    if stop:
-        raise BuildError(stop)
-    artifacts += bundle_artifacts
-
     fab_artifacts, fab_findings = _fabrication(design, acceptance, say, timings)
-    findings += fab_findings
-    stop = errors_in(findings, spec.build.strict)
-    if stop:
-        raise BuildError(stop)
-    artifacts += fab_artifacts
-
-    say("writing reports")
-    artifacts.append(Artifact("design.json", _json_bytes(design.as_dict()), "every derived dimension, mm and mm^3"))
-    artifacts.append(Artifact("spec.json", _json_bytes(spec.model_dump(mode="json")), "the spec with every default filled in"))
-    artifacts.append(Artifact("findings.json", _json_bytes([f.as_dict() for f in findings]), "design and mesh checks"))
-    say("drawing the report")
-    t = time.perf_counter()
-    from .export.report import render_report
-
-    report_files = [("report.html", "this page: the whole build on one page"),
-                    ("manifest.json", "what made what: hashes, versions")]
-    artifacts.append(Artifact("report.html", render_report(spec, design, findings, list(artifacts), prediction,
-                                                           fitted.calibration.to_json(), meshes,
-                                                           extra_files=report_files, board=routed),
-                              "the whole build on one page, for a browser"))
-    timings["report"] = time.perf_counter() - t
-    models = {f"{m.family}_model": m.as_dict() for m in prediction.models}
-    artifacts.append(Artifact("manifest.json", _manifest(spec, design, artifacts, models), "what made what: hashes, versions"))
-    timings["total"] = time.perf_counter() - t0
-    cal = fitted.calibration.to_json()
-    image = next((a.path for a in artifacts if a.path.endswith(".hex")), None)
-    calibration = {"source": cal["scan"]["source"], "method": cal["method"], "order": cal["order"],
-                   "rms_holdout_Fz_mN": round(1000 * cal["errors"]["Fz_N"]["rms_holdout"], 2),
-                   "rms_holdout_Fr_mN": round(1000 * cal["errors"]["Fr_N"]["rms_holdout"], 2), "image": image}
-    return BuildResult(spec, design, artifacts, findings, timings, prediction=prediction, calibration=calibration)
+    stages = (_Stage(predict_artifacts, predict_findings),
+              _Stage(bundle_artifacts, acceptance_findings + bundle_findings),
+              _Stage(fab_artifacts, fab_findings))
+    return _PhysicsBranch(stages, prediction, fitted.calibration.to_json(), timings)
 
 
 def _manifest(spec: Spec, design: Design, artifacts: list[Artifact], models: dict[str, object]) -> bytes:

@@ -103,7 +103,7 @@ def _run_build(spec: Path | None, out_dir: Path | None, as_json: bool, scan_path
         loaded = load_spec(spec)
         scan = None
         if scan_path is not None:
-            from .models.calibration import read_scan_csv
+            from .formats.scan_csv import read_scan_csv
 
             scan = read_scan_csv(scan_path)
         with _progress(sys.stderr.isatty() and not as_json) as progress:

@@ -104,10 +104,15 @@ def test_assembled_mould_does_not_collide_and_leaves_the_cavity():
     assert _intersection_volume(lid_assembled, part) == pytest.approx(0.0, abs=1e-6)
 
 
-def test_same_spec_same_bytes():
-    spec = load_spec(None)
-    a, b = plan(spec), plan(spec)
-    assert [(x.path, x.data) for x in a.artifacts] == [(x.path, x.data) for x in b.artifacts]
+def test_same_spec_same_bytes_in_one_process_or_two(default_build):
+    """The session build ran its physics branch in a forked worker where it could; this plan runs everything
+    in one process. Same spec, same bytes, whichever way the work was split."""
+    from magfab.fork import parallel_available
+
+    again = plan(load_spec(None), parallel=False)
+    assert [(x.path, x.data) for x in again.artifacts] == [(x.path, x.data) for x in default_build.artifacts]
+    assert "wait-physics" not in again.timings_s
+    assert ("wait-physics" in default_build.timings_s) == parallel_available()
 
 
 def _top_flat_area(mesh) -> float:

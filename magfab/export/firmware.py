@@ -109,18 +109,6 @@ class FirmwareError(InputError):
         super().__init__(f"calibration.{key} = {shown}: {allowed}")
 
 
-def __getattr__(name: str) -> object:
-    # The compiler and simulator drivers live in magfab.export.toolchain (which imports this module's target
-    # constants); kept reachable here for build.py's ``firmware.build_hex`` until it imports them from there.
-    if name in _TOOLCHAIN:
-        from . import toolchain
-        return getattr(toolchain, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-_TOOLCHAIN = ("CompileError", "build_avr_elf", "build_hex", "build_host", "run_simavr", "write_tree")
-
-
 # ---- chip configuration -----------------------------------------------------------------------------------
 
 

@@ -75,6 +75,8 @@ from typing import TYPE_CHECKING, Any, Mapping
 import numpy as np
 
 from .. import __version__
+from ..errors import ModelLimitError
+from ..formats import acceptance_json
 from ..recipes import catalogue
 from ..units import GAUSS_PER_TESLA, UT_PER_GAUSS
 from . import field as fieldmod
@@ -85,7 +87,7 @@ if TYPE_CHECKING:
 
 __all__ = ["FORMAT", "G0", "DEFAULT_WEIGHT_G", "Tolerances", "SOURCES", "acceptance", "default_weight_g"]
 
-FORMAT = "magfab-acceptance/1"
+FORMAT = acceptance_json.FORMAT
 G0 = 9.80665  # m/s^2, standard gravity (CGPM 1901)
 DEFAULT_WEIGHT_G = 50.0
 #: The known weight stays at or below this fraction of the softest material's predicted range, so the
@@ -191,7 +193,7 @@ def _bz(radius: float, height: float, br: float, d: np.ndarray) -> np.ndarray:
     """Bz in G on the axis, at distances ``d`` (mm) below the magnet's lower face."""
     d = np.asarray(d, dtype=float)
     if np.any(d <= 0.05):
-        raise ValueError(f"the magnet's lower face would reach the Hall point (d = {float(d.min()):.3g} mm)")
+        raise ModelLimitError(f"the magnet's lower face would reach the Hall point (d = {float(d.min()):.3g} mm)")
     return np.asarray(fieldmod.bz_br(fieldmod.Magnet(radius, height, br), d, 0.0, model=fieldmod.FieldModel.EXACT)[0],
                       dtype=float)
 
@@ -328,7 +330,7 @@ def _travel_curves(normal: Mapping[str, Any]) -> tuple[np.ndarray, dict[str, np.
     curves = {k: np.asarray([p[1] for p in v], dtype=float) for k, v in normal["curve"].items()}
     for k, f in curves.items():
         if len(f) != len(u) or np.any(np.diff(f) <= 0) or np.any(np.diff(u) < 0):
-            raise ValueError(f"the prediction's normal curve '{k}' is not increasing: no force -> travel mapping")
+            raise ModelLimitError(f"the prediction's normal curve '{k}' is not increasing: no force -> travel mapping")
     return u, curves
 
 
@@ -347,7 +349,7 @@ def _weight(data: Mapping[str, Any], inp: _Inputs, corners: list[tuple[float, fl
     if not (math.isfinite(w) and w > 0):
         raise ValueError(f"weight_g must be a positive number of grams; instead received {weight_g!r}")
     if force > f_range:
-        raise ValueError(f"a {w:g} g weight ({force:.3g} N) presses beyond the predicted range of the softest "
+        raise ModelLimitError(f"a {w:g} g weight ({force:.3g} N) presses beyond the predicted range of the softest "
                          f"material ({f_range:.3g} N = {f_range / G0 * 1000:.0f} g): use a lighter weight")
     grid = np.unique(np.concatenate([np.linspace(0.0, f_range, TABLE_POINTS), [force]]))
     travel = {k: np.interp(grid, f, u) for k, f in curves.items()}  # magnet travel at each force, mm

@@ -58,17 +58,16 @@ import numpy as np
 
 from ..errors import InputError, ScanError
 from ..formats import calibration_json
-from ..formats.scan_csv import FORCE_COLUMNS, MIN_ROWS, SCAN_COLUMNS, Scan, read_scan_csv, scan_csv
+from ..formats.scan_csv import FORCE_COLUMNS, MIN_ROWS, SCAN_COLUMNS, Scan
 from ..units import UT_PER_GAUSS
 from .region import HULL_MAX_VERTICES, Scaling, ValidRegion, guard_ops
-from .scan import scan_track, simulate_scan
 
 if TYPE_CHECKING:
     from ..design import Design
 
 __all__ = [
     "FORMAT", "MIN_ROWS", "ORDERS", "MLS_ORDER", "SCAN_COLUMNS", "FORCE_COLUMNS", "HULL_MAX_VERTICES",
-    "CalibrationError", "ScanError", "Scan", "read_scan_csv", "scan_csv", "scan_track", "simulate_scan",
+    "CalibrationError", "ScanError", "Scan",
     "monomials", "Scaling", "ValidRegion", "MLSModel", "Calibration", "Candidate", "FitResult",
     "fit", "choose", "poly_ops", "mls_ops", "guard_ops", "evaluation_time_s",
 ]
@@ -90,15 +89,6 @@ class CalibrationError(InputError):
     of the wrong shape): one line naming the value and what is allowed. A scan that cannot be calibrated on
     raises :class:`~magfab.errors.ScanError`, a malformed calibration.json
     :class:`magfab.formats.calibration_json.CalibrationError` (a :class:`~magfab.errors.CalibrationFormatError`)."""
-
-
-def __getattr__(name: str) -> object:
-    # The chart renders with matplotlib, which belongs to export/; kept reachable here for build.py's
-    # ``calibrate.chart`` until it imports magfab.export.calibration_chart itself.
-    if name == "chart":
-        from ..export.calibration_chart import chart
-        return chart
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 # ---------------------------------------------------------------------------------------------------

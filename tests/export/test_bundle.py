@@ -21,6 +21,7 @@ from magfab.cli import main
 from magfab.errors import MagfabError
 from magfab.export import firmware, readout, toolchain
 from magfab.formats import calibration_json
+from magfab.formats.scan_csv import read_scan_csv
 from magfab.models import calibration as C
 
 
@@ -121,7 +122,7 @@ def test_end_to_end_simulated_chip_to_host_forces(bundle, tmp_path):
     files = {str(p.relative_to(out / "firmware")): p.read_bytes() for p in (out / "firmware").rglob("*")
              if p.is_file() and not p.name.endswith(".hex")}
     exe = toolchain.build_host(files, tmp_path / "fw")
-    scan = C.read_scan_csv(out / "calibration" / "scan_simulated.csv")
+    scan = read_scan_csv(out / "calibration" / "scan_simulated.csv")
     pick = np.linspace(0, scan.rows - 1, 12).round().astype(int)
     script = "".join(f"B {bx:.4f} {by:.4f} {bz:.4f} 25\nS 1\n" for bx, by, bz in scan.B_uT[pick])
     run = subprocess.run([str(exe)], input=script.encode(), capture_output=True, timeout=120)

@@ -12,8 +12,10 @@ import pytest
 
 from magfab import derive, load_spec, parse_spec
 from magfab.export.calibration_chart import chart
-from magfab.formats import scan_csv
+from magfab.formats import scan_csv as scan_format
+from magfab.formats.scan_csv import read_scan_csv, scan_csv
 from magfab.models import calibration as C
+from magfab.models.scan import scan_track, simulate_scan
 from magfab.models import field as F
 from magfab.models.region import _cross
 from magfab.units import UT_PER_GAUSS
@@ -32,12 +34,12 @@ def pred(design):
 
 @pytest.fixture(scope="module")
 def scan(design, pred):
-    return C.simulate_scan(design, pred)
+    return simulate_scan(design, pred)
 
 
 @pytest.fixture(scope="module")
 def ideal(design, pred):
-    return C.simulate_scan(design, pred, ideal=True)
+    return simulate_scan(design, pred, ideal=True)
 
 
 @pytest.fixture(scope="module")
@@ -56,8 +58,8 @@ def poly4(pred, scan):
 
 
 def test_csv_round_trip_is_exact(scan):
-    text = C.scan_csv(scan)
-    back = C.read_scan_csv(text)
+    text = scan_csv(scan)
+    back = read_scan_csv(text)
     assert np.array_equal(back.time_s, scan.time_s) and np.array_equal(back.B_uT, scan.B_uT)
     assert np.array_equal(back.F_N, scan.F_N) and back.temperature_C is None
     assert back.sha256 == scan.sha256  # a simulated scan's hash is its CSV's
@@ -67,7 +69,7 @@ def test_csv_any_column_order_extra_columns_comments_and_temperature(scan, tmp_p
     n = 60
     t = np.linspace(20.0, 21.0, n)
     s = C.Scan(scan.time_s[:n], scan.B_uT[:n], scan.F_N[:n], t, "x")
-    lines = C.scan_csv(s, comments=["spec magone", "chip gain 0"]).splitlines()
+    lines = scan_csv(s, comments=["spec magone", "chip gain 0"]).splitlines()
     assert lines[0] == "# spec magone" and lines[2].startswith("time_s,Bx_uT")
     header = lines[2].split(",")
     order = list(reversed(range(len(header))))
@@ -75,11 +77,11 @@ def test_csv_any_column_order_extra_columns_comments_and_temperature(scan, tmp_p
     shuffled += [",".join([row.split(",")[i] for i in order] + ["free text"]) for row in lines[3:]]
     path = tmp_path / "scan.csv"
     path.write_text("\n".join(lines[:2] + shuffled) + "\n", encoding="utf-8")
-    back = C.read_scan_csv(path)
+    back = read_scan_csv(path)
     assert back.source == "scan.csv" and back.rows == n
     assert np.array_equal(back.temperature_C, t) and np.array_equal(back.B_uT, s.B_uT)
     assert np.array_equal(back.F_N, s.F_N)
-    rec = C.read_scan_csv(C.scan_csv(C.Scan(s.time_s, s.B_uT, None)), require_force=False)
+    rec = read_scan_csv(scan_csv(C.Scan(s.time_s, s.B_uT, None)), require_force=False)
     assert rec.F_N is None and rec.rows == n
 
 
@@ -87,7 +89,7 @@ def test_csv_any_column_order_extra_columns_comments_and_temperature(scan, tmp_p
 
 
 def test_simulated_track_is_the_papers_y_z_raster(design, pred, scan):
-    y, delta = C.scan_track(design, pred)
+    y, delta = scan_track(design, pred)
     cal = design.spec.calibration
     nominal = pred.curves["nominal"]
     delta_end = np.interp(pred.data["normal"]["travel_mm"], nominal.magnet_displacement_mm, nominal.indentation_mm)
@@ -100,7 +102,7 @@ def test_simulated_track_is_the_papers_y_z_raster(design, pred, scan):
 
 
 def test_simulated_scan_physics(design, pred, ideal):
-    y, delta = C.scan_track(design, pred)
+    y, delta = scan_track(design, pred)
     centre = (delta == 0) & (np.abs(y) < 1e-12)
     # at rest on the axis: the predicted rest field, no lateral field, no force
     magnet = F.Magnet.from_spec(design.spec)
@@ -131,9 +133,9 @@ def test_simulated_noise_matches_the_prediction_and_is_deterministic(design, pre
     q = design.spec.calibration.reference_resolution_mN / 1000.0
     assert np.abs(scan.F_N / q - np.round(scan.F_N / q)).max() < 1e-6
     assert np.sqrt(np.mean((scan.F_N[:, 2] - ideal.F_N[:, 2]) ** 2)) == pytest.approx(q / math.sqrt(12), rel=0.1)
-    again = C.simulate_scan(design, pred)
+    again = simulate_scan(design, pred)
     assert again.sha256 == scan.sha256 and np.array_equal(again.B_uT, scan.B_uT)
-    other = C.simulate_scan(derive(parse_spec("[calibration]\nseed = 1\n")), pred)
+    other = simulate_scan(derive(parse_spec("[calibration]\nseed = 1\n")), pred)
     assert other.sha256 != scan.sha256 and np.array_equal(other.F_N, scan.F_N)
 
 
@@ -273,7 +275,7 @@ def test_region_polygon_is_small_and_holds_the_scan(scan):
 
 
 def test_zeroing_sets_the_tare(poly4, scan, pred, design):
-    y, delta = C.scan_track(design, pred)
+    y, delta = scan_track(design, pred)
     rest = scan.B_uT[(delta == 0) & (np.abs(y) < 0.3)]
     cal = poly4.calibration.zeroed(rest)
     assert cal.tare_N[0] != 0.0
@@ -355,5 +357,5 @@ def test_chart_is_deterministic(result):
 
 
 def test_the_too_few_rows_message_names_the_largest_fit():
-    assert scan_csv.LARGEST_ORDER == C.ORDERS[-1] and scan_csv.MIN_ROWS == C.MIN_ROWS
+    assert scan_format.LARGEST_ORDER == C.ORDERS[-1] and scan_format.MIN_ROWS == C.MIN_ROWS
 

@@ -1,0 +1,114 @@
+"""Run one branch of the pipeline in a forked worker process while the main process runs another.
+
+The build has two independent branches after the design is derived: the CAD branch (the CAD kernel, the
+solids, the meshes, the board) and the physics branch (predictions, plots, calibration, firmware and the
+bench papers). On a machine with two or more cores they run side by side: the worker is a ``fork`` of the
+main process, so it inherits the derived design without pickling it and imports no CAD kernel of its own.
+Its result comes back pickled through a pipe. Where ``fork`` is not the platform's way (Windows, macOS) or
+``MAGFAB_JOBS=1`` is set, the branch runs in-process, first, with the same result.
+
+Results are the same bytes either way (tests compare the two): each branch is deterministic on its own.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import sys
+import traceback
+from contextlib import contextmanager
+from typing import Any, Callable, Iterator
+
+from .errors import BuildError
+
+__all__ = ["Branch", "side_branch", "parallel_available"]
+
+_JOB: tuple[Callable[..., Any], tuple[Any, ...]] | None = None  # what the forked child runs (inherited, not pickled)
+
+
+def parallel_available() -> bool:
+    """True where a second branch can run in a forked worker: Linux, two or more cores, MAGFAB_JOBS not 1."""
+    if os.environ.get("MAGFAB_JOBS", "").strip() == "1":
+        return False
+    return sys.platform.startswith("linux") and (os.cpu_count() or 1) >= 2
+
+
+class Branch:
+    """The side branch's result: :meth:`result` returns it, or raises what the branch raised."""
+
+    def __init__(self, fn: Callable[..., Any], args: tuple[Any, ...], forked: bool) -> None:
+        self._fn, self._args, self._done, self._value = fn, args, False, None
+        self._process = self._conn = None
+        self.forked = forked
+        if forked:
+            global _JOB
+            ctx = multiprocessing.get_context("fork")
+            self._conn, child = ctx.Pipe(duplex=False)
+            _JOB = (fn, args)
+            try:
+                self._process = ctx.Process(target=_child, args=(child,), daemon=True)
+                self._process.start()
+            finally:
+                _JOB = None
+            child.close()
+        else:
+            self._value = _outcome(fn, args)
+            self._done = True
+
+    def result(self) -> Any:
+        if not self._done:
+            try:
+                self._value = self._conn.recv()
+            except EOFError:  # the worker died without a word (killed, out of memory)
+                self._process.join(5)
+                self._value = ("crash", f"the worker process ended without a result (exit code "
+                                        f"{self._process.exitcode})")
+            self._done = True
+            self._process.join()
+        kind, payload = self._value
+        if kind == "ok":
+            return payload
+        if kind == "build-error":
+            raise BuildError(payload)
+        if kind == "interrupted":
+            raise KeyboardInterrupt
+        raise RuntimeError(f"in the build's worker process: {payload}")
+
+    def cancel(self) -> None:
+        if self._process is not None and self._process.is_alive():
+            self._process.kill()
+            self._process.join()
+
+
+def _outcome(fn: Callable[..., Any], args: tuple[Any, ...]) -> tuple[str, Any]:
+    """The branch's result as a tagged, picklable value; BuildError's findings travel as themselves."""
+    try:
+        return "ok", fn(*args)
+    except BuildError as exc:
+        return "build-error", exc.findings
+    except KeyboardInterrupt:
+        return "interrupted", None
+
+
+def _child(conn) -> None:
+    fn, args = _JOB  # type: ignore[misc]
+    try:
+        value = _outcome(fn, args)
+    except BaseException:  # noqa: BLE001 - reported to the parent, which raises it there
+        value = ("crash", traceback.format_exc(limit=-8))
+    try:
+        conn.send(value)
+    finally:
+        conn.close()
+        os._exit(0)  # no atexit handlers, no buffers flushed twice: the parent owns those
+
+
+@contextmanager
+def side_branch(fn: Callable[..., Any], *args: Any, parallel: bool | None = None) -> Iterator[Branch]:
+    """Start ``fn(*args)`` beside the block (forked when ``parallel``, default :func:`parallel_available`);
+    the block calls ``.result()`` when it needs it. Leaving the block early kills the worker."""
+    branch = Branch(fn, args, parallel_available() if parallel is None else parallel)
+    try:
+        yield branch
+    finally:
+        branch.cancel()
