@@ -1,23 +1,57 @@
 """The output folder: the only code that writes it.
 
 A build's files are :class:`Artifact` values (path, bytes, what it is for) until :func:`write` puts them
-into place: it writes a temporary folder beside the target and renames it into place only when every
-file is there, so an error or an interrupt never leaves half an output and never clobbers the previous
-good one; :func:`check_target` refuses, before any work, a folder that is not an earlier magfab build.
+into place. The rules, in the order a user meets them:
+
+* **Which folders a build may replace.** :func:`check_target` refuses, before any work, a folder that is
+  not absent, empty or an earlier magfab build (one with a ``manifest.json``), and one magfab cannot write
+  (read-only folder or mount): :class:`OutputError` naming the path and the OS error in words.
+* **The build folder is magfab's only where its manifest says so.** A rebuild replaces exactly the files
+  the previous ``manifest.json`` lists under ``artifacts`` (and the manifest itself); every other file or
+  folder in it (a scan recorded into the folder, notes) is kept, byte for byte (it is hard-linked into the
+  new build, copied where the file system cannot link). A kept file at a path the new build writes stops
+  the build before anything changes: move it away. (A manifest without an ``artifacts`` list, which no
+  magfab ever wrote, marks every file as magfab's.)
+* **The swap is recoverable.** The new build is written into ``.NAME.tmp-*`` beside the target; a journal
+  ``.NAME.swap`` naming where the previous build goes is written; then the previous build is renamed to
+  ``.NAME.old-*`` and the new one into place; the journal is removed only once the new one is there. A run
+  killed between any two of these steps leaves either a complete build at the path or a journal from which
+  the next :func:`write` or :func:`check_target` puts the previous build back (:func:`_recover`); an error or
+  interrupt runs the same recovery at once. Temporaries of killed runs are removed by the next run.
+* **One writer at a time.** Writers of one folder take an ``flock`` on ``.NAME.lock`` beside it for the
+  swap (a few seconds at most); a second writer waits for it, and gives up with :class:`OutputError` naming
+  the other build's process after ``lock_timeout_s``.
+
+This guards against kills and errors, not power loss (nothing is fsynced).
 """
 
 from __future__ import annotations
 
+import errno
+import fcntl
 import json
 import os
+import re
+import secrets
 import shutil
-import tempfile
+import time
+from contextlib import suppress
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
+from typing import Callable
 
 from .errors import OutputError
 
 __all__ = ["Artifact", "check_target", "write", "OutputError"]
+
+LOCK_WAIT_S = 120.0  # how long a second writer of one folder waits for the first before giving up
+
+_step_hook: Callable[[str], None] | None = None  # tests set it to kill the process between two steps
+
+
+def _step(what: str) -> None:
+    if _step_hook is not None:
+        _step_hook(what)
 
 
 @dataclass(frozen=True)
@@ -34,50 +68,331 @@ def _safe_relative(path: str) -> PurePosixPath:
     return p
 
 
-def _is_previous_build(path: Path) -> bool:
-    manifest = path / "manifest.json"
+def _absolute(out_dir: Path) -> Path:
+    out = Path(os.path.abspath(out_dir))
+    return out.resolve() if out.is_symlink() else out
+
+
+# ---- the previous build: what is magfab's, what is the user's ----
+
+def _listed(out: Path) -> set[str] | None:
+    """The paths the previous build's manifest says magfab wrote (with the manifest); None if it lists none."""
     try:
-        return "magfab_version" in json.loads(manifest.read_text(encoding="utf-8"))
+        manifest = json.loads((out / "manifest.json").read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        return {"manifest.json"}  # an empty folder: anything that appears in it is the user's
+    except (OSError, ValueError):
+        return None
+    items = manifest.get("artifacts") if isinstance(manifest, dict) else None
+    if not isinstance(items, list):
+        return None
+    paths = {item if isinstance(item, str) else item.get("path") if isinstance(item, dict) else None for item in items}
+    return {str(PurePosixPath(p)) for p in paths if isinstance(p, str) and p} | {"manifest.json"}
+
+
+def _user_files(out: Path) -> list[str]:
+    """Relative paths in ``out`` that its manifest does not list: files, links and empty folders (``name/``)."""
+    listed = _listed(out) if out.is_dir() else None
+    if listed is None:
+        return []
+    magfab_dirs = {str(q) for p in listed for q in PurePosixPath(p).parents}
+    found: list[str] = []
+
+    def walk(folder: str, prefix: str) -> None:
+        with os.scandir(folder) as entries:
+            for entry in sorted(entries, key=lambda e: e.name):
+                rel = prefix + entry.name
+                if entry.is_dir(follow_symlinks=False):
+                    before = len(found)
+                    walk(entry.path, rel + "/")
+                    if len(found) == before and rel not in magfab_dirs:
+                        found.append(rel + "/")
+                elif rel not in listed:
+                    found.append(rel)
+
+    walk(str(out), "")
+    return found
+
+
+def _check_collisions(out: Path, users: list[str], paths: list[str]) -> None:
+    files = set(paths)
+    folders = {str(q) for p in paths for q in PurePosixPath(p).parents}
+    for rel in users:
+        p = rel.rstrip("/")
+        above = {str(q) for q in PurePosixPath(p).parents}
+        if p in files or (not rel.endswith("/") and p in folders) or above & files:
+            raise OutputError(f"{out / p} is not magfab's (the previous manifest.json does not list it) but this "
+                              "build writes that path; move it away and build again")
+
+
+def _carry(src: Path, dst: Path, users: list[str]) -> None:
+    """Put the user's files of ``src`` into ``dst`` (hard links: same bytes, same inode), skipping any there."""
+    for rel in users:
+        s, d = src / rel, dst / rel
+        if os.path.lexists(d):
+            continue
+        d.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            if rel.endswith("/"):
+                os.mkdir(d)
+            else:
+                _link(s, d)
+        except FileNotFoundError:  # the user removed it meanwhile
+            continue
+        _step(f"kept {rel}")
+
+
+def _link(src: Path, dst: Path) -> None:
+    try:
+        os.link(src, dst, follow_symlinks=False)
+    except OSError as exc:
+        if exc.errno not in {errno.EPERM, errno.EMLINK, errno.EXDEV, errno.ENOTSUP, errno.EOPNOTSUPP}:
+            raise
+        if os.path.islink(src):
+            os.symlink(os.readlink(src), dst)
+        else:
+            shutil.copy2(src, dst)
+
+
+# ---- the folder beside the target: temporaries, journal, lock ----
+
+def _sibling(out: Path, kind: str) -> Path:
+    return out.parent / f".{out.name}.{kind}"
+
+
+def _new_sibling(out: Path, kind: str) -> Path:
+    return _sibling(out, f"{kind}-{secrets.token_hex(8)}")
+
+
+def _temporaries(out: Path) -> list[Path]:
+    """Leftovers of earlier runs beside ``out``: ``.NAME.tmp-*`` and ``.NAME.old-*`` (also the 8-character
+    names of magfab versions before the journal)."""
+    pattern = re.compile(rf"\.{re.escape(out.name)}\.(tmp|old)-([0-9a-f]{{16}}|[a-z0-9_]{{8}})")
+    try:
+        names = os.listdir(out.parent)
+    except FileNotFoundError:
+        return []
+    return sorted(out.parent / n for n in names if pattern.fullmatch(n))
+
+
+def _remove(path: Path) -> None:
+    if path.is_symlink() or not path.is_dir():
+        with suppress(FileNotFoundError):
+            os.unlink(path)
+    else:
+        shutil.rmtree(path, ignore_errors=True)
+
+
+def _journal_old(out: Path) -> Path | None:
+    """Where the journal says the previous build was moved (None: no journal, or one cut short)."""
+    try:
+        name = json.loads(_sibling(out, "swap").read_text(encoding="utf-8"))["old"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    old = out.parent / str(name)
+    return old if old in _temporaries(out) else None
+
+
+def _acquire(out: Path, timeout_s: float) -> int | None:
+    """An fd holding the flock on ``.NAME.lock``, or None if another process still holds it after the wait."""
+    path = _sibling(out, "lock")
+    deadline = time.monotonic() + timeout_s
+    while True:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            if time.monotonic() >= deadline:
+                return None
+            time.sleep(0.02)
+            continue
+        try:
+            same = os.path.samestat(os.fstat(fd), os.stat(path))
+        except FileNotFoundError:
+            same = False
+        if same:  # else its holder removed it as we opened it: lock the new one
+            break
+        os.close(fd)
+    with suppress(OSError):
+        os.ftruncate(fd, 0)
+        os.write(fd, f"{os.getpid()}\n".encode())
+    return fd
+
+
+def _release(out: Path, fd: int) -> None:
+    with suppress(FileNotFoundError):
+        os.unlink(_sibling(out, "lock"))  # while still holding it, so no waiter locks a removed file
+    os.close(fd)
+
+
+def _busy(out: Path) -> OutputError:
+    try:
+        pid = _sibling(out, "lock").read_text().strip()
+    except OSError:
+        pid = ""
+    who = f"another magfab build (process {pid})" if pid.isdigit() else "another magfab build"
+    return OutputError(f"{who} is writing {out}; try again when it has finished")
+
+
+# ---- recovery and the swap ----
+
+def _recover(out: Path) -> None:
+    """Finish or undo what a killed or failed run left beside ``out``: with the lock held, and idempotent.
+
+    Killed between the two renames: the previous build goes back. After them: the user's files that
+    appeared in the previous build meanwhile are carried over. Then the journal and all temporaries go."""
+    old = _journal_old(out)
+    if old is not None and old.is_dir():
+        if not os.path.lexists(out):
+            os.rename(old, out)
+            _step("restored")
+        else:
+            _carry(old, out, _user_files(old))
+    if not os.path.lexists(out):
+        _restore_legacy(out)
+    with suppress(FileNotFoundError):
+        os.unlink(_sibling(out, "swap"))
+        _step("journal removed")
+    for stale in _temporaries(out):
+        _remove(stale)
+        _step(f"removed {stale.name}")
+
+
+def _restore_legacy(out: Path) -> None:
+    """magfab before the journal moved the previous build to ``.NAME.old-XXXXXXXX/previous``: put it back."""
+    held = [h / "previous" for h in _temporaries(out) if (h / "previous" / "manifest.json").is_file()]
+    if held:
+        os.rename(max(held, key=lambda p: p.stat().st_mtime), out)
+
+
+def _swap(out: Path, tmp: Path) -> None:
+    if os.path.lexists(out):
+        old = _new_sibling(out, "old")
+        _sibling(out, "swap").write_text(json.dumps({"old": old.name, "new": tmp.name}), encoding="utf-8")
+        _step("journal written")
+        os.rename(out, old)
+        _step("previous moved aside")
+    os.rename(tmp, out)
+    _step("new in place")
+
+
+def _write_tree(tmp: Path, artifacts: list[Artifact]) -> None:
+    for a in artifacts:
+        target = tmp.joinpath(*_safe_relative(a.path).parts)
+        target.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            with open(target, "wb") as f:
+                f.write(a.data)
+        except OSError as exc:
+            exc.filename = exc.filename or str(target)
+            raise
+        _step(f"wrote {a.path}")
+
+
+# ---- errors ----
+
+def _os_error(exc: OSError, out: Path) -> OutputError:
+    """One line: the path the user knows (in the target, not in our temporary) and the OS error in words."""
+    shown = Path(exc.filename) if exc.filename else out
+    try:
+        first, *rest = shown.relative_to(out.parent).parts
+    except ValueError:
+        first, rest = "", []
+    if first.startswith(f".{out.name}.tmp-") and rest:
+        shown = out.joinpath(*rest)
+    elif first.startswith(f".{out.name}."):  # the temporary itself, the lock, the journal
+        shown = out.parent
+    words = os.strerror(exc.errno) if exc.errno else str(exc)
+    return OutputError(f"cannot write {shown}: {words}")
+
+
+def _cannot_write(path: Path) -> OutputError:
+    try:
+        read_only = bool(os.statvfs(path).f_flag & os.ST_RDONLY)
+    except OSError:
+        read_only = False
+    return OutputError(f"cannot write {path}: {os.strerror(errno.EROFS if read_only else errno.EACCES)}")
+
+
+def _check_replaceable(out: Path) -> None:
+    if os.path.lexists(out):
+        if not out.is_dir() or not (_is_previous_build(out) or not any(out.iterdir())):
+            raise OutputError(f"--out {out} exists and is not an earlier magfab build (no manifest.json); "
+                              "refusing to replace it: choose another directory")
+        need = [out.parent, out]
+    else:
+        need = [next(p for p in out.parents if os.path.lexists(p))]
+        if not need[0].is_dir():
+            raise OutputError(f"cannot write {out}: {need[0]} is not a folder")
+    for folder in need:
+        if not os.access(folder, os.W_OK | os.X_OK):
+            raise _cannot_write(folder)
+
+
+def _is_previous_build(path: Path) -> bool:
+    try:
+        return "magfab_version" in json.loads((path / "manifest.json").read_text(encoding="utf-8"))
     except (OSError, ValueError, TypeError):
         return False
 
 
+# ---- the two entry points ----
+
 def check_target(out_dir: Path) -> Path:
-    """``out_dir`` as an absolute path if a build may replace it (absent, empty, or an earlier magfab build);
-    :class:`OutputError` otherwise. Checked before any work, and again just before the swap."""
-    out_dir = Path(out_dir).absolute()
-    if out_dir.exists() and not (out_dir.is_dir() and (_is_previous_build(out_dir) or not any(out_dir.iterdir()))):
-        raise OutputError(f"--out {out_dir} exists and is not an earlier magfab build (no manifest.json); "
-                          "refusing to replace it: choose another directory")
-    return out_dir
+    """``out_dir`` as an absolute path if a build may replace it (absent, empty, or an earlier magfab build,
+    and writable); :class:`OutputError` otherwise. Also finishes what a killed run left beside it. Checked
+    before any work, and again just before the swap."""
+    out = _absolute(out_dir)
+    if _temporaries(out) or os.path.lexists(_sibling(out, "swap")) or os.path.lexists(_sibling(out, "lock")):
+        try:
+            fd = _acquire(out, 0.0)
+            if fd is not None:  # else the build holding it recovers
+                try:
+                    _recover(out)
+                finally:
+                    _release(out, fd)
+        except OSError as exc:
+            raise _os_error(exc, out) from exc
+    _check_replaceable(out)
+    return out
 
 
-def write(out_dir: Path, artifacts: list[Artifact]) -> Path:
-    """Put the artifacts into ``out_dir`` atomically; an existing ``out_dir`` must be an earlier magfab build."""
-    out_dir = check_target(out_dir)
-    for a in artifacts:
-        _safe_relative(a.path)
-    parent = out_dir.parent
-    parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.tmp-", dir=parent))
-    old: Path | None = None
+def write(out_dir: Path, artifacts: list[Artifact], *, lock_timeout_s: float = LOCK_WAIT_S) -> Path:
+    """Put the artifacts into ``out_dir`` (see the module's rules); returns it as an absolute path.
+
+    Any OS error (full disk, read-only folder) is an :class:`OutputError` naming the path, with the previous
+    output as it was and no temporaries left."""
+    out = _absolute(out_dir)
+    paths = [str(_safe_relative(a.path)) for a in artifacts]
     try:
-        for a in artifacts:
-            target = tmp.joinpath(*_safe_relative(a.path).parts)
-            target.parent.mkdir(parents=True, exist_ok=True)
-            target.write_bytes(a.data)
-        os.chmod(tmp, 0o755)
-        if out_dir.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.old-", dir=parent))
-            os.rename(out_dir, old / "previous")
-        os.rename(tmp, out_dir)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        if old is not None and (old / "previous").exists() and not out_dir.exists():
-            os.rename(old / "previous", out_dir)
-        if old is not None and not (old / "previous").exists():  # restored: the empty holder goes too
-            shutil.rmtree(old, ignore_errors=True)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        fd = _acquire(out, lock_timeout_s)
+    except OSError as exc:
+        raise _os_error(exc, out) from exc
+    if fd is None:
+        raise _busy(out)
+    try:
+        _step("locked")
+        _recover(out)
+        _check_replaceable(out)
+        users = _user_files(out)
+        _check_collisions(out, users, paths)
+        tmp = _new_sibling(out, "tmp")
+        os.mkdir(tmp)
+        _step("temporary made")
+        _write_tree(tmp, artifacts)
+        _carry(out, tmp, users)
+        if out.is_dir():
+            shutil.copymode(out, tmp)  # a user's chmod 700 on the folder stays
+        _swap(out, tmp)
+        _recover(out)  # commits: the journal goes, then the previous build
+    except BaseException as exc:
+        with suppress(OSError):
+            _recover(out)
+        if isinstance(exc, OSError):
+            raise _os_error(exc, out) from exc
         raise
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)
-    return out_dir
+    finally:
+        _release(out, fd)
+    return out

@@ -1,0 +1,415 @@
+"""The output folder (magfab/output.py): user files are never lost, the swap survives a kill at every step,
+errors and interrupts at every step, concurrent writers, a full disk and a read-only folder.
+
+Fake artifacts stand in for a build (the writer does not care what is in them, only that a manifest lists
+them); one test goes through ``magfab calibrate`` on the session's real default build."""
+
+from __future__ import annotations
+
+import dataclasses
+import errno
+import fcntl
+import importlib
+import json
+import os
+import random
+import shutil
+import signal
+import time
+import traceback
+
+import pytest
+
+from magfab import output
+from magfab.errors import OutputError
+from magfab.output import Artifact, check_target, write
+
+
+def _fake(tag: str, *extra: str) -> list[Artifact]:
+    """A build: files under a tag, and a manifest listing them as build.py's does."""
+    files = [Artifact(f"parts/{tag}.stl", tag.encode() * 100, ""), Artifact("report.html", f"<p>{tag}".encode(), "")]
+    files += [Artifact(p, f"{tag} {p}".encode(), "") for p in extra]
+    listing = [{"path": a.path, "sha256": "", "bytes": len(a.data), "description": ""} for a in files]
+    manifest = json.dumps({"magfab_version": "test", "tag": tag, "artifacts": listing}).encode()
+    return files + [Artifact("manifest.json", manifest, "")]
+
+
+def _tree(folder) -> dict[str, bytes | str | None]:
+    """Everything under a folder: files by bytes, links by target, empty folders as None."""
+    found: dict[str, bytes | str | None] = {}
+    for root, dirs, files in os.walk(folder):
+        rel = os.path.relpath(root, folder)
+        for name in dirs + files:
+            path, key = os.path.join(root, name), os.path.normpath(os.path.join(rel, name))
+            if os.path.islink(path):
+                found[key] = "-> " + os.readlink(path)
+            elif os.path.isfile(path):
+                found[key] = open(path, "rb").read()
+            elif not os.listdir(path):
+                found[key] = None
+    return found
+
+
+def _expected(tag: str, user: dict, *extra: str) -> dict:
+    return {**{a.path: a.data for a in _fake(tag, *extra)}, **user}
+
+
+def _add_user_files(out) -> dict:
+    """What a user leaves in a build: a scan, a note inside a magfab folder, a folder of their own, a link."""
+    (out / "scan.csv").write_bytes(b"x_mm,y_mm,z_mm,Bx_G\n0,0,1,2\n")
+    (out / "parts" / "mine.txt").write_bytes(b"\x00\xffmy notes")
+    (out / "bench" / "day1").mkdir(parents=True)
+    (out / "bench" / "day1" / "log.txt").write_bytes(b"log")
+    (out / "empty").mkdir()
+    os.symlink("scan.csv", out / "latest.csv")
+    return {"scan.csv": b"x_mm,y_mm,z_mm,Bx_G\n0,0,1,2\n", "parts/mine.txt": b"\x00\xffmy notes",
+            "bench/day1/log.txt": b"log", "empty": None, "latest.csv": "-> scan.csv"}
+
+
+def _beside(out) -> list[str]:
+    return sorted(os.listdir(out.parent))
+
+
+@pytest.fixture
+def built(tmp_path):
+    """An earlier build with the user's files in it; returns (out, the user's files)."""
+    out = tmp_path / "out"
+    write(out, _fake("old"))
+    return out, _add_user_files(out)
+
+
+# ---- 1. user files are never lost ----
+
+def test_user_files_survive_build_and_rebuild(built):
+    out, user = built
+    inode = os.stat(out / "scan.csv").st_ino
+    write(out, _fake("new"))
+    assert _tree(out) == _expected("new", user)  # parts/old.stl (magfab's) went, the user's stayed
+    assert os.stat(out / "scan.csv").st_ino == inode  # the same file, not a copy
+    write(out, _fake("newer", "bench/summary.md"))  # into the user's folder: allowed
+    assert _tree(out) == _expected("newer", user, "bench/summary.md")
+    assert _beside(out) == ["out"]
+
+
+def test_a_user_file_where_the_build_writes_stops_it_before_anything_changes(built):
+    out, user = built
+    before = _tree(out)
+    for clash in (_fake("new", "scan.csv"), _fake("new", "empty"), _fake("new", "scan.csv/inner"),
+                  _fake("new", "latest.csv")):
+        with pytest.raises(OutputError, match="scan.csv|empty|latest.csv.* is not magfab's"):
+            write(out, clash)
+        assert _tree(out) == before and _beside(out) == ["out"]
+
+
+def test_a_folder_that_is_not_a_build_is_refused(tmp_path):
+    precious = tmp_path / "thesis"
+    precious.mkdir()
+    (precious / "chapter1.tex").write_text("do not delete")
+    for call in (lambda: check_target(precious), lambda: write(precious, _fake("new"))):
+        with pytest.raises(OutputError, match="not an earlier magfab build"):
+            call()
+    assert _tree(precious) == {"chapter1.tex": b"do not delete"} and _beside(precious) == ["thesis"]
+
+
+def test_files_in_an_empty_target_are_the_users(tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    write(out, _fake("new"))
+    (out / "scan.csv").write_text("1")
+    write(out, _fake("newer"))
+    assert _tree(out) == _expected("newer", {"scan.csv": b"1"})
+
+
+def test_a_scan_in_the_real_build_folder_survives_calibrate(default_build, tmp_path, monkeypatch):
+    """``magfab calibrate build/x/scan.csv`` (the README's bench steps) rebuilds the folder the scan is in.
+    The plan is the session's default build (a rebuild of the same spec); the CLI, build() and write() run."""
+    from click.testing import CliRunner
+
+    from magfab.cli import main
+
+    build_mod = importlib.import_module("magfab.build")  # the module: magfab.build is also the function
+
+    out = tmp_path / "magone"
+    shutil.copytree(default_build.out_dir, out)
+    scan = (out / "calibration" / "scan_simulated.csv").read_bytes()
+    (out / "scan.csv").write_bytes(scan)
+    seen = []
+
+    def plan(spec, progress=None, scan=None):
+        seen.append(scan)
+        return dataclasses.replace(default_build, out_dir=None, timings_s=dict(default_build.timings_s))
+
+    monkeypatch.setattr(build_mod, "plan", plan)
+    result = CliRunner().invoke(main, ["calibrate", str(out / "scan.csv"), "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert seen and seen[0] is not None  # the scan was read from the folder before it was rebuilt
+    assert (out / "scan.csv").read_bytes() == scan
+    assert _tree(out) == {**_tree(default_build.out_dir), "scan.csv": scan}
+    assert _beside(out) == ["magone"]
+
+
+# ---- 2. the swap: kills, errors and interrupts at every step ----
+
+def _steps(out, tags=("new",)) -> list[str]:
+    """The steps of one uninterrupted write over ``out`` (on a copy, so ``out`` is untouched)."""
+    copy = out.parent / "count" / out.name
+    shutil.copytree(out, copy, symlinks=True)
+    seen: list[str] = []
+    output._step_hook = seen.append
+    try:
+        write(copy, _fake(*tags))
+    finally:
+        output._step_hook = None
+    shutil.rmtree(copy.parent)
+    return seen
+
+
+def _killed_at(k: int, call) -> int:
+    """Run ``call`` in a child that SIGKILLs itself at its k-th step; the child's wait status."""
+    pid = os.fork()
+    if pid == 0:  # pragma: no cover - the child
+        count = iter(range(k + 1))
+
+        def hook(what):
+            if next(count) == k:
+                os.kill(os.getpid(), signal.SIGKILL)
+
+        output._step_hook = hook
+        try:
+            call()
+        finally:
+            os._exit(0)
+    return os.waitpid(pid, 0)[1]
+
+
+def test_a_kill_at_every_step_leaves_the_old_or_the_new_build(built):
+    out, user = built
+    old, new = _tree(out), _expected("new", user)
+    steps = _steps(out)
+    assert len(steps) >= 10 and "previous moved aside" in steps
+    for k, step in enumerate(steps):
+        status = _killed_at(k, lambda: write(out, _fake("new")))
+        assert os.WIFSIGNALED(status) and os.WTERMSIG(status) == signal.SIGKILL, step
+        check_target(out)  # the recovery call
+        assert _tree(out) in (old, new), f"killed after {step!r}"
+        assert _beside(out) == ["out"], f"killed after {step!r}"
+        write(out, _fake("old"))  # back to the old build for the next step
+        assert _tree(out) == old
+
+
+@pytest.mark.slow
+def test_a_kill_at_every_step_of_the_write_then_of_its_recovery(built):
+    out, user = built
+    old, new = _tree(out), _expected("new", user)
+    for k, step in enumerate(_steps(out)):
+        for j in range(20):
+            _killed_at(k, lambda: write(out, _fake("new")))
+            status = _killed_at(j, lambda: check_target(out))
+            check_target(out)
+            assert _tree(out) in (old, new), f"killed after {step!r}, then at step {j} of the recovery"
+            assert _beside(out) == ["out"]
+            write(out, _fake("old"))
+            if not os.WIFSIGNALED(status):
+                break
+
+
+def test_a_kill_between_the_two_renames_is_undone_by_the_next_run(built):
+    """Finding 2: killed after the previous build was moved aside, before the new one landed."""
+    out, user = built
+    old = _tree(out)
+    pid = os.fork()
+    if pid == 0:  # pragma: no cover - the child
+        real, calls = os.rename, []
+
+        def rename(src, dst):
+            calls.append(src)
+            if len(calls) == 2:
+                os.kill(os.getpid(), signal.SIGKILL)
+            real(src, dst)
+
+        os.rename = rename
+        try:
+            write(out, _fake("new"))
+        finally:
+            os._exit(0)
+    assert os.WIFSIGNALED(os.waitpid(pid, 0)[1])
+    check_target(out)
+    assert _tree(out) == old and _beside(out) == ["out"]
+
+
+@pytest.mark.parametrize("error", [OSError(errno.ENOSPC, "No space left on device"), KeyboardInterrupt()],
+                         ids=["ENOSPC", "interrupt"])
+def test_an_error_at_every_step_leaves_a_complete_build_and_no_temporaries(built, error):
+    out, user = built
+    old, new = _tree(out), _expected("new", user)
+    steps = _steps(out)
+    assert "new in place" in steps
+    for k, step in enumerate(steps):
+        count = iter(range(len(steps) * 3))
+
+        def hook(what, k=k):
+            if next(count) == k:
+                raise error
+
+        output._step_hook = hook
+        try:
+            with pytest.raises(KeyboardInterrupt if isinstance(error, KeyboardInterrupt) else OutputError) as raised:
+                write(out, _fake("new"))
+        finally:
+            output._step_hook = None
+        if raised.type is OutputError:
+            assert str(raised.value) == f"cannot write {out}: No space left on device"
+        assert _tree(out) in (old, new), f"failed after {step!r}"
+        assert _beside(out) == ["out"], f"failed after {step!r}"
+        write(out, _fake("old"))
+
+
+def test_stale_temporaries_are_removed_and_others_kept(built, tmp_path):
+    out, user = built
+    old = _tree(out)
+    for name in (".out.tmp-0123456789abcdef", ".out.old-fedcba9876543210", ".out.tmp-abcd_123"):
+        (tmp_path / name / "parts").mkdir(parents=True)
+        (tmp_path / name / "parts" / "x.stl").write_text("partial")
+    (tmp_path / ".out.swap").write_text('{"old": ".out.old-')  # cut short by a kill
+    (tmp_path / ".out.lock").write_text("99999999\n")  # its holder was killed
+    keep = [".out.tmp-mine", ".outer.tmp-0123456789abcdef", ".out.tmp-0123456789abcdef.bak"]
+    for name in keep:
+        (tmp_path / name).write_text("not magfab's")
+    check_target(out)
+    assert _beside(out) == sorted(["out", *keep]) and _tree(out) == old
+
+
+def test_a_previous_build_stranded_by_an_older_magfab_is_put_back(tmp_path):
+    """magfab before the journal, killed between its renames, left the build in .out.old-XXXXXXXX/previous."""
+    out = tmp_path / "out"
+    write(out, _fake("old"))
+    user = _add_user_files(out)
+    (tmp_path / ".out.old-k2j_9x0a").mkdir()
+    os.rename(out, tmp_path / ".out.old-k2j_9x0a" / "previous")
+    (tmp_path / ".out.tmp-q8w7e6r5").mkdir()
+    assert check_target(out) == out
+    assert _tree(out) == _expected("old", user) and _beside(out) == ["out"]
+
+
+# ---- concurrent writers ----
+
+def _writer(out, tag: str, times: int) -> int:
+    """Child: ``times`` writes with random pauses between steps; 0 done, 3 refused (OutputError), 1 a traceback."""
+    rng = random.Random(tag)
+    output._step_hook = lambda what: rng.random() < 0.3 and time.sleep(rng.random() * 0.003)
+    try:
+        for _ in range(times):
+            write(out, _fake(tag))
+        return 0
+    except OutputError:
+        return 3
+    except BaseException:
+        traceback.print_exc()
+        return 1
+
+
+def test_concurrent_writers_to_one_folder_all_finish_with_a_complete_build(built):
+    out, user = built
+    tags = [f"w{i}" for i in range(4)]
+    pids = []
+    for tag in tags:
+        pid = os.fork()
+        if pid == 0:  # pragma: no cover - the child
+            os._exit(_writer(out, tag, 6))
+        pids.append(pid)
+    codes = [os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1]) for pid in pids]
+    assert codes == [0] * len(tags)
+    assert _tree(out) in [_expected(tag, user) for tag in tags]
+    assert _beside(out) == ["out"]
+
+
+def test_a_second_writer_that_cannot_wait_is_refused_naming_the_first(built):
+    out, user = built
+    before = _tree(out)
+    fd = os.open(out.parent / ".out.lock", os.O_RDWR | os.O_CREAT)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        os.write(fd, b"4242\n")
+        with pytest.raises(OutputError, match=r"another magfab build \(process 4242\) is writing .*out"):
+            write(out, _fake("new"), lock_timeout_s=0.2)
+        assert check_target(out) == out  # does not wait, and leaves the holder's files alone
+    finally:
+        os.close(fd)
+    assert _tree(out) == before
+
+
+# ---- a full disk, a read-only folder ----
+
+def test_a_full_disk_is_one_line_naming_the_file_and_nothing_is_lost(built, monkeypatch):
+    out, user = built
+    before = _tree(out)
+    real_open = open
+
+    class Full:
+        def __init__(self, f):
+            self.f = f
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            self.f.close()
+
+        def write(self, data):
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    def full_open(path, mode="r", *args, **kwargs):
+        f = real_open(path, mode, *args, **kwargs)
+        return Full(f) if str(path).endswith(".stl") else f
+
+    monkeypatch.setattr(output, "open", full_open, raising=False)
+    with pytest.raises(OutputError) as raised:
+        write(out, _fake("new"))
+    assert str(raised.value) == f"cannot write {out / 'parts' / 'new.stl'}: No space left on device"
+    assert _tree(out) == before and _beside(out) == ["out"]
+
+
+@pytest.mark.parametrize("fail", ["lock", "mkdir", "rename"])
+def test_a_read_only_folder_is_one_line_naming_it_and_nothing_is_lost(built, monkeypatch, fail):
+    """Simulated (root ignores permissions): the first call that needs the parent writable fails with EACCES."""
+    out, user = built
+    before = _tree(out)
+    real = {"lock": os.open, "mkdir": os.mkdir, "rename": os.rename}[fail]
+
+    def denied(path, *args, **kwargs):
+        if os.path.dirname(os.path.abspath(path)) == str(out.parent) and (fail != "lock" or str(path).endswith(".lock")):
+            raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(path))
+        return real(path, *args, **kwargs)
+
+    monkeypatch.setattr(os, {"lock": "open", "mkdir": "mkdir", "rename": "rename"}[fail], denied)
+    with pytest.raises(OutputError) as raised:
+        write(out, _fake("new"))
+    named = out if fail == "rename" else out.parent  # the folder it could not rename, or create in
+    assert str(raised.value) == f"cannot write {named}: Permission denied"
+    monkeypatch.undo()
+    assert _tree(out) == before and _beside(out) == ["out"]
+
+
+@pytest.mark.parametrize("which", ["parent", "out"])
+def test_a_read_only_folder_is_refused_before_any_work(built, monkeypatch, which):
+    out, user = built
+    folder = out.parent if which == "parent" else out
+    real_access = os.access
+    monkeypatch.setattr(os, "access", lambda p, mode, **kw: str(p) != str(folder) and real_access(p, mode, **kw))
+    with pytest.raises(OutputError, match=f"^cannot write {folder}: Permission denied$"):
+        check_target(out)
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root ignores folder permissions (the simulated tests cover it)")
+@pytest.mark.parametrize("which", ["parent", "out"])
+def test_a_really_read_only_folder(built, which):
+    out, user = built
+    before = _tree(out)
+    folder = out.parent if which == "parent" else out
+    folder.chmod(0o555)
+    try:
+        with pytest.raises(OutputError, match=f"cannot write {folder}: Permission denied"):
+            write(out, _fake("new"))
+    finally:
+        folder.chmod(0o755)
+    assert _tree(out) == before and _beside(out) == ["out"]
