@@ -119,11 +119,15 @@ def test_the_most_expensive_allowed_spec_builds_within_budget(tmp_path):
     spec = parse_spec(MOST_EXPENSIVE, default_name="costly")
     cost = estimate(derive(spec))
     assert cost.seconds > 0.8 * BUDGET_S, cost  # it is near the limit by the estimate
-    t, cpu = time.perf_counter(), resource.getrusage(resource.RUSAGE_SELF)
+    who = (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN)  # the build forks a worker for the CAD stages
+
+    def cpu() -> float:
+        return sum(r.ru_utime + r.ru_stime for r in map(resource.getrusage, who))
+
+    t, c = time.perf_counter(), cpu()
     build(spec, tmp_path / "costly")
-    wall = time.perf_counter() - t
-    used = resource.getrusage(resource.RUSAGE_SELF)
-    cpu_s = used.ru_utime + used.ru_stime - cpu.ru_utime - cpu.ru_stime
-    print(f"estimated {cost.seconds:.0f} s {cost.megabytes:.0f} MB; measured {wall:.1f} s wall, {cpu_s:.1f} s CPU, "
-          f"peak {used.ru_maxrss / 1024:.0f} MB")
-    assert cpu_s <= BUDGET_S and used.ru_maxrss / 1024 <= BUDGET_MB
+    wall, cpu_s = time.perf_counter() - t, cpu() - c
+    peak_mb = max(resource.getrusage(w).ru_maxrss for w in who) / 1024
+    print(f"estimated {cost.seconds:.0f} s {cost.megabytes:.0f} MB; measured {wall:.1f} s wall, {cpu_s:.1f} s CPU "
+          f"(this process and its children), peak {peak_mb:.0f} MB")
+    assert cpu_s <= BUDGET_S and peak_mb <= BUDGET_MB
