@@ -79,10 +79,8 @@ def _listed(out: Path) -> set[str] | None:
     """The paths the previous build's manifest says magfab wrote (with the manifest); None if it lists none."""
     try:
         manifest = json.loads((out / "manifest.json").read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        return {"manifest.json"}  # an empty folder: anything that appears in it is the user's
     except (OSError, ValueError):
-        return None
+        return {"manifest.json"}  # an empty folder (or a manifest gone bad meanwhile): all else is the user's
     items = manifest.get("artifacts") if isinstance(manifest, dict) else None
     if not isinstance(items, list):
         return None
@@ -170,7 +168,7 @@ def _temporaries(out: Path) -> list[Path]:
     pattern = re.compile(rf"\.{re.escape(out.name)}\.(tmp|old)-([0-9a-f]{{16}}|[a-z0-9_]{{8}})")
     try:
         names = os.listdir(out.parent)
-    except FileNotFoundError:
+    except OSError:  # no such folder (nothing to clean), or one we cannot list (the checks say why)
         return []
     return sorted(out.parent / n for n in names if pattern.fullmatch(n))
 
@@ -344,17 +342,17 @@ def check_target(out_dir: Path) -> Path:
     and writable); :class:`OutputError` otherwise. Also finishes what a killed run left beside it. Checked
     before any work, and again just before the swap."""
     out = _absolute(out_dir)
-    if _temporaries(out) or os.path.lexists(_sibling(out, "swap")) or os.path.lexists(_sibling(out, "lock")):
-        try:
+    try:
+        if _temporaries(out) or os.path.lexists(_sibling(out, "swap")) or os.path.lexists(_sibling(out, "lock")):
             fd = _acquire(out, 0.0)
             if fd is not None:  # else the build holding it recovers
                 try:
                     _recover(out)
                 finally:
                     _release(out, fd)
-        except OSError as exc:
-            raise _os_error(exc, out) from exc
-    _check_replaceable(out)
+        _check_replaceable(out)
+    except OSError as exc:
+        raise _os_error(exc, out) from exc
     return out
 
 

@@ -120,6 +120,34 @@ def test_files_in_an_empty_target_are_the_users(tmp_path):
     assert _tree(out) == _expected("newer", {"scan.csv": b"1"})
 
 
+def test_a_file_the_user_adds_while_the_build_swaps_is_kept(built, monkeypatch):
+    out, user = built
+
+    def hook(what):
+        if what == "journal written":  # after the user's files were linked into the new build
+            (out / "late.csv").write_bytes(b"late")
+
+    monkeypatch.setattr(output, "_step_hook", hook)
+    write(out, _fake("new"))
+    assert _tree(out) == _expected("new", {**user, "late.csv": b"late"})
+
+
+def test_a_manifest_without_a_list_marks_every_file_as_magfabs(tmp_path):
+    """No magfab wrote one (its manifests always list the artifacts); test doubles such as test_cli's do."""
+    out = tmp_path / "out"
+    write(out, [Artifact("manifest.json", b'{"magfab_version": "test"}', ""), Artifact("a.txt", b"a", "")])
+    write(out, _fake("new"))
+    assert _tree(out) == _expected("new", {})
+
+
+def test_an_output_folder_under_a_file_is_refused(tmp_path):
+    (tmp_path / "file").write_text("x")
+    for call in (lambda: check_target(tmp_path / "file" / "out"), lambda: write(tmp_path / "file" / "out", _fake("a"))):
+        with pytest.raises(OutputError, match="cannot write .*file"):
+            call()
+    assert _beside(tmp_path / "file") == ["file"]
+
+
 def test_a_scan_in_the_real_build_folder_survives_calibrate(default_build, tmp_path, monkeypatch):
     """``magfab calibrate build/x/scan.csv`` (the README's bench steps) rebuilds the folder the scan is in.
     The plan is the session's default build (a rebuild of the same spec); the CLI, build() and write() run."""
