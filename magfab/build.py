@@ -20,6 +20,7 @@ from .check import design_findings, errors_in, mesh_findings, mould_fit_findings
 from .design import Design, derive
 from .errors import BuildError, Finding, ModelLimitError, OutputError, Severity
 from .fork import side_branch
+from .limits import check_scan
 from .output import Artifact, check_target, write
 from .spec import Spec
 
@@ -274,6 +275,8 @@ def plan(spec: Spec, progress: Progress | None = None, scan=None, parallel: bool
     say = progress or (lambda _stage: None)
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
+    if scan is not None:
+        check_scan(spec, scan)
     say("deriving the design")
     design = derive(spec)
     findings = design_findings(design)

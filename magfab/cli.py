@@ -178,7 +178,8 @@ def check(spec: Path | None, as_json: bool) -> None:
 def init(path: Path, force: bool) -> None:
     """Write a commented copy of the default (MagOne) spec to PATH (default: spec.toml)."""
     from .errors import SpecError
-    from .spec import NAME_PATTERN, default_spec_text, is_valid_name, shown
+    from .errors import shown
+    from .spec import NAME_PATTERN, default_spec_text, is_valid_name
 
     with _handled():
         if not is_valid_name(path.stem):  # the design is named after its file, in a TOML string and a folder

@@ -23,7 +23,8 @@ from functools import cached_property
 from .errors import SpecError
 from .limits import check_limits
 from .recipes import Recipe, catalogue
-from .spec import Spec, Tip, shown
+from .errors import shown
+from .spec import Spec, Tip
 
 __all__ = ["Design", "derive", "DISTANCE_TOLERANCE_MM"]
 

@@ -54,16 +54,51 @@ class SpecError(InputError):
 
     @property
     def message(self) -> str:
-        text = f"{self.key} = {_show(self.value)}: {self.allowed}"
+        text = f"{self.key} = {shown(self.value)}: {self.allowed}"
         return f"{text} ({self.hint})" if self.hint else text
 
 
-def _show(value: object) -> str:
-    if isinstance(value, str):
-        return repr(value)
-    if isinstance(value, float):
-        return f"{value:g}"
-    return str(value)
+#: Longest value an error line shows whole; longer ones are cut in the middle with their length.
+SHOWN_MAX_CHARS = 60
+
+
+class _Shown:
+    """A value as an error line shows it: exact (floats by their shortest round-trip repr, so a value just past
+    a bound is not printed as the bound) and bounded in length. ``raw`` is the value itself."""
+
+    def __init__(self, raw: object) -> None:
+        self.raw = raw
+        if isinstance(raw, bool):
+            text = "true" if raw else "false"
+        elif isinstance(raw, float):
+            text = repr(raw)
+        elif isinstance(raw, str):
+            text = repr(raw)
+        else:
+            text = str(raw)
+        self.text = _shorten(text)
+
+    def __str__(self) -> str:
+        return self.text
+
+    __repr__ = __str__
+
+    def __eq__(self, other: object) -> bool:
+        return self.raw == (other.raw if isinstance(other, _Shown) else other)
+
+    __hash__ = None  # type: ignore[assignment]
+
+
+def _shorten(text: str, limit: int = SHOWN_MAX_CHARS) -> str:
+    if len(text) <= limit:
+        return text
+    keep = (limit - 5) // 2
+    return f"{text[:keep]}...{text[-keep:]} ({len(text)} characters)"
+
+
+def shown(value: object) -> _Shown:
+    """``value`` for a :class:`SpecError`: exact and at most about :data:`SHOWN_MAX_CHARS` characters."""
+    return value if isinstance(value, _Shown) else _Shown(value)
 
 
 class Severity(str, Enum):

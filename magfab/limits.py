@@ -33,6 +33,7 @@ from .errors import SpecError
 
 if TYPE_CHECKING:
     from .design import Design
+    from .spec import Spec
 
 __all__ = ["BUDGET_S", "BUDGET_MB", "Cost", "estimate", "check_limits", "fe_meshes", "scan_rows", "triangles",
            "MAX_TRIANGLES", "MAX_FE_WORK", "MAX_SCAN_ROWS", "MAX_MLS_ROWS"]
@@ -318,3 +319,18 @@ def _bisect(count, lo: float, hi: float, limit: int = MAX_TRIANGLES) -> float | 
         else:
             lo = mid
     return hi
+
+
+def check_scan(spec: "Spec", scan) -> None:
+    """A measured scan the spec's calibration can afford: moving least squares grows with rows squared, so a
+    scan calibrated with ``calibration.method`` "mls" or "auto" may have at most :data:`MAX_MLS_ROWS` rows, and
+    any scan at most :data:`MAX_SCAN_ROWS`. :class:`~magfab.errors.ScanError` before any work otherwise."""
+    from .errors import ScanError
+
+    method = spec.calibration.method.value
+    if method != "poly" and scan.rows > MAX_MLS_ROWS:
+        raise ScanError(f"scan {scan.source}: {scan.rows:,} rows; calibration.method = {method!r} fits moving least "
+                        f"squares, whose cost grows with rows squared: at most {MAX_MLS_ROWS:,} rows (thin the scan, "
+                        "or set calibration.method = \"poly\")")
+    if scan.rows > MAX_SCAN_ROWS:
+        raise ScanError(f"scan {scan.source}: {scan.rows:,} rows; at most {MAX_SCAN_ROWS:,} (thin the scan)")

@@ -21,7 +21,7 @@ from typing import Any, Optional
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator
 
-from .errors import SpecError
+from .errors import SHOWN_MAX_CHARS, SpecError, _shorten, shown
 from .recipes import catalogue
 
 __all__ = ["Spec", "Tip", "Density", "Printer", "load_spec", "parse_spec", "default_spec_text", "spec_schema",
@@ -29,52 +29,12 @@ __all__ = ["Spec", "Tip", "Density", "Printer", "load_spec", "parse_spec", "defa
 
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
 #: Longest value text an error line shows; a longer one is cut in the middle and its length given.
-SHOWN_MAX_CHARS = 60
 
 
 def is_valid_name(name: str) -> bool:
     """Whether ``name`` is a design name: the whole string matches :data:`NAME_PATTERN` (Python's ``$`` alone
     would also accept a trailing newline, which then breaks the TOML that ``init`` writes)."""
     return re.fullmatch(NAME_PATTERN, name) is not None
-
-
-class _Shown:
-    """A value as an error line shows it: exact (floats by their shortest round-trip repr, so a value just past
-    a bound is not printed as the bound) and bounded in length. ``raw`` is the value itself."""
-
-    def __init__(self, raw: object) -> None:
-        self.raw = raw
-        if isinstance(raw, bool):
-            text = "true" if raw else "false"
-        elif isinstance(raw, float):
-            text = repr(raw)
-        elif isinstance(raw, str):
-            text = repr(raw)
-        else:
-            text = str(raw)
-        self.text = _shorten(text)
-
-    def __str__(self) -> str:
-        return self.text
-
-    __repr__ = __str__
-
-    def __eq__(self, other: object) -> bool:
-        return self.raw == (other.raw if isinstance(other, _Shown) else other)
-
-    __hash__ = None  # type: ignore[assignment]
-
-
-def _shorten(text: str, limit: int = SHOWN_MAX_CHARS) -> str:
-    if len(text) <= limit:
-        return text
-    keep = (limit - 5) // 2
-    return f"{text[:keep]}...{text[-keep:]} ({len(text)} characters)"
-
-
-def shown(value: object) -> _Shown:
-    """``value`` for a :class:`SpecError`: exact and at most about :data:`SHOWN_MAX_CHARS` characters."""
-    return value if isinstance(value, _Shown) else _Shown(value)
 
 
 class Tip(str, Enum):

@@ -11,6 +11,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from magfab import SpecError, derive, load_spec, parse_spec
+from magfab import limits
 from magfab.limits import BUDGET_MB, BUDGET_S, MAX_MLS_ROWS, MAX_TRIANGLES, estimate, scan_rows
 
 
@@ -131,3 +132,23 @@ def test_the_most_expensive_allowed_spec_builds_within_budget(tmp_path):
     print(f"estimated {cost.seconds:.0f} s {cost.megabytes:.0f} MB; measured {wall:.1f} s wall, {cpu_s:.1f} s CPU "
           f"(this process and its children), peak {peak_mb:.0f} MB")
     assert cpu_s <= BUDGET_S and peak_mb <= BUDGET_MB
+
+
+def test_a_measured_scan_too_large_for_mls_is_refused_before_any_work(tmp_path):
+    """A user's scan with 6,000 rows calibrated by MLS (rows^2: minutes) exits 2 at once, naming the limit."""
+    import numpy as np
+    from click.testing import CliRunner
+
+    from magfab.cli import main
+    from magfab.formats.scan_csv import Scan, scan_csv
+
+    n = limits.MAX_MLS_ROWS + 1000
+    t = np.arange(n) * 1e-3
+    scan = Scan(t, np.tile([1.0, 2.0, 300.0], (n, 1)) + t[:, None], np.tile([0.0, 0.0, 0.1], (n, 1)))
+    (tmp_path / "scan.csv").write_text(scan_csv(scan))
+    (tmp_path / "mls.toml").write_text('name = "mls"\n[calibration]\nmethod = "mls"\n')
+    result = CliRunner().invoke(main, ["calibrate", str(tmp_path / "scan.csv"), "--spec", str(tmp_path / "mls.toml"),
+                                       "--out", str(tmp_path / "out")])
+    assert result.exit_code == 2, result.output
+    assert f"at most {limits.MAX_MLS_ROWS:,} rows" in result.output and len(result.output.strip().splitlines()) == 1
+    assert not (tmp_path / "out").exists()

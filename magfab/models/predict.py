@@ -176,9 +176,11 @@ def normal_curve(design: "Design", body: mech.Body, mu: float, indentation: np.n
         curve = mech.MODELS[name](body, mu, indentation)
         return curve, ModelUse("mechanics", name, math.nan,
                                "closed form; its error against the FE model is charted by bench/mechanics.py", "spec")
+    from ..limits import fe_meshes  # the meshes the spec's cost limits were checked against
+
     previous = None
     chosen = None
-    for mesh in FE_MESHES_MM:
+    for mesh in fe_meshes(design):  # coarse to fine; past the last, the model-error warning says so
         curve = _fe_curve(body, mu, indentation, mesh)
         if previous is not None:
             n = min(len(curve.force_N), len(previous.force_N))
