@@ -12,16 +12,17 @@ import hashlib
 import io
 import math
 import os
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
-from ..errors import ScanError
+from ..errors import ScanError, shown
 
-__all__ = ["SCAN_COLUMNS", "FORCE_COLUMNS", "TEMPERATURE_COLUMN", "MIN_ROWS", "ScanError", "Scan", "scan_csv",
-           "read_scan_csv"]
+__all__ = ["SCAN_COLUMNS", "FORCE_COLUMNS", "TEMPERATURE_COLUMN", "MIN_ROWS", "BANDS", "MIN_SPAN_UT",
+           "MIN_THICKNESS", "ScanError", "Scan", "scan_csv", "read_scan_csv", "check_calibration_scan"]
 
 #: Required scan columns; the force columns are required for a calibration (not for a recording).
 SCAN_COLUMNS = ("time_s", "Bx_uT", "By_uT", "Bz_uT")
@@ -32,7 +33,24 @@ MIN_ROWS = 50
 #: The largest polynomial order every fit tries (``magfab.models.calibration.ORDERS[-1]``; a test keeps them
 #: equal), named in the too-few-rows message.
 LARGEST_ORDER = 6
-
+#: A value: ASCII decimal digits, an optional sign, point and exponent (what every CSV writer emits). Python's
+#: float() also takes '1_000', 'inf', 'nan', ' 1e3 ' with other Unicode spaces and other scripts' digits.
+NUMBER = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
+#: Plausible band of each column, (low, high, unit): beyond it a value is a unit or scaling mistake, not a
+#: reading. Field: 1 T is past any magnetometer chip's full scale (the MLX90393's is below 0.1 T); force:
+#: 1 kN (100 kgf) is far past what a tactile tip's elastomer survives; time: about 30 years; temperature:
+#: beyond any chip's rating (the MLX90393's is -40 to 125 degC).
+BANDS = {
+    "time_s": (-1e9, 1e9, "s"),
+    "Bx_uT": (-1e6, 1e6, "uT"), "By_uT": (-1e6, 1e6, "uT"), "Bz_uT": (-1e6, 1e6, "uT"),
+    "temperature_C": (-100.0, 250.0, "degC"),
+    "Fx_N": (-1e3, 1e3, "N"), "Fy_N": (-1e3, 1e3, "N"), "Fz_N": (-1e3, 1e3, "N"),
+}
+#: Least range of Bz and of Br a calibration scan must span, uT: a few LSB of the chip's finest setting.
+MIN_SPAN_UT = 1.0
+#: Least RMS distance of the scan's (Bz, Br) points from their best straight line, in the scaled variables
+#: (each axis mapped onto -1..1 by its range): below it the points lie on a line and span no area.
+MIN_THICKNESS = 1e-3
 
 
 @dataclass(frozen=True)
@@ -103,17 +121,19 @@ def _load(source: "str | os.PathLike[str] | bytes") -> tuple[bytes, str]:
         raise ScanError(f"{path}: cannot read the scan file ({exc.strerror or exc})") from None
 
 
-def _number(text: str, name: str, line: int, column: str) -> float:
-    try:
-        x = float(text)
-    except ValueError:
-        x = math.nan
-        shown = repr(text.strip()[:24]) if text.strip() else "an empty field"
-    else:
-        shown = text.strip()
-    if not math.isfinite(x):
-        raise ScanError(f"{name}: line {line}, column {column!r}: {shown} is not a finite number; "
-                        "every value must be a finite decimal number (e.g. 12.5 or -3e-2)")
+def _number(text: str, name: str, line: int, column: str, row: int) -> float:
+    stripped = text.strip(" \t")
+    if not NUMBER.fullmatch(stripped):
+        shown = repr(stripped[:24]) if stripped else "an empty field"
+        finite = stripped.lower().lstrip("+-") in ("nan", "inf", "infinity")
+        raise ScanError(f"{name}: line {line} (row {row}), column {column!r}: {shown} is not "
+                        f"{'a finite' if finite else 'a decimal'} number; every value must be a finite decimal "
+                        "number in ASCII digits (e.g. 12.5 or -3e-2)")
+    x = float(stripped)
+    lo, hi, unit = BANDS[column]
+    if not lo <= x <= hi:  # also an overflow to inf, e.g. 1e999
+        raise ScanError(f"{name}: line {line} (row {row}), column {column!r}: {stripped} is outside the plausible "
+                        f"band {lo:g} to {hi:g} {unit}; check the column's unit and scaling")
     return x
 
 
@@ -126,7 +146,7 @@ def _header(lines: list[tuple[int, str]], name: str, require_force: bool) -> tup
     seen: set[str] = set()
     for c in names:
         if c in seen:
-            raise ScanError(f"{name}: line {number} (header): column {c!r} appears twice; each column once")
+            raise ScanError(f"{name}: line {number} (header): column {shown(c)} appears twice; each column once")
         seen.add(c)
     with_force = require_force or any(c in seen for c in FORCE_COLUMNS)
     needed = SCAN_COLUMNS + (FORCE_COLUMNS if with_force else ())
@@ -142,8 +162,11 @@ def read_scan_csv(source: "str | os.PathLike[str] | bytes", *, require_force: bo
     """A scan from a CSV file (path), CSV text (a str with a newline) or CSV bytes; docs/bundle.md section 1.
 
     Raises :class:`ScanError` (one line: file, line number, column, what is allowed) for a missing file or
-    column, a non-numeric or non-finite value, a row of the wrong length, decreasing time or fewer than
-    ``min_rows`` rows. ``require_force=False`` accepts a recording without the force columns (``F_N`` None).
+    column, a value that is not an ASCII decimal number or lies outside its column's :data:`BANDS`, a row of
+    the wrong length, decreasing time or fewer than ``min_rows`` rows; with ``require_force`` (a calibration
+    scan) also for (Bz, Br) points that span no area (:func:`check_calibration_scan`), so a scan the fit
+    would refuse is refused before any build work. ``require_force=False`` accepts a recording without the
+    force columns (``F_N`` None).
     """
     raw, name = _load(source)
     try:
@@ -156,13 +179,13 @@ def read_scan_csv(source: "str | os.PathLike[str] | bytes", *, require_force: bo
     index = {c: names.index(c) for c in wanted}
     values: dict[str, list[float]] = {c: [] for c in wanted}
     last_t, last_line = -math.inf, hline
-    for number, s in lines[1:]:
+    for row, (number, s) in enumerate(lines[1:], 1):
         fields = s.split(",")
         if len(fields) != len(names):
             raise ScanError(f"{name}: line {number}: {len(fields)} values, but the header (line {hline}) names "
                             f"{len(names)} columns; every row needs one value per column")
         for c in wanted:
-            values[c].append(_number(fields[index[c]], name, number, c))
+            values[c].append(_number(fields[index[c]], name, number, c, row))
         t = values["time_s"][-1]
         if t < last_t:
             raise ScanError(f"{name}: line {number}, column 'time_s': {t!r} is less than {last_t!r} on line "
@@ -176,5 +199,42 @@ def read_scan_csv(source: "str | os.PathLike[str] | bytes", *, require_force: bo
                         "coefficients and is cross-validated)")
     arr = {c: np.asarray(v, dtype=float) for c, v in values.items()}
     forces = np.column_stack([arr[c] for c in FORCE_COLUMNS]) if FORCE_COLUMNS[0] in arr else None
-    return Scan(arr["time_s"], np.column_stack([arr[c] for c in SCAN_COLUMNS[1:]]), forces,
+    scan = Scan(arr["time_s"], np.column_stack([arr[c] for c in SCAN_COLUMNS[1:]]), forces,
                 arr.get(TEMPERATURE_COLUMN), name, hashlib.sha256(raw).hexdigest())
+    if require_force:
+        check_calibration_scan(scan)
+    return scan
+
+
+def check_calibration_scan(scan: Scan) -> None:
+    """:class:`ScanError` unless ``scan`` can be calibrated on: force columns, every value finite and within
+    :data:`BANDS`, and (Bz, Br) points that span an area (each axis at least :data:`MIN_SPAN_UT`, the points
+    at least :data:`MIN_THICKNESS` off a straight line in the scaled variables). Cheap (one 2x2 eigenproblem),
+    so run when the scan is read and again at the start of every fit, before any build work."""
+    if scan.F_N is None:
+        raise ScanError(f"scan {scan.source}: no force columns ({', '.join(FORCE_COLUMNS)}); a calibration "
+                        "needs the reference force")
+    columns = dict(zip(SCAN_COLUMNS + FORCE_COLUMNS, [scan.time_s, *scan.B_uT.T, *scan.F_N.T]))
+    if scan.temperature_C is not None:
+        columns[TEMPERATURE_COLUMN] = scan.temperature_C
+    for column, x in columns.items():
+        lo, hi, unit = BANDS[column]
+        bad = np.flatnonzero(~((x >= lo) & (x <= hi)))  # NaN fails both
+        if bad.size:
+            raise ScanError(f"scan {scan.source}: row {bad[0] + 1}, column {column!r}: {float(x[bad[0]])!r} is "
+                            f"outside the plausible band {lo:g} to {hi:g} {unit} (or not finite)")
+    bz, br = scan.B_uT[:, 2], scan.Br_uT
+    uv = []
+    for axis, x in (("Bz", bz), ("Br", br)):
+        span = float(x.max() - x.min())
+        if not span >= MIN_SPAN_UT:
+            raise ScanError(f"scan {scan.source}: the scan's (Bz, Br) points span no area: {axis} spans only "
+                            f"{span:.3g} uT (at least {MIN_SPAN_UT:g} uT needed); a calibration needs a 2-D scan "
+                            "(normal and lateral load)")
+        uv.append((x - (x.max() + x.min()) / 2.0) / (span / 2.0))
+    centred = np.column_stack(uv) - np.mean(uv, axis=1)
+    thickness = math.sqrt(max(float(np.linalg.eigvalsh(centred.T @ centred / len(bz))[0]), 0.0))
+    if not thickness >= MIN_THICKNESS:
+        raise ScanError(f"scan {scan.source}: the scan's (Bz, Br) points span no area: they lie on a line (RMS "
+                        f"distance {thickness:.2g} of the scaled range, at least {MIN_THICKNESS:g} needed); a "
+                        "calibration needs a 2-D scan (normal and lateral load)")

@@ -58,7 +58,7 @@ import numpy as np
 
 from ..errors import InputError, ScanError
 from ..formats import calibration_json
-from ..formats.scan_csv import FORCE_COLUMNS, MIN_ROWS, SCAN_COLUMNS, Scan
+from ..formats.scan_csv import FORCE_COLUMNS, MIN_ROWS, SCAN_COLUMNS, Scan, check_calibration_scan
 from ..units import UT_PER_GAUSS
 from .region import HULL_MAX_VERTICES, Scaling, ValidRegion, guard_ops
 
@@ -502,11 +502,10 @@ def fit(scan: Scan, design: "Design", *, mls: bool = True) -> FitResult:
     unless ``mls`` is False) to ``scan``, cross-validate them and build the calibration the spec's
     ``calibration.method`` chooses (module doc). The chip settings recorded are the spec's."""
     cal = design.spec.calibration
-    if scan.F_N is None:
-        raise ScanError(f"scan {scan.source}: no force columns ({', '.join(FORCE_COLUMNS)}); a calibration "
-                               "needs the reference force")
     if scan.rows < MIN_ROWS:
         raise ScanError(f"scan {scan.source}: {scan.rows} rows; a calibration needs at least {MIN_ROWS}")
+    check_calibration_scan(scan)  # force columns, plausible values, (Bz, Br) spanning an area: before any work
+    assert scan.F_N is not None
     bz, br = scan.B_uT[:, 2], scan.Br_uT
     y = np.column_stack([scan.F_N[:, 2], scan.Fr_N])
     scaling = Scaling.of(bz, br)

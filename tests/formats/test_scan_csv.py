@@ -28,8 +28,20 @@ MALFORMED = {
                        ["line 1", "'Fz_N'", "required columns"]),
     "not a number": (_edit(5, 2, "abc"), ["line 5", "'By_uT'", "'abc'", "finite"]),
     "empty field": (_edit(7, 6, ""), ["line 7", "'Fz_N'", "empty field"]),
-    "nan": (_edit(9, 3, "nan"), ["line 9", "'Bz_uT'", "nan is not a finite number"]),
+    "nan": (_edit(9, 3, "nan"), ["line 9", "'Bz_uT'", "'nan' is not a finite number"]),
     "infinity": (_edit(10, 4, "-inf"), ["line 10", "'Fx_N'", "-inf"]),
+    # issue 12, finding 5: float() reads these, a CSV must not
+    "underscore": (_edit(11, 3, "20_100"), ["line 11", "'Bz_uT'", "'20_100' is not a decimal number"]),
+    "arabic-indic digits": (_edit(13, 1, "\u0661\u0662"), ["line 13", "'Bx_uT'", "not a decimal number", "ASCII"]),
+    "Infinity": (_edit(14, 5, "Infinity"), ["line 14", "'Fy_N'", "not a finite number"]),
+    "overflow": (_edit(15, 6, "1e999"), ["line 15", "'Fz_N'", "1e999", "outside the plausible band -1000 to 1000 N"]),
+    "non-breaking space": (_edit(16, 2, "\u00a05"), ["line 16", "'By_uT'", "not a decimal number"]),
+    # issue 12, finding 4: forces or fields scaled by 1e300 are refused when read, naming the row and band
+    "force 1e300": (_edit(17, 6, "3e300"), ["line 17 (row 16)", "'Fz_N'", "-1000 to 1000 N"]),
+    "field 1e300": (_edit(18, 3, "2.01e304"), ["line 18 (row 17)", "'Bz_uT'", "-1e+06 to 1e+06 uT"]),
+    "temperature": ("\n".join([_good()[0] + ",temperature_C"] + [r + ",25" for r in _good()[1:5]]
+                               + [_good()[5] + ",2500"] + [r + ",25" for r in _good()[6:]]),
+                    ["line 6 (row 5)", "'temperature_C'", "-100 to 250 degC"]),
     "decreasing time": (_edit(12, 0, "0.05"), ["line 12", "'time_s'", "non-decreasing", "line 11"]),
     "short row": ("\n".join(_good()[:20] + ["0.5,1,2"] + _good()[20:]), ["line 21", "3 values", "7 columns"]),
     "duplicate column": ("\n".join([_good()[0] + ",Bz_uT"] + [r + ",1" for r in _good()[1:]]),
@@ -57,3 +69,42 @@ def test_unreadable_inputs(tmp_path):
         read_scan_csv(tmp_path / "absent.csv")
     with pytest.raises(ScanError, match="not UTF-8"):
         read_scan_csv(b"time_s,Bx_uT\n\xff\xfe\n")
+
+
+def test_plain_decimal_forms_are_read():
+    text = "\n".join(_good()[:3] + ["+0.03,1.,-.5,2e4,0,1E-3,0.0"] + _good()[4:]) + "\n"
+    scan = read_scan_csv(text.encode("utf-8"))
+    assert scan.B_uT[2].tolist() == [1.0, -0.5, 2e4] and scan.F_N[2, 1] == 1e-3
+
+
+def _scan(bz, br, fz=None):
+    """A calibration scan CSV with (Bz, Br) as given (Br all along +x)."""
+    rows = ["time_s,Bx_uT,By_uT,Bz_uT,Fx_N,Fy_N,Fz_N"]
+    for i, (z, r) in enumerate(zip(bz, br)):
+        rows.append(f"{0.01 * i!r},{r!r},0,{z!r},{0.001 * i!r},0,{0.01 * i if fz is None else fz[i]!r}")
+    return ("\n".join(rows) + "\n").encode("utf-8")
+
+
+@pytest.mark.parametrize("case, bz, br, words", [
+    ("no lateral field", [20000.0 + 10 * i for i in range(60)], [0.0] * 60, ["Br spans only 0 uT"]),
+    ("no normal travel", [20000.0] * 60, [10.0 * i for i in range(60)], ["Bz spans only 0 uT"]),
+    ("on a line", [20000.0 + 10 * i for i in range(60)], [3.0 * i for i in range(60)], ["lie on a line"]),
+    ("sub-LSB lateral noise", [20000.0 + 10 * i for i in range(60)], [1e-7 * (i % 3) for i in range(60)],
+     ["Br spans only 2e-07 uT"]),
+])
+def test_a_scan_spanning_no_area_is_refused_when_read(case, bz, br, words):
+    """Issue 12, finding 4: the fit found this only after the whole build (exit 1); the reader finds it."""
+    with pytest.raises(ScanError) as info:
+        read_scan_csv(_scan(bz, br))
+    message = str(info.value)
+    assert "span no area" in message and "\n" not in message
+    for w in words:
+        assert w in message, message
+    # a recording (no calibration) may be one-dimensional
+    assert read_scan_csv(_scan(bz, br), require_force=False).rows == 60
+
+
+def test_a_two_dimensional_scan_passes():
+    bz = [20000.0 + 10 * (i // 8) for i in range(64)]
+    br = [5.0 * (i % 8) for i in range(64)]
+    assert read_scan_csv(_scan(bz, br)).rows == 64

@@ -359,3 +359,28 @@ def test_chart_is_deterministic(result):
 def test_the_too_few_rows_message_names_the_largest_fit():
     assert scan_format.LARGEST_ORDER == C.ORDERS[-1] and scan_format.MIN_ROWS == C.MIN_ROWS
 
+
+
+@pytest.mark.parametrize("change", ["force x 1e300", "field x 1e300", "no lateral field", "Br on a line in Bz"])
+def test_fit_refuses_an_implausible_or_flat_scan_before_any_work(design, scan, change, monkeypatch):
+    """Issue 12, finding 4: a scan built in memory (not read from a CSV) meets the same checks at the start of
+    the fit: one ScanError line, no RuntimeWarning, and no candidate fitted."""
+    from dataclasses import replace
+    import warnings
+
+    b, f = scan.B_uT.copy(), scan.F_N.copy()
+    if change == "force x 1e300":
+        f *= 1e300
+    elif change == "field x 1e300":
+        b *= 1e300
+    elif change == "no lateral field":
+        b[:, :2] = 0.0
+    else:
+        b[:, 0], b[:, 1] = 0.1 * (b[:, 2] - b[:, 2].min()), 0.0
+    monkeypatch.setattr(C, "_poly_candidate", lambda *a, **k: pytest.fail("a candidate was fitted"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(C.ScanError) as info:
+            C.fit(replace(scan, B_uT=b, F_N=f), design)
+    assert "\n" not in str(info.value)
+    assert ("plausible band" in str(info.value)) == ("1e300" in change)
