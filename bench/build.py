@@ -9,7 +9,7 @@ What it measures (all times are wall-clock seconds, from :func:`time.perf_counte
 1. **Cold**: fresh interpreters (the OS file cache is warm after the first run): ``python -c pass``,
    ``python -c "import magfab"``, ``python -c "import cadquery"``, ``magfab --help`` and the default build
    ``python -m magfab.cli build --out <tmp>``, each N times; median and min.
-2. **Warm**: in one process, after importing magfab and cadquery, ``plan()`` of ``magfab.build`` N times;
+2. **Warm**: in one process, after importing magfab and cadquery, ``plan()`` of ``magfab.pipeline`` N times;
    the median of every stage it reports in ``BuildResult.timings_s``.
 3. **Mould only**: the mould cup and lid (``magfab.mould``), tessellated with ``magfab.export.cad`` at the
    spec's tolerances and turned into STL bytes, warm in-process and as a cold process. If ``openscad``
@@ -127,11 +127,11 @@ def cold_figures(repeat: int, work: Path) -> dict[str, dict[str, object]]:
 
 
 def warm_plan_figures(repeat: int) -> dict[str, object]:
-    """Per-stage seconds of ``magfab.build.plan`` on the default spec, N times in one warm process."""
+    """Per-stage seconds of ``magfab.pipeline.plan`` on the default spec, N times in one warm process."""
     import cadquery  # noqa: F401 - imported first so that no stage pays for it
 
     import magfab
-    from magfab.build import plan  # not magfab.build.plan: the package re-exports build() over the module
+    from magfab.pipeline import plan
 
     spec = magfab.load_spec(None)
     runs = [plan(spec).timings_s for _ in range(repeat)]
@@ -151,10 +151,10 @@ def warm_plan_figures(repeat: int) -> dict[str, object]:
 
 
 def mould_parts() -> list[tuple[str, Callable]]:
-    """(file stem, builder) of the mould's parts, taken from ``magfab.build.PARTS``."""
+    """(file stem, builder) of the mould's parts, taken from ``magfab.pipeline.PARTS``."""
     import importlib
 
-    from magfab.build import PARTS
+    from magfab.pipeline import PARTS
 
     return [(stem, getattr(importlib.import_module(module), func))
             for stem, module, func, _printed, _what in PARTS if module == "magfab.mould"]

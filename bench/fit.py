@@ -65,7 +65,7 @@ def main() -> None:
     spec = load_spec(args.spec)
     design = derive(spec)
 
-    from magfab.build import PARTS, _solid
+    from magfab.pipeline import PARTS, _solid
     from magfab.export.cad import tessellate
     from magfab.fit import mould_fit
 

@@ -5,27 +5,31 @@ The public API is a pipeline of pure functions::
     spec = load_spec("spec.toml")      # validated, frozen Spec (None: the embedded MagOne design)
     design = derive(spec)              # every derived dimension, in one place
     result = build(spec, out_dir)      # solids, meshes, checks, files written atomically
+
+The names are loaded on first use, so ``import magfab`` (and ``magfab --help``) cost almost nothing.
 """
+
+from importlib import import_module
 
 __version__ = "0.1.0"
 
-from .build import BuildResult, build, plan  # noqa: E402
-from .design import Design, derive  # noqa: E402
-from .errors import BuildError, Finding, Severity, SpecError  # noqa: E402
-from .spec import Spec, load_spec, parse_spec  # noqa: E402
+_API = {
+    "BuildError": "errors", "Finding": "errors", "Severity": "errors", "SpecError": "errors",
+    "Spec": "spec", "load_spec": "spec", "parse_spec": "spec",
+    "Design": "design", "derive": "design",
+    "BuildResult": "pipeline", "build": "pipeline", "plan": "pipeline",
+}
 
-__all__ = [
-    "__version__",
-    "BuildError",
-    "BuildResult",
-    "Design",
-    "Finding",
-    "Severity",
-    "Spec",
-    "SpecError",
-    "build",
-    "derive",
-    "load_spec",
-    "parse_spec",
-    "plan",
-]
+__all__ = ["__version__", *sorted(_API)]
+
+
+def __getattr__(name: str) -> object:
+    if name not in _API:
+        raise AttributeError(f"module 'magfab' has no attribute {name!r}")
+    value = getattr(import_module(f".{_API[name]}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

@@ -6,16 +6,35 @@ Exit codes: 0 success; 2 invalid or infeasible spec, scan or output directory (a
 
 from __future__ import annotations
 
-import json
-import os
+import signal
 import sys
-from contextlib import contextmanager
-from pathlib import Path
-from typing import Iterator
 
-import click
 
-from . import __version__
+def _on_interrupt(signum: int, frame: object) -> None:
+    """Remember the interrupt, then raise it: a library that turns it into another error on the way (an
+    ImportError from an import it cut short) still ends as an interrupt, exit 130."""
+    global _interrupted
+    _interrupted = True
+    raise KeyboardInterrupt
+
+
+_interrupted = False
+if __name__ in ("__main__", "magfab.cli"):  # the command line, from its first line: Ctrl-C is exit 130, no traceback
+    signal.signal(signal.SIGINT, _on_interrupt)
+try:
+    import json
+    import os
+    import warnings
+    from contextlib import contextmanager
+    from pathlib import Path
+    from typing import Iterator
+
+    import click
+
+    from . import __version__
+except KeyboardInterrupt:
+    sys.stderr.write("magfab: error: interrupted; nothing was written\n")
+    raise SystemExit(130) from None
 
 EXIT_BAD_INPUT = 2
 EXIT_INTERNAL = 1
@@ -45,6 +64,8 @@ def _handled() -> Iterator[None]:
             raise
         _fail(f"{exc.filename}: {exc.strerror}", EXIT_BAD_INPUT)
     except Exception as exc:  # noqa: BLE001 - the last line of defence: one message, exit 1
+        if _interrupted:
+            _fail("interrupted; nothing was written and any previous output is untouched", EXIT_INTERRUPTED)
         if os.environ.get("MAGFAB_DEBUG"):
             raise
         _fail(f"internal error: {type(exc).__name__}: {exc} (set MAGFAB_DEBUG=1 for a traceback)", EXIT_INTERNAL)
@@ -70,6 +91,14 @@ def _progress(enabled: bool) -> Iterator[object]:
 @click.version_option(__version__, prog_name="magfab")
 def main() -> None:
     """Turn one design spec into the files to make a magnetic soft tactile sensor."""
+    signal.signal(signal.SIGINT, _on_interrupt)
+    warnings.showwarning = _one_line_warning
+
+
+def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:  # noqa: ANN001
+    """A library's warning as one line on stderr (what and which library), never its source line."""
+    origin = Path(filename).parent.name if filename else "?"
+    click.echo(f"magfab: warning: {category.__name__}: {message} ({origin})", err=True)
 
 
 @main.command()
@@ -96,10 +125,10 @@ def calibrate(scan: Path, spec: Path | None, out_dir: Path | None, as_json: bool
 
 
 def _run_build(spec: Path | None, out_dir: Path | None, as_json: bool, scan_path: Path | None) -> None:
-    from .build import build as run_build
-    from .spec import load_spec
+    with _handled():  # every import inside: Ctrl-C while a heavy library loads is still exit 130
+        from .pipeline import build as run_build
+        from .spec import load_spec
 
-    with _handled():
         loaded = load_spec(spec)
         scan = None
         if scan_path is not None:
@@ -148,13 +177,13 @@ def _print_findings(findings: list) -> None:
 @click.option("--json", "as_json", is_flag=True, help="Print the findings as JSON on stdout.")
 def check(spec: Path | None, as_json: bool) -> None:
     """Validate SPEC and run the design checks, predictions included; writes nothing."""
-    from .check import design_findings, errors_in
-    from .design import derive
-    from .errors import BuildError
-    from .models.predict import predict_with_findings
-    from .spec import load_spec
-
     with _handled():
+        from .check import design_findings, errors_in
+        from .design import derive
+        from .errors import BuildError
+        from .models.predict import predict_with_findings
+        from .spec import load_spec
+
         loaded = load_spec(spec)
         design = derive(loaded)
         findings = design_findings(design)
@@ -177,11 +206,10 @@ def check(spec: Path | None, as_json: bool) -> None:
 @click.option("--force", is_flag=True, help="Overwrite PATH if it exists.")
 def init(path: Path, force: bool) -> None:
     """Write a commented copy of the default (MagOne) spec to PATH (default: spec.toml)."""
-    from .errors import SpecError
-    from .errors import shown
-    from .spec import NAME_PATTERN, default_spec_text, is_valid_name
-
     with _handled():
+        from .errors import SpecError, shown
+        from .spec import NAME_PATTERN, default_spec_text, is_valid_name
+
         if not is_valid_name(path.stem):  # the design is named after its file, in a TOML string and a folder
             raise SpecError("name", shown(path.stem), "the file's name (without .toml) names the design and must "
                             "match " + NAME_PATTERN, "choose a file name of letters, digits, '.', '_' and '-'")

@@ -12,7 +12,7 @@ from magfab.fit import mould_fit
 
 
 def _meshes(design):
-    from magfab.build import PARTS, _solid
+    from magfab.pipeline import PARTS, _solid
     from magfab.export.cad import tessellate
 
     tol, ang = design.spec.mould.tessellation_tolerance_mm, design.spec.mould.angular_tolerance_deg

@@ -115,7 +115,7 @@ method = "auto"
 
 @pytest.mark.slow
 def test_the_most_expensive_allowed_spec_builds_within_budget(tmp_path):
-    from magfab.build import build
+    from magfab.pipeline import build
 
     spec = parse_spec(MOST_EXPENSIVE, default_name="costly")
     cost = estimate(derive(spec))

@@ -155,7 +155,7 @@ def test_a_scan_in_the_real_build_folder_survives_calibrate(default_build, tmp_p
 
     from magfab.cli import main
 
-    build_mod = importlib.import_module("magfab.build")  # the module: magfab.build is also the function
+    build_mod = importlib.import_module("magfab.pipeline")
 
     out = tmp_path / "magone"
     shutil.copytree(default_build.out_dir, out)

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Mapping
 
 from ..errors import Finding, Severity, SpecError
 from ..recipes import Recipe, catalogue
-from .bom import bom_csv, bom_rows  # re-exported: build.py writes bom.csv through this module
+from .bom import bom_csv, bom_rows  # re-exported: pipeline.py writes bom.csv through this module
 
 if TYPE_CHECKING:
     from ..design import Design

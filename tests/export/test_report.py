@@ -20,7 +20,7 @@ import pytest
 
 from conftest import require_tool
 from magfab import pcb
-from magfab.build import PARTS, Artifact
+from magfab.pipeline import PARTS, Artifact
 from magfab.errors import Finding, Severity
 from magfab.export.cad import tessellate
 from magfab.export.report import BENCH_FILES, render_report, section_loops

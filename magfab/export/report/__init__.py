@@ -35,7 +35,7 @@ if TYPE_CHECKING:
     import trimesh
 
     from ...board.layout import Board
-    from ...build import Artifact
+    from ...output import Artifact
     from ...design import Design
     from ...models.predict import Prediction
     from ...spec import Spec
@@ -134,7 +134,7 @@ def render_report(spec: "Spec", design: "Design", findings: Sequence[Finding], a
                   board: "Board") -> bytes:
     """report.html as UTF-8 bytes: one self-contained page for the build (module doc).
 
-    ``artifacts``: what the build writes besides the report (``magfab.build.Artifact``: path, data,
+    ``artifacts``: what the build writes besides the report (``magfab.output.Artifact``: path, data,
     description); ``extra_files``: (path, description) of files written with or after the report (the
     report itself, the checklists, the BOM, the manifest), listed and linked too. ``calibration`` is the
     calibration.json content (or None); ``meshes`` the tessellated parts by file stem, at least

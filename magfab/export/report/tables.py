@@ -11,7 +11,7 @@ from urllib.parse import quote
 from ...errors import Finding, Severity
 
 if TYPE_CHECKING:
-    from ...build import Artifact
+    from ...output import Artifact
     from ...design import Design
     from ...board.layout import Board
     from ...spec import Spec
