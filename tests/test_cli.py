@@ -93,11 +93,12 @@ def test_interrupt_mid_build_leaves_the_previous_output(default_build, tmp_path,
 
 
 def _fake_build(tag: str):
-    """Artifacts standing in for a build: the swap does not care what is in them, only that a manifest is."""
+    """Artifacts standing in for a build: a part and a manifest listing it, as a real build writes."""
     from magfab.output import Artifact
 
-    manifest = json.dumps({"magfab_version": "test", "tag": tag}).encode()
-    return [Artifact("manifest.json", manifest, ""), Artifact(f"parts/{tag}.stl", tag.encode() * 100, "")]
+    part = Artifact(f"parts/{tag}.stl", tag.encode() * 100, "")
+    manifest = json.dumps({"magfab_version": "test", "artifacts": [{"path": part.path}]}).encode()
+    return [Artifact("manifest.json", manifest, ""), part]
 
 
 def test_interrupt_while_writing_restores_the_previous_output(tmp_path, monkeypatch):
