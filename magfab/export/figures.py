@@ -41,9 +41,9 @@ def _axis_field(plt, design: "Design", pred: "Prediction"):
     ax2.plot(d, grad, color="#ff7f0e", label="dBz/dz")
     ax2.set_ylabel("dBz/dz, G/mm", color="#ff7f0e")
     ax2.set_yscale("log")
-    chip = pred.data["chip"]
-    ax.axhline(chip["full_scale_z_G"], color="0.4", lw=0.8, ls=":")
-    ax.text(d[-1], chip["full_scale_z_G"], " chip full scale (Z)", va="bottom", ha="right", fontsize=8)
+    chip = pred.chip
+    ax.axhline(chip.full_scale_z_G, color="0.4", lw=0.8, ls=":")
+    ax.text(d[-1], chip.full_scale_z_G, " chip full scale (Z)", va="bottom", ha="right", fontsize=8)
     for x, name in ((sen.d_min_mm, "d_min"), (design.d_rest_mm, "d_max")):
         ax.axvline(x, color="k", lw=0.8, ls="--")
         ax.text(x, ax.get_ylim()[1], f" {name} {x:g}", va="top", fontsize=8)
@@ -81,17 +81,17 @@ def _force(plt, design: "Design", pred: "Prediction"):
     for k, c in pred.curves.items():
         axes[0].plot(c.indentation_mm, c.force_N, color=BAND_COLOURS[k], label=f"{k} (mu {c.mu_kPa:g} kPa)")
         axes[1].plot(c.indentation_mm, c.stiffness_N_per_mm, color=BAND_COLOURS[k], label=k)
-    u_max = pred.data["normal"]["travel_mm"]
+    u_max = pred.normal.travel_mm
     idx = np.interp(u_max, pred.arrays["u"], pred.arrays["indentation"])
     for ax in axes:
         ax.axvline(idx, color="k", lw=0.8, ls="--")
         ax.set_xlabel("indentation, mm")
-    axes[0].text(idx, 0, f" range ends: {pred.data['normal']['range_limit']}", fontsize=8, rotation=90, va="bottom")
+    axes[0].text(idx, 0, f" range ends: {pred.normal.range_limit}", fontsize=8, rotation=90, va="bottom")
     axes[0].set_ylabel("normal force, N")
     axes[1].set_ylabel("dF/d(indentation), N/mm")
     axes[0].legend(fontsize=8)
-    m = pred.data["models"]["mechanics"]
-    fig.suptitle(f"Elastomer ({design.spec.elastomer.material}): {m['model']}, {m['detail']}", fontsize=8)
+    m = pred.model("mechanics")
+    fig.suptitle(f"Elastomer ({design.spec.elastomer.material}): {m.name}, {m.detail}", fontsize=8)
     fig.tight_layout()
     return fig
 
@@ -109,7 +109,7 @@ def _sensitivity(plt, design: "Design", pred: "Prediction"):
     axes[0].set_yscale("log")
     axes[0].legend(fontsize=7)
     axes[1].set_xlabel("magnet axial travel, mm")
-    axes[1].set_ylabel(f"resolution at {pred.data['noise_G']['total_z_G']:.3g} G noise, mN")
+    axes[1].set_ylabel(f"resolution at {pred.noise.total_z_G:.3g} G noise, mN")
     axes[1].set_yscale("log")
     axes[1].legend(fontsize=7)
     fig.suptitle("Sensitivity and resolution against deformation (nominal remanence)", fontsize=9)
@@ -120,12 +120,12 @@ def _sensitivity(plt, design: "Design", pred: "Prediction"):
 def _speed_accuracy(plt, design: "Design", pred: "Prediction", table: Sequence[Mapping[str, object]]):
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
     markers = {"field": "o", "mechanics": "s", "shear": "^"}
-    used = pred.data["models"]
+    used = {m.family: m for m in pred.models}
     mesh = pred.curves["nominal"].mesh_mm
 
     def chosen(row: Mapping[str, object]) -> bool:
         m = used.get(str(row["family"]))
-        if m is None or m["model"] != row["model"]:
+        if m is None or m.name != row["model"]:
             return False
         if row["family"] == "mechanics":
             return row.get("mesh_mm") in (None, mesh)

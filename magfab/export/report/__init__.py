@@ -149,7 +149,6 @@ def render_report(spec: "Spec", design: "Design", findings: Sequence[Finding], a
     extra = [(str(p), str(d)) for p, d in extra_files]
     files = tables.file_groups(artifacts, extra)
     listed = {a.path for a in artifacts} | {p for p, _ in extra}
-    data = prediction.data
     stack = Figure("stackup", "Stack-up", "The assembled sensor at rest, cut through its axis (board frame). The "
                    "magnet rests against the pocket roof, north pole up; the dashed line is where its lower face "
                    "sits at d_min.", _data_uri(stackup_figure(design, meshes), "image/svg+xml"))
@@ -157,12 +156,12 @@ def render_report(spec: "Spec", design: "Design", findings: Sequence[Finding], a
         "report/report.html.j2",
         spec=spec, version=__version__, sha256=spec.sha256(), design=design,
         bench=[{"href": href(p), "path": p, "what": w} for p, w in BENCH_FILES if p in listed],
-        key_figures=tables.key_figures(design, data, calibration, findings),
+        key_figures=tables.key_figures(design, prediction, calibration, findings),
         stack=stack, stack_rows=tables.stack_rows(design), heights=tables.heights(design),
         parts=_part_figures(meshes, artifacts), board=_board_figure(design, board, artifacts),
         board_parts=tables.board_parts(board),
-        tables=tables.prediction_tables(data), plots=_plot_figures(artifacts, "plots/"),
-        models=tables.model_rows(data), calibration=tables.calibration_summary(calibration, spec.calibration.tolerance_mN),
+        tables=tables.prediction_tables(prediction), plots=_plot_figures(artifacts, "plots/"),
+        models=tables.model_rows(prediction), calibration=tables.calibration_summary(calibration, spec.calibration.tolerance_mN),
         calibration_plots=_plot_figures(artifacts, "calibration/"),
         findings=tables.findings_by_severity(findings), spec_sections=tables.spec_sections(spec), files=files,
         file_count=sum(len(g["rows"]) for g in files), spec_json="spec.json" if "spec.json" in listed else "",

@@ -5,6 +5,7 @@ board and the build's files (grouped by folder, linked by relative paths)."""
 from __future__ import annotations
 
 import json
+import math
 from typing import TYPE_CHECKING, Mapping, Sequence
 from urllib.parse import quote
 
@@ -14,6 +15,7 @@ if TYPE_CHECKING:
     from ...output import Artifact
     from ...design import Design
     from ...board.layout import Board
+    from ...models.predict import Prediction
     from ...spec import Spec
 
 __all__ = ["href", "spec_sections", "stack_rows", "heights", "prediction_tables", "key_figures", "model_rows",
@@ -88,63 +90,63 @@ def heights(design: "Design") -> list[tuple[str, str]]:
         ("elastomer top", d.z_elastomer_base_mm + d.elastomer_height_mm)], key=lambda r: r[1])]
 
 
-def prediction_tables(data: Mapping[str, object]) -> dict[str, list[tuple[str, str]]]:
-    n, s, f, c, nz = data["normal"], data["shear"], data["field"], data["chip"], data["noise_G"]
+def prediction_tables(pred: "Prediction") -> dict[str, list[tuple[str, str]]]:
+    n, s, f, c, nz = pred.normal, pred.shear, pred.field, pred.chip, pred.noise
     band = lambda m, fmt: ", ".join(f"{k} {format(v, fmt)}" for k, v in m.items())  # noqa: E731
     return {
         "normal": [
-            ("sensitivity over the range", f"{n['sensitivity_G_per_N'][0]:.1f} – {n['sensitivity_G_per_N'][1]:.1f} G/N"),
-            ("resolution, worst case", f"{n['resolution_mN']:.2f} mN"),
-            ("resolution at rest (weakest magnet)", band(n["resolution_at_rest_mN"], ".2f") + " mN"),
-            ("range, worst case", f"{n['range_N']:.3f} N (ends at: {n['range_limit']})"),
-            ("range by material", band(n["range_by_material_N"], ".3f") + " N"),
-            ("magnet travel over the range", f"{n['travel_mm']:.3f} mm"),
-            ("stiffness at rest", band(n["stiffness_at_rest_N_per_mm"], ".3f") + " N/mm"),
-        ] + ([("where the mechanics model stopped", str(n["model_limit"]))] if "model_limit" in n else []),
+            ("sensitivity over the range", f"{n.sensitivity_G_per_N[0]:.1f} – {n.sensitivity_G_per_N[1]:.1f} G/N"),
+            ("resolution, worst case", f"{n.resolution_mN:.2f} mN"),
+            ("resolution at rest (weakest magnet)", band(n.resolution_at_rest_mN, ".2f") + " mN"),
+            ("range, worst case", f"{n.range_N:.3f} N (ends at: {n.range_limit})"),
+            ("range by material", band(n.range_by_material_N, ".3f") + " N"),
+            ("magnet travel over the range", f"{n.travel_mm:.3f} mm"),
+            ("stiffness at rest", band(n.stiffness_at_rest_N_per_mm, ".3f") + " N/mm"),
+        ] + ([("where the mechanics model stopped", n.model_limit)] if n.model_limit else []),
         "shear": [
-            ("sensitivity", f"{s['sensitivity_G_per_N'][0]:.1f} – {s['sensitivity_G_per_N'][1]:.1f} G/N"),
-            ("resolution, worst case", f"{s['resolution_mN']:.2f} mN"),
-            ("range, worst case", f"{s['range_N']:.3f} N (ends at: {s['range_limit']})"),
-            ("range by material", band(s["range_by_material_N"], ".3f") + " N"),
-            ("stiffness", band(s["stiffness_N_per_mm"], ".3f") + " N/mm"),
+            ("sensitivity", f"{s.sensitivity_G_per_N[0]:.1f} – {s.sensitivity_G_per_N[1]:.1f} G/N"),
+            ("resolution, worst case", f"{s.resolution_mN:.2f} mN"),
+            ("range, worst case", f"{s.range_N:.3f} N (ends at: {s.range_limit})"),
+            ("range by material", band(s.range_by_material_N, ".3f") + " N"),
+            ("stiffness", band(s.stiffness_N_per_mm, ".3f") + " N/mm"),
         ],
         "field": [
-            ("Bz at rest (nominal magnet)", f"{f['Bz_rest_G']:.1f} G"),
-            ("dBz/dz at rest", f"{f['dBz_dz_rest_G_per_mm']:.1f} G/mm"),
-            ("dBr/dr at rest", f"{f['dBr_dr_rest_G_per_mm']:.1f} G/mm"),
-            ("Bz at d_min (nominal / strongest magnet)", f"{f['Bz_d_min_G']:.1f} / {f['Bz_d_min_strongest_G']:.1f} G"),
-            ("Bz where the range ends (strongest magnet)", f"{f['Bz_range_end_strongest_G']:.1f} G"),
-            ("remanence band", band(f["remanence_T"], ".3f") + " T"),
-            ("elastomer shear modulus band", band(data["material_mu_kPa"], "g") + " kPa"),
+            ("Bz at rest (nominal magnet)", f"{f.Bz_rest_G:.1f} G"),
+            ("dBz/dz at rest", f"{f.dBz_dz_rest_G_per_mm:.1f} G/mm"),
+            ("dBr/dr at rest", f"{f.dBr_dr_rest_G_per_mm:.1f} G/mm"),
+            ("Bz at d_min (nominal / strongest magnet)", f"{f.Bz_d_min_G:.1f} / {f.Bz_d_min_strongest_G:.1f} G"),
+            ("Bz where the range ends (strongest magnet)", f"{f.Bz_range_end_strongest_G:.1f} G"),
+            ("remanence band", band(f.remanence_T, ".3f") + " T"),
+            ("elastomer shear modulus band", band(pred.material_mu_kPa, "g") + " kPa"),
         ],
         "chip": [
-            ("GAIN_SEL / RES / OSR / DIG_FILT", f"{c['gain_sel']} / {c['resolution']} / {c['osr']} / {c['dig_filt']}"),
-            ("LSB, xy / z", f"{c['lsb_xy_uT']:.3f} / {c['lsb_z_uT']:.3f} µT"),
-            ("full scale, xy / z", f"{c['full_scale_xy_G']:.1f} / {c['full_scale_z_G']:.1f} G"),
-            ("saturation onset", f"{c['saturation_onset_G']:.0f} G"),
-            ("conversion (T+X+Y+Z)", f"{c['conversion_ms']:.3f} ms ({c['rate_Hz']:.0f} Hz)"),
+            ("GAIN_SEL / RES / OSR / DIG_FILT", f"{c.gain_sel} / {c.resolution} / {c.osr} / {c.dig_filt}"),
+            ("LSB, xy / z", f"{c.lsb_xy_uT:.3f} / {c.lsb_z_uT:.3f} µT"),
+            ("full scale, xy / z", f"{c.full_scale_xy_G:.1f} / {c.full_scale_z_G:.1f} G"),
+            ("saturation onset", f"{c.saturation_onset_G:.0f} G"),
+            ("conversion (T+X+Y+Z)", f"{c.conversion_ms:.3f} ms ({c.rate_Hz:.0f} Hz)"),
         ],
         "noise": [
-            ("environment", f"{nz['environment_G']:.3f} G"),
-            ("chip, xy / z", f"{nz['chip_xy_G']:.3f} / {nz['chip_z_G']:.3f} G"),
-            ("quantisation, xy / z", f"{nz['quantisation_xy_G']:.4f} / {nz['quantisation_z_G']:.4f} G"),
-            ("total, xy / z", f"{nz['total_xy_G']:.3f} / {nz['total_z_G']:.3f} G"),
+            ("environment", f"{nz.environment_G:.3f} G"),
+            ("chip, xy / z", f"{nz.chip_xy_G:.3f} / {nz.chip_z_G:.3f} G"),
+            ("quantisation, xy / z", f"{nz.quantisation_xy_G:.4f} / {nz.quantisation_z_G:.4f} G"),
+            ("total, xy / z", f"{nz.total_xy_G:.3f} / {nz.total_z_G:.3f} G"),
         ],
     }
 
 
-def key_figures(design: "Design", data: Mapping[str, object], calibration: Mapping[str, object] | None,
+def key_figures(design: "Design", pred: "Prediction", calibration: Mapping[str, object] | None,
                  findings: Sequence[Finding]) -> list[tuple[str, str, str]]:
-    n, s = data["normal"], data["shear"]
+    n, s = pred.normal, pred.shear
     out = [
         ("d_rest", f"{design.d_rest_mm:.2f} mm", f"cover {design.cover_mm:.2f} mm, skin {design.skin_mm:.2f} mm"),
-        ("Bz at rest", f"{data['field']['Bz_rest_G']:.1f} G", f"noise {data['noise_G']['total_z_G']:.3f} G RMS (z)"),
-        ("normal sensitivity", f"{n['sensitivity_G_per_N'][0]:.1f} – {n['sensitivity_G_per_N'][1]:.1f} G/N",
-         f"resolution {n['resolution_mN']:.2f} mN"),
-        ("normal range", f"{n['range_N']:.3f} N", f"ends at: {n['range_limit']}"),
-        ("shear sensitivity", f"{s['sensitivity_G_per_N'][0]:.1f} – {s['sensitivity_G_per_N'][1]:.1f} G/N",
-         f"resolution {s['resolution_mN']:.2f} mN"),
-        ("shear range", f"{s['range_N']:.3f} N", f"ends at: {s['range_limit']}"),
+        ("Bz at rest", f"{pred.field.Bz_rest_G:.1f} G", f"noise {pred.noise.total_z_G:.3f} G RMS (z)"),
+        ("normal sensitivity", f"{n.sensitivity_G_per_N[0]:.1f} – {n.sensitivity_G_per_N[1]:.1f} G/N",
+         f"resolution {n.resolution_mN:.2f} mN"),
+        ("normal range", f"{n.range_N:.3f} N", f"ends at: {n.range_limit}"),
+        ("shear sensitivity", f"{s.sensitivity_G_per_N[0]:.1f} – {s.sensitivity_G_per_N[1]:.1f} G/N",
+         f"resolution {s.resolution_mN:.2f} mN"),
+        ("shear range", f"{s.range_N:.3f} N", f"ends at: {s.range_limit}"),
         ("silicone per part", f"{design.elastomer_volume_mm3 / 1000:.3f} mL",
          f"{design.spec.mould.cavities} cavit{'y' if design.spec.mould.cavities == 1 else 'ies'} per mould"),
     ]
@@ -158,14 +160,10 @@ def key_figures(design: "Design", data: Mapping[str, object], calibration: Mappi
     return out
 
 
-def model_rows(data: Mapping[str, object]) -> list[dict[str, str]]:
-    rows = []
-    for family, m in data["models"].items():
-        err = m.get("relative_error")
-        rows.append({"family": family, "model": str(m["model"]), "chosen_by": str(m["chosen_by"]),
-                     "error": "not measured here" if err is None else f"{100 * float(err):.2g} %",
-                     "detail": str(m["detail"])})
-    return rows
+def model_rows(pred: "Prediction") -> list[dict[str, str]]:
+    return [{"family": m.family, "model": m.name, "chosen_by": m.chosen_by,
+             "error": f"{100 * m.error:.2g} %" if math.isfinite(m.error) else "not measured here", "detail": m.detail}
+            for m in pred.models]
 
 
 def calibration_summary(calibration: Mapping[str, object] | None, tolerance_mN: float) -> dict[str, object] | None:
