@@ -201,21 +201,34 @@ def _revolved_polygon_volume(profile: list[tuple[float, float]]) -> float:
 
 
 def derive(spec: Spec) -> Design:
-    """Compute the whole design from a validated spec, or raise :class:`SpecError` if it cannot exist."""
+    """Compute the whole design from a validated spec, or raise :class:`SpecError` if it cannot exist.
+
+    In the order a person would design it: the magnet and its pocket in the elastomer, the stack from the
+    chip's sensing point up, where the pocket sits so that the rest distance is d_max, the pad, the chip's
+    address, the mould round the part; then what all that would cost to build (:mod:`magfab.limits`)."""
     chip = catalogue("chips")[spec.sensor.chip]
     printer = catalogue("printers")[spec.mould.printer.value]
-    mag, el, sen, pad, mould = spec.magnet, spec.elastomer, spec.sensor, spec.pad, spec.mould
+    part = _elastomer(spec)
+    stack = _stack(spec, chip)
+    pocket = _pocket(spec, part, stack)
+    fields = {**part, **stack, **pocket, **_pad(spec), **_address(spec, chip),
+              **_mould(spec, printer, part, pocket["core_base_radius_mm"])}
+    design = Design(spec=spec, printer=printer, chip=chip, **fields)
+    check_limits(design)  # what the build would cost, before any of it: check and build both refuse
+    return design
 
+
+def _elastomer(spec: Spec) -> dict[str, object]:
+    """The magnet, the elastomer's envelope and the pocket's size, checked against each other."""
+    mag, el = spec.magnet, spec.elastomer
     R_m, H_m = mag.diameter_mm / 2.0, mag.height_mm
     R_e, H_e = el.diameter_mm / 2.0, el.height_mm
     c, skin_min = el.pocket_clearance_mm, el.min_skin_mm
     R_p, h_p = R_m + c, H_m + c
     r_ch = el.insert_channel_diameter_mm / 2.0
-
     if el.tip is Tip.HEMISPHERE and H_e < R_e:
         raise SpecError("elastomer.height_mm", shown(H_e), f"must be at least the tip radius {_fmt(R_e)} mm for a hemisphere tip",
                         "or use tip = \"flat\"")
-    base_h = H_e - R_e if el.tip is Tip.HEMISPHERE else H_e
     if R_p + skin_min > R_e:
         limit = 2.0 * (R_e - skin_min - c)
         raise SpecError("magnet.diameter_mm", shown(mag.diameter_mm),
@@ -224,26 +237,41 @@ def derive(spec: Spec) -> Design:
     if r_ch > R_p:
         raise SpecError("elastomer.insert_channel_diameter_mm", shown(el.insert_channel_diameter_mm),
                         f"must be at most the pocket diameter {_fmt(2 * R_p)} mm")
+    return dict(magnet_radius_mm=R_m, magnet_height_mm=H_m, elastomer_radius_mm=R_e, elastomer_height_mm=H_e,
+                base_height_mm=H_e - R_e if el.tip is Tip.HEMISPHERE else H_e, tip=el.tip,
+                pocket_radius_mm=R_p, pocket_height_mm=h_p, channel_radius_mm=r_ch)
 
-    # Stack-up in the board frame.
+
+def _stack(spec: Spec, chip) -> dict[str, float]:
+    """Heights in the board frame (board top face at z = 0): the sensing point, the pad, the elastomer's base."""
+    sen, pad = spec.sensor, spec.pad
     body_max, h_nom, h_max = chip["body_mm"].high, chip["height_mm"].nominal, chip["height_mm"].high
     depth = sen.sensing_depth_mm if sen.sensing_depth_mm is not None else chip["sensing_depth_mm"].nominal
     if depth > h_nom:
         raise SpecError("sensor.sensing_depth_mm", shown(depth), f"must be at most the package height {_fmt(h_nom)} mm")
-    z_sense = h_nom - depth
-    recess_side = body_max + 2.0 * pad.recess_clearance_mm
     recess_depth = h_max + pad.recess_clearance_mm
     if recess_depth >= pad.thickness_mm:
         raise SpecError("pad.thickness_mm", shown(pad.thickness_mm),
                         f"must exceed the chip recess depth {_fmt(recess_depth)} mm (package height max "
                         f"{_fmt(h_max)} mm + recess clearance)")
-    z_pad_top = pad.thickness_mm
-    z_base = z_pad_top + pad.glue_thickness_mm
+    return dict(chip_body_max_mm=body_max, chip_height_nominal_mm=h_nom, chip_height_max_mm=h_max,
+                sensing_depth_mm=depth, z_sense_mm=h_nom - depth, z_pad_top_mm=pad.thickness_mm,
+                z_elastomer_base_mm=pad.thickness_mm + pad.glue_thickness_mm,
+                recess_side_mm=body_max + 2.0 * pad.recess_clearance_mm, recess_depth_mm=recess_depth,
+                pad_roof_mm=pad.thickness_mm - recess_depth, pad_thickness_mm=pad.thickness_mm)
 
-    # The magnet's roof-limited position: roof z in the elastomer frame sets d.
+
+def _pocket(spec: Spec, part: dict[str, object], stack: dict[str, float]) -> dict[str, object]:
+    """Where the pocket's roof sits so that the magnet's lower face is d_max above the sensing point, within
+    what the skin allows; the funnel and channel below it; d_min checked against the stack."""
+    el, sen = spec.elastomer, spec.sensor
+    R_e, H_e, base_h = part["elastomer_radius_mm"], part["elastomer_height_mm"], part["base_height_mm"]
+    R_p, h_p, r_ch, H_m = part["pocket_radius_mm"], part["pocket_height_mm"], part["channel_radius_mm"], part["magnet_height_mm"]
+    z_base, z_sense, skin_min = stack["z_elastomer_base_mm"], stack["z_sense_mm"], el.min_skin_mm
     roof_max = base_h + math.sqrt((R_e - skin_min) ** 2 - R_p**2) if el.tip is Tip.HEMISPHERE else H_e - skin_min
     roof_max = min(roof_max, H_e - skin_min)
     roof_min = skin_min + h_p
+
     def d_of_roof(roof: float) -> float:  # the magnet's top is at the roof
         return z_base + roof - H_m - z_sense
 
@@ -265,7 +293,6 @@ def derive(spec: Spec) -> Design:
                         f"must be between {_fmt(d_lo)} and {_fmt(d_hi)} mm for this stack (pad top + glue at "
                         f"{_fmt(z_base - z_sense)} mm above the sensing point, a {_fmt(H_e)} mm elastomer, "
                         f"{_fmt(skin_min)} mm minimum skin)")
-    d_rest = d_of_roof(roof)
     if sen.d_min_mm >= sen.d_max_mm:
         raise SpecError("sensor.d_min_mm", shown(sen.d_min_mm), f"must be less than sensor.d_max_mm = {_fmt(sen.d_max_mm)} mm")
     if sen.d_min_mm <= z_base - z_sense:
@@ -274,13 +301,19 @@ def derive(spec: Spec) -> Design:
                         "above the sensing point")
     floor = roof - h_p
     funnel_bottom = floor - (R_p - r_ch)
-    core_base_r = r_ch if funnel_bottom >= 0.0 else R_p - floor
     if el.tip is Tip.HEMISPHERE:
         skin = min(R_e - R_p, R_e - math.hypot(R_p, max(0.0, roof - base_h)))
     else:
         skin = min(R_e - R_p, H_e - roof)
+    return dict(pocket_roof_z_mm=roof, pocket_floor_z_mm=floor, funnel_bottom_z_mm=max(funnel_bottom, 0.0),
+                core_base_radius_mm=r_ch if funnel_bottom >= 0.0 else R_p - floor, cover_mm=H_e - roof, skin_mm=skin,
+                z_magnet_low_mm=z_base + roof - H_m, z_magnet_top_mm=z_base + roof, d_rest_mm=d_of_roof(roof),
+                d_rest_range_mm=(d_lo, d_hi))
 
-    # Pad.
+
+def _pad(spec: Spec) -> dict[str, object]:
+    """The pad's disc, centring lip and the two alignment holes (of different sizes: it fits one way round)."""
+    pad, R_e = spec.pad, spec.elastomer.diameter_mm / 2.0
     lip_inner = R_e + pad.lip_clearance_mm
     lip_outer = lip_inner + pad.lip_width_mm if pad.lip_height_mm > 0 else lip_inner
     R_pad = pad.diameter_mm / 2.0
@@ -294,8 +327,13 @@ def derive(spec: Spec) -> Design:
         raise SpecError("pad.alignment_hole_spacing_mm", shown(pad.alignment_hole_spacing_mm),
                         f"must place both holes (diameters {_fmt(d1)} and {_fmt(d2)} mm) between the lip "
                         f"(radius {_fmt(lip_outer)} mm) and the pad's edge (radius {_fmt(R_pad)} mm)")
+    return dict(pad_radius_mm=R_pad, lip_inner_radius_mm=lip_inner, lip_outer_radius_mm=lip_outer,
+                lip_height_mm=pad.lip_height_mm, alignment_holes=((-sx, 0.0, d1), (sx, 0.0, d2)))
 
-    # I2C address: the option code's base address plus the A1/A0 straps.
+
+def _address(spec: Spec, chip) -> dict[str, object]:
+    """The I2C address: the option code's base plus the A1/A0 straps; and the chip's refused OSR/DIG_FILT pairs."""
+    sen = spec.sensor
     codes = sorted(k.rsplit("_", 1)[1] for k in chip.quantities if k.startswith("i2c_base_address_"))
     if sen.option_code not in codes:
         raise SpecError("sensor.option_code", shown(sen.option_code), "must be one of " + ", ".join(repr(c) for c in codes)
@@ -312,49 +350,32 @@ def derive(spec: Spec) -> Design:
                         f"is not allowed with sensor.osr = {sen.osr} (the chip refuses OSR/DIG_FILT pairs "
                         + ", ".join(f"{a}/{b}" for a, b in sorted(forbidden)) + ")",
                         "raise sensor.dig_filt or sensor.osr")
-    straps = ((sen.i2c_address - base) >> 1 & 1, (sen.i2c_address - base) & 1)
+    return dict(i2c_address=sen.i2c_address,
+                address_straps=((sen.i2c_address - base) >> 1 & 1, (sen.i2c_address - base) & 1))
 
-    # Mould: a cup holding N inverted cavities in a row along x, and a lid carrying the cores.
-    wall = mould.wall_mm
-    n = mould.cavities
+
+def _mould(spec: Spec, printer, part: dict[str, object], core_base_r: float) -> dict[str, object]:
+    """A cup holding N inverted cavities in a row along x, and a lid carrying the cores, fill and vent holes."""
+    R_e, H_e = part["elastomer_radius_mm"], part["elastomer_height_mm"]
+    wall, n = spec.mould.wall_mm, spec.mould.cavities
     pitch = 2.0 * R_e + wall
-    centres = tuple((i - (n - 1) / 2.0) * pitch for i in range(n))
     span = (n - 1) * pitch
     pin_d = REGISTRATION_PIN_MM
-    clearance = printer["fit_clearance_mm"].nominal
     pin_x = span / 2.0 + R_e + wall + pin_d / 2.0
     cup = (2.0 * (pin_x + pin_d / 2.0 + wall), 2.0 * (R_e + wall), H_e + wall)
     lid_t = max(wall, 2.5)
-    lid = (cup[0] + 2.0 * PRY_LIP_MM, cup[1], lid_t)
     annulus = R_e - core_base_r
     sprue_d = min(SPRUE_MAX_MM, annulus - 1.0)
     vent_d = max(VENT_MIN_MM, printer["min_hole_mm"].nominal)
     if sprue_d <= 0.0 or vent_d > annulus - 0.6:
-        raise SpecError("elastomer.diameter_mm", shown(el.diameter_mm),
+        raise SpecError("elastomer.diameter_mm", shown(spec.elastomer.diameter_mm),
                         "leaves no room between the insertion channel and the cavity wall for the fill and vent "
                         "holes", "use a larger elastomer or a narrower insert channel")
-
-    design = Design(
-        spec=spec, printer=printer, chip=chip,
-        magnet_radius_mm=R_m, magnet_height_mm=H_m,
-        elastomer_radius_mm=R_e, elastomer_height_mm=H_e, base_height_mm=base_h, tip=el.tip,
-        pocket_radius_mm=R_p, pocket_height_mm=h_p, pocket_roof_z_mm=roof, pocket_floor_z_mm=floor,
-        channel_radius_mm=r_ch, funnel_bottom_z_mm=max(funnel_bottom, 0.0), core_base_radius_mm=core_base_r,
-        cover_mm=H_e - roof, skin_mm=skin,
-        chip_body_max_mm=body_max, chip_height_nominal_mm=h_nom, chip_height_max_mm=h_max,
-        sensing_depth_mm=depth, z_sense_mm=z_sense, z_pad_top_mm=z_pad_top, z_elastomer_base_mm=z_base,
-        z_magnet_low_mm=z_base + roof - H_m, z_magnet_top_mm=z_base + roof, d_rest_mm=d_rest,
-        d_rest_range_mm=(d_lo, d_hi),
-        pad_radius_mm=R_pad, pad_thickness_mm=pad.thickness_mm, recess_side_mm=recess_side,
-        recess_depth_mm=recess_depth, pad_roof_mm=pad.thickness_mm - recess_depth,
-        lip_inner_radius_mm=lip_inner, lip_outer_radius_mm=lip_outer, lip_height_mm=pad.lip_height_mm,
-        alignment_holes=((-sx, 0.0, d1), (sx, 0.0, d2)),
-        i2c_address=sen.i2c_address, address_straps=straps,
-        cavity_centres_x_mm=centres, cavity_pitch_mm=pitch, wall_mm=wall, cup_size_mm=cup,
-        lid_thickness_mm=lid_t, lid_size_mm=lid, pin_diameter_mm=pin_d, pin_hole_diameter_mm=pin_d + 2 * clearance,
+    return dict(
+        cavity_centres_x_mm=tuple((i - (n - 1) / 2.0) * pitch for i in range(n)), cavity_pitch_mm=pitch,
+        wall_mm=wall, cup_size_mm=cup, lid_thickness_mm=lid_t, lid_size_mm=(cup[0] + 2.0 * PRY_LIP_MM, cup[1], lid_t),
+        pin_diameter_mm=pin_d, pin_hole_diameter_mm=pin_d + 2 * printer["fit_clearance_mm"].nominal,
         pin_positions_x_mm=(-pin_x, pin_x), pin_height_mm=0.8 * lid_t, core_root_mm=lid_t / 2.0,
         sprue_diameter_mm=sprue_d, sprue_offset_mm=(core_base_r + R_e) / 2.0,
         vent_diameter_mm=vent_d, vent_offset_mm=R_e - vent_d / 2.0 - 0.3, vent_angles_deg=(210.0, 330.0),
     )
-    check_limits(design)  # what the build would cost, before any of it: check and build both refuse
-    return design
