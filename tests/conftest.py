@@ -46,6 +46,22 @@ KICAD_FOOTPRINTS = os.environ.get("KICAD6_FOOTPRINT_DIR", "/usr/share/kicad/foot
 
 
 @pytest.fixture(scope="session")
+def magone_design():
+    """The MagOne design, derived once per session."""
+    from magfab import derive
+
+    return derive(load_spec(None))
+
+
+@pytest.fixture(scope="session")
+def magone_prediction(magone_design):
+    """The MagOne prediction, computed once per session (the models are deterministic)."""
+    from magfab.models.predict import predict
+
+    return predict(magone_design)
+
+
+@pytest.fixture(scope="session")
 def default_build(tmp_path_factory):
     """The default (MagOne) build, written once per session."""
     out = tmp_path_factory.mktemp("default") / "magone"

@@ -16,24 +16,23 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from magfab import SpecError, derive, load_spec, parse_spec
+from magfab import SpecError, derive, parse_spec
 from magfab.models.acceptance import FORMAT, G0, Tolerances, acceptance, default_weight_g
 from magfab.models.field import Magnet, bz_br
-from magfab.models.predict import predict
 from magfab.export.readout import render, validate_acceptance
 from test_readout import make_calibration, ref_decode, write_tree
 
 PKG = "readout/src/magfab_readout"
 
 
-@pytest.fixture(scope="module")
-def design():
-    return derive(load_spec(None))
+@pytest.fixture(scope="session")
+def design(magone_design):
+    return magone_design
 
 
-@pytest.fixture(scope="module")
-def prediction(design):
-    return predict(design)
+@pytest.fixture(scope="session")
+def prediction(magone_prediction):
+    return magone_prediction
 
 
 @pytest.fixture(scope="module")

@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from magfab import SpecError, derive, load_spec, parse_spec
+from magfab import SpecError, derive, parse_spec
 from magfab.models import field as F
 from magfab.models import mechanics as M
 from magfab.check import prediction_findings
@@ -17,14 +17,14 @@ from magfab.errors import Severity
 from magfab.models.predict import chip_setting, noise, predict
 
 
-@pytest.fixture(scope="module")
-def design():
-    return derive(load_spec(None))
+@pytest.fixture(scope="session")
+def design(magone_design):
+    return magone_design
 
 
-@pytest.fixture(scope="module")
-def pred(design):
-    return predict(design)
+@pytest.fixture(scope="session")
+def pred(magone_prediction):
+    return magone_prediction
 
 
 def _codes(found, severity=Severity.ERROR):
