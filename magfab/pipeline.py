@@ -286,6 +286,12 @@ def plan(spec: Spec, progress: Progress | None = None, scan=None, parallel: bool
     with side_branch(_physics, design, scan, parallel=parallel) as physics:
         cad_artifacts, cad_findings, meshes, routed = _cad(design, say, timings)
         _stop(findings + cad_findings, spec)
+        say("drawing the parts and the board for the report")
+        t = time.perf_counter()
+        from .export.report import draw_pictures, render_report
+
+        pictures = draw_pictures(design, meshes, cad_artifacts, routed)
+        timings["report-pictures"] = time.perf_counter() - t
         say("waiting for the predictions and the bundle")
         t = time.perf_counter()
         branch = physics.result()
@@ -306,12 +312,11 @@ def plan(spec: Spec, progress: Progress | None = None, scan=None, parallel: bool
     artifacts.append(Artifact("findings.json", _json_bytes([f.as_dict() for f in findings]), "design and mesh checks"))
     say("drawing the report")
     t = time.perf_counter()
-    from .export.report import render_report
-
     report_files = [("report.html", "this page: the whole build on one page"),
                     ("manifest.json", "what made what: hashes, versions")]
     artifacts.append(Artifact("report.html", render_report(spec, design, findings, list(artifacts), prediction, cal,
-                                                           meshes, extra_files=report_files, board=routed),
+                                                           meshes, extra_files=report_files, board=routed,
+                                                           pictures=pictures),
                               "the whole build on one page, for a browser"))
     timings["report"] = time.perf_counter() - t
     models = {f"{m.family}_model": m.as_dict() for m in prediction.models}

@@ -128,10 +128,33 @@ def _board_figure(design: "Design", board: "Board", artifacts: Sequence["Artifac
 # The page
 
 
+@dataclass(frozen=True)
+class Pictures:
+    """The report's drawings of the parts, the stack-up and the board: they need only the CAD branch's results,
+    so the build draws them while the predictions are still being computed."""
+
+    stack: Figure
+    parts: list[Figure]
+    board: Figure
+
+
+def draw_pictures(design: "Design", meshes: Mapping[str, "trimesh.Trimesh"], artifacts: Sequence["Artifact"],
+                  board: "Board") -> Pictures:
+    """The stack-up (cut from the elastomer and pad meshes), every part whole and cut away, the routed board."""
+    missing = {"elastomer", "pad"} - set(meshes)
+    if missing:
+        raise ValueError(f"the report needs the meshes of {', '.join(sorted(missing))} "
+                         "(the stack-up is cut from them)")
+    stack = Figure("stackup", "Stack-up", "The assembled sensor at rest, cut through its axis (board frame). The "
+                   "magnet rests against the pocket roof, north pole up; the dashed line is where its lower face "
+                   "sits at d_min.", _data_uri(stackup_figure(design, meshes), "image/svg+xml"))
+    return Pictures(stack, _part_figures(meshes, artifacts), _board_figure(design, board, artifacts))
+
+
 def render_report(spec: "Spec", design: "Design", findings: Sequence[Finding], artifacts: Sequence["Artifact"],
                   prediction: "Prediction", calibration: Mapping[str, object] | None,
                   meshes: Mapping[str, "trimesh.Trimesh"], extra_files: Iterable[tuple[str, str]] = (), *,
-                  board: "Board") -> bytes:
+                  board: "Board", pictures: Pictures | None = None) -> bytes:
     """report.html as UTF-8 bytes: one self-contained page for the build (module doc).
 
     ``artifacts``: what the build writes besides the report (``magfab.output.Artifact``: path, data,
@@ -139,26 +162,22 @@ def render_report(spec: "Spec", design: "Design", findings: Sequence[Finding], a
     report itself, the checklists, the BOM, the manifest), listed and linked too. ``calibration`` is the
     calibration.json content (or None); ``meshes`` the tessellated parts by file stem, at least
     ``elastomer`` and ``pad`` (the stack-up is drawn from their sections); ``board`` the routed board
-    the build wrote (``magfab.pcb.board(design)``), drawn as it is, never routed again here."""
+    the build wrote (``magfab.pcb.board(design)``), drawn as it is, never routed again here; ``pictures``
+    what :func:`draw_pictures` drew from them already (drawn here when not given)."""
     from ..templating import render
 
-    missing = {"elastomer", "pad"} - set(meshes)
-    if missing:
-        raise ValueError(f"render_report needs the meshes of {', '.join(sorted(missing))} "
-                         "(the stack-up is cut from them)")
+    if pictures is None:
+        pictures = draw_pictures(design, meshes, artifacts, board)
     extra = [(str(p), str(d)) for p, d in extra_files]
     files = tables.file_groups(artifacts, extra)
     listed = {a.path for a in artifacts} | {p for p, _ in extra}
-    stack = Figure("stackup", "Stack-up", "The assembled sensor at rest, cut through its axis (board frame). The "
-                   "magnet rests against the pocket roof, north pole up; the dashed line is where its lower face "
-                   "sits at d_min.", _data_uri(stackup_figure(design, meshes), "image/svg+xml"))
     html = render(
         "report/report.html.j2",
         spec=spec, version=__version__, sha256=spec.sha256(), design=design,
         bench=[{"href": href(p), "path": p, "what": w} for p, w in BENCH_FILES if p in listed],
         key_figures=tables.key_figures(design, prediction, calibration, findings),
-        stack=stack, stack_rows=tables.stack_rows(design), heights=tables.heights(design),
-        parts=_part_figures(meshes, artifacts), board=_board_figure(design, board, artifacts),
+        stack=pictures.stack, stack_rows=tables.stack_rows(design), heights=tables.heights(design),
+        parts=pictures.parts, board=pictures.board,
         board_parts=tables.board_parts(board),
         tables=tables.prediction_tables(prediction), plots=_plot_figures(artifacts, "plots/"),
         models=tables.model_rows(prediction), calibration=tables.calibration_summary(calibration, spec.calibration.tolerance_mN),
