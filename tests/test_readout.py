@@ -381,7 +381,8 @@ def test_decoder_resynchronises_rejects_bad_crcs_and_counts_them(pkg):
     wire[3] = bytes(corrupted)
     wire[6] = wire[6][:14]  # cut short: the next frame starts inside it
     noise = b"\x00\xffF,1,2\x13\xa5\x5a\x01\x02garbage" + bytes(40)  # a fake sync and a fake text start
-    info = b"I,magfab,my,name,0123456789ABCDEF,0,2,0,2\n"
+    body = b"I,magfab,my,name,0123456789ABCDEF,0,2,0,2"
+    info = body + b"*%04X\n" % ref_crc(body)
     stream = noise + b"".join(wire[:5]) + info + b"".join(wire[5:]) + b"\xa5"
     expected = [f["seq"] for k, f in enumerate(frames) if k not in (3, 6)]
 
@@ -401,35 +402,43 @@ def test_decoder_resynchronises_rejects_bad_crcs_and_counts_them(pkg):
     assert [s.seq for s in samples] == expected
     assert whole.stats.crc_errors == 3  # the fake sync, the corrupted frame, the truncated one
     assert whole.stats.lost == 2 and whole.stats.frames == 10
-    assert infos == [pkg.DeviceInfo("my,name", "0123456789abcdef", 0, 2, 0, 2, info.decode().strip())]
+    assert infos == [pkg.DeviceInfo("my,name", "0123456789abcdef", 0, 2, 0, 2, body.decode())]
     by_seq = {f["seq"]: f for f in frames}
     for s in samples:
         f = by_seq[s.seq]
         assert (s.t_us, s.status, s.counts, s.temperature_raw) == (f["t_us"], f["status"], f["counts"], f["t_raw"])
-        assert s.force_N == tuple(f32(x) for x in f["forces"])
-        assert s.B_uT == (f["counts"][0] * 3.004, f["counts"][1] * 3.004, f["counts"][2] * 4.84)
-        if s.chip_error:  # no reading from the chip: no temperature either
-            assert s.temperature_C is None
+        if s.chip_error:  # no reading from the chip: no force, field or temperature, whatever the frame carries
+            assert all(math.isnan(x) for x in s.force_N + s.B_uT) and s.temperature_C is None
         else:
+            assert s.force_N == tuple(f32(x) for x in f["forces"])
+            assert s.B_uT == (f["counts"][0] * 3.004, f["counts"][1] * 3.004, f["counts"][2] * 4.84)
             assert s.temperature_C == pytest.approx(25 + (f["t_raw"] - 46244) / 45.2)
+    assert sum(s.chip_error for s in samples) == 4  # statuses 2, 7, 10, 11 (3 and 6 are the broken frames)
     assert whole.stats.skipped_bytes == len(stream) - 10 * 31 - len(info) - 1  # the last byte may start a frame
     assert pkg.decode_frames(stream) == items
 
 
+def checked(body: bytes, end: bytes = b"\n") -> bytes:
+    """A text or info line with its checksum (docs/bundle.md section 3), computed by the tests' own CRC."""
+    return body + b"*%04X" % ref_crc(body) + end
+
+
 def test_text_lines_bad_lines_and_chip_errors(pkg):
-    text = (b"F,7,1000,0,0.1234,-0.5000,2.0000,60.08,-3.00,29824.08,25.02\r\n"
-            b"F,8,2712,2,nan,nan,nan,nan,nan,nan,nan\n"
-            b"F,9,4424,1,1.0,2.0\n"  # too few fields
-            b"F,10,6136,0,0.0000,0.0000,1.5000,0.00,0.00,15000.00,24.98\n")
+    text = (checked(b"F,7,1000,0,0.1234,-0.5000,2.0000,60.08,-3.00,29824.08,25.02", b"\r\n")
+            + checked(b"F,8,2712,2,nan,nan,nan,nan,nan,nan,nan")
+            + checked(b"F,9,4424,1,1.0,2.0")  # too few fields
+            + b"F,10,5000,0,0.0000,0.0000,1.5000,0.00,0.00,15000.00,24.98\n"  # no checksum
+            + checked(b"F,11,5500,0,0.0000,0.0000,1.5000,0.00,0.00,15000.00,24.98")[:-3] + b"00\n"  # a wrong one
+            + checked(b"F,12,6136,0,0.0000,0.0000,1.5000,0.00,0.00,15000.00,24.98"))
     decoder = pkg.Decoder()
     samples = decoder.feed(text)
-    assert [s.seq for s in samples] == [7, 8, 10]
+    assert [s.seq for s in samples] == [7, 8, 12]
     assert samples[0].force_N == (0.1234, -0.5, 2.0) and samples[0].B_uT == (60.08, -3.0, 29824.08)
     assert samples[0].temperature_C == 25.02 and samples[0].source == "text"
     assert samples[1].chip_error and all(math.isnan(f) for f in samples[1].force_N)
-    assert decoder.stats.bad_lines == 1 and decoder.stats.lost == 1
+    assert decoder.stats.bad_lines == 3 and decoder.stats.lost == 3
     line = pkg.encode_text_line(7, 1000, 0, (0.12344, -0.5, 2.0), (60.08, -3.0, 29824.08), 25.02)
-    assert line == b"F,7,1000,0,0.1234,-0.5000,2.0000,60.08,-3.00,29824.08,25.02\n"
+    assert line == checked(b"F,7,1000,0,0.1234,-0.5000,2.0000,60.08,-3.00,29824.08,25.02")
 
 
 # --- the simulated board ------------------------------------------------------------------------------------
@@ -460,6 +469,7 @@ def test_simulated_text_mode_and_commands(pkg):
     sim.write(b"t")
     lines = sim.read(10**6).decode().splitlines()
     assert len(lines) == 5 and all(line.startswith("F,") and line.count(",") == 10 for line in lines)
+    assert all(checked(line.encode()[:-5], b"") == line.encode() for line in lines)
     sim.write(b"i")
     assert sim.read(10**6).startswith(b"I,magfab,magone," + pkg.Calibration.embedded().short_hash.encode())
     sim.write(b"b")
@@ -509,7 +519,7 @@ def test_device_errors_say_what_to_do(pkg):
     with pytest.raises(pkg.NoData, match="no info line"):
         pkg.Device(transport=Silent(), timeout_s=0.2).info()
     noisy = pkg.SimulatedDevice(realtime=False, corrupt_fraction=0.3, text=False)
-    with pytest.raises(pkg.CrcErrorRate, match=r"failed the CRC \(\d+ %, the limit is 5 %\): check that the baud"):
+    with pytest.raises(pkg.CrcErrorRate, match=r"failed their CRC \(\d+ %, the limit is 5 %\): check that the baud"):
         pkg.Device(transport=noisy).read(1000)
     mild = pkg.SimulatedDevice(realtime=False, corrupt_fraction=0.01, text=False)
     with pkg.Device(transport=mild) as device:
@@ -583,7 +593,7 @@ def test_installed_cli_info_and_errors(installed):
     assert proc.returncode == 0, proc.stderr
     assert "I,magfab,magone," in proc.stdout and "calibration: match" in proc.stdout
     proc = cli(installed, "stream", "--simulate", "--simulate-corrupt", "0.5", "--count", "500")
-    assert proc.returncode == 1 and "failed the CRC" in proc.stderr
+    assert proc.returncode == 1 and "failed their CRC" in proc.stderr
     proc = cli(installed, "stream", "--port", "/dev/does-not-exist", "--count", "1")
     assert proc.returncode == 1
     assert ("not found" if installed.serial else "pyserial is not installed") in proc.stderr

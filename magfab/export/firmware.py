@@ -18,6 +18,7 @@ the named constants below, each with its source or marked as an assumption. The 
 
 from __future__ import annotations
 
+import binascii
 import math
 import struct
 from dataclasses import dataclass
@@ -39,6 +40,7 @@ __all__ = [
     "FirmwareError",
     "calibration_sha256",
     "chip_config",
+    "info_line",
     "raw_words",
     "render",
     "twi_settings",
@@ -342,6 +344,13 @@ def _bench_points(chip: ChipConfig, cal: dict[str, Any]) -> list[dict[str, Any]]
     return out
 
 
+def info_line(name: str, sha16: str, chip: ChipConfig) -> str:
+    """The firmware's answer to 'i' (docs/bundle.md section 3), checksum and newline included: the text is a
+    constant in the image, so its checksum is computed here, CRC-16/CCITT-FALSE as the frames'."""
+    body = f"I,magfab,{name},{sha16},{chip.gain_sel},{chip.resolution},{chip.osr},{chip.dig_filt}"
+    return f"{body}*{binascii.crc_hqx(body.encode('utf-8'), 0xFFFF):04X}\n"
+
+
 def _context(design: "Design", calibration: Mapping[str, Any]) -> dict[str, Any]:
     spec, recipe = design.spec, design.chip
     fw = spec.firmware
@@ -350,7 +359,7 @@ def _context(design: "Design", calibration: Mapping[str, Any]) -> dict[str, Any]
     ubrr, baud_error = _uart(fw.baud)
     twbr, twps, i2c_actual = twi_settings(fw.i2c_hz)
     sha16 = calibration_sha256(calibration)[:16]
-    info = f"I,magfab,{spec.name},{sha16},{chip.gain_sel},{chip.resolution},{chip.osr},{chip.dig_filt}\n"
+    info = info_line(spec.name, sha16, chip)
     forbidden = []
     for pair in recipe.texts.get("forbidden_osr_dig_filt", "").split():
         osr, dig_filt = (int(v) for v in pair.split("/"))

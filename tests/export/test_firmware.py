@@ -113,7 +113,8 @@ FRAME = struct.Struct("<BBBBBI3hH3fH")
 
 
 def parse_stream(data: bytes) -> list[tuple[str, object]]:
-    """Binary frames (CRC checked) and text lines, in order; anything else fails the test."""
+    """Binary frames (CRC checked) and text lines (checksum checked and removed: ``body\n``), in order;
+    anything else fails the test."""
     out: list[tuple[str, object]] = []
     i = 0
     while i < len(data):
@@ -127,7 +128,9 @@ def parse_stream(data: bytes) -> list[tuple[str, object]]:
             i += 31
         else:
             end = data.index(b"\n", i)
-            out.append(("line", data[i:end + 1]))
+            body, star, checksum = data[i:end].rpartition(b"*")
+            assert star and checksum == b"%04X" % crc16_ccitt_false(body), "checksum mismatch"
+            out.append(("line", body + b"\n"))
             i = end + 1
     return out
 
@@ -464,6 +467,7 @@ def test_text_mode_info_and_switching(host):
     sha = hashlib.sha256(json.dumps(cal, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
     s = host.design.spec.sensor
     assert items[3][1] == f"I,magfab,magone,{sha[:16]},{s.gain_sel},{s.resolution},{s.osr},{s.dig_filt}\n".encode()
+    assert firmware.info_line("magone", sha[:16], host.chip).encode() in out
     binary = items[0][1]
     for k in (1, 2):
         fields = items[k][1].decode().rstrip("\n").split(",")
@@ -481,6 +485,53 @@ def test_text_mode_error_line(host):
     out, _ = host.run("C t\nB 900 -400 -2800 25\nS 1\nF error 2\nS 1\n")
     lines = [x for _, x in parse_stream(out)]
     assert lines[1].decode().split(",")[3:] == ["2", "nan", "nan", "nan", "nan", "nan", "nan", "nan\n"]
+
+
+def test_text_lines_carry_a_checksum(host):
+    """Issue 12, finding 6: every text and info line ends in *XXXX, the CRC-16/CCITT-FALSE of what precedes the
+    '*' in upper-case hex; a changed byte fails it."""
+    out, _ = host.run("C t\nB 900 -400 -2800 25\nS 3\nC i\nS 1\n")
+    lines = out.split(b"\n")[:-1]
+    assert len(lines) == 5 and all(re.fullmatch(rb"[FI],.*\*[0-9A-F]{4}", x) for x in lines), lines
+    assert len(parse_stream(out)) == 5
+    broken = bytearray(out)
+    broken[out.index(b",", 10) + 1] ^= 0x01  # a digit of the first line's t_us or status
+    with pytest.raises(AssertionError, match="checksum"):
+        parse_stream(bytes(broken))
+
+
+@pytest.mark.parametrize("line", ["K 0", "K nan", "K -1", "K inf", "K 1e300", "K", "B nan 0 0 25",
+                                  "B 0 0 1e300 25", "B 0 0 100 inf"])
+def test_host_double_refuses_values_outside_its_bands(host, line):
+    """Issue 12, finding 6: K 0, K nan and K -1 were undefined behaviour in the simulator's arithmetic (the cast of
+    an infinite or NaN conversion count); now a value outside its band is a line that cannot be read (exit 2)."""
+    proc = subprocess.run([str(host.exe)], input=f"B 900 -400 -2800 25\nS 1\n{line}\nS 2\n".encode(),
+                          capture_output=True, timeout=60)
+    assert proc.returncode == 2 and f"line 3: cannot read: {line}" in proc.stderr.decode(), proc.stderr
+    for bad in ("0", "nan", "-1"):
+        usage = subprocess.run([str(host.exe), "--clock-scale", bad], input=b"S 1\n", capture_output=True, timeout=60)
+        assert usage.returncode == 2 and b"usage" in usage.stderr
+
+
+def test_host_double_is_free_of_undefined_behaviour_at_its_band_edges(host, tmp_path):
+    """The harness and the core built with UBSan and ASan (aborting on the first report) run the bands' edges."""
+    require_tool("gcc")
+    toolchain.write_tree(host.files, tmp_path)
+    core = tmp_path / firmware.CORE_DIR
+    exe = tmp_path / "host" / "magfab_host_san"
+    flags = ["-fsanitize=undefined,address,float-cast-overflow,float-divide-by-zero", "-fno-sanitize-recover=all", "-g"]
+    proc = subprocess.run(["gcc", *firmware.HOST_CFLAGS, *flags, "-I", str(core), "-I", str(tmp_path / "host"),
+                           "-o", str(exe), str(tmp_path / "host" / "host_main.c"),
+                           str(tmp_path / "host" / "sim_mlx90393.c"), *[str(core / s) for s in firmware.CORE_SOURCES],
+                           "-lm"], capture_output=True, text=True)
+    if proc.returncode != 0 and ("sanitizer" in proc.stderr.lower() or "asan" in proc.stderr.lower()):
+        pytest.skip("gcc's sanitizer runtimes are not installed")
+    assert proc.returncode == 0, proc.stderr
+    script = ("B 1e6 -1e6 1e6 250\nS 2\nK 0.01\nS 3\nK 100\nS 3\nB -1e6 0 -1e6 -100\nC t\nS 2\nF stuck\nS 2\n"
+              "F reset\nS 2\nK 1\nF timeout 3\nS 4\nC i\nS 1\n")
+    run = subprocess.run([str(exe)], input=script.encode(), capture_output=True, timeout=120)
+    assert run.returncode == 0, run.stderr.decode(errors="replace")[-2000:]
+    assert b"runtime error" not in run.stderr
 
 
 def test_spec_strings_are_escaped(build_host):

@@ -150,8 +150,8 @@ def _stream(args: argparse.Namespace, out) -> int:
 
 def _summary(device: Device, n: int, worst: Optional[float]) -> None:
     s = device.stats
-    text = "{} samples; {} lost (sequence gaps), {} CRC errors, {} bad lines, {} bytes skipped".format(
-        n, s.lost, s.crc_errors, s.bad_lines, s.skipped_bytes)
+    text = ("{} samples; {} lost (sequence gaps), {} CRC errors, {} bad lines, {} refused values, {} bytes "
+            "skipped").format(n, s.lost, s.crc_errors, s.bad_lines, s.refused, s.skipped_bytes)
     if worst is not None:
         text += "; host vs firmware force: max |dF| = {:.3g} N".format(worst)
     print("magfab-readout: " + text, file=sys.stderr)

@@ -40,7 +40,8 @@ class NoData(DeviceError):
 
 
 class CrcErrorRate(DeviceError):
-    """Too many binary frames fail their CRC: wrong baud rate, a bad cable or another writer on the port."""
+    """Too many binary frames fail their CRC (or text lines their checksum): wrong baud rate, a bad cable or
+    another writer on the port."""
 
 
 class CalibrationMismatch(DeviceError):
@@ -200,15 +201,17 @@ class Device:
 
     def _check_crc(self) -> None:
         stats = self.decoder.stats
-        good, bad = stats.frames - self._crc_mark[0], stats.crc_errors - self._crc_mark[1]
+        mark = (stats.frames + stats.lines, stats.crc_errors + stats.bad_lines)
+        good, bad = mark[0] - self._crc_mark[0], mark[1] - self._crc_mark[1]
         attempts = good + bad
         if attempts >= CRC_MIN_ATTEMPTS and bad > self.max_crc_error_rate * attempts:
             raise CrcErrorRate(
-                "{} of the last {} frames from {} failed the CRC ({:.0f} %, the limit is {:.0f} %): check that the "
+                "{} of the last {} frames or lines from {} failed their CRC ({:.0f} %, the limit is {:.0f} %): check "
+                "that the "
                 "baud rate ({}) matches the firmware's, the cable and its length, and that nothing else uses the port"
                 .format(bad, attempts, self.port, 100.0 * bad / attempts, 100.0 * self.max_crc_error_rate, self.baud))
         if attempts >= CRC_WINDOW:
-            self._crc_mark = (stats.frames, stats.crc_errors)
+            self._crc_mark = mark
 
     def _no_data(self, what: str, received: int) -> NoData:
         stats = self.decoder.stats

@@ -8,17 +8,24 @@ Binary frame (little-endian, 31 bytes)::
     4  1  status flags            29 2  CRC-16/CCITT-FALSE over bytes 2..28
     5  4  time, us (uint32)
 
-Text line: ``F,<seq>,<t_us>,<status>,<Fx_N>,<Fy_N>,<Fz_N>,<Bx_uT>,<By_uT>,<Bz_uT>,<T_C>``; info line:
-``I,magfab,<spec name>,<calibration sha256 first 16 hex>,<gain_sel>,<resolution>,<osr>,<dig_filt>``.
+Text line: ``F,<seq>,<t_us>,<status>,<Fx_N>,<Fy_N>,<Fz_N>,<Bx_uT>,<By_uT>,<Bz_uT>,<T_C>*XXXX``; info line:
+``I,magfab,<spec name>,<calibration sha256 first 16 hex>,<gain_sel>,<resolution>,<osr>,<dig_filt>*XXXX``.
+``XXXX`` is the CRC-16/CCITT-FALSE of the bytes before the ``*`` in four upper-case hex digits (as NMEA's
+``*hh``): a person still reads the line, a script checks it.
 
 :class:`Decoder` takes bytes as they arrive, in either mode or both mixed (the info line comes in the middle
 of a binary stream), resynchronises on the sync bytes after noise or a lost byte, refuses frames whose CRC
-fails and counts every kind of trouble in :class:`DecoderStats`.
+fails and lines whose checksum is missing or wrong, and counts every kind of trouble in :class:`DecoderStats`.
+It never yields a force the firmware did not mean: a sample with the chip-error bit comes with NaN forces
+and field whatever its frame carries, and a sample whose forces are not finite or lie beyond
+:data:`FORCE_LIMIT_N` (or, in a text line, whose field is beyond :data:`FIELD_LIMIT_UT`) is refused.
 """
 
 from __future__ import annotations
 
+import binascii
 import math
+import re
 import struct
 from dataclasses import dataclass, field
 from typing import List, Optional, Tuple, Union
@@ -27,8 +34,9 @@ from . import _build
 
 __all__ = [
     "SYNC", "FRAME_LENGTH", "FRAME_FORCE", "STATUS_OUTSIDE_REGION", "STATUS_CHIP_ERROR", "STATUS_FULL_SCALE",
-    "STATUS_RECOVERED", "Sample", "DeviceInfo", "DecoderStats", "Decoder", "crc16_ccitt_false",
-    "encode_frame", "encode_text_line", "encode_info_line", "decode_frames", "temperature_C",
+    "STATUS_RECOVERED", "FORCE_LIMIT_N", "FIELD_LIMIT_UT", "Sample", "DeviceInfo", "DecoderStats", "Decoder",
+    "crc16_ccitt_false", "line_checksum", "encode_frame", "encode_text_line", "encode_info_line", "decode_frames",
+    "temperature_C",
 ]
 
 SYNC = b"\xa5\x5a"
@@ -39,6 +47,16 @@ STATUS_CHIP_ERROR = 0x02  # NACK, ERROR bit, wrong byte count or timeout; the fo
 STATUS_FULL_SCALE = 0x04  # a field axis is at the chip's full scale
 STATUS_RECOVERED = 0x08  # the chip was reset since the last frame
 MAX_LINE = 200  # longest text or info line accepted, bytes
+#: Largest |force| a sample may carry, N: 1 kN (100 kgf) is far past what a tactile tip's elastomer survives,
+#: so a larger value is a fault, never a reading (the scan CSV's band, magfab/formats/scan_csv.py).
+FORCE_LIMIT_N = 1000.0
+#: Largest |field| a text line may carry, uT: 1 T is past any magnetometer chip's full scale.
+FIELD_LIMIT_UT = 1.0e6
+
+_INT = re.compile(r"[0-9]{1,10}")
+#: What the firmware prints for a float (mf_format_float): [-]digits.digits, d.dddde+XX beyond 1e9, nan, inf.
+_FLOAT = re.compile(r"-?[0-9]{1,10}(?:\.[0-9]{1,6})?(?:e\+[0-9]{2})?|nan|-?inf")
+_CHECKED = re.compile(rb"(.*)\*([0-9A-F]{4})")
 
 _BODY = struct.Struct("<BBBI3hH3f")  # bytes 2..28: type, seq, status, time, counts, temperature, forces
 _CRC = struct.Struct("<H")
@@ -46,25 +64,23 @@ _FLAG_LETTERS = ((STATUS_OUTSIDE_REGION, "o"), (STATUS_CHIP_ERROR, "E"), (STATUS
                  (STATUS_RECOVERED, "R"))
 
 
-def _crc_table() -> List[int]:
-    table = []
-    for byte in range(256):
-        crc = byte << 8
-        for _ in range(8):
-            crc = ((crc << 1) ^ 0x1021) if crc & 0x8000 else (crc << 1)
-        table.append(crc & 0xFFFF)
-    return table
-
-
-_TABLE = _crc_table()
-
-
 def crc16_ccitt_false(data: bytes) -> int:
-    """CRC-16/CCITT-FALSE: polynomial 0x1021, initial value 0xFFFF, no reflection, no final XOR."""
-    crc = 0xFFFF
-    for byte in data:
-        crc = ((crc << 8) & 0xFFFF) ^ _TABLE[((crc >> 8) ^ byte) & 0xFF]
-    return crc
+    """CRC-16/CCITT-FALSE: polynomial 0x1021, initial value 0xFFFF, no reflection, no final XOR (the standard
+    library's CRC-CCITT, ``binascii.crc_hqx``, started at 0xFFFF)."""
+    return binascii.crc_hqx(bytes(data), 0xFFFF)
+
+
+def line_checksum(body: bytes) -> bytes:
+    """``*XXXX``: the CRC-16/CCITT-FALSE of a text or info line's ``body`` (everything before the ``*``)."""
+    return b"*%04X" % crc16_ccitt_false(body)
+
+
+def _checked_body(raw: bytes) -> Optional[bytes]:
+    """The body of a line ``body*XXXX`` whose checksum is right, else None."""
+    m = _CHECKED.fullmatch(raw)
+    if m is None or line_checksum(m.group(1)) != b"*" + m.group(2):
+        return None
+    return m.group(1)
 
 
 def temperature_C(raw: int) -> float:
@@ -82,7 +98,8 @@ class Sample:
     """One sample from the device.
 
     ``B_uT`` is (Bx, By, Bz) in microtesla; ``force_N`` is (Fx, Fy, Fz) in newton as the firmware computed it,
-    minus the host's zero offset when one is set (``device_force_N`` keeps the firmware's value);
+    minus the host's zero offset when one is set (``device_force_N`` keeps the firmware's value); both are NaN
+    when the chip-error bit is set (the sample is kept for its sequence number, time and flags);
     ``counts`` and ``temperature_raw`` are the raw chip readings (binary frames only); ``time_s`` is the
     device time since the first sample of a :class:`~magfab_readout.Device` stream (None from the decoder).
     """
@@ -151,12 +168,13 @@ class DeviceInfo:
 class DecoderStats:
     """What the decoder saw: good frames and lines, and every kind of trouble."""
 
-    frames: int = 0  # binary frames with a good CRC
-    lines: int = 0  # text sample lines
+    frames: int = 0  # binary frames with a good CRC and plausible values (or the chip-error bit)
+    lines: int = 0  # text sample lines with a good checksum and plausible values (or the chip-error bit)
     infos: int = 0  # info lines
     crc_errors: int = 0  # sync found but the CRC failed
     unknown_frames: int = 0  # good CRC, frame type this reader does not know
-    bad_lines: int = 0  # printable lines starting 'F,' or 'I,' that do not parse
+    bad_lines: int = 0  # printable lines starting 'F,' or 'I,' without a right checksum, or that do not parse
+    refused: int = 0  # good CRC or checksum, no chip-error bit, but a force not finite or beyond FORCE_LIMIT_N
     skipped_bytes: int = 0  # bytes that were not part of any frame or line
     lost: int = 0  # samples missing according to the sequence numbers
     bytes: int = 0  # everything fed in
@@ -168,9 +186,9 @@ class DecoderStats:
 
     @property
     def crc_error_rate(self) -> float:
-        """Fraction of binary frame candidates whose CRC failed."""
-        attempts = self.frames + self.crc_errors
-        return self.crc_errors / attempts if attempts else 0.0
+        """Fraction of binary frame candidates whose CRC failed and text lines whose checksum failed."""
+        attempts = self.frames + self.lines + self.crc_errors + self.bad_lines
+        return (self.crc_errors + self.bad_lines) / attempts if attempts else 0.0
 
 
 def encode_frame(seq: int, t_us: int, status: int, counts: Tuple[int, int, int], temperature_raw: int,
@@ -190,19 +208,22 @@ def _number(x: float, decimals: int) -> str:
 
 def encode_text_line(seq: int, t_us: int, status: int, force_N: Tuple[float, float, float],
                      B_uT: Tuple[float, float, float], temperature: Optional[float]) -> bytes:
-    """One text sample line: forces to 4 decimals, field and temperature to 2 ('nan' where there is none)."""
+    """One text sample line: forces to 4 decimals, field and temperature to 2 ('nan' where there is none), then
+    the checksum (:func:`line_checksum`)."""
     fields = ["F", str(seq & 0xFF), str(t_us & 0xFFFFFFFF), str(status & 0xFF)]
     fields += [_number(f, 4) for f in force_N]
     fields += [_number(b, 2) for b in B_uT]
     fields.append(_number(float("nan") if temperature is None else temperature, 2))
-    return (",".join(fields) + "\n").encode("ascii")
+    body = ",".join(fields).encode("ascii")
+    return body + line_checksum(body) + b"\n"
 
 
 def encode_info_line(spec_name: str, calibration_hash: str, gain_sel: int, resolution: int, osr: int,
                      dig_filt: int) -> bytes:
-    """The firmware's info line (answer to 'i')."""
-    text = "I,magfab,{},{},{},{},{},{}\n".format(spec_name, calibration_hash[:16], gain_sel, resolution, osr, dig_filt)
-    return text.encode("utf-8")
+    """The firmware's info line (answer to 'i'), with its checksum."""
+    body = "I,magfab,{},{},{},{},{},{}".format(spec_name, calibration_hash[:16], gain_sel, resolution, osr,
+                                               dig_filt).encode("utf-8")
+    return body + line_checksum(body) + b"\n"
 
 
 def _printable(chunk: bytes) -> bool:
@@ -270,11 +291,17 @@ class Decoder:
         if kind != FRAME_FORCE:
             self.stats.unknown_frames += 1
             return FRAME_LENGTH
-        self.stats.frames += 1
         self._sequence(seq)
-        B = (bx * self.lsb_xy_uT, by * self.lsb_xy_uT, bz * self.lsb_z_uT)
-        temp = temperature_C(t_raw) if self.temperature and not status & STATUS_CHIP_ERROR else None
-        out.append(Sample(seq, t_us, status, B, (fx, fy, fz), temp, "binary", (bx, by, bz), t_raw))
+        if status & STATUS_CHIP_ERROR or _plausible((fx, fy, fz)):
+            self.stats.frames += 1
+        if status & STATUS_CHIP_ERROR:
+            out.append(Sample(seq, t_us, status, _NAN3, _NAN3, None, "binary", (bx, by, bz), t_raw))
+        elif _plausible((fx, fy, fz)):
+            B = (bx * self.lsb_xy_uT, by * self.lsb_xy_uT, bz * self.lsb_z_uT)
+            temp = temperature_C(t_raw) if self.temperature else None
+            out.append(Sample(seq, t_us, status, B, (fx, fy, fz), temp, "binary", (bx, by, bz), t_raw))
+        else:
+            self.stats.refused += 1
         return FRAME_LENGTH
 
     def _line(self, buf: bytes, i: int, out: list) -> int:
@@ -290,40 +317,58 @@ class Decoder:
         if not _printable(raw):
             self.stats.skipped_bytes += 1  # an 'F,' or 'I,' inside binary data
             return 1
-        item = self._parse_line(raw.decode("ascii").rstrip("\r"))
+        body = _checked_body(raw[:-1] if raw.endswith(b"\r") else raw)
+        item = self._parse_line(body.decode("ascii")) if body is not None else None
         if item is None:
             self.stats.bad_lines += 1
-        else:
+        elif item is not _REFUSED:
             out.append(item)
         return end - i + 1
 
-    def _parse_line(self, text: str) -> Union[Sample, DeviceInfo, None]:
-        try:
-            if text.startswith("I,magfab,"):
-                name, calibration_hash, gain, res, osr, dig = text[len("I,magfab,"):].rsplit(",", 5)
-                int(calibration_hash, 16)
-                info = DeviceInfo(name, calibration_hash.lower(), int(gain), int(res), int(osr), int(dig), text)
-                self.stats.infos += 1
-                return info
-            parts = text.split(",")
-            if parts[0] != "F" or len(parts) != 11:
+    def _parse_line(self, text: str) -> Union[Sample, DeviceInfo, object, None]:
+        """The sample or info line a checked line body holds; None when it does not parse, ``_REFUSED`` for a
+        sample whose values are refused (counted)."""
+        if text.startswith("I,magfab,"):
+            parts = text[len("I,magfab,"):].rsplit(",", 5)
+            if len(parts) != 6:
                 return None
-            seq, t_us, status = int(parts[1]), int(parts[2]), int(parts[3])
-            if not (0 <= seq < 256 and 0 <= t_us < 2**32 and 0 <= status < 256):
+            name, calibration_hash, *settings = parts
+            if not re.fullmatch(r"[0-9A-Fa-f]{16}", calibration_hash) or not all(_INT.fullmatch(x) for x in settings):
                 return None
-            values = [float(p) for p in parts[4:]]
-        except ValueError:
+            self.stats.infos += 1
+            return DeviceInfo(name, calibration_hash.lower(), *(int(x) for x in settings), text)  # type: ignore[call-arg]
+        parts = text.split(",")
+        if parts[0] != "F" or len(parts) != 11 or not all(_INT.fullmatch(p) for p in parts[1:4]) \
+                or not all(_FLOAT.fullmatch(p) for p in parts[4:]):
             return None
-        self.stats.lines += 1
+        seq, t_us, status = int(parts[1]), int(parts[2]), int(parts[3])
+        if not (seq < 256 and t_us < 2**32 and status < 256):
+            return None
+        values = [float(p) for p in parts[4:]]
         self._sequence(seq)
-        temp = values[6] if not math.isnan(values[6]) else None
-        return Sample(seq, t_us, status, (values[3], values[4], values[5]), (values[0], values[1], values[2]),
-                      temp, "text")
+        if status & STATUS_CHIP_ERROR:
+            self.stats.lines += 1
+            return Sample(seq, t_us, status, _NAN3, _NAN3, None, "text")
+        force, B, temp = tuple(values[0:3]), tuple(values[3:6]), values[6]
+        if not _plausible(force) or not all(abs(b) <= FIELD_LIMIT_UT for b in B):
+            self.stats.refused += 1
+            return _REFUSED
+        self.stats.lines += 1
+        return Sample(seq, t_us, status, B, force, temp if not math.isnan(temp) else None, "text")
 
     def _sequence(self, seq: int) -> None:
         if self._last_seq is not None:
             self.stats.lost += (seq - self._last_seq - 1) % 256
         self._last_seq = seq
+
+
+_NAN3 = (math.nan, math.nan, math.nan)
+_REFUSED = object()
+
+
+def _plausible(force: Tuple[float, ...]) -> bool:
+    """Every component finite and within :data:`FORCE_LIMIT_N` (NaN fails the comparison)."""
+    return all(abs(f) <= FORCE_LIMIT_N for f in force)
 
 
 def decode_frames(data: bytes, lsb_xy_uT: float = _build.LSB_XY_UT, lsb_z_uT: float = _build.LSB_Z_UT) -> list:

@@ -105,6 +105,19 @@ static uint8_t put_digits(char *out, uint32_t v, uint8_t width)
     return width;
 }
 
+/* *XXXX: the CRC of the line so far in four upper-case hex digits, as the host checks it. */
+static uint8_t put_checksum(char *out, uint8_t n)
+{
+    static const char hex[] = "0123456789ABCDEF";
+    uint16_t crc = mf_crc16((const uint8_t *)out, n);
+    uint8_t k;
+    out[n++] = '*';
+    for (k = 0; k < 4; ++k) {
+        out[n++] = hex[(crc >> (12 - 4 * k)) & 0x0FU];
+    }
+    return n;
+}
+
 static const uint32_t pow10_table[7] = {1UL, 10UL, 100UL, 1000UL, 10000UL, 100000UL, 1000000UL};
 
 uint8_t mf_format_float(char *out, float x, uint8_t decimals)
@@ -176,6 +189,7 @@ uint8_t mf_frame_text(char *out, uint8_t seq, uint32_t t_us, const mf_sample_t *
     }
     out[n++] = ',';
     n = (uint8_t)(n + mf_format_float(&out[n], s->t_C, 2));
+    n = put_checksum(out, n);
     out[n++] = '\n';
     return n;
 }

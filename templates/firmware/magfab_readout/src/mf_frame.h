@@ -14,14 +14,15 @@ extern "C" {
 #define MF_FRAME_SYNC0 0xA5
 #define MF_FRAME_SYNC1 0x5A
 #define MF_FRAME_FORCE 0x01
-#define MF_TEXT_MAX 176 /* longest text line, newline included */
+#define MF_TEXT_MAX 176 /* longest text line, checksum and newline included (166: 7 floats of 19 characters) */
 
 /* CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF, no reflection, no final xor). */
 uint16_t mf_crc16(const uint8_t *data, uint8_t len);
 /* The 31-byte frame, little-endian; returns MF_FRAME_LEN. */
 uint8_t mf_frame_binary(uint8_t *out, uint8_t seq, uint32_t t_us, const mf_sample_t *s);
-/* F,<seq>,<t_us>,<status>,<Fx_N>,<Fy_N>,<Fz_N>,<Bx_uT>,<By_uT>,<Bz_uT>,<T_C>\n : forces to 4 decimals, field
- * and temperature to 2; NaN prints as nan. out holds MF_TEXT_MAX bytes; returns the length (no terminator). */
+/* F,<seq>,<t_us>,<status>,<Fx_N>,<Fy_N>,<Fz_N>,<Bx_uT>,<By_uT>,<Bz_uT>,<T_C>*XXXX\n : forces to 4 decimals, field
+ * and temperature to 2; NaN prints as nan; XXXX is mf_crc16 of the bytes before the '*' in upper-case hex.
+ * out holds MF_TEXT_MAX bytes; returns the length (no terminator). */
 uint8_t mf_frame_text(char *out, uint8_t seq, uint32_t t_us, const mf_sample_t *s);
 /* x with the given decimals (at most 6), nan / inf / -inf, or d.dddde+XX beyond 1e9; returns the length. */
 uint8_t mf_format_float(char *out, float x, uint8_t decimals);
