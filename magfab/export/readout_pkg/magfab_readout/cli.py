@@ -315,17 +315,35 @@ def _ask(prompt: str, yes: bool) -> None:
         raise DeviceError("no answer on stdin (end of input): run the check at a terminal, or pass --yes")
 
 
-def _check(args: argparse.Namespace, out) -> int:
-    data = load_acceptance()
-    if data is None:
-        raise DeviceError("this readout package carries no acceptance.json (it was built without the acceptance "
-                          "bands): rebuild with magfab build and reinstall ./readout")
-    bands = Bands(data)
+class _Steps:
+    """The acceptance test's steps as they are reported: numbered PASS/FAIL lines, and the verdict."""
+
+    def __init__(self, out) -> None:
+        self.out, self.results = out, []  # (name, passed)
+
+    def report(self, name: str, passed: bool, text: str) -> None:
+        self.results.append((name, passed))
+        self.out.write("step {}  {:<26} {}  {}\n".format(len(self.results), name, "PASS" if passed else "FAIL", text))
+        self.out.flush()
+
+    def verdict(self) -> int:
+        failed = [k + 1 for k, (_, passed) in enumerate(self.results) if not passed]
+        if failed:
+            self.out.write("verdict: FAIL (step{} {} of {})\n".format("s" if len(failed) > 1 else "",
+                                                                      ", ".join(map(str, failed)), len(self.results)))
+            return 1
+        self.out.write("verdict: PASS (all {} steps)\n".format(len(self.results)))
+        return 0
+
+
+def _check_options(args: argparse.Namespace, bands: "Bands", data: dict):
+    """The weight, its predicted rise and the simulated tip the options ask for; UsageError when they clash."""
     if args.samples < 1:
         raise UsageError("--samples must be at least 1")
     if not args.settle >= 0:
         raise UsageError("--settle must be zero or positive")
     weight = bands.weight_g if args.weight_g is None else float(args.weight_g)
+    rise = None
     if not args.no_weight:
         if not (math.isfinite(weight) and weight > 0):
             raise UsageError("--weight-g must be a positive number of grams")
@@ -336,120 +354,131 @@ def _check(args: argparse.Namespace, out) -> int:
         pattern = RestTip.from_acceptance(data, scale=scale, flipped=args.simulate_flipped)
     elif args.simulate_grade or args.simulate_flipped:
         raise UsageError("--simulate-grade and --simulate-flipped need --simulate")
+    return weight, rise, pattern
 
+
+def _check(args: argparse.Namespace, out) -> int:
+    data = load_acceptance()
+    if data is None:
+        raise DeviceError("this readout package carries no acceptance.json (it was built without the acceptance "
+                          "bands): rebuild with magfab build and reinstall ./readout")
+    bands = Bands(data)
+    weight, rise, pattern = _check_options(args, bands, data)
     n = args.samples
-    lsb_z, lsb_xy = _build.LSB_Z_UT, _build.LSB_XY_UT
-    allow = bands.sigmas * bands.noise_z / math.sqrt(n) + lsb_z / 2.0
-    allow_xy = bands.sigmas * bands.noise_xy / math.sqrt(n) + lsb_xy / 2.0
-    lo, nom, hi = bands.rest
-    steps = []  # (name, passed)
-
-    def report(name: str, passed: bool, text: str) -> None:
-        steps.append((name, passed))
-        out.write("step {}  {:<26} {}  {}\n".format(len(steps), name, "PASS" if passed else "FAIL", text))
-        out.flush()
-
+    allow = bands.sigmas * bands.noise_z / math.sqrt(n) + _build.LSB_Z_UT / 2.0
+    steps = _Steps(out)
     with _device(args, text=None, pattern=pattern) as device:
-        out.write("# magfab-readout {} check: spec {}, calibration {}, {}\n".format(
-            __version__, json.dumps(_build.SPEC_NAME), device.calibration.short_hash, device.port))
-        out.write("# predicted (worst case over the magnet, material and assembly tolerances; magfab acceptance.json):\n"
-                  "#   Bz at rest {:.0f} .. {:.0f} uT (nominal {:.0f}), positive with the north pole away from the "
-                  "chip; |Bxy| at rest <= {:.0f} uT\n".format(lo, hi, nom, bands.bxy_max))
-        if not args.no_weight:
-            out.write("#   a {:g} g weight on the tip raises Bz by {:.0f} .. {:.0f} uT (nominal {:.0f})\n".format(
-                weight, rise[0], rise[2], rise[1]))
-        out.write("# reading {} samples with nothing touching the tip\n".format(n))
-        out.flush()
+        _check_header(out, device, bands, weight, rise, n)
         (bx, by, bz), full = _mean_field(device, n)
-
-        # 1. the sign: an upside-down magnet reads the same field negated
-        floor = allow + bands.earth
-        if bz > floor:
-            report("polarity (sign of Bz)", True, "measured {:+.0f} uT: positive, the north pole faces away from the "
-                   "chip as designed".format(bz))
-        elif bz < -floor:
-            report("polarity (sign of Bz)", False, "measured {:+.0f} uT: negative, the magnet is upside down (its "
-                   "north pole faces the chip); push it out of the pocket and turn it over".format(bz))
-        else:
-            report("polarity (sign of Bz)", False, "measured {:+.0f} uT: no field from the magnet (|Bz| under {:.0f} uT); "
-                   "is there a magnet in the fingertip, and is the fingertip on the chip?".format(bz, floor))
-
-        # 2. the field at rest
-        text = "measured {:+.0f} uT, predicted {:.0f} .. {:.0f} uT (nominal {:.0f})".format(bz, lo, hi, nom)
-        if full:
-            report("Bz at rest", False, text + ": {} samples had an axis at the chip's full scale (magnet far too "
-                   "close or too strong)".format(full))
-        elif lo - allow <= bz <= hi + allow:
-            report("Bz at rest", True, text)
-        elif bz < 0 and lo - allow <= -bz <= hi + allow:
-            report("Bz at rest", False, text + ": the magnet is upside down (|Bz| is inside the band)")
-        elif bz > hi + allow:
-            report("Bz at rest", False, text + ": stronger than predicted - a stronger grade than {}, a bigger magnet, "
-                   "or the magnet closer to the chip (not pushed home, thin pad or glue)".format(bands.grade))
-        else:
-            report("Bz at rest", False, text + ": weaker than predicted - a weaker or partly demagnetised magnet "
-                   "(heated above 80 C?), a smaller magnet, or the magnet further from the chip (thick glue, pad "
-                   "not seated)")
-        if abs(bz) > floor:
-            implied = abs(bz) / nom * bands.remanence[1]
-            note = "#   at the nominal stack-up this field means a remanence of {:.2f} T ({} is {:.2f} .. {:.2f} T)".format(
-                implied, bands.grade, bands.remanence[0], bands.remanence[2])
-            if len(bands.inside) > 1 and steps[-1][1]:
-                note += "; the band also holds the nominal field of grades {}: it cannot tell those apart".format(
-                    ", ".join(g for g in bands.inside if g != bands.grade))
-            out.write(note + "\n")
-
-        # 3. the lateral field at rest
-        bxy = math.hypot(bx, by)
-        text = "measured {:.0f} uT, predicted at most {:.0f} uT".format(bxy, bands.bxy_max)
-        if bxy <= bands.bxy_max + allow_xy:
-            report("|Bxy| at rest", True, text)
-        else:
-            report("|Bxy| at rest", False, text + ": the magnet is off the chip's axis or tilted (check the pad on its "
-                   "pins and the fingertip in the lip), or a magnetic object is near")
-
-        # 4. the known weight
+        _check_polarity(steps, bz, allow + bands.earth)
+        _check_rest(steps, out, bands, bz, full, allow)
+        _check_lateral(steps, bands, bx, by, bands.sigmas * bands.noise_xy / math.sqrt(n) + _build.LSB_XY_UT / 2.0)
         if not args.no_weight:
-            _ask("place the {:g} g weight on the tip, centred, with nothing else touching".format(weight), args.yes)
-            if args.simulate:
-                device.transport.place_weight(weight)
-            device.drain()
-            start = None
-            for sample in device.samples():
-                start = sample.time_s if start is None else start
-                if sample.time_s - start >= args.settle:
-                    break
-            out.write("# reading {} samples with {:g} g on the tip\n".format(n, weight))
-            (_, _, bz_w), full_w = _mean_field(device, n)
-            delta = bz_w - bz
-            allow_d = bands.sigmas * bands.noise_z * math.sqrt(2.0 / n) + lsb_z
-            name = "rise of Bz under {:g} g".format(weight)
-            text = "measured {:+.0f} uT, predicted {:.0f} .. {:.0f} uT (nominal {:.0f})".format(
-                delta, rise[0], rise[2], rise[1])
-            if full_w:
-                report(name, False, text + ": {} samples had an axis at the chip's full scale".format(full_w))
-            elif rise[0] - allow_d <= delta <= rise[2] + allow_d:
-                report(name, True, text)
-            elif delta < -allow_d:
-                report(name, False, text + ": Bz fell under the weight - the magnet is upside down" if bz < 0 else
-                       text + ": Bz fell under the weight - is the weight on the tip, and the fingertip glued down?")
-            elif delta < rise[0] - allow_d:
-                report(name, False, text + ": a smaller rise than predicted - a stiffer silicone than the recipe's "
-                       "band (mix ratio, cure), the weight off-centre or resting on something else, or the magnet "
-                       "further from the chip")
-            else:
-                report(name, False, text + ": a larger rise than predicted - a softer silicone (under-cured or "
-                       "off-ratio) or the magnet closer to the chip")
-            if not args.yes:
-                sys.stderr.write("take the weight off the tip\n")
+            _check_weight(steps, out, args, device, bands, weight, rise, bz)
+    return steps.verdict()
 
-    failed = [k + 1 for k, (_, passed) in enumerate(steps) if not passed]
-    if failed:
-        out.write("verdict: FAIL (step{} {} of {})\n".format("s" if len(failed) > 1 else "",
-                                                             ", ".join(map(str, failed)), len(steps)))
-        return 1
-    out.write("verdict: PASS (all {} steps)\n".format(len(steps)))
-    return 0
+
+def _check_header(out, device, bands: "Bands", weight: float, rise, n: int) -> None:
+    lo, nom, hi = bands.rest
+    out.write("# magfab-readout {} check: spec {}, calibration {}, {}\n".format(
+        __version__, json.dumps(_build.SPEC_NAME), device.calibration.short_hash, device.port))
+    out.write("# predicted (worst case over the magnet, material and assembly tolerances; magfab acceptance.json):\n"
+              "#   Bz at rest {:.0f} .. {:.0f} uT (nominal {:.0f}), positive with the north pole away from the "
+              "chip; |Bxy| at rest <= {:.0f} uT\n".format(lo, hi, nom, bands.bxy_max))
+    if rise is not None:
+        out.write("#   a {:g} g weight on the tip raises Bz by {:.0f} .. {:.0f} uT (nominal {:.0f})\n".format(
+            weight, rise[0], rise[2], rise[1]))
+    out.write("# reading {} samples with nothing touching the tip\n".format(n))
+    out.flush()
+
+
+def _check_polarity(steps: _Steps, bz: float, floor: float) -> None:
+    """Step 1, the sign: an upside-down magnet reads the same field negated."""
+    if bz > floor:
+        steps.report("polarity (sign of Bz)", True, "measured {:+.0f} uT: positive, the north pole faces away from the "
+                     "chip as designed".format(bz))
+    elif bz < -floor:
+        steps.report("polarity (sign of Bz)", False, "measured {:+.0f} uT: negative, the magnet is upside down (its "
+                     "north pole faces the chip); push it out of the pocket and turn it over".format(bz))
+    else:
+        steps.report("polarity (sign of Bz)", False, "measured {:+.0f} uT: no field from the magnet (|Bz| under {:.0f} "
+                     "uT); is there a magnet in the fingertip, and is the fingertip on the chip?".format(bz, floor))
+
+
+def _check_rest(steps: _Steps, out, bands: "Bands", bz: float, full: int, allow: float) -> None:
+    """Step 2, the field at rest against the predicted band, and the remanence it implies."""
+    lo, nom, hi = bands.rest
+    text = "measured {:+.0f} uT, predicted {:.0f} .. {:.0f} uT (nominal {:.0f})".format(bz, lo, hi, nom)
+    if full:
+        steps.report("Bz at rest", False, text + ": {} samples had an axis at the chip's full scale (magnet far too "
+                     "close or too strong)".format(full))
+    elif lo - allow <= bz <= hi + allow:
+        steps.report("Bz at rest", True, text)
+    elif bz < 0 and lo - allow <= -bz <= hi + allow:
+        steps.report("Bz at rest", False, text + ": the magnet is upside down (|Bz| is inside the band)")
+    elif bz > hi + allow:
+        steps.report("Bz at rest", False, text + ": stronger than predicted - a stronger grade than {}, a bigger "
+                     "magnet, or the magnet closer to the chip (not pushed home, thin pad or glue)".format(bands.grade))
+    else:
+        steps.report("Bz at rest", False, text + ": weaker than predicted - a weaker or partly demagnetised magnet "
+                     "(heated above 80 C?), a smaller magnet, or the magnet further from the chip (thick glue, pad "
+                     "not seated)")
+    if abs(bz) > allow + bands.earth:
+        implied = abs(bz) / nom * bands.remanence[1]
+        note = "#   at the nominal stack-up this field means a remanence of {:.2f} T ({} is {:.2f} .. {:.2f} T)".format(
+            implied, bands.grade, bands.remanence[0], bands.remanence[2])
+        if len(bands.inside) > 1 and steps.results[-1][1]:
+            note += "; the band also holds the nominal field of grades {}: it cannot tell those apart".format(
+                ", ".join(g for g in bands.inside if g != bands.grade))
+        out.write(note + "\n")
+
+
+def _check_lateral(steps: _Steps, bands: "Bands", bx: float, by: float, allow_xy: float) -> None:
+    """Step 3, the lateral field at rest: the magnet on the chip's axis and level."""
+    bxy = math.hypot(bx, by)
+    text = "measured {:.0f} uT, predicted at most {:.0f} uT".format(bxy, bands.bxy_max)
+    if bxy <= bands.bxy_max + allow_xy:
+        steps.report("|Bxy| at rest", True, text)
+    else:
+        steps.report("|Bxy| at rest", False, text + ": the magnet is off the chip's axis or tilted (check the pad on "
+                     "its pins and the fingertip in the lip), or a magnetic object is near")
+
+
+def _check_weight(steps: _Steps, out, args: argparse.Namespace, device, bands: "Bands", weight: float, rise,
+                  bz: float) -> None:
+    """Step 4, the known weight: the rise of Bz against the band the material and magnet predict."""
+    n = args.samples
+    _ask("place the {:g} g weight on the tip, centred, with nothing else touching".format(weight), args.yes)
+    if args.simulate:
+        device.transport.place_weight(weight)
+    device.drain()
+    start = None
+    for sample in device.samples():
+        start = sample.time_s if start is None else start
+        if sample.time_s - start >= args.settle:
+            break
+    out.write("# reading {} samples with {:g} g on the tip\n".format(n, weight))
+    (_, _, bz_w), full_w = _mean_field(device, n)
+    delta = bz_w - bz
+    allow_d = bands.sigmas * bands.noise_z * math.sqrt(2.0 / n) + _build.LSB_Z_UT
+    name = "rise of Bz under {:g} g".format(weight)
+    text = "measured {:+.0f} uT, predicted {:.0f} .. {:.0f} uT (nominal {:.0f})".format(delta, rise[0], rise[2], rise[1])
+    if full_w:
+        steps.report(name, False, text + ": {} samples had an axis at the chip's full scale".format(full_w))
+    elif rise[0] - allow_d <= delta <= rise[2] + allow_d:
+        steps.report(name, True, text)
+    elif delta < -allow_d:
+        steps.report(name, False, text + ": Bz fell under the weight - the magnet is upside down" if bz < 0 else
+                     text + ": Bz fell under the weight - is the weight on the tip, and the fingertip glued down?")
+    elif delta < rise[0] - allow_d:
+        steps.report(name, False, text + ": a smaller rise than predicted - a stiffer silicone than the recipe's "
+                     "band (mix ratio, cure), the weight off-centre or resting on something else, or the magnet "
+                     "further from the chip")
+    else:
+        steps.report(name, False, text + ": a larger rise than predicted - a softer silicone (under-cured or "
+                     "off-ratio) or the magnet closer to the chip")
+    if not args.yes:
+        sys.stderr.write("take the weight off the tip\n")
 
 
 def main(argv: Optional[List[str]] = None) -> int:
