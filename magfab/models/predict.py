@@ -47,7 +47,7 @@ if TYPE_CHECKING:
 G_PER_UT = 1.0 / UT_PER_GAUSS
 N_INDENT = 21  # indentation steps along the normal curve
 #: Mesh sizes (mm) the automatic FE choice tries, coarse to fine; each is checked against the next finer.
-FE_MESHES_MM = (0.75, 0.5, 0.35, 0.25)
+FE_MESHES_MM = (1.0, 0.75, 0.5, 0.35)
 #: Observed convergence order of the FE force under refinement (bench/mechanics.py measures it).
 FE_ORDER = 1.0
 SHEAR_STEP_MM = 0.01  # finite-difference step for dBr/dr at the axis
@@ -160,11 +160,21 @@ def choose_field(design: "Design", magnet: fieldmod.Magnet) -> ModelUse:
     return ModelUse("field", name, err, "error over the working volume, measured against the exact field", "spec")
 
 
-def _fe_curve(body: mech.Body, mu: float, indentation: np.ndarray, mesh: float) -> mech.Curve:
-    """The FE curve, truncated where the model fails (element inversion, non-convergence, stretch beyond the
-    material's elongation at break): the singular stress at the magnet's sharp edge stops it earlier the finer
-    the mesh, so the prediction keeps what the model reached and says where it stopped."""
-    return mech.fe(body, mu, indentation, mesh_mm=mesh, on_failure=mech.OnFailure.TRUNCATE)
+def _fe_curve(body: mech.Body, mu: float, indentation: np.ndarray, mesh: float, depth_mm: float) -> mech.Curve:
+    """The FE curve up to ``depth_mm``, the deepest indentation the design is used over (see :func:`normal_curve`):
+    the FE is solved there and no deeper, and the curve says so in ``info["failure"]``, so the range ends there if
+    nothing ends it earlier. A failure before that depth (element inversion, non-convergence) truncates the curve
+    where the model stopped."""
+    d = np.asarray(indentation, dtype=float)
+    if d[-1] <= depth_mm:
+        return mech.fe(body, mu, d, mesh_mm=mesh, on_failure=mech.OnFailure.TRUNCATE)
+    kept = np.append(d[d < depth_mm - 1e-9], depth_mm)
+    curve = mech.fe(body, mu, kept, mesh_mm=mesh, on_failure=mech.OnFailure.TRUNCATE)
+    if "failure" not in curve.info:
+        curve.info["failure"] = (f"the FE is solved to {depth_mm:g} mm of indentation, the depth the design is used "
+                                 "over (calibration.scan_z_mm)")
+        curve.info["failed_at_mm"] = float(d[kept.size - 1]) if kept.size - 1 < d.size else math.nan
+    return curve
 
 
 def normal_curve(design: "Design", body: mech.Body, mu: float, indentation: np.ndarray) -> tuple[mech.Curve, ModelUse]:
@@ -180,8 +190,9 @@ def normal_curve(design: "Design", body: mech.Body, mu: float, indentation: np.n
 
     previous = None
     chosen = None
+    depth = float(design.spec.calibration.scan_z_mm)  # the deepest indentation the design is used over
     for mesh in fe_meshes(design):  # coarse to fine; past the last, the model-error warning says so
-        curve = _fe_curve(body, mu, indentation, mesh)
+        curve = _fe_curve(body, mu, indentation, mesh, depth)
         if previous is not None:
             n = min(len(curve.force_N), len(previous.force_N))
             if n < 2:
@@ -198,7 +209,7 @@ def normal_curve(design: "Design", body: mech.Body, mu: float, indentation: np.n
     curve, err, coarse = chosen
     how = "auto" if name == "auto" else "spec"
     return curve, ModelUse("mechanics", "fe", err,
-                           f"axisymmetric neo-Hookean FE, mesh {curve.mesh_mm:g} mm; error estimated against mesh "
+                           f"{mech.MODEL_DESCRIPTION} Mesh {curve.mesh_mm:g} mm; error estimated against mesh "
                            f"{coarse:g} mm (Richardson, order {FE_ORDER:g})", how)
 
 

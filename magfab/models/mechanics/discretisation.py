@@ -33,6 +33,8 @@ class _Axisym:
     doflocs: np.ndarray  # (2, N)
     dof_tags: np.ndarray  # (N,)
     corner_r: np.ndarray  # (nel, 3) scalar P2 dofs of the corners (= vertex indices)
+    node_grad: np.ndarray  # (nel, 6 nodes, 2, 6 basis) in-plane gradients of the P2 basis at the element's nodes
+    node_inv_r: np.ndarray  # (nel, 6) 1 / r at the element's nodes (0 on the axis, where the hoop stretch is F_rr)
     pattern: tuple  # (unique keys' rows, cols, inverse) for fast sparse assembly
 
 
@@ -94,4 +96,20 @@ def _axisym(mesh: _Mesh) -> _Axisym:
     w = sb.dx * 2.0 * math.pi * rq
     Bt = np.ascontiguousarray(B.reshape(nel, nq * 5, 12).transpose(0, 2, 1))
     psi_t = np.ascontiguousarray(psi.transpose(0, 2, 1))
-    return _Axisym(mesh, N, M, B, Bt, psi, psi_t, w, edofs, sb.doflocs, tags, m.t.T.copy(), _pattern(edofs))
+    node_grad, node_inv_r = _node_gradients(m, sb)
+    return _Axisym(mesh, N, M, B, Bt, psi, psi_t, w, edofs, sb.doflocs, tags, m.t.T.copy(), node_grad, node_inv_r,
+                   _pattern(edofs))
+
+
+def _node_gradients(m, sb):
+    """Gradients of the P2 basis at each element's six nodes (the deformed element is curved: its Jacobian varies,
+    and the nodes are where an inverted corner or edge shows first) and 1 / r there (0 on the axis)."""
+    from skfem import Basis, ElementTriP2
+
+    X = np.array([[0.0, 1.0, 0.0, 0.5, 0.5, 0.0], [0.0, 0.0, 1.0, 0.0, 0.5, 0.5]])  # ElementTriP2's node order
+    nb = Basis(m, ElementTriP2(), quadrature=(X, np.ones(6)))
+    grad = np.stack([nb.basis[i][0].grad for i in range(6)], axis=-1)  # (2, nel, 6 nodes, 6 basis)
+    r = _values(nb.global_coordinates())[0]  # (nel, 6)
+    scale = float(np.max(r)) if r.size else 1.0
+    inv_r = np.where(r > 1e-12 * scale, 1.0 / np.where(r > 1e-12 * scale, r, 1.0), 0.0)
+    return np.ascontiguousarray(grad.transpose(1, 2, 0, 3)), inv_r

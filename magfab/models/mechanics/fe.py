@@ -66,7 +66,7 @@ def fe(body: Body, mu_kPa: float, indentation_mm: Sequence[float] | np.ndarray, 
     mesh = _body_mesh(body, mesh_size(body, mesh_mm), int(refine), float(refine_near_apex_mm))
     prob = _Indentation(body, _axisym(mesh), mat, bool(base_bonded))
     path = _LoadPath(prob, stretch_limit)
-    out = np.zeros((d.size, 5))  # force, tangent, magnet displacement, max stretch, max stress (units of mu)
+    out = np.zeros((d.size, 6))  # force, tangent, magnet displacement, max stretch, max stress, peak stretch
     done = 0
     info: dict[str, object] = {"elements": int(mesh.t.shape[1]), "dofs": int(prob.ndof),
                                "min_angle_deg": mesh.min_angle_deg, "material": law.value}
@@ -82,7 +82,8 @@ def fe(body: Body, mu_kPa: float, indentation_mm: Sequence[float] | np.ndarray, 
     unit = _newton_per_mu_mm2(mu)
     out, d = out[:done], d[:done]
     F, tangent = out[:, 0] * unit, out[:, 1] * unit
-    info.update(newton_iterations=path.iterations, step_cuts=path.cuts, tangent_N_per_mm=tangent)
+    info.update(newton_iterations=path.iterations, step_cuts=path.cuts, tangent_N_per_mm=tangent,
+                peak_stretch=out[:, 5].copy())
     return Curve(MechanicsModel.FE.value, mu, d, F, out[:, 2], _smooth_stiffness(d, F, tangent), out[:, 3],
                  out[:, 4] * mu, mesh_mm=mesh.h, info=info)
 
@@ -118,7 +119,7 @@ class _LoadPath:
                                          f"(last converged {self.current:.4g} mm)") from None
                 continue
             self.iterations += new.iterations
-            lmax, lmin, _ = prob.energy.extremes(new.x)
+            lmax, lmin, _, _ = prob.energy.extremes(new.x)
             if lmax > self.stretch_limit or lmin < 1.0 / self.stretch_limit:
                 raise MechanicsError(f"fe (mesh {h:g} mm): excessive distortion at indentation "
                                      f"{trial:.4g} mm: principal stretches {lmin:.3g} to {lmax:.3g} leave "
@@ -126,12 +127,13 @@ class _LoadPath:
             self.state, self.current = new, trial
             self.hist = (self.hist + [(self.current, self.state.x)])[-2:]
 
-    def record(self, delta: float) -> tuple[float, float, float, float, float]:
-        """(force, tangent, magnet displacement, largest stretch, largest |stress|) at ``delta``, in units of mu."""
+    def record(self, delta: float) -> tuple[float, float, float, float, float, float]:
+        """(force, tangent, magnet displacement, largest averaged stretch, largest |stress|, largest pointwise
+        stretch) at ``delta``, in units of mu."""
         prob, x = self.prob, self.state.x
         F, K = prob.force(self.state, delta)
-        lmax, _, smax = prob.energy.extremes(x)
-        return F, K, prob.magnet_displacement(x), lmax, smax
+        lmax, _, smax, peak = prob.energy.extremes(x)
+        return F, K, prob.magnet_displacement(x), lmax, smax, peak
 
 
 def _smooth_stiffness(d: np.ndarray, F: np.ndarray, tangent: np.ndarray) -> np.ndarray:

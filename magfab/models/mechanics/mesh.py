@@ -1,7 +1,8 @@
 """The triangulation of the body's (r, z) profile for the axisymmetric FE.
 
-Deterministic: boundary points every <= h along the outline, an equilateral lattice inside, Delaunay, a few
-Laplacian smoothing sweeps; refinement by scikit-fem. Every vertex carries a bitmask of the boundaries it lies
+Deterministic: boundary points spaced by a size function (the mesh size ``h``, graded down at the magnet's
+rounded edges), then Triangle's quality Delaunay mesher (:func:`_graded_mesh`); uniform refinement by scikit-fem,
+new boundary points moved onto the cap and the rounded edges. Every vertex carries a bitmask of the boundaries it lies
 on (axis, bonded base, outer surface, magnet), which the FE turns into constraints. Meshes are cached (the studies
 clear the caches for cold timings).
 """
@@ -41,16 +42,44 @@ class _Mesh:
     min_angle_deg: float
 
 
-def _inside(body: Body, r: np.ndarray, z: np.ndarray) -> np.ndarray:
-    """Strictly inside the silicone (outside the magnet)."""
-    R, hb, H = body.radius_mm, body.base_height_mm, body.height_mm
-    if body.tip == FLAT:
-        outer = (r > 0) & (r < R) & (z > 0) & (z < H)
-    else:
-        outer = (r > 0) & (z > 0) & (((r < R) & (z <= hb)) | ((z > hb) & (r * r + (z - hb) ** 2 < R * R)))
-    if body.has_magnet:
-        outer &= ~((r < body.magnet_radius_mm) & (z > body.magnet_z_mm) & (z < body.magnet_top_mm))
-    return outer
+#: Element size along the magnet's rounded edge, as a fraction of the edge radius (a quarter circle in ~8 arcs).
+EDGE_SIZE_FRACTION = 0.07
+#: Growth of the element size with distance from the rounded edge (size = edge size + GRADING * distance, capped
+#: at the mesh size): a gentle 1:4 slope keeps the minimum angle above Triangle's 30-degree quality bound.
+GRADING = 0.25
+#: Minimum angle (degrees) asked of Triangle's quality mesher.
+MIN_ANGLE_DEG = 30.0
+
+
+def _magnet_distance(body: Body, r: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """Signed distance (mm) from (r, z) to the magnet's rounded-rectangle profile (negative inside)."""
+    rm, hm, re = body.magnet_radius_mm, body.magnet_height_mm, body.magnet_edge_radius_mm
+    zc = body.magnet_z_mm + 0.5 * hm
+    qr, qz = np.abs(r) - (rm - re), np.abs(z - zc) - (0.5 * hm - re)
+    outside = np.hypot(np.maximum(qr, 0.0), np.maximum(qz, 0.0))
+    return outside + np.minimum(np.maximum(qr, qz), 0.0) - re
+
+
+def _edge_centres(body: Body) -> np.ndarray:
+    """(2, k) centres of the magnet's rounded edges (k = 2), or (2, 0) for a sharp-edged or no magnet."""
+    re = body.magnet_edge_radius_mm
+    if not body.has_magnet or re <= 0.0:
+        return np.zeros((2, 0))
+    rc = body.magnet_radius_mm - re
+    return np.array([[rc, rc], [body.magnet_z_mm + re, body.magnet_top_mm - re]])
+
+
+def _size(body: Body, h: float, r: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """The wanted element size (mm) at (r, z): ``h``, graded down to the edge size near the rounded edges."""
+    c = _edge_centres(body)
+    size = np.full(np.shape(r), float(h))
+    if c.shape[1]:
+        re = body.magnet_edge_radius_mm
+        he = min(h, EDGE_SIZE_FRACTION * re)
+        for rc, zc in c.T:
+            dist = np.maximum(np.hypot(r - rc, z - zc) - re, 0.0)
+            size = np.minimum(size, he + GRADING * dist)
+    return size
 
 
 def _intervals_minus(a: float, b: float, c: float, d: float) -> list[tuple[float, float]]:
@@ -85,68 +114,86 @@ def _boundary_pieces(body: Body) -> list[tuple[str, tuple, int]]:
     else:
         pieces.append(("arc", (0.0, hb, R, 0.0, 0.5 * math.pi), _OUTER))
     if mag:
-        pieces.append(("seg", (0.0, zm, rm, zm), _MAGNET))
-        pieces.append(("seg", (rm, zm, rm, zt), _MAGNET))
-        pieces.append(("seg", (rm, zt, 0.0, zt), _MAGNET))
+        re = body.magnet_edge_radius_mm
+        pieces.append(("seg", (0.0, zm, rm - re, zm), _MAGNET))
+        pieces.append(("seg", (rm, zm + re, rm, zt - re), _MAGNET))
+        pieces.append(("seg", (rm - re, zt, 0.0, zt), _MAGNET))
+        if re > 0.0:
+            pieces.append(("arc", (rm - re, zm + re, re, -0.5 * math.pi, 0.0), _MAGNET))
+            pieces.append(("arc", (rm - re, zt - re, re, 0.0, 0.5 * math.pi), _MAGNET))
     return pieces
 
 
-def _sample_piece(kind: str, geo: tuple, h: float) -> np.ndarray:
-    """Points (2, n) along one boundary piece, both ends included, spacing at most h."""
+def _sample_piece(body: Body, kind: str, geo: tuple, h: float) -> np.ndarray:
+    """Points (2, n) along one boundary piece, both ends exact, spaced by the size function :func:`_size`."""
+    s = np.linspace(0.0, 1.0, 513)
     if kind == "seg":
         r0, z0, r1, z1 = geo
-        n = max(1, math.ceil(math.hypot(r1 - r0, z1 - z0) / h - 1e-9))
-        s = np.linspace(0.0, 1.0, n + 1)
-        return np.vstack([r0 + s * (r1 - r0), z0 + s * (z1 - z0)])
-    rc, zc, rad, a0, a1 = geo
-    n = max(2, math.ceil(rad * (a1 - a0) / h - 1e-9))
-    a = np.linspace(a0, a1, n + 1)
-    pts = np.vstack([rc + rad * np.cos(a), zc + rad * np.sin(a)])
-    for i, ang in ((0, a0), (-1, a1)):  # exact ends, so they merge with the neighbouring pieces
-        pts[:, i] = (rc + rad * round(math.cos(ang)), zc + rad * round(math.sin(ang)))
-    return pts
+        pts = np.vstack([r0 + s * (r1 - r0), z0 + s * (z1 - z0)])
+        length = math.hypot(r1 - r0, z1 - z0)
+    else:
+        rc, zc, rad, a0, a1 = geo
+        a = a0 + s * (a1 - a0)
+        pts = np.vstack([rc + rad * np.cos(a), zc + rad * np.sin(a)])
+        length = rad * (a1 - a0)
+    inv = 1.0 / _size(body, h, pts[0], pts[1])
+    cum = np.concatenate([[0.0], np.cumsum(0.5 * (inv[1:] + inv[:-1]) * np.diff(s) * length)])
+    n = max(1 if kind == "seg" else 2, math.ceil(cum[-1] - 1e-9))
+    t = np.interp(np.linspace(0.0, cum[-1], n + 1), cum, s)
+    if kind == "seg":
+        out = np.vstack([r0 + t * (r1 - r0), z0 + t * (z1 - z0)])
+        out[:, 0], out[:, -1] = (r0, z0), (r1, z1)
+    else:
+        a = a0 + t * (a1 - a0)
+        out = np.vstack([rc + rad * np.cos(a), zc + rad * np.sin(a)])
+        for i, ang in ((0, a0), (-1, a1)):  # exact ends, so they merge with the neighbouring pieces
+            c, sn = math.cos(ang), math.sin(ang)
+            out[:, i] = (rc + rad * (round(c) if abs(c - round(c)) < 1e-12 else c),
+                         zc + rad * (round(sn) if abs(sn - round(sn)) < 1e-12 else sn))
+    return out
 
 
-def _lattice_mesh(body: Body, h: float) -> _Mesh:
-    """Deterministic mesh of size ~h: boundary points every <= h, an equilateral lattice inside (kept >= h/2 from
-    the boundary), Delaunay, a few Laplacian smoothing sweeps of the interior points, and checks."""
-    from scipy.spatial import Delaunay, cKDTree
+def _graded_mesh(body: Body, h: float) -> _Mesh:
+    """Quality mesh of size ~h graded down to :data:`EDGE_SIZE_FRACTION` of the edge radius at the magnet's rounded
+    edges: boundary points by the size function, then Triangle (Shewchuk's quality Delaunay mesher, the ``triangle``
+    package) with a 30-degree minimum angle, no Steiner points on the boundary, and per-triangle area bounds from the
+    size function, refined twice so the interior follows the grading. Deterministic."""
+    import triangle
 
     scale = max(body.radius_mm, body.height_mm)
     key = 1e-9 * scale
-    merged: dict[tuple[int, int], list] = {}
-    dense = []
-    for kind, geo, tag in _boundary_pieces(body):
-        for r, z in _sample_piece(kind, geo, h).T:
+    index: dict[tuple[int, int], int] = {}
+    verts: list[tuple[float, float]] = []
+    segs: list[tuple[int, int]] = []
+    for kind, geo, _tag_ in _boundary_pieces(body):
+        ids = []
+        for r, z in _sample_piece(body, kind, geo, h).T:
             k = (round(r / key), round(z / key))
-            if k in merged:
-                merged[k][2] |= tag
-            else:
-                merged[k] = [r, z, tag]
-        dense.append(_sample_piece(kind, geo, h / 8.0))
-    bnd = np.array([(v[0], v[1]) for v in merged.values()]).T
-    btag = np.array([v[2] for v in merged.values()], dtype=np.int64)
-
-    dz = h * math.sqrt(3.0) / 2.0
-    rows = np.arange(1, int(body.height_mm / dz) + 2)
-    cols = np.arange(0, int(body.radius_mm / h) + 2)
-    rr = (cols[None, :] + 0.5 * (rows[:, None] % 2)) * h
-    zz = np.broadcast_to(rows[:, None] * dz, rr.shape)
-    r, z = rr.ravel(), zz.ravel()
-    keep = _inside(body, r, z)
-    r, z = r[keep], z[keep]
-    dist, _ = cKDTree(np.hstack(dense).T).query(np.vstack([r, z]).T)
-    keep = dist > 0.5 * h
-    p = np.hstack([bnd, np.vstack([r[keep], z[keep]])])
-    tags = np.concatenate([btag, np.zeros(int(keep.sum()), dtype=np.int64)])
-
-    t = Delaunay(p.T, qhull_options="Qbb Qc Qz Q12").simplices.T
-    t = _orient(p, t)
-    cr, cz = p[:, t].mean(axis=1)
-    area = _areas(p, t)
-    t = t[:, _inside(body, cr, cz) & (area > 1e-10 * h * h)]
-    t = _smooth(p, t, tags == 0, sweeps=4)
+            if k not in index:
+                index[k] = len(verts)
+                verts.append((r, z))
+            ids.append(index[k])
+        segs.extend((a, b) for a, b in zip(ids[:-1], ids[1:]) if a != b)
+    pslg: dict[str, np.ndarray] = {"vertices": np.array(verts), "segments": np.array(segs, dtype=np.int32)}
+    if body.has_magnet:
+        pslg["holes"] = np.array([[0.5 * body.magnet_radius_mm, body.magnet_z_mm + 0.5 * body.magnet_height_mm]])
+    quality = f"pq{MIN_ANGLE_DEG:g}Y"
+    tri = triangle.triangulate(pslg, quality + f"a{_area(h):.17g}")
+    for _ in range(3):
+        p, t = tri["vertices"], tri["triangles"]
+        c = p[t].mean(axis=1)
+        want = _area(_size(body, h, c[:, 0], c[:, 1]))
+        if np.all(_areas(p.T, _orient(p.T, t.T)) <= 1.2 * want):
+            break
+        tri = triangle.triangulate({**tri, "triangle_max_area": want}, "r" + quality)
+    p = np.array(tri["vertices"], dtype=float).T.copy()
+    t = _orient(p, np.array(tri["triangles"], dtype=np.int64).T)
     return _finish(body, p, t, h)
+
+
+def _area(size: np.ndarray | float) -> np.ndarray | float:
+    """Area (mm^2) of an equilateral triangle of side ``size``."""
+    return math.sqrt(3.0) / 4.0 * np.asarray(size) ** 2
 
 
 def _areas(p: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -158,27 +205,6 @@ def _orient(p: np.ndarray, t: np.ndarray) -> np.ndarray:
     t = t.copy()
     neg = _areas(p, t) < 0
     t[1, neg], t[2, neg] = t[2, neg].copy(), t[1, neg].copy()
-    return t
-
-
-def _smooth(p: np.ndarray, t: np.ndarray, movable: np.ndarray, sweeps: int) -> np.ndarray:
-    """Laplacian smoothing of the movable points in place (kept only while every triangle stays positive)."""
-    n = p.shape[1]
-    edges = np.hstack([t[[0, 1]], t[[1, 2]], t[[2, 0]]])
-    edges = np.unique(np.sort(edges, axis=0), axis=1)
-    deg = np.bincount(edges.ravel(), minlength=n).astype(float)
-    used = deg > 0
-    for _ in range(sweeps):
-        acc = np.zeros_like(p)
-        for a, b in ((0, 1), (1, 0)):
-            np.add.at(acc, (slice(None), edges[a]), p[:, edges[b]])
-        new = p.copy()
-        m = movable & used
-        new[:, m] = acc[:, m] / deg[m]
-        if np.all(_areas(new, t) > 0):
-            p[:, :] = new
-        else:
-            break
     return t
 
 
@@ -211,10 +237,8 @@ def _tag(body: Body, p: np.ndarray, on_boundary: np.ndarray) -> np.ndarray:
     tags[on_boundary & (r < tol)] |= _AXIS
     tags[on_boundary & (z < tol)] |= _BASE
     if body.has_magnet:
-        rm, zm, zt = body.magnet_radius_mm, body.magnet_z_mm, body.magnet_top_mm
-        on_side = (np.abs(r - rm) < tol) & (z > zm - tol) & (z < zt + tol)
-        on_face = ((np.abs(z - zm) < tol) | (np.abs(z - zt) < tol)) & (r < rm + tol)
-        tags[on_boundary & (on_side | on_face)] |= _MAGNET
+        _project_on_edges(body, p, on_boundary, tol)
+        tags[on_boundary & (np.abs(_magnet_distance(body, p[0], p[1])) < tol)] |= _MAGNET
     outer = on_boundary & (np.abs(r - R) < tol) & (z < hb + tol)
     if body.tip == FLAT:
         outer |= on_boundary & (np.abs(z - H) < tol)
@@ -227,6 +251,19 @@ def _tag(body: Body, p: np.ndarray, on_boundary: np.ndarray) -> np.ndarray:
         outer |= cap
     tags[outer] |= _OUTER
     return tags
+
+
+def _project_on_edges(body: Body, p: np.ndarray, on_boundary: np.ndarray, tol: float) -> None:
+    """Move boundary points near a rounded magnet edge onto its arc (chord midpoints of a refined mesh), in place."""
+    re = body.magnet_edge_radius_mm
+    for rc, zc in _edge_centres(body).T:
+        dr, dz = p[0] - rc, p[1] - zc
+        rho = np.hypot(dr, dz)
+        lower = zc < body.magnet_z_mm + 0.5 * body.magnet_height_mm
+        sector = (dr > tol) & ((dz < -tol) if lower else (dz > tol))
+        near = on_boundary & sector & (np.abs(rho - re) < 0.1 * re)
+        p[0, near] = rc + dr[near] * re / rho[near]
+        p[1, near] = zc + dz[near] * re / rho[near]
 
 
 def _min_angle(p: np.ndarray, t: np.ndarray) -> float:
@@ -259,7 +296,7 @@ def _body_mesh(body: Body, h: float, refine: int = 0, refine_near_apex_mm: float
 @lru_cache(maxsize=16)
 def _unit_mesh(body: Body, h: float, refine: int, refine_near: float) -> _Mesh:
     """_body_mesh for a body of unit radius; ``h`` of the result is the size away from any local refinement."""
-    mesh = _lattice_mesh(body, h)
+    mesh = _graded_mesh(body, h)
     from skfem import MeshTri
 
     for _ in range(refine):
