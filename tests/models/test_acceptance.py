@@ -5,13 +5,11 @@ command line."""
 
 from __future__ import annotations
 
-import importlib
 import itertools
 import json
 import subprocess
 import sys
 from dataclasses import replace
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -20,7 +18,7 @@ from magfab import SpecError, derive, parse_spec
 from magfab.models.acceptance import FORMAT, G0, Tolerances, acceptance, default_weight_g
 from magfab.models.field import Magnet, bz_br
 from magfab.export.readout import render, validate_acceptance
-from test_readout import make_calibration, ref_decode, write_tree
+from readout_support import imported, install, make_calibration, ref_decode, write_tree
 
 PKG = "readout/src/magfab_readout"
 
@@ -236,15 +234,8 @@ def test_malformed_acceptance_is_refused_by_key(design, acc, change, key):
 
 @pytest.fixture(scope="module")
 def pkg(rendered, tmp_path_factory):
-    root = write_tree(rendered, tmp_path_factory.mktemp("acceptance-src"))
-    src = str(root / "readout" / "src")
-    sys.path.insert(0, src)
-    try:
-        yield importlib.import_module("magfab_readout")
-    finally:
-        sys.path.remove(src)
-        for name in [n for n in sys.modules if n == "magfab_readout" or n.startswith("magfab_readout.")]:
-            del sys.modules[name]
+    with imported(rendered, tmp_path_factory.mktemp("acceptance-src")) as module:
+        yield module
 
 
 def test_simulated_sensor_sends_firmware_frames_of_the_predicted_field(pkg, acc):
@@ -278,25 +269,8 @@ def test_simulated_sensor_sends_firmware_frames_of_the_predicted_field(pkg, acc)
 
 @pytest.fixture(scope="module")
 def installed(rendered, tmp_path_factory):
-    """The package with acceptance.json pip-installed into a fresh virtual environment (as test_readout's)."""
-    root = tmp_path_factory.mktemp("acceptance-venv")
-    bundle = write_tree(rendered, root / "bundle")
-    venv = root / "venv"
-    made = subprocess.run([sys.executable, "-m", "venv", "--system-site-packages", str(venv)],
-                          capture_output=True, text=True, timeout=120)
-    if made.returncode != 0:
-        pytest.skip(f"cannot create a virtual environment here: {made.stderr.strip()[-500:]}")
-    python = venv / "bin" / "python"
-    log = []
-    for extra in (["--no-build-isolation", "--no-deps"], []):
-        proc = subprocess.run([str(python), "-m", "pip", "install", "--quiet", *extra, str(bundle / "readout")],
-                              capture_output=True, text=True, timeout=240)
-        if proc.returncode == 0:
-            break
-        log.append(proc.stderr.strip()[-800:])
-    else:
-        pytest.skip("pip cannot install the generated package here: " + " | ".join(log))
-    return SimpleNamespace(python=python, script=venv / "bin" / "magfab-readout")
+    """The package with acceptance.json pip-installed into a fresh virtual environment."""
+    return install(rendered, tmp_path_factory.mktemp("acceptance-venv"))
 
 
 FAST = ("--samples", "150", "--settle", "0.1")

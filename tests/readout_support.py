@@ -1,0 +1,169 @@
+"""What the readout tests share: a calibration made here, independent implementations of the bundle formats
+(docs/bundle.md) to check the package against, and the package rendered, imported and pip-installed.
+
+Plain functions and fixture factories (no test in here); the test modules that use them import them."""
+
+from __future__ import annotations
+
+import importlib
+import math
+import random
+import struct
+import subprocess
+import sys
+from contextlib import contextmanager
+from pathlib import Path
+from types import SimpleNamespace
+
+import pytest
+
+from conftest import ref_crc16
+
+PKG = "readout/src/magfab_readout"
+CSV_REQUIRED = ("time_s", "Bx_uT", "By_uT", "Bz_uT", "Fx_N", "Fy_N", "Fz_N")
+
+
+# --- a calibration built here (calibrate.py is not needed) ---------------------------------------------------
+
+def make_calibration(order: int = 4, seed: int = 1, tare=(0.0, 0.0)) -> dict:
+    """A plausible order-n calibration: Fz grows with Bz, Fr with Br, both zero at the region's low corner
+    (where the magnet rests), plus small seeded terms on every monomial so each one is exercised."""
+    monomials = [[i, k - i] for k in range(order + 1) for i in range(k, -1, -1)]
+    rng = random.Random(seed)
+    cz = [0.05 * rng.uniform(-1, 1) / (1 + i + j) for i, j in monomials]
+    cr = [0.05 * rng.uniform(-1, 1) / (1 + i + j) for i, j in monomials]
+    cz[0], cz[1] = 2.0, 2.0  # 2 (u + 1): u = -1 at the low end of Bz
+    cr[0], cr[2] = 1.5, 1.5  # 1.5 (v + 1): v = -1 at Br = 0
+    return {
+        "format": "magfab-calibration/1", "method": "poly", "order": order, "monomials": monomials,
+        "scaling": {"Bz_uT": {"center": 21000.0, "scale": 9000.0}, "Br_uT": {"center": 4000.0, "scale": 4000.0}},
+        "coefficients": {"Fz_N": cz, "Fr_N": cr}, "shear_sign": -1, "direction_min_uT": 30.0,
+        "tare_N": {"Fz_N": tare[0], "Fr_N": tare[1]},
+        "valid_region": {"Bz_uT": [12000.0, 30000.0], "Br_uT": [0.0, 8000.0],
+                         "hull": [[12000.0, 0.0], [30000.0, 0.0], [30000.0, 3000.0], [22000.0, 8000.0],
+                                  [12000.0, 4000.0]]},
+        "errors": {"Fz_N": {"rms_holdout": 0.012, "max_holdout": 0.05, "rms_fit": 0.01},
+                   "Fr_N": {"rms_holdout": 0.011, "max_holdout": 0.04, "rms_fit": 0.009}, "folds": 5},
+        "scan": {"sha256": "ab" * 32, "rows": 4000, "source": "simulated"},
+        "chip": {"gain_sel": 0, "resolution": 2, "osr": 0, "dig_filt": 2, "lsb_xy_uT": 3.004, "lsb_z_uT": 4.84},
+    }
+
+
+# --- independent implementations ------------------------------------------------------------------------------
+
+def ref_forces(cal: dict, Bx: float, By: float, Bz: float) -> tuple:
+    """docs/bundle.md section 2 written out directly, float64."""
+    Br = math.sqrt(Bx**2 + By**2)
+    u = (Bz - cal["scaling"]["Bz_uT"]["center"]) / cal["scaling"]["Bz_uT"]["scale"]
+    v = (Br - cal["scaling"]["Br_uT"]["center"]) / cal["scaling"]["Br_uT"]["scale"]
+    F = {name: sum(c * u**i * v**j for c, (i, j) in zip(cal["coefficients"][name], cal["monomials"]))
+         - cal["tare_N"][name] for name in ("Fz_N", "Fr_N")}
+    if Br < cal["direction_min_uT"] or Br == 0:
+        return 0.0, 0.0, F["Fz_N"]
+    s = cal["shear_sign"]
+    return s * F["Fr_N"] * Bx / Br, s * F["Fr_N"] * By / Br, F["Fz_N"]
+
+
+def ref_inside(cal: dict, Bz: float, Br: float) -> bool:
+    """Box test plus ray casting (a different algorithm from the package's half-plane test)."""
+    region = cal["valid_region"]
+    if not (region["Bz_uT"][0] <= Bz <= region["Bz_uT"][1] and region["Br_uT"][0] <= Br <= region["Br_uT"][1]):
+        return False
+    inside = False
+    hull = region["hull"]
+    for (x1, y1), (x2, y2) in zip(hull, hull[1:] + hull[:1]):
+        if (y1 > Br) != (y2 > Br) and Bz < x1 + (Br - y1) * (x2 - x1) / (y2 - y1):
+            inside = not inside
+    return inside
+
+
+def ref_distance_to_hull(cal: dict, Bz: float, Br: float) -> float:
+    hull = cal["valid_region"]["hull"]
+    best = math.inf
+    for (x1, y1), (x2, y2) in zip(hull, hull[1:] + hull[:1]):
+        dx, dy = x2 - x1, y2 - y1
+        t = max(0.0, min(1.0, ((Bz - x1) * dx + (Br - y1) * dy) / (dx * dx + dy * dy)))
+        best = min(best, math.hypot(Bz - x1 - t * dx, Br - y1 - t * dy))
+    return best
+
+
+ref_crc = ref_crc16
+
+
+def ref_frame(seq, t_us, status, counts, t_raw, forces) -> bytes:
+    """A force frame assembled field by field at the documented offsets."""
+    body = bytearray(27)  # frame bytes 2..28
+    body[0], body[1], body[2] = 0x01, seq, status
+    body[3:7] = t_us.to_bytes(4, "little")
+    for k, c in enumerate(counts):
+        body[7 + 2 * k:9 + 2 * k] = int(c).to_bytes(2, "little", signed=True)
+    body[13:15] = t_raw.to_bytes(2, "little")
+    for k, f in enumerate(forces):
+        body[15 + 4 * k:19 + 4 * k] = struct.pack("<f", f)
+    return b"\xa5\x5a" + bytes(body) + ref_crc(bytes(body)).to_bytes(2, "little")
+
+
+def ref_decode(data: bytes) -> list:
+    """Frames laid back to back (no noise): each one's fields, asserting sync and CRC."""
+    assert len(data) % 31 == 0
+    out = []
+    for k in range(0, len(data), 31):
+        f = data[k:k + 31]
+        assert f[:2] == b"\xa5\x5a" and f[2] == 1
+        assert ref_crc(f[2:29]) == int.from_bytes(f[29:31], "little")
+        counts = tuple(int.from_bytes(f[9 + 2 * a:11 + 2 * a], "little", signed=True) for a in range(3))
+        forces = tuple(struct.unpack("<f", f[17 + 4 * a:21 + 4 * a])[0] for a in range(3))
+        out.append({"seq": f[3], "status": f[4], "t_us": int.from_bytes(f[5:9], "little"), "counts": counts,
+                    "t_raw": int.from_bytes(f[15:17], "little"), "forces": forces})
+    return out
+
+
+def f32(x: float) -> float:
+    return struct.unpack("<f", struct.pack("<f", x))[0]
+
+
+# --- the package on disk, imported, installed ---------------------------------------------------------------
+
+def write_tree(files: dict, root: Path) -> Path:
+    for relative, data in files.items():
+        path = root / relative
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(data)
+    return root
+
+
+@contextmanager
+def imported(rendered: dict, root: Path):
+    """The generated package imported in this process from its source tree under ``root``."""
+    write_tree(rendered, root)
+    src = str(root / "readout" / "src")
+    sys.path.insert(0, src)
+    try:
+        yield importlib.import_module("magfab_readout")
+    finally:
+        sys.path.remove(src)
+        for name in [n for n in sys.modules if n == "magfab_readout" or n.startswith("magfab_readout.")]:
+            del sys.modules[name]
+
+
+def install(rendered: dict, root: Path) -> SimpleNamespace:
+    """The package pip-installed into a fresh virtual environment under ``root``: first as a user would (build
+    isolation, pyserial from the index), then offline with the system's setuptools; skips when neither works."""
+    bundle = write_tree(rendered, root / "bundle")
+    venv = root / "venv"
+    made = subprocess.run([sys.executable, "-m", "venv", "--system-site-packages", str(venv)],
+                          capture_output=True, text=True, timeout=120)
+    if made.returncode != 0:
+        pytest.skip(f"cannot create a virtual environment here: {made.stderr.strip()[-500:]}")
+    python = venv / "bin" / "python"
+    log = []
+    for extra in ([], ["--no-build-isolation", "--no-deps"]):
+        proc = subprocess.run([str(python), "-m", "pip", "install", "--quiet", *extra, str(bundle / "readout")],
+                              capture_output=True, text=True, timeout=240)
+        if proc.returncode == 0:
+            break
+        log.append(proc.stderr.strip()[-800:])
+    else:
+        pytest.skip("pip cannot install the generated package here: " + " | ".join(log))
+    serial = subprocess.run([str(python), "-c", "import serial"], capture_output=True).returncode == 0
+    return SimpleNamespace(python=python, script=venv / "bin" / "magfab-readout", serial=serial, root=root)
