@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from readout_support import imported
 from click.testing import CliRunner
 
 from conftest import require_tool
@@ -59,19 +60,15 @@ def test_build_ships_a_flashable_image(bundle):
 
 def _decoder(out: Path):
     """The build's generated readout package, imported from its folder without leaving it in sys.modules
-    (tests/test_readout.py imports its own rendering under the same name)."""
+    (the readout tests import their own rendering under the same name)."""
     ours = lambda name: name == "magfab_readout" or name.startswith("magfab_readout.")  # noqa: E731
     saved = {name: mod for name, mod in sys.modules.items() if ours(name)}
     for name in saved:
         del sys.modules[name]
-    src = str(out / "readout" / "src")
-    sys.path.insert(0, src)
     try:
-        return importlib.import_module("magfab_readout")
+        with imported({}, out) as module:
+            return module
     finally:
-        sys.path.remove(src)
-        for name in [n for n in sys.modules if ours(n)]:
-            del sys.modules[name]
         sys.modules.update(saved)
 
 

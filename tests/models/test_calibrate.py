@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from magfab import derive, load_spec, parse_spec
+from magfab import derive, parse_spec
 from magfab.export.calibration_chart import chart
 from magfab.formats import scan_csv as scan_format
 from magfab.formats.scan_csv import read_scan_csv, scan_csv
@@ -19,17 +19,17 @@ from magfab.models.scan import scan_track, simulate_scan
 from magfab.models import field as F
 from magfab.models.region import _cross
 from magfab.units import UT_PER_GAUSS
-from magfab.models.predict import chip_setting, noise, predict
+from magfab.models.predict import chip_setting, noise
 
 
-@pytest.fixture(scope="module")
-def design():
-    return derive(load_spec(None))
+@pytest.fixture(scope="session")
+def design(magone_design):
+    return magone_design
 
 
-@pytest.fixture(scope="module")
-def pred(design):
-    return predict(design)
+@pytest.fixture(scope="session")
+def pred(magone_prediction):
+    return magone_prediction
 
 
 @pytest.fixture(scope="module")
