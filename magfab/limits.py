@@ -66,19 +66,24 @@ MB_PER_TRIANGLE = 0.006  # 233k triangles: 983 MB peak, of which ~550 MB the CAD
 
 # ---- the normal-load FE ---------------------------------------------------------------------------------
 #: Relative FE error per mesh size over the elastomer radius, err ~ C h / R (order 1, as predict.FE_ORDER):
-#: MagOne measured 0.0056 at h = 0.5 mm, R = 6 mm (C = 0.067); 1.5x margin.
-FE_ERROR_PER_H_OVER_R = 0.1
-#: Triangles of the (r, z) profile mesh per (profile area / h^2): the equilateral lattice, 1 / (sqrt(3) / 4)
-#: = 2.31; measured 2.16-2.27 on MagOne and a 20 mm elastomer, 0.75 to 0.25 mm.
+#: with the magnet's edges rounded and graded (issue 13) MagOne measured 0.0018 at h = 0.75 mm against 1 mm,
+#: R = 6 mm (C = 0.014); 2x margin.
+FE_ERROR_PER_H_OVER_R = 0.03
+#: Triangles of the (r, z) profile mesh per (profile area / h^2): equilateral triangles of side h,
+#: 1 / (sqrt(3) / 4) = 2.31, away from the magnet's edges.
 FE_TRIANGLES_PER_AREA_H2 = 2.4
+#: Triangles added by the grading at the magnet's two rounded edges (size 0.07 of the edge radius, growing 1:4),
+#: nearly independent of h and of the scale: measured 827, 787, 835, 975 on MagOne at 1, 0.75, 0.5, 0.35 mm.
+FE_EDGE_TRIANGLES = 900
 #: Indentation steps along the normal curve (predict.N_INDENT); the FE may stop earlier.
 FE_STEPS = 21
-#: Seconds per triangle-step of the nonlinear FE, counting all FE_STEPS although a curve often stops earlier:
-#: measured 0.47-0.51 ms (MagOne 0.75-0.25 mm, 2,430 triangles in 24.5 s; a 20 mm elastomer); 1.4x margin.
-SECONDS_PER_FE_WORK = 0.7e-3
-#: FE work (triangles x steps, summed over the meshes tried): 28 s at the rate above. MagOne runs 0.75 and
-#: 0.5 mm at 1 % (476 triangles, 10k triangle-steps, 5.4 s).
-MAX_FE_WORK = 40_000
+#: Seconds per triangle-step of the nonlinear FE, counting all FE_STEPS although a curve often stops earlier
+#: (QDLDL factorisation, issue 13): measured 0.12 ms (MagOne 1 and 0.75 mm, 1,844 triangles, 4.7 s); 1.5x margin.
+SECONDS_PER_FE_WORK = 0.18e-3
+#: FE work (triangles x steps, summed over the meshes tried): 16 s at the rate above, three of the graded meshes
+#: (all four of predict.FE_MESHES_MM, 101k, are refused: no spec needs them). MagOne runs 1 and 0.75 mm at 1 %
+#: (2,030 estimated triangles, 43k triangle-steps, ~5 s).
+MAX_FE_WORK = 90_000
 MB_PER_FE_TRIANGLE = 0.1  # 1,299 triangles: 221 MB peak, with ~100 MB of Python and numpy
 
 # ---- calibration ----------------------------------------------------------------------------------------
@@ -159,7 +164,7 @@ def _profile_area_mm2(design: "Design") -> float:
 
 
 def fe_triangles(design: "Design", mesh_mm: float) -> int:
-    return int(FE_TRIANGLES_PER_AREA_H2 * _profile_area_mm2(design) / (mesh_mm * mesh_mm))
+    return int(FE_TRIANGLES_PER_AREA_H2 * _profile_area_mm2(design) / (mesh_mm * mesh_mm)) + FE_EDGE_TRIANGLES
 
 
 def fe_meshes(design: "Design", tolerance_pct: float | None = None) -> tuple[float, ...]:
