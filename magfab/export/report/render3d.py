@@ -246,16 +246,21 @@ def part_figure(stem: str, mesh: "trimesh.Trimesh") -> bytes:
     fig.subplots_adjust(left=0.0, right=1.0, bottom=0.0, top=0.93, wspace=0.0)
     fig.set_dpi(PART_DPI * SUPERSAMPLE)
     fig.canvas.draw()
-    pixels = np.asarray(fig.canvas.buffer_rgba(), dtype=np.float64)[:, :, :3]
+    pixels = np.asarray(fig.canvas.buffer_rgba())[:, :, :3]  # uint8, a view: no float copy of the big canvas
     plt.close(fig)
     return _png(_squeeze_blank_rows(_downsample(pixels, SUPERSAMPLE)))
 
 
 def _downsample(pixels: np.ndarray, k: int) -> np.ndarray:
-    """Average k x k blocks of an (h, w, 3) image: antialiasing by supersampling, uint8 out."""
+    """Average k x k blocks of an (h, w, 3) uint8 image: antialiasing by supersampling, uint8 out.
+
+    Integer sums rounded half up: the same bytes as rounding the float mean for odd k (a block's mean is
+    never exactly half-way), at a fraction of the cost of a float copy of the whole canvas."""
     h, w = (pixels.shape[0] // k) * k, (pixels.shape[1] // k) * k
-    blocks = pixels[:h, :w].reshape(h // k, k, w // k, k, 3).mean(axis=(1, 3))
-    return np.round(blocks).astype(np.uint8)
+    image = pixels[:h, :w].astype(np.uint32)
+    rows = sum(image[i::k] for i in range(k))  # strided adds: far faster than a reduce over a reshaped view
+    sums = sum(rows[:, j::k] for j in range(k))
+    return ((2 * sums + k * k) // (2 * k * k)).astype(np.uint8)
 
 
 def _squeeze_blank_rows(rgb: np.ndarray, keep: int = 12) -> np.ndarray:
