@@ -124,15 +124,15 @@ def _load(source: "str | os.PathLike[str] | bytes") -> tuple[bytes, str]:
 def _number(text: str, name: str, line: int, column: str, row: int) -> float:
     stripped = text.strip(" \t")
     if not NUMBER.fullmatch(stripped):
-        shown = repr(stripped[:24]) if stripped else "an empty field"
+        what = shown(stripped) if stripped else "an empty field"
         finite = stripped.lower().lstrip("+-") in ("nan", "inf", "infinity")
-        raise ScanError(f"{name}: line {line} (row {row}), column {column!r}: {shown} is not "
+        raise ScanError(f"{name}: line {line} (row {row}), column {column!r}: {what} is not "
                         f"{'a finite' if finite else 'a decimal'} number; every value must be a finite decimal "
                         "number in ASCII digits (e.g. 12.5 or -3e-2)")
     x = float(stripped)
     lo, hi, unit = BANDS[column]
     if not lo <= x <= hi:  # also an overflow to inf, e.g. 1e999
-        raise ScanError(f"{name}: line {line} (row {row}), column {column!r}: {stripped} is outside the plausible "
+        raise ScanError(f"{name}: line {line} (row {row}), column {column!r}: {shown(stripped)} is outside the plausible "
                         f"band {lo:g} to {hi:g} {unit}; check the column's unit and scaling")
     return x
 
