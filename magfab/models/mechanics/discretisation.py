@@ -69,15 +69,18 @@ def _pattern(edofs: np.ndarray):
     cols = np.tile(edofs, (1, n)).ravel()
     nd = int(edofs.max()) + 1
     keys, inverse = np.unique(rows.astype(np.int64) * nd + cols, return_inverse=True)
-    return keys // nd, keys % nd, inverse.ravel(), nd
+    r = keys // nd
+    return r, keys % nd, inverse.ravel(), nd, np.searchsorted(r, np.arange(nd + 1))
 
 
 def _sparse(pattern, ke: np.ndarray):
+    """The global matrix of element matrices ``ke`` in CSR with the pattern's fixed structure (sorted unique keys are
+    already in CSR order, so no conversion): every matrix of one pattern has the same ``indices``, ``indptr``."""
     from scipy.sparse import csr_matrix
 
-    r, c, inv, nd = pattern
+    r, c, inv, nd, indptr = pattern
     data = np.bincount(inv, weights=ke.ravel(), minlength=r.size)
-    return csr_matrix((data, (r, c)), shape=(nd, nd))
+    return csr_matrix((data, c, indptr), shape=(nd, nd))
 
 
 @lru_cache(maxsize=8)

@@ -62,14 +62,16 @@ class _Energy:
         Bt = d.Bt  # (nel, 12, nq * 5)
         Ru = np.matmul(Bt, (S * w[..., None]).reshape(nel, nq * 5, 1))[..., 0]
         Rp = np.matmul(d.psi_t, ((J - 1.0) * w)[..., None])[..., 0]
-        R = np.bincount(d.edofs.ravel(), weights=np.hstack([Ru, Rp]).ravel(), minlength=self.ndof)
-        DB = np.matmul(D * w[..., None, None], d.B).reshape(nel, nq * 5, 12)
-        ke = np.zeros((nel, 15, 15))
-        ke[:, :12, :12] = np.matmul(Bt, DB)
-        jpsi = (j * w[..., None])[..., :, None] * d.psi[:, :, None, :]  # (nel, nq, 5, 3)
-        Kup = np.matmul(Bt, jpsi.reshape(nel, nq * 5, 3))
-        ke[:, :12, 12:] = Kup
-        ke[:, 12:, :12] = np.transpose(Kup, (0, 2, 1))
+        R = np.bincount(d.edofs.ravel(), weights=np.concatenate([Ru, Rp], axis=1).ravel(), minlength=self.ndof)
+        Dj = np.empty((nel, nq, 6, 5))  # rows: D w, then (dJ/dg) w -- one product with B gives D B w and B^T j w
+        np.multiply(D, w[..., None, None], out=Dj[:, :, :5])
+        np.multiply(j, w[..., None], out=Dj[:, :, 5])
+        DjB = np.matmul(Dj, d.B)  # (nel, nq, 6, 12)
+        ke = np.empty((nel, 15, 15))
+        np.matmul(Bt, DjB[:, :, :5].reshape(nel, nq * 5, 12), out=ke[:, :12, :12])
+        np.matmul(DjB[:, :, 5].transpose(0, 2, 1), d.psi, out=ke[:, :12, 12:])  # (nel, 12, 3)
+        ke[:, 12:, :12] = ke[:, :12, 12:].transpose(0, 2, 1)
+        ke[:, 12:, 12:] = 0.0
         return R, _sparse(d.pattern, ke)
 
     def extremes(self, x: np.ndarray) -> tuple[float, float, float, float]:

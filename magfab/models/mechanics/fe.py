@@ -98,6 +98,7 @@ class _LoadPath:
         self.current = 0.0
         self.hist: list[tuple[float, np.ndarray]] = [(0.0, self.state.x)]
         self.iterations = self.cuts = 0
+        self.rate: np.ndarray | None = None  # d x / d delta at the current state, if :meth:`record` computed it
 
     def reach(self, target: float) -> None:
         """Step from the current indentation to ``target`` (mm), halving a failing step down to 1/64 of what is
@@ -106,7 +107,10 @@ class _LoadPath:
         step = target - self.current
         while self.current < target:
             trial = min(self.current + step, target)
-            guess = _extrapolate(self.hist, trial)
+            if self.rate is not None:  # Euler predictor along the path's tangent: second-order accurate
+                guess = self.state.x + self.rate * (trial - self.current)
+            else:
+                guess = _extrapolate(self.hist, trial)
             if not prob.energy.admissible(guess):
                 guess = self.state.x.copy()
             try:
@@ -124,14 +128,14 @@ class _LoadPath:
                 raise MechanicsError(f"fe (mesh {h:g} mm): excessive distortion at indentation "
                                      f"{trial:.4g} mm: principal stretches {lmin:.3g} to {lmax:.3g} leave "
                                      f"[1/{self.stretch_limit:g}, {self.stretch_limit:g}]")
-            self.state, self.current = new, trial
+            self.state, self.current, self.rate = new, trial, None
             self.hist = (self.hist + [(self.current, self.state.x)])[-2:]
 
     def record(self, delta: float) -> tuple[float, float, float, float, float, float]:
         """(force, tangent, magnet displacement, largest averaged stretch, largest |stress|, largest pointwise
         stretch) at ``delta``, in units of mu."""
         prob, x = self.prob, self.state.x
-        F, K = prob.force(self.state, delta)
+        F, K, self.rate = prob.force(self.state, delta)
         lmax, _, smax, peak = prob.energy.extremes(x)
         return F, K, prob.magnet_displacement(x), lmax, smax, peak
 

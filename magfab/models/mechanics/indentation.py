@@ -37,24 +37,46 @@ class _State:
 
 
 class _LDL:
-    """A factorisation of the reduced tangent: QDLDL's sparse LDL^T (AMD ordering) of the saddle-point matrix with its
+    """A factorisation of a reduced tangent ``K`` (CSR): QDLDL's sparse LDL^T of the saddle-point matrix with its
     zero pressure block shifted by -1e-10 of the largest diagonal entry (quasi-definite, so no pivoting is needed),
-    and two rounds of iterative refinement against the unshifted matrix in :meth:`solve`. Five to ten times faster
-    than SuperLU's threshold-pivoting LU here; if QDLDL meets a zero pivot, SuperLU with COLAMD takes over."""
+    and two rounds of iterative refinement against the unshifted ``K`` in :meth:`solve`. ``solver`` may be a QDLDL
+    solver whose symbolic factorisation (AMD ordering, elimination tree) is reused from an earlier matrix of the same
+    structure; ``version`` says which of its numeric factorisations this is (:attr:`valid`). If QDLDL meets a zero
+    pivot, SuperLU with COLAMD takes over."""
 
-    def __init__(self, K):
-        self.K = K.tocsc()
-        diag = self.K.diagonal()
-        shift = np.where(diag == 0.0, -1e-10 * float(np.max(np.abs(diag), initial=1.0)), 0.0)
+    def __init__(self, K, upper=None, owner: "_Reduction | None" = None):
+        self.K, self.owner = K, owner
+        self._lu = None
+        if upper is None:
+            from scipy.sparse import triu
+
+            upper = triu(K, format="csc")
+            diag = upper.diagonal()
+            upper = upper + _diag_shift(diag)
         try:
             import qdldl
-            from scipy.sparse import diags
 
-            self._lu = qdldl.Solver((self.K + diags(shift)).tocsc())
+            if owner is not None and owner.solver is not None:
+                owner.solver.update(upper, upper=True)
+                self._lu = owner.solver
+            else:
+                self._lu = qdldl.Solver(upper, upper=True)
+                if owner is not None:
+                    owner.solver = self._lu
         except (ValueError, RuntimeError, ImportError):
             from scipy.sparse.linalg import splu
 
-            self._lu = splu(self.K, permc_spec="COLAMD", diag_pivot_thresh=0.01)
+            self._lu = splu(K.tocsc(), permc_spec="COLAMD", diag_pivot_thresh=0.01)
+            if owner is not None:
+                owner.solver = None
+        if owner is not None:
+            owner.version += 1
+            self.version = owner.version
+
+    @property
+    def valid(self) -> bool:
+        """False once the shared solver has been refactored for another matrix."""
+        return self.owner is None or self.owner.version == self.version
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         y = self._lu.solve(b)
@@ -63,8 +85,65 @@ class _LDL:
         return y
 
 
+def _diag_shift(diag: np.ndarray):
+    from scipy.sparse import diags
+
+    return diags(np.where(diag == 0.0, -1e-10 * float(np.max(np.abs(diag), initial=1.0)), 0.0), format="csc")
+
+
 def _factor(K) -> _LDL:
-    return _LDL(K)
+    return _LDL(K.tocsr())
+
+
+class _Reduction:
+    """T^T K T for tangents K of the discretisation's fixed sparsity pattern, T the map from the unknowns with nothing
+    in contact (:meth:`_Indentation.constraints`): the reduced matrix is a sum of K's entries (each unknown maps at
+    most one dof, the magnet's axial unknown several), so its values are one ``bincount`` of K's data into a structure
+    computed once. A contact set fixes some unknowns (``fixed``): their rows and columns are zeroed and their diagonal
+    set to 1, which keeps the structure, so QDLDL's symbolic factorisation of the upper triangle (CSC, the pressure
+    diagonal shifted) is computed once per load path and only the numeric factorisation is repeated."""
+
+    def __init__(self, pattern, T):
+        r, c, _, nd, _ = pattern
+        Tc = T.tocsr()
+        n = T.shape[1]
+        has = np.diff(Tc.indptr) > 0
+        col = np.full(nd, -1, dtype=np.int64)
+        col[has] = Tc.indices[Tc.indptr[:-1][has]]
+        self.unknown = col  # dof -> its unknown (-1: prescribed whatever the contact set)
+        keep = (col[r] >= 0) & (col[c] >= 0)
+        self.keep = np.nonzero(keep)[0]
+        keys, inv = np.unique(col[r[keep]] * n + col[c[keep]], return_inverse=True)
+        rows, cols = keys // n, keys % n
+        self.n, self.inv, self.nnz, self.rows, self.cols = n, inv.ravel(), keys.size, rows, cols
+        self.indptr = np.searchsorted(rows, np.arange(n + 1))
+        self.diag = np.nonzero(rows == cols)[0]
+        up = np.nonzero(rows <= cols)[0]
+        up = up[np.argsort(cols[up] * n + rows[up], kind="stable")]
+        self.upper, self.u_rows = up, rows[up]
+        self.u_indptr = np.searchsorted(cols[up], np.arange(n + 1))
+        self.u_diag = np.nonzero(rows[up] == cols[up])[0]
+        self.solver, self.version = None, 0
+
+    def matrix(self, K, fixed: np.ndarray):
+        """T^T K T in CSR, the ``fixed`` unknowns' (a mask) rows and columns replaced by the identity's."""
+        from scipy.sparse import csr_matrix
+
+        data = np.bincount(self.inv, weights=K.data[self.keep], minlength=self.nnz)
+        if fixed.any():
+            data[fixed[self.rows] | fixed[self.cols]] = 0.0
+            data[self.diag[fixed[self.rows[self.diag]]]] = 1.0
+        return csr_matrix((data, self.cols, self.indptr), shape=(self.n, self.n))
+
+    def factor(self, K, fixed: np.ndarray) -> _LDL:
+        """A factorisation of :meth:`matrix` (see :class:`_LDL`)."""
+        from scipy.sparse import csc_matrix
+
+        Kr = self.matrix(K, fixed)
+        ud = Kr.data[self.upper]
+        d = ud[self.u_diag]
+        ud[self.u_diag] = np.where(d == 0.0, -1e-10 * float(np.max(np.abs(d), initial=1.0)), d)
+        return _LDL(Kr, csc_matrix((ud, self.u_rows, self.u_indptr), shape=(self.n, self.n)), self)
 
 
 class _Indentation:
@@ -91,11 +170,24 @@ class _Indentation:
         self.base_free = np.concatenate([np.nonzero(~fixed_r)[0], N + np.nonzero(~fixed_z)[0],
                                          2 * N + np.arange(M)])
         scale = max(body.radius_mm, body.height_mm)
-        # Residuals are nodal forces in mu * mm^2; the indenter force is ~0.1-10 scale^2, so 1e-9 scale^2 is a
-        # relative accuracy of ~1e-10 on it (Newton converges quadratically: one iteration more would give 1e-20).
-        self.tol = 1e-9 * scale * scale
-        self.set_tol = 1e-4 * scale * scale  # revise the contact set once the residual is this small
+        # Residuals are nodal forces in mu * mm^2; the indenter force is ~0.1-10 scale^2, so 1e-6 scale^2 is a
+        # relative accuracy of ~1e-7 on it (measured on MagOne: forces within 5e-8 of a 1e-9 tolerance's, one Newton
+        # iteration less per step; Newton converges quadratically, so the last iterate is far better than this).
+        self.tol = 1e-6 * scale * scale
+        # Revise the contact set once the residual is this small: the sign of a node's reaction is settled after one or
+        # two iterations, and revising then saves the iterations a tighter threshold spends converging the wrong set.
+        self.set_tol = 1e-2 * scale * scale
         self.gap_tol = 1e-9 * scale
+        T0 = self.constraints(np.zeros(self.candidates.size, dtype=bool), 0.0)[0]
+        self.T = T0  # unknowns -> dofs with nothing in contact; a contact set fixes some unknowns (_fixed)
+        self.reduction = _Reduction(disc.pattern, T0)
+        self.contact_unknowns = self.reduction.unknown[N + self.candidates]
+
+    def _fixed(self, active: np.ndarray) -> np.ndarray:
+        """Mask over the unknowns of :attr:`T`: those the contact set ``active`` prescribes."""
+        fixed = np.zeros(self.T.shape[1], dtype=bool)
+        fixed[self.contact_unknowns[active]] = True
+        return fixed
 
     # -- constraints --
 
@@ -144,12 +236,14 @@ class _Indentation:
         """
         N, c, top = self.disc.N, self.candidates, self.body.height_mm - delta
         active = active | self._penetrating(x, top)
-        T, g, prescribed, _ = self.constraints(active, delta)
+        T = self.T
+        _, g, prescribed, _ = self.constraints(active, delta)
+        fixed = self._fixed(active)
         lu = None
         for it in range(1, self.MAX_ITER + 1):
             R, K = self.energy.assemble(x)
             rem = np.where(prescribed, g - x, 0.0)
-            r = T.T @ R
+            r = np.where(fixed, 0.0, T.T @ R)
             if not np.all(np.isfinite(r)):
                 raise _StepFailure("non-finite residual (element inversion)")
             res, pending = np.max(np.abs(r), initial=0.0), np.max(np.abs(rem))
@@ -158,14 +252,16 @@ class _Indentation:
                 drop = active & (-R[N + c] < -self.tol)
                 if add.any() or drop.any():
                     active = (active & ~drop) | add
-                    T, g, prescribed, _ = self.constraints(active, delta)
+                    _, g, prescribed, _ = self.constraints(active, delta)
+                    fixed = self._fixed(active)
                     rem = np.where(prescribed, g - x, 0.0)
-                    r = T.T @ R
+                    r = np.where(fixed, 0.0, T.T @ R)
                     lu = None
                 elif res <= self.tol:
                     return _State(x, active, it, R, K, lu)
-            lu = _factor(T.T @ K @ T)
-            x = self._line_search(x, T @ lu.solve(-(r + T.T @ (K @ rem))) + rem)
+            lu = self.reduction.factor(K, fixed)
+            b = np.where(fixed, 0.0, -(r + T.T @ (K @ rem)))
+            x = self._line_search(x, T @ lu.solve(b) + rem)
         raise _StepFailure(f"Newton did not converge in {self.MAX_ITER} iterations")
 
     def _penetrating(self, x: np.ndarray, top: float) -> np.ndarray:
@@ -189,30 +285,32 @@ class _Indentation:
         R, K = self.energy.assemble(x)
         return _State(x, np.zeros(self.candidates.size, dtype=bool), 0, R, K, None)
 
-    def force(self, state: _State, delta: float) -> tuple[float, float]:
-        """(force, d force / d delta) on the indenter, in mu * mm^2 and mu * mm: the reaction and its consistent
-        tangent with the converged contact set (at delta = 0 the nodes touching the indenter count as in contact)."""
+    def force(self, state: _State, delta: float) -> tuple[float, float, np.ndarray | None]:
+        """(force, d force / d delta, d x / d delta) on the indenter, in mu * mm^2 and mu * mm: the reaction and its
+        consistent tangent with the converged contact set (at delta = 0 the nodes touching the indenter count as in
+        contact); d x / d delta (None with nothing in contact) is the load path's tangent, the next step's
+        predictor."""
         active, lu = state.active, state.lu
         if delta == 0.0:
             touching = self.Z[self.candidates] + state.x[self.disc.N + self.candidates] >= \
                 self.body.height_mm - self.gap_tol
             if np.any(touching & ~active):
                 active, lu = active | touching, None
-        T, _, _, load = self.constraints(active, delta)
+        _, _, _, load = self.constraints(active, delta)
         F = float(load @ state.R)
         if not np.any(load):
-            return F, 0.0
-        K = state.K
-        Kr = T.T @ K @ T
-        b = -(T.T @ (K @ load))
-        if lu is None:
-            y = _factor(Kr).solve(b)
+            return F, 0.0, None
+        K, T, fixed = state.K, self.T, self._fixed(active)
+        Kr = self.reduction.matrix(K, fixed)
+        b = np.where(fixed, 0.0, -(T.T @ (K @ load)))
+        if lu is None or not lu.valid:
+            y = self.reduction.factor(K, fixed).solve(b)
         else:  # the factorisation is one Newton step old: two rounds of iterative refinement make it exact
             y = lu.solve(b)
             for _ in range(2):
                 y += lu.solve(b - Kr @ y)  # (lu refines against its own matrix; these rounds against Kr)
         dx = T @ y + load
-        return F, float(load @ (K @ dx))
+        return F, float(load @ (K @ dx)), dx
 
     def magnet_displacement(self, x: np.ndarray) -> float:
         return float(-x[self.magnet_z[0]]) if self.body.has_magnet else math.nan

@@ -22,19 +22,6 @@ _HJ = ((0, 3, 4), (1, 2, 4), (0, 4, 3), (3, 4, 0), (1, 4, 2), (2, 4, 1))  # (i, 
 _HJ_SIGN = (1.0, -1.0, 1.0, 1.0, -1.0, -1.0)
 
 
-def _kinematics(g: np.ndarray):
-    a, b, c, d, h = (g[..., i] for i in range(5))
-    det2 = a * d - b * c
-    J = det2 * h
-    j = np.stack([d * h, -c * h, -b * h, a * h, det2], axis=-1)
-    Hm = np.zeros(g.shape + (5,))
-    for (i, k, s), sign in zip(_HJ, _HJ_SIGN):
-        v = sign * g[..., s]
-        Hm[..., i, k] = v
-        Hm[..., k, i] = v
-    return det2, J, j, Hm
-
-
 @dataclass(frozen=True)
 class _Material:
     """Incompressible Yeoh in units of mu = 2 C10: W = 1/2 [(I1-3) + k2 (I1-3)^2 + k3 (I1-3)^3 - 2 ln J] + p (J-1).
@@ -47,16 +34,29 @@ class _Material:
     k3: float = 0.0
 
     def response(self, g: np.ndarray, p: np.ndarray):
-        """(dW/dg, d2W/dg2, dJ/dg, J, det2) at every point; g (..., 5), p (...)."""
-        det2, J, j, Hm = _kinematics(g)
-        s = np.sum(g * g, axis=-1) - 3.0
+        """(dW/dg, d2W/dg2, dJ/dg, J, det2) at every point; g (..., 5), p (...).
+
+        d2W/dg2 = 2 W_1 I + (p - 1/J) d2J/dg2 + j j^T / J^2 (+ 4 W_11 g g^T for Yeoh), built in place: the Hessian
+        of J has six symmetric pairs of entries (_HJ), each an entry of g."""
+        a, b, c, d, h = (g[..., i] for i in range(5))
+        det2 = a * d - b * c
+        J = det2 * h
+        j = np.stack([d * h, -c * h, -b * h, a * h, det2], axis=-1)
+        s = np.einsum("...i,...i->...", g, g) - 3.0
         f1 = 0.5 * (1.0 + 2.0 * self.k2 * s + 3.0 * self.k3 * s * s)  # dW/dI1
-        f2 = 0.5 * (2.0 * self.k2 + 6.0 * self.k3 * s)  # d2W/dI1^2
         Jinv = 1.0 / J
-        S = 2.0 * f1[..., None] * g + (p - Jinv)[..., None] * j
-        D = (2.0 * f1)[..., None, None] * np.eye(5) + (p - Jinv)[..., None, None] * Hm
-        D += (Jinv * Jinv)[..., None, None] * j[..., :, None] * j[..., None, :]
+        q = p - Jinv
+        S = 2.0 * f1[..., None] * g + q[..., None] * j
+        jJ = j * Jinv[..., None]
+        D = jJ[..., :, None] * jJ[..., None, :]
+        for i in range(5):
+            D[..., i, i] += 2.0 * f1
+        for (i, k, m), sign in zip(_HJ, _HJ_SIGN):
+            v = (sign * q) * g[..., m]
+            D[..., i, k] += v
+            D[..., k, i] += v
         if self.k2 or self.k3:
+            f2 = 0.5 * (2.0 * self.k2 + 6.0 * self.k3 * s)  # d2W/dI1^2
             D += (4.0 * f2)[..., None, None] * g[..., :, None] * g[..., None, :]
         return S, D, j, J, det2
 

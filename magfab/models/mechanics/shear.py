@@ -14,6 +14,7 @@ import numpy as np
 from ...units import N_PER_KPA_MM2
 from .body import Body, MechanicsError, _check_mu, _newton_per_mu_mm2, check_option
 from .discretisation import _pattern, _scalar_p2, _sparse
+from .indentation import _factor
 from .mesh import _AXIS, _BASE, _MAGNET, _Mesh, _body_mesh, mesh_size
 from .options import ShearEnds, ShearModel
 
@@ -73,7 +74,6 @@ def _mode1_matrix(mesh: _Mesh):
 def _fe_shear(body: Body, mesh_mm: float | None, ends: ShearEnds) -> float:
     """Lateral force on the magnet per unit lateral displacement of its lower-face centre, mu * mm (mu = 1)."""
     from scipy.sparse import csr_matrix
-    from scipy.sparse.linalg import spsolve
 
     if not body.has_magnet:
         raise MechanicsError("shear: the FE shear load is applied to the magnet; the body has none")
@@ -109,7 +109,7 @@ def _fe_shear(body: Body, mesh_mm: float | None, ends: ShearEnds) -> float:
         vals.append(phi_vec[nz])
         n += 1
     T = csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(nd, n))
-    y = spsolve((T.T @ K @ T).tocsc(), -(T.T @ (K @ s_vec)))
+    y = _factor(T.T @ K @ T).solve(-(T.T @ (K @ s_vec)))  # sparse LDL^T (QDLDL), as the indentation FE
     x = T @ y + s_vec
     return float(s_vec @ (K @ x))
 
