@@ -45,7 +45,9 @@ def test_the_suggested_value_fits():
 def test_magone_is_well_within_the_budget():
     cost = estimate(derive(load_spec(None)))
     assert cost.seconds < BUDGET_S / 2 and cost.megabytes < BUDGET_MB / 2
-    assert cost.fe_meshes_mm == (0.75, 0.5)  # what the build's auto choice runs at 1 % (predictions.json)
+    # What the build's auto choice runs at 1 % (predictions.json): with the magnet's edges rounded and graded (issue 13)
+    # the error constant fell (limits.FE_ERROR_PER_H_OVER_R), so the coarser pair already meets 1 %.
+    assert cost.fe_meshes_mm == (1.0, 0.75)
     assert 2673 <= scan_rows(derive(load_spec(None))) <= MAX_MLS_ROWS  # 2,673 rows in the build; an upper bound
 
 
