@@ -63,7 +63,7 @@ def test_material_changes_the_ratio_the_times_and_the_papers():
 
 def test_overrides_win_over_the_recipe():
     d = derive(parse_spec("[fabrication]\ndensity_g_cm3 = 2.14\npot_life_min = 5\ncure_time_h = 1.5\nwaste_pct = 0\n"
-                          "[mould]\ncavities = 16\n"))
+                          "[mould]\ncavities = 8\n"))
     q = C.quantities(d)
     assert q.density_g_cm3 == 2.14 and q.cure_time_h == 1.5
     assert any(f.code == "pot-life" and f.severity is Severity.WARNING for f in C.findings(d))
