@@ -52,7 +52,9 @@ def rows(repeat: int, reference_mesh_mm: float) -> tuple[list[dict], dict]:
                     "reference": "magpylib Cylinder", "ratio_to_reference_time": 1.0 / m.speedup_vs_magpylib})
     body = M.Body.from_design(design)
     mu = M.band(spec.elastomer.material)[1]
-    mech = M.measure(body, mu, 1.25 * (design.d_rest_mm - spec.sensor.d_min_mm), reference_mesh_mm=reference_mesh_mm)
+    # Over the depth the build solves the FE to (predict.normal_curve): the scan depth, or 1.25 x the travel to d_min.
+    depth = min(float(spec.calibration.scan_z_mm), 1.25 * (design.d_rest_mm - spec.sensor.d_min_mm))
+    mech = M.measure(body, mu, depth, reference_mesh_mm=reference_mesh_mm)
     t_ref = next(r["time_s"] for r in mech["rows"] if r["model"] == "fe" and r["error"] == 0.0)
     for r in mech["rows"]:
         label = r["model"] if r.get("mesh_mm") is None else f"fe {r['mesh_mm']:g} mm"
