@@ -91,7 +91,6 @@ def _progress(enabled: bool) -> Iterator[object]:
 @click.version_option(__version__, prog_name="magfab")
 def main() -> None:
     """Turn one design spec into the files to make a magnetic soft tactile sensor."""
-    signal.signal(signal.SIGINT, _on_interrupt)
     warnings.showwarning = _one_line_warning
 
 

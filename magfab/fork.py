@@ -37,7 +37,7 @@ class Branch:
     """The side branch's result: :meth:`result` returns it, or raises what the branch raised."""
 
     def __init__(self, fn: Callable[..., Any], args: tuple[Any, ...], forked: bool) -> None:
-        self._fn, self._args, self._done, self._value = fn, args, False, None
+        self._done, self._value = False, None
         self._process = self._conn = None
         self.forked = forked
         if forked:

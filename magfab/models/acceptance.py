@@ -186,7 +186,8 @@ def _weight_for(range_N: float) -> float:
 
 
 def _data(prediction: "Prediction | Mapping[str, Any]") -> Mapping[str, Any]:
-    return prediction.data if hasattr(prediction, "data") else prediction  # type: ignore[return-value]
+    """predictions.json's content, from a Prediction or as read from the file."""
+    return prediction.as_json() if hasattr(prediction, "as_json") else prediction  # type: ignore[return-value]
 
 
 def _bz(radius: float, height: float, br: float, d: np.ndarray) -> np.ndarray:

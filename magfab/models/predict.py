@@ -30,7 +30,6 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import asdict, dataclass, field
-from functools import cached_property
 from typing import TYPE_CHECKING, Mapping
 
 import numpy as np
@@ -294,11 +293,6 @@ class Prediction:
     @property
     def curves(self) -> Mapping[str, mech.Curve]:
         return self.normal.curves
-
-    @cached_property
-    def data(self) -> Mapping[str, object]:
-        """predictions.json's dict (:meth:`as_json`), for code that works from the file's contents."""
-        return self.as_json()
 
     def model(self, family: str) -> ModelUse:
         return next(m for m in self.models if m.family == family)

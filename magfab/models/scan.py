@@ -41,12 +41,10 @@ def scan_track(design: "Design", prediction: "Prediction") -> tuple[np.ndarray, 
     predicted normal range ends (``normal.travel_mm`` of magnet travel, through the nominal FE curve).
     """
     cal = design.spec.calibration
-    data = prediction.data
     nominal = prediction.curves["nominal"]
-    travel_end = float(data["normal"]["travel_mm"])  # type: ignore[index]
-    delta_end = float(np.interp(travel_end, nominal.magnet_displacement_mm, nominal.indentation_mm))
-    k_s = float(data["shear"]["stiffness_N_per_mm"]["nominal"])  # type: ignore[index]
-    lateral_end = float(data["shear"]["range_by_material_N"]["nominal"]) / k_s  # type: ignore[index]
+    delta_end = float(np.interp(prediction.normal.travel_mm, nominal.magnet_displacement_mm, nominal.indentation_mm))
+    k_s = prediction.shear.stiffness_N_per_mm["nominal"]
+    lateral_end = prediction.shear.range_by_material_N["nominal"] / k_s
     step = cal.scan_step_mm
     half = min(cal.scan_y_mm / 2.0, lateral_end)
     ny = int(math.floor(2.0 * half / step + 1e-9)) + 1
@@ -80,7 +78,7 @@ def simulate_scan(design: "Design", prediction: "Prediction | None" = None, *, i
     nominal = pred.curves["nominal"]
     u = np.interp(delta, nominal.indentation_mm, nominal.magnet_displacement_mm)  # axial travel, + down
     fz = np.interp(delta, nominal.indentation_mm, nominal.force_N)
-    k_s = float(pred.data["shear"]["stiffness_N_per_mm"]["nominal"])  # type: ignore[index]
+    k_s = pred.shear.stiffness_N_per_mm["nominal"]
     magnet = fieldmod.Magnet.from_spec(design.spec)
     gap = design.d_rest_mm - u
     # The sensor at the origin, the magnet's centre at (0, y, gap + H/2): in the magnet's frame the sensing

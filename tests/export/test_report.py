@@ -124,7 +124,7 @@ def test_report_lists_and_links_every_file(inputs, report, site):
 
 def test_report_shows_the_key_figures_models_findings_and_spec(inputs, report):
     text = htmllib.unescape(" ".join(Page(report.decode()).text))
-    design, data, cal = inputs["design"], inputs["prediction"].data, inputs["calibration"]
+    design, data, cal = inputs["design"], inputs["prediction"].as_json(), inputs["calibration"]
     n, s = data["normal"], data["shear"]
     sens = "{0:.1f} – {1:.1f} G/N".format
     expected = [f"{design.d_rest_mm:.2f} mm", f"cover {design.cover_mm:.2f} mm", f"skin {design.skin_mm:.2f} mm",

@@ -47,11 +47,11 @@ def bz_G(radius, height, br, d):
 def test_output_is_json_deterministic_and_self_consistent(design, prediction, acc):
     text = json.dumps(acc, allow_nan=False, sort_keys=True)
     assert json.loads(text) == acc
-    assert json.dumps(acceptance(design, prediction.data), allow_nan=False, sort_keys=True) == text  # data alone
+    assert json.dumps(acceptance(design, prediction.as_json()), allow_nan=False, sort_keys=True) == text  # data alone
     assert acc["format"] == FORMAT == "magfab-acceptance/1" and acc["spec_name"] == "magone"
     rest, weight = acc["rest"]["Bz_uT"], acc["weight"]["delta_Bz_uT"]
     assert acc["rest_Bz_uT"] == [rest["min"], rest["max"]] and acc["delta_Bz_uT"] == [weight["min"], weight["max"]]
-    assert acc["weight_g"] == acc["weight"]["weight_g"] == default_weight_g(prediction.data) == 50.0
+    assert acc["weight_g"] == acc["weight"]["weight_g"] == default_weight_g(prediction.as_json()) == 50.0
     assert acc["weight"]["force_N"] == pytest.approx(0.05 * G0)
     assert acc["rest"]["sign"] == 1 and "north pole up" in acc["rest"]["orientation"]
     names = {a["name"] for a in acc["assumptions"]}
@@ -65,7 +65,7 @@ def test_output_is_json_deterministic_and_self_consistent(design, prediction, ac
 
 
 def test_bands_contain_the_prediction(prediction, acc):
-    field = prediction.data["field"]
+    field = prediction.as_json()["field"]
     lo, hi = acc["rest_Bz_uT"]
     assert lo < field["Bz_rest_G"] * 100 < hi
     assert acc["rest"]["Bz_uT"]["nominal"] == pytest.approx(field["Bz_rest_G"] * 100, rel=1e-4)

@@ -92,7 +92,7 @@ def test_simulated_track_is_the_papers_y_z_raster(design, pred, scan):
     y, delta = scan_track(design, pred)
     cal = design.spec.calibration
     nominal = pred.curves["nominal"]
-    delta_end = np.interp(pred.data["normal"]["travel_mm"], nominal.magnet_displacement_mm, nominal.indentation_mm)
+    delta_end = np.interp(pred.as_json()["normal"]["travel_mm"], nominal.magnet_displacement_mm, nominal.indentation_mm)
     ny = round(cal.scan_y_mm / cal.scan_step_mm) + 1  # MagOne: +-2 mm is inside the lateral range (R_m)
     nz = math.floor(min(cal.scan_z_mm, delta_end) / cal.scan_step_mm + 1e-9) + 1
     assert scan.rows == len(y) == ny * nz and scan.B_uT.shape == (ny * nz, 3) and scan.F_N.shape == (ny * nz, 3)
@@ -109,12 +109,12 @@ def test_simulated_scan_physics(design, pred, ideal):
     exact_rest = F.bz_br(magnet, design.d_rest_mm, 0.0, model="exact")[0] * UT_PER_GAUSS
     assert ideal.B_uT[centre, 2][0] == pytest.approx(exact_rest, rel=1e-12)
     # the prediction's own figure comes from its chosen (faster) field model
-    assert ideal.B_uT[centre, 2][0] == pytest.approx(pred.data["field"]["Bz_rest_G"] * UT_PER_GAUSS, rel=1e-3)
+    assert ideal.B_uT[centre, 2][0] == pytest.approx(pred.as_json()["field"]["Bz_rest_G"] * UT_PER_GAUSS, rel=1e-3)
     assert np.abs(ideal.B_uT[centre, :2]).max() < 1e-9 and np.abs(ideal.F_N[centre]).max() == 0.0
     # below the magnet the radial field points towards the axis: By follows the magnet's offset y
     off = np.abs(y) > 0.1
     assert np.all(np.sign(ideal.B_uT[off, 1]) == np.sign(y[off])) and np.abs(ideal.B_uT[:, 0]).max() < 1e-9
-    k_s = pred.data["shear"]["stiffness_N_per_mm"]["nominal"]
+    k_s = pred.as_json()["shear"]["stiffness_N_per_mm"]["nominal"]
     assert ideal.F_N[:, 1] == pytest.approx(k_s * y, abs=1e-12)
     # Bz grows with indentation (the gap closes)
     axis = np.abs(y) < 1e-12

@@ -41,7 +41,7 @@ def test_the_issues_figures_follow_eq10_and_eq11_from_the_published_data(pred, d
     """Recomputed from predictions.json alone (curves, travel, remanence band, noise) and eq. 6 written here:
     S_F = (dBz/du) / (dF/du) (eq. 10) over the range, every material and magnet band; R = N_B / S_F (eq. 11)
     at its worst; the range is the softest curve's force at the binding travel."""
-    d = json.loads(json.dumps(pred.data))  # as written
+    d = json.loads(json.dumps(pred.as_json()))  # as written
     n, f, noise_G = d["normal"], d["field"], d["noise_G"]
     u = np.asarray(n["magnet_displacement_mm"])
     inside = u <= n["travel_mm"] + 1e-9
@@ -76,20 +76,20 @@ def test_field_at_rest_is_eq6_and_gradient_its_derivative(pred, design):
     """On the axis the prediction's field is BRIEF eq. 6 with the nominal remanence."""
     m = F.Magnet.from_spec(design.spec)
     d, R, H, br = design.d_rest_mm, m.radius_mm, m.height_mm, m.remanence_T * 1e4
-    assert pred.data["field"]["Bz_rest_G"] == pytest.approx(float(eq6(d, R, H, br)), rel=1e-4)
+    assert pred.as_json()["field"]["Bz_rest_G"] == pytest.approx(float(eq6(d, R, H, br)), rel=1e-4)
     h = 1e-4
     slope = float(eq6(d + h, R, H, br) - eq6(d - h, R, H, br)) / (2 * h)
-    assert pred.data["field"]["dBz_dz_rest_G_per_mm"] == pytest.approx(-slope, rel=1e-5)
+    assert pred.as_json()["field"]["dBz_dz_rest_G_per_mm"] == pytest.approx(-slope, rel=1e-5)
 
 
 def test_band_orders_as_physics_says(pred):
     """Softer silicone: more sensitive and finer resolution, smaller force range; stiffness scales with mu."""
-    n = pred.data["normal"]
+    n = pred.as_json()["normal"]
     at_rest = n["resolution_at_rest_mN"]
     assert at_rest["soft"] < at_rest["nominal"] < at_rest["stiff"]
     r = n["range_by_material_N"]
     assert r["soft"] < r["nominal"] < r["stiff"]
-    mus = pred.data["material_mu_kPa"]
+    mus = pred.as_json()["material_mu_kPa"]
     k = n["stiffness_at_rest_N_per_mm"]
     assert k["stiff"] / k["soft"] == pytest.approx(mus["stiff"] / mus["soft"], rel=1e-9)
     # the worst case is the stiff material with the weakest magnet, at rest (BRIEF sec. 3)
@@ -104,8 +104,8 @@ def test_sensitivity_is_field_gradient_over_stiffness(pred, design):
     k_e = np.gradient(pred.curves["stiff"].force_N, u, edge_order=2)
     s_f = s_b / k_e
     assert np.allclose(a["sf_stiff_low"], s_f)
-    n_b = pred.data["noise_G"]["total_z_G"]
-    assert pred.data["normal"]["resolution_at_rest_mN"]["stiff"] == pytest.approx(1000 * n_b / s_f[0])
+    n_b = pred.as_json()["noise_G"]["total_z_G"]
+    assert pred.as_json()["normal"]["resolution_at_rest_mN"]["stiff"] == pytest.approx(1000 * n_b / s_f[0])
 
 
 def test_noise_combines_environment_chip_and_quantisation(design):
@@ -121,7 +121,7 @@ def test_noise_combines_environment_chip_and_quantisation(design):
 
 
 def test_range_limits_are_reported_and_consistent(pred, design):
-    n = pred.data["normal"]
+    n = pred.as_json()["normal"]
     limits = n["range_limits_travel_mm"]
     assert limits["d_min"] == pytest.approx(design.d_rest_mm - design.spec.sensor.d_min_mm)
     assert n["travel_mm"] == pytest.approx(min(limits.values()))
@@ -131,9 +131,9 @@ def test_range_limits_are_reported_and_consistent(pred, design):
 
 
 def test_shear_uses_the_fe_and_its_range_is_the_magnet_radius(pred, design):
-    s = pred.data["shear"]
+    s = pred.as_json()["shear"]
     body = M.Body.from_design(design)
-    k = M.shear_stiffness(body, pred.data["material_mu_kPa"]["soft"], "fe")
+    k = M.shear_stiffness(body, pred.as_json()["material_mu_kPa"]["soft"], "fe")
     assert s["stiffness_N_per_mm"]["soft"] == pytest.approx(k, rel=1e-9)
     assert s["range_N"] == pytest.approx(k * design.magnet_radius_mm)
 
@@ -172,20 +172,20 @@ def test_guidelines_warn(design):
 def test_auto_picks_the_cheapest_field_model_within_tolerance(design):
     """The working volume runs to r = R_m: eq. 6 and the dipole fail there, the surrogate fits 1 %; a tolerance
     tighter than the surrogate's own error takes the exact field."""
-    assert predict(design).data["models"]["field"]["model"] == "surrogate"
+    assert predict(design).as_json()["models"]["field"]["model"] == "surrogate"
     tight = derive(parse_spec("[predict]\ntolerance_pct = 0.0001\nmechanics_model = \"column\"\n"))
-    assert predict(tight).data["models"]["field"]["model"] == "exact"
+    assert predict(tight).as_json()["models"]["field"]["model"] == "exact"
 
 
 def test_a_chosen_model_outside_tolerance_is_a_warning():
     d = derive(parse_spec('[predict]\nfield_model = "dipole"\nmechanics_model = "column"\n'))
     p = predict(d)
-    assert p.data["models"]["field"]["model"] == "dipole" and p.data["models"]["field"]["chosen_by"] == "spec"
+    assert p.as_json()["models"]["field"]["model"] == "dipole" and p.as_json()["models"]["field"]["chosen_by"] == "spec"
     assert "model-error" in _codes(prediction_findings(d, p), Severity.WARNING)
 
 
 def test_fe_mesh_choice_meets_the_tolerance_by_its_estimate(pred):
-    m = pred.data["models"]["mechanics"]
+    m = pred.as_json()["models"]["mechanics"]
     assert m["model"] == "fe" and m["relative_error"] <= 0.01
 
 
@@ -197,13 +197,13 @@ def test_bad_register_pairs_are_refused():
 
 def test_prediction_is_deterministic(design, pred):
     again = predict(design)
-    assert json.dumps(again.data, sort_keys=True) == json.dumps(pred.data, sort_keys=True)
+    assert json.dumps(again.as_json(), sort_keys=True) == json.dumps(pred.as_json(), sort_keys=True)
 
 
 def test_build_writes_predictions_plots_and_records_models(default_build, pred):
     out = default_build.out_dir
     data = json.loads((out / "predictions.json").read_text())
-    assert data == json.loads(json.dumps(pred.data))  # the build writes the prediction of its design, whole
+    assert data == json.loads(json.dumps(pred.as_json()))  # the build writes the prediction of its design, whole
     for stem in ("field_axis", "field_contours", "force", "sensitivity", "speed_accuracy"):
         svg = (out / "plots" / f"{stem}.svg").read_text()
         assert svg.lstrip().startswith("<?xml") and "<svg" in svg
