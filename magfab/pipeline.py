@@ -236,16 +236,19 @@ def _bundle(design: Design, prediction, scan, acceptance: dict | None, say: Prog
     return out, found, result
 
 
-def _fabrication(design: Design, acceptance: dict | None, say: Progress, timings: dict[str, float]):
-    """The bench papers: checklist.md, checklist.html (tick boxes, printable) and bom.csv."""
+def _fabrication(design: Design, prediction, acceptance: dict | None, say: Progress, timings: dict[str, float]):
+    """The bench papers: checklist.md, checklist.html (tick boxes, printable) and bom.csv. The checklist's scan
+    step spans the simulated scan's extent (one depth for the scan, the checklist and the predicted range)."""
     from .export import checklist
+    from .models.scan import scan_plan
 
     say("writing the checklist and the bill of materials")
     t = time.perf_counter()
+    plan = scan_plan(design, prediction) if prediction is not None else None
     out = [
-        Artifact("checklist.md", checklist.checklist_md(design, acceptance).encode(),
+        Artifact("checklist.md", checklist.checklist_md(design, acceptance, plan).encode(),
                  "fabrication checklist with the quantities filled in (Markdown)"),
-        Artifact("checklist.html", checklist.checklist_html(design, acceptance).encode(),
+        Artifact("checklist.html", checklist.checklist_html(design, acceptance, plan).encode(),
                  "the same checklist with tick boxes, to print"),
         Artifact("bom.csv", checklist.bom_csv(design).encode(),
                  f"bill of materials for {design.spec.fabrication.sensors} sensor(s)"),
@@ -398,7 +401,7 @@ def _physics(design: Design, scan) -> _PhysicsBranch:
     predict_artifacts, predict_findings, prediction = _predictions(design, say, timings)
     acceptance, acceptance_findings = _acceptance(design, prediction)
     bundle_artifacts, bundle_findings, fitted = _bundle(design, prediction, scan, acceptance, say, timings)
-    fab_artifacts, fab_findings = _fabrication(design, acceptance, say, timings)
+    fab_artifacts, fab_findings = _fabrication(design, prediction, acceptance, say, timings)
     stages = (_Stage(predict_artifacts, predict_findings),
               _Stage(bundle_artifacts, acceptance_findings + bundle_findings),
               _Stage(fab_artifacts, fab_findings))

@@ -18,6 +18,7 @@ from ..recipes import Recipe, catalogue
 from .bom import bom_csv, bom_rows  # re-exported: pipeline.py writes bom.csv through this module
 
 if TYPE_CHECKING:
+    from ..models.scan import ScanPlan
     from ..design import Design
 
 __all__ = ["Quantities", "quantities", "mix_ratio", "sections", "checklist_md", "checklist_html", "bom_rows", "bom_csv",
@@ -264,13 +265,21 @@ def _flash_section(design: "Design") -> Section:
     ]
 
 
-def _calibrate_section(design: "Design") -> Section:
+def _calibrate_section(design: "Design", plan: "ScanPlan | None") -> Section:
     spec = design.spec
     cal = spec.calibration
+    if plan is None:  # no prediction to cap it: the spec's extent
+        from ..models.scan import ScanPlan
+
+        columns = int(round(cal.scan_y_mm / cal.scan_step_mm)) + 1
+        rows = int(round(cal.scan_z_mm / cal.scan_step_mm)) + 1
+        plan = ScanPlan(cal.scan_y_mm / 2.0, cal.scan_z_mm, cal.scan_step_mm, columns, rows,
+                        "calibration.scan_z_mm", "calibration.scan_y_mm")
     return "Calibrate", [
         f"Scan against a reference force sensor (resolution {cal.reference_resolution_mN:g} mN): the y-z track, "
-        f"{cal.scan_y_mm:g} mm in y centred on the axis and {cal.scan_z_mm:g} mm of indentation, in "
-        f"{cal.scan_step_mm * 1000:g} um steps (about {(int(round(cal.scan_y_mm / cal.scan_step_mm)) + 1) * (int(round(cal.scan_z_mm / cal.scan_step_mm)) + 1)} points).",
+        f"{2.0 * plan.y_half_mm:.3g} mm in y centred on the axis (set by {plan.y_end}) and {plan.depth_mm:.3g} mm of "
+        f"indentation (set by {plan.depth_end}; the simulated scan and the predicted range stop there too), in "
+        f"{plan.step_mm * 1000:g} um steps ({plan.points} points).",
         "Record with magfab-readout record scan.csv and add the reference's Fx_N, Fy_N, Fz_N columns (docs/bundle.md).",
         f"magfab calibrate scan.csv --spec {spec.name}.toml: order {cal.order} ({cal.method.value}), {cal.folds}-fold "
         f"held-out error, tolerance {cal.tolerance_mN:g} mN; reflash the new image and reinstall the reader.",
@@ -293,24 +302,28 @@ def _acceptance_section(acceptance: Mapping[str, object] | None) -> Section:
     return "Acceptance test", accept
 
 
-def sections(design: "Design", acceptance: Mapping[str, object] | None = None) -> list[Section]:
+def sections(design: "Design", acceptance: Mapping[str, object] | None = None,
+             plan: "ScanPlan | None" = None) -> list[Section]:
     """The checklist as (section title, steps): plain text with the spec's and the recipes' numbers filled
-    in; the Markdown and HTML templates only lay it out (and escape it)."""
+    in; the Markdown and HTML templates only lay it out (and escape it). ``plan``: the calibration scan's extent
+    (:func:`magfab.models.scan.scan_plan`; omitted, the spec's)."""
     q = quantities(design)
     return [_print_section(design), _prepare_section(design, q), _mix_section(design, q), _pour_section(q),
             _magnet_section(design), _solder_section(design), _assemble_section(design), _flash_section(design),
-            _calibrate_section(design), _acceptance_section(acceptance)]
+            _calibrate_section(design, plan), _acceptance_section(acceptance)]
 
 
-def checklist_md(design: "Design", acceptance: Mapping[str, object] | None = None) -> str:
+def checklist_md(design: "Design", acceptance: Mapping[str, object] | None = None,
+                 plan: "ScanPlan | None" = None) -> str:
     from .templating import render
 
     return render("checklist/checklist.md.j2", spec=design.spec, q=quantities(design),
-                  sections=sections(design, acceptance))
+                  sections=sections(design, acceptance, plan))
 
 
-def checklist_html(design: "Design", acceptance: Mapping[str, object] | None = None) -> str:
+def checklist_html(design: "Design", acceptance: Mapping[str, object] | None = None,
+                 plan: "ScanPlan | None" = None) -> str:
     from .templating import render
 
     return render("checklist/checklist.html.j2", spec=design.spec, q=quantities(design),
-                  sections=sections(design, acceptance))
+                  sections=sections(design, acceptance, plan))

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import hashlib
 import math
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -28,30 +28,57 @@ if TYPE_CHECKING:
     from ..design import Design
     from .predict import Prediction
 
-__all__ = ["scan_track", "simulate_scan"]
+__all__ = ["ScanPlan", "scan_plan", "scan_track", "simulate_scan"]
 
 
 
-def scan_track(design: "Design", prediction: "Prediction") -> tuple[np.ndarray, np.ndarray]:
-    """The y-z track of the scan: (y_mm, indentation_mm), each (N,), in raster order (one row of y per
-    indentation step, y increasing along each row, indentation increasing row by row).
+@dataclass(frozen=True)
+class ScanPlan:
+    """The extent of the calibration scan, the one the simulated scan runs and the checklist tells the bench to
+    run: ``y_half_mm`` either side of the axis and 0..``depth_mm`` of indentation in ``step_mm`` steps
+    (``columns`` x ``rows`` points); ``depth_end`` and ``y_end`` name what ends each span (the spec's scan extent,
+    or the predicted range's limit when it ends first)."""
 
-    y spans ``scan_y_mm`` centred on the axis, capped at the predicted lateral range (the magnet radius or
-    the chip's xy full scale); the indentation spans 0..``scan_z_mm``, capped at the indentation where the
-    predicted normal range ends (``normal.travel_mm`` of magnet travel, through the nominal FE curve).
-    """
+    y_half_mm: float
+    depth_mm: float
+    step_mm: float
+    columns: int
+    rows: int
+    depth_end: str
+    y_end: str
+
+    @property
+    def points(self) -> int:
+        return self.columns * self.rows
+
+
+def scan_plan(design: "Design", prediction: "Prediction") -> ScanPlan:
+    """The scan's extent (:class:`ScanPlan`): ``scan_y_mm`` centred on the axis, capped at the predicted lateral
+    range (the magnet radius or the chip's xy full scale), and 0..``scan_z_mm`` of indentation, capped at the
+    indentation where the predicted normal range ends (``normal.travel_mm`` of magnet travel, through the nominal
+    FE curve); one depth for the simulated scan, the checklist's scan step and the predicted range."""
     cal = design.spec.calibration
     nominal = prediction.curves["nominal"]
     delta_end = float(np.interp(prediction.normal.travel_mm, nominal.magnet_displacement_mm, nominal.indentation_mm))
-    k_s = prediction.shear.stiffness_N_per_mm["nominal"]
-    lateral_end = prediction.shear.range_by_material_N["nominal"] / k_s
+    lateral_end = prediction.shear.range_by_material_N["nominal"] / prediction.shear.stiffness_N_per_mm["nominal"]
     step = cal.scan_step_mm
-    half = min(cal.scan_y_mm / 2.0, lateral_end)
-    ny = int(math.floor(2.0 * half / step + 1e-9)) + 1
-    y = (np.arange(ny) - (ny - 1) / 2.0) * step
-    z_end = min(cal.scan_z_mm, delta_end)
-    nz = int(math.floor(z_end / step + 1e-9)) + 1
-    delta = np.arange(nz) * step
+    half, y_end = cal.scan_y_mm / 2.0, "calibration.scan_y_mm"
+    if lateral_end < half:
+        half, y_end = lateral_end, f"the predicted shear range ({prediction.shear.range_limit})"
+    depth, depth_end = float(cal.scan_z_mm), "calibration.scan_z_mm"
+    if delta_end < depth - 1e-9:
+        depth, depth_end = delta_end, f"the predicted normal range ({prediction.normal.range_limit})"
+    columns = int(math.floor(2.0 * half / step + 1e-9)) + 1
+    rows = int(math.floor(depth / step + 1e-9)) + 1
+    return ScanPlan(half, depth, step, columns, rows, depth_end, y_end)
+
+
+def scan_track(design: "Design", prediction: "Prediction") -> tuple[np.ndarray, np.ndarray]:
+    """The y-z track of the scan (:func:`scan_plan`): (y_mm, indentation_mm), each (N,), in raster order (one row
+    of y per indentation step, y increasing along each row, indentation increasing row by row)."""
+    plan = scan_plan(design, prediction)
+    y = (np.arange(plan.columns) - (plan.columns - 1) / 2.0) * plan.step_mm
+    delta = np.arange(plan.rows) * plan.step_mm
     dd, yy = np.meshgrid(delta, y, indexing="ij")
     return yy.ravel(), dd.ravel()
 

@@ -80,7 +80,7 @@ def test_address_and_option_code_reach_the_bom_and_the_checklist():
 def test_markdown_and_html_escape_what_they_carry(design, monkeypatch):
     hostile = "<script>alert(1)</script> *bold* [link](x) a_b | c"
     assert "<" not in md(hostile) and "\\*bold\\*" in md(hostile) and "\\[link\\]" in md(hostile)
-    monkeypatch.setattr(C, "sections", lambda d, a=None: [("Step " + hostile, [hostile])])
+    monkeypatch.setattr(C, "sections", lambda d, a=None, p=None: [("Step " + hostile, [hostile])])
     html = C.checklist_html(design)
     assert "<script>" not in html and "&lt;script&gt;alert(1)&lt;/script&gt;" in html
     text = C.checklist_md(design)
@@ -119,3 +119,25 @@ def test_the_build_quotes_its_own_acceptance_bands_and_bom(default_build):
     assert f"within {lo:.0f} to {hi:.0f} uT" in line and f"a {w:g} g weight raises Bz by {d_lo:.0f} to {d_hi:.0f} uT" in line
     assert C.bom_csv is bom.bom_csv
     assert (out / "bom.csv").read_text() == bom.bom_csv(default_build.design)
+
+
+def test_the_scan_step_the_simulated_scan_and_the_range_share_one_depth(default_build, magone_design,
+                                                                          magone_prediction):
+    """The checklist tells the bench to scan exactly as deep as the simulated scan goes, and that is where the
+    predicted normal range ends (MagOne: the stretch limit, before the spec's 3 mm scan depth)."""
+    import numpy as np
+
+    from magfab.models.scan import scan_plan, scan_track
+
+    pred = magone_prediction
+    plan = scan_plan(magone_design, pred)
+    nominal = pred.curves["nominal"]
+    end = float(np.interp(pred.normal.travel_mm, nominal.magnet_displacement_mm, nominal.indentation_mm))
+    assert plan.depth_mm == pytest.approx(min(end, magone_design.spec.calibration.scan_z_mm))
+    y, delta = scan_track(magone_design, pred)
+    assert plan.depth_mm - plan.step_mm < delta.max() <= plan.depth_mm + 1e-9
+    assert y.size == plan.points
+    text = (default_build.out_dir / "checklist.md").read_text()
+    assert f"{plan.depth_mm:.3g} mm of indentation" in text and f"({plan.points} points)" in text
+    if plan.depth_mm < magone_design.spec.calibration.scan_z_mm:
+        assert f"the predicted normal range ({pred.normal.range_limit})" in text
