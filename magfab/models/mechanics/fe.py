@@ -29,9 +29,9 @@ import numpy as np
 
 from .body import Body, Curve, MechanicsError, _check_indentation, _check_mu, _newton_per_mu_mm2, check_option
 from .discretisation import _axisym
-from .indentation import _Indentation, _State, _StepFailure
+from .indentation import MagnetInterface, _Indentation, _State, _StepFailure
 from .material import _material
-from .mesh import _body_mesh, mesh_size
+from .mesh import Wall, _body_mesh, check_void, mesh_size
 from .options import MaterialLaw, MechanicsModel, OnFailure
 
 __all__ = ["fe", "STRETCH_LIMIT"]
@@ -44,7 +44,8 @@ STRETCH_LIMIT = 10.0
 def fe(body: Body, mu_kPa: float, indentation_mm: Sequence[float] | np.ndarray, mesh_mm: float | None = None,
        material: MaterialLaw | str = MaterialLaw.NEO_HOOKEAN, yeoh_ratios: tuple[float, float] | None = None,
        refine: int = 0, refine_near_apex_mm: float = 0.0, stretch_limit: float = STRETCH_LIMIT,
-       base_bonded: bool = True, on_failure: OnFailure | str = OnFailure.RAISE) -> Curve:
+       base_bonded: bool = True, on_failure: OnFailure | str = OnFailure.RAISE,
+       interface: MagnetInterface | str = MagnetInterface.BONDED, void: Wall | None = None) -> Curve:
     """Axisymmetric large-strain FE of the indentation (module doc). Returns a :class:`~.body.Curve`.
 
     ``mesh_mm``: element size in mm (default ``radius / 12``, 0.5 mm for MagOne); ``refine``: extra refinement
@@ -52,6 +53,13 @@ def fe(body: Body, mu_kPa: float, indentation_mm: Sequence[float] | np.ndarray, 
     ``yeoh_ratios = (C20/C10, C30/C10)`` (C10 = mu/2). No Yeoh coefficients are in the recipes (the sourced data
     are neo-Hookean fits), so Yeoh needs the ratios given explicitly. ``base_bonded = False`` lets the base slide
     (frictionless), for checks against the homogeneous uniaxial solution.
+
+    The magnet's interface (``interface``): "bonded" (the build's model, :data:`MODEL_DESCRIPTION`) or "sliding"
+    (bilateral frictionless contact on the reference normals of its rounded profile; exact on its flat faces, on
+    the rounded edges a node sliding by s leaves the arc by ~s^2 / (2 edge radius), reported as
+    ``info["max_slide_mm"]``). ``void``: the silicone removed inside a wall from the base to the magnet's lower
+    face (:func:`~.mesh.channel_wall` gives the design's open insertion channel and funnel); the void's walls
+    are free surfaces, their contact with each other or with the magnet is not modelled.
 
     Steps through the indentations in order, halving a failing step (down to 1/64 of it). On element inversion,
     Newton non-convergence, or a principal stretch beyond ``stretch_limit`` (or below its inverse) it raises
@@ -63,17 +71,22 @@ def fe(body: Body, mu_kPa: float, indentation_mm: Sequence[float] | np.ndarray, 
     law = check_option(MaterialLaw, material, "material")
     mat = _material(law, yeoh_ratios)
     policy = check_option(OnFailure, on_failure, "on_failure")
-    mesh = _body_mesh(body, mesh_size(body, mesh_mm), int(refine), float(refine_near_apex_mm))
-    prob = _Indentation(body, _axisym(mesh), mat, bool(base_bonded))
+    interface = check_option(MagnetInterface, interface, "interface")
+    mesh = _body_mesh(body, mesh_size(body, mesh_mm), int(refine), float(refine_near_apex_mm), check_void(body, void))
+    prob = _Indentation(body, _axisym(mesh), mat, bool(base_bonded), interface)
     path = _LoadPath(prob, stretch_limit)
     out = np.zeros((d.size, 6))  # force, tangent, magnet displacement, max stretch, max stress, peak stretch
+    slide = np.zeros(d.size)  # largest slide along a sliding magnet's surface, mm
     done = 0
     info: dict[str, object] = {"elements": int(mesh.t.shape[1]), "dofs": int(prob.ndof),
                                "min_angle_deg": mesh.min_angle_deg, "material": law.value}
+    if interface != MagnetInterface.BONDED or void:
+        info.update(interface=interface.value, void=void, max_slide_mm=slide)
     try:
         for i, target in enumerate(d):
             path.reach(target)
             out[i] = path.record(target)
+            slide[i] = prob.magnet_slide(path.state.x)
             done = i + 1
     except MechanicsError as exc:
         if policy == OnFailure.RAISE:
@@ -81,6 +94,8 @@ def fe(body: Body, mu_kPa: float, indentation_mm: Sequence[float] | np.ndarray, 
         info.update(failure=str(exc), failed_at_mm=float(d[done]) if done < d.size else math.nan)
     unit = _newton_per_mu_mm2(mu)
     out, d = out[:done], d[:done]
+    if "max_slide_mm" in info:
+        info["max_slide_mm"] = slide[:done]
     F, tangent = out[:, 0] * unit, out[:, 1] * unit
     info.update(newton_iterations=path.iterations, step_cuts=path.cuts, tangent_N_per_mm=tangent,
                 peak_stretch=out[:, 5].copy())

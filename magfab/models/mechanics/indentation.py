@@ -9,14 +9,24 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from enum import Enum
 
 import numpy as np
 
-from .body import Body
+from .body import Body, MechanicsError
 from .discretisation import _Axisym
 from .energy import STRETCH_AVERAGING_FRACTION, _Energy
 from .material import _Material
-from .mesh import _AXIS, _BASE, _MAGNET, _OUTER
+from .mesh import _AXIS, _BASE, _MAGNET, _OUTER, _magnet_normals
+
+
+class MagnetInterface(str, Enum):
+    """How the silicone holds the rigid magnet: bonded (glued: every surface node moves with it), or sliding
+    (bilateral frictionless: a surface node keeps to the magnet's surface, normal to it, and slides freely along
+    it; no separation, so a sealed pocket that neither glues nor opens)."""
+
+    BONDED = "bonded"
+    SLIDING = "sliding"
 
 
 class _StepFailure(Exception):
@@ -110,10 +120,14 @@ class _Reduction:
         has = np.diff(Tc.indptr) > 0
         col = np.full(nd, -1, dtype=np.int64)
         col[has] = Tc.indices[Tc.indptr[:-1][has]]
-        self.unknown = col  # dof -> its unknown (-1: prescribed whatever the contact set)
-        keep = (col[r] >= 0) & (col[c] >= 0)
-        self.keep = np.nonzero(keep)[0]
-        keys, inv = np.unique(col[r[keep]] * n + col[c[keep]], return_inverse=True)
+        self.unknown = col  # dof -> its (first) unknown (-1: prescribed whatever the contact set)
+        if np.all(np.diff(Tc.indptr) <= 1) and np.all(Tc.data == 1.0):
+            keep = (col[r] >= 0) & (col[c] >= 0)
+            self.keep, self.weight = np.nonzero(keep)[0], None
+            ka, kb = col[r[self.keep]], col[c[self.keep]]
+        else:  # a sliding magnet: a dof is a weighted sum of unknowns (:meth:`_Indentation.constraints`)
+            self.keep, ka, kb, self.weight = _expand(r, c, Tc)
+        keys, inv = np.unique(ka * n + kb, return_inverse=True)
         rows, cols = keys // n, keys % n
         self.n, self.inv, self.nnz, self.rows, self.cols = n, inv.ravel(), keys.size, rows, cols
         self.indptr = np.searchsorted(rows, np.arange(n + 1))
@@ -129,7 +143,8 @@ class _Reduction:
         """T^T K T in CSR, the ``fixed`` unknowns' (a mask) rows and columns replaced by the identity's."""
         from scipy.sparse import csr_matrix
 
-        data = np.bincount(self.inv, weights=K.data[self.keep], minlength=self.nnz)
+        kd = K.data[self.keep] if self.weight is None else K.data[self.keep] * self.weight
+        data = np.bincount(self.inv, weights=kd, minlength=self.nnz)
         if fixed.any():
             data[fixed[self.rows] | fixed[self.cols]] = 0.0
             data[self.diag[fixed[self.rows[self.diag]]]] = 1.0
@@ -146,6 +161,24 @@ class _Reduction:
         return _LDL(Kr, csc_matrix((ud, self.u_rows, self.u_indptr), shape=(self.n, self.n)), self)
 
 
+def _expand(r: np.ndarray, c: np.ndarray, Tc) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """For T^T K T with a general T (CSR): every (K entry, unknown a of its row's dof, unknown b of its column's dof)
+    as (index into K's data, a, b, T[i, a] T[j, b]), so the reduced matrix is again one weighted ``bincount``."""
+    cnt = np.diff(Tc.indptr)
+
+    def spread(k: np.ndarray, dof: np.ndarray):
+        m = cnt[dof]
+        rep = np.repeat(np.arange(k.size), m)
+        off = np.arange(rep.size) - np.repeat(np.cumsum(m) - m, m)
+        at = Tc.indptr[dof[rep]] + off
+        return rep, Tc.indices[at], Tc.data[at]
+
+    rep1, a, wa = spread(np.arange(r.size), r)
+    k1 = rep1  # K entry of each (entry, a) pair
+    rep2, b, wb = spread(k1, c[k1])
+    return k1[rep2], a[rep2], b, wa[rep2] * wb
+
+
 class _Indentation:
     """Newton solver for the indentation problem on one discretisation (dimensionless: mu = 1, mm).
 
@@ -154,7 +187,8 @@ class _Indentation:
 
     MAX_ITER = 30
 
-    def __init__(self, body: Body, disc: _Axisym, material: _Material, base_bonded: bool = True):
+    def __init__(self, body: Body, disc: _Axisym, material: _Material, base_bonded: bool = True,
+                 interface: MagnetInterface = MagnetInterface.BONDED):
         self.body, self.disc = body, disc
         self.energy = _Energy(disc, material, STRETCH_AVERAGING_FRACTION * body.radius_mm)
         N, M = disc.N, disc.M
@@ -165,6 +199,8 @@ class _Indentation:
         fixed_r = ((t & (_AXIS | (_BASE if base_bonded else 0))) != 0) | on_magnet
         fixed_z = ((t & _BASE) != 0) | on_magnet
         self.magnet_z = np.nonzero(on_magnet)[0] + N
+        self.magnet_ref = self.magnet_z[0] if self.magnet_z.size else -1  # a z dof that moves exactly as the magnet
+        self.slide, self.slide_normal = self._sliding_nodes(on_magnet, interface)
         self.candidates = np.nonzero(((t & _OUTER) != 0) & ((t & (_BASE | _MAGNET)) == 0))[0]
         self.Z = disc.doflocs[1]
         self.base_free = np.concatenate([np.nonzero(~fixed_r)[0], N + np.nonzero(~fixed_z)[0],
@@ -183,6 +219,27 @@ class _Indentation:
         self.reduction = _Reduction(disc.pattern, T0)
         self.contact_unknowns = self.reduction.unknown[N + self.candidates]
 
+    def _sliding_nodes(self, on_magnet: np.ndarray, interface: MagnetInterface) -> tuple[np.ndarray, np.ndarray]:
+        """The magnet's surface nodes that slide on it, and their outward normals (2, k) in the reference state; none
+        for a bonded magnet. Nodes on the axis (the radial displacement fixed there) and the corners of a sharp-edged
+        magnet (no single normal) stay bonded."""
+        none = (np.zeros(0, dtype=np.int64), np.zeros((2, 0)))
+        if interface == MagnetInterface.BONDED or not self.body.has_magnet:
+            return none
+        if self.plate:
+            raise MechanicsError("Input interface 'sliding' needs a magnet inside the silicone; this magnet is the "
+                                 "flat tip's top plate, pushed by the indenter itself")
+        t, (r, z) = self.disc.dof_tags, self.disc.doflocs
+        nodes = np.nonzero(on_magnet & ((t & _AXIS) == 0))[0]
+        normal, unique = _magnet_normals(self.body, r[nodes], z[nodes])
+        nodes, normal = nodes[unique], normal[:, unique]
+        flat = np.nonzero(on_magnet & ((t & _AXIS) != 0))[0]  # the axis node: n = (0, +-1), u_z is the magnet's
+        if flat.size:
+            self.magnet_ref = flat[0] + self.disc.N
+        else:
+            self.magnet_ref = nodes[np.argmax(np.abs(normal[1]))] + self.disc.N
+        return nodes, normal
+
     def _fixed(self, active: np.ndarray) -> np.ndarray:
         """Mask over the unknowns of :attr:`T`: those the contact set ``active`` prescribes."""
         fixed = np.zeros(self.T.shape[1], dtype=bool)
@@ -194,8 +251,9 @@ class _Indentation:
     def constraints(self, active: np.ndarray, delta: float):
         """(T, g, prescribed, load) for the active contact nodes at ``delta``.
 
-        Admissible states are x = T y + g: T (ndof x nfree) maps the unknowns (free dofs, and the magnet's common
-        axial displacement) to all dofs; g holds the prescribed values on the ``prescribed`` dofs (the bonded base,
+        Admissible states are x = T y + g: T (ndof x nfree) maps the unknowns (free dofs, the magnet's common
+        axial displacement w, and for a sliding magnet each surface node's slide s along the tangent t = (-n_z, n_r)
+        of its reference normal n: u = w e_z + s t, so (u - w e_z) . n = 0) to all dofs; g holds the prescribed values on the ``prescribed`` dofs (the bonded base,
         the axis, the magnet's radial displacement, the nodes touching the indenter); ``load`` is d g / d delta.
         """
         from scipy.sparse import csr_matrix
@@ -203,7 +261,7 @@ class _Indentation:
         N = self.disc.N
         act = self.candidates[active]
         free = np.setdiff1d(self.base_free, N + act, assume_unique=True)
-        rows, cols = [free], [np.arange(free.size)]
+        rows, cols, vals = [free], [np.arange(free.size)], [np.ones(free.size)]
         n = free.size
         g = np.zeros(self.ndof)
         prescribed = np.ones(self.ndof, dtype=bool)
@@ -218,10 +276,18 @@ class _Indentation:
             else:
                 rows.append(self.magnet_z)
                 cols.append(np.full(self.magnet_z.size, n))
+                vals.append(np.ones(self.magnet_z.size))
                 prescribed[self.magnet_z] = False
                 n += 1
-        rows, cols = np.concatenate(rows), np.concatenate(cols)
-        T = csr_matrix((np.ones(rows.size), (rows, cols)), shape=(self.ndof, n))
+        if self.slide.size:  # the tangential slide of each sliding node: u_r = -n_z s, u_z = w + n_r s
+            k = n + np.arange(self.slide.size)
+            rows += [self.slide, N + self.slide]
+            cols += [k, k]
+            vals += [-self.slide_normal[1], self.slide_normal[0]]
+            prescribed[self.slide] = False
+            n += self.slide.size
+        rows, cols, vals = np.concatenate(rows), np.concatenate(cols), np.concatenate(vals)
+        T = csr_matrix((vals, (rows, cols)), shape=(self.ndof, n))
         return T, g, prescribed, load
 
     # -- one load step --
@@ -313,4 +379,13 @@ class _Indentation:
         return F, float(load @ (K @ dx)), dx
 
     def magnet_displacement(self, x: np.ndarray) -> float:
-        return float(-x[self.magnet_z[0]]) if self.body.has_magnet else math.nan
+        return float(-x[self.magnet_ref]) if self.body.has_magnet else math.nan
+
+    def magnet_slide(self, x: np.ndarray) -> float:
+        """Largest tangential slide (mm) of a silicone node along the magnet's surface (0 if bonded)."""
+        if not self.slide.size:
+            return 0.0
+        N = self.disc.N
+        w = x[self.magnet_ref]
+        ur, uz = x[self.slide], x[N + self.slide] - w
+        return float(np.max(np.abs(-self.slide_normal[1] * ur + self.slide_normal[0] * uz)))
