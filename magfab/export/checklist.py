@@ -218,7 +218,11 @@ def _magnet_section(design: "Design") -> Section:
         "then reads a positive Bz at rest; the acceptance test checks the sign.",
         f"Push the magnet up the insertion channel (it stretches) until it stops against the pocket's roof, "
         f"{design.cover_mm:g} mm below the tip.",
-        f"Seal the channel with {glue.name}: {_t(glue, 'mix', '')} Handling cure "
+        f"Fill the insertion channel and the funnel with {glue.name} up to the magnet, without bubbles (about "
+        f"{design.core_volume_mm3 - design.magnet_volume_mm3:.0f} uL: the channel, funnel and pocket clearance less "
+        "the magnet); the predicted force assumes the magnet glued in a filled channel (report, the note under the "
+        "stack-up drawing): an open channel makes the tip markedly softer. Glue: "
+        f"{_t(glue, 'mix', '')} Handling cure "
         + (f"{glue['cure_time_handling_min'].nominal:g} min" if 'cure_time_handling_min' in glue.quantities else "per the datasheet")
         + (f", full cure {glue['cure_time_full_h'].nominal:g} h." if 'cure_time_full_h' in glue.quantities else "."),
     ]

@@ -141,3 +141,11 @@ def test_the_scan_step_the_simulated_scan_and_the_range_share_one_depth(default_
     assert f"{plan.depth_mm:.3g} mm of indentation" in text and f"({plan.points} points)" in text
     if plan.depth_mm < magone_design.spec.calibration.scan_z_mm:
         assert f"the predicted normal range ({pred.normal.range_limit})" in text
+
+
+def test_the_glue_step_fills_the_channel_the_force_model_assumes_filled(design):
+    """The FE bonds the magnet in a filled channel (an open one is ~34 % softer at 1 mm on MagOne,
+    tests/models/test_mechanics_pocket.py): the magnet step says to fill it, with the design's own volume."""
+    step = next(s for title, steps in C.sections(design) if title == "Magnet" for s in steps if "Fill" in s)
+    volume = design.core_volume_mm3 - design.magnet_volume_mm3
+    assert 20.0 < volume < 35.0 and f"about {volume:.0f} uL" in step and "up to the magnet" in step
