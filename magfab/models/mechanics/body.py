@@ -62,8 +62,10 @@ class Body:
     :class:`magfab.spec.Tip` or its value). The magnet is a
     rigid cylinder on the axis whose lower face is ``magnet_z_mm`` above the base; ``magnet_radius_mm = 0``
     means no magnet. Its two outer circular edges are rounded with radius ``magnet_edge_radius_mm`` (0: sharp;
-    a design takes the magnet recipe's sourced value). The insertion channel and the pocket clearance are not
-    modelled (a bonded magnet in solid silicone: :data:`~magfab.models.mechanics.MODEL_DESCRIPTION` says why).
+    a design takes the magnet recipe's sourced value). By default the magnet is bonded in solid silicone (the glue
+    fills the insertion channel; :data:`~magfab.models.mechanics.MODEL_DESCRIPTION` says why); ``fe(interface=
+    "sliding")`` and ``fe(void=channel_wall(...))`` model an unglued magnet and an open channel. The 0.05 mm pocket
+    clearance is not modelled.
     """
 
     radius_mm: float
