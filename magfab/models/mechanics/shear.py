@@ -1,5 +1,9 @@
 """Shear stiffness at the magnet: Timoshenko's closed form for the column below the magnet, or a small-strain
-Fourier-mode-1 FE of the same axisymmetric body under a lateral load on the magnet.
+Fourier-mode-1 FE of the same axisymmetric body under a lateral load on the magnet, at rest.
+
+The bench loads through the surface under a normal preload, and the magnet tilts: :mod:`.shear_surface` (the same
+mode-1 FE linearised about the preloaded state, loaded through the contact patch; at rest and loaded on the magnet
+it is this one, which its tests pin).
 
 Lengths in mm, moduli in kPa, stiffness in N/mm.
 """
