@@ -23,7 +23,7 @@ says where and why, for a caller that uses the failure as the range limit.
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -45,7 +45,8 @@ def fe(body: Body, mu_kPa: float, indentation_mm: Sequence[float] | np.ndarray, 
        material: MaterialLaw | str = MaterialLaw.NEO_HOOKEAN, yeoh_ratios: tuple[float, float] | None = None,
        refine: int = 0, refine_near_apex_mm: float = 0.0, stretch_limit: float = STRETCH_LIMIT,
        base_bonded: bool = True, on_failure: OnFailure | str = OnFailure.RAISE,
-       interface: MagnetInterface | str = MagnetInterface.BONDED, void: Wall | None = None) -> Curve:
+       interface: MagnetInterface | str = MagnetInterface.BONDED, void: Wall | None = None,
+       probe: Callable[[float, _Indentation, _State], None] | None = None) -> Curve:
     """Axisymmetric large-strain FE of the indentation (module doc). Returns a :class:`~.body.Curve`.
 
     ``mesh_mm``: element size in mm (default ``radius / 12``, 0.5 mm for MagOne); ``refine``: extra refinement
@@ -60,6 +61,9 @@ def fe(body: Body, mu_kPa: float, indentation_mm: Sequence[float] | np.ndarray, 
     ``info["max_slide_mm"]``). ``void``: the silicone removed inside a wall from the base to the magnet's lower
     face (:func:`~.mesh.channel_wall` gives the design's open insertion channel and funnel); the void's walls
     are free surfaces, their contact with each other or with the magnet is not modelled.
+
+    ``probe``: called as ``probe(indentation_mm, problem, converged state)`` at each indentation reached (a
+    :class:`~.shear_surface.ShearProbe` solves the shear response there, on this load path).
 
     Steps through the indentations in order, halving a failing step (down to 1/64 of it). On element inversion,
     Newton non-convergence, or a principal stretch beyond ``stretch_limit`` (or below its inverse) it raises
@@ -86,6 +90,8 @@ def fe(body: Body, mu_kPa: float, indentation_mm: Sequence[float] | np.ndarray, 
         for i, target in enumerate(d):
             path.reach(target)
             out[i] = path.record(target)
+            if probe is not None:  # e.g. a ShearProbe: the shear response at this converged preload
+                probe(float(target), prob, path.state)
             slide[i] = prob.magnet_slide(path.state.x)
             done = i + 1
     except MechanicsError as exc:

@@ -22,7 +22,9 @@ __all__ = ["convergence", "measure"]
 
 def _clear_caches() -> None:
     """Forget meshes and discretisations (for cold timings)."""
-    for f in (_body_mesh, _unit_mesh, _axisym, _mode1_matrix):
+    from .shear_surface import _operator
+
+    for f in (_body_mesh, _unit_mesh, _axisym, _mode1_matrix, _operator):
         f.cache_clear()
 
 
