@@ -1,0 +1,146 @@
+"""The shipped .hex on a simulated MLX90393 bus: ``mlxbus.c`` (libsimavr + the build's chip model) compiled into a
+shared library and driven through ctypes.
+
+    lib = build_library(build_dir, out_dir)     # cc + pkg-config simavr; None when either is missing
+    bus = Bus(lib, build_dir / "firmware" / "magfab-atmega328p.hex", addr7=0x0C)
+    bus.set_field(bx_uT, by_uT, bz_uT, t_C)
+    data = bus.run_us(20_000)                   # UART bytes the image sent in that simulated time
+
+Faults: :meth:`Bus.chip_fault` (inside the chip model: ``error``, ``short``, ``reset``, ``stuck``),
+:meth:`Bus.nack`, :meth:`Bus.all_ff`, :meth:`Bus.hang_us`, :meth:`Bus.absent`, :meth:`Bus.reset_in` (on the bus).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import shutil
+import subprocess
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+F_CPU_HZ = 16_000_000
+#: enum sim_fault of firmware/host/sim_mlx90393.h
+CHIP_FAULTS = {"nack": 0, "error": 1, "short": 2, "trunc": 3, "timeout": 4, "stuck": 5, "reset": 6}
+_CPU_DONE = 5  # sim_avr.h: cpu_Done, then cpu_Crashed
+
+
+class HarnessUnavailable(Exception):
+    """The harness cannot be built here (the reason says which tool or library is missing)."""
+
+
+def build_library(build_dir: Path, out_dir: Path) -> Path:
+    """Compile mlxbus.c with the build's chip model into ``out_dir/libmlxbus.so``; raises
+    :class:`HarnessUnavailable` when cc, pkg-config or libsimavr-dev is missing."""
+    for tool in ("cc", "pkg-config"):
+        if shutil.which(tool) is None:
+            raise HarnessUnavailable(f"{tool} is not installed")
+    flags = subprocess.run(["pkg-config", "--cflags", "--libs", "simavr"], capture_output=True, text=True)
+    if flags.returncode != 0:
+        raise HarnessUnavailable("libsimavr is not installed (Debian package libsimavr-dev; .ci/run installs it)")
+    fw = Path(build_dir) / "firmware"
+    lib = Path(out_dir) / "libmlxbus.so"
+    command = ["cc", "-std=gnu99", "-O2", "-Wall", "-Wextra", "-Werror", "-shared", "-fPIC", "-o", str(lib),
+               f"-I{fw / 'host'}", f"-I{fw / 'magfab_readout' / 'src'}", str(HERE / "mlxbus.c"),
+               str(fw / "host" / "sim_mlx90393.c"), *flags.stdout.split(), "-lm"]
+    proc = subprocess.run(command, capture_output=True, text=True, timeout=120)
+    if proc.returncode != 0:
+        raise RuntimeError(f"building the bus harness failed:\n{proc.stderr[-3000:]}")
+    return lib
+
+
+def _declare(lib: ctypes.CDLL) -> ctypes.CDLL:
+    p, u8, u16, u32, u64, d = (ctypes.c_void_p, ctypes.c_uint8, ctypes.c_uint16, ctypes.c_uint32,
+                               ctypes.c_uint64, ctypes.c_double)
+    signatures = {
+        "bus_open": (p, [ctypes.c_char_p, u8, u32]), "bus_run_until": (ctypes.c_int, [p, u64]),
+        "bus_time_us": (u64, [p]), "bus_take_uart": (u32, [p, ctypes.c_char_p, u32]),
+        "bus_send_uart": (None, [p, u8]), "bus_set_field": (None, [p, d, d, d, d]),
+        "bus_chip_fault": (None, [p, ctypes.c_int, u16]), "bus_nack": (None, [p, u32, u32]),
+        "bus_ff_reads": (None, [p, u32]), "bus_reset_in": (None, [p, u32]), "bus_hang_us": (None, [p, u64]),
+        "bus_absent": (None, [p, ctypes.c_int]), "bus_status_fixes": (u32, [p]), "bus_phases": (u32, [p]),
+        "bus_held": (u32, [p]), "bus_uart_cycles_per_byte": (u32, [p]), "bus_chip_register": (u16, [p, u8]),
+        "bus_chip_mode": (ctypes.c_int, [p]), "bus_conversion_us": (d, [p]), "bus_conversions": (u64, [p]),
+        "bus_close": (None, [p]),
+    }
+    for name, (restype, argtypes) in signatures.items():
+        fn = getattr(lib, name)
+        fn.restype, fn.argtypes = restype, argtypes
+    return lib
+
+
+class Bus:
+    """One ATmega328P running ``hex_path`` with a simulated MLX90393 at ``addr7`` on its TWI bus."""
+
+    def __init__(self, lib: Path, hex_path: Path, addr7: int) -> None:
+        self._lib = _declare(ctypes.CDLL(str(lib)))
+        self._h = self._lib.bus_open(str(hex_path).encode(), addr7, F_CPU_HZ)
+        if not self._h:
+            raise OSError(f"simavr cannot load {hex_path}")
+        self._buf = ctypes.create_string_buffer(1 << 20)
+
+    def __enter__(self) -> "Bus":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        if self._h:
+            self._lib.bus_close(self._h)
+            self._h = None
+
+    def run_us(self, dt_us: float) -> bytes:
+        """Run ``dt_us`` of simulated time; the bytes the image sent on its UART meanwhile."""
+        state = self._lib.bus_run_until(self._h, self.time_us + int(dt_us))
+        if state >= _CPU_DONE:
+            raise RuntimeError(f"the AVR core stopped (simavr state {state})")
+        n = self._lib.bus_take_uart(self._h, self._buf, len(self._buf))
+        return self._buf.raw[:n]
+
+    def send(self, data: bytes) -> None:
+        """Bytes from the host to the image's UART."""
+        for c in data:
+            self._lib.bus_send_uart(self._h, c)
+
+    def set_field(self, bx_uT: float, by_uT: float, bz_uT: float, t_C: float = 25.0) -> None:
+        self._lib.bus_set_field(self._h, bx_uT, by_uT, bz_uT, t_C)
+
+    def chip_fault(self, name: str, count: int = 1) -> None:
+        """A fault inside the chip model: ``error`` (next commands rejected), ``short`` (RM one word short),
+        ``reset`` (power-on now: registers to defaults, RS pending), ``stuck`` (conversions stop until RT)."""
+        self._lib.bus_chip_fault(self._h, CHIP_FAULTS[name], count)
+
+    def nack(self, addr_phases: int = 0, data_bytes: int = 0) -> None:
+        """The next address phases / written data bytes for the chip get no ACK."""
+        self._lib.bus_nack(self._h, addr_phases, data_bytes)
+
+    def all_ff(self, reads: int = 1) -> None:
+        """The next reads are ACKed and then read all 0xFF (the chip lets SDA go)."""
+        self._lib.bus_ff_reads(self._h, reads)
+
+    def reset_in(self, phases: int) -> None:
+        """The chip restarts at the start of the ``phases``-th address phase from now (1: the next)."""
+        self._lib.bus_reset_in(self._h, phases)
+
+    def hang_us(self, us: float) -> None:
+        """From the next TWI step on, every step for ``us`` microseconds is held (SCL low): TWINT never comes."""
+        self._lib.bus_hang_us(self._h, int(us))
+
+    def absent(self, on: bool) -> None:
+        """The chip off the bus (nothing ACKs) or back on it."""
+        self._lib.bus_absent(self._h, int(on))
+
+    def register(self, reg: int) -> int:
+        """The chip model's register ``reg`` now."""
+        return self._lib.bus_chip_register(self._h, reg)
+
+    time_us = property(lambda self: self._lib.bus_time_us(self._h))
+    phases = property(lambda self: self._lib.bus_phases(self._h), doc="address phases on the bus so far")
+    status_fixes = property(lambda self: self._lib.bus_status_fixes(self._h))
+    held = property(lambda self: self._lib.bus_held(self._h), doc="TWI steps held by hang_us")
+    uart_cycles_per_byte = property(lambda self: self._lib.bus_uart_cycles_per_byte(self._h))
+    chip_mode = property(lambda self: self._lib.bus_chip_mode(self._h), doc="0 idle, 1 burst, 2 single")
+    conversion_us = property(lambda self: self._lib.bus_conversion_us(self._h),
+                             doc="the chip's conversion time at its current registers, us")
+    conversions = property(lambda self: self._lib.bus_conversions(self._h),
+                           doc="conversions completed since the chip's burst started")
