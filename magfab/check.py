@@ -138,6 +138,11 @@ def errors_in(findings: list[Finding], strict: bool = False) -> list[Finding]:
     return [f for f in findings if f.severity in stop]
 
 
+#: The spec key that moves each normal range limit (predict.py's labels); d_min and the chip's full scale have theirs
+#: in their own findings, and "model" (the FE stopped before the scan depth) none a user sets.
+_RANGE_LIMIT_KEYS = {"stretch": "predict.max_stretch", "scan depth": "calibration.scan_z_mm"}
+
+
 def prediction_findings(design: Design, pred) -> list[Finding]:
     """BRIEF eq. 9 as errors and the paper's section 2.6 guidelines as warnings, from a
     :class:`magfab.models.predict.Prediction`; the predicted figures themselves as info."""
@@ -170,8 +175,8 @@ def prediction_findings(design: Design, pred) -> list[Finding]:
         travel = normal.range_limits_travel_mm
         out.append(Finding(I, "range-limit",
                            f"the normal range ends at {normal.travel_mm:.2f} mm of magnet travel ({normal.range_limit}), "
-                           f"before the magnet reaches d_min ({travel['d_min']:.2f} mm of travel)", "predict.max_stretch"
-                           if normal.range_limit == "stretch" else ""))
+                           f"before the magnet reaches d_min ({travel['d_min']:.2f} mm of travel)",
+                           _RANGE_LIMIT_KEYS.get(normal.range_limit, "")))
     # Guidelines (paper sec. 2.6).
     ratio = spec.magnet.height_mm / spec.magnet.diameter_mm
     if not 0.2 <= ratio <= 0.5:

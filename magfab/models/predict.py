@@ -17,7 +17,10 @@ combination that makes it worst (resolution: stiff material, weakest magnet, at 
 environment's (``predict.noise_G``) and the chip's own (at its OSR/DIG_FILT) and quantisation, in quadrature.
 
 The force range ends at the first of: the magnet reaching d_min, the chip's output reaching full scale at its
-configured gain and resolution, and the silicone reaching ``predict.max_stretch`` anywhere.
+configured gain and resolution, the silicone reaching ``predict.max_stretch`` (the FE's principal stretch averaged
+with a smooth kernel of radius R/30 about each point, :mod:`.mechanics.energy`: it converges under refinement where
+a pointwise stretch at a corner does not), and the depth the FE is solved to (the scan depth, ``scan depth``) or
+where it stopped (``model``).
 
 Models: ``predict.field_model`` and ``predict.mechanics_model``; ``auto`` takes the cheapest field model whose
 error over the working volume fits ``predict.tolerance_pct`` (measured against the exact field, per build), and
@@ -159,6 +162,10 @@ def choose_field(design: "Design", magnet: fieldmod.Magnet) -> ModelUse:
     return ModelUse("field", name, err, "error over the working volume, measured against the exact field", "spec")
 
 
+#: What ends a normal curve solved to the scan depth, and one the FE could not take further (range limit labels).
+SCAN_DEPTH, MODEL = "scan depth", "model"
+
+
 def _fe_curve(body: mech.Body, mu: float, indentation: np.ndarray, mesh: float, depth_mm: float) -> mech.Curve:
     """The FE curve up to ``depth_mm``, the deepest indentation the design is used over (see :func:`normal_curve`):
     the FE is solved there and no deeper, and the curve says so in ``info["failure"]``, so the range ends there if
@@ -173,7 +180,16 @@ def _fe_curve(body: mech.Body, mu: float, indentation: np.ndarray, mesh: float, 
         curve.info["failure"] = (f"the FE is solved to {depth_mm:g} mm of indentation, the depth the design is used "
                                  "over (calibration.scan_z_mm)")
         curve.info["failed_at_mm"] = float(d[kept.size - 1]) if kept.size - 1 < d.size else math.nan
+        curve.info["ends_at"] = SCAN_DEPTH
     return curve
+
+
+def _curve_end(curve: mech.Curve, indentation: np.ndarray) -> tuple[str, str]:
+    """(label, note) for a curve shorter than ``indentation``: :data:`SCAN_DEPTH` or :data:`MODEL`, and why it ends;
+    ("", "") for a curve that runs the whole grid."""
+    if len(curve.force_N) >= len(indentation):
+        return "", ""
+    return str(curve.info.get("ends_at", MODEL)), str(curve.info.get("failure", ""))
 
 
 def normal_curve(design: "Design", body: mech.Body, mu: float, indentation: np.ndarray) -> tuple[mech.Curve, ModelUse]:
@@ -256,11 +272,12 @@ class NormalFigures:
     resolution_at_rest_mN: Mapping[str, float]  # per material, weakest magnet
     range_N: float  # the softest material's
     range_by_material_N: Mapping[str, float]
-    range_limit: str  # what ends the range: d_min, chip full scale, stretch or model
+    range_limit: str  # what ends the range: d_min, chip full scale, stretch, scan depth or model
     range_limits_travel_mm: Mapping[str, float]  # magnet travel at which each limit would bind
     travel_mm: float
     stiffness_at_rest_N_per_mm: Mapping[str, float]
-    model_limit: str = ""  # why the mechanics model stopped early, if it did
+    sensitivity_at_rest_G_per_N: Mapping[str, float]  # per material, nominal magnet grade
+    model_limit: str = ""  # why the mechanics model's curve ends before the indentation grid does, if it does
 
 
 @dataclass(frozen=True)
@@ -273,6 +290,7 @@ class ShearFigures:
     range_N: float
     range_by_material_N: Mapping[str, float]
     range_limit: str
+    sensitivity_at_rest_G_per_N: Mapping[str, float]  # per material, nominal magnet grade
 
 
 @dataclass(frozen=True)
@@ -313,6 +331,7 @@ class Prediction:
             "range_limits_travel_mm": dict(n.range_limits_travel_mm),
             "travel_mm": n.travel_mm,
             "stiffness_at_rest_N_per_mm": dict(n.stiffness_at_rest_N_per_mm),
+            "sensitivity_at_rest_G_per_N": dict(n.sensitivity_at_rest_G_per_N),
         }
         if n.model_limit:
             normal["model_limit"] = n.model_limit
@@ -326,7 +345,8 @@ class Prediction:
             "normal": normal,
             "shear": {"stiffness_N_per_mm": dict(s.stiffness_N_per_mm), "sensitivity_G_per_N": list(s.sensitivity_G_per_N),
                       "resolution_mN": s.resolution_mN, "range_N": s.range_N,
-                      "range_by_material_N": dict(s.range_by_material_N), "range_limit": s.range_limit},
+                      "range_by_material_N": dict(s.range_by_material_N), "range_limit": s.range_limit,
+                      "sensitivity_at_rest_G_per_N": dict(s.sensitivity_at_rest_G_per_N)},
             "noise_G": asdict(self.noise),
             "models": {m.family: m.as_dict() for m in self.models},
         }
@@ -354,16 +374,12 @@ def predict(design: "Design") -> Prediction:
 
     body = mech.Body.from_design(design)
     mus = _band(design)
-    travel = design.d_rest_mm - sen.d_min_mm
-    # Indent a little past the travel to d_min: the magnet lags the surface, and the curve must reach d_min.
-    # Steps graded finer near zero, where a rounded tip's force rises as indentation^1.5.
-    indentation = 1.25 * travel * np.linspace(0.0, 1.0, N_INDENT) ** 1.5
+    indentation = indentation_grid(design)
     nominal, muse = normal_curve(design, body, mus["nominal"], indentation)
-    limit_note = str(nominal.info.get("failure", "")) if len(nominal.force_N) < len(indentation) else ""
     curves = {k: nominal.scaled(mu) if k != "nominal" else nominal for k, mu in mus.items()}
     t_mech = time.perf_counter()
 
-    normal, normal_arrays = _normal(design, chip, nz, magnets, fuse.name, curves, limit_note)
+    normal, normal_arrays = _normal(design, chip, nz, magnets, fuse.name, curves, _curve_end(nominal, indentation))
     shear, shear_arrays = _shear(design, chip, nz, magnets, fuse.name, body, mus)
     t_end = time.perf_counter()
     u = normal_arrays["u"]
@@ -385,10 +401,32 @@ def predict(design: "Design") -> Prediction:
     return Prediction(field_figures, chip, mus, normal, shear, Noise(**nz), (fuse, muse, shear_use), arrays, timings)
 
 
+def indentation_grid(design: "Design") -> np.ndarray:
+    """The indentations (mm) the normal curve is asked for: a little past the travel to d_min (the magnet lags the
+    surface, and the curve must reach d_min), in :data:`N_INDENT` steps graded finer near zero, where a rounded
+    tip's force rises as indentation^1.5. The FE solves them up to the scan depth (:func:`_fe_curve`)."""
+    travel = design.d_rest_mm - design.spec.sensor.d_min_mm
+    return 1.25 * travel * np.linspace(0.0, 1.0, N_INDENT) ** 1.5
+
+
+def normal_on_mesh(design: "Design", mesh_mm: float, field_model: str = "exact") -> NormalFigures:
+    """The normal figures as :func:`predict` makes them, with the FE on the one mesh ``mesh_mm`` and the given
+    field model: what a convergence study of the range compares between meshes."""
+    body = mech.Body.from_design(design)
+    mus = _band(design)
+    indentation = indentation_grid(design)
+    nominal = _fe_curve(body, mus["nominal"], indentation, mesh_mm, float(design.spec.calibration.scan_z_mm))
+    curves = {k: nominal.scaled(mu) if k != "nominal" else nominal for k, mu in mus.items()}
+    chip = chip_setting(design)
+    magnets = {band: fieldmod.Magnet.from_spec(design.spec, band) for band in GRADE_BAND}
+    return _normal(design, chip, noise(design, chip), magnets, field_model, curves, _curve_end(nominal, indentation))[0]
+
+
 def _normal(design: "Design", chip: ChipSetting, nz: Mapping[str, float], magnets: Mapping[str, fieldmod.Magnet],
-            fmodel: str, curves: Mapping[str, mech.Curve], limit_note: str) -> tuple[NormalFigures, dict[str, np.ndarray]]:
+            fmodel: str, curves: Mapping[str, mech.Curve], end: tuple[str, str]) -> tuple[NormalFigures, dict[str, np.ndarray]]:
     """Normal load: the chain along the nominal curve (the magnet's travel does not depend on mu), over the
-    material band and the grade's band, and what ends the range."""
+    material band and the grade's band, and what ends the range (``end``: :func:`_curve_end` of the nominal
+    curve)."""
     sen, p = design.spec.sensor, design.spec.predict
     nominal = curves["nominal"]
     travel = design.d_rest_mm - sen.d_min_mm
@@ -407,8 +445,9 @@ def _normal(design: "Design", chip: ChipSetting, nz: Mapping[str, float], magnet
     stretched = np.nonzero(nominal.max_stretch > p.max_stretch)[0]
     if stretched.size:
         limits["stretch"] = _crossing(u, nominal.max_stretch, p.max_stretch, stretched[0])
-    if limit_note:
-        limits["model"] = float(u[-1])
+    end_label, limit_note = end
+    if end_label:
+        limits[end_label] = float(u[-1])
     binding = min(limits, key=limits.get)
     u_max = limits[binding]
     in_range = (u <= u_max + 1e-9) & keep
@@ -428,6 +467,7 @@ def _normal(design: "Design", chip: ChipSetting, nz: Mapping[str, float], magnet
         range_limits_travel_mm=limits,
         travel_mm=u_max,
         stiffness_at_rest_N_per_mm={k: float(v[0]) for k, v in k_e.items()},
+        sensitivity_at_rest_G_per_N={k: float(s_f[(k, "nominal")][0]) for k in curves},
         model_limit=limit_note,
     )
     arrays = {"u": u, "in_range": in_range, **{f"bz_{b}": v for b, v in bz.items()},
@@ -460,6 +500,7 @@ def _shear(design: "Design", chip: ChipSetting, nz: Mapping[str, float], magnets
         range_N=min(shear_range.values()),
         range_by_material_N=shear_range,
         range_limit=binding,
+        sensitivity_at_rest_G_per_N={k: float(s_fs[(k, "nominal")][0]) for k in ks},
     )
     arrays = {"r": r, **{f"br_{b}": v for b, v in br.items()}, **{f"dbr_{b}": v for b, v in dbr.items()},
               **{f"sfs_{k}_{b}": v for (k, b), v in s_fs.items()}}

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -123,11 +124,56 @@ def test_noise_combines_environment_chip_and_quantisation(design):
 def test_range_limits_are_reported_and_consistent(pred, design):
     n = pred.as_json()["normal"]
     limits = n["range_limits_travel_mm"]
+    assert set(limits) <= {"d_min", "chip full scale", "stretch", "scan depth", "model"}
     assert limits["d_min"] == pytest.approx(design.d_rest_mm - design.spec.sensor.d_min_mm)
     assert n["travel_mm"] == pytest.approx(min(limits.values()))
     assert n["range_limit"] == min(limits, key=limits.get)
     u, f = pred.arrays["u"], pred.curves["soft"].force_N
     assert n["range_N"] == pytest.approx(float(np.interp(n["travel_mm"], u, f)))
+    # MagOne's FE reaches the 3 mm scan depth (issue 13): the curve ends there, named so, not as a model failure;
+    # the kernel-averaged stretch 2.0 ends the range first (tests/models/test_range_convergence.py)
+    nominal = pred.curves["nominal"]
+    assert nominal.indentation_mm[-1] == pytest.approx(design.spec.calibration.scan_z_mm)
+    assert "model" not in limits and limits["scan depth"] == pytest.approx(nominal.magnet_displacement_mm[-1])
+    assert "calibration.scan_z_mm" in n["model_limit"]
+    assert n["range_limit"] == "stretch"
+    stretch = np.interp(n["travel_mm"], u, nominal.max_stretch)
+    assert stretch == pytest.approx(design.spec.predict.max_stretch, rel=1e-9)
+
+
+def test_a_curve_is_named_by_what_ends_it():
+    """"scan depth" when the FE was solved to the depth the design is used over, "model" when it stopped before."""
+    from magfab.models.predict import MODEL, SCAN_DEPTH, _curve_end
+
+    d = np.linspace(0.0, 3.0, 4)
+    body = M.Body(6.0, 8.0, 2.0, magnet_radius_mm=2.5, magnet_height_mm=2.0, magnet_z_mm=4.0)
+    curve = M.fe(body, 23.0, d[:2], mesh_mm=2.0)
+    assert _curve_end(curve, d[:2]) == ("", "")
+    stopped = replace(curve, info={**curve.info, "failure": "element inversion at indentation 2 mm"})
+    assert _curve_end(stopped, d) == (MODEL, "element inversion at indentation 2 mm")
+    solved = replace(curve, info={**curve.info, "failure": "solved to 1 mm", "ends_at": SCAN_DEPTH})
+    assert _curve_end(solved, d) == (SCAN_DEPTH, "solved to 1 mm")
+
+
+def test_sensitivity_at_rest_is_eq10_per_material_with_the_nominal_magnet(pred, design):
+    """predictions.json's at-rest sensitivities, recomputed from its own numbers and eq. 6 written here: normal
+    S_F = (dBz/du) / (dF/du) at u = 0, shear (dBr/dr) / k_s, each for the nominal grade and every material."""
+    d = json.loads(json.dumps(pred.as_json()))
+    n, s, f = d["normal"], d["shear"], d["field"]
+    u = np.asarray(n["magnet_displacement_mm"])
+    m = F.Magnet.from_spec(design.spec)
+    br_G = f["remanence_T"]["nominal"] * 1e4
+    s_b = np.gradient(eq6(design.d_rest_mm - u, m.radius_mm, m.height_mm, br_G), u, edge_order=2)[0]
+    for k in ("soft", "nominal", "stiff"):
+        k_e = np.gradient([force for _, force in n["curve"][k]], u, edge_order=2)[0]
+        assert n["sensitivity_at_rest_G_per_N"][k] == pytest.approx(s_b / k_e, rel=1e-3)
+        assert s["sensitivity_at_rest_G_per_N"][k] == pytest.approx(
+            f["dBr_dr_rest_G_per_mm"] / s["stiffness_N_per_mm"][k], rel=1e-9)
+    for key in ("normal", "shear"):
+        at_rest = d[key]["sensitivity_at_rest_G_per_N"]
+        assert at_rest["soft"] > at_rest["nominal"] > at_rest["stiff"] > 0  # softer silicone, more G per N
+        lo, hi = d[key]["sensitivity_G_per_N"]
+        assert lo <= at_rest["stiff"] and at_rest["soft"] <= hi  # inside the band over the range, both bands
 
 
 def test_shear_uses_the_fe_and_its_range_is_the_magnet_radius(pred, design):

@@ -101,10 +101,12 @@ def prediction_tables(pred: "Prediction") -> dict[str, list[tuple[str, str]]]:
             ("range, worst case", f"{n.range_N:.3f} N (ends at: {n.range_limit})"),
             ("range by material", band(n.range_by_material_N, ".3f") + " N"),
             ("magnet travel over the range", f"{n.travel_mm:.3f} mm"),
+            ("sensitivity at rest (nominal magnet)", band(n.sensitivity_at_rest_G_per_N, ".1f") + " G/N"),
             ("stiffness at rest", band(n.stiffness_at_rest_N_per_mm, ".3f") + " N/mm"),
-        ] + ([("where the mechanics model stopped", n.model_limit)] if n.model_limit else []),
+        ] + ([("where the FE curve ends", n.model_limit)] if n.model_limit else []),
         "shear": [
             ("sensitivity", f"{s.sensitivity_G_per_N[0]:.1f} – {s.sensitivity_G_per_N[1]:.1f} G/N"),
+            ("sensitivity at rest (nominal magnet)", band(s.sensitivity_at_rest_G_per_N, ".1f") + " G/N"),
             ("resolution, worst case", f"{s.resolution_mN:.2f} mN"),
             ("range, worst case", f"{s.range_N:.3f} N (ends at: {s.range_limit})"),
             ("range by material", band(s.range_by_material_N, ".3f") + " N"),

@@ -1,0 +1,26 @@
+"""check.prediction_findings reads the normal range's limit labels (predict.py): the note names what ended the range
+and the spec key that moves it."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import pytest
+
+from magfab.check import prediction_findings
+
+
+@pytest.mark.parametrize("label, key", [("stretch", "predict.max_stretch"), ("scan depth", "calibration.scan_z_mm"),
+                                        ("model", ""), ("chip full scale", "")])
+def test_the_range_limit_note_names_its_key(magone_design, magone_prediction, label, key):
+    pred = magone_prediction
+    normal = replace(pred.normal, range_limit=label)
+    found = [f for f in prediction_findings(magone_design, replace(pred, normal=normal)) if f.code == "range-limit"]
+    assert len(found) == 1 and found[0].key == key
+    assert f"({label})" in found[0].message and "before the magnet reaches d_min" in found[0].message
+
+
+def test_no_note_when_d_min_ends_the_range(magone_design, magone_prediction):
+    pred = magone_prediction
+    normal = replace(pred.normal, range_limit="d_min")
+    assert not [f for f in prediction_findings(magone_design, replace(pred, normal=normal)) if f.code == "range-limit"]
