@@ -80,8 +80,8 @@ FE_STEPS = 21
 #: Seconds per triangle-step of the nonlinear FE, counting all FE_STEPS although a curve often stops earlier
 #: (QDLDL factorisation, one symbolic factorisation per load path, kernel-averaged stretch; issue 13): the two FE
 #: curves of a MagOne prediction (1 and 0.75 mm, 1,844 triangles, solved to the 3 mm scan depth, meshes cold) took
-#: 2.1-4.0 s over six runs on the shared two-core machine, 0.054-0.10 ms per triangle-step, median 0.065 ms;
-#: 1.5x the median.
+#: 2.1-4.0 s over nine runs on the shared two-core machine, 0.054-0.10 ms per triangle-step, median 0.068 ms;
+#: 1.5x the median, rounded.
 SECONDS_PER_FE_WORK = 0.1e-3
 #: FE work (triangles x steps, summed over the meshes tried): 9 s at the rate above, three of the graded meshes
 #: (all four of predict.FE_MESHES_MM, 101k, are refused: no spec needs them). MagOne runs 1 and 0.75 mm at 1 %
