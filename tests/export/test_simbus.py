@@ -41,6 +41,7 @@ class Sim:
     cal: dict
     build_info: dict
     frames: object  # the build's magfab_readout.frames module
+    registers: list  # (mask, value) of registers 0, 1, 2 as the build configures them
 
     def boot(self, field=FIELD_UT) -> Bus:
         bus = Bus(self.lib, self.hex_path, self.addr7)
@@ -88,8 +89,9 @@ def sim(default_build, tmp_path_factory):
         info = json.loads((out / "readout" / "src" / "magfab_readout" / "build.json").read_text())
         cal = json.loads((out / "calibration" / "calibration.json").read_text())
         config = (out / "firmware" / "magfab_readout" / "src" / "mf_config.h").read_text()
-        addr7 = int(re.search(r"#define MF_I2C_ADDR (\w+)", config).group(1), 0)
-        yield Sim(lib, hex_path, addr7, cal, info, frames)
+        define = {m.group(1): int(m.group(2), 0) for m in re.finditer(r"#define MF_(\w+) (\w+?)U?L?\b", config)}
+        registers = [(define[f"REG{k}_MASK"], define[f"REG{k}_VALUE"]) for k in range(3)]
+        yield Sim(lib, hex_path, define["I2C_ADDR"], cal, info, frames, registers)
     finally:
         sys.path.remove(src)
         for name in [n for n in sys.modules if n == "magfab_readout" or n.startswith("magfab_readout.")]:
@@ -170,22 +172,37 @@ def test_chip_absent_300_ms(sim):
         assert after[0].recovered and not any(s.chip_error for s in after[-5:]), flags(after)
 
 
-SILENT_BEFORE_FIX = {13, 14, 15, 19, 20, 21}  # RR/WR/RR of registers 1 and 2: RS was checked on RM only
+def assert_configured(sim: Sim, bus: Bus) -> None:
+    """The chip's registers hold the build's settings (the bits the firmware owns)."""
+    for reg, (mask, value) in enumerate(sim.registers):
+        assert bus.register(reg) & mask == value, f"register {reg}: {bus.register(reg):#06x}"
 
 
-@pytest.mark.parametrize("phase", [pytest.param(p, marks=pytest.mark.xfail(
-    strict=True, reason="issue 14 item 1: silent wrong force")) if p in SILENT_BEFORE_FIX else p
-    for p in range(1, STARTUP_PHASES + 1)])
+@pytest.mark.parametrize("phase", range(1, STARTUP_PHASES + 1))
 def test_chip_reset_at_every_start_up_step(sim, phase):
     """A chip reset (power-on registers, RS pending) at each address phase of the start-up and the first read:
-    never a wrong force, the configuration re-applied, forces streaming."""
+    never a wrong force, the configuration re-applied and read back, forces streaming."""
     with sim.boot() as bus:
         bus.reset_in(phase)
-        decoder = sim.frames.Decoder()
-        samples = sim.samples(decoder, bus.run_us(SETTLE_US))
+        samples = sim.samples(sim.frames.Decoder(), bus.run_us(SETTLE_US))
         assert sim.wrong(samples) == [], f"phase {phase}: {flags(samples)} {sim.wrong(samples)[:1]}"
         assert samples and not any(s.chip_error for s in samples[-3:]), flags(samples)
         assert bus.phases > phase
+        assert_configured(sim, bus)
+
+
+@pytest.mark.parametrize("phase", range(1, STARTUP_PHASES + 1))
+def test_chip_reset_at_every_recovery_step(sim, phase):
+    """The same during the recovery after a fault (a NACKed read): the second reset strikes the restart."""
+    def inject(bus):
+        bus.nack(addr_phases=1)
+        bus.reset_in(1 + phase)  # after the failed read's write phase (NACKed: no read follows), the restart
+
+    before, after, bus = run_with(sim, inject, after_us=60_000)  # two restarts of about 12 ms each at most
+    with bus:
+        assert sim.wrong(before + after) == [], f"phase {phase}: {flags(after)}"
+        assert any(s.chip_error for s in after) and not any(s.chip_error for s in after[-3:]), flags(after)
+        assert_configured(sim, bus)
 
 
 def test_output_rate_in_simulated_time(sim):

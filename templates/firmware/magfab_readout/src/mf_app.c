@@ -61,11 +61,14 @@ static int start_once(mf_app_t *a)
     (void)mlx_command(&a->chip, MLX_CMD_EX); /* from any mode back to idle; rejected when already idle */
     a->hal->delay_us(a->hal->ctx, MF_EXIT_WAIT_US);
     rc = mlx_command(&a->chip, MLX_CMD_RT);
-    if (rc != MF_OK && rc != MF_E_CHIP) {
-        return rc; /* the bus failed; an ERROR bit here is judged by the NOP below, after the reset */
+    if (rc != MF_OK && rc != MF_E_CHIP && rc != MF_E_RESET) {
+        return rc; /* the bus failed; the chip's answer to RT is judged by the NOP below, after the reset */
     }
     a->hal->delay_us(a->hal->ctx, MF_RESET_WAIT_US);
     rc = mlx_command(&a->chip, MLX_CMD_NOP); /* reads out (and so clears) the RS bit of the reset */
+    if (rc == MF_E_RESET && !(a->chip.status & MLX_ST_ERROR)) {
+        rc = MF_OK; /* the RS this sequence expects; from here on any RS fails the start (MF_E_RESET) */
+    }
     if (rc != MF_OK) {
         return rc;
     }
@@ -83,6 +86,9 @@ static int start_once(mf_app_t *a)
     }
 #if MF_BURST
     rc = mlx_command(&a->chip, (uint8_t)(MLX_CMD_SB | MF_ZYXT));
+    if (rc == MF_OK && !(a->chip.status & MLX_ST_BURST)) {
+        rc = MF_E_MODE;
+    }
     if (rc != MF_OK) {
         return rc;
     }
@@ -136,9 +142,6 @@ static int acquire(mf_app_t *a, mlx_raw_t *raw, uint32_t *t_us)
     }
 #else
     rc = mlx_command(&a->chip, (uint8_t)(MLX_CMD_SM | MF_ZYXT));
-    if (rc == MF_OK && (a->chip.status & MLX_ST_RS)) {
-        rc = MF_E_RESET;
-    }
     if (rc != MF_OK) {
         *t_us = now(a);
         return rc;

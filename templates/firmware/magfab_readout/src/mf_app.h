@@ -32,7 +32,9 @@ typedef struct mf_app {
 
 void mf_app_init(mf_app_t *a, const mf_hal_t *hal);
 void mf_app_poll(mf_app_t *a);
-/* Exit, reset, configure and (burst) start the chip, up to MF_START_TRIES times. */
+/* Exit, reset, configure and (burst) start the chip, up to MF_START_TRIES times. Every reply after the NOP that
+ * reads out the reset's RS is checked for RS and ERROR, and every register is read back, so a chip that
+ * restarts anywhere in the sequence fails the attempt instead of streaming on its power-on settings. */
 int mf_app_start_chip(mf_app_t *a);
 /* Act on every byte the host has sent: 'b' binary, 't' text, 'i' the info line. */
 void mf_app_commands(mf_app_t *a);

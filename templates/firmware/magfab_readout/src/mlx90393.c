@@ -39,6 +39,16 @@ static int transfer(mlx_t *m, const uint8_t *tx, uint8_t ntx, uint8_t *rx, uint8
     return MF_OK;
 }
 
+/* Every reply's status: RS first (the chip restarted and lost its settings, whatever else it says), then
+ * ERROR (the command was rejected). */
+static int status_rc(uint8_t status)
+{
+    if (status & MLX_ST_RS) {
+        return MF_E_RESET;
+    }
+    return (status & MLX_ST_ERROR) ? MF_E_CHIP : MF_OK;
+}
+
 /* D1:D0 against the words expected: 2 + 2 * D bytes follow the status. */
 static int check_count(uint8_t status, uint8_t words)
 {
@@ -52,7 +62,7 @@ int mlx_command(mlx_t *m, uint8_t cmd)
     if (rc != MF_OK) {
         return rc;
     }
-    return (status & MLX_ST_ERROR) ? MF_E_CHIP : MF_OK;
+    return status_rc(status);
 }
 
 int mlx_read_register(mlx_t *m, uint8_t reg, uint16_t *value)
@@ -63,11 +73,11 @@ int mlx_read_register(mlx_t *m, uint8_t reg, uint16_t *value)
     tx[0] = MLX_CMD_RR;
     tx[1] = (uint8_t)((reg & 0x3F) << 2);
     rc = transfer(m, tx, 2, rx, 3);
+    if (rc == MF_OK) {
+        rc = status_rc(rx[0]);
+    }
     if (rc != MF_OK) {
         return rc;
-    }
-    if (rx[0] & MLX_ST_ERROR) {
-        return MF_E_CHIP;
     }
     if (check_count(rx[0], 1) != MF_OK) {
         return MF_E_COUNT;
@@ -89,7 +99,7 @@ int mlx_write_register(mlx_t *m, uint8_t reg, uint16_t value)
     if (rc != MF_OK) {
         return rc;
     }
-    return (status & MLX_ST_ERROR) ? MF_E_CHIP : MF_OK;
+    return status_rc(status);
 }
 
 int mlx_update_register(mlx_t *m, uint8_t reg, uint16_t mask, uint16_t value)
@@ -127,14 +137,11 @@ int mlx_read_measurement(mlx_t *m, uint8_t zyxt, mlx_raw_t *raw)
         return MF_E_ARG;
     }
     rc = transfer(m, &cmd, 1, rx, (uint8_t)(1 + 2 * n));
+    if (rc == MF_OK) {
+        rc = status_rc(rx[0]);
+    }
     if (rc != MF_OK) {
         return rc;
-    }
-    if (rx[0] & MLX_ST_RS) {
-        return MF_E_RESET;
-    }
-    if (rx[0] & MLX_ST_ERROR) {
-        return MF_E_CHIP;
     }
     if (check_count(rx[0], n) != MF_OK) {
         return MF_E_COUNT;

@@ -53,9 +53,12 @@ typedef struct mlx_raw {
 void mlx_init(mlx_t *m, const mf_hal_t *hal, uint8_t addr7);
 /* Channels selected by zyxt bits: the number of 16-bit words RM returns. */
 uint8_t mlx_words(uint8_t zyxt);
-/* A one-byte command (SB, SM, EX, RT, NOP, ...): MF_OK, a bus error, or MF_E_CHIP on the ERROR bit. */
+/* Every reply's status byte is checked, RS before ERROR: MF_E_RESET when the chip shows it restarted (so a
+ * reset that strikes any command is seen by the command it strikes), MF_E_CHIP on the ERROR bit. The caller
+ * that expects RS (the NOP after RT) accepts MF_E_RESET when chip.status has no ERROR bit. */
+/* A one-byte command (SB, SM, EX, RT, NOP, ...): MF_OK, a bus error, MF_E_RESET or MF_E_CHIP. */
 int mlx_command(mlx_t *m, uint8_t cmd);
-/* RR / WR of a 16-bit register (address 0..31). RR also checks the byte count (D = 0). */
+/* RR / WR of a 16-bit register (address 0..31): MF_E_RESET, MF_E_CHIP; RR also checks the byte count (D = 0). */
 int mlx_read_register(mlx_t *m, uint8_t reg, uint16_t *value);
 int mlx_write_register(mlx_t *m, uint8_t reg, uint16_t value);
 /* Read-modify-write of the bits in mask, then read back: MF_E_VERIFY if the chip holds something else. */
