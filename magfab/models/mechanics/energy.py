@@ -106,7 +106,8 @@ def _kernel(s: np.ndarray) -> np.ndarray:
     """The averaging kernel k(s) = (1 - s^2)^3 on s = distance / radius in [0, 1], 0 beyond: smooth (its value and
     first two derivatives vanish at s = 1), so a quadrature point entering the support as the mesh changes adds a
     weight that starts at zero, where a ball's indicator would add it whole."""
-    return np.clip(1.0 - s * s, 0.0, None) ** 3
+    t = np.clip(1.0 - s * s, 0.0, None)
+    return t * t * t
 
 
 def _quadrature_points(disc: _Axisym) -> np.ndarray:
@@ -156,6 +157,8 @@ def _averaging(disc: _Axisym, radius_mm: float):
     rows = np.concatenate([rows, own_rows[alone]])
     cols = np.concatenate([cols, own_cols[alone]])
     vals = np.concatenate([vals, w.ravel()[alone]])
-    A = csr_matrix((vals, (rows, cols)), shape=(nel, nel * nq))
-    norm = np.asarray(A.sum(axis=1)).ravel()
-    return csr_matrix(A.multiply(1.0 / norm[:, None])), c
+    norm = np.bincount(rows, weights=vals, minlength=nel)
+    order = np.argsort(rows, kind="stable")  # nearly sorted already: the CSR is built without a sparse sort
+    indptr = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=nel))])
+    A = csr_matrix(((vals / norm[rows])[order], cols[order], indptr), shape=(nel, nel * nq))
+    return A, c
