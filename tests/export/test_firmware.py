@@ -32,6 +32,7 @@ from magfab.spec import Acquisition, Transport
 STUBS = Path(__file__).parents[1] / "firmware_sim" / "arduino_stub"
 E_NACK, E_BUS, E_TIMEOUT, E_CHIP, E_COUNT, E_RESET, E_MODE, E_VERIFY = -1, -2, -3, -4, -5, -6, -7, -8
 OUTSIDE, CHIP_ERROR, SATURATED, RECOVERED = 1, 2, 4, 8
+STAGE_READ, STAGE_START = 1, 2  # the fault word's high byte (docs/bundle.md section 3)
 WEIRD_NAME = 'we"ird\\name\nwith?? trigraph??= and é'
 
 
@@ -401,6 +402,7 @@ def test_fault_gives_error_frame_then_recovery(host, fault, code):
     assert [e for _, e, _, _ in p] == [0, 0, 0, code, 0, 0, 0]
     good, bad, after = frames[2], frames[3], frames[4]
     assert bad["status"] & CHIP_ERROR and np.all(np.isnan(bad["forces"])) and bad["counts"] == (0, 0, 0)
+    assert bad["t_raw"] == STAGE_READ << 8 | -code  # an error frame carries its fault word
     assert after["status"] == RECOVERED
     np.testing.assert_array_equal(after["forces"], good["forces"])
     assert frames[5]["status"] == 0
@@ -418,6 +420,8 @@ def test_lost_chip_retries_then_recovers(host):
     lost = [x for x in p if x[2] == 1]
     assert len(lost) >= 3
     assert all(f["status"] & CHIP_ERROR and np.all(np.isnan(f["forces"])) for f in frames[2:2 + len(lost)])
+    assert [f["t_raw"] for f in frames[2:2 + len(lost)]] == [STAGE_READ << 8 | -E_NACK] + [
+        STAGE_START << 8 | -E_NACK] * (len(lost) - 1)
     gaps = np.diff([f["t_us"] for f in frames[3:2 + len(lost)]])
     assert np.all(gaps >= firmware.LOST_RETRY_US)
     back = frames[2 + len(lost):]
@@ -484,7 +488,8 @@ def test_text_mode_info_and_switching(host):
 def test_text_mode_error_line(host):
     out, _ = host.run("C t\nB 900 -400 -2800 25\nS 1\nF error 2\nS 1\n")
     lines = [x for _, x in parse_stream(out)]
-    assert lines[1].decode().split(",")[3:] == ["2", "nan", "nan", "nan", "nan", "nan", "nan", "nan\n"]
+    assert lines[1].decode().split(",")[3:] == ["2", "nan", "nan", "nan", "nan", "nan", "nan", "nan",
+                                                f"{STAGE_READ << 8 | -E_CHIP}\n"]  # the fault word ends it
 
 
 def test_text_lines_carry_a_checksum(host):

@@ -271,6 +271,7 @@ def test_decoder_resynchronises_rejects_bad_crcs_and_counts_them(pkg):
         assert (s.t_us, s.status, s.counts, s.temperature_raw) == (f["t_us"], f["status"], f["counts"], f["t_raw"])
         if s.chip_error:  # no reading from the chip: no force, field or temperature, whatever the frame carries
             assert all(math.isnan(x) for x in s.force_N + s.B_uT) and s.temperature_C is None
+            assert s.fault == (f["t_raw"] or None)  # bytes 15..16 of an error frame: the fault word
         else:
             assert s.force_N == tuple(f32(x) for x in f["forces"])
             assert s.B_uT == (f["counts"][0] * 3.004, f["counts"][1] * 3.004, f["counts"][2] * 4.84)
@@ -287,7 +288,7 @@ def checked(body: bytes, end: bytes = b"\n") -> bytes:
 
 def test_text_lines_bad_lines_and_chip_errors(pkg):
     text = (checked(b"F,7,1000,0,0.1234,-0.5000,2.0000,60.08,-3.00,29824.08,25.02", b"\r\n")
-            + checked(b"F,8,2712,2,nan,nan,nan,nan,nan,nan,nan")
+            + checked(b"F,8,2712,2,nan,nan,nan,nan,nan,nan,nan,518")  # the fault: chip reset (6) at start (2)
             + checked(b"F,9,4424,1,1.0,2.0")  # too few fields
             + b"F,10,5000,0,0.0000,0.0000,1.5000,0.00,0.00,15000.00,24.98\n"  # no checksum
             + checked(b"F,11,5500,0,0.0000,0.0000,1.5000,0.00,0.00,15000.00,24.98")[:-3] + b"00\n"  # a wrong one
@@ -298,6 +299,7 @@ def test_text_lines_bad_lines_and_chip_errors(pkg):
     assert samples[0].force_N == (0.1234, -0.5, 2.0) and samples[0].B_uT == (60.08, -3.0, 29824.08)
     assert samples[0].temperature_C == 25.02 and samples[0].source == "text"
     assert samples[1].chip_error and all(math.isnan(f) for f in samples[1].force_N)
+    assert samples[1].fault == 518 and samples[1].fault_name == "chip reset at start"
     assert decoder.stats.bad_lines == 3 and decoder.stats.lost == 3
     line = pkg.encode_text_line(7, 1000, 0, (0.12344, -0.5, 2.0), (60.08, -3.0, 29824.08), 25.02)
     assert line == checked(b"F,7,1000,0,0.1234,-0.5000,2.0000,60.08,-3.00,29824.08,25.02")
@@ -421,11 +423,11 @@ def test_installed_cli_streams_zeroes_and_checks(installed):
     proc = cli(installed, "stream", "--simulate", "--count", "60", "--zero", "100", "--raw", "--check")
     assert proc.returncode == 0, proc.stderr
     header = [line for line in proc.stdout.splitlines() if line.startswith("# t_s")]
-    assert header == ["# t_s seq Fx_N Fy_N Fz_N Bx_uT By_uT Bz_uT T_C flags Bx_lsb By_lsb Bz_lsb T_raw dF_N"]
+    assert header == ["# t_s seq Fx_N Fy_N Fz_N Bx_uT By_uT Bz_uT T_C flags fault Bx_lsb By_lsb Bz_lsb T_raw dF_N"]
     rows = _rows(proc.stdout)
-    assert len(rows) == 60 and all(len(r) == 15 for r in rows)
+    assert len(rows) == 60 and all(len(r) == 16 for r in rows) and {r[10] for r in rows} == {"-"}
     assert max(abs(float(x)) for r in rows for x in r[2:5]) < 0.05  # tared at rest
-    assert max(float(r[14]) for r in rows) < 1e-5  # host and "firmware" agree (float32)
+    assert max(float(r[15]) for r in rows) < 1e-5  # host and "firmware" agree (float32)
     assert "# zero: offset" in proc.stdout and "0 CRC errors" in proc.stderr
 
 
@@ -512,4 +514,4 @@ def test_installed_cli_over_a_real_serial_port(installed, pkg):
         proc = cli(installed, "stream", "--port", port, "--count", "30", "--text", "--check")
         assert proc.returncode == 0, proc.stderr
         rows = _rows(proc.stdout)
-        assert len(rows) == 30 and max(float(r[10]) for r in rows) < 1e-3  # text rounds the field to 0.01 uT
+        assert len(rows) == 30 and max(float(r[11]) for r in rows) < 1e-3  # text rounds the field to 0.01 uT

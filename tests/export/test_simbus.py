@@ -132,26 +132,27 @@ def test_the_wrong_force_check_can_fail(sim):
 
 
 FAULTS = {
-    # name: (inject, the host sees at least one error frame)
-    "address NACK": (lambda bus: bus.nack(addr_phases=1), True),
-    "data NACK": (lambda bus: bus.nack(data_bytes=1), True),
-    "short read": (lambda bus: bus.chip_fault("short"), True),
-    "all 0xFF": (lambda bus: bus.all_ff(1), True),
-    "bus hang 1.5 ms": (lambda bus: bus.hang_us(1500), True),
-    "chip reset in burst": (lambda bus: bus.chip_fault("reset"), True),
-    "conversions stop": (lambda bus: bus.chip_fault("stuck"), True),
-    "ERROR bit once": (lambda bus: bus.chip_fault("error"), False),  # the read's one retry absorbs it
+    # name: (inject, the fault the host is told of, None: no error frame)
+    "address NACK": (lambda bus: bus.nack(addr_phases=1), "nack at read"),
+    "data NACK": (lambda bus: bus.nack(data_bytes=1), "nack at read"),
+    "short read": (lambda bus: bus.chip_fault("short"), "byte count at read"),
+    "all 0xFF": (lambda bus: bus.all_ff(1), "bus error at read"),
+    "bus hang 1.5 ms": (lambda bus: bus.hang_us(1500), "bus timeout at read"),
+    "chip reset in burst": (lambda bus: bus.chip_fault("reset"), "chip reset at read"),
+    "conversions stop": (lambda bus: bus.chip_fault("stuck"), "chip ERROR bit at read"),
+    "ERROR bit once": (lambda bus: bus.chip_fault("error"), None),  # the read's one retry absorbs it
 }
 
 
 @pytest.mark.parametrize("fault", list(FAULTS))
 def test_fault_gives_error_frames_never_a_wrong_force(sim, fault):
-    inject, seen = FAULTS[fault]
+    inject, named = FAULTS[fault]
     before, after, bus = run_with(sim, inject)
     with bus:
         assert sim.wrong(before + after) == [], flags(after)
         errors = [s for s in after if s.chip_error]
-        assert bool(errors) == seen, flags(after)
+        assert (errors[0].fault_name if errors else None) == named, flags(after)
+        seen = named is not None
         assert after[-5:] and not any(s.chip_error for s in after[-5:]), flags(after)  # streaming again
         assert bus.held >= (fault.startswith("bus hang")), "the harness held no TWI step"
         if seen:
@@ -168,6 +169,8 @@ def test_chip_absent_300_ms(sim):
         bus.absent(False)
         after = sim.samples(decoder, bus.run_us(LOST_RETRY_US + 30_000))
         assert during and all(s.chip_error for s in during[1:]), flags(during)
+        errors = [s.fault_name for s in during if s.chip_error]
+        assert errors[0] == "nack at read" and set(errors[1:]) == {"nack at start"}, errors
         assert sim.wrong(before + during + after) == []
         assert after[0].recovered and not any(s.chip_error for s in after[-5:]), flags(after)
 

@@ -48,7 +48,8 @@ def _parser() -> argparse.ArgumentParser:
 
     stream = commands.add_parser("stream", parents=[common], help="print calibrated forces as they arrive",
                                  description="Print Fx Fy Fz (N), the field B (uT), the temperature and the status "
-                                 "flags (o outside the calibrated region, E chip error, S full scale, R recovered).")
+                                 "flags (o outside the calibrated region, E chip error, S full scale, R recovered), "
+                                 "and on an error row which fault struck where (e.g. nack_at_read).")
     stream.add_argument("--text", action="store_true", help="ask the firmware for text lines instead of binary frames")
     stream.add_argument("--zero", type=int, default=0, metavar="N",
                         help="average N samples at rest first and subtract that force from the rest (tare)")
@@ -122,7 +123,7 @@ def _stream(args: argparse.Namespace, out) -> int:
             offset = device.zero(args.zero)
             out.write("# zero: offset Fx {:+.4f} N, Fy {:+.4f} N, Fz {:+.4f} N from {} samples\n".format(
                 *offset, args.zero))
-        columns = ["t_s", "seq", "Fx_N", "Fy_N", "Fz_N", "Bx_uT", "By_uT", "Bz_uT", "T_C", "flags"]
+        columns = ["t_s", "seq", "Fx_N", "Fy_N", "Fz_N", "Bx_uT", "By_uT", "Bz_uT", "T_C", "flags", "fault"]
         if args.raw:
             columns += ["Bx_lsb", "By_lsb", "Bz_lsb", "T_raw"]
         if args.check:
@@ -134,7 +135,8 @@ def _stream(args: argparse.Namespace, out) -> int:
             row = [_number(sample.time_s, 10, 4, False), "{:3d}".format(sample.seq)]
             row += [_number(f, 8, 4) for f in sample.force_N]
             row += [_number(b, 9, 2) for b in sample.B_uT]
-            row += [_number(sample.temperature_C, 6, 2, False), sample.flags]
+            row += [_number(sample.temperature_C, 6, 2, False), sample.flags,
+                    (sample.fault_name or "-").replace(" ", "_")]
             if args.raw:
                 counts = sample.counts or (0, 0, 0)
                 row += ["{:6d}".format(c) for c in counts] + ["{:5d}".format(sample.temperature_raw or 0)]

@@ -8,7 +8,11 @@ Binary frame (little-endian, 31 bytes)::
     4  1  status flags            29 2  CRC-16/CCITT-FALSE over bytes 2..28
     5  4  time, us (uint32)
 
-Text line: ``F,<seq>,<t_us>,<status>,<Fx_N>,<Fy_N>,<Fz_N>,<Bx_uT>,<By_uT>,<Bz_uT>,<T_C>*XXXX``; info line:
+On a chip-error frame (status bit 1) bytes 15..16 carry the fault word instead of the temperature: the stage
+where the fault struck in the high byte, the error in the low byte (:data:`FAULTS`, :func:`fault_name`).
+
+Text line: ``F,<seq>,<t_us>,<status>,<Fx_N>,<Fy_N>,<Fz_N>,<Bx_uT>,<By_uT>,<Bz_uT>,<T_C>*XXXX``, a chip-error line
+with ``,<fault>`` (the fault word in decimal) before the ``*``; info line:
 ``I,magfab,<spec name>,<calibration sha256 first 16 hex>,<gain_sel>,<resolution>,<osr>,<dig_filt>*XXXX``.
 ``XXXX`` is the CRC-16/CCITT-FALSE of the bytes before the ``*`` in four upper-case hex digits (as NMEA's
 ``*hh``): a person still reads the line, a script checks it.
@@ -36,7 +40,7 @@ __all__ = [
     "SYNC", "FRAME_LENGTH", "FRAME_FORCE", "STATUS_OUTSIDE_REGION", "STATUS_CHIP_ERROR", "STATUS_FULL_SCALE",
     "STATUS_RECOVERED", "FORCE_LIMIT_N", "FIELD_LIMIT_UT", "Sample", "DeviceInfo", "DecoderStats", "Decoder",
     "crc16_ccitt_false", "line_checksum", "encode_frame", "encode_text_line", "encode_info_line", "decode_frames",
-    "temperature_C",
+    "temperature_C", "FAULTS", "FAULT_STAGES", "fault_name",
 ]
 
 SYNC = b"\xa5\x5a"
@@ -52,6 +56,12 @@ MAX_LINE = 200  # longest text or info line accepted, bytes
 FORCE_LIMIT_N = 1000.0
 #: Largest |field| a text line may carry, uT: 1 T is past any magnetometer chip's full scale.
 FIELD_LIMIT_UT = 1.0e6
+
+#: The low byte of a fault word: the firmware's error (mf_errors.h, MF_E_* negated).
+FAULTS = {1: "nack", 2: "bus error", 3: "bus timeout", 4: "chip ERROR bit", 5: "byte count", 6: "chip reset",
+          7: "chip mode", 8: "register verify", 9: "transfer too long"}
+#: The high byte of a fault word: where it struck (mf_sample.h, MF_STAGE_*).
+FAULT_STAGES = {1: "read", 2: "start"}
 
 _INT = re.compile(r"[0-9]{1,10}")
 #: What the firmware prints for a float (mf_format_float): [-]digits.digits, d.dddde+XX beyond 1e9, nan, inf.
@@ -88,6 +98,15 @@ def temperature_C(raw: int) -> float:
     return 25.0 + (raw - _build.TEMPERATURE_RAW_25C) / _build.TEMPERATURE_LSB_PER_C
 
 
+def fault_name(word: Optional[int]) -> Optional[str]:
+    """A fault word as words, e.g. ``'nack at read'`` (unknown codes by number); None for None or 0."""
+    if not word:
+        return None
+    error, stage = word & 0xFF, word >> 8
+    return "{} at {}".format(FAULTS.get(error, "error {}".format(error)),
+                             FAULT_STAGES.get(stage, "stage {}".format(stage)))
+
+
 def flag_letters(status: int) -> str:
     """Status flags as four letters, '-' where clear: o outside region, E chip error, S full scale, R recovered."""
     return "".join(letter if status & bit else "-" for bit, letter in _FLAG_LETTERS)
@@ -101,7 +120,8 @@ class Sample:
     minus the host's zero offset when one is set (``device_force_N`` keeps the firmware's value); both are NaN
     when the chip-error bit is set (the sample is kept for its sequence number, time and flags);
     ``counts`` and ``temperature_raw`` are the raw chip readings (binary frames only); ``time_s`` is the
-    device time since the first sample of a :class:`~magfab_readout.Device` stream (None from the decoder).
+    device time since the first sample of a :class:`~magfab_readout.Device` stream (None from the decoder);
+    ``fault`` is the fault word of a chip-error sample (:func:`fault_name`, :attr:`fault_name`), else None.
     """
 
     seq: int
@@ -115,6 +135,7 @@ class Sample:
     temperature_raw: Optional[int] = None
     time_s: Optional[float] = None
     device_force_N: Optional[Tuple[float, float, float]] = field(default=None, compare=False)
+    fault: Optional[int] = None
 
     def __post_init__(self) -> None:
         if self.device_force_N is None:
@@ -139,6 +160,11 @@ class Sample:
     def recovered(self) -> bool:
         """Status bit 3: the chip was reset since the last frame."""
         return bool(self.status & STATUS_RECOVERED)
+
+    @property
+    def fault_name(self) -> Optional[str]:
+        """What failed and where, e.g. ``'chip reset at read'``; None for a good sample."""
+        return fault_name(self.fault)
 
     @property
     def flags(self) -> str:
@@ -193,7 +219,8 @@ class DecoderStats:
 
 def encode_frame(seq: int, t_us: int, status: int, counts: Tuple[int, int, int], temperature_raw: int,
                  force_N: Tuple[float, float, float]) -> bytes:
-    """One binary force frame, exactly as the firmware sends it."""
+    """One binary force frame, exactly as the firmware sends it (a chip-error frame: ``temperature_raw`` is
+    the fault word)."""
     body = _BODY.pack(FRAME_FORCE, seq & 0xFF, status & 0xFF, t_us & 0xFFFFFFFF,
                       int(counts[0]), int(counts[1]), int(counts[2]), int(temperature_raw) & 0xFFFF,
                       float(force_N[0]), float(force_N[1]), float(force_N[2]))
@@ -207,13 +234,15 @@ def _number(x: float, decimals: int) -> str:
 
 
 def encode_text_line(seq: int, t_us: int, status: int, force_N: Tuple[float, float, float],
-                     B_uT: Tuple[float, float, float], temperature: Optional[float]) -> bytes:
-    """One text sample line: forces to 4 decimals, field and temperature to 2 ('nan' where there is none), then
-    the checksum (:func:`line_checksum`)."""
+                     B_uT: Tuple[float, float, float], temperature: Optional[float], fault: int = 0) -> bytes:
+    """One text sample line: forces to 4 decimals, field and temperature to 2 ('nan' where there is none), the
+    fault word on a chip-error line, then the checksum (:func:`line_checksum`)."""
     fields = ["F", str(seq & 0xFF), str(t_us & 0xFFFFFFFF), str(status & 0xFF)]
     fields += [_number(f, 4) for f in force_N]
     fields += [_number(b, 2) for b in B_uT]
     fields.append(_number(float("nan") if temperature is None else temperature, 2))
+    if status & STATUS_CHIP_ERROR:
+        fields.append(str(fault & 0xFFFF))
     body = ",".join(fields).encode("ascii")
     return body + line_checksum(body) + b"\n"
 
@@ -295,7 +324,8 @@ class Decoder:
         if status & STATUS_CHIP_ERROR or _plausible((fx, fy, fz)):
             self.stats.frames += 1
         if status & STATUS_CHIP_ERROR:
-            out.append(Sample(seq, t_us, status, _NAN3, _NAN3, None, "binary", (bx, by, bz), t_raw))
+            out.append(Sample(seq, t_us, status, _NAN3, _NAN3, None, "binary", (bx, by, bz), t_raw,
+                              fault=t_raw or None))
         elif _plausible((fx, fy, fz)):
             B = (bx * self.lsb_xy_uT, by * self.lsb_xy_uT, bz * self.lsb_z_uT)
             temp = temperature_C(t_raw) if self.temperature else None
@@ -338,17 +368,20 @@ class Decoder:
             self.stats.infos += 1
             return DeviceInfo(name, calibration_hash.lower(), *(int(x) for x in settings), text)  # type: ignore[call-arg]
         parts = text.split(",")
+        fault = parts.pop() if len(parts) == 12 and _INT.fullmatch(parts[-1]) else None
         if parts[0] != "F" or len(parts) != 11 or not all(_INT.fullmatch(p) for p in parts[1:4]) \
                 or not all(_FLOAT.fullmatch(p) for p in parts[4:]):
             return None
         seq, t_us, status = int(parts[1]), int(parts[2]), int(parts[3])
         if not (seq < 256 and t_us < 2**32 and status < 256):
             return None
+        if fault is not None and (not status & STATUS_CHIP_ERROR or int(fault) > 0xFFFF):
+            return None  # a fault word ends only a chip-error line (one without it: an unknown fault)
         values = [float(p) for p in parts[4:]]
         self._sequence(seq)
         if status & STATUS_CHIP_ERROR:
             self.stats.lines += 1
-            return Sample(seq, t_us, status, _NAN3, _NAN3, None, "text")
+            return Sample(seq, t_us, status, _NAN3, _NAN3, None, "text", fault=int(fault) if fault else None)
         force, B, temp = tuple(values[0:3]), tuple(values[3:6]), values[6]
         if not _plausible(force) or not all(abs(b) <= FIELD_LIMIT_UT for b in B):
             self.stats.refused += 1

@@ -28,6 +28,9 @@ from .frames import (STATUS_CHIP_ERROR, STATUS_FULL_SCALE, STATUS_OUTSIDE_REGION
 
 __all__ = ["PressPattern", "RestTip", "SimulatedDevice"]
 
+#: The fault word of the simulated device's error samples: a NACK while reading (frames.FAULTS, FAULT_STAGES).
+SIMULATED_FAULT = 1 << 8 | 1
+
 GOLDEN_ANGLE = math.pi * (3.0 - math.sqrt(5.0))  # turns the press direction evenly round the circle
 
 
@@ -267,8 +270,8 @@ class SimulatedDevice:
             nan = float("nan")
             status |= STATUS_CHIP_ERROR
             if self.text:
-                return encode_text_line(seq, t_us, status, (nan, nan, nan), (nan, nan, nan), None)
-            return encode_frame(seq, t_us, status, (0, 0, 0), 0, (nan, nan, nan))
+                return encode_text_line(seq, t_us, status, (nan, nan, nan), (nan, nan, nan), None, SIMULATED_FAULT)
+            return encode_frame(seq, t_us, status, (0, 0, 0), SIMULATED_FAULT, (nan, nan, nan))
         Bx, By, Bz = self.pattern.field(t_s)
         lsb_xy, lsb_z = _build.LSB_XY_UT, _build.LSB_Z_UT
         counts = (_clamp16(Bx / lsb_xy + self._noise.gauss(0.0, self.noise_lsb)),

@@ -204,7 +204,7 @@ void mf_app_poll(mf_app_t *a)
         wait_until(a, a->t_next);
         rc = mf_app_start_chip(a);
         if (rc != MF_OK) {
-            mf_sample_fail(&s);
+            mf_sample_fail(&s, rc, MF_STAGE_START);
             a->poll_error = (int8_t)rc;
             a->last_error = (int8_t)rc;
             ++a->errors;
@@ -221,7 +221,7 @@ void mf_app_poll(mf_app_t *a)
     if (rc == MF_OK) {
         mf_app_process(&raw, &s);
     } else {
-        mf_sample_fail(&s);
+        mf_sample_fail(&s, rc, MF_STAGE_READ);
         a->last_error = (int8_t)rc;
         ++a->errors;
     }

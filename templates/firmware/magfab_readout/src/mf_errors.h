@@ -6,7 +6,7 @@
 
 #define MF_OK 0
 #define MF_E_NACK (-1)    /* the chip did not acknowledge its address or a byte */
-#define MF_E_BUS (-2)     /* bus error or lost arbitration */
+#define MF_E_BUS (-2)     /* bus error, lost arbitration, or a status byte no chip sends (all 1s) */
 #define MF_E_TIMEOUT (-3) /* a transfer did not complete in time (SCL or SDA held, clock stretched too long) */
 #define MF_E_CHIP (-4)    /* ERROR bit of the status byte: the chip rejected the command */
 #define MF_E_COUNT (-5)   /* wrong byte count: D1:D0 of the status byte, or fewer bytes than asked for */

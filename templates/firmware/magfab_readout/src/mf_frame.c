@@ -62,7 +62,7 @@ uint8_t mf_frame_binary(uint8_t *out, uint8_t seq, uint32_t t_us, const mf_sampl
         put_u16(&out[9 + 2 * k], (uint16_t)s->b_counts[k]);
         put_f32(&out[17 + 4 * k], s->f_N[k]);
     }
-    put_u16(&out[15], s->t_raw);
+    put_u16(&out[15], (s->flags & MF_FLAG_CHIP_ERROR) ? s->fault : s->t_raw); /* an error frame: the fault */
     put_u16(&out[29], mf_crc16(&out[2], 27));
     return MF_FRAME_LEN;
 }
@@ -189,6 +189,10 @@ uint8_t mf_frame_text(char *out, uint8_t seq, uint32_t t_us, const mf_sample_t *
     }
     out[n++] = ',';
     n = (uint8_t)(n + mf_format_float(&out[n], s->t_C, 2));
+    if (s->flags & MF_FLAG_CHIP_ERROR) {
+        out[n++] = ',';
+        n = (uint8_t)(n + put_uint(&out[n], s->fault));
+    }
     n = put_checksum(out, n);
     out[n++] = '\n';
     return n;

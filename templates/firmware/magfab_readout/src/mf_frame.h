@@ -18,10 +18,12 @@ extern "C" {
 
 /* CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF, no reflection, no final xor). */
 uint16_t mf_crc16(const uint8_t *data, uint8_t len);
-/* The 31-byte frame, little-endian; returns MF_FRAME_LEN. */
+/* The 31-byte frame, little-endian; on a chip error bytes 15..16 carry the fault word instead of the
+ * temperature; returns MF_FRAME_LEN. */
 uint8_t mf_frame_binary(uint8_t *out, uint8_t seq, uint32_t t_us, const mf_sample_t *s);
-/* F,<seq>,<t_us>,<status>,<Fx_N>,<Fy_N>,<Fz_N>,<Bx_uT>,<By_uT>,<Bz_uT>,<T_C>*XXXX\n : forces to 4 decimals, field
- * and temperature to 2; NaN prints as nan; XXXX is mf_crc16 of the bytes before the '*' in upper-case hex.
+/* F,<seq>,<t_us>,<status>,<Fx_N>,<Fy_N>,<Fz_N>,<Bx_uT>,<By_uT>,<Bz_uT>,<T_C>[,<fault>]*XXXX\n : forces to 4
+ * decimals, field and temperature to 2; NaN prints as nan; a chip-error line ends with the fault word (the
+ * binary frame's bytes 15..16 on an error frame: MF_STAGE_* << 8 | -MF_E_*); XXXX is mf_crc16 of the bytes before the '*' in upper-case hex.
  * out holds MF_TEXT_MAX bytes; returns the length (no terminator). */
 uint8_t mf_frame_text(char *out, uint8_t seq, uint32_t t_us, const mf_sample_t *s);
 /* x with the given decimals (at most 6), nan / inf / -inf, or d.dddde+XX beyond 1e9; returns the length. */

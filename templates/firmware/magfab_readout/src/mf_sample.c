@@ -35,6 +35,7 @@ void mf_sample_convert(const mlx_raw_t *raw, mf_sample_t *s)
     c[1] = counts(raw->y);
     c[2] = counts(raw->z);
     s->flags = 0;
+    s->fault = 0;
     for (k = 0; k < 3; ++k) {
         if (c[k] >= MF_RAW_LIMIT || c[k] <= -MF_RAW_LIMIT) {
             s->flags |= MF_FLAG_SATURATED;
@@ -54,10 +55,11 @@ void mf_sample_convert(const mlx_raw_t *raw, mf_sample_t *s)
     s->f_N[0] = s->f_N[1] = s->f_N[2] = NAN;
 }
 
-void mf_sample_fail(mf_sample_t *s)
+void mf_sample_fail(mf_sample_t *s, int rc, uint8_t stage)
 {
     uint8_t k;
     s->flags = MF_FLAG_CHIP_ERROR;
+    s->fault = (uint16_t)((uint16_t)stage << 8 | (uint8_t)(-rc));
     s->t_raw = 0;
     s->t_C = NAN;
     for (k = 0; k < 3; ++k) {

@@ -16,10 +16,15 @@ extern "C" {
 #define MF_FLAG_SATURATED 0x04  /* a field axis at the chip's output limit */
 #define MF_FLAG_RECOVERED 0x08  /* the chip was reset since the last frame */
 
+/* Where a fault struck, the high byte of a failed sample's fault word (its low byte is -MF_E_*). */
+#define MF_STAGE_READ 1  /* reading the sample (RM, or SM and RM) */
+#define MF_STAGE_START 2 /* starting the chip: boot, or the recovery after a failed sample, all attempts failed */
+
 typedef struct mf_sample {
     uint8_t flags;
     int16_t b_counts[3]; /* X, Y, Z counts, RES offsets removed (0 on a chip error) */
     uint16_t t_raw;      /* raw temperature word (0 when not converted or on a chip error) */
+    uint16_t fault;      /* on a chip error: MF_STAGE_* << 8 | -MF_E_*; 0 otherwise */
     float b_uT[3];       /* X, Y, Z field, microtesla (NaN on a chip error) */
     float t_C;           /* chip temperature, degC (NaN when not converted or on a chip error) */
     float f_N[3];        /* Fx, Fy, Fz, newton (NaN on a chip error) */
@@ -27,8 +32,9 @@ typedef struct mf_sample {
 
 /* Counts and microtesla from the raw words; sets MF_FLAG_SATURATED, clears the other flags and the forces. */
 void mf_sample_convert(const mlx_raw_t *raw, mf_sample_t *s);
-/* A sample that failed: chip-error flag, zero counts, NaN everywhere else. */
-void mf_sample_fail(mf_sample_t *s);
+/* A sample that failed with error rc (MF_E_*) at stage (MF_STAGE_*): chip-error flag, the fault word, zero
+ * counts, NaN everywhere else. */
+void mf_sample_fail(mf_sample_t *s, int rc, uint8_t stage);
 
 #ifdef __cplusplus
 }

@@ -39,10 +39,14 @@ static int transfer(mlx_t *m, const uint8_t *tx, uint8_t ntx, uint8_t *rx, uint8
     return MF_OK;
 }
 
-/* Every reply's status: RS first (the chip restarted and lost its settings, whatever else it says), then
- * ERROR (the command was rejected). */
+/* Every reply's status: one no chip sends (two mode bits at once: all 1s from a released bus) is a bus
+ * error; then RS (the chip restarted and lost its settings, whatever else it says), then ERROR (rejected). */
 static int status_rc(uint8_t status)
 {
+    uint8_t modes = (uint8_t)(status & (MLX_ST_BURST | MLX_ST_WOC | MLX_ST_SM));
+    if (modes & (uint8_t)(modes - 1U)) {
+        return MF_E_BUS;
+    }
     if (status & MLX_ST_RS) {
         return MF_E_RESET;
     }
