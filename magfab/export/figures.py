@@ -121,9 +121,10 @@ def _sensitivity(plt, design: "Design", pred: "Prediction"):
     fig, axes = plt.subplots(1, 2, figsize=(9.0, 4.0))
     for k in BAND_COLOURS:
         axes[0].plot(a["u"][keep], a[f"sf_{k}_nominal"][keep], color=BAND_COLOURS[k], label=f"normal, {k}")
-        axes[0].plot(a["r"], a[f"sfs_{k}_nominal"], color=BAND_COLOURS[k], ls="--", label=f"shear, {k}")
+        axes[0].plot(a["u_shear"], a[f"sfs_{k}_nominal"], color=BAND_COLOURS[k], ls="--", marker=".",
+                     label=f"shear, {k}")
         axes[1].plot(a["u"][keep], a[f"res_{k}_nominal"][keep], color=BAND_COLOURS[k], label=f"normal, {k}")
-    axes[0].set_xlabel("magnet travel (normal: axial; shear: lateral), mm")
+    axes[0].set_xlabel("magnet axial travel (shear: small lateral load under that normal preload), mm")
     axes[0].set_ylabel("sensitivity S_F, G/N")
     axes[0].set_yscale("log")
     axes[0].legend(fontsize=7)

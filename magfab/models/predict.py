@@ -39,6 +39,7 @@ import numpy as np
 
 from . import field as fieldmod
 from . import mechanics as mech
+from .shear_figures import SHEAR_DESCRIPTION, ShearFigures, rest_response, shear_figures, shear_probe_depths
 from ..errors import Finding, Severity
 from ..spec import FieldModel
 from ..units import GAUSS_PER_MT, MN_PER_N, UT_PER_GAUSS
@@ -166,16 +167,17 @@ def choose_field(design: "Design", magnet: fieldmod.Magnet) -> ModelUse:
 SCAN_DEPTH, MODEL = "scan depth", "model"
 
 
-def _fe_curve(body: mech.Body, mu: float, indentation: np.ndarray, mesh: float, depth_mm: float) -> mech.Curve:
+def _fe_curve(body: mech.Body, mu: float, indentation: np.ndarray, mesh: float, depth_mm: float,
+              probe: mech.ShearProbe | None = None) -> mech.Curve:
     """The FE curve up to ``depth_mm``, the deepest indentation the design is used over (see :func:`normal_curve`):
     the FE is solved there and no deeper, and the curve says so in ``info["failure"]``, so the range ends there if
     nothing ends it earlier. A failure before that depth (element inversion, non-convergence) truncates the curve
-    where the model stopped."""
+    where the model stopped. ``probe``: solved at each converged indentation (the shear response along the scan)."""
     d = np.asarray(indentation, dtype=float)
     if d[-1] <= depth_mm:
-        return mech.fe(body, mu, d, mesh_mm=mesh, on_failure=mech.OnFailure.TRUNCATE)
+        return mech.fe(body, mu, d, mesh_mm=mesh, on_failure=mech.OnFailure.TRUNCATE, probe=probe)
     kept = np.append(d[d < depth_mm - 1e-9], depth_mm)
-    curve = mech.fe(body, mu, kept, mesh_mm=mesh, on_failure=mech.OnFailure.TRUNCATE)
+    curve = mech.fe(body, mu, kept, mesh_mm=mesh, on_failure=mech.OnFailure.TRUNCATE, probe=probe)
     if "failure" not in curve.info:
         curve.info["failure"] = (f"the FE is solved to {depth_mm:g} mm of indentation, the depth the design is used "
                                  "over (calibration.scan_z_mm)")
@@ -192,22 +194,29 @@ def _curve_end(curve: mech.Curve, indentation: np.ndarray) -> tuple[str, str]:
     return str(curve.info.get("ends_at", MODEL)), str(curve.info.get("failure", ""))
 
 
-def normal_curve(design: "Design", body: mech.Body, mu: float, indentation: np.ndarray) -> tuple[mech.Curve, ModelUse]:
-    """The normal curve at the nominal modulus with the model the spec asks for (see module doc)."""
+def normal_curve(design: "Design", body: mech.Body, mu: float,
+                 indentation: np.ndarray) -> tuple[mech.Curve, ModelUse, mech.ShearResponse | None]:
+    """The normal curve at the nominal modulus with the model the spec asks for (see module doc), and for the FE the
+    shear response along it (:func:`~.shear_figures.shear_probe_depths`, on the chosen mesh; None for a closed
+    form)."""
     p = design.spec.predict
     tol = p.tolerance_pct / 100.0
     name = p.mechanics_model.value
     if name in ("column", "hertz_column"):
         curve = mech.MODELS[name](body, mu, indentation)
         return curve, ModelUse("mechanics", name, math.nan,
-                               "closed form; its error against the FE model is charted by bench/mechanics.py", "spec")
+                               "closed form; its error against the FE model is charted by bench/mechanics.py",
+                               "spec"), None
     from ..limits import fe_meshes  # the meshes the spec's cost limits were checked against
 
     previous = None
     chosen = None
     depth = float(design.spec.calibration.scan_z_mm)  # the deepest indentation the design is used over
+    depths, rest = shear_probe_depths(design, indentation), design.spec.calibration.scan_step_mm
     for mesh in fe_meshes(design):  # coarse to fine; past the last, the model-error warning says so
-        curve = _fe_curve(body, mu, indentation, mesh, depth)
+        probe = mech.ShearProbe(depths_mm=depths, rest_indentation_mm=rest)
+        curve = _fe_curve(body, mu, indentation, mesh, depth, probe)
+        curve.info["shear_probe"] = probe
         if previous is not None:
             n = min(len(curve.force_N), len(previous.force_N))
             if n < 2:
@@ -223,9 +232,10 @@ def normal_curve(design: "Design", body: mech.Body, mu: float, indentation: np.n
     assert chosen is not None
     curve, err, coarse = chosen
     how = "auto" if name == "auto" else "spec"
+    probe = curve.info.pop("shear_probe")
     return curve, ModelUse("mechanics", "fe", err,
                            f"{mech.MODEL_DESCRIPTION} Mesh {curve.mesh_mm:g} mm; error estimated against mesh "
-                           f"{coarse:g} mm (Richardson, order {FE_ORDER:g})", how)
+                           f"{coarse:g} mm (Richardson, order {FE_ORDER:g})", how), probe.response(mu)
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -281,19 +291,6 @@ class NormalFigures:
 
 
 @dataclass(frozen=True)
-class ShearFigures:
-    """Shear (lateral) load over the material band; forces N."""
-
-    stiffness_N_per_mm: Mapping[str, float]
-    sensitivity_G_per_N: tuple[float, float]
-    resolution_mN: float
-    range_N: float
-    range_by_material_N: Mapping[str, float]
-    range_limit: str
-    sensitivity_at_rest_G_per_N: Mapping[str, float]  # per material, nominal magnet grade
-
-
-@dataclass(frozen=True)
 class Prediction:
     """What the sensor will do (module doc), plus the arrays the plots need. Frozen values throughout;
     :meth:`as_json` is the one place they become predictions.json's nested dict."""
@@ -343,10 +340,7 @@ class Prediction:
                      "conversion_ms": c.conversion_ms, "rate_Hz": c.rate_Hz},
             "material_mu_kPa": dict(self.material_mu_kPa),
             "normal": normal,
-            "shear": {"stiffness_N_per_mm": dict(s.stiffness_N_per_mm), "sensitivity_G_per_N": list(s.sensitivity_G_per_N),
-                      "resolution_mN": s.resolution_mN, "range_N": s.range_N,
-                      "range_by_material_N": dict(s.range_by_material_N), "range_limit": s.range_limit,
-                      "sensitivity_at_rest_G_per_N": dict(s.sensitivity_at_rest_G_per_N)},
+            "shear": s.as_json(),
             "noise_G": asdict(self.noise),
             "models": {m.family: m.as_dict() for m in self.models},
         }
@@ -375,12 +369,15 @@ def predict(design: "Design") -> Prediction:
     body = mech.Body.from_design(design)
     mus = _band(design)
     indentation = indentation_grid(design)
-    nominal, muse = normal_curve(design, body, mus["nominal"], indentation)
+    nominal, muse, response = normal_curve(design, body, mus["nominal"], indentation)
     curves = {k: nominal.scaled(mu) if k != "nominal" else nominal for k, mu in mus.items()}
     t_mech = time.perf_counter()
 
     normal, normal_arrays = _normal(design, chip, nz, magnets, fuse.name, curves, _curve_end(nominal, indentation))
-    shear, shear_arrays = _shear(design, chip, nz, magnets, fuse.name, body, mus)
+    if response is None:
+        response = rest_response(design, body, mus["nominal"])
+    depth_end = float(np.interp(normal.travel_mm, nominal.magnet_displacement_mm, nominal.indentation_mm))
+    shear, shear_arrays = shear_figures(design, nz, magnets, chip.full_scale_xy_G, fuse.name, mus, response, depth_end)
     t_end = time.perf_counter()
     u = normal_arrays["u"]
     field_figures = FieldFigures(
@@ -392,9 +389,7 @@ def predict(design: "Design") -> Prediction:
         Bz_range_end_strongest_G=float(np.interp(normal.travel_mm, u, normal_arrays["bz_high"])),
         remanence_T={b: m.remanence_T for b, m in magnets.items()},
     )
-    shear_use = ModelUse("shear", "fe", math.nan,
-                         "small-strain Fourier mode-1 FE, lateral force on the magnet, magnet free to "
-                         "tilt (Timoshenko's column overestimates it by ~34 % for an embedded magnet)", "auto")
+    shear_use = ModelUse("shear", "fe", math.nan, f"{SHEAR_DESCRIPTION}; mesh {response.mesh_mm:g} mm", "auto")
     arrays = {**normal_arrays, "indentation": nominal.indentation_mm, **shear_arrays}
     timings = {"field_choice": t_field - t0, "mechanics": t_mech - t_field, "chain": t_end - t_mech,
                "total": t_end - t0}
@@ -473,37 +468,6 @@ def _normal(design: "Design", chip: ChipSetting, nz: Mapping[str, float], magnet
     arrays = {"u": u, "in_range": in_range, **{f"bz_{b}": v for b, v in bz.items()},
               **{f"sb_{b}": v for b, v in s_b.items()}, **{f"ke_{k}": v for k, v in k_e.items()},
               **{f"sf_{k}_{b}": v for (k, b), v in s_f.items()}, **{f"res_{k}_{b}": v for (k, b), v in res_mN.items()}}
-    return figures, arrays
-
-
-def _shear(design: "Design", chip: ChipSetting, nz: Mapping[str, float], magnets: Mapping[str, fieldmod.Magnet],
-           fmodel: str, body: mech.Body, mus: Mapping[str, float]) -> tuple[ShearFigures, dict[str, np.ndarray]]:
-    """Shear load: lateral travel up to the magnet's radius (or the XY full scale), over both bands."""
-    r = np.linspace(0.0, design.magnet_radius_mm, 21)
-    ks_nominal = mech.shear_stiffness(body, mus["nominal"], mech.ShearModel.FE)  # linear in mu: one solve
-    ks = {k: ks_nominal * mu / mus["nominal"] for k, mu in mus.items()}
-    br = {b: np.asarray(fieldmod.bz_br(m, design.d_rest_mm, r, model=fmodel, rtol=None)[1]) for b, m in magnets.items()}
-    dbr = {b: _derivative(r, v) for b, v in br.items()}
-    s_fs = {(k, b): dbr[b] / ks[k] for k in ks for b in magnets}
-    s_fs_all = np.array(list(s_fs.values()))
-    res_s_mN = {kb: MN_PER_N * nz["total_xy_G"] / np.maximum(v, 1e-300) for kb, v in s_fs.items()}
-    limits = {"lateral travel = magnet radius": design.magnet_radius_mm}
-    over_xy = np.nonzero(br["high"] > chip.full_scale_xy_G)[0]
-    if over_xy.size:
-        limits["chip full scale"] = _crossing(r, br["high"], chip.full_scale_xy_G, over_xy[0])
-    binding = min(limits, key=limits.get)
-    shear_range = {k: float(v * limits[binding]) for k, v in ks.items()}
-    figures = ShearFigures(
-        stiffness_N_per_mm=ks,
-        sensitivity_G_per_N=(float(s_fs_all.min()), float(s_fs_all.max())),
-        resolution_mN=max(float(v[0]) for v in res_s_mN.values()),
-        range_N=min(shear_range.values()),
-        range_by_material_N=shear_range,
-        range_limit=binding,
-        sensitivity_at_rest_G_per_N={k: float(s_fs[(k, "nominal")][0]) for k in ks},
-    )
-    arrays = {"r": r, **{f"br_{b}": v for b, v in br.items()}, **{f"dbr_{b}": v for b, v in dbr.items()},
-              **{f"sfs_{k}_{b}": v for (k, b), v in s_fs.items()}}
     return figures, arrays
 
 

@@ -62,13 +62,16 @@ def test_the_issues_figures_follow_eq10_and_eq11_from_the_published_data(pred, d
     soft = np.asarray([force for _, force in n["curve"]["soft"]])
     assert n["range_N"] == pytest.approx(float(np.interp(n["travel_mm"], u, soft)), rel=1e-12)
     assert n["range_N"] == min(n["range_by_material_N"].values())
-    # shear: on the axis dBr/dr = dBz/dz / 2 (paraxial expansion of a curl- and divergence-free field), so the
-    # worst shear resolution is the stiff material with the weakest magnet at rest
+    # shear: on the axis dBr/dr = dBz/dz / 2 (paraxial expansion of a curl- and divergence-free field); the chip
+    # reads the magnet's shift (dBx/dshift = dBr/dr) and tilt (dBx/dtilt = Bz - gap dBr/dr, field.tilt), so at rest
+    # S = dBr/dr / k_s + (Bz - d_rest dBr/dr) tilt_per_N; the worst resolution is the stiff material with the
+    # weakest magnet at rest (the sensitivity rises with preload as the gap closes and the tilt falls)
     s = d["shear"]
     assert f["dBr_dr_rest_G_per_mm"] == pytest.approx(f["dBz_dz_rest_G_per_mm"] / 2, rel=2e-3)
-    weakest = f["dBr_dr_rest_G_per_mm"] * f["remanence_T"]["low"] / f["remanence_T"]["nominal"]
-    stiff = s["stiffness_N_per_mm"]["stiff"]
-    assert s["resolution_mN"] == pytest.approx(1000 * noise_G["total_xy_G"] * stiff / weakest, rel=1e-9)
+    weak = f["remanence_T"]["low"] / f["remanence_T"]["nominal"]
+    d_shift, d_tilt = f["dBr_dr_rest_G_per_mm"], f["Bz_rest_G"] - design.d_rest_mm * f["dBr_dr_rest_G_per_mm"]
+    worst = weak * (d_shift / s["stiffness_N_per_mm"]["stiff"] + d_tilt * s["tilt_at_rest_rad_per_N"]["stiff"])
+    assert s["resolution_mN"] == pytest.approx(1000 * noise_G["total_xy_G"] / worst, rel=2e-3)
     assert s["range_N"] == pytest.approx(s["stiffness_N_per_mm"]["soft"] * design.magnet_radius_mm)
     assert set(d["models"]) == {"field", "mechanics", "shear"}
 
@@ -157,7 +160,8 @@ def test_a_curve_is_named_by_what_ends_it():
 
 def test_sensitivity_at_rest_is_eq10_per_material_with_the_nominal_magnet(pred, design):
     """predictions.json's at-rest sensitivities, recomputed from its own numbers and eq. 6 written here: normal
-    S_F = (dBz/du) / (dF/du) at u = 0, shear (dBr/dr) / k_s, each for the nominal grade and every material."""
+    S_F = (dBz/du) / (dF/du) at u = 0, shear dBr/dr / k_s + (Bz - d_rest dBr/dr) tilt (the magnet's shift and
+    tilt per N), each for the nominal grade and every material."""
     d = json.loads(json.dumps(pred.as_json()))
     n, s, f = d["normal"], d["shear"], d["field"]
     u = np.asarray(n["magnet_displacement_mm"])
@@ -167,8 +171,10 @@ def test_sensitivity_at_rest_is_eq10_per_material_with_the_nominal_magnet(pred, 
     for k in ("soft", "nominal", "stiff"):
         k_e = np.gradient([force for _, force in n["curve"][k]], u, edge_order=2)[0]
         assert n["sensitivity_at_rest_G_per_N"][k] == pytest.approx(s_b / k_e, rel=1e-3)
+        d_shift, d_tilt = f["dBr_dr_rest_G_per_mm"], f["Bz_rest_G"] - design.d_rest_mm * f["dBr_dr_rest_G_per_mm"]
         assert s["sensitivity_at_rest_G_per_N"][k] == pytest.approx(
-            f["dBr_dr_rest_G_per_mm"] / s["stiffness_N_per_mm"][k], rel=1e-9)
+            d_shift / s["stiffness_N_per_mm"][k] + d_tilt * s["tilt_at_rest_rad_per_N"][k], rel=2e-3)
+        assert s["sensitivity_at_rest_G_per_N"][k] < d_shift / s["stiffness_N_per_mm"][k]  # the tilt cancels some
     for key in ("normal", "shear"):
         at_rest = d[key]["sensitivity_at_rest_G_per_N"]
         assert at_rest["soft"] > at_rest["nominal"] > at_rest["stiff"] > 0  # softer silicone, more G per N
@@ -177,11 +183,19 @@ def test_sensitivity_at_rest_is_eq10_per_material_with_the_nominal_magnet(pred, 
 
 
 def test_shear_uses_the_fe_and_its_range_is_the_magnet_radius(pred, design):
+    """At rest the magnet's lateral stiffness under a load through the surface is today's load-on-the-magnet FE
+    within 2 % (MagOne); along the scan it falls with preload (compressive prestress), and the sensitivity the
+    chip sees rises (the gap closes, the tilt falls)."""
     s = pred.as_json()["shear"]
     body = M.Body.from_design(design)
     k = M.shear_stiffness(body, pred.as_json()["material_mu_kPa"]["soft"], "fe")
-    assert s["stiffness_N_per_mm"]["soft"] == pytest.approx(k, rel=1e-9)
-    assert s["range_N"] == pytest.approx(k * design.magnet_radius_mm)
+    assert s["stiffness_N_per_mm"]["soft"] == pytest.approx(k, rel=0.02)
+    assert s["range_N"] == pytest.approx(s["stiffness_N_per_mm"]["soft"] * design.magnet_radius_mm)
+    along = s["along_scan"]
+    assert along["indentation_mm"][0] == 0.0 and along["indentation_mm"][-1] == design.spec.calibration.scan_z_mm
+    assert np.all(np.diff(along["magnet_stiffness_N_per_mm"]["nominal"]) < 0)
+    assert np.all(np.diff(along["sensitivity_G_per_N"]["nominal"]) > 0)
+    assert along["magnet_stiffness_N_per_mm"]["soft"][0] == s["stiffness_N_per_mm"]["soft"]
 
 
 def test_saturating_design_is_refused_with_the_distance_to_use():
