@@ -245,11 +245,10 @@ class Predict(_Section):
     required_resolution_mN: Optional[float] = Field(
         None, gt=0.0, le=1.0e4,
         description="Worst-case normal force resolution the application needs, mN (omit: no requirement).")
-    # The allowed stretch is an engineering choice, NOT a sourced material limit: a fatigue or working-strain rule
-    # for casting silicones (a factor on the datasheet's elongation at break, e.g. from cyclic Ecoflex / Dragon Skin
-    # tests or a rubber design guide) was searched for and not found (issue 13), so no recipe carries a working
-    # stretch and 2.0 (100 % strain, a ninth of Ecoflex 00-30's 900 % elongation at break) stays the default. It is
-    # compared with the FE's kernel-averaged stretch (models/mechanics/energy.py), not a pointwise one.
+    # The allowed stretch 2.0 is where the material model's sources end (recipes/materials.toml): every neo-Hookean
+    # band is fitted to tensile data up to 100 % strain, so past it the force curve extrapolates. It is not a fatigue
+    # limit (none was found for casting silicones, issue 13); 100 % strain is a ninth of Ecoflex 00-30's 900 %
+    # elongation at break. It is compared with the FE's kernel-averaged stretch (models/mechanics/energy.py).
     max_stretch: float = Field(
         2.0, gt=1.0, le=10.0,
         description="Largest principal stretch allowed anywhere in the elastomer under load (limits the force range).")

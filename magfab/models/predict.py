@@ -214,7 +214,8 @@ def normal_curve(design: "Design", body: mech.Body, mu: float,
     depth = float(design.spec.calibration.scan_z_mm)  # the deepest indentation the design is used over
     depths, rest = shear_probe_depths(design, indentation), design.spec.calibration.scan_step_mm
     for mesh in fe_meshes(design):  # coarse to fine; past the last, the model-error warning says so
-        probe = mech.ShearProbe(depths_mm=depths, rest_indentation_mm=rest)
+        # the first mesh is never the chosen one (it is the reference of the second's error estimate): no probe
+        probe = mech.ShearProbe(depths_mm=depths, rest_indentation_mm=rest) if previous is not None else None
         curve = _fe_curve(body, mu, indentation, mesh, depth, probe)
         curve.info["shear_probe"] = probe
         if previous is not None:
