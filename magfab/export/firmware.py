@@ -74,14 +74,17 @@ HALLCONF = 0xC
 #: Temperature channel, TCMP off: T = 25 C + (raw - T25) / TRES, both from recipes/chips.toml (datasheet Table 7).
 TEMPERATURE_RAW_25C = int(catalogue("chips")["mlx90393"]["temperature_raw_25C"].nominal)
 TEMPERATURE_LSB_PER_C = catalogue("chips")["mlx90393"]["temperature_lsb_per_C"].nominal
-#: Allowance on the datasheet's conversion time for the chip's internal oscillator. Assumption: the recipe gives
-#: the typical TCONV only. Every read waits this much longer than the nominal conversion.
-TCONV_MARGIN = 0.10
+#: How long after a conversion is due (the datasheet's table) the firmware reads it, as a fraction of the conversion.
+#: Assumption: covers the read's own start-up and the timer's granularity; the reads then follow on a fixed grid one
+#: conversion apart, so the margin does not accumulate and every conversion is read once. A chip slower than the
+#: table is caught by the ERROR-bit retry below (the grid then re-anchors on the retry); one faster than the table
+#: loses conversions in proportion.
+READ_MARGIN = 0.05
 #: Wait after RT before the next command. Assumption: the recipe has no start-up time; public drivers wait 1 to
 #: 10 ms. Only recovery pays it.
 RESET_WAIT_US = 5000
 #: A read the chip rejects while it is still in its measuring mode (burst, or a single measurement not done) is
-#: tried once more after this fraction of the conversion wait: a slow oscillator, not a fault, until it fails
+#: tried once more after this fraction of the conversion: a slow oscillator, not a fault, until it fails
 #: twice.
 RETRY_FRACTION = 0.25
 START_TRIES = 3
@@ -131,13 +134,24 @@ class ChipConfig:
     raw_signed: bool  # RES 0/1: two's complement words
     raw_zero: int  # word at zero field (RES 2: 32768, RES 3: 16384, else 0)
     raw_limit: int  # |counts| at the output limit: the saturation flag
-    tconv_us: int  # one measurement of the zyxt channels, nominal (datasheet formula), rounded up
-    tconv_wait_us: int  # the same with TCONV_MARGIN: the wait before every read
+    tconv_us: int  # one measurement of the zyxt channels: the datasheet's table (recipe), rounded up
+    read_margin_us: int  # READ_MARGIN of it: how long after a conversion is due it is read
 
     @property
     def sample_rate_Hz(self) -> float:
-        """Frames per second in burst mode (one per conversion wait); single mode adds the bus time."""
-        return 1e6 / self.tconv_wait_us
+        """Frames per second in burst mode: one per conversion (the reads are paced by the chip's table).
+        Single mode adds the margin and the bus time to each sample."""
+        return 1e6 / self.tconv_us
+
+
+def conversion_us(chip: Any, osr: int, dig_filt: int, temperature: bool, axes: int = 3) -> float:
+    """One measurement of ``axes`` magnetic axes (and T), us, from the datasheet's table of full (ZYXT)
+    measurements in the recipe (``tconv_osr<o>_dig_filt<d>_ms``); fewer channels take off the Table 8 formula's
+    per-channel time (TCONVM per axis, TCONVT for T at OSR2 = 0)."""
+    full = chip[f"tconv_osr{osr}_dig_filt{dig_filt}_ms"].nominal * 1000.0
+    axis = chip["tconvm_offset_us"].nominal + chip["tconvm_step_us"].nominal * 2**osr * (2 + 2**dig_filt)
+    temp = chip["tconvm_offset_us"].nominal + chip["tconvt_step_us"].nominal
+    return full - (3 - axes) * axis - (0.0 if temperature else temp)
 
 
 def _value(option: object) -> str:
@@ -156,9 +170,7 @@ def chip_config(design: "Design") -> ChipConfig:
         (0x01, 0x1FFF, zyxt << 6),  # BURST_DATA_RATE 0, BURST_SEL, TCMP_EN 0, EXT_TRG 0, WOC_DIFF 0
         (0x02, 0x1FFF, s.osr | s.dig_filt << 2 | res << 5 | res << 7 | res << 9),  # OSR2 = 0
     )
-    axis = chip["tconvm_offset_us"].nominal + chip["tconvm_step_us"].nominal * 2**s.osr * (2 + 2**s.dig_filt)
-    temp = chip["tconvm_offset_us"].nominal + chip["tconvt_step_us"].nominal  # OSR2 = 0
-    tconv = 3 * axis + (temp if temperature else 0.0) + chip["tconv_end_us"].nominal
+    tconv = math.ceil(round(conversion_us(chip, s.osr, s.dig_filt, temperature), 6))
     zero = int(chip[f"output_zero_res{res}_lsb"].nominal) if res >= 2 else 0
     return ChipConfig(
         gain_sel=s.gain_sel, resolution=res, osr=s.osr, dig_filt=s.dig_filt, zyxt=zyxt,
@@ -166,7 +178,7 @@ def chip_config(design: "Design") -> ChipConfig:
         lsb_xy_uT=chip[f"sensitivity_xy_gain{s.gain_sel}_uT_per_lsb"].nominal * 2**res,
         lsb_z_uT=chip[f"sensitivity_z_gain{s.gain_sel}_uT_per_lsb"].nominal * 2**res,
         raw_signed=res < 2, raw_zero=zero, raw_limit=int(chip[f"output_limit_res{res}_lsb"].nominal),
-        tconv_us=math.ceil(tconv), tconv_wait_us=math.ceil(tconv * (1.0 + TCONV_MARGIN)),
+        tconv_us=tconv, read_margin_us=math.ceil(tconv * READ_MARGIN),
     )
 
 
@@ -386,10 +398,10 @@ def _context(design: "Design", calibration: Mapping[str, Any]) -> dict[str, Any]
         "raw_signed": int(chip.raw_signed), "raw_zero": chip.raw_zero, "raw_limit": chip.raw_limit,
         "t_raw_25c": TEMPERATURE_RAW_25C, "t_lsb_per_c": TEMPERATURE_LSB_PER_C,
         "t_c_per_lsb": 1.0 / TEMPERATURE_LSB_PER_C,
-        "tconv_us": chip.tconv_us, "tconv_wait_us": chip.tconv_wait_us, "margin_pct": round(TCONV_MARGIN * 100),
-        "first_wait_us": 2 * chip.tconv_wait_us,
-        "retry_us": math.ceil(chip.tconv_wait_us * RETRY_FRACTION),
-        "exit_wait_us": chip.tconv_wait_us,
+        "tconv_us": chip.tconv_us, "read_margin_us": chip.read_margin_us, "margin_pct": round(READ_MARGIN * 100),
+        "tconv_ms": f"{chip.tconv_us / 1000:.3f}",
+        "retry_us": math.ceil(chip.tconv_us * RETRY_FRACTION),
+        "exit_wait_us": chip.tconv_us + chip.read_margin_us,
         "reset_wait_us": RESET_WAIT_US, "start_tries": START_TRIES, "lost_retry_us": LOST_RETRY_US,
         "board_pullups": bool(spec.pcb.pullups),
         "hex_name": HEX_NAME,
@@ -403,7 +415,8 @@ def _context(design: "Design", calibration: Mapping[str, Any]) -> dict[str, Any]
         "out_limit": [int(recipe[f"output_limit_res{r}_lsb"].nominal) for r in range(4)],
         "out_zero": [0, 0, int(recipe["output_zero_res2_lsb"].nominal), int(recipe["output_zero_res3_lsb"].nominal)],
         "tconvm_offset": recipe["tconvm_offset_us"].nominal, "tconvm_step": recipe["tconvm_step_us"].nominal,
-        "tconvt_step": recipe["tconvt_step_us"].nominal, "tconv_end": recipe["tconv_end_us"].nominal,
+        "tconvt_step": recipe["tconvt_step_us"].nominal,
+        "tconv_table": [[recipe[f"tconv_osr{o}_dig_filt{d}_ms"].nominal * 1000.0 for o in range(4)] for d in range(8)],
         "forbidden": forbidden,
         "reg_default": list(SIM_REGISTER_DEFAULTS),
     }

@@ -92,12 +92,12 @@ def calibration_sha256(calibration: Mapping[str, Any]) -> str:
 
 def _build_data(design, checked: calibration_json.Checked) -> dict[str, object]:
     """build.json: what the package's ``_build`` module reads (the spec, the firmware's settings, the hash)."""
-    from ..models.predict import chip_setting  # numpy; kept out of 'import magfab'
+    from .firmware import chip_config
 
     spec = design.spec
-    chip = chip_setting(design)
+    chip = chip_config(design)  # the firmware's own: its rate is one frame per conversion (the datasheet's table)
     limit = design.chip[f"output_limit_res{spec.sensor.resolution}_lsb"].nominal
-    numbers = {"lsb_xy_uT": chip.lsb_xy_uT, "lsb_z_uT": chip.lsb_z_uT, "sample_rate_Hz": chip.rate_Hz}
+    numbers = {"lsb_xy_uT": chip.lsb_xy_uT, "lsb_z_uT": chip.lsb_z_uT, "sample_rate_Hz": chip.sample_rate_Hz}
     for key, value in numbers.items():
         if not (math.isfinite(value) and value > 0):
             raise SpecError("sensor", value, f"gives a {key} that is not a positive number")
@@ -116,7 +116,7 @@ def _build_data(design, checked: calibration_json.Checked) -> dict[str, object]:
         "lsb_xy_uT": float(chip.lsb_xy_uT),
         "lsb_z_uT": float(chip.lsb_z_uT),
         "full_scale_counts": int(round(limit)),
-        "sample_rate_Hz": round(float(chip.rate_Hz), 6),
+        "sample_rate_Hz": round(float(chip.sample_rate_Hz), 6),
         "temperature_raw_25C": TEMPERATURE_RAW_25C,
         "temperature_lsb_per_C": TEMPERATURE_LSB_PER_C,
         "calibration_sha256": checked.sha256,

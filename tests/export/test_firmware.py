@@ -291,7 +291,8 @@ def test_single_mode_and_no_temperature(build_host):
     assert [f["status"] for f in frames] == [0, 0, 0]
     assert all(f["t_raw"] == 0 for f in frames)
     period = np.diff([f["t_us"] for f in frames])
-    assert np.all(period >= h.chip.tconv_wait_us) and np.all(period < h.chip.tconv_wait_us + 400)
+    wait = h.chip.tconv_us + h.chip.read_margin_us
+    assert np.all(period >= wait) and np.all(period < wait + 400)
 
 
 @pytest.mark.parametrize("res", [0, 1, 2, 3])
@@ -429,21 +430,23 @@ def test_lost_chip_retries_then_recovers(host):
     assert all(f["status"] == 0 for f in back[1:])
 
 
-def test_burst_pace_is_the_computed_conversion_time(host):
-    """Burst frames come one computed conversion (+ the oscillator margin) apart: >= 500 Hz for MagOne. The
-    simulated chip rejects a read before its conversion is done, so the wait is long enough; a chip 30 % slower
-    than nominal needs the odd retry, so the wait is not generously padded either; one twice as slow fails."""
+def test_burst_pace_is_the_datasheet_conversion_time(host):
+    """Burst frames come exactly one conversion apart, the datasheet table's 1.84 ms for MagOne's T+X+Y+Z at OSR 0,
+    DIG_FILT 2 (the Table 8 formula would say 1.712 ms): a fixed grid, so no read is lost to drift. The simulated
+    chip rejects a read before its conversion is done: a chip slower than the table needs retries (the safety
+    net, each a quarter-conversion later, re-anchoring the grid) but still no error; one twice as slow fails."""
     chip = host.chip
+    assert (chip.osr, chip.dig_filt, chip.temperature) == (0, 2, True) and chip.tconv_us == 1840
     axis = 67 + 64 * 2**chip.osr * (2 + 2**chip.dig_filt)
-    assert chip.tconv_us == math.ceil(3 * axis + (67 + 192) + 100)
-    retry = math.ceil(chip.tconv_wait_us * firmware.RETRY_FRACTION)
-    for scale, retried, errors in ((1.0, False, False), (1.09, False, False), (1.3, True, False), (2.0, None, True)):
+    assert chip.tconv_us > math.ceil(3 * axis + (67 + 192) + 100)  # the table is longer than the formula
+    retry = math.ceil(chip.tconv_us * firmware.RETRY_FRACTION)
+    for scale, retried, errors in ((1.0, False, False), (1.09, True, False), (1.3, True, False), (2.0, None, True)):
         out, events = host.run("B 900 -400 -2800 25\nS 60\n", "--clock-scale", str(scale))
         assert any(e != 0 for _, e, _, _ in polls(events)) is errors, scale
-        if retried is not None:  # every read on time, or (a slow chip) the odd one retried a quarter-wait later
-            late = np.diff([f["t_us"] for f in frames_of(out)]) - chip.tconv_wait_us
+        if retried is not None:  # every read on the grid, or (a slow chip) the odd one retried a quarter later
+            late = np.diff([f["t_us"] for f in frames_of(out)]) - chip.tconv_us
             assert set(late[late != 0]) <= set(range(retry, retry + 400)) and bool(np.any(late)) is retried, scale
-    assert 1e6 / chip.tconv_wait_us >= 500.0
+    assert 1e6 / chip.tconv_us >= 500.0
 
 
 # ---- output modes ------------------------------------------------------------------------------------------

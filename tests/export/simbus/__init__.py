@@ -57,7 +57,7 @@ def _declare(lib: ctypes.CDLL) -> ctypes.CDLL:
         "bus_send_uart": (None, [p, u8]), "bus_set_field": (None, [p, d, d, d, d]),
         "bus_chip_fault": (None, [p, ctypes.c_int, u16]), "bus_nack": (None, [p, u32, u32]),
         "bus_ff_reads": (None, [p, u32]), "bus_reset_in": (None, [p, u32]), "bus_hang_us": (None, [p, u64]),
-        "bus_absent": (None, [p, ctypes.c_int]), "bus_status_fixes": (u32, [p]), "bus_phases": (u32, [p]),
+        "bus_absent": (None, [p, ctypes.c_int]), "bus_clock_scale": (None, [p, d]), "bus_status_fixes": (u32, [p]), "bus_phases": (u32, [p]),
         "bus_held": (u32, [p]), "bus_uart_cycles_per_byte": (u32, [p]), "bus_chip_register": (u16, [p, u8]),
         "bus_chip_mode": (ctypes.c_int, [p]), "bus_conversion_us": (d, [p]), "bus_conversions": (u64, [p]),
         "bus_close": (None, [p]),
@@ -129,6 +129,10 @@ class Bus:
     def absent(self, on: bool) -> None:
         """The chip off the bus (nothing ACKs) or back on it."""
         self._lib.bus_absent(self._h, int(on))
+
+    def clock_scale(self, scale: float) -> None:
+        """The chip's conversions take ``scale`` times the datasheet table's time from now on (a slow oscillator)."""
+        self._lib.bus_clock_scale(self._h, scale)
 
     def register(self, reg: int) -> int:
         """The chip model's register ``reg`` now."""

@@ -301,6 +301,8 @@ void bus_ff_reads(bus_t *b, uint32_t n) { b->ff_reads = n; }
 void bus_reset_in(bus_t *b, uint32_t n) { b->reset_in = n; }
 void bus_hang_us(bus_t *b, uint64_t us) { b->hang_for_us = us; }
 void bus_absent(bus_t *b, int absent) { b->absent = (uint8_t)absent; }
+/* The chip's oscillator: its conversions take this many times the table's time from now on. */
+void bus_clock_scale(bus_t *b, double scale) { b->chip.clock_scale = scale; }
 uint32_t bus_status_fixes(bus_t *b) { return b->status_fixes; }
 uint32_t bus_phases(bus_t *b) { return b->phases; }
 uint32_t bus_held(bus_t *b) { return b->held; }

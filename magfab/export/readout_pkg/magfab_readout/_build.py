@@ -28,7 +28,7 @@ DIG_FILT = int(_DATA["dig_filt"])
 LSB_XY_UT = float(_DATA["lsb_xy_uT"])  # microtesla per count, X and Y
 LSB_Z_UT = float(_DATA["lsb_z_uT"])  # microtesla per count, Z
 FULL_SCALE_COUNTS = int(_DATA["full_scale_counts"])  # |count| at which an axis is at the chip's full scale
-SAMPLE_RATE_HZ = float(_DATA["sample_rate_Hz"])  # one T+X+Y+Z conversion per sample
+SAMPLE_RATE_HZ = float(_DATA["sample_rate_Hz"])  # one frame per conversion (the datasheet table's time)
 
 # Temperature: T = 25 C + (raw - TEMPERATURE_RAW_25C) / TEMPERATURE_LSB_PER_C (MLX90393, TCMP off).
 TEMPERATURE_ENABLED = bool(_DATA["temperature"])

@@ -1,6 +1,8 @@
-/* The readout loop: see mf_app.h. Timing comes from the datasheet's conversion-time formula (mf_config.h),
- * never from fixed generous delays: in burst mode each read is scheduled one conversion (plus the oscillator
- * margin) after the previous one, so every read finds a fresh conversion. */
+/* The readout loop: see mf_app.h. Timing comes from the datasheet's conversion-time table (mf_config.h), never
+ * from fixed generous delays: in burst mode the reads follow a fixed grid one conversion apart, the first a small
+ * margin after the first conversion is due, so every read finds a fresh conversion and none is skipped (the
+ * grid does not drift with the time a read or a frame takes). A read the chip rejects as too early is retried
+ * once, and the grid re-anchors on the retry: the safety net for a chip slower than the table. */
 #include "mf_app.h"
 
 #include "mf_calib.h"
@@ -92,7 +94,7 @@ static int start_once(mf_app_t *a)
     if (rc != MF_OK) {
         return rc;
     }
-    a->t_next = now(a) + MF_FIRST_WAIT_US;
+    a->t_next = now(a) + MF_TCONV_US + MF_READ_MARGIN_US;
 #else
     a->t_next = now(a);
 #endif
@@ -114,14 +116,16 @@ int mf_app_start_chip(mf_app_t *a)
 }
 
 /* RM, once more after MF_RETRY_US if the chip rejects it while still in the measuring mode: the conversion
- * ran late (the chip's oscillator is slower than the margin allows). A second rejection is an error.
- * *t_us is when the last attempt started. */
-static int read_measurement(mf_app_t *a, mlx_raw_t *raw, uint8_t mode_bit, uint32_t *t_us)
+ * ran late (the chip's oscillator is slower than the table). A second rejection is an error.
+ * *t_us is when the last attempt started; *retried says whether there was a second. */
+static int read_measurement(mf_app_t *a, mlx_raw_t *raw, uint8_t mode_bit, uint32_t *t_us, uint8_t *retried)
 {
     int rc;
     *t_us = now(a);
+    *retried = 0;
     rc = mlx_read_measurement(&a->chip, MF_ZYXT, raw);
     if (rc == MF_E_CHIP && (a->chip.status & mode_bit)) {
+        *retried = 1;
         a->hal->delay_us(a->hal->ctx, MF_RETRY_US);
         *t_us = now(a);
         rc = mlx_read_measurement(&a->chip, MF_ZYXT, raw);
@@ -133,10 +137,15 @@ static int read_measurement(mf_app_t *a, mlx_raw_t *raw, uint8_t mode_bit, uint3
 static int acquire(mf_app_t *a, mlx_raw_t *raw, uint32_t *t_us)
 {
     int rc;
+    uint8_t retried;
 #if MF_BURST
+    if ((int32_t)(now(a) - a->t_next) > (int32_t)MF_TCONV_US) {
+        a->t_next = now(a); /* fell behind by more than a conversion (a stalled host link): catch up, not burst */
+    }
     wait_until(a, a->t_next);
-    rc = read_measurement(a, raw, MLX_ST_BURST, t_us);
-    a->t_next = *t_us + MF_TCONV_WAIT_US; /* paced from the read that found the conversion */
+    rc = read_measurement(a, raw, MLX_ST_BURST, t_us, &retried);
+    /* the grid: one conversion on from the scheduled read, or from the retry that found a late conversion */
+    a->t_next = (retried ? *t_us : a->t_next) + MF_TCONV_US;
     if (rc == MF_OK && !(a->chip.status & MLX_ST_BURST)) {
         rc = MF_E_MODE;
     }
@@ -146,8 +155,8 @@ static int acquire(mf_app_t *a, mlx_raw_t *raw, uint32_t *t_us)
         *t_us = now(a);
         return rc;
     }
-    a->hal->delay_us(a->hal->ctx, MF_TCONV_WAIT_US);
-    rc = read_measurement(a, raw, MLX_ST_SM, t_us);
+    a->hal->delay_us(a->hal->ctx, MF_TCONV_US + MF_READ_MARGIN_US);
+    rc = read_measurement(a, raw, MLX_ST_SM, t_us, &retried);
 #endif
     return rc;
 }
