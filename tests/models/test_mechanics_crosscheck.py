@@ -1,27 +1,39 @@
 """An independent cross-check of the indentation FE: the same axisymmetric problem solved with FElupe's elements.
 
 What is shared and what is not. Shared: the geometry and its straight-sided triangulation (magfab's graded mesh
-vertices and triangles, its boundary tags), and a small Newton / active-set loop written here (rigid magnet: one
-common axial displacement; flat frictionless indenter: prescribed axial displacement on the surface nodes it
-touches). Not shared: the quadratic nodes (FElupe's ``add_midpoints_edges``), FElupe's quadratic triangles,
-quadrature, axisymmetric kinematics, its neo-Hookean law and its (u, p, J) three-field nearly-incompressible
+vertices and triangles, its boundary tags), and a small Newton / active-set loop written here (rigid magnet: u_r = 0
+and one common axial displacement on every node of its surface, midpoints included; flat frictionless indenter:
+prescribed axial displacement on the surface nodes it touches). Not shared: the quadratic nodes (FElupe's
+``add_midpoints_edges``), FElupe's quadratic triangle element, its quadrature (7 points), axisymmetric kinematics,
+its neo-Hookean law (``NeoHookeCompressible``, lambda = 0) and its (u, p, J) three-field nearly-incompressible
 formulation (continuous P1 pressure and volume ratio, bulk modulus 5000 mu; magfab: two-field Taylor-Hood P2/P1,
-exact incompressibility).
+exact incompressibility, its own assembly and kinematics), and the linear solver (SuperLU; magfab: QDLDL).
 
 FElupe's conventions (read from its source, ``felupe/field/_axi.py``): the first coordinate is the axial one, the
 second the radius (the hoop stretch is 1 + u_2 / X_2), so magfab's (r, z) points are swapped and each triangle's
-corner order reversed to stay counter-clockwise. The NaN residual of the first attempt came from the (r, z) order
-(FElupe took z as the radius) and from FElupe's mean-dilatation state, which moves incrementally with every
-evaluation and is poisoned by one evaluation at an inverted trial state; the three-field form below keeps p and J
-as ordinary unknowns, so an evaluation is a pure function of them.
+corner order reversed to stay counter-clockwise. The three-field form keeps p and J as ordinary unknowns, so an
+evaluation is a pure function of them (FElupe's mean-dilatation state, by contrast, moves with every evaluation).
 
-Status (issue 13 item 4, still open, so the tests with a magnet are skipped): FElupe converges on MagOne but is
-softer than magfab -- F(0.5 mm) = 10.36, 10.63, 10.67 mu mm^2 on 1.0, 0.5, 0.25 mm meshes against magfab's 10.93, 10.93,
-10.99 (-5.5 %, -2.8 %, -3.0 %), and 26 % softer at 1 mm on the 1 mm mesh, where its Newton stalls (0.8-1.3 mm).
-Without a magnet the two agree within 0.2-1.7 % (flat and hemispherical tips, 0.1-1 mm). FElupe's solution shows
-J oscillating between 0.6 and 1.4 across the quadrature points of the elements between the magnet's top and the
-apex (the volume constraint holds only on P1 averages there), and the result depends on the law's volumetric part
-(isochoric NeoHooke: 8 % softer at 0.5 mm) -- see the report for the next steps.
+FElupe's own quadratic triangle has a wrong shape-function gradient (FElupe 11.3.0, unchanged in the newest
+upstream source seen; ``element/_triangle.py``, ``QuadraticTriangle.gradient``): d N_5 / d s is written 4 (t1 - r)
+where N_5 = 4 s t1 gives 4 (t1 - s) (t1 = 1 - r - s), so it is right only where r = s. Integrals of a gradient
+against a constant are unaffected (the error integrates to zero over the triangle), so plane problems with uniform
+stress pass; against the axisymmetric weight 2 pi R, or any varying stress, they are not: a homogeneous axisymmetric
+stretch leaves interior nodal forces of ~2 % of the boundary ones (the patch test fails), and on MagOne the volume
+ratio oscillated between 0.6 and 1.5 at the quadrature points above the magnet. That was the whole of the
+disagreement this module used to report (FElupe 3-6 % softer at 0.5 mm, 26 % at 1 mm, Newton stalling near 1 mm):
+:class:`QuadraticTriangle` below is FElupe's element with the derivative corrected (its shape functions are
+FElupe's), and with it the two codes agree within 0.1 % to 3 mm on MagOne's 1 mm mesh. Isolated first, each in both
+codes (1 mm mesh, before the fix): the magnet pushed down 0.2 / 0.5 mm with a free top agreed within 0.9 / 1.3 %;
+the indenter bonded on magfab's contact set at 0.5 mm disagreed by 5.2 %, as the full active-set problem did, so
+the contact loop was not at fault.
+
+What the agreement shows. Both codes discretise the same vertices with quadratic displacements and linear continuous
+pressures, and their energies agree where J = 1, so they solve nearly the same discrete problem: the check is of
+magfab's implementation (kinematics, assembly, axis, magnet, contact, load stepping), not of its mesh error, which
+tests/models/test_mechanics.py and the range convergence tests measure. What is left between them is FElupe's finite
+bulk modulus: -0.05 to -0.08 % at 5000 mu, -0.5 to -0.75 % at 500 mu, -0.005 to -0.007 % at 50000 mu (MagOne, 1 mm
+mesh, 0.5 to 3 mm).
 """
 
 from __future__ import annotations
@@ -30,9 +42,6 @@ import numpy as np
 import pytest
 
 fem = pytest.importorskip("felupe")
-
-OPEN = pytest.mark.skip(reason="issue 13 item 4 open: FElupe runs but is 3-6 % softer than magfab on MagOne at 0.5 mm "
-                               "and stalls near 1 mm (module doc)")
 
 from scipy.sparse import csr_matrix  # noqa: E402
 from scipy.sparse.linalg import splu  # noqa: E402
@@ -47,36 +56,64 @@ BULK_PER_MU = 5000.0
 TOLERANCE = 0.02
 
 
+class QuadraticTriangle(fem.element.QuadraticTriangle):
+    """FElupe's six-node triangle (its shape functions and node order: corners, then the midpoints of edges 0-1,
+    1-2, 2-0) with the gradient of those shape functions, (6, 2) at (r, s); FElupe 11.3.0 gets d N_5 / d s wrong
+    (module doc)."""
+
+    def gradient(self, rs):
+        r, s = rs
+        t1 = 1.0 - r - s
+        return np.array([[1.0 - 4.0 * t1, 1.0 - 4.0 * t1], [4.0 * r - 1.0, 0.0], [0.0, 4.0 * s - 1.0],
+                         [4.0 * (t1 - r), -4.0 * r], [4.0 * s, 4.0 * r], [-4.0 * s, 4.0 * (t1 - s)]])
+
+
 def _quadratic_mesh(body: mech.Body, mesh_mm: float):
-    """FElupe's triangle6 mesh on magfab's vertices: (points (n, 2) as (z, r), cells (nel, 6), tags (n,)). A boundary
-    edge's midpoint gets the tags both its ends share; an interior edge's midpoint none."""
+    """FElupe's triangle6 mesh on magfab's vertices: (points (n, 2) as (z, r), cells (nel, 6), number of vertices,
+    tags (n,)). The vertices come first. A boundary edge's midpoint gets the tags both its ends share; an interior
+    edge's midpoint none."""
     m = _body_mesh(body, mesh_mm)
-    points, cells, kind = fem.mesh.add_midpoints_edges(m.p.T[:, ::-1].copy(), m.t.T[:, [0, 2, 1]].copy(), "triangle")
+    points, cells, _ = fem.mesh.add_midpoints_edges(m.p.T[:, ::-1].copy(), m.t.T[:, [0, 2, 1]].copy(), "triangle")
+    nv = m.p.shape[1]
     tags = np.zeros(len(points), dtype=np.int64)
-    tags[: m.p.shape[1]] = m.tags
-    ends = ((0, 1), (1, 2), (2, 0))  # FElupe's triangle6: nodes 3, 4, 5 are the midpoints of these edges
+    tags[:nv] = m.tags
+    ends = ((0, 1), (1, 2), (2, 0))  # triangle6: nodes 3, 4, 5 are the midpoints of these edges
     for k, (a, b) in zip((3, 4, 5), ends):
         tags[cells[:, k]] = tags[cells[:, a]] & tags[cells[:, b]]
     edges = np.sort(np.concatenate([cells[:, [a, b]] for a, b in ends]), axis=1)
     mids = np.concatenate([cells[:, k] for k in (3, 4, 5)])
     _, inverse, counts = np.unique(edges, axis=0, return_inverse=True, return_counts=True)
     tags[mids[counts[inverse.ravel()] > 1]] = 0
-    return points, cells, kind, tags
+    return points, cells, nv, tags
+
+
+def _mixed_fields(points: np.ndarray, cells: np.ndarray, nv: int):
+    """FElupe's (u, p, J) fields: u axisymmetric on the corrected quadratic triangles, p and J on the vertices'
+    linear triangles (continuous P1), all at the same 7-point quadrature."""
+    quadrature = fem.TriangleQuadrature(order=5)
+    region = fem.Region(fem.Mesh(points, cells, "triangle6"), QuadraticTriangle(), quadrature)
+    dual = fem.RegionTriangle(fem.Mesh(points[:nv], cells[:, :3], "triangle"), quadrature=quadrature, grad=False)
+    return fem.FieldContainer([fem.FieldAxisymmetric(region, dim=2), fem.Field(dual, values=0.0),
+                               fem.Field(dual, values=1.0)])
+
+
+def _factor(A):
+    """SuperLU of the reduced saddle-point tangent: minimum degree on A^T + A with a weak diagonal preference is ~7x
+    faster than the default (COLAMD, partial pivoting) here and as accurate (residual ~1e-12)."""
+    return splu(A.tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.01, options={"SymmetricMode": True})
 
 
 class FElupeIndentation:
     """The indentation on FElupe's mixed (u, p, J) axisymmetric solid, dimensionless (mu = 1, mm). Unknowns x: the
     displacement (n, 2) flattened (axial, radial per node), then p and J - 1 at the m vertices."""
 
-    def __init__(self, body: mech.Body, mesh_mm: float, bulk_per_mu: float = BULK_PER_MU, order: int = 5):
+    def __init__(self, body: mech.Body, mesh_mm: float, bulk_per_mu: float = BULK_PER_MU):
         self.body = body
-        points, cells, kind, tags = _quadratic_mesh(body, mesh_mm)
-        region = fem.RegionQuadraticTriangle(fem.Mesh(points, cells, kind),
-                                             quadrature=fem.TriangleQuadrature(order=order))
-        self.field = fem.FieldsMixed(region, n=3, axisymmetric=True)
+        points, cells, nv, tags = _quadratic_mesh(body, mesh_mm)
+        self.field = _mixed_fields(points, cells, nv)
         law = fem.NearlyIncompressible(fem.NeoHookeCompressible(mu=1.0, lmbda=0.0), bulk=bulk_per_mu)
         self.solid = fem.SolidBody(law, self.field)
-        self.n, self.m = len(points), self.field[1].values.shape[0]
+        self.n, self.m = len(points), nv
         self.nd = 2 * self.n + 2 * self.m
         self.Z = points[:, 0]
         magnet = ((tags & _MAGNET) != 0) & ((tags & _BASE) == 0)
@@ -85,7 +122,8 @@ class FElupeIndentation:
         self.fixed_z = ((tags & _BASE) != 0) | magnet
         self.cand = np.nonzero(((tags & _OUTER) != 0) & ((tags & (_BASE | _MAGNET)) == 0))[0]
         scale = max(body.radius_mm, body.height_mm)
-        self.tol, self.gap = 1e-8 * scale * scale, 1e-9 * scale
+        # nodal forces in mu mm^2 (the indenter force is ~1-200 here): 1e-6 scale^2 is ~1e-7 of it
+        self.tol, self.set_tol, self.gap = 1e-6 * scale * scale, 1e-2 * scale * scale, 1e-9 * scale
 
     def residual(self, x: np.ndarray) -> np.ndarray | None:
         """FElupe's assembled residual at x, or None where an element is inverted (non-finite)."""
@@ -93,7 +131,8 @@ class FElupeIndentation:
         self.field[0].values[:] = x[:n2].reshape(self.n, 2)
         self.field[1].values[:, 0] = x[n2:n2 + self.m]
         self.field[2].values[:, 0] = 1.0 + x[n2 + self.m:]
-        R = np.asarray(self.solid.assemble.vector(self.field).todense()).ravel()
+        with np.errstate(invalid="ignore", divide="ignore"):
+            R = np.asarray(self.solid.assemble.vector(self.field).todense()).ravel()
         return R if np.all(np.isfinite(R)) else None
 
     def operators(self, active: np.ndarray, delta: float):
@@ -112,17 +151,30 @@ class FElupeIndentation:
         prescribed[rows] = False
         return T, g, prescribed
 
-    def newton(self, delta: float, x: np.ndarray, R: np.ndarray, active: np.ndarray):
-        """Newton with the prescribed values entering as a consistent tangent step, halving a step until no element
-        inverts. Raises RuntimeError."""
+    def step(self, delta: float, x: np.ndarray, active: np.ndarray):
+        """One load step from the guess x: Newton with the prescribed values entering as a consistent tangent step
+        (a step halved until no element inverts), the contact set revised once the residual is small (penetrating
+        nodes join, pulling ones leave), done when the residual vanishes and the set stays. Raises RuntimeError."""
+        top = self.body.height_mm - delta
+        active = active | (self.Z[self.cand] + x[2 * self.cand] > top + self.gap)
         T, g, prescribed = self.operators(active, delta)
-        for _ in range(25):
+        R = self.residual(x)
+        if R is None:
+            raise RuntimeError(f"inverted guess at {delta:g} mm")
+        for _ in range(40):
             rem = np.where(prescribed, g - x, 0.0)
-            r = T.T @ R
-            if np.max(np.abs(r)) < self.tol and np.max(np.abs(rem)) < self.gap:
-                return x, R
+            res, pending = np.max(np.abs(T.T @ R)), np.max(np.abs(rem))
+            if res < self.set_tol and pending < self.gap:
+                add = ~active & (self.Z[self.cand] + x[2 * self.cand] > top + self.gap)
+                drop = active & (R[2 * self.cand] > self.tol)
+                if add.any() or drop.any():
+                    active = (active & ~drop) | add
+                    T, g, prescribed = self.operators(active, delta)
+                    rem = np.where(prescribed, g - x, 0.0)
+                elif res < self.tol:
+                    return x, R, active
             K = self.solid.assemble.matrix().tocsr()
-            dx = T @ splu((T.T @ K @ T).tocsc()).solve(-(r + T.T @ (K @ rem))) + rem
+            dx = T @ _factor(T.T @ K @ T).solve(-(T.T @ (R + K @ rem))) + rem
             for alpha in 0.5 ** np.arange(12):
                 Rn = self.residual(x + alpha * dx)
                 if Rn is not None:
@@ -132,76 +184,99 @@ class FElupeIndentation:
             x, R = x + alpha * dx, Rn
         raise RuntimeError(f"Newton did not converge at {delta:g} mm")
 
-    def step(self, delta: float, x: np.ndarray, R: np.ndarray, active: np.ndarray):
-        """One load step with the active set: add penetrating nodes, drop pulling ones, until it settles."""
-        top = self.body.height_mm - delta
-        for _ in range(30):
-            x, R = self.newton(delta, x, R, active)
-            add = ~active & (self.Z[self.cand] + x[2 * self.cand] > top + self.gap)
-            drop = active & (R[2 * self.cand] > self.tol)
-            if not (add.any() or drop.any()):
-                return x, R, active
-            active = (active & ~drop) | add
-        raise RuntimeError(f"contact set did not settle at {delta:g} mm")
-
-    def run(self, depths_mm: np.ndarray, step_mm: float = 0.1) -> np.ndarray:
-        """(k, 2): indenter force (mu mm^2) and magnet displacement (mm, + down) at each depth; a failing step is
-        halved down to 1/64 of ``step_mm``."""
-        x = np.zeros(self.nd)
+    def run(self, depths_mm: np.ndarray, step_mm: float = 0.5) -> np.ndarray:
+        """(k, 2): indenter force (mu mm^2) and magnet displacement (mm, + down) at each depth; each step starts from
+        the linear extrapolation of the last two converged states; a failing step is halved down to 1/64 of
+        ``step_mm``. Raises RuntimeError naming the depth where it stopped."""
+        x, active, prev = np.zeros(self.nd), np.zeros(self.cand.size, dtype=bool), None
         R = self.residual(x)
-        active = np.zeros(self.cand.size, dtype=bool)
         out, current = [], 0.0
         for target in depths_mm:
             step = step_mm
             while current < target - 1e-12:
                 delta = min(current + step, target)
+                guess = x if prev is None else x + (x - prev[1]) * (delta - current) / (current - prev[0])
+                if guess is not x and self.residual(guess) is None:
+                    guess = x
                 try:
-                    x, R, active = self.step(delta, x, R, active.copy())
+                    xn, R, active_n = self.step(delta, guess, active.copy())
                 except RuntimeError:
                     step *= 0.5
                     if step < step_mm / 64:
                         raise
                     continue
-                current, step = delta, min(2 * step, step_mm)
+                prev, x, active, current = (current, x), xn, active_n, delta
+                step = min(2 * step, step_mm)
             travel = -float(x[2 * self.magnet[0]]) if self.magnet.size else float("nan")
             out.append((-float(R[2 * self.cand[active]].sum()), travel))
         return np.array(out)
 
 
-def _compare(body: mech.Body, mesh_mm: float, mu_kPa: float = 23.0) -> tuple[np.ndarray, np.ndarray]:
-    ours = mech.fe(body, mu_kPa, np.concatenate([[0.0], DEPTHS_MM]), mesh_mm=mesh_mm).force_N[1:]
-    theirs = FElupeIndentation(body, mesh_mm).run(DEPTHS_MM)[:, 0] * mu_kPa * 1e-3  # mu mm^2 -> N
-    return ours, theirs
+def _compare(body: mech.Body, mesh_mm: float, depths_mm: np.ndarray = DEPTHS_MM) -> tuple[np.ndarray, np.ndarray]:
+    """(ours, theirs), each (k, 2): indenter force (mu mm^2) and magnet travel (mm) at each depth, mu = 1."""
+    curve = mech.fe(body, 1.0, np.concatenate([[0.0], depths_mm]), mesh_mm=mesh_mm)  # 1 kPa mm^2 = 1e-3 N
+    ours = np.column_stack([curve.force_N[1:] * 1e3, curve.magnet_displacement_mm[1:]])
+    return ours, FElupeIndentation(body, mesh_mm).run(depths_mm)
+
+
+def _body(name: str | None) -> mech.Body:
+    return mech.Body.from_design(derive(load_spec(None if name is None else f"bench/designs/{name}.toml")))
 
 
 @pytest.fixture(scope="module")
 def magone() -> mech.Body:
-    return mech.Body.from_design(derive(load_spec(None)))
+    return _body(None)
 
 
-@OPEN
+def test_quadratic_triangle_gradient_is_the_derivative_of_its_shape_functions():
+    """The corrected element's gradient against central differences of FElupe's shape functions (FElupe's own
+    gradient is off by up to 0.4 here: module doc)."""
+    element, h = QuadraticTriangle(), 1e-6
+    for rs in ([0.2, 0.3], [0.1, 0.7], [1 / 3, 1 / 3], [0.6, 0.05]):
+        rs = np.array(rs)
+        numeric = np.column_stack([(element.function(rs + h * e) - element.function(rs - h * e)) / (2 * h)
+                                   for e in np.eye(2)])
+        np.testing.assert_allclose(element.gradient(rs), numeric, atol=1e-8)
+
+
+def test_felupe_passes_the_axisymmetric_patch_test(magone):
+    """A homogeneous stretch (u_z = -0.1 z, u_r = 0.05 r, uniform stress with equal radial and hoop stretch) leaves no
+    force on an interior node of MagOne's 1 mm mesh (with FElupe's own element: up to 0.17 mu mm^2, 2 % of the
+    largest)."""
+    fe = FElupeIndentation(magone, 1.0)
+    points = fe.field[0].region.mesh.points
+    x = np.zeros(fe.nd)
+    x[:2 * fe.n] = np.column_stack([-0.1 * points[:, 0], 0.05 * points[:, 1]]).ravel()
+    R = fe.residual(x)[:2 * fe.n].reshape(fe.n, 2)
+    _, _, _, tags = _quadratic_mesh(magone, 1.0)
+    assert np.max(np.abs(R[tags == 0])) < 1e-10 * np.max(np.abs(R))
+
+
 def test_felupe_agrees_on_magone_to_full_indentation(magone):
-    """MagOne (rounded magnet edges, bonded base), 1 mm mesh graded at the edges: within 2 % at 0.5 to 3 mm."""
+    """MagOne (rounded magnet edges, bonded base), the 1 mm mesh auto may pick, to the 3 mm scan depth: force and
+    magnet travel within 2 % at 0.5, 1, 2 and 3 mm (measured -0.05 to -0.08 % and -0.01 %; the rest is FElupe's
+    finite bulk modulus: 0.5 to 0.75 % at 500 mu, 0.005 to 0.007 % at 50000 mu)."""
     ours, theirs = _compare(magone, 1.0)
-    np.testing.assert_array_less(np.abs(ours / theirs - 1.0), TOLERANCE)
+    np.testing.assert_array_less(np.abs(theirs / ours - 1.0), TOLERANCE)
 
 
 def test_felupe_agrees_without_a_magnet():
-    """No magnet, flat tip: the two codes agree within 2 % to 1 mm on the 1 mm mesh (measured 0.2-1.3 %)."""
+    """No magnet, flat tip: the two codes agree within 2 % to 1 mm on the 1 mm mesh."""
     body = mech.Body(radius_mm=6.0, height_mm=6.3, base_height_mm=6.3, tip="flat")
     d = np.array([0.1, 0.5, 1.0])
     ours = mech.fe(body, 1.0, np.concatenate([[0.0], d]), mesh_mm=1.0).force_N[1:] * 1e3
     theirs = FElupeIndentation(body, 1.0).run(d)[:, 0]
-    np.testing.assert_array_less(np.abs(ours / theirs - 1.0), TOLERANCE)
+    np.testing.assert_array_less(np.abs(theirs / ours - 1.0), TOLERANCE)
 
 
-@OPEN
 @pytest.mark.slow
-@pytest.mark.parametrize("flat", [False, True])
-def test_felupe_agrees_on_a_finer_mesh_and_a_flat_tip(magone, flat):
-    body = magone
-    if flat:
-        body = mech.Body(radius_mm=6.0, height_mm=6.3, base_height_mm=6.3, tip="flat", magnet_radius_mm=2.5,
-                         magnet_height_mm=2.0, magnet_z_mm=3.0, magnet_edge_radius_mm=0.2)
-    ours, theirs = _compare(body, 0.5)
-    np.testing.assert_array_less(np.abs(ours / theirs - 1.0), TOLERANCE)
+@pytest.mark.parametrize("name, mesh_mm", [(None, 0.75), (None, 0.5), ("small_magnet", 1.0), ("small_magnet", 0.75),
+                                           ("stiff_material", 1.0), ("flat_tip", 1.0), ("flat_tip", 0.75)])
+def test_felupe_agrees_on_the_bench_designs_and_finer_meshes(name, mesh_mm):
+    """MagOne on the 0.75 and 0.5 mm meshes, the bench designs on the meshes auto may pick (1.0, 0.75 mm), each to
+    its scan depth: force and travel within 2 % (measured within 0.08 %; stiff_material has MagOne's geometry, and
+    the forces scale with mu). Not flat_tip on 0.5 mm: magfab's FE inverts an element there at 2.66 mm."""
+    body = _body(name)
+    depth = derive(load_spec(None if name is None else f"bench/designs/{name}.toml")).spec.calibration.scan_z_mm
+    ours, theirs = _compare(body, mesh_mm, np.append(DEPTHS_MM[DEPTHS_MM < depth - 1e-9], depth))
+    np.testing.assert_array_less(np.abs(theirs / ours - 1.0), TOLERANCE)
