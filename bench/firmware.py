@@ -135,7 +135,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--spec", type=Path, help="spec TOML (default: the embedded MagOne design)")
     parser.add_argument("--calibration", type=Path, help="a calibration.json to time instead of synthetic ones")
     parser.add_argument("--orders", default="1,2,3,4,5,6", help="polynomial orders of the synthetic calibrations")
-    parser.add_argument("--hull", type=int, default=64, help="points on the synthetic hull")
+    parser.add_argument("--hull", type=int, default=32,
+                        help="points on the synthetic hull (the EEPROM record holds 1 KB: 32 fit up to order 6)")
     parser.add_argument("--build", type=Path, help="an existing build folder to measure (default: build the spec)")
     parser.add_argument("--no-rate", action="store_true", help="skip the shipped build's rate on the simulated bus")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)

@@ -216,7 +216,9 @@ def _bundle(design: Design, prediction, scan, acceptance: dict | None, say: Prog
     say("rendering the firmware and the readout package")
     t = time.perf_counter()
     fw = firmware.render(design, cal)
-    out += [Artifact(f"firmware/{rel}", data, "firmware source") for rel, data in sorted(fw.items())]
+    out += [Artifact(f"firmware/{rel}", data, "EEPROM image beside the .hex: the calibration record the image reads "
+                     "(docs/bundle.md section 4)" if rel == firmware.EEP_NAME else "firmware source")
+            for rel, data in sorted(fw.items())]
     rd = readout.render(design, cal, acceptance)
     out += [Artifact(rel, data, "readout package (pip install ./readout)") for rel, data in sorted(rd.items())]
     timings["render"] = time.perf_counter() - t

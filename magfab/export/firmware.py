@@ -3,13 +3,15 @@
 :func:`render` -- ``(design, calibration) -> {relative path: bytes}``: the portable C core
 (``magfab_readout/src``: MLX90393 protocol, conversion, calibration, frames, the loop), the Arduino sketch
 and ``platformio.ini``, the bare-metal ATmega328P main and its Makefile, the cycle benchmark, the host
-simulator with its harness, and the avrdude flash scripts. Deterministic: the same inputs give the same bytes.
+simulator with its harness, the avrdude flash scripts, and the EEPROM image (:data:`EEP_NAME`) holding the
+calibration record the image reads at start-up and ``magfab-readout upload`` rewrites. Deterministic: the same
+inputs give the same bytes.
 Compiling them (avr-gcc, gcc, simavr) is :mod:`magfab.export.toolchain`'s job; this module holds the target's
 constants both share.
 
 The calibration is checked by :func:`magfab.formats.calibration_json.validate` (the one validator of the file);
-on top, :class:`FirmwareError` refuses what the C tables cannot hold (float32 range, order above
-:data:`MAX_ORDER`, more than :data:`MAX_HULL_POINTS` hull points).
+on top, :class:`FirmwareError` refuses what the EEPROM record cannot hold (float32 range, order above
+:data:`MAX_ORDER`, a record over the 1 KB EEPROM).
 
 Every chip number comes from the recipe (``magfab/recipes/chips.toml``); the few the recipe does not carry are
 the named constants below, each with its source or marked as an assumption. The serial formats are those of
@@ -20,7 +22,6 @@ from __future__ import annotations
 
 import binascii
 import math
-import struct
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Mapping
 
@@ -34,12 +35,14 @@ if TYPE_CHECKING:
 
 __all__ = [
     "AVR_CFLAGS",
+    "EEP_NAME",
     "HEX_NAME",
     "HOST_CFLAGS",
     "ChipConfig",
     "FirmwareError",
     "calibration_sha256",
     "chip_config",
+    "eeprom_record",
     "info_line",
     "raw_words",
     "render",
@@ -51,6 +54,8 @@ __all__ = [
 F_CPU_HZ = 16_000_000
 MCU = "atmega328p"
 HEX_NAME = "magfab-atmega328p.hex"
+#: The EEPROM image beside it (Intel HEX from address 0): the calibration record the image reads.
+EEP_NAME = "magfab-atmega328p.eep"
 #: Flash left for the application under the 2 KB bootloader of older Nanos (Optiboot on the Uno takes 512 B).
 FLASH_LIMIT_BYTES = 32 * 1024 - 2048
 #: Static RAM allowed, leaving 512 of the 2048 bytes for the stack (float routines, frame buffers).
@@ -58,7 +63,7 @@ RAM_LIMIT_BYTES = 2048 - 512
 #: Largest UART rate error accepted (the receiver samples mid-bit; 2 to 2.5 % is the usual 8N1 budget).
 BAUD_ERROR_LIMIT = 0.025
 
-CORE_SOURCES = ("mlx90393.c", "mf_sample.c", "mf_calib.c", "mf_frame.c", "mf_app.c")
+CORE_SOURCES = ("mlx90393.c", "mf_sample.c", "mf_nv.c", "mf_calib.c", "mf_frame.c", "mf_app.c")
 CORE_DIR = "magfab_readout/src"
 AVR_CFLAGS = ("-mmcu=" + MCU, f"-DF_CPU={F_CPU_HZ}UL", "-Os", "-std=gnu99", "-Wall", "-Wextra",
               "-ffunction-sections", "-fdata-sections")
@@ -98,14 +103,12 @@ I2C_TIMEOUT_MIN_US = 1000
 #: it does not own. Simulator only.
 SIM_REGISTER_DEFAULTS = (0x047C, 0x6000, 0x0000)
 
-FLOAT32_MAX = 3.4028234663852886e38
-MAX_ORDER = 8
-MAX_HULL_POINTS = 1000
+MAX_ORDER = 8  # the record's (readout_pkg/magfab_readout/eeprom.py MAX_ORDER)
 
 
 class FirmwareError(InputError):
-    """A calibration or spec value the firmware cannot carry (float32 range, the C tables' order, the image
-    size): names the key path, the value and what is allowed. Exit 2."""
+    """A calibration or spec value the firmware cannot carry (float32 range, the record's order, the EEPROM or
+    image size): names the key path, the value and what is allowed. Exit 2."""
 
     def __init__(self, key: str, value: object, allowed: str) -> None:
         shown = repr(value)
@@ -214,126 +217,47 @@ def twi_settings(hz: int) -> tuple[int, int, int]:
     raise SpecError("firmware.i2c_hz", hz, "is below what the ATmega328P's TWI can divide 16 MHz down to (~490 Hz)")
 
 
-# ---- calibration ------------------------------------------------------------------------------------------
+# ---- calibration: the EEPROM record --------------------------------------------------------------------------
 
 
-def _float32(key: str, value: float) -> float:
-    """``value`` (finite, from the validated file) if a float32 holds it, else :class:`FirmwareError`."""
-    if abs(value) > FLOAT32_MAX:
-        raise FirmwareError(key, value, "must be finite and within float32 range")
-    return value
+def _eeprom_module():
+    """The package's ``eeprom`` module (one implementation: the build's .eep and ``magfab-readout upload`` both
+    pack with it), loaded as a file because the package's ``__init__`` needs a build's build.json."""
+    import importlib.util
+    import sys
+    from pathlib import Path
 
-
-def _hull(checked: calibration_json.Checked) -> list[tuple[float, float]]:
-    """The validated hull (convex, counter-clockwise, no closing repeat) without its collinear (or numerically
-    flat) vertices: each costs the firmware an edge test on every reading."""
-    key = "valid_region.hull"
-    pts = [(_float32(f"{key}[{n}][0]", x), _float32(f"{key}[{n}][1]", y)) for n, (x, y) in enumerate(checked.hull)]
-    tol = 1e-9 * checked.span * checked.span
-    changed = True
-    while changed and len(pts) > 3:
-        changed = False
-        for k in range(len(pts)):
-            if cross(pts[k - 1], pts[k], pts[(k + 1) % len(pts)]) <= tol or pts[k] == pts[k - 1]:
-                del pts[k]
-                changed = True
-                break
-    if len(pts) > MAX_HULL_POINTS:
-        raise FirmwareError(key, f"{len(pts)} points", f"must have at most {MAX_HULL_POINTS} points for the firmware")
-    return pts
+    name = "magfab.export._readout_eeprom"
+    if name not in sys.modules:
+        path = Path(__file__).parent / "readout_pkg" / "magfab_readout" / "eeprom.py"
+        spec = importlib.util.spec_from_file_location(name, path)
+        module = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]
+        sys.modules[name] = module
+        spec.loader.exec_module(module)  # type: ignore[union-attr]
+    return sys.modules[name]
 
 
 def _calibration_context(cal: Mapping[str, Any]) -> dict[str, Any]:
-    """Validate a calibration.json dict (:func:`magfab.formats.calibration_json.validate`), check what the
-    firmware can carry on top (order, float32 range) and lay it out for the C tables (Horner order, clean hull)."""
+    """Validate a calibration.json dict (:func:`magfab.formats.calibration_json.validate`) and lay it out as the
+    firmware evaluates it (the package's ``eeprom.layout``); what it cannot carry is a :class:`FirmwareError`."""
+    ee = _eeprom_module()
     c = calibration_json.validate(dict(cal) if isinstance(cal, Mapping) else cal)
-    order = c.order
-    if order > MAX_ORDER:
-        raise FirmwareError("order", order, f"must be an integer from 0 to {MAX_ORDER}")
-    index = {m: n for n, m in enumerate(c.monomials)}
-    # Horner rows: for i = n down to 0, the coefficients of u^i v^j for j = n - i down to 0.
-    rows: list[dict[str, Any]] = [{"i": i, "fz": [], "fr": []} for i in range(order, -1, -1)]
-    for force, name in (("Fz_N", "fz"), ("Fr_N", "fr")):
-        values = [_float32(f"coefficients.{force}[{m}]", x) for m, x in enumerate(c.coefficients[force])]
-        for row in rows:
-            i = row["i"]
-            row[name] = [values[index[(i, j)]] for j in range(order - i, -1, -1)]
-    scale = {}
-    for k, name in enumerate(calibration_json.INPUTS):
-        center = _float32(f"scaling.{name}.center", c.center[k])
-        s = c.scale[k]
-        if not 1e-30 < s < 1e30:
-            raise FirmwareError(f"scaling.{name}.scale", s, "must be between 1e-30 and 1e30 (float32 reciprocal)")
-        scale[name] = (center, s)
-    box = {name: tuple(_float32(f"valid_region.{name}[{k}]", x) for k, x in enumerate(pair))
-           for name, pair in zip(calibration_json.INPUTS, c.box)}
-    hull = _hull(c)
-    n = len(hull)
-    edges = []
-    for k in range(n):
-        (x0, y0), (x1, y1) = hull[k], hull[(k + 1) % n]
-        ex, ey = -(y1 - y0), x1 - x0
-        edges.append((ex, ey, ex * x0 + ey * y0))
-    return {
-        "order": order,
-        "n_coef": (order + 1) * (order + 2) // 2,
-        "rows": rows,
-        "bz_center": scale["Bz_uT"][0], "bz_scale": scale["Bz_uT"][1], "bz_inv_scale": 1.0 / scale["Bz_uT"][1],
-        "br_center": scale["Br_uT"][0], "br_scale": scale["Br_uT"][1], "br_inv_scale": 1.0 / scale["Br_uT"][1],
-        "shear_sign": float(c.shear_sign),
-        "direction_min_uT": _float32("direction_min_uT", c.direction_min_uT),
-        "tare_fz": _float32("tare_N.Fz_N", c.tare_N[0]),
-        "tare_fr": _float32("tare_N.Fr_N", c.tare_N[1]),
-        "bz_lo": box["Bz_uT"][0], "bz_hi": box["Bz_uT"][1], "br_lo": box["Br_uT"][0], "br_hi": box["Br_uT"][1],
-        "hull": hull,
-        "fan": [(x - hull[0][0], y - hull[0][1]) for x, y in hull],
-        "edges": edges,
-        "inner": _inner_box(hull),
-    }
+    try:
+        return ee.layout(c)
+    except ee.EepromError as exc:
+        raise FirmwareError(exc.key, exc.value, exc.allowed) from None
 
 
-def _inside_convex(hull: list[tuple[float, float]], q: tuple[float, float]) -> bool:
-    return all(cross(hull[k - 1], hull[k], q) >= 0.0 for k in range(len(hull)))
-
-
-def _inner_box(hull: list[tuple[float, float]]) -> tuple[float, float, float, float]:
-    """(Bz lo, Bz hi, Br lo, Br hi) of a rectangle inside the convex hull: centred on the vertices' mean, with the
-    hull's aspect, as large as keeps all four corners inside (so the whole rectangle is), shrunk by a float32
-    step at each side. Readings in it skip the hull test; an empty box (lo > hi) when none fits."""
-    cz = sum(p[0] for p in hull) / len(hull)
-    cr = sum(p[1] for p in hull) / len(hull)
-    hz = (max(p[0] for p in hull) - min(p[0] for p in hull)) / 2.0
-    hr = (max(p[1] for p in hull) - min(p[1] for p in hull)) / 2.0
-
-    def fits(t: float) -> bool:
-        return all(_inside_convex(hull, (cz + a * t * hz, cr + b * t * hr)) for a in (-1, 1) for b in (-1, 1))
-
-    lo, hi = 0.0, 1.0
-    if not fits(0.0):
-        return (1.0, -1.0, 1.0, -1.0)
-    for _ in range(60):
-        mid = (lo + hi) / 2.0
-        lo, hi = (mid, hi) if fits(mid) else (lo, mid)
-    t = lo * (1.0 - 1e-6)
-    box = [cz - t * hz, cz + t * hz, cr - t * hr, cr + t * hr]
-    # float32 literals rounded inwards, so the C rectangle is never larger than this one
-    out = []
-    for k, x in enumerate(box):
-        f = struct.unpack("<f", struct.pack("<f", x))[0]
-        if (k % 2 == 0 and f < x) or (k % 2 == 1 and f > x):
-            f = _f32_step(f, towards=x)
-        out.append(f)
-    return (out[0], out[1], out[2], out[3])
-
-
-def _f32_step(f: float, towards: float) -> float:
-    """The next float32 after f in the direction of ``towards``."""
-    bits = struct.unpack("<I", struct.pack("<f", f))[0]
-    up = towards > f
-    if f == 0.0:
-        return struct.unpack("<f", struct.pack("<I", 1 if up else 0x80000001))[0]
-    bits += 1 if (f > 0) == up else -1
-    return struct.unpack("<f", struct.pack("<I", bits))[0]
+def eeprom_record(design: "Design", calibration: Mapping[str, Any]) -> bytes:
+    """The EEPROM record of this calibration for this build's chip settings (docs/bundle.md section 4): what the
+    .eep holds and ``magfab-readout upload`` writes. :class:`FirmwareError` when it does not fit 1 KB."""
+    ee = _eeprom_module()
+    chip = chip_config(design)
+    settings = (chip.gain_sel, chip.resolution, chip.osr, chip.dig_filt)
+    try:
+        return ee.pack(_calibration_context(calibration), calibration_sha256(calibration)[:16], settings)
+    except ee.EepromError as exc:
+        raise FirmwareError(exc.key, exc.value, exc.allowed) from None
 
 
 # ---- rendering --------------------------------------------------------------------------------------------
@@ -370,8 +294,7 @@ def _context(design: "Design", calibration: Mapping[str, Any]) -> dict[str, Any]
     cal = _calibration_context(calibration)
     ubrr, baud_error = _uart(fw.baud)
     twbr, twps, i2c_actual = twi_settings(fw.i2c_hz)
-    sha16 = calibration_sha256(calibration)[:16]
-    info = info_line(spec.name, sha16, chip)
+    record = eeprom_record(design, calibration)
     forbidden = []
     for pair in recipe.texts.get("forbidden_osr_dig_filt", "").split():
         osr, dig_filt = (int(v) for v in pair.split("/"))
@@ -379,7 +302,9 @@ def _context(design: "Design", calibration: Mapping[str, Any]) -> dict[str, Any]
     regs = {reg: (mask, value) for reg, mask, value in chip.registers}
     return {
         **cal,
-        "info_line": info,
+        "info_head": f"I,magfab,{spec.name},",
+        "info_tail": f",{chip.gain_sel},{chip.resolution},{chip.osr},{chip.dig_filt}",
+        "record": list(record), "record_len": len(record), "sha16": calibration_sha256(calibration)[:16],
         "i2c_address": design.i2c_address,
         "sim_address": design.i2c_address,
         "i2c_hz": fw.i2c_hz,
@@ -404,7 +329,7 @@ def _context(design: "Design", calibration: Mapping[str, Any]) -> dict[str, Any]
         "exit_wait_us": chip.tconv_us + chip.read_margin_us,
         "reset_wait_us": RESET_WAIT_US, "start_tries": START_TRIES, "lost_retry_us": LOST_RETRY_US,
         "board_pullups": bool(spec.pcb.pullups),
-        "hex_name": HEX_NAME,
+        "hex_name": HEX_NAME, "eep_name": EEP_NAME,
         "avr_cflags": " ".join(AVR_CFLAGS), "avr_ldflags": " ".join(AVR_LDFLAGS),
         "host_cflags": " ".join(HOST_CFLAGS),
         "core_src_make": " ".join(f"$(CORE)/{s}" for s in CORE_SOURCES),
@@ -444,4 +369,5 @@ def render(design: "Design", calibration: Mapping[str, Any]) -> dict[str, bytes]
         if rel.endswith(".bat"):
             text = text.replace("\r\n", "\n").replace("\n", "\r\n")
         out[rel] = text.encode("utf-8")
-    return out
+    out[EEP_NAME] = _eeprom_module().intel_hex(bytes(context["record"]))
+    return dict(sorted(out.items()))

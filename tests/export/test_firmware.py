@@ -233,11 +233,13 @@ def test_render_is_deterministic_and_complete(host):
     again = firmware.render(host.design, host.cal)
     assert again == host.files
     for rel in ("magfab_readout/magfab_readout.ino", "platformio.ini", "avr/main.c", "avr/Makefile", "flash.sh",
-                "flash.bat", "host/sim_mlx90393.c", "magfab_readout/src/mf_calib_data.h"):
+                "flash.bat", "host/sim_mlx90393.c", "magfab_readout/src/mf_nv_image.h", firmware.EEP_NAME):
         assert rel in again
     other = firmware.render(host.design, make_calibration(seed=2))
     changed = {rel for rel in again if again[rel] != other[rel]}
-    assert changed == {"magfab_readout/src/mf_calib_data.h", "magfab_readout/src/mf_config.h"}  # info line hash
+    # the calibration lives in EEPROM: the AVR image's sources do not change with it (the host's RAM store
+    # starts from the record, mf_nv_image.h)
+    assert changed == {"magfab_readout/src/mf_nv_image.h", firmware.EEP_NAME}
     assert b"\r\n" in again["flash.bat"] and b"\r\n" not in again["flash.sh"]
 
 
@@ -597,8 +599,8 @@ def test_hull_with_closing_and_collinear_points(build_host):
     mid = [(hull[0][0] + hull[1][0]) / 2, (hull[0][1] + hull[1][1]) / 2]
     cal["valid_region"]["hull"] = [hull[0], mid, *hull[1:], hull[0]]
     h = build_host("ring", spec_variant(), cal)
-    data = h.files["magfab_readout/src/mf_calib_data.h"].decode()
-    assert "#define MF_CAL_HULL_N 8\n" in data
+    record = firmware.eeprom_record(h.design, cal)
+    assert struct.unpack_from("<H", record, 6)[0] == 8  # the record's hull: the ring and the collinear point gone
     rng = np.random.default_rng(3)
     chip = h.chip
     words, want = [], []

@@ -465,6 +465,24 @@ def test_installed_cli_info_and_errors(installed):
     assert proc.returncode == 1 and "--raw needs binary frames" in proc.stderr
 
 
+def test_installed_cli_uploads_a_calibration(installed, calibration, tmp_path):
+    """``magfab-readout upload [CALIBRATION.json]`` against the simulated board: the package's own calibration,
+    then another one (its hash reported back); a file that is not a calibration is refused before anything is
+    sent. The firmware's side of the round trip: tests/export/test_simbus.py::test_upload_round_trip."""
+    proc = cli(installed, "upload", "--simulate")
+    assert proc.returncode == 0, proc.stderr
+    assert "read back equal" in proc.stdout and calibration_sha256(calibration)[:16] in proc.stdout
+    other = json.loads(json.dumps(calibration))
+    other["tare_N"]["Fz_N"] += 0.1
+    path = tmp_path / "new.json"
+    path.write_text(json.dumps(other))
+    proc = cli(installed, "upload", str(path), "--simulate")
+    assert proc.returncode == 0 and calibration_sha256(other)[:16] in proc.stdout, proc.stderr
+    path.write_text(json.dumps({"format": "magfab-calibration/1"}))
+    proc = cli(installed, "upload", str(path), "--simulate")
+    assert proc.returncode == 1 and "calibration.json" in proc.stderr
+
+
 @contextmanager
 def pseudo_terminal(pkg, feed: bool):
     """A pty whose far end behaves as the board (the simulated device) when ``feed``; yields the port name."""

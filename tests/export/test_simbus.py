@@ -22,7 +22,7 @@ import pytest
 from conftest import _missing, require_tool
 from readout_support import ref_forces
 from magfab.export.firmware import LOST_RETRY_US
-from simbus import Bus, HarnessUnavailable, build_library
+from simbus import Bus, HarnessUnavailable, build_library, read_intel_hex
 
 FIELD_UT = (120.0, -80.0, -2500.0)  # inside MagOne's calibrated region
 FORCE_TOL_N = 1e-5
@@ -43,8 +43,9 @@ class Sim:
     frames: object  # the build's magfab_readout.frames module
     registers: list  # (mask, value) of registers 0, 1, 2 as the build configures them
 
-    def boot(self, field=FIELD_UT) -> Bus:
-        bus = Bus(self.lib, self.hex_path, self.addr7)
+    def boot(self, field=FIELD_UT, eep="build") -> Bus:
+        """The image running with the build's .eep in its EEPROM (None: an erased EEPROM)."""
+        bus = Bus(self.lib, self.hex_path, self.addr7, self.hex_path.with_suffix(".eep") if eep == "build" else eep)
         bus.set_field(*field)
         return bus
 
@@ -55,11 +56,12 @@ class Sim:
         lsb = (self.build_info["lsb_xy_uT"], self.build_info["lsb_xy_uT"], self.build_info["lsb_z_uT"])
         return tuple(round(b / q) for b, q in zip(field, lsb))
 
-    def wrong(self, samples: list, field=FIELD_UT) -> list:
-        """The samples that carry a force (no chip-error flag) that is not the true one for ``field``."""
+    def wrong(self, samples: list, field=FIELD_UT, cal=None) -> list:
+        """The samples that carry a force (no chip-error flag) that is not the true one for ``field`` by ``cal``
+        (the build's calibration.json by default)."""
         counts = self.expected_counts(field)
         lsb = (self.build_info["lsb_xy_uT"], self.build_info["lsb_xy_uT"], self.build_info["lsb_z_uT"])
-        truth = ref_forces(self.cal, *(c * q for c, q in zip(counts, lsb)))
+        truth = ref_forces(cal or self.cal, *(c * q for c, q in zip(counts, lsb)))
         bad = []
         for s in samples:
             if s.chip_error:
@@ -86,6 +88,7 @@ def sim(default_build, tmp_path_factory):
     sys.path.insert(0, src)
     try:
         frames = importlib.import_module("magfab_readout.frames")
+        frames.device = importlib.import_module("magfab_readout.device")  # the build's Device, for upload
         info = json.loads((out / "readout" / "src" / "magfab_readout" / "build.json").read_text())
         cal = json.loads((out / "calibration" / "calibration.json").read_text())
         config = (out / "firmware" / "magfab_readout" / "src" / "mf_config.h").read_text()
@@ -225,9 +228,10 @@ def variant_hex(sim, default_build, tmp_path_factory):
         design = derive(spec)
         if (osr, dig_filt) == (default.sensor.osr, default.sensor.dig_filt):
             return sim.hex_path, firmware.chip_config(design)
-        image = toolchain.build_hex(firmware.render(design, sim.cal))
+        files = firmware.render(design, sim.cal)
         path = tmp_path_factory.mktemp(f"osr{osr}df{dig_filt}") / "image.hex"
-        path.write_bytes(image[0])
+        path.write_bytes(toolchain.build_hex(files)[0])
+        path.with_suffix(".eep").write_bytes(files[firmware.EEP_NAME])  # its record: made for these settings
         return path, firmware.chip_config(design)
 
     return build
@@ -236,7 +240,7 @@ def variant_hex(sim, default_build, tmp_path_factory):
 def measure_rate(sim: Sim, hex_path, seconds: float, bus_setup=None) -> tuple:
     """(frames per simulated second, the chip's conversions per second, share of its conversions delivered,
     samples) over ``seconds`` of steady streaming."""
-    with Bus(sim.lib, hex_path, sim.addr7) as bus:
+    with Bus(sim.lib, hex_path, sim.addr7, hex_path.with_suffix(".eep")) as bus:
         bus.set_field(*FIELD_UT)
         decoder = sim.frames.Decoder()
         sim.samples(decoder, bus.run_us(SETTLE_US))
@@ -272,3 +276,97 @@ def test_a_chip_slower_than_the_table_is_caught_by_the_retry(sim):
     _, _, delivered, samples = measure_rate(sim, sim.hex_path, 0.5, lambda bus: bus.clock_scale(1.03))
     assert sim.wrong(samples) == [] and not any(s.chip_error for s in samples)
     assert delivered >= 0.99
+
+
+# ---- calibration in EEPROM: missing, invalid, uploaded ------------------------------------------------------------
+
+
+class BusTransport:
+    """The simulated board as the serial port of the build's ``magfab_readout.Device``: each read runs 2 ms of
+    simulated time and returns what the image sent meanwhile."""
+
+    port = "the simulated bus"
+
+    def __init__(self, bus: Bus) -> None:
+        self.bus = bus
+
+    def read(self, size: int = 4096, timeout_s: float = 0.05) -> bytes:
+        return self.bus.run_us(2000)
+
+    def write(self, data: bytes) -> int:
+        self.bus.send(data)
+        return len(data)
+
+    def close(self) -> None:
+        pass
+
+
+def retared(cal: dict, fz_N: float) -> dict:
+    """The calibration with another Fz tare: another hash, other forces."""
+    new = json.loads(json.dumps(cal))
+    new["tare_N"]["Fz_N"] = cal["tare_N"]["Fz_N"] + fz_N
+    return new
+
+
+@pytest.mark.parametrize("eeprom", ["erased", "bad CRC", "other chip settings"])
+def test_no_valid_calibration_gives_error_frames_never_a_force(sim, eeprom):
+    """Without a valid record in EEPROM (none, one byte changed, one made for OSR 1 / DIG_FILT 1): every frame an
+    error naming it, the chip still read (no restart), never a force; the info line's hash is all zeros."""
+    from magfab import derive
+    from magfab.export import firmware
+
+    with sim.boot(eep=None) as bus:
+        if eeprom == "bad CRC":
+            record = bytearray(firmware.eeprom_record(derive(load_spec_default()), sim.cal))
+            record[40] ^= 0x01
+            bus.eeprom_set(0, bytes(record))
+        elif eeprom == "other chip settings":
+            spec = load_spec_default()
+            spec = spec.model_copy(update={"sensor": spec.sensor.model_copy(update={"osr": 1, "dig_filt": 1})})
+            bus.eeprom_set(0, firmware.eeprom_record(derive(spec), sim.cal))
+        decoder = sim.frames.Decoder()
+        samples = sim.samples(decoder, bus.run_us(SETTLE_US))
+        phases = bus.phases
+        bus.send(b"i")
+        infos = [x for x in decoder.feed(bus.run_us(5000)) if isinstance(x, sim.frames.DeviceInfo)]
+        assert len(samples) > 10 and all(s.chip_error for s in samples)
+        assert {s.fault_name for s in samples} == {"no valid calibration at eeprom"}
+        assert infos and infos[0].calibration_hash == "0" * 16
+        # started once, then one RM (two address phases) per frame: a missing calibration is no chip fault
+        assert phases - 2 * len(samples) <= STARTUP_PHASES + 2
+
+
+def load_spec_default():
+    from magfab import load_spec
+
+    return load_spec(None)
+
+
+def test_upload_round_trip(sim):
+    """``Device.upload`` (what ``magfab-readout upload`` runs) against the image: an erased board gets a new
+    calibration over serial, reads it back equal, reports its hash, and streams the new calibration's true
+    forces; the record equals magfab's own packing of it (the .eep's), so recalibrating needs no compiler."""
+    from magfab import derive
+    from magfab.export import firmware
+
+    new = retared(sim.cal, 0.25)
+    with sim.boot(eep=None) as bus:
+        decoder = sim.frames.Decoder()
+        assert all(s.chip_error for s in sim.samples(decoder, bus.run_us(SETTLE_US)))
+        device = sim.frames.device.Device(transport=BusTransport(bus), timeout_s=20.0)
+        info = device.upload(new)
+        record = firmware.eeprom_record(derive(load_spec_default()), new)
+        assert bus.eeprom(0, len(record)) == record
+        assert info.calibration_hash == firmware.calibration_sha256(new)[:16]
+        samples = sim.samples(sim.frames.Decoder(), bus.run_us(20_000))
+        assert samples and not any(s.chip_error for s in samples)
+        assert sim.wrong(samples, cal=new) == [] and len(sim.wrong(samples)) == len(samples)  # the new forces
+
+
+def test_the_build_eep_holds_its_calibration(sim):
+    """The build's .eep is its calibration record: the image loaded with it streams the calibration.json's forces
+    (every other test), and the record carries its hash and settings."""
+    from magfab.formats.calibration_json import calibration_sha256
+
+    data = b"".join(d for _, d in read_intel_hex(sim.hex_path.with_suffix(".eep").read_text()))
+    assert data[:3] == b"MF\x01" and data[8:24].decode() == calibration_sha256(sim.cal)[:16]

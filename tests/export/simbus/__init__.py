@@ -2,7 +2,8 @@
 shared library and driven through ctypes.
 
     lib = build_library(build_dir, out_dir)     # cc + pkg-config simavr; None when either is missing
-    bus = Bus(lib, build_dir / "firmware" / "magfab-atmega328p.hex", addr7=0x0C)
+    bus = Bus(lib, build_dir / "firmware" / "magfab-atmega328p.hex", addr7=0x0C,
+              eep=build_dir / "firmware" / "magfab-atmega328p.eep")   # the EEPROM avrdude would write
     bus.set_field(bx_uT, by_uT, bz_uT, t_C)
     data = bus.run_us(20_000)                   # UART bytes the image sent in that simulated time
 
@@ -48,6 +49,18 @@ def build_library(build_dir: Path, out_dir: Path) -> Path:
     return lib
 
 
+def read_intel_hex(text: str) -> list[tuple[int, bytes]]:
+    """(address, bytes) of each data record of an Intel HEX file (checksums checked)."""
+    out = []
+    for line in text.split():
+        raw = bytes.fromhex(line[1:])
+        if sum(raw) & 0xFF:
+            raise ValueError(f"bad Intel HEX checksum: {line}")
+        if raw[3] == 0:
+            out.append((raw[1] << 8 | raw[2], raw[4:4 + raw[0]]))
+    return out
+
+
 def _declare(lib: ctypes.CDLL) -> ctypes.CDLL:
     p, u8, u16, u32, u64, d = (ctypes.c_void_p, ctypes.c_uint8, ctypes.c_uint16, ctypes.c_uint32,
                                ctypes.c_uint64, ctypes.c_double)
@@ -60,7 +73,8 @@ def _declare(lib: ctypes.CDLL) -> ctypes.CDLL:
         "bus_absent": (None, [p, ctypes.c_int]), "bus_clock_scale": (None, [p, d]), "bus_status_fixes": (u32, [p]), "bus_phases": (u32, [p]),
         "bus_held": (u32, [p]), "bus_uart_cycles_per_byte": (u32, [p]), "bus_chip_register": (u16, [p, u8]),
         "bus_chip_mode": (ctypes.c_int, [p]), "bus_conversion_us": (d, [p]), "bus_conversions": (u64, [p]),
-        "bus_close": (None, [p]),
+        "bus_close": (None, [p]), "bus_eeprom_set": (ctypes.c_int, [p, u16, ctypes.c_char_p, u32]),
+        "bus_eeprom_get": (ctypes.c_int, [p, u16, ctypes.c_char_p, u32]),
     }
     for name, (restype, argtypes) in signatures.items():
         fn = getattr(lib, name)
@@ -71,12 +85,28 @@ def _declare(lib: ctypes.CDLL) -> ctypes.CDLL:
 class Bus:
     """One ATmega328P running ``hex_path`` with a simulated MLX90393 at ``addr7`` on its TWI bus."""
 
-    def __init__(self, lib: Path, hex_path: Path, addr7: int) -> None:
+    def __init__(self, lib: Path, hex_path: Path, addr7: int, eep: Path | None = None) -> None:
         self._lib = _declare(ctypes.CDLL(str(lib)))
         self._h = self._lib.bus_open(str(hex_path).encode(), addr7, F_CPU_HZ)
         if not self._h:
             raise OSError(f"simavr cannot load {hex_path}")
         self._buf = ctypes.create_string_buffer(1 << 20)
+        if eep is not None:
+            for address, data in read_intel_hex(Path(eep).read_text()):
+                if self._lib.bus_eeprom_set(self._h, address, data, len(data)) != 0:
+                    raise OSError(f"simavr cannot load {eep} into the EEPROM")
+
+    def eeprom_set(self, offset: int, data: bytes) -> None:
+        """Bytes into the EEPROM now (as a programmer would write them)."""
+        if self._lib.bus_eeprom_set(self._h, offset, bytes(data), len(data)) != 0:
+            raise OSError("simavr cannot write the EEPROM")
+
+    def eeprom(self, offset: int, size: int) -> bytes:
+        """The EEPROM's bytes now."""
+        out = ctypes.create_string_buffer(size)
+        if self._lib.bus_eeprom_get(self._h, offset, out, size) != 0:
+            raise OSError("simavr cannot read the EEPROM")
+        return out.raw
 
     def __enter__(self) -> "Bus":
         return self

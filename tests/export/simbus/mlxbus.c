@@ -17,6 +17,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "avr_eeprom.h"
 #include "avr_twi.h"
 #include "avr_uart.h"
 #include "sim_avr.h"
@@ -265,6 +266,29 @@ bus_t *bus_open(const char *hex_path, uint8_t addr7, uint32_t f_cpu_hz)
     sim_init(&b->chip, addr7, &b->now_us);
     hook_up(b);
     return b;
+}
+
+/* The EEPROM's bytes from offset on (what a .eep holds; avrdude would write it): straight into simavr's EEPROM
+ * module (its ioctl is answered by another module first in Debian's 1.6). 0 when done. */
+int bus_eeprom_set(bus_t *b, uint16_t offset, const uint8_t *data, uint32_t len)
+{
+    avr_eeprom_t *ee = (avr_eeprom_t *)find_io(b->avr, "eeprom");
+    if (!ee || (uint32_t)offset + len > ee->size) {
+        return -1;
+    }
+    memcpy(ee->eeprom + offset, data, len);
+    return 0;
+}
+
+/* len bytes of the EEPROM from offset into out. 0 when done. */
+int bus_eeprom_get(bus_t *b, uint16_t offset, uint8_t *out, uint32_t len)
+{
+    avr_eeprom_t *ee = (avr_eeprom_t *)find_io(b->avr, "eeprom");
+    if (!ee || (uint32_t)offset + len > ee->size) {
+        return -1;
+    }
+    memcpy(out, ee->eeprom + offset, len);
+    return 0;
 }
 
 /* Run until simulated time t_us; returns the core's state (sim_avr.h: cpu_Done 5, cpu_Crashed 6). */

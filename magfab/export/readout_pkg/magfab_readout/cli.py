@@ -1,5 +1,6 @@
-"""``magfab-readout``: stream calibrated forces, record scans, ask the board what it runs, and run the
-acceptance test (``check``) against the bands magfab predicted for this build (acceptance.json).
+"""``magfab-readout``: stream calibrated forces, record scans, ask the board what it runs, write a new
+calibration into its EEPROM (``upload``), and run the acceptance test (``check``) against the bands magfab
+predicted for this build (acceptance.json).
 
 Exit status: 0 done (``check``: passed), 1 a device or calibration problem (one line on stderr) or a failed
 check, 2 a usage error, 130 Ctrl-C.
@@ -17,7 +18,7 @@ from typing import List, Optional, Tuple
 
 from . import __version__, _build, acceptance_json
 from .calibration import Calibration, CalibrationError
-from .device import Device, DeviceError, cross_check
+from .device import Device, DeviceError, calibration_record, cross_check
 from .simulate import RestTip, SimulatedDevice
 
 G0 = 9.80665  # m/s^2
@@ -69,6 +70,14 @@ def _parser() -> argparse.ArgumentParser:
 
     commands.add_parser("info", parents=[common], help="ask the board which spec and calibration it runs",
                         description="Send 'i', print the board's answer and check its calibration against this package's.")
+
+    upload = commands.add_parser(
+        "upload", parents=[common], help="write a calibration into the board's EEPROM (no compiler, no reflash)",
+        description="Check a calibration.json, write it into the board's EEPROM over serial (docs/bundle.md section "
+        "4), read it back, and check that the board now reports its hash. Without a file: this package's own "
+        "calibration (what the build's .eep holds).")
+    upload.add_argument("calibration", nargs="?", metavar="CALIBRATION.json",
+                        help="the calibration to write (default: the one embedded in this package)")
 
     check = commands.add_parser(
         "check", parents=[common], help="acceptance test: the field at rest and under a known weight vs the prediction",
@@ -213,6 +222,23 @@ def _info(args: argparse.Namespace, out) -> int:
         for warning in warnings:
             out.write("warning: {}\n".format(warning))
         out.write("calibration: match\n")
+    return 0
+
+
+def _upload(args: argparse.Namespace, out) -> int:
+    if args.calibration:
+        try:
+            with open(args.calibration, encoding="utf-8") as handle:
+                data = json.load(handle)
+        except ValueError as exc:
+            raise CalibrationError("", args.calibration, "is not valid JSON ({})".format(exc)) from None
+    else:
+        data = json.loads(pkgutil.get_data("magfab_readout", "calibration.json").decode("utf-8"))  # type: ignore[union-attr]
+    record = calibration_record(data)
+    with _device(args, text=None) as device:
+        info = device.upload(data)
+    out.write("uploaded {} bytes, read back equal; the board runs calibration {} (spec {})\n".format(
+        len(record), info.calibration_hash, json.dumps(info.spec_name)))
     return 0
 
 
@@ -493,6 +519,8 @@ def main(argv: Optional[List[str]] = None) -> int:
             return _record(args)
         if args.command == "check":
             return _check(args, sys.stdout)
+        if args.command == "upload":
+            return _upload(args, sys.stdout)
         return _info(args, sys.stdout)
     except BrokenPipeError:
         devnull = os.open(os.devnull, os.O_WRONLY)

@@ -16,11 +16,14 @@ from typing import Deque, Iterator, List, Optional, Tuple, Union
 
 from . import _build
 from .calibration import Calibration
-from .frames import Decoder, DeviceInfo, Sample
+from . import eeprom
+from .calibration_json import calibration_sha256
+from .calibration_json import validate as validate_calibration
+from .frames import Decoder, DeviceInfo, EepromReply, Sample
 from .simulate import SimulatedDevice
 
-__all__ = ["Device", "DeviceError", "PortNotFound", "NoData", "CrcErrorRate", "CalibrationMismatch",
-           "SerialTransport", "find_port", "cross_check"]
+__all__ = ["Device", "DeviceError", "PortNotFound", "NoData", "CrcErrorRate", "CalibrationMismatch", "UploadFailed",
+           "SerialTransport", "find_port", "cross_check", "calibration_record"]
 
 RESEND_S = 0.5  # a command sent while the board boots (it resets when the port opens) is lost: send again
 CRC_WINDOW = 500  # frame candidates over which the CRC failure rate is judged
@@ -46,6 +49,21 @@ class CrcErrorRate(DeviceError):
 
 class CalibrationMismatch(DeviceError):
     """The firmware reports another calibration than the one this package embeds."""
+
+
+class UploadFailed(DeviceError):
+    """A calibration upload was refused or did not read back as written."""
+
+
+WRITE_CHUNK = 16  # bytes per EEPROM write command (the firmware's limit)
+READ_CHUNK = 32  # bytes per EEPROM read command
+
+
+def calibration_record(calibration: dict) -> bytes:
+    """The EEPROM record (docs/bundle.md section 4) of a calibration.json dict for this build's chip settings: the
+    bytes ``upload`` writes, the same as a build's .eep holds for its own calibration."""
+    settings = (_build.GAIN_SEL, _build.RESOLUTION, _build.OSR, _build.DIG_FILT)
+    return eeprom.pack(eeprom.layout(validate_calibration(calibration)), calibration_sha256(calibration)[:16], settings)
 
 
 def _ports() -> list:
@@ -247,8 +265,9 @@ class Device:
                         raise self._no_data("frames", n)
                     continue
             item = self._queue.popleft()
-            if isinstance(item, DeviceInfo):
-                self.last_info = item
+            if not isinstance(item, Sample):
+                if isinstance(item, DeviceInfo):
+                    self.last_info = item
                 continue
             last = time.monotonic()
             if self.text is not None and (item.source == "text") != self.text and last - self._mode_sent > RESEND_S:
@@ -281,7 +300,7 @@ class Device:
                 if isinstance(item, Sample):
                     self._stamp(item)  # keeps the device clock running through the dropped samples
                     dropped += 1
-                else:
+                elif isinstance(item, DeviceInfo):
                     self.last_info = item
         return dropped
 
@@ -325,6 +344,78 @@ class Device:
             if isinstance(item, DeviceInfo):
                 self.last_info = item
                 return item
+
+    # --- the EEPROM: calibration upload ------------------------------------------------------------------------
+
+    def _command(self, command: bytes, kind: str, address: int) -> EepromReply:
+        """Send an EEPROM command (again every RESEND_S: both kinds may be repeated) and wait for its answer;
+        samples arriving meanwhile are dropped."""
+        start = time.monotonic()
+        sent = -math.inf
+        while True:
+            now = time.monotonic()
+            if now - start > self.timeout_s:
+                raise self._no_data("answer to the EEPROM command '{}'".format(command[:1].decode()),
+                                    self.decoder.stats.samples)
+            if now - sent > RESEND_S:
+                self.transport.write(command)
+                sent = now
+            if not self._queue:
+                self._fill(0.05)
+                continue
+            item = self._queue.popleft()
+            if isinstance(item, EepromReply) and item.kind == kind and item.address == address:
+                return item
+            if isinstance(item, DeviceInfo):
+                self.last_info = item
+
+    def eeprom_read(self, address: int, length: int) -> bytes:
+        """``length`` bytes of the board's EEPROM from ``address``."""
+        out = b""
+        while len(out) < length:
+            n = min(READ_CHUNK, length - len(out))
+            a = address + len(out)
+            reply = self._command(b"r" + bytes((a & 0xFF, a >> 8, n)), "R", a)
+            if len(reply.data) != n:
+                raise UploadFailed("the board returned {} bytes of EEPROM at {} instead of {}".format(
+                    len(reply.data), a, n))
+            out += reply.data
+        return out
+
+    def eeprom_write(self, address: int, data: bytes) -> EepromReply:
+        """Write ``data`` to the board's EEPROM from ``address``; the last chunk's answer (its ``record`` is 0
+        when the calibration record is valid afterwards)."""
+        reply = None
+        for k in range(0, len(data), WRITE_CHUNK):
+            a, chunk = address + k, bytes(data[k:k + WRITE_CHUNK])
+            body = b"w" + bytes((a & 0xFF, a >> 8, len(chunk))) + chunk
+            crc = eeprom.crc16(body)
+            reply = self._command(body + bytes((crc & 0xFF, crc >> 8)), "W", a)
+            if reply.status != 0 or reply.length != len(chunk):
+                raise UploadFailed("the board refused the EEPROM write at {} ({})".format(
+                    a, {1: "bad CRC", 2: "outside the EEPROM"}.get(reply.status, reply.status)))
+        if reply is None:
+            raise ValueError("eeprom_write needs at least one byte")
+        return reply
+
+    def upload(self, calibration: dict) -> DeviceInfo:
+        """Write ``calibration`` (a calibration.json dict, checked first) into the board's EEPROM, read it back,
+        and check that the board now runs it (its info line carries the new hash). No compiler, no reflash.
+        Returns the new info line; :class:`UploadFailed` when anything differs."""
+        record = calibration_record(calibration)
+        last = self.eeprom_write(0, record)
+        back = self.eeprom_read(0, len(record))
+        if back != record:
+            first = next(k for k, (a, b) in enumerate(zip(back, record)) if a != b)
+            raise UploadFailed("the EEPROM read back differs from what was written at byte {}".format(first))
+        if last.record != 0:
+            raise UploadFailed("the board does not accept the record written (made for other chip settings?)")
+        info = self.info()
+        if info.calibration_hash.lower() != calibration_sha256(calibration)[:16]:
+            raise UploadFailed("the board reports calibration {} after the upload, not {}".format(
+                info.calibration_hash, calibration_sha256(calibration)[:16]))
+        self.calibration = Calibration(dict(calibration))
+        return info
 
     def check_info(self, info: DeviceInfo) -> List[str]:
         """Raise :class:`CalibrationMismatch` unless the device runs this package's calibration; return warnings

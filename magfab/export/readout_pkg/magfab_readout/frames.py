@@ -59,11 +59,12 @@ FIELD_LIMIT_UT = 1.0e6
 
 #: The low byte of a fault word: the firmware's error (mf_errors.h, MF_E_* negated).
 FAULTS = {1: "nack", 2: "bus error", 3: "bus timeout", 4: "chip ERROR bit", 5: "byte count", 6: "chip reset",
-          7: "chip mode", 8: "register verify", 9: "transfer too long"}
+          7: "chip mode", 8: "register verify", 9: "transfer too long", 10: "no valid calibration"}
 #: The high byte of a fault word: where it struck (mf_sample.h, MF_STAGE_*).
-FAULT_STAGES = {1: "read", 2: "start"}
+FAULT_STAGES = {1: "read", 2: "start", 3: "eeprom"}
 
 _INT = re.compile(r"[0-9]{1,10}")
+_LINE_STARTS = (b"F,", b"I,", b"W,", b"R,")
 #: What the firmware prints for a float (mf_format_float): [-]digits.digits, d.dddde+XX beyond 1e9, nan, inf.
 _FLOAT = re.compile(r"-?[0-9]{1,10}(?:\.[0-9]{1,6})?(?:e\+[0-9]{2})?|nan|-?inf")
 _CHECKED = re.compile(rb"(.*)\*([0-9A-F]{4})")
@@ -190,6 +191,20 @@ class DeviceInfo:
         return self.gain_sel, self.resolution, self.osr, self.dig_filt
 
 
+@dataclass(frozen=True)
+class EepromReply:
+    """The firmware's answer to an EEPROM command (docs/bundle.md section 4): ``kind`` 'W' (a write: ``status``
+    0 written, 1 bad CRC, 2 outside the EEPROM; ``record`` 0 when the calibration record is now valid, 10 when
+    not) or 'R' (a read: ``data``)."""
+
+    kind: str
+    address: int
+    length: int = 0
+    status: int = 0
+    record: int = 0
+    data: bytes = b""
+
+
 @dataclass
 class DecoderStats:
     """What the decoder saw: good frames and lines, and every kind of trouble."""
@@ -197,6 +212,7 @@ class DecoderStats:
     frames: int = 0  # binary frames with a good CRC and plausible values (or the chip-error bit)
     lines: int = 0  # text sample lines with a good checksum and plausible values (or the chip-error bit)
     infos: int = 0  # info lines
+    replies: int = 0  # answers to EEPROM commands (W and R lines)
     crc_errors: int = 0  # sync found but the CRC failed
     unknown_frames: int = 0  # good CRC, frame type this reader does not know
     bad_lines: int = 0  # printable lines starting 'F,' or 'I,' without a right checksum, or that do not parse
@@ -286,7 +302,7 @@ class Decoder:
         while True:
             j = self._next_candidate(buf, i)
             if j < 0:
-                keep = 1 if buf[-1:] in (b"\xa5", b"F", b"I") and len(buf) > i else 0
+                keep = 1 if buf[-1:] in (b"\xa5", b"F", b"I", b"W", b"R") and len(buf) > i else 0
                 stats.skipped_bytes += len(buf) - i - keep
                 i = len(buf) - keep
                 break
@@ -306,7 +322,7 @@ class Decoder:
 
     @staticmethod
     def _next_candidate(buf: bytes, start: int) -> int:
-        found = [k for k in (buf.find(SYNC, start), buf.find(b"F,", start), buf.find(b"I,", start)) if k >= 0]
+        found = [k for k in (buf.find(SYNC, start), *(buf.find(p, start) for p in _LINE_STARTS)) if k >= 0]
         return min(found) if found else -1
 
     def _frame(self, frame: bytes, out: list) -> int:
@@ -367,6 +383,8 @@ class Decoder:
                 return None
             self.stats.infos += 1
             return DeviceInfo(name, calibration_hash.lower(), *(int(x) for x in settings), text)  # type: ignore[call-arg]
+        if text[:2] in ("W,", "R,"):
+            return self._reply(text)
         parts = text.split(",")
         fault = parts.pop() if len(parts) == 12 and _INT.fullmatch(parts[-1]) else None
         if parts[0] != "F" or len(parts) != 11 or not all(_INT.fullmatch(p) for p in parts[1:4]) \
@@ -388,6 +406,17 @@ class Decoder:
             return _REFUSED
         self.stats.lines += 1
         return Sample(seq, t_us, status, B, force, temp if not math.isnan(temp) else None, "text")
+
+    def _reply(self, text: str) -> Optional[EepromReply]:
+        parts = text.split(",")
+        if parts[0] == "W" and len(parts) == 5 and all(_INT.fullmatch(p) for p in parts[1:]):
+            self.stats.replies += 1
+            return EepromReply("W", *(int(p) for p in parts[1:]))  # type: ignore[arg-type]
+        if parts[0] == "R" and len(parts) == 3 and _INT.fullmatch(parts[1]) and re.fullmatch(r"([0-9A-F]{2})*", parts[2]):
+            self.stats.replies += 1
+            data = bytes.fromhex(parts[2])
+            return EepromReply("R", int(parts[1]), len(data), data=data)
+        return None
 
     def _sequence(self, seq: int) -> None:
         if self._last_seq is not None:

@@ -21,10 +21,10 @@ import random
 import time
 from typing import Optional, Tuple
 
-from . import _build
+from . import _build, eeprom
 from .calibration import Calibration
 from .frames import (STATUS_CHIP_ERROR, STATUS_FULL_SCALE, STATUS_OUTSIDE_REGION, STATUS_RECOVERED,
-                     encode_frame, encode_info_line, encode_text_line, temperature_C)
+                     encode_frame, encode_info_line, encode_text_line, line_checksum, temperature_C)
 
 __all__ = ["PressPattern", "RestTip", "SimulatedDevice"]
 
@@ -204,13 +204,45 @@ class SimulatedDevice:
         self._pending = b""
         self._start: Optional[float] = None
         self.closed = False
+        self._command = b""
+        #: The board's EEPROM as the simulated firmware sees it: erased, then written by 'w' commands
+        #: (``magfab-readout upload``); the info line's hash follows a valid record written there.
+        self.eeprom = bytearray(b"\xff" * eeprom.SIZE)
 
     # --- the serial port's interface ---------------------------------------------------------------------
 
+    def _eeprom_command(self) -> None:
+        """Answer a complete 'w' / 'r' command as the firmware does (docs/bundle.md section 4)."""
+        cmd = self._command
+        address, n = cmd[1] | cmd[2] << 8, cmd[3]
+        if cmd[:1] == b"r":
+            body = "R,{},{}".format(address, bytes(self.eeprom[address:address + min(n, 32)]).hex().upper())
+        else:
+            crc = cmd[4 + n] | cmd[5 + n] << 8
+            status = 1 if eeprom.crc16(cmd[:4 + n]) != crc else (2 if address + n > eeprom.SIZE else 0)
+            if status == 0:
+                self.eeprom[address:address + n] = cmd[4:4 + n]
+            settings = (_build.GAIN_SEL, _build.RESOLUTION, _build.OSR, _build.DIG_FILT)
+            valid = eeprom.check(bytes(self.eeprom)) and eeprom.unpack_header(bytes(self.eeprom))["settings"] == settings
+            if valid:
+                head = eeprom.unpack_header(bytes(self.eeprom))
+                self.info_line = encode_info_line(self.info_line.decode().split(",")[2], head["sha16"], *settings)
+            body = "W,{},{},{},{}".format(address, n, status, 0 if valid else 10)
+        self._pending += body.encode("ascii") + line_checksum(body.encode("ascii")) + b"\n"
+        self._command = b""
+
     def write(self, data: bytes) -> int:
-        """Commands from the host: 'b' binary frames, 't' text lines, 'i' one info line; others are ignored."""
+        """Commands from the host: 'b' binary frames, 't' text lines, 'i' one info line, and the EEPROM commands
+        'w' and 'r'; others are ignored."""
         for byte in bytes(data):
-            if byte == ord("b"):
+            if self._command:
+                self._command += bytes((byte,))
+                if len(self._command) >= 4 and (self._command[:1] == b"r" or len(self._command) == 6 + self._command[3]):
+                    self._eeprom_command()
+                continue
+            if byte in (ord("w"), ord("r")):
+                self._command = bytes((byte,))
+            elif byte == ord("b"):
                 self.text = False
             elif byte == ord("t"):
                 self.text = True

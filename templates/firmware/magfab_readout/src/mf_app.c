@@ -8,9 +8,13 @@
 #include "mf_calib.h"
 #include "mf_config.h"
 #include "mf_frame.h"
+#include "mf_nv.h"
 #include "mf_rom.h"
 
-static const char mf_info_line[] MF_ROM = MF_INFO_LINE;
+static const char mf_info_head[] MF_ROM = MF_INFO_HEAD;
+static const char mf_info_tail[] MF_ROM = MF_INFO_TAIL;
+#define MF_CMD_TIMEOUT_US 50000UL
+#define MF_READ_MAX 32
 
 static uint32_t now(const mf_app_t *a)
 {
@@ -25,29 +29,121 @@ static void wait_until(const mf_app_t *a, uint32_t t)
     }
 }
 
-static void send_info(const mf_app_t *a)
+static uint8_t put_rom(char *out, const char *p)
 {
-    uint8_t chunk[16];
     uint8_t n = 0;
-    const char *p = mf_info_line;
     char c;
     while ((c = (char)mf_rom_byte(p++)) != '\0') {
-        chunk[n++] = (uint8_t)c;
-        if (n == sizeof chunk) {
-            a->hal->serial_write(a->hal->ctx, chunk, n);
-            n = 0;
-        }
+        out[n++] = c;
     }
-    if (n > 0) {
-        a->hal->serial_write(a->hal->ctx, chunk, n);
+    return n;
+}
+
+static void send_line(const mf_app_t *a, char *line, uint8_t n)
+{
+    n = mf_frame_seal(line, n);
+    a->hal->serial_write(a->hal->ctx, (const uint8_t *)line, n);
+}
+
+/* I,magfab,<name>,<the record's hash>,<settings>: the hash is the calibration the image runs now. */
+static void send_info(const mf_app_t *a)
+{
+    char line[MF_TEXT_MAX];
+    uint8_t n = put_rom(line, mf_info_head);
+    uint8_t k;
+    for (k = 0; k < 16; ++k) {
+        line[n++] = mf_calib_sha(k);
+    }
+    n = (uint8_t)(n + put_rom(&line[n], mf_info_tail));
+    send_line(a, line, n);
+}
+
+static uint8_t put_field(char *out, uint8_t n, uint32_t v)
+{
+    out[n++] = ',';
+    return (uint8_t)(n + mf_format_uint(&out[n], v));
+}
+
+/* 'w': W,<addr>,<len>,<rc: 0 written, 1 bad CRC, 2 outside the EEPROM>,<the record now: 0 valid, 10 not> */
+static void eeprom_write_command(mf_app_t *a)
+{
+    char line[40];
+    uint16_t addr = (uint16_t)(a->cmd[1] | (uint16_t)a->cmd[2] << 8);
+    uint8_t len = a->cmd[3];
+    uint16_t crc = (uint16_t)(a->cmd[4 + len] | (uint16_t)a->cmd[5 + len] << 8);
+    uint8_t rc = 0;
+    uint8_t n;
+    if (mf_crc16(a->cmd, (uint8_t)(4 + len)) != crc) {
+        rc = 1;
+    } else if ((uint32_t)addr + len > MF_NV_SIZE) {
+        rc = 2;
+    } else {
+        mf_nv_write(addr, &a->cmd[4], len);
+        (void)mf_calib_load();
+    }
+    line[0] = 'W';
+    n = put_field(line, 1, addr);
+    n = put_field(line, n, len);
+    n = put_field(line, n, rc);
+    n = put_field(line, n, (uint32_t)-mf_calib_status());
+    send_line(a, line, n);
+}
+
+/* 'r': R,<addr>,<bytes in hex> (nothing past the EEPROM's end) */
+static void eeprom_read_command(const mf_app_t *a)
+{
+    static const char hex[] = "0123456789ABCDEF";
+    char line[16 + 2 * MF_READ_MAX];
+    uint16_t addr = (uint16_t)(a->cmd[1] | (uint16_t)a->cmd[2] << 8);
+    uint8_t k, n;
+    line[0] = 'R';
+    n = put_field(line, 1, addr);
+    line[n++] = ',';
+    for (k = 0; k < a->cmd[3] && k < MF_READ_MAX && (uint32_t)addr + k < MF_NV_SIZE; ++k) {
+        uint8_t b = mf_nv_byte((uint16_t)(addr + k));
+        line[n++] = hex[b >> 4];
+        line[n++] = hex[b & 0x0F];
+    }
+    send_line(a, line, n);
+}
+
+/* One more byte of a 'w' / 'r' command; runs it when complete. */
+static void command_byte(mf_app_t *a, uint8_t c)
+{
+    uint8_t need;
+    a->cmd[a->cmd_len++] = c;
+    if (a->cmd_len < 4) {
+        return;
+    }
+    if (a->cmd[0] == 'r') {
+        eeprom_read_command(a);
+        a->cmd_len = 0;
+        return;
+    }
+    if (a->cmd[3] == 0 || a->cmd[3] > 16) {
+        a->cmd_len = 0; /* not a write this firmware makes: dropped */
+        return;
+    }
+    need = (uint8_t)(6 + a->cmd[3]);
+    if (a->cmd_len == need) {
+        eeprom_write_command(a);
+        a->cmd_len = 0;
     }
 }
 
 void mf_app_commands(mf_app_t *a)
 {
     int c;
+    if (a->cmd_len > 0 && (uint32_t)(now(a) - a->cmd_t) > MF_CMD_TIMEOUT_US) {
+        a->cmd_len = 0; /* the rest never came */
+    }
     while ((c = a->hal->serial_read(a->hal->ctx)) >= 0) {
-        if (c == 'b') {
+        if (a->cmd_len > 0) {
+            command_byte(a, (uint8_t)c);
+        } else if (c == 'w' || c == 'r') {
+            a->cmd_t = now(a);
+            command_byte(a, (uint8_t)c);
+        } else if (c == 'b') {
             a->text_mode = 0;
         } else if (c == 't') {
             a->text_mode = 1;
@@ -194,6 +290,8 @@ void mf_app_init(mf_app_t *a, const mf_hal_t *hal)
     a->start_error = MF_OK;
     a->errors = 0;
     a->recoveries = 0;
+    a->cmd_len = 0;
+    (void)mf_calib_load();
     a->t0 = now(a);
     a->t_next = a->t0;
     if (mf_app_start_chip(a) != MF_OK) {
@@ -227,7 +325,11 @@ void mf_app_poll(mf_app_t *a)
         ++a->recoveries;
     }
     rc = acquire(a, &raw, &t);
-    if (rc == MF_OK) {
+    if (rc == MF_OK && mf_calib_status() != MF_OK) {
+        mf_sample_fail(&s, MF_E_CALIB, MF_STAGE_EEPROM); /* a good reading, but no force without a calibration */
+        a->last_error = MF_E_CALIB;
+        ++a->errors;
+    } else if (rc == MF_OK) {
         mf_app_process(&raw, &s);
     } else {
         mf_sample_fail(&s, rc, MF_STAGE_READ);

@@ -27,6 +27,9 @@ typedef struct mf_app {
     uint32_t t0;               /* micros() at mf_app_init: frame time zero */
     uint32_t t_next;           /* earliest micros() for the next read (burst) or start attempt (lost) */
     uint32_t errors;           /* samples that failed */
+    uint8_t cmd[24];           /* a multi-byte host command ('w', 'r') being received */
+    uint8_t cmd_len;
+    uint32_t cmd_t;            /* micros() at its first byte: a command not complete in MF_CMD_TIMEOUT_US is dropped */
     uint32_t recoveries;       /* successful recoveries after a failed sample */
 } mf_app_t;
 
@@ -36,7 +39,9 @@ void mf_app_poll(mf_app_t *a);
  * reads out the reset's RS is checked for RS and ERROR, and every register is read back, so a chip that
  * restarts anywhere in the sequence fails the attempt instead of streaming on its power-on settings. */
 int mf_app_start_chip(mf_app_t *a);
-/* Act on every byte the host has sent: 'b' binary, 't' text, 'i' the info line. */
+/* Act on every byte the host has sent: 'b' binary, 't' text, 'i' the info line, and the EEPROM commands of
+ * docs/bundle.md section 4: 'w' <addr:u16> <n:u8, 1..16> <n bytes> <crc:u16> writes (answered by a W line, the
+ * calibration record reloaded), 'r' <addr:u16> <n:u8, 1..32> reads (answered by an R line). */
 void mf_app_commands(mf_app_t *a);
 /* Sample processing without the bus: counts -> microtesla -> forces, flags. */
 void mf_app_process(const mlx_raw_t *raw, mf_sample_t *s);

@@ -1,14 +1,90 @@
-/* Calibration evaluation: see mf_calib.h. The polynomial (unrolled, constants in the code) and the region
- * tables (flash on AVR) come from mf_calib_data.h. */
+/* Calibration evaluation from the EEPROM record: see mf_calib.h. The record's scalars and coefficients are copied
+ * to RAM when it is loaded (every sample needs all of them; 360 B at order 8); the hull tables are read from
+ * EEPROM as the region test needs them (a few entries per reading, and only near the region's edge). */
 #include "mf_calib.h"
 
 #include <math.h>
 
-#include "mf_calib_data.h"
-#include "mf_rom.h"
+#include "mf_config.h"
+#include "mf_errors.h"
+#include "mf_frame.h"
+#include "mf_nv.h"
 
-#define FAN_Z(k) mf_rom_float(&mf_cal_fan[2 * (k)])
-#define FAN_R(k) mf_rom_float(&mf_cal_fan[2 * (k) + 1])
+enum { BZ_CENTER, BZ_INV_SCALE, BR_CENTER, BR_INV_SCALE, SHEAR_SIGN, DIRECTION_MIN, TARE_FZ, TARE_FR, BZ_LO, BZ_HI,
+       BR_LO, BR_HI, IN_BZ_LO, IN_BZ_HI, IN_BR_LO, IN_BR_HI, P0_BZ, P0_BR, N_FLOATS };
+
+static struct {
+    int8_t status;
+    uint8_t order;
+    uint16_t hull_n;
+    uint16_t fan_at;  /* EEPROM address of the fan: (dz, dr) per hull point */
+    uint16_t edge_at; /* and of the edge lines: (ex, ey, c) per hull point */
+    float f[N_FLOATS];
+    float coef[(MF_CAL_MAX_ORDER + 1) * (MF_CAL_MAX_ORDER + 2)]; /* the Horner rows, as in the record */
+} cal = {MF_E_CALIB, 0, 0, 0, 0, {0}, {0}};
+
+static uint16_t record_crc(uint16_t len)
+{
+    uint8_t chunk[16];
+    uint16_t crc = 0xFFFF;
+    uint16_t a = 0;
+    while (a < len) {
+        uint16_t left = (uint16_t)(len - a);
+        uint8_t n = (uint8_t)(left < (uint16_t)sizeof chunk ? left : (uint16_t)sizeof chunk);
+        uint8_t k;
+        for (k = 0; k < n; ++k) {
+            chunk[k] = mf_nv_byte((uint16_t)(a + k));
+        }
+        crc = mf_crc16_update(crc, chunk, n);
+        a = (uint16_t)(a + n);
+    }
+    return crc;
+}
+
+int mf_calib_load(void)
+{
+    uint8_t order = mf_nv_byte(3);
+    uint16_t len = mf_nv_u16(4);
+    uint16_t n = mf_nv_u16(6);
+    uint16_t n_coef = (uint16_t)((order + 1U) * (order + 2U) / 2U);
+    uint16_t fan_at = (uint16_t)(MF_CAL_COEF_AT + 8U * n_coef);
+    uint16_t k;
+    cal.status = MF_E_CALIB;
+    if (mf_nv_byte(0) != MF_CAL_MAGIC0 || mf_nv_byte(1) != MF_CAL_MAGIC1 || mf_nv_byte(2) != MF_CAL_VERSION
+        || order > MF_CAL_MAX_ORDER || n < 3 || n > 200 || len > MF_NV_SIZE
+        || len != (uint16_t)(fan_at + 20U * n + 2U) || record_crc((uint16_t)(len - 2)) != mf_nv_u16((uint16_t)(len - 2))) {
+        return MF_E_CALIB;
+    }
+    if (mf_nv_byte(MF_CAL_SETTINGS_AT) != MF_GAIN_SEL || mf_nv_byte(MF_CAL_SETTINGS_AT + 1) != MF_RESOLUTION
+        || mf_nv_byte(MF_CAL_SETTINGS_AT + 2) != MF_OSR || mf_nv_byte(MF_CAL_SETTINGS_AT + 3) != MF_DIG_FILT) {
+        return MF_E_CALIB; /* made for other chip settings: its microtesla would be wrong */
+    }
+    for (k = 0; k < N_FLOATS; ++k) {
+        cal.f[k] = mf_nv_float((uint16_t)(MF_CAL_FLOATS_AT + 4U * k));
+    }
+    for (k = 0; k < 2U * n_coef; ++k) {
+        cal.coef[k] = mf_nv_float((uint16_t)(MF_CAL_COEF_AT + 4U * k));
+    }
+    cal.order = order;
+    cal.hull_n = n;
+    cal.fan_at = fan_at;
+    cal.edge_at = (uint16_t)(fan_at + 8U * n);
+    cal.status = MF_OK;
+    return MF_OK;
+}
+
+int mf_calib_status(void)
+{
+    return cal.status;
+}
+
+char mf_calib_sha(uint8_t k)
+{
+    return cal.status == MF_OK ? (char)mf_nv_byte((uint16_t)(MF_CAL_SHA_AT + k)) : '0';
+}
+
+#define FAN_Z(k) mf_nv_float((uint16_t)(cal.fan_at + 8U * (k)))
+#define FAN_R(k) mf_nv_float((uint16_t)(cal.fan_at + 8U * (k) + 4U))
 
 /* Left of p_0 -> p_k (q relative to p_0), > 0; on it, 0. */
 static float fan_side(uint16_t k, float qz, float qr)
@@ -19,23 +95,22 @@ static float fan_side(uint16_t k, float qz, float qr)
 uint8_t mf_calib_inside(float bz, float br)
 {
     float qz, qr;
-    const float *e;
-    uint16_t lo, hi;
-    if (!(bz >= MF_CAL_BZ_LO && bz <= MF_CAL_BZ_HI && br >= MF_CAL_BR_LO && br <= MF_CAL_BR_HI)) {
+    uint16_t lo, hi, e;
+    if (!(bz >= cal.f[BZ_LO] && bz <= cal.f[BZ_HI] && br >= cal.f[BR_LO] && br <= cal.f[BR_HI])) {
         return 0; /* outside the box, or NaN */
     }
-    if (bz >= MF_CAL_IN_BZ_LO && bz <= MF_CAL_IN_BZ_HI && br >= MF_CAL_IN_BR_LO && br <= MF_CAL_IN_BR_HI) {
+    if (bz >= cal.f[IN_BZ_LO] && bz <= cal.f[IN_BZ_HI] && br >= cal.f[IN_BR_LO] && br <= cal.f[IN_BR_HI]) {
         return 1;
     }
     /* Convex hull: find the fan wedge (p_0, p_k, p_k+1) holding q by bisection, then test its outer edge.
      * O(log N) products, so a long hull costs little more than a short one. */
-    qz = bz - MF_CAL_P0_BZ;
-    qr = br - MF_CAL_P0_BR;
-    if (fan_side(1, qz, qr) < 0.0f || fan_side(MF_CAL_HULL_N - 1, qz, qr) > 0.0f) {
+    qz = bz - cal.f[P0_BZ];
+    qr = br - cal.f[P0_BR];
+    if (fan_side(1, qz, qr) < 0.0f || fan_side((uint16_t)(cal.hull_n - 1), qz, qr) > 0.0f) {
         return 0;
     }
     lo = 1;
-    hi = MF_CAL_HULL_N - 1;
+    hi = (uint16_t)(cal.hull_n - 1);
     while ((uint16_t)(hi - lo) > 1U) {
         uint16_t mid = (uint16_t)((lo + hi) / 2U);
         if (fan_side(mid, qz, qr) >= 0.0f) {
@@ -44,8 +119,30 @@ uint8_t mf_calib_inside(float bz, float br)
             hi = mid;
         }
     }
-    e = &mf_cal_edge[3 * lo];
-    return mf_rom_float(&e[0]) * bz + mf_rom_float(&e[1]) * br >= mf_rom_float(&e[2]) ? 1 : 0;
+    e = (uint16_t)(cal.edge_at + 12U * lo);
+    return mf_nv_float(e) * bz + mf_nv_float((uint16_t)(e + 4)) * br >= mf_nv_float((uint16_t)(e + 8)) ? 1 : 0;
+}
+
+/* Fz and Fr (before the tare) at the scaled field (u, v): F = p_n(v) u^n + ... + p_0(v), each p_i(v) in Horner
+ * form; the record holds, for i = n down to 0, the n - i + 1 coefficients of p_i for Fz, then those for Fr. */
+static void poly(float u, float v, float *fz, float *fr)
+{
+    const float *c = cal.coef;
+    float az = 0.0f, ar = 0.0f;
+    uint8_t m, k;
+    for (m = 1; m <= (uint8_t)(cal.order + 1); ++m) {
+        float qz = c[0];
+        float qr = c[m];
+        for (k = 1; k < m; ++k) {
+            qz = qz * v + c[k];
+            qr = qr * v + c[m + k];
+        }
+        az = (m == 1) ? qz : az * u + qz;
+        ar = (m == 1) ? qr : ar * u + qr;
+        c += 2U * m;
+    }
+    *fz = az;
+    *fr = ar;
 }
 
 void mf_calib_forces(mf_sample_t *s)
@@ -55,11 +152,11 @@ void mf_calib_forces(mf_sample_t *s)
     float bz = s->b_uT[2];
     float br = sqrtf(bx * bx + by * by);
     float fz, fr;
-    mf_cal_poly((bz - MF_CAL_BZ_CENTER) * MF_CAL_BZ_INV_SCALE, (br - MF_CAL_BR_CENTER) * MF_CAL_BR_INV_SCALE, &fz, &fr);
-    fz -= MF_CAL_TARE_FZ;
-    fr -= MF_CAL_TARE_FR;
-    if (br >= MF_CAL_DIRECTION_MIN_UT && br > 0.0f) {
-        float k = MF_CAL_SHEAR_SIGN * fr / br;
+    poly((bz - cal.f[BZ_CENTER]) * cal.f[BZ_INV_SCALE], (br - cal.f[BR_CENTER]) * cal.f[BR_INV_SCALE], &fz, &fr);
+    fz -= cal.f[TARE_FZ];
+    fr -= cal.f[TARE_FR];
+    if (br >= cal.f[DIRECTION_MIN] && br > 0.0f) {
+        float k = cal.f[SHEAR_SIGN] * fr / br;
         s->f_N[0] = k * bx;
         s->f_N[1] = k * by;
     } else {

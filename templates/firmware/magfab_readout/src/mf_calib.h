@@ -1,8 +1,11 @@
-/* The force calibration (calibration.json, eq. 12-14 of the brief) evaluated in float32:
+/* The force calibration (calibration.json, eq. 12-14 of the brief) evaluated in float32 from the calibration
+ * record in EEPROM (docs/bundle.md section 4, mf_nv.h):
  *   Br = sqrt(Bx^2 + By^2), u = (Bz - c_z) / s_z, v = (Br - c_r) / s_r,
  *   F = sum c_ij u^i v^j (Horner form) - tare, for F in Fz, Fr,
  *   Fx = shear_sign Fr Bx / Br, Fy = shear_sign Fr By / Br (0 when Br < direction_min_uT),
- * and the valid-region test (box, then the convex hull) that sets MF_FLAG_OUTSIDE. */
+ * and the valid-region test (box, then the convex hull) that sets MF_FLAG_OUTSIDE.
+ * Without a valid record (missing, wrong version or length, bad CRC, made for other chip settings) there is no
+ * force: the loop sends error frames (MF_E_CALIB) until one is uploaded. */
 #ifndef MF_CALIB_H
 #define MF_CALIB_H
 
@@ -12,7 +15,24 @@
 extern "C" {
 #endif
 
-/* Forces of a converted sample (b_uT set); adds MF_FLAG_OUTSIDE outside the calibrated region. */
+/* Record layout (readout package eeprom.py): header, then the floats, the Horner rows, the hull fan and edges. */
+#define MF_CAL_MAGIC0 'M'
+#define MF_CAL_MAGIC1 'F'
+#define MF_CAL_VERSION 1
+#define MF_CAL_SHA_AT 8      /* 16 ASCII hex digits of the calibration's sha256 */
+#define MF_CAL_SETTINGS_AT 24 /* gain_sel, resolution, osr, dig_filt the record was made for */
+#define MF_CAL_FLOATS_AT 28
+#define MF_CAL_COEF_AT 100
+#define MF_CAL_MAX_ORDER 8
+
+/* Read and check the record (MF_OK or MF_E_CALIB); call at start-up and after every write. */
+int mf_calib_load(void);
+/* MF_OK when the last load found a valid record. */
+int mf_calib_status(void);
+/* Byte k (0..15) of the record's calibration hash, for the info line ('0' without a valid record). */
+char mf_calib_sha(uint8_t k);
+/* Forces of a converted sample (b_uT set); adds MF_FLAG_OUTSIDE outside the calibrated region. Only with a
+ * valid record (mf_calib_status() == MF_OK). */
 void mf_calib_forces(mf_sample_t *s);
 /* 1 when (Bz, Br) in microtesla lies in the calibrated region: inside the box and the hull, edges included. */
 uint8_t mf_calib_inside(float bz, float br);

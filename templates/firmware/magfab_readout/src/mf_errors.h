@@ -14,5 +14,6 @@
 #define MF_E_MODE (-7)    /* the status byte shows the wrong mode (the chip left burst mode) */
 #define MF_E_VERIFY (-8)  /* a register read back differs from what was written */
 #define MF_E_ARG (-9)     /* a transfer the driver cannot make (too long for the bus driver's buffer) */
+#define MF_E_CALIB (-10)  /* no valid calibration record in EEPROM (missing, bad CRC, other chip settings) */
 
 #endif

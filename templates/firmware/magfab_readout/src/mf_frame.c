@@ -12,7 +12,11 @@ typedef char mf_float_is_32_bits[(sizeof(float) == 4) ? 1 : -1];
 
 uint16_t mf_crc16(const uint8_t *data, uint8_t len)
 {
-    uint16_t crc = 0xFFFF;
+    return mf_crc16_update(0xFFFF, data, len);
+}
+
+uint16_t mf_crc16_update(uint16_t crc, const uint8_t *data, uint8_t len)
+{
     uint8_t i;
     for (i = 0; i < len; ++i) {
 #if defined(__AVR__)
@@ -67,7 +71,7 @@ uint8_t mf_frame_binary(uint8_t *out, uint8_t seq, uint32_t t_us, const mf_sampl
     return MF_FRAME_LEN;
 }
 
-static uint8_t put_uint(char *out, uint32_t v)
+uint8_t mf_format_uint(char *out, uint32_t v)
 {
     char tmp[10];
     uint8_t n = 0;
@@ -118,6 +122,13 @@ static uint8_t put_checksum(char *out, uint8_t n)
     return n;
 }
 
+uint8_t mf_frame_seal(char *out, uint8_t n)
+{
+    n = put_checksum(out, n);
+    out[n++] = '\n';
+    return n;
+}
+
 static const uint32_t pow10_table[7] = {1UL, 10UL, 100UL, 1000UL, 10000UL, 100000UL, 1000000UL};
 
 uint8_t mf_format_float(char *out, float x, uint8_t decimals)
@@ -155,7 +166,7 @@ uint8_t mf_format_float(char *out, float x, uint8_t decimals)
         frac -= scale;
         ++whole;
     }
-    n = (uint8_t)(n + put_uint(&out[n], whole));
+    n = (uint8_t)(n + mf_format_uint(&out[n], whole));
     if (decimals > 0) {
         out[n++] = '.';
         n = (uint8_t)(n + put_digits(&out[n], frac, decimals));
@@ -174,11 +185,11 @@ uint8_t mf_frame_text(char *out, uint8_t seq, uint32_t t_us, const mf_sample_t *
     uint8_t k;
     out[n++] = 'F';
     out[n++] = ',';
-    n = (uint8_t)(n + put_uint(&out[n], seq));
+    n = (uint8_t)(n + mf_format_uint(&out[n], seq));
     out[n++] = ',';
-    n = (uint8_t)(n + put_uint(&out[n], t_us));
+    n = (uint8_t)(n + mf_format_uint(&out[n], t_us));
     out[n++] = ',';
-    n = (uint8_t)(n + put_uint(&out[n], s->flags));
+    n = (uint8_t)(n + mf_format_uint(&out[n], s->flags));
     for (k = 0; k < 3; ++k) {
         out[n++] = ',';
         n = (uint8_t)(n + mf_format_float(&out[n], s->f_N[k], 4));
@@ -191,7 +202,7 @@ uint8_t mf_frame_text(char *out, uint8_t seq, uint32_t t_us, const mf_sample_t *
     n = (uint8_t)(n + mf_format_float(&out[n], s->t_C, 2));
     if (s->flags & MF_FLAG_CHIP_ERROR) {
         out[n++] = ',';
-        n = (uint8_t)(n + put_uint(&out[n], s->fault));
+        n = (uint8_t)(n + mf_format_uint(&out[n], s->fault));
     }
     n = put_checksum(out, n);
     out[n++] = '\n';

@@ -18,6 +18,8 @@ extern "C" {
 
 /* CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF, no reflection, no final xor). */
 uint16_t mf_crc16(const uint8_t *data, uint8_t len);
+/* The same CRC continued over more bytes (start with 0xFFFF). */
+uint16_t mf_crc16_update(uint16_t crc, const uint8_t *data, uint8_t len);
 /* The 31-byte frame, little-endian; on a chip error bytes 15..16 carry the fault word instead of the
  * temperature; returns MF_FRAME_LEN. */
 uint8_t mf_frame_binary(uint8_t *out, uint8_t seq, uint32_t t_us, const mf_sample_t *s);
@@ -26,6 +28,11 @@ uint8_t mf_frame_binary(uint8_t *out, uint8_t seq, uint32_t t_us, const mf_sampl
  * binary frame's bytes 15..16 on an error frame: MF_STAGE_* << 8 | -MF_E_*); XXXX is mf_crc16 of the bytes before the '*' in upper-case hex.
  * out holds MF_TEXT_MAX bytes; returns the length (no terminator). */
 uint8_t mf_frame_text(char *out, uint8_t seq, uint32_t t_us, const mf_sample_t *s);
+/* Ends a text line of n bytes: '*', the CRC of those bytes in four upper-case hex digits, '\n'; returns the
+ * new length (out holds n + 6 bytes). */
+uint8_t mf_frame_seal(char *out, uint8_t n);
+/* v in decimal; returns the length (no terminator). */
+uint8_t mf_format_uint(char *out, uint32_t v);
 /* x with the given decimals (at most 6), nan / inf / -inf, or d.dddde+XX beyond 1e9; returns the length. */
 uint8_t mf_format_float(char *out, float x, uint8_t decimals);
 

@@ -19,6 +19,7 @@ extern "C" {
 /* Where a fault struck, the high byte of a failed sample's fault word (its low byte is -MF_E_*). */
 #define MF_STAGE_READ 1  /* reading the sample (RM, or SM and RM) */
 #define MF_STAGE_START 2 /* starting the chip: boot, or the recovery after a failed sample, all attempts failed */
+#define MF_STAGE_EEPROM 3 /* the calibration record (the chip was read fine) */
 
 typedef struct mf_sample {
     uint8_t flags;

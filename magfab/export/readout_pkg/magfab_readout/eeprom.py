@@ -1,0 +1,209 @@
+"""The calibration record the firmware reads from the ATmega328P's EEPROM (docs/bundle.md section 4).
+
+One implementation for both ends: magfab renders the build's .eep with it, and ``magfab-readout upload`` packs a
+new calibration.json with it and writes it over serial, so recalibrating needs no compiler and no reflash. It
+uses the standard library only, and is loaded by magfab as a file (the package's ``__init__`` needs build.json).
+
+:func:`layout` turns a validated calibration (``calibration_json.validate``) into what the C code evaluates:
+Horner rows, the hull without its collinear points as a fan with one edge line per wedge, an inner rectangle;
+:func:`pack` lays it out as the record (version, length, CRC-16/CCITT-FALSE); :func:`intel_hex` writes bytes as
+the Intel HEX an avrdude ``-U eeprom:w:FILE.eep:i`` takes.
+"""
+
+from __future__ import annotations
+
+import binascii
+import struct
+from typing import Any, Dict, List, Sequence, Tuple
+
+MAGIC = b"MF"
+VERSION = 1
+#: EEPROM of the ATmega328P, bytes; the record starts at address 0.
+SIZE = 1024
+HEADER = struct.Struct("<2sBBHH16s4B")  # magic, version, order, length, hull points, sha16, chip settings
+FLOATS = ("bz_center", "bz_inv_scale", "br_center", "br_inv_scale", "shear_sign", "direction_min_uT", "tare_fz",
+          "tare_fr", "bz_lo", "bz_hi", "br_lo", "br_hi", "in_bz_lo", "in_bz_hi", "in_br_lo", "in_br_hi",
+          "p0_bz", "p0_br")
+COEF_OFFSET = HEADER.size + 4 * len(FLOATS)  # 100
+FLOAT32_MAX = 3.4028234663852886e38
+MAX_ORDER = 8
+INPUTS = ("Bz_uT", "Br_uT")
+
+
+class EepromError(ValueError):
+    """A calibration the record cannot hold: ``key`` (path in calibration.json), ``value`` and what is allowed."""
+
+    def __init__(self, key: str, value: object, allowed: str) -> None:
+        self.key, self.value, self.allowed = key, value, allowed
+        shown = repr(value)
+        super().__init__("calibration.{} = {}: {}".format(key, shown if len(shown) <= 80 else shown[:77] + "...",
+                                                          allowed))
+
+
+def crc16(data: bytes) -> int:
+    """CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF), the frames' checksum."""
+    return binascii.crc_hqx(bytes(data), 0xFFFF)
+
+
+def _f32(x: float) -> float:
+    return struct.unpack("<f", struct.pack("<f", x))[0]
+
+
+def _float32(key: str, value: float) -> float:
+    if not abs(value) <= FLOAT32_MAX:
+        raise EepromError(key, value, "must be finite and within float32 range")
+    return value
+
+
+def _cross(o: Sequence[float], a: Sequence[float], b: Sequence[float]) -> float:
+    return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+
+
+def clean_hull(checked: Any) -> List[Tuple[float, float]]:
+    """The validated hull (convex, counter-clockwise) without its collinear or numerically flat vertices: each
+    costs the firmware an edge test on every reading."""
+    key = "valid_region.hull"
+    pts = [(_float32("{}[{}][0]".format(key, n), x), _float32("{}[{}][1]".format(key, n), y))
+           for n, (x, y) in enumerate(checked.hull)]
+    tol = 1e-9 * checked.span * checked.span
+    changed = True
+    while changed and len(pts) > 3:
+        changed = False
+        for k in range(len(pts)):
+            if _cross(pts[k - 1], pts[k], pts[(k + 1) % len(pts)]) <= tol or pts[k] == pts[k - 1]:
+                del pts[k]
+                changed = True
+                break
+    return pts
+
+
+def _inside(hull: List[Tuple[float, float]], q: Tuple[float, float]) -> bool:
+    return all(_cross(hull[k - 1], hull[k], q) >= 0.0 for k in range(len(hull)))
+
+
+def _f32_step(f: float, towards: float) -> float:
+    """The next float32 after f in the direction of ``towards``."""
+    bits = struct.unpack("<I", struct.pack("<f", f))[0]
+    up = towards > f
+    if f == 0.0:
+        return struct.unpack("<f", struct.pack("<I", 1 if up else 0x80000001))[0]
+    bits += 1 if (f > 0) == up else -1
+    return struct.unpack("<f", struct.pack("<I", bits))[0]
+
+
+def inner_box(hull: List[Tuple[float, float]]) -> Tuple[float, float, float, float]:
+    """(Bz lo, Bz hi, Br lo, Br hi) of a rectangle inside the convex hull: centred on the vertices' mean, with the
+    hull's aspect, as large as keeps its corners inside, rounded inwards to float32. Readings in it skip the
+    hull test; an empty box (lo > hi) when none fits."""
+    cz = sum(p[0] for p in hull) / len(hull)
+    cr = sum(p[1] for p in hull) / len(hull)
+    hz = (max(p[0] for p in hull) - min(p[0] for p in hull)) / 2.0
+    hr = (max(p[1] for p in hull) - min(p[1] for p in hull)) / 2.0
+
+    def fits(t: float) -> bool:
+        return all(_inside(hull, (cz + a * t * hz, cr + b * t * hr)) for a in (-1, 1) for b in (-1, 1))
+
+    if not fits(0.0):
+        return (1.0, -1.0, 1.0, -1.0)
+    lo, hi = 0.0, 1.0
+    for _ in range(60):
+        mid = (lo + hi) / 2.0
+        lo, hi = (mid, hi) if fits(mid) else (lo, mid)
+    t = lo * (1.0 - 1e-6)
+    out = []
+    for k, x in enumerate((cz - t * hz, cz + t * hz, cr - t * hr, cr + t * hr)):
+        f = _f32(x)
+        if (k % 2 == 0 and f < x) or (k % 2 == 1 and f > x):
+            f = _f32_step(f, towards=x)
+        out.append(f)
+    return (out[0], out[1], out[2], out[3])
+
+
+def layout(checked: Any) -> Dict[str, Any]:
+    """What the firmware evaluates, from a validated calibration (``calibration_json.validate``'s result)."""
+    order = checked.order
+    if order > MAX_ORDER:
+        raise EepromError("order", order, "must be an integer from 0 to {}".format(MAX_ORDER))
+    index = {m: n for n, m in enumerate(checked.monomials)}
+    # Horner rows: for i = n down to 0, the coefficients of u^i v^j for j = n - i down to 0.
+    rows: List[Dict[str, Any]] = [{"i": i, "fz": [], "fr": []} for i in range(order, -1, -1)]
+    for force, name in (("Fz_N", "fz"), ("Fr_N", "fr")):
+        values = [_float32("coefficients.{}[{}]".format(force, m), x)
+                  for m, x in enumerate(checked.coefficients[force])]
+        for row in rows:
+            row[name] = [values[index[(row["i"], j)]] for j in range(order - row["i"], -1, -1)]
+    scale = {}
+    for k, name in enumerate(INPUTS):
+        s = checked.scale[k]
+        if not 1e-30 < s < 1e30:
+            raise EepromError("scaling.{}.scale".format(name), s, "must be between 1e-30 and 1e30 (float32 reciprocal)")
+        scale[name] = (_float32("scaling.{}.center".format(name), checked.center[k]), s)
+    box = {name: tuple(_float32("valid_region.{}[{}]".format(name, k), x) for k, x in enumerate(pair))
+           for name, pair in zip(INPUTS, checked.box)}
+    hull = clean_hull(checked)
+    edges = []
+    for k in range(len(hull)):
+        (x0, y0), (x1, y1) = hull[k], hull[(k + 1) % len(hull)]
+        ex, ey = -(y1 - y0), x1 - x0
+        edges.append((ex, ey, ex * x0 + ey * y0))
+    inner = inner_box(hull)
+    return {
+        "order": order, "n_coef": (order + 1) * (order + 2) // 2, "rows": rows,
+        "bz_center": scale["Bz_uT"][0], "bz_scale": scale["Bz_uT"][1], "bz_inv_scale": 1.0 / scale["Bz_uT"][1],
+        "br_center": scale["Br_uT"][0], "br_scale": scale["Br_uT"][1], "br_inv_scale": 1.0 / scale["Br_uT"][1],
+        "shear_sign": float(checked.shear_sign),
+        "direction_min_uT": _float32("direction_min_uT", checked.direction_min_uT),
+        "tare_fz": _float32("tare_N.Fz_N", checked.tare_N[0]), "tare_fr": _float32("tare_N.Fr_N", checked.tare_N[1]),
+        "bz_lo": box["Bz_uT"][0], "bz_hi": box["Bz_uT"][1], "br_lo": box["Br_uT"][0], "br_hi": box["Br_uT"][1],
+        "in_bz_lo": inner[0], "in_bz_hi": inner[1], "in_br_lo": inner[2], "in_br_hi": inner[3],
+        "p0_bz": hull[0][0], "p0_br": hull[0][1],
+        "hull": hull, "fan": [(x - hull[0][0], y - hull[0][1]) for x, y in hull], "edges": edges, "inner": inner,
+    }
+
+
+def pack(lay: Dict[str, Any], sha16: str, settings: Sequence[int]) -> bytes:
+    """The EEPROM record: header (magic, version, order, length, hull points, the calibration hash's first 16 hex
+    digits for the info line, the chip settings gain_sel / resolution / osr / dig_filt it was made for), the
+    floats, the Horner rows (per row its Fz then its Fr coefficients), the hull fan and edge lines, the CRC.
+    :class:`EepromError` when it does not fit the EEPROM."""
+    n = len(lay["hull"])
+    body = b"".join(struct.pack("<f", lay[name]) for name in FLOATS)
+    for row in lay["rows"]:
+        body += struct.pack("<{}f".format(2 * len(row["fz"])), *row["fz"], *row["fr"])
+    body += b"".join(struct.pack("<2f", *p) for p in lay["fan"]) + b"".join(struct.pack("<3f", *e) for e in lay["edges"])
+    length = HEADER.size + len(body) + 2
+    if length > SIZE:
+        raise EepromError("valid_region.hull", "{} points at order {}".format(n, lay["order"]),
+                          "the record takes {} B, the EEPROM holds {} B: use a shorter hull or a lower order"
+                          .format(length, SIZE))
+    head = HEADER.pack(MAGIC, VERSION, lay["order"], length, n, sha16.encode("ascii"), *settings)
+    record = head + body
+    return record + struct.pack("<H", crc16(record))
+
+
+def unpack_header(data: bytes) -> Dict[str, Any]:
+    """The header fields of a record read back (no CRC check: see :func:`check`)."""
+    magic, version, order, length, n, sha16, *settings = HEADER.unpack_from(data, 0)
+    return {"magic": magic, "version": version, "order": order, "length": length, "hull_points": n,
+            "sha16": sha16.decode("ascii", "replace"), "settings": tuple(settings)}
+
+
+def check(data: bytes) -> bool:
+    """Whether ``data`` starts with a whole record whose magic, version and CRC are right."""
+    if len(data) < HEADER.size + 2:
+        return False
+    head = unpack_header(data)
+    length = head["length"]
+    return (head["magic"] == MAGIC and head["version"] == VERSION and HEADER.size + 2 <= length <= min(SIZE, len(data))
+            and struct.unpack_from("<H", data, length - 2)[0] == crc16(data[:length - 2]))
+
+
+def intel_hex(data: bytes, start: int = 0) -> bytes:
+    """``data`` as Intel HEX records of 16 bytes from address ``start``, with the end-of-file record."""
+    lines = []
+    for k in range(0, len(data), 16):
+        chunk = data[k:k + 16]
+        rec = struct.pack(">BHB", len(chunk), start + k, 0) + chunk
+        lines.append(":{}{:02X}".format(rec.hex().upper(), (-sum(rec)) & 0xFF))
+    lines.append(":00000001FF")
+    return ("\n".join(lines) + "\n").encode("ascii")

@@ -1,0 +1,26 @@
+/* Non-volatile storage of the calibration record (docs/bundle.md section 4): the ATmega328P's EEPROM on AVR;
+ * elsewhere (the host simulator, non-AVR Arduino cores) a RAM copy that starts as this build's record
+ * (mf_nv_image.h) and keeps what is written until the next reset. */
+#ifndef MF_NV_H
+#define MF_NV_H
+
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#define MF_NV_SIZE 1024U
+
+uint8_t mf_nv_byte(uint16_t addr);
+uint16_t mf_nv_u16(uint16_t addr); /* little-endian */
+float mf_nv_float(uint16_t addr);  /* IEEE-754 binary32, little-endian */
+/* Write len bytes from addr on (the caller keeps addr + len within MF_NV_SIZE); bytes already equal are not
+ * rewritten (EEPROM wear). Blocks: about 3.4 ms per changed byte on the ATmega328P. */
+void mf_nv_write(uint16_t addr, const uint8_t *data, uint8_t len);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif
