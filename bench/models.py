@@ -11,7 +11,9 @@ On the MagOne design (the embedded spec):
 2. Elastomer (``magfab.models.mechanics.measure``): the column and Hertz-plus-column closed forms and the FE model at
    several mesh sizes against the finest FE mesh, over the indentation range the reference reaches;
    time per force curve at the nominal modulus.
-3. Shear: the Timoshenko column against the mode-1 FE at the finest mesh.
+3. Shear: the Timoshenko column against the mode-1 FE at the finest mesh (load on the magnet); and the shear as the
+   build applies it (through the contact patch, the magnet shifting and tilting): the chip's lateral sensitivity
+   at rest on the build's meshes against the finest.
 4. The whole MagOne prediction (``magfab.models.predict.predict``, band included), median of N runs.
 
 Prints one table, writes ``<out>/model_bench.json`` and ``<out>/model_bench.svg``/``.png`` (error against
@@ -75,6 +77,23 @@ def rows(repeat: int, reference_mesh_mm: float) -> tuple[list[dict], dict]:
         out.append({"family": "shear", "model": label.split()[0], "label": f"shear {label}", "error": abs(k - k_fe) / k_fe,
                     "time_s": dt, "unit": "per stiffness", "reference": f"shear fe {reference_mesh_mm:g} mm",
                     "ratio_to_reference_time": dt / t_fe, "mesh_mm": mesh})
+    # Shear as the build applies it (through the contact patch; the magnet shifts and tilts): the chip's lateral
+    # sensitivity at rest, G/N, on the build's meshes against the reference mesh.
+    gap, rest = design.d_rest_mm, spec.calibration.scan_step_mm
+
+    def surface(h: float | None) -> tuple[float, float]:
+        t0 = time.perf_counter()
+        r = M.shear_response(body, mu, (0.0,), mesh_mm=h, rest_indentation_mm=rest)
+        return float(F.lateral_field(magnet, gap, r.displacement_mm_per_N[0], r.tilt_rad_per_N[0])), \
+            time.perf_counter() - t0
+
+    s_ref, t_sref = surface(reference_mesh_mm)
+    for h in (1.0, 0.75, reference_mesh_mm):
+        sv, dt = (s_ref, t_sref) if h == reference_mesh_mm else surface(h)
+        out.append({"family": "shear", "model": "surface", "label": f"shear surface {h:g} mm",
+                    "error": abs(sv - s_ref) / abs(s_ref), "time_s": dt, "unit": "per sensitivity at rest",
+                    "reference": f"shear surface {reference_mesh_mm:g} mm", "ratio_to_reference_time": dt / t_sref,
+                    "mesh_mm": h})
     times = []
     for _ in range(repeat):
         t = time.perf_counter()

@@ -149,7 +149,7 @@ def _speed_accuracy(plt, design: "Design", pred: "Prediction", table: Sequence[M
             return False
         if row["family"] == "mechanics":
             return row.get("mesh_mm") in (None, mesh)
-        return row["family"] != "shear" or row.get("mesh_mm") is None  # the build's shear FE: default mesh
+        return row["family"] != "shear" or row.get("mesh_mm") == mesh  # the shear is probed on the chosen mesh
 
     for row in table:
         err = max(float(row["error"]), 1e-16)

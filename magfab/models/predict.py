@@ -390,7 +390,7 @@ def predict(design: "Design") -> Prediction:
         Bz_range_end_strongest_G=float(np.interp(normal.travel_mm, u, normal_arrays["bz_high"])),
         remanence_T={b: m.remanence_T for b, m in magnets.items()},
     )
-    shear_use = ModelUse("shear", "fe", math.nan, f"{SHEAR_DESCRIPTION}; mesh {response.mesh_mm:g} mm", "auto")
+    shear_use = ModelUse("shear", "surface", math.nan, f"{SHEAR_DESCRIPTION}; mesh {response.mesh_mm:g} mm", "auto")
     arrays = {**normal_arrays, "indentation": nominal.indentation_mm, **shear_arrays}
     timings = {"field_choice": t_field - t0, "mechanics": t_mech - t_field, "chain": t_end - t_mech,
                "total": t_end - t0}
