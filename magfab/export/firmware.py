@@ -29,6 +29,7 @@ from ..errors import InputError, SpecError
 from ..formats import calibration_json
 from ..formats.calibration_json import calibration_sha256, cross
 from ..recipes import catalogue
+from ..models.predict import conversion_us  # the chip's pace, shared with the prediction
 
 if TYPE_CHECKING:
     from ..design import Design
@@ -145,16 +146,6 @@ class ChipConfig:
         """Frames per second in burst mode: one per conversion (the reads are paced by the chip's table).
         Single mode adds the margin and the bus time to each sample."""
         return 1e6 / self.tconv_us
-
-
-def conversion_us(chip: Any, osr: int, dig_filt: int, temperature: bool, axes: int = 3) -> float:
-    """One measurement of ``axes`` magnetic axes (and T), us, from the datasheet's table of full (ZYXT)
-    measurements in the recipe (``tconv_osr<o>_dig_filt<d>_ms``); fewer channels take off the Table 8 formula's
-    per-channel time (TCONVM per axis, TCONVT for T at OSR2 = 0)."""
-    full = chip[f"tconv_osr{osr}_dig_filt{dig_filt}_ms"].nominal * 1000.0
-    axis = chip["tconvm_offset_us"].nominal + chip["tconvm_step_us"].nominal * 2**osr * (2 + 2**dig_filt)
-    temp = chip["tconvm_offset_us"].nominal + chip["tconvt_step_us"].nominal
-    return full - (3 - axes) * axis - (0.0 if temperature else temp)
 
 
 def _value(option: object) -> str:

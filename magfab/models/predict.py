@@ -33,7 +33,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import asdict, dataclass, field
-from typing import TYPE_CHECKING, Mapping
+from typing import TYPE_CHECKING, Any, Mapping
 
 import numpy as np
 
@@ -82,6 +82,16 @@ class ChipSetting:
         return 1000.0 / self.conversion_ms
 
 
+def conversion_us(chip: Mapping[str, Any], osr: int, dig_filt: int, temperature: bool, axes: int = 3) -> float:
+    """One measurement of ``axes`` magnetic axes (and T), us, from the datasheet's table of full (ZYXT)
+    measurements in the recipe (``tconv_osr<o>_dig_filt<d>_ms``); fewer channels take off the Table 8 formula's
+    per-channel time (TCONVM per axis, TCONVT for T at OSR2 = 0)."""
+    full = chip[f"tconv_osr{osr}_dig_filt{dig_filt}_ms"].nominal * 1000.0
+    axis = chip["tconvm_offset_us"].nominal + chip["tconvm_step_us"].nominal * 2**osr * (2 + 2**dig_filt)
+    temp = chip["tconvm_offset_us"].nominal + chip["tconvt_step_us"].nominal
+    return full - (3 - axes) * axis - (0.0 if temperature else temp)
+
+
 def chip_setting(design: "Design") -> ChipSetting:
     """Scale, range, noise and conversion time from the chip recipe and the spec's register fields.
 
@@ -96,8 +106,7 @@ def chip_setting(design: "Design") -> ChipSetting:
     lsb_z = chip[f"sensitivity_z_gain{s.gain_sel}_uT_per_lsb"].nominal * scale
     limit = chip[f"output_limit_res{s.resolution}_lsb"].nominal
     t_axis = chip["tconvm_offset_us"].nominal + chip["tconvm_step_us"].nominal * 2 ** s.osr * (2 + 2 ** s.dig_filt)
-    t_temp = chip["tconvm_offset_us"].nominal + chip["tconvt_step_us"].nominal  # OSR2 = 0
-    conversion_us = 3 * t_axis + t_temp + chip["tconv_end_us"].nominal
+    tconv_us = conversion_us(chip, s.osr, s.dig_filt, bool(design.spec.firmware.temperature))  # the firmware's pace
     averaging = math.sqrt(chip["noise_reference_conversion_us"].nominal / t_axis)
     return ChipSetting(
         s.gain_sel, s.resolution, s.osr, s.dig_filt, lsb_xy, lsb_z,
@@ -105,7 +114,7 @@ def chip_setting(design: "Design") -> ChipSetting:
         saturation_onset_G=chip["saturation_onset_mT"].nominal * GAUSS_PER_MT,
         noise_xy_G=chip["noise_xy_bound_uT"].nominal * G_PER_UT * averaging,
         noise_z_G=chip["noise_z_bound_uT"].nominal * G_PER_UT * averaging,
-        conversion_ms=conversion_us / 1000.0,
+        conversion_ms=tconv_us / 1000.0,
     )
 
 

@@ -285,3 +285,12 @@ def test_a_model_that_cannot_answer_is_a_finding_not_a_traceback(design, monkeyp
     assert [(f.code, f.severity, f.key) for f in found] == [
         ("prediction-failed", Severity.ERROR, "predict.mechanics_model")]
     assert "element inversion" in found[0].message
+
+
+def test_the_predicted_rate_is_the_firmwares_pace(default_build):
+    """One conversion time for the prediction (noise, scan sample times) and the firmware's pacing: the datasheet's
+    table (chips.toml tconv_osr<o>_dig_filt<d>_ms), which the simulated bus delivers 100 % of (test_simbus)."""
+    pred = json.loads((default_build.out_dir / "predictions.json").read_text())
+    build = json.loads((default_build.out_dir / "readout/src/magfab_readout/build.json").read_text())
+    assert pred["chip"]["conversion_ms"] == pytest.approx(1.84)  # OSR 0, DIG_FILT 2, with T (MagOne)
+    assert build["sample_rate_Hz"] == pytest.approx(pred["chip"]["rate_Hz"], rel=1e-6)
