@@ -264,7 +264,9 @@ def _flash_section(design: "Design") -> Section:
     return "Flash and read", [
         f"Wire the board to an Arduino Uno or Nano through an I2C level shifter (the board is 3.3 V).",
         f"Flash: sh firmware/flash.sh PORT (Windows: firmware\\flash.bat PORT) writes firmware/{firmware.HEX_NAME}.",
-        "Install the reader: pip install ./readout; then magfab-readout info (the calibration hash must match) and "
+        "Install the reader: pip install ./readout; then magfab-readout upload (the image keeps its calibration in "
+        "EEPROM, which the Arduino bootloader does not write: until this runs the board sends only error frames "
+        "'no valid calibration'), magfab-readout info (the calibration hash must match) and "
         f"magfab-readout stream --zero 200 (binary frames at {spec.firmware.baud} baud).",
     ]
 
@@ -286,7 +288,8 @@ def _calibrate_section(design: "Design", plan: "ScanPlan | None") -> Section:
         f"{plan.step_mm * 1000:g} um steps ({plan.points} points).",
         "Record with magfab-readout record scan.csv and add the reference's Fx_N, Fy_N, Fz_N columns (docs/bundle.md).",
         f"magfab calibrate scan.csv --spec {spec.name}.toml: order {cal.order} ({cal.method.value}), {cal.folds}-fold "
-        f"held-out error, tolerance {cal.tolerance_mN:g} mN; reflash the new image and reinstall the reader.",
+        f"held-out error, tolerance {cal.tolerance_mN:g} mN; then pip install ./readout again and magfab-readout "
+        "upload: the new calibration goes into the EEPROM over serial, no compiler and no reflash.",
     ]
 
 
