@@ -27,8 +27,9 @@ _JOB: tuple[Callable[..., Any], tuple[Any, ...]] | None = None  # what the forke
 
 
 def parallel_available() -> bool:
-    """True where a second branch can run in a forked worker: Linux, two or more cores, MAGFAB_JOBS not 1."""
-    if os.environ.get("MAGFAB_JOBS", "").strip() == "1":
+    """True where a second branch can run in a forked worker: Linux, two or more cores, MAGFAB_JOBS not 1, and not
+    already inside a worker (a build's physics branch runs its prediction in-process: its cores are taken)."""
+    if os.environ.get("MAGFAB_JOBS", "").strip() == "1" or multiprocessing.current_process().daemon:
         return False
     return sys.platform.startswith("linux") and (os.cpu_count() or 1) >= 2
 

@@ -216,18 +216,22 @@ def normal_curve(design: "Design", body: mech.Body, mu: float,
         return curve, ModelUse("mechanics", name, math.nan,
                                "closed form; its error against the FE model is charted by bench/mechanics.py",
                                "spec"), None
+    from ..fork import side_branch
     from ..limits import fe_meshes  # the meshes the spec's cost limits were checked against
 
-    previous = None
     chosen = None
     depth = float(design.spec.calibration.scan_z_mm)  # the deepest indentation the design is used over
     depths, rest = shear_probe_depths(design, indentation), design.spec.calibration.scan_step_mm
-    for mesh in fe_meshes(design):  # coarse to fine; past the last, the model-error warning says so
-        # the first mesh is never the chosen one (it is the reference of the second's error estimate): no probe
-        probe = mech.ShearProbe(depths_mm=depths, rest_indentation_mm=rest) if previous is not None else None
-        curve = _fe_curve(body, mu, indentation, mesh, depth, probe)
-        curve.info["shear_probe"] = probe
-        if previous is not None:
+    meshes = fe_meshes(design)  # coarse to fine; past the last, the model-error warning says so
+    # The first mesh is only the reference of the second's error estimate (never chosen, so not probed): it is solved
+    # in a forked worker beside the second where two cores allow (magfab.fork; the same numbers either way).
+    with side_branch(_fe_curve, body, mu, indentation, meshes[0], depth) as first:
+        previous = None
+        for mesh in meshes[1:]:
+            probe = mech.ShearProbe(depths_mm=depths, rest_indentation_mm=rest)
+            curve = _fe_curve(body, mu, indentation, mesh, depth, probe)
+            curve.info["shear_probe"] = probe
+            previous = first.result() if previous is None else previous
             n = min(len(curve.force_N), len(previous.force_N))
             if n < 2:
                 raise mech.MechanicsError(f"fe (mesh {mesh:g} mm): {curve.info.get('failure', 'no steps')}")
@@ -238,7 +242,7 @@ def normal_curve(design: "Design", body: mech.Body, mu: float,
             chosen = (curve, err, previous.mesh_mm)
             if err <= tol:
                 break
-        previous = curve
+            previous = curve
     assert chosen is not None
     curve, err, coarse = chosen
     how = "auto" if name == "auto" else "spec"
