@@ -180,9 +180,9 @@ def _acceptance(design: Design, prediction) -> tuple[dict | None, list[Finding]]
 
 def _bundle(design: Design, prediction, scan, acceptance: dict | None, say: Progress, timings: dict[str, float]):
     """The firmware-plus-calibration bundle: calibration.json (from ``scan``, or a simulated scan when there
-    is none yet), its chart, the firmware sources, the AVR image where avr-gcc exists, the flash scripts and
-    the readout package."""
-    from .export import calibration_chart, firmware, readout, toolchain
+    is none yet), its chart, the firmware sources, the generic AVR image with the .eep of its settings and
+    calibration, the flash scripts and the readout package."""
+    from .export import calibration_chart, firmware, readout
     from .formats.scan_csv import scan_csv
     from .models import calibration as calibrate
     from .models.scan import simulate_scan
@@ -222,19 +222,13 @@ def _bundle(design: Design, prediction, scan, acceptance: dict | None, say: Prog
     rd = readout.render(design, cal, acceptance)
     out += [Artifact(rel, data, "readout package (pip install ./readout)") for rel, data in sorted(rd.items())]
     timings["render"] = time.perf_counter() - t
-    t = time.perf_counter()
-    image = toolchain.build_hex(fw)
-    if image is None:
-        found.append(Finding(Severity.INFO, "firmware-hex-skipped",
-                             "avr-gcc (Debian packages gcc-avr and avr-libc) is not installed, so no ready-to-flash "
-                             "image was built: build it with 'make' in firmware/avr, or install the toolchain and rebuild",
-                             "firmware"))
-    else:
-        hex_bytes, sizes = image
-        out.append(Artifact("firmware/magfab-atmega328p.hex", hex_bytes,
-                            f"ready-to-flash image for Arduino Uno/Nano (ATmega328P, 16 MHz): flash "
-                            f"{sizes.get('flash_bytes')} B, RAM {sizes.get('ram_bytes')} B"))
-        timings["avr-gcc"] = time.perf_counter() - t
+    # the generic image shipped in the package, on every machine (avr-gcc or not): its settings and calibration
+    # are the .eep's record (firmware.shipped_image; bench/firmware.py measured it against a build-specific one)
+    hex_bytes, made = firmware.shipped_image()
+    out.append(Artifact(f"firmware/{firmware.HEX_NAME}", hex_bytes,
+                        f"ready-to-flash image for Arduino Uno/Nano (ATmega328P, 16 MHz), the same for every build: "
+                        f"settings and calibration from the .eep; flash {made['flash_bytes']} B, RAM "
+                        f"{made['ram_bytes']} B ({made['toolchain']['avr-gcc']}, avr-libc {made['toolchain']['avr-libc']})"))
     return out, found, result
 
 

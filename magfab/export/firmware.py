@@ -44,9 +44,12 @@ __all__ = [
     "calibration_sha256",
     "chip_config",
     "eeprom_record",
+    "generic_sources",
+    "image_settings",
     "info_line",
     "raw_words",
     "render",
+    "shipped_image",
     "twi_settings",
 ]
 
@@ -63,7 +66,14 @@ FLASH_LIMIT_BYTES = 32 * 1024 - 2048
 RAM_LIMIT_BYTES = 2048 - 512
 #: Largest UART rate error accepted (the receiver samples mid-bit; 2 to 2.5 % is the usual 8N1 budget).
 BAUD_ERROR_LIMIT = 0.025
+#: Without a valid record the image does not touch the chip (it knows neither its address nor its settings) and
+#: sends one error frame per this interval.
+NO_RECORD_US = 20_000
 
+#: Package data beside this module: the generic image (:func:`shipped_image`) and ``toolchain.json``, the avr-gcc
+#: and avr-libc versions that made it (``python -m magfab.export.toolchain`` rebuilds both).
+GENERIC_DIR = "generic_image"
+GENERIC_TOOLCHAIN = "toolchain.json"
 CORE_SOURCES = ("mlx90393.c", "mf_sample.c", "mf_nv.c", "mf_calib.c", "mf_frame.c", "mf_app.c")
 CORE_DIR = "magfab_readout/src"
 AVR_CFLAGS = ("-mmcu=" + MCU, f"-DF_CPU={F_CPU_HZ}UL", "-Os", "-std=gnu99", "-Wall", "-Wextra",
@@ -239,12 +249,36 @@ def _calibration_context(cal: Mapping[str, Any]) -> dict[str, Any]:
         raise FirmwareError(exc.key, exc.value, exc.allowed) from None
 
 
-def eeprom_record(design: "Design", calibration: Mapping[str, Any]) -> bytes:
-    """The EEPROM record of this calibration for this build's chip settings (docs/bundle.md section 4): what the
-    .eep holds and ``magfab-readout upload`` writes. :class:`FirmwareError` when it does not fit 1 KB."""
+def image_settings(design: "Design") -> dict[str, Any]:
+    """What the generic image reads from the record besides the calibration (the package's ``eeprom.SETTINGS``,
+    docs/bundle.md section 4): every number the build-specific sources carried in mf_config.h, computed here from
+    the spec and the chip's recipe. Plain JSON values: build.json carries them for ``magfab-readout upload``.
+    :class:`~magfab.errors.SpecError` for a baud or I2C clock the board cannot make."""
     ee = _eeprom_module()
-    chip = chip_config(design)
-    settings = (chip.gain_sel, chip.resolution, chip.osr, chip.dig_filt)
+    chip, fw = chip_config(design), design.spec.firmware
+    ubrr, _ = _uart(fw.baud)
+    twbr, twps, i2c_actual = twi_settings(fw.i2c_hz)
+    flags = ((ee.FLAG_BURST if chip.burst else 0) | (ee.FLAG_TEMPERATURE if chip.temperature else 0)
+             | (ee.FLAG_TEXT if _value(fw.output) == "text" else 0) | (ee.FLAG_RAW_SIGNED if chip.raw_signed else 0))
+    regs = {reg: (mask, value) for reg, mask, value in chip.registers}
+    return {
+        "name": design.spec.name, "gain_sel": chip.gain_sel, "resolution": chip.resolution, "osr": chip.osr,
+        "dig_filt": chip.dig_filt, "i2c_address": design.i2c_address, "twbr": twbr, "twps_bits": twps,
+        "flags": flags, "zyxt": chip.zyxt, "ubrr": ubrr, "baud": int(fw.baud), "i2c_hz": int(fw.i2c_hz),
+        "i2c_timeout_us": max(I2C_TIMEOUT_MIN_US, math.ceil(I2C_TIMEOUT_BYTES * 9 * 1e6 / i2c_actual)),
+        **{f"reg{k}_{part}": regs[k][n] for k in range(3) for n, part in enumerate(("mask", "value"))},
+        "tconv_us": chip.tconv_us, "read_margin_us": chip.read_margin_us,
+        "retry_us": math.ceil(chip.tconv_us * RETRY_FRACTION), "exit_wait_us": chip.tconv_us + chip.read_margin_us,
+        "raw_zero": chip.raw_zero, "raw_limit": chip.raw_limit, "t_raw_25c": TEMPERATURE_RAW_25C,
+        "lsb_xy_uT": chip.lsb_xy_uT, "lsb_z_uT": chip.lsb_z_uT, "t_c_per_lsb": 1.0 / TEMPERATURE_LSB_PER_C,
+    }
+
+
+def eeprom_record(design: "Design", calibration: Mapping[str, Any]) -> bytes:
+    """The EEPROM record of this calibration for this build's settings (docs/bundle.md section 4): what the .eep
+    holds and ``magfab-readout upload`` writes. :class:`FirmwareError` when it does not fit 1 KB."""
+    ee = _eeprom_module()
+    settings = image_settings(design)
     try:
         return ee.pack(_calibration_context(calibration), calibration_sha256(calibration)[:16], settings)
     except ee.EepromError as exc:
@@ -272,18 +306,30 @@ def _bench_points(chip: ChipConfig, cal: dict[str, Any]) -> list[dict[str, Any]]
 
 
 def info_line(name: str, sha16: str, chip: ChipConfig) -> str:
-    """The firmware's answer to 'i' (docs/bundle.md section 3), checksum and newline included: the text is a
-    constant in the image, so its checksum is computed here, CRC-16/CCITT-FALSE as the frames'."""
+    """The firmware's answer to 'i' (docs/bundle.md section 3), checksum and newline included (CRC-16/CCITT-FALSE
+    as the frames'): the reference the tests hold the image's line to."""
     body = f"I,magfab,{name},{sha16},{chip.gain_sel},{chip.resolution},{chip.osr},{chip.dig_filt}"
     return f"{body}*{binascii.crc_hqx(body.encode('utf-8'), 0xFFFF):04X}\n"
 
 
-def _context(design: "Design", calibration: Mapping[str, Any]) -> dict[str, Any]:
+def _image_constants() -> dict[str, Any]:
+    """What the generic image's sources take from magfab: firmware constants, none of them from a spec."""
+    fallback_baud = _eeprom_module().FALLBACK_BAUD  # without a valid record (the package's upload knows it too)
+    fallback_ubrr, fallback_error = _uart(fallback_baud)
+    return {
+        "generic": 1, "fallback_baud": fallback_baud, "fallback_ubrr": fallback_ubrr,
+        "fallback_baud_error_pct": f"{fallback_error * 100:+.2f}", "no_record_us": NO_RECORD_US,
+        "reset_wait_us": RESET_WAIT_US, "start_tries": START_TRIES, "lost_retry_us": LOST_RETRY_US,
+    }
+
+
+def _context(design: "Design", calibration: Mapping[str, Any], generic: bool) -> dict[str, Any]:
     spec, recipe = design.spec, design.chip
     fw = spec.firmware
     chip = chip_config(design)
     cal = _calibration_context(calibration)
     ubrr, baud_error = _uart(fw.baud)
+    settings = image_settings(design)
     twbr, twps, i2c_actual = twi_settings(fw.i2c_hz)
     record = eeprom_record(design, calibration)
     forbidden = []
@@ -293,15 +339,15 @@ def _context(design: "Design", calibration: Mapping[str, Any]) -> dict[str, Any]
     regs = {reg: (mask, value) for reg, mask, value in chip.registers}
     return {
         **cal,
-        "info_head": f"I,magfab,{spec.name},",
-        "info_tail": f",{chip.gain_sel},{chip.resolution},{chip.osr},{chip.dig_filt}",
+        **_image_constants(),
+        "generic": int(generic),
         "record": list(record), "record_len": len(record), "sha16": calibration_sha256(calibration)[:16],
         "i2c_address": design.i2c_address,
         "sim_address": design.i2c_address,
         "i2c_hz": fw.i2c_hz,
         "i2c_actual_hz": i2c_actual,
         "twbr": twbr, "twps_bits": twps, "twps_div": 4**twps,
-        "i2c_timeout_us": max(I2C_TIMEOUT_MIN_US, math.ceil(I2C_TIMEOUT_BYTES * 9 * 1e6 / i2c_actual)),
+        "i2c_timeout_us": settings["i2c_timeout_us"],
         "i2c_timeout_bytes": I2C_TIMEOUT_BYTES, "i2c_timeout_min_us": I2C_TIMEOUT_MIN_US,
         "baud": fw.baud, "ubrr": ubrr, "baud_error_pct": f"{baud_error * 100:+.2f}",
         "text_output": int(_value(fw.output) == "text"),
@@ -316,9 +362,7 @@ def _context(design: "Design", calibration: Mapping[str, Any]) -> dict[str, Any]
         "t_c_per_lsb": 1.0 / TEMPERATURE_LSB_PER_C,
         "tconv_us": chip.tconv_us, "read_margin_us": chip.read_margin_us, "margin_pct": round(READ_MARGIN * 100),
         "tconv_ms": f"{chip.tconv_us / 1000:.3f}",
-        "retry_us": math.ceil(chip.tconv_us * RETRY_FRACTION),
-        "exit_wait_us": chip.tconv_us + chip.read_margin_us,
-        "reset_wait_us": RESET_WAIT_US, "start_tries": START_TRIES, "lost_retry_us": LOST_RETRY_US,
+        "retry_us": settings["retry_us"], "exit_wait_us": settings["exit_wait_us"],
         "board_pullups": bool(spec.pcb.pullups),
         "hex_name": HEX_NAME, "eep_name": EEP_NAME,
         "avr_cflags": " ".join(AVR_CFLAGS), "avr_ldflags": " ".join(AVR_LDFLAGS),
@@ -338,20 +382,34 @@ def _context(design: "Design", calibration: Mapping[str, Any]) -> dict[str, Any]
     }
 
 
-def render(design: "Design", calibration: Mapping[str, Any]) -> dict[str, bytes]:
+def render(design: "Design", calibration: Mapping[str, Any], *, generic: bool = True) -> dict[str, bytes]:
     """Every firmware file, keyed by its path relative to the bundle's firmware folder.
+
+    ``generic`` (the default, what a build ships): the image's sources carry no setting of the spec; it reads them
+    from the EEPROM record (:func:`image_settings`), so it is the same image for every build, the one shipped
+    in the wheel (:mod:`magfab.export.generic_image`). ``generic=False`` compiles the spec's settings in as
+    constants (the record must then match them): what bench/firmware.py measures the generic one against.
 
     ``calibration`` is a calibration.json dict (docs/bundle.md); :class:`FirmwareError` names the key of
     anything the firmware cannot carry, :class:`~magfab.errors.SpecError` a spec the board cannot run
     (a baud rate the 16 MHz UART cannot make). ``*.j2`` templates are rendered (stripped of the suffix), other
     files copied; ``.bat`` files get CRLF line ends."""
+    context = _context(design, calibration, generic)
+    out = _render_tree(context, lambda rel: True)
+    out[EEP_NAME] = _eeprom_module().intel_hex(bytes(context["record"]))
+    return dict(sorted(out.items()))
+
+
+def _render_tree(context: Mapping[str, Any], wanted) -> dict[str, bytes]:
+    """The firmware templates whose relative path ``wanted`` accepts, rendered with ``context``."""
     from .templating import render as render_template, templates_dir
 
-    context = _context(design, calibration)
     root = templates_dir() / "firmware"
     out: dict[str, bytes] = {}
     for path in sorted(p for p in root.rglob("*") if p.is_file() and "__pycache__" not in p.parts):
         rel = path.relative_to(root).as_posix()
+        if not wanted(rel):
+            continue
         if rel.endswith(".j2"):
             text = render_template(f"firmware/{rel}", **context)
             rel = rel[:-3]
@@ -360,5 +418,23 @@ def render(design: "Design", calibration: Mapping[str, Any]) -> dict[str, bytes]
         if rel.endswith(".bat"):
             text = text.replace("\r\n", "\n").replace("\n", "\r\n")
         out[rel] = text.encode("utf-8")
-    out[EEP_NAME] = _eeprom_module().intel_hex(bytes(context["record"]))
-    return dict(sorted(out.items()))
+    return out
+
+
+def generic_sources() -> dict[str, bytes]:
+    """The sources of the generic image, keyed as in :func:`render` (``avr/main.c`` and the core): rendered
+    without a spec, byte-equal to every build's copies (a test holds them to it). :func:`toolchain.build_hex`
+    of these is the shipped image."""
+    return _render_tree(_image_constants(), lambda rel: rel.startswith(CORE_DIR + "/") and "mf_nv_image" not in rel
+                        or rel == "avr/main.c.j2")
+
+
+def shipped_image() -> tuple[bytes, dict[str, Any]]:
+    """The generic image in the package (Intel HEX bytes) and ``toolchain.json``: the avr-gcc and avr-libc versions
+    that built it, its flash and RAM, the sha256 of the image and of :func:`generic_sources`. One image for every
+    build and machine, with or without avr-gcc: the settings and calibration come from the build's .eep."""
+    import json
+    from importlib.resources import files
+
+    folder = files("magfab.export").joinpath(GENERIC_DIR)
+    return folder.joinpath(HEX_NAME).read_bytes(), json.loads(folder.joinpath(GENERIC_TOOLCHAIN).read_text())

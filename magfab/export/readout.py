@@ -92,7 +92,7 @@ def calibration_sha256(calibration: Mapping[str, Any]) -> str:
 
 def _build_data(design, checked: calibration_json.Checked) -> dict[str, object]:
     """build.json: what the package's ``_build`` module reads (the spec, the firmware's settings, the hash)."""
-    from .firmware import chip_config
+    from .firmware import chip_config, image_settings
 
     spec = design.spec
     chip = chip_config(design)  # the firmware's own: its rate is one frame per conversion (the datasheet's table)
@@ -120,6 +120,7 @@ def _build_data(design, checked: calibration_json.Checked) -> dict[str, object]:
         "temperature_raw_25C": TEMPERATURE_RAW_25C,
         "temperature_lsb_per_C": TEMPERATURE_LSB_PER_C,
         "calibration_sha256": checked.sha256,
+        "image_settings": image_settings(design),
     }
 
 

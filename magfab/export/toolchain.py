@@ -5,6 +5,9 @@ simavr).
 * :func:`build_host` -- the core and the simulated MLX90393 compiled for the host with
   ``gcc -std=c99 -Wall -Wextra -Werror -pedantic``, for the tests.
 * :func:`build_avr_elf`, :func:`run_simavr` -- an AVR program compiled and run in the simulator.
+* :func:`versions`, :func:`build_generic`, :func:`write_generic_image` -- the generic image the wheel ships
+  (:func:`magfab.export.firmware.shipped_image`), rebuilt from :func:`~magfab.export.firmware.generic_sources`;
+  ``python -m magfab.export.toolchain`` rewrites it and its ``toolchain.json`` in the source tree.
 
 A tool that fails on what we gave it raises :class:`CompileError` (a :class:`~magfab.errors.ToolError`: our
 bug, exit 1); a missing tool gives None or FileNotFoundError as each function says.
@@ -12,6 +15,8 @@ bug, exit 1); a missing tool gives None or FileNotFoundError as each function sa
 
 from __future__ import annotations
 
+import hashlib
+import json
 import re
 import shutil
 import signal
@@ -21,10 +26,12 @@ from pathlib import Path, PurePosixPath
 from typing import Any, Mapping
 
 from ..errors import ToolError
-from .firmware import (AVR_CFLAGS, AVR_LDFLAGS, CORE_DIR, CORE_SOURCES, F_CPU_HZ, FLASH_LIMIT_BYTES, HOST_CFLAGS,
-                       HOST_PROGRAM, MCU, RAM_LIMIT_BYTES, FirmwareError)
+from .firmware import (AVR_CFLAGS, AVR_LDFLAGS, CORE_DIR, CORE_SOURCES, F_CPU_HZ, FLASH_LIMIT_BYTES, GENERIC_DIR,
+                       GENERIC_TOOLCHAIN, HEX_NAME, HOST_CFLAGS, HOST_PROGRAM, MCU, RAM_LIMIT_BYTES, FirmwareError,
+                       generic_sources)
 
-__all__ = ["CompileError", "build_avr_elf", "build_hex", "build_host", "run_simavr", "write_tree"]
+__all__ = ["CompileError", "build_avr_elf", "build_generic", "build_hex", "build_host", "run_simavr", "versions",
+           "write_generic_image", "write_tree"]
 
 
 class CompileError(ToolError):
@@ -160,3 +167,63 @@ def run_simavr(elf: str | Path, timeout_s: float = 120.0, *, stop_after_s: float
         if proc.returncode != 0:
             raise CompileError(command, out.decode(errors="replace") + err.decode(errors="replace"))
     return _ANSI.sub("", err.decode("ascii", errors="replace"))  # simavr logs the UART on stderr
+
+
+# ---- the generic image ---------------------------------------------------------------------------------------
+
+
+def versions() -> dict[str, str] | None:
+    """The AVR toolchain on PATH: the first line of ``avr-gcc --version`` and ``avr-objcopy --version``, and
+    avr-libc's ``__AVR_LIBC_VERSION_STRING__``; None without avr-gcc or avr-objcopy. Equal versions (and
+    flags, :data:`~magfab.export.firmware.AVR_CFLAGS`) make the same bytes."""
+    gcc, objcopy = shutil.which("avr-gcc"), shutil.which("avr-objcopy")
+    if gcc is None or objcopy is None:
+        return None
+    here = Path.cwd()
+    macros = subprocess.run([gcc, f"-mmcu={MCU}", "-E", "-dM", "-include", "avr/version.h", "-x", "c", "-"],
+                            input="", capture_output=True, text=True, cwd=here, timeout=60)
+    libc = re.search(r'__AVR_LIBC_VERSION_STRING__ "([^"]+)"', macros.stdout)
+    return {"avr-gcc": _run([gcc, "--version"], here).splitlines()[0].strip(),
+            "avr-objcopy": _run([objcopy, "--version"], here).splitlines()[0].strip(),
+            "avr-libc": libc.group(1) if libc else "unknown"}
+
+
+def _sources_sha256(files: Mapping[str, bytes]) -> str:
+    digest = hashlib.sha256()
+    for rel in sorted(files):
+        digest.update(rel.encode() + b"\0" + files[rel] + b"\0")
+    return digest.hexdigest()
+
+
+def build_generic() -> tuple[bytes, dict[str, Any]] | None:
+    """The generic image compiled here from :func:`~magfab.export.firmware.generic_sources`, and what
+    ``toolchain.json`` records of it (toolchain versions, sizes, the sha256 of the sources and of the image);
+    None without the AVR toolchain."""
+    files = generic_sources()
+    found = versions()
+    built = build_hex(files) if found else None
+    if built is None:
+        return None
+    image, sizes = built
+    info = {"toolchain": found, "flash_bytes": sizes["flash_bytes"], "ram_bytes": sizes["ram_bytes"],
+            "sources_sha256": _sources_sha256(files), "image_sha256": hashlib.sha256(image).hexdigest(),
+            "cflags": " ".join((*AVR_CFLAGS, *AVR_LDFLAGS))}
+    return image, info
+
+
+def write_generic_image(folder: Path | None = None) -> Path:
+    """Rebuild the generic image and write it with its ``toolchain.json`` into ``folder`` (default: the package's
+    ``generic_image``, in the source tree). FileNotFoundError without the AVR toolchain."""
+    built = build_generic()
+    if built is None:
+        raise FileNotFoundError("avr-gcc and avr-objcopy are needed (Debian packages gcc-avr, binutils-avr, avr-libc)")
+    image, info = built
+    out = Path(folder) if folder is not None else Path(__file__).resolve().parent / GENERIC_DIR
+    out.mkdir(parents=True, exist_ok=True)
+    (out / HEX_NAME).write_bytes(image)
+    (out / GENERIC_TOOLCHAIN).write_text(json.dumps(info, indent=2, sort_keys=True) + "\n")
+    return out
+
+
+if __name__ == "__main__":  # python -m magfab.export.toolchain: regenerate the shipped generic image
+    print(f"wrote {write_generic_image()}")

@@ -32,7 +32,8 @@ from magfab.spec import Acquisition, Transport
 STUBS = Path(__file__).parents[1] / "firmware_sim" / "arduino_stub"
 E_NACK, E_BUS, E_TIMEOUT, E_CHIP, E_COUNT, E_RESET, E_MODE, E_VERIFY = -1, -2, -3, -4, -5, -6, -7, -8
 OUTSIDE, CHIP_ERROR, SATURATED, RECOVERED = 1, 2, 4, 8
-STAGE_READ, STAGE_START = 1, 2  # the fault word's high byte (docs/bundle.md section 3)
+STAGE_READ, STAGE_START, STAGE_EEPROM = 1, 2, 3  # the fault word's high byte (docs/bundle.md section 3)
+E_CALIB = -10  # no valid calibration record
 WEIRD_NAME = 'we"ird\\name\nwith?? trigraph??= and é'
 
 
@@ -654,20 +655,19 @@ def test_avr_image_builds_clean_and_fits(avr_image, host, tmp_path):
 
 
 def test_avr_image_runs_under_simavr(avr_image, host, tmp_path):
-    """The real ATmega328P image (timer, UART interrupts, TWI driver) in simavr, which has no MLX90393 on its bus:
-    text-mode error lines at the bounded retry rate, never a force."""
+    """The real ATmega328P image (timer, UART interrupts, TWI driver) in simavr with an erased EEPROM and no
+    MLX90393 on its bus: without a record it leaves the chip alone and sends text error lines naming the missing
+    calibration (fault word 0x030A) at the bounded rate, never a force."""
     require_tool("simavr")
-    text_host = derive(spec_variant(firmware_output=Transport.TEXT))
-    files = firmware.render(text_host, host.cal)
-    elf, warnings = toolchain.build_avr_elf(files, tmp_path, "main")
+    elf, warnings = toolchain.build_avr_elf(host.files, tmp_path, "main")
     assert warnings == ""
     uart = toolchain.run_simavr(elf, stop_after_s=1.5)
     lines = [x for x in uart.splitlines() if x.startswith("F,")]
     assert len(lines) >= 3, uart[-2000:]
-    rows = [x.rstrip(".").split(",") for x in lines]
-    assert all(r[3] == "2" and r[4:7] == ["nan"] * 3 for r in rows)
+    rows = [x.rstrip(".").split("*")[0].split(",") for x in lines]
+    assert all(r[3] == "2" and r[4:11] == ["nan"] * 7 and r[11] == str(STAGE_EEPROM << 8 | -E_CALIB) for r in rows)
     gaps = np.diff([int(r[2]) for r in rows])
-    assert np.all(gaps >= firmware.LOST_RETRY_US) and np.all(gaps < firmware.LOST_RETRY_US + 20000)
+    assert np.all(gaps >= firmware.NO_RECORD_US) and np.all(gaps < firmware.NO_RECORD_US + 2000)
 
 
 def test_avr_cycles_per_sample_meet_500_hz(host, tmp_path):

@@ -36,3 +36,7 @@ TEMPERATURE_RAW_25C = _DATA["temperature_raw_25C"]
 TEMPERATURE_LSB_PER_C = _DATA["temperature_lsb_per_C"]
 
 CALIBRATION_SHA256 = _DATA["calibration_sha256"]
+
+# What the generic image reads from the EEPROM record besides the calibration (eeprom.SETTING_KEYS, the spec name,
+# the four chip settings): ``upload`` writes them with every new calibration.
+IMAGE_SETTINGS = dict(_DATA["image_settings"])

@@ -16,9 +16,9 @@ import pkgutil
 import sys
 from typing import List, Optional, Tuple
 
-from . import __version__, _build, acceptance_json
+from . import __version__, _build, acceptance_json, eeprom
 from .calibration import Calibration, CalibrationError
-from .device import Device, DeviceError, calibration_record, cross_check
+from .device import Device, DeviceError, NoData, calibration_record, cross_check
 from .simulate import RestTip, SimulatedDevice
 
 G0 = 9.80665  # m/s^2
@@ -235,8 +235,17 @@ def _upload(args: argparse.Namespace, out) -> int:
     else:
         data = json.loads(pkgutil.get_data("magfab_readout", "calibration.json").decode("utf-8"))  # type: ignore[union-attr]
     record = calibration_record(data)
-    with _device(args, text=None) as device:
-        info = device.upload(data)
+    try:
+        with _device(args, text=None) as device:
+            info = device.upload(data)
+    except NoData:
+        if args.simulate or args.baud == eeprom.FALLBACK_BAUD:
+            raise
+        # a board without a valid record speaks at the fallback baud (docs/bundle.md section 4)
+        out.write("no answer at {} baud; trying {} baud (a board without a calibration)\n".format(
+            args.baud, eeprom.FALLBACK_BAUD))
+        with _device(argparse.Namespace(**{**vars(args), "baud": eeprom.FALLBACK_BAUD}), text=None) as device:
+            info = device.upload(data)
     out.write("uploaded {} bytes, read back equal; the board runs calibration {} (spec {})\n".format(
         len(record), info.calibration_hash, json.dumps(info.spec_name)))
     return 0

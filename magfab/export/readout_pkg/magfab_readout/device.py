@@ -60,10 +60,10 @@ READ_CHUNK = 32  # bytes per EEPROM read command
 
 
 def calibration_record(calibration: dict) -> bytes:
-    """The EEPROM record (docs/bundle.md section 4) of a calibration.json dict for this build's chip settings: the
-    bytes ``upload`` writes, the same as a build's .eep holds for its own calibration."""
-    settings = (_build.GAIN_SEL, _build.RESOLUTION, _build.OSR, _build.DIG_FILT)
-    return eeprom.pack(eeprom.layout(validate_calibration(calibration)), calibration_sha256(calibration)[:16], settings)
+    """The EEPROM record (docs/bundle.md section 4) of a calibration.json dict with this build's settings: the bytes
+    ``upload`` writes, the same as a build's .eep holds for its own calibration."""
+    return eeprom.pack(eeprom.layout(validate_calibration(calibration)), calibration_sha256(calibration)[:16],
+                       _build.IMAGE_SETTINGS)
 
 
 def _ports() -> list:
@@ -409,7 +409,8 @@ class Device:
             first = next(k for k, (a, b) in enumerate(zip(back, record)) if a != b)
             raise UploadFailed("the EEPROM read back differs from what was written at byte {}".format(first))
         if last.record != 0:
-            raise UploadFailed("the board does not accept the record written (made for other chip settings?)")
+            raise UploadFailed("the board does not accept the record written (made for other chip settings, or a "
+                               "firmware older than record version {}?)".format(eeprom.VERSION))
         info = self.info()
         if info.calibration_hash.lower() != calibration_sha256(calibration)[:16]:
             raise UploadFailed("the board reports calibration {} after the upload, not {}".format(

@@ -6,7 +6,9 @@ uses the standard library only, and is loaded by magfab as a file (the package's
 
 :func:`layout` turns a validated calibration (``calibration_json.validate``) into what the C code evaluates:
 Horner rows, the hull without its collinear points as a fan with one edge line per wedge, an inner rectangle;
-:func:`pack` lays it out as the record (version, length, CRC-16/CCITT-FALSE); :func:`intel_hex` writes bytes as
+:func:`pack` lays it out as the record (version, length, CRC-16/CCITT-FALSE) with the image's settings (version 2:
+the I2C address and clock, the baud, the chip's register words, the conversion pace and the count scale, all
+computed by magfab from the spec, so that one generic image serves every build); :func:`intel_hex` writes bytes as
 the Intel HEX an avrdude ``-U eeprom:w:FILE.eep:i`` takes.
 """
 
@@ -17,14 +19,29 @@ import struct
 from typing import Any, Dict, List, Sequence, Tuple
 
 MAGIC = b"MF"
-VERSION = 1
+VERSION = 2
 #: EEPROM of the ATmega328P, bytes; the record starts at address 0.
 SIZE = 1024
 HEADER = struct.Struct("<2sBBHH16s4B")  # magic, version, order, length, hull points, sha16, chip settings
+#: The image's settings after the header (docs/bundle.md section 4), in this order; the spec name (NAME_LEN bytes
+#: of UTF-8) goes at the record's end, before the CRC.
+SETTINGS = struct.Struct("<6BH2IH6H4I3H3f")
+SETTING_KEYS = ("i2c_address", "twbr", "twps_bits", "flags", "zyxt", "name_len", "ubrr", "baud", "i2c_hz",
+                "i2c_timeout_us", "reg0_mask", "reg0_value", "reg1_mask", "reg1_value", "reg2_mask", "reg2_value",
+                "tconv_us", "read_margin_us", "retry_us", "exit_wait_us", "raw_zero", "raw_limit", "t_raw_25c",
+                "lsb_xy_uT", "lsb_z_uT", "t_c_per_lsb")
+#: Bits of the settings' ``flags``.
+FLAG_BURST, FLAG_TEMPERATURE, FLAG_TEXT, FLAG_RAW_SIGNED = 1, 2, 4, 8
+NAME_MAX = 64
+#: The baud of an image without a valid record (it has nothing else to go by): the spec's default. ``upload``
+#: falls back to it when the board does not answer at the build's baud.
+FALLBACK_BAUD = 250000
+SETTINGS_OFFSET = HEADER.size  # 28
 FLOATS = ("bz_center", "bz_inv_scale", "br_center", "br_inv_scale", "shear_sign", "direction_min_uT", "tare_fz",
           "tare_fr", "bz_lo", "bz_hi", "br_lo", "br_hi", "in_bz_lo", "in_bz_hi", "in_br_lo", "in_br_hi",
           "p0_bz", "p0_br")
-COEF_OFFSET = HEADER.size + 4 * len(FLOATS)  # 100
+FLOATS_OFFSET = SETTINGS_OFFSET + SETTINGS.size  # 92
+COEF_OFFSET = FLOATS_OFFSET + 4 * len(FLOATS)  # 164
 FLOAT32_MAX = 3.4028234663852886e38
 MAX_ORDER = 8
 INPUTS = ("Bz_uT", "Br_uT")
@@ -161,31 +178,42 @@ def layout(checked: Any) -> Dict[str, Any]:
     }
 
 
-def pack(lay: Dict[str, Any], sha16: str, settings: Sequence[int]) -> bytes:
+def pack(lay: Dict[str, Any], sha16: str, settings: Dict[str, Any]) -> bytes:
     """The EEPROM record: header (magic, version, order, length, hull points, the calibration hash's first 16 hex
     digits for the info line, the chip settings gain_sel / resolution / osr / dig_filt it was made for), the
-    floats, the Horner rows (per row its Fz then its Fr coefficients), the hull fan and edge lines, the CRC.
-    :class:`EepromError` when it does not fit the EEPROM."""
+    image's settings (``settings``: those four, :data:`SETTING_KEYS` but ``name_len``, and ``name``, the spec
+    name), the floats, the Horner rows (per row its Fz then its Fr coefficients), the hull fan and edge lines, the
+    name, the CRC. :class:`EepromError` when it does not fit the EEPROM."""
     n = len(lay["hull"])
-    body = b"".join(struct.pack("<f", lay[name]) for name in FLOATS)
+    name = settings["name"].encode("utf-8")
+    if len(name) > NAME_MAX:
+        raise EepromError("name", settings["name"], "must be at most {} bytes of UTF-8 in the record".format(NAME_MAX))
+    block = SETTINGS.pack(*(len(name) if key == "name_len" else settings[key] for key in SETTING_KEYS))
+    body = block + b"".join(struct.pack("<f", lay[name]) for name in FLOATS)
     for row in lay["rows"]:
         body += struct.pack("<{}f".format(2 * len(row["fz"])), *row["fz"], *row["fr"])
     body += b"".join(struct.pack("<2f", *p) for p in lay["fan"]) + b"".join(struct.pack("<3f", *e) for e in lay["edges"])
+    body += name
     length = HEADER.size + len(body) + 2
     if length > SIZE:
         raise EepromError("valid_region.hull", "{} points at order {}".format(n, lay["order"]),
                           "the record takes {} B, the EEPROM holds {} B: use a shorter hull or a lower order"
                           .format(length, SIZE))
-    head = HEADER.pack(MAGIC, VERSION, lay["order"], length, n, sha16.encode("ascii"), *settings)
+    chip = (settings["gain_sel"], settings["resolution"], settings["osr"], settings["dig_filt"])
+    head = HEADER.pack(MAGIC, VERSION, lay["order"], length, n, sha16.encode("ascii"), *chip)
     record = head + body
     return record + struct.pack("<H", crc16(record))
 
 
 def unpack_header(data: bytes) -> Dict[str, Any]:
-    """The header fields of a record read back (no CRC check: see :func:`check`)."""
+    """The header fields of a record read back (no CRC check: see :func:`check`); ``image`` holds the image's
+    settings (:data:`SETTING_KEYS`) when ``data`` reaches past them."""
     magic, version, order, length, n, sha16, *settings = HEADER.unpack_from(data, 0)
-    return {"magic": magic, "version": version, "order": order, "length": length, "hull_points": n,
-            "sha16": sha16.decode("ascii", "replace"), "settings": tuple(settings)}
+    out = {"magic": magic, "version": version, "order": order, "length": length, "hull_points": n,
+           "sha16": sha16.decode("ascii", "replace"), "settings": tuple(settings)}
+    if len(data) >= FLOATS_OFFSET:
+        out["image"] = dict(zip(SETTING_KEYS, SETTINGS.unpack_from(data, SETTINGS_OFFSET)))
+    return out
 
 
 def check(data: bytes) -> bool:

@@ -9,12 +9,10 @@
 #include "mf_config.h"
 #include "mf_frame.h"
 #include "mf_nv.h"
-#include "mf_rom.h"
 
-static const char mf_info_head[] MF_ROM = MF_INFO_HEAD;
-static const char mf_info_tail[] MF_ROM = MF_INFO_TAIL;
 #define MF_CMD_TIMEOUT_US 50000UL
 #define MF_READ_MAX 32
+#define MF_NO_RECORD_POLL_US 200UL
 
 static uint32_t now(const mf_app_t *a)
 {
@@ -29,33 +27,10 @@ static void wait_until(const mf_app_t *a, uint32_t t)
     }
 }
 
-static uint8_t put_rom(char *out, const char *p)
-{
-    uint8_t n = 0;
-    char c;
-    while ((c = (char)mf_rom_byte(p++)) != '\0') {
-        out[n++] = c;
-    }
-    return n;
-}
-
 static void send_line(const mf_app_t *a, char *line, uint8_t n)
 {
     n = mf_frame_seal(line, n);
     a->hal->serial_write(a->hal->ctx, (const uint8_t *)line, n);
-}
-
-/* I,magfab,<name>,<the record's hash>,<settings>: the hash is the calibration the image runs now. */
-static void send_info(const mf_app_t *a)
-{
-    char line[MF_TEXT_MAX];
-    uint8_t n = put_rom(line, mf_info_head);
-    uint8_t k;
-    for (k = 0; k < 16; ++k) {
-        line[n++] = mf_calib_sha(k);
-    }
-    n = (uint8_t)(n + put_rom(&line[n], mf_info_tail));
-    send_line(a, line, n);
 }
 
 static uint8_t put_field(char *out, uint8_t n, uint32_t v)
@@ -63,6 +38,31 @@ static uint8_t put_field(char *out, uint8_t n, uint32_t v)
     out[n++] = ',';
     return (uint8_t)(n + mf_format_uint(&out[n], v));
 }
+
+/* I,magfab,<name>,<hash>,<gain_sel>,<resolution>,<osr>,<dig_filt>: all from the record the image runs now (an
+ * empty name, sixteen zeros and zeros without a valid one). */
+static void send_info(const mf_app_t *a)
+{
+    static const char head[] = "I,magfab,";
+    char line[MF_TEXT_MAX];
+    uint8_t n = 0;
+    uint8_t k;
+    for (k = 0; head[k] != '\0'; ++k) {
+        line[n++] = head[k];
+    }
+    for (k = 0; k < mf_calib_name_len(); ++k) {
+        line[n++] = mf_calib_name(k);
+    }
+    line[n++] = ',';
+    for (k = 0; k < 16; ++k) {
+        line[n++] = mf_calib_sha(k);
+    }
+    for (k = 0; k < 4; ++k) {
+        n = put_field(line, n, mf_calib_setting(k));
+    }
+    send_line(a, line, n);
+}
+
 
 /* 'w': W,<addr>,<len>,<rc: 0 written, 1 bad CRC, 2 outside the EEPROM>,<the record now: 0 valid, 10 not> */
 static void eeprom_write_command(mf_app_t *a)
@@ -79,7 +79,10 @@ static void eeprom_write_command(mf_app_t *a)
         rc = 2;
     } else {
         mf_nv_write(addr, &a->cmd[4], len);
-        (void)mf_calib_load();
+        if (mf_calib_load() == MF_OK) {
+            a->lost = 1; /* (re)start the chip now, with the settings of the record just completed */
+            a->t_next = now(a);
+        }
     }
     line[0] = 'W';
     n = put_field(line, 1, addr);
@@ -156,6 +159,8 @@ void mf_app_commands(mf_app_t *a)
 static int start_once(mf_app_t *a)
 {
     int rc;
+    uint8_t reg;
+    a->chip.addr = MF_I2C_ADDR; /* the record's (a generic image's address can change with an upload) */
     (void)mlx_command(&a->chip, MLX_CMD_EX); /* from any mode back to idle; rejected when already idle */
     a->hal->delay_us(a->hal->ctx, MF_EXIT_WAIT_US);
     rc = mlx_command(&a->chip, MLX_CMD_RT);
@@ -170,19 +175,16 @@ static int start_once(mf_app_t *a)
     if (rc != MF_OK) {
         return rc;
     }
-    rc = mlx_update_register(&a->chip, 0x00, MF_REG0_MASK, MF_REG0_VALUE);
-    if (rc != MF_OK) {
-        return rc;
+    for (reg = 0; reg < 3; ++reg) {
+        rc = mlx_update_register(&a->chip, reg, MF_REG_MASK(reg), MF_REG_VALUE(reg));
+        if (rc != MF_OK) {
+            return rc;
+        }
     }
-    rc = mlx_update_register(&a->chip, 0x01, MF_REG1_MASK, MF_REG1_VALUE);
-    if (rc != MF_OK) {
-        return rc;
+    if (!MF_BURST) {
+        a->t_next = now(a);
+        return MF_OK;
     }
-    rc = mlx_update_register(&a->chip, 0x02, MF_REG2_MASK, MF_REG2_VALUE);
-    if (rc != MF_OK) {
-        return rc;
-    }
-#if MF_BURST
     rc = mlx_command(&a->chip, (uint8_t)(MLX_CMD_SB | MF_ZYXT));
     if (rc == MF_OK && !(a->chip.status & MLX_ST_BURST)) {
         rc = MF_E_MODE;
@@ -191,9 +193,6 @@ static int start_once(mf_app_t *a)
         return rc;
     }
     a->t_next = now(a) + MF_TCONV_US + MF_READ_MARGIN_US;
-#else
-    a->t_next = now(a);
-#endif
     return MF_OK;
 }
 
@@ -234,7 +233,15 @@ static int acquire(mf_app_t *a, mlx_raw_t *raw, uint32_t *t_us)
 {
     int rc;
     uint8_t retried;
-#if MF_BURST
+    if (!MF_BURST) {
+        rc = mlx_command(&a->chip, (uint8_t)(MLX_CMD_SM | MF_ZYXT));
+        if (rc != MF_OK) {
+            *t_us = now(a);
+            return rc;
+        }
+        a->hal->delay_us(a->hal->ctx, MF_TCONV_US + MF_READ_MARGIN_US);
+        return read_measurement(a, raw, MLX_ST_SM, t_us, &retried);
+    }
     if ((int32_t)(now(a) - a->t_next) > (int32_t)MF_TCONV_US) {
         a->t_next = now(a); /* fell behind by more than a conversion (a stalled host link): catch up, not burst */
     }
@@ -245,15 +252,6 @@ static int acquire(mf_app_t *a, mlx_raw_t *raw, uint32_t *t_us)
     if (rc == MF_OK && !(a->chip.status & MLX_ST_BURST)) {
         rc = MF_E_MODE;
     }
-#else
-    rc = mlx_command(&a->chip, (uint8_t)(MLX_CMD_SM | MF_ZYXT));
-    if (rc != MF_OK) {
-        *t_us = now(a);
-        return rc;
-    }
-    a->hal->delay_us(a->hal->ctx, MF_TCONV_US + MF_READ_MARGIN_US);
-    rc = read_measurement(a, raw, MLX_ST_SM, t_us, &retried);
-#endif
     return rc;
 }
 
@@ -280,8 +278,11 @@ void mf_app_emit(mf_app_t *a, const mf_sample_t *s, uint32_t t_us)
 void mf_app_init(mf_app_t *a, const mf_hal_t *hal)
 {
     a->hal = hal;
+    (void)mf_calib_load(); /* the record: the calibration and (MF_GENERIC) every setting below */
     mlx_init(&a->chip, hal, MF_I2C_ADDR);
-    a->text_mode = MF_OUTPUT_TEXT;
+    /* without a record, text lines a person reads in any serial monitor; the record's mode applies from the next
+     * reset on (the host switches with 'b' / 't' meanwhile) */
+    a->text_mode = (uint8_t)(mf_calib_status() != MF_OK || MF_OUTPUT_TEXT ? 1 : 0);
     a->seq = 0;
     a->lost = 0;
     a->recovered_pending = 0;
@@ -291,10 +292,11 @@ void mf_app_init(mf_app_t *a, const mf_hal_t *hal)
     a->errors = 0;
     a->recoveries = 0;
     a->cmd_len = 0;
-    (void)mf_calib_load();
     a->t0 = now(a);
     a->t_next = a->t0;
-    if (mf_app_start_chip(a) != MF_OK) {
+    if (mf_calib_status() != MF_OK) {
+        a->lost = 1; /* no record: the chip is left alone (mf_app_poll) until one is written */
+    } else if (mf_app_start_chip(a) != MF_OK) {
         a->lost = 1;
         a->t_next = now(a);
     }
@@ -307,6 +309,22 @@ void mf_app_poll(mf_app_t *a)
     uint32_t t;
     int rc;
     mf_app_commands(a);
+    while (mf_calib_status() != MF_OK && (int32_t)(a->t_next - now(a)) > 0) {
+        a->hal->delay_us(a->hal->ctx, MF_NO_RECORD_POLL_US); /* the host's commands answered while waiting */
+        mf_app_commands(a);
+    }
+    if (mf_calib_status() != MF_OK) {
+        /* no valid record: neither the chip's address nor its settings are known, and no force could be made */
+        mf_sample_fail(&s, MF_E_CALIB, MF_STAGE_EEPROM);
+        a->poll_error = MF_E_CALIB;
+        a->last_error = MF_E_CALIB;
+        ++a->errors;
+        t = now(a);
+        mf_app_emit(a, &s, t);
+        a->lost = 1; /* started when a valid record is written (mf_app_commands) */
+        a->t_next = t + MF_NO_RECORD_US;
+        return;
+    }
     if (a->lost) {
         wait_until(a, a->t_next);
         rc = mf_app_start_chip(a);
@@ -325,11 +343,7 @@ void mf_app_poll(mf_app_t *a)
         ++a->recoveries;
     }
     rc = acquire(a, &raw, &t);
-    if (rc == MF_OK && mf_calib_status() != MF_OK) {
-        mf_sample_fail(&s, MF_E_CALIB, MF_STAGE_EEPROM); /* a good reading, but no force without a calibration */
-        a->last_error = MF_E_CALIB;
-        ++a->errors;
-    } else if (rc == MF_OK) {
+    if (rc == MF_OK) {
         mf_app_process(&raw, &s);
     } else {
         mf_sample_fail(&s, rc, MF_STAGE_READ);

@@ -10,6 +10,11 @@
 #include "mf_frame.h"
 #include "mf_nv.h"
 
+#if MF_GENERIC
+mf_settings_t mf_set = {0, 0, 0, 0, 0, 0, MF_FALLBACK_UBRR, MF_FALLBACK_BAUD, 0, 0, {0, 0, 0}, {0, 0, 0},
+                        0, 0, 0, 0, 0, 0, 0, 0.0f, 0.0f, 0.0f};
+#endif
+
 enum { BZ_CENTER, BZ_INV_SCALE, BR_CENTER, BR_INV_SCALE, SHEAR_SIGN, DIRECTION_MIN, TARE_FZ, TARE_FR, BZ_LO, BZ_HI,
        BR_LO, BR_HI, IN_BZ_LO, IN_BZ_HI, IN_BR_LO, IN_BR_HI, P0_BZ, P0_BR, N_FLOATS };
 
@@ -19,9 +24,11 @@ static struct {
     uint16_t hull_n;
     uint16_t fan_at;  /* EEPROM address of the fan: (dz, dr) per hull point */
     uint16_t edge_at; /* and of the edge lines: (ex, ey, c) per hull point */
+    uint16_t name_at; /* and of the spec name */
+    uint8_t name_len;
     float f[N_FLOATS];
     float coef[(MF_CAL_MAX_ORDER + 1) * (MF_CAL_MAX_ORDER + 2)]; /* the Horner rows, as in the record */
-} cal = {MF_E_CALIB, 0, 0, 0, 0, {0}, {0}};
+} cal = {MF_E_CALIB, 0, 0, 0, 0, 0, 0, {0}, {0}};
 
 static uint16_t record_crc(uint16_t len)
 {
@@ -41,24 +48,78 @@ static uint16_t record_crc(uint16_t len)
     return crc;
 }
 
+#if MF_GENERIC
+/* The image's settings from a record whose CRC is right; MF_E_CALIB for values no magfab build writes. */
+static int load_settings(void)
+{
+    uint16_t a = MF_CAL_IMAGE_AT;
+    uint8_t k;
+    mf_set.i2c_address = mf_nv_byte(a);
+    mf_set.twbr = mf_nv_byte((uint16_t)(a + 1));
+    mf_set.twps_bits = mf_nv_byte((uint16_t)(a + 2));
+    mf_set.flags = mf_nv_byte((uint16_t)(a + 3));
+    mf_set.zyxt = mf_nv_byte((uint16_t)(a + 4));
+    mf_set.name_len = mf_nv_byte((uint16_t)(a + 5));
+    mf_set.ubrr = mf_nv_u16((uint16_t)(a + 6));
+    mf_set.baud = mf_nv_u32((uint16_t)(a + 8));
+    mf_set.i2c_hz = mf_nv_u32((uint16_t)(a + 12));
+    mf_set.i2c_timeout_us = mf_nv_u16((uint16_t)(a + 16));
+    for (k = 0; k < 3; ++k) {
+        mf_set.reg_mask[k] = mf_nv_u16((uint16_t)(a + 18 + 4 * k));
+        mf_set.reg_value[k] = mf_nv_u16((uint16_t)(a + 20 + 4 * k));
+    }
+    mf_set.tconv_us = mf_nv_u32((uint16_t)(a + 30));
+    mf_set.read_margin_us = mf_nv_u32((uint16_t)(a + 34));
+    mf_set.retry_us = mf_nv_u32((uint16_t)(a + 38));
+    mf_set.exit_wait_us = mf_nv_u32((uint16_t)(a + 42));
+    mf_set.raw_zero = mf_nv_u16((uint16_t)(a + 46));
+    mf_set.raw_limit = mf_nv_u16((uint16_t)(a + 48));
+    mf_set.t_raw_25c = mf_nv_u16((uint16_t)(a + 50));
+    mf_set.lsb_xy_uT = mf_nv_float((uint16_t)(a + 52));
+    mf_set.lsb_z_uT = mf_nv_float((uint16_t)(a + 56));
+    mf_set.t_c_per_lsb = mf_nv_float((uint16_t)(a + 60));
+    if (mf_set.i2c_address < 0x08U || mf_set.i2c_address > 0x77U || mf_set.twps_bits > 3U || mf_set.ubrr > 4095U
+        || (mf_set.zyxt & 0x0EU) != 0x0EU || mf_set.zyxt > 0x0FU || mf_set.tconv_us == 0UL
+        || mf_set.i2c_hz == 0UL || mf_set.baud == 0UL || mf_set.raw_limit == 0U
+        || !(mf_set.lsb_xy_uT > 0.0f) || !(mf_set.lsb_z_uT > 0.0f)) {
+        return MF_E_CALIB;
+    }
+    return MF_OK;
+}
+#endif
+
 int mf_calib_load(void)
 {
     uint8_t order = mf_nv_byte(3);
     uint16_t len = mf_nv_u16(4);
     uint16_t n = mf_nv_u16(6);
+    uint8_t name_len = mf_nv_byte(MF_CAL_IMAGE_AT + 5);
     uint16_t n_coef = (uint16_t)((order + 1U) * (order + 2U) / 2U);
     uint16_t fan_at = (uint16_t)(MF_CAL_COEF_AT + 8U * n_coef);
     uint16_t k;
     cal.status = MF_E_CALIB;
+#if MF_GENERIC
+    mf_set.ubrr = MF_FALLBACK_UBRR; /* what the UART starts with, unless a valid record says otherwise */
+    mf_set.baud = MF_FALLBACK_BAUD;
+#endif
     if (mf_nv_byte(0) != MF_CAL_MAGIC0 || mf_nv_byte(1) != MF_CAL_MAGIC1 || mf_nv_byte(2) != MF_CAL_VERSION
-        || order > MF_CAL_MAX_ORDER || n < 3 || n > 200 || len > MF_NV_SIZE
-        || len != (uint16_t)(fan_at + 20U * n + 2U) || record_crc((uint16_t)(len - 2)) != mf_nv_u16((uint16_t)(len - 2))) {
+        || order > MF_CAL_MAX_ORDER || n < 3 || n > 200 || len > MF_NV_SIZE || name_len > MF_CAL_NAME_MAX
+        || len != (uint16_t)(fan_at + 20U * n + name_len + 2U)
+        || record_crc((uint16_t)(len - 2)) != mf_nv_u16((uint16_t)(len - 2))) {
         return MF_E_CALIB;
     }
+#if MF_GENERIC
+    if (load_settings() != MF_OK) {
+        mf_set.ubrr = MF_FALLBACK_UBRR;
+        mf_set.baud = MF_FALLBACK_BAUD;
+        return MF_E_CALIB;
+    }
+#else
     if (mf_nv_byte(MF_CAL_SETTINGS_AT) != MF_GAIN_SEL || mf_nv_byte(MF_CAL_SETTINGS_AT + 1) != MF_RESOLUTION
         || mf_nv_byte(MF_CAL_SETTINGS_AT + 2) != MF_OSR || mf_nv_byte(MF_CAL_SETTINGS_AT + 3) != MF_DIG_FILT) {
         return MF_E_CALIB; /* made for other chip settings: its microtesla would be wrong */
     }
+#endif
     for (k = 0; k < N_FLOATS; ++k) {
         cal.f[k] = mf_nv_float((uint16_t)(MF_CAL_FLOATS_AT + 4U * k));
     }
@@ -69,6 +130,8 @@ int mf_calib_load(void)
     cal.hull_n = n;
     cal.fan_at = fan_at;
     cal.edge_at = (uint16_t)(fan_at + 8U * n);
+    cal.name_at = (uint16_t)(cal.edge_at + 12U * n);
+    cal.name_len = name_len;
     cal.status = MF_OK;
     return MF_OK;
 }
@@ -81,6 +144,21 @@ int mf_calib_status(void)
 char mf_calib_sha(uint8_t k)
 {
     return cal.status == MF_OK ? (char)mf_nv_byte((uint16_t)(MF_CAL_SHA_AT + k)) : '0';
+}
+
+uint8_t mf_calib_setting(uint8_t k)
+{
+    return cal.status == MF_OK ? mf_nv_byte((uint16_t)(MF_CAL_SETTINGS_AT + k)) : 0U;
+}
+
+uint8_t mf_calib_name_len(void)
+{
+    return cal.status == MF_OK ? cal.name_len : 0U;
+}
+
+char mf_calib_name(uint8_t k)
+{
+    return (char)mf_nv_byte((uint16_t)(cal.name_at + k));
 }
 
 #define FAN_Z(k) mf_nv_float((uint16_t)(cal.fan_at + 8U * (k)))

@@ -4,8 +4,9 @@
  *   F = sum c_ij u^i v^j (Horner form) - tare, for F in Fz, Fr,
  *   Fx = shear_sign Fr Bx / Br, Fy = shear_sign Fr By / Br (0 when Br < direction_min_uT),
  * and the valid-region test (box, then the convex hull) that sets MF_FLAG_OUTSIDE.
- * Without a valid record (missing, wrong version or length, bad CRC, made for other chip settings) there is no
- * force: the loop sends error frames (MF_E_CALIB) until one is uploaded. */
+ * Without a valid record (missing, wrong version or length, bad CRC, settings out of range, or, in a build-specific
+ * image, made for other chip settings) there is no force: the loop sends error frames (MF_E_CALIB) until one is
+ * uploaded. The generic image (MF_GENERIC) also takes its settings from the record (mf_settings.h). */
 #ifndef MF_CALIB_H
 #define MF_CALIB_H
 
@@ -15,15 +16,18 @@
 extern "C" {
 #endif
 
-/* Record layout (readout package eeprom.py): header, then the floats, the Horner rows, the hull fan and edges. */
+/* Record layout (readout package eeprom.py): header, the image's settings, the floats, the Horner rows, the hull
+ * fan and edges, the spec name, the CRC. */
 #define MF_CAL_MAGIC0 'M'
 #define MF_CAL_MAGIC1 'F'
-#define MF_CAL_VERSION 1
+#define MF_CAL_VERSION 2
 #define MF_CAL_SHA_AT 8      /* 16 ASCII hex digits of the calibration's sha256 */
 #define MF_CAL_SETTINGS_AT 24 /* gain_sel, resolution, osr, dig_filt the record was made for */
-#define MF_CAL_FLOATS_AT 28
-#define MF_CAL_COEF_AT 100
+#define MF_CAL_IMAGE_AT 28   /* the image's settings: mf_settings_t's fields in order, packed */
+#define MF_CAL_FLOATS_AT 92
+#define MF_CAL_COEF_AT 164
 #define MF_CAL_MAX_ORDER 8
+#define MF_CAL_NAME_MAX 64
 
 /* Read and check the record (MF_OK or MF_E_CALIB); call at start-up and after every write. */
 int mf_calib_load(void);
@@ -31,6 +35,11 @@ int mf_calib_load(void);
 int mf_calib_status(void);
 /* Byte k (0..15) of the record's calibration hash, for the info line ('0' without a valid record). */
 char mf_calib_sha(uint8_t k);
+/* Byte k (0..3) of the chip settings the record was made for: gain_sel, resolution, osr, dig_filt (0 without). */
+uint8_t mf_calib_setting(uint8_t k);
+/* The spec name's length in bytes and byte k of it (empty without a valid record). */
+uint8_t mf_calib_name_len(void);
+char mf_calib_name(uint8_t k);
 /* Forces of a converted sample (b_uT set); adds MF_FLAG_OUTSIDE outside the calibrated region. Only with a
  * valid record (mf_calib_status() == MF_OK). */
 void mf_calib_forces(mf_sample_t *s);

@@ -70,3 +70,8 @@ uint16_t mf_nv_u16(uint16_t addr)
 {
     return (uint16_t)(mf_nv_byte(addr) | (uint16_t)mf_nv_byte((uint16_t)(addr + 1)) << 8);
 }
+
+uint32_t mf_nv_u32(uint16_t addr)
+{
+    return (uint32_t)mf_nv_u16(addr) | (uint32_t)mf_nv_u16((uint16_t)(addr + 2)) << 16;
+}

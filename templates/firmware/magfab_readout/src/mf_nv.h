@@ -14,6 +14,7 @@ extern "C" {
 
 uint8_t mf_nv_byte(uint16_t addr);
 uint16_t mf_nv_u16(uint16_t addr); /* little-endian */
+uint32_t mf_nv_u32(uint16_t addr); /* little-endian */
 float mf_nv_float(uint16_t addr);  /* IEEE-754 binary32, little-endian */
 /* Write len bytes from addr on (the caller keeps addr + len within MF_NV_SIZE); bytes already equal are not
  * rewritten (EEPROM wear). Blocks: about 3.4 ms per changed byte on the ATmega328P. */

@@ -9,11 +9,10 @@
  * around 2^15 / 2^14 (TCMP off). */
 static int32_t counts(uint16_t word)
 {
-#if MF_RAW_SIGNED
-    return word >= 0x8000U ? (int32_t)word - 65536L : (int32_t)word;
-#else
+    if (MF_RAW_SIGNED) {
+        return word >= 0x8000U ? (int32_t)word - 65536L : (int32_t)word;
+    }
     return (int32_t)word - MF_RAW_ZERO;
-#endif
 }
 
 static int16_t clamp16(int32_t c)
@@ -45,13 +44,13 @@ void mf_sample_convert(const mlx_raw_t *raw, mf_sample_t *s)
     s->b_uT[0] = (float)c[0] * MF_LSB_XY_UT;
     s->b_uT[1] = (float)c[1] * MF_LSB_XY_UT;
     s->b_uT[2] = (float)c[2] * MF_LSB_Z_UT;
-#if MF_TEMPERATURE
-    s->t_raw = raw->t;
-    s->t_C = 25.0f + (float)((int32_t)raw->t - MF_T_RAW_25C) * MF_T_C_PER_LSB;
-#else
-    s->t_raw = 0;
-    s->t_C = NAN;
-#endif
+    if (MF_TEMPERATURE) {
+        s->t_raw = raw->t;
+        s->t_C = 25.0f + (float)((int32_t)raw->t - MF_T_RAW_25C) * MF_T_C_PER_LSB;
+    } else {
+        s->t_raw = 0;
+        s->t_C = NAN;
+    }
     s->f_N[0] = s->f_N[1] = s->f_N[2] = NAN;
 }
 
