@@ -119,7 +119,7 @@ def shipped(spec_path: Path | None, build_dir: Path | None) -> dict:
         cycles = measure(design, cal)["cycles"]
         lib = build_library(out, Path(tmp))
         with Bus(lib, hex_path, design.i2c_address) as bus:
-            bus.set_field(120.0, -80.0, -2500.0)
+            bus.set_field(1200.0, -800.0, 20000.0)  # inside MagOne's calibrated region
             bus.run_us(SETTLE_US)
             t0, c0 = bus.time_us, bus.conversions
             data = bus.run_us(RATE_SECONDS * 1e6)

@@ -25,7 +25,7 @@ from readout_support import ref_forces
 from magfab.export.firmware import LOST_RETRY_US
 from simbus import Bus, HarnessUnavailable, build_library, read_intel_hex
 
-FIELD_UT = (120.0, -80.0, -2500.0)  # inside MagOne's calibrated region
+FIELD_UT = (1200.0, -800.0, 20000.0)  # inside MagOne's calibrated region (test_streams_the_true_force checks)
 FORCE_TOL_N = 1e-5
 FORCE_REL = 1e-5
 SETTLE_US = 40_000  # boot to steady streaming, with margin (the first frame comes at about 15 ms)
@@ -123,6 +123,7 @@ def test_streams_the_true_force(sim):
         samples = sim.samples(decoder, bus.run_us(100_000))
         assert len(samples) > 30
         assert not any(s.chip_error for s in samples) and sim.wrong(samples) == []
+        assert not any(s.outside_region for s in samples)  # the forces are the calibration's, not extrapolated
         assert decoder.stats.crc_errors == 0 and decoder.stats.lost == 0
 
 
@@ -378,3 +379,64 @@ def test_the_build_eep_holds_its_calibration(sim):
 
     data = b"".join(d for _, d in read_intel_hex(sim.hex_path.with_suffix(".eep").read_text()))
     assert data[:3] == b"MF\x02" and data[8:24].decode() == calibration_sha256(sim.cal)[:16]
+
+
+# ---- the generic image: rebuilt from source, and on a machine without avr-gcc ------------------------------------
+
+
+def stream(sim: Sim, hex_path, eep, us: int = 60_000) -> list:
+    """(seq, status, counts, forces as text, fault) of every frame ``hex_path`` sends with ``eep`` in its EEPROM."""
+    with Bus(sim.lib, hex_path, sim.addr7, eep) as bus:
+        bus.set_field(*FIELD_UT)
+        samples = sim.samples(sim.frames.Decoder(), bus.run_us(us))
+    return [(s.seq, s.status, s.counts, repr(s.force_N), s.fault) for s in samples]
+
+
+def test_the_generic_image_rebuilt_from_source(sim, tmp_path):
+    """With avr-gcc (CI): the generic image compiled here from its sources is byte-identical to the shipped one
+    when the toolchain's versions are those recorded beside it; with any toolchain, both images on the simulated
+    bus send the same frames (sequence, status, counts, forces, fault words), with the build's record and with
+    none."""
+    from magfab.export import firmware, toolchain
+
+    for tool in ("avr-gcc", "avr-objcopy", "avr-size"):
+        require_tool(tool)
+    image, info = toolchain.build_generic()
+    shipped, made = firmware.shipped_image()
+    if info["toolchain"] == made["toolchain"]:
+        assert image == shipped and info == made
+    else:
+        print(f"toolchain {info['toolchain']} is not the recorded {made['toolchain']}: comparing behaviour only")
+    rebuilt = tmp_path / firmware.HEX_NAME
+    rebuilt.write_bytes(image)
+    eep = sim.hex_path.with_suffix(".eep")
+    theirs, ours = stream(sim, sim.hex_path, eep), stream(sim, rebuilt, eep)
+    assert len(ours) > 10 and ours == theirs
+    assert stream(sim, rebuilt, None, 50_000) == stream(sim, sim.hex_path, None, 50_000)  # erased: error lines
+
+
+def test_a_build_without_avr_gcc_writes_an_image_that_runs(sim, default_build, tmp_path, monkeypatch):
+    """A pip-only machine: avr-gcc hidden from PATH (the toolchain cannot compile), the build's bundle step still
+    writes the .hex, the generic image, and the .eep of its settings and calibration; the simulated board running
+    them streams the calibration's true forces."""
+    from magfab import derive, load_spec
+    from magfab.export import firmware, toolchain
+    from magfab.formats.scan_csv import read_scan_csv
+    from magfab.pipeline import _bundle
+
+    scan = read_scan_csv(default_build.out_dir / "calibration" / "scan_simulated.csv")
+    monkeypatch.setenv("PATH", str(tmp_path))  # nothing on it: no avr-gcc, no avr-objcopy
+    assert toolchain.build_hex(firmware.generic_sources()) is None and toolchain.versions() is None
+    artifacts, _, _ = _bundle(derive(load_spec(None)), None, scan, None, lambda *a, **k: None, {})
+    written = {a.path: a.data for a in artifacts}
+    for name in (firmware.HEX_NAME, firmware.EEP_NAME):
+        (tmp_path / name).write_bytes(written[f"firmware/{name}"])
+    monkeypatch.undo()
+    cal = json.loads(written["calibration/calibration.json"])
+    assert written[f"firmware/{firmware.HEX_NAME}"] == firmware.shipped_image()[0]
+    with Bus(sim.lib, tmp_path / firmware.HEX_NAME, sim.addr7, tmp_path / firmware.EEP_NAME) as bus:
+        bus.set_field(*FIELD_UT)
+        samples = sim.samples(sim.frames.Decoder(), bus.run_us(100_000))
+    print(f"pip-only build: {len(samples)} frames in 100 ms simulated, {sum(s.chip_error for s in samples)} errors")
+    assert len(samples) > 30 and not any(s.chip_error for s in samples)
+    assert sim.wrong(samples, cal=cal) == []

@@ -1,0 +1,59 @@
+"""The generic image (issue 14 item 6): one ATmega328P image for every build, its settings and calibration from the
+EEPROM record, shipped ready-built as package data (magfab/export/generic_image) so that a machine without
+avr-gcc still gets a ready-to-flash .hex. Here: its sources carry no setting of any spec, the shipped image is
+the one its sources make (sha256 recorded beside it), and the wheel's package data takes it. Rebuilding it with
+avr-gcc and running it and the shipped one on the simulated bus is in test_simbus.py."""
+
+from __future__ import annotations
+
+import fnmatch
+import hashlib
+import tomllib
+from pathlib import Path
+
+from magfab import derive, load_spec
+from magfab.export import firmware, toolchain
+from magfab.spec import Acquisition, Transport
+
+from test_firmware import make_calibration, spec_variant
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_every_build_renders_the_generic_sources():
+    """Builds that differ in every setting the image uses (name, baud, I2C clock, acquisition, output, OSR,
+    DIG_FILT, resolution, gain, temperature) render byte-equal image sources: the settings live in the .eep only."""
+    other = spec_variant("zq-other-build", firmware_baud=115200, firmware_i2c_hz=100000, firmware_acquisition=Acquisition.SINGLE,
+                         firmware_output=Transport.TEXT, firmware_temperature=False, sensor_osr=1, sensor_dig_filt=1,
+                         sensor_resolution=1, sensor_gain_sel=5)
+    generic = firmware.generic_sources()
+    assert "avr/main.c" in generic and "magfab_readout/src/mf_config.h" in generic
+    for spec in (load_spec(None), other):
+        files = firmware.render(derive(spec), make_calibration())
+        assert {rel: files[rel] for rel in generic} == generic
+    own = firmware.render(derive(other), make_calibration(), generic=False)  # negative control: constants compiled in
+    assert own["magfab_readout/src/mf_config.h"] != generic["magfab_readout/src/mf_config.h"]
+    assert derive(other).spec.name.encode() not in b"".join(generic.values())
+
+
+def test_the_shipped_image_is_made_from_todays_sources():
+    """toolchain.json records the sha256 of the sources the shipped image was built from: a source changed without
+    ``python -m magfab.export.toolchain`` fails here, with or without avr-gcc."""
+    image, made = firmware.shipped_image()
+    assert made["sources_sha256"] == toolchain._sources_sha256(firmware.generic_sources())
+    assert made["image_sha256"] == hashlib.sha256(image).hexdigest()
+    assert made["cflags"] == " ".join((*firmware.AVR_CFLAGS, *firmware.AVR_LDFLAGS))
+    assert set(made["toolchain"]) == {"avr-gcc", "avr-libc", "avr-objcopy"}
+    assert made["flash_bytes"] <= firmware.FLASH_LIMIT_BYTES and made["ram_bytes"] <= firmware.RAM_LIMIT_BYTES
+    lines = image.decode("ascii").splitlines()
+    assert lines[-1] == ":00000001FF" and all(sum(bytes.fromhex(x[1:])) & 0xFF == 0 for x in lines)
+
+
+def test_the_wheel_takes_the_shipped_image():
+    """pyproject.toml's package data matches every file of magfab/export/generic_image (the wheel test,
+    tests/test_packaging.py, checks the built wheel itself)."""
+    data = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["package-data"]["magfab.export"]
+    folder = ROOT / "magfab" / "export" / firmware.GENERIC_DIR
+    shipped = sorted(p.relative_to(folder.parent).as_posix() for p in folder.iterdir() if p.is_file())
+    assert shipped == [f"{firmware.GENERIC_DIR}/{firmware.HEX_NAME}", f"{firmware.GENERIC_DIR}/{firmware.GENERIC_TOOLCHAIN}"]
+    assert all(any(fnmatch.fnmatch(rel, pattern) for pattern in data) for rel in shipped)
