@@ -18,7 +18,10 @@ What it measures:
    at the spec's clock (computed from the bit count) plus the UART interrupts that drain one 31-byte frame
    (an estimate: cycles per interrupt below), against the conversion wait the firmware paces itself by.
 3. **Flash and RAM** of the real image (avr-size: text + data, data + bss).
-4. **The shipped build, measured**: the cycles per sample with the build's own calibration.json, and the output
+4. **Generic against build-specific**: the image every build ships (settings from the EEPROM record) and one
+   compiled with the spec's settings as constants (``firmware.render(generic=False)``): cycles per sample, flash
+   and RAM of both, the measurement behind shipping the generic one.
+5. **The shipped build, measured**: the cycles per sample with the build's own calibration.json, and the output
    rate of its .hex on the simulated I2C bus (tests/export/simbus: libsimavr with the build's MLX90393 model,
    which converts at the datasheet table's time): frames per simulated second against the chip's conversions
    over the same time. ``--build`` names an existing build folder; without it the spec is built into a
@@ -80,8 +83,8 @@ def rm_transfer_us(i2c_hz: float, words: int) -> float:
     return bits * 1e6 / i2c_hz
 
 
-def measure(design, calibration: dict) -> dict:
-    files = firmware.render(design, calibration)
+def measure(design, calibration: dict, generic: bool = True) -> dict:
+    files = firmware.render(design, calibration, generic=generic)
     image = toolchain.build_hex(files)
     with tempfile.TemporaryDirectory(prefix="magfab-fw-bench-") as tmp:
         elf, _ = toolchain.build_avr_elf(files, tmp, "bench")
@@ -118,7 +121,7 @@ def shipped(spec_path: Path | None, build_dir: Path | None) -> dict:
         design = derive(load_spec(spec_path))
         cycles = measure(design, cal)["cycles"]
         lib = build_library(out, Path(tmp))
-        with Bus(lib, hex_path, design.i2c_address) as bus:
+        with Bus(lib, hex_path, design.i2c_address, hex_path.with_suffix(".eep")) as bus:
             bus.set_field(1200.0, -800.0, 20000.0)  # inside MagOne's calibrated region
             bus.run_us(SETTLE_US)
             t0, c0 = bus.time_us, bus.conversions
@@ -130,13 +133,29 @@ def shipped(spec_path: Path | None, build_dir: Path | None) -> dict:
             "chip_Hz": chip_hz, "delivered": frames / conversions, "seconds": seconds}
 
 
+def generic_vs_own(design, calibration: dict, f_mhz: float) -> dict:
+    """The generic image against one with the spec's settings compiled in: worst cycles per sample, flash, RAM."""
+    out = {}
+    for name, generic in (("generic", True), ("own", False)):
+        r = measure(design, calibration, generic)
+        sizes = r["sizes"] or {}
+        out[name] = {"sample_cycles": max(r["cycles"]["sample_binary"].values()),
+                     "flash_bytes": sizes.get("flash_bytes"), "ram_bytes": sizes.get("ram_bytes")}
+    g, o = out["generic"], out["own"]
+    print(f"generic image (settings from EEPROM) against build-specific (order {calibration['order']}): "
+          f"{g['sample_cycles']} vs {o['sample_cycles']} cycles per sample "
+          f"({(g['sample_cycles'] - o['sample_cycles']) / f_mhz:+.0f} us, {g['sample_cycles'] / o['sample_cycles'] - 1:+.1%}), "
+          f"flash {g['flash_bytes']} vs {o['flash_bytes']} B, RAM {g['ram_bytes']} vs {o['ram_bytes']} B")
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--spec", type=Path, help="spec TOML (default: the embedded MagOne design)")
     parser.add_argument("--calibration", type=Path, help="a calibration.json to time instead of synthetic ones")
     parser.add_argument("--orders", default="1,2,3,4,5,6", help="polynomial orders of the synthetic calibrations")
-    parser.add_argument("--hull", type=int, default=32,
-                        help="points on the synthetic hull (the EEPROM record holds 1 KB: 32 fit up to order 6)")
+    parser.add_argument("--hull", type=int, default=28,
+                        help="points on the synthetic hull (the EEPROM record holds 1 KB: 28 fit up to order 6 with the settings)")
     parser.add_argument("--build", type=Path, help="an existing build folder to measure (default: build the spec)")
     parser.add_argument("--no-rate", action="store_true", help="skip the shipped build's rate on the simulated bus")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
@@ -185,7 +204,8 @@ def main(argv: list[str] | None = None) -> int:
               f"{1e6 / busy_us:>7.0f} {rate:>7.0f} {sizes.get('flash_bytes', '-'):>7} {sizes.get('ram_bytes', '-'):>5}")
     print("cycles are per call (best of 4 repeats; the run is deterministic); 'sample' is the worst point; "
           "'rate' = 1 / max(busy time, the conversion).")
-    result = {"f_cpu_Hz": firmware.F_CPU_HZ, "spec": design.spec.name, "i2c_Hz": i2c_hz, "rows": rows}
+    result = {"f_cpu_Hz": firmware.F_CPU_HZ, "spec": design.spec.name, "i2c_Hz": i2c_hz, "rows": rows,
+              "generic_vs_own": generic_vs_own(design, calibrations[0], f_mhz)}
     if not args.no_rate:
         m = shipped(args.spec, args.build)
         result["shipped"] = m
