@@ -37,3 +37,10 @@ def test_templates_ship_as_magfab_templates(wheel_files):
     wanted = {"magfab/templates/" + str(p.relative_to(ROOT / "templates"))
               for p in (ROOT / "templates").rglob("*") if p.is_file() and "__pycache__" not in p.parts}
     assert wanted and wanted - wheel_files == set()
+
+
+def test_the_generic_firmware_image_ships(wheel_files):
+    """A pip-only machine (no avr-gcc) still writes a ready-to-flash .hex: the generic image and the record of the
+    toolchain that made it are package data (issue 14 item 6)."""
+    assert {"magfab/export/generic_image/magfab-atmega328p.hex",
+            "magfab/export/generic_image/toolchain.json"} <= wheel_files
