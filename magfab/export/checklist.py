@@ -263,7 +263,8 @@ def _flash_section(design: "Design") -> Section:
     spec = design.spec
     return "Flash and read", [
         f"Wire the board to an Arduino Uno or Nano through an I2C level shifter (the board is 3.3 V).",
-        f"Flash: sh firmware/flash.sh PORT (Windows: firmware\\flash.bat PORT) writes firmware/{firmware.HEX_NAME}.",
+        f"Flash: sh firmware/flash.sh uno PORT (a Nano: nano, or nano-old for the old bootloader; Windows: "
+        f"firmware\\flash.bat uno PORT) writes firmware/{firmware.HEX_NAME}.",
         "Install the reader: pip install ./readout; then magfab-readout upload (the image keeps its calibration in "
         "EEPROM, which the Arduino bootloader does not write: until this runs the board sends only error frames "
         "'no valid calibration'), magfab-readout info (the calibration hash must match) and "

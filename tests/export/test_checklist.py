@@ -149,3 +149,17 @@ def test_the_glue_step_fills_the_channel_the_force_model_assumes_filled(design):
     step = next(s for title, steps in C.sections(design) if title == "Magnet" for s in steps if "Fill" in s)
     volume = design.core_volume_mm3 - design.magnet_volume_mm3
     assert 20.0 < volume < 35.0 and f"about {volume:.0f} uL" in step and "up to the magnet" in step
+
+
+def test_flash_commands_name_a_board_flash_sh_accepts(default_build):
+    """The README's and the checklist's flash commands pass flash.sh a board it knows (it exits 2 on anything
+    else, as `sh firmware/flash.sh /dev/ttyACM0` once did)."""
+    import re
+    from pathlib import Path
+
+    script = (default_build.out_dir / "firmware" / "flash.sh").read_text()
+    boards = set(re.search(r"usage: sh flash.sh ([\w|-]+)", script).group(1).split("|"))
+    readme = (Path(__file__).parents[2] / "README.md").read_text()
+    checklist = (default_build.out_dir / "checklist.md").read_text()
+    used = re.findall(r"sh firmware/flash\.sh (\S+)", readme + checklist)
+    assert used and set(used) <= boards, (used, boards)
