@@ -32,14 +32,14 @@ sys.path.insert(0, str(BENCH_DIR.parent / "tests" / "models"))  # the FElupe mod
 from magfab import load_spec  # noqa: E402
 from magfab.design import derive  # noqa: E402
 from magfab.models import mechanics as mech  # noqa: E402
+from magfab.models.predict import FE_MESHES_MM, _band  # noqa: E402
 from test_mechanics_crosscheck import FElupeIndentation  # noqa: E402
 
 DESIGNS = (("MagOne", None), ("small_magnet", BENCH_DIR / "designs" / "small_magnet.toml"),
            ("stiff_material", BENCH_DIR / "designs" / "stiff_material.toml"),
            ("flat_tip", BENCH_DIR / "designs" / "flat_tip.toml"))
 DEPTHS_MM = (0.5, 1.0, 2.0, 2.5, 3.0)
-MESHES_MM = (1.0, 0.75)
-MATERIALS = ("soft", "nominal", "stiff")
+MESHES_MM = FE_MESHES_MM[:2]  # the meshes auto may pick on these designs
 
 
 def _ours(body: mech.Body, depths: np.ndarray, mesh_mm: float) -> tuple[np.ndarray, float, str]:
@@ -71,8 +71,9 @@ def _theirs(body: mech.Body, depths: np.ndarray, mesh_mm: float) -> tuple[np.nda
 def _design(name: str, path: Path | None) -> tuple[list[str], list[str], list[str]]:
     """Rows of the force table, the time table and the notes for one design."""
     spec = load_spec(path)
-    body = mech.Body.from_design(derive(spec))
-    mus = dict(zip(MATERIALS, spec.elastomer.shear_modulus_kPa or mech.band(spec.elastomer.material)))
+    design = derive(spec)
+    body = mech.Body.from_design(design)
+    mus = _band(design)
     depth = float(spec.calibration.scan_z_mm)
     depths = np.array([d for d in DEPTHS_MM if d <= depth + 1e-9])
     rows, notes, runs = [], [], {}

@@ -240,7 +240,7 @@ def _fabrication(design: Design, prediction, acceptance: dict | None, say: Progr
 
     say("writing the checklist and the bill of materials")
     t = time.perf_counter()
-    plan = scan_plan(design, prediction) if prediction is not None else None
+    plan = scan_plan(design, prediction)
     out = [
         Artifact("checklist.md", checklist.checklist_md(design, acceptance, plan).encode(),
                  "fabrication checklist with the quantities filled in (Markdown)"),

@@ -25,10 +25,9 @@ from .errors import SHOWN_MAX_CHARS, SpecError, _shorten, shown
 from .recipes import catalogue
 
 __all__ = ["Spec", "Tip", "Density", "Printer", "load_spec", "parse_spec", "default_spec_text", "spec_schema",
-           "NAME_PATTERN", "is_valid_name", "shown"]
+           "NAME_PATTERN", "is_valid_name"]
 
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
-#: Longest value text an error line shows; a longer one is cut in the middle and its length given.
 
 
 def is_valid_name(name: str) -> bool:

@@ -62,6 +62,18 @@ def magone_prediction(magone_design):
 
 
 @pytest.fixture(scope="session")
+def design(magone_design):
+    """Short name for the MagOne design (a test module may define its own ``design``, which then wins)."""
+    return magone_design
+
+
+@pytest.fixture(scope="session")
+def pred(magone_prediction):
+    """Short name for the MagOne prediction."""
+    return magone_prediction
+
+
+@pytest.fixture(scope="session")
 def default_build(tmp_path_factory):
     """The default (MagOne) build, written once per session."""
     out = tmp_path_factory.mktemp("default") / "magone"

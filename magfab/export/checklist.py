@@ -276,12 +276,9 @@ def _calibrate_section(design: "Design", plan: "ScanPlan | None") -> Section:
     spec = design.spec
     cal = spec.calibration
     if plan is None:  # no prediction to cap it: the spec's extent
-        from ..models.scan import ScanPlan
+        from ..models.scan import scan_plan
 
-        columns = int(round(cal.scan_y_mm / cal.scan_step_mm)) + 1
-        rows = int(round(cal.scan_z_mm / cal.scan_step_mm)) + 1
-        plan = ScanPlan(cal.scan_y_mm / 2.0, cal.scan_z_mm, cal.scan_step_mm, columns, rows,
-                        "calibration.scan_z_mm", "calibration.scan_y_mm")
+        plan = scan_plan(design)
     return "Calibrate", [
         f"Scan against a reference force sensor (resolution {cal.reference_resolution_mN:g} mN): the y-z track, "
         f"{2.0 * plan.y_half_mm:.3g} mm in y centred on the axis (set by {plan.y_end}) and {plan.depth_mm:.3g} mm of "

@@ -11,7 +11,7 @@ constants both share.
 
 The calibration is checked by :func:`magfab.formats.calibration_json.validate` (the one validator of the file);
 on top, :class:`FirmwareError` refuses what the EEPROM record cannot hold (float32 range, order above
-:data:`MAX_ORDER`, a record over the 1 KB EEPROM).
+``MAX_ORDER`` of readout_pkg/magfab_readout/eeprom.py, a record over the 1 KB EEPROM).
 
 Every chip number comes from the recipe (``magfab/recipes/chips.toml``); the few the recipe does not carry are
 the named constants below, each with its source or marked as an assumption. The serial formats are those of
@@ -27,9 +27,9 @@ from typing import TYPE_CHECKING, Any, Mapping
 
 from ..errors import InputError, SpecError
 from ..formats import calibration_json
-from ..formats.calibration_json import calibration_sha256, cross
+from ..formats.calibration_json import calibration_sha256
 from ..recipes import catalogue
-from ..models.predict import conversion_us  # the chip's pace, shared with the prediction
+from ..models.chip import conversion_us  # the chip's pace, shared with the prediction
 
 if TYPE_CHECKING:
     from ..design import Design
@@ -113,9 +113,6 @@ I2C_TIMEOUT_MIN_US = 1000
 #: reserved bit in reg 0, and COMM_MODE = I2C only in reg 1, so the tests catch a driver that overwrites bits
 #: it does not own. Simulator only.
 SIM_REGISTER_DEFAULTS = (0x047C, 0x6000, 0x0000)
-
-MAX_ORDER = 8  # the record's (readout_pkg/magfab_readout/eeprom.py MAX_ORDER)
-
 
 class FirmwareError(InputError):
     """A calibration or spec value the firmware cannot carry (float32 range, the record's order, the EEPROM or
@@ -338,7 +335,6 @@ def _context(design: "Design", calibration: Mapping[str, Any], generic: bool) ->
         forbidden.append(osr << 3 | dig_filt)
     regs = {reg: (mask, value) for reg, mask, value in chip.registers}
     return {
-        **cal,
         **_image_constants(),
         "generic": int(generic),
         "record": list(record), "record_len": len(record), "sha16": calibration_sha256(calibration)[:16],

@@ -33,13 +33,15 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import asdict, dataclass, field
-from typing import TYPE_CHECKING, Any, Mapping
+from typing import TYPE_CHECKING, Mapping
 
 import numpy as np
 
 from . import field as fieldmod
 from . import mechanics as mech
-from .shear_figures import SHEAR_DESCRIPTION, ShearFigures, rest_response, shear_figures, shear_probe_depths
+from .chip import conversion_us
+from .shear_figures import (SHEAR_DESCRIPTION, ShearFigures, _crossing, rest_response, shear_figures,
+                            shear_probe_depths)
 from ..errors import Finding, Severity
 from ..spec import FieldModel
 from ..units import GAUSS_PER_MT, MN_PER_N, UT_PER_GAUSS
@@ -80,16 +82,6 @@ class ChipSetting:
     @property
     def rate_Hz(self) -> float:
         return 1000.0 / self.conversion_ms
-
-
-def conversion_us(chip: Mapping[str, Any], osr: int, dig_filt: int, temperature: bool, axes: int = 3) -> float:
-    """One measurement of ``axes`` magnetic axes (and T), us, from the datasheet's table of full (ZYXT)
-    measurements in the recipe (``tconv_osr<o>_dig_filt<d>_ms``); fewer channels take off the Table 8 formula's
-    per-channel time (TCONVM per axis, TCONVT for T at OSR2 = 0)."""
-    full = chip[f"tconv_osr{osr}_dig_filt{dig_filt}_ms"].nominal * 1000.0
-    axis = chip["tconvm_offset_us"].nominal + chip["tconvm_step_us"].nominal * 2**osr * (2 + 2**dig_filt)
-    temp = chip["tconvm_offset_us"].nominal + chip["tconvt_step_us"].nominal
-    return full - (3 - axes) * axis - (0.0 if temperature else temp)
 
 
 def chip_setting(design: "Design") -> ChipSetting:
@@ -230,7 +222,6 @@ def normal_curve(design: "Design", body: mech.Body, mu: float,
         for mesh in meshes[1:]:
             probe = mech.ShearProbe(depths_mm=depths, rest_indentation_mm=rest)
             curve = _fe_curve(body, mu, indentation, mesh, depth, probe)
-            curve.info["shear_probe"] = probe
             previous = first.result() if previous is None else previous
             n = min(len(curve.force_N), len(previous.force_N))
             if n < 2:
@@ -239,14 +230,13 @@ def normal_curve(design: "Design", body: mech.Body, mu: float,
             fine, coarse = curve.force_N[:n], previous.force_N[:n]
             diff = float(np.max(np.abs(fine - coarse)) / np.max(np.abs(fine)))
             err = diff / (ratio**FE_ORDER - 1.0)  # Richardson estimate of the finer mesh's error
-            chosen = (curve, err, previous.mesh_mm)
+            chosen = (curve, err, previous.mesh_mm, probe)
             if err <= tol:
                 break
             previous = curve
     assert chosen is not None
-    curve, err, coarse = chosen
+    curve, err, coarse, probe = chosen
     how = "auto" if name == "auto" else "spec"
-    probe = curve.info.pop("shear_probe")
     return curve, ModelUse("mechanics", "fe", err,
                            f"{mech.MODEL_DESCRIPTION} Mesh {curve.mesh_mm:g} mm; error estimated against mesh "
                            f"{coarse:g} mm (Richardson, order {FE_ORDER:g})", how), probe.response(mu)
@@ -483,14 +473,6 @@ def _normal(design: "Design", chip: ChipSetting, nz: Mapping[str, float], magnet
               **{f"sb_{b}": v for b, v in s_b.items()}, **{f"ke_{k}": v for k, v in k_e.items()},
               **{f"sf_{k}_{b}": v for (k, b), v in s_f.items()}, **{f"res_{k}_{b}": v for (k, b), v in res_mN.items()}}
     return figures, arrays
-
-
-def _crossing(x: np.ndarray, y: np.ndarray, level: float, k: int) -> float:
-    """Where y first reaches ``level`` (y[k] is the first sample beyond it), by linear interpolation."""
-    if k == 0:
-        return float(x[0])
-    x0, x1, y0, y1 = x[k - 1], x[k], y[k - 1], y[k]
-    return float(x0 + (level - y0) * (x1 - x0) / (y1 - y0))
 
 
 def predict_with_findings(design: "Design") -> tuple[Prediction | None, list[Finding]]:

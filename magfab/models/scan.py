@@ -52,22 +52,26 @@ class ScanPlan:
         return self.columns * self.rows
 
 
-def scan_plan(design: "Design", prediction: "Prediction") -> ScanPlan:
+def scan_plan(design: "Design", prediction: "Prediction | None" = None) -> ScanPlan:
     """The scan's extent (:class:`ScanPlan`): ``scan_y_mm`` centred on the axis, capped at the predicted lateral
     range (the magnet radius or the chip's xy full scale), and 0..``scan_z_mm`` of indentation, capped at the
     indentation where the predicted normal range ends (``normal.travel_mm`` of magnet travel, through the nominal
-    FE curve); one depth for the simulated scan, the checklist's scan step and the predicted range."""
+    FE curve); one depth for the simulated scan, the checklist's scan step and the predicted range. Without a
+    prediction, the spec's extent uncapped."""
     cal = design.spec.calibration
-    nominal = prediction.curves["nominal"]
-    delta_end = float(np.interp(prediction.normal.travel_mm, nominal.magnet_displacement_mm, nominal.indentation_mm))
-    lateral_end = prediction.shear.range_by_material_N["nominal"] / prediction.shear.stiffness_N_per_mm["nominal"]
     step = cal.scan_step_mm
     half, y_end = cal.scan_y_mm / 2.0, "calibration.scan_y_mm"
-    if lateral_end < half:
-        half, y_end = lateral_end, f"the predicted shear range ({prediction.shear.range_limit})"
     depth, depth_end = float(cal.scan_z_mm), "calibration.scan_z_mm"
-    if delta_end < depth - 1e-9:
-        depth, depth_end = delta_end, f"the predicted normal range ({prediction.normal.range_limit})"
+    if prediction is not None:
+        nominal = prediction.curves["nominal"]
+        delta_end = float(np.interp(prediction.normal.travel_mm, nominal.magnet_displacement_mm,
+                                    nominal.indentation_mm))
+        shear = prediction.shear
+        lateral_end = shear.range_by_material_N["nominal"] / shear.stiffness_N_per_mm["nominal"]
+        if lateral_end < half:
+            half, y_end = lateral_end, f"the predicted shear range ({shear.range_limit})"
+        if delta_end < depth - 1e-9:
+            depth, depth_end = delta_end, f"the predicted normal range ({prediction.normal.range_limit})"
     columns = int(math.floor(2.0 * half / step + 1e-9)) + 1
     rows = int(math.floor(depth / step + 1e-9)) + 1
     return ScanPlan(half, depth, step, columns, rows, depth_end, y_end)

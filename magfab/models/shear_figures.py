@@ -112,9 +112,7 @@ def shear_figures(design: "Design", nz: Mapping[str, float], magnets: Mapping[st
     limits = {"lateral travel = magnet radius": design.magnet_radius_mm}
     over = np.nonzero(br_high > full_scale_xy_G)[0]
     if over.size:
-        k0 = int(over[0])
-        limits["chip full scale"] = float(r[0]) if k0 == 0 else float(np.interp(
-            full_scale_xy_G, br_high[k0 - 1:k0 + 1], r[k0 - 1:k0 + 1]))
+        limits["chip full scale"] = _crossing(r, br_high, full_scale_xy_G, int(over[0]))
     binding = min(limits, key=limits.get)
     shear_range = {k: float(v * limits[binding]) for k, v in ks.items()}
 
@@ -140,3 +138,11 @@ def shear_figures(design: "Design", nz: Mapping[str, float], magnets: Mapping[st
               "dbr_nominal": np.gradient(br["nominal"], r, edge_order=2),
               **{f"sfs_{k}_{b}": v for (k, b), v in s.items()}}
     return figures, arrays
+
+
+def _crossing(x: np.ndarray, y: np.ndarray, level: float, k: int) -> float:
+    """Where y first reaches ``level`` (y[k] is the first sample beyond it), by linear interpolation."""
+    if k == 0:
+        return float(x[0])
+    x0, x1, y0, y1 = x[k - 1], x[k], y[k - 1], y[k]
+    return float(x0 + (level - y0) * (x1 - x0) / (y1 - y0))

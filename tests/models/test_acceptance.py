@@ -23,19 +23,9 @@ from readout_support import imported, install, make_calibration, ref_decode, wri
 PKG = "readout/src/magfab_readout"
 
 
-@pytest.fixture(scope="session")
-def design(magone_design):
-    return magone_design
-
-
-@pytest.fixture(scope="session")
-def prediction(magone_prediction):
-    return magone_prediction
-
-
 @pytest.fixture(scope="module")
-def acc(design, prediction):
-    return acceptance(design, prediction)
+def acc(design, pred):
+    return acceptance(design, pred)
 
 
 def bz_G(radius, height, br, d):
@@ -44,14 +34,14 @@ def bz_G(radius, height, br, d):
 
 # --- the bands ------------------------------------------------------------------------------------------------
 
-def test_output_is_json_deterministic_and_self_consistent(design, prediction, acc):
+def test_output_is_json_deterministic_and_self_consistent(design, pred, acc):
     text = json.dumps(acc, allow_nan=False, sort_keys=True)
     assert json.loads(text) == acc
-    assert json.dumps(acceptance(design, prediction.as_json()), allow_nan=False, sort_keys=True) == text  # data alone
+    assert json.dumps(acceptance(design, pred.as_json()), allow_nan=False, sort_keys=True) == text  # data alone
     assert acc["format"] == FORMAT == "magfab-acceptance/1" and acc["spec_name"] == "magone"
     rest, weight = acc["rest"]["Bz_uT"], acc["weight"]["delta_Bz_uT"]
     assert acc["rest_Bz_uT"] == [rest["min"], rest["max"]] and acc["delta_Bz_uT"] == [weight["min"], weight["max"]]
-    assert acc["weight_g"] == acc["weight"]["weight_g"] == default_weight_g(prediction.as_json()) == 50.0
+    assert acc["weight_g"] == acc["weight"]["weight_g"] == default_weight_g(pred.as_json()) == 50.0
     assert acc["weight"]["force_N"] == pytest.approx(0.05 * G0)
     assert acc["rest"]["sign"] == 1 and "north pole up" in acc["rest"]["orientation"]
     names = {a["name"] for a in acc["assumptions"]}
@@ -64,20 +54,20 @@ def test_output_is_json_deterministic_and_self_consistent(design, prediction, ac
     assert all(np.diff(table["force_N"]) > 0) and table["delta_Bz_max_uT"][0] == 0.0
 
 
-def test_bands_contain_the_prediction(prediction, acc):
-    field = prediction.as_json()["field"]
+def test_bands_contain_the_prediction(pred, acc):
+    field = pred.as_json()["field"]
     lo, hi = acc["rest_Bz_uT"]
     assert lo < field["Bz_rest_G"] * 100 < hi
     assert acc["rest"]["Bz_uT"]["nominal"] == pytest.approx(field["Bz_rest_G"] * 100, rel=1e-4)
     # The prediction's own band (material soft..stiff x magnet low..high, at the nominal distance), from its
     # arrays: force -> magnet travel (normal curves) -> Bz along the normal curve.
-    u, force = prediction.arrays["u"], 0.05 * G0
+    u, force = pred.arrays["u"], 0.05 * G0
     dlo, dhi = acc["delta_Bz_uT"]
     rises = {}
-    for material, curve in prediction.curves.items():
+    for material, curve in pred.curves.items():
         travel = np.interp(force, curve.force_N, u)
         for band in ("low", "nominal", "high"):
-            bz = prediction.arrays[f"bz_{band}"]
+            bz = pred.arrays[f"bz_{band}"]
             rises[material, band] = 100 * (np.interp(travel, u, bz) - bz[0])
     assert all(dlo < r < dhi for r in rises.values()), (rises, dlo, dhi)
     assert acc["weight"]["delta_Bz_uT"]["nominal"] == pytest.approx(rises["nominal", "nominal"], rel=0.01)
@@ -135,42 +125,42 @@ def width(a):
     return a["rest_Bz_uT"][1] - a["rest_Bz_uT"][0], a["delta_Bz_uT"][1] - a["delta_Bz_uT"][0]
 
 
-def test_band_widths_follow_the_tolerances(design, prediction, acc):
+def test_band_widths_follow_the_tolerances(design, pred, acc):
     nominal = acc["rest"]["Bz_uT"]["nominal"]
     rem = acc["magnet"]["remanence_T"]
     # No tolerance at all: the rest band is the nominal prediction itself.
-    none = acceptance(design, prediction, tolerances=replace(ZERO, remanence_T=(rem["nominal"], rem["nominal"])))
+    none = acceptance(design, pred, tolerances=replace(ZERO, remanence_T=(rem["nominal"], rem["nominal"])))
     assert none["rest_Bz_uT"] == pytest.approx([nominal, nominal], abs=0.002)
     # The remanence band alone scales the field: its ends are the grade's ends.
-    grade = acceptance(design, prediction, tolerances=ZERO)
+    grade = acceptance(design, pred, tolerances=ZERO)
     assert grade["rest_Bz_uT"] == pytest.approx([nominal * rem["low"] / rem["nominal"],
                                                  nominal * rem["high"] / rem["nominal"]], rel=1e-6)
-    wider = acceptance(design, prediction, tolerances=replace(ZERO, remanence_T=(1.10, 1.30)))
+    wider = acceptance(design, pred, tolerances=replace(ZERO, remanence_T=(1.10, 1.30)))
     assert wider["rest_Bz_uT"][0] < grade["rest_Bz_uT"][0] and wider["rest_Bz_uT"][1] > grade["rest_Bz_uT"][1]
     assert wider["delta_Bz_uT"][0] < grade["delta_Bz_uT"][0] and wider["delta_Bz_uT"][1] > grade["delta_Bz_uT"][1]
     # Every tolerance widens both bands; the Earth's field widens the rest band by twice itself and not the rise.
     base = width(acc)
     for change in (dict(magnet_height_mm=0.1), dict(printer_mm=0.2), dict(glue_fraction=1.0),
                    dict(sensitivity_pct=(5.0, 5.0)), dict(sensing_depth_mm=(0.3, 0.3)), dict(seating_mm=0.2)):
-        w = width(acceptance(design, prediction, tolerances=replace(Tolerances(), **change)))
+        w = width(acceptance(design, pred, tolerances=replace(Tolerances(), **change)))
         assert w[0] > base[0] and w[1] > base[1], change
-    earthy = acceptance(design, prediction, tolerances=Tolerances(earth_field_uT=165.0))
+    earthy = acceptance(design, pred, tolerances=Tolerances(earth_field_uT=165.0))
     assert width(earthy)[0] == pytest.approx(base[0] + 200.0, abs=0.01) and width(earthy)[1] == base[1]
     # The printer's tolerance comes from printers.toml: an FDM pad and core (0.15 mm layers) widen the band.
     fdm = derive(parse_spec('name = "magone"\n[mould]\nprinter = "fdm"\n'))
-    fdm_acc = acceptance(fdm, prediction)
+    fdm_acc = acceptance(fdm, pred)
     assert fdm_acc["rest"]["stack_mm"]["pad thickness"] == [-0.15, 0.15]
     assert width(fdm_acc)[0] > base[0]
 
 
-def test_the_weight_and_its_limits(design, prediction, acc):
-    bands = [acceptance(design, prediction, weight_g=w)["delta_Bz_uT"] for w in (20.0, 50.0, 100.0)]
+def test_the_weight_and_its_limits(design, pred, acc):
+    bands = [acceptance(design, pred, weight_g=w)["delta_Bz_uT"] for w in (20.0, 50.0, 100.0)]
     assert bands[1] == acc["delta_Bz_uT"]
     assert bands[0][0] < bands[1][0] < bands[2][0] and bands[0][1] < bands[1][1] < bands[2][1]
     with pytest.raises(ValueError, match="beyond the predicted range .* use a lighter weight"):
-        acceptance(design, prediction, weight_g=500.0)
+        acceptance(design, pred, weight_g=500.0)
     with pytest.raises(ValueError, match="positive number of grams"):
-        acceptance(design, prediction, weight_g=-1.0)
+        acceptance(design, pred, weight_g=-1.0)
 
 
 def test_which_magnet_grades_the_rest_band_tells_apart(design, acc):

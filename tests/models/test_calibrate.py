@@ -22,16 +22,6 @@ from magfab.units import UT_PER_GAUSS
 from magfab.models.predict import chip_setting, noise
 
 
-@pytest.fixture(scope="session")
-def design(magone_design):
-    return magone_design
-
-
-@pytest.fixture(scope="session")
-def pred(magone_prediction):
-    return magone_prediction
-
-
 @pytest.fixture(scope="module")
 def scan(design, pred):
     return simulate_scan(design, pred)

@@ -18,16 +18,6 @@ from magfab.errors import Severity
 from magfab.models.predict import chip_setting, noise, predict
 
 
-@pytest.fixture(scope="session")
-def design(magone_design):
-    return magone_design
-
-
-@pytest.fixture(scope="session")
-def pred(magone_prediction):
-    return magone_prediction
-
-
 def _codes(found, severity=Severity.ERROR):
     return {f.code for f in found if f.severity is severity}
 

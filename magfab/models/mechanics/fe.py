@@ -120,6 +120,7 @@ class _LoadPath:
         self.hist: list[tuple[float, np.ndarray]] = [(0.0, self.state.x)]
         self.iterations = self.cuts = 0
         self.rate: np.ndarray | None = None  # d x / d delta at the current state, if :meth:`record` computed it
+        self.extremes = prob.energy.extremes(self.state.x)  # of the current state: checked once, recorded after
 
     def reach(self, target: float) -> None:
         """Step from the current indentation to ``target`` (mm), halving a failing step down to 1/64 of what is
@@ -144,12 +145,13 @@ class _LoadPath:
                                          f"(last converged {self.current:.4g} mm)") from None
                 continue
             self.iterations += new.iterations
-            lmax, lmin, _, _ = prob.energy.extremes(new.x)
+            extremes = prob.energy.extremes(new.x)
+            lmax, lmin = extremes[:2]
             if lmax > self.stretch_limit or lmin < 1.0 / self.stretch_limit:
                 raise MechanicsError(f"fe (mesh {h:g} mm): excessive distortion at indentation "
                                      f"{trial:.4g} mm: principal stretches {lmin:.3g} to {lmax:.3g} leave "
                                      f"[1/{self.stretch_limit:g}, {self.stretch_limit:g}]")
-            self.state, self.current, self.rate = new, trial, None
+            self.state, self.current, self.rate, self.extremes = new, trial, None, extremes
             self.hist = (self.hist + [(self.current, self.state.x)])[-2:]
 
     def record(self, delta: float) -> tuple[float, float, float, float, float, float]:
@@ -157,7 +159,7 @@ class _LoadPath:
         stretch) at ``delta``, in units of mu."""
         prob, x = self.prob, self.state.x
         F, K, self.rate = prob.force(self.state, delta)
-        lmax, _, smax, peak = prob.energy.extremes(x)
+        lmax, _, smax, peak = self.extremes
         return F, K, prob.magnet_displacement(x), lmax, smax, peak
 
 
