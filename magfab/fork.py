@@ -21,9 +21,10 @@ from typing import Any, Callable, Iterator
 
 from .errors import BuildError
 
-__all__ = ["Branch", "side_branch", "parallel_available"]
+__all__ = ["Branch", "side_branch", "parallel_available", "deferred_interrupt"]
 
-_JOB: tuple[Callable[..., Any], tuple[Any, ...]] | None = None  # what the forked child runs (inherited, not pickled)
+_JOB: tuple[Callable[..., Any], tuple[Any, ...], Any] | None = None  # what the forked child runs, and the parent's
+# end of the pipe (inherited, not pickled)
 
 
 def parallel_available() -> bool:
@@ -45,7 +46,7 @@ class Branch:
             global _JOB
             ctx = multiprocessing.get_context("fork")
             self._conn, child = ctx.Pipe(duplex=False)
-            _JOB = (fn, args)
+            _JOB = (fn, args, self._conn)
             try:
                 self._process = ctx.Process(target=_child, args=(child,), daemon=True)
                 self._process.start()
@@ -92,7 +93,10 @@ def _outcome(fn: Callable[..., Any], args: tuple[Any, ...]) -> tuple[str, Any]:
 
 
 def _child(conn) -> None:
-    fn, args = _JOB  # type: ignore[misc]
+    fn, args, reader = _JOB  # type: ignore[misc]
+    # The child's copy of the parent's end: closed, so a parent that died (a crash, a kill) makes the send below fail
+    # at once instead of blocking on a full pipe nobody reads, which left the worker holding the terminal's pipes.
+    reader.close()
     try:
         value = _outcome(fn, args)
     except BaseException:  # noqa: BLE001 - reported to the parent, which raises it there
@@ -113,3 +117,22 @@ def side_branch(fn: Callable[..., Any], *args: Any, parallel: bool | None = None
         yield branch
     finally:
         branch.cancel()
+
+
+@contextmanager
+def deferred_interrupt() -> Iterator[None]:
+    """Hold Ctrl-C (SIGINT) back for the block and deliver it after: for imports of extension modules that are not
+    safe to interrupt half-way (VTK, loaded by the CAD kernel, crashed the process with a segmentation fault when
+    the CLI's KeyboardInterrupt landed inside its initialisation). Where signal masks do not exist, a no-op."""
+    import signal
+
+    mask = getattr(signal, "pthread_sigmask", None)
+    if mask is None:
+        yield
+        return
+    mask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        mask(signal.SIG_UNBLOCK, {signal.SIGINT})
+

@@ -19,7 +19,7 @@ from . import __version__
 from .check import design_findings, errors_in, mesh_findings, mould_fit_findings
 from .design import Design, derive
 from .errors import BuildError, Finding, ModelLimitError, OutputError, Severity
-from .fork import side_branch
+from .fork import deferred_interrupt, side_branch
 from .limits import check_scan
 from .output import Artifact, check_target, write
 from .spec import Spec
@@ -340,8 +340,9 @@ def _cad(design: Design, say: Progress, timings: dict[str, float]):
     spec = design.spec
     say("loading the CAD kernel")
     t = time.perf_counter()
-    import cadquery  # noqa: F401  - timed on its own, not charged to the first part
-    import trimesh  # noqa: F401
+    with deferred_interrupt():  # a Ctrl-C inside VTK's initialisation crashed the process: deliver it after
+        import cadquery  # noqa: F401  - timed on its own, not charged to the first part
+        import trimesh  # noqa: F401
 
     from .export.cad import step_bytes, stl_bytes, tessellate
     from .fit import mould_fit
