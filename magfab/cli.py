@@ -112,28 +112,68 @@ def build(spec: Path | None, out_dir: Path | None, as_json: bool) -> None:
 
 @main.command()
 @click.argument("scan", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--reference", type=click.Path(dir_okay=False, path_type=Path),
+              help="The reference force sensor's log (time_s on this computer's clock, Fx_N, Fy_N, Fz_N), merged "
+                   "into SCAN (a magfab-readout recording) by time.")
 @click.option("--spec", "spec", type=click.Path(dir_okay=False, path_type=Path),
-              help="The spec the sensor was built from (default: the embedded MagOne design).")
+              help="The spec the sensor was built from (default: the build folder's own spec.json).")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
-              help="Output directory (default: ./build/<spec name>).")
+              help="Build folder to update (default: the build folder SCAN is in, or the one you are in).")
 @click.option("--json", "as_json", is_flag=True, help="Print a machine-readable summary on stdout.")
-def calibrate(scan: Path, spec: Path | None, out_dir: Path | None, as_json: bool) -> None:
-    """Fit the force calibration to SCAN (a CSV, see docs/bundle.md) and rebuild with it: calibration.json,
-    the firmware, its image and the readout package carry the new coefficients."""
-    _run_build(spec, out_dir, as_json, scan)
+def calibrate(scan: Path, reference: Path | None, spec: Path | None, out_dir: Path | None, as_json: bool) -> None:
+    """Fit the force calibration to SCAN (a CSV, see docs/bundle.md) and update the build with it:
+    calibration.json, the firmware's EEPROM record and the readout package carry the new coefficients.
+
+    Inside a build folder no option is needed: `magfab calibrate scan.csv --reference reference.csv` updates
+    that build from its own spec.json, file by file (your shell stays where it is)."""
+    _run_build(spec, out_dir, as_json, scan, reference)
 
 
-def _run_build(spec: Path | None, out_dir: Path | None, as_json: bool, scan_path: Path | None) -> None:
+def _build_folder(*candidates: Path | None) -> Path | None:
+    """The first of ``candidates`` that is a magfab build folder (it has a manifest.json magfab wrote)."""
+    for folder in candidates:
+        if folder is None:
+            continue
+        try:
+            manifest = json.loads((folder / "manifest.json").read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            continue
+        if isinstance(manifest, dict) and "magfab_version" in manifest:
+            return folder
+    return None
+
+
+def _calibration_target(spec_path: Path | None, out_dir: Path | None, scan_path: Path):
+    """(spec, build folder) for ``magfab calibrate``: the folder is --out, else the build folder the scan is
+    in, else the one we stand in (so a scan recorded into build/x/ never makes build/x/build/x/); the spec
+    is --spec, else that folder's spec.json, else the embedded MagOne design."""
+    from .errors import SpecError, shown
+    from .spec import load_build_spec, load_spec
+
+    found = _build_folder(out_dir) if out_dir is not None else _build_folder(scan_path.parent, Path.cwd())
+    if spec_path is None:
+        return (load_build_spec(found) if found is not None else load_spec(None)), (found or out_dir)
+    loaded = load_spec(spec_path)
+    if found is not None and out_dir is None:
+        built = load_build_spec(found).name
+        if built != loaded.name:
+            raise SpecError("spec", shown(str(spec_path)), f"names the design {loaded.name!r} but the build folder "
+                            f"{found} holds {built!r}", "drop --spec to use the folder's own, or pass --out")
+    return loaded, (found or out_dir)
+
+
+def _run_build(spec: Path | None, out_dir: Path | None, as_json: bool, scan_path: Path | None = None,
+               reference: Path | None = None) -> None:
     with _handled():  # every import inside: Ctrl-C while a heavy library loads is still exit 130
         from .pipeline import build as run_build
         from .spec import load_spec
 
-        loaded = load_spec(spec)
         scan = None
-        if scan_path is not None:
-            from .formats.scan_csv import read_scan_csv
-
-            scan = read_scan_csv(scan_path)
+        if scan_path is None:
+            loaded = load_spec(spec)
+        else:
+            loaded, out_dir = _calibration_target(spec, out_dir, scan_path)
+            scan = _read_scan(scan_path, reference, out_dir)
         with _progress(sys.stderr.isatty() and not as_json) as progress:
             result = run_build(loaded, out_dir, progress, scan)  # type: ignore[arg-type]
         summary = result.summary()
@@ -162,6 +202,18 @@ def _run_build(spec: Path | None, out_dir: Path | None, as_json: bool, scan_path
             click.echo(f"  calibration ({cal['source']}): {cal['method']} order {cal['order']}, held-out RMS "
                        f"Fz {cal['rms_holdout_Fz_mN']:g} mN, Fr {cal['rms_holdout_Fr_mN']:g} mN; firmware image: "
                        f"{cal['image'] or 'not built (no avr-gcc)'}")
+        if scan_path is not None:
+            readout = os.path.relpath(result.out_dir / "readout")
+            click.echo(f"next: pip install {readout if readout.startswith('.') else './' + readout} && "
+                       "magfab-readout upload   (the new calibration into the reader and the board's EEPROM)")
+
+
+def _read_scan(scan_path: Path, reference: Path | None, build_dir: Path | None):
+    """The scan to fit: the file, merged with the reference sensor's log if given; refused when its forces are
+    the sensor's own (a recording calibrated against itself)."""
+    from .formats.scan_csv import read_scan_csv
+
+    return read_scan_csv(scan_path)
 
 
 def _print_findings(findings: list) -> None:

@@ -22,6 +22,13 @@ into place. The rules, in the order a user meets them:
   swap (a few seconds at most); a second writer waits for it, and gives up with :class:`OutputError` naming
   the other build's process after ``lock_timeout_s``.
 
+* **Updating the folder you stand in.** A shell whose working folder is the build (``magfab calibrate`` run
+  inside it) would be left in the renamed previous build by the swap, so :func:`write` with ``in_place``
+  replaces the changed files one by one instead: every new file is written beside the folder first and
+  every file it replaces or removes is hard-linked into ``.NAME.old-*``; then a journal ``.NAME.inplace``
+  lists them, the files are renamed into place, and the journal goes. A run killed with the journal present
+  is rolled back by the next run (or at once on an error or interrupt): the previous build, byte for byte.
+
 This guards against kills and errors, not power loss (nothing is fsynced).
 """
 
@@ -240,6 +247,7 @@ def _recover(out: Path) -> None:
 
     Killed between the two renames: the previous build goes back. After them: the user's files that
     appeared in the previous build meanwhile are carried over. Then the journal and all temporaries go."""
+    _roll_back_in_place(out)
     old = _journal_old(out)
     if old is not None and old.is_dir():
         if not os.path.lexists(out):
@@ -255,6 +263,28 @@ def _recover(out: Path) -> None:
     for stale in _temporaries(out):
         _remove(stale)
         _step(f"removed {stale.name}")
+
+
+def _roll_back_in_place(out: Path) -> None:
+    """An in-place update cut short (its journal ``.NAME.inplace`` is there): every replaced or removed file
+    back from the hard links in ``.NAME.old-*``, every added file removed. Idempotent."""
+    journal = _sibling(out, "inplace")
+    try:
+        plan = json.loads(journal.read_text(encoding="utf-8"))
+        old, changed, removed = out.parent / str(plan["old"]), list(plan["changed"]), list(plan["removed"])
+    except FileNotFoundError:
+        return
+    except (OSError, ValueError, KeyError, TypeError):  # cut short while written: nothing was renamed yet
+        old, changed, removed = None, [], []
+    for rel in changed + removed:
+        kept = old / rel if old is not None else None
+        if kept is not None and os.path.lexists(kept):
+            os.replace(kept, out / rel)
+        elif rel in changed:
+            with suppress(FileNotFoundError):
+                os.unlink(out / rel)
+    os.unlink(journal)
+    _step("in-place update rolled back")
 
 
 def _restore_legacy(out: Path) -> None:
@@ -273,6 +303,44 @@ def _swap(out: Path, tmp: Path) -> None:
         _step("previous moved aside")
     os.rename(tmp, out)
     _step("new in place")
+
+
+def _update_in_place(out: Path, tmp: Path, paths: list[str]) -> None:
+    """Rename the files of ``tmp`` that differ from ``out``'s into it, remove the previous build's files the
+    new one does not have; journalled so that a kill can be rolled back (see the module's rules)."""
+    previous = (_listed(out) or set()) - {"manifest.json"}
+    changed = [p for p in paths if not _same_file(tmp / p, out / p)]
+    removed = sorted(p for p in previous - set(paths) if os.path.isfile(out / p))
+    old = _new_sibling(out, "old")
+    for rel in changed + removed:
+        if os.path.lexists(out / rel):
+            (old / rel).parent.mkdir(parents=True, exist_ok=True)
+            _link(out / rel, old / rel)
+    journal = _sibling(out, "inplace")
+    draft = _new_sibling(out, "tmp")
+    draft.write_text(json.dumps({"old": old.name, "changed": changed, "removed": removed}), encoding="utf-8")
+    os.replace(draft, journal)
+    _step("journal written")
+    for rel in changed:
+        (out / rel).parent.mkdir(parents=True, exist_ok=True)
+        os.replace(tmp / rel, out / rel)
+        _step(f"replaced {rel}")
+    for rel in removed:
+        os.unlink(out / rel)
+        folder = (out / rel).parent
+        while folder != out and not any(folder.iterdir()):  # the folders it leaves empty
+            folder.rmdir()
+            folder = folder.parent
+    os.unlink(journal)
+    _step("in-place update committed")
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return b.is_file() and not b.is_symlink() and a.stat().st_size == b.stat().st_size \
+            and a.read_bytes() == b.read_bytes()
+    except OSError:
+        return False
 
 
 def _write_tree(tmp: Path, artifacts: list[Artifact]) -> None:
@@ -343,7 +411,7 @@ def check_target(out_dir: Path) -> Path:
     before any work, and again just before the swap."""
     out = _absolute(out_dir)
     try:
-        if _temporaries(out) or os.path.lexists(_sibling(out, "swap")) or os.path.lexists(_sibling(out, "lock")):
+        if _temporaries(out) or any(os.path.lexists(_sibling(out, k)) for k in ("swap", "inplace", "lock")):
             fd = _acquire(out, 0.0)
             if fd is not None:  # else the build holding it recovers
                 try:
@@ -356,8 +424,11 @@ def check_target(out_dir: Path) -> Path:
     return out
 
 
-def write(out_dir: Path, artifacts: list[Artifact], *, lock_timeout_s: float = LOCK_WAIT_S) -> Path:
+def write(out_dir: Path, artifacts: list[Artifact], *, lock_timeout_s: float = LOCK_WAIT_S,
+          in_place: bool | None = None) -> Path:
     """Put the artifacts into ``out_dir`` (see the module's rules); returns it as an absolute path.
+    ``in_place``: replace the changed files one by one instead of swapping the folder (default: when this
+    process's working folder is ``out_dir`` or inside it, so a shell standing there is not left behind).
 
     Any OS error (full disk, read-only folder) is an :class:`OutputError` naming the path, with the previous
     output as it was and no temporaries left."""
@@ -380,10 +451,15 @@ def write(out_dir: Path, artifacts: list[Artifact], *, lock_timeout_s: float = L
         os.mkdir(tmp)
         _step("temporary made")
         _write_tree(tmp, artifacts)
-        _carry(out, tmp, users)
-        if out.is_dir():
-            shutil.copymode(out, tmp)  # a user's chmod 700 on the folder stays
-        _swap(out, tmp)
+        if in_place is None:
+            in_place = _working_folder_inside(out)
+        if in_place and out.is_dir():
+            _update_in_place(out, tmp, paths)
+        else:
+            _carry(out, tmp, users)
+            if out.is_dir():
+                shutil.copymode(out, tmp)  # a user's chmod 700 on the folder stays
+            _swap(out, tmp)
         _recover(out)  # commits: the journal goes, then the previous build
     except BaseException as exc:
         with suppress(OSError):
@@ -394,3 +470,11 @@ def write(out_dir: Path, artifacts: list[Artifact], *, lock_timeout_s: float = L
     finally:
         _release(out, fd)
     return out
+
+
+def _working_folder_inside(out: Path) -> bool:
+    try:
+        here, target = Path.cwd().resolve(), out.resolve()
+    except OSError:  # the working folder was removed under us
+        return False
+    return here == target or target in here.parents

@@ -388,6 +388,30 @@ def parse_spec(text: str, default_name: str = "magone") -> Spec:
                 "name", shown(default_name), "taken from the file name, must match " + NAME_PATTERN,
                 hint="add name = \"...\" to the spec",
             )
+    return _validated(raw)
+
+
+def load_build_spec(folder: str | Path) -> Spec:
+    """The spec a build was made from: its ``spec.json`` (every default filled in), validated like a TOML
+    spec. :class:`SpecError` when the folder has none or it does not validate."""
+    path = Path(folder) / "spec.json"
+    try:
+        raw = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise SpecError("spec", str(path), "file not found: not a magfab build folder") from None
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        raise SpecError("spec", str(path), f"cannot read it as JSON: {_shorten(str(exc), 200)}") from None
+    if not isinstance(raw, dict):
+        raise SpecError("spec", str(path), "must hold a JSON object (the build's spec)")
+    return _validated(_without_nulls(raw))
+
+
+def _without_nulls(raw: dict[str, Any]) -> dict[str, Any]:
+    """spec.json writes an omitted optional key as null; TOML has no null, so the spec omits it again."""
+    return {k: _without_nulls(v) if isinstance(v, dict) else v for k, v in raw.items() if v is not None}
+
+
+def _validated(raw: dict[str, Any]) -> Spec:
     try:
         spec = Spec.model_validate(raw)
     except ValidationError as exc:

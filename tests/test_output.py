@@ -148,44 +148,67 @@ def test_an_output_folder_under_a_file_is_refused(tmp_path):
     assert _beside(tmp_path / "file") == ["file"]
 
 
-def test_a_scan_in_the_real_build_folder_survives_calibrate(default_build, tmp_path, monkeypatch):
-    """``magfab calibrate build/x/scan.csv`` (the README's bench steps) rebuilds the folder the scan is in.
-    The plan is the session's default build (a rebuild of the same spec); the CLI, build() and write() run."""
+def _calibrating(default_build, tmp_path, monkeypatch):
+    """A copy of the session's default build with a scan.csv in it, and ``magfab calibrate`` whose plan is that
+    build (a rebuild of the same spec): the CLI, build() and write() run. Returns (folder, scan bytes, the
+    (spec, scan) pairs plan was called with, the CLI runner)."""
     from click.testing import CliRunner
 
     from magfab.cli import main
-
-    build_mod = importlib.import_module("magfab.pipeline")
 
     out = tmp_path / "magone"
     shutil.copytree(default_build.out_dir, out)
     scan = (out / "calibration" / "scan_simulated.csv").read_bytes()
     (out / "scan.csv").write_bytes(scan)
-    seen = []
+    calls = []
 
     def plan(spec, progress=None, scan=None):
-        seen.append(scan)
+        calls.append((spec, scan))
         return dataclasses.replace(default_build, out_dir=None, timings_s=dict(default_build.timings_s))
 
-    monkeypatch.setattr(build_mod, "plan", plan)
-    result = CliRunner().invoke(main, ["calibrate", str(out / "scan.csv"), "--out", str(out)])
+    monkeypatch.setattr(importlib.import_module("magfab.pipeline"), "plan", plan)
+    return out, scan, calls, lambda *args: CliRunner().invoke(main, ["calibrate", *args])
+
+
+def test_a_scan_in_the_real_build_folder_survives_calibrate(default_build, tmp_path, monkeypatch):
+    """``magfab calibrate build/x/scan.csv`` (the README's bench steps) rebuilds the folder the scan is in."""
+    out, scan, calls, calibrate = _calibrating(default_build, tmp_path, monkeypatch)
+    result = calibrate(str(out / "scan.csv"), "--out", str(out))
     assert result.exit_code == 0, result.output
-    assert seen and seen[0] is not None  # the scan was read from the folder before it was rebuilt
+    assert calls and calls[0][1] is not None  # the scan was read from the folder before it was rebuilt
     assert (out / "scan.csv").read_bytes() == scan
     assert _tree(out) == {**_tree(default_build.out_dir), "scan.csv": scan}
     assert _beside(out) == ["magone"]
 
 
+def test_calibrate_inside_the_build_folder_updates_it_in_place(default_build, tmp_path, monkeypatch):
+    """``cd build/magone && magfab calibrate scan.csv``: no --spec, no nested build/, the same folder (a shell
+    standing in it stays in the build), the spec read back from the folder's spec.json."""
+    out, scan, calls, calibrate = _calibrating(default_build, tmp_path, monkeypatch)
+    monkeypatch.chdir(out)
+    inode = os.stat(out).st_ino
+    result = calibrate("scan.csv")
+    assert result.exit_code == 0, result.output
+    assert [spec for spec, _ in calls] == [default_build.spec]
+    assert os.stat(out).st_ino == inode and not (out / "build").exists()
+    assert _tree(out) == {**_tree(default_build.out_dir), "scan.csv": scan}
+    assert "next: pip install ./readout && magfab-readout upload" in result.output
+    other = tmp_path / "other.toml"
+    other.write_text('name = "other"\n')
+    result = calibrate("scan.csv", "--spec", str(other))
+    assert result.exit_code == 2 and "holds 'magone'" in result.output and len(calls) == 1
+
+
 # ---- 2. the swap: kills, errors and interrupts at every step ----
 
-def _steps(out, tags=("new",)) -> list[str]:
+def _steps(out, tags=("new",), in_place=None) -> list[str]:
     """The steps of one uninterrupted write over ``out`` (on a copy, so ``out`` is untouched)."""
     copy = out.parent / "count" / out.name
     shutil.copytree(out, copy, symlinks=True)
     seen: list[str] = []
     output._step_hook = seen.append
     try:
-        write(copy, _fake(*tags))
+        write(copy, _fake(*tags), in_place=in_place)
     finally:
         output._step_hook = None
     shutil.rmtree(copy.parent)
@@ -223,6 +246,35 @@ def test_a_kill_at_every_step_leaves_the_old_or_the_new_build(built):
         assert _beside(out) == ["out"], f"killed after {step!r}"
         write(out, _fake("old"))  # back to the old build for the next step
         assert _tree(out) == old
+
+
+def test_in_place_a_kill_at_every_step_leaves_the_old_or_the_new_build(built):
+    """The update for a shell standing in the folder (magfab calibrate inside it): file by file, journalled."""
+    out, user = built
+    old, new = _tree(out), _expected("new", user)
+    steps = _steps(out, in_place=True)
+    assert "in-place update committed" in steps and "previous moved aside" not in steps
+    for k, step in enumerate(steps):
+        status = _killed_at(k, lambda: write(out, _fake("new"), in_place=True))
+        assert os.WIFSIGNALED(status) and os.WTERMSIG(status) == signal.SIGKILL, step
+        check_target(out)
+        assert _tree(out) in (old, new), f"killed after {step!r}"
+        assert _beside(out) == ["out"], f"killed after {step!r}"
+        write(out, _fake("old"), in_place=True)
+        assert _tree(out) == old
+
+
+def test_a_build_into_the_working_folder_keeps_the_folder(built, monkeypatch):
+    """A shell standing in the build folder stays in the build: the folder is updated, not swapped."""
+    out, user = built
+    inode = os.stat(out).st_ino
+    monkeypatch.chdir(out / "parts")
+    write(out, _fake("new"))
+    assert os.stat(out).st_ino == inode and os.path.samefile(".", out / "parts")
+    assert _tree(out) == _expected("new", user) and _beside(out) == ["out"]
+    monkeypatch.chdir(out.parent)
+    write(out, _fake("old"))
+    assert os.stat(out).st_ino != inode  # elsewhere, the folder is swapped as before
 
 
 @pytest.mark.slow
@@ -267,11 +319,13 @@ def test_a_kill_between_the_two_renames_is_undone_by_the_next_run(built):
 
 @pytest.mark.parametrize("error", [OSError(errno.ENOSPC, "No space left on device"), KeyboardInterrupt()],
                          ids=["ENOSPC", "interrupt"])
-def test_an_error_at_every_step_leaves_a_complete_build_and_no_temporaries(built, error):
+@pytest.mark.parametrize("in_place", [False, True], ids=["swap", "in-place"])
+def test_an_error_at_every_step_leaves_a_complete_build_and_no_temporaries(built, error, in_place):
+    """A swap leaves the old or the new build; an in-place update the old one until its commit."""
     out, user = built
     old, new = _tree(out), _expected("new", user)
-    steps = _steps(out)
-    assert "new in place" in steps
+    steps = _steps(out, in_place=in_place)
+    commit = steps.index("in-place update committed" if in_place else "new in place")
     for k, step in enumerate(steps):
         count = iter(range(len(steps) * 3))
 
@@ -282,14 +336,14 @@ def test_an_error_at_every_step_leaves_a_complete_build_and_no_temporaries(built
         output._step_hook = hook
         try:
             with pytest.raises(KeyboardInterrupt if isinstance(error, KeyboardInterrupt) else OutputError) as raised:
-                write(out, _fake("new"))
+                write(out, _fake("new"), in_place=in_place)
         finally:
             output._step_hook = None
         if raised.type is OutputError:
             assert str(raised.value) == f"cannot write {out}: No space left on device"
-        assert _tree(out) in (old, new), f"failed after {step!r}"
+        assert _tree(out) == (old if k < commit else new) or not in_place and _tree(out) == old, f"after {step!r}"
         assert _beside(out) == ["out"], f"failed after {step!r}"
-        write(out, _fake("old"))
+        write(out, _fake("old"), in_place=in_place)
 
 
 def test_stale_temporaries_are_removed_and_others_kept(built, tmp_path):
