@@ -146,9 +146,17 @@ def imported(rendered: dict, root: Path):
             del sys.modules[name]
 
 
+def listing(folder: Path) -> list:
+    """Every file and folder under ``folder``: (relative path, size or None for a folder), sorted."""
+    return sorted((p.relative_to(folder).as_posix(), None if p.is_dir() else p.stat().st_size)
+                  for p in folder.rglob("*"))
+
+
 def install(rendered: dict, root: Path) -> SimpleNamespace:
-    """The package pip-installed into a fresh virtual environment under ``root``: first as a user would (build
-    isolation, pyserial from the index), then offline with the system's setuptools; skips when neither works."""
+    """The package pip-installed into a fresh virtual environment under ``root`` as the README says, from the
+    folder holding ``readout/`` (``pip install ./readout``): first as a user would (build isolation: the build
+    backend and pyserial from the index), then offline with what the system has (``--no-build-isolation
+    --no-deps``); skips when neither works. ``before`` and ``after`` list that folder around the install."""
     bundle = write_tree(rendered, root / "bundle")
     venv = root / "venv"
     made = subprocess.run([sys.executable, "-m", "venv", "--system-site-packages", str(venv)],
@@ -157,8 +165,9 @@ def install(rendered: dict, root: Path) -> SimpleNamespace:
         pytest.skip(f"cannot create a virtual environment here: {made.stderr.strip()[-500:]}")
     python = venv / "bin" / "python"
     log = []
+    before = listing(bundle)
     for extra in ([], ["--no-build-isolation", "--no-deps"]):
-        proc = subprocess.run([str(python), "-m", "pip", "install", "--quiet", *extra, str(bundle / "readout")],
+        proc = subprocess.run([str(python), "-m", "pip", "install", "--quiet", *extra, "./readout"], cwd=bundle,
                               capture_output=True, text=True, timeout=240)
         if proc.returncode == 0:
             break
@@ -166,4 +175,5 @@ def install(rendered: dict, root: Path) -> SimpleNamespace:
     else:
         pytest.skip("pip cannot install the generated package here: " + " | ".join(log))
     serial = subprocess.run([str(python), "-c", "import serial"], capture_output=True).returncode == 0
-    return SimpleNamespace(python=python, script=venv / "bin" / "magfab-readout", serial=serial, root=root)
+    return SimpleNamespace(python=python, script=venv / "bin" / "magfab-readout", serial=serial, root=root,
+                           bundle=bundle, before=before, after=listing(bundle))

@@ -15,6 +15,7 @@ import select
 import subprocess
 import sys
 import threading
+import time
 import tomllib
 from contextlib import contextmanager
 from pathlib import Path
@@ -24,7 +25,7 @@ import pytest
 from magfab import SpecError, derive, load_spec
 from magfab.export.readout import calibration_sha256, render
 
-from readout_support import (CSV_REQUIRED, PKG, f32, imported, install, make_calibration, ref_crc, ref_decode,
+from readout_support import (PKG, f32, imported, install, make_calibration, ref_crc, ref_decode,
                              ref_distance_to_hull, ref_forces, ref_frame, ref_inside)
 
 
@@ -58,8 +59,13 @@ def installed(rendered, tmp_path_factory):
     return install(rendered, tmp_path_factory.mktemp("readout-venv"))
 
 
-def cli(installed, *args, timeout=60):
-    return subprocess.run([str(installed.script), *map(str, args)], capture_output=True, text=True, timeout=timeout)
+def cli(installed, *args, timeout=60, port_variable=None):
+    """The installed command; ``MAGFAB_READOUT_PORT`` is ``port_variable`` (unset when None)."""
+    env = {k: v for k, v in os.environ.items() if k != "MAGFAB_READOUT_PORT"}
+    if port_variable is not None:
+        env["MAGFAB_READOUT_PORT"] = port_variable
+    return subprocess.run([str(installed.script), *map(str, args)], capture_output=True, text=True, timeout=timeout,
+                          env=env)
 
 
 # --- rendering --------------------------------------------------------------------------------------------
@@ -79,6 +85,9 @@ def test_render_is_complete_deterministic_and_embeds_the_calibration(design, cal
     assert project["project"]["name"] == "magfab-readout"
     assert project["project"]["scripts"] == {"magfab-readout": "magfab_readout.cli:main"}
     assert [d.split(">")[0] for d in project["project"]["dependencies"]] == ["pyserial"]
+    # a backend that builds out of tree: setuptools wrote readout/build/ and *.egg-info into the build folder
+    assert project["build-system"]["build-backend"] == "flit_core.buildapi" and "setuptools" not in project.get("tool", {})
+    assert project["tool"]["flit"]["module"]["name"] == "magfab_readout"
     assert json.loads(rendered[f"{PKG}/calibration.json"]) == calibration
     sha = hashlib.sha256(json.dumps(calibration, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
     assert calibration_sha256(calibration) == sha
@@ -353,6 +362,33 @@ def test_zero_subtracts_the_mean_force_at_rest(pkg):
     assert later[1].time_s - later[0].time_s == pytest.approx(1.84e-3, rel=1e-3)  # the datasheet table's T+X+Y+Z
 
 
+def _rest_readings(pkg, samples):
+    """Mean (Fx, Fy, Fz) of ``samples`` and how many were flagged outside the calibrated region."""
+    mean = tuple(sum(s.force_N[a] for s in samples) / len(samples) for a in range(3))
+    return mean, sum("o" in s.flags for s in samples)
+
+
+def assert_reads_zero_at_rest(pkg, calibration: dict) -> None:
+    """The simulated board at rest, untared, reads within the calibration's held-out RMS of zero, as a real one
+    right after its calibration (it read Fx +37 mN at rest until --zero: its rest field was a coarse grid point
+    off the axis), and inside the calibrated region."""
+    sim = pkg.SimulatedDevice(pkg.Calibration(calibration), realtime=False, chunk=500, text=False)
+    with pkg.Device(transport=sim, calibration=pkg.Calibration(calibration)) as device:
+        samples = device.read(int(sim.pattern.rest_s * sim.rate_Hz))  # the pattern's first rest
+    mean, outside = _rest_readings(pkg, samples)
+    rms = calibration["errors"]
+    bound = (rms["Fr_N"]["rms_holdout"], rms["Fr_N"]["rms_holdout"], rms["Fz_N"]["rms_holdout"])
+    assert all(abs(m) < b for m, b in zip(mean, bound)), (mean, bound, sim.pattern.rest)
+    assert outside <= 0.02 * len(samples)
+
+
+def test_the_simulated_board_reads_zero_at_rest_without_a_tare(pkg, calibration):
+    assert_reads_zero_at_rest(pkg, calibration)
+    shifted = json.loads(json.dumps(calibration))  # Fz = 0 inside the region, not at its edge
+    shifted["coefficients"]["Fz_N"][0] -= 0.5
+    assert_reads_zero_at_rest(pkg, shifted)
+
+
 # --- errors a user meets --------------------------------------------------------------------------------------
 
 class Silent:
@@ -413,6 +449,17 @@ def test_missing_port_is_named(pkg):
         pkg.Device("/dev/does-not-exist")
 
 
+def test_the_port_defaults_to_MAGFAB_READOUT_PORT(pkg, monkeypatch):
+    device = sys.modules["magfab_readout.device"]
+    monkeypatch.setenv("MAGFAB_READOUT_PORT", "/dev/ttyACM7")
+    assert device.default_port() == "/dev/ttyACM7"
+    monkeypatch.setenv("MAGFAB_READOUT_PORT", " ")  # set but empty: the one USB serial port present
+    monkeypatch.setattr(device, "find_port", lambda: "/dev/ttyUSB3")
+    assert device.default_port() == "/dev/ttyUSB3"
+    monkeypatch.delenv("MAGFAB_READOUT_PORT")
+    assert device.default_port() == "/dev/ttyUSB3"
+
+
 # --- the installed command line -----------------------------------------------------------------------------
 
 def _rows(stdout: str) -> list:
@@ -431,8 +478,26 @@ def test_installed_cli_streams_zeroes_and_checks(installed):
     assert "# zero: offset" in proc.stdout and "0 CRC errors" in proc.stderr
 
 
+def test_pip_install_leaves_the_folder_as_it_was(installed):
+    """``pip install ./readout`` from the folder holding it: no readout/build/, no *.egg-info (issue 15)."""
+    assert installed.after == installed.before
+    assert [p for p, _ in installed.after if p.endswith(".egg-info") or p == "readout/build"] == []
+
+
+def test_installed_cli_streams_zero_at_rest_without_a_tare(installed, calibration):
+    proc = cli(installed, "stream", "--simulate", "--count", "300")
+    assert proc.returncode == 0, proc.stderr
+    rows = _rows(proc.stdout)
+    mean = [sum(float(r[k]) for r in rows) / len(rows) for k in (2, 3, 4)]
+    bound = [calibration["errors"][key]["rms_holdout"] for key in ("Fr_N", "Fr_N", "Fz_N")]
+    assert len(rows) == 300 and all(abs(m) < b for m, b in zip(mean, bound)), (mean, bound)
+
+
 def test_installed_cli_records_a_scan_csv(installed, calibration, tmp_path):
+    """``record`` writes the field and the sensor's own forces under ``F*_sensor_N`` (never the reference's
+    ``F*_N`` a calibration fits to), with the device's time and the host's."""
     out = tmp_path / "scan.csv"
+    started = time.time()
     proc = cli(installed, "record", out, "--seconds", "0.4", "--simulate")
     assert proc.returncode == 0, proc.stderr
     text = out.read_text()
@@ -440,15 +505,18 @@ def test_installed_cli_records_a_scan_csv(installed, calibration, tmp_path):
     assert '# spec: "magone"' in comments
     assert f"# calibration_sha256: {calibration_sha256(calibration)}" in comments
     rows = list(csv.DictReader(io.StringIO("\n".join(l for l in text.splitlines() if not l.startswith("#")))))
-    assert set(CSV_REQUIRED) | {"temperature_C"} <= set(rows[0])
+    sensor = ("Fx_sensor_N", "Fy_sensor_N", "Fz_sensor_N")
+    field = ("time_s", "host_time_s", "Bx_uT", "By_uT", "Bz_uT", "temperature_C")
+    assert set(field + sensor) <= set(rows[0]) and not {"Fx_N", "Fy_N", "Fz_N"} & set(rows[0])
     assert 0.4 * 543.5 * 0.9 < len(rows) < 0.4 * 543.5 * 1.1  # 1 / 1.84 ms
     times = [float(r["time_s"]) for r in rows]
     assert times[0] == 0.0 and all(b >= a for a, b in zip(times, times[1:]))
+    host = [float(r["host_time_s"]) for r in rows]
+    assert started <= host[0] <= host[-1] <= time.time()
     for r in rows:
-        values = [float(r[c]) for c in CSV_REQUIRED + ("temperature_C",)]
-        assert all(math.isfinite(v) for v in values)
+        assert all(math.isfinite(float(r[c])) for c in field + sensor)
         want = ref_forces(calibration, float(r["Bx_uT"]), float(r["By_uT"]), float(r["Bz_uT"]))
-        got = (float(r["Fx_N"]), float(r["Fy_N"]), float(r["Fz_N"]))
+        got = tuple(float(r[c]) for c in sensor)
         assert all(abs(g - w) <= 1e-6 + 1e-6 * abs(w) for g, w in zip(got, want))
 
 
@@ -523,11 +591,19 @@ def pseudo_terminal(pkg, feed: bool):
 def test_installed_cli_over_a_real_serial_port(installed, pkg):
     if not installed.serial:
         pytest.skip("pyserial could not be installed into the test venv (no package index)")
+    proc = cli(installed, "info", port_variable="/dev/magfab-no-such-port")
+    assert proc.returncode == 1 and "'/dev/magfab-no-such-port' not found" in proc.stderr
+    assert "the port named by MAGFAB_READOUT_PORT" in proc.stderr
+    proc = cli(installed, "info", "--port", "/dev/does-not-exist", port_variable="/dev/magfab-no-such-port")
+    assert proc.returncode == 1 and "'/dev/does-not-exist' not found" in proc.stderr  # --port comes first
+    assert "MAGFAB_READOUT_PORT" not in proc.stderr
     with pseudo_terminal(pkg, feed=False) as port:
         proc = cli(installed, "stream", "--port", port, "--timeout", "0.5", "--count", "1")
         assert proc.returncode == 1 and f"no frames from {port} within 0.5 s; nothing arrived" in proc.stderr
     with pseudo_terminal(pkg, feed=True) as port:
         proc = cli(installed, "info", "--port", port)
+        assert proc.returncode == 0 and "calibration: match" in proc.stdout, proc.stderr
+        proc = cli(installed, "info", port_variable=port)  # no --port: MAGFAB_READOUT_PORT names it
         assert proc.returncode == 0 and "calibration: match" in proc.stdout, proc.stderr
         proc = cli(installed, "stream", "--port", port, "--count", "30", "--text", "--check")
         assert proc.returncode == 0, proc.stderr

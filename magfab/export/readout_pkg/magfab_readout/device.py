@@ -23,11 +23,13 @@ from .frames import Decoder, DeviceInfo, EepromReply, Sample
 from .simulate import SimulatedDevice
 
 __all__ = ["Device", "DeviceError", "PortNotFound", "NoData", "CrcErrorRate", "CalibrationMismatch", "UploadFailed",
-           "SerialTransport", "find_port", "cross_check", "calibration_record"]
+           "SerialTransport", "PORT_VARIABLE", "default_port", "find_port", "cross_check", "calibration_record"]
 
 RESEND_S = 0.5  # a command sent while the board boots (it resets when the port opens) is lost: send again
 CRC_WINDOW = 500  # frame candidates over which the CRC failure rate is judged
 CRC_MIN_ATTEMPTS = 100  # below this a handful of errors (the boot, a glitch) would judge too soon
+#: The environment variable naming the serial port to use when none is given (``Device(port=None)``, ``--port``).
+PORT_VARIABLE = "MAGFAB_READOUT_PORT"
 
 
 class DeviceError(RuntimeError):
@@ -95,9 +97,16 @@ def find_port() -> str:
     if len(usb) == 1:
         return usb[0].device
     if not usb:
-        raise PortNotFound("no USB serial port found (other ports: {}): plug the board in, or pass --port (or try "
-                           "--simulate)".format(_describe(ports)))
-    raise PortNotFound("several USB serial ports found: {}; choose one with --port".format(_describe(usb)))
+        raise PortNotFound("no USB serial port found (other ports: {}): plug the board in, or pass --port or set {} "
+                           "(or try --simulate)".format(_describe(ports), PORT_VARIABLE))
+    raise PortNotFound("several USB serial ports found: {}; choose one with --port or {}".format(
+        _describe(usb), PORT_VARIABLE))
+
+
+def default_port() -> str:
+    """The port to open when none is given: ``$MAGFAB_READOUT_PORT`` when it is set (and not empty), else
+    :func:`find_port`'s one USB serial port present."""
+    return os.environ.get(PORT_VARIABLE, "").strip() or find_port()
 
 
 class SerialTransport:
@@ -154,6 +163,9 @@ def cross_check(sample: Sample, calibration: Calibration) -> float:
 class Device:
     """A sensor board streaming the firmware's frames (or the simulator with ``simulate=True``).
 
+    ``port`` is the serial port's name (``"/dev/ttyACM0"``, ``"COM3"``, a pseudo-terminal); None opens the port
+    named by the environment variable ``MAGFAB_READOUT_PORT`` when it is set, else the one USB serial port present.
+
     ``text`` switches the firmware to text lines (True), binary frames (False) or leaves it as it starts (None).
     ``timeout_s`` is how long to wait for data before :class:`NoData`. Use as a context manager, or call
     :meth:`close`. ``transport`` replaces the port by any object with ``read(size, timeout_s)``, ``write`` and
@@ -174,8 +186,14 @@ class Device:
             self.transport = SimulatedDevice(self.calibration)
             self.port = self.transport.port
         else:
-            self.port = port or find_port()
-            self.transport = SerialTransport(self.port, self.baud)
+            self.port = port or default_port()
+            try:
+                self.transport = SerialTransport(self.port, self.baud)
+            except PortNotFound as exc:
+                if port or not os.environ.get(PORT_VARIABLE, "").strip():
+                    raise
+                raise PortNotFound("{} (the port named by {}: set it to the board's port, or unset it to use the one "
+                                   "USB serial port present)".format(exc, PORT_VARIABLE)) from None
         self.decoder = Decoder()
         self.offset_N: Tuple[float, float, float] = (0.0, 0.0, 0.0)
         self.last_info: Optional[DeviceInfo] = None

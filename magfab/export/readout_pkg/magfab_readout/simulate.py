@@ -2,8 +2,9 @@
 without hardware.
 
 The field is not computed from physics: the pattern moves (Bz, Br) inside the calibration's valid region,
-from a rest point (the point of the region where the calibrated force is smallest) towards each corner of
-the region in turn and back, while the lateral direction of the field turns. The chip's quantisation and a
+from a rest point (the field where the calibration reads no force, near the axis: so the board reads zero at
+rest without a tare, as a real one right after its calibration) towards each corner of the region in turn and
+back, while the lateral direction of the field turns. The chip's quantisation and a
 little Gaussian noise are added, and the forces are the embedded calibration's global polynomial evaluated
 at the quantised field, exactly what the firmware would send for that field. The frames are byte-for-byte the firmware's
 format, and the simulator answers the commands 'b', 't' and 'i'.
@@ -31,23 +32,84 @@ __all__ = ["PressPattern", "RestTip", "SimulatedDevice"]
 #: The fault word of the simulated device's error samples: a NACK while reading (frames.FAULTS, FAULT_STAGES).
 SIMULATED_FAULT = 1 << 8 | 1
 
+REST_MARGIN_SIGMAS = 3.0  # the press pattern's rest point lies this many noise sigmas inside the valid region
 GOLDEN_ANGLE = math.pi * (3.0 - math.sqrt(5.0))  # turns the press direction evenly round the circle
 
 
 class PressPattern:
     """A repeating press: ``rest_s`` at rest, then a raised-cosine press of ``press_s`` towards the next corner
     of the valid region (``reach`` of the way from the rest point), the lateral direction turning with the
-    press and coming back at rest, so the field is continuous."""
+    press and coming back at rest, so the field is continuous.
 
-    def __init__(self, calibration: Calibration, rest_s: float = 1.0, press_s: float = 1.5, reach: float = 0.9) -> None:
+    The rest point is the field where the calibration reads no force, as a real sensor reads at rest right after
+    its calibration (whose scan started from rest at zero force): near the axis (the lateral field below the
+    calibration's ``direction_min_uT``, where the firmware gives no lateral force), Bz where the calibrated Fz
+    crosses zero, at least ``margin_uT`` inside the valid region so the noise at rest stays inside it."""
+
+    def __init__(self, calibration: Calibration, rest_s: float = 1.0, press_s: float = 1.5, reach: float = 0.9,
+                 margin_uT: float = 0.0) -> None:
         self.calibration = calibration
         self.rest_s = float(rest_s)
         self.press_s = float(press_s)
+        self.margin_uT = max(0.0, float(margin_uT))
         self.rest = self._rest_point()
         self.targets = self._targets(reach)
 
+    def _force(self, Bz: float, Br: float) -> float:
+        """|F| (N) the firmware gives for a field (Bz, Br): the global polynomial, no lateral force below
+        ``direction_min_uT``."""
+        return math.sqrt(sum(f * f for f in self.calibration.evaluate(Br, 0.0, Bz, method="poly")))
+
+    def _inside(self, Bz: float, Br: float, margin: float) -> bool:
+        """(Bz, Br) and the points ``margin`` from it along each axis all in the valid region."""
+        return all(self.calibration.in_region(z, r) for z, r in (
+            (Bz, Br), (Bz - margin, Br), (Bz + margin, Br), (Bz, max(0.0, Br - margin)), (Bz, Br + margin)))
+
+    def _candidates(self) -> list:
+        """(|F|, Bz, Br) along lines of constant Br near the axis: a grid over the region's Bz, and each root of
+        Fz between grid points (bisection) with a fine ladder of points either side of it (for a root just
+        outside the region); least force first."""
+        cal = self.calibration
+        (zlo, zhi), (rlo, rhi) = cal.box
+        step = max(cal.to_dict()["direction_min_uT"], 1e-3 * (rhi - rlo)) / 4.0
+        rung = max(self.margin_uT, step, 1e-4 * (zhi - zlo)) / 4.0
+        out = []
+        n = 200
+        for k in range(12):  # Br from 0 to 2.75 direction_min_uT: the axis, and just off it
+            Br = max(rlo, 0.0) + k * step
+            zs = [zlo + (zhi - zlo) * a / n for a in range(n + 1)]
+            fz = [cal.model(z, Br, method="poly")[0] for z in zs]
+            out += [(self._force(z, Br), z, Br) for z in zs]
+            for a in range(n):
+                if (fz[a] < 0.0) != (fz[a + 1] < 0.0):
+                    root = self._root(Br, zs[a], zs[a + 1])
+                    out += [(self._force(z, Br), z, Br) for z in (root + j * rung for j in range(-40, 41))]
+        return sorted(out)
+
+    def _root(self, Br: float, lo: float, hi: float) -> float:
+        """Bz between ``lo`` and ``hi`` where the calibrated Fz at ``Br`` changes sign (bisection)."""
+        below = self.calibration.model(lo, Br, method="poly")[0] < 0.0
+        for _ in range(48):
+            mid = 0.5 * (lo + hi)
+            if (self.calibration.model(mid, Br, method="poly")[0] < 0.0) == below:
+                lo = mid
+            else:
+                hi = mid
+        return 0.5 * (lo + hi)
+
     def _rest_point(self) -> Tuple[float, float]:
-        """The grid point of the valid region (kept off its edges) where |F| of the calibration is smallest."""
+        """(Bz, Br) at rest: the candidate with the least force at least ``margin_uT`` inside the region (then
+        any inside it); the region's grid point of least force when no candidate near the axis is inside."""
+        candidates = self._candidates()
+        for margin in (self.margin_uT, 0.0):
+            for _, Bz, Br in candidates:
+                if self._inside(Bz, Br, margin):
+                    return Bz, Br
+        return self._least_force_point()
+
+    def _least_force_point(self) -> Tuple[float, float]:
+        """The grid point of the valid region (kept off its edges) where the firmware's |F| is smallest: for a
+        region away from the axis."""
         cal = self.calibration
         hull = cal.hull
         centre = (sum(p[0] for p in hull) / len(hull), sum(p[1] for p in hull) / len(hull))
@@ -62,8 +124,7 @@ class PressPattern:
                 inner = (centre[0] + 0.98 * (point[0] - centre[0]), centre[1] + 0.98 * (point[1] - centre[1]))
                 if not (cal.in_region(*point) and cal.in_region(*inner)):
                     continue
-                Fz, Fr = cal.model(*inner, method="poly")
-                norm = math.hypot(Fz, Fr)
+                norm = self._force(*inner)
                 if norm < best_norm:
                     best, best_norm = inner, norm
         return best if best is not None else centre
@@ -186,7 +247,11 @@ class SimulatedDevice:
         if not 0.0 <= corrupt_fraction <= 1.0:
             raise ValueError("corrupt_fraction must be in [0, 1]; instead received {!r}".format(corrupt_fraction))
         self.calibration = calibration if calibration is not None else Calibration.embedded()
-        self.pattern = pattern if pattern is not None else PressPattern(self.calibration)
+        if not (math.isfinite(noise_lsb) and noise_lsb >= 0):
+            raise ValueError("noise_lsb must be a non-negative number; instead received {!r}".format(noise_lsb))
+        # the rest point 3 sigma of the noise inside the region: its readings stay inside it
+        margin = REST_MARGIN_SIGMAS * noise_lsb * max(_build.LSB_XY_UT, _build.LSB_Z_UT)
+        self.pattern = pattern if pattern is not None else PressPattern(self.calibration, margin_uT=margin)
         self.rate_Hz = float(rate_Hz)
         self.period_us = int(round(1e6 / self.rate_Hz))
         self.realtime = realtime
