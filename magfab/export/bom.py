@@ -1,78 +1,143 @@
-"""The bill of materials (bom.csv): one row per item, quantities for ``fabrication.sensors``."""
+"""The bill of materials (bom.csv): one row per item, quantities for ``fabrication.sensors``, each with the
+source its choice or figure comes from (a recipe in ``magfab/recipes`` or the build's own files)."""
 
 from __future__ import annotations
 
 import csv
 import io
-from typing import TYPE_CHECKING
+import math
+from typing import TYPE_CHECKING, Mapping
 
 from ..recipes import catalogue
 
 if TYPE_CHECKING:
     from ..design import Design
 
-__all__ = ["bom_rows", "bom_csv"]
+__all__ = ["FIELDS", "bom_rows", "bom_csv"]
+
+FIELDS = ("item", "part", "description", "quantity", "unit", "source")
+
+#: Solder paste per board: a 0.125 mm stencil over the chip's lands prints a few mm3; a syringe is the
+#: smallest unit sold, so the BOM asks for one syringe whatever the count.
+_PASTE_UNIT = "syringe"
 
 
-def bom_rows(design: "Design") -> list[dict[str, object]]:
-    """The bill of materials: one row per item, quantities for ``fabrication.sensors``."""
+def _row(item: str, part: str, description: str, quantity: float, unit: str, source: str) -> dict[str, object]:
+    return {"item": item, "part": part, "description": description, "quantity": quantity, "unit": unit,
+            "source": source}
+
+
+def _sensor_rows(design: "Design") -> list[dict[str, object]]:
+    """The parts of the sensor itself: chip, magnet, silicone, glues, board and its parts, prints."""
     spec = design.spec
     n = spec.fabrication.sensors
     from .checklist import quantities  # checklist re-exports this module, so import it at call time
 
     q = quantities(design)
-    parts = catalogue("parts")
+    parts, adhesives, assembly = catalogue("parts"), catalogue("adhesives"), catalogue("assembly")
     pcb = spec.pcb
+    glue, release, ca = (adhesives[spec.fabrication.adhesive], adhesives[spec.fabrication.release_agent],
+                         adhesives["loctite-401"])
+    stencil = assembly["stencil"]
+    mag = assembly.get(f"magnet-{spec.magnet.grade.lower()}")
+    coating = mag.texts.get("coating", "") if mag is not None else ""
     rows = [
-        {"item": "Hall sensor IC", "part": f"MLX90393SLW-ABA-{spec.sensor.option_code}-RE",
-         "description": f"Melexis MLX90393, QFN-16 3x3 mm, option code {spec.sensor.option_code} (I2C base for address "
-                        f"0x{design.i2c_address:02X})", "quantity": n, "unit": "pcs"},
-        {"item": "Magnet", "part": f"NdFeB {spec.magnet.grade} disc {spec.magnet.diameter_mm:g} x {spec.magnet.height_mm:g} mm",
-         "description": "axially magnetised, Ni-Cu-Ni coated", "quantity": n, "unit": "pcs"},
-        {"item": "Silicone", "part": q.material,
-         "description": f"mix {q.ratio[0]:g}:{q.ratio[1]:g} by weight; {q.total_g:.1f} g in {q.pours} pour(s) "
-                        f"including {q.waste_pct:g} % waste", "quantity": round(q.total_g, 1), "unit": "g"},
-        {"item": "Adhesive", "part": catalogue("adhesives")[spec.fabrication.adhesive].name,
-         "description": "seals the magnet in its pocket and glues the elastomer to the pad", "quantity": 1, "unit": "tube"},
-        {"item": "Release agent", "part": catalogue("adhesives")[spec.fabrication.release_agent].name,
-         "description": "on the mould before every pour", "quantity": 1, "unit": "can"},
-        {"item": "PCB", "part": f"{spec.name} breakout {pcb.width_mm:g} x {pcb.height_mm:g} mm",
-         "description": f"2 layers, {pcb.thickness_mm:g} mm FR-4, from pcb/gerbers", "quantity": n, "unit": "pcs"},
-        {"item": "Capacitor", "part": "100 nF 0603 X7R", "description": "C1, C2: VDD and VDDIO decoupling",
-         "quantity": 2 * n, "unit": "pcs"},
+        _row("Hall sensor IC", f"MLX90393SLW-ABA-{spec.sensor.option_code}-RE",
+             f"Melexis MLX90393, QFN-16 3x3 mm, option code {spec.sensor.option_code} (I2C base for address "
+             f"0x{design.i2c_address:02X})", n, "pcs", "Melexis MLX90393 datasheet, ordering information; recipes/chips.toml"),
+        _row("Magnet", f"NdFeB {spec.magnet.grade} disc {spec.magnet.diameter_mm:g} x {spec.magnet.height_mm:g} mm",
+             "axially magnetised" + (f", {coating} coated" if coating else ""), n, "pcs",
+             "spec magnet; recipes/magnets.toml (remanence), recipes/assembly.toml (coating)"),
+        _row("Silicone", q.material, f"mix {q.ratio[0]:g}:{q.ratio[1]:g} by weight; {q.total_g:.1f} g in {q.pours} "
+             f"pour(s) including {q.waste_pct:g} % waste", round(q.total_g, 1), "g",
+             "recipes/materials.toml (manufacturer's technical bulletin); quantity from the mould's volume"),
+        _row("Adhesive", glue.name, "seals the magnet in its channel and glues the elastomer to the pad", 1, "tube",
+             "recipes/adhesives.toml " + glue.key),
+        _row("Pad adhesive", ca.name, "fixes the printed pad to the board", 1, "bottle",
+             "recipes/adhesives.toml loctite-401 (LOCTITE 401 technical data sheet)"),
+        _row("Release agent", release.name, "on the mould before every pour", 1, "can",
+             "recipes/adhesives.toml " + release.key),
+        _row("Sealer", "clear acrylic spray", "barrier coat in the mould's cavities against cure inhibition", 1, "can",
+             "recipes/printers.toml barrier_coat (Smooth-On FAQ 129)"),
+        _row("PCB", f"{spec.name} breakout {pcb.width_mm:g} x {pcb.height_mm:g} mm",
+             f"2 layers, {pcb.thickness_mm:g} mm FR-4, from pcb/gerbers", n, "pcs", "pcb/gerbers (this build)"),
+        _row("Stencil", f"top-side solder-paste stencil, {stencil['thickness_mm'].nominal:g} mm stainless",
+             "laser-cut from pcb/gerbers F_Paste, for the chip", 1, "pcs",
+             "recipes/assembly.toml stencil (Silicon Labs QFN stencil notes)"),
+        _row("Solder paste", "no-clean SAC305, Type 3 or finer", "printed through the stencil for the chip", 1,
+             _PASTE_UNIT, "recipes/assembly.toml stencil.paste (Silicon Labs QFN stencil note 9)"),
+        _row("Solder wire", catalogue("bench")["solder-wire"].name, "the bottom-side parts, by hand", 1, "reel",
+             "recipes/bench.toml solder-wire"),
+        _row("Capacitor", "100 nF 0603 X7R", "C1, C2: VDD and VDDIO decoupling", 2 * n, "pcs",
+             "pcb/ (this build): one on each supply pin"),
     ]
     if pcb.pullups:
         ohm = parts["jst-sh-4"]["pullup_ohm"].nominal
-        rows.append({"item": "Resistor", "part": f"{ohm / 1000:g} kOhm 0603 1 %", "description": "R1, R2: I2C pull-ups",
-                     "quantity": 2 * n, "unit": "pcs"})
+        rows.append(_row("Resistor", f"{ohm / 1000:g} kOhm 0603 1 %", "R1, R2: I2C pull-ups", 2 * n, "pcs",
+                         "recipes/parts.toml jst-sh-4 pullup_ohm (SparkFun Qwiic boards)"))
     rows += [
-        {"item": "Connector", "part": "JST SM04B-SRSS-TB", "description": "J1: Qwiic (SH 1.0 mm, 4 pins)",
-         "quantity": n, "unit": "pcs"},
-        {"item": "Cable", "part": "Qwiic cable (JST SH 4-pin, 1.0 mm)", "description": "to the microcontroller board",
-         "quantity": n, "unit": "pcs"},
-        {"item": "Dowel pins", "part": "; ".join(f"{d:g} mm x {pcb.thickness_mm + design.pad_thickness_mm:g} mm"
-                                                 for _, _, d in design.alignment_holes),
-         "description": "align the pad on the board (one hole of each size)", "quantity": n, "unit": "sets"},
+        _row("Connector", "JST SM04B-SRSS-TB", "J1: Qwiic (SH 1.0 mm, 4 pins)", n, "pcs",
+             "recipes/parts.toml jst-sh-4 (JST SH catalogue)"),
+        _row("Dowel pins", "; ".join(f"{d:g} mm x {pcb.thickness_mm + design.pad_thickness_mm:g} mm"
+                                     for _, _, d in design.alignment_holes),
+             "align the pad on the board (one hole of each size)", n, "sets", "design.json alignment holes (this build)"),
     ]
     if pcb.mounting_hole_diameter_mm > 0:
-        rows.append({"item": "Screws", "part": f"M2 x 6 mm", "description": "mount the board (H3, H4)",
-                     "quantity": 2 * n, "unit": "pcs"})
+        rows.append(_row("Screws", "M2 x 6 mm", "mount the board (H3, H4)", 2 * n, "pcs",
+                         "recipes/parts.toml npth (ISO 273 clearance for M2)"))
     rows += [
-        {"item": "Printed mould", "part": "mould_cup.stl + mould_lid.stl",
-         "description": f"{design.printer.name}; {spec.mould.cavities} cavit{'y' if spec.mould.cavities == 1 else 'ies'}",
-         "quantity": 1, "unit": "set"},
-        {"item": "Printed pad", "part": "pad.stl", "description": design.printer.name, "quantity": n, "unit": "pcs"},
-        {"item": "Microcontroller", "part": "Arduino Uno or Nano (ATmega328P, 16 MHz)",
-         "description": "runs firmware/magfab-atmega328p.hex; needs an I2C level shifter to the 3.3 V board",
-         "quantity": n, "unit": "pcs"},
+        _row("Printed mould", "mould_cup.stl + mould_lid.stl",
+             f"{design.printer.name}; {spec.mould.cavities} cavit{'y' if spec.mould.cavities == 1 else 'ies'}", 1, "set",
+             "this build; recipes/printers.toml"),
+        _row("Printed pad", "pad.stl", design.printer.name, n, "pcs", "this build; recipes/printers.toml"),
     ]
     return rows
 
 
-def bom_csv(design: "Design") -> str:
+def _bench_rows(design: "Design", acceptance: Mapping[str, object] | None) -> list[dict[str, object]]:
+    """What reads, wires and calibrates the sensor: microcontroller, level shifter, cable, the calibration rig
+    and the acceptance test's weight (when the build has acceptance bands)."""
+    n = design.spec.fabrication.sensors
+    bench = catalogue("bench")
+    cal = design.spec.calibration
+    disc = 2.0 * (design.elastomer_radius_mm + cal.scan_y_mm / 2.0 + bench["indenter"]["margin_mm"].nominal)
+    rows = [
+        _row("Microcontroller", bench["arduino"].name, "runs firmware/magfab-atmega328p.hex", n, "pcs",
+             "recipes/bench.toml arduino (Arduino Wire reference, Uno Rev3 specifications)"),
+        _row("Level shifter", bench["level-shifter"].name, "I2C between the 3.3 V breakout and the 5 V Arduino", n,
+             "pcs", "recipes/bench.toml level-shifter (Pololu 2595; NXP AN10441 circuit)"),
+        _row("Cable", bench["qwiic-jumper"].name, "from J1 to the level shifter's low side", n, "pcs",
+             "recipes/bench.toml qwiic-jumper (SparkFun Qwiic connect system)"),
+        _row("Jumper wires", "male-female 0.1 in jumper wires", "level shifter's high side to the Arduino", 4 * n, "pcs",
+             "the wiring table in checklist.md"),
+        _row("Reference force sensor", bench["reference-sensor"].name,
+             f"the calibration's reference, resolution {cal.reference_resolution_mN:g} mN", 1, "pcs",
+             "recipes/bench.toml reference-sensor (ATI Nano17 calibration table)"),
+        _row("Indenter", f"flat rigid disc, at least {math.ceil(disc):g} mm across",
+             "on the reference sensor's tool side; covers the tip over the whole scan", 1, "pcs",
+             "recipes/bench.toml indenter (the FE's flat indenter)"),
+        _row("Stage", bench["stage"].name,
+             f"moves the indenter in {cal.scan_step_mm * 1000:g} um steps; graduations "
+             f"{cal.scan_step_mm * bench['stage']['graduation_fraction'].nominal * 1000:g} um or finer", 1, "pcs",
+             "recipes/bench.toml stage (spec calibration.scan_step_mm)"),
+    ]
+    weight = acceptance.get("weight_g") if acceptance else None
+    if weight:
+        rows.append(_row("Test weight", f"{float(weight):g} g calibration weight",  # type: ignore[arg-type]
+                         "the acceptance test's known weight", 1, "pcs", "calibration/acceptance.json weight_g (this build)"))
+    return rows
+
+
+def bom_rows(design: "Design", acceptance: Mapping[str, object] | None = None) -> list[dict[str, object]]:
+    """The bill of materials: one row per item (:data:`FIELDS`), quantities for ``fabrication.sensors``;
+    ``acceptance`` (acceptance.json's content) adds the acceptance test's weight."""
+    return _sensor_rows(design) + _bench_rows(design, acceptance)
+
+
+def bom_csv(design: "Design", acceptance: Mapping[str, object] | None = None) -> str:
     out = io.StringIO()
-    w = csv.DictWriter(out, fieldnames=["item", "part", "description", "quantity", "unit"], lineterminator="\n")
+    w = csv.DictWriter(out, fieldnames=list(FIELDS), lineterminator="\n")
     w.writeheader()
-    for row in bom_rows(design):
+    for row in bom_rows(design, acceptance):
         w.writerow(row)
     return out.getvalue()

@@ -21,8 +21,8 @@ if TYPE_CHECKING:
     from ..models.scan import ScanPlan
     from ..design import Design
 
-__all__ = ["Quantities", "quantities", "mix_ratio", "sections", "checklist_md", "checklist_html", "bom_rows", "bom_csv",
-           "findings"]
+__all__ = ["Quantities", "quantities", "mix_ratio", "Step", "Table", "Section", "sections", "checklist_md",
+           "checklist_html", "bom_rows", "bom_csv", "FLASH_COMMANDS", "CALIBRATE_COMMANDS", "findings"]
 
 #: Minutes at the bench per pour, before the silicone is in the mould: weigh and mix (3), degas (5), pour
 #: and close the lid (2 per cavity). Our estimate of a careful first-timer; checked against the pot life.
@@ -121,18 +121,70 @@ def findings(design: "Design") -> list[Finding]:
 
 
 # ---------------------------------------------------------------------------------------------------
-# Rendering
+# Rendering: sections of imperative steps; a step may end in a ```sh block of commands (run from the build
+# folder) and a section may open with a table. Numbers come from the spec, the design or a recipe quantity
+# (each with its source in magfab/recipes); provenance stays in the recipes' *_source fields.
+
+#: The bench commands, run from the build folder (the README lists the same). One command per line.
+FLASH_COMMANDS = (
+    "sh firmware/flash.sh uno /dev/ttyACM0       # a Nano: nano (new bootloader) or nano-old",
+    "pip install ./readout",
+    "magfab-readout upload",
+    "magfab-readout info",
+    "magfab-readout stream --zero 200            # Ctrl-C ends it",
+)
+CALIBRATE_COMMANDS = (
+    "magfab-readout record scan.csv              # during the scan; Ctrl-C ends it",
+    "magfab calibrate scan.csv --reference reference.csv",
+    "pip install ./readout",
+    "magfab-readout upload",
+)
+
+
+@dataclass(frozen=True)
+class Step:
+    """One tick box: the instruction, then (optional) the commands to type, shown as a ``sh`` block."""
+
+    text: str
+    commands: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class Table:
+    header: tuple[str, ...]
+    rows: tuple[tuple[str, ...], ...]
+
+
+@dataclass(frozen=True)
+class Section:
+    title: str
+    steps: tuple[Step, ...]
+    table: Table | None = None  # shown before the steps
+
+
+def _section(title: str, steps: list[str | Step], table: Table | None = None) -> Section:
+    return Section(title, tuple(s if isinstance(s, Step) else Step(s) for s in steps), table)
 
 
 def _t(recipe: Recipe, key: str, fallback: str = "") -> str:
     return recipe.texts.get(key, fallback)
 
 
+def _lc(text: str) -> str:
+    """``text`` with its first letter in lower case, to follow a colon."""
+    return text[:1].lower() + text[1:]
+
+
 def _q(recipe: Recipe, key: str) -> float | None:
     return recipe[key].nominal if key in recipe.quantities else None
 
 
-Section = tuple[str, list[str]]
+def _parts_section(design: "Design", acceptance: Mapping[str, object] | None) -> Section:
+    rows = tuple((str(r["item"]), str(r["part"]), f"{r['quantity']:g} {r['unit']}")
+                 for r in bom_rows(design, acceptance))
+    return _section("Parts", ["Check you have every part in the table before you start (bom.csv lists the same "
+                              "parts with a description and a source for each)."],
+                    Table(("item", "part", "quantity"), rows))
 
 
 def _print_section(design: "Design") -> Section:
@@ -140,42 +192,54 @@ def _print_section(design: "Design") -> Section:
     n = design.spec.fabrication.sensors
     layer = _q(printer, "layer_height_mm")
     wash, post, post_t = _q(printer, "wash_time_min"), _q(printer, "post_cure_time_min"), _q(printer, "post_cure_temperature_C")
-    prints = [
+    dry = _q(printer, "dry_time_min")
+    steps = [
         f"Print mould_cup.stl and mould_lid.stl once, and pad.stl {n} time(s), on the {printer.name}, in the poses the "
-        f"files are saved in (lid cores point up){f', {layer * 1000:g} um layers' if layer else ''}. The walls are at "
-        f"least {design.wall_mm:g} mm; the printer's minimum is {printer['min_wall_mm'].nominal:g} mm.",
+        f"files are saved in (lid cores up){f', {layer * 1000:g} um layers' if layer else ''}. The thinnest wall is "
+        f"{design.wall_mm:g} mm, above the printer's {printer['min_wall_mm'].nominal:g} mm minimum.",
     ]
-    if wash is not None and post is not None:
-        prints.append(f"Wash the prints in IPA for at least {wash:g} min, dry them, then post-cure for {post:g} min"
-                      + (f" at {post_t:g} C" if post_t is not None else "") + ". " + _t(printer, "post_process"))
-    elif _t(printer, "post_process"):
-        prints.append(_t(printer, "post_process"))
-    prints.append(f"Check the pad's alignment holes ({', '.join(f'{d:g} mm' for _, _, d in design.alignment_holes)}) "
-                  "take their dowel pins; ream them if the printer closed them up.")
-    return "Print the mould and the pad", prints
+    if wash is not None:
+        steps.append(f"Wash the prints in IPA for {wash:g} min.")
+    if _t(printer, "post_process"):
+        steps.append(_t(printer, "post_process"))
+    if post is not None:
+        steps.append((f"Let them dry for at least {dry:g} min, then p" if dry is not None else "P")
+                     + f"ost-cure them for {post:g} min" + (f" at {post_t:g} C" if post_t is not None else "") + ".")
+    holes = ", ".join(f"{d:g} mm" for _, _, d in design.alignment_holes)
+    steps.append(f"Check that a dowel pin goes through each of the pad's alignment holes ({holes}); ream a hole the "
+                 "printer closed up.")
+    return _section("Print the mould and the pad", steps)
 
 
 def _prepare_section(design: "Design", q: Quantities) -> Section:
     printer = design.printer
     rec = _silicone(design)
     release = catalogue("adhesives")[design.spec.fabrication.release_agent]
-    inhibit = _t(printer, "inhibits_platinum")
-    prep = []
-    if inhibit and not inhibit.lower().startswith("no"):
-        prep.append(f"Cure inhibition: {inhibit.split(' - ')[0]}. {_t(printer, 'barrier_coat')} Cast a test patch of "
-                    f"{q.material} in an offcut first; if it stays tacky after {q.cure_time_h:g} h, seal the mould.")
-    else:
-        prep.append(f"Cure inhibition: {inhibit or 'no data for this printer'}. {_t(printer, 'barrier_coat')}")
-    prep.append(f"Release agent ({release.name}): {_t(release, 'application', 'a light, even coat on cup and lid')}")
-    prep.append(f"Inhibitors to keep away from the silicone: {_t(rec, 'inhibition', 'see the silicone datasheet')}")
-    return "Prepare the mould", prep
+    coats, coat_dry = _q(printer, "barrier_coats"), _q(printer, "barrier_dry_min")
+    seal = _t(printer, "barrier_coat")
+    if coats is not None and coat_dry is not None:
+        seal += f" Use {coats:g} coats, each dried at least {coat_dry:g} min (longer in humid air)."
+    if _t(printer, "inhibits_platinum") == "yes":
+        seal = "Seal the mould (resin prints can stop platinum silicone curing): " + _lc(seal)
+    steps = [seal,
+             f"Cast a test patch of {q.material} on an offcut printed and finished like the mould; if it is still "
+             f"tacky after {q.cure_time_h:g} h, the surface inhibits the cure: seal it (again) and test once more."]
+    rel = f"Release agent, {release.name}: {_lc(_t(release, 'application', 'a light, even coat on cup and lid.'))}"
+    rel_dry = _q(release, "dry_time_min")
+    steps.append(rel + (f" Let it dry {rel_dry:g} min before you pour." if rel_dry is not None else ""))
+    steps.append(_t(rec, "inhibition", "Keep sulfur, latex and tin-cure silicone away from the silicone."))
+    return _section("Prepare the mould", steps)
 
 
 def _mix_section(design: "Design", q: Quantities) -> Section:
     rec = _silicone(design)
     n = design.spec.fabrication.sensors
     a_name, b_name = ("part A", "part B") if q.ratio[0] == q.ratio[1] else ("base", "curing agent")
-    mix = [
+    cup, inhg, extra = (_q(rec, k) for k in ("degas_cup_ratio", "degas_vacuum_inHg", "degas_extra_min"))
+    degas = "Degas: " + (f"stand the cup (at least {cup:g} times the mix's volume: it rises) in the vacuum chamber, "
+                         f"pull {inhg:g} inHg and hold it until the foam rises, breaks and falls, then {extra:g} min "
+                         "more. " if None not in (cup, inhg, extra) else "") + _t(rec, "degas")
+    return _section("Weigh, mix and degas", [
         f"Per pour ({q.pours} pour(s) for {n} sensor(s), {q.cavities} cavit{'y' if q.cavities == 1 else 'ies'} each): "
         f"weigh {q.part_a_g:.1f} g of {a_name} and {q.part_b_g:.1f} g of {b_name} of {q.material} "
         f"({q.ratio[0]:g}:{q.ratio[1]:g} by weight; {q.batch_g:.1f} g in all).",
@@ -186,135 +250,192 @@ def _mix_section(design: "Design", q: Quantities) -> Section:
         + ".",
         f"Pot life {q.pot_life_min:g} min: you have about {q.bench_time_min:g} min of work (mix {MIX_MIN:g}, degas "
         f"{DEGAS_MIN:g}, pour {POUR_MIN_PER_CAVITY:g} per cavity). Start the clock when B meets A.",
-        "Mix for 3 min, scraping the sides and the bottom of the cup.",
-        f"Degas: {_t(rec, 'degas', 'vacuum-degas until the foam collapses')}",
-    ]
-    return "Weigh, mix and degas", mix
+        f"Mix for {MIX_MIN:g} min, scraping the sides and the bottom of the cup.",
+        degas,
+    ])
 
 
-def _pour_section(q: Quantities) -> Section:
+def _pour_section(design: "Design", q: Quantities) -> Section:
+    from ..design import PRY_LIP_MM
+
     cure_at = f" at {q.cure_temperature_C:g} C" if q.cure_temperature_C is not None else ""
-    return "Pour, cure and demould", [
+    return _section("Pour, cure and demould", [
         "Pour slowly in a thin stream into one side of each cavity, filling it to the brim.",
         "Lower the lid onto its registration pins; the excess rises through the fill hole and the vents.",
         f"Cure for {q.cure_time_h:g} h{cure_at} before opening.",
-        "Lever the lid off at the 3 mm overhangs; the part comes out of the cup on its core. Peel it off the core.",
+        f"Lever the lid off at its {PRY_LIP_MM:g} mm overhangs; the part comes out of the cup on its core. Peel it off "
+        "the core.",
         "Trim the sprue and vent stubs flush with the base.",
-    ]
+    ])
 
 
 def _magnet_section(design: "Design") -> Section:
     spec = design.spec
     assembly = catalogue("assembly")
-    glue = catalogue("adhesives")[spec.fabrication.adhesive]
-    polarity = assembly["polarity-check"]
     mag = assembly.get(f"magnet-{spec.magnet.grade.lower()}")
-    return "Magnet", [
+    t_max = _q(mag, "max_operating_temp_C") if mag is not None else None
+    return _section("Insert the magnet", [
         f"Magnet: NdFeB {spec.magnet.grade}, {spec.magnet.diameter_mm:g} mm diameter x {spec.magnet.height_mm:g} mm, "
-        "axially magnetised" + (f"; {_t(mag, 'coating', '')}" if mag is not None and _t(mag, 'coating') else "") + ".",
-        f"Polarity: {_t(polarity, 'method', 'mark the north pole with a compass')}",
-        f"Heat: {_t(assembly['magnet-handling'], 'heat', 'keep the magnet below its maximum operating temperature')}",
-        "Orientation, the same for every sensor: north pole up, away from the chip (towards the fingertip). The chip "
-        "then reads a positive Bz at rest; the acceptance test checks the sign.",
-        f"Push the magnet up the insertion channel (it stretches) until it stops against the pocket's roof, "
-        f"{design.cover_mm:g} mm below the tip.",
-        f"Fill the insertion channel and the funnel with {glue.name} up to the magnet, without bubbles (about "
-        f"{design.core_volume_mm3 - design.magnet_volume_mm3:.0f} uL: the channel, funnel and pocket clearance less "
-        "the magnet); the predicted force assumes the magnet glued in a filled channel (report, the note under the "
-        "stack-up drawing): an open channel makes the tip markedly softer. Glue: "
-        f"{_t(glue, 'mix', '')} Handling cure "
-        + (f"{glue['cure_time_handling_min'].nominal:g} min" if 'cure_time_handling_min' in glue.quantities else "per the datasheet")
-        + (f", full cure {glue['cure_time_full_h'].nominal:g} h." if 'cure_time_full_h' in glue.quantities else "."),
-    ]
+        "axially magnetised" + (f", {_t(mag, 'coating')} coated" if mag is not None and _t(mag, "coating") else "") + ".",
+        "Polarity: " + _lc(_t(assembly["polarity-check"], "method", "mark each magnet's north face.")),
+        _t(assembly["magnet-handling"], "heat", "Keep magnets away from hot steps.")
+        + (f" {spec.magnet.grade} is rated {t_max:g} C." if t_max is not None else ""),
+        f"Push the magnet, dotted (north) face first, up the insertion channel from the part's base (the silicone "
+        f"stretches) until it stops against the pocket's roof, {design.cover_mm:g} mm below the tip. North then faces "
+        "the fingertip, away from the chip, the same in every sensor: the chip reads a positive Bz at rest, and the "
+        "acceptance test checks the sign.",
+    ])
 
 
 def _solder_section(design: "Design") -> Section:
     spec = design.spec
     assembly = catalogue("assembly")
     stencil, reflow = assembly["stencil"], assembly["reflow"]
-    return "Solder the board", [
+    coverage = catalogue("land")["tolerances"]["ep_paste_coverage"].nominal
+    wire = catalogue("bench")["solder-wire"]
+    return _section("Solder the board", [
         f"Order the board from pcb/gerbers ({spec.pcb.width_mm:g} x {spec.pcb.height_mm:g} mm, 2 layers, "
-        f"{spec.pcb.thickness_mm:g} mm) with a {stencil['thickness_mm'].nominal:g} mm stencil. "
-        + _t(stencil, "perimeter_aperture"),
-        f"Paste: {_t(stencil, 'paste', 'no-clean').rstrip('.')}. The exposed pad's paste is split in four apertures "
-        "(65 % coverage) so the chip does not float.",
-        f"Place U1 (pin 1 at the silk arrow), then reflow: peak {reflow['peak_C'].nominal:g} C "
-        f"(never above the package's {reflow['package_classification_peak_C'].nominal:g} C), "
-        f"{reflow['time_above_liquidus_s'].nominal:g} s above liquidus. {_t(reflow, 'soak')}",
-        f"Hot air instead of an oven: {_t(reflow, 'hot_air_rework')}",
-        "Place C1, C2 (100 nF) on the bottom, under the chip" + (", R1, R2 (pull-ups) behind J1" if spec.pcb.pullups else "")
-        + ", and J1 (Qwiic) on the bottom edge. Inspect the QFN's sides for bridges.",
+        f"{spec.pcb.thickness_mm:g} mm) with a {stencil['thickness_mm'].nominal:g} mm stencil for the top side (the "
+        f"F_Paste layer). {_t(stencil, 'perimeter_aperture')}",
+        f"{_t(stencil, 'paste')} The chip's exposed pad gets its paste in four apertures ({coverage * 100:.0f} % "
+        "coverage) so the chip does not float.",
+        f"Print the paste, place U1 (pin 1 at the silk arrow) and reflow. {_t(reflow, 'soak')} Peak at "
+        f"{reflow['peak_C'].nominal:g} C (never above the package's {reflow['package_classification_peak_C'].nominal:g} C), "
+        f"{reflow['time_above_liquidus_s'].nominal:g} s above liquidus.",
+        f"Without a reflow oven, use hot air: {_lc(_t(reflow, 'hot_air_rework'))}",
+        "Inspect the chip's sides for bridges. Then solder C1, C2 (100 nF) on the bottom, under the chip"
+        + (", R1, R2 (pull-ups) behind J1" if spec.pcb.pullups else "")
+        + f", and J1 (Qwiic) on the bottom edge by hand, with {wire.name.split(',')[0].lower()}.",
         f"The board answers at I2C address 0x{design.i2c_address:02X} (A1/A0 strapped on the board).",
-    ]
+    ])
 
 
 def _assemble_section(design: "Design") -> Section:
-    glue = catalogue("adhesives")[design.spec.fabrication.adhesive]
-    return "Assemble", [
-        f"Glue the elastomer's flat base to the pad, inside its lip, with a thin even layer of {glue.name}.",
-        "Put the dowel pins in the board's two alignment holes and lower the pad over the chip: the square recess "
-        "drops over the package and the holes of different sizes let it fit one way round.",
-    ]
+    adhesives = catalogue("adhesives")
+    glue = adhesives[design.spec.fabrication.adhesive]
+    ca = adhesives["loctite-401"]
+    fillet = ca["fillet_mm"].nominal
+    bead_ul = 0.5 * fillet * fillet * 2.0 * math.pi * design.pad_radius_mm
+    pins = " and ".join(f"{d:g} mm" for _, _, d in design.alignment_holes)
+    handling = _q(glue, "cure_time_handling_min")
+    full = _q(glue, "cure_time_full_h")
+    return _section("Assemble", [
+        f"Push the dowel pins ({pins}) into the board's two alignment holes and lower the pad over them and the chip: "
+        "the square recess drops over the package, and the holes of different sizes let it fit one way round.",
+        f"Fix the pad: hold it flat on the board and run a {fillet:g} mm bead of {ca.name} around its rim where it "
+        f"meets the board (about {bead_ul:.0f} uL); keep the glue on the rim, not under the pad, which would lift it. "
+        f"Hold it still for {ca['fixture_time_s'].nominal:g} s; the bond reaches full strength in "
+        f"{ca['cure_time_full_h'].nominal:g} h.",
+        f"Fill the magnet's insertion channel and the funnel with {glue.name} up to the magnet, without bubbles (about "
+        f"{design.core_volume_mm3 - design.magnet_volume_mm3:.0f} uL: the channel, funnel and pocket clearance less "
+        "the magnet). The predicted force assumes a filled channel (report, the note under the stack-up drawing): "
+        f"an open one makes the tip markedly softer. {_t(glue, 'mix')}",
+        f"Before that glue sets, spread a thin, even layer of {glue.name} on the elastomer's flat base and press it "
+        "onto the pad, inside its lip."
+        + (f" Leave it {handling:g} min before handling" if handling is not None else "")
+        + (f" and {full:g} h before loading the tip." if full is not None else "."),
+    ])
+
+
+def _wiring_table() -> Table:
+    qwiic = catalogue("parts")["jst-sh-4"]
+    bench = catalogue("bench")
+    ls, uno = bench["level-shifter"], bench["arduino"]
+    j1 = {_t(qwiic, f"qwiic_pin_{k}"): f"{_t(qwiic, f'qwiic_pin_{k}')} (pin {k})" for k in range(1, 5)}
+    return Table(("breakout J1 (Qwiic)", "level shifter, low side", "level shifter, high side", "Arduino Uno / Nano"), (
+        (j1["GND"], _t(ls, "gnd_pin"), _t(ls, "gnd_pin"), _t(uno, "gnd_pin")),
+        (j1["3V3"], _t(ls, "lv_pin"), "", _t(uno, "v3_pin")),
+        (j1["SDA"], _t(ls, "sda_low_pin"), _t(ls, "sda_high_pin"), f"{_t(uno, 'sda_pin')} (SDA)"),
+        (j1["SCL"], _t(ls, "scl_low_pin"), _t(ls, "scl_high_pin"), f"{_t(uno, 'scl_pin')} (SCL)"),
+        ("", "", _t(ls, "hv_pin"), _t(uno, "v5_pin")),
+    ))
+
+
+def _wiring_section(design: "Design") -> Section:
+    bench = catalogue("bench")
+    ls, uno, jumper = bench["level-shifter"], bench["arduino"], bench["qwiic-jumper"]
+    vdd = _t(catalogue("chips")["mlx90393"], "function_VDD", "supply")
+    return _section("Wire the board", [
+        f"Wire the breakout to the {uno.name} through the {ls.name}, as in the table: the {jumper.name.split(',')[0]} "
+        f"into J1, its pins into the shifter's low side, jumper wires from the high side to the Arduino.",
+        f"The breakout is a 3.3 V board (MLX90393 VDD: {vdd}): its 3V3 and the shifter's {_t(ls, 'lv_pin')} take the "
+        f"Arduino's {_t(uno, 'v3_pin')} pin, the shifter's {_t(ls, 'hv_pin')} its {_t(uno, 'v5_pin')} pin. Do not "
+        "connect SDA and SCL straight to the Arduino: at 5 V the ATmega328P's I2C inputs need "
+        f"{uno['vih_fraction'].nominal:g} x 5 V = {uno['vih_fraction'].nominal * 5:.2g} V to read a high, more than "
+        "the 3.3 V bus gives.",
+    ], _wiring_table())
 
 
 def _flash_section(design: "Design") -> Section:
     from . import firmware
 
-    spec = design.spec
-    return "Flash and read", [
-        f"Wire the board to an Arduino Uno or Nano through an I2C level shifter (the board is 3.3 V).",
-        f"Flash: sh firmware/flash.sh uno PORT (a Nano: nano, or nano-old for the old bootloader; Windows: "
-        f"firmware\\flash.bat uno PORT) writes firmware/{firmware.HEX_NAME}.",
-        "Install the reader: pip install ./readout; then magfab-readout upload (the image keeps its calibration in "
-        "EEPROM, which the Arduino bootloader does not write: until this runs the board sends only error frames "
-        "'no valid calibration'), magfab-readout info (the calibration hash must match) and "
-        f"magfab-readout stream --zero 200 (binary frames at {spec.firmware.baud} baud).",
-    ]
+    return _section("Flash and read", [Step(
+        "Plug the Arduino into this computer and run these from the build folder (the folder holding this "
+        f"checklist). They flash firmware/{firmware.HEX_NAME} with avrdude (a Uno as shown; a Nano: nano, or nano-old "
+        "for the old bootloader; the last argument is the Arduino's serial port, a COM port on Windows with "
+        "firmware\\flash.bat), install the reader with this build's calibration, write that calibration into the "
+        "board's EEPROM (the bootloader leaves the EEPROM empty, and until then the board sends only 'no valid "
+        "calibration' error frames), check that the board reports the same calibration hash, and stream calibrated "
+        f"forces at {design.spec.firmware.baud} baud, zeroed on the first 200 samples: keep the tip untouched while "
+        "it starts.", FLASH_COMMANDS)])
 
 
 def _calibrate_section(design: "Design", plan: "ScanPlan | None") -> Section:
-    spec = design.spec
-    cal = spec.calibration
+    cal = design.spec.calibration
+    bench = catalogue("bench")
+    ref, indenter, stage = bench["reference-sensor"], bench["indenter"], bench["stage"]
     if plan is None:  # no prediction to cap it: the spec's extent
         from ..models.scan import scan_plan
 
         plan = scan_plan(design)
-    return "Calibrate", [
-        f"Scan against a reference force sensor (resolution {cal.reference_resolution_mN:g} mN): the y-z track, "
-        f"{2.0 * plan.y_half_mm:.3g} mm in y centred on the axis (set by {plan.y_end}) and {plan.depth_mm:.3g} mm of "
-        f"indentation (set by {plan.depth_end}; the simulated scan and the predicted range stop there too), in "
-        f"{plan.step_mm * 1000:g} um steps ({plan.points} points).",
-        "Record with magfab-readout record scan.csv and add the reference's Fx_N, Fy_N, Fz_N columns (docs/bundle.md).",
-        f"magfab calibrate scan.csv --spec {spec.name}.toml: order {cal.order} ({cal.method.value}), {cal.folds}-fold "
-        f"held-out error, tolerance {cal.tolerance_mN:g} mN; then pip install ./readout again and magfab-readout "
-        "upload: the new calibration goes into the EEPROM over serial, no compiler and no reflash.",
-    ]
+    disc = 2.0 * (design.elastomer_radius_mm + plan.y_half_mm + indenter["margin_mm"].nominal)
+    return _section("Calibrate", [
+        f"Build the rig: the {ref.name} (resolution {cal.reference_resolution_mN:g} mN, the figure the simulated scan "
+        f"assumed) on a {_lc(stage.name)} graduated in "
+        f"{plan.step_mm * stage['graduation_fraction'].nominal * 1000:g} um or finer, a flat rigid disc at least "
+        f"{disc:.3g} mm across on its tool side, the fingertip under it.",
+        f"Scan the y-z track: {2.0 * plan.y_half_mm:.3g} mm in y centred on the axis (set by {plan.y_end}) and "
+        f"{plan.depth_mm:.3g} mm of indentation (set by {plan.depth_end}; the simulated scan and the predicted range "
+        f"stop there too), in {plan.step_mm * 1000:g} um steps ({plan.points} points).",
+        "Log the reference sensor on this computer as reference.csv, with the columns time_s (seconds since the Unix "
+        "epoch on this computer's clock, as Python's time.time() gives), Fx_N, Fy_N and Fz_N (the sensor's frame: +z "
+        "presses the tip towards the chip).",
+        Step("From the build folder, record the sensor during the scan (the recording's host_time_s column is the same "
+             "clock, which is how calibrate pairs each sample with the reference's force), fit the calibration to "
+             f"the reference: order {cal.order} ({cal.method.value}), {cal.folds}-fold held-out error, tolerance "
+             f"{cal.tolerance_mN:g} mN, written into this build folder; then reinstall the reader with the new "
+             "calibration and upload it into the board's EEPROM (no compiler, no reflash).", CALIBRATE_COMMANDS),
+    ])
 
 
 def _acceptance_section(acceptance: Mapping[str, object] | None) -> Section:
-    accept = ["With nothing touching the tip: magfab-readout check (it reads the field at rest, then asks for a "
-              "known weight on the tip)."]
-    if acceptance:
-        rest = acceptance.get("rest_Bz_uT")
-        weight = acceptance.get("weight_g")
-        delta = acceptance.get("delta_Bz_uT")
-        if rest and weight and delta:
-            accept.append(f"Pass: Bz at rest within {rest[0]:.0f} to {rest[1]:.0f} uT (positive: magnet the right way "
-                          f"up), and a {weight:g} g weight raises Bz by {delta[0]:.0f} to {delta[1]:.0f} uT.")
-    accept.append("A fail names the step and the measured and predicted values: a weak or strong field points at the "
-                  "magnet grade or the stack-up, a negative one at an upside-down magnet, a small rise at a stiff "
-                  "batch of silicone.")
-    return "Acceptance test", accept
+    rest = acceptance.get("rest_Bz_uT") if acceptance else None
+    weight = acceptance.get("weight_g") if acceptance else None
+    delta = acceptance.get("delta_Bz_uT") if acceptance else None
+    if not (rest and weight and delta):
+        return _section("Acceptance test", [
+            "This build has no acceptance bands (no calibration/acceptance.json: the prediction gave no weight that "
+            "fits the range), so there is no check to run; compare the streamed forces with a known weight by hand."])
+    w = float(weight)  # type: ignore[arg-type]
+    return _section("Acceptance test", [
+        Step(f"From the build folder, with nothing touching the tip, run the check: it reads the field at rest, then "
+             f"asks you to put the {w:g} g weight on the tip.", (f"magfab-readout check --weight-g {w:g}",)),
+        f"Pass: Bz at rest within {rest[0]:.0f} to {rest[1]:.0f} uT (positive: magnet the right way up), and a {w:g} g "  # type: ignore[index]
+        f"weight raises Bz by {delta[0]:.0f} to {delta[1]:.0f} uT.",  # type: ignore[index]
+        "A fail names the step and the measured and predicted values: a weak or strong field points at the magnet grade "
+        "or the stack-up, a negative one at an upside-down magnet, a small rise at a stiff batch of silicone.",
+    ])
 
 
 def sections(design: "Design", acceptance: Mapping[str, object] | None = None,
              plan: "ScanPlan | None" = None) -> list[Section]:
-    """The checklist as (section title, steps): plain text with the spec's and the recipes' numbers filled
-    in; the Markdown and HTML templates only lay it out (and escape it). ``plan``: the calibration scan's extent
-    (:func:`magfab.models.scan.scan_plan`; omitted, the spec's)."""
+    """The checklist as :class:`Section` s of :class:`Step` s: plain text with the spec's, the design's and the
+    recipes' numbers filled in; the Markdown and HTML templates only lay it out (and escape it). ``plan``: the
+    calibration scan's extent (:func:`magfab.models.scan.scan_plan`; omitted, the spec's)."""
     q = quantities(design)
-    return [_print_section(design), _prepare_section(design, q), _mix_section(design, q), _pour_section(q),
-            _magnet_section(design), _solder_section(design), _assemble_section(design), _flash_section(design),
+    return [_parts_section(design, acceptance), _print_section(design), _prepare_section(design, q),
+            _mix_section(design, q), _pour_section(design, q), _magnet_section(design), _solder_section(design),
+            _assemble_section(design), _wiring_section(design), _flash_section(design),
             _calibrate_section(design, plan), _acceptance_section(acceptance)]
 
 
@@ -327,7 +448,7 @@ def checklist_md(design: "Design", acceptance: Mapping[str, object] | None = Non
 
 
 def checklist_html(design: "Design", acceptance: Mapping[str, object] | None = None,
-                 plan: "ScanPlan | None" = None) -> str:
+                   plan: "ScanPlan | None" = None) -> str:
     from .templating import render
 
     return render("checklist/checklist.html.j2", spec=design.spec, q=quantities(design),

@@ -1,4 +1,5 @@
-"""Catalogue data (materials, magnet grades, printers, chips), read from the TOML files beside this module.
+"""Catalogue data (materials, magnet grades, printers, chips, parts, adhesives, assembly, the bench kit), read from
+the TOML files beside this module.
 
 Every number in a recipe is a table with its ``source``: either ``{value = x, source = "..."}`` or
 ``{min = a, nominal = b, max = c, source = "..."}``. Numbers are parsed by TOML, never evaluated.
@@ -15,7 +16,7 @@ from typing import Mapping
 
 __all__ = ["Quantity", "Recipe", "catalogue", "KINDS"]
 
-KINDS = ("materials", "magnets", "printers", "chips", "land", "parts", "adhesives", "assembly")
+KINDS = ("materials", "magnets", "printers", "chips", "land", "parts", "adhesives", "assembly", "bench")
 
 
 @dataclass(frozen=True)
@@ -87,7 +88,7 @@ def _entry(kind: str, key: str, table: Mapping[str, object]) -> Recipe:
 
 @cache
 def catalogue(kind: str) -> Mapping[str, Recipe]:
-    """All entries of one catalogue (``materials``, ``magnets``, ``printers`` or ``chips``), by key."""
+    """All entries of one catalogue (one of :data:`KINDS`), by key."""
     if kind not in KINDS:
         raise KeyError(f"unknown recipe kind {kind!r}; known: {', '.join(KINDS)}")
     raw = tomllib.loads(resources.files(__name__).joinpath(f"{kind}.toml").read_text(encoding="utf-8"))
