@@ -249,7 +249,7 @@ def _mix_section(design: "Design", q: Quantities) -> Section:
         + (f" (raised to the {MIN_BATCH_G:g} g smallest batch a 0.1 g scale weighs to 1 %)" if q.batch_g <= MIN_BATCH_G else "")
         + ".",
         f"Pot life {q.pot_life_min:g} min: you have about {q.bench_time_min:g} min of work (mix {MIX_MIN:g}, degas "
-        f"{DEGAS_MIN:g}, pour {POUR_MIN_PER_CAVITY:g} per cavity). Start the clock when B meets A.",
+        f"{DEGAS_MIN:g}, pour {POUR_MIN_PER_CAVITY:g} per cavity). Start the clock when the {b_name} meets the {a_name}.",
         f"Mix for {MIX_MIN:g} min, scraping the sides and the bottom of the cup.",
         degas,
     ])
@@ -358,7 +358,7 @@ def _wiring_section(design: "Design") -> Section:
     return _section("Wire the board", [
         f"Wire the breakout to the {uno.name} through the {ls.name}, as in the table: the {jumper.name.split(',')[0]} "
         f"into J1, its pins into the shifter's low side, jumper wires from the high side to the Arduino.",
-        f"The breakout is a 3.3 V board (MLX90393 VDD: {vdd}): its 3V3 and the shifter's {_t(ls, 'lv_pin')} take the "
+        f"The breakout is a 3.3 V board (the MLX90393's VDD takes {vdd.removeprefix('supply, ')}): its 3V3 and the shifter's {_t(ls, 'lv_pin')} take the "
         f"Arduino's {_t(uno, 'v3_pin')} pin, the shifter's {_t(ls, 'hv_pin')} its {_t(uno, 'v5_pin')} pin. Do not "
         "connect SDA and SCL straight to the Arduino: at 5 V the ATmega328P's I2C inputs need "
         f"{uno['vih_fraction'].nominal:g} x 5 V = {uno['vih_fraction'].nominal * 5:.2g} V to read a high, more than "
@@ -394,17 +394,18 @@ def _calibrate_section(design: "Design", plan: "ScanPlan | None") -> Section:
         f"assumed) on a {_lc(stage.name)} graduated in "
         f"{plan.step_mm * stage['graduation_fraction'].nominal * 1000:g} um or finer, a flat rigid disc at least "
         f"{disc:.3g} mm across on its tool side, the fingertip under it.",
-        f"Scan the y-z track: {2.0 * plan.y_half_mm:.3g} mm in y centred on the axis (set by {plan.y_end}) and "
-        f"{plan.depth_mm:.3g} mm of indentation (set by {plan.depth_end}; the simulated scan and the predicted range "
-        f"stop there too), in {plan.step_mm * 1000:g} um steps ({plan.points} points).",
         "Log the reference sensor on this computer as reference.csv, with the columns time_s (seconds since the Unix "
         "epoch on this computer's clock, as Python's time.time() gives), Fx_N, Fy_N and Fz_N (the sensor's frame: +z "
         "presses the tip towards the chip).",
-        Step("From the build folder, record the sensor during the scan (the recording's host_time_s column is the same "
-             "clock, which is how calibrate pairs each sample with the reference's force), fit the calibration to "
-             f"the reference: order {cal.order} ({cal.method.value}), {cal.folds}-fold held-out error, tolerance "
-             f"{cal.tolerance_mN:g} mN, written into this build folder; then reinstall the reader with the new "
-             "calibration and upload it into the board's EEPROM (no compiler, no reflash).", CALIBRATE_COMMANDS),
+        f"The track to scan: {2.0 * plan.y_half_mm:.3g} mm in y centred on the axis (set by {plan.y_end}) and "
+        f"{plan.depth_mm:.3g} mm of indentation (set by {plan.depth_end}; the simulated scan and the predicted range "
+        f"stop there too), in {plan.step_mm * 1000:g} um steps ({plan.points} points).",
+        Step("From the build folder: start the reference log and the recording (the first line below), run the scan, "
+             "and end both when it is done. The recording's host_time_s column is this computer's clock too, which "
+             "is how calibrate pairs each sample with the reference's force. Then fit the calibration to the "
+             f"reference (order {cal.order}, {cal.method.value}, {cal.folds}-fold held-out error, tolerance "
+             f"{cal.tolerance_mN:g} mN), which updates this build folder, reinstall the reader with the new "
+             "calibration, and upload it into the board's EEPROM (no compiler, no reflash).", CALIBRATE_COMMANDS),
     ])
 
 
