@@ -2,8 +2,14 @@
 
 One row per sample: ``time_s`` and the field ``Bx_uT, By_uT, Bz_uT`` (chip axes), optionally
 ``temperature_C``, and for a calibration the reference force ``Fx_N, Fy_N, Fz_N`` (sensor frame); columns in
-any order, others ignored, ``#`` lines are comments. :func:`read_scan_csv` is the one reader: every malformed
-file gives one :class:`~magfab.errors.ScanError` line naming the file, the line number and the column.
+any order, others ignored, ``#`` lines are comments. :func:`read_scan_csv` is the one reader of a scan: every
+malformed file gives one :class:`~magfab.errors.ScanError` line naming the file, the line number and the column.
+
+Two related files share its parsing: a recording of ``magfab-readout record`` (:func:`read_recording`: the
+host's clock ``host_time_s`` beside ``time_s``, and the sensor's own forces ``Fx_sensor_N, Fy_sensor_N,
+Fz_sensor_N``, which a calibration refuses) and a reference force sensor's log (:func:`read_reference`:
+``time_s`` on the same host clock, ``Fx_N, Fy_N, Fz_N``); :func:`magfab.models.scan_guards.merge_reference`
+makes a scan of the two.
 """
 
 from __future__ import annotations
@@ -21,12 +27,20 @@ import numpy as np
 
 from ..errors import ScanError, shown
 
-__all__ = ["SCAN_COLUMNS", "FORCE_COLUMNS", "TEMPERATURE_COLUMN", "MIN_ROWS", "BANDS", "MIN_SPAN_UT",
-           "MIN_THICKNESS", "ScanError", "Scan", "scan_csv", "read_scan_csv", "check_calibration_scan"]
+__all__ = ["SCAN_COLUMNS", "FORCE_COLUMNS", "SENSOR_FORCE_COLUMNS", "HOST_TIME_COLUMN", "REFERENCE_COLUMNS",
+           "TEMPERATURE_COLUMN", "MIN_ROWS", "BANDS", "HOST_TIME_BAND", "MIN_SPAN_UT", "MIN_THICKNESS", "ScanError",
+           "Scan", "Recording", "Reference", "scan_csv", "read_scan_csv", "read_recording", "read_reference",
+           "check_calibration_scan"]
 
 #: Required scan columns; the force columns are required for a calibration (not for a recording).
 SCAN_COLUMNS = ("time_s", "Bx_uT", "By_uT", "Bz_uT")
 FORCE_COLUMNS = ("Fx_N", "Fy_N", "Fz_N")
+#: The sensor's own calibrated force, as ``magfab-readout record`` writes it: never a calibration's reference.
+SENSOR_FORCE_COLUMNS = ("Fx_sensor_N", "Fy_sensor_N", "Fz_sensor_N")
+#: A recording's host clock (``time.time()`` when the sample was read: Unix time, s), beside the device's time_s.
+HOST_TIME_COLUMN = "host_time_s"
+#: A reference force sensor's log: ``time_s`` on the host clock of the recording's ``host_time_s``, and its force.
+REFERENCE_COLUMNS = ("time_s",) + FORCE_COLUMNS
 TEMPERATURE_COLUMN = "temperature_C"
 #: Smallest scan a calibration accepts: the order-6 fit has 28 coefficients and is cross-validated.
 MIN_ROWS = 50
@@ -45,12 +59,21 @@ BANDS = {
     "Bx_uT": (-1e6, 1e6, "uT"), "By_uT": (-1e6, 1e6, "uT"), "Bz_uT": (-1e6, 1e6, "uT"),
     "temperature_C": (-100.0, 250.0, "degC"),
     "Fx_N": (-1e3, 1e3, "N"), "Fy_N": (-1e3, 1e3, "N"), "Fz_N": (-1e3, 1e3, "N"),
+    "Fx_sensor_N": (-1e3, 1e3, "N"), "Fy_sensor_N": (-1e3, 1e3, "N"), "Fz_sensor_N": (-1e3, 1e3, "N"),
 }
+#: The host clock's band (Unix time in s, 1970 to about the year 5000): a recording's ``host_time_s`` and a
+#: reference log's ``time_s``.
+HOST_TIME_BAND = (0.0, 1e11, "s")
+BANDS[HOST_TIME_COLUMN] = HOST_TIME_BAND
 #: Least range of Bz and of Br a calibration scan must span, uT: a few LSB of the chip's finest setting.
 MIN_SPAN_UT = 1.0
 #: Least RMS distance of the scan's (Bz, Br) points from their best straight line, in the scaled variables
 #: (each axis mapped onto -1..1 by its range): below it the points lie on a line and span no area.
 MIN_THICKNESS = 1e-3
+#: Largest difference, N, between Fx_N.. and Fx_sensor_N.. on every row that still counts as a copy: a twentieth
+#: of the recorder's last decimal (1e-6 N) would be too tight for a spreadsheet's re-rounding, a micronewton is
+#: far below any reference's resolution (an ATI Nano17's is 6.25 mN).
+COPY_TOLERANCE_N = 1e-6
 
 
 @dataclass(frozen=True)
@@ -121,7 +144,7 @@ def _load(source: "str | os.PathLike[str] | bytes") -> tuple[bytes, str]:
         raise ScanError(f"{path}: cannot read the scan file ({exc.strerror or exc})") from None
 
 
-def _number(text: str, name: str, line: int, column: str, row: int) -> float:
+def _number(text: str, name: str, line: int, column: str, row: int, band: tuple[float, float, str]) -> float:
     stripped = text.strip(" \t")
     if not NUMBER.fullmatch(stripped):
         what = shown(stripped) if stripped else "an empty field"
@@ -130,14 +153,25 @@ def _number(text: str, name: str, line: int, column: str, row: int) -> float:
                         f"{'a finite' if finite else 'a decimal'} number; every value must be a finite decimal "
                         "number in ASCII digits (e.g. 12.5 or -3e-2)")
     x = float(stripped)
-    lo, hi, unit = BANDS[column]
+    lo, hi, unit = band
     if not lo <= x <= hi:  # also an overflow to inf, e.g. 1e999
         raise ScanError(f"{name}: line {line} (row {row}), column {column!r}: {shown(stripped)} is outside the plausible "
                         f"band {lo:g} to {hi:g} {unit}; check the column's unit and scaling")
     return x
 
 
-def _header(lines: list[tuple[int, str]], name: str, require_force: bool) -> tuple[int, list[str]]:
+def _lines(source: "str | os.PathLike[str] | bytes") -> tuple[list[tuple[int, str]], str, bytes]:
+    """(numbered lines that are neither blank nor comments, the file's name, its bytes)."""
+    raw, name = _load(source)
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise ScanError(f"{name}: byte {exc.start} is not UTF-8; the scan must be UTF-8 text") from None
+    lines = [(i, s) for i, s in enumerate(text.splitlines(), 1) if s.strip() and not s.lstrip().startswith("#")]
+    return lines, name, raw
+
+
+def _header(lines: list[tuple[int, str]], name: str) -> tuple[int, list[str]]:
     if not lines:
         raise ScanError(f"{name}: line 1: no header row (the file is empty or holds only comments); expected "
                         f"a header naming {', '.join(SCAN_COLUMNS + FORCE_COLUMNS)}")
@@ -148,13 +182,54 @@ def _header(lines: list[tuple[int, str]], name: str, require_force: bool) -> tup
         if c in seen:
             raise ScanError(f"{name}: line {number} (header): column {shown(c)} appears twice; each column once")
         seen.add(c)
-    with_force = require_force or any(c in seen for c in FORCE_COLUMNS)
-    needed = SCAN_COLUMNS + (FORCE_COLUMNS if with_force else ())
-    missing = [c for c in needed if c not in seen]
-    if missing:
-        raise ScanError(f"{name}: line {number} (header): missing column {missing[0]!r}; required columns are "
-                        f"{', '.join(needed)} (any order; {TEMPERATURE_COLUMN} optional, others ignored)")
     return number, names
+
+
+def _require(names: list[str], needed: tuple[str, ...], name: str, number: int, note: str) -> None:
+    """ScanError naming the first of ``needed`` the header lacks; for missing reference force columns beside the
+    sensor's own (a recording), the line says why those cannot stand in (guard A, docs/bundle.md section 1)."""
+    missing = [c for c in needed if c not in names]
+    if not missing:
+        return
+    if missing[0] in FORCE_COLUMNS and any(c in names for c in SENSOR_FORCE_COLUMNS):
+        raise ScanError(f"{name}: line {number} (header): no reference force ({', '.join(FORCE_COLUMNS)}): "
+                        f"{', '.join(SENSOR_FORCE_COLUMNS)} are this sensor's own calibrated forces (a magfab-readout "
+                        "recording), and a fit to them only gives back the calibration that made them; log a "
+                        "reference force sensor during the scan and merge its log with --reference "
+                        "(docs/bundle.md section 1)")
+    raise ScanError(f"{name}: line {number} (header): missing column {missing[0]!r}; required columns are "
+                    f"{', '.join(needed)} ({note})")
+
+
+def _values(lines: list[tuple[int, str]], names: list[str], wanted: Sequence[str], name: str,
+            bands: dict[str, tuple[float, float, str]]) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """The ``wanted`` columns as arrays (rows,) and each row's line number (rows,); ``time_s`` non-decreasing."""
+    hline = lines[0][0]
+    index = {c: names.index(c) for c in wanted}
+    values: dict[str, list[float]] = {c: [] for c in wanted}
+    numbers = []
+    last_t, last_line = -math.inf, hline
+    for row, (number, s) in enumerate(lines[1:], 1):
+        fields = s.split(",")
+        if len(fields) != len(names):
+            raise ScanError(f"{name}: line {number}: {len(fields)} values, but the header (line {hline}) names "
+                            f"{len(names)} columns; every row needs one value per column")
+        for c in wanted:
+            values[c].append(_number(fields[index[c]], name, number, c, row, bands[c]))
+        numbers.append(number)
+        t = values["time_s"][-1]
+        if t < last_t:
+            raise ScanError(f"{name}: line {number}, column 'time_s': {t!r} is less than {last_t!r} on line "
+                            f"{last_line}; time_s must be non-decreasing")
+        last_t, last_line = t, number
+    return {c: np.asarray(v, dtype=float) for c, v in values.items()}, np.asarray(numbers, dtype=int)
+
+
+def _enough(lines: list[tuple[int, str]], name: str, what: str) -> None:
+    """ScanError unless the file holds two data rows (what interpolation in time needs)."""
+    if len(lines) - 1 < 2:
+        raise ScanError(f"{name}: line {lines[-1][0]}: the {what} ends after {len(lines) - 1} data rows; at least 2 "
+                        "are needed")
 
 
 def read_scan_csv(source: "str | os.PathLike[str] | bytes", *, require_force: bool = True,
@@ -166,44 +241,92 @@ def read_scan_csv(source: "str | os.PathLike[str] | bytes", *, require_force: bo
     the wrong length, decreasing time or fewer than ``min_rows`` rows; with ``require_force`` (a calibration
     scan) also for (Bz, Br) points that span no area (:func:`check_calibration_scan`), so a scan the fit
     would refuse is refused before any build work. ``require_force=False`` accepts a recording without the
-    force columns (``F_N`` None).
+    force columns (``F_N`` None). A recording's sensor forces (:data:`SENSOR_FORCE_COLUMNS`) never stand in
+    for the reference force: without ``Fx_N, Fy_N, Fz_N`` beside them, or with copies of them there, the scan
+    is refused with a line saying so (guard A).
     """
-    raw, name = _load(source)
-    try:
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise ScanError(f"{name}: byte {exc.start} is not UTF-8; the scan must be UTF-8 text") from None
-    lines = [(i, s) for i, s in enumerate(text.splitlines(), 1) if s.strip() and not s.lstrip().startswith("#")]
-    hline, names = _header(lines, name, require_force)
+    lines, name, raw = _lines(source)
+    hline, names = _header(lines, name)
+    with_force = require_force or any(c in names for c in FORCE_COLUMNS)
+    _require(names, SCAN_COLUMNS + (FORCE_COLUMNS if with_force else ()), name, hline,
+             f"any order; {TEMPERATURE_COLUMN} optional, others ignored")
+    sensor = with_force and all(c in names for c in SENSOR_FORCE_COLUMNS)
     wanted = [c for c in SCAN_COLUMNS + (TEMPERATURE_COLUMN,) + FORCE_COLUMNS if c in names]
-    index = {c: names.index(c) for c in wanted}
-    values: dict[str, list[float]] = {c: [] for c in wanted}
-    last_t, last_line = -math.inf, hline
-    for row, (number, s) in enumerate(lines[1:], 1):
-        fields = s.split(",")
-        if len(fields) != len(names):
-            raise ScanError(f"{name}: line {number}: {len(fields)} values, but the header (line {hline}) names "
-                            f"{len(names)} columns; every row needs one value per column")
-        for c in wanted:
-            values[c].append(_number(fields[index[c]], name, number, c, row))
-        t = values["time_s"][-1]
-        if t < last_t:
-            raise ScanError(f"{name}: line {number}, column 'time_s': {t!r} is less than {last_t!r} on line "
-                            f"{last_line}; time_s must be non-decreasing")
-        last_t, last_line = t, number
+    arr, _ = _values(lines, names, wanted + list(SENSOR_FORCE_COLUMNS if sensor else ()), name, BANDS)
     rows = len(lines) - 1
     if rows < min_rows:
         end = lines[-1][0]
         raise ScanError(f"{name}: line {end}: the scan ends after {rows} data rows; a calibration needs at "
                         f"least {min_rows} (the order-{LARGEST_ORDER} fit has {(LARGEST_ORDER + 1) * (LARGEST_ORDER + 2) // 2} "
                         "coefficients and is cross-validated)")
-    arr = {c: np.asarray(v, dtype=float) for c, v in values.items()}
     forces = np.column_stack([arr[c] for c in FORCE_COLUMNS]) if FORCE_COLUMNS[0] in arr else None
+    if sensor and forces is not None:
+        own = np.column_stack([arr[c] for c in SENSOR_FORCE_COLUMNS])
+        if np.max(np.abs(forces - own)) <= COPY_TOLERANCE_N:
+            raise ScanError(f"{name}: columns {', '.join(FORCE_COLUMNS)} repeat {', '.join(SENSOR_FORCE_COLUMNS)} "
+                            "(this sensor's own forces) on every row; the reference force must come from a "
+                            "reference sensor: merge its log with --reference (docs/bundle.md section 1)")
     scan = Scan(arr["time_s"], np.column_stack([arr[c] for c in SCAN_COLUMNS[1:]]), forces,
                 arr.get(TEMPERATURE_COLUMN), name, hashlib.sha256(raw).hexdigest())
     if require_force:
         check_calibration_scan(scan)
     return scan
+
+
+@dataclass(frozen=True)
+class Recording:
+    """A recording of ``magfab-readout record`` (docs/bundle.md section 1): ``scan`` (device ``time_s``, field,
+    temperature, and in ``F_N`` the sensor's own forces, or None when the file has no Fx_sensor_N... columns),
+    ``host_time_s`` (N,) the host's clock when each sample was read (Unix time, s) and ``lines`` (N,) each row's
+    line number in the file."""
+
+    scan: Scan
+    host_time_s: np.ndarray
+    lines: np.ndarray
+
+
+@dataclass(frozen=True)
+class Reference:
+    """A reference force sensor's log: ``time_s`` (M,) on the host clock of the recording's ``host_time_s``
+    (Unix time, s), non-decreasing; ``F_N`` (M, 3) its force in the sensor frame, N; ``lines`` (M,) each row's
+    line number; ``source`` the file name; ``sha256`` of its bytes."""
+
+    time_s: np.ndarray
+    F_N: np.ndarray
+    lines: np.ndarray
+    source: str
+    sha256: str
+
+
+def read_recording(source: "str | os.PathLike[str] | bytes") -> Recording:
+    """A recording (:class:`Recording`) from a file, CSV text or bytes; ScanError (one line) as
+    :func:`read_scan_csv`, and for a missing ``host_time_s``."""
+    lines, name, raw = _lines(source)
+    hline, names = _header(lines, name)
+    _require(names, SCAN_COLUMNS + (HOST_TIME_COLUMN,), name, hline, "any order; a recording of magfab-readout "
+             "record has host_time_s, the host's clock, which ties it to the reference's log: record again "
+             f"with a current readout package; {TEMPERATURE_COLUMN} and {', '.join(SENSOR_FORCE_COLUMNS)} optional")
+    optional = [c for c in (TEMPERATURE_COLUMN,) + SENSOR_FORCE_COLUMNS if c in names]
+    arr, numbers = _values(lines, names, list(SCAN_COLUMNS) + [HOST_TIME_COLUMN] + optional, name, BANDS)
+    _enough(lines, name, "recording")
+    own = (np.column_stack([arr[c] for c in SENSOR_FORCE_COLUMNS])
+           if all(c in arr for c in SENSOR_FORCE_COLUMNS) else None)
+    scan = Scan(arr["time_s"], np.column_stack([arr[c] for c in SCAN_COLUMNS[1:]]), own, arr.get(TEMPERATURE_COLUMN),
+                name, hashlib.sha256(raw).hexdigest())
+    return Recording(scan, arr[HOST_TIME_COLUMN], numbers)
+
+
+def read_reference(source: "str | os.PathLike[str] | bytes") -> Reference:
+    """A reference force sensor's log (:class:`Reference`): columns ``time_s`` (host clock, Unix time, s) and
+    ``Fx_N, Fy_N, Fz_N`` (others ignored); ScanError (one line) as :func:`read_scan_csv`."""
+    lines, name, raw = _lines(source)
+    hline, names = _header(lines, name)
+    _require(names, REFERENCE_COLUMNS, name, hline, "any order, others ignored; time_s is the host's clock, "
+             "Unix time in s, the clock of the recording's host_time_s")
+    arr, numbers = _values(lines, names, REFERENCE_COLUMNS, name, {**BANDS, "time_s": HOST_TIME_BAND})
+    _enough(lines, name, "reference log")
+    return Reference(arr["time_s"], np.column_stack([arr[c] for c in FORCE_COLUMNS]), numbers, name,
+                     hashlib.sha256(raw).hexdigest())
 
 
 def check_calibration_scan(scan: Scan) -> None:

@@ -108,3 +108,49 @@ def test_a_two_dimensional_scan_passes():
     bz = [20000.0 + 10 * (i // 8) for i in range(64)]
     br = [5.0 * (i % 8) for i in range(64)]
     assert read_scan_csv(_scan(bz, br)).rows == 64
+
+
+def _recording_text(host: bool = True, sensor: bool = True) -> str:
+    """A recording as magfab-readout record writes it (docs/bundle.md section 1)."""
+    names = ["time_s"] + (["host_time_s"] if host else []) + ["Bx_uT", "By_uT", "Bz_uT"]
+    names += ["Fx_sensor_N", "Fy_sensor_N", "Fz_sensor_N"] if sensor else []
+    rows = [",".join(names)]
+    for i in range(60):
+        row = [f"{0.00184 * i:.6f}"] + ([f"{1.7e9 + 0.002 * i:.6f}"] if host else [])
+        row += [str(i % 8), str(-i), str(20000 + 10 * i)] + (["0.0", f"{0.001 * i:.3f}", f"{0.01 * i:.2f}"] if sensor else [])
+        rows.append(",".join(row))
+    return "\n".join(rows) + "\n"
+
+
+def test_guard_a_the_sensors_own_forces_never_stand_in_for_the_reference():
+    """Issue 15: a recording calibrated against itself reported 'held-out RMS Fz 0 mN'; its columns are named
+    for what they are, and the reader says why they cannot be the reference, in one line."""
+    with pytest.raises(ScanError) as info:
+        read_scan_csv(_recording_text().encode())
+    message = str(info.value)
+    assert "\n" not in message and "line 1 (header)" in message
+    for part in ("Fx_sensor_N", "own calibrated forces", "reference force sensor", "--reference"):
+        assert part in message, message
+    # without them the plain missing-column line
+    with pytest.raises(ScanError, match="missing column 'Fx_N'; required columns"):
+        read_scan_csv(_recording_text(sensor=False).encode())
+    # a recording needs no force columns
+    assert read_scan_csv(_recording_text().encode(), require_force=False).F_N is None
+
+
+def test_recording_and_reference_readers():
+    from magfab.formats.scan_csv import read_recording, read_reference
+
+    rec = read_recording(_recording_text().encode())
+    assert rec.scan.rows == 60 and rec.host_time_s[1] == 1.7e9 + 0.002 and rec.scan.F_N[2, 2] == 0.02
+    assert rec.lines[0] == 2
+    with pytest.raises(ScanError, match="missing column 'host_time_s'.*record again"):
+        read_recording(_recording_text(host=False).encode())
+    ref = read_reference(b"# a log\nFz_N,time_s,Fx_N,Fy_N\n0.5,1700000000.25,0,0.1\n0.6,1700000000.5,0,0.2\n")
+    assert ref.time_s.tolist() == [1700000000.25, 1700000000.5] and ref.F_N[1].tolist() == [0.0, 0.2, 0.6]
+    assert ref.lines.tolist() == [3, 4]
+    # a recording passed as the reference is refused by the same guard
+    with pytest.raises(ScanError, match="own calibrated forces"):
+        read_reference(_recording_text().encode())
+    with pytest.raises(ScanError, match="line 3.*'time_s'.*non-decreasing"):
+        read_reference(b"time_s,Fx_N,Fy_N,Fz_N\n2,0,0,0\n1,0,0,0\n")
