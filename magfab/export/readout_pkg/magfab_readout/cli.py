@@ -13,7 +13,9 @@ import json
 import math
 import os
 import pkgutil
+import signal
 import sys
+import time
 from typing import List, Optional, Tuple
 
 from . import __version__, _build, acceptance_json, eeprom
@@ -23,7 +25,9 @@ from .simulate import RestTip, SimulatedDevice
 
 G0 = 9.80665  # m/s^2
 
-CSV_COLUMNS = ("time_s", "Bx_uT", "By_uT", "Bz_uT", "temperature_C", "Fx_N", "Fy_N", "Fz_N", "status", "seq")
+#: ``record``'s columns (docs/bundle.md section 1): host_time_s ties the recording to a reference sensor's log.
+CSV_COLUMNS = ("time_s", "host_time_s", "Bx_uT", "By_uT", "Bz_uT", "temperature_C", "Fx_sensor_N", "Fy_sensor_N",
+               "Fz_sensor_N", "status", "seq")
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -60,12 +64,16 @@ def _parser() -> argparse.ArgumentParser:
     stream.add_argument("--count", type=int, metavar="N", help="stop after N samples")
     stream.add_argument("--seconds", type=float, metavar="S", help="stop after S seconds of device time")
 
-    record = commands.add_parser("record", parents=[common], help="record a scan CSV (docs/bundle.md format)",
-                                 description="Write time, field, temperature and this sensor's calibrated force as "
-                                 "a scan CSV with a # comment header. Samples with a chip error are left out.")
+    record = commands.add_parser("record", parents=[common], help="record the field during a scan, until Ctrl-C",
+                                 description="Write the device's and the host's time, the field, the temperature and "
+                                 "this sensor's own calibrated force (Fx_sensor_N, Fy_sensor_N, Fz_sensor_N) as CSV "
+                                 "with a # comment header (docs/bundle.md section 1), until Ctrl-C or --seconds. "
+                                 "Samples with a chip error are left out. To calibrate, log a reference force "
+                                 "sensor on this computer's clock during the scan and pass its log to magfab "
+                                 "calibrate --reference.")
     record.add_argument("out", metavar="OUT.csv", help="file to write")
-    record.add_argument("--seconds", type=float, default=10.0, metavar="S",
-                        help="seconds of device time to record (default: %(default)s)")
+    record.add_argument("--seconds", type=float, metavar="S",
+                        help="stop after S seconds of device time (default: record until Ctrl-C)")
     record.add_argument("--text", action="store_true", help="ask the firmware for text lines instead of binary frames")
 
     commands.add_parser("info", parents=[common], help="ask the board which spec and calibration it runs",
@@ -172,8 +180,33 @@ def _csv(x: Optional[float], decimals: int) -> str:
     return "{:.{}f}".format(x, decimals)
 
 
+class _Interrupt:
+    """SIGINT while recording: KeyboardInterrupt while waiting for the device, held back while a row is written."""
+
+    requested = writing = False
+
+    def __call__(self, signum, frame) -> None:
+        self.requested = True
+        if not self.writing:
+            raise KeyboardInterrupt
+
+
+def _record_header(f, device, info, columns: List[str]) -> None:
+    f.write("# magfab-readout {} record\n".format(__version__))
+    f.write("# spec: {}\n".format(json.dumps(_build.SPEC_NAME)))
+    f.write("# calibration_sha256: {}\n".format(device.calibration.sha256))
+    f.write("# device: {}\n".format(json.dumps(info.line)))
+    f.write("# chip: gain_sel={} resolution={} osr={} dig_filt={} lsb_xy_uT={!r} lsb_z_uT={!r}\n".format(
+        _build.GAIN_SEL, _build.RESOLUTION, _build.OSR, _build.DIG_FILT, _build.LSB_XY_UT, _build.LSB_Z_UT))
+    f.write("# time_s: the device's clock; host_time_s: this computer's clock (Unix time, s) when the sample was read\n")
+    f.write("# Fx_sensor_N, Fy_sensor_N, Fz_sensor_N: this sensor's own calibrated force, not a reference; to "
+            "calibrate, log a reference force sensor during the scan with time_s on this computer's clock (Unix "
+            "time, s) and Fx_N, Fy_N, Fz_N, and pass it: magfab calibrate THIS.csv --reference REFERENCE.csv\n")
+    f.write(",".join(columns) + "\n")
+
+
 def _record(args: argparse.Namespace) -> int:
-    if not args.seconds > 0:
+    if args.seconds is not None and not args.seconds > 0:
         raise DeviceError("--seconds must be positive")
     with _device(args, text=bool(args.text)) as device:
         info = device.info()
@@ -182,30 +215,38 @@ def _record(args: argparse.Namespace) -> int:
         temperature = _build.TEMPERATURE_ENABLED
         columns = [c for c in CSV_COLUMNS if temperature or c != "temperature_C"]
         written = skipped = 0
+        stop = _Interrupt()
         with open(args.out, "w", encoding="utf-8", newline="") as f:
-            f.write("# magfab-readout {} record\n".format(__version__))
-            f.write("# spec: {}\n".format(json.dumps(_build.SPEC_NAME)))
-            f.write("# calibration_sha256: {}\n".format(device.calibration.sha256))
-            f.write("# device: {}\n".format(json.dumps(info.line)))
-            f.write("# chip: gain_sel={} resolution={} osr={} dig_filt={} lsb_xy_uT={!r} lsb_z_uT={!r}\n".format(
-                _build.GAIN_SEL, _build.RESOLUTION, _build.OSR, _build.DIG_FILT, _build.LSB_XY_UT, _build.LSB_Z_UT))
-            f.write("# Fx_N, Fy_N, Fz_N: this sensor's own calibrated force; replace them with a reference "
-                    "sensor's to calibrate\n")
-            f.write(",".join(columns) + "\n")
-            for sample in device.samples(seconds=args.seconds):
-                values = list(sample.B_uT) + list(sample.force_N)
-                if sample.chip_error or not all(math.isfinite(v) for v in values) or (
-                        temperature and sample.temperature_C is None):
-                    skipped += 1
-                    continue
-                row = [_csv(sample.time_s, 6)] + [_csv(b, 4) for b in sample.B_uT]
-                if temperature:
-                    row.append(_csv(sample.temperature_C, 3))
-                row += [_csv(x, 6) for x in sample.force_N] + [str(sample.status), str(sample.seq)]
-                f.write(",".join(row) + "\n")
-                written += 1
-        print("magfab-readout: wrote {} samples to {} ({} chip-error samples left out)".format(
-            written, args.out, skipped), file=sys.stderr)
+            _record_header(f, device, info, columns)
+            try:
+                previous = signal.signal(signal.SIGINT, stop)
+            except ValueError:  # not the main thread: Ctrl-C stays a KeyboardInterrupt, caught below
+                previous = None
+            try:
+                for sample in device.samples(seconds=args.seconds):
+                    stop.writing = True
+                    host = time.time()
+                    values = list(sample.B_uT) + list(sample.force_N)
+                    if sample.chip_error or not all(math.isfinite(v) for v in values) or (
+                            temperature and sample.temperature_C is None):
+                        skipped += 1
+                    else:
+                        row = [_csv(sample.time_s, 6), _csv(host, 6)] + [_csv(b, 4) for b in sample.B_uT]
+                        if temperature:
+                            row.append(_csv(sample.temperature_C, 3))
+                        row += [_csv(x, 6) for x in sample.force_N] + [str(sample.status), str(sample.seq)]
+                        f.write(",".join(row) + "\n")
+                        written += 1
+                    stop.writing = False
+                    if stop.requested:
+                        break
+            except KeyboardInterrupt:
+                pass
+            finally:
+                if previous is not None:
+                    signal.signal(signal.SIGINT, previous)
+        print("magfab-readout: wrote {} rows to {}{} ({} chip-error samples left out)".format(
+            written, args.out, " (Ctrl-C)" if stop.requested else "", skipped), file=sys.stderr)
         _summary(device, written + skipped, None)
     return 0
 

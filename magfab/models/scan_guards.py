@@ -1,0 +1,283 @@
+"""Guards on a calibration scan, and the merge that makes one from a recording and a reference sensor's log
+(docs/bundle.md section 1).
+
+The readout's ``record`` writes the sensor's own calibrated force (``Fx_sensor_N``...), which a calibration must
+never take for the reference: fitted to them, it reports a held-out error near 0 and calibrates nothing.
+
+- Guard A (the names) is in the reader, :func:`magfab.formats.scan_csv.read_scan_csv`.
+- Guard B (the numbers), :func:`reject_self_calibrated`: force columns that reproduce a calibration's own
+  output from the scan's field, far below the reference's resolution, are a recording whose columns were
+  renamed. A genuine reference differs from any smooth fit by at least its quantisation (resolution / sqrt 12).
+- Guard C (a flag), :func:`scan_depth_warnings`: a scan whose force goes past the predicted range.
+- :func:`merge_reference`: the reference's force interpolated at each recorded sample's time on the host clock.
+
+Units: force N, field uT, time s.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from dataclasses import replace
+from typing import TYPE_CHECKING, Mapping
+
+import numpy as np
+
+from ..errors import ScanError
+from ..formats.scan_csv import (MIN_ROWS, Recording, Reference, Scan, check_calibration_scan, read_recording,
+                                read_reference, scan_csv)
+from ..units import UT_PER_GAUSS
+
+if TYPE_CHECKING:
+    import os
+
+    from .calibration import Calibration
+    from .predict import Prediction
+
+__all__ = ["SELF_FRACTION", "SELF_FLOOR_N", "GAP_PERIODS", "MIN_OVERLAP", "self_calibration_rms_N",
+           "reject_self_calibrated", "scan_depth_warnings", "host_clock", "merge_reference", "merged_csv"]
+
+#: Guard B refuses force columns within this fraction of the reference's resolution (RMS) of the calibration's
+#: output: a genuine reference differs from any smooth fit by at least its quantisation, resolution / sqrt(12)
+#: (29 % of it), while a recording matches to its last written decimal (1e-6 N) and float32 (about 1e-6 N).
+SELF_FRACTION = 0.01
+#: ... and never less than this, N (a spec may give a reference resolution of 0).
+SELF_FLOOR_N = 1e-5
+#: A reference log's gap longer than this many of the recording's sample periods is refused.
+GAP_PERIODS = 10.0
+#: The least fraction of the recording's rows the reference's time span must cover.
+MIN_OVERLAP = 0.5
+
+#: What the points past each range limit (predict's labels) do.
+_BEYOND = {
+    "d_min": "bring the magnet closer to the chip than sensor.d_min_mm",
+    "chip full scale": "drive the chip's output past its full scale, where readings clip",
+    "stretch": "stretch the silicone past predict.max_stretch, where it may tear or creep",
+    "scan depth": "lie deeper than the mechanics model was solved (calibration.scan_z_mm)",
+    "model": "lie where the mechanics model stopped",
+    "lateral travel = magnet radius": "move the magnet sideways by more than its radius",
+}
+
+
+# ---------------------------------------------------------------------------------------------------
+# Guard B: force columns that are the calibration's own output
+
+
+def self_calibration_rms_N(scan: Scan, calibration: "Calibration") -> float:
+    """RMS difference, N, over the rows and the three axes, between the scan's force columns and the global
+    polynomial of ``calibration`` (what the firmware sends) evaluated at the scan's field, each axis's mean
+    difference removed first (so a tare does not hide a copy). NaN when no row evaluates to a finite force."""
+    if scan.F_N is None:
+        raise ScanError(f"scan {scan.source}: no force columns to compare with the calibration")
+    own, _ = calibration.evaluate(scan.B_uT, "poly")
+    d = scan.F_N - own
+    d = d[np.isfinite(d).all(axis=1)]
+    if not len(d):
+        return math.nan
+    d = d - d.mean(axis=0)
+    return float(np.sqrt(np.mean(d * d)))
+
+
+def reject_self_calibrated(scan: Scan, calibration: "Calibration", reference_resolution_mN: float) -> None:
+    """:class:`ScanError` (one line) when ``scan``'s force columns reproduce ``calibration``'s own output from its
+    field (:func:`self_calibration_rms_N` at most ``SELF_FRACTION`` of ``reference_resolution_mN``, the spec's
+    ``calibration.reference_resolution_mN``, or :data:`SELF_FLOOR_N`, whichever is larger): a
+    recording of the sensor's own forces under the reference's column names. ``calibration`` is the one the
+    sensor ran while recording (the build's calibration.json, as uploaded)."""
+    limit_N = max(SELF_FRACTION * reference_resolution_mN / 1000.0, SELF_FLOOR_N)
+    rms = self_calibration_rms_N(scan, calibration)
+    if rms <= limit_N:
+        raise ScanError(
+            f"scan {scan.source}: its force columns are this sensor's own calibrated forces: they match the current "
+            f"calibration evaluated at the scan's field to {rms * 1e6:.2g} uN RMS, far below the reference's "
+            f"resolution ({reference_resolution_mN:g} mN, calibration.reference_resolution_mN), and a fit to them "
+            "only gives the calibration back; log a reference force sensor during the scan and merge its log with "
+            "--reference (docs/bundle.md section 1)")
+
+
+# ---------------------------------------------------------------------------------------------------
+# Guard C: a scan past the predicted range
+
+
+def _as_json(prediction: "Prediction | Mapping[str, object]") -> Mapping[str, object]:
+    as_json = getattr(prediction, "as_json", None)
+    return as_json() if callable(as_json) else prediction  # type: ignore[return-value]
+
+
+def scan_depth_warnings(scan: Scan, prediction: "Prediction | Mapping[str, object]") -> list[str]:
+    """Warning lines (none when the scan stays in range) for a scan whose largest normal force Fz passes the
+    predicted normal range (``normal.range_N``, the band's softest silicone's) or whose largest lateral force
+    Fr passes the shear range (``shear.range_N``). ``prediction``: a :class:`~magfab.models.predict.Prediction`
+    or predictions.json's dict. Each line names the force, the range, what ends it, the other silicones' ranges,
+    how many rows lie beyond and what they do there; the normal one adds what the field says, which does not
+    depend on the silicone (:func:`_field_within`)."""
+    if scan.F_N is None:
+        return []
+    doc = _as_json(prediction)
+    out = []
+    for axis, force, key in (("Fz", scan.F_N[:, 2], "normal"), ("Fr", scan.Fr_N, "shear")):
+        figures = doc[key]  # type: ignore[index]
+        limit_N, ends = float(figures["range_N"]), str(figures["range_limit"])
+        beyond = int(np.count_nonzero(force > limit_N))
+        if not beyond:
+            continue
+        others = sorted((float(v), k) for k, v in figures.get("range_by_material_N", {}).items())[1:]
+        band = "".join(f"; the band's softest silicone's, {', '.join(f'{k} {v:.3g} N' for v, k in others)}"
+                       for _ in others[:1])
+        does = _BEYOND.get(ends, "lie outside the predicted range")
+        line = (f"scan reaches {axis} {float(force.max()):.3g} N, beyond the predicted {key} range {limit_N:.3g} N "
+                f"(ends at: {ends}{band}): the points beyond it ({beyond} of {scan.rows} rows) ")
+        within = _field_within(scan, doc) if key == "normal" else None
+        if within:
+            line += (f"are within the range only if the cast silicone is stiffer than the softest, as the field "
+                     f"suggests ({within}); otherwise they {does}")
+        else:
+            line += does + (" unless the cast silicone is stiffer than the softest" if others and within is None else "")
+            if within == "":
+                line += (f"; the field confirms it (|Bz| reaches {_top_bz_uT(scan):.0f} uT, past the range's end "
+                         "whatever the silicone)")
+        out.append(line + "; the fit uses them, but the design is not rated there: keep the scan within the range")
+    return out
+
+
+def _top_bz_uT(scan: Scan) -> float:
+    return float(np.max(np.abs(scan.B_uT[:, 2])))
+
+
+def _field_within(scan: Scan, doc: Mapping[str, object]) -> str | None:
+    """What the scan's field says about the magnet's travel, whatever the silicone: a phrase when |Bz| stays
+    within the field at the end of the normal range with the strongest magnet of the grade (an upper bound), ""
+    when it passes it, None when predictions.json does not give that field."""
+    end_G = doc.get("field", {}).get("Bz_range_end_strongest_G")  # type: ignore[union-attr]
+    if end_G is None:
+        return None
+    end_uT = float(end_G) * UT_PER_GAUSS
+    if _top_bz_uT(scan) > end_uT:
+        return ""
+    return f"|Bz| up to {_top_bz_uT(scan):.0f} uT, within the {end_uT:.0f} uT at the end of the range"
+
+
+# ---------------------------------------------------------------------------------------------------
+# Merging a reference sensor's log
+
+
+def host_clock(recording: Recording) -> np.ndarray:
+    """The host-clock time (Unix time, s) of each recorded sample, (N,): the device's time_s mapped onto the host
+    clock by the line under every (time_s, host_time_s) pair that hugs them closest (least total gap: the edge of
+    their lower convex hull over the mean time_s, as in network clock-skew estimation). host_time_s is when the
+    host read a sample, late by the serial link's buffering (a batch of samples read at once: up to tens of ms),
+    while the device's clock spaces the samples exactly; the line's slope takes the two clocks' rate difference
+    (a ceramic resonator's 0.5 %) and it passes through the least-delayed reads. A recording whose device time
+    does not advance keeps host_time_s."""
+    t, h = recording.scan.time_s, recording.host_time_s
+    if len(t) < 2 or not float(t[-1] - t[0]) > 0.0:
+        return h.copy()
+    x, y = t - t[0], h - h[0]  # small numbers: Unix time's 1.7e9 would eat the cross products' precision
+    hull = _lower_hull(x, y)
+    k = min(int(np.searchsorted(x[hull], float(np.mean(x)))), len(hull) - 1)
+    i, j = hull[max(k - 1, 0)], hull[max(k, 1)]
+    slope = (y[j] - y[i]) / (x[j] - x[i])
+    return h[0] + y[i] + slope * (x - x[i])
+
+
+def _lower_hull(x: np.ndarray, y: np.ndarray) -> list[int]:
+    """Indices of the lower convex hull of the points (x, y), x non-decreasing, from left to right (Andrew's
+    monotone chain; of points with equal x only the lowest can be on it)."""
+    hull: list[int] = []
+    for k in range(len(x)):
+        if hull and x[hull[-1]] == x[k]:
+            if y[k] >= y[hull[-1]]:
+                continue
+            hull.pop()
+        while len(hull) >= 2:
+            i, j = hull[-2], hull[-1]
+            if (x[j] - x[i]) * (y[k] - y[i]) - (y[j] - y[i]) * (x[k] - x[i]) > 0:
+                break
+            hull.pop()
+        hull.append(k)
+    return hull
+
+
+def _period(recording: Recording) -> float:
+    """The recording's sample period, s: the median step of the device's time (of host_time_s if it has none)."""
+    for t in (recording.scan.time_s, recording.host_time_s):
+        steps = np.diff(t)
+        steps = steps[steps > 0]
+        if steps.size:
+            return float(np.median(steps))
+    return 0.0
+
+
+def _check_host_time(recording: Recording) -> None:
+    back = np.flatnonzero(np.diff(recording.host_time_s) < 0)
+    if back.size:
+        k = int(back[0]) + 1
+        raise ScanError(f"{recording.scan.source}: line {int(recording.lines[k])}, column 'host_time_s': "
+                        f"{float(recording.host_time_s[k])!r} is less than on the row before; host_time_s must be "
+                        "non-decreasing (was the computer's clock set back during the recording?)")
+
+
+def _overlap(h: np.ndarray, rec: Recording, ref: Reference) -> np.ndarray:
+    """The recorded rows inside the reference's time span, (N,) bool; ScanError unless at least
+    :data:`MIN_OVERLAP` of them are."""
+    t0, t1 = float(ref.time_s[0]), float(ref.time_s[-1])
+    inside = (h >= t0) & (h <= t1)
+    spans = (f"the reference's time_s runs {t0:.3f} to {t1:.3f} s, the recording's host time "
+             f"{float(h[0]):.3f} to {float(h[-1]):.3f} s")
+    if not inside.any():
+        raise ScanError(f"{ref.source} and {rec.scan.source} do not overlap in time: {spans}; both must be the "
+                        "same computer's clock (Unix time, s), logged during the same scan")
+    if inside.sum() < MIN_OVERLAP * len(h):
+        raise ScanError(f"only {int(inside.sum())} of the {len(h)} rows of {rec.scan.source} "
+                        f"({100.0 * inside.sum() / len(h):.0f} %) fall within the time span of {ref.source} "
+                        f"({spans}); at least {100 * MIN_OVERLAP:.0f} % must: log the reference through the whole scan")
+    return inside
+
+
+def _check_gaps(h: np.ndarray, ref: Reference, period_s: float) -> None:
+    """ScanError for a step of the reference's time longer than :data:`GAP_PERIODS` recording periods with
+    recorded samples inside it (where its force would be interpolated across the gap)."""
+    limit = GAP_PERIODS * period_s
+    steps = np.diff(ref.time_s)
+    for k in np.flatnonzero(steps > limit):
+        a, b = float(ref.time_s[k]), float(ref.time_s[k + 1])
+        within = int(np.searchsorted(h, b, "left") - np.searchsorted(h, a, "right"))
+        if within:
+            raise ScanError(f"{ref.source}: line {int(ref.lines[k + 1])}: a gap of {b - a:.3g} s in time_s after "
+                            f"line {int(ref.lines[k])}, over {within} recorded samples; the reference must be logged "
+                            f"at least every {1000.0 * limit:.3g} ms through the scan ({GAP_PERIODS:g} of the "
+                            f"recording's sample periods of {1000.0 * period_s:.3g} ms) to be interpolated at "
+                            "each sample")
+
+
+def merge_reference(recording: "Recording | str | os.PathLike[str] | bytes",
+                    reference: "Reference | str | os.PathLike[str] | bytes") -> Scan:
+    """A calibration scan (force columns ``Fx_N``...) from a ``magfab-readout record`` recording and a reference
+    force sensor's log (each a parsed value or a path, CSV text or bytes; docs/bundle.md section 1): the
+    reference's force interpolated linearly at each recorded sample's host-clock time (:func:`host_clock`),
+    the recording's rows outside the reference's time span dropped. ScanError (one line) when the two do not
+    overlap, when under :data:`MIN_OVERLAP` of the recording does, when the reference has a gap longer than
+    :data:`GAP_PERIODS` sample periods of the recording over recorded samples, and for a merged scan a
+    calibration cannot use (:func:`~magfab.formats.scan_csv.check_calibration_scan`, fewer than MIN_ROWS rows).
+    ``source`` is "RECORDING + REFERENCE"; ``sha256`` that of :func:`~magfab.formats.scan_csv.scan_csv` of it."""
+    rec = recording if isinstance(recording, Recording) else read_recording(recording)
+    ref = reference if isinstance(reference, Reference) else read_reference(reference)
+    _check_host_time(rec)
+    h = host_clock(rec)
+    inside = _overlap(h, rec, ref)
+    _check_gaps(h, ref, _period(rec))
+    force = np.column_stack([np.interp(h[inside], ref.time_s, ref.F_N[:, k]) for k in range(3)])
+    s = rec.scan
+    temperature = None if s.temperature_C is None else s.temperature_C[inside]
+    merged = Scan(s.time_s[inside], s.B_uT[inside], force, temperature, f"{s.source} + {ref.source}", "")
+    merged = replace(merged, sha256=hashlib.sha256(scan_csv(merged).encode("utf-8")).hexdigest())
+    if merged.rows < MIN_ROWS:
+        raise ScanError(f"{merged.source}: {merged.rows} rows overlap in time; a calibration needs at least {MIN_ROWS}")
+    check_calibration_scan(merged)
+    return merged
+
+
+def merged_csv(scan: Scan) -> bytes:
+    """The merged scan as scan CSV bytes (docs/bundle.md section 1), naming its sources in a comment."""
+    return scan_csv(scan, [f"merged by magfab: {scan.source} (force: the reference, interpolated on the host "
+                           "clock)"]).encode("utf-8")
