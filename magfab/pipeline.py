@@ -246,7 +246,7 @@ def _fabrication(design: Design, prediction, acceptance: dict | None, say: Progr
                  "fabrication checklist with the quantities filled in (Markdown)"),
         Artifact("checklist.html", checklist.checklist_html(design, acceptance, plan).encode(),
                  "the same checklist with tick boxes, to print"),
-        Artifact("bom.csv", checklist.bom_csv(design).encode(),
+        Artifact("bom.csv", checklist.bom_csv(design, acceptance).encode(),
                  f"bill of materials for {design.spec.fabrication.sensors} sensor(s)"),
     ]
     timings["checklist"] = time.perf_counter() - t
