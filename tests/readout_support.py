@@ -49,6 +49,28 @@ def make_calibration(order: int = 4, seed: int = 1, tare=(0.0, 0.0)) -> dict:
     }
 
 
+# --- the simulated board at rest ------------------------------------------------------------------------------
+
+def _rest_readings(samples):
+    """Mean (Fx, Fy, Fz) of ``samples`` and how many were flagged outside the calibrated region."""
+    mean = tuple(sum(s.force_N[a] for s in samples) / len(samples) for a in range(3))
+    return mean, sum("o" in s.flags for s in samples)
+
+
+def assert_reads_zero_at_rest(pkg, calibration: dict) -> None:
+    """The simulated board at rest, untared, reads within the calibration's held-out RMS of zero, as a real one
+    right after its calibration (it read Fx +37 mN at rest until --zero: its rest field was a coarse grid point
+    off the axis), and inside the calibrated region."""
+    sim = pkg.SimulatedDevice(pkg.Calibration(calibration), realtime=False, chunk=500, text=False)
+    with pkg.Device(transport=sim, calibration=pkg.Calibration(calibration)) as device:
+        samples = device.read(int(sim.pattern.rest_s * sim.rate_Hz))  # the pattern's first rest
+    mean, outside = _rest_readings(samples)
+    rms = calibration["errors"]
+    bound = (rms["Fr_N"]["rms_holdout"], rms["Fr_N"]["rms_holdout"], rms["Fz_N"]["rms_holdout"])
+    assert all(abs(m) < b for m, b in zip(mean, bound)), (mean, bound, sim.pattern.rest)
+    assert outside <= 0.02 * len(samples)
+
+
 # --- independent implementations ------------------------------------------------------------------------------
 
 def ref_forces(cal: dict, Bx: float, By: float, Bz: float) -> tuple:
@@ -152,6 +174,18 @@ def listing(folder: Path) -> list:
                   for p in folder.rglob("*"))
 
 
+def _pip(python: Path, cwd: Path, *args: str) -> subprocess.CompletedProcess:
+    """pip acting on the environment of ``python``: this interpreter's pip with ``--python`` (pip 22.3 or newer;
+    the environment then needs no pip of its own, which takes seconds to install), else the environment's own
+    (installed by ensurepip the first time)."""
+    proc = subprocess.run([sys.executable, "-m", "pip", "--python", str(python), *args], cwd=cwd,
+                          capture_output=True, text=True, timeout=240)
+    if "no such option: --python" not in proc.stderr:
+        return proc
+    subprocess.run([str(python), "-m", "ensurepip", "--default-pip"], capture_output=True, timeout=240)
+    return subprocess.run([str(python), "-m", "pip", *args], cwd=cwd, capture_output=True, text=True, timeout=240)
+
+
 def install(rendered: dict, root: Path) -> SimpleNamespace:
     """The package pip-installed into a fresh virtual environment under ``root`` as the README says, from the
     folder holding ``readout/`` (``pip install ./readout``): first as a user would (build isolation: the build
@@ -159,7 +193,7 @@ def install(rendered: dict, root: Path) -> SimpleNamespace:
     --no-deps``); skips when neither works. ``before`` and ``after`` list that folder around the install."""
     bundle = write_tree(rendered, root / "bundle")
     venv = root / "venv"
-    made = subprocess.run([sys.executable, "-m", "venv", "--system-site-packages", str(venv)],
+    made = subprocess.run([sys.executable, "-m", "venv", "--without-pip", "--system-site-packages", str(venv)],
                           capture_output=True, text=True, timeout=120)
     if made.returncode != 0:
         pytest.skip(f"cannot create a virtual environment here: {made.stderr.strip()[-500:]}")
@@ -167,8 +201,7 @@ def install(rendered: dict, root: Path) -> SimpleNamespace:
     log = []
     before = listing(bundle)
     for extra in ([], ["--no-build-isolation", "--no-deps"]):
-        proc = subprocess.run([str(python), "-m", "pip", "install", "--quiet", *extra, "./readout"], cwd=bundle,
-                              capture_output=True, text=True, timeout=240)
+        proc = _pip(python, bundle, "install", "--quiet", *extra, "./readout")
         if proc.returncode == 0:
             break
         log.append(proc.stderr.strip()[-800:])

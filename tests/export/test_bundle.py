@@ -8,13 +8,15 @@ from __future__ import annotations
 import importlib
 import importlib.util
 import json
+import re
+import shlex
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
-from readout_support import imported
+from readout_support import assert_reads_zero_at_rest, imported, install
 from click.testing import CliRunner
 
 from conftest import require_tool
@@ -163,3 +165,135 @@ def test_calibrate_command_refuses_a_malformed_scan(tmp_path):
     assert not target.exists()
     result = CliRunner().invoke(main, ["calibrate", str(tmp_path / "missing.csv"), "--out", str(target)])
     assert result.exit_code == 2 and "missing.csv" in result.output
+
+
+# --- the readout package as the bench uses it --------------------------------------------------------------
+
+def test_pip_install_from_a_copy_of_the_build_leaves_it_as_it_was(bundle, tmp_path):
+    """``pip install ./readout`` run in (a copy of) the build folder writes nothing there (setuptools wrote
+    readout/build/ and readout/src/*.egg-info), and the installed package carries the build's data files."""
+    out, cal = bundle
+    files = {p.relative_to(out).as_posix(): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    installed = install(files, tmp_path)
+    assert installed.after == installed.before
+    run = subprocess.run([str(installed.script), "info", "--simulate"], capture_output=True, text=True, timeout=60)
+    assert run.returncode == 0 and "calibration: match" in run.stdout, run.stderr
+    assert calibration_json.calibration_sha256(cal)[:16] in run.stdout
+    probe = ("import json, pkgutil; print(json.dumps([json.loads(pkgutil.get_data('magfab_readout', n)) "
+             "for n in ('calibration.json', 'acceptance.json')]))")
+    data = subprocess.run([str(installed.python), "-c", probe], capture_output=True, text=True, timeout=60,
+                          cwd=tmp_path)
+    assert data.returncode == 0, data.stderr
+    shipped = [json.loads((out / "calibration" / name).read_text()) for name in ("calibration.json", "acceptance.json")]
+    assert json.loads(data.stdout) == shipped
+
+
+def test_the_simulated_board_reads_zero_at_rest_with_the_builds_calibration(bundle):
+    """The build's own calibration: at rest the simulated board read Fx +37 mN until --zero (issue 15)."""
+    out, cal = bundle
+    assert_reads_zero_at_rest(_decoder(out), cal)
+
+
+# --- the bundle's READMEs: commands as a person types them -----------------------------------------------------
+
+BENCH = """\
+sh firmware/flash.sh uno /dev/ttyACM0
+pip install ./readout
+magfab-readout upload
+magfab-readout info
+magfab-readout stream --zero 200            # Ctrl-C ends it
+magfab-readout record scan.csv              # during the scan; Ctrl-C ends it
+magfab calibrate scan.csv --reference reference.csv
+pip install ./readout
+magfab-readout upload
+magfab-readout check --weight-g 50
+"""
+
+
+def _blocks(text: str, language: str) -> list:
+    return re.findall(rf"^```{language}\n(.*?)^```$", text, re.S | re.M)
+
+
+def _commands(text: str) -> list:
+    """The ```sh blocks' commands, comments kept, in order."""
+    return [line for block in _blocks(text, "sh") for line in block.splitlines() if line.strip()]
+
+
+def _runs_until_ctrl_c(line: str) -> bool:
+    words = shlex.split(line, comments=True)
+    if words[:2] in (["magfab-readout", "stream"], ["magfab-readout", "record"]):
+        return not {"--count", "--seconds"} & set(words)
+    return False
+
+
+@pytest.mark.parametrize("page", ["readout/README.md", "firmware/README.md"])
+def test_bundle_readmes_give_every_command_as_typed(bundle, page):
+    """Every command in a ```sh block, runnable as written from the page's folder: no placeholders, the
+    board's port written out, no tool CI cannot install (PlatformIO fetches its toolchain: prose only), each
+    command that runs until Ctrl-C says so, paths that exist; Python in ```python blocks that compile; no
+    indented (untagged) code blocks."""
+    out, _ = bundle
+    text = (out / page).read_text()
+    folder = (out / page).parent if page.startswith("firmware") else out
+    commands = _commands(text)
+    fences = re.findall(r"^```(\w*)$", text, re.M)
+    assert set(fences[0::2]) <= {"sh", "python", "bat"} and set(fences[1::2]) == {""} and len(fences) % 2 == 0
+    assert not re.search(r"^\s+```|^    \S", re.sub(r"^```\w+\n.*?^```$", "", text, flags=re.S | re.M), re.M)
+    assert commands
+    built = {"host/magfab_host"}  # made by the block's `make -C host`
+    for line in commands:
+        words = shlex.split(line, comments=True)
+        assert words and not re.search(r"[\[\]<>]|\bPORT\b|NEW|\.\.\.", " ".join(words)), line
+        assert words[0] not in ("pio", "platformio", "sudo", "cd"), line
+        assert _runs_until_ctrl_c(line) == ("Ctrl-C ends it" in line), line
+        for word in words:
+            if "/" in word and not word.startswith(("/dev/", "-")) and word not in built:
+                assert (folder / word).exists(), f"{page}: {word} (from {folder.name}/) does not exist"
+    for block in _blocks(text, "python"):
+        compile(block, page, "exec")
+
+
+def test_the_readout_readme_gives_the_bench_sequence_from_the_build_folder(bundle):
+    out, _ = bundle
+    text = (out / "readout" / "README.md").read_text()
+    assert BENCH in _blocks(text, "sh")
+    assert "from the build folder" in text and "MAGFAB_READOUT_PORT" in text
+    assert "Fx_sensor_N" in text and "host_time_s" in text and "--reference" in text
+    firmware_text = (out / "firmware" / "README.md").read_text()
+    assert "from this folder, `firmware/`" in firmware_text
+    assert ["sh flash.sh uno /dev/ttyACM0", "pip install ../readout", "magfab-readout upload",
+            "magfab-readout info"] == _commands(firmware_text)[:4]
+
+
+def test_the_firmware_readme_states_the_rate_every_page_states(bundle):
+    """One conversion time (models/chip.py via the firmware's context): the firmware README's us and Hz are the
+    readout's build.json rate and the report's predictions.json rate, rounded as the report rounds them."""
+    out, _ = bundle
+    rate = json.loads((out / "predictions.json").read_text())["chip"]["rate_Hz"]
+    build = json.loads((out / "readout" / "src" / "magfab_readout" / "build.json").read_text())
+    assert build["sample_rate_Hz"] == pytest.approx(rate, rel=1e-9)
+    us, hz = round(1e6 / rate), f"{rate:.0f}"
+    assert (us, hz) == (1840, "543")  # MagOne: OSR 0, DIG_FILT 2, T+X+Y+Z (the datasheet's table)
+    assert f"one sample every {us} us, {hz} Hz" in (out / "firmware" / "README.md").read_text()
+    assert f"{hz} samples a second" in (out / "readout" / "README.md").read_text()
+    assert f"({hz} Hz)" in (out / "report.html").read_text()
+
+
+def test_the_firmware_readmes_host_build_runs_as_written(bundle, tmp_path):
+    """The host build's two commands, run from a copy of firmware/: three text lines with a force."""
+    require_tool("cc")
+    require_tool("make")
+    out, _ = bundle
+    text = (out / "firmware" / "README.md").read_text()
+    lines = [line for line in _commands(text) if "host" in line]
+    assert len(lines) == 2
+    folder = tmp_path / "firmware"
+    for path in (out / "firmware").rglob("*"):
+        if path.is_file():
+            target = folder / path.relative_to(out / "firmware")
+            target.parent.mkdir(parents=True, exist_ok=True)
+            target.write_bytes(path.read_bytes())
+    runs = [subprocess.run(line, shell=True, cwd=folder, capture_output=True, timeout=120) for line in lines]
+    assert all(r.returncode == 0 for r in runs), [r.stderr.decode()[-400:] for r in runs]
+    frames = runs[1].stdout.decode().splitlines()
+    assert len(frames) == 3 and all(f.startswith("F,") for f in frames)

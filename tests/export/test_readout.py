@@ -25,8 +25,8 @@ import pytest
 from magfab import SpecError, derive, load_spec
 from magfab.export.readout import calibration_sha256, render
 
-from readout_support import (PKG, f32, imported, install, make_calibration, ref_crc, ref_decode,
-                             ref_distance_to_hull, ref_forces, ref_frame, ref_inside)
+from readout_support import (PKG, assert_reads_zero_at_rest, f32, imported, install, make_calibration, ref_crc,
+                             ref_decode, ref_distance_to_hull, ref_forces, ref_frame, ref_inside)
 
 
 # --- fixtures -------------------------------------------------------------------------------------------------
@@ -76,7 +76,8 @@ def test_render_is_complete_deterministic_and_embeds_the_calibration(design, cal
     expected = {"readout/pyproject.toml", "readout/README.md"} | {
         f"{PKG}/{name}" for name in ("__init__.py", "__main__.py", "_build.py", "acceptance_json.py", "build.json",
                                      "calibration.py", "calibration.json", "calibration_json.py", "cli.py",
-                                     "device.py", "frames.py", "json_checks.py", "simulate.py")}
+                                     "device.py", "eeprom.py", "frames.py", "json_checks.py", "simulate.py")}
+    assert set(rendered) == expected
     for path, data in rendered.items():
         assert isinstance(data, bytes) and not Path(path).is_absolute()
         if path.endswith(".py"):
@@ -360,26 +361,6 @@ def test_zero_subtracts_the_mean_force_at_rest(pkg):
         assert sample.force_N == tuple(f - o for f, o in zip(ref.force_N, offset))
     assert max(abs(f) for s in later for f in s.force_N) < 0.05  # still at rest: about zero
     assert later[1].time_s - later[0].time_s == pytest.approx(1.84e-3, rel=1e-3)  # the datasheet table's T+X+Y+Z
-
-
-def _rest_readings(pkg, samples):
-    """Mean (Fx, Fy, Fz) of ``samples`` and how many were flagged outside the calibrated region."""
-    mean = tuple(sum(s.force_N[a] for s in samples) / len(samples) for a in range(3))
-    return mean, sum("o" in s.flags for s in samples)
-
-
-def assert_reads_zero_at_rest(pkg, calibration: dict) -> None:
-    """The simulated board at rest, untared, reads within the calibration's held-out RMS of zero, as a real one
-    right after its calibration (it read Fx +37 mN at rest until --zero: its rest field was a coarse grid point
-    off the axis), and inside the calibrated region."""
-    sim = pkg.SimulatedDevice(pkg.Calibration(calibration), realtime=False, chunk=500, text=False)
-    with pkg.Device(transport=sim, calibration=pkg.Calibration(calibration)) as device:
-        samples = device.read(int(sim.pattern.rest_s * sim.rate_Hz))  # the pattern's first rest
-    mean, outside = _rest_readings(pkg, samples)
-    rms = calibration["errors"]
-    bound = (rms["Fr_N"]["rms_holdout"], rms["Fr_N"]["rms_holdout"], rms["Fz_N"]["rms_holdout"])
-    assert all(abs(m) < b for m, b in zip(mean, bound)), (mean, bound, sim.pattern.rest)
-    assert outside <= 0.02 * len(samples)
 
 
 def test_the_simulated_board_reads_zero_at_rest_without_a_tare(pkg, calibration):
