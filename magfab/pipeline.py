@@ -155,11 +155,7 @@ def _predictions(design: Design, say: Progress, timings: dict[str, float]):
     t = time.perf_counter()
     out = [Artifact("predictions.json", _json_bytes(pred.as_json()), "predicted field, force curve, sensitivity, "
                     "resolution, range and noise, with the models used")]
-    what = {"field_axis": "Bz and dBz/dz on the axis, d_min and d_max marked",
-            "field_contours": "Bz and Br contours in the z-r plane with the magnet's travel envelope",
-            "force": "force and stiffness against indentation, soft / nominal / stiff material",
-            "sensitivity": "sensitivity and resolution against deformation, normal and shear",
-            "speed_accuracy": "every model's error against its time (bench/models.py figures)"}
+    what = plots.CAPTIONS
     for name, data in sorted(plots.figures(design, pred, model_bench()).items()):
         stem = name.rsplit(".", 1)[0]
         out.append(Artifact(f"plots/{name}", data, what[stem] + ", " + name.rsplit(".", 1)[1].upper()))

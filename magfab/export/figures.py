@@ -19,6 +19,13 @@ if TYPE_CHECKING:
 
 BAND_COLOURS = {"soft": "#1f77b4", "nominal": "#2ca02c", "stiff": "#d62728"}
 
+#: What each plot shows, by file stem: the report's captions and the file table's descriptions.
+CAPTIONS = {"field_axis": "Bz and dBz/dz on the axis, d_min and d_max marked",
+            "field_contours": "Bz and Br contours in the z-r plane with the magnet's travel envelope",
+            "force": "force and stiffness against indentation, soft / nominal / stiff material",
+            "sensitivity": "sensitivity and resolution against deformation, normal and shear",
+            "speed_accuracy": "every model's error against its time (bench/models.py figures)"}
+
 
 def _plain_log_ticks(fig) -> None:
     """Log axes labelled in plain numbers (100, 0.5), not 10^2 or 2x10^0: easier to read, and no mathtext to
