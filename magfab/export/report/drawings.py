@@ -17,7 +17,7 @@ if TYPE_CHECKING:
     from ...design import Design
     from ...board.layout import Board
 
-__all__ = ["stackup_figure", "board_svg", "STACK_STYLE"]
+__all__ = ["stackup_figure", "board_svg", "board_half_width", "STACK_STYLE"]
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -63,14 +63,46 @@ def _style(layer: str) -> dict[str, object]:
     return {"fc": fc, "ec": ec, "hatch": hatch, "lw": 0.7}
 
 
+#: A board wider than the pad by more than this each side is drawn broken off (the drawing stays readable).
+BOARD_MARGIN_SHOWN_MM = 8.0
+
+
+def board_half_width(design: "Design") -> tuple[float, bool]:
+    """Half the width the board is drawn at, mm, and whether it is broken off: its true half-width
+    (``pcb.width_mm`` / 2; the pad is centred on the board) unless that is more than
+    ``BOARD_MARGIN_SHOWN_MM`` beyond the pad."""
+    true = design.spec.pcb.width_mm / 2.0
+    shown = design.pad_radius_mm + BOARD_MARGIN_SHOWN_MM
+    return (true, False) if true <= shown else (shown, True)
+
+
+def _dimension_board(ax, design: "Design", half: float, broken: bool) -> None:
+    """The board's width as a horizontal dimension under it (its true width, also when broken off)."""
+    pcb = design.spec.pcb
+    z = -pcb.thickness_mm - 0.7
+    ax.annotate("", xy=(-half, z), xytext=(half, z),
+                arrowprops={"arrowstyle": "<|-|>", "lw": 0.7, "color": "k", "shrinkA": 0, "shrinkB": 0,
+                            "mutation_scale": 6})
+    note = ", broken off" if broken else ""
+    ax.text(0.0, z - 0.25, f"board {pcb.width_mm:g} mm wide{note} ({pcb.width_mm:g} x {pcb.height_mm:g} x "
+            f"{pcb.thickness_mm:g} mm)", fontsize=7, ha="center", va="top", bbox={"fc": "w", "ec": "none", "pad": 0.5})
+
+
 def _draw_stack(ax, design: "Design", meshes: Mapping[str, "trimesh.Trimesh"]) -> None:
     """The layers in section: board, chip, pad (mesh section), glue, elastomer (mesh section), magnet."""
     from matplotlib.patches import Rectangle
 
     d = design
-    half = d.pad_radius_mm + 1.5
+    half, broken = board_half_width(design)
     t = d.spec.pcb.thickness_mm
     ax.add_patch(Rectangle((-half, -t), 2 * half, t, **_style("board")))
+    if broken:  # break marks: a zigzag across each cut end
+        zig = np.array([-t - 0.25, -0.75 * t, -0.5 * t, -0.25 * t, 0.25])
+        for side in (-1.0, 1.0):
+            xs = side * half + 0.25 * np.array([0.0, 1.0, -1.0, 1.0, 0.0])
+            ax.fill_betweenx(zig, xs, side * (half + 0.6), color="w", lw=0, zorder=3)
+            ax.plot(xs, zig, color=STACK_STYLE["board"][1], lw=0.8, zorder=4)
+    _dimension_board(ax, design, half, broken)
     ax.add_patch(Rectangle((-d.chip_body_max_mm / 2, 0.0), d.chip_body_max_mm, d.chip_height_nominal_mm,
                            **_style("chip")))
     _fill_loops(ax, section_loops(meshes["pad"]), 0.0, **_style("pad"))
@@ -116,7 +148,8 @@ def stackup_figure(design: "Design", meshes: Mapping[str, "trimesh.Trimesh"]) ->
     spec = design.spec
     labels = {"elastomer": f"elastomer ({spec.elastomer.material})", "north": f"magnet {spec.magnet.grade}, N up",
               "glue": "glue", "pad": "pad", "chip": f"{design.chip.key} (x: sensing point)", "board": "board"}
-    half = design.pad_radius_mm + 1.5
+    half = board_half_width(design)[0] + 0.6
+    left = max(half, design.pad_radius_mm + 7.0)  # room for the d_min dimension's two lines of text
     with matplotlib.rc_context({"svg.hashsalt": "magfab-report", "svg.fonttype": "path"}):
         fig, ax = plt.subplots(figsize=(8.0, 4.2))
         _draw_stack(ax, design, meshes)
@@ -124,8 +157,8 @@ def stackup_figure(design: "Design", meshes: Mapping[str, "trimesh.Trimesh"]) ->
         ax.legend(handles=[Patch(**_style(k), label=v) for k, v in labels.items()], fontsize=7, loc="upper left",
                   bbox_to_anchor=(1.0, 1.0), frameon=False)
         ax.set_aspect("equal")
-        ax.set_xlim(-half - 5.5, half + 5.5)
-        ax.set_ylim(-spec.pcb.thickness_mm - 0.5, design.z_elastomer_base_mm + design.elastomer_height_mm + 1.5)
+        ax.set_xlim(-left, half)
+        ax.set_ylim(-spec.pcb.thickness_mm - 1.8, design.z_elastomer_base_mm + design.elastomer_height_mm + 1.5)
         ax.set_xlabel("x, mm (section through the axis)", fontsize=8)
         ax.set_ylabel("z above the board, mm", fontsize=8)
         ax.tick_params(labelsize=7)
