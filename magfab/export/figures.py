@@ -22,7 +22,7 @@ BAND_COLOURS = {"soft": "#1f77b4", "nominal": "#2ca02c", "stiff": "#d62728"}
 #: What each plot shows, by file stem: the report's captions and the file table's descriptions. Each says what
 #: is drawn, no more (tests/export/test_figures.py checks the figures against these claims).
 CAPTIONS = {
-    "field_axis": "Bz and dBz/dz on the axis against the gap d, the chip's Z full scale, d_min and d_max marked",
+    "field_axis": "Bz and |dBz/dz| on the axis against the gap d, the chip's Z full scale, d_min and d_max marked",
     "field_contours": "|Bz| and |Br| in the z-r plane, filled log contours each with its colour bar, where Bz "
                       "changes sign dotted and the magnet's travel envelope dashed",
     "force": "force and stiffness against indentation, soft / nominal / stiff material, where the normal range "
