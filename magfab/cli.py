@@ -173,7 +173,7 @@ def _run_build(spec: Path | None, out_dir: Path | None, as_json: bool, scan_path
             loaded = load_spec(spec)
         else:
             loaded, out_dir = _calibration_target(spec, out_dir, scan_path)
-            scan = _read_scan(scan_path, reference, out_dir)
+            scan = _read_scan(scan_path, reference, out_dir, loaded)
         with _progress(sys.stderr.isatty() and not as_json) as progress:
             result = run_build(loaded, out_dir, progress, scan)  # type: ignore[arg-type]
         summary = result.summary()
@@ -208,12 +208,29 @@ def _run_build(spec: Path | None, out_dir: Path | None, as_json: bool, scan_path
                        "magfab-readout upload   (the new calibration into the reader and the board's EEPROM)")
 
 
-def _read_scan(scan_path: Path, reference: Path | None, build_dir: Path | None):
-    """The scan to fit: the file, merged with the reference sensor's log if given; refused when its forces are
-    the sensor's own (a recording calibrated against itself)."""
-    from .formats.scan_csv import read_scan_csv
+def _read_scan(scan_path: Path, reference: Path | None, build_dir: Path | None, spec):
+    """The scan to fit: the file, or a recording merged with the reference sensor's log; refused when its
+    forces are the sensor's own (a recording calibrated against itself: by their names in the reader, by their
+    values against the build's present calibration here)."""
+    if reference is not None:
+        from .models.scan_guards import merge_reference
 
-    return read_scan_csv(scan_path)
+        scan = merge_reference(scan_path, reference)
+    else:
+        from .formats.scan_csv import read_scan_csv
+
+        scan = read_scan_csv(scan_path)
+    present = None if build_dir is None else Path(build_dir) / "calibration" / "calibration.json"
+    if present is not None and present.is_file():
+        from .models.calibration import Calibration
+        from .models.scan_guards import reject_self_calibrated
+
+        try:
+            calibration = Calibration.from_json(json.loads(present.read_text(encoding="utf-8")))
+        except ValueError:  # a calibration.json gone bad: the rebuild replaces it; nothing to compare with
+            return scan
+        reject_self_calibrated(scan, calibration, spec.calibration.reference_resolution_mN)
+    return scan
 
 
 def _print_findings(findings: list) -> None:

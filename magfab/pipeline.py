@@ -191,6 +191,11 @@ def _bundle(design: Design, prediction, scan, acceptance: dict | None, say: Prog
         scan = simulate_scan(design, prediction)
         out.append(Artifact("calibration/scan_simulated.csv", scan_csv(scan).encode(),
                             "the simulated y-z scan behind the provisional calibration (scan CSV format)"))
+    else:
+        from .models.scan_guards import scan_depth_warnings
+
+        found += [Finding(Severity.WARNING, "scan-range", text, "calibration.scan_z_mm")
+                  for text in scan_depth_warnings(scan, prediction)]
     say("fitting the calibration")
     # Moving least squares costs seconds; only fit it when the spec may use it.
     result = calibrate.fit(scan, design, mls=design.spec.calibration.method.value != "poly")
@@ -203,9 +208,9 @@ def _bundle(design: Design, prediction, scan, acceptance: dict | None, say: Prog
                          f"Fr {1000 * err['Fr_N']['rms_holdout']:.2f} mN ({err['folds']}-fold)"
                          + ("" if result.meets_tolerance else f"; {result.message}"), "calibration.tolerance_mN"))
     out.append(Artifact("calibration/calibration.json", _json_bytes(cal),
-                        "force calibration (eq. 12-14): coefficients, scaling, valid region, held-out errors, scan hash"))
+                        "force calibration (polynomial in Bz, Br): coefficients, scaling, valid region, held-out errors, scan hash"))
     for name, data in sorted(calibration_chart.chart(result).items()):
-        out.append(Artifact(f"calibration/{name}", data, "held-out force error against evaluation cost, per order and MLS"))
+        out.append(Artifact(f"calibration/{name}", data, calibration_chart.caption(result)))
     if acceptance is not None:
         out.append(Artifact("calibration/acceptance.json", _json_bytes(acceptance),
                             "acceptance-test bands: field at rest and the rise under a known weight, with assumptions"))

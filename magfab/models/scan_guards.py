@@ -26,7 +26,6 @@ import numpy as np
 from ..errors import ScanError
 from ..formats.scan_csv import (MIN_ROWS, Recording, Reference, Scan, check_calibration_scan, read_recording,
                                 read_reference, scan_csv)
-from ..units import UT_PER_GAUSS
 
 if TYPE_CHECKING:
     import os
@@ -105,56 +104,68 @@ def _as_json(prediction: "Prediction | Mapping[str, object]") -> Mapping[str, ob
 
 
 def scan_depth_warnings(scan: Scan, prediction: "Prediction | Mapping[str, object]") -> list[str]:
-    """Warning lines (none when the scan stays in range) for a scan whose largest normal force Fz passes the
-    predicted normal range (``normal.range_N``, the band's softest silicone's) or whose largest lateral force
-    Fr passes the shear range (``shear.range_N``). ``prediction``: a :class:`~magfab.models.predict.Prediction`
-    or predictions.json's dict. Each line names the force, the range, what ends it, the other silicones' ranges,
-    how many rows lie beyond and what they do there; the normal one adds what the field says, which does not
-    depend on the silicone (:func:`_field_within`)."""
+    """Warning lines (none when the scan stays in range) for a scan that went past the predicted ranges.
+    ``prediction``: a :class:`~magfab.models.predict.Prediction` or predictions.json's dict.
+
+    Normal: judged by the field, which says how far the magnet travelled whatever the silicone and the magnet
+    (:func:`_travel`): past the range's end when |Bz| rose above its value at rest by more than it does at the
+    end of the range. (Judged by force, a scan of a nominal silicone to its own range's end would pass the
+    softest silicone's range, which ``normal.range_N`` quotes.) Without a rest reading in the scan, by force:
+    past the stiffest silicone's range. Shear: by force, past the stiffest silicone's range."""
     if scan.F_N is None:
         return []
     doc = _as_json(prediction)
     out = []
-    for axis, force, key in (("Fz", scan.F_N[:, 2], "normal"), ("Fr", scan.Fr_N, "shear")):
-        figures = doc[key]  # type: ignore[index]
-        limit_N, ends = float(figures["range_N"]), str(figures["range_limit"])
-        beyond = int(np.count_nonzero(force > limit_N))
-        if not beyond:
-            continue
-        others = sorted((float(v), k) for k, v in figures.get("range_by_material_N", {}).items())[1:]
-        band = "".join(f"; the band's softest silicone's, {', '.join(f'{k} {v:.3g} N' for v, k in others)}"
-                       for _ in others[:1])
-        does = _BEYOND.get(ends, "lie outside the predicted range")
-        line = (f"scan reaches {axis} {float(force.max()):.3g} N, beyond the predicted {key} range {limit_N:.3g} N "
-                f"(ends at: {ends}{band}): the points beyond it ({beyond} of {scan.rows} rows) ")
-        within = _field_within(scan, doc) if key == "normal" else None
-        if within:
-            line += (f"are within the range only if the cast silicone is stiffer than the softest, as the field "
-                     f"suggests ({within}); otherwise they {does}")
-        else:
-            line += does + (" unless the cast silicone is stiffer than the softest" if others and within is None else "")
-            if within == "":
-                line += (f"; the field confirms it (|Bz| reaches {_top_bz_uT(scan):.0f} uT, past the range's end "
-                         "whatever the silicone)")
-        out.append(line + "; the fit uses them, but the design is not rated there: keep the scan within the range")
-    return out
+    travel = _travel(scan, doc)
+    normal, shear = doc["normal"], doc["shear"]  # type: ignore[index]
+    if travel is not None:
+        ratio, end, beyond = travel
+        if beyond:
+            out.append(f"scan goes past the predicted normal range (ends at: {normal['range_limit']}): |Bz| rises to "
+                       f"{ratio:.3g} x its value at rest, beyond the {end:.3g} x at the range's end whatever the "
+                       f"magnet and the silicone; the points beyond it ({beyond} of {scan.rows} rows) "
+                       f"{_BEYOND.get(str(normal['range_limit']), 'lie outside the predicted range')}")
+    else:
+        out += _past_stiffest(scan.F_N[:, 2], "Fz", "normal", normal, scan.rows)
+    out += _past_stiffest(scan.Fr_N, "Fr", "shear", shear, scan.rows)
+    return [line + "; the fit uses them, but the design is not rated there: keep the scan within the range"
+            for line in out]
 
 
-def _top_bz_uT(scan: Scan) -> float:
-    return float(np.max(np.abs(scan.B_uT[:, 2])))
+def _past_stiffest(force: np.ndarray, axis: str, key: str, figures: Mapping[str, object], rows: int) -> list[str]:
+    """A line when ``force`` passes the range of even the stiffest silicone of the band."""
+    ranges = {str(k): float(v) for k, v in figures.get("range_by_material_N", {}).items()} or \
+        {"predicted": float(figures["range_N"])}  # type: ignore[union-attr, arg-type]
+    name, limit_N = max(ranges.items(), key=lambda kv: kv[1])
+    beyond = int(np.count_nonzero(force > limit_N))
+    if not beyond:
+        return []
+    ends = str(figures["range_limit"])
+    return [f"scan reaches {axis} {float(force.max()):.3g} N, beyond the predicted {key} range of even the "
+            f"{name} silicone, {limit_N:.3g} N (ends at: {ends}): the points beyond it ({beyond} of {rows} rows) "
+            + _BEYOND.get(ends, "lie outside the predicted range")]
 
 
-def _field_within(scan: Scan, doc: Mapping[str, object]) -> str | None:
-    """What the scan's field says about the magnet's travel, whatever the silicone: a phrase when |Bz| stays
-    within the field at the end of the normal range with the strongest magnet of the grade (an upper bound), ""
-    when it passes it, None when predictions.json does not give that field."""
-    end_G = doc.get("field", {}).get("Bz_range_end_strongest_G")  # type: ignore[union-attr]
-    if end_G is None:
+def _travel(scan: Scan, doc: Mapping[str, object]) -> tuple[float, float, int] | None:
+    """(|Bz| at its highest over |Bz| at rest in the scan, the same ratio at the end of the normal range, rows
+    past it), or None without a rest reading (rows with no force) or the prediction's field at the range's end.
+    The ratio does not depend on the magnet's strength (the field scales with its remanence) nor on the
+    silicone (the travel at the range's end is the same for every modulus of a neo-Hookean band)."""
+    field = doc.get("field", {})  # type: ignore[union-attr]
+    end_G, rest_G = field.get("Bz_range_end_strongest_G"), field.get("Bz_rest_G")
+    remanence = field.get("remanence_T", {})
+    if end_G is None or not rest_G or not remanence.get("nominal"):
         return None
-    end_uT = float(end_G) * UT_PER_GAUSS
-    if _top_bz_uT(scan) > end_uT:
-        return ""
-    return f"|Bz| up to {_top_bz_uT(scan):.0f} uT, within the {end_uT:.0f} uT at the end of the range"
+    end = float(end_G) / (float(rest_G) * float(remanence["high"]) / float(remanence["nominal"]))
+    quiet = (np.abs(scan.F_N[:, 2]) <= 0.02 * max(float(np.max(np.abs(scan.F_N[:, 2]))), 1e-9)) & \
+        (scan.Fr_N <= 0.02 * max(float(np.max(scan.Fr_N)), 1e-9))
+    if not np.any(quiet):
+        return None
+    rest = float(np.median(scan.B_uT[quiet, 2]))
+    if abs(rest) < 1.0:
+        return None
+    ratios = scan.B_uT[:, 2] / rest
+    return float(ratios.max()), end, int(np.count_nonzero(ratios > end))
 
 
 # ---------------------------------------------------------------------------------------------------

@@ -33,7 +33,8 @@ CSV_COLUMNS = ("time_s", "host_time_s", "Bx_uT", "By_uT", "Bz_uT", "temperature_
 def _parser() -> argparse.ArgumentParser:
     common = argparse.ArgumentParser(add_help=False)
     link = common.add_argument_group("connection")
-    link.add_argument("--port", help="serial port (default: the one USB serial port present)")
+    link.add_argument("--port", help="serial port (default: $MAGFAB_READOUT_PORT when set, else the one USB serial "
+                      "port present)")
     link.add_argument("--baud", type=int, default=_build.BAUD, help="baud rate (default: %(default)s, the firmware's)")
     link.add_argument("--timeout", type=float, default=3.0, metavar="S",
                       help="seconds to wait for data before giving up (default: %(default)s)")

@@ -1,0 +1,225 @@
+"""A bench in software, for the pages' commands: an Arduino Uno on a serial port (a pseudo-terminal), with
+the MLX90393 breakout on its I2C bus and a tip the test can press.
+
+* Until something is flashed, the board is its bootloader: :class:`Stk500` answers avrdude's ``arduino``
+  programmer (STK500 v1, as Optiboot does), so ``sh firmware/flash.sh uno PORT`` runs the real avrdude
+  against it. When avrdude leaves programming mode, the bytes it wrote are what the board runs.
+* Then the board is the ATmega328P in simavr running those bytes (``tests/export/simbus``: libsimavr and
+  the build's own MLX90393 model), its EEPROM empty as a bootloader leaves it, paced to the wall clock so
+  ``magfab-readout`` sees the firmware's real rate, its UART bridged to the pseudo-terminal.
+* :meth:`Rig.set_field` is what the magnet does to the chip: the test sets the field a press gives.
+
+    with Rig(build_dir, lib) as rig:          # rig.port: the serial port to hand to the commands
+        rig.set_field(0, 0, 18763)            # uT
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import select
+import sys
+import threading
+import time
+import tty
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "export"))
+from simbus import Bus, build_library  # noqa: E402
+
+__all__ = ["Rig", "Stk500", "build_library", "intel_hex"]
+
+_SIGNATURE_M328P = bytes([0x1E, 0x95, 0x0F])
+_INSYNC, _OK, _EOP = 0x14, 0x10, 0x20
+_CHUNK = 16  # host bytes handed to the AVR's UART per step
+EEPROM_BYTES = 1024  # ATmega328P
+
+
+def intel_hex(flash: bytes) -> str:
+    """Intel HEX text of ``flash`` (16-byte records from address 0, then the end record)."""
+    lines = []
+    for at in range(0, len(flash), 16):
+        chunk = flash[at:at + 16]
+        raw = bytes([len(chunk), at >> 8 & 0xFF, at & 0xFF, 0]) + chunk
+        lines.append(":" + (raw + bytes([-sum(raw) & 0xFF])).hex().upper())
+    return "\n".join(lines + [":00000001FF"]) + "\n"
+
+
+class Stk500:
+    """The bootloader's side of STK500 v1 (the commands avrdude's ``arduino`` programmer sends).
+
+    ``feed(bytes) -> bytes`` consumes what avrdude sent and returns the answers; ``done`` is set when it
+    leaves programming mode; ``flash`` is the program memory written so far."""
+
+    # command -> bytes that follow it before Sync_CRC_EOP (None: its own length rule)
+    _ARGS = {0x30: 0, 0x41: 1, 0x40: 2, 0x42: 20, 0x45: None, 0x50: 0, 0x51: 0, 0x55: 2, 0x56: 4, 0x64: None,
+             0x74: 3, 0x75: 0}
+
+    def __init__(self) -> None:
+        self.buf = bytearray()
+        self.flash = bytearray(b"\xff" * 32768)
+        self.written = 0
+        self.address = 0
+        self.done = False
+
+    def _need(self) -> int | None:
+        """Bytes the command at the front needs in all (with its EOP), or None until that is known."""
+        cmd = self.buf[0]
+        if cmd == 0x45:
+            return None if len(self.buf) < 2 else 1 + self.buf[1] + 1
+        if cmd == 0x64:
+            return None if len(self.buf) < 3 else 4 + (self.buf[1] << 8 | self.buf[2]) + 1
+        return 1 + self._ARGS.get(cmd, 0) + 1
+
+    def feed(self, data: bytes) -> bytes:
+        self.buf += data
+        out = bytearray()
+        while self.buf:
+            need = self._need()
+            if need is None or len(self.buf) < need:
+                break
+            frame, self.buf = bytes(self.buf[:need]), self.buf[need:]
+            out += self._answer(frame) if frame[-1] == _EOP else bytes([0x15])  # NOSYNC
+        return bytes(out)
+
+    def _answer(self, frame: bytes) -> bytes:
+        cmd = frame[0]
+        if cmd == 0x41:  # GET_PARAMETER: hardware 2, software 8.0 (Optiboot's)
+            return bytes([_INSYNC, {0x80: 2, 0x81: 8, 0x82: 0}.get(frame[1], 0x03), _OK])
+        if cmd == 0x75:
+            return bytes([_INSYNC, *_SIGNATURE_M328P, _OK])
+        if cmd == 0x56:  # universal SPI command (fuses, lock): answer 0
+            return bytes([_INSYNC, 0, _OK])
+        if cmd == 0x55:  # word address
+            self.address = (frame[1] | frame[2] << 8) * 2
+        elif cmd == 0x64 and chr(frame[3]) == "F":
+            data = frame[4:-1]
+            self.flash[self.address:self.address + len(data)] = data
+            self.written = max(self.written, self.address + len(data))
+        elif cmd == 0x74:
+            size = frame[1] << 8 | frame[2]
+            data = self.flash[self.address:self.address + size] if chr(frame[3]) == "F" else b"\xff" * size
+            return bytes([_INSYNC]) + bytes(data) + bytes([_OK])
+        elif cmd == 0x51:
+            self.done = True
+        return bytes([_INSYNC, _OK])
+
+
+class Rig:
+    """The board on a pseudo-terminal (see the module's docstring)."""
+
+    def __init__(self, build_dir: Path, lib: Path, work: Path) -> None:
+        self.build_dir, self.lib, self.work = Path(build_dir), Path(lib), Path(work)
+        self.master, self._slave = os.openpty()
+        tty.setraw(self._slave)  # no echo: what the board sends is never read back as the host's
+        os.set_blocking(self.master, False)
+        self.port = os.ttyname(self._slave)
+        self.loader = Stk500()
+        self.bus: Bus | None = None
+        self._eeprom: bytes | None = None
+        self._pending = b""
+        self.resets = 0
+        self.flashed: Path | None = None
+        self._field = (0.0, 0.0, 0.0, 25.0)
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, name="rig", daemon=True)
+
+    def __enter__(self) -> "Rig":
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        self._thread.join(10)
+        if self.bus is not None:
+            self.bus.close()
+        os.close(self.master)
+        os.close(self._slave)
+        if self._error is not None and exc[0] is None:
+            raise RuntimeError("the simulated board failed") from self._error
+
+    def set_field(self, bx_uT: float, by_uT: float, bz_uT: float, t_C: float = 25.0) -> None:
+        """The field at the chip from now on (the magnet's, as a press moves it)."""
+        with self._lock:
+            self._field = (bx_uT, by_uT, bz_uT, t_C)
+
+    def eeprom(self, size: int) -> bytes:
+        with self._lock:
+            return self.bus.eeprom(0, size) if self.bus is not None else b""
+
+    def _send(self, data: bytes) -> None:
+        """To the host; dropped when nobody reads the port and its buffer is full, as a USB serial line drops."""
+        try:
+            os.write(self.master, data)
+        except BlockingIOError:
+            pass
+
+    def _receive(self) -> bytes:
+        try:
+            return os.read(self.master, 4096) if select.select([self.master], [], [], 0.002)[0] else b""
+        except (BlockingIOError, OSError):
+            return b""
+
+    def _run(self) -> None:
+        try:
+            while not self._stop.is_set():
+                data = self._receive()
+                if self.bus is not None and data.startswith(b"0 ") and not self._pending:
+                    self._reset()  # avrdude opening the port: a real Uno resets into its bootloader on DTR
+                if self.bus is None:
+                    self._send(self.loader.feed(data))
+                    if self.loader.done:
+                        self._boot()
+                else:
+                    self._step(data)
+        except BaseException as exc:  # noqa: BLE001 - reported on exit
+            self._error = exc
+
+    def _reset(self) -> None:
+        """Into the bootloader, the EEPROM kept (the bootloader does not touch it)."""
+        with self._lock:
+            self._eeprom = self.bus.eeprom(0, EEPROM_BYTES)
+            self.bus.close()
+            self.bus = None
+        self.loader = Stk500()
+        self.resets += 1
+
+    def _boot(self) -> None:
+        """The bootloader hands over: the board runs what avrdude wrote, with the EEPROM as it was (empty,
+        0xFF, on a new board)."""
+        self.flashed = self.work / "flashed.hex"
+        self.flashed.write_text(intel_hex(bytes(self.loader.flash[:self.loader.written])))
+        with self._lock:
+            self.bus = Bus(self.lib, self.flashed, addr7=_address(self.build_dir))
+            if self._eeprom is not None:
+                self.bus.eeprom_set(0, self._eeprom)
+        self._t0 = time.monotonic()
+        self._byte_us = 10e6 / _baud(self.build_dir)  # 10 bits a byte
+
+    def _step(self, data: bytes) -> None:
+        """Host bytes in at the line's rate (the AVR's receive buffer is small), simulated time up to the wall
+        clock (in slices of 20 ms at most), board bytes out."""
+        self._pending += data
+        chunk, self._pending = self._pending[:_CHUNK], self._pending[_CHUNK:]
+        with self._lock:
+            self.bus.send(chunk)
+            self.bus.set_field(*self._field)
+            dt = min((time.monotonic() - self._t0) * 1e6 - self.bus.time_us, 20_000)
+            dt = max(dt, len(chunk) * self._byte_us)
+            out = self.bus.run_us(dt) if dt > 0 else b""
+        if out:
+            self._send(out)
+
+
+def _spec(build_dir: Path) -> dict:
+    return json.loads((build_dir / "spec.json").read_text())
+
+
+def _address(build_dir: Path) -> int:
+    return int(_spec(build_dir)["sensor"]["i2c_address"])
+
+
+def _baud(build_dir: Path) -> int:
+    return int(_spec(build_dir)["firmware"]["baud"])

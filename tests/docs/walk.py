@@ -1,0 +1,189 @@
+"""Paste a page's commands into a shell at the simulated bench, as a person would, one line at a time.
+
+:class:`Bench` keeps the working folder (``cd`` lines move it) and runs every other line with ``bash -c`` in a
+shell environment whose ``pip``/``python`` are a fresh virtual environment (what ``pip install ./readout``
+installs into) and whose ``magfab`` is the one under test. Where a person would do something besides typing:
+
+* a line whose comment says ``Ctrl-C ends it`` runs until the bench has seen enough, then gets SIGINT;
+* ``magfab-readout record`` runs while :class:`Scan` moves the simulated tip along the build's scan track and
+  logs the reference sensor's forces to ``reference.csv`` (time.time(), Fx_N, Fy_N, Fz_N at 1 kHz);
+* ``magfab-readout check`` waits for its prompt, then the known weight goes on the tip and Enter is pressed.
+
+The only text changed in a line is the port: ``/dev/ttyACM0`` (the pages' Linux Uno) becomes the rig's
+pseudo-terminal, which ``MAGFAB_READOUT_PORT`` also names for the commands that take the default port."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+G = 9.80665
+PAGE_PORT = "/dev/ttyACM0"
+
+
+@dataclass
+class Ran:
+    line: str
+    cwd: Path
+    returncode: int
+    stdout: str
+    stderr: str
+    seconds: float = 0.0
+
+
+class Scan:
+    """The scan track of a build's simulated scan (``calibration/scan_simulated.csv``), subsampled to a
+    serpentine of ``every``-th points, played on the rig: the field follows the tip, and the reference sensor
+    logs the force. Between two points both move linearly (the stage moves), so the sensor's and the
+    reference's timestamps need agree only to a fraction of a step."""
+
+    def __init__(self, build_dir: Path, every: int = 4, dwell_s: float = 0.03) -> None:
+        spec = json.loads((build_dir / "spec.json").read_text())["calibration"]
+        n_y = round(spec["scan_y_mm"] / spec["scan_step_mm"]) + 1
+        with open(build_dir / "calibration" / "scan_simulated.csv", newline="") as f:
+            rows = [r for r in csv.DictReader(line for line in f if not line.startswith("#"))]
+        grid = [rows[k:k + n_y] for k in range(0, len(rows), n_y)]
+        points = []
+        for i, row in enumerate(grid[::every]):
+            row = row[::every]
+            points += row if i % 2 == 0 else row[::-1]
+        self.points = [([float(r[k]) for k in ("Bx_uT", "By_uT", "Bz_uT")],
+                        [float(r[k]) for k in ("Fx_N", "Fy_N", "Fz_N")]) for r in points]
+        self.dwell_s = dwell_s
+        centre = [row[n_y // 2] for row in grid]  # the track's points on the axis: a press straight down
+        self.axis = sorted((float(r["Fz_N"]), [float(r[k]) for k in ("Bx_uT", "By_uT", "Bz_uT")]) for r in centre)
+        self.rest = self.field_at(0.0)
+
+    def field_at(self, fz_N: float) -> list[float]:
+        """The field of an on-axis press of ``fz_N`` (interpolated along the track's on-axis points)."""
+        below = [p for p in self.axis if p[0] <= fz_N] or self.axis[:1]
+        above = [p for p in self.axis if p[0] >= fz_N] or self.axis[-1:]
+        (f0, b0), (f1, b1) = below[-1], above[0]
+        w = 0.0 if f1 == f0 else (fz_N - f0) / (f1 - f0)
+        return [a + w * (b - a) for a, b in zip(b0, b1)]
+
+    def play(self, rig, reference: Path) -> None:
+        """Move the tip along the track, logging the reference at 1 kHz; back to rest at the end."""
+        with open(reference, "w", newline="") as f:
+            out = csv.writer(f)
+            out.writerow(["time_s", "Fx_N", "Fy_N", "Fz_N"])
+            for (b0, f0), (b1, f1) in zip(self.points, self.points[1:]):
+                start = time.monotonic()
+                while (w := (time.monotonic() - start) / self.dwell_s) < 1.0:
+                    rig.set_field(*[a + w * (b - a) for a, b in zip(b0, b1)])
+                    out.writerow([f"{time.time():.6f}"] + [f"{a + w * (b - a):.6f}" for a, b in zip(f0, f1)])
+                    time.sleep(0.001)
+        rig.set_field(*self.rest)
+
+
+@dataclass
+class Bench:
+    """A shell at the bench. ``plug_in(build_dir)`` gives the rig (a context manager made from the build: its
+    chip model and address) once the first line needs the board; the scan track is read then too, before a
+    calibration replaces the build's simulated scan."""
+    cwd: Path
+    venv: Path
+    plug_in: object
+    weight_g: float = 50.0
+    rig: object = None
+    scan: Scan | None = None
+    ran: list[Ran] = field(default_factory=list)
+
+    @property
+    def env(self) -> dict:
+        return bench_env(self.venv, self.rig.port if self.rig is not None else None)
+
+    def _board(self, line: str) -> None:
+        if self.rig is None and (PAGE_PORT in line or "magfab-readout" in line or "flash.sh" in line):
+            self.scan = Scan(self.cwd)
+            self.rig = self.plug_in(self.cwd)
+
+    def paste(self, line: str, timeout_s: float = 600) -> Ran:
+        self._t = time.monotonic()
+        self._board(line)
+        if self.rig is not None:
+            line = line.replace(PAGE_PORT, self.rig.port)
+        if line.startswith("cd "):
+            self.cwd = (self.cwd / line[3:].split("#")[0].strip()).resolve()
+            return self._log(Ran(line, self.cwd, 0, "", ""))
+        if "magfab-readout check" in line and not {"--yes", "-y", "--no-weight"} & set(line.split()):
+            return self._log(self._interactive(line, timeout_s))
+        if "Ctrl-C ends it" in line:
+            return self._log(self._until_interrupted(line, timeout_s))
+        proc = subprocess.run(["bash", "-c", line], cwd=self.cwd, env=self.env, capture_output=True, text=True,
+                              timeout=timeout_s)
+        return self._log(Ran(line, self.cwd, proc.returncode, proc.stdout, proc.stderr))
+
+    def python(self, source: str, timeout_s: float = 120) -> Ran:
+        self._t = time.monotonic()
+        proc = subprocess.run(["python", "-c", source], cwd=self.cwd, env=self.env, capture_output=True, text=True,
+                              timeout=timeout_s)
+        return self._log(Ran("python: " + source.splitlines()[0], self.cwd, proc.returncode, proc.stdout, proc.stderr))
+
+    def _log(self, ran: Ran) -> Ran:
+        ran.seconds = time.monotonic() - self._t
+        self.ran.append(ran)
+        return ran
+
+    def _start(self, line: str, **kw) -> subprocess.Popen:
+        return subprocess.Popen(["bash", "-c", "exec " + line], cwd=self.cwd, env=self.env, text=True,
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, **kw)
+
+    def _until_interrupted(self, line: str, timeout_s: float) -> Ran:
+        """Run it; meanwhile play the scan (``record``) or let it run 3 s; then Ctrl-C (SIGINT to it)."""
+        proc = self._start(line)
+        time.sleep(1.5)  # it opens the port and finds the frames
+        if " record " in f" {line} ":
+            self.scan.play(self.rig, self.cwd / "reference.csv")
+        time.sleep(1.5)
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=timeout_s)
+        return Ran(line, self.cwd, proc.returncode, out, err)
+
+    def _interactive(self, line: str, timeout_s: float) -> Ran:
+        """``check``: at rest until it asks for the weight, then the weight's field, then Enter."""
+        self.rig.set_field(*self.scan.rest)
+        proc = self._start(line, stdin=subprocess.PIPE)
+        err: list[str] = []
+        asked = threading.Event()
+
+        def read_err() -> None:
+            for chunk in iter(lambda: proc.stderr.read(1), ""):
+                err.append(chunk)
+                if "press Enter" in "".join(err[-80:]):
+                    asked.set()
+
+        reader = threading.Thread(target=read_err, daemon=True)
+        reader.start()
+        deadline = time.monotonic() + timeout_s
+        while not asked.wait(0.1) and proc.poll() is None and time.monotonic() < deadline:
+            pass
+        if asked.is_set():
+            self.rig.set_field(*self.scan.field_at(self.weight_g * 1e-3 * G))
+            time.sleep(0.3)
+            proc.stdin.write("\n")
+            proc.stdin.flush()
+        out = proc.stdout.read()
+        proc.wait(timeout_s)
+        reader.join(5)
+        self.rig.set_field(*self.scan.rest)
+        return Ran(line, self.cwd, proc.returncode, out, "".join(err))
+
+
+def bench_env(venv: Path, port: str | None = None) -> dict:
+    """The shell's environment: the bench venv first on PATH (its pip, python, magfab-readout), then the
+    magfab under test (this interpreter's folder), then the system's."""
+    path = [str(venv / "bin"), str(Path(sys.executable).parent), os.environ.get("PATH", "")]
+    env = {k: v for k, v in os.environ.items() if k not in {"PYTHONPATH", "VIRTUAL_ENV", "PYTHONHOME"}}
+    env.update(PATH=os.pathsep.join(path), VIRTUAL_ENV=str(venv), PIP_DISABLE_PIP_VERSION_CHECK="1")
+    if port:
+        env["MAGFAB_READOUT_PORT"] = port
+    return env
