@@ -81,6 +81,8 @@ MLS_ORDER = 2
 MLS_BANDWIDTHS = tuple(float(x) for x in np.geomspace(1.5, 48.0, 11))
 #: The shear direction is undefined below this many RMS xy field noise (the chip's and the environment's).
 DIRECTION_MIN_SIGMAS = 3.0
+#: The valid region reaches this many RMS xy field noise beyond the scan's points (region.ValidRegion.of).
+REGION_MARGIN_SIGMAS = 3.0
 FORCES = calibration_json.FORCES
 
 
@@ -510,7 +512,8 @@ def fit(scan: Scan, design: "Design", *, mls: bool = True) -> FitResult:
     y = np.column_stack([scan.F_N[:, 2], scan.Fr_N])
     scaling = Scaling.of(bz, br)
     u, v = scaling(bz, br)
-    region = ValidRegion.of(bz, br)
+    chip, noise_xy_uT = _chip_json(design)
+    region = ValidRegion.of(bz, br, margin_uT=REGION_MARGIN_SIGMAS * noise_xy_uT)
     fold = _folds(scan.rows, cal.folds, cal.seed)
     orders = sorted(set(ORDERS) | {cal.order})
     max_order = max(o for o in orders if len(monomials(o)) * cal.folds <= scan.rows * (cal.folds - 1))
@@ -520,7 +523,6 @@ def fit(scan: Scan, design: "Design", *, mls: bool = True) -> FitResult:
     label, meets = choose(cands, cal.method.value, min(cal.order, max_order), cal.tolerance_mN)
     chosen = next(c for c in cands if c.label == label)
     firmware = min((c for c in cands if c.method == "poly" and c.order <= cal.order), key=lambda c: c.worst_rms_N)
-    chip, noise_xy_uT = _chip_json(design)
     base = Calibration("poly", 0, scaling, np.zeros((1, 2)), _shear_sign(scan), DIRECTION_MIN_SIGMAS * noise_xy_uT,
                        region, {"folds": cal.folds}, {"sha256": scan.sha256, "rows": scan.rows, "source": scan.source},
                        chip)

@@ -78,6 +78,22 @@ def _enclosing(poly: np.ndarray, max_vertices: int) -> np.ndarray:
     return np.array(p)
 
 
+def _widened(poly: np.ndarray, mu: float, mv: float) -> np.ndarray:
+    """The convex CCW polygon ``poly`` (n, 2) with each edge moved outward by the support of the box
+    [-mu, mu] x [-mv, mv] in its normal's direction: the intersection of the moved half-planes, which holds
+    ``poly`` grown by the box (every point within mu in u and mv in v of it); same vertex count."""
+    n = len(poly)
+    edges = np.roll(poly, -1, axis=0) - poly
+    normals = np.column_stack([edges[:, 1], -edges[:, 0]])  # outward for a CCW polygon
+    normals /= np.linalg.norm(normals, axis=1)[:, None]
+    offsets = np.einsum("ij,ij->i", normals, poly) + mu * np.abs(normals[:, 0]) + mv * np.abs(normals[:, 1])
+    out = []
+    for i in range(n):  # vertex i + 1 is where edge i meets edge i + 1
+        j = (i + 1) % n
+        out.append(np.linalg.solve(np.vstack([normals[i], normals[j]]), [offsets[i], offsets[j]]))
+    return np.roll(np.array(out), 1, axis=0)
+
+
 #: Most vertices the region's polygon may have. The guard costs 6 operations per vertex on every reading
 #: (MagOne's 32-vertex hull: 196 operations, more than the order-4 polynomial's 73 and ~1.5 ms of soft float
 #: on a 16 MHz AVR), so a hull with more vertices (the noise makes dozens) is replaced by the least-area
@@ -96,7 +112,12 @@ class ValidRegion:
     hull: tuple[tuple[float, float], ...]
 
     @classmethod
-    def of(cls, bz: np.ndarray, br: np.ndarray, max_vertices: int = HULL_MAX_VERTICES) -> "ValidRegion":
+    def of(cls, bz: np.ndarray, br: np.ndarray, max_vertices: int = HULL_MAX_VERTICES,
+           margin_uT: float = 0.0) -> "ValidRegion":
+        """The region of the scan points, widened by ``margin_uT`` on every side (Br not below 0): a reading
+        that differs from a scan point by the chip's noise is still inside. The scan's rest point is a corner
+        of the region (least indentation, no lateral load), so without the margin a sensor at rest reads
+        outside about half the time."""
         from scipy.spatial import ConvexHull
 
         sc = Scaling.of(bz, br)
@@ -107,8 +128,12 @@ class ValidRegion:
             raise ScanError(f"the scan's (Bz, Br) points span no area ({str(exc).splitlines()[0]}); "
                                    "a calibration needs a 2-D scan (normal and lateral load)") from None
         poly = _enclosing(scaled[idx], max_vertices)
+        if margin_uT > 0:
+            poly = _widened(poly, margin_uT / sc.bz_scale, margin_uT / sc.br_scale)
         hull = tuple((sc.bz_center + sc.bz_scale * float(u), sc.br_center + sc.br_scale * float(v)) for u, v in poly)
-        return cls((float(bz.min()), float(bz.max())), (float(br.min()), float(br.max())), hull)
+        m = max(margin_uT, 0.0)
+        return cls((float(bz.min()) - m, float(bz.max()) + m), (max(float(br.min()) - m, 0.0), float(br.max()) + m),
+                   hull)
 
     def contains(self, bz: np.ndarray, br: np.ndarray) -> np.ndarray:
         """True where (Bz, Br) (uT, any shape) is inside the box and the hull (edges included, to a

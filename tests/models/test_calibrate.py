@@ -374,3 +374,26 @@ def test_fit_refuses_an_implausible_or_flat_scan_before_any_work(design, scan, c
             C.fit(replace(scan, B_uT=b, F_N=f), design)
     assert "\n" not in str(info.value)
     assert ("plausible band" in str(info.value)) == ("1e300" in change)
+
+
+def test_the_region_reaches_the_noise_beyond_the_scan(scan, poly4, design):
+    """Widened by REGION_MARGIN_SIGMAS of the chip's noise: every scan point moved by the margin in Bz and Br is
+    inside, one moved by twice it outward from a corner is not; a sensor at rest (the scan's rest point, a corner
+    of the region, plus the chip's noise) reads inside nearly always (without the margin: about half the time)."""
+    bz, br = scan.B_uT[:, 2], scan.Br_uT
+    m = 40.0
+    tight, wide = C.ValidRegion.of(bz, br), C.ValidRegion.of(bz, br, margin_uT=m)
+    for dz in (-m, m):
+        for dr in (-m, m):
+            assert wide.contains(bz + dz, np.maximum(br + dr, 0.0)).all()
+    assert not wide.contains(bz.max() + 2 * m, br.mean()) and wide.br_uT[0] == 0.0
+    assert 1.0 < _area(wide.hull) / _area(tight.hull) < 1.2 and len(wide.hull) == len(tight.hull)
+    cal = poly4.calibration
+    _, noise_uT = C._chip_json(design)
+    rest = np.argmin(np.abs(scan.F_N[:, 2]) + scan.Fr_N)
+    rng = np.random.default_rng(1)
+    B = scan.B_uT[rest] + rng.normal(0.0, noise_uT, (2000, 3))
+    B[:, :2] = rng.normal(0.0, noise_uT, (2000, 2))  # at rest on the axis: the lateral field is the noise
+    _, inside = cal.evaluate(B)
+    assert inside.mean() > 0.99
+    assert tight.contains(B[:, 2], np.hypot(B[:, 0], B[:, 1])).mean() < 0.9
