@@ -191,7 +191,7 @@ def _bundle(design: Design, prediction, scan, acceptance: dict | None, say: Prog
         scan = simulate_scan(design, prediction)
         out.append(Artifact("calibration/scan_simulated.csv", scan_csv(scan).encode(),
                             "the simulated y-z scan behind the provisional calibration (scan CSV format)"))
-    else:
+    elif prediction is not None:
         from .models.scan_guards import scan_depth_warnings
 
         found += [Finding(Severity.WARNING, "scan-range", text, "calibration.scan_z_mm")
