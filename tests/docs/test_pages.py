@@ -81,6 +81,8 @@ def test_the_readme_walk_reaches_a_passing_acceptance_test(walked):
     assert "FAIL" not in check.stdout and check.stdout.count("PASS") >= 4, check.stdout
     cal = json.loads((build / "calibration" / "calibration.json").read_text())
     assert cal["scan"]["source"] == "scan.csv + reference.csv" and not (build / "calibration" / "scan_simulated.csv").exists()
+    fitted = _ran(walked, "magfab calibrate").stdout
+    print(next(line for line in fitted.splitlines() if "calibration (" in line))  # the bench scan's fit, with -s
     uploads = [r for r in walked.ran if r.line.startswith("magfab-readout upload")]
     assert len(uploads) == 2 and cal["scan"]["sha256"] and uploads[-1].stdout != uploads[0].stdout
     with open(build / "scan.csv", newline="") as f:

@@ -45,7 +45,7 @@ class Scan:
     logs the force. Between two points both move linearly (the stage moves), so the sensor's and the
     reference's timestamps need agree only to a fraction of a step."""
 
-    def __init__(self, build_dir: Path, every: int = 4, dwell_s: float = 0.03) -> None:
+    def __init__(self, build_dir: Path, every: int = 5, dwell_s: float = 0.03) -> None:
         spec = json.loads((build_dir / "spec.json").read_text())["calibration"]
         n_y = round(spec["scan_y_mm"] / spec["scan_step_mm"]) + 1
         with open(build_dir / "calibration" / "scan_simulated.csv", newline="") as f:
@@ -143,7 +143,7 @@ class Bench:
         time.sleep(1.5)  # it opens the port and finds the frames
         if " record " in f" {line} ":
             self.scan.play(self.rig, self.cwd / "reference.csv")
-        time.sleep(1.5)
+        time.sleep(0.5)
         proc.send_signal(signal.SIGINT)
         out, err = proc.communicate(timeout=timeout_s)
         return Ran(line, self.cwd, proc.returncode, out, err)
