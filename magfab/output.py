@@ -267,22 +267,33 @@ def _recover(out: Path) -> None:
 
 def _roll_back_in_place(out: Path) -> None:
     """An in-place update cut short (its journal ``.NAME.inplace`` is there): every replaced or removed file
-    back from the hard links in ``.NAME.old-*``, every added file removed. Idempotent."""
+    back from the hard links in ``.NAME.old-*`` (which stay until the journal goes), every added file and the
+    folders made for them removed. Idempotent: a rollback cut short is finished by the next."""
     journal = _sibling(out, "inplace")
     try:
         plan = json.loads(journal.read_text(encoding="utf-8"))
-        old, changed, removed = out.parent / str(plan["old"]), list(plan["changed"]), list(plan["removed"])
+        old, kept, added = out.parent / str(plan["old"]), list(plan["kept"]), list(plan["added"])
+        made = list(plan["made"])
     except FileNotFoundError:
         return
     except (OSError, ValueError, KeyError, TypeError):  # cut short while written: nothing was renamed yet
-        old, changed, removed = None, [], []
-    for rel in changed + removed:
-        kept = old / rel if old is not None else None
-        if kept is not None and os.path.lexists(kept):
-            os.replace(kept, out / rel)
-        elif rel in changed:
-            with suppress(FileNotFoundError):
-                os.unlink(out / rel)
+        old, kept, added, made = None, [], [], []
+    for rel in kept:  # link back, the hard link in old/ kept: a second rollback finds it again
+        if old is None or not os.path.lexists(old / rel):
+            continue
+        target = out / rel
+        if os.path.lexists(target) and not os.path.samestat(os.lstat(target), os.lstat(old / rel)):
+            os.unlink(target)
+        if not os.path.lexists(target):
+            target.parent.mkdir(parents=True, exist_ok=True)
+            _link(old / rel, target)
+        _step(f"put back {rel}")
+    for rel in added:
+        with suppress(FileNotFoundError):
+            os.unlink(out / rel)
+    for folder in sorted(made, key=len, reverse=True):
+        with suppress(OSError):  # still holds something (a user's file): it stays
+            os.rmdir(out / folder)
     os.unlink(journal)
     _step("in-place update rolled back")
 
@@ -311,14 +322,17 @@ def _update_in_place(out: Path, tmp: Path, paths: list[str]) -> None:
     previous = (_listed(out) or set()) - {"manifest.json"}
     changed = [p for p in paths if not _same_file(tmp / p, out / p)]
     removed = sorted(p for p in previous - set(paths) if os.path.isfile(out / p))
+    added = [p for p in changed if not os.path.lexists(out / p)]
+    made = sorted({str(q) for p in added for q in PurePosixPath(p).parents
+                   if str(q) != "." and not os.path.lexists(out / str(q))})
+    kept = [p for p in changed + removed if p not in set(added)]
     old = _new_sibling(out, "old")
-    for rel in changed + removed:
-        if os.path.lexists(out / rel):
-            (old / rel).parent.mkdir(parents=True, exist_ok=True)
-            _link(out / rel, old / rel)
+    for rel in kept:
+        (old / rel).parent.mkdir(parents=True, exist_ok=True)
+        _link(out / rel, old / rel)
     journal = _sibling(out, "inplace")
     draft = _new_sibling(out, "tmp")
-    draft.write_text(json.dumps({"old": old.name, "changed": changed, "removed": removed}), encoding="utf-8")
+    draft.write_text(json.dumps({"old": old.name, "kept": kept, "added": added, "made": made}), encoding="utf-8")
     os.replace(draft, journal)
     _step("journal written")
     for rel in changed:
@@ -327,8 +341,9 @@ def _update_in_place(out: Path, tmp: Path, paths: list[str]) -> None:
         _step(f"replaced {rel}")
     for rel in removed:
         os.unlink(out / rel)
+        _step(f"removed {rel}")
         folder = (out / rel).parent
-        while folder != out and not any(folder.iterdir()):  # the folders it leaves empty
+        while folder != out and not any(folder.iterdir()):  # the folders it leaves empty (a rollback remakes them)
             folder.rmdir()
             folder = folder.parent
     os.unlink(journal)

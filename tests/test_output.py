@@ -317,6 +317,29 @@ def test_a_kill_between_the_two_renames_is_undone_by_the_next_run(built):
     assert _tree(out) == old and _beside(out) == ["out"]
 
 
+def test_in_place_a_kill_in_the_write_then_in_its_rollback_loses_nothing(tmp_path):
+    """Killed at any step of an in-place update that empties a folder and makes one, then at any step of the
+    rollback the next run does: the run after that finds the previous build or the new one, byte for byte."""
+    out = tmp_path / "out"
+    write(out, _fake("old", "gone/old.txt"), in_place=False)
+    (out / "scan.csv").write_bytes(b"mine")
+    old = _tree(out)
+    new = {**_expected("new", {"scan.csv": b"mine"}, "fresh/deep/new.txt")}
+    steps = _steps(out, ("new", "fresh/deep/new.txt"), in_place=True)
+    assert "removed gone/old.txt" in steps
+    for k, step in enumerate(steps):
+        for j in range(40):
+            _killed_at(k, lambda: write(out, _fake("new", "fresh/deep/new.txt"), in_place=True))
+            status = _killed_at(j, lambda: check_target(out))
+            check_target(out)
+            assert _tree(out) in (old, new), f"killed after {step!r}, then at step {j} of the recovery"
+            assert _beside(out) == ["out"]
+            write(out, _fake("old", "gone/old.txt"), in_place=True)
+            assert _tree(out) == old
+            if not os.WIFSIGNALED(status):
+                break
+
+
 @pytest.mark.parametrize("error", [OSError(errno.ENOSPC, "No space left on device"), KeyboardInterrupt()],
                          ids=["ENOSPC", "interrupt"])
 @pytest.mark.parametrize("in_place", [False, True], ids=["swap", "in-place"])
