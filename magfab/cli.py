@@ -146,20 +146,25 @@ def _build_folder(*candidates: Path | None) -> Path | None:
 def _calibration_target(spec_path: Path | None, out_dir: Path | None, scan_path: Path):
     """(spec, build folder) for ``magfab calibrate``: the folder is --out, else the build folder the scan is
     in, else the one we stand in (so a scan recorded into build/x/ never makes build/x/build/x/); the spec
-    is --spec, else that folder's spec.json, else the embedded MagOne design."""
+    is --spec, else that folder's spec.json (or, for --out a new folder, the spec of the build the scan is in or
+    we stand in), else the embedded MagOne design."""
     from .errors import SpecError, shown
     from .spec import load_build_spec, load_spec
 
+    from .pipeline import default_out_dir
+
     found = _build_folder(out_dir) if out_dir is not None else _build_folder(scan_path.parent, Path.cwd())
     if spec_path is None:
-        return (load_build_spec(found) if found is not None else load_spec(None)), (found or out_dir)
+        source = found or _build_folder(scan_path.parent, Path.cwd())  # --out a new folder: the scan's build's spec
+        loaded = load_build_spec(source) if source is not None else load_spec(None)
+        return loaded, (found or out_dir or default_out_dir(loaded))
     loaded = load_spec(spec_path)
     if found is not None and out_dir is None:
         built = load_build_spec(found).name
         if built != loaded.name:
             raise SpecError("spec", shown(str(spec_path)), f"names the design {loaded.name!r} but the build folder "
                             f"{found} holds {built!r}", "drop --spec to use the folder's own, or pass --out")
-    return loaded, (found or out_dir)
+    return loaded, (found or out_dir or default_out_dir(loaded))
 
 
 def _run_build(spec: Path | None, out_dir: Path | None, as_json: bool, scan_path: Path | None = None,

@@ -191,11 +191,15 @@ def _bundle(design: Design, prediction, scan, acceptance: dict | None, say: Prog
         scan = simulate_scan(design, prediction)
         out.append(Artifact("calibration/scan_simulated.csv", scan_csv(scan).encode(),
                             "the simulated y-z scan behind the provisional calibration (scan CSV format)"))
-    elif prediction is not None:
-        from .models.scan_guards import scan_depth_warnings
+    else:
+        from .models.scan_guards import MERGED, merged_csv, scan_depth_warnings
 
-        found += [Finding(Severity.WARNING, "scan-range", text, "calibration.scan_z_mm")
-                  for text in scan_depth_warnings(scan, prediction)]
+        if MERGED in scan.source:  # made in memory from a recording and a reference log: keep what was fitted
+            out.append(Artifact("calibration/scan_merged.csv", merged_csv(scan),
+                                "the recording merged with the reference log, as fitted (scan CSV format)"))
+        if prediction is not None:
+            found += [Finding(Severity.WARNING, "scan-range", text, "calibration.scan_z_mm")
+                      for text in scan_depth_warnings(scan, prediction)]
     say("fitting the calibration")
     # Moving least squares costs seconds; only fit it when the spec may use it.
     result = calibrate.fit(scan, design, mls=design.spec.calibration.method.value != "poly")

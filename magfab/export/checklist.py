@@ -374,8 +374,8 @@ def _flash_section(design: "Design") -> Section:
         f"checklist). They flash firmware/{firmware.HEX_NAME} with avrdude (a Uno as shown; a Nano: nano, or nano-old "
         "for the old bootloader; the last argument is the Arduino's serial port, a COM port on Windows with "
         "firmware\\flash.bat), install the reader with this build's calibration, write that calibration into the "
-        "board's EEPROM (the bootloader leaves the EEPROM empty, and until then the board sends only 'no valid "
-        "calibration' error frames), check that the board reports the same calibration hash, and stream calibrated "
+        "board's EEPROM (the bootloader leaves the EEPROM empty, and until then the board sends only text error "
+        "lines naming the missing calibration), check that the board reports the same calibration hash, and stream calibrated "
         f"forces at {design.spec.firmware.baud} baud, zeroed on the first 200 samples: keep the tip untouched while "
         "it starts.", FLASH_COMMANDS)])
 

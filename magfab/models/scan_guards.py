@@ -33,7 +33,7 @@ if TYPE_CHECKING:
     from .calibration import Calibration
     from .predict import Prediction
 
-__all__ = ["SELF_FRACTION", "SELF_FLOOR_N", "GAP_PERIODS", "MIN_OVERLAP", "self_calibration_rms_N",
+__all__ = ["MERGED", "SELF_FRACTION", "SELF_FLOOR_N", "GAP_PERIODS", "MIN_OVERLAP", "self_calibration_rms_N",
            "reject_self_calibrated", "scan_depth_warnings", "host_clock", "merge_reference", "merged_csv"]
 
 #: Guard B refuses force columns within this fraction of the reference's resolution (RMS) of the calibration's
@@ -44,6 +44,8 @@ SELF_FRACTION = 0.01
 SELF_FLOOR_N = 1e-5
 #: A reference log's gap longer than this many of the recording's sample periods is refused.
 GAP_PERIODS = 10.0
+#: What joins a merged scan's two sources in its name ("scan.csv + reference.csv").
+MERGED = " + "
 #: The least fraction of the recording's rows the reference's time span must cover.
 MIN_OVERLAP = 0.5
 
@@ -280,7 +282,7 @@ def merge_reference(recording: "Recording | str | os.PathLike[str] | bytes",
     force = np.column_stack([np.interp(h[inside], ref.time_s, ref.F_N[:, k]) for k in range(3)])
     s = rec.scan
     temperature = None if s.temperature_C is None else s.temperature_C[inside]
-    merged = Scan(s.time_s[inside], s.B_uT[inside], force, temperature, f"{s.source} + {ref.source}", "")
+    merged = Scan(s.time_s[inside], s.B_uT[inside], force, temperature, f"{s.source}{MERGED}{ref.source}", "")
     merged = replace(merged, sha256=hashlib.sha256(scan_csv(merged).encode("utf-8")).hexdigest())
     if merged.rows < MIN_ROWS:
         raise ScanError(f"{merged.source}: {merged.rows} rows overlap in time; a calibration needs at least {MIN_ROWS}")

@@ -118,6 +118,7 @@ class Rig:
         self.bus: Bus | None = None
         self._eeprom: bytes | None = None
         self._pending = b""
+        self._last_rx = 0.0
         self.resets = 0
         self.flashed: Path | None = None
         self._field = (0.0, 0.0, 0.0, 25.0)
@@ -133,6 +134,8 @@ class Rig:
     def __exit__(self, *exc) -> None:
         self._stop.set()
         self._thread.join(10)
+        if self._thread.is_alive():  # never free the simulator under a thread still running it
+            raise RuntimeError("the simulated board's thread did not stop")
         if self.bus is not None:
             self.bus.close()
         os.close(self.master)
@@ -166,7 +169,10 @@ class Rig:
         try:
             while not self._stop.is_set():
                 data = self._receive()
-                if self.bus is not None and data.startswith(b"0 ") and not self._pending:
+                quiet = time.monotonic() - self._last_rx > 0.05  # not the rest of a host command cut by a read
+                if data:
+                    self._last_rx = time.monotonic()
+                if self.bus is not None and data.startswith(b"0 ") and not self._pending and quiet:
                     self._reset()  # avrdude opening the port: a real Uno resets into its bootloader on DTR
                 if self.bus is None:
                     self._send(self.loader.feed(data))

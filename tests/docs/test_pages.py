@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import hashlib
 import json
 import subprocess
 import sys
@@ -83,6 +84,13 @@ def test_the_readme_walk_reaches_a_passing_acceptance_test(walked):
     assert cal["scan"]["source"] == "scan.csv + reference.csv" and not (build / "calibration" / "scan_simulated.csv").exists()
     fitted = _ran(walked, "magfab calibrate").stdout
     print(next(line for line in fitted.splitlines() if "calibration (" in line))  # the bench scan's fit, with -s
+    merged = (build / "calibration" / "scan_merged.csv").read_bytes()  # what was fitted, by its hash
+    from magfab.formats.scan_csv import read_scan_csv
+
+    assert read_scan_csv(merged).rows == cal["scan"]["rows"]
+    data = b"".join(line for line in merged.splitlines(keepends=True) if not line.startswith(b"#"))
+    assert hashlib.sha256(data).hexdigest() == cal["scan"]["sha256"]  # the file without its comment
+    assert _ran(walked, "magfab-readout record").returncode == 0  # Ctrl-C ends a recording as a success
     uploads = [r for r in walked.ran if r.line.startswith("magfab-readout upload")]
     assert len(uploads) == 2 and cal["scan"]["sha256"] and uploads[-1].stdout != uploads[0].stdout
     with open(build / "scan.csv", newline="") as f:
@@ -93,9 +101,19 @@ def test_the_readme_walk_reaches_a_passing_acceptance_test(walked):
 def test_the_rest_of_the_pages_run_as_written(walked):
     """The checklist's and the bundle READMEs' commands, each page from its own folder, after the README's walk
     (a line the walk already ran in the same folder is not run twice: the same text, the same state)."""
+    for tool in ("avr-gcc", "simavr", "make"):  # the firmware README builds the image and its benchmark
+        require_tool(tool)
     build = walked.cwd
     done = {(_command(r.line), r.cwd) for r in walked.ran}
     pages = [("checklist.md", build), ("readout/README.md", build), ("firmware/README.md", build / "firmware")]
+    try:
+        ran = _paste_pages(walked, build, pages, done)
+    finally:
+        walked.cwd = build
+    assert ran >= 3
+
+
+def _paste_pages(walked, build, pages, done) -> int:
     ran = 0
     for page, folder in pages:
         walked.cwd = folder
@@ -111,8 +129,7 @@ def test_the_rest_of_the_pages_run_as_written(walked):
                 _assert_ok(ran_line, block)
                 done.add((_command(ran_line.line), ran_line.cwd))
                 ran += 1
-    walked.cwd = build
-    assert ran >= 3
+    return ran
 
 
 def _command(line: str) -> str:

@@ -20,6 +20,7 @@ import os
 import signal
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from dataclasses import dataclass, field
@@ -138,15 +139,23 @@ class Bench:
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, **kw)
 
     def _until_interrupted(self, line: str, timeout_s: float) -> Ran:
-        """Run it; meanwhile play the scan (``record``) or let it run 3 s; then Ctrl-C (SIGINT to it)."""
-        proc = self._start(line)
-        time.sleep(1.5)  # it opens the port and finds the frames
-        if " record " in f" {line} ":
-            self.scan.play(self.rig, self.cwd / "reference.csv")
-        time.sleep(0.5)
-        proc.send_signal(signal.SIGINT)
-        out, err = proc.communicate(timeout=timeout_s)
-        return Ran(line, self.cwd, proc.returncode, out, err)
+        """Run it; meanwhile play the scan (``record``) or let it run 2 s; then Ctrl-C (SIGINT to it). Its output
+        goes to files, as to a terminal that never stops reading (a pipe nobody reads would stall it)."""
+        with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
+            proc = subprocess.Popen(["bash", "-c", "exec " + line], cwd=self.cwd, env=self.env, text=True,
+                                    stdout=out, stderr=err)
+            time.sleep(1.5)  # it opens the port and finds the frames
+            if " record " in f" {line} ":
+                self.scan.play(self.rig, self.cwd / "reference.csv")
+            time.sleep(0.5)
+            proc.send_signal(signal.SIGINT)
+            try:
+                proc.wait(timeout_s)
+            finally:
+                proc.kill()
+            out.seek(0)
+            err.seek(0)
+            return Ran(line, self.cwd, proc.returncode, out.read(), err.read())
 
     def _interactive(self, line: str, timeout_s: float) -> Ran:
         """``check``: at rest until it asks for the weight, then the weight's field, then Enter."""
@@ -171,6 +180,8 @@ class Bench:
             time.sleep(0.3)
             proc.stdin.write("\n")
             proc.stdin.flush()
+        else:  # it never asked (or the deadline passed): end it, so a broken page fails instead of hanging
+            proc.kill()
         out = proc.stdout.read()
         proc.wait(timeout_s)
         reader.join(5)
