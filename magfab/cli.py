@@ -131,16 +131,9 @@ def calibrate(scan: Path, reference: Path | None, spec: Path | None, out_dir: Pa
 
 def _build_folder(*candidates: Path | None) -> Path | None:
     """The first of ``candidates`` that is a magfab build folder (it has a manifest.json magfab wrote)."""
-    for folder in candidates:
-        if folder is None:
-            continue
-        try:
-            manifest = json.loads((folder / "manifest.json").read_text(encoding="utf-8"))
-        except (OSError, ValueError):
-            continue
-        if isinstance(manifest, dict) and "magfab_version" in manifest:
-            return folder
-    return None
+    from .output import is_build
+
+    return next((folder for folder in candidates if folder is not None and is_build(folder)), None)
 
 
 def _calibration_target(spec_path: Path | None, out_dir: Path | None, scan_path: Path):
@@ -149,13 +142,13 @@ def _calibration_target(spec_path: Path | None, out_dir: Path | None, scan_path:
     is --spec, else that folder's spec.json (or, for --out a new folder, the spec of the build the scan is in or
     we stand in), else the embedded MagOne design."""
     from .errors import SpecError, shown
+    from .pipeline import default_out_dir
     from .spec import load_build_spec, load_spec
 
-    from .pipeline import default_out_dir
-
-    found = _build_folder(out_dir) if out_dir is not None else _build_folder(scan_path.parent, Path.cwd())
+    here = _build_folder(scan_path.parent, Path.cwd())
+    found = _build_folder(out_dir) if out_dir is not None else here
     if spec_path is None:
-        source = found or _build_folder(scan_path.parent, Path.cwd())  # --out a new folder: the scan's build's spec
+        source = found or here  # --out a new folder: the spec of the build the scan is in
         loaded = load_build_spec(source) if source is not None else load_spec(None)
         return loaded, (found or out_dir or default_out_dir(loaded))
     loaded = load_spec(spec_path)

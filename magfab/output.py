@@ -49,7 +49,7 @@ from typing import Callable
 
 from .errors import OutputError
 
-__all__ = ["Artifact", "check_target", "write", "OutputError"]
+__all__ = ["Artifact", "check_target", "write", "is_build", "OutputError"]
 
 LOCK_WAIT_S = 120.0  # how long a second writer of one folder waits for the first before giving up
 
@@ -398,7 +398,7 @@ def _cannot_write(path: Path) -> OutputError:
 
 def _check_replaceable(out: Path) -> None:
     if os.path.lexists(out):
-        if not out.is_dir() or not (_is_previous_build(out) or not any(out.iterdir())):
+        if not out.is_dir() or not (is_build(out) or not any(out.iterdir())):
             raise OutputError(f"--out {out} exists and is not an earlier magfab build (no manifest.json); "
                               "refusing to replace it: choose another directory")
         need = [out.parent, out]
@@ -411,7 +411,8 @@ def _check_replaceable(out: Path) -> None:
             raise _cannot_write(folder)
 
 
-def _is_previous_build(path: Path) -> bool:
+def is_build(path: Path) -> bool:
+    """Whether ``path`` holds an earlier magfab build (a manifest.json magfab wrote)."""
     try:
         return "magfab_version" in json.loads((path / "manifest.json").read_text(encoding="utf-8"))
     except (OSError, ValueError, TypeError):

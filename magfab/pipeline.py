@@ -155,10 +155,9 @@ def _predictions(design: Design, say: Progress, timings: dict[str, float]):
     t = time.perf_counter()
     out = [Artifact("predictions.json", _json_bytes(pred.as_json()), "predicted field, force curve, sensitivity, "
                     "resolution, range and noise, with the models used")]
-    what = plots.CAPTIONS
     for name, data in sorted(plots.figures(design, pred, model_bench()).items()):
-        stem = name.rsplit(".", 1)[0]
-        out.append(Artifact(f"plots/{name}", data, what[stem] + ", " + name.rsplit(".", 1)[1].upper()))
+        stem, kind = name.rsplit(".", 1)
+        out.append(Artifact(f"plots/{name}", data, plots.CAPTIONS[stem] + ", " + kind.upper()))
     timings["plots"] = time.perf_counter() - t
     return out, found, pred
 

@@ -27,22 +27,14 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "export"))
 from simbus import Bus, build_library  # noqa: E402
 
-__all__ = ["Rig", "Stk500", "build_library", "intel_hex"]
+from magfab.export.firmware import _eeprom_module  # noqa: E402  (its intel_hex writes the build's .eep)
+
+__all__ = ["Rig", "Stk500", "build_library"]
 
 _SIGNATURE_M328P = bytes([0x1E, 0x95, 0x0F])
 _INSYNC, _OK, _EOP = 0x14, 0x10, 0x20
 _CHUNK = 16  # host bytes handed to the AVR's UART per step
 EEPROM_BYTES = 1024  # ATmega328P
-
-
-def intel_hex(flash: bytes) -> str:
-    """Intel HEX text of ``flash`` (16-byte records from address 0, then the end record)."""
-    lines = []
-    for at in range(0, len(flash), 16):
-        chunk = flash[at:at + 16]
-        raw = bytes([len(chunk), at >> 8 & 0xFF, at & 0xFF, 0]) + chunk
-        lines.append(":" + (raw + bytes([-sum(raw) & 0xFF])).hex().upper())
-    return "\n".join(lines + [":00000001FF"]) + "\n"
 
 
 class Stk500:
@@ -196,7 +188,7 @@ class Rig:
         """The bootloader hands over: the board runs what avrdude wrote, with the EEPROM as it was (empty,
         0xFF, on a new board)."""
         self.flashed = self.work / "flashed.hex"
-        self.flashed.write_text(intel_hex(bytes(self.loader.flash[:self.loader.written])))
+        self.flashed.write_bytes(_eeprom_module().intel_hex(bytes(self.loader.flash[:self.loader.written])))
         with self._lock:
             self.bus = Bus(self.lib, self.flashed, addr7=_address(self.build_dir))
             if self._eeprom is not None:

@@ -37,7 +37,6 @@ class Ran:
     returncode: int
     stdout: str
     stderr: str
-    seconds: float = 0.0
 
 
 class Scan:
@@ -108,7 +107,6 @@ class Bench:
             self.rig = self.plug_in(self.cwd)
 
     def paste(self, line: str, timeout_s: float = 600) -> Ran:
-        self._t = time.monotonic()
         self._board(line)
         if self.rig is not None:
             line = line.replace(PAGE_PORT, self.rig.port)
@@ -124,26 +122,23 @@ class Bench:
         return self._log(Ran(line, self.cwd, proc.returncode, proc.stdout, proc.stderr))
 
     def python(self, source: str, timeout_s: float = 120) -> Ran:
-        self._t = time.monotonic()
         proc = subprocess.run(["python", "-c", source], cwd=self.cwd, env=self.env, capture_output=True, text=True,
                               timeout=timeout_s)
         return self._log(Ran("python: " + source.splitlines()[0], self.cwd, proc.returncode, proc.stdout, proc.stderr))
 
     def _log(self, ran: Ran) -> Ran:
-        ran.seconds = time.monotonic() - self._t
         self.ran.append(ran)
         return ran
 
-    def _start(self, line: str, **kw) -> subprocess.Popen:
+    def _start(self, line: str, stdout=subprocess.PIPE, stderr=subprocess.PIPE, **kw) -> subprocess.Popen:
         return subprocess.Popen(["bash", "-c", "exec " + line], cwd=self.cwd, env=self.env, text=True,
-                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, **kw)
+                                stdout=stdout, stderr=stderr, **kw)
 
     def _until_interrupted(self, line: str, timeout_s: float) -> Ran:
         """Run it; meanwhile play the scan (``record``) or let it run 2 s; then Ctrl-C (SIGINT to it). Its output
         goes to files, as to a terminal that never stops reading (a pipe nobody reads would stall it)."""
         with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
-            proc = subprocess.Popen(["bash", "-c", "exec " + line], cwd=self.cwd, env=self.env, text=True,
-                                    stdout=out, stderr=err)
+            proc = self._start(line, stdout=out, stderr=err)
             time.sleep(1.5)  # it opens the port and finds the frames
             if " record " in f" {line} ":
                 self.scan.play(self.rig, self.cwd / "reference.csv")
