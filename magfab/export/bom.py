@@ -12,6 +12,7 @@ from ..recipes import catalogue
 
 if TYPE_CHECKING:
     from ..design import Design
+    from ..recipes import Recipe
 
 __all__ = ["FIELDS", "bom_rows", "bom_csv"]
 
@@ -20,6 +21,17 @@ FIELDS = ("item", "part", "description", "quantity", "unit", "source")
 #: Solder paste per board: a 0.125 mm stencil over the chip's lands prints a few mm3; a syringe is the
 #: smallest unit sold, so the BOM asks for one syringe whatever the count.
 _PASTE_UNIT = "syringe"
+
+
+def magnet_recipe(design: "Design") -> "Recipe | None":
+    """The magnet grade's entry in recipes/assembly.toml (coating, operating temperature), if it has one."""
+    return catalogue("assembly").get(f"magnet-{design.spec.magnet.grade.lower()}")
+
+
+def indenter_disc_mm(design: "Design", y_half_mm: float) -> float:
+    """The least diameter of the flat indenter: it covers the tip over a scan reaching ``y_half_mm`` off the
+    axis, with the recipe's margin."""
+    return 2.0 * (design.elastomer_radius_mm + y_half_mm + catalogue("bench")["indenter"]["margin_mm"].nominal)
 
 
 def _row(item: str, part: str, description: str, quantity: float, unit: str, source: str) -> dict[str, object]:
@@ -39,7 +51,7 @@ def _sensor_rows(design: "Design") -> list[dict[str, object]]:
     glue, release, ca = (adhesives[spec.fabrication.adhesive], adhesives[spec.fabrication.release_agent],
                          adhesives["loctite-401"])
     stencil = assembly["stencil"]
-    mag = assembly.get(f"magnet-{spec.magnet.grade.lower()}")
+    mag = magnet_recipe(design)
     coating = mag.texts.get("coating", "") if mag is not None else ""
     rows = [
         _row("Hall sensor IC", f"MLX90393SLW-ABA-{spec.sensor.option_code}-RE",
@@ -100,7 +112,7 @@ def _bench_rows(design: "Design", acceptance: Mapping[str, object] | None) -> li
     n = design.spec.fabrication.sensors
     bench = catalogue("bench")
     cal = design.spec.calibration
-    disc = 2.0 * (design.elastomer_radius_mm + cal.scan_y_mm / 2.0 + bench["indenter"]["margin_mm"].nominal)
+    disc = indenter_disc_mm(design, cal.scan_y_mm / 2.0)
     rows = [
         _row("Microcontroller", bench["arduino"].name, "runs firmware/magfab-atmega328p.hex", n, "pcs",
              "recipes/bench.toml arduino (Arduino Wire reference, Uno Rev3 specifications)"),

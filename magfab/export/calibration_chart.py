@@ -28,19 +28,22 @@ def caption(result: "FitResult") -> str:
 def _legend(fig, result: "FitResult") -> None:
     from matplotlib.lines import Line2D
 
+    from .figures import _legend_below
+
+    mls = _fitted_mls(result)
     handles = [Line2D([], [], marker=m, color=c, lw=0.8, ms=6, label=f"{f[:2]}, polynomial (number: order)")
                for f, (m, c) in FORCE_STYLE.items()]
-    if _fitted_mls(result):
+    if mls:
         handles += [Line2D([], [], marker="*", color=c, ls="none", ms=11, label=f"{f[:2]}, moving least squares")
                     for f, (_m, c) in FORCE_STYLE.items()]
     handles += [Line2D([], [], marker="o", ms=14, mfc="none", mec="k", ls="none", label=f"ringed: {result.chosen}, "
                        "the fit chosen"),
                 Line2D([], [], color="r", lw=0.8, ls="--", label=f"tolerance {result.tolerance_mN:g} mN "
                        "(calibration.tolerance_mN)")]
-    if not _fitted_mls(result):
+    if not mls:
         handles.append(Line2D([], [], ls="none", label='moving least squares not fitted (calibration.method '
                               '"auto" or "mls" fits it)'))
-    fig.legend(handles=handles, loc="outside lower center", ncol=2, fontsize=7.5, frameon=False)
+    _legend_below(fig, handles, ncol=2)
 
 
 def chart(result: "FitResult") -> dict[str, bytes]:

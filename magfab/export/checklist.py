@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Mapping
 
 from ..errors import Finding, Severity, SpecError
 from ..recipes import Recipe, catalogue
-from .bom import bom_csv, bom_rows  # re-exported: pipeline.py writes bom.csv through this module
+from .bom import bom_csv, bom_rows, indenter_disc_mm, magnet_recipe  # bom_*: re-exported: pipeline.py writes bom.csv through this module
 
 if TYPE_CHECKING:
     from ..models.scan import ScanPlan
@@ -272,7 +272,7 @@ def _pour_section(design: "Design", q: Quantities) -> Section:
 def _magnet_section(design: "Design") -> Section:
     spec = design.spec
     assembly = catalogue("assembly")
-    mag = assembly.get(f"magnet-{spec.magnet.grade.lower()}")
+    mag = magnet_recipe(design)
     t_max = _q(mag, "max_operating_temp_C") if mag is not None else None
     return _section("Insert the magnet", [
         f"Magnet: NdFeB {spec.magnet.grade}, {spec.magnet.diameter_mm:g} mm diameter x {spec.magnet.height_mm:g} mm, "
@@ -383,12 +383,12 @@ def _flash_section(design: "Design") -> Section:
 def _calibrate_section(design: "Design", plan: "ScanPlan | None") -> Section:
     cal = design.spec.calibration
     bench = catalogue("bench")
-    ref, indenter, stage = bench["reference-sensor"], bench["indenter"], bench["stage"]
+    ref, stage = bench["reference-sensor"], bench["stage"]
     if plan is None:  # no prediction to cap it: the spec's extent
         from ..models.scan import scan_plan
 
         plan = scan_plan(design)
-    disc = 2.0 * (design.elastomer_radius_mm + plan.y_half_mm + indenter["margin_mm"].nominal)
+    disc = indenter_disc_mm(design, plan.y_half_mm)
     return _section("Calibrate", [
         f"Build the rig: the {ref.name} (resolution {cal.reference_resolution_mN:g} mN, the figure the simulated scan "
         f"assumed) on a {_lc(stage.name)} graduated in "
