@@ -103,10 +103,15 @@ def find_port() -> str:
         _describe(usb), PORT_VARIABLE))
 
 
+def _named_port() -> str:
+    """``$MAGFAB_READOUT_PORT``, stripped ("" when unset)."""
+    return os.environ.get(PORT_VARIABLE, "").strip()
+
+
 def default_port() -> str:
     """The port to open when none is given: ``$MAGFAB_READOUT_PORT`` when it is set (and not empty), else
     :func:`find_port`'s one USB serial port present."""
-    return os.environ.get(PORT_VARIABLE, "").strip() or find_port()
+    return _named_port() or find_port()
 
 
 class SerialTransport:
@@ -186,11 +191,12 @@ class Device:
             self.transport = SimulatedDevice(self.calibration)
             self.port = self.transport.port
         else:
-            self.port = port or default_port()
+            named = "" if port else _named_port()
+            self.port = port or named or find_port()
             try:
                 self.transport = SerialTransport(self.port, self.baud)
             except PortNotFound as exc:
-                if port or not os.environ.get(PORT_VARIABLE, "").strip():
+                if not named:
                     raise
                 raise PortNotFound("{} (the port named by {}: set it to the board's port, or unset it to use the one "
                                    "USB serial port present)".format(exc, PORT_VARIABLE)) from None

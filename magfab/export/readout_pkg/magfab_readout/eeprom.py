@@ -185,15 +185,15 @@ def pack(lay: Dict[str, Any], sha16: str, settings: Dict[str, Any]) -> bytes:
     name), the floats, the Horner rows (per row its Fz then its Fr coefficients), the hull fan and edge lines, the
     name, the CRC. :class:`EepromError` when it does not fit the EEPROM."""
     n = len(lay["hull"])
-    name = settings["name"].encode("utf-8")
-    if len(name) > NAME_MAX:
+    spec_name = settings["name"].encode("utf-8")
+    if len(spec_name) > NAME_MAX:
         raise EepromError("name", settings["name"], "must be at most {} bytes of UTF-8 in the record".format(NAME_MAX))
-    block = SETTINGS.pack(*(len(name) if key == "name_len" else settings[key] for key in SETTING_KEYS))
+    block = SETTINGS.pack(*(len(spec_name) if key == "name_len" else settings[key] for key in SETTING_KEYS))
     body = block + b"".join(struct.pack("<f", lay[name]) for name in FLOATS)
     for row in lay["rows"]:
         body += struct.pack("<{}f".format(2 * len(row["fz"])), *row["fz"], *row["fr"])
     body += b"".join(struct.pack("<2f", *p) for p in lay["fan"]) + b"".join(struct.pack("<3f", *e) for e in lay["edges"])
-    body += name
+    body += spec_name
     length = HEADER.size + len(body) + 2
     if length > SIZE:
         raise EepromError("valid_region.hull", "{} points at order {}".format(n, lay["order"]),
