@@ -1,5 +1,5 @@
-"""Catalogue data (materials, magnet grades, printers, chips, parts, adhesives, assembly, the bench kit), read from
-the TOML files beside this module.
+"""Catalogue data (materials, magnet grades, stock magnet discs, printers, chips, parts, adhesives, assembly, the bench
+kit), read from the TOML files beside this module.
 
 Every number in a recipe is a table with its ``source``: either ``{value = x, source = "..."}`` or
 ``{min = a, nominal = b, max = c, source = "..."}``. Numbers are parsed by TOML, never evaluated.
@@ -16,7 +16,7 @@ from typing import Mapping
 
 __all__ = ["Quantity", "Recipe", "catalogue", "KINDS"]
 
-KINDS = ("materials", "magnets", "printers", "chips", "land", "parts", "adhesives", "assembly", "bench")
+KINDS = ("materials", "magnets", "magnet_stock", "printers", "chips", "land", "parts", "adhesives", "assembly", "bench")
 
 
 @dataclass(frozen=True)
