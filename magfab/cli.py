@@ -268,22 +268,107 @@ def check(spec: Path | None, as_json: bool) -> None:
 
 
 @main.command()
-@click.argument("path", required=False, default="spec.toml", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("path", required=False, type=click.Path(dir_okay=False, path_type=Path))
 @click.option("--force", is_flag=True, help="Overwrite PATH if it exists.")
-def init(path: Path, force: bool) -> None:
+@click.option("--targets", "targets", is_flag=True,
+              help="Write a commented design-targets file for `magfab design` instead (default PATH: targets.toml).")
+def init(path: Path | None, force: bool, targets: bool) -> None:
     """Write a commented copy of the default (MagOne) spec to PATH (default: spec.toml)."""
     with _handled():
+        from importlib import resources
+
         from .errors import SpecError, shown
         from .spec import NAME_PATTERN, default_spec_text, is_valid_name
 
+        path = path or Path("targets.toml" if targets else "spec.toml")
         if not is_valid_name(path.stem):  # the design is named after its file, in a TOML string and a folder
             raise SpecError("name", shown(path.stem), "the file's name (without .toml) names the design and must "
                             "match " + NAME_PATTERN, "choose a file name of letters, digits, '.', '_' and '-'")
         if path.exists() and not force:
             _fail(f"{path} exists; use --force to overwrite it", EXIT_BAD_INPUT)
+        if targets:
+            text = resources.files("magfab.examples").joinpath("targets.toml").read_text(encoding="utf-8")
+            path.write_text(text.replace('name = "fingertip"', f'name = "{path.stem}"', 1), encoding="utf-8")
+            click.echo(f"wrote {path}; edit it, then: magfab design {path}")
+            return
         text = default_spec_text().replace('name = "magone"', f'name = "{path.stem}"', 1)
         path.write_text(text, encoding="utf-8")
         click.echo(f"wrote {path}; edit it, then: magfab build {path}")
+
+
+@contextmanager
+def _bar(enabled: bool) -> Iterator[object]:
+    """A progress bar per phase of a study (search, verify, sweep) on a terminal's stderr; silent otherwise."""
+    if not enabled:
+        yield None
+        return
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+    tasks: dict[str, object] = {}
+    with Progress(TextColumn("magfab: {task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
+                  console=Console(stderr=True), transient=True) as bar:
+        def update(phase: str, done: int, total: int) -> None:
+            if phase not in tasks:
+                tasks[phase] = bar.add_task(phase, total=total)
+            bar.update(tasks[phase], completed=done, total=total)
+
+        yield update
+
+
+_STUDY_OPTIONS = [
+    click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
+                 help="Study folder (default: ./design/<targets name>); running again resumes its study."),
+    click.option("--scheduler", help="Address of an existing Dask scheduler (default: a local cluster)."),
+    click.option("--workers", type=click.IntRange(1, 256), help="Local cluster's worker processes (default: the cores)."),
+]
+
+
+def _study_options(f):
+    for option in reversed(_STUDY_OPTIONS):
+        f = option(f)
+    return f
+
+
+@main.command()
+@click.argument("targets", type=click.Path(dir_okay=False, path_type=Path))
+@_study_options
+def design(targets: Path, out_dir: Path | None, scheduler: str | None, workers: int | None) -> None:
+    """Search for designs that meet TARGETS (a TOML file: requirements, variables, objectives) and write the Pareto
+    front, its page and plot, and each front design as a spec `magfab build` accepts."""
+    with _handled(), _bar(sys.stderr.isatty()) as bar:
+        from .inverse.run import design as run_design
+
+        r = run_design(targets, out_dir, scheduler, workers, bar)
+        states = {s: sum(t.state == s for t in r.trials) for s in ("ok", "infeasible", "failed")}
+        click.echo(f"searched {len(r.trials)} designs ({states['ok']} feasible, {states['infeasible']} infeasible, "
+                   f"{states['failed']} failed); verified {len(r.verified)} by the full chain; front of "
+                   f"{len(r.front)} in {r.folder}")
+        if r.chosen is None:
+            click.echo("no verified design meets every requirement: see README.md there", err=True)
+            sys.exit(EXIT_BAD_INPUT)
+        click.echo(f"chosen: {r.names[r.chosen]}; build it: magfab build {r.folder / 'designs' / r.names[r.chosen]}.toml")
+
+
+@main.command()
+@click.argument("targets", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--grid", "levels", type=click.IntRange(2, 50), help="A full grid, LEVELS even steps over each range.")
+@click.option("--lhs", "samples", type=click.IntRange(1, 1_000_000), help="A Latin hypercube of SAMPLES designs.")
+@click.option("--models", "fidelity", type=click.Choice(["surrogate", "fe"]), default="surrogate", show_default=True,
+              help="The cheap models (elastomer surrogate) or the full chain (FE).")
+@_study_options
+def sweep(targets: Path, levels: int | None, samples: int | None, fidelity: str, out_dir: Path | None,
+          scheduler: str | None, workers: int | None) -> None:
+    """Evaluate every design of a grid or Latin hypercube of TARGETS' variables; write sweep.csv (and .parquet)."""
+    with _handled(), _bar(sys.stderr.isatty()) as bar:
+        from .inverse.run import sweep as run_sweep
+
+        if (levels is None) == (samples is None):
+            _fail("give one of --grid LEVELS or --lhs SAMPLES", EXIT_BAD_INPUT)
+        folder, recs = run_sweep(targets, out_dir, scheduler, workers, levels, samples, fidelity, bar)
+        states = {s: sum(t.state == s for t in recs) for s in ("ok", "infeasible", "failed")}
+        click.echo(f"evaluated {len(recs)} designs ({states['ok']} feasible, {states['infeasible']} infeasible, "
+                   f"{states['failed']} failed): {folder / 'sweep.csv'}")
 
 
 @main.command()

@@ -415,7 +415,7 @@ def _validated(raw: dict[str, Any]) -> Spec:
     try:
         spec = Spec.model_validate(raw)
     except ValidationError as exc:
-        raise _translate(exc, raw) from None
+        raise translate_error(exc, raw) from None
     for (section, key), kind in _CATALOGUE_KEYS.items():
         value = getattr(getattr(spec, section), key)
         known = sorted(catalogue(kind))
@@ -424,8 +424,8 @@ def _validated(raw: dict[str, Any]) -> Spec:
     return spec
 
 
-def _model_at(loc: tuple[Any, ...]) -> type[BaseModel] | None:
-    model: type[BaseModel] = Spec
+def _model_at(loc: tuple[Any, ...], root: type[BaseModel] | None = None) -> type[BaseModel] | None:
+    model: type[BaseModel] = root or Spec
     for part in loc:
         field = model.model_fields.get(str(part))
         if field is None or not (isinstance(field.annotation, type) and issubclass(field.annotation, BaseModel)):
@@ -480,9 +480,10 @@ def _number(x: object) -> str:
     return repr(x) if isinstance(x, float) else str(x)
 
 
-def _translate(exc: ValidationError, raw: dict[str, Any]) -> SpecError:
+def translate_error(exc: ValidationError, raw: dict[str, Any], root: type[BaseModel] | None = None) -> SpecError:
     """Turn pydantic's first error into our one-line message: the key, the value exactly and bounded in
-    length (:func:`shown`), and what is allowed with its bound printed as the model holds it."""
+    length (:func:`shown`), and what is allowed with its bound printed as the model holds it. ``root``: the model
+    validated (default :class:`Spec`; the design search's targets use it too)."""
     err = exc.errors(include_url=False)[0]
     loc = tuple(err["loc"])
     key = _key(loc)
@@ -491,7 +492,7 @@ def _translate(exc: ValidationError, raw: dict[str, Any]) -> SpecError:
     if isinstance(value, dict):
         value = "{...}"
     if kind == "extra_forbidden":
-        parent = _model_at(loc[:-1])
+        parent = _model_at(loc[:-1], root)
         allowed = sorted(parent.model_fields) if parent else []
         what = "unknown section" if len(loc) == 1 and value == "{...}" else "unknown key"
         return SpecError(key, shown(value), f"{what}; allowed: {', '.join(allowed)}", _did_you_mean(str(loc[-1]), allowed))

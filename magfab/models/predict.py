@@ -33,7 +33,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import asdict, dataclass, field
-from typing import TYPE_CHECKING, Mapping
+from typing import TYPE_CHECKING, Callable, Mapping
 
 import numpy as np
 
@@ -242,6 +242,19 @@ def normal_curve(design: "Design", body: mech.Body, mu: float,
                            f"{coarse:g} mm (Richardson, order {FE_ORDER:g})", how), probe.response(mu)
 
 
+def surrogate_curve(design: "Design", body: mech.Body, mu: float,
+                    indentation: np.ndarray) -> tuple[mech.Curve, ModelUse, mech.ShearResponse]:
+    """:func:`normal_curve`'s result from the elastomer surrogate (:mod:`.mechanics.surrogate`), for the design search:
+    the curve to the scan depth and the shear response at the same preloads the FE probe would solve."""
+    from .mechanics import surrogate
+
+    depth = float(design.spec.calibration.scan_z_mm)
+    curve, response = surrogate.normal_and_shear(body, mu, indentation, depth, shear_probe_depths(design, indentation),
+                                                 design.spec.calibration.scan_step_mm)
+    return curve, ModelUse("mechanics", "surrogate", surrogate.held_out_error().get("force_max", math.nan),
+                           surrogate.SURROGATE_DESCRIPTION, "search"), response
+
+
 # ---------------------------------------------------------------------------------------------------
 # The prediction: typed values, turned into predictions.json's dict only by :meth:`Prediction.as_json`
 
@@ -359,8 +372,14 @@ def _band(design: "Design") -> dict[str, float]:
     return dict(zip(MATERIALS, spec.elastomer.shear_modulus_kPa or mech.band(spec.elastomer.material)))
 
 
-def predict(design: "Design") -> Prediction:
-    """Sensitivity, resolution and range for ``design`` (module doc). Deterministic."""
+#: What replaces :func:`normal_curve` in :func:`predict`: (design, body, mu_kPa, indentation) -> (nominal curve, its
+#: ModelUse, the shear response along it or None). The design search passes the elastomer surrogate's.
+ElastomerModel = Callable[["Design", mech.Body, float, np.ndarray], tuple[mech.Curve, ModelUse, "mech.ShearResponse | None"]]
+
+
+def predict(design: "Design", elastomer: ElastomerModel | None = None) -> Prediction:
+    """Sensitivity, resolution and range for ``design`` (module doc). Deterministic. ``elastomer``: the normal curve
+    and shear response from another model than the spec's (default :func:`normal_curve`)."""
     t0 = time.perf_counter()
     spec = design.spec
     sen = spec.sensor
@@ -373,7 +392,7 @@ def predict(design: "Design") -> Prediction:
     body = mech.Body.from_design(design)
     mus = _band(design)
     indentation = indentation_grid(design)
-    nominal, muse, response = normal_curve(design, body, mus["nominal"], indentation)
+    nominal, muse, response = (elastomer or normal_curve)(design, body, mus["nominal"], indentation)
     curves = {k: nominal.scaled(mu) if k != "nominal" else nominal for k, mu in mus.items()}
     t_mech = time.perf_counter()
 
@@ -475,13 +494,13 @@ def _normal(design: "Design", chip: ChipSetting, nz: Mapping[str, float], magnet
     return figures, arrays
 
 
-def predict_with_findings(design: "Design") -> tuple[Prediction | None, list[Finding]]:
+def predict_with_findings(design: "Design", elastomer: ElastomerModel | None = None) -> tuple[Prediction | None, list[Finding]]:
     """:func:`predict` and its design checks; a model that cannot give an answer for this design (the FE
     failing at its first step, a field model refusing every point) is an error finding, not a traceback."""
     from ..check import prediction_findings
 
     try:
-        pred = predict(design)
+        pred = predict(design, elastomer)
     except (mech.MechanicsError, fieldmod.FieldModelError) as exc:
         return None, [Finding(Severity.ERROR, "prediction-failed", f"no prediction for this design: {exc}",
                               "predict.mechanics_model" if isinstance(exc, mech.MechanicsError) else "predict.field_model")]

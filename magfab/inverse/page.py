@@ -1,0 +1,162 @@
+"""The study's files: the tables, the Pareto plot and the page (Markdown and HTML) of ``magfab design``."""
+
+from __future__ import annotations
+
+import html
+import io
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from .files import write_bytes
+from .pareto import front_mask
+from .tables import rows, write_table
+from .targets import OBJECTIVES
+
+if TYPE_CHECKING:
+    from .run import DesignResult
+
+__all__ = ["write_outputs", "plot_front"]
+
+_LABELS = {"normal_resolution_mN": "normal resolution, mN", "shear_resolution_mN": "shear resolution, mN",
+           "normal_range_N": "normal range, N", "shear_range_N": "shear range, N",
+           "diameter_mm": "elastomer diameter, mm", "height_mm": "elastomer height, mm"}
+
+
+def write_outputs(result: "DesignResult", base) -> list[Path]:
+    from .run import write_specs
+
+    folder = result.folder
+    files = write_table(folder, "trials", rows(result.trials))
+    extra = [{**{f"screened_{o.value}": s.metrics.get(o.value) for o in result.targets.objectives},
+              "on_front": i in result.front, "chosen": i == result.chosen}
+             for i, s in enumerate(result.screened)]
+    files += write_table(folder, "pareto", rows(result.verified, result.names, extra))
+    for ext in ("svg", "png"):
+        files.append(write_bytes(folder / f"pareto.{ext}", plot_front(result, ext)))
+    files += write_specs(result, base)
+    md = page_markdown(result)
+    files.append(write_bytes(folder / "README.md", md.encode()))
+    files.append(write_bytes(folder / "index.html", _html(result, md).encode()))
+    return files
+
+
+def _values(result: "DesignResult", recs) -> np.ndarray:
+    return result.objective_values(recs) if recs else np.zeros((0, len(result.targets.objectives)))
+
+
+def plot_front(result: "DesignResult", ext: str) -> bytes:
+    """The first objective against each other one: every feasible design the search evaluated (cheap models), the
+    infeasible ones, the cheap models' front, and the verified designs (full chain) joined to their screening value,
+    the chosen one ringed."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    objs = [o.value for o in result.targets.objectives]
+    pairs = [(0, j) for j in range(1, len(objs))] or [(0, 0)]
+    fig, axes = plt.subplots(1, len(pairs), figsize=(4.6 * len(pairs), 4.2), squeeze=False)
+    ok = [r for r in result.trials if r.state == "ok"]
+    bad = [r for r in result.trials if r.state == "infeasible"]
+    v_ok, v_bad = _values(result, ok), _values(result, bad)
+    front = v_ok[front_mask(v_ok, result.targets.directions())] if len(v_ok) else v_ok
+    ver = [i for i, r in enumerate(result.verified) if r.state in ("ok", "infeasible")]
+    v_ver = _values(result, [result.verified[i] for i in ver])
+    v_scr = _values(result, [result.screened[i] for i in ver])
+    for ax, (a, b) in zip(axes[0], pairs):
+        ax.scatter(v_bad[:, a], v_bad[:, b], s=8, marker="x", color="#e8a0a0", label="infeasible (cheap models)")
+        ax.scatter(v_ok[:, a], v_ok[:, b], s=8, color="#b0b0b0", label="feasible (cheap models)")
+        ax.scatter(front[:, a], front[:, b], s=22, color="#1f77b4", label="front (cheap models)")
+        for k, i in enumerate(ver):
+            ax.plot([v_scr[k, a], v_ver[k, a]], [v_scr[k, b], v_ver[k, b]], color="#555555", lw=0.8)
+        on = np.array([i in result.front for i in ver], dtype=bool)
+        if len(v_ver):
+            ax.scatter(v_ver[on, a], v_ver[on, b], s=46, marker="D", facecolor="none", edgecolor="black",
+                       label="verified front (full chain)")
+            ax.scatter(v_ver[~on, a], v_ver[~on, b], s=30, marker="D", facecolor="none", edgecolor="#999999",
+                       label="verified, off the front")
+        if result.chosen is not None:
+            c = result.objective_values([result.verified[result.chosen]])[0]
+            ax.scatter([c[a]], [c[b]], s=160, facecolor="none", edgecolor="red", lw=1.5, label="chosen")
+        ax.set_xlabel(_LABELS[objs[a]] + _arrow(objs[a]))
+        ax.set_ylabel(_LABELS[objs[b]] + _arrow(objs[b]))
+        ax.grid(alpha=0.3)
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=8, frameon=False)
+    fig.suptitle(f"{result.targets.name}: {len(result.trials)} designs searched, {len(result.verified)} verified",
+                 fontsize=10)
+    fig.tight_layout(rect=(0, 0.12, 1, 0.95))
+    buf = io.BytesIO()
+    meta = {"svg": {"Date": None}, "png": {"Software": None}}[ext]
+    fig.savefig(buf, format=ext, dpi=130, metadata=meta)
+    plt.close(fig)
+    return buf.getvalue()
+
+
+def _arrow(objective: str) -> str:
+    return " (lower is better)" if OBJECTIVES[objective] == "minimize" else " (higher is better)"
+
+
+def _fmt(v: Any) -> str:
+    return f"{v:.4g}" if isinstance(v, float) else str(v)
+
+
+def _md(text: object) -> str:
+    """Text from a study (reasons, names) in a Markdown table cell: no markup, no pipes, one line."""
+    s = html.escape(str(text), quote=False).replace("|", "\\|").replace("\n", " ")
+    for ch in "*_`[]<>#":
+        s = s.replace(ch, "\\" + ch)
+    return s
+
+
+def page_markdown(result: "DesignResult") -> str:
+    t = result.targets
+    objs = [o.value for o in t.objectives]
+    req = {k: v for k, v in t.require.model_dump().items() if v is not None}
+    states = {s: sum(r.state == s for r in result.trials) for s in ("ok", "infeasible", "failed")}
+    cheap = t.study.models.value == "surrogate"
+    how = "the cheap models (the elastomer surrogate for the FE)" if cheap else "the full model chain (FE)"
+    again = (f"The {len(result.verified)} designs nearest the front were re-evaluated by the full model chain (FE), "
+             "which every figure below is." if cheap else "Every figure below is the full chain's.")
+    lines = [f"# Design study: {_md(t.name)}", "",
+             "Requirements: " + ", ".join(f"{k} = {v:g}" for k, v in req.items()) + ".",
+             "Objectives: " + ", ".join(f"{o} ({OBJECTIVES[o]})" for o in objs) + ".", "",
+             f"The search evaluated {len(result.trials)} designs with {how}: {states['ok']} meet every requirement, "
+             f"{states['infeasible']} do not, {states['failed']} could not be evaluated (trials.csv gives each "
+             f"reason). {again}", "",
+             "![Pareto front](pareto.svg)", ""]
+    if result.chosen is None:
+        lines += ["No verified design meets every requirement. Relax a requirement, widen the variables, or raise "
+                  "study.trials; pareto.csv lists what the verified designs reach.", ""]
+    else:
+        name = result.names[result.chosen]
+        lines += [f"Chosen: **{_md(name)}**, the best on {objs[0]}. Build it:", "", "```sh",
+                  f"magfab build designs/{name}.toml", "```", ""]
+    head = ["design"] + objs + ["magnet", "grade", "material", "tip", "d_max_mm", "d_min_mm",
+                                "elastomer_diameter_mm", "cover_mm"]
+    lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for i in result.front:
+        r = result.verified[i]
+        cells = [result.names[i]] + [_fmt(r.metrics[o]) for o in objs] + [_fmt(r.point[k]) for k in head[1 + len(objs):]]
+        lines.append("| " + " | ".join(_md(c) for c in cells) + " |")
+    lines += ["", "Each design's spec is `designs/NAME.toml` and its full-chain figures `designs/NAME.json`; the "
+              "cheap models' figures for the same designs are in pareto.csv (columns screened_*)."]
+    return "\n".join(lines) + "\n"
+
+
+def _html(result: "DesignResult", md: str) -> str:
+    """The page as HTML: the Markdown's text, escaped, with the plot inline."""
+    body = []
+    for line in md.splitlines():
+        if line.startswith("![Pareto"):
+            body.append('<p><img src="pareto.svg" alt="Pareto front" style="max-width:100%"></p>')
+        elif line.startswith("# "):
+            body.append(f"<h1>{html.escape(line[2:])}</h1>")
+        elif line.startswith("|"):
+            body.append(f"<pre>{html.escape(line)}</pre>")
+        elif line:
+            body.append(f"<p>{html.escape(line)}</p>")
+    return ("<!doctype html><html><head><meta charset=\"utf-8\"><title>" + html.escape(result.targets.name)
+            + "</title></head><body>" + "\n".join(body) + "</body></html>\n")

@@ -1,0 +1,159 @@
+"""``magfab design`` and ``magfab sweep``: from TARGETS.toml to a study folder.
+
+``design``: the search (:mod:`.study`) with the cheap models, then the designs near the front re-verified by the
+full chain (FE), the front of the verified designs, and the files::
+
+    DIR/study.db                  the Optuna storage (SQLite; resumed by running the command again)
+    DIR/trials.csv, .parquet      every design the search evaluated, with its state and reason
+    DIR/pareto.csv, .parquet      the verified designs (full-chain figures, and the cheap models' beside them)
+    DIR/pareto.svg, .png          the front
+    DIR/index.html, README.md     the page: targets, front, the chosen design and how to build it
+    DIR/designs/NAME.toml         each verified front design as a spec `magfab build` accepts
+    DIR/designs/NAME.json         its full-chain predictions (predictions.json's) and findings
+
+``sweep``: every design of a grid or a Latin hypercube of the same variables, in ``DIR/sweep.csv`` (.parquet).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from ..errors import InputError
+from .evaluate import FE, SURROGATE
+from .files import spec_toml, write_bytes
+from .pareto import front_mask, pick_for_verification
+from .space import candidate_spec, grid, latin_hypercube
+from .study import Record, client, evaluate_all, records, run_study
+from .tables import rows, write_table
+from .targets import Targets, load_targets
+
+__all__ = ["DesignResult", "design", "sweep", "default_folder"]
+
+Progress = Callable[[str, int, int], None]
+
+
+@dataclass
+class DesignResult:
+    """What ``magfab design`` found: every trial, the verified designs, the front among them and the chosen one."""
+
+    targets: Targets
+    folder: Path
+    trials: list[Record]
+    verified: list[Record]  # the full chain's results, in verification order
+    screened: list[Record]  # the same designs' cheap-model results
+    front: list[int]  # indices into verified: feasible and non-dominated by the full chain
+    chosen: int | None  # index into verified
+    names: list[str] = field(default_factory=list)  # design names of the verified designs
+    files: list[Path] = field(default_factory=list)
+
+    def objective_values(self, recs: list[Record]) -> np.ndarray:
+        return np.array([[r.metrics[o.value] for o in self.targets.objectives] for r in recs], dtype=float)
+
+
+def default_folder(targets: Targets) -> Path:
+    return Path("design") / targets.name
+
+
+def _storage(targets: Targets, folder: Path) -> str:
+    return targets.study.storage or f"sqlite:///{(folder / 'study.db').resolve()}"
+
+
+def _check_folder(folder: Path) -> None:
+    if folder.exists() and not folder.is_dir():
+        raise InputError(f"--out {folder}: exists and is not a folder")
+    if folder.is_dir() and any(folder.iterdir()) and not (folder / "study.db").exists() \
+            and not (folder / "sweep.csv").exists():
+        raise InputError(f"--out {folder}: a folder that is not a magfab study (no study.db or sweep.csv); "
+                         "give an empty or new folder")
+
+
+def design(targets_path: Path, out: Path | None = None, scheduler: str | None = None, workers: int | None = None,
+           progress: Progress | None = None) -> DesignResult:
+    """Run ``magfab design`` (module doc)."""
+    targets, base = load_targets(targets_path)
+    folder = out or default_folder(targets)
+    _check_folder(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    say = progress or (lambda *_: None)
+    with client(scheduler, workers) as c:
+        study = run_study(targets, base, _storage(targets, folder), c, lambda n, t: say("search", n, t))
+        trials = records(study)
+        picks = _near_front(trials, targets)
+        screened = [trials[i] for i in picks]
+        if targets.study.models.value == FE:  # the search ran the full chain already
+            verified = screened
+        else:
+            verified = evaluate_all([r.point for r in screened], targets, base, c, FE,
+                                    lambda n, t: say("verify (full chain)", n, t), prefix="v")
+    names = [f"{targets.name}-{r.number}" for r in screened]
+    result = DesignResult(targets, folder, trials, verified, screened, [], None, names)
+    _front(result)
+    from .page import write_outputs
+
+    result.files = write_outputs(result, base)
+    return result
+
+
+def _near_front(trials: list[Record], targets: Targets) -> list[int]:
+    """Indices of up to ``study.verify`` feasible trials near the cheap models' front."""
+    ok = [i for i, r in enumerate(trials) if r.state == "ok"]
+    if not ok:
+        return []
+    values = np.array([[trials[i].metrics[o.value] for o in targets.objectives] for i in ok], dtype=float)
+    return [ok[j] for j in pick_for_verification(values, targets.directions(), targets.study.verify)]
+
+
+def _front(result: DesignResult) -> None:
+    """The front of the verified designs that meet every requirement by the full chain, and the chosen one: the best
+    on the first objective (ties: the next)."""
+    ok = [i for i, r in enumerate(result.verified) if r.state == "ok"]
+    if not ok:
+        return
+    values = result.objective_values([result.verified[i] for i in ok])
+    mask = front_mask(values, result.targets.directions())
+    result.front = [ok[i] for i in np.nonzero(mask)[0]]
+    keys = [tuple(v) for v in (values[mask] * np.where(np.array(result.targets.directions()) == "minimize", 1, -1))]
+    result.chosen = result.front[min(range(len(keys)), key=lambda i: keys[i])]
+
+
+def sweep(targets_path: Path, out: Path | None = None, scheduler: str | None = None, workers: int | None = None,
+          levels: int | None = None, samples: int | None = None, fidelity: str = SURROGATE,
+          progress: Progress | None = None) -> tuple[Path, list[Record]]:
+    """Evaluate every design of a grid (``levels`` per numeric range) or a Latin hypercube (``samples``)."""
+    targets, base = load_targets(targets_path)
+    if fidelity not in (SURROGATE, FE):
+        raise InputError(f"--models {fidelity}: must be {SURROGATE} or {FE}")
+    points = list(grid(targets.variables, levels)) if levels else latin_hypercube(targets.variables, samples or 100,
+                                                                                    targets.study.seed)
+    if len(points) > targets.study.trials and levels:
+        raise InputError(f"--grid {levels}: {len(points)} designs, more than study.trials = {targets.study.trials} "
+                         "(raise study.trials or lower --grid)")
+    folder = out or default_folder(targets)
+    _check_folder(folder)
+    say = progress or (lambda *_: None)
+    with client(scheduler, workers) as c:
+        recs = evaluate_all(points, targets, base, c, fidelity, lambda n, t: say("sweep", n, t), prefix="s")
+    write_table(folder, "sweep", rows(recs))
+    return folder, recs
+
+
+def write_specs(result: DesignResult, base) -> list[Path]:
+    """designs/NAME.toml and NAME.json for each verified front design."""
+    import json
+
+    out = []
+    for i in result.front:
+        r, name = result.verified[i], result.names[i]
+        spec = candidate_spec(r.point, base, result.targets, name)
+        header = (f"{name}: a design magfab design found for the targets {result.targets.name!r}.\n"
+                  f"Full-chain figures: " + ", ".join(f"{o.value} = {r.metrics[o.value]:.4g}"
+                                                      for o in result.targets.objectives))
+        out.append(write_bytes(result.folder / "designs" / f"{name}.toml", spec_toml(spec, header)))
+        data: dict[str, Any] = {"design": name, "point": r.point, "figures": r.metrics, "model": r.model}
+        out.append(write_bytes(result.folder / "designs" / f"{name}.json",
+                               (json.dumps(data, indent=1, sort_keys=True) + "\n").encode()))
+    return out

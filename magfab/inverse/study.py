@@ -1,0 +1,207 @@
+"""The search: Optuna asks, Dask evaluates, the storage keeps every result as it arrives.
+
+The loop runs in the calling process (ask-and-tell): it keeps two designs per worker in flight on the Dask cluster,
+tells Optuna each result as it completes and asks for the next. Only this process touches the storage, so an
+SQLite file is safe; a database URL lets several machines' studies share one. Each result is committed when it
+arrives, so an interrupted study resumes where it stopped: trials left running are marked failed ("interrupted")
+and their points asked again. A design that fails is recorded with its reason and the study goes on.
+
+Clusters: ``scheduler=None`` starts a local cluster of ``workers`` processes on this machine (one thread each: the
+models are NumPy-bound); an address connects to an existing Dask scheduler unchanged (its workers need magfab).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+from dataclasses import dataclass, field
+from typing import Any, Callable, Iterable, Iterator
+
+from ..errors import InputError
+from ..spec import Spec
+from .evaluate import constraint_names, evaluate
+from .space import base_point, params_of, point_of, suggest
+from .targets import Sampler, Targets
+
+__all__ = ["Record", "client", "run_study", "evaluate_all", "records"]
+
+#: Designs kept in flight per worker: enough to hide the scheduler's round trip, few enough that the sampler sees
+#: recent results.
+IN_FLIGHT_PER_WORKER = 2
+#: User attributes a trial carries.
+STATE, REASON, MODEL, METRICS, CONSTRAINTS, ERRORS = "state", "reason", "model", "metrics", "constraints", "errors"
+
+
+class StudyError(InputError):
+    """A study that cannot run as asked: another targets file's study in the same storage, an unreachable scheduler."""
+
+
+@dataclass
+class Record:
+    """One evaluated design, as tables and plots take it."""
+
+    number: int
+    point: dict[str, Any]
+    state: str  # ok, infeasible, failed
+    reason: str
+    model: str
+    metrics: dict[str, Any]
+    constraints: list[float] = field(default_factory=list)
+    errors: list[str] = field(default_factory=list)
+
+
+@contextlib.contextmanager
+def client(scheduler: str | None, workers: int | None) -> Iterator[Any]:
+    """A Dask client: on a new local cluster (``workers`` processes, default the cores) or on ``scheduler``."""
+    import dask
+    from distributed import Client, LocalCluster
+
+    with dask.config.set({"distributed.worker.daemon": False, "logging.distributed": "error"}):
+        if scheduler:
+            try:
+                c = Client(scheduler, timeout="10s")
+            except OSError as exc:
+                raise StudyError(f"--scheduler {scheduler}: cannot connect to a Dask scheduler there ({exc})") from None
+            with c:
+                yield c
+            return
+        import os
+
+        n = workers or os.cpu_count() or 1
+        with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                          silence_logs=50) as cluster, Client(cluster) as c:
+            yield c
+
+
+def _sampler(targets: Targets):
+    import optuna
+
+    s = targets.study
+    if s.sampler is Sampler.NSGA2:
+        population = max(8, min(50, s.trials // 10))
+        return optuna.samplers.NSGAIISampler(population_size=population, seed=s.seed)
+    return optuna.samplers.TPESampler(seed=s.seed, multivariate=True, n_startup_trials=min(max(10, s.trials // 10), 100))
+
+
+def open_study(targets: Targets, storage: str):
+    """The study in ``storage`` (created, or loaded to resume). A study of the same name made from other targets is
+    refused rather than mixed."""
+    import optuna
+
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    study = optuna.create_study(study_name=targets.name, storage=storage, directions=targets.directions(),
+                                sampler=_sampler(targets), load_if_exists=True)
+    made_from = study.user_attrs.get("targets_sha256")
+    if made_from is None:
+        study.set_user_attr("targets_sha256", targets.sha256())
+    elif made_from != targets.sha256():
+        raise StudyError(f"the study {targets.name!r} in {storage} was made from other targets; give another name "
+                         "or --out folder to start a new one")
+    return study
+
+
+def _recover(study) -> int:
+    """Trials an interrupted run left RUNNING: failed as "interrupted", their points asked again. Returns how many."""
+    from optuna.trial import TrialState
+
+    stale = study.get_trials(deepcopy=False, states=(TrialState.RUNNING, TrialState.WAITING))
+    for t in stale:
+        if t.state == TrialState.RUNNING:
+            study._storage.set_trial_user_attr(t._trial_id, REASON, "interrupted")
+            study._storage.set_trial_state_values(t._trial_id, state=TrialState.FAIL)
+            if t.params:
+                study.enqueue_trial(t.params, skip_if_exists=True)
+    return sum(t.state == TrialState.RUNNING for t in stale)
+
+
+def _tell(study, trial, result: dict[str, Any], targets: Targets) -> None:
+    """Record a result: its figures and reason as user attributes, its constraints (which Optuna's samplers read:
+    feasible when all <= 0) and its objective values; a failed design as a failed trial."""
+    from optuna.trial import TrialState
+
+    for key in (STATE, REASON, MODEL, METRICS, CONSTRAINTS, ERRORS):
+        trial.set_user_attr(key, result.get(key))
+    if result["state"] == "failed":
+        study.tell(trial, state=TrialState.FAIL)
+        return
+    for name, value in zip(constraint_names(targets), result["constraints"]):
+        trial.set_constraint(name, float(value))
+    values = [float(result["metrics"][o.value]) for o in targets.objectives]
+    if not all(math.isfinite(v) for v in values):
+        trial.set_user_attr(REASON, "a figure is not finite")
+        study.tell(trial, state=TrialState.FAIL)
+        return
+    study.tell(trial, values)
+
+
+def run_study(targets: Targets, base: Spec, storage: str, dask_client, progress: Callable[[int, int], None] | None = None,
+              ) -> Any:
+    """Run the study to ``targets.study.trials`` evaluated designs (counting those a previous run stored)."""
+    from distributed import as_completed
+    from optuna.trial import TrialState
+
+    study = open_study(targets, storage)
+    _recover(study)
+    finished = (TrialState.COMPLETE, TrialState.FAIL)
+    done = len(study.get_trials(deepcopy=False, states=finished))
+    if done == 0:
+        start = base_point(base, targets.variables)
+        if start is not None:
+            study.enqueue_trial(params_of(start))
+    total = targets.study.trials
+    args = (base.model_dump_json(), targets.model_dump_json())
+    workers = max(1, len(dask_client.scheduler_info().get("workers", {})) or 1)
+    pending: dict[Any, Any] = {}
+    queue = as_completed()
+
+    def submit() -> None:
+        trial = study.ask()
+        point = suggest(trial, targets.variables)
+        fut = dask_client.submit(evaluate, point, *args, targets.study.models.value, f"{targets.name}-{trial.number}", pure=False)
+        pending[fut] = trial
+        queue.add(fut)
+
+    while done + len(pending) < total and len(pending) < IN_FLIGHT_PER_WORKER * workers:
+        submit()
+    if progress:
+        progress(done, total)
+    for fut in queue:
+        trial = pending.pop(fut)
+        _tell(study, trial, fut.result(), targets)
+        done += 1
+        if progress:
+            progress(done, total)
+        if done + len(pending) < total:
+            submit()
+    return study
+
+
+def records(study) -> list[Record]:
+    """Every finished trial as a :class:`Record`, in trial order."""
+    from optuna.trial import TrialState
+
+    out = []
+    for t in study.get_trials(deepcopy=False, states=(TrialState.COMPLETE, TrialState.FAIL)):
+        a = t.user_attrs
+        out.append(Record(t.number, point_of(t.params), a.get(STATE) or "failed", a.get(REASON) or "", a.get(MODEL) or "",
+                          a.get(METRICS) or {}, a.get(CONSTRAINTS) or [], a.get(ERRORS) or []))
+    return out
+
+
+def evaluate_all(points: Iterable[dict[str, Any]], targets: Targets, base: Spec, dask_client, fidelity: str,
+                 progress: Callable[[int, int], None] | None = None, prefix: str = "") -> list[Record]:
+    """Evaluate ``points`` on the cluster (a sweep, or the re-verification of the front), in their order."""
+    from distributed import as_completed
+
+    points = list(points)
+    args = (base.model_dump_json(), targets.model_dump_json())
+    futures = {dask_client.submit(evaluate, p, *args, fidelity, f"{targets.name}-{prefix}{i}", pure=False): i
+               for i, p in enumerate(points)}
+    results: dict[int, dict[str, Any]] = {}
+    for n, fut in enumerate(as_completed(futures), 1):
+        results[futures[fut]] = fut.result()
+        if progress:
+            progress(n, len(points))
+    return [Record(i, points[i], r["state"], r["reason"], r["model"], r["metrics"], r["constraints"], r["errors"])
+            for i, r in sorted(results.items())]
+
