@@ -339,7 +339,11 @@ def design(targets: Path, out_dir: Path | None, scheduler: str | None, workers: 
     with _handled(), _bar(sys.stderr.isatty()) as bar:
         from .inverse.run import design as run_design
 
-        r = run_design(targets, out_dir, scheduler, workers, bar)
+        try:
+            r = run_design(targets, out_dir, scheduler, workers, bar)
+        except KeyboardInterrupt:
+            _fail("interrupted; the designs evaluated so far are kept in the study folder's study.db: run the same "
+                  "command again to resume", EXIT_INTERRUPTED)
         states = {s: sum(t.state == s for t in r.trials) for s in ("ok", "infeasible", "failed")}
         click.echo(f"searched {len(r.trials)} designs ({states['ok']} feasible, {states['infeasible']} infeasible, "
                    f"{states['failed']} failed); verified {len(r.verified)} by the full chain; front of "

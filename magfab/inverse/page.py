@@ -36,10 +36,19 @@ def write_outputs(result: "DesignResult", base) -> list[Path]:
     for ext in ("svg", "png"):
         files.append(write_bytes(folder / f"pareto.{ext}", plot_front(result, ext)))
     files += write_specs(result, base)
-    md = page_markdown(result)
-    files.append(write_bytes(folder / "README.md", md.encode()))
-    files.append(write_bytes(folder / "index.html", _html(result, md).encode()))
+    files.append(write_bytes(folder / "README.md", page_markdown(result).encode()))
+    files.append(write_bytes(folder / "index.html", _html(result).encode()))
+    _remove_stale(folder, files)
     return files
+
+
+def _remove_stale(folder: Path, written: list[Path]) -> None:
+    """A resumed study's front may have moved: its earlier designs/ files and chosen.toml go."""
+    keep = {p.resolve() for p in written}
+    stale = [p for p in (folder / "designs").glob("*") if p.suffix in (".toml", ".json")] + [folder / "chosen.toml"]
+    for p in stale:
+        if p.exists() and p.resolve() not in keep:
+            p.unlink()
 
 
 def _values(result: "DesignResult", recs) -> np.ndarray:
@@ -66,9 +75,9 @@ def plot_front(result: "DesignResult", ext: str) -> bytes:
     v_ver = _values(result, [result.verified[i] for i in ver])
     v_scr = _values(result, [result.screened[i] for i in ver])
     for ax, (a, b) in zip(axes[0], pairs):
-        ax.scatter(v_bad[:, a], v_bad[:, b], s=8, marker="x", color="#e8a0a0", label="infeasible (cheap models)")
-        ax.scatter(v_ok[:, a], v_ok[:, b], s=8, color="#b0b0b0", label="feasible (cheap models)")
-        ax.scatter(front[:, a], front[:, b], s=22, color="#1f77b4", label="front (cheap models)")
+        ax.scatter(v_bad[:, a], v_bad[:, b], s=8, marker="x", color="#e8a0a0", label="infeasible (search)")
+        ax.scatter(v_ok[:, a], v_ok[:, b], s=8, color="#b0b0b0", label="feasible (search)")
+        ax.scatter(front[:, a], front[:, b], s=22, color="#1f77b4", label="front of the search")
         for k, i in enumerate(ver):
             ax.plot([v_scr[k, a], v_ver[k, a]], [v_scr[k, b], v_ver[k, b]], color="#555555", lw=0.8)
         on = np.array([i in result.front for i in ver], dtype=bool)
@@ -84,10 +93,10 @@ def plot_front(result: "DesignResult", ext: str) -> bytes:
         ax.set_ylabel(_LABELS[objs[b]] + _arrow(objs[b]))
         ax.grid(alpha=0.3)
     handles, labels = axes[0][0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=8, frameon=False)
+    fig.legend(handles, labels, loc="lower center", ncol=2 if len(pairs) == 1 else 4, fontsize=8, frameon=False)
     fig.suptitle(f"{result.targets.name}: {len(result.trials)} designs searched, {len(result.verified)} verified",
                  fontsize=10)
-    fig.tight_layout(rect=(0, 0.12, 1, 0.95))
+    fig.tight_layout(rect=(0, 0.16 if len(pairs) == 1 else 0.1, 1, 0.95))
     buf = io.BytesIO()
     meta = {"svg": {"Date": None}, "png": {"Software": None}}[ext]
     fig.savefig(buf, format=ext, dpi=130, metadata=meta)
@@ -104,14 +113,15 @@ def _fmt(v: Any) -> str:
 
 
 def _md(text: object) -> str:
-    """Text from a study (reasons, names) in a Markdown table cell: no markup, no pipes, one line."""
+    """Text from a study (reasons, names) in Markdown: no markup, no pipes, one line."""
     s = html.escape(str(text), quote=False).replace("|", "\\|").replace("\n", " ")
-    for ch in "*_`[]<>#":
+    for ch in "*_`[]#":
         s = s.replace(ch, "\\" + ch)
     return s
 
 
-def page_markdown(result: "DesignResult") -> str:
+def _parts(result: "DesignResult") -> list[tuple[str, Any]]:
+    """The page as (kind, content) parts, rendered to Markdown and HTML alike: h1, p, code, img, table."""
     t = result.targets
     objs = [o.value for o in t.objectives]
     req = {k: v for k, v in t.require.model_dump().items() if v is not None}
@@ -120,43 +130,65 @@ def page_markdown(result: "DesignResult") -> str:
     how = "the cheap models (the elastomer surrogate for the FE)" if cheap else "the full model chain (FE)"
     again = (f"The {len(result.verified)} designs nearest the front were re-evaluated by the full model chain (FE), "
              "which every figure below is." if cheap else "Every figure below is the full chain's.")
-    lines = [f"# Design study: {_md(t.name)}", "",
-             "Requirements: " + ", ".join(f"{k} = {v:g}" for k, v in req.items()) + ".",
-             "Objectives: " + ", ".join(f"{o} ({OBJECTIVES[o]})" for o in objs) + ".", "",
-             f"The search evaluated {len(result.trials)} designs with {how}: {states['ok']} meet every requirement, "
-             f"{states['infeasible']} do not, {states['failed']} could not be evaluated (trials.csv gives each "
-             f"reason). {again}", "",
-             "![Pareto front](pareto.svg)", ""]
+    parts: list[tuple[str, Any]] = [
+        ("h1", f"Design study: {t.name}"),
+        ("p", "Requirements: " + ", ".join(f"{k} = {v:g}" for k, v in req.items()) + ". Objectives: "
+         + ", ".join(f"{o} ({OBJECTIVES[o]})" for o in objs) + "."),
+        ("p", f"The search evaluated {len(result.trials)} designs with {how}: {states['ok']} meet every requirement, "
+              f"{states['infeasible']} do not, {states['failed']} could not be evaluated (trials.csv gives each "
+              f"reason). {again}"),
+        ("img", "pareto.svg"),
+    ]
     if result.chosen is None:
-        lines += ["No verified design meets every requirement. Relax a requirement, widen the variables, or raise "
-                  "study.trials; pareto.csv lists what the verified designs reach.", ""]
+        parts.append(("p", "No verified design meets every requirement. Relax a requirement, widen the variables, or "
+                           "raise study.trials; pareto.csv lists what the verified designs reach."))
     else:
-        name = result.names[result.chosen]
-        lines += [f"Chosen: **{_md(name)}**, the best on {objs[0]}. Build it:", "", "```sh",
-                  f"magfab build designs/{name}.toml", "```", ""]
+        parts += [("p", f"Chosen: {result.names[result.chosen]}, the best on {objs[0]} (its spec is also "
+                        "chosen.toml). Build it from this folder:"),
+                  ("code", f"magfab build designs/{result.names[result.chosen]}.toml")]
     head = ["design"] + objs + ["magnet", "grade", "material", "tip", "d_max_mm", "d_min_mm",
                                 "elastomer_diameter_mm", "cover_mm"]
-    lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    for i in result.front:
-        r = result.verified[i]
-        cells = [result.names[i]] + [_fmt(r.metrics[o]) for o in objs] + [_fmt(r.point[k]) for k in head[1 + len(objs):]]
-        lines.append("| " + " | ".join(_md(c) for c in cells) + " |")
-    lines += ["", "Each design's spec is `designs/NAME.toml` and its full-chain figures `designs/NAME.json`; the "
-              "cheap models' figures for the same designs are in pareto.csv (columns screened_*)."]
-    return "\n".join(lines) + "\n"
+    body = [[result.names[i]] + [_fmt(result.verified[i].metrics[o]) for o in objs]
+            + [_fmt(result.verified[i].point[k]) for k in head[1 + len(objs):]] for i in result.front]
+    parts += [("table", (head, body)),
+              ("p", "Each design's spec is designs/NAME.toml and its full-chain figures designs/NAME.json; the cheap "
+                    "models' figures for the same designs are in pareto.csv (columns screened_*).")]
+    return parts
 
 
-def _html(result: "DesignResult", md: str) -> str:
-    """The page as HTML: the Markdown's text, escaped, with the plot inline."""
-    body = []
-    for line in md.splitlines():
-        if line.startswith("![Pareto"):
-            body.append('<p><img src="pareto.svg" alt="Pareto front" style="max-width:100%"></p>')
-        elif line.startswith("# "):
-            body.append(f"<h1>{html.escape(line[2:])}</h1>")
-        elif line.startswith("|"):
-            body.append(f"<pre>{html.escape(line)}</pre>")
-        elif line:
-            body.append(f"<p>{html.escape(line)}</p>")
-    return ("<!doctype html><html><head><meta charset=\"utf-8\"><title>" + html.escape(result.targets.name)
-            + "</title></head><body>" + "\n".join(body) + "</body></html>\n")
+def page_markdown(result: "DesignResult") -> str:
+    out = []
+    for kind, c in _parts(result):
+        if kind == "h1":
+            out += [f"# {_md(c)}", ""]
+        elif kind == "p":
+            out += [_md(c), ""]
+        elif kind == "code":
+            out += ["```sh", c, "```", ""]
+        elif kind == "img":
+            out += [f"![Pareto front]({c})", ""]
+        else:
+            head, rows = c
+            out += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+            out += ["| " + " | ".join(_md(x) for x in row) + " |" for row in rows] + [""]
+    return "\n".join(out)
+
+
+def _html(result: "DesignResult") -> str:
+    out = []
+    for kind, c in _parts(result):
+        if kind == "h1":
+            out.append(f"<h1>{html.escape(c)}</h1>")
+        elif kind == "p":
+            out.append(f"<p>{html.escape(c)}</p>")
+        elif kind == "code":
+            out.append(f"<pre>{html.escape(c)}</pre>")
+        elif kind == "img":
+            out.append(f'<p><img src="{html.escape(c)}" alt="Pareto front" style="max-width:100%"></p>')
+        else:
+            head, rows = c
+            cells = ["<tr>" + "".join(f"<th>{html.escape(h)}</th>" for h in head) + "</tr>"]
+            cells += ["<tr>" + "".join(f"<td>{html.escape(x)}</td>" for x in row) + "</tr>" for row in rows]
+            out.append('<table border="1" cellspacing="0" cellpadding="3">' + "".join(cells) + "</table>")
+    return ('<!doctype html>\n<html><head><meta charset="utf-8"><title>' + html.escape(result.targets.name)
+            + "</title></head><body>\n" + "\n".join(out) + "\n</body></html>\n")

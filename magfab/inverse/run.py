@@ -9,7 +9,8 @@ full chain (FE), the front of the verified designs, and the files::
     DIR/pareto.svg, .png          the front
     DIR/index.html, README.md     the page: targets, front, the chosen design and how to build it
     DIR/designs/NAME.toml         each verified front design as a spec `magfab build` accepts
-    DIR/designs/NAME.json         its full-chain predictions (predictions.json's) and findings
+    DIR/designs/NAME.json         its full-chain figures
+    DIR/chosen.toml               the chosen design's spec (the best verified one on the first objective)
 
 ``sweep``: every design of a grid or a Latin hypercube of the same variables, in ``DIR/sweep.csv`` (.parquet).
 """
@@ -77,9 +78,9 @@ def design(targets_path: Path, out: Path | None = None, scheduler: str | None = 
     targets, base = load_targets(targets_path)
     folder = out or default_folder(targets)
     _check_folder(folder)
-    folder.mkdir(parents=True, exist_ok=True)
     say = progress or (lambda *_: None)
     with client(scheduler, workers) as c:
+        folder.mkdir(parents=True, exist_ok=True)  # once the cluster is there: a bad --scheduler writes nothing
         study = run_study(targets, base, _storage(targets, folder), c, lambda n, t: say("search", n, t))
         trials = records(study)
         picks = _near_front(trials, targets)
@@ -152,7 +153,10 @@ def write_specs(result: DesignResult, base) -> list[Path]:
         header = (f"{name}: a design magfab design found for the targets {result.targets.name!r}.\n"
                   f"Full-chain figures: " + ", ".join(f"{o.value} = {r.metrics[o.value]:.4g}"
                                                       for o in result.targets.objectives))
-        out.append(write_bytes(result.folder / "designs" / f"{name}.toml", spec_toml(spec, header)))
+        text = spec_toml(spec, header)
+        out.append(write_bytes(result.folder / "designs" / f"{name}.toml", text))
+        if i == result.chosen:  # one fixed name for the chosen design, so a page can say how to build it
+            out.append(write_bytes(result.folder / "chosen.toml", text))
         data: dict[str, Any] = {"design": name, "point": r.point, "figures": r.metrics, "model": r.model}
         out.append(write_bytes(result.folder / "designs" / f"{name}.json",
                                (json.dumps(data, indent=1, sort_keys=True) + "\n").encode()))

@@ -28,8 +28,10 @@ __all__ = ["Record", "client", "run_study", "evaluate_all", "records"]
 #: Designs kept in flight per worker: enough to hide the scheduler's round trip, few enough that the sampler sees
 #: recent results.
 IN_FLIGHT_PER_WORKER = 2
-#: User attributes a trial carries.
-STATE, REASON, MODEL, METRICS, CONSTRAINTS, ERRORS = "state", "reason", "model", "metrics", "constraints", "errors"
+#: The user attribute a trial carries its evaluation in (one write per trial: each attribute is a storage round trip).
+RESULT = "result"
+#: What of an evaluation the storage keeps.
+KEPT = ("state", "reason", "model", "metrics", "constraints", "errors")
 
 
 class StudyError(InputError):
@@ -100,18 +102,47 @@ def open_study(targets: Targets, storage: str):
     return study
 
 
+#: The user attribute naming the run (host:pid) that asked a trial.
+RUNNER = "runner"
+
+
+def _runner() -> str:
+    import os
+    import socket
+
+    return f"{socket.gethostname()}:{os.getpid()}"
+
+
+def _dead(runner: str | None) -> bool:
+    """True for a run on this host whose process is gone (a run elsewhere, sharing the storage, is left alone)."""
+    import os
+    import socket
+
+    host, _, pid = (runner or "").rpartition(":")
+    if host != socket.gethostname() or not pid.isdigit():
+        return False
+    try:
+        os.kill(int(pid), 0)
+    except ProcessLookupError:
+        return True
+    except PermissionError:
+        return False
+    return False
+
+
 def _recover(study) -> int:
-    """Trials an interrupted run left RUNNING: failed as "interrupted", their points asked again. Returns how many."""
+    """Trials a killed run on this host left RUNNING: failed as "interrupted", their points asked again (runs on
+    other machines sharing the storage keep theirs). Returns how many."""
     from optuna.trial import TrialState
 
-    stale = study.get_trials(deepcopy=False, states=(TrialState.RUNNING, TrialState.WAITING))
+    stale = [t for t in study.get_trials(deepcopy=False, states=(TrialState.RUNNING,))
+             if _dead(t.user_attrs.get(RUNNER)) or RUNNER not in t.user_attrs]
     for t in stale:
-        if t.state == TrialState.RUNNING:
-            study._storage.set_trial_user_attr(t._trial_id, REASON, "interrupted")
-            study._storage.set_trial_state_values(t._trial_id, state=TrialState.FAIL)
-            if t.params:
-                study.enqueue_trial(t.params, skip_if_exists=True)
-    return sum(t.state == TrialState.RUNNING for t in stale)
+        study._storage.set_trial_user_attr(t._trial_id, RESULT, {"state": "failed", "reason": "interrupted"})
+        study._storage.set_trial_state_values(t._trial_id, state=TrialState.FAIL)
+        if t.params:
+            study.enqueue_trial(t.params, skip_if_exists=True)
+    return len(stale)
 
 
 def _tell(study, trial, result: dict[str, Any], targets: Targets) -> None:
@@ -119,18 +150,16 @@ def _tell(study, trial, result: dict[str, Any], targets: Targets) -> None:
     feasible when all <= 0) and its objective values; a failed design as a failed trial."""
     from optuna.trial import TrialState
 
-    for key in (STATE, REASON, MODEL, METRICS, CONSTRAINTS, ERRORS):
-        trial.set_user_attr(key, result.get(key))
-    if result["state"] == "failed":
+    kept = {k: result.get(k) for k in KEPT}
+    values = [float(result["metrics"][o.value]) for o in targets.objectives] if result["state"] != "failed" else []
+    if values and not all(math.isfinite(v) for v in values):
+        kept.update(state="failed", reason="a figure is not finite")
+    trial.set_user_attr(RESULT, kept)
+    if kept["state"] == "failed":
         study.tell(trial, state=TrialState.FAIL)
         return
     for name, value in zip(constraint_names(targets), result["constraints"]):
         trial.set_constraint(name, float(value))
-    values = [float(result["metrics"][o.value]) for o in targets.objectives]
-    if not all(math.isfinite(v) for v in values):
-        trial.set_user_attr(REASON, "a figure is not finite")
-        study.tell(trial, state=TrialState.FAIL)
-        return
     study.tell(trial, values)
 
 
@@ -154,8 +183,11 @@ def run_study(targets: Targets, base: Spec, storage: str, dask_client, progress:
     pending: dict[Any, Any] = {}
     queue = as_completed()
 
+    runner = _runner()
+
     def submit() -> None:
         trial = study.ask()
+        trial.set_user_attr(RUNNER, runner)
         point = suggest(trial, targets.variables)
         fut = dask_client.submit(evaluate, point, *args, targets.study.models.value, f"{targets.name}-{trial.number}", pure=False)
         pending[fut] = trial
@@ -182,9 +214,11 @@ def records(study) -> list[Record]:
 
     out = []
     for t in study.get_trials(deepcopy=False, states=(TrialState.COMPLETE, TrialState.FAIL)):
-        a = t.user_attrs
-        out.append(Record(t.number, point_of(t.params), a.get(STATE) or "failed", a.get(REASON) or "", a.get(MODEL) or "",
-                          a.get(METRICS) or {}, a.get(CONSTRAINTS) or [], a.get(ERRORS) or []))
+        if "magnet" not in t.params:  # asked, never given a point (cut short before it was drawn)
+            continue
+        a = t.user_attrs.get(RESULT) or {"state": "failed", "reason": "no result stored"}
+        out.append(Record(t.number, point_of(t.params), a.get("state") or "failed", a.get("reason") or "",
+                          a.get("model") or "", a.get("metrics") or {}, a.get("constraints") or [], a.get("errors") or []))
     return out
 
 

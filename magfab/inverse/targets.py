@@ -254,7 +254,11 @@ class Targets(_Table):
         return [OBJECTIVES[o] for o in self.objectives]
 
     def sha256(self) -> str:
-        return hashlib.sha256(json.dumps(self.model_dump(mode="json"), sort_keys=True).encode()).hexdigest()
+        """What a study's results depend on: everything but how long it runs and where it is stored (a study resumed
+        with more trials is the same study)."""
+        raw = self.model_dump(mode="json")
+        raw["study"] = {k: v for k, v in raw["study"].items() if k not in ("trials", "verify", "storage")}
+        return hashlib.sha256(json.dumps(raw, sort_keys=True).encode()).hexdigest()
 
 
 def _lowest(c: Choice) -> float:

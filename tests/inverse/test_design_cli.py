@@ -1,0 +1,120 @@
+"""`magfab design` as a user runs it: targets that MagOne meets give designs at least as good on every objective, the
+chosen one builds, the files are there, a second run resumes the study, and bad input is one line and exit 2."""
+
+from __future__ import annotations
+
+import csv
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from magfab import build, load_spec
+
+#: Requirements MagOne meets (resolution 3.7 mN, range 1.03 N, 12 mm), objectives it is judged on.
+TARGETS = """
+name = "likemagone"
+objectives = ["normal_resolution_mN", "normal_range_N", "diameter_mm"]
+[require]
+normal_resolution_mN = 4.0
+normal_range_N = 1.0
+max_diameter_mm = 12.0
+[variables]
+materials = ["ecoflex-00-30", "ecoflex-00-50", "dragon-skin-10"]
+tips = ["hemisphere"]
+d_max_mm = [4.0, 8.0]
+d_min_mm = [2.5, 3.5]
+elastomer_diameter_mm = [10.0, 12.0]
+cover_mm = [1.0, 2.5]
+[study]
+trials = 160
+verify = 6
+seed = 1
+"""
+
+
+def magfab(*args: str, cwd: Path) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "magfab.cli", *args], cwd=cwd, capture_output=True, text=True,
+                          timeout=600)
+
+
+@pytest.fixture(scope="module")
+def study(tmp_path_factory):
+    cwd = tmp_path_factory.mktemp("design")
+    (cwd / "targets.toml").write_text(TARGETS)
+    run = magfab("design", "targets.toml", "--workers", "2", cwd=cwd)
+    assert run.returncode == 0, run.stderr
+    return cwd, cwd / "design" / "likemagone", run
+
+
+def _pareto(folder: Path) -> list[dict]:
+    with open(folder / "pareto.csv", newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def test_designs_at_least_as_good_as_magone(study, magone_prediction):
+    """Some verified front design is at least as good as MagOne on every objective, by the full chain."""
+    _, folder, _ = study
+    magone = (magone_prediction.normal.resolution_mN, magone_prediction.normal.range_N, 12.0)
+    front = [r for r in _pareto(folder) if r["on_front"] == "True"]
+    assert front
+    better = [r for r in front if float(r["normal_resolution_mN"]) <= magone[0]
+              and float(r["normal_range_N"]) >= magone[1] and float(r["diameter_mm"]) <= magone[2]]
+    assert better, f"no front design dominates MagOne {magone}: {[(r['design'], r['normal_resolution_mN'], r['normal_range_N'], r['diameter_mm']) for r in front]}"
+    assert all(r["model"] == "fe" for r in front)  # re-verified by the full chain
+
+
+def test_the_files_a_user_gets(study):
+    cwd, folder, run = study
+    for name in ("study.db", "trials.csv", "trials.parquet", "pareto.csv", "pareto.parquet", "pareto.svg",
+                 "pareto.png", "README.md", "index.html"):
+        assert (folder / name).stat().st_size > 0, name
+    trials = list(csv.DictReader(open(folder / "trials.csv", newline="")))
+    assert len(trials) == 160
+    assert all(t["reason"] for t in trials if t["state"] != "ok")  # every failure and violation says why
+    import pyarrow.parquet as pq
+
+    assert pq.read_table(folder / "trials.parquet").num_rows == 160
+    page = (folder / "README.md").read_text()
+    chosen = run.stdout.split("chosen: ")[1].split(";")[0]
+    assert f"magfab build designs/{chosen}.toml" in page
+    for spec_file in (folder / "designs").glob("*.toml"):
+        spec = load_spec(spec_file)
+        figures = json.loads(spec_file.with_suffix(".json").read_text())
+        assert figures["model"] == "fe" and spec.name == spec_file.stem
+
+
+def test_the_chosen_design_builds(study, tmp_path):
+    """The page's build command, run from the study folder (as the page says), writes a whole build."""
+    _, folder, run = study
+    chosen = run.stdout.split("chosen: ")[1].split(";")[0]
+    result = build(load_spec(folder / "designs" / f"{chosen}.toml"), tmp_path / chosen)
+    assert (tmp_path / chosen / "predictions.json").exists()
+    assert not [f for f in result.findings if f.severity.value == "error"]
+
+
+def test_running_again_resumes(study):
+    cwd, folder, run = study
+    again = magfab("design", "targets.toml", "--workers", "2", cwd=cwd)
+    assert again.returncode == 0, again.stderr
+    assert "searched 160 designs" in again.stdout
+    assert again.stdout.split("chosen: ")[1] == run.stdout.split("chosen: ")[1]
+
+
+@pytest.mark.parametrize("text, words", [
+    ('objectives = ["resolution"]', "objectives = "),
+    ('[variables]\ngrades = ["N99"]', "variables.grades"),
+])
+def test_bad_targets_one_line_exit_2_nothing_written(tmp_path, text, words):
+    (tmp_path / "t.toml").write_text(text)
+    run = magfab("design", "t.toml", cwd=tmp_path)
+    assert run.returncode == 2 and words in run.stderr and len(run.stderr.strip().splitlines()) == 1, run.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["t.toml"]
+
+
+def test_an_unreachable_scheduler_is_one_line(tmp_path):
+    (tmp_path / "t.toml").write_text("[study]\ntrials = 2")
+    run = magfab("design", "t.toml", "--scheduler", "tcp://127.0.0.1:9", cwd=tmp_path)
+    assert run.returncode == 2 and "--scheduler" in run.stderr and len(run.stderr.strip().splitlines()) == 1, run.stderr

@@ -1,0 +1,102 @@
+"""The search on a local Dask cluster of two workers: its front against brute force on a small grid, a study that
+resumes after an interruption, and failed designs recorded with their reason while the study goes on."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from magfab.inverse.pareto import front_mask
+from magfab.inverse.space import grid
+from magfab.inverse.study import client, evaluate_all, open_study, records, run_study
+from magfab.inverse.targets import parse_targets
+from magfab.spec import load_spec
+
+BASE = load_spec(None)
+#: 2 magnets (as sold: 5 x 2 mm N52, 4 x 2 mm N45) x 2 silicones x 3 rest distances x 2 diameters = 24 designs.
+SMALL = """
+name = "small"
+objectives = ["normal_resolution_mN", "normal_range_N"]
+[variables]
+magnets = ["d5_h2", "d4_h2"]
+materials = ["ecoflex-00-30", "dragon-skin-10"]
+tips = ["hemisphere"]
+d_max_mm = {values = [4.5, 6.0, 7.5]}
+d_min_mm = {values = [3.0]}
+elastomer_diameter_mm = {values = [10.0, 12.0]}
+cover_mm = {values = [1.5]}
+[study]
+trials = %d
+seed = 3
+"""
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    with client(None, 2) as c:
+        yield c
+
+
+def _key(point) -> tuple:
+    return tuple(sorted(point.items()))
+
+
+def _front(recs, targets) -> set:
+    ok = [r for r in recs if r.state == "ok"]
+    v = np.array([[r.metrics[o.value] for o in targets.objectives] for r in ok])
+    return {_key(r.point) for r, on in zip(ok, front_mask(v, targets.directions())) if on}
+
+
+def test_front_against_brute_force(cluster, tmp_path):
+    """Every design of the grid evaluated (the brute force), then a study of twice as many trials on the same space:
+    the study's front holds only true front designs, and all of them."""
+    targets = parse_targets(SMALL % 48)
+    everything = evaluate_all(grid(targets.variables, 2), targets, BASE, cluster, "surrogate")
+    assert len(everything) == 24 and all(r.model == "surrogate" for r in everything)
+    assert sum(r.state == "ok" for r in everything) >= 6, [r.reason for r in everything]
+    truth = _front(everything, targets)
+    assert 2 <= len(truth) < 24
+    study = run_study(targets, BASE, f"sqlite:///{tmp_path / 'study.db'}", cluster)
+    recs = records(study)
+    assert len(recs) == 48
+    found = _front(recs, targets)
+    assert found <= truth  # no dominated design is claimed
+    assert found == truth, f"the study missed {len(truth - found)} of {len(truth)} front designs"
+    # the same design gets the same figures from the study as from the brute force (deterministic evaluation)
+    by_point = {_key(r.point): r.metrics for r in everything}
+    for r in recs:
+        if r.state == "ok":
+            assert r.metrics == by_point[_key(r.point)]
+
+
+def test_an_interrupted_study_resumes(cluster, tmp_path):
+    """A trial left running (the process was killed while a design was out) is failed as "interrupted" and its
+    point asked again; the study then runs to its new total, counting what the first run stored."""
+    from magfab.inverse.space import suggest
+    from magfab.inverse.study import StudyError
+
+    storage = f"sqlite:///{tmp_path / 'study.db'}"
+    first = parse_targets(SMALL % 6)
+    run_study(first, BASE, storage, cluster)
+    study = open_study(first, storage)
+    orphan = study.ask()  # asked, never told: what a kill leaves behind
+    point = suggest(orphan, first.variables)
+    study = run_study(parse_targets(SMALL % 10), BASE, storage, cluster)  # more trials: the same study, extended
+    recs = records(study)
+    assert len(recs) == 10
+    interrupted = [r for r in recs if r.reason == "interrupted"]
+    assert len(interrupted) == 1 and interrupted[0].point == point
+    assert [r for r in recs if r.point == point and r.state != "failed"], "the interrupted design was not asked again"
+    other = parse_targets((SMALL % 6).replace('"normal_range_N"]', '"diameter_mm"]'))
+    with pytest.raises(StudyError, match="other targets"):
+        open_study(other, storage)
+
+
+def test_failed_designs_are_recorded_and_the_study_goes_on(cluster, tmp_path):
+    text = (SMALL % 8).replace("d_min_mm = {values = [3.0]}", "d_min_mm = {values = [3.0, 8.0]}")
+    study = run_study(parse_targets(text), BASE, f"sqlite:///{tmp_path / 'study.db'}", cluster)
+    recs = records(study)
+    assert len(recs) == 8
+    failed = [r for r in recs if r.point["d_min_mm"] == 8.0]
+    assert failed and all(r.state == "failed" and r.reason.startswith("sensor.d_min_mm") for r in failed)
+    assert any(r.state != "failed" for r in recs)
