@@ -62,6 +62,27 @@ def _rate(points, targets, base, workers: int, fidelity: str) -> tuple[float, li
     return len(points) / dt, recs, overhead
 
 
+def _study_overhead(targets, n: int, folder: Path) -> dict[str, float]:
+    """Seconds per trial the search loop itself costs (ask, the point, the stored result, tell) on the SQLite storage
+    with the targets' sampler, evaluating nothing: per window of trials, since a sampler's ask grows with history."""
+    from magfab.inverse import study as st
+    from magfab.inverse.space import suggest
+
+    t = targets.model_copy(update={"name": "overhead"})
+    study = st.open_study(t, f"sqlite:///{folder / 'overhead.db'}")
+    fake = {"state": "ok", "reason": "", "model": "none", "errors": [],
+            "constraints": [0.0] * len(st.constraint_names(t))}
+    out, t0, rng = {}, time.perf_counter(), np.random.default_rng(0)
+    for i in range(1, n + 1):
+        trial = study.ask()
+        suggest(trial, t.variables)
+        metrics = {o.value: float(rng.random()) for o in t.objectives}
+        st.tell(study, trial, {**fake, "metrics": metrics}, t)
+        if i in (50, 100, 200, 400, 800, 1600) or i == n:
+            out[str(i)] = (time.perf_counter() - t0) / i
+    return out
+
+
 def _errors(cheap, full) -> dict[str, dict[str, float]]:
     out = {}
     for f in FIGURES:
@@ -76,6 +97,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--surrogate-designs", type=int, default=400)
     ap.add_argument("--fe-designs", type=int, default=16)
+    ap.add_argument("--overhead-trials", type=int, default=800)
     ap.add_argument("--out", type=Path, default=Path(tempfile.gettempdir()) / "magfab-bench")
     a = ap.parse_args(argv)
     from magfab.inverse.space import latin_hypercube
@@ -106,6 +128,12 @@ def main(argv: list[str] | None = None) -> int:
         error_vs_full_chain=_errors(cheap_on_fe, recs["fe"]),
         states={k: {s: sum(r.state == s for r in v) for s in ("ok", "infeasible", "failed")} for k, v in recs.items()},
     )
+    a.out.mkdir(parents=True, exist_ok=True)
+    (a.out / "overhead.db").unlink(missing_ok=True)
+    loop = _study_overhead(targets, a.overhead_trials, a.out)
+    result["search_loop_s_per_trial_mean_to"] = loop
+    print("search loop (ask + store + tell, no evaluation), mean s per trial up to N trials: "
+          + ", ".join(f"{k}: {1e3 * v:.1f} ms" for k, v in loop.items()))
     t1 = 1.0 / rates["surrogate"][1]  # s per design on one worker, cheap models
     paper = {}
     for n in (2, 8, 32, 128, 512):

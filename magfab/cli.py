@@ -342,7 +342,7 @@ def design(targets: Path, out_dir: Path | None, scheduler: str | None, workers: 
         try:
             r = run_design(targets, out_dir, scheduler, workers, bar)
         except KeyboardInterrupt:
-            _fail("interrupted; the designs evaluated so far are kept in the study folder's study.db: run the same "
+            _fail("interrupted; the designs evaluated so far are kept in the study folder's study.log: run the same "
                   "command again to resume", EXIT_INTERRUPTED)
         states = {s: sum(t.state == s for t in r.trials) for s in ("ok", "infeasible", "failed")}
         click.echo(f"searched {len(r.trials)} designs ({states['ok']} feasible, {states['infeasible']} infeasible, "

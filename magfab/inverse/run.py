@@ -3,7 +3,7 @@
 ``design``: the search (:mod:`.study`) with the cheap models, then the designs near the front re-verified by the
 full chain (FE), the front of the verified designs, and the files::
 
-    DIR/study.db                  the Optuna storage (SQLite; resumed by running the command again)
+    DIR/study.log                 the Optuna storage (its journal file; resumed by running the command again)
     DIR/trials.csv, .parquet      every design the search evaluated, with its state and reason
     DIR/pareto.csv, .parquet      the verified designs (full-chain figures, and the cheap models' beside them)
     DIR/pareto.svg, .png          the front
@@ -59,16 +59,16 @@ def default_folder(targets: Targets) -> Path:
     return Path("design") / targets.name
 
 
-def _storage(targets: Targets, folder: Path) -> str:
-    return targets.study.storage or f"sqlite:///{(folder / 'study.db').resolve()}"
+def _storage(targets: Targets, folder: Path) -> str | Path:
+    return targets.study.storage or folder / "study.log"
 
 
 def _check_folder(folder: Path) -> None:
     if folder.exists() and not folder.is_dir():
         raise InputError(f"--out {folder}: exists and is not a folder")
-    if folder.is_dir() and any(folder.iterdir()) and not (folder / "study.db").exists() \
+    if folder.is_dir() and any(folder.iterdir()) and not (folder / "study.log").exists() \
             and not (folder / "sweep.csv").exists():
-        raise InputError(f"--out {folder}: a folder that is not a magfab study (no study.db or sweep.csv); "
+        raise InputError(f"--out {folder}: a folder that is not a magfab study (no study.log or sweep.csv); "
                          "give an empty or new folder")
 
 

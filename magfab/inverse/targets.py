@@ -223,8 +223,9 @@ class Study(_Table):
     models: Models = Field(Models.SURROGATE, strict=False,
                            description="'surrogate' (the elastomer surrogate: milliseconds per design) or 'fe' (the "
                                        "full chain for every design: seconds each).")
-    storage: Optional[str] = Field(None, description="Optuna storage URL (an RDB such as postgresql://...); "
-                                                     "default: study.db (SQLite) in the output folder.")
+    storage: Optional[str] = Field(None, description="Optuna storage: a database URL (postgresql://..., sqlite:///...) "
+                                                     "that many machines share; default: the journal file study.log "
+                                                     "in the output folder.")
 
 
 class Targets(_Table):

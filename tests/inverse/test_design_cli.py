@@ -68,7 +68,7 @@ def test_designs_at_least_as_good_as_magone(study, magone_prediction):
 
 def test_the_files_a_user_gets(study):
     cwd, folder, run = study
-    for name in ("study.db", "trials.csv", "trials.parquet", "pareto.csv", "pareto.parquet", "pareto.svg",
+    for name in ("study.log", "trials.csv", "trials.parquet", "pareto.csv", "pareto.parquet", "pareto.svg",
                  "pareto.png", "README.md", "index.html"):
         assert (folder / name).stat().st_size > 0, name
     trials = list(csv.DictReader(open(folder / "trials.csv", newline="")))

@@ -56,7 +56,7 @@ def test_front_against_brute_force(cluster, tmp_path):
     assert sum(r.state == "ok" for r in everything) >= 6, [r.reason for r in everything]
     truth = _front(everything, targets)
     assert 2 <= len(truth) < 24
-    study = run_study(targets, BASE, f"sqlite:///{tmp_path / 'study.db'}", cluster)
+    study = run_study(targets, BASE, tmp_path / "study.log", cluster)
     recs = records(study)
     assert len(recs) == 48
     found = _front(recs, targets)
@@ -75,7 +75,7 @@ def test_an_interrupted_study_resumes(cluster, tmp_path):
     from magfab.inverse.space import suggest
     from magfab.inverse.study import StudyError
 
-    storage = f"sqlite:///{tmp_path / 'study.db'}"
+    storage = tmp_path / "study.log"
     first = parse_targets(SMALL % 6)
     run_study(first, BASE, storage, cluster)
     study = open_study(first, storage)
@@ -94,7 +94,7 @@ def test_an_interrupted_study_resumes(cluster, tmp_path):
 
 def test_failed_designs_are_recorded_and_the_study_goes_on(cluster, tmp_path):
     text = (SMALL % 8).replace("d_min_mm = {values = [3.0]}", "d_min_mm = {values = [3.0, 8.0]}")
-    study = run_study(parse_targets(text), BASE, f"sqlite:///{tmp_path / 'study.db'}", cluster)
+    study = run_study(parse_targets(text), BASE, tmp_path / "study.log", cluster)
     recs = records(study)
     assert len(recs) == 8
     failed = [r for r in recs if r.point["d_min_mm"] == 8.0]
