@@ -4,7 +4,7 @@
 targets as JSON), never raises, and says which models it used:
 
 ``surrogate``
-    The elastomer surrogate (:mod:`magfab.models.mechanics.surrogate`) in place of the FE, and the cheapest field
+    The elastomer surrogate (:mod:`magfab.models.mechanics.fe_surrogate`) in place of the FE, and the cheapest field
     model within tolerance: milliseconds per design. A body outside the surrogate's validated region falls back to
     the FE (``fe (outside surrogate region)``).
 ``fe``
@@ -78,11 +78,11 @@ def _constraints(targets: Targets, m: dict[str, float], errors: list[str]) -> li
 def _elastomer_model(design) -> tuple[Any, str]:
     """The surrogate's elastomer model for ``design``, or (None, why not) outside its validated region."""
     from ..models import mechanics as mech
-    from ..models.mechanics import surrogate
+    from ..models.mechanics import fe_surrogate
     from ..models.predict import surrogate_curve
 
     body = mech.Body.from_design(design)
-    if not surrogate.in_region(body):
+    if not fe_surrogate.in_region(body):
         return None, "fe (outside surrogate region)"
     return surrogate_curve, SURROGATE
 

@@ -89,6 +89,7 @@ def plot_front(result: "DesignResult", ext: str) -> bytes:
         if result.chosen is not None:
             c = result.objective_values([result.verified[result.chosen]])[0]
             ax.scatter([c[a]], [c[b]], s=160, facecolor="none", edgecolor="red", lw=1.5, label="chosen")
+        _zoom(ax, np.vstack([v_ok, v_ver]) if len(v_ok) else v_bad, a, b)
         ax.set_xlabel(_LABELS[objs[a]] + _arrow(objs[a]))
         ax.set_ylabel(_LABELS[objs[b]] + _arrow(objs[b]))
         ax.grid(alpha=0.3)
@@ -102,6 +103,15 @@ def plot_front(result: "DesignResult", ext: str) -> bytes:
     fig.savefig(buf, format=ext, dpi=130, metadata=meta)
     plt.close(fig)
     return buf.getvalue()
+
+
+def _zoom(ax, v: np.ndarray, a: int, b: int) -> None:
+    """Axes spanning the feasible and verified designs (with a margin): far infeasible ones stay off the chart."""
+    for col, setter in ((a, ax.set_xlim), (b, ax.set_ylim)):
+        if len(v):
+            lo, hi = float(np.min(v[:, col])), float(np.max(v[:, col]))
+            pad = 0.08 * (hi - lo) or 0.05 * abs(hi) or 1.0
+            setter(lo - pad, hi + pad)
 
 
 def _arrow(objective: str) -> str:

@@ -28,7 +28,7 @@ from .evaluate import FE, SURROGATE
 from .files import spec_toml, write_bytes
 from .pareto import front_mask, pick_for_verification
 from .space import candidate_spec, grid, latin_hypercube
-from .study import Record, client, evaluate_all, records, run_study
+from .study import KEPT, Record, client, evaluate_all, records, run_study
 from .tables import rows, write_table
 from .targets import Targets, load_targets
 
@@ -88,8 +88,7 @@ def design(targets_path: Path, out: Path | None = None, scheduler: str | None = 
         if targets.study.models.value == FE:  # the search ran the full chain already
             verified = screened
         else:
-            verified = evaluate_all([r.point for r in screened], targets, base, c, FE,
-                                    lambda n, t: say("verify (full chain)", n, t), prefix="v")
+            verified = _verified(study, screened, targets, base, c, lambda n, t: say("verify (full chain)", n, t))
     names = [f"{targets.name}-{r.number}" for r in screened]
     result = DesignResult(targets, folder, trials, verified, screened, [], None, names)
     _front(result)
@@ -97,6 +96,17 @@ def design(targets_path: Path, out: Path | None = None, scheduler: str | None = 
 
     result.files = write_outputs(result, base)
     return result
+
+
+def _verified(study, screened: list[Record], targets: Targets, base, dask_client, progress) -> list[Record]:
+    """The full chain's results for ``screened``: those a previous run stored in the study (its user attributes
+    "verified:N"), the rest evaluated now on the cluster and stored."""
+    kept = dict(study.user_attrs)
+    todo = [r for r in screened if f"verified:{r.number}" not in kept]
+    for r, v in zip(todo, evaluate_all([r.point for r in todo], targets, base, dask_client, FE, progress, prefix="v")):
+        kept[f"verified:{r.number}"] = stored = {k: getattr(v, k) for k in KEPT}
+        study.set_user_attr(f"verified:{r.number}", stored)
+    return [Record(r.number, r.point, **kept[f"verified:{r.number}"]) for r in screened]
 
 
 def _near_front(trials: list[Record], targets: Targets) -> list[int]:

@@ -62,7 +62,7 @@ def client(scheduler: str | None, workers: int | None) -> Iterator[Any]:
     with dask.config.set({"distributed.worker.daemon": False, "logging.distributed": "error"}):
         if scheduler:
             try:
-                c = Client(scheduler, timeout="10s")
+                c = Client(scheduler, timeout="3s")
             except OSError as exc:
                 raise StudyError(f"--scheduler {scheduler}: cannot connect to a Dask scheduler there ({exc})") from None
             with c:

@@ -42,7 +42,7 @@ from enum import Enum
 from pathlib import Path
 from typing import Any, Optional, Union
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_serializer, field_validator
 
 from ..errors import SpecError, shown
 from ..recipes import catalogue
@@ -89,7 +89,12 @@ class Require(_Table):
 
 
 def _range(v: Any, lo: float, hi: float, what: str) -> Any:
-    """A [low, high] pair (TOML array) within [lo, hi], or a {values = [...]} table of listed values."""
+    """A [low, high] pair (TOML array) within [lo, hi], or a {values = [...]} table of listed values (and the
+    {range = [low, high]} its JSON form writes for a pair)."""
+    if isinstance(v, tuple):
+        v = list(v)
+    if isinstance(v, dict) and set(v) == {"range"}:
+        v = v["range"]
     if isinstance(v, dict):
         if set(v) != {"values"} or not isinstance(v["values"], list) or not v["values"]:
             raise ValueError("must be [low, high] or {values = [v1, v2, ...]}")
@@ -117,7 +122,7 @@ class Variables(_Table):
                                                                 "or a list of its keys.")
     grades: list[str] = Field(["N35", "N42", "N45", "N52"], description="Magnet grades, keys of recipes/magnets.toml.")
     materials: Optional[list[str]] = Field(None, description="Silicones, keys of recipes/materials.toml (default: all).")
-    tips: list[Tip] = Field([Tip.HEMISPHERE, Tip.FLAT], description="Tip shapes.")
+    tips: list[Tip] = Field([Tip.FLAT, Tip.HEMISPHERE], description="Tip shapes.")
     d_max_mm: Choice = Field((3.0, 10.0), description="Rest distance magnet to sensing point, mm.")
     d_min_mm: Choice = Field((2.0, 4.0), description="Closest distance under load, mm.")
     elastomer_diameter_mm: Choice = Field((8.0, 20.0), description="Elastomer diameter, mm.")
@@ -128,6 +133,11 @@ class Variables(_Table):
     def _numbers(cls, v: Any, info) -> Any:
         bounds = {"elastomer_diameter_mm": (4.0, 40.0), "cover_mm": (0.2, 20.0)}.get(info.field_name, (0.5, 40.0))
         return _range(v, *bounds, "mm")
+
+    @field_serializer("d_max_mm", "d_min_mm", "elastomer_diameter_mm", "cover_mm")
+    def _tagged(self, c: Choice) -> dict[str, list[float]]:
+        """JSON keeps a range and listed values apart (both would be arrays): what workers and the study's hash read."""
+        return {"values": list(c)} if isinstance(c, list) else {"range": list(c)}
 
     @field_validator("magnets")
     @classmethod

@@ -244,15 +244,17 @@ def normal_curve(design: "Design", body: mech.Body, mu: float,
 
 def surrogate_curve(design: "Design", body: mech.Body, mu: float,
                     indentation: np.ndarray) -> tuple[mech.Curve, ModelUse, mech.ShearResponse]:
-    """:func:`normal_curve`'s result from the elastomer surrogate (:mod:`.mechanics.surrogate`), for the design search:
-    the curve to the scan depth and the shear response at the same preloads the FE probe would solve."""
-    from .mechanics import surrogate
+    """:func:`normal_curve`'s result from the elastomer FE's surrogate (:mod:`.mechanics.fe_surrogate`), for the design
+    search: the curve to the scan depth and the shear response at the preloads the FE probe would solve. Raises
+    :class:`~.mechanics.fe_surrogate.OutsideRegion` for a body outside its validated region."""
+    from .mechanics import fe_surrogate
 
     depth = float(design.spec.calibration.scan_z_mm)
-    curve, response = surrogate.normal_and_shear(body, mu, indentation, depth, shear_probe_depths(design, indentation),
-                                                 design.spec.calibration.scan_step_mm)
-    return curve, ModelUse("mechanics", "surrogate", surrogate.held_out_error().get("force_max", math.nan),
-                           surrogate.SURROGATE_DESCRIPTION, "search"), response
+    curve, response = fe_surrogate.normal_and_shear(body, mu, indentation, depth,
+                                                    shear_probe_depths(design, indentation),
+                                                    design.spec.calibration.scan_step_mm)
+    return curve, ModelUse("mechanics", "surrogate", fe_surrogate.held_out_error()["force_rms"],
+                           str(fe_surrogate.DESCRIPTION), "search"), response
 
 
 # ---------------------------------------------------------------------------------------------------

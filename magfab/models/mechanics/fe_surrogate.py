@@ -1,0 +1,341 @@
+"""A surrogate of the elastomer FE over dimensionless geometry, for the design search.
+
+The FE (:func:`~.fe.fe` with a :class:`~.shear_surface.ShearProbe`, as the build runs it) takes seconds per design;
+the search evaluates thousands. Neo-Hookean results scale exactly: with every length multiplied by R and the modulus
+by mu, forces scale with mu R^2, displacements with R, stiffnesses with mu R, tilts per newton with 1 / (mu R^2) and
+displacements per newton with 1 / (mu R), stretches not at all. So one table of FE runs on bodies of radius
+R = 6 mm covers every size: each body is four ratios to its radius,
+
+    a = magnet radius / R,  h = magnet height / R,  z = magnet's lower face above the base / R,
+    c = silicone above the magnet on the axis / R     (hemispherical tip; the body's height is z + h + c),
+
+and each run gives, on a fixed grid of indentation over R (:data:`GRID`), the force, magnet travel, peak stretch,
+stiffness and peak stress, and at every other grid point the shear response (preload, magnet drop, lateral
+displacement and tilt per newton, indenter stiffness, patch radius). The table's runs are a Latin hypercube over
+:data:`BOX`; a radial-basis interpolator (scipy's ``RBFInterpolator``, thin-plate spline with a linear term) per grid
+point maps the four ratios to every output there, fitted on the runs that reached it; a last one gives the depth
+each run reached (the FE stops where an element inverts or a stretch passes its limit), where the surrogate's curve
+ends too. Its error is measured on held-out runs of another hypercube (``held_out`` in the data file) and by
+``bench/design.py`` on whole designs against the full chain.
+
+Used only inside :data:`BOX` and for bodies :class:`~.body.Body` accepts with a hemispherical tip: anything else is
+:class:`OutsideRegion`, and the search evaluates it with the FE.
+
+Not scale-free, so approximated: the magnet's edge radius (the recipe's 0.2 mm at R = 6 mm) and the rest patch of
+the shear probe (the scan step) keep their ratio to R = 6 mm; the held-out error includes what that costs.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import dataclass, replace
+from functools import lru_cache
+from importlib import resources
+from typing import Sequence
+
+import numpy as np
+
+from ...spec import Tip
+from .body import Body, Curve, MechanicsError
+from .shear_surface import ShearProbe, ShearResponse
+
+__all__ = ["OutsideRegion", "BOX", "GRID", "in_region", "curve", "normal_and_shear", "held_out_error", "DESCRIPTION",
+           "ratios", "body_of", "run", "fit_data"]
+
+#: The box of ratios the table covers (a, h, z, c), and so the surrogate's validated region.
+BOX = {"a": (0.10, 0.80), "h": (0.08, 0.80), "z": (0.15, 1.60), "c": (0.05, 0.80)}
+#: Least silicone between the magnet's top corner and the cap, over R, the surrogate answers for (the hypercube has
+#: few bodies nearer the cap: they are rejected when the magnet pierces it).
+CAP_CLEARANCE = 0.05
+#: Indentation over R at the table's columns: graded finer near zero (a rounded tip's force rises as delta^1.5).
+GRID = 0.75 * np.linspace(0.0, 1.0, 25) ** 1.5
+#: The shear response's columns: every other grid point.
+PROBED = np.arange(0, GRID.size, 2)
+#: The deepest preload (over R) the surrogate gives the shear response at. Deeper, the lateral compliance of many
+#: bodies diverges (the loaded cap loses lateral stability: the FE's displacement per newton grows by 10x and changes
+#: sign within a few grid points), which no smooth fit follows: the held-out error of the displacement per newton
+#: was 3.8 % (median) at 0.5 R and 29 % at 0.65 R, against under 2.8 % up to 0.41 R.
+SHEAR_DEPTH_MAX = float(GRID[PROBED[8]])
+#: The table's bodies: radius, mesh, magnet edge radius and rest patch depth, mm (MagOne's build values).
+R_TABLE, MESH_TABLE, EDGE_TABLE, REST_TABLE = 6.0, 0.75, 0.2, 0.05
+MU_TABLE = 1.0  # kPa: the table is per unit modulus
+DATA = "fe_surrogate.json"
+CURVE_KEYS = ("force", "travel", "stretch", "stiffness", "stress")
+SHEAR_KEYS = ("preload", "drop", "disp", "tilt", "kind", "patch")
+#: Outputs fitted in log space (positive, spanning decades): the rest as they are.
+LOG_KEYS = ("force", "stiffness", "stress", "preload", "disp", "kind")
+#: Outputs fixed at rest (no load: no force, travel, stress, drop; stretch 1): not fitted at the first grid point.
+AT_REST = {"force": 0.0, "travel": 0.0, "stretch": 1.0, "stress": 0.0, "preload": 0.0, "drop": 0.0}
+
+
+class OutsideRegion(MechanicsError):
+    """A body the surrogate was not validated for: the search evaluates it with the FE instead."""
+
+
+def ratios(body: Body) -> dict[str, float]:
+    """The four ratios of a body (module doc)."""
+    R = body.radius_mm
+    return {"a": body.magnet_radius_mm / R, "h": body.magnet_height_mm / R, "z": body.magnet_z_mm / R,
+            "c": (body.height_mm - body.magnet_top_mm) / R}
+
+
+def body_of(x: dict[str, float], R: float = R_TABLE) -> Body:
+    """The hemispherical-tip body of ratios ``x`` at radius ``R`` (:class:`MechanicsError` if it cannot exist)."""
+    H = (x["z"] + x["h"] + x["c"]) * R
+    rm, hm = x["a"] * R, x["h"] * R
+    return Body(radius_mm=R, height_mm=H, base_height_mm=H - R, tip=Tip.HEMISPHERE, magnet_radius_mm=rm,
+                magnet_height_mm=hm, magnet_z_mm=x["z"] * R,
+                magnet_edge_radius_mm=min(EDGE_TABLE * R / R_TABLE, 0.25 * min(2.0 * rm, hm)))
+
+
+def in_region(body: Body) -> bool:
+    return _refusal(body) == ""
+
+
+def _refusal(body: Body) -> str:
+    if body.tip != Tip.HEMISPHERE:
+        return "the surrogate covers hemispherical tips only"
+    if not body.has_magnet:
+        return "the surrogate covers bodies with a magnet only"
+    R, corner_z = body.radius_mm, body.magnet_top_mm - body.base_height_mm
+    if corner_z > 0 and R - math.hypot(body.magnet_radius_mm, corner_z) < CAP_CLEARANCE * R:
+        return f"the magnet's corner is within {CAP_CLEARANCE:g} R of the cap, where the table has few runs"
+    for k, v in ratios(body).items():
+        lo, hi = BOX[k]
+        if not lo - 1e-9 <= v <= hi + 1e-9:
+            return f"ratio {k} = {v:.3g} is outside the surrogate's validated {lo:g}-{hi:g}"
+    return ""
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# The table: FE runs (what bench/fe_surrogate.py makes and ships)
+
+
+def run(x: dict[str, float]) -> dict[str, object]:
+    """One FE run of the table: the body of ratios ``x`` at R_TABLE, its curve on GRID and its shear response on
+    PROBED, per unit modulus, as plain lists (NaN where the FE stopped), with the seconds it took."""
+    from .fe import fe
+    from .options import OnFailure
+
+    body = body_of(x)
+    d = GRID * R_TABLE
+    probe = ShearProbe(depths_mm=d[PROBED], rest_indentation_mm=REST_TABLE)
+    t0 = time.perf_counter()
+    curve = fe(body, MU_TABLE, d, mesh_mm=MESH_TABLE, on_failure=OnFailure.TRUNCATE, probe=probe)
+    seconds = time.perf_counter() - t0
+    resp = probe.response(MU_TABLE)
+    n = len(curve.force_N)
+
+    def col(values, size) -> list[float]:
+        v = np.full(size, math.nan)
+        v[:len(values)] = values
+        return [float(f"{t:.9g}") for t in v]
+
+    out: dict[str, object] = {"x": x, "reach": float(d[n - 1] / R_TABLE) if n else 0.0, "seconds": seconds}
+    for key, arr in zip(CURVE_KEYS, (curve.force_N, curve.magnet_displacement_mm, curve.max_stretch,
+                                     curve.stiffness_N_per_mm, curve.max_stress_kPa)):
+        out[key] = col(arr, GRID.size)
+    for key, arr in zip(SHEAR_KEYS, (resp.normal_force_N, resp.magnet_drop_mm, resp.displacement_mm_per_N,
+                                     resp.tilt_rad_per_N, resp.stiffness_N_per_mm, resp.patch_radius_mm)):
+        out[key] = col(arr, PROBED.size)
+    return out
+
+
+def fit_data(runs: Sequence[dict], held_out: Sequence[dict]) -> dict[str, object]:
+    """The shipped data: the table's runs, the held-out runs and their errors against the surrogate fitted on the
+    table (:func:`_errors`). No timings: the same FE runs give the same bytes (bench/fe_surrogate.py prints the
+    speed)."""
+    model = _Model(list(runs))
+    return {"box": BOX, "grid": [float(g) for g in GRID], "probed": [int(i) for i in PROBED], "r_table_mm": R_TABLE,
+            "mesh_table_mm": MESH_TABLE, "runs": list(runs), "held_out": list(held_out),
+            "held_out_error": _errors(model, held_out)}
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# The model
+
+
+def _scaled(x: np.ndarray) -> np.ndarray:
+    lo = np.array([BOX[k][0] for k in "ahzc"])
+    hi = np.array([BOX[k][1] for k in "ahzc"])
+    return (np.atleast_2d(x) - lo) / (hi - lo)
+
+
+@dataclass
+class _Column:
+    """The interpolator at one grid point: every output there, for the runs that reached it."""
+
+    keys: tuple[str, ...]
+    rbf: object | None  # scipy RBFInterpolator, or None where fewer runs reached it than it needs
+
+
+class _Model:
+    def __init__(self, runs: list[dict]):
+        from scipy.interpolate import RBFInterpolator
+
+        X = _scaled(np.array([[r["x"][k] for k in "ahzc"] for r in runs]))
+        self.reach = RBFInterpolator(X, np.array([r["reach"] for r in runs]), kernel="thin_plate_spline", degree=1)
+        self.columns: list[_Column] = []
+        for k in range(GRID.size):
+            keys = tuple(key for key in CURVE_KEYS + (SHEAR_KEYS if k in PROBED else ()) if k or key not in AT_REST)
+            j = int(np.searchsorted(PROBED, k))
+            Y = np.array([[_forward(key, r[key][k] if key in CURVE_KEYS else r[key][j]) for key in keys] for r in runs])
+            ok = np.all(np.isfinite(Y), axis=1)
+            rbf = (RBFInterpolator(X[ok], Y[ok], kernel="thin_plate_spline", degree=1) if ok.sum() >= 12 else None)
+            self.columns.append(_Column(keys, rbf))
+
+    def predict(self, x: np.ndarray) -> tuple[float, dict[str, np.ndarray]]:
+        """(reach, outputs on GRID / PROBED) at one point of ratios (a, h, z, c), per unit modulus, at R_TABLE."""
+        xs = _scaled(x)
+        reach = float(self.reach(xs)[0])
+        out = {k: np.full(GRID.size, math.nan) for k in CURVE_KEYS}
+        out.update({k: np.full(PROBED.size, math.nan) for k in SHEAR_KEYS})
+        for k, col in enumerate(self.columns):
+            if col.rbf is None:
+                break
+            y = col.rbf(xs)[0]
+            j = int(np.searchsorted(PROBED, k))
+            for key, v in zip(col.keys, y):
+                if key in CURVE_KEYS:
+                    out[key][k] = _inverse(key, v)
+                else:
+                    out[key][j] = _inverse(key, v)
+        for key, v in AT_REST.items():
+            out[key][0] = v
+        return reach, out
+
+
+def _forward(key: str, v: float) -> float:
+    if key in LOG_KEYS:
+        return math.log(v) if v > 0 else math.nan  # NaN (not reached) stays NaN
+    return v
+
+
+def _inverse(key: str, v: float) -> float:
+    return math.exp(v) if key in LOG_KEYS else v
+
+
+@lru_cache(maxsize=1)
+def _shipped() -> tuple[_Model, dict]:
+    data = json.loads(resources.files("magfab.models.mechanics").joinpath(DATA).read_text(encoding="utf-8"))
+    return _Model(data["runs"]), data
+
+
+def held_out_error() -> dict[str, float]:
+    """The shipped table's held-out errors (relative: RMS, 90th percentile and max per output, at the table's grid
+    points)."""
+    return dict(_shipped()[1]["held_out_error"])
+
+
+def _errors(model: _Model, held_out: Sequence[dict]) -> dict[str, float]:
+    """Relative errors of the surrogate on held-out runs, over the grid points both reached (force from the second
+    grid point on: the first is zero)."""
+    errs: dict[str, list[float]] = {"force": [], "travel": [], "stretch": [], "disp": [], "reach": []}
+    for r in held_out:
+        reach, out = model.predict(np.array([r["x"][k] for k in "ahzc"]))
+        errs["reach"].append(abs(reach - r["reach"]) / max(r["reach"], 1e-9))
+        for key in ("force", "travel", "stretch", "disp"):
+            truth, guess = np.array(r[key], dtype=float), out[key]
+            both = np.isfinite(truth) & np.isfinite(guess) & (np.abs(truth) > 0)
+            if key == "disp":  # the shear response is given up to SHEAR_DEPTH_MAX only
+                both &= GRID[PROBED] <= SHEAR_DEPTH_MAX + 1e-12
+            if key == "stretch":
+                both &= truth > 1.0
+                errs[key] += list(np.abs(guess[both] - truth[both]) / (truth[both] - 1.0 + 1e-12))
+            else:
+                errs[key] += list(np.abs(guess[both] - truth[both]) / np.abs(truth[both]))
+    out = {}
+    for key, e in errs.items():
+        e = np.array(e, dtype=float)
+        out[f"{key}_max"] = float(e.max()) if e.size else math.nan
+        out[f"{key}_rms"] = float(np.sqrt(np.mean(e**2))) if e.size else math.nan
+        out[f"{key}_p90"] = float(np.percentile(e, 90)) if e.size else math.nan
+    return out
+
+
+def _description() -> str:
+    e = held_out_error()
+    return (f"Surrogate of the elastomer FE over dimensionless geometry (RBF over 4 ratios, {len(_shipped()[1]['runs'])}"
+            f" FE runs); held-out error: force RMS {100 * e['force_rms']:.1f} % (90th percentile "
+            f"{100 * e['force_p90']:.1f} %), magnet travel RMS {100 * e['travel_rms']:.1f} %")
+
+
+class _Description:
+    def __str__(self) -> str:
+        return _description()
+
+
+DESCRIPTION = _Description()
+
+
+def _interpolate(x: np.ndarray, y: np.ndarray, at: np.ndarray, log: bool) -> np.ndarray:
+    """Monotone cubic (PCHIP) interpolation; ``log``: in log-log for a quantity that is zero at zero and grows as a
+    power near it (force ~ delta^1.5 on a rounded tip: linear PCHIP on the table's grid is 12 % off at MagOne's first
+    indentation, log-log 7 %, measured)."""
+    from scipy.interpolate import PchipInterpolator
+
+    if not log:
+        return PchipInterpolator(x, y)(at)
+    pos = (x > 0) & (y > 0)
+    out = np.zeros_like(np.asarray(at, dtype=float))
+    nz = at > 0
+    out[nz] = np.exp(PchipInterpolator(np.log(x[pos]), np.log(y[pos]), extrapolate=True)(np.log(at[nz])))
+    return out
+
+
+def curve(body: Body, mu_kPa: float, indentation_mm: np.ndarray) -> Curve:
+    """The normal curve alone, over ``indentation_mm`` (what the speed-accuracy chart compares with the FE)."""
+    d = np.asarray(indentation_mm, dtype=float)
+    return normal_and_shear(body, mu_kPa, d, float(d[-1]), d[:1], REST_TABLE)[0]
+
+
+def normal_and_shear(body: Body, mu_kPa: float, indentation_mm: np.ndarray, depth_mm: float,
+                     probe_depths_mm: np.ndarray, rest_indentation_mm: float) -> tuple[Curve, ShearResponse]:
+    """What ``predict`` takes from the FE (the nominal curve to ``depth_mm`` and the shear response at
+    ``probe_depths_mm``), from the surrogate: the table scaled to this body's radius and modulus, interpolated in
+    indentation (PCHIP) onto the indentations asked for. :class:`OutsideRegion` outside the validated region."""
+    why = _refusal(body)
+    if why:
+        raise OutsideRegion(why)
+    model = _shipped()[0]
+    R, mu = body.radius_mm, float(mu_kPa)
+    reach, t = model.predict(np.array([ratios(body)[k] for k in "ahzc"]))
+    grid = GRID * R
+    k = R / R_TABLE  # the table is at R_TABLE and per unit modulus (MU_TABLE = 1 kPa)
+    fin = np.isfinite(t["force"]) & (grid <= max(reach, 0.0) * R + 1e-9)
+    if fin.sum() < 3:
+        raise OutsideRegion(f"the surrogate's curve ends at once for this body (reach {reach * R:.3g} mm)")
+    end = min(max(reach, 0.0) * R, float(grid[fin][-1]))
+    d = np.asarray(indentation_mm, dtype=float)
+    ends_at = "model" if end < depth_mm else "scan depth"
+    last = min(end, depth_mm)
+    inside = int(np.count_nonzero(d <= last + 1e-9))
+    kept = d[:inside] if inside == d.size or d[inside - 1] >= last - 1e-9 else np.append(d[:inside], last)
+
+    def along(key: str, scale: float) -> np.ndarray:
+        return _interpolate(grid[fin], t[key][fin] * scale, kept, log=key in ("force", "travel"))
+
+    curve = Curve("surrogate", mu, kept, force_N=along("force", mu * k * k), magnet_displacement_mm=along("travel", k),
+                  stiffness_N_per_mm=along("stiffness", mu * k), max_stretch=along("stretch", 1.0),
+                  max_stress_kPa=along("stress", mu), mesh_mm=None)
+    if inside < d.size:
+        info = {"failure": (f"the surrogate's curve is solved to {last:g} mm of indentation ("
+                            + ("the depth the design is used over, calibration.scan_z_mm)" if ends_at == "scan depth"
+                               else "where the FE runs it was fitted on stop)")),
+                "failed_at_mm": float(d[inside]), "ends_at": ends_at}
+        curve = replace(curve, info=info)
+    probe = np.asarray(probe_depths_mm, dtype=float)
+    probe = probe[probe <= min(last, SHEAR_DEPTH_MAX * R) + 1e-9]
+    pg = grid[PROBED]
+    pfin = np.isfinite(t["disp"]) & (pg <= end + 1e-9)
+
+    def probed(key: str, scale: float) -> np.ndarray:
+        return _interpolate(pg[pfin], t[key][pfin] * scale, probe, log=key in ("preload", "drop"))
+
+    response = ShearResponse("surface", mu, probe, probed("preload", mu * k * k), probed("drop", k),
+                             probed("disp", 1.0 / (mu * k)), probed("tilt", 1.0 / (mu * k * k)),
+                             probed("kind", mu * k), probed("patch", k), MESH_TABLE * R / R_TABLE,
+                             {"model": "surrogate"})
+    return curve, response
