@@ -71,6 +71,10 @@ def client(scheduler: str | None, workers: int | None) -> Iterator[Any]:
         import os
 
         n = workers or os.cpu_count() or 1
+        import warnings
+
+        # The scheduler's HTTP endpoint moves to a free port when 8787 is taken (another cluster): nothing to report.
+        warnings.filterwarnings("ignore", message="Port 8787 is already in use", category=UserWarning)
         with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
                           silence_logs=50) as cluster, Client(cluster) as c:
             yield c
