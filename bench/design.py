@@ -62,14 +62,15 @@ def _rate(points, targets, base, workers: int, fidelity: str) -> tuple[float, li
     return len(points) / dt, recs, overhead
 
 
-def _study_overhead(targets, n: int, folder: Path) -> dict[str, float]:
-    """Seconds per trial the search loop itself costs (ask, the point, the stored result, tell) on the SQLite storage
-    with the targets' sampler, evaluating nothing: per window of trials, since a sampler's ask grows with history."""
+def _study_overhead(targets, n: int, where) -> dict[str, float]:
+    """Seconds per trial the search loop itself costs (ask, the point, the stored result, tell) on the storage at
+    ``where`` with the targets' sampler, evaluating nothing: the mean up to N trials, since a sampler's ask grows with
+    history."""
     from magfab.inverse import study as st
     from magfab.inverse.space import suggest
 
     t = targets.model_copy(update={"name": "overhead"})
-    study = st.open_study(t, f"sqlite:///{folder / 'overhead.db'}")
+    study = st.open_study(t, where)
     fake = {"state": "ok", "reason": "", "model": "none", "errors": [],
             "constraints": [0.0] * len(st.constraint_names(t))}
     out, t0, rng = {}, time.perf_counter(), np.random.default_rng(0)
@@ -129,25 +130,36 @@ def main(argv: list[str] | None = None) -> int:
         states={k: {s: sum(r.state == s for r in v) for s in ("ok", "infeasible", "failed")} for k, v in recs.items()},
     )
     a.out.mkdir(parents=True, exist_ok=True)
-    (a.out / "overhead.db").unlink(missing_ok=True)
-    loop = _study_overhead(targets, a.overhead_trials, a.out)
-    result["search_loop_s_per_trial_mean_to"] = loop
-    print("search loop (ask + store + tell, no evaluation), mean s per trial up to N trials: "
-          + ", ".join(f"{k}: {1e3 * v:.1f} ms" for k, v in loop.items()))
+    loops = {}
+    for store, where in (("journal file (default)", a.out / "overhead.log"),
+                         ("sqlite", f"sqlite:///{a.out / 'overhead.db'}")):
+        for old in (a.out / "overhead.log", a.out / "overhead.db"):
+            old.unlink(missing_ok=True)
+        n = a.overhead_trials if store.startswith("journal") else min(a.overhead_trials, 200)
+        loops[store] = loop = _study_overhead(targets, n, where)
+        print(f"search loop on the {store} (ask + store + tell, no evaluation), mean per trial up to N trials: "
+              + ", ".join(f"{k}: {1e3 * v:.1f} ms" for k, v in loop.items()))
+    result["search_loop_s_per_trial_mean_to"] = loops
     t1 = 1.0 / rates["surrogate"][1]  # s per design on one worker, cheap models
+    efficiency = rates["surrogate"][2] / (2 * rates["surrogate"][1])
+    loop = max(loops["journal file (default)"].values())  # the client's own cost per trial, at its largest measured
     paper = {}
     for n in (2, 8, 32, 128, 512):
-        # each worker runs designs back to back; the scheduler serialises ~per_task of work per task
-        compute = 1e6 * t1 / n
-        paper[str(n)] = {"hours": max(compute, 1e6 * per_task) / 3600.0,
-                         "bound": "scheduler" if 1e6 * per_task > compute else "workers"}
+        # A sweep (no sampler): the workers run designs back to back at the measured 2-worker efficiency; the scheduler
+        # handles one task per design (batching designs into tasks would lift that bound). A search: every trial also
+        # passes the client's ask-store-tell loop, one at a time.
+        compute = 1e6 * t1 / (n * efficiency)
+        sweep_h = max(compute, 1e6 * per_task) / 3600.0
+        paper[str(n)] = {"sweep_hours": sweep_h, "sweep_bound": "scheduler" if 1e6 * per_task > compute else "workers",
+                         "search_hours": max(sweep_h, 1e6 * loop / 3600.0)}
     result["study_1e6_on_paper"] = paper
     print(f"surrogate vs FE speed ratio (1 worker): {speed_ratio:.0f}x; scheduler overhead {1e3 * per_task:.2f} ms/task")
     for f, e in result["error_vs_full_chain"].items():
         print(f"  {f:22s} median {100 * e['median']:.1f} %  p90 {100 * e['p90']:.1f} %  max {100 * e['max']:.1f} % "
               f"(n={e['n']})")
     for n, p in paper.items():
-        print(f"  10^6 designs on {n:>3s} workers: {p['hours']:.2f} h ({p['bound']}-bound)")
+        print(f"  10^6 designs on {n:>3s} workers: sweep {p['sweep_hours']:.2f} h ({p['sweep_bound']}-bound), "
+              f"search at least {p['search_hours']:.2f} h (the client's loop)")
     a.out.mkdir(parents=True, exist_ok=True)
     (a.out / "design_bench.json").write_text(json.dumps(result, indent=1, sort_keys=True) + "\n")
     print(f"wrote {a.out / 'design_bench.json'}")

@@ -24,7 +24,7 @@ from typing import Any, Callable
 import numpy as np
 
 from ..errors import InputError
-from .evaluate import FE, SURROGATE
+from .evaluate import FE, SURROGATE, constraint_names
 from .files import spec_toml, write_bytes
 from .pareto import front_mask, pick_for_verification
 from .space import candidate_spec, grid, latin_hypercube
@@ -167,7 +167,9 @@ def write_specs(result: DesignResult, base) -> list[Path]:
         out.append(write_bytes(result.folder / "designs" / f"{name}.toml", text))
         if i == result.chosen:  # one fixed name for the chosen design, so a page can say how to build it
             out.append(write_bytes(result.folder / "chosen.toml", text))
-        data: dict[str, Any] = {"design": name, "point": r.point, "figures": r.metrics, "model": r.model}
+        data: dict[str, Any] = {"design": name, "point": r.point, "figures": r.metrics, "model": r.model,
+                                "requirements": dict(zip(constraint_names(result.targets), r.constraints)),
+                                "error_findings": r.errors}
         out.append(write_bytes(result.folder / "designs" / f"{name}.json",
                                (json.dumps(data, indent=1, sort_keys=True) + "\n").encode()))
     return out

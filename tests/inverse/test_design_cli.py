@@ -85,6 +85,7 @@ def test_the_files_a_user_gets(study):
         spec = load_spec(spec_file)
         figures = json.loads(spec_file.with_suffix(".json").read_text())
         assert figures["model"] == "fe" and spec.name == spec_file.stem
+        assert figures["error_findings"] == [] and all(v <= 0 for v in figures["requirements"].values())
 
 
 def test_running_again_resumes(study):
@@ -104,6 +105,13 @@ def test_bad_targets_one_line_exit_2_nothing_written(tmp_path, text, words):
     run = magfab("design", "t.toml", cwd=tmp_path)
     assert run.returncode == 2 and words in run.stderr and len(run.stderr.strip().splitlines()) == 1, run.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["t.toml"]
+
+
+@pytest.mark.parametrize("args", [(), ("--grid", "3", "--lhs", "5")])
+def test_sweep_takes_one_plan(tmp_path, args):
+    (tmp_path / "t.toml").write_text("[study]\ntrials = 2")
+    run = magfab("sweep", "t.toml", *args, cwd=tmp_path)
+    assert run.returncode == 2 and "--grid" in run.stderr and len(run.stderr.strip().splitlines()) == 1, run.stderr
 
 
 def test_an_unreachable_scheduler_is_one_line(tmp_path):
