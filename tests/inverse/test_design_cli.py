@@ -114,6 +114,19 @@ def test_sweep_takes_one_plan(tmp_path, args):
     assert run.returncode == 2 and "--grid" in run.stderr and len(run.stderr.strip().splitlines()) == 1, run.stderr
 
 
+def test_an_existing_cluster_by_its_address(tmp_path):
+    """--scheduler connects to a Dask cluster started elsewhere (here: by this test) and runs the study there."""
+    from distributed import LocalCluster
+
+    small = TARGETS.replace("trials = 160", "trials = 8").replace("verify = 6", "verify = 1")
+    (tmp_path / "t.toml").write_text(small)
+    with LocalCluster(n_workers=2, threads_per_worker=1, dashboard_address=None) as cluster:
+        run = magfab("design", "t.toml", "--scheduler", cluster.scheduler_address, cwd=tmp_path)
+        assert run.returncode in (0, 2) and "Traceback" not in run.stderr, run.stderr  # 2: none of 8 met the targets
+        counts = cluster.scheduler.task_prefixes["evaluate"].state_counts  # what went through this scheduler
+    assert "searched 8 designs" in run.stdout and counts["memory"] >= 8  # every searched design went through it
+
+
 def test_an_unreachable_scheduler_is_one_line(tmp_path):
     (tmp_path / "t.toml").write_text("[study]\ntrials = 2")
     run = magfab("design", "t.toml", "--scheduler", "tcp://127.0.0.1:9", cwd=tmp_path)

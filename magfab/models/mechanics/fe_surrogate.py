@@ -45,7 +45,7 @@ __all__ = ["OutsideRegion", "BOX", "GRID", "in_region", "curve", "normal_and_she
            "ratios", "body_of", "run", "fit_data"]
 
 #: The box of ratios the table covers (a, h, z, c), and so the surrogate's validated region.
-BOX = {"a": (0.10, 0.80), "h": (0.08, 0.80), "z": (0.15, 1.60), "c": (0.05, 0.80)}
+BOX = {"a": (0.10, 0.80), "h": (0.08, 0.80), "z": (0.15, 2.20), "c": (0.05, 0.80)}
 #: Least silicone between the magnet's top corner and the cap, over R, the surrogate answers for (the hypercube has
 #: few bodies nearer the cap: they are rejected when the magnet pierces it).
 CAP_CLEARANCE = 0.05
