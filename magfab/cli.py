@@ -348,9 +348,10 @@ def design(targets: Path, out_dir: Path | None, scheduler: str | None, workers: 
         click.echo(f"searched {len(r.trials)} designs ({states['ok']} feasible, {states['infeasible']} infeasible, "
                    f"{states['failed']} failed); verified {len(r.verified)} by the full chain; front of "
                    f"{len(r.front)} in {r.folder}")
-        if r.chosen is None:
-            click.echo("no verified design meets every requirement: see README.md there", err=True)
-            sys.exit(EXIT_BAD_INPUT)
+        if r.chosen is None:  # a result, not an input error: the study and its tables are written and resumable
+            click.echo("magfab: warning: no verified design meets every requirement: see README.md there; relax a "
+                       "requirement, widen the variables or raise study.trials and run again", err=True)
+            return
         click.echo(f"chosen: {r.names[r.chosen]}; build it: magfab build {r.folder / 'designs' / r.names[r.chosen]}.toml")
 
 

@@ -14,6 +14,9 @@ from __future__ import annotations
 
 import contextlib
 import math
+import os
+import socket
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator
@@ -59,7 +62,7 @@ def client(scheduler: str | None, workers: int | None) -> Iterator[Any]:
     import dask
     from distributed import Client, LocalCluster
 
-    with dask.config.set({"distributed.worker.daemon": False, "logging.distributed": "error"}):
+    with dask.config.set({"logging.distributed": "error"}):
         if scheduler:
             try:
                 c = Client(scheduler, timeout="3s")
@@ -68,15 +71,10 @@ def client(scheduler: str | None, workers: int | None) -> Iterator[Any]:
             with c:
                 yield c
             return
-        import os
-
-        n = workers or os.cpu_count() or 1
-        import warnings
-
         # The scheduler's HTTP endpoint moves to a free port when 8787 is taken (another cluster): nothing to report.
         warnings.filterwarnings("ignore", message="Port 8787 is already in use", category=UserWarning)
-        with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
-                          silence_logs=50) as cluster, Client(cluster) as c:
+        with LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
+                          dashboard_address=None, silence_logs=50) as cluster, Client(cluster) as c:
             yield c
 
 
@@ -131,17 +129,11 @@ RUNNER = "runner"
 
 
 def _runner() -> str:
-    import os
-    import socket
-
     return f"{socket.gethostname()}:{os.getpid()}"
 
 
 def _dead(runner: str | None) -> bool:
     """True for a run on this host whose process is gone (a run elsewhere, sharing the storage, is left alone)."""
-    import os
-    import socket
-
     host, _, pid = (runner or "").rpartition(":")
     if host != socket.gethostname() or not pid.isdigit():
         return False

@@ -122,7 +122,7 @@ def test_an_existing_cluster_by_its_address(tmp_path):
     (tmp_path / "t.toml").write_text(small)
     with LocalCluster(n_workers=2, threads_per_worker=1, dashboard_address=None) as cluster:
         run = magfab("design", "t.toml", "--scheduler", cluster.scheduler_address, cwd=tmp_path)
-        assert run.returncode in (0, 2) and "Traceback" not in run.stderr, run.stderr  # 2: none of 8 met the targets
+        assert run.returncode == 0 and "Traceback" not in run.stderr, run.stderr
         counts = cluster.scheduler.task_prefixes["evaluate"].state_counts  # what went through this scheduler
     assert "searched 8 designs" in run.stdout and counts["memory"] >= 8  # every searched design went through it
 
