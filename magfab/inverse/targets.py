@@ -25,7 +25,7 @@
     gain_sel = 0
 
     [study]
-    trials = 400                          # designs the search evaluates (cheap models)
+    trials = 250                          # designs the search evaluates (cheap models)
     verify = 8                            # designs near the front re-evaluated by the full model chain (FE)
     seed = 0
 

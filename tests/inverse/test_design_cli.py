@@ -30,8 +30,8 @@ d_min_mm = [2.5, 3.5]
 elastomer_diameter_mm = [10.0, 12.0]
 cover_mm = [1.0, 2.5]
 [study]
-trials = 160
-verify = 6
+trials = 120
+verify = 4
 seed = 1
 """
 
@@ -73,11 +73,11 @@ def test_the_files_a_user_gets(study):
                  "pareto.png", "README.md", "index.html"):
         assert (folder / name).stat().st_size > 0, name
     trials = list(csv.DictReader(open(folder / "trials.csv", newline="")))
-    assert len(trials) == 160
+    assert len(trials) == 120
     assert all(t["reason"] for t in trials if t["state"] != "ok")  # every failure and violation says why
     import pyarrow.parquet as pq
 
-    assert pq.read_table(folder / "trials.parquet").num_rows == 160
+    assert pq.read_table(folder / "trials.parquet").num_rows == 120
     page = (folder / "README.md").read_text()
     chosen = run.stdout.split("chosen: ")[1].split(";")[0]
     assert f"magfab build designs/{chosen}.toml" in page
@@ -92,7 +92,7 @@ def test_running_again_resumes(study):
     cwd, folder, run = study
     again = magfab("design", "targets.toml", "--workers", "2", cwd=cwd)
     assert again.returncode == 0, again.stderr
-    assert "searched 160 designs" in again.stdout
+    assert "searched 120 designs" in again.stdout
     assert again.stdout.split("chosen: ")[1] == run.stdout.split("chosen: ")[1]
 
 
@@ -118,7 +118,7 @@ def test_an_existing_cluster_by_its_address(tmp_path):
     """--scheduler connects to a Dask cluster started elsewhere (here: by this test) and runs the study there."""
     from distributed import LocalCluster
 
-    small = TARGETS.replace("trials = 160", "trials = 8").replace("verify = 6", "verify = 1")
+    small = TARGETS.replace("trials = 120", "trials = 8").replace("verify = 4", "verify = 1")
     (tmp_path / "t.toml").write_text(small)
     with LocalCluster(n_workers=2, threads_per_worker=1, dashboard_address=None) as cluster:
         run = magfab("design", "t.toml", "--scheduler", cluster.scheduler_address, cwd=tmp_path)
