@@ -138,8 +138,9 @@ def _parts(result: "DesignResult") -> list[tuple[str, Any]]:
     states = {s: sum(r.state == s for r in result.trials) for s in ("ok", "infeasible", "failed")}
     cheap = t.study.models.value == "surrogate"
     how = "the cheap models (the elastomer surrogate for the FE)" if cheap else "the full model chain (FE)"
-    again = (f"The {len(result.verified)} designs nearest the front were re-evaluated by the full model chain (FE), "
-             "which every figure below is." if cheap else "Every figure below is the full chain's.")
+    again = (f"The {len(result.verified)} designs nearest the front (a third of them from those the cheap models "
+             "found just short of a requirement, if any) were re-evaluated by the full model chain (FE), which every "
+             "figure below is." if cheap else "Every figure below is the full chain's.")
     parts: list[tuple[str, Any]] = [
         ("h1", f"Design study: {t.name}"),
         ("p", "Requirements: " + ", ".join(f"{k} = {v:g}" for k, v in req.items()) + ". Objectives: "

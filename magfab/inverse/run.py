@@ -109,13 +109,39 @@ def _verified(study, screened: list[Record], targets: Targets, base, dask_client
     return [Record(r.number, r.point, **kept[f"verified:{r.number}"]) for r in screened]
 
 
+#: A design the cheap chain finds short of a requirement by at most this (relative) is "near-feasible": twice the
+#: surrogate's 90th-percentile held-out force error, so the full chain may well find it meets the requirement.
+NEAR_MARGIN = 0.06
+#: The share of the verification budget kept for near-feasible designs (when there are any).
+NEAR_SHARE = 1.0 / 3.0
+
+
 def _near_front(trials: list[Record], targets: Targets) -> list[int]:
-    """Indices of up to ``study.verify`` feasible trials near the cheap models' front."""
+    """Indices of up to ``study.verify`` trials for the full chain: the cheap chain's feasible front (spread along
+    it, then the next ranks), and, with a third of the budget, the front of the near-feasible designs, those short of
+    a requirement by at most :data:`NEAR_MARGIN` (the best designs often sit on a requirement's boundary, where the
+    cheap chain's error decides which side they fall)."""
     ok = [i for i, r in enumerate(trials) if r.state == "ok"]
-    if not ok:
+    near = [i for i, r in enumerate(trials) if _near_feasible(r)]
+    k = targets.study.verify
+    k_near = min(len(near), int(round(k * NEAR_SHARE))) if ok else min(len(near), k)
+    return _picks(trials, ok, targets, k - k_near) + _picks(trials, near, targets, k_near)
+
+
+def _near_feasible(r: Record) -> bool:
+    """Infeasible only by requirement margins within NEAR_MARGIN (the last constraint counts error findings; the
+    one a resolution requirement adds, resolution-short, is that requirement again)."""
+    if r.state != "infeasible" or not r.constraints:
+        return False
+    other_errors = [e for e in r.errors if not e.startswith("resolution-short")]
+    return not other_errors and all(c <= NEAR_MARGIN for c in r.constraints[:-1])
+
+
+def _picks(trials: list[Record], idx: list[int], targets: Targets, k: int) -> list[int]:
+    if not idx or k <= 0:
         return []
-    values = np.array([[trials[i].metrics[o.value] for o in targets.objectives] for i in ok], dtype=float)
-    return [ok[j] for j in pick_for_verification(values, targets.directions(), targets.study.verify)]
+    values = np.array([[trials[i].metrics[o.value] for o in targets.objectives] for i in idx], dtype=float)
+    return [idx[j] for j in pick_for_verification(values, targets.directions(), k)]
 
 
 def _front(result: DesignResult) -> None:

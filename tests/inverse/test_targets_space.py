@@ -93,3 +93,25 @@ def test_front_and_ranks_against_a_hand_example():
     assert front_mask(v, ["minimize", "maximize"]).tolist() == [True, False, True, False, False, False]
     assert pick_for_verification(v, dirs, 3) == [0, 3, 1]  # both extremes, then the farthest from them
     assert pick_for_verification(v, dirs, 5) == [0, 1, 3, 4, 2]  # the whole front, then the next rank
+
+
+def test_verification_takes_near_feasible_designs_too():
+    """A third of the verification budget goes to designs the cheap chain finds just short of a requirement (within
+    NEAR_MARGIN); far misses and other error findings (eq. 9: chip saturation) are never verified."""
+    from magfab.inverse.run import _near_front
+    from magfab.inverse.study import Record
+
+    t = parse_targets('objectives = ["normal_resolution_mN", "normal_range_N"]\n[require]\nnormal_range_N = 1.0\n'
+                      '[study]\nverify = 3')
+
+    def rec(n, state, res, rng, errors=()):
+        constraints = [(1.0 - rng) / 1.0, float(len(errors))]
+        return Record(n, {}, state, "", "surrogate", {"normal_resolution_mN": res, "normal_range_N": rng},
+                      constraints, list(errors))
+
+    trials = [rec(0, "ok", 3.0, 1.2), rec(1, "ok", 2.5, 1.1), rec(2, "ok", 3.5, 1.0),
+              rec(3, "infeasible", 2.0, 0.97),  # 3 % short: near
+              rec(4, "infeasible", 1.0, 0.80),  # 20 % short: far
+              rec(5, "infeasible", 1.5, 0.99, ["chip-saturates: ..."])]  # an eq. 9 error: never
+    picks = _near_front(trials, t)
+    assert sorted(picks) == [0, 1, 3]
