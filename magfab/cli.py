@@ -344,7 +344,9 @@ def design(targets: Path, out_dir: Path | None, scheduler: str | None, workers: 
         except KeyboardInterrupt:
             _fail("interrupted; the designs evaluated so far are kept in the study folder's study.log: run the same "
                   "command again to resume", EXIT_INTERRUPTED)
-        states = {s: sum(t.state == s for t in r.trials) for s in ("ok", "infeasible", "failed")}
+        from .inverse.study import tally
+
+        states = tally(r.trials)
         click.echo(f"searched {len(r.trials)} designs ({states['ok']} feasible, {states['infeasible']} infeasible, "
                    f"{states['failed']} failed); verified {len(r.verified)} by the full chain; front of "
                    f"{len(r.front)} in {r.folder}")
@@ -359,8 +361,8 @@ def design(targets: Path, out_dir: Path | None, scheduler: str | None, workers: 
 @click.argument("targets", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("--grid", "levels", type=click.IntRange(2, 50), help="A full grid, LEVELS even steps over each range.")
 @click.option("--lhs", "samples", type=click.IntRange(1, 1_000_000), help="A Latin hypercube of SAMPLES designs.")
-@click.option("--models", "fidelity", type=click.Choice(["surrogate", "fe"]), default="surrogate", show_default=True,
-              help="The cheap models (elastomer surrogate) or the full chain (FE).")
+@click.option("--models", "fidelity", default="surrogate", show_default=True,
+              help="'surrogate' (the cheap models: the elastomer surrogate) or 'fe' (the full chain).")
 @_study_options
 def sweep(targets: Path, levels: int | None, samples: int | None, fidelity: str, out_dir: Path | None,
           scheduler: str | None, workers: int | None) -> None:
@@ -371,7 +373,9 @@ def sweep(targets: Path, levels: int | None, samples: int | None, fidelity: str,
         if (levels is None) == (samples is None):
             _fail("give one of --grid LEVELS or --lhs SAMPLES", EXIT_BAD_INPUT)
         folder, recs = run_sweep(targets, out_dir, scheduler, workers, levels, samples, fidelity, bar)
-        states = {s: sum(t.state == s for t in recs) for s in ("ok", "infeasible", "failed")}
+        from .inverse.study import tally
+
+        states = tally(recs)
         click.echo(f"evaluated {len(recs)} designs ({states['ok']} feasible, {states['infeasible']} infeasible, "
                    f"{states['failed']} failed): {folder / 'sweep.csv'}")
 

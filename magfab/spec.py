@@ -24,8 +24,8 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationIn
 from .errors import SHOWN_MAX_CHARS, SpecError, _shorten, shown
 from .recipes import catalogue
 
-__all__ = ["Spec", "Tip", "Density", "Printer", "load_spec", "parse_spec", "default_spec_text", "spec_schema",
-           "NAME_PATTERN", "is_valid_name"]
+__all__ = ["Spec", "Tip", "Density", "Printer", "load_spec", "parse_spec", "spec_from_dict", "default_spec_text",
+           "spec_schema", "NAME_PATTERN", "is_valid_name"]
 
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
 
@@ -344,6 +344,11 @@ class Spec(_Section):
     def sha256(self) -> str:
         return hashlib.sha256(self.canonical_json().encode()).hexdigest()
 
+    def toml_dict(self) -> dict[str, Any]:
+        """Every key as a TOML spec file holds it (an omitted optional key stays omitted): what
+        :func:`spec_from_dict` reads back to this spec."""
+        return _without_nulls(self.model_dump(mode="json"))
+
 
 _CATALOGUE_KEYS = {
     ("magnet", "grade"): "magnets",
@@ -404,6 +409,12 @@ def load_build_spec(folder: str | Path) -> Spec:
     if not isinstance(raw, dict):
         raise SpecError("spec", str(path), "must hold a JSON object (the build's spec)")
     return _validated(_without_nulls(raw))
+
+
+def spec_from_dict(raw: dict[str, Any]) -> Spec:
+    """Validate a spec given as a dict (parsed TOML, or :meth:`Spec.toml_dict` changed): :class:`SpecError` as for a
+    file."""
+    return _validated(raw)
 
 
 def _without_nulls(raw: dict[str, Any]) -> dict[str, Any]:

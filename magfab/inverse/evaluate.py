@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import os
 import time
+from functools import lru_cache
 import traceback
 from typing import Any
 
@@ -28,11 +29,11 @@ from ..design import derive
 from ..errors import InputError, ModelLimitError, Severity
 from ..spec import FieldModel, Spec
 from .space import candidate_spec
-from .targets import Objective, Targets
+from .targets import Models, Objective, Targets
 
 __all__ = ["SURROGATE", "FE", "evaluate", "metrics_of", "constraint_names"]
 
-SURROGATE, FE = "surrogate", "fe"
+SURROGATE, FE = Models.SURROGATE.value, Models.FE.value  # the model chains (TARGETS' study.models)
 
 
 def constraint_names(targets: Targets) -> list[str]:
@@ -87,6 +88,12 @@ def _elastomer_model(design) -> tuple[Any, str]:
     return surrogate_curve, SURROGATE
 
 
+@lru_cache(maxsize=4)
+def _inputs(base_json: str, targets_json: str) -> tuple[Spec, Targets]:
+    """The base spec and targets, parsed once per worker (every design of a study sends the same two strings)."""
+    return Spec.model_validate_json(base_json), Targets.model_validate_json(targets_json)
+
+
 def evaluate(point: dict[str, Any], base_json: str, targets_json: str, fidelity: str = SURROGATE,
              name: str = "candidate") -> dict[str, Any]:
     """Evaluate one point (module doc). Returns ``{"state": "ok" | "infeasible" | "failed", "reason", "model",
@@ -96,8 +103,7 @@ def evaluate(point: dict[str, Any], base_json: str, targets_json: str, fidelity:
     out: dict[str, Any] = {"state": "failed", "reason": "", "model": fidelity, "metrics": {}, "constraints": [],
                            "errors": []}
     try:
-        targets = Targets.model_validate_json(targets_json)
-        base = Spec.model_validate_json(base_json)
+        base, targets = _inputs(base_json, targets_json)
         _run(point, base, targets, fidelity, name, out)
     except (InputError, ModelLimitError) as exc:
         out["reason"] = str(exc)

@@ -28,8 +28,6 @@ def write_bytes(path: Path, data: bytes) -> Path:
 
 def spec_toml(spec: Spec, header: str) -> bytes:
     """A spec as TOML ``magfab build`` reads back to the same spec (omitted optional keys stay omitted)."""
-    from ..spec import _without_nulls
-
-    raw = _without_nulls(spec.model_dump(mode="json"))
+    raw = spec.toml_dict()
     comment = "".join(f"# {line}\n" if line else "#\n" for line in header.splitlines())
     return (comment + "\n" + tomli_w.dumps(raw)).encode("utf-8")

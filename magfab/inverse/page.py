@@ -4,20 +4,24 @@ from __future__ import annotations
 
 import html
 import io
+import json
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .files import write_bytes
+from .evaluate import constraint_names
+from .files import spec_toml, write_bytes
 from .pareto import front_mask
+from .space import candidate_spec
+from .study import tally
 from .tables import rows, write_table
-from .targets import OBJECTIVES
+from .targets import OBJECTIVES, Models
 
 if TYPE_CHECKING:
     from .run import DesignResult
 
-__all__ = ["write_outputs", "plot_front"]
+__all__ = ["write_outputs", "write_specs", "plot_front"]
 
 _LABELS = {"normal_resolution_mN": "normal resolution, mN", "shear_resolution_mN": "shear resolution, mN",
            "normal_range_N": "normal range, N", "shear_range_N": "shear range, N",
@@ -25,8 +29,6 @@ _LABELS = {"normal_resolution_mN": "normal resolution, mN", "shear_resolution_mN
 
 
 def write_outputs(result: "DesignResult", base) -> list[Path]:
-    from .run import write_specs
-
     folder = result.folder
     files = write_table(folder, "trials", rows(result.trials))
     extra = [{**{f"screened_{o.value}": s.metrics.get(o.value) for o in result.targets.objectives},
@@ -42,6 +44,27 @@ def write_outputs(result: "DesignResult", base) -> list[Path]:
     return files
 
 
+def write_specs(result: "DesignResult", base) -> list[Path]:
+    """designs/NAME.toml and NAME.json for each verified front design, and chosen.toml."""
+    out = []
+    for i in result.front:
+        r, name = result.verified[i], result.names[i]
+        spec = candidate_spec(r.point, base, result.targets, name)
+        header = (f"{name}: a design magfab design found for the targets {result.targets.name!r}.\n"
+                  f"Full-chain figures: " + ", ".join(f"{o.value} = {r.metrics[o.value]:.4g}"
+                                                      for o in result.targets.objectives))
+        text = spec_toml(spec, header)
+        out.append(write_bytes(result.folder / "designs" / f"{name}.toml", text))
+        if i == result.chosen:  # one fixed name for the chosen design, so a page can say how to build it
+            out.append(write_bytes(result.folder / "chosen.toml", text))
+        data: dict[str, Any] = {"design": name, "point": r.point, "figures": r.metrics, "model": r.model,
+                                "requirements": dict(zip(constraint_names(result.targets), r.constraints)),
+                                "error_findings": r.errors}
+        out.append(write_bytes(result.folder / "designs" / f"{name}.json",
+                               (json.dumps(data, indent=1, sort_keys=True) + "\n").encode()))
+    return out
+
+
 def _remove_stale(folder: Path, written: list[Path]) -> None:
     """A resumed study's front may have moved: its earlier designs/ files and chosen.toml go."""
     keep = {p.resolve() for p in written}
@@ -49,10 +72,6 @@ def _remove_stale(folder: Path, written: list[Path]) -> None:
     for p in stale:
         if p.exists() and p.resolve() not in keep:
             p.unlink()
-
-
-def _values(result: "DesignResult", recs) -> np.ndarray:
-    return result.objective_values(recs) if recs else np.zeros((0, len(result.targets.objectives)))
 
 
 def plot_front(result: "DesignResult", ext: str) -> bytes:
@@ -69,11 +88,11 @@ def plot_front(result: "DesignResult", ext: str) -> bytes:
     fig, axes = plt.subplots(1, len(pairs), figsize=(4.6 * len(pairs), 4.2), squeeze=False)
     ok = [r for r in result.trials if r.state == "ok"]
     bad = [r for r in result.trials if r.state == "infeasible"]
-    v_ok, v_bad = _values(result, ok), _values(result, bad)
+    v_ok, v_bad = result.objective_values(ok), result.objective_values(bad)
     front = v_ok[front_mask(v_ok, result.targets.directions())] if len(v_ok) else v_ok
     ver = [i for i, r in enumerate(result.verified) if r.state in ("ok", "infeasible")]
-    v_ver = _values(result, [result.verified[i] for i in ver])
-    v_scr = _values(result, [result.screened[i] for i in ver])
+    v_ver = result.objective_values([result.verified[i] for i in ver])
+    v_scr = result.objective_values([result.screened[i] for i in ver])
     for ax, (a, b) in zip(axes[0], pairs):
         ax.scatter(v_bad[:, a], v_bad[:, b], s=8, marker="x", color="#e8a0a0", label="infeasible (search)")
         ax.scatter(v_ok[:, a], v_ok[:, b], s=8, color="#b0b0b0", label="feasible (search)")
@@ -135,8 +154,8 @@ def _parts(result: "DesignResult") -> list[tuple[str, Any]]:
     t = result.targets
     objs = [o.value for o in t.objectives]
     req = {k: v for k, v in t.require.model_dump().items() if v is not None}
-    states = {s: sum(r.state == s for r in result.trials) for s in ("ok", "infeasible", "failed")}
-    cheap = t.study.models.value == "surrogate"
+    states = tally(result.trials)
+    cheap = t.study.models is Models.SURROGATE
     how = "the cheap models (the elastomer surrogate for the FE)" if cheap else "the full model chain (FE)"
     again = (f"The {len(result.verified)} designs nearest the front (a third of them from those the cheap models "
              "found just short of a requirement, if any) were re-evaluated by the full model chain (FE), which every "

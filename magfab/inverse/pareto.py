@@ -6,7 +6,12 @@ from typing import Sequence
 
 import numpy as np
 
-__all__ = ["minimised", "front_mask", "ranks", "pick_for_verification", "dominates_or_equals"]
+__all__ = ["values_of", "minimised", "front_mask", "ranks", "pick_for_verification", "dominates_or_equals"]
+
+
+def values_of(records: Sequence, objectives: Sequence[str]) -> np.ndarray:
+    """The objective values of records (anything with a ``metrics`` dict), one row each: shape (n, objectives)."""
+    return np.array([[r.metrics[o] for o in objectives] for r in records], dtype=float).reshape(-1, len(objectives))
 
 
 def minimised(values: np.ndarray, directions: Sequence[str]) -> np.ndarray:

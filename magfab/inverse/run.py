@@ -19,18 +19,17 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Callable
 
 import numpy as np
 
 from ..errors import InputError
-from .evaluate import FE, SURROGATE, constraint_names
-from .files import spec_toml, write_bytes
-from .pareto import front_mask, pick_for_verification
-from .space import candidate_spec, grid, latin_hypercube
+from .evaluate import FE, SURROGATE
+from .pareto import front_mask, pick_for_verification, values_of
+from .space import grid, latin_hypercube
 from .study import KEPT, Record, client, evaluate_all, records, run_study
 from .tables import rows, write_table
-from .targets import Targets, load_targets
+from .targets import Models, Targets, load_targets
 
 __all__ = ["DesignResult", "design", "sweep", "default_folder"]
 
@@ -52,7 +51,7 @@ class DesignResult:
     files: list[Path] = field(default_factory=list)
 
     def objective_values(self, recs: list[Record]) -> np.ndarray:
-        return np.array([[r.metrics[o.value] for o in self.targets.objectives] for r in recs], dtype=float)
+        return values_of(recs, [o.value for o in self.targets.objectives])
 
 
 def default_folder(targets: Targets) -> Path:
@@ -106,7 +105,7 @@ def _verified(study, screened: list[Record], targets: Targets, base, dask_client
     for r, v in zip(todo, evaluate_all([r.point for r in todo], targets, base, dask_client, FE, progress, prefix="v")):
         kept[f"verified:{r.number}"] = stored = {k: getattr(v, k) for k in KEPT}
         study.set_user_attr(f"verified:{r.number}", stored)
-    return [Record(r.number, r.point, **kept[f"verified:{r.number}"]) for r in screened]
+    return [Record.of(r.number, r.point, kept[f"verified:{r.number}"]) for r in screened]
 
 
 #: A design the cheap chain finds short of a requirement by at most this (relative) is "near-feasible": twice the
@@ -140,7 +139,7 @@ def _near_feasible(r: Record) -> bool:
 def _picks(trials: list[Record], idx: list[int], targets: Targets, k: int) -> list[int]:
     if not idx or k <= 0:
         return []
-    values = np.array([[trials[i].metrics[o.value] for o in targets.objectives] for i in idx], dtype=float)
+    values = values_of([trials[i] for i in idx], [o.value for o in targets.objectives])
     return [idx[j] for j in pick_for_verification(values, targets.directions(), k)]
 
 
@@ -162,8 +161,8 @@ def sweep(targets_path: Path, out: Path | None = None, scheduler: str | None = N
           progress: Progress | None = None) -> tuple[Path, list[Record]]:
     """Evaluate every design of a grid (``levels`` per numeric range) or a Latin hypercube (``samples``)."""
     targets, base = load_targets(targets_path)
-    if fidelity not in (SURROGATE, FE):
-        raise InputError(f"--models {fidelity}: must be {SURROGATE} or {FE}")
+    if fidelity not in {m.value for m in Models}:
+        raise InputError(f"--models {fidelity}: must be one of " + ", ".join(m.value for m in Models))
     points = list(grid(targets.variables, levels)) if levels else latin_hypercube(targets.variables, samples or 100,
                                                                                     targets.study.seed)
     if len(points) > targets.study.trials and levels:
@@ -176,26 +175,3 @@ def sweep(targets_path: Path, out: Path | None = None, scheduler: str | None = N
         recs = evaluate_all(points, targets, base, c, fidelity, lambda n, t: say("sweep", n, t), prefix="s")
     write_table(folder, "sweep", rows(recs))
     return folder, recs
-
-
-def write_specs(result: DesignResult, base) -> list[Path]:
-    """designs/NAME.toml and NAME.json for each verified front design."""
-    import json
-
-    out = []
-    for i in result.front:
-        r, name = result.verified[i], result.names[i]
-        spec = candidate_spec(r.point, base, result.targets, name)
-        header = (f"{name}: a design magfab design found for the targets {result.targets.name!r}.\n"
-                  f"Full-chain figures: " + ", ".join(f"{o.value} = {r.metrics[o.value]:.4g}"
-                                                      for o in result.targets.objectives))
-        text = spec_toml(spec, header)
-        out.append(write_bytes(result.folder / "designs" / f"{name}.toml", text))
-        if i == result.chosen:  # one fixed name for the chosen design, so a page can say how to build it
-            out.append(write_bytes(result.folder / "chosen.toml", text))
-        data: dict[str, Any] = {"design": name, "point": r.point, "figures": r.metrics, "model": r.model,
-                                "requirements": dict(zip(constraint_names(result.targets), r.constraints)),
-                                "error_findings": r.errors}
-        out.append(write_bytes(result.folder / "designs" / f"{name}.json",
-                               (json.dumps(data, indent=1, sort_keys=True) + "\n").encode()))
-    return out

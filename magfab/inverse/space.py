@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from functools import lru_cache
 from typing import Any, Iterator
 
 import numpy as np
@@ -21,7 +22,7 @@ import numpy as np
 from ..design import SECOND_HOLE_EXTRA_MM, derive
 from ..errors import SpecError
 from ..recipes import catalogue
-from ..spec import Spec, _validated, _without_nulls
+from ..spec import Spec, spec_from_dict
 from .targets import Targets, Variables
 
 __all__ = ["NUMERIC", "CATEGORICAL", "stock_disc", "candidate_spec", "suggest", "grid", "latin_hypercube",
@@ -135,7 +136,7 @@ def candidate_spec(point: dict[str, Any], base: Spec, targets: Targets, name: st
     diameter, height, grades = stock_disc(point["magnet"])
     if grades and point["grade"] not in grades:
         raise SpecError("magnet.grade", point["grade"], f"stock disc {point['magnet']} is sold in " + ", ".join(grades))
-    raw = _without_nulls(base.model_dump(mode="json"))
+    raw = base.toml_dict()
     raw["name"] = name
     raw["magnet"].update(diameter_mm=diameter, height_mm=height, grade=point["grade"])
     el = raw["elastomer"]
@@ -154,11 +155,13 @@ def candidate_spec(point: dict[str, Any], base: Spec, targets: Targets, name: st
     if targets.require.normal_resolution_mN is not None:
         raw["predict"]["required_resolution_mN"] = targets.require.normal_resolution_mN
     raw["pad"].update(_pad_for(base, d_e))
-    return _validated(raw)
+    return spec_from_dict(raw)
 
 
+@lru_cache(maxsize=8)
 def _stack_offset(base: Spec) -> float:
-    """Height of the elastomer's base above the sensing point, mm (pad + glue - sensing point)."""
+    """Height of the elastomer's base above the sensing point, mm (pad + glue - sensing point), derived once per base
+    (a frozen spec is hashable)."""
     design = derive(base)
     return design.z_elastomer_base_mm - design.z_sense_mm
 

@@ -19,7 +19,7 @@ import socket
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterable, Iterator
+from typing import Any, Callable, Iterable, Iterator, Mapping
 
 from ..errors import InputError
 from ..spec import Spec
@@ -27,7 +27,7 @@ from .evaluate import constraint_names, evaluate
 from .space import base_point, params_of, point_of, suggest
 from .targets import Sampler, Targets
 
-__all__ = ["Record", "StudyError", "client", "open_study", "run_study", "tell", "evaluate_all", "records"]
+__all__ = ["Record", "tally", "StudyError", "client", "open_study", "run_study", "tell", "evaluate_all", "records"]
 
 #: Designs kept in flight per worker: enough to hide the scheduler's round trip, few enough that the sampler sees
 #: recent results.
@@ -54,6 +54,19 @@ class Record:
     metrics: dict[str, Any]
     constraints: list[float] = field(default_factory=list)
     errors: list[str] = field(default_factory=list)
+
+    @classmethod
+    def of(cls, number: int, point: dict[str, Any], result: Mapping[str, Any]) -> "Record":
+        """A record from an evaluation's result (or what the store kept of it: :data:`KEPT`)."""
+        return cls(number, point, result.get("state") or "failed", result.get("reason") or "",
+                   result.get("model") or "", result.get("metrics") or {}, result.get("constraints") or [],
+                   result.get("errors") or [])
+
+
+def tally(records: Iterable[Record]) -> dict[str, int]:
+    """How many records are feasible ("ok"), infeasible and failed."""
+    states = [r.state for r in records]
+    return {s: states.count(s) for s in ("ok", "infeasible", "failed")}
 
 
 @contextlib.contextmanager
@@ -232,9 +245,8 @@ def records(study) -> list[Record]:
     for t in study.get_trials(deepcopy=False, states=(TrialState.COMPLETE, TrialState.FAIL)):
         if "magnet" not in t.params:  # asked, never given a point (cut short before it was drawn)
             continue
-        a = t.user_attrs.get(RESULT) or {"state": "failed", "reason": "no result stored"}
-        out.append(Record(t.number, point_of(t.params), a.get("state") or "failed", a.get("reason") or "",
-                          a.get("model") or "", a.get("metrics") or {}, a.get("constraints") or [], a.get("errors") or []))
+        out.append(Record.of(t.number, point_of(t.params),
+                             t.user_attrs.get(RESULT) or {"state": "failed", "reason": "no result stored"}))
     return out
 
 
@@ -252,6 +264,5 @@ def evaluate_all(points: Iterable[dict[str, Any]], targets: Targets, base: Spec,
         results[futures[fut]] = fut.result()
         if progress:
             progress(n, len(points))
-    return [Record(i, points[i], r["state"], r["reason"], r["model"], r["metrics"], r["constraints"], r["errors"])
-            for i, r in sorted(results.items())]
+    return [Record.of(i, points[i], r) for i, r in sorted(results.items())]
 

@@ -7,6 +7,7 @@ import io
 from pathlib import Path
 from typing import Any, Sequence
 
+from .files import write_bytes
 from .space import CATEGORICAL, NUMERIC
 from .study import Record
 from .targets import Objective
@@ -68,7 +69,5 @@ def parquet_bytes(table: list[dict[str, Any]]) -> bytes:
 
 def write_table(folder: Path, stem: str, table: list[dict[str, Any]]) -> list[Path]:
     """``stem``.csv and ``stem``.parquet in ``folder`` (each written to a temporary name and renamed)."""
-    from .files import write_bytes
-
     return [write_bytes(folder / f"{stem}.csv", csv_bytes(table)),
             write_bytes(folder / f"{stem}.parquet", parquet_bytes(table))]

@@ -46,7 +46,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_serial
 
 from ..errors import SpecError, shown
 from ..recipes import catalogue
-from ..spec import NAME_PATTERN, Spec, Tip, is_valid_name, load_spec, translate_error
+from ..spec import NAME_PATTERN, Sensor, Spec, Tip, is_valid_name, load_spec, translate_error
 
 __all__ = ["Objective", "OBJECTIVES", "Targets", "load_targets", "parse_targets"]
 
@@ -161,15 +161,8 @@ class Variables(_Table):
 
     @field_validator("tips", mode="before")
     @classmethod
-    def _tip_names(cls, v: Any) -> Any:
-        return _enums(v, Tip)
-
-    @field_validator("tips")
-    @classmethod
-    def _tips(cls, v: list[Tip]) -> list[Tip]:
-        if not v:
-            raise ValueError("must name at least one tip: hemisphere, flat")
-        return sorted(set(v), key=lambda t: t.value)
+    def _tips(cls, v: Any) -> Any:
+        return sorted(set(_enums(v, Tip)), key=lambda t: t.value)
 
     def magnet_keys(self) -> list[str]:
         return sorted(catalogue("magnet_stock")) if self.magnets == "stock" else list(self.magnets)
@@ -178,11 +171,12 @@ class Variables(_Table):
         return sorted(catalogue("materials")) if self.materials is None else list(self.materials)
 
 
-def _enums(v: Any, kind: type[Enum]) -> Any:
-    """TOML strings to the Enum's members (strict mode takes members only); an unknown name names the choices."""
-    if not isinstance(v, list):
-        return v
+def _enums(v: Any, kind: type[Enum]) -> list:
+    """A non-empty TOML array of names to the Enum's members (strict mode takes members only); an unknown name, or
+    none, names the choices."""
     names = [m.value for m in kind]
+    if not isinstance(v, list) or not v:
+        raise ValueError("must be a non-empty array of: " + ", ".join(names))
     out = []
     for x in v:
         if x not in names:
@@ -201,12 +195,12 @@ def _known(values: list[str], known: list[str], where: str) -> list[str]:
 
 
 class Chip(_Table):
-    """Register fields every candidate uses (spec [sensor])."""
+    """Register fields every candidate uses: the spec's [sensor] fields themselves (defaults, bounds, descriptions)."""
 
-    gain_sel: int = Field(0, ge=0, le=7)
-    resolution: int = Field(2, ge=0, le=3)
-    osr: int = Field(0, ge=0, le=3)
-    dig_filt: int = Field(2, ge=0, le=7)
+    gain_sel: int = Sensor.model_fields["gain_sel"]
+    resolution: int = Sensor.model_fields["resolution"]
+    osr: int = Sensor.model_fields["osr"]
+    dig_filt: int = Sensor.model_fields["dig_filt"]
 
 
 class Sampler(str, Enum):
@@ -251,15 +245,11 @@ class Targets(_Table):
 
     @field_validator("objectives", mode="before")
     @classmethod
-    def _names(cls, v: Any) -> Any:
-        return _enums(v, Objective)
-
-    @field_validator("objectives")
-    @classmethod
-    def _objectives(cls, v: list[Objective]) -> list[Objective]:
-        if not v or len(set(v)) != len(v):
-            raise ValueError("must name one or more distinct objectives: " + ", ".join(o.value for o in Objective))
-        return v
+    def _objectives(cls, v: Any) -> Any:
+        names = _enums(v, Objective)
+        if len(set(names)) != len(names):
+            raise ValueError("must name distinct objectives")
+        return names
 
     def directions(self) -> list[str]:
         return [OBJECTIVES[o] for o in self.objectives]

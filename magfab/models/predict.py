@@ -254,7 +254,7 @@ def surrogate_curve(design: "Design", body: mech.Body, mu: float,
                                                     shear_probe_depths(design, indentation),
                                                     design.spec.calibration.scan_step_mm)
     return curve, ModelUse("mechanics", "surrogate", fe_surrogate.held_out_error()["force_rms"],
-                           str(fe_surrogate.DESCRIPTION), "search"), response
+                           fe_surrogate.description(), "search"), response
 
 
 # ---------------------------------------------------------------------------------------------------

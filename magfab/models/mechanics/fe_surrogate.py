@@ -41,7 +41,7 @@ from ...spec import Tip
 from .body import Body, Curve, MechanicsError
 from .shear_surface import ShearProbe, ShearResponse
 
-__all__ = ["OutsideRegion", "BOX", "GRID", "in_region", "curve", "normal_and_shear", "held_out_error", "DESCRIPTION",
+__all__ = ["OutsideRegion", "BOX", "GRID", "in_region", "curve", "normal_and_shear", "held_out_error", "description",
            "ratios", "body_of", "run", "fit_data"]
 
 #: The box of ratios the table covers (a, h, z, c), and so the surrogate's validated region.
@@ -255,19 +255,12 @@ def _errors(model: _Model, held_out: Sequence[dict]) -> dict[str, float]:
     return out
 
 
-def _description() -> str:
+def description() -> str:
+    """One line for the report and the ModelUse: what the surrogate is and its held-out error."""
     e = held_out_error()
     return (f"Surrogate of the elastomer FE over dimensionless geometry (RBF over 4 ratios, {len(_shipped()[1]['runs'])}"
             f" FE runs); held-out error: force RMS {100 * e['force_rms']:.1f} % (90th percentile "
             f"{100 * e['force_p90']:.1f} %), magnet travel RMS {100 * e['travel_rms']:.1f} %")
-
-
-class _Description:
-    def __str__(self) -> str:
-        return _description()
-
-
-DESCRIPTION = _Description()
 
 
 def _interpolate(x: np.ndarray, y: np.ndarray, at: np.ndarray, log: bool) -> np.ndarray:
