@@ -24,9 +24,9 @@ from .errors import SpecError
 from .limits import check_limits
 from .recipes import Recipe, catalogue
 from .errors import shown
-from .spec import Spec, Tip
+from .spec import Polarity, Skin, Spec, Tip
 
-__all__ = ["Design", "derive", "DISTANCE_TOLERANCE_MM"]
+__all__ = ["Design", "Taxel", "ArrayLayout", "derive", "DISTANCE_TOLERANCE_MM"]
 
 #: How closely an explicit ``elastomer.cover_mm`` must reproduce ``sensor.d_max_mm``.
 DISTANCE_TOLERANCE_MM = 1e-3
@@ -43,6 +43,46 @@ def _fmt(x: float) -> str:
     """A derived bound for a message: exact to 1e-9 mm (no '6 mm' for 6.0004), without float noise."""
     r = round(x, 9) + 0.0
     return str(int(r)) if r.is_integer() else repr(r)
+
+
+@dataclass(frozen=True)
+class Taxel:
+    """One magnet over one chip. Position in the board frame (the chip's centre, the magnet's axis), mm."""
+
+    index: int  # the order the firmware reads the chips in, and the frames' taxel index
+    x_mm: float
+    y_mm: float
+    polarity: int  # +1: magnetised along +z (north up, as the single taxel); -1: flipped
+    i2c_address: int  # 7-bit
+    option_code: str  # the chip to order: MLX90393SLW-ABA-<code>
+    address_straps: tuple[int, int]  # (A1, A0): 0 = GND, 1 = supply
+
+    def as_dict(self) -> dict[str, object]:
+        return {"index": self.index, "x_mm": _rounded(self.x_mm), "y_mm": _rounded(self.y_mm),
+                "polarity": self.polarity, "i2c_address": self.i2c_address, "option_code": self.option_code,
+                "address_straps": list(self.address_straps)}
+
+
+@dataclass(frozen=True)
+class ArrayLayout:
+    """Where an array's taxels stand and how they are addressed (board frame, mm)."""
+
+    taxels: tuple[Taxel, ...]
+    skin: Skin
+    polarity: Polarity
+    pitch_mm: float  # the smallest centre-to-centre distance
+    min_pitch_mm: float  # the smallest the geometry allows (lips, pockets, recesses); the crosstalk budget may ask more
+    hull_mm: tuple[tuple[float, float], ...]  # convex hull of the taxel centres, counter-clockwise (1 or 2 points too)
+    pad_extent_mm: tuple[float, float, float, float]  # (x_min, y_min, x_max, y_max) of the pad: the hull grown by its radius
+
+    @property
+    def option_codes(self) -> tuple[str, ...]:
+        return tuple(sorted({t.option_code for t in self.taxels}))
+
+    def as_dict(self) -> dict[str, object]:
+        return {"taxels": [t.as_dict() for t in self.taxels], "skin": self.skin.value, "polarity": self.polarity.value,
+                "pitch_mm": _rounded(self.pitch_mm), "min_pitch_mm": _rounded(self.min_pitch_mm),
+                "hull_mm": _rounded(self.hull_mm), "pad_extent_mm": _rounded(self.pad_extent_mm)}
 
 
 @dataclass(frozen=True)
@@ -110,6 +150,14 @@ class Design:
     vent_diameter_mm: float
     vent_offset_mm: float
     vent_angles_deg: tuple[float, ...]
+    array: ArrayLayout | None = None  # None: one taxel at the origin
+
+    @property
+    def taxels(self) -> tuple[Taxel, ...]:
+        """Every taxel (one at the origin for a single-taxel design)."""
+        if self.array is not None:
+            return self.array.taxels
+        return (Taxel(0, 0.0, 0.0, 1, self.i2c_address, self.spec.sensor.option_code, self.address_straps),)
 
     # ---- profiles (r, z) in the elastomer frame ----------------------------------------------
 
@@ -170,12 +218,14 @@ class Design:
         """Every derived number (for design.json), rounded to 1 nm so the text is stable."""
         out: dict[str, object] = {}
         for name in self.__dataclass_fields__:
-            if name in {"spec", "printer", "chip"}:
+            if name in {"spec", "printer", "chip", "array"}:
                 continue
             out[name] = _rounded(getattr(self, name))
         out["tip"] = self.tip.value
         out["printer"] = self.printer.key
         out["chip"] = self.chip.key
+        if self.array is not None:  # a single taxel's design.json is what it was before arrays
+            out["array"] = self.array.as_dict()
         for name in ("envelope_volume_mm3", "core_volume_mm3", "elastomer_volume_mm3", "magnet_volume_mm3"):
             out[name] = _rounded(getattr(self, name))
         return out
@@ -184,7 +234,7 @@ class Design:
 def _rounded(value: object) -> object:
     if isinstance(value, float):
         return round(value, 6) + 0.0
-    if isinstance(value, tuple):
+    if isinstance(value, (tuple, list)):
         return [_rounded(v) for v in value]
     return value
 
@@ -213,6 +263,9 @@ def derive(spec: Spec) -> Design:
     pocket = _pocket(spec, part, stack)
     fields = {**part, **stack, **pocket, **_pad(spec), **_address(spec, chip),
               **_mould(spec, printer, part, pocket["core_base_radius_mm"])}
+    if spec.array is not None and spec.array.taxels > 1:
+        fields["array"] = _array(spec, chip, printer, fields)
+        fields["alignment_holes"] = _array_holes(spec, fields)
     design = Design(spec=spec, printer=printer, chip=chip, **fields)
     check_limits(design)  # what the build would cost, before any of it: check and build both refuse
     return design
@@ -379,3 +432,98 @@ def _mould(spec: Spec, printer, part: dict[str, object], core_base_r: float) -> 
         sprue_diameter_mm=sprue_d, sprue_offset_mm=(core_base_r + R_e) / 2.0,
         vent_diameter_mm=vent_d, vent_offset_mm=R_e - vent_d / 2.0 - 0.3, vent_angles_deg=(210.0, 330.0),
     )
+
+
+def _array(spec: Spec, chip, printer, fields: dict[str, object]) -> ArrayLayout:
+    """The array's taxels: their centres (a grid centred on the origin, row 0 at +y, index row by row; or the
+    explicit positions), polarity, and one I2C address each; checked against the smallest pitch the parts allow."""
+    arr = spec.array
+    if arr.positions_mm is not None:
+        centres, key = list(arr.positions_mm), "array.positions_mm"
+        signs = [(-1) ** i for i in range(len(centres))]
+    else:
+        p, key = arr.pitch_mm, "array.pitch_mm"
+        cells = [(r, c) for r in range(arr.rows) for c in range(arr.cols)]
+        centres = [((c - (arr.cols - 1) / 2.0) * p, ((arr.rows - 1) / 2.0 - r) * p) for r, c in cells]
+        signs = [(-1) ** (r + c) for r, c in cells]
+    if arr.polarity is Polarity.SAME:
+        signs = [1] * len(centres)
+    pitch = min(math.dist(a, b) for i, a in enumerate(centres) for b in centres[i + 1:])
+    minimum = _min_pitch(spec, printer, fields)
+    if pitch + 1e-9 < minimum:
+        raise SpecError(key, shown(arr.pitch_mm if arr.positions_mm is None else arr.positions_mm),
+                        f"puts two taxels {_fmt(pitch)} mm apart: at least {_fmt(minimum)} mm for "
+                        + ("separate fingertips with their centring lips" if arr.skin is Skin.SEPARATE else
+                           "one skin (pockets apart by the minimum skin, chip recesses by the printer's minimum wall)"))
+    addresses = _address_plan(spec, chip, len(centres))
+    taxels = tuple(Taxel(i, x + 0.0, y + 0.0, s, a, code, straps)
+                   for i, ((x, y), s, (a, code, straps)) in enumerate(zip(centres, signs, addresses)))
+    hull = _hull(centres)
+    R = spec.pad.diameter_mm / 2.0
+    xs, ys = [x for x, _ in centres], [y for _, y in centres]
+    return ArrayLayout(taxels, arr.skin, arr.polarity, pitch, minimum, tuple(hull),
+                       (min(xs) - R, min(ys) - R, max(xs) + R, max(ys) + R))
+
+
+def _min_pitch(spec: Spec, printer, fields: dict[str, object]) -> float:
+    """The closest two taxels' centres may be: separate fingertips share one lip wall between them; a continuous
+    skin keeps the minimum skin between two pockets; the pad keeps its minimum wall between two chip recesses."""
+    recesses = fields["recess_side_mm"] + printer["min_wall_mm"].nominal
+    if spec.array.skin is Skin.SEPARATE:
+        return max(2.0 * fields["lip_inner_radius_mm"] + (spec.pad.lip_width_mm if spec.pad.lip_height_mm > 0 else 0.0),
+                   recesses)
+    return max(2.0 * fields["pocket_radius_mm"] + spec.elastomer.min_skin_mm, recesses)
+
+
+def _address_plan(spec: Spec, chip, n: int) -> list[tuple[int, str, tuple[int, int]]]:
+    """(address, option code, (A1, A0)) per taxel: the four A1/A0 straps of the sensor's option code from its
+    address on, then the next option codes' (the order number's -0xx sets the base: one code per four chips, as the
+    ReSkin/AnySkin boards mix two). Ordering the right chips needs no programming step; the chip's user-writable
+    EE_I2C_ADDR (datasheet section 8.4) would, for each chip alone on the bus before assembly."""
+    codes = sorted(k.rsplit("_", 1)[1] for k in chip.quantities if k.startswith("i2c_base_address_"))
+    start = codes.index(spec.sensor.option_code)
+    plan = []
+    for code in codes[start:] + codes[:start]:
+        base = int(chip[f"i2c_base_address_{code}"].nominal)
+        first = spec.sensor.i2c_address - base if code == spec.sensor.option_code else 0
+        plan += [(base + k, code, (k >> 1 & 1, k & 1)) for k in range(first, 4)]
+    if len(plan) < n:
+        raise SpecError("sensor.i2c_address", shown(spec.sensor.i2c_address),
+                        f"leaves {len(plan)} addresses for {n} taxels on one bus",
+                        f"start at the base address of option code {codes[0]}")
+    return plan[:n]
+
+
+def _hull(points: list[tuple[float, float]]) -> list[tuple[float, float]]:
+    """Convex hull, counter-clockwise from the lowest-leftmost point (Andrew's monotone chain); collinear points
+    give the two ends."""
+    pts = sorted(set(points))
+    if len(pts) <= 2:
+        return pts
+
+    def half(seq):
+        out: list[tuple[float, float]] = []
+        for p in seq:
+            while len(out) >= 2 and (out[-1][0] - out[-2][0]) * (p[1] - out[-2][1]) \
+                    - (out[-1][1] - out[-2][1]) * (p[0] - out[-2][0]) <= 1e-12:
+                out.pop()
+            out.append(p)
+        return out
+
+    lower, upper = half(pts), half(reversed(pts))
+    return lower[:-1] + upper[:-1]
+
+
+def _array_holes(spec: Spec, fields: dict[str, object]) -> tuple[tuple[float, float, float], ...]:
+    """The pad's two alignment holes beyond the outermost taxels along x, at pad.alignment_hole_spacing_mm / 2 from
+    them (the smaller one at -x): inside the pad's outline (the taxels' hull grown by the pad radius)."""
+    taxels = fields["array"].taxels
+    d1 = spec.pad.alignment_hole_diameter_mm
+    sx = spec.pad.alignment_hole_spacing_mm / 2.0
+    lo, hi = min(t.x_mm for t in taxels), max(t.x_mm for t in taxels)
+
+    def mean_y(x: float) -> float:
+        ys = [t.y_mm for t in taxels if abs(t.x_mm - x) < 1e-9]
+        return (min(ys) + max(ys)) / 2.0
+
+    return ((lo - sx, mean_y(lo) + 0.0, d1), (hi + sx, mean_y(hi) + 0.0, d1 + SECOND_HOLE_EXTRA_MM))

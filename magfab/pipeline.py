@@ -311,7 +311,7 @@ def plan(spec: Spec, progress: Progress | None = None, scan=None, parallel: bool
 
     say("writing reports")
     artifacts.append(Artifact("design.json", _json_bytes(design.as_dict()), "every derived dimension, mm and mm^3"))
-    artifacts.append(Artifact("spec.json", _json_bytes(spec.model_dump(mode="json")), "the spec with every default filled in"))
+    artifacts.append(Artifact("spec.json", _json_bytes(spec.dump()), "the spec with every default filled in"))
     artifacts.append(Artifact("findings.json", _json_bytes([f.as_dict() for f in findings]), "design and mesh checks"))
     say("drawing the report")
     t = time.perf_counter()

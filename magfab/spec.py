@@ -9,9 +9,9 @@ The JSON Schema shipped beside this module (``spec.schema.json``) is generated f
 
 from __future__ import annotations
 
-import difflib
 import hashlib
 import json
+import math
 import re
 import tomllib
 from enum import Enum
@@ -19,12 +19,14 @@ from importlib import resources
 from pathlib import Path
 from typing import Any, Optional
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator, model_validator
 
-from .errors import SHOWN_MAX_CHARS, SpecError, _shorten, shown
+from .errors import SpecError, _shorten, shown
+from .spec_errors import did_you_mean, translate_error
 from .recipes import catalogue
 
-__all__ = ["Spec", "Tip", "Density", "Printer", "load_spec", "parse_spec", "spec_from_dict", "default_spec_text",
+__all__ = ["Spec", "Tip", "Density", "Printer", "Array", "Skin", "Polarity", "MAX_TAXELS", "load_spec", "parse_spec",
+           "spec_from_dict", "default_spec_text", "translate_error",
            "spec_schema", "NAME_PATTERN", "is_valid_name"]
 
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
@@ -314,6 +316,76 @@ class Fabrication(_Section):
     density_g_cm3: Optional[float] = Field(None, gt=0.1, le=10.0, description="Override the silicone's density, g/cm^3.")
 
 
+class Skin(str, Enum):
+    """How an array's taxels are cast: 'separate' fingertips on one base, or one 'continuous' skin with N magnets."""
+
+    SEPARATE = "separate"
+    CONTINUOUS = "continuous"
+
+
+class Polarity(str, Enum):
+    """Magnetisation of an array's magnets: all 'same' (+z), or 'alternating' (a checkerboard; by index for
+    explicit positions)."""
+
+    SAME = "same"
+    ALTERNATING = "alternating"
+
+
+#: Taxels one array may hold: four option codes times four A1/A0 straps give sixteen addresses on one I2C bus.
+MAX_TAXELS = 16
+
+
+class Array(_Section):
+    """Several taxels from one spec: every taxel is the fingertip the other sections describe, each over its own
+    MLX90393, on one board. Omit the section for a single taxel."""
+
+    rows: int = Field(1, ge=1, le=MAX_TAXELS, description="Rows of the grid (along y).")
+    cols: int = Field(1, ge=1, le=MAX_TAXELS, description="Columns of the grid (along x).")
+    pitch_mm: Optional[float] = Field(
+        None, gt=0.0, le=100.0, description="Centre-to-centre distance of neighbouring taxels in the grid, mm "
+        "(required for a grid of more than one taxel).")
+    positions_mm: Optional[tuple[tuple[float, float], ...]] = Field(
+        None, description="Explicit taxel centres [[x, y], ...] in the board frame, mm, instead of rows, cols and "
+        "pitch_mm (taxel index = order in the list).")
+    skin: Skin = Field(Skin.SEPARATE, strict=False, description="'separate' fingertips or one 'continuous' skin.")
+    polarity: Polarity = Field(Polarity.SAME, strict=False, description="'same' or 'alternating' magnetisation.")
+    crosstalk_mN: Optional[float] = Field(
+        None, gt=0.0, le=1.0e4, description="Largest force error at a taxel that its neighbours moving through "
+        "their range may cause, mN; omit: the taxel's normal force resolution.")
+
+    @field_validator("positions_mm", mode="before")
+    @classmethod
+    def _pairs(cls, v: Any) -> Any:
+        """TOML gives arrays as lists; strict mode takes only tuples."""
+        if v is None:
+            return v
+        if not isinstance(v, list) or not v or not all(
+                isinstance(p, list) and len(p) == 2
+                and all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) and abs(x) <= 500
+                        for x in p) for p in v):
+            raise ValueError(f"must be an array of 1 to {MAX_TAXELS} [x, y] pairs of numbers within +-500 mm")
+        if len(v) > MAX_TAXELS:
+            raise ValueError(f"must hold at most {MAX_TAXELS} taxels (four option codes x four A1/A0 straps on one "
+                             "I2C bus)")
+        return tuple((float(x), float(y)) for x, y in v)
+
+    @model_validator(mode="after")
+    def _grid(self) -> "Array":
+        if self.positions_mm is not None:
+            if self.rows != 1 or self.cols != 1 or self.pitch_mm is not None:
+                raise ValueError("give either positions_mm or rows, cols and pitch_mm, not both")
+        elif self.rows * self.cols > MAX_TAXELS:
+            raise ValueError(f"rows x cols = {self.rows * self.cols} taxels: at most {MAX_TAXELS} (four option codes "
+                             "x four A1/A0 straps on one I2C bus)")
+        elif self.rows * self.cols > 1 and self.pitch_mm is None:
+            raise ValueError("pitch_mm is required for a grid of more than one taxel")
+        return self
+
+    @property
+    def taxels(self) -> int:
+        return len(self.positions_mm) if self.positions_mm is not None else self.rows * self.cols
+
+
 class Build(_Section):
     """Build options."""
 
@@ -336,10 +408,16 @@ class Spec(_Section):
     firmware: Firmware = Field(default_factory=Firmware)
     fabrication: Fabrication = Field(default_factory=Fabrication)
     build: Build = Field(default_factory=Build)
+    array: Optional[Array] = Field(None, description="Several taxels on one board (omit for one).")
+
+    def dump(self) -> dict[str, Any]:
+        """Every key, defaults included, as JSON values (spec.json); a single taxel has no ``array`` key, so its
+        spec, hash and build are what they were before arrays existed."""
+        return self.model_dump(mode="json", exclude={"array"} if self.array is None else None)
 
     def canonical_json(self) -> str:
         """Every key, defaults included, as sorted JSON: the basis of the spec hash."""
-        return json.dumps(self.model_dump(mode="json"), sort_keys=True, separators=(",", ":"))
+        return json.dumps(self.dump(), sort_keys=True, separators=(",", ":"))
 
     def sha256(self) -> str:
         return hashlib.sha256(self.canonical_json().encode()).hexdigest()
@@ -347,7 +425,7 @@ class Spec(_Section):
     def toml_dict(self) -> dict[str, Any]:
         """Every key as a TOML spec file holds it (an omitted optional key stays omitted): what
         :func:`spec_from_dict` reads back to this spec."""
-        return _without_nulls(self.model_dump(mode="json"))
+        return _without_nulls(self.dump())
 
 
 _CATALOGUE_KEYS = {
@@ -431,104 +509,8 @@ def _validated(raw: dict[str, Any]) -> Spec:
         value = getattr(getattr(spec, section), key)
         known = sorted(catalogue(kind))
         if value not in known:
-            raise SpecError(f"{section}.{key}", shown(value), "must be one of " + ", ".join(known), _did_you_mean(value, known))
+            raise SpecError(f"{section}.{key}", shown(value), "must be one of " + ", ".join(known), did_you_mean(value, known))
     return spec
-
-
-def _model_at(loc: tuple[Any, ...], root: type[BaseModel] | None = None) -> type[BaseModel] | None:
-    model: type[BaseModel] = root or Spec
-    for part in loc:
-        field = model.model_fields.get(str(part))
-        if field is None or not (isinstance(field.annotation, type) and issubclass(field.annotation, BaseModel)):
-            return None
-        model = field.annotation
-    return model
-
-
-def _did_you_mean(word: str, choices: list[str]) -> str:
-    if len(word) > 4 * max(map(len, choices), default=0):  # nothing that long is a typo of a choice
-        return ""
-    close = difflib.get_close_matches(word, choices, n=1, cutoff=0.6)
-    return f"did you mean {close[0]!r}?" if close else ""
-
-
-def _lookup(raw: dict[str, Any], loc: tuple[Any, ...]) -> Any:
-    value: Any = raw
-    for part in loc:
-        if isinstance(value, dict) and part in value:
-            value = value[part]
-        elif isinstance(value, (list, tuple)) and isinstance(part, int) and 0 <= part < len(value):
-            value = value[part]
-        else:
-            return "<missing>"
-    return value
-
-
-def _key_part(part: object) -> str:
-    """A key as TOML would write it: bare when it can be, else quoted with escapes (one line, always, and
-    shortened like a value when it is long)."""
-    if isinstance(part, int):
-        return f"[{part}]"
-    text = str(part)
-    return text if re.fullmatch(r"[A-Za-z0-9_-]+", text) and len(text) <= SHOWN_MAX_CHARS else _shorten(json.dumps(text))
-
-
-def _key(loc: tuple[Any, ...]) -> str:
-    return "".join(p if p.startswith("[") or not i else "." + p for i, p in enumerate(map(_key_part, loc)))
-
-
-#: Unit suffixes of key names, as a message prints them after a bound.
-_UNITS = {"mm": "mm", "deg": "deg", "kPa": "kPa", "pct": "%", "mN": "mN", "G": "G", "h": "h", "min": "min",
-          "hz": "Hz"}
-_BOUNDS = {"greater_than": ("gt", "greater than"), "greater_than_equal": ("ge", "at least"),
-           "less_than": ("lt", "less than"), "less_than_equal": ("le", "at most")}
-
-
-def _number(x: object) -> str:
-    """A bound exactly as the model holds it: 10.0 -> '10', 0.5 -> '0.5', 2147483647 -> '2147483647'."""
-    if isinstance(x, float) and x.is_integer() and abs(x) < 1e16:
-        return str(int(x))
-    return repr(x) if isinstance(x, float) else str(x)
-
-
-def translate_error(exc: ValidationError, raw: dict[str, Any], root: type[BaseModel] | None = None) -> SpecError:
-    """Turn pydantic's first error into our one-line message: the key, the value exactly and bounded in
-    length (:func:`shown`), and what is allowed with its bound printed as the model holds it. ``root``: the model
-    validated (default :class:`Spec`; the design search's targets use it too)."""
-    err = exc.errors(include_url=False)[0]
-    loc = tuple(err["loc"])
-    key = _key(loc)
-    value = err.get("input", _lookup(raw, loc))
-    kind = err["type"]
-    if isinstance(value, dict):
-        value = "{...}"
-    if kind == "extra_forbidden":
-        parent = _model_at(loc[:-1], root)
-        allowed = sorted(parent.model_fields) if parent else []
-        what = "unknown section" if len(loc) == 1 and value == "{...}" else "unknown key"
-        return SpecError(key, shown(value), f"{what}; allowed: {', '.join(allowed)}", _did_you_mean(str(loc[-1]), allowed))
-    if kind == "missing":
-        return SpecError(key, "<missing>", "required key is missing")
-    if kind == "model_type":
-        return SpecError(key, shown(value), "must be a table (a [section])")
-    last = next((str(p) for p in reversed(loc) if not isinstance(p, int)), "")
-    suffix = last.rsplit("_", 1)[-1] if "_" in last else ""
-    unit = f" {_UNITS[suffix]}" if suffix in _UNITS else ""
-    ctx = err.get("ctx") or {}
-    if kind in _BOUNDS:
-        name, words = _BOUNDS[kind]
-        msg = f"must be {words} {_number(ctx[name])}{unit}"
-    elif kind == "float_type":
-        msg = "must be a number" + (unit and f" (in{unit})")
-    elif kind in {"int_type", "int_from_float", "int_parsing"}:
-        msg = "must be an integer (a whole number such as 12 or 12.0)"
-    elif kind == "value_error":
-        msg = str(ctx.get("error", err["msg"])).removeprefix("Value error, ")
-    elif kind == "string_pattern_mismatch":
-        msg = f"must match the pattern {ctx.get('pattern', '')}"
-    else:
-        msg = err["msg"].replace("Input should be", "must be").replace("String should", "must")
-    return SpecError(key, shown(value), msg)
 
 
 def spec_schema() -> dict[str, Any]:

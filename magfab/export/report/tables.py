@@ -49,18 +49,21 @@ def spec_sections(spec: "Spec") -> list[dict[str, object]]:
     """Every section and key of the spec with its value, meaning and whether it differs from the default."""
     from ...spec import Spec
 
-    values, defaults = spec.model_dump(mode="json"), Spec().model_dump(mode="json")
+    values, defaults = spec.dump(), Spec().model_dump(mode="json")
     general = {"title": "general", "doc": "", "rows": []}
     sections = [general]
     for name, info in type(spec).model_fields.items():
+        if name not in values:  # a single taxel's spec has no [array]
+            continue
         value = values[name]
         if not isinstance(value, dict):
             general["rows"].append({"key": name, "value": _spec_value(value, name), "doc": info.description or "",
                                     "changed": value != defaults[name]})
             continue
         model = type(getattr(spec, name))
+        default = defaults[name] or model().model_dump(mode="json")
         rows = [{"key": k, "value": _spec_value(v, k), "doc": model.model_fields[k].description or "",
-                 "changed": v != defaults[name].get(k)} for k, v in value.items()]
+                 "changed": v != default.get(k)} for k, v in value.items()]
         sections.append({"title": name, "doc": (model.__doc__ or "").strip(), "rows": rows})
     return sections
 
