@@ -173,47 +173,70 @@ def _acceptance(design: Design, prediction) -> tuple[dict | None, list[Finding]]
                               f"this design: {exc}", "predict.max_stretch")]
 
 
+def _calibration_finding(result, prefix: str, source: str = "") -> Finding:
+    """The calibration's held-out errors, a warning when they miss the tolerance."""
+    err = result.calibration.to_json()["errors"]
+    return Finding(Severity.INFO if result.meets_tolerance else Severity.WARNING, "calibration",
+                   f"{prefix}{source}{result.chosen}, held-out RMS Fz {1000 * err['Fz_N']['rms_holdout']:.2f} mN, "
+                   f"Fr {1000 * err['Fr_N']['rms_holdout']:.2f} mN ({err['folds']}-fold)"
+                   + ("" if result.meets_tolerance else f"; {result.message}"), "calibration.tolerance_mN")
+
+
+def _scan(design: Design, prediction, scan, say: Progress):
+    """The scan a single taxel's calibration is fitted to: ``scan`` (with the depth warnings, and the merged file kept
+    when it was merged in memory) or a simulated one. Returns (artifacts, scan, findings)."""
+    from .formats.scan_csv import scan_csv
+    from .models.scan import simulate_scan
+    from .models.scan_guards import MERGED, merged_csv, scan_depth_warnings
+
+    if scan is None:
+        say("simulating a calibration scan")
+        scan = simulate_scan(design, prediction)
+        return [Artifact("calibration/scan_simulated.csv", scan_csv(scan).encode(),
+                         "the simulated y-z scan behind the provisional calibration (scan CSV format)")], scan, []
+    out = []
+    if MERGED in scan.source:  # made in memory from a recording and a reference log: keep what was fitted
+        out.append(Artifact("calibration/scan_merged.csv", merged_csv(scan),
+                            "the recording merged with the reference log, as fitted (scan CSV format)"))
+    found = [] if prediction is None else [Finding(Severity.WARNING, "scan-range", text, "calibration.scan_z_mm")
+                                           for text in scan_depth_warnings(scan, prediction)]
+    return out, scan, found
+
+
 def _bundle(design: Design, prediction, scan, acceptance: dict | None, say: Progress, timings: dict[str, float]):
     """The firmware-plus-calibration bundle: calibration.json (from ``scan``, or a simulated scan when there
     is none yet), its chart, the firmware sources, the generic AVR image with the .eep of its settings and
     calibration, the flash scripts and the readout package."""
     from .export import calibration_chart, firmware, readout
-    from .formats.scan_csv import scan_csv
     from .models import calibration as calibrate
-    from .models.scan import simulate_scan
 
     out: list[Artifact] = []
     found: list[Finding] = []
     t = time.perf_counter()
-    if scan is None:
-        say("simulating a calibration scan")
-        scan = simulate_scan(design, prediction)
-        out.append(Artifact("calibration/scan_simulated.csv", scan_csv(scan).encode(),
-                            "the simulated y-z scan behind the provisional calibration (scan CSV format)"))
+    mls = design.spec.calibration.method.value != "poly"  # moving least squares costs seconds: only when it may be used
+    array_doc = None
+    if design.array is not None:
+        say("fitting every taxel's calibration")
+        arrayed = _taxel_calibrations(design, prediction, scan, mls)
+        out += arrayed.artifacts
+        found += arrayed.findings
+        result, array_doc = arrayed.fits[0], arrayed.doc
     else:
-        from .models.scan_guards import MERGED, merged_csv, scan_depth_warnings
-
-        if MERGED in scan.source:  # made in memory from a recording and a reference log: keep what was fitted
-            out.append(Artifact("calibration/scan_merged.csv", merged_csv(scan),
-                                "the recording merged with the reference log, as fitted (scan CSV format)"))
-        if prediction is not None:
-            found += [Finding(Severity.WARNING, "scan-range", text, "calibration.scan_z_mm")
-                      for text in scan_depth_warnings(scan, prediction)]
-    say("fitting the calibration")
-    # Moving least squares costs seconds; only fit it when the spec may use it.
-    result = calibrate.fit(scan, design, mls=design.spec.calibration.method.value != "poly")
+        scan_files, scan, scan_found = _scan(design, prediction, scan, say)
+        out += scan_files
+        found += scan_found
+        say("fitting the calibration")
+        result = calibrate.fit(scan, design, mls=mls)
     cal = result.calibration.to_json()
     timings["calibrate"] = time.perf_counter() - t
-    err = cal["errors"]
-    found.append(Finding(Severity.INFO if result.meets_tolerance else Severity.WARNING, "calibration",
-                         f"calibration from the {cal['scan']['source']} scan ({cal['scan']['rows']} rows): "
-                         f"{result.chosen}, held-out RMS Fz {1000 * err['Fz_N']['rms_holdout']:.2f} mN, "
-                         f"Fr {1000 * err['Fr_N']['rms_holdout']:.2f} mN ({err['folds']}-fold)"
-                         + ("" if result.meets_tolerance else f"; {result.message}"), "calibration.tolerance_mN"))
-    out.append(Artifact("calibration/calibration.json", _json_bytes(cal),
-                        "force calibration (polynomial in Bz, Br): coefficients, scaling, valid region, held-out errors, scan hash"))
+    if array_doc is None:
+        found.append(_calibration_finding(result, "", f"calibration from the {cal['scan']['source']} scan "
+                                          f"({cal['scan']['rows']} rows): "))
+        out.append(Artifact("calibration/calibration.json", _json_bytes(cal), "force calibration (polynomial in Bz, "
+                            "Br): coefficients, scaling, valid region, held-out errors, scan hash"))
     for name, data in sorted(calibration_chart.chart(result).items()):
-        out.append(Artifact(f"calibration/{name}", data, calibration_chart.caption(result)))
+        out.append(Artifact(f"calibration/{name}", data, calibration_chart.caption(result)
+                            + ("" if array_doc is None else " (taxel 0)")))
     if acceptance is not None:
         out.append(Artifact("calibration/acceptance.json", _json_bytes(acceptance),
                             "acceptance-test bands: field at rest and the rise under a known weight, with assumptions"))
@@ -223,7 +246,8 @@ def _bundle(design: Design, prediction, scan, acceptance: dict | None, say: Prog
     out += [Artifact(f"firmware/{rel}", data, "EEPROM image beside the .hex: the calibration record the image reads "
                      "(docs/bundle.md section 4)" if rel == firmware.EEP_NAME else "firmware source")
             for rel, data in sorted(fw.items())]
-    rd = readout.render(design, cal, acceptance)
+    rd = readout.render(design, cal, acceptance, array_doc,
+                        () if array_doc is None else tuple(f.calibration.to_json() for f in arrayed.fits))
     out += [Artifact(rel, data, "readout package (pip install ./readout)") for rel, data in sorted(rd.items())]
     timings["render"] = time.perf_counter() - t
     # the generic image shipped in the package, on every machine (avr-gcc or not): its settings and calibration
@@ -234,6 +258,39 @@ def _bundle(design: Design, prediction, scan, acceptance: dict | None, say: Prog
                         f"settings and calibration from the .eep; flash {made['flash_bytes']} B, RAM "
                         f"{made['ram_bytes']} B ({made['toolchain']['avr-gcc']}, avr-libc {made['toolchain']['avr-libc']})"))
     return out, found, result
+
+
+@dataclass(frozen=True)
+class _Arrayed:
+    fits: tuple  # FitResult per taxel
+    doc: dict  # calibration/array.json
+    artifacts: list
+    findings: list
+
+
+def _taxel_calibrations(design: Design, prediction, scan, mls: bool) -> _Arrayed:
+    """An array's calibrations: each taxel's simulated scan (its neighbours' field included), its fit to the
+    compensated scan, and calibration/array.json (:mod:`magfab.models.taxels`)."""
+    from .formats.scan_csv import scan_csv
+    from .models.taxels import calibrate_taxels
+
+    if scan is not None:
+        raise BuildError([Finding(Severity.ERROR, "array-scan", "an array is calibrated from one scan per taxel; "
+                                  "magfab calibrate takes one scan, so an array build keeps its simulated calibrations",
+                                  "array")])
+    arrayed = calibrate_taxels(design, prediction, mls=mls)
+    doc = arrayed.as_json(design)
+    out = [Artifact("calibration/array.json", _json_bytes(doc), "the array: each taxel's address, order code, "
+                    "polarity, position and calibration file, and the neighbours' field the host removes")]
+    found = []
+    for taxel, fitted, scan in zip(design.taxels, arrayed.fits, arrayed.scans):
+        k = taxel.index
+        out.append(Artifact(f"calibration/{arrayed.file_name(k)}", _json_bytes(fitted.calibration.to_json()),
+                            f"force calibration of taxel {k} (fitted to its scan with the neighbours' field removed)"))
+        out.append(Artifact(f"calibration/scan_simulated_taxel_{k:02d}.csv", scan_csv(scan).encode(),
+                            f"the simulated scan of taxel {k}, as its chip reads it (scan CSV format)"))
+        found.append(_calibration_finding(fitted, f"taxel {k}: "))
+    return _Arrayed(arrayed.fits, doc, out, found)
 
 
 def _fabrication(design: Design, prediction, acceptance: dict | None, say: Progress, timings: dict[str, float]):

@@ -154,13 +154,16 @@ def _json_file(data: object) -> bytes:
     return (json.dumps(data, indent=1, sort_keys=True, allow_nan=False) + "\n").encode("ascii")
 
 
-def render(design, calibration: Mapping[str, Any], acceptance: Mapping[str, Any] | None = None) -> dict[str, bytes]:
+def render(design, calibration: Mapping[str, Any], acceptance: Mapping[str, Any] | None = None,
+           array: Mapping[str, Any] | None = None, taxel_calibrations: tuple = ()) -> dict[str, bytes]:
     """Every file of the readout package: ``{"readout/<relative path>": bytes}``, sorted, deterministic.
 
     ``design`` is a :class:`~magfab.design.Design` (from :func:`magfab.derive`); ``calibration`` is the parsed
     calibration.json (docs/bundle.md), which the package embeds (sorted keys, one-space indent); ``acceptance``
     is :func:`magfab.models.acceptance.acceptance`'s result, embedded as acceptance.json for the ``check`` command
-    (None: the package has no acceptance data and ``check`` says so). Raises :class:`SpecError` for a
+    (None: the package has no acceptance data and ``check`` says so). For an array, ``array`` is
+    calibration/array.json and ``taxel_calibrations`` every taxel's calibration.json, embedded under the names
+    array.json gives them (``calibration`` is then taxel 0's). Raises :class:`SpecError` for a
     calibration the readout cannot evaluate or malformed acceptance data, TypeError for a ``design`` of the
     wrong type.
     """
@@ -184,4 +187,10 @@ def render(design, calibration: Mapping[str, Any], acceptance: Mapping[str, Any]
     files[f"{package}/calibration.json"] = _json_file(json.loads(checked.canonical))
     if accepted is not None:
         files[f"{package}/acceptance.json"] = _json_file(accepted)
+    if array is not None:  # the compensation of docs/bundle.md section 5, the same file magfab computes it with
+        files[f"{package}/array_json.py"] = resources.files(calibration_json.__package__).joinpath(
+            "array_json.py").read_bytes()
+        files[f"{package}/array.json"] = _json_file(array)
+        for taxel, cal in zip(array["taxels"], taxel_calibrations, strict=True):
+            files[f"{package}/{taxel['calibration']}"] = _json_file(json.loads(validate_calibration(cal).canonical))
     return dict(sorted(files.items()))

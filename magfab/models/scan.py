@@ -91,7 +91,8 @@ def _quantise(x: np.ndarray, step: float) -> np.ndarray:
     return np.round(x / step) * step if step > 0 else x
 
 
-def simulate_scan(design: "Design", prediction: "Prediction | None" = None, *, ideal: bool = False) -> Scan:
+def simulate_scan(design: "Design", prediction: "Prediction | None" = None, *, ideal: bool = False, polarity: int = 1,
+                  background_uT: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> Scan:
     """The simulated calibration scan of ``design`` (module doc): field in uT at the sensing point and the
     reference force in N along :func:`scan_track`.
 
@@ -99,6 +100,8 @@ def simulate_scan(design: "Design", prediction: "Prediction | None" = None, *, i
     quantisation is then applied by rounding to its LSB, so the total matches ``total_xy_G``/``total_z_G``),
     clipped at the chip's full scale; the reference forces are rounded to ``reference_resolution_mN``.
     ``ideal=True``: the same track without noise, quantisation or clipping (the truth a fit should recover).
+    ``polarity`` -1 flips the magnet (an array's alternating taxel); ``background_uT`` is a steady field added at
+    the chip (an array's neighbours at rest, :mod:`.taxels`).
     Sample times are one chip conversion apart. Deterministic (``calibration.seed``).
     """
     from .predict import chip_setting, noise, predict
@@ -115,7 +118,7 @@ def simulate_scan(design: "Design", prediction: "Prediction | None" = None, *, i
     # The sensor at the origin, the magnet's centre at (0, y, gap + H/2): in the magnet's frame the sensing
     # point is at (0, -y, -(gap + H/2)).
     points = np.column_stack([np.zeros_like(y), -y, -(gap + magnet.height_mm / 2.0)])
-    b = fieldmod.exact(magnet, points) * UT_PER_GAUSS
+    b = polarity * fieldmod.exact(magnet, points) * UT_PER_GAUSS + np.asarray(background_uT, float)
     f = np.column_stack([np.zeros_like(y), k_s * y, fz])
     chip = chip_setting(design)
     if not ideal:
