@@ -39,6 +39,24 @@ def _row(item: str, part: str, description: str, quantity: float, unit: str, sou
             "source": source}
 
 
+def _chip_rows(design: "Design") -> list[dict[str, object]]:
+    """The Hall chips, one row per option code: the order number's suffix sets the I2C base address, so an array
+    of more than four chips orders two or more codes (the address plan of design.json)."""
+    n = design.spec.fabrication.sensors
+    source = "Melexis MLX90393 datasheet, ordering information; recipes/chips.toml"
+    if design.array is None:
+        code = design.spec.sensor.option_code
+        return [_row("Hall sensor IC", f"MLX90393SLW-ABA-{code}-RE", f"Melexis MLX90393, QFN-16 3x3 mm, option code "
+                     f"{code} (I2C base for address 0x{design.i2c_address:02X})", n, "pcs", source)]
+    rows = []
+    for code in design.array.option_codes:
+        chips = [t for t in design.taxels if t.option_code == code]
+        where = ", ".join(f"U{t.index + 1} (taxel {t.index}, 0x{t.i2c_address:02X})" for t in chips)
+        rows.append(_row("Hall sensor IC", f"MLX90393SLW-ABA-{code}-RE", f"Melexis MLX90393, QFN-16 3x3 mm, option "
+                         f"code {code}: {where}", len(chips) * n, "pcs", source))
+    return rows
+
+
 def _sensor_rows(design: "Design") -> list[dict[str, object]]:
     """The parts of the sensor itself: chip, magnet, silicone, glues, board and its parts, prints."""
     spec = design.spec
@@ -53,12 +71,11 @@ def _sensor_rows(design: "Design") -> list[dict[str, object]]:
     stencil = assembly["stencil"]
     mag = magnet_recipe(design)
     coating = mag.texts.get("coating", "") if mag is not None else ""
-    rows = [
-        _row("Hall sensor IC", f"MLX90393SLW-ABA-{spec.sensor.option_code}-RE",
-             f"Melexis MLX90393, QFN-16 3x3 mm, option code {spec.sensor.option_code} (I2C base for address "
-             f"0x{design.i2c_address:02X})", n, "pcs", "Melexis MLX90393 datasheet, ordering information; recipes/chips.toml"),
+    taxels = len(design.taxels)
+    rows = _chip_rows(design) + [
         _row("Magnet", f"NdFeB {spec.magnet.grade} disc {spec.magnet.diameter_mm:g} x {spec.magnet.height_mm:g} mm",
-             "axially magnetised" + (f", {coating} coated" if coating else ""), n, "pcs",
+             "axially magnetised" + (f", {coating} coated" if coating else "")
+             + (f"; {taxels} per sensor" if taxels > 1 else ""), taxels * n, "pcs",
              "spec magnet; recipes/magnets.toml (remanence), recipes/assembly.toml (coating)"),
         _row("Silicone", q.material, f"mix {q.ratio[0]:g}:{q.ratio[1]:g} by weight; {q.total_g:.1f} g in {q.pours} "
              f"pour(s) including {q.waste_pct:g} % waste", round(q.total_g, 1), "g",
@@ -80,7 +97,8 @@ def _sensor_rows(design: "Design") -> list[dict[str, object]]:
              _PASTE_UNIT, "recipes/assembly.toml stencil.paste (Silicon Labs QFN stencil note 9)"),
         _row("Solder wire", catalogue("bench")["solder-wire"].name, "the bottom-side parts, by hand", 1, "reel",
              "recipes/bench.toml solder-wire"),
-        _row("Capacitor", "100 nF 0603 X7R", "C1, C2: VDD and VDDIO decoupling", 2 * n, "pcs",
+        _row("Capacitor", "100 nF 0603 X7R", "C1, C2: VDD and VDDIO decoupling" if taxels == 1 else
+             f"VDD and VDDIO decoupling, two per chip (C1-C{2 * taxels})", 2 * taxels * n, "pcs",
              "pcb/ (this build): one on each supply pin"),
     ]
     if pcb.pullups:

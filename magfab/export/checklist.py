@@ -187,6 +187,24 @@ def _parts_section(design: "Design", acceptance: Mapping[str, object] | None) ->
                     Table(("item", "part", "quantity"), rows))
 
 
+def _array_sections(design: "Design") -> list[Section]:
+    """An array's address plan and orientation, before anything is made (none for a single taxel)."""
+    if design.array is None:
+        return []
+    from .checklist_array import ADDRESS_HEADER, address_rows, chips_text
+
+    arr = design.array
+    return [_section(f"The array: {len(design.taxels)} taxels, address plan", [
+        f"Each taxel is the fingertip of this checklist over its own MLX90393, {arr.pitch_mm:g} mm apart "
+        f"({'separate fingertips on one pad' if arr.skin.value == 'separate' else 'one skin holding every magnet'}, "
+        f"magnets {arr.polarity.value}). The table is the board's silkscreen, design.json's array and "
+        "calibration/array.json: the firmware reads the chips in taxel order.",
+        f"Order the chips by the code in the table ({chips_text(design)}): the code sets the chip's I2C base "
+        "address and the board's A1/A0 straps the last two bits, so a chip from the wrong reel answers at the wrong "
+        "address and the firmware reports that taxel's chip as missing.",
+    ], Table(ADDRESS_HEADER, address_rows(design)))]
+
+
 def _print_section(design: "Design") -> Section:
     printer = design.printer
     n = design.spec.fabrication.sensors
@@ -274,7 +292,13 @@ def _magnet_section(design: "Design") -> Section:
     assembly = catalogue("assembly")
     mag = magnet_recipe(design)
     t_max = _q(mag, "max_operating_temp_C") if mag is not None else None
-    return _section("Insert the magnet", [
+    if design.array is not None:
+        from .checklist_array import magnets_text
+
+        array = [f"Insert {len(design.taxels)} magnets, one per pocket, as below. " + magnets_text(design)]
+    else:
+        array = []
+    return _section("Insert the magnet" + ("s" if array else ""), array + [
         f"Magnet: NdFeB {spec.magnet.grade}, {spec.magnet.diameter_mm:g} mm diameter x {spec.magnet.height_mm:g} mm, "
         "axially magnetised" + (f", {_t(mag, 'coating')} coated" if mag is not None and _t(mag, "coating") else "") + ".",
         "Polarity: " + _lc(_t(assembly["polarity-check"], "method", "mark each magnet's north face.")),
@@ -299,15 +323,27 @@ def _solder_section(design: "Design") -> Section:
         f"F_Paste layer). {_t(stencil, 'perimeter_aperture')}",
         f"{_t(stencil, 'paste')} The chip's exposed pad gets its paste in four apertures ({coverage * 100:.0f} % "
         "coverage) so the chip does not float.",
-        f"Print the paste, place U1 (pin 1 at the silk arrow) and reflow. {_t(reflow, 'soak')} Peak at "
+        f"Print the paste, place {_chips(design)} (pin 1 at the silk arrow) and reflow. {_t(reflow, 'soak')} Peak at "
         f"{reflow['peak_C'].nominal:g} C (never above the package's {reflow['package_classification_peak_C'].nominal:g} C), "
         f"{reflow['time_above_liquidus_s'].nominal:g} s above liquidus.",
         f"Without a reflow oven, use hot air: {_lc(_t(reflow, 'hot_air_rework'))}",
-        "Inspect the chip's sides for bridges. Then solder C1, C2 (100 nF) on the bottom, under the chip"
+        "Inspect the chip's sides for bridges. Then solder "
+        + ("C1, C2 (100 nF) on the bottom, under the chip" if design.array is None else
+           f"C1-C{2 * len(design.taxels)} (100 nF) on the bottom, two under each chip")
         + (", R1, R2 (pull-ups) behind J1" if spec.pcb.pullups else "")
         + f", and J1 (Qwiic) on the bottom edge by hand, with {wire.name.split(',')[0].lower()}.",
-        f"The board answers at I2C address 0x{design.i2c_address:02X} (A1/A0 strapped on the board).",
+        f"The board answers at I2C address 0x{design.i2c_address:02X} (A1/A0 strapped on the board)." if design.array
+        is None else f"The chips answer at {', '.join(f'0x{t.i2c_address:02X}' for t in design.taxels)} (the address "
+        "plan: A1/A0 strapped on the board per chip).",
     ])
+
+
+def _chips(design: "Design") -> str:
+    if design.array is None:
+        return "U1"
+    from .checklist_array import chips_text
+
+    return f"U1-U{len(design.taxels)} ({chips_text(design)})"
 
 
 def _assemble_section(design: "Design") -> Section:
@@ -434,7 +470,7 @@ def sections(design: "Design", acceptance: Mapping[str, object] | None = None,
     recipes' numbers filled in; the Markdown and HTML templates only lay it out (and escape it). ``plan``: the
     calibration scan's extent (:func:`magfab.models.scan.scan_plan`; omitted, the spec's)."""
     q = quantities(design)
-    return [_parts_section(design, acceptance), _print_section(design), _prepare_section(design, q),
+    return [_parts_section(design, acceptance)] + _array_sections(design) + [_print_section(design), _prepare_section(design, q),
             _mix_section(design, q), _pour_section(design, q), _magnet_section(design), _solder_section(design),
             _assemble_section(design), _wiring_section(design), _flash_section(design),
             _calibrate_section(design, plan), _acceptance_section(acceptance)]

@@ -27,6 +27,7 @@ import numpy as np
 from ... import __version__
 from ...errors import Finding
 from . import tables
+from .array import array_context
 from .drawings import board_svg, stackup_figure
 from .render3d import PART_VIEWS, part_figure, section_loops
 from .tables import href
@@ -179,6 +180,7 @@ def render_report(spec: "Spec", design: "Design", findings: Sequence[Finding], a
         stack=pictures.stack, stack_rows=tables.stack_rows(design), heights=tables.heights(design),
         parts=pictures.parts, board=pictures.board,
         board_parts=tables.board_parts(board),
+        array=array_context(design, artifacts, lambda folder: _plot_figures(artifacts, folder)),
         tables=tables.prediction_tables(prediction), plots=_plot_figures(artifacts, "plots/"),
         models=tables.model_rows(prediction), calibration=tables.calibration_summary(calibration, spec.calibration.tolerance_mN),
         calibration_plots=_plot_figures(artifacts, "calibration/"),
