@@ -119,14 +119,18 @@ def build(spec: Path | None, out_dir: Path | None, as_json: bool) -> None:
               help="The spec the sensor was built from (default: the build folder's own spec.json).")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
               help="Build folder to update (default: the build folder SCAN is in, or the one you are in).")
+@click.option("--taxel", type=click.IntRange(min=0), default=None,
+              help="For an array: the taxel SCAN pressed (its rows of the recording's taxel column are fitted).")
 @click.option("--json", "as_json", is_flag=True, help="Print a machine-readable summary on stdout.")
-def calibrate(scan: Path, reference: Path | None, spec: Path | None, out_dir: Path | None, as_json: bool) -> None:
+def calibrate(scan: Path, reference: Path | None, spec: Path | None, out_dir: Path | None, taxel: int | None,
+              as_json: bool) -> None:
     """Fit the force calibration to SCAN (a CSV, see docs/bundle.md) and update the build with it:
     calibration.json, the firmware's EEPROM record and the readout package carry the new coefficients.
 
     Inside a build folder no option is needed: `magfab calibrate scan.csv --reference reference.csv` updates
-    that build from its own spec.json, file by file (your shell stays where it is)."""
-    _run_build(spec, out_dir, as_json, scan, reference)
+    that build from its own spec.json, file by file (your shell stays where it is). An array is calibrated one
+    taxel at a time (`--taxel K`); the other taxels keep the scans they were fitted to."""
+    _run_build(spec, out_dir, as_json, scan, reference, taxel)
 
 
 def _build_folder(*candidates: Path | None) -> Path | None:
@@ -161,7 +165,7 @@ def _calibration_target(spec_path: Path | None, out_dir: Path | None, scan_path:
 
 
 def _run_build(spec: Path | None, out_dir: Path | None, as_json: bool, scan_path: Path | None = None,
-               reference: Path | None = None) -> None:
+               reference: Path | None = None, taxel: int | None = None) -> None:
     with _handled():  # every import inside: Ctrl-C while a heavy library loads is still exit 130
         from .pipeline import build as run_build
         from .spec import load_spec
@@ -171,7 +175,7 @@ def _run_build(spec: Path | None, out_dir: Path | None, as_json: bool, scan_path
             loaded = load_spec(spec)
         else:
             loaded, out_dir = _calibration_target(spec, out_dir, scan_path)
-            scan = _read_scan(scan_path, reference, out_dir, loaded)
+            scan = _read_scan(scan_path, reference, out_dir, loaded, taxel)
         with _progress(sys.stderr.isatty() and not as_json) as progress:
             result = run_build(loaded, out_dir, progress, scan)  # type: ignore[arg-type]
         summary = result.summary()
@@ -206,28 +210,32 @@ def _run_build(spec: Path | None, out_dir: Path | None, as_json: bool, scan_path
                        "magfab-readout upload   (the new calibration into the reader and the board's EEPROM)")
 
 
-def _read_scan(scan_path: Path, reference: Path | None, build_dir: Path | None, spec):
+def _read_scan(scan_path: Path, reference: Path | None, build_dir: Path | None, spec, taxel: int | None = None):
     """The scan to fit: the file, or a recording merged with the reference sensor's log; refused when its
     forces are the sensor's own (a recording calibrated against itself: by their names in the reader, by their
-    values against the build's present calibration here)."""
+    values against the build's present calibration here). For an array, {taxel: scan} with the scans the build
+    folder's other taxels were fitted to (:func:`magfab.array_bench.taxel_scans`)."""
+    from .formats.scan_csv import read_recording, read_scan_csv
+    from .models.scan_guards import merge_reference
+
+    if spec.array is not None or taxel is not None:
+        from .array_bench import check_taxel
+
+        check_taxel(spec, taxel)
     if reference is not None:
-        from .models.scan_guards import merge_reference
-
-        scan = merge_reference(scan_path, reference)
+        scan = merge_reference(read_recording(scan_path, taxel), reference)
     else:
-        from .formats.scan_csv import read_scan_csv
+        scan = read_scan_csv(scan_path, taxel=taxel)
+    folder = None if build_dir is None else Path(build_dir)
+    if spec.array is not None:
+        from .array_bench import taxel_scans
 
-        scan = read_scan_csv(scan_path)
-    present = None if build_dir is None else Path(build_dir) / "calibration" / "calibration.json"
+        return taxel_scans(folder, spec, taxel, scan)
+    present = None if folder is None else folder / "calibration" / "calibration.json"
     if present is not None and present.is_file():
-        from .models.calibration import Calibration
-        from .models.scan_guards import reject_self_calibrated
+        from .models.scan_guards import reject_self_calibrated_file
 
-        try:
-            calibration = Calibration.from_json(json.loads(present.read_text(encoding="utf-8")))
-        except ValueError:  # a calibration.json gone bad: the rebuild replaces it; nothing to compare with
-            return scan
-        reject_self_calibrated(scan, calibration, spec.calibration.reference_resolution_mN)
+        reject_self_calibrated_file(scan, present, spec.calibration.reference_resolution_mN)
     return scan
 
 

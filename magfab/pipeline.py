@@ -217,7 +217,7 @@ def _bundle(design: Design, prediction, scan, acceptance: dict | None, say: Prog
     array_doc = None
     if design.array is not None:
         say("fitting every taxel's calibration")
-        arrayed = _taxel_calibrations(design, prediction, scan, mls)
+        arrayed = _taxel_calibrations(design, prediction, scan, mls)  # scan: None or {taxel: Scan}
         out += arrayed.artifacts
         found += arrayed.findings
         result, array_doc = arrayed.fits[0], arrayed.doc
@@ -268,17 +268,20 @@ class _Arrayed:
     findings: list
 
 
-def _taxel_calibrations(design: Design, prediction, scan, mls: bool) -> _Arrayed:
-    """An array's calibrations: each taxel's simulated scan (its neighbours' field included), its fit to the
-    compensated scan, and calibration/array.json (:mod:`magfab.models.taxels`)."""
+def _taxel_calibrations(design: Design, prediction, scans: dict | None, mls: bool) -> _Arrayed:
+    """An array's calibrations: each taxel's scan (measured, from ``scans`` {taxel: Scan}, or simulated with its
+    neighbours' field), its fit to the scan with the neighbours' field removed, and calibration/array.json
+    (:mod:`magfab.models.taxels`). A measured scan is kept in the build (:mod:`magfab.array_bench`) so the next
+    taxel's calibration refits it."""
+    from .array_bench import measured_scan_path
     from .formats.scan_csv import scan_csv
-    from .models.taxels import calibrate_taxels
+    from .models.scan_guards import scan_depth_warnings
+    from .models.taxels import array_field, calibrate_taxels, compensated, simulate_taxel_scan
 
-    if scan is not None:
-        raise BuildError([Finding(Severity.ERROR, "array-scan", "an array is calibrated from one scan per taxel; "
-                                  "magfab calibrate takes one scan, so an array build keeps its simulated calibrations",
-                                  "array")])
-    arrayed = calibrate_taxels(design, prediction, mls=mls)
+    scans = scans or {}
+    field = array_field(design)
+    every = tuple(scans.get(t.index) or simulate_taxel_scan(design, prediction, t.index, field) for t in design.taxels)
+    arrayed = calibrate_taxels(design, prediction, every, mls=mls)
     doc = arrayed.as_json(design)
     out = [Artifact("calibration/array.json", _json_bytes(doc), "the array: each taxel's address, order code, "
                     "polarity, position and calibration file, and the neighbours' field the host removes")]
@@ -287,9 +290,16 @@ def _taxel_calibrations(design: Design, prediction, scan, mls: bool) -> _Arrayed
         k = taxel.index
         out.append(Artifact(f"calibration/{arrayed.file_name(k)}", _json_bytes(fitted.calibration.to_json()),
                             f"force calibration of taxel {k} (fitted to its scan with the neighbours' field removed)"))
-        out.append(Artifact(f"calibration/scan_simulated_taxel_{k:02d}.csv", scan_csv(scan).encode(),
-                            f"the simulated scan of taxel {k}, as its chip reads it (scan CSV format)"))
-        found.append(_calibration_finding(fitted, f"taxel {k}: "))
+        if k in scans:
+            out.append(Artifact(measured_scan_path(k), scan_csv(scan, [f"taxel {k}, measured: {scan.source}"]).encode(),
+                                f"the measured scan taxel {k}'s calibration is fitted to (scan CSV format)"))
+            found += [Finding(Severity.WARNING, "scan-range", f"taxel {k}: {text}", "calibration.scan_z_mm")
+                      for text in scan_depth_warnings(compensated(scan, field, k), prediction)]
+        else:
+            out.append(Artifact(f"calibration/scan_simulated_taxel_{k:02d}.csv", scan_csv(scan).encode(),
+                                f"the simulated scan of taxel {k}, as its chip reads it (scan CSV format)"))
+        found.append(_calibration_finding(fitted, f"taxel {k}: ", f"{'measured' if k in scans else 'simulated'} "
+                                          "scan, "))
     return _Arrayed(arrayed.fits, doc, out, found)
 
 
@@ -335,8 +345,8 @@ def plan(spec: Spec, progress: Progress | None = None, scan=None, parallel: bool
     say = progress or (lambda _stage: None)
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
-    if scan is not None:
-        check_scan(spec, scan)
+    for measured in (scan.values() if isinstance(scan, dict) else [] if scan is None else [scan]):
+        check_scan(spec, measured)
     say("deriving the design")
     design = derive(spec)
     findings = design_findings(design)

@@ -27,7 +27,7 @@ import numpy as np
 
 from ..errors import ScanError, shown
 
-__all__ = ["SCAN_COLUMNS", "FORCE_COLUMNS", "SENSOR_FORCE_COLUMNS", "HOST_TIME_COLUMN", "REFERENCE_COLUMNS",
+__all__ = ["SCAN_COLUMNS", "FORCE_COLUMNS", "SENSOR_FORCE_COLUMNS", "HOST_TIME_COLUMN", "TAXEL_COLUMN", "REFERENCE_COLUMNS",
            "TEMPERATURE_COLUMN", "MIN_ROWS", "BANDS", "HOST_TIME_BAND", "MIN_SPAN_UT", "MIN_THICKNESS", "ScanError",
            "Scan", "Recording", "Reference", "scan_csv", "read_scan_csv", "read_recording", "read_reference",
            "check_calibration_scan"]
@@ -38,6 +38,8 @@ FORCE_COLUMNS = ("Fx_N", "Fy_N", "Fz_N")
 #: The sensor's own calibrated force, as ``magfab-readout record`` writes it: never a calibration's reference.
 SENSOR_FORCE_COLUMNS = ("Fx_sensor_N", "Fy_sensor_N", "Fz_sensor_N")
 #: A recording's host clock (``time.time()`` when the sample was read: Unix time, s), beside the device's time_s.
+#: An array's recording: which taxel each row is (docs/bundle.md section 1).
+TAXEL_COLUMN = "taxel"
 HOST_TIME_COLUMN = "host_time_s"
 #: A reference force sensor's log: ``time_s`` on the host clock of the recording's ``host_time_s``, and its force.
 REFERENCE_COLUMNS = ("time_s",) + FORCE_COLUMNS
@@ -225,6 +227,23 @@ def _values(lines: list[tuple[int, str]], names: list[str], wanted: Sequence[str
     return {c: np.asarray(v, dtype=float) for c, v in values.items()}, np.asarray(numbers, dtype=int)
 
 
+def _taxel_rows(lines: list[tuple[int, str]], names: list[str], taxel: int | None,
+                name: str) -> list[tuple[int, str]]:
+    """The header and the rows of one taxel of an array's recording (its ``taxel`` column, docs/bundle.md section 1);
+    all lines when ``taxel`` is None. ScanError without the column or without a row of that taxel."""
+    if taxel is None:
+        return lines
+    if TAXEL_COLUMN not in names:
+        raise ScanError(f"{name}: line {lines[0][0]} (header): no {TAXEL_COLUMN!r} column, so no rows can be told to "
+                        f"be taxel {taxel}'s; record an array with a current readout package")
+    at = names.index(TAXEL_COLUMN)
+    rows = [(n, s) for n, s in lines[1:] if len(s.split(",")) == len(names) and s.split(",")[at].strip() == str(taxel)]
+    if not rows:
+        seen = sorted({s.split(",")[at].strip() for _, s in lines[1:] if len(s.split(",")) == len(names)})
+        raise ScanError(f"{name}: no rows of taxel {taxel}; the file holds taxel(s) {', '.join(seen) or 'none'}")
+    return [lines[0]] + rows
+
+
 def _enough(lines: list[tuple[int, str]], name: str, what: str) -> None:
     """ScanError unless the file holds two data rows (what interpolation in time needs)."""
     if len(lines) - 1 < 2:
@@ -233,7 +252,7 @@ def _enough(lines: list[tuple[int, str]], name: str, what: str) -> None:
 
 
 def read_scan_csv(source: "str | os.PathLike[str] | bytes", *, require_force: bool = True,
-                  min_rows: int = MIN_ROWS) -> Scan:
+                  min_rows: int = MIN_ROWS, taxel: int | None = None) -> Scan:
     """A scan from a CSV file (path), CSV text (a str with a newline) or CSV bytes; docs/bundle.md section 1.
 
     Raises :class:`ScanError` (one line: file, line number, column, what is allowed) for a missing file or
@@ -243,10 +262,12 @@ def read_scan_csv(source: "str | os.PathLike[str] | bytes", *, require_force: bo
     would refuse is refused before any build work. ``require_force=False`` accepts a recording without the
     force columns (``F_N`` None). A recording's sensor forces (:data:`SENSOR_FORCE_COLUMNS`) never stand in
     for the reference force: without ``Fx_N, Fy_N, Fz_N`` beside them, or with copies of them there, the scan
-    is refused with a line saying so (guard A).
+    is refused with a line saying so (guard A). ``taxel``: only the rows of that taxel of an array (its ``taxel``
+    column).
     """
     lines, name, raw = _lines(source)
     hline, names = _header(lines, name)
+    lines = _taxel_rows(lines, names, taxel, name)
     with_force = require_force or any(c in names for c in FORCE_COLUMNS)
     _require(names, SCAN_COLUMNS + (FORCE_COLUMNS if with_force else ()), name, hline,
              f"any order; {TEMPERATURE_COLUMN} optional, others ignored")
@@ -298,11 +319,12 @@ class Reference:
     sha256: str
 
 
-def read_recording(source: "str | os.PathLike[str] | bytes") -> Recording:
+def read_recording(source: "str | os.PathLike[str] | bytes", taxel: int | None = None) -> Recording:
     """A recording (:class:`Recording`) from a file, CSV text or bytes; ScanError (one line) as
-    :func:`read_scan_csv`, and for a missing ``host_time_s``."""
+    :func:`read_scan_csv`, and for a missing ``host_time_s``. ``taxel``: only that taxel's rows of an array's."""
     lines, name, raw = _lines(source)
     hline, names = _header(lines, name)
+    lines = _taxel_rows(lines, names, taxel, name)
     _require(names, SCAN_COLUMNS + (HOST_TIME_COLUMN,), name, hline, "any order; a recording of magfab-readout "
              "record has host_time_s, the host's clock, which ties it to the reference's log: record again "
              f"with a current readout package; {TEMPERATURE_COLUMN} and {', '.join(SENSOR_FORCE_COLUMNS)} optional")

@@ -294,3 +294,18 @@ def merged_csv(scan: Scan) -> bytes:
     """The merged scan as scan CSV bytes (docs/bundle.md section 1), naming its sources in a comment."""
     return scan_csv(scan, [f"merged by magfab: {scan.source} (force: the reference, interpolated on the host "
                            "clock)"]).encode("utf-8")
+
+
+def reject_self_calibrated_file(scan: Scan, path: object, reference_resolution_mN: float) -> None:
+    """Guard B against the calibration.json at ``path`` (a build's present one); skipped when that file has gone
+    bad: the rebuild replaces it, and there is nothing to compare with."""
+    import json
+    from pathlib import Path
+
+    from .calibration import Calibration
+
+    try:
+        calibration = Calibration.from_json(json.loads(Path(path).read_text(encoding="utf-8")))
+    except ValueError:
+        return
+    reject_self_calibrated(scan, calibration, reference_resolution_mN)

@@ -78,3 +78,41 @@ def test_each_taxel_is_fitted_to_its_compensated_scan(strip):
     assert [t["calibration"] for t in doc["taxels"]] == [f"taxel_{k:02d}.json" for k in range(5)]
     assert [t["i2c_address"] for t in doc["taxels"]] == [0x0C, 0x0D, 0x0E, 0x0F, 0x10]
     assert all(f.meets_tolerance for f in whole.fits)
+
+
+def test_one_taxel_is_calibrated_from_its_rows_of_a_recording(strip, tmp_path):
+    """An array recording holds every taxel's rows (its taxel column): --taxel K fits K's rows, the build keeps that
+    scan for the next calibration, and the other taxels keep theirs."""
+    from magfab import pipeline
+    from magfab.array_bench import check_taxel, taxel_scans
+    from magfab.errors import ScanError, SpecError
+    from magfab.formats.scan_csv import read_scan_csv, scan_csv
+    from magfab.models.predict import predict
+
+    design, field = strip
+    pred = predict(design)
+    measured = [taxels.simulate_taxel_scan(design, pred, k, field) for k in range(5)]
+    lines = [scan_csv(s).splitlines() for s in measured]
+    header = lines[0][0] + ",taxel"
+    rows = [f"{line},{k}" for k, rows in enumerate(lines) for line in rows[1:] if not line.startswith("#")]
+    path = tmp_path / "rec.csv"
+    path.write_text("\n".join([header] + rows) + "\n")
+    scan = read_scan_csv(path, taxel=2)
+    np.testing.assert_allclose(scan.B_uT, measured[2].B_uT, atol=1e-3)
+    with pytest.raises(ScanError, match="no rows of taxel 7; the file holds taxel"):
+        read_scan_csv(path, taxel=7)
+    with pytest.raises(SpecError, match="give the taxel the scan pressed, 0 to 4"):
+        check_taxel(design.spec, None)
+    with pytest.raises(SpecError, match="is a single taxel"):
+        check_taxel(parse_spec(""), 0)
+
+    arrayed = pipeline._taxel_calibrations(design, pred, taxel_scans(None, design.spec, 2, scan), False)
+    files = {a.path: a for a in arrayed.artifacts}
+    assert "calibration/scan_taxel_02.csv" in files and "calibration/scan_simulated_taxel_02.csv" not in files
+    assert "calibration/scan_simulated_taxel_01.csv" in files
+    kept = tmp_path / "calibration"
+    kept.mkdir()
+    (kept / "scan_taxel_02.csv").write_bytes(files["calibration/scan_taxel_02.csv"].data)
+    again = taxel_scans(tmp_path, design.spec, 3, read_scan_csv(path, taxel=3))
+    assert sorted(again) == [2, 3] and again[2].rows == scan.rows
+    assert any("taxel 2: measured scan" in f.message for f in arrayed.findings)
