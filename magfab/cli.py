@@ -275,13 +275,19 @@ def check(spec: Path | None, as_json: bool) -> None:
             click.echo(f"{loaded.name}: ok")
 
 
+#: The example specs ``magfab init --example`` copies (magfab/examples/NAME.toml).
+EXAMPLES = ("magone", "fingertip_2x2", "strip_1x5")
+
+
 @main.command()
 @click.argument("path", required=False, type=click.Path(dir_okay=False, path_type=Path))
 @click.option("--force", is_flag=True, help="Overwrite PATH if it exists.")
 @click.option("--targets", "targets", is_flag=True,
               help="Write a commented design-targets file for `magfab design` instead (default PATH: targets.toml).")
-def init(path: Path | None, force: bool, targets: bool) -> None:
-    """Write a commented copy of the default (MagOne) spec to PATH (default: spec.toml)."""
+@click.option("--example", type=click.Choice(list(EXAMPLES)), default="magone", show_default=True,
+              help="Which example spec to copy: the MagOne taxel, a 2x2 fingertip in one skin, a 1x5 strip.")
+def init(path: Path | None, force: bool, targets: bool, example: str) -> None:
+    """Write a commented copy of an example spec (default: MagOne) to PATH (default: spec.toml)."""
     with _handled():
         from importlib import resources
 
@@ -299,7 +305,9 @@ def init(path: Path | None, force: bool, targets: bool) -> None:
             path.write_text(text.replace('name = "fingertip"', f'name = "{path.stem}"', 1), encoding="utf-8")
             click.echo(f"wrote {path}; edit it, then: magfab design {path}")
             return
-        text = default_spec_text().replace('name = "magone"', f'name = "{path.stem}"', 1)
+        text = (default_spec_text() if example == "magone" else
+                resources.files("magfab.examples").joinpath(f"{example}.toml").read_text(encoding="utf-8"))
+        text = text.replace(f'name = "{example}"', f'name = "{path.stem}"', 1)
         path.write_text(text, encoding="utf-8")
         click.echo(f"wrote {path}; edit it, then: magfab build {path}")
 

@@ -188,3 +188,15 @@ def test_ctrl_c_at_any_moment_is_exit_130_in_one_line(tmp_path, delay_s):
         assert err.strip().splitlines() == [err.strip().splitlines()[-1]]
         assert "interrupted" in err
         assert not out.exists() or (out / "manifest.json").is_file()
+
+
+def test_init_copies_an_array_example(tmp_path, monkeypatch):
+    from magfab.spec import load_spec
+
+    monkeypatch.chdir(tmp_path)
+    result = CliRunner().invoke(main, ["init", "--example", "strip_1x5", "row.toml"])
+    assert result.exit_code == 0, result.output
+    spec = load_spec("row.toml")
+    assert spec.name == "row" and spec.array.taxels == 5 and spec.array.pitch_mm == 14.0
+    bad = CliRunner().invoke(main, ["init", "--example", "nope", "x.toml"])
+    assert bad.exit_code == 2 and "fingertip_2x2" in bad.output
