@@ -188,6 +188,10 @@ def _run_build(spec: Path | None, out_dir: Path | None, as_json: bool, scan_path
                    f"{result.timings_s['total']:.2f} s)")
         click.echo(f"  rest distance {fig['d_rest_mm']} mm, cover {fig['cover_mm']} mm, "
                    f"silicone {fig['cavity_volume_mL']} mL ({fig['silicone_per_part_g']} g) per part")
+        if "taxels" in fig:
+            click.echo(f"  array: {fig['taxels']} taxels, pitch {fig['pitch_mm']} mm, {fig['skin']} skin, "
+                       f"{fig['polarity']} polarity; chips at {', '.join(fig['addresses'])} (order codes "
+                       f"{', '.join(fig['option_codes'])}: the address plan in checklist.md)")
         pred = summary.get("predictions")
         if pred:
             n0, n1 = pred["normal_sensitivity_G_per_N"]

@@ -69,6 +69,7 @@ class BuildResult:
                 "cavity_volume_mL": round(d.elastomer_volume_mm3 / 1000.0, 4),
                 "silicone_per_part_g": round(d.elastomer_volume_mm3 / 1000.0 * material["density_g_cm3"].nominal, 3),
                 "cavities": self.spec.mould.cavities,
+                **self._array_summary(),
             },
             "predictions": self._prediction_summary(),
             "calibration": self.calibration,
@@ -76,6 +77,14 @@ class BuildResult:
             "timings_s": {k: round(v, 3) for k, v in self.timings_s.items()},
         }
 
+    def _array_summary(self) -> dict[str, object]:
+        """An array's taxels (none for a single taxel, whose summary is what it was)."""
+        arr = self.design.array
+        if arr is None:
+            return {}
+        return {"taxels": len(arr.taxels), "pitch_mm": round(arr.pitch_mm, 4), "skin": arr.skin.value,
+                "polarity": arr.polarity.value, "addresses": [f"0x{t.i2c_address:02X}" for t in arr.taxels],
+                "option_codes": list(arr.option_codes)}
 
     def _prediction_summary(self) -> dict[str, object] | None:
         p = self.prediction
