@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
+from . import outline
 from .design import Design
 from .errors import Finding, Severity
 from .spec import FieldModel
@@ -52,9 +53,12 @@ def design_findings(design: Design) -> list[Finding]:
     need(design.sprue_diameter_mm, min_hole, E, "sprue", "the fill hole", "elastomer.diameter_mm",
          "the annulus between channel and cavity wall is too narrow")
     need(design.pad_roof_mm, min_wall, E, "pad-roof", "the pad's roof over the chip recess", "pad.thickness_mm")
-    rim = design.pad_radius_mm - (design.alignment_holes[-1][0] + design.alignment_holes[-1][2] / 2)
+    if design.array is None:
+        rim = design.pad_radius_mm - (design.alignment_holes[-1][0] + design.alignment_holes[-1][2] / 2)
+        web = (design.alignment_holes[0][0] * -1 - design.alignment_holes[0][2] / 2) - design.lip_outer_radius_mm
+    else:
+        rim, web = _array_pad_walls(design)
     need(rim, min_wall, E, "pad-rim", "the pad's wall outside the larger alignment hole", "pad.alignment_hole_spacing_mm")
-    web = (design.alignment_holes[0][0] * -1 - design.alignment_holes[0][2] / 2) - design.lip_outer_radius_mm
     need(web, min_wall, W, "pad-web", "the pad's web between lip and alignment hole", "pad.alignment_hole_spacing_mm")
     if design.lip_height_mm > 0:
         need(design.lip_outer_radius_mm - design.lip_inner_radius_mm, min_wall, W, "pad-lip", "the centring lip",
@@ -75,9 +79,28 @@ def design_findings(design: Design) -> list[Finding]:
     out.append(Finding(I, "stack", f"magnet lower face {_f(design.d_rest_mm)} mm above the sensing point "
                        f"(which is {_f(design.sensing_depth_mm)} mm below the package top)"))
     out.append(Finding(I, "cavity-volume", f"cavity volume {design.elastomer_volume_mm3 / 1000:.3f} mL of silicone per "
-                       f"part, {design.spec.mould.cavities} cavit{'y' if design.spec.mould.cavities == 1 else 'ies'} "
-                       "per mould"))
+                       f"part, {design.cavities} cavit{'y' if design.cavities == 1 else 'ies'} per mould"))
+    if design.array is not None:
+        arr = design.array
+        out.append(Finding(I, "array", f"{len(arr.taxels)} taxels {_f(arr.pitch_mm)} mm apart ({arr.skin.value} "
+                           f"{'skin' if design.continuous else 'tips'}; the parts allow {_f(arr.min_pitch_mm)} mm): "
+                           f"{_f(arr.pitch_mm - design.recess_side_mm)} mm of pad between chip recesses" +
+                           (f", {_f(arr.pitch_mm - 2 * design.pocket_radius_mm)} mm of silicone between pockets"
+                            if design.continuous else "")))
     return out
+
+
+def _array_pad_walls(design: Design) -> tuple[float, float]:
+    """An array pad's thinnest wall outside an alignment hole (to the pad's outline, the taxels' hull grown by the
+    pad radius) and web between a hole and a centring lip (round each tip, or round the skin)."""
+    hull = list(design.array.hull_mm)
+    rim = web = math.inf
+    for x, y, d in design.alignment_holes:
+        rim = min(rim, design.pad_radius_mm - outline.distance((x, y), hull) - d / 2)
+        to_lip = outline.distance((x, y), hull) if design.continuous else \
+            min(math.dist((x, y), (t.x_mm, t.y_mm)) for t in design.taxels)
+        web = min(web, to_lip - d / 2 - design.lip_outer_radius_mm)
+    return rim, web
 
 
 def mesh_findings(name: str, mesh: "trimesh.Trimesh", solid_volume_mm3: float, tolerance_mm: float) -> list[Finding]:

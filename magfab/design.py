@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from functools import cached_property
 
 from .errors import SpecError
+from . import outline
 from .limits import check_limits
 from .recipes import Recipe, catalogue
 from .errors import shown
@@ -74,6 +75,8 @@ class ArrayLayout:
     min_pitch_mm: float  # the smallest the geometry allows (lips, pockets, recesses); the crosstalk budget may ask more
     hull_mm: tuple[tuple[float, float], ...]  # convex hull of the taxel centres, counter-clockwise (1 or 2 points too)
     pad_extent_mm: tuple[float, float, float, float]  # (x_min, y_min, x_max, y_max) of the pad: the hull grown by its radius
+    part_centres_mm: tuple[tuple[float, float], ...]  # the magnets in one cast part's frame: every taxel of a
+    # continuous skin (its outline's extent centred on the origin), or one tip's axis for separate tips
 
     @property
     def option_codes(self) -> tuple[str, ...]:
@@ -82,7 +85,8 @@ class ArrayLayout:
     def as_dict(self) -> dict[str, object]:
         return {"taxels": [t.as_dict() for t in self.taxels], "skin": self.skin.value, "polarity": self.polarity.value,
                 "pitch_mm": _rounded(self.pitch_mm), "min_pitch_mm": _rounded(self.min_pitch_mm),
-                "hull_mm": _rounded(self.hull_mm), "pad_extent_mm": _rounded(self.pad_extent_mm)}
+                "hull_mm": _rounded(self.hull_mm), "pad_extent_mm": _rounded(self.pad_extent_mm),
+                "part_centres_mm": _rounded(self.part_centres_mm)}
 
 
 @dataclass(frozen=True)
@@ -159,6 +163,27 @@ class Design:
             return self.array.taxels
         return (Taxel(0, 0.0, 0.0, 1, self.i2c_address, self.spec.sensor.option_code, self.address_straps),)
 
+    @property
+    def continuous(self) -> bool:
+        """True for one cast skin holding every magnet."""
+        return self.array is not None and self.array.skin is Skin.CONTINUOUS
+
+    @property
+    def part_centres_mm(self) -> tuple[tuple[float, float], ...]:
+        """The magnets' axes in one cast part's frame (one at the origin unless the part is a continuous skin)."""
+        return self.array.part_centres_mm if self.continuous else ((0.0, 0.0),)
+
+    @property
+    def parts_per_sensor(self) -> int:
+        """Cast parts one sensor needs: a tip per taxel of separate tips, else one (a tip, or the skin)."""
+        return len(self.array.taxels) if self.array is not None and not self.continuous else 1
+
+    @property
+    def cavities(self) -> int:
+        """Cast parts per mould: the spec's count, or for an array that does not set it the parts one array needs
+        (a tip per taxel, or one skin)."""
+        return len(self.cavity_centres_x_mm)
+
     # ---- profiles (r, z) in the elastomer frame ----------------------------------------------
 
     @property
@@ -184,19 +209,31 @@ class Design:
     def lid_holes(self) -> list[tuple[float, float, float]]:
         """(x, y, diameter) of every through hole in the lid, assembled frame: pin holes, sprues, vents."""
         holes = [(x, 0.0, self.pin_hole_diameter_mm) for x in self.pin_positions_x_mm]
-        for x in self.cavity_centres_x_mm:
-            holes.append((x, self.sprue_offset_mm, self.sprue_diameter_mm))
+        gap = self.printer["min_wall_mm"].nominal
+        for x, y in self.core_centres_mm:
+            holes.append((x, y + self.sprue_offset_mm, self.sprue_diameter_mm))
             for a in self.vent_angles_deg:
                 ang = math.radians(a)
-                holes.append((x + self.vent_offset_mm * math.cos(ang), self.vent_offset_mm * math.sin(ang),
-                              self.vent_diameter_mm))
+                vent = (x + self.vent_offset_mm * math.cos(ang), y + self.vent_offset_mm * math.sin(ang),
+                        self.vent_diameter_mm)
+                # in a continuous skin two neighbours' vents may meet: one does for both (the skin's base, under
+                # the lid, is the inverted cavity's top everywhere, so any vent on it lets the air out)
+                if all(math.dist(vent[:2], h[:2]) >= (vent[2] + h[2]) / 2.0 + gap for h in holes):
+                    holes.append(vent)
         return holes
+
+    @property
+    def core_centres_mm(self) -> list[tuple[float, float]]:
+        """(x, y) of every core in the assembled mould (each cast part lies upside down: its y turned over)."""
+        return [(x + px + 0.0, -py + 0.0) for x in self.cavity_centres_x_mm for px, py in self.part_centres_mm]
 
     # ---- closed-form volumes -----------------------------------------------------------------
 
     @cached_property
     def envelope_volume_mm3(self) -> float:
         R, hb = self.elastomer_radius_mm, self.base_height_mm
+        if self.continuous:
+            return _skin_volume(self.part_centres_mm, R, hb, self.tip is Tip.HEMISPHERE)
         v = math.pi * R * R * hb
         return v + (2.0 / 3.0) * math.pi * R**3 if self.tip is Tip.HEMISPHERE else v
 
@@ -207,8 +244,8 @@ class Design:
 
     @cached_property
     def elastomer_volume_mm3(self) -> float:
-        """Silicone in one cast part: the mould cavity less the core."""
-        return self.envelope_volume_mm3 - self.core_volume_mm3
+        """Silicone in one cast part: the mould cavity less the core (each core, for a continuous skin)."""
+        return self.envelope_volume_mm3 - len(self.part_centres_mm) * self.core_volume_mm3
 
     @property
     def magnet_volume_mm3(self) -> float:
@@ -250,6 +287,30 @@ def _revolved_polygon_volume(profile: list[tuple[float, float]]) -> float:
     return abs(v) * math.pi / 3.0
 
 
+def _skin_volume(centres: tuple[tuple[float, float], ...], R: float, hb: float, domes: bool) -> float:
+    """A continuous skin's envelope: its outline (the centres' hull grown by R) times the base height, and a
+    hemispherical dome over each centre: closed form where the domes stay apart, else their union integrated on a
+    0.02 mm grid (midpoint rule; its error is below 1e-4 of the volume)."""
+    h = outline.hull(list(centres))
+    v = outline.area(h, R) * hb
+    if not domes:
+        return v
+    pitch = min((math.dist(a, b) for i, a in enumerate(centres) for b in centres[i + 1:]), default=math.inf)
+    if pitch >= 2.0 * R:
+        return v + len(centres) * (2.0 / 3.0) * math.pi * R**3
+    import numpy as np
+
+    step = 0.02
+    xs, ys = [c[0] for c in centres], [c[1] for c in centres]
+    gx = np.arange(min(xs) - R + step / 2, max(xs) + R, step)
+    gy = np.arange(min(ys) - R + step / 2, max(ys) + R, step)
+    X, Y = np.meshgrid(gx, gy)
+    top = np.zeros_like(X)
+    for cx, cy in centres:
+        top = np.maximum(top, np.sqrt(np.clip(R * R - (X - cx) ** 2 - (Y - cy) ** 2, 0.0, None)))
+    return v + float(top.sum()) * step * step
+
+
 def derive(spec: Spec) -> Design:
     """Compute the whole design from a validated spec, or raise :class:`SpecError` if it cannot exist.
 
@@ -261,11 +322,11 @@ def derive(spec: Spec) -> Design:
     part = _elastomer(spec)
     stack = _stack(spec, chip)
     pocket = _pocket(spec, part, stack)
-    fields = {**part, **stack, **pocket, **_pad(spec), **_address(spec, chip),
-              **_mould(spec, printer, part, pocket["core_base_radius_mm"])}
+    fields = {**part, **stack, **pocket, **_pad(spec), **_address(spec, chip)}
     if spec.array is not None and spec.array.taxels > 1:
         fields["array"] = _array(spec, chip, printer, fields)
         fields["alignment_holes"] = _array_holes(spec, fields)
+    fields.update(_mould(spec, printer, part, pocket["core_base_radius_mm"], fields.get("array")))
     design = Design(spec=spec, printer=printer, chip=chip, **fields)
     check_limits(design)  # what the build would cost, before any of it: check and build both refuse
     return design
@@ -407,15 +468,23 @@ def _address(spec: Spec, chip) -> dict[str, object]:
                 address_straps=((sen.i2c_address - base) >> 1 & 1, (sen.i2c_address - base) & 1))
 
 
-def _mould(spec: Spec, printer, part: dict[str, object], core_base_r: float) -> dict[str, object]:
-    """A cup holding N inverted cavities in a row along x, and a lid carrying the cores, fill and vent holes."""
+def _mould(spec: Spec, printer, part: dict[str, object], core_base_r: float,
+           array: ArrayLayout | None) -> dict[str, object]:
+    """A cup holding N inverted cavities in a row along x, and a lid carrying the cores, fill and vent holes. A
+    cavity is one tip, or one continuous skin; an array's default count is the parts it needs (a tip per taxel)."""
     R_e, H_e = part["elastomer_radius_mm"], part["elastomer_height_mm"]
     wall, n = spec.mould.wall_mm, spec.mould.cavities
-    pitch = 2.0 * R_e + wall
+    hx = hy = R_e  # the cast part's half extent
+    if array is not None and array.skin is Skin.CONTINUOUS:
+        hx = R_e + max(x for x, _ in array.part_centres_mm)
+        hy = R_e + max(y for _, y in array.part_centres_mm)
+    elif array is not None and "cavities" not in spec.mould.model_fields_set:
+        n = len(array.taxels)
+    pitch = 2.0 * hx + wall
     span = (n - 1) * pitch
     pin_d = REGISTRATION_PIN_MM
-    pin_x = span / 2.0 + R_e + wall + pin_d / 2.0
-    cup = (2.0 * (pin_x + pin_d / 2.0 + wall), 2.0 * (R_e + wall), H_e + wall)
+    pin_x = span / 2.0 + hx + wall + pin_d / 2.0
+    cup = (2.0 * (pin_x + pin_d / 2.0 + wall), 2.0 * (hy + wall), H_e + wall)
     lid_t = max(wall, 2.5)
     annulus = R_e - core_base_r
     sprue_d = min(SPRUE_MAX_MM, annulus - 1.0)
@@ -458,11 +527,13 @@ def _array(spec: Spec, chip, printer, fields: dict[str, object]) -> ArrayLayout:
     addresses = _address_plan(spec, chip, len(centres))
     taxels = tuple(Taxel(i, x + 0.0, y + 0.0, s, a, code, straps)
                    for i, ((x, y), s, (a, code, straps)) in enumerate(zip(centres, signs, addresses)))
-    hull = _hull(centres)
+    hull = outline.hull(centres)
     R = spec.pad.diameter_mm / 2.0
     xs, ys = [x for x, _ in centres], [y for _, y in centres]
+    cx, cy = (min(xs) + max(xs)) / 2.0, (min(ys) + max(ys)) / 2.0
+    part = tuple((x - cx + 0.0, y - cy + 0.0) for x, y in centres) if arr.skin is Skin.CONTINUOUS else ((0.0, 0.0),)
     return ArrayLayout(taxels, arr.skin, arr.polarity, pitch, minimum, tuple(hull),
-                       (min(xs) - R, min(ys) - R, max(xs) + R, max(ys) + R))
+                       (min(xs) - R, min(ys) - R, max(xs) + R, max(ys) + R), part)
 
 
 def _min_pitch(spec: Spec, printer, fields: dict[str, object]) -> float:
@@ -492,26 +563,6 @@ def _address_plan(spec: Spec, chip, n: int) -> list[tuple[int, str, tuple[int, i
                         f"leaves {len(plan)} addresses for {n} taxels on one bus",
                         f"start at the base address of option code {codes[0]}")
     return plan[:n]
-
-
-def _hull(points: list[tuple[float, float]]) -> list[tuple[float, float]]:
-    """Convex hull, counter-clockwise from the lowest-leftmost point (Andrew's monotone chain); collinear points
-    give the two ends."""
-    pts = sorted(set(points))
-    if len(pts) <= 2:
-        return pts
-
-    def half(seq):
-        out: list[tuple[float, float]] = []
-        for p in seq:
-            while len(out) >= 2 and (out[-1][0] - out[-2][0]) * (p[1] - out[-2][1]) \
-                    - (out[-1][1] - out[-2][1]) * (p[0] - out[-2][0]) <= 1e-12:
-                out.pop()
-            out.append(p)
-        return out
-
-    lower, upper = half(pts), half(reversed(pts))
-    return lower[:-1] + upper[:-1]
 
 
 def _array_holes(spec: Spec, fields: dict[str, object]) -> tuple[tuple[float, float, float], ...]:

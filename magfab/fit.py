@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Mapping
 
 import numpy as np
 
+from . import outline
 from .design import Design
 
 if TYPE_CHECKING:
@@ -79,10 +80,15 @@ TOP_GAP_MM = 0.01
 
 
 def _region(design: Design, x_mm: float, radius_mm: float, bottom_mm: float, top_gap_mm: float = 0.0):
-    """A cylinder round cavity ``x_mm`` from ``bottom_mm`` up to ``top_gap_mm`` below the cup's top face."""
+    """A cylinder round cavity ``x_mm`` from ``bottom_mm`` up to ``top_gap_mm`` below the cup's top face (for a
+    continuous skin, the prism of its taxels' hull grown by ``radius_mm``)."""
     import manifold3d
 
     top = design.cup_size_mm[2] - top_gap_mm
+    if design.continuous:
+        h = outline.hull([(x, -y) for x, y in design.part_centres_mm])
+        section = manifold3d.CrossSection([outline.polygon(h, radius_mm)])
+        return manifold3d.Manifold.extrude(section, top - bottom_mm).translate((x_mm, 0.0, bottom_mm))
     return manifold3d.Manifold.cylinder(top - bottom_mm, radius_mm, radius_mm, 128).translate((x_mm, 0.0, bottom_mm))
 
 

@@ -154,9 +154,9 @@ def triangles(design: "Design") -> int:
     tol, ang = m.tessellation_tolerance_mm, m.angular_tolerance_deg
     n_dome = facets(design.elastomer_radius_mm, tol, ang)
     n_small = facets(1.0, tol, ang)
-    copies = m.cavities + 1
+    copies = (design.cavities + 1) * len(design.part_centres_mm)  # every dome: the part's and each cavity's
     dome = DOME_TRIANGLES * copies * n_dome**2 if design.tip.value == "hemisphere" else RIM_TRIANGLES * copies * n_dome
-    return int(dome + SMALL_FEATURE_TRIANGLES * n_small * copies / 2.0)
+    return int(dome + SMALL_FEATURE_TRIANGLES * n_small * (copies + len(design.taxels) - 1) / 2.0)
 
 
 def _profile_area_mm2(design: "Design") -> float:
@@ -244,7 +244,7 @@ def check_limits(design: "Design") -> Cost:
             need = _bisect(lambda x: triangles(_with(design, mould=m.model_copy(update={name: x}))), lo, hi)
             if need is not None:
                 raise SpecError(key, getattr(m, name), what, f"raise {key} to at least {_fmt(_round_up(need))}")
-        raise SpecError("mould.cavities", m.cavities, what, "use fewer cavities per mould")
+        raise SpecError("mould.cavities", design.cavities, what, "use fewer cavities per mould")
     if cost.fe_work > MAX_FE_WORK:
         p = spec.predict
         finest_ok = [h for h in cost.fe_meshes_mm if sum(fe_triangles(design, g) for g in cost.fe_meshes_mm

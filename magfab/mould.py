@@ -1,5 +1,8 @@
 """The inverse casting mould: a cup with the cavities and a lid that carries the pocket cores.
 
+A cavity holds one tip, or one continuous skin (an array cast as one part: a core under each of its taxels, a
+fill hole beside each core, the vents shared where two would meet).
+
 How it is used (the fabrication checklist says the same): spray release agent, fill each cavity of the
 cup to the brim, lower the lid onto the registration pins so each core sinks into its cavity; the excess
 silicone and the air escape through the fill (sprue) and vent holes. After curing, lever the lid off at
@@ -18,7 +21,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from .design import Design
-from .elastomer import core_solid, revolve_profile
+from .elastomer import core_solid, envelope_solid
 
 if TYPE_CHECKING:
     import cadquery as cq
@@ -33,8 +36,7 @@ OVERLAP_MM = 0.5
 
 def _cavity_tool(design: Design) -> "cq.Workplane":
     """The envelope, extended past its base so the cut opens cleanly through the cup's top face."""
-    profile = [(r, -OVERLAP_MM if i < 2 else z) for i, (r, z) in enumerate(design.envelope_profile)]
-    return revolve_profile(profile, arc_at=3 if len(profile) == 5 else None)
+    return envelope_solid(design, below_mm=OVERLAP_MM)
 
 
 def _flip_to(solid: "cq.Workplane", x: float, z: float) -> "cq.Workplane":
@@ -66,13 +68,13 @@ def lid_solid(design: Design) -> "cq.Workplane":
     lx, ly, _ = design.lid_size_mm
     lid = cq.Workplane("XY", origin=(0, 0, h)).box(lx, ly, t, centered=(True, True, False))
     core = core_solid(design, extend_below_mm=design.core_root_mm)
-    for x in design.cavity_centres_x_mm:
-        lid = lid.union(_flip_to(core, x, h))
+    for x, y in design.core_centres_mm:
+        lid = lid.union(_flip_to(core, x, h).translate((0, y, 0)) if y else _flip_to(core, x, h))
     for x, y, d in design.lid_holes:
         lid = lid.cut(cq.Workplane("XY", origin=(x, y, h - OVERLAP_MM)).circle(d / 2).extrude(t + 2 * OVERLAP_MM))
     r = design.sprue_diameter_mm / 2.0
-    for x in design.cavity_centres_x_mm:
+    for x, y in design.core_centres_mm:
         cone = cq.Solid.makeCone(r, r + COUNTERSINK_MM + OVERLAP_MM, COUNTERSINK_MM + OVERLAP_MM,
-                                 pnt=cq.Vector(x, design.sprue_offset_mm, h + t - COUNTERSINK_MM))
+                                 pnt=cq.Vector(x, y + design.sprue_offset_mm, h + t - COUNTERSINK_MM))
         lid = lid.cut(cq.Workplane("XY").add(cone))
     return lid.rotate((0, 0, 0), (1, 0, 0), 180).translate((0, 0, h + t))

@@ -68,7 +68,7 @@ class BuildResult:
                 "skin_mm": round(d.skin_mm, 4),
                 "cavity_volume_mL": round(d.elastomer_volume_mm3 / 1000.0, 4),
                 "silicone_per_part_g": round(d.elastomer_volume_mm3 / 1000.0 * material["density_g_cm3"].nominal, 3),
-                "cavities": self.spec.mould.cavities,
+                "cavities": d.cavities,
                 **self._array_summary(),
             },
             "predictions": self._prediction_summary(),

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 import shutil
+from pathlib import Path
 
 import pytest
 
@@ -89,3 +90,14 @@ def ref_crc16(data: bytes) -> int:
             crc = ((crc << 1) ^ 0x1021) & 0xFFFF if crc & 0x8000 else (crc << 1) & 0xFFFF
     return crc
 
+
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "magfab" / "examples"
+
+
+@pytest.fixture(scope="session")
+def array_builds(tmp_path_factory):
+    """The two array examples built once per session: ``{"fingertip_2x2": BuildResult, "strip_1x5": ...}`` (a 2x2
+    continuous skin at 10 mm, alternating; a 1x5 strip of separate tips at 14 mm, same polarity)."""
+    root = tmp_path_factory.mktemp("arrays")
+    return {name: build(load_spec(EXAMPLES / f"{name}.toml"), root / name) for name in ("fingertip_2x2", "strip_1x5")}

@@ -117,7 +117,7 @@ def _sensor_rows(design: "Design") -> list[dict[str, object]]:
                          "recipes/parts.toml npth (ISO 273 clearance for M2)"))
     rows += [
         _row("Printed mould", "mould_cup.stl + mould_lid.stl",
-             f"{design.printer.name}; {spec.mould.cavities} cavit{'y' if spec.mould.cavities == 1 else 'ies'}", 1, "set",
+             f"{design.printer.name}; {design.cavities} cavit{'y' if design.cavities == 1 else 'ies'}", 1, "set",
              "this build; recipes/printers.toml"),
         _row("Printed pad", "pad.stl", design.printer.name, n, "pcs", "this build; recipes/printers.toml"),
     ]

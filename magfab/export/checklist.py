@@ -88,14 +88,14 @@ def quantities(design: "Design") -> Quantities:
     pot = _override(fab.pot_life_min, rec, "pot_life_min", "fabrication.pot_life_min")
     cure = _override(fab.cure_time_h, rec, "cure_time_h", "fabrication.cure_time_h")
     ratio = mix_ratio(rec.texts.get("mix_ratio_by_weight", ""), f"recipes/materials.toml:{rec.key}.mix_ratio_by_weight")
-    cavities = spec.mould.cavities
+    cavities = design.cavities
     holes = [d for x, y, d in design.lid_holes[len(design.pin_positions_x_mm):]]  # sprues and vents
     holes_mm3 = sum(math.pi * d * d / 4 * design.lid_thickness_mm for d in holes)
     part_mm3 = design.elastomer_volume_mm3
     holds_mm3 = cavities * part_mm3 + holes_mm3
     batch = max(holds_mm3 / 1000.0 * density * (1 + fab.waste_pct / 100.0), MIN_BATCH_G)
     a, b = ratio
-    pours = math.ceil(fab.sensors / cavities)
+    pours = math.ceil(fab.sensors * design.parts_per_sensor / cavities)
     temp = rec["cure_temperature_C"].nominal if "cure_temperature_C" in rec.quantities else None
     return Quantities(
         material=rec.name, sensors=fab.sensors, cavities=cavities, pours=pours, part_volume_mL=part_mm3 / 1000.0,

@@ -153,7 +153,7 @@ def key_figures(design: "Design", pred: "Prediction", calibration: Mapping[str, 
          f"resolution {s.resolution_mN:.2f} mN"),
         ("shear range", f"{s.range_N:.3f} N", f"ends at: {s.range_limit}"),
         ("silicone per part", f"{design.elastomer_volume_mm3 / 1000:.3f} mL",
-         f"{design.spec.mould.cavities} cavit{'y' if design.spec.mould.cavities == 1 else 'ies'} per mould"),
+         f"{design.cavities} cavit{'y' if design.cavities == 1 else 'ies'} per mould"),
     ]
     if calibration is not None:
         err = calibration["errors"]
