@@ -277,6 +277,21 @@ class _Arrayed:
     findings: list
 
 
+def _crosstalk(design: Design, prediction) -> tuple[list[Artifact], list[Finding], bool]:
+    """The array's crosstalk budget (:mod:`magfab.models.crosstalk`): array/crosstalk.json, its charts, its
+    findings, and whether the host is to remove a moving neighbour's field (the budget is over without it)."""
+    from .export import crosstalk_figures
+    from .models import crosstalk
+
+    xt = crosstalk.crosstalk(design, prediction)
+    out = [Artifact("array/crosstalk.json", _json_bytes(xt.as_json()), "the crosstalk budget: each taxel's misreading "
+                    "as its neighbours move, with and without the host's compensation, the least pitch per polarity")]
+    for name, data in sorted(crosstalk_figures.figures(xt).items()):
+        stem, kind = name.rsplit(".", 1)
+        out.append(Artifact(f"array/{name}", data, crosstalk_figures.CAPTIONS[stem] + ", " + kind.upper()))
+    return out, crosstalk.findings(design, xt), xt.dynamic
+
+
 def _taxel_calibrations(design: Design, prediction, scans: dict | None, mls: bool) -> _Arrayed:
     """An array's calibrations: each taxel's scan (measured, from ``scans`` {taxel: Scan}, or simulated with its
     neighbours' field), its fit to the scan with the neighbours' field removed, and calibration/array.json
@@ -290,11 +305,11 @@ def _taxel_calibrations(design: Design, prediction, scans: dict | None, mls: boo
     scans = scans or {}
     field = array_field(design)
     every = tuple(scans.get(t.index) or simulate_taxel_scan(design, prediction, t.index, field) for t in design.taxels)
-    arrayed = calibrate_taxels(design, prediction, every, mls=mls)
+    out, found, dynamic = _crosstalk(design, prediction)
+    arrayed = calibrate_taxels(design, prediction, every, mls=mls, dynamic=dynamic)
     doc = arrayed.as_json(design)
-    out = [Artifact("calibration/array.json", _json_bytes(doc), "the array: each taxel's address, order code, "
+    out += [Artifact("calibration/array.json", _json_bytes(doc), "the array: each taxel's address, order code, "
                     "polarity, position and calibration file, and the neighbours' field the host removes")]
-    found = []
     for taxel, fitted, scan in zip(design.taxels, arrayed.fits, arrayed.scans):
         k = taxel.index
         out.append(Artifact(f"calibration/{arrayed.file_name(k)}", _json_bytes(fitted.calibration.to_json()),

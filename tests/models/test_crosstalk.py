@@ -1,0 +1,112 @@
+"""The crosstalk budget: the neighbours' field against magpylib's superposition, the least pitch where the budget
+crosses the tolerance, what polarity changes and what it does not, the skin's coupling against Boussinesq and under
+mesh refinement, the magnets' force against dipoles far apart, and the findings."""
+
+from __future__ import annotations
+
+import json
+
+import magpylib
+import numpy as np
+import pytest
+
+from magfab import derive, parse_spec
+from magfab.models import crosstalk as X
+from magfab.models.mechanics.coupling import boussinesq_ratio, coupling
+
+
+@pytest.fixture(scope="module")
+def strip(array_builds):
+    b = array_builds["strip_1x5"]
+    return b.design, b.prediction, json.loads((b.out_dir / "array" / "crosstalk.json").read_text())
+
+
+def _layout(design):
+    xy = np.array([[t.x_mm, t.y_mm] for t in design.taxels])
+    return xy, np.array([float(t.polarity) for t in design.taxels])
+
+
+def test_neighbours_field_is_magpylibs_superposition(array_builds):
+    d = array_builds["fingertip_2x2"].design
+    loads = X._Loads.of(d, array_builds["fingertip_2x2"].prediction)
+    xy, signs = _layout(d)
+    _, _, rest = X.layout_errors(loads, xy, signs)
+    m = loads.magnet
+    for i, (x, y) in enumerate(xy):
+        mags = [magpylib.magnet.Cylinder(polarization=(0, 0, s * m.remanence_T), dimension=(2 * m.radius_mm, m.height_mm),
+                                         position=(px, py, loads.z_centre)) for j, ((px, py), s) in
+                enumerate(zip(xy, signs)) if j != i]
+        B = magpylib.getB(mags, (x, y, loads.z_chip), sumup=True) * 1e4  # T -> G
+        assert rest[i] == pytest.approx(B, abs=1e-3 * np.abs(B).max())
+
+
+def test_the_least_pitch_is_where_the_budget_crosses_the_tolerance(strip):
+    d, pred, doc = strip
+    loads = X._Loads.of(d, pred)
+    xy, signs = _layout(d)
+    centre = xy.mean(axis=0)
+    least, tol = doc["min_pitch_mm"]["same"], doc["tolerance_mN"]
+
+    def worst(p):
+        f, common, _ = X.layout_errors(loads, centre + (xy - centre) * p / d.array.pitch_mm, signs)
+        return max(f.max(), common.max())
+
+    assert worst(least * 1.002) <= tol < worst(least * 0.99)
+    assert d.array.pitch_mm < least  # the example sits below it: hence the warning and the dynamic compensation
+    assert doc["dynamic"] is True and doc["min_pitch_compensated_mm"]["same"] < least
+
+
+def test_polarity_changes_every_neighbour_at_once_not_one_alone(array_builds):
+    d = array_builds["fingertip_2x2"].design
+    loads = X._Loads.of(d, array_builds["fingertip_2x2"].prediction)
+    xy, _ = _layout(d)
+    same, alternating = np.ones(4), np.array([1.0, -1.0, -1.0, 1.0])
+    f_same, c_same, _ = X.layout_errors(loads, xy, same)
+    f_alt, c_alt, _ = X.layout_errors(loads, xy, alternating)
+    assert f_alt == pytest.approx(f_same)  # one neighbour's misreading has the same size either way
+    # pressed together: two edge neighbours and the diagonal one add with alternating signs in a checkerboard
+    assert not np.allclose(c_alt, c_same, rtol=0.05)
+
+
+def test_the_host_compensation_removes_a_pressed_neighbour():
+    d = derive(parse_spec('name = "pair"\n[array]\nrows = 1\ncols = 2\npitch_mm = 14'))
+    from magfab.models.predict import predict
+
+    loads = X._Loads.of(d, predict(d))
+    xy, signs = _layout(d)
+    from dataclasses import replace
+
+    pressed = replace(loads, shear_travel_mm=1e-9)  # only the normal press
+    raw = X.layout_errors(pressed, xy, signs)[0].max()
+    left = X.compensated_errors(d, pressed, xy, signs)[0].max()
+    assert left < raw / 100.0
+
+
+def test_skin_coupling_against_boussinesq_and_under_refinement():
+    r = np.array([2.0, 5.0, 10.0])
+    thick = coupling(300.0, 2.6, 12.0)
+    assert thick.at(r) == pytest.approx(boussinesq_ratio(r, 2.6), rel=0.06)
+    coarse, fine = coupling(7.9, 2.6, 20.0, cell_mm=0.2), coupling(7.9, 2.6, 20.0, cell_mm=0.1)
+    assert np.abs(coarse.at(r) - fine.at(r)).max() < 1e-3
+    # bonded to the pad, a thin layer couples far less than a half-space, and rises between taxels (incompressible)
+    assert abs(fine.at(10.0)) < boussinesq_ratio(np.array([10.0]), 2.6)[0] / 4 and fine.at(10.0) < 0
+
+
+def test_magnet_force_tends_to_the_dipoles_far_apart(strip):
+    d, pred, _ = strip
+    loads = X._Loads.of(d, pred)
+    near_dip, near_exact = X._magnet_force(loads, 10.0, True)
+    far_dip, far_exact = X._magnet_force(loads, 40.0, True)
+    assert far_exact == pytest.approx(far_dip, rel=0.02) and near_exact > near_dip > 0
+    assert X._magnet_force(loads, 10.0, False)[1] == pytest.approx(-near_exact)
+
+
+def test_findings_warn_below_the_least_pitch_only(array_builds):
+    for name in ("fingertip_2x2", "strip_1x5"):
+        codes = {f.code for f in array_builds[name].findings}
+        assert {"array-crosstalk", "array-crosstalk-budget"} <= codes
+    d = derive(parse_spec('name = "far"\n[array]\nrows = 1\ncols = 2\npitch_mm = 45\ncrosstalk_mN = 5'))
+    from magfab.models.predict import predict
+
+    xt = X.crosstalk(d, predict(d))
+    assert "array-crosstalk" not in {f.code for f in X.findings(d, xt)}
