@@ -11,10 +11,12 @@ the grid router in ``route``), ``rules`` (the checks) and ``kicad_files`` (the t
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from .board.connect import NETS_ROUTED, ROUTE_GRID_MM, route_all
 from .board.kicad_files import LIBRARY, files
 from .board.layout import HOLE_CLEARANCE_MM, ORIGIN, SILK_MIN_TEXT_MM, Board, Placed, SilkText
-from .board.placement import label, place
+from .board.placement import label, pad_hull, place, taxel_marks
 from .board.route import Router
 from .board.rules import distance_margin, findings
 from .design import Design
@@ -36,5 +38,13 @@ def board(design: Design) -> Board:
     tracks, unrouted = route_all(router, parts, NETS_ROUTED)
     rules = {"clearance": pcb.clearance_mm, "track_width": pcb.track_width_mm, "via_diameter": pcb.via_diameter_mm,
              "via_drill": pcb.via_drill_mm, "edge_clearance": pcb.edge_clearance_mm, "hole_clearance": HOLE_CLEARANCE_MM}
-    return Board(design.spec.name, outline, tuple(parts), tuple(tracks), circle, label(design, outline, parts, circle),
-                 rules, pcb.thickness_mm, design.i2c_address, tuple(unrouted))
+    board = Board(design.spec.name, outline, tuple(parts), tuple(tracks), circle, label(design, outline, parts, circle),
+                  rules, pcb.thickness_mm, design.i2c_address, tuple(unrouted))
+    if design.array is None:
+        return board
+    table = ("address plan: taxel, chip, I2C address, order code, A1 A0 straps",
+             *(f"T{t.index}  U{t.index + 1}  0x{t.i2c_address:02X}  MLX90393SLW-ABA-{t.option_code}  "
+               + "  ".join(f"{pin}={'3V3' if level else 'GND'}" for pin, level in zip(("A1", "A0"), t.address_straps))
+               for t in design.taxels))
+    board = replace(board, pad_hull=pad_hull(design), address_table=table)
+    return replace(board, marks=taxel_marks(design, board))

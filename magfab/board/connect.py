@@ -76,7 +76,7 @@ def _fanout(u1: Placed, width: float, clearance: float, via_diameter: float) -> 
         outer, start, inner = _stub_ends(u1, c, epc, h)
         fan_out = c.net != GROUND or number == _vss(u1)
         if c.net == GROUND:
-            stub = Copper.seg(*start, *inner, w, "F.Cu", c.net, f"U1.{number} stub")
+            stub = Copper.seg(*start, *inner, w, "F.Cu", c.net, f"{u1.ref}.{number} stub")
             if all(distance(stub, o) >= clearance for o in others):
                 stubs.append(stub)
                 # Only the fanned-out VSS pin gives the pad's group a way out; a strap pin tied to the
@@ -86,23 +86,33 @@ def _fanout(u1: Placed, width: float, clearance: float, via_diameter: float) -> 
                 fan_out = True
         if fan_out:
             cx, cy = (c.a[0] + c.b[0]) / 2, (c.a[1] + c.b[1]) / 2
-            stubs.append(Copper.seg(cx, cy, *outer, w, "F.Cu", c.net, f"U1.{number} stub"))
+            stubs.append(Copper.seg(cx, cy, *outer, w, "F.Cu", c.net, f"{u1.ref}.{number} stub"))
             terminals.append(Copper.rect(outer[0] - h, outer[1] - h, outer[0] + h, outer[1] + h, ["F.Cu"], c.net,
-                                         f"U1.{number}"))
+                                         f"{u1.ref}.{number}"))
     if not ep_tied:
         h = width / 2
         ex, ey = (epc.a[0] + epc.b[0]) / 2, (epc.a[1] + epc.b[1]) / 2
-        stubs.append(Copper.point(ex, ey, via_diameter / 2, LAYERS, GROUND, "U1.EP via"))
+        stubs.append(Copper.point(ex, ey, via_diameter / 2, LAYERS, GROUND, f"{u1.ref}.EP via"))
         # Escape on the bottom towards -x, between the decoupling capacitors above and below the chip.
         tx = round(ex - (u1.footprint.courtyard[2] - u1.footprint.courtyard[0]) / 2 - FANOUT_MM, 6)
-        stubs.append(Copper.seg(ex, ey, tx, ey, width, "B.Cu", GROUND, "U1.EP stub"))
-        terminals.append(Copper.rect(tx - h, ey - h, tx + h, ey + h, ["B.Cu"], GROUND, "U1.EP"))
+        stubs.append(Copper.seg(ex, ey, tx, ey, width, "B.Cu", GROUND, f"{u1.ref}.EP stub"))
+        terminals.append(Copper.rect(tx - h, ey - h, tx + h, ey + h, ["B.Cu"], GROUND, f"{u1.ref}.EP"))
     return stubs, terminals
 
 
 def _vss(u1: Placed) -> str:
     """The chip's first ground pin: the one that fans out for the exposed pad's group."""
     return next(n for n, net in sorted(u1.nets.items(), key=lambda kv: int(kv[0])) if net == GROUND)
+
+
+def _is_chip(p: Placed) -> bool:
+    return p.ref.startswith("U")
+
+
+def _chip_order(owner: str) -> tuple:
+    """Sort key: a chip's terminals by chip number (U2 before U10), then the owner's name."""
+    ref = owner.split(".")[0]
+    return (int(ref[1:]) if ref[:1] == "U" and ref[1:].isdigit() else 0, owner)
 
 
 def _clash(a: Copper, b: Copper, clearance: float, via_drill: float) -> bool:
@@ -117,11 +127,12 @@ def _connections(parts: list[Placed], terminals: list[Copper], order: tuple[str,
     """(net, new end, end already connected) per connection still to route: each net's pads and the
     chip's stub terminals joined by a spanning tree, nets in ``order``."""
     items = [c for p in parts for c in p.copper()]
+    chips = {p.ref for p in parts if _is_chip(p)}
     connections = []
     for net in order:
-        ends = [c for c in items if c.net == net and c.kind == "rect" and not c.owner.startswith("U1.")]
+        ends = [c for c in items if c.net == net and c.kind == "rect" and c.owner.split(".")[0] not in chips]
         ends += [t for t in terminals if t.net == net]
-        ends.sort(key=lambda c: (not c.owner.startswith("U1"), c.owner))
+        ends.sort(key=lambda c: (c.owner.split(".")[0] not in chips, _chip_order(c.owner)))
         connections += [(net, new, old) for new, old in _mst(ends) if not touching(new, old)]
     return connections
 
@@ -134,7 +145,11 @@ def route_all(router: Router, parts: list[Placed], order: tuple[str, ...] = NETS
     tracks that path would clash with are ripped up and queued again. Each connection may be ripped
     up at most ``RIP_UP_LIMIT`` times, so the loop ends; the order of events depends only on the board,
     so the result is deterministic. Returns (tracks, messages for connections left unrouted)."""
-    stubs, terminals = _fanout(parts[0], router.width, router.clearance, router.via_diameter)
+    stubs, terminals = [], []
+    for chip in (p for p in parts if _is_chip(p)):
+        s, t = _fanout(chip, router.width, router.clearance, router.via_diameter)
+        stubs += s
+        terminals += t
     connections = _connections(parts, terminals, order)
     routes: dict[int, list[Copper]] = {}
     ripped = [0] * len(connections)

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import json
 
-from .. import __version__
+from .. import __version__, outline
 from ..formats.sexpr import Sym, at, render, xy
 from .layout import GROUND, Board
 from .route import HOLE_TO_HOLE_MM, LAYERS
@@ -97,13 +97,22 @@ def _drawing_nodes(b: Board) -> list[tuple]:
     """The outline on Edge.Cuts, the rigid pad's outline on Dwgs.User, and the label lines as top silk."""
     x0, y0, x1, y1 = b.outline
     cx, cy, r = b.pad_circle
-    out = [("gr_rect", ("start", x0, y0), ("end", x1, y1), ("layer", "Edge.Cuts"), ("width", 0.1), ("fill", Sym("none"))),
-           ("gr_circle", ("center", cx, cy), ("end", cx + r, cy), ("layer", "Dwgs.User"), ("width", 0.1),
-            ("fill", Sym("none"))),
-           ("gr_text", "rigid pad outline", at(cx, cy - r - 0.8), ("layer", "Dwgs.User"),
-            ("effects", ("font", ("size", 0.8, 0.8), ("thickness", 0.12))))]
+    out = [("gr_rect", ("start", x0, y0), ("end", x1, y1), ("layer", "Edge.Cuts"), ("width", 0.1), ("fill", Sym("none")))]
+    if b.pad_hull:
+        pts = outline.polygon(list(b.pad_hull), r, 72)
+        out.append(("gr_poly", ("pts", *[("xy", round(x, 4), round(y, 4)) for x, y in pts]), ("layer", "Dwgs.User"),
+                    ("width", 0.1), ("fill", Sym("none"))))
+        cy = min(y for _, y in b.pad_hull)
+    else:
+        out.append(("gr_circle", ("center", cx, cy), ("end", cx + r, cy), ("layer", "Dwgs.User"), ("width", 0.1),
+                    ("fill", Sym("none"))))
+    out.append(("gr_text", "rigid pad outline", at(cx, cy - r - 0.8), ("layer", "Dwgs.User"),
+                ("effects", ("font", ("size", 0.8, 0.8), ("thickness", 0.12)))))
     out += [("gr_text", t.text, at(t.x, t.y), ("layer", "F.SilkS"),
-             ("effects", ("font", ("size", t.size, t.size), ("thickness", t.thickness)))) for t in b.label]
+             ("effects", ("font", ("size", t.size, t.size), ("thickness", t.thickness)))) for t in b.label + b.marks]
+    for k, line in enumerate(b.address_table):  # beside the board, on a drawing layer: for the assembler
+        out.append(("gr_text", line, at(x1 + 2.0, y0 + 1.0 + 1.4 * k), ("layer", "Cmts.User"),
+                    ("effects", ("font", ("size", 1.0, 1.0), ("thickness", 0.15)), ("justify", Sym("left")))))
     return out
 
 

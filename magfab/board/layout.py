@@ -16,7 +16,7 @@ from .footprint import Footprint, flip_layer
 from .route import LAYERS, Copper
 
 __all__ = ["ORIGIN", "SUPPLY", "GROUND", "PAD_KEEPOUT_MARGIN_MM", "HOLE_CLEARANCE_MM", "SILK_STROKE_MM",
-           "SILK_MIN_TEXT_MM", "SILK_ADVANCE", "Placed", "SilkText", "Board", "disc_clear", "overlap"]
+           "SILK_MIN_TEXT_MM", "SILK_ADVANCE", "Placed", "SilkText", "Board", "disc_clear", "outline_clear", "overlap"]
 
 ORIGIN = (100.0, 100.0)  # chip centre on the KiCad sheet, mm
 SUPPLY, GROUND = "+3V3", "GND"
@@ -107,6 +107,14 @@ class Board:
     thickness_mm: float
     address: int
     unrouted: tuple[str, ...] = ()
+    pad_hull: tuple[tuple[float, float], ...] = ()  # an array's pad: the taxels' hull (KiCad frame), grown by r
+    marks: tuple[SilkText, ...] = ()  # an array's taxel marks ("T0 0x0C") beside each chip, top silk
+    address_table: tuple[str, ...] = ()  # an array's address plan, one line per chip, drawn beside the board
+
+    def pad_clear(self, box: Box, margin: float = 0.0) -> bool:
+        """Whether an axis-aligned box lies wholly outside the rigid pad (grown by ``margin``)."""
+        cx, cy, r = self.pad_circle
+        return outline_clear(box, self.pad_hull or ((cx, cy),), r + margin)
 
     def nets(self) -> list[str]:
         """Every net name, the unconnected pins' nets last."""
@@ -120,6 +128,35 @@ class Board:
 
     def footprints(self) -> dict[str, Footprint]:
         return {p.footprint.name: p.footprint for p in self.parts}
+
+
+def outline_clear(box: Box, hull, r: float) -> bool:
+    """Whether an axis-aligned box lies wholly outside a convex hull (KiCad frame) grown by ``r``: the box's
+    distance from the hull (zero where they meet) is at least r."""
+    from .. import outline
+
+    if len(hull) == 1:
+        return disc_clear(box, hull[0][0], hull[0][1], r)
+    corners = [(box[0], box[1]), (box[2], box[1]), (box[2], box[3]), (box[0], box[3])]
+    if any(box[0] <= x <= box[2] and box[1] <= y <= box[3] for x, y in hull):
+        return False
+    if any(outline.distance(c, list(hull)) == 0.0 for c in corners):
+        return False
+    edges = list(zip(corners, corners[1:] + corners[:1]))
+    return all(_segments_apart(a, b, p, q, r) for a, b in edges for p, q in zip(hull, hull[1:] + hull[:1]))
+
+
+def _segments_apart(a, b, p, q, r: float) -> bool:
+    """Whether two segments are at least r apart (zero if they cross; else the least end-to-segment distance)."""
+    from .. import outline
+
+    def side(o, u, v) -> float:
+        return (u[0] - o[0]) * (v[1] - o[1]) - (u[1] - o[1]) * (v[0] - o[0])
+
+    if side(a, b, p) * side(a, b, q) < 0 and side(p, q, a) * side(p, q, b) < 0:
+        return False
+    return min(outline.distance(a, [p, q]), outline.distance(b, [p, q]), outline.distance(p, [a, b]),
+               outline.distance(q, [a, b])) >= r
 
 
 def disc_clear(box: Box, cx: float, cy: float, r: float) -> bool:

@@ -15,24 +15,25 @@ from ..design import Design
 from ..errors import SpecError
 from ..recipes import catalogue
 from .footprint import Footprint, chip_footprint, connector_footprint, hole_footprint, qfn_footprint
-from .layout import (GROUND, HOLE_CLEARANCE_MM, ORIGIN, PAD_KEEPOUT_MARGIN_MM, SILK_ADVANCE, SILK_STROKE_MM, SUPPLY,
-                     Box, Placed, SilkText, disc_clear, overlap)
+from .layout import (GROUND, HOLE_CLEARANCE_MM, ORIGIN, PAD_KEEPOUT_MARGIN_MM, SILK_ADVANCE, SILK_MIN_TEXT_MM,
+                     SILK_STROKE_MM, SUPPLY,
+                     Box, Placed, SilkText, outline_clear, overlap)
 from .route import distance
 
-__all__ = ["place", "label", "wrap"]
+__all__ = ["place", "label", "wrap", "pad_hull"]
 
 
-def _chip_nets(design: Design, fp: Footprint) -> dict[str, str]:
+def _chip_nets(design: Design, fp: Footprint, straps: tuple[int, int] | None = None, ref: str = "U1") -> dict[str, str]:
     """Pad number -> net for the MLX90393, from the chip recipe's pin names and the address straps."""
     chip = design.chip
-    a1, a0 = design.address_straps
+    a1, a0 = straps or design.address_straps
     by_name = {"VSS": GROUND, "EP": GROUND, "VDD": SUPPLY, "VDDIO": SUPPLY, "CS": SUPPLY, "SCL": "SCL", "SDA": "SDA",
                "A1": SUPPLY if a1 else GROUND, "A0": SUPPLY if a0 else GROUND}
     nets = {}
     ep_number = str(max(int(p.number) for p in fp.copper_pads()))
     for p in fp.copper_pads():
         pin = chip.texts["pin_EP" if p.number == ep_number else f"pin_{p.number}"]
-        nets[p.number] = by_name.get(pin, f"unconnected-(U1-{pin}-Pad{p.number})")
+        nets[p.number] = by_name.get(pin, f"unconnected-({ref}-{pin}-Pad{p.number})")
     return nets
 
 
@@ -51,23 +52,55 @@ def place(design: Design) -> tuple[list[Placed], Box, tuple[float, float, float]
     ox, oy = ORIGIN
     hw, hh = pcb.width_mm / 2, pcb.height_mm / 2
     outline = (ox - hw, oy - hh, ox + hw, oy + hh)
+    if design.array is not None:
+        _array_fits(design, hw, hh)
     for key, half in (("pcb.width_mm", hw), ("pcb.height_mm", hh)):
         if half < design.pad_radius_mm + PAD_KEEPOUT_MARGIN_MM:
             raise SpecError(key, 2 * half, f"must be at least {2 * (design.pad_radius_mm + PAD_KEEPOUT_MARGIN_MM):g} mm "
                             f"so the {2 * design.pad_radius_mm:g} mm mounting pad fits on the board")
     qfn = qfn_footprint(design.chip, pcb.density, clearance=pcb.clearance_mm)
-    placed = [Placed("U1", f"MLX90393SLW-ABA-{design.spec.sensor.option_code}", qfn, ox, oy,
-                     nets=_chip_nets(design, qfn))]
+    placed = _chips(design, qfn)
     gap = _land_gap(placed[0])
     if pcb.clearance_mm > gap + 1e-9:
         raise SpecError("pcb.clearance_mm", pcb.clearance_mm,
                         f"must be at most {gap:g} mm: the MLX90393's lands at density {pcb.density.value} are "
                         f"{gap:g} mm apart, so no board could meet a larger clearance")
+    chips = len(placed)
     placed += _holes(design)
-    j1 = _connector(design, outline, placed)
+    j1 = _connector(design, outline, placed, chips)
     placed.append(j1)
-    placed += _passives(design, qfn, j1)
+    placed += _passives(design, qfn, j1, placed[:chips])
     return placed, outline, (ox, oy, design.pad_radius_mm)
+
+
+def pad_hull(design: Design) -> tuple[tuple[float, float], ...]:
+    """The rigid pad's core in KiCad's frame: the taxels' hull (the pad is it grown by the pad radius); one point,
+    the chip's centre, for a single taxel."""
+    ox, oy = ORIGIN
+    hull = design.array.hull_mm if design.array is not None else ((0.0, 0.0),)
+    return tuple((round(ox + x, 6), round(oy - y, 6)) for x, y in hull)
+
+
+def _array_fits(design: Design, hw: float, hh: float) -> None:
+    """An array's pad (the hull grown by its radius) and the margin fit on the board, or one SpecError."""
+    x0, y0, x1, y1 = design.array.pad_extent_mm
+    m = PAD_KEEPOUT_MARGIN_MM
+    for key, half, need in (("pcb.width_mm", hw, max(-x0, x1) + m), ("pcb.height_mm", hh, max(-y0, y1) + m)):
+        if half < need:
+            raise SpecError(key, 2 * half, f"must be at least {2 * need:g} mm so the array's {x1 - x0:g} x {y1 - y0:g} "
+                            "mm mounting pad fits on the board, centred on it")
+
+
+def _chips(design: Design, qfn: Footprint) -> list[Placed]:
+    """U1 under the single magnet, or U1..UN under each taxel's (designator: taxel index + 1), each strapped to
+    its address."""
+    ox, oy = ORIGIN
+    if design.array is None:
+        return [Placed("U1", f"MLX90393SLW-ABA-{design.spec.sensor.option_code}", qfn, ox, oy,
+                       nets=_chip_nets(design, qfn))]
+    return [Placed(f"U{t.index + 1}", f"MLX90393SLW-ABA-{t.option_code}", qfn, round(ox + t.x_mm, 6),
+                   round(oy - t.y_mm, 6), nets=_chip_nets(design, qfn, t.address_straps, f"U{t.index + 1}"))
+            for t in design.taxels]
 
 
 def _holes(design: Design) -> list[Placed]:
@@ -90,7 +123,7 @@ def _holes(design: Design) -> list[Placed]:
     return out
 
 
-def _connector(design: Design, outline: Box, placed: list[Placed]) -> Placed:
+def _connector(design: Design, outline: Box, placed: list[Placed], chips: int = 1) -> Placed:
     """The Qwiic connector on the bottom edge, mating face flush with it, as near the centre line as the
     pad's keep-out and the holes allow."""
     pcb = design.spec.pcb
@@ -111,9 +144,9 @@ def _connector(design: Design, outline: Box, placed: list[Placed]) -> Placed:
             continue
         if any(c.bbox()[0] < outline[0] + e or c.bbox()[2] > outline[2] - e for c in cand.copper()):
             continue
-        if not disc_clear(cy, ox, oy, keep_r):
+        if not outline_clear(cy, pad_hull(design), keep_r):
             continue
-        if any(overlap(cy, h.box(h.footprint.courtyard)) for h in placed[1:]):
+        if any(overlap(cy, h.box(h.footprint.courtyard)) for h in placed[chips:]):
             continue
         return cand
     raise SpecError("pcb.width_mm", pcb.width_mm,
@@ -122,18 +155,19 @@ def _connector(design: Design, outline: Box, placed: list[Placed]) -> Placed:
                     "make the board larger (usually pcb.height_mm: 30 x 28 fits the default pad, 28 x 28 does not)")
 
 
-def _passives(design: Design, qfn: Footprint, j1: Placed) -> list[Placed]:
-    """Decoupling right under the chip (bottom side): C1 by VDD (top row), C2 by VDDIO (bottom row); the
-    I2C pull-ups, if asked for, behind the connector."""
+def _passives(design: Design, qfn: Footprint, j1: Placed, chips: list[Placed]) -> list[Placed]:
+    """Decoupling right under each chip (bottom side): C1 by VDD (top row), C2 by VDDIO (bottom row), and so on
+    for the next chip; the I2C pull-ups, if asked for, behind the connector."""
     pcb = design.spec.pcb
-    ox, oy = ORIGIN
     parts = catalogue("parts")
     cap = chip_footprint(parts["chip-0603"], pcb.density, prefix="C")
     off = round(qfn.body[3] + cap.courtyard[3] + 0.1, 2)
     # On the bottom side KiCad mirrors a footprint top to bottom, so the angles below put each
     # reference text on the side away from its neighbour.
-    out = [Placed("C1", "100nF", cap, ox, round(oy - off, 6), 180.0, True, {"1": SUPPLY, "2": GROUND}),
-           Placed("C2", "100nF", cap, ox, round(oy + off, 6), 0.0, True, {"1": SUPPLY, "2": GROUND})]
+    out = []
+    for k, u in enumerate(chips):
+        out += [Placed(f"C{2 * k + 1}", "100nF", cap, u.x, round(u.y - off, 6), 180.0, True, {"1": SUPPLY, "2": GROUND}),
+                Placed(f"C{2 * k + 2}", "100nF", cap, u.x, round(u.y + off, 6), 0.0, True, {"1": SUPPLY, "2": GROUND})]
     if pcb.pullups:
         res = chip_footprint(parts["chip-0603"], pcb.density, prefix="R")
         ohm = parts["jst-sh-4"]["pullup_ohm"].nominal
@@ -177,8 +211,12 @@ def label(design: Design, outline: Box, parts: list[Placed], circle: tuple[float
                 right = min(right, cy[0])
     width = right - left - 0.2
     address = f"MLX90393 I2C 0x{design.i2c_address:02X}"
+    if design.array is not None:
+        t = design.taxels
+        address = f"{len(t)} x MLX90393 I2C 0x{t[0].i2c_address:02X}-0x{t[-1].i2c_address:02X}"
     name = design.spec.name
-    room = circle[1] - circle[2] - (y0 + edge + 0.5)  # fabs clip silk within ~0.5 mm of the edge
+    pad_top = min(y for _, y in pad_hull(design)) - circle[2]
+    room = pad_top - (y0 + edge + 0.5)  # fabs clip silk within ~0.5 mm of the edge
 
     def height(n: int, size: float) -> float:
         return (n - 1) * 1.6 * size + 2 * (0.7 * size + SILK_STROKE_MM / 2)
@@ -194,3 +232,38 @@ def label(design: Design, outline: Box, parts: list[Placed], circle: tuple[float
     top = y0 + edge + 0.5 + 0.7 * size + SILK_STROKE_MM / 2
     return tuple(SilkText(t, round((x0 + x1) / 2, 6), round(top + k * 1.6 * size, 6), size)
                  for k, t in enumerate([*lines, address]))
+
+
+def taxel_marks(design: Design, board) -> tuple[SilkText, ...]:
+    """Beside each chip, on the top silk (under the pad once it is glued, there to solder and check by): its taxel
+    and address, "T0 0x0C". Each goes to the first side of its chip (right, left, above, below; each side nearest first) where it clears
+    every top pad, via, courtyard, other mark and the edge (tracks lie under the solder mask); a chip with no such side goes without (the address
+    table on the drawing layer and the checklist carry the plan)."""
+    x0, y0, x1, y1 = board.outline
+    e = design.spec.pcb.edge_clearance_mm
+    # silk may cross tracks (under the solder mask), not pads or vias (bare copper)
+    top = [c.bbox() for p in board.parts for c in p.copper() if "F.Cu" in c.layers]
+    top += [c.bbox() for c in board.tracks if c.kind == "point"]
+    yards = [p.box(p.footprint.courtyard) for p in board.parts if not p.bottom and not _is_chip_ref(p.ref)]
+    marks: list[SilkText] = []
+    for t, u in zip(design.taxels, (p for p in board.parts if _is_chip_ref(p.ref))):
+        text = f"T{t.index} 0x{t.i2c_address:02X}"
+        cy = u.box(u.footprint.courtyard)
+        half_w = SILK_ADVANCE * SILK_MIN_TEXT_MM * len(text) / 2 + 0.3
+        sides = [((cy[2] + half_w + d, u.y), (cy[0] - half_w - d, u.y), (u.x, cy[1] - 0.9 - d), (u.x, cy[3] + 0.9 + d))
+                 for d in (0.0, 0.8, 1.6)]
+        for x, y in (p for three in zip(*sides) for p in three):
+            mark = SilkText(text, round(x, 6), round(y, 6), SILK_MIN_TEXT_MM)
+            box = mark.box()
+            grown = (box[0] - 0.2, box[1] - 0.2, box[2] + 0.2, box[3] + 0.2)
+            if box[0] < x0 + e or box[1] < y0 + e or box[2] > x1 - e or box[3] > y1 - e:
+                continue
+            if any(overlap(grown, c) for c in top + yards) or any(overlap(box, m.box()) for m in marks):
+                continue
+            marks.append(mark)
+            break
+    return tuple(marks)
+
+
+def _is_chip_ref(ref: str) -> bool:
+    return ref.startswith("U")

@@ -8,7 +8,7 @@ import math
 from typing import Callable, Mapping
 
 from ..errors import Finding, Severity
-from .layout import PAD_KEEPOUT_MARGIN_MM, Board, disc_clear, overlap
+from .layout import PAD_KEEPOUT_MARGIN_MM, Board, overlap
 from .route import (HOLE_TO_HOLE_MM, Copper, clearance_violations, connected, distance, is_via, near, touching,
                     via_clearance)
 
@@ -90,11 +90,11 @@ def _part_rules(b: Board, err: Report) -> None:
             holes = p.ref.startswith("H") or q.ref.startswith("H")
             if (p.bottom == q.bottom or holes) and overlap(p.box(p.footprint.courtyard), q.box(q.footprint.courtyard)):
                 err("pcb-courtyard", f"courtyards of {p.ref} and {q.ref} overlap")
-    cx, cy, r = b.pad_circle
+    r = b.pad_circle[2]
     for p in b.parts:
-        if p.bottom or p.ref == "U1" or p.ref in {"H1", "H2"}:
+        if p.bottom or p.ref.startswith("U") or p.ref in {"H1", "H2"}:
             continue
-        if not disc_clear(p.box(p.footprint.courtyard), cx, cy, r + PAD_KEEPOUT_MARGIN_MM):
+        if not b.pad_clear(p.box(p.footprint.courtyard), PAD_KEEPOUT_MARGIN_MM):
             err("pcb-pad-keepout", f"{p.ref} stands inside the mounting pad's disc (radius {r:g} mm): the pad would "
                                    "not sit flat")
 
@@ -103,11 +103,10 @@ def _silk_rules(b: Board, err: Report) -> None:
     """Each label line lies inside the edge clearance, off the pad's disc, the holes and the other lines."""
     x0, y0, x1, y1 = b.outline
     e = b.rules["edge_clearance"]
-    cx, cy, r = b.pad_circle
     for t in b.label:
         box = t.box()
         inside = box[0] >= x0 + e and box[1] >= y0 + e and box[2] <= x1 - e and box[3] <= y1 - e
-        clear = disc_clear(box, cx, cy, r) and not any(
+        clear = b.pad_clear(box) and not any(
             overlap(box, p.box(p.footprint.courtyard)) for p in b.parts if p.ref.startswith("H"))
         clear = clear and not any(overlap(box, o.box()) for o in b.label if o is not t)
         if not inside or not clear:

@@ -121,6 +121,13 @@ def _board_figure(design: "Design", board: "Board", artifacts: Sequence["Artifac
                f"0x{board.address:02X}; top copper red, bottom copper blue (seen through the board), vias gold, "
                f"drilled holes white, the mounting pad's disc dashed (nothing but the chip stands inside it on top)."
                + unrouted)
+    if design.array is not None:
+        t = design.taxels
+        caption = (f"{pcb_spec.width_mm:g} x {pcb_spec.height_mm:g} mm, {board.thickness_mm:g} mm thick, {len(t)} "
+                   f"chips on one I2C bus at 0x{t[0].i2c_address:02X}-0x{t[-1].i2c_address:02X} (each marked T<taxel> "
+                   "<address> beside it); top copper red, bottom copper blue (seen through the board), vias gold, "
+                   "drilled holes white, the mounting pad's outline dashed (nothing but the chips stands inside it on "
+                   "top)." + unrouted)
     svg = board_svg(board, pcb_spec.via_drill_mm)
     return Figure("board", "Breakout board", caption, _data_uri(svg, "image/svg+xml"), links)
 

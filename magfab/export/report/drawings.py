@@ -208,15 +208,21 @@ def board_svg(board: "Board", via_drill_mm: float) -> bytes:
     out += [f'<circle cx="{h.a[0]:.4f}" cy="{h.a[1]:.4f}" r="{h.r:.4f}" fill="#fff" stroke="#000" '
             'stroke-width="0.08"/>' for h in holes]
     cx, cy, r = board.pad_circle
-    out.append(f'<circle cx="{cx}" cy="{cy}" r="{r}" fill="none" stroke="#fff" stroke-width="0.12" '
-               'stroke-dasharray="0.6 0.4"/>')
+    if board.pad_hull:  # an array's pad: the taxels' hull grown by the pad radius
+        from ... import outline
+
+        pts = " ".join(f"{x:.4f},{y:.4f}" for x, y in outline.polygon(list(board.pad_hull), r, 72))
+        out.append(f'<polygon points="{pts}" fill="none" stroke="#fff" stroke-width="0.12" stroke-dasharray="0.6 0.4"/>')
+    else:
+        out.append(f'<circle cx="{cx}" cy="{cy}" r="{r}" fill="none" stroke="#fff" stroke-width="0.12" '
+                   'stroke-dasharray="0.6 0.4"/>')
     for p in board.parts:
         if p.ref.startswith("H"):
             continue
         colour = "#ffd0d0" if not p.bottom else "#cfe0ff"
         out.append(f'<text x="{p.x:.3f}" y="{p.y:.3f}" font-size="0.9" text-anchor="middle" '
                    f'dominant-baseline="central" fill="{colour}">{escape(p.ref)}</text>')
-    for t in board.label:
+    for t in board.label + board.marks:
         out.append(f'<text x="{t.x:.3f}" y="{t.y:.3f}" font-size="{t.size:.3f}" text-anchor="middle" '
                    f'dominant-baseline="central" fill="#f0f0f0">{escape(t.text)}</text>')
     out.append("</svg>\n")
