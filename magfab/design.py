@@ -35,6 +35,9 @@ DISTANCE_TOLERANCE_MM = 1e-3
 #: Fixed mould features (not spec keys; each is checked against the printer's minimums).
 REGISTRATION_PIN_MM = 3.0  # diameter of the cup's registration pins
 PRY_LIP_MM = 3.0  # lid overhang at each end of the cup, to lever the lid off
+#: Separate tips: one cavity per taxel by default, up to this many (a row of five MagOne tips is an 82 mm cup and
+#: within the triangle budget of magfab/limits.py; more taxels pour more than once).
+ARRAY_CAVITIES_DEFAULT_MAX = 5
 SPRUE_MAX_MM = 3.0  # fill/overflow hole per cavity
 VENT_MIN_MM = 1.0  # vent hole per cavity at the rim, at least this or the printer's minimum hole
 SECOND_HOLE_EXTRA_MM = 0.5  # the pad's second alignment hole is larger by this: one way round only
@@ -181,7 +184,7 @@ class Design:
     @property
     def cavities(self) -> int:
         """Cast parts per mould: the spec's count, or for an array that does not set it the parts one array needs
-        (a tip per taxel, or one skin)."""
+        (a tip per taxel up to ARRAY_CAVITIES_DEFAULT_MAX, or one skin)."""
         return len(self.cavity_centres_x_mm)
 
     # ---- profiles (r, z) in the elastomer frame ----------------------------------------------
@@ -479,7 +482,7 @@ def _mould(spec: Spec, printer, part: dict[str, object], core_base_r: float,
         hx = R_e + max(x for x, _ in array.part_centres_mm)
         hy = R_e + max(y for _, y in array.part_centres_mm)
     elif array is not None and "cavities" not in spec.mould.model_fields_set:
-        n = len(array.taxels)
+        n = min(len(array.taxels), ARRAY_CAVITIES_DEFAULT_MAX)
     pitch = 2.0 * hx + wall
     span = (n - 1) * pitch
     pin_d = REGISTRATION_PIN_MM

@@ -89,6 +89,15 @@ SECONDS_PER_FE_WORK = 0.1e-3
 MAX_FE_WORK = 90_000
 MB_PER_FE_TRIANGLE = 0.1  # 1,299 triangles: 221 MB peak, with ~100 MB of Python and numpy
 
+# ---- an array's board -----------------------------------------------------------------------------------
+#: Routing the breakout board grows with the square of its chips (every connection of the bus searches a board
+#: that grows with them): 0.6 s for one chip, 7.4 s for four, 12 s for five, 117 s for sixteen (a 4x4 at 14 mm),
+#: measured in one session on the two-core machine: 0.46 s x N^2, 1.3x margin.
+SECONDS_PER_CHIP2 = 0.6
+#: The board's share of the budget: the rest of an array build took about 14 s (the CAD and physics branches side
+#: by side), so 40 s keeps it within the minute; eight chips (38 s) pass, nine do not.
+MAX_BOARD_S = 40.0
+
 # ---- calibration ----------------------------------------------------------------------------------------
 #: Rows of the simulated scan (field, force, the polynomial fits, the CSV in the build): linear and cheap, but
 #: each row is an exact-field evaluation and a CSV line. MagOne: 2,673 rows (at most 4,941 by the spec's
@@ -245,6 +254,13 @@ def check_limits(design: "Design") -> Cost:
             if need is not None:
                 raise SpecError(key, getattr(m, name), what, f"raise {key} to at least {_fmt(_round_up(need))}")
         raise SpecError("mould.cavities", design.cavities, what, "use fewer cavities per mould")
+    chips = len(design.taxels)
+    if SECONDS_PER_CHIP2 * chips**2 > MAX_BOARD_S:
+        most = int(math.sqrt(MAX_BOARD_S / SECONDS_PER_CHIP2))
+        key = "array.rows" if spec.array.positions_mm is None else "array.positions_mm"
+        raise SpecError(key, getattr(spec.array, key.split(".")[1]),
+                        f"makes {chips} taxels, whose board would take about {SECONDS_PER_CHIP2 * chips**2:.0f} s to "
+                        f"route (limit {MAX_BOARD_S:g} s)", f"use at most {most} taxels per array")
     if cost.fe_work > MAX_FE_WORK:
         p = spec.predict
         finest_ok = [h for h in cost.fe_meshes_mm if sum(fe_triangles(design, g) for g in cost.fe_meshes_mm

@@ -154,3 +154,11 @@ def test_a_measured_scan_too_large_for_mls_is_refused_before_any_work(tmp_path):
     assert result.exit_code == 2, result.output
     assert f"at most {limits.MAX_MLS_ROWS:,} rows" in result.output and len(result.output.strip().splitlines()) == 1
     assert not (tmp_path / "out").exists()
+
+
+def test_an_array_whose_board_would_route_too_long_is_refused():
+    from magfab import derive, parse_spec
+
+    with pytest.raises(SpecError) as err:
+        derive(parse_spec('[array]\nrows = 3\ncols = 3\npitch_mm = 14'))
+    assert str(err.value).startswith("array.rows = 3:") and "at most 8 taxels" in str(err.value)
