@@ -12,10 +12,14 @@ The compensation of one cycle of readings ``B[k]`` (uT, chip axes, one per taxel
 magnet j travels z towards its chip (both exact, computed by magfab; ``neighbour_uT[k][j]`` over ``travel_mm``);
 ``D`` the field of a point dipole of the magnet's moment, ``r_kj`` chip k from magnet j's centre at rest, ``s_j``
 its polarity. Magnet j's motion ``t_j`` (its axial part ``z_j``) is read from its own chip: the travel by
-inverting the own field's Bz along the axis (``travel_mm`` -> ``own_Bz_uT``, for polarity +1), the lateral offset
-by the own field's lateral rate at that travel (``own_rate_uT_per_mm``: Bx at the chip per mm of the magnet's x
-offset). So the axial part, most of it, is exact and only the lateral part rests on the dipole (within 2-4 % of
-the exact field at 8-14 mm). With ``dynamic`` false only the offsets are removed. Each taxel's calibration (its
+inverting the own field's Bz along the axis (``travel_mm`` -> ``own_Bz_uT``, for polarity +1), and with the
+lateral offset from the own field's (Bx, Bz) over travel and offset (``own_lateral_uT`` over ``travel_mm`` x
+``lateral_mm``, the magnet shifted along +x: for each offset the travel that gives the measured Bz, then the offset
+whose |Bx| there is the measured lateral field; the direction is the lateral field's). ``D`` is the field of the
+magnet's moment spread over its cylinder (``magnet_mm``: radius, height) as 2 x 6 x 2 point dipoles
+(Gauss-Legendre in radius and height, even in angle), so the lateral part converges on the exact field much
+faster than one dipole with distance. So the axial part, most of it, is exact and only the lateral part rests on
+the dipoles. With ``dynamic`` false only the offsets are removed. Each taxel's calibration (its
 own file) then takes ``B'[k]`` as a single taxel's calibration takes B.
 """
 
@@ -30,8 +34,10 @@ __all__ = ["FORMAT", "ArrayError", "Compensator", "validate"]
 
 FORMAT = "magfab-array/1"
 MAX_TAXELS = 16
-#: Jacobi sweeps of the travel estimate: each taxel's own field is first cleaned of its neighbours' motion.
-SWEEPS = 2
+#: Jacobi sweeps of the motion estimate: each taxel's own field is cleaned of its neighbours' motion, then read again
+#: (a 1x5 strip at 14 mm, one magnet slid 2.5 mm: 55 mN left after 2 sweeps with a linear lateral rate, 0.54 after 3
+#: with the tables, 0.22 after 4, 0.04 after 5; each costs the same again).
+SWEEPS = 4
 
 Vector = Tuple[float, float, float]
 
@@ -80,9 +86,18 @@ def validate(data: object) -> "Compensator":
     own = _table(data, "own_Bz_uT", len(travel))
     if any(b <= a for a, b in zip(own, own[1:])):
         raise ArrayError("own_Bz_uT", own, "must increase with the travel (the magnet nears its chip)")
-    rate = _table(data, "own_rate_uT_per_mm", len(travel))
-    if any(r == 0.0 for r in rate):
-        raise ArrayError("own_rate_uT_per_mm", rate, "must be non-zero")
+    lateral = _table(data, "lateral_mm")
+    if lateral[0] != 0.0 or any(b <= a for a, b in zip(lateral, lateral[1:])):
+        raise ArrayError("lateral_mm", lateral, "must start at 0 and increase")
+    table = lookup(data, "own_lateral_uT", ArrayError)
+    if not isinstance(table, list) or len(table) != len(travel) or not all(
+            isinstance(row, list) and len(row) == len(lateral) and all(
+                isinstance(v, list) and len(v) == 2 and all(is_number(x) and math.isfinite(x) for x in v) for v in row)
+            for row in table):
+        raise ArrayError("own_lateral_uT", table, f"must be {len(travel)} x {len(lateral)} [Bx, Bz] pairs")
+    size = _table(data, "magnet_mm", 2)
+    if not all(x > 0 for x in size):
+        raise ArrayError("magnet_mm", size, "must be the magnet's radius and height, both positive")
     if not isinstance(data.get("dynamic"), bool):
         raise ArrayError("dynamic", data.get("dynamic"), "must be true or false")
     rows = lookup(data, "neighbour_uT", ArrayError)
@@ -90,7 +105,7 @@ def validate(data: object) -> "Compensator":
         raise ArrayError("neighbour_uT", rows, f"must be {n} x {n} tables (chip k, magnet j)")
     neighbour = [[_vectors({"t": rows[k][j]}, "t", len(travel)) for j in range(n)] for k in range(n)]
     return Compensator([t["polarity"] for t in taxels], _vectors(data, "chips_mm", n), _vectors(data, "centres_mm", n),
-                       _vectors(data, "offset_uT", n), travel, own, rate, neighbour,
+                       _vectors(data, "offset_uT", n), travel, own, (lateral, table, size), neighbour,
                        finite(data, "moment_uT_mm3", ArrayError, positive=True), data["dynamic"])
 
 
@@ -105,6 +120,20 @@ def _interp(x: float, xs: Sequence[float], ys: Sequence[float]) -> float:
     return ys[hi - 1] + f * (ys[hi] - ys[hi - 1])
 
 
+def _cylinder_points(radius: float, height: float) -> List[Tuple[float, float, float, float]]:
+    """(x, y, z, weight) of 2 x 6 x 2 point dipoles filling a cylinder of unit total weight: Gauss-Legendre nodes in
+    r^2 (equal areas) and in z, six angles."""
+    g = 1.0 / math.sqrt(3.0)
+    out = []
+    for u in ((1 - g) / 2, (1 + g) / 2):  # r^2 / R^2 at the two Gauss nodes on [0, 1]
+        rho = radius * math.sqrt(u)
+        for m in range(6):
+            phi = math.pi * (2 * m + (u > 0.5)) / 6
+            for h in (-g * height / 2, g * height / 2):
+                out.append((rho * math.cos(phi), rho * math.sin(phi), h, 1.0 / 24))
+    return out
+
+
 def dipole_uT(moment_uT_mm3: float, r: Vector) -> Vector:
     """Field (uT) of a +z point dipole at displacement ``r`` (mm) from it: m (3 (z.r) r / |r|^5 - z / |r|^3)."""
     d2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2]
@@ -117,10 +146,12 @@ def dipole_uT(moment_uT_mm3: float, r: Vector) -> Vector:
 class Compensator:
     """Removes from each taxel's reading what the other magnets put there (module doc)."""
 
-    def __init__(self, polarity, chips, centres, offset, travel, own, rate, neighbour, moment, dynamic) -> None:
+    def __init__(self, polarity, chips, centres, offset, travel, own, lateral, neighbour, moment, dynamic) -> None:
         self.polarity, self.chips, self.centres, self.offset = polarity, chips, centres, offset
-        self.travel, self.own, self.rate, self.neighbour = travel, own, rate, neighbour
+        self.travel, self.own, self.neighbour = travel, own, neighbour
+        self.lateral, self.table, (radius, height) = lateral
         self.moment, self.dynamic = moment, dynamic
+        self.points = _cylinder_points(radius, height)
 
     @property
     def taxels(self) -> int:
@@ -129,19 +160,41 @@ class Compensator:
     def _motion(self, j: int, b: Vector) -> Vector:
         """Magnet j's displacement (mm, board frame) from its own field ``b`` (neighbours removed)."""
         s = self.polarity[j]
-        dz = _interp(s * b[2], self.own, self.travel)
-        rate = _interp(dz, self.travel, self.rate)
-        return (s * b[0] / rate, s * b[1] / rate, -dz)
+        bz, br = s * b[2], math.hypot(b[0], b[1])
+        dz = _interp(bz, self.own, self.travel)
+        if br == 0.0:
+            return (0.0, 0.0, -dz)
+        prev = None
+        for k, off in enumerate(self.lateral):  # the first offset whose |Bx| (at its own travel) reaches br
+            column_bz = [row[k][1] for row in self.table]
+            z = _interp(bz, column_bz, self.travel) if all(b2 > a2 for a2, b2 in zip(column_bz, column_bz[1:])) else dz
+            r = abs(_interp(z, self.travel, [row[k][0] for row in self.table]))
+            if r >= br and prev is not None:
+                f = (br - prev[2]) / (r - prev[2]) if r != prev[2] else 1.0
+                off, z = prev[0] + f * (off - prev[0]), prev[1] + f * (z - prev[1])
+                break
+            prev = (off, z, r)
+        # the chip's lateral field is s * sign(table) * |Bx| along the magnet's shift: the shift is along it or against
+        sign = -1.0 if self.table[0][1][0] * s < 0 else 1.0
+        return (sign * off * b[0] / br, sign * off * b[1] / br, -z)
 
     def _from(self, j: int, k: int, t: Vector) -> Vector:
         """What magnet j moved by ``t`` changes at chip k (uT): the exact axial table, the lateral part by dipole."""
         c, p = self.centres[j], self.chips[k]
         axial = [_interp(-t[2], self.travel, [v[a] for v in self.neighbour[k][j]]) for a in range(3)]
         lowered = (p[0] - c[0], p[1] - c[1], p[2] - c[2] - t[2])
-        a = dipole_uT(self.moment, (lowered[0] - t[0], lowered[1] - t[1], lowered[2]))
-        b = dipole_uT(self.moment, lowered)
+        a = self._spread((lowered[0] - t[0], lowered[1] - t[1], lowered[2]))
+        b = self._spread(lowered)
         s = self.polarity[j]
         return (axial[0] + s * (a[0] - b[0]), axial[1] + s * (a[1] - b[1]), axial[2] + s * (a[2] - b[2]))
+
+    def _spread(self, r: Vector) -> Vector:
+        """The moment spread over the magnet's cylinder (module doc), at displacement ``r`` from its centre."""
+        x = y = z = 0.0
+        for px, py, pz, w in self.points:
+            f = dipole_uT(self.moment * w, (r[0] - px, r[1] - py, r[2] - pz))
+            x, y, z = x + f[0], y + f[1], z + f[2]
+        return (x, y, z)
 
     def apply(self, readings: Sequence[Sequence[float]]) -> List[Vector]:
         """One cycle's readings (one [Bx, By, Bz] uT per taxel, in taxel order) -> each taxel's own field."""

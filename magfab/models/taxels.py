@@ -34,9 +34,8 @@ __all__ = ["ArrayField", "ArrayCalibration", "array_field", "field_at_chips", "s
 
 #: Points of the own-field tables along the magnet's travel from rest to d_min.
 TABLE_POINTS = 33
-#: Lateral offset of the central difference behind the own field's lateral rate, mm (the rate is linear in the
-#: offset to 1e-4 over the shear range's fraction of a millimetre).
-RATE_STEP_MM = 0.01
+#: Points of the own-field tables across the magnet's lateral offset, from 0 to half the elastomer's radius.
+LATERAL_POINTS = 13
 
 
 def _magnet_centres(design: "Design") -> np.ndarray:
@@ -72,7 +71,9 @@ class ArrayField:
     rest_uT: np.ndarray  # (N, 3) each chip's own magnet at rest
     travel_mm: np.ndarray  # (M,) the magnet's axial travel from rest towards its chip
     own_Bz_uT: np.ndarray  # (M,) the own field's Bz at the chip over that travel, polarity +1
-    own_rate_uT_per_mm: np.ndarray  # (M,) Bx at the chip per mm of the magnet's x offset, over that travel
+    lateral_mm: np.ndarray  # (K,) the magnet's lateral offset
+    own_lateral_uT: np.ndarray  # (M, K, 2) the own field's (Bx, Bz) at the chip, magnet at travel i shifted +x by k
+    magnet_mm: tuple[float, float]  # radius, height: the lateral part's distributed dipoles fill this cylinder
     neighbour_uT: np.ndarray  # (N, N, M, 3) change at chip k as magnet j travels (its polarity applied; 0 for k = j)
     moment_uT_mm3: float  # the magnet's dipole moment as mu0 m / 4 pi
 
@@ -80,7 +81,8 @@ class ArrayField:
         r = lambda a: np.round(a, 6).tolist()  # noqa: E731 - 1e-6 uT or mm: far below a count, stable text
         return {"chips_mm": r(self.chips_mm), "centres_mm": r(self.centres_mm), "offset_uT": r(self.offset_uT),
                 "rest_uT": r(self.rest_uT), "travel_mm": r(self.travel_mm), "own_Bz_uT": r(self.own_Bz_uT),
-                "own_rate_uT_per_mm": r(self.own_rate_uT_per_mm), "neighbour_uT": r(self.neighbour_uT),
+                "lateral_mm": r(self.lateral_mm),
+                "own_lateral_uT": r(self.own_lateral_uT), "magnet_mm": r(self.magnet_mm), "neighbour_uT": r(self.neighbour_uT),
                 "moment_uT_mm3": round(self.moment_uT_mm3, 6)}
 
 
@@ -92,7 +94,6 @@ def array_field(design: "Design") -> ArrayField:
     travel = np.linspace(0.0, design.d_rest_mm - design.spec.sensor.d_min_mm, TABLE_POINTS)
     below = -(design.d_rest_mm - travel + magnet.height_mm / 2.0)  # the chip in the magnet's frame
     axis = fieldmod.exact(magnet, np.column_stack([np.zeros_like(travel), np.zeros_like(travel), below]))
-    side = fieldmod.exact(magnet, np.column_stack([np.full_like(travel, -RATE_STEP_MM), np.zeros_like(travel), below]))
     moment = magnet.remanence_T * 1e6 * math.pi * magnet.radius_mm**2 * magnet.height_mm / (4.0 * math.pi)
     n = len(B)
     neighbour = np.zeros((n, n, len(travel), 3))
@@ -100,9 +101,11 @@ def array_field(design: "Design") -> ArrayField:
     for i, t in enumerate(travel):
         lowered = field_at_chips(design, centres - [0.0, 0.0, t])
         neighbour[:, :, i, :] = np.where(own[:, :, None], 0.0, lowered - B)
+    lateral = np.linspace(0.0, design.elastomer_radius_mm / 2.0, LATERAL_POINTS)
+    grid = np.array([[-s, 0.0, z] for z in below for s in lateral])
+    table = fieldmod.exact(magnet, grid)[:, [0, 2]].reshape(len(travel), len(lateral), 2) * UT_PER_GAUSS
     return ArrayField(_chips(design), centres, np.where(own[:, :, None], 0.0, B).sum(axis=1) + 0.0,
-                      B[own] + 0.0, travel, axis[:, 2] * UT_PER_GAUSS, side[:, 0] * UT_PER_GAUSS / RATE_STEP_MM,
-                      neighbour + 0.0, moment)
+                      B[own] + 0.0, travel, axis[:, 2] * UT_PER_GAUSS, lateral, table + 0.0, (magnet.radius_mm, magnet.height_mm), neighbour + 0.0, moment)
 
 
 def simulate_taxel_scan(design: "Design", prediction: "Prediction", k: int, field: ArrayField | None = None) -> "Scan":

@@ -68,7 +68,7 @@ def test_polarity_changes_every_neighbour_at_once_not_one_alone(array_builds):
     assert not np.allclose(c_alt, c_same, rtol=0.05)
 
 
-def test_the_host_compensation_removes_a_pressed_neighbour():
+def test_the_host_compensation_removes_a_pressed_or_sliding_neighbour():
     d = derive(parse_spec('name = "pair"\n[array]\nrows = 1\ncols = 2\npitch_mm = 14'))
     from magfab.models.predict import predict
 
@@ -80,6 +80,11 @@ def test_the_host_compensation_removes_a_pressed_neighbour():
     raw = X.layout_errors(pressed, xy, signs)[0].max()
     left = X.compensated_errors(d, pressed, xy, signs)[0].max()
     assert left < raw / 100.0
+    # slid through the whole shear travel (2.5 mm): the lateral tables and the spread moment keep up
+    slid_raw, slid_left = X.layout_errors(loads, xy, signs)[0].max(), X.compensated_errors(d, loads, xy, signs)[0].max()
+    assert slid_raw > 50.0 and slid_left < slid_raw / 100.0
+    flipped = np.array([1.0, -1.0])  # and with the neighbour magnetised the other way
+    assert X.compensated_errors(d, loads, xy, flipped)[0].max() < slid_raw / 100.0
 
 
 def test_skin_coupling_against_boussinesq_and_under_refinement():
@@ -102,9 +107,12 @@ def test_magnet_force_tends_to_the_dipoles_far_apart(strip):
 
 
 def test_findings_warn_below_the_least_pitch_only(array_builds):
-    for name in ("fingertip_2x2", "strip_1x5"):
-        codes = {f.code for f in array_builds[name].findings}
-        assert {"array-crosstalk", "array-crosstalk-budget"} <= codes
+    skin = {f.code: f for f in array_builds["fingertip_2x2"].findings}
+    strip = {f.code: f for f in array_builds["strip_1x5"].findings}
+    # the skin at 10 mm: a load on one taxel moves its neighbours' magnets (26 mN read), past the 3.7 mN tolerance
+    assert skin["array-crosstalk"].key == "array.pitch_mm" and "array-crosstalk-budget" in skin
+    # the strip of separate tips at 14 mm: the compensation leaves a fraction of a millinewton
+    assert "array-crosstalk" not in strip and "array-crosstalk-budget" in strip
     d = derive(parse_spec('name = "far"\n[array]\nrows = 1\ncols = 2\npitch_mm = 45\ncrosstalk_mN = 5'))
     from magfab.models.predict import predict
 
