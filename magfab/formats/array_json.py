@@ -10,8 +10,8 @@ The compensation of one cycle of readings ``B[k]`` (uT, chip axes, one per taxel
 
 ``offset[k]`` is the field of every other magnet at chip k at rest and ``A_kj(z)`` the change at chip k when
 magnet j travels z towards its chip (both exact, computed by magfab; ``neighbour_uT[k][j]`` over ``travel_mm``);
-``D`` the field of a point dipole of the magnet's moment, ``r_kj`` chip k from magnet j's centre at rest, ``s_j``
-its polarity. Magnet j's motion ``t_j`` (its axial part ``z_j``) is read from its own chip: the travel by
+``D`` the field of the magnet's moment (below), ``r_kj`` chip k from magnet j's centre at rest, ``s_j`` its
+polarity. Magnet j's motion ``t_j`` (its axial part ``z_j``) is read from its own chip: the travel by
 inverting the own field's Bz along the axis (``travel_mm`` -> ``own_Bz_uT``, for polarity +1), and with the
 lateral offset from the own field's (Bx, Bz) over travel and offset (``own_lateral_uT`` over ``travel_mm`` x
 ``lateral_mm``, the magnet shifted along +x: for each offset the travel that gives the measured Bz, then the offset
@@ -19,7 +19,8 @@ whose |Bx| there is the measured lateral field; the direction is the lateral fie
 magnet's moment spread over its cylinder (``magnet_mm``: radius, height) as 2 x 6 x 2 point dipoles
 (Gauss-Legendre in radius and height, even in angle), so the lateral part converges on the exact field much
 faster than one dipole with distance. So the axial part, most of it, is exact and only the lateral part rests on
-the dipoles. With ``dynamic`` false only the offsets are removed. Each taxel's calibration (its
+the dipoles. The motions are estimated from the cleaned fields again, SWEEPS times (Jacobi). With ``dynamic``
+false only the offsets are removed. Each taxel's calibration (its
 own file) then takes ``B'[k]`` as a single taxel's calibration takes B.
 """
 
