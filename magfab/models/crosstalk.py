@@ -34,7 +34,8 @@ if TYPE_CHECKING:
     from ..design import Design
     from .predict import Prediction
 
-__all__ = ["Crosstalk", "crosstalk", "findings", "layout_errors", "compensated_errors"]
+__all__ = ["Crosstalk", "crosstalk", "findings", "layout_errors", "compensated_errors", "pitch_budget", "least_pitch",
+           "magnet_forces"]
 
 #: Pitches swept for the least pitch: from the parts' minimum up to this many times the spec's pitch (or 60 mm).
 SWEEP_POINTS = 48
@@ -56,6 +57,7 @@ class _Loads:
     normal_G_per_N: float
     shear_G_per_N: float
     range_N: float
+    shear_stiffness_N_per_mm: float  # the softest of the material band's lateral stiffness at the magnet
 
     @classmethod
     def of(cls, design: "Design", pred: "Prediction") -> "_Loads":
@@ -63,7 +65,7 @@ class _Loads:
         return cls(fieldmod.Magnet.from_spec(design.spec), design.z_sense_mm,
                    design.z_magnet_low_mm + design.magnet_height_mm / 2.0, pred.normal.travel_mm,
                    pred.shear.range_N / stiff, min(pred.normal.sensitivity_G_per_N),
-                   min(pred.shear.sensitivity_G_per_N), pred.normal.range_N)
+                   min(pred.shear.sensitivity_G_per_N), pred.normal.range_N, stiff)
 
 
 def layout_errors(loads: _Loads, xy: np.ndarray, signs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -166,6 +168,9 @@ class Crosstalk:
     force_exact_mN: float  # the same from the exact field's energy
     coupling_curve: tuple[np.ndarray, np.ndarray] | None  # (r mm, c) for a continuous skin
     coupling_depth_mm: float  # the magnets' depth under the skin's top (0: separate tips)
+    magnet_forces_mN: np.ndarray  # (N, 2) net lateral force on each magnet at rest from the others (exact)
+    predisplacement_mm: np.ndarray  # (N, 2) the lateral shift it gives the magnet through the softest shear stiffness
+    shear_travel_mm: float  # the magnet's lateral travel at the shear range (softest), for scale
 
     @property
     def worst_mN(self) -> np.ndarray:
@@ -199,6 +204,8 @@ class Crosstalk:
                                              for k, v in self.min_pitch_compensated_mm.items()},
                 "sweep_mm": r(self.sweep_mm, 3), "sweep_worst_mN": {k: r(v) for k, v in self.sweep_worst_mN.items()},
                 "magnet_force_mN": round(self.force_mN, 3), "magnet_force_exact_mN": round(self.force_exact_mN, 3),
+                "magnet_net_force_mN": r(self.magnet_forces_mN, 3), "predisplacement_mm": r(self.predisplacement_mm, 5),
+                "shear_travel_mm": round(self.shear_travel_mm, 4),
                 "dynamic": self.dynamic, "header": list(self.HEADER), "rows": [list(row) for row in self.rows()]}
 
 
@@ -248,6 +255,53 @@ def _magnet_force(loads: _Loads, r_mm: float, same: bool) -> tuple[float, float]
     return 1000.0 * sign * dipole, 1000.0 * (exact if same else -exact)
 
 
+def pitch_budget(design: "Design", loads: _Loads, signs: np.ndarray, curve, pitch_mm: float,
+                 compensate: bool = False) -> float:
+    """The worst taxel's misreading (mN) with ``design``'s layout scaled about its centre to ``pitch_mm`` and
+    magnetised ``signs``: the worst neighbour alone (field and, through a continuous skin ``curve``, mechanics) or
+    every neighbour pressed at once; ``compensate``: what the host's compensation leaves of the field part."""
+    xy = np.array([[t.x_mm, t.y_mm] for t in design.taxels])
+    centre = xy.mean(axis=0)
+    scaled = centre + (xy - centre) * (pitch_mm / design.array.pitch_mm)
+    f, cm = compensated_errors(design, loads, scaled, signs) if compensate else layout_errors(loads, scaled, signs)[:2]
+    return float(np.maximum((f + _mechanical(design, loads, scaled, curve)[1]).max(axis=1), cm).max())
+
+
+def least_pitch(design: "Design", loads: _Loads, signs: np.ndarray, curve, sweep: np.ndarray, tol: float,
+                compensate: bool = False, steps: int = 30) -> tuple[np.ndarray, float | None]:
+    """(:func:`pitch_budget` over ``sweep``, the least pitch from which it stays within ``tol``: bisected between the
+    sweep's last failing and first passing pitch, so a budget that dips and rises again is not crossed early; the
+    sweep's first pitch when it all passes, None when its last fails)."""
+    def budget(p: float) -> float:
+        return pitch_budget(design, loads, signs, curve, p, compensate)
+
+    worst = np.array([budget(p) for p in sweep])
+    failing = np.flatnonzero(worst > tol)
+    if len(failing) == 0:
+        return worst, float(sweep[0])
+    k = failing[-1]
+    if k == len(sweep) - 1:
+        return worst, None
+    lo, hi = float(sweep[k]), float(sweep[k + 1])
+    for _ in range(steps):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if budget(mid) > tol else (lo, mid)
+    return worst, hi
+
+
+def magnet_forces(loads: _Loads, xy: np.ndarray, signs: np.ndarray) -> np.ndarray:
+    """(N, 2) net lateral force on each magnet at rest from all the others, mN (the exact field's energy, pair by
+    pair: like poles push a magnet away from its neighbour, unlike pull it towards)."""
+    out = np.zeros((len(xy), 2))
+    for i in range(len(xy)):
+        for j in range(len(xy)):
+            if i != j:
+                d = xy[i] - xy[j]
+                r = float(np.hypot(*d))
+                out[i] += _magnet_force(loads, r, signs[i] == signs[j])[1] * d / r
+    return out
+
+
 def crosstalk(design: "Design", pred: "Prediction") -> Crosstalk:
     """The budget of ``design``'s array (``design.array`` must not be None)."""
     from .mechanics.coupling import coupling
@@ -257,7 +311,6 @@ def crosstalk(design: "Design", pred: "Prediction") -> Crosstalk:
     xy = np.array([[t.x_mm, t.y_mm] for t in design.taxels])
     signs = np.array([float(t.polarity) for t in design.taxels])
     tol = design.spec.array.crosstalk_mN or pred.normal.resolution_mN
-    centre = xy.mean(axis=0)
     sweep = np.geomspace(arr.min_pitch_mm, max(4.0 * arr.pitch_mm, 60.0), SWEEP_POINTS)
     span = float(_distances(xy).max()) / arr.pitch_mm
     curve, depth = None, 0.0
@@ -271,34 +324,23 @@ def crosstalk(design: "Design", pred: "Prediction") -> Crosstalk:
     least_comp: dict[str, float | None] = {}
     for name, alt in (("same", False), ("alternating", True)):
         s = _signs(design, alt)
-
-        def scaled(p: float) -> np.ndarray:
-            return centre + (xy - centre) * (p / arr.pitch_mm)
-
-        def budget(p: float, compensate: bool = False) -> float:
-            f, cm, _ = layout_errors(loads, scaled(p), s)
-            if compensate:
-                f, cm = compensated_errors(design, loads, scaled(p), s)
-            return float(np.maximum((f + _mechanical(design, loads, scaled(p), curve)[1]).max(axis=1), cm).max())
-
-        worst[name] = np.array([budget(p) for p in sweep])
-        least[name] = _least(budget, sweep, worst[name], tol)
+        worst[name], least[name] = least_pitch(design, loads, s, curve, sweep, tol)
         least_comp[name] = None
         if len(xy) <= COMPENSATED_SWEEP_MAX:
-            coarse = sweep[::3]
-            least_comp[name] = _least(lambda p: budget(p, True), coarse, np.array([budget(p, True) for p in coarse]),
-                                      tol, steps=12)
+            least_comp[name] = least_pitch(design, loads, s, curve, sweep[::3], tol, compensate=True, steps=12)[1]
     magnet = loads.magnet
     own_dmin = fieldmod.exact(magnet, np.array([[0.0, 0.0, -(design.spec.sensor.d_min_mm + magnet.height_mm / 2)]]))[0, 2]
-    nearest = float(np.min(_distances(xy) + np.eye(len(xy)) * 1e9))
-    i, j = np.unravel_index(np.argmin(_distances(xy) + np.eye(len(xy)) * 1e9), (len(xy), len(xy)))
-    force, exact = _magnet_force(loads, nearest, signs[i] == signs[j])
+    dist = _distances(xy) + np.eye(len(xy)) * 1e9
+    i, j = np.unravel_index(np.argmin(dist), dist.shape)
+    force, exact = _magnet_force(loads, float(dist[i, j]), signs[i] == signs[j])
+    net = magnet_forces(loads, xy, signs)
     residual, common_residual = compensated_errors(design, loads, xy, signs)
     return Crosstalk(arr.polarity.value, arr.skin.value, arr.pitch_mm, tol, field, residual, common, common_residual,
                      c, mech, rest,
                      float(np.max(np.abs(own_dmin * signs + rest[:, 2]))), pred.chip.full_scale_z_G, least, least_comp,
                      sweep,
-                     worst, force, exact, None if curve is None else (curve.r_mm, curve.ratio), depth)
+                     worst, force, exact, None if curve is None else (curve.r_mm, curve.ratio), depth,
+                     net, net / 1000.0 / loads.shear_stiffness_N_per_mm, loads.shear_travel_mm)
 
 
 def findings(design: "Design", xt: Crosstalk) -> list[Finding]:
@@ -322,27 +364,14 @@ def findings(design: "Design", xt: Crosstalk) -> list[Finding]:
         out.append(Finding(Severity.WARNING, "array-saturation",
                            f"with its neighbours' field a chip reads {xt.saturation_G:.0f} G when its magnet is at "
                            f"d_min, past the {xt.full_scale_G:.0f} G full scale", "sensor.d_min_mm"))
+    shift = float(np.hypot(*xt.predisplacement_mm.T).max())
     mech = f"; through the skin up to {xt.mechanical_mN.max():.1f} mN" if xt.coupling_curve is not None else ""
     out.append(Finding(Severity.INFO, "array-crosstalk-budget",
                        f"crosstalk: a moving neighbour reads as up to {xt.field_mN.max():.1f} mN, "
                        f"{xt.residual_mN.max():.2f} mN after compensation; every neighbour pressed "
                        f"{xt.common_mN.max():.1f} mN ({xt.common_residual_mN.max():.2f} compensated){mech}; the "
                        f"nearest magnets {'repel' if xt.force_exact_mN > 0 else 'attract'} with "
-                       f"{abs(xt.force_exact_mN):.1f} mN at rest (dipoles {abs(xt.force_mN):.1f})"))
+                       f"{abs(xt.force_exact_mN):.1f} mN at rest (dipoles {abs(xt.force_mN):.1f}), which shifts a "
+                       f"magnet sideways by up to {shift * 1000:.0f} um ({100 * shift / xt.shear_travel_mm:.1f} % of its "
+                       f"shear travel, a static shift)"))
     return out
-
-
-def _least(budget, sweep: np.ndarray, worst: np.ndarray, tol: float, steps: int = 30) -> float | None:
-    """The smallest pitch from which every larger pitch of the sweep is within ``tol`` (bisected between the last
-    failing and the first passing pitch); None when even the largest fails."""
-    failing = np.flatnonzero(worst > tol)
-    if len(failing) == 0:
-        return float(sweep[0])
-    k = failing[-1]
-    if k == len(sweep) - 1:
-        return None
-    lo, hi = float(sweep[k]), float(sweep[k + 1])
-    for _ in range(steps):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if budget(mid) > tol else (lo, mid)
-    return hi

@@ -13,6 +13,8 @@ import pytest
 from magfab import derive, parse_spec
 from magfab.models import crosstalk as X
 from magfab.models.mechanics.coupling import boussinesq_ratio, coupling
+from magfab.models.taxels import field_at_chips
+from magfab.units import UT_PER_GAUSS
 
 
 @pytest.fixture(scope="module")
@@ -26,9 +28,10 @@ def _layout(design):
     return xy, np.array([float(t.polarity) for t in design.taxels])
 
 
-def test_neighbours_field_is_magpylibs_superposition(array_builds):
-    d = array_builds["fingertip_2x2"].design
-    loads = X._Loads.of(d, array_builds["fingertip_2x2"].prediction)
+@pytest.mark.parametrize("name", ["fingertip_2x2", "strip_1x5"])
+def test_neighbours_field_is_magpylibs_superposition(array_builds, name):
+    d = array_builds[name].design
+    loads = X._Loads.of(d, array_builds[name].prediction)
     xy, signs = _layout(d)
     _, _, rest = X.layout_errors(loads, xy, signs)
     m = loads.magnet
@@ -38,6 +41,9 @@ def test_neighbours_field_is_magpylibs_superposition(array_builds):
                 enumerate(zip(xy, signs)) if j != i]
         B = magpylib.getB(mags, (x, y, loads.z_chip), sumup=True) * 1e4  # T -> G
         assert rest[i] == pytest.approx(B, abs=1e-3 * np.abs(B).max())
+    # and the calibration's own superposition (models.taxels) agrees with the budget's
+    table = field_at_chips(d) / UT_PER_GAUSS
+    assert rest == pytest.approx(table.sum(axis=1) - np.einsum("iik->ik", table), abs=1e-9)
 
 
 def test_the_least_pitch_is_where_the_budget_crosses_the_tolerance(strip):
@@ -61,11 +67,30 @@ def test_polarity_changes_every_neighbour_at_once_not_one_alone(array_builds):
     loads = X._Loads.of(d, array_builds["fingertip_2x2"].prediction)
     xy, _ = _layout(d)
     same, alternating = np.ones(4), np.array([1.0, -1.0, -1.0, 1.0])
-    f_same, c_same, _ = X.layout_errors(loads, xy, same)
-    f_alt, c_alt, _ = X.layout_errors(loads, xy, alternating)
+    f_same, c_same, r_same = X.layout_errors(loads, xy, same)
+    f_alt, c_alt, r_alt = X.layout_errors(loads, xy, alternating)
     assert f_alt == pytest.approx(f_same)  # one neighbour's misreading has the same size either way
-    # pressed together: two edge neighbours and the diagonal one add with alternating signs in a checkerboard
-    assert not np.allclose(c_alt, c_same, rtol=0.05)
+    # in a checkerboard the two edge neighbours flip and the diagonal one does not: their lateral fields at rest
+    # and their pressed changes partly cancel (about a third less at 10 mm), not halve
+    assert np.all(np.hypot(r_alt[:, 0], r_alt[:, 1]) < 0.7 * np.hypot(r_same[:, 0], r_same[:, 1]))
+    assert np.all(c_alt < 0.8 * c_same) and np.all(c_alt > 0.5 * c_same)
+    # while the axial offset grows: an edge neighbour's Bz and the diagonal's have opposite signs at these distances
+    assert np.all(np.abs(r_alt[:, 2]) > np.abs(r_same[:, 2]))
+    # the least pitch is set by one neighbour sliding, so it is the same for both polarities
+    doc = json.loads((array_builds["fingertip_2x2"].out_dir / "array" / "crosstalk.json").read_text())
+    assert doc["min_pitch_mm"]["same"] == doc["min_pitch_mm"]["alternating"]
+
+
+def test_the_magnets_push_the_strips_ends_out_or_pull_them_in(strip):
+    d, pred, doc = strip
+    loads = X._Loads.of(d, pred)
+    xy, same = _layout(d)
+    net = np.array(doc["magnet_net_force_mN"])
+    assert net[0, 0] < 0 < net[-1, 0] and net[0, 0] == pytest.approx(-net[-1, 0], rel=1e-3)
+    assert abs(net[2, 0]) < 1e-3 and np.abs(net[:, 1]).max() < 1e-3  # the middle one is balanced; nothing across
+    assert np.array(doc["predisplacement_mm"]) == pytest.approx(net / 1000 / loads.shear_stiffness_N_per_mm, abs=1e-5)
+    alternating = X.magnet_forces(loads, xy, np.array([1.0, -1.0, 1.0, -1.0, 1.0]))
+    assert alternating[0, 0] > 0 > alternating[-1, 0]  # unlike neighbours attract: the ends are pulled in
 
 
 def test_the_host_compensation_removes_a_pressed_or_sliding_neighbour():
