@@ -43,6 +43,10 @@ MU0 = 4e-7 * math.pi
 #: The least pitch with the host's compensation is swept (a third of the points) for arrays up to this many taxels;
 #: its cost grows as N^3 (every neighbour's motion, every chip, the compensation's sweeps).
 COMPENSATED_SWEEP_MAX = 8
+#: Warn when the neighbours' magnets shift a magnet sideways at rest by more than this fraction of its shear travel:
+#: the tip then rests off centre and one side of its shear range is short by that fraction (the shift is linear in
+#: the softest shear stiffness, so past a few tenths it is only an order of magnitude).
+SHIFT_WARN = 0.1
 
 
 @dataclass(frozen=True)
@@ -364,7 +368,15 @@ def findings(design: "Design", xt: Crosstalk) -> list[Finding]:
         out.append(Finding(Severity.WARNING, "array-saturation",
                            f"with its neighbours' field a chip reads {xt.saturation_G:.0f} G when its magnet is at "
                            f"d_min, past the {xt.full_scale_G:.0f} G full scale", "sensor.d_min_mm"))
-    shift = float(np.hypot(*xt.predisplacement_mm.T).max())
+    shifts = np.hypot(*xt.predisplacement_mm.T)
+    shift, k = float(shifts.max()), int(np.argmax(shifts))
+    if shift > SHIFT_WARN * xt.shear_travel_mm:
+        out.append(Finding(Severity.WARNING, "array-magnet-force",
+                           f"the other magnets {'pull' if xt.force_exact_mN < 0 else 'push'} taxel {k}'s magnet "
+                           f"sideways with {np.hypot(*xt.magnet_forces_mN[k]):.0f} mN at rest, about {shift:.2f} mm "
+                           f"through the softest shear stiffness ({100 * shift / xt.shear_travel_mm:.0f} % of its "
+                           f"{xt.shear_travel_mm:.1f} mm shear travel): the tip rests off centre and its shear range is "
+                           f"that much shorter on one side; widen the pitch", "array.pitch_mm"))
     mech = f"; through the skin up to {xt.mechanical_mN.max():.1f} mN" if xt.coupling_curve is not None else ""
     out.append(Finding(Severity.INFO, "array-crosstalk-budget",
                        f"crosstalk: a moving neighbour reads as up to {xt.field_mN.max():.1f} mN, "

@@ -143,3 +143,16 @@ def test_findings_warn_below_the_least_pitch_only(array_builds):
 
     xt = X.crosstalk(d, predict(d))
     assert "array-crosstalk" not in {f.code for f in X.findings(d, xt)}
+
+
+def test_close_magnets_in_a_skin_warn_of_their_pull():
+    from magfab.models.predict import predict
+
+    d = derive(parse_spec('name = "close"\n[array]\nrows = 1\ncols = 2\npitch_mm = 7\nskin = "continuous"\n'
+                          'polarity = "alternating"'))
+    xt = X.crosstalk(d, predict(d))
+    found = {f.code: f for f in X.findings(d, xt)}
+    assert xt.force_exact_mN < 0 and xt.predisplacement_mm[0, 0] > 0.1 * xt.shear_travel_mm  # pulled together
+    assert found["array-magnet-force"].key == "array.pitch_mm" and "pull" in found["array-magnet-force"].message
+    assert found["array-crosstalk"].key == "array.pitch_mm"
+
