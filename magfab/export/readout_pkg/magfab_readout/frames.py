@@ -17,6 +17,20 @@ with ``,<fault>`` (the fault word in decimal) before the ``*``; info line:
 ``XXXX`` is the CRC-16/CCITT-FALSE of the bytes before the ``*`` in four upper-case hex digits (as NMEA's
 ``*hh``): a person still reads the line, a script checks it.
 
+An array's image sends a field frame (type 0x02, 20 bytes) per chip per cycle instead: the taxel's field, no
+force (the host computes each taxel's force from every taxel's field, docs/bundle.md section 5)::
+
+    0  2  sync 0xA5 0x5A          10 6  Bx, By, Bz raw counts (int16, RES offsets removed)
+    2  1  frame type 0x02         16 2  temperature raw (uint16), the fault word on a chip-error frame
+    3  1  sequence (per cycle)    18 2  CRC-16/CCITT-FALSE over bytes 2..17
+    4  1  status flags (this chip's)
+    5  4  time, us (uint32): when this chip was read
+    9  1  taxel index
+
+Every frame of one cycle carries the same sequence number; text line
+``B,<taxel>,<seq>,<t_us>,<status>,<Bx_uT>,<By_uT>,<Bz_uT>,<T_C>*XXXX`` (``,<fault>`` before the ``*`` on a chip
+error); an array's info line ends with ``,<taxels>``.
+
 :class:`Decoder` takes bytes as they arrive, in either mode or both mixed (the info line comes in the middle
 of a binary stream), resynchronises on the sync bytes after noise or a lost byte, refuses frames whose CRC
 fails and lines whose checksum is missing or wrong, and counts every kind of trouble in :class:`DecoderStats`.
@@ -32,7 +46,7 @@ import math
 import re
 import struct
 from dataclasses import dataclass, field
-from typing import List, Optional, Tuple, Union
+from typing import Dict, List, Optional, Tuple, Union
 
 from . import _build
 
@@ -40,12 +54,15 @@ __all__ = [
     "SYNC", "FRAME_LENGTH", "FRAME_FORCE", "STATUS_OUTSIDE_REGION", "STATUS_CHIP_ERROR", "STATUS_FULL_SCALE",
     "STATUS_RECOVERED", "FORCE_LIMIT_N", "FIELD_LIMIT_UT", "Sample", "DeviceInfo", "DecoderStats", "Decoder",
     "crc16_ccitt_false", "line_checksum", "encode_frame", "encode_text_line", "encode_info_line", "decode_frames",
-    "temperature_C", "FAULTS", "FAULT_STAGES", "fault_name",
+    "temperature_C", "FAULTS", "FAULT_STAGES", "fault_name", "FRAME_FIELD", "FIELD_FRAME_LENGTH", "encode_field_frame",
+    "encode_field_line", "frame_length",
 ]
 
 SYNC = b"\xa5\x5a"
 FRAME_LENGTH = 31
 FRAME_FORCE = 0x01
+FRAME_FIELD = 0x02  # an array's: one chip's field, the taxel index, no force
+FIELD_FRAME_LENGTH = 20
 STATUS_OUTSIDE_REGION = 0x01  # the reading is outside the calibrated region: the force is extrapolated
 STATUS_CHIP_ERROR = 0x02  # NACK, ERROR bit, wrong byte count or timeout; the forces are NaN
 STATUS_FULL_SCALE = 0x04  # a field axis is at the chip's full scale
@@ -64,12 +81,13 @@ FAULTS = {1: "nack", 2: "bus error", 3: "bus timeout", 4: "chip ERROR bit", 5: "
 FAULT_STAGES = {1: "read", 2: "start", 3: "eeprom"}
 
 _INT = re.compile(r"[0-9]{1,10}")
-_LINE_STARTS = (b"F,", b"I,", b"W,", b"R,")
+_LINE_STARTS = (b"F,", b"I,", b"W,", b"R,", b"B,")
 #: What the firmware prints for a float (mf_format_float): [-]digits.digits, d.dddde+XX beyond 1e9, nan, inf.
 _FLOAT = re.compile(r"-?[0-9]{1,10}(?:\.[0-9]{1,6})?(?:e\+[0-9]{2})?|nan|-?inf")
 _CHECKED = re.compile(rb"(.*)\*([0-9A-F]{4})")
 
 _BODY = struct.Struct("<BBBI3hH3f")  # bytes 2..28: type, seq, status, time, counts, temperature, forces
+_FIELD_BODY = struct.Struct("<BBBIB3hH")  # bytes 2..17: type, seq, status, time, taxel, counts, temperature
 _CRC = struct.Struct("<H")
 _FLAG_LETTERS = ((STATUS_OUTSIDE_REGION, "o"), (STATUS_CHIP_ERROR, "E"), (STATUS_FULL_SCALE, "S"),
                  (STATUS_RECOVERED, "R"))
@@ -122,7 +140,9 @@ class Sample:
     when the chip-error bit is set (the sample is kept for its sequence number, time and flags);
     ``counts`` and ``temperature_raw`` are the raw chip readings (binary frames only); ``time_s`` is the
     device time since the first sample of a :class:`~magfab_readout.Device` stream (None from the decoder);
-    ``fault`` is the fault word of a chip-error sample (:func:`fault_name`, :attr:`fault_name`), else None.
+    ``fault`` is the fault word of a chip-error sample (:func:`fault_name`, :attr:`fault_name`), else None;
+    ``taxel`` the index of the chip an array's field frame came from (0 for a single taxel's force frames, whose
+    ``force_N`` is NaN: the host computes an array's forces).
     """
 
     seq: int
@@ -137,6 +157,7 @@ class Sample:
     time_s: Optional[float] = None
     device_force_N: Optional[Tuple[float, float, float]] = field(default=None, compare=False)
     fault: Optional[int] = None
+    taxel: int = 0
 
     def __post_init__(self) -> None:
         if self.device_force_N is None:
@@ -184,6 +205,7 @@ class DeviceInfo:
     osr: int
     dig_filt: int
     line: str
+    taxels: int = 1  # an array's image: the number of chips it reads
 
     @property
     def settings(self) -> Tuple[int, int, int, int]:
@@ -243,19 +265,30 @@ def encode_frame(seq: int, t_us: int, status: int, counts: Tuple[int, int, int],
     return SYNC + body + _CRC.pack(crc16_ccitt_false(body))
 
 
+def encode_field_frame(taxel: int, seq: int, t_us: int, status: int, counts: Tuple[int, int, int],
+                       temperature_raw: int) -> bytes:
+    """One binary field frame of an array's image (a chip-error frame: ``temperature_raw`` is the fault word)."""
+    body = _FIELD_BODY.pack(FRAME_FIELD, seq & 0xFF, status & 0xFF, t_us & 0xFFFFFFFF, taxel & 0xFF,
+                            int(counts[0]), int(counts[1]), int(counts[2]), int(temperature_raw) & 0xFFFF)
+    return SYNC + body + _CRC.pack(crc16_ccitt_false(body))
+
+
+def frame_length(kind: int) -> int:
+    """Bytes of a binary frame of type ``kind`` (an unknown type is checked as a force frame's length)."""
+    return FIELD_FRAME_LENGTH if kind == FRAME_FIELD else FRAME_LENGTH
+
+
 def _number(x: float, decimals: int) -> str:
     if math.isnan(x):
         return "nan"
     return "{:.{}f}".format(x, decimals)  # as the firmware: a small negative number prints as -0.0000
 
 
-def encode_text_line(seq: int, t_us: int, status: int, force_N: Tuple[float, float, float],
-                     B_uT: Tuple[float, float, float], temperature: Optional[float], fault: int = 0) -> bytes:
-    """One text sample line: forces to 4 decimals, field and temperature to 2 ('nan' where there is none), the
-    fault word on a chip-error line, then the checksum (:func:`line_checksum`)."""
-    fields = ["F", str(seq & 0xFF), str(t_us & 0xFFFFFFFF), str(status & 0xFF)]
-    fields += [_number(f, 4) for f in force_N]
-    fields += [_number(b, 2) for b in B_uT]
+def _sealed_line(fields: List[str], status: int, B_uT: Tuple[float, float, float], temperature: Optional[float],
+                 fault: int) -> bytes:
+    """``fields`` then the field and temperature to 2 decimals ('nan' where there is none), the fault word on a
+    chip-error line, and the checksum (:func:`line_checksum`)."""
+    fields = fields + [_number(b, 2) for b in B_uT]
     fields.append(_number(float("nan") if temperature is None else temperature, 2))
     if status & STATUS_CHIP_ERROR:
         fields.append(str(fault & 0xFFFF))
@@ -263,12 +296,29 @@ def encode_text_line(seq: int, t_us: int, status: int, force_N: Tuple[float, flo
     return body + line_checksum(body) + b"\n"
 
 
+def encode_text_line(seq: int, t_us: int, status: int, force_N: Tuple[float, float, float],
+                     B_uT: Tuple[float, float, float], temperature: Optional[float], fault: int = 0) -> bytes:
+    """One text sample line: forces to 4 decimals, field and temperature to 2 ('nan' where there is none), the
+    fault word on a chip-error line, then the checksum (:func:`line_checksum`)."""
+    fields = ["F", str(seq & 0xFF), str(t_us & 0xFFFFFFFF), str(status & 0xFF)] + [_number(f, 4) for f in force_N]
+    return _sealed_line(fields, status, B_uT, temperature, fault)
+
+
+def encode_field_line(taxel: int, seq: int, t_us: int, status: int, B_uT: Tuple[float, float, float],
+                      temperature: Optional[float], fault: int = 0) -> bytes:
+    """One text field line of an array's image (as :func:`encode_text_line`, the taxel first and no forces)."""
+    fields = ["B", str(taxel & 0xFF), str(seq & 0xFF), str(t_us & 0xFFFFFFFF), str(status & 0xFF)]
+    return _sealed_line(fields, status, B_uT, temperature, fault)
+
+
 def encode_info_line(spec_name: str, calibration_hash: str, gain_sel: int, resolution: int, osr: int,
-                     dig_filt: int) -> bytes:
-    """The firmware's info line (answer to 'i'), with its checksum."""
+                     dig_filt: int, taxels: int = 1) -> bytes:
+    """The firmware's info line (answer to 'i'), with its checksum; an array's ends with its number of taxels."""
     body = "I,magfab,{},{},{},{},{},{}".format(spec_name, calibration_hash[:16], gain_sel, resolution, osr,
-                                               dig_filt).encode("utf-8")
-    return body + line_checksum(body) + b"\n"
+                                               dig_filt)
+    if taxels != 1:
+        body += ",{}".format(taxels)
+    return body.encode("utf-8") + line_checksum(body.encode("utf-8")) + b"\n"
 
 
 def _printable(chunk: bytes) -> bool:
@@ -290,7 +340,7 @@ class Decoder:
         self.temperature = bool(temperature)
         self.stats = DecoderStats()
         self._buffer = b""
-        self._last_seq: Optional[int] = None
+        self._last_seq: Dict[int, int] = {}  # per taxel
 
     def feed(self, data: bytes) -> List[Union[Sample, DeviceInfo]]:
         """Decode what ``data`` completes; see the class docstring."""
@@ -302,16 +352,19 @@ class Decoder:
         while True:
             j = self._next_candidate(buf, i)
             if j < 0:
-                keep = 1 if buf[-1:] in (b"\xa5", b"F", b"I", b"W", b"R") and len(buf) > i else 0
+                keep = 1 if buf[-1:] in (b"\xa5", b"F", b"I", b"W", b"R", b"B") and len(buf) > i else 0
                 stats.skipped_bytes += len(buf) - i - keep
                 i = len(buf) - keep
                 break
             stats.skipped_bytes += j - i
             i = j
             if buf.startswith(SYNC, i):
-                if len(buf) - i < FRAME_LENGTH:
+                if len(buf) - i < 3:
                     break
-                step = self._frame(buf[i:i + FRAME_LENGTH], out)
+                length = frame_length(buf[i + 2])
+                if len(buf) - i < length:
+                    break
+                step = self._frame(buf[i:i + length], out)
             else:
                 step = self._line(buf, i, out)
                 if step == 0:
@@ -326,12 +379,15 @@ class Decoder:
         return min(found) if found else -1
 
     def _frame(self, frame: bytes, out: list) -> int:
-        """Bytes consumed by the frame at the start of ``frame`` (31 bytes long)."""
-        (crc,) = _CRC.unpack_from(frame, 29)
-        if crc16_ccitt_false(frame[2:29]) != crc:
+        """Bytes consumed by the frame ``frame`` (as long as :func:`frame_length` of its type)."""
+        end = len(frame) - 2
+        (crc,) = _CRC.unpack_from(frame, end)
+        if crc16_ccitt_false(frame[2:end]) != crc:
             self.stats.crc_errors += 1
             self.stats.skipped_bytes += 1
             return 1  # resynchronise: the next sync may start inside this candidate
+        if frame[2] == FRAME_FIELD:
+            return self._field_frame(frame, out)
         kind, seq, status, t_us, bx, by, bz, t_raw, fx, fy, fz = _BODY.unpack_from(frame, 2)
         if kind != FRAME_FORCE:
             self.stats.unknown_frames += 1
@@ -349,6 +405,19 @@ class Decoder:
         else:
             self.stats.refused += 1
         return FRAME_LENGTH
+
+    def _field_frame(self, frame: bytes, out: list) -> int:
+        kind, seq, status, t_us, taxel, bx, by, bz, t_raw = _FIELD_BODY.unpack_from(frame, 2)
+        self._sequence(seq, taxel)
+        self.stats.frames += 1
+        if status & STATUS_CHIP_ERROR:
+            out.append(Sample(seq, t_us, status, _NAN3, _NAN3, None, "binary", (bx, by, bz), t_raw,
+                              fault=t_raw or None, taxel=taxel))
+        else:
+            B = (bx * self.lsb_xy_uT, by * self.lsb_xy_uT, bz * self.lsb_z_uT)
+            temp = temperature_C(t_raw) if self.temperature else None
+            out.append(Sample(seq, t_us, status, B, _NAN3, temp, "binary", (bx, by, bz), t_raw, taxel=taxel))
+        return FIELD_FRAME_LENGTH
 
     def _line(self, buf: bytes, i: int, out: list) -> int:
         """Bytes consumed by the line candidate at ``i``; 0 when it is not complete yet."""
@@ -375,16 +444,11 @@ class Decoder:
         """The sample or info line a checked line body holds; None when it does not parse, ``_REFUSED`` for a
         sample whose values are refused (counted)."""
         if text.startswith("I,magfab,"):
-            parts = text[len("I,magfab,"):].rsplit(",", 5)
-            if len(parts) != 6:
-                return None
-            name, calibration_hash, *settings = parts
-            if not re.fullmatch(r"[0-9A-Fa-f]{16}", calibration_hash) or not all(_INT.fullmatch(x) for x in settings):
-                return None
-            self.stats.infos += 1
-            return DeviceInfo(name, calibration_hash.lower(), *(int(x) for x in settings), text)  # type: ignore[call-arg]
+            return self._info(text)
         if text[:2] in ("W,", "R,"):
             return self._reply(text)
+        if text[:2] == "B,":
+            return self._field_line(text)
         parts = text.split(",")
         fault = parts.pop() if len(parts) == 12 and _INT.fullmatch(parts[-1]) else None
         if parts[0] != "F" or len(parts) != 11 or not all(_INT.fullmatch(p) for p in parts[1:4]) \
@@ -407,6 +471,48 @@ class Decoder:
         self.stats.lines += 1
         return Sample(seq, t_us, status, B, force, temp if not math.isnan(temp) else None, "text")
 
+    def _info(self, text: str) -> Optional[DeviceInfo]:
+        """An info line: a single taxel's six fields after the name, an array's seven (the last its taxels; the
+        hash's 16 characters never pass for a number, so a name with commas stays unambiguous)."""
+        body = text[len("I,magfab,"):]
+        for count in (6, 5):
+            parts = body.rsplit(",", count)
+            if len(parts) != count + 1:
+                continue
+            name, calibration_hash, *settings = parts
+            if re.fullmatch(r"[0-9A-Fa-f]{16}", calibration_hash) and all(_INT.fullmatch(x) for x in settings):
+                self.stats.infos += 1
+                values = [int(x) for x in settings]
+                taxels = values.pop() if count == 6 else 1
+                return DeviceInfo(name, calibration_hash.lower(), *values, text, taxels)  # type: ignore[call-arg]
+        return None
+
+    def _field_line(self, text: str) -> Union[Sample, object, None]:
+        """``B,<taxel>,<seq>,<t_us>,<status>,<Bx>,<By>,<Bz>,<T>[,<fault>]`` (checked body)."""
+        parts = text.split(",")
+        fault = parts.pop() if len(parts) == 10 and _INT.fullmatch(parts[-1]) else None
+        if len(parts) != 9 or not all(_INT.fullmatch(p) for p in parts[1:5]) \
+                or not all(_FLOAT.fullmatch(p) for p in parts[5:]):
+            return None
+        taxel, seq, t_us, status = (int(p) for p in parts[1:5])
+        if not (taxel < 256 and seq < 256 and t_us < 2**32 and status < 256):
+            return None
+        if fault is not None and (not status & STATUS_CHIP_ERROR or int(fault) > 0xFFFF):
+            return None
+        self._sequence(seq, taxel)
+        if status & STATUS_CHIP_ERROR:
+            self.stats.lines += 1
+            return Sample(seq, t_us, status, _NAN3, _NAN3, None, "text", fault=int(fault) if fault else None,
+                          taxel=taxel)
+        values = [float(p) for p in parts[5:]]
+        B, temp = tuple(values[0:3]), values[3]
+        if not all(abs(b) <= FIELD_LIMIT_UT for b in B):
+            self.stats.refused += 1
+            return _REFUSED
+        self.stats.lines += 1
+        return Sample(seq, t_us, status, B, _NAN3, temp if not math.isnan(temp) else None, "text",  # type: ignore[arg-type]
+                      taxel=taxel)
+
     def _reply(self, text: str) -> Optional[EepromReply]:
         parts = text.split(",")
         if parts[0] == "W" and len(parts) == 5 and all(_INT.fullmatch(p) for p in parts[1:]):
@@ -418,10 +524,12 @@ class Decoder:
             return EepromReply("R", int(parts[1]), len(data), data=data)
         return None
 
-    def _sequence(self, seq: int) -> None:
-        if self._last_seq is not None:
-            self.stats.lost += (seq - self._last_seq - 1) % 256
-        self._last_seq = seq
+    def _sequence(self, seq: int, taxel: int = 0) -> None:
+        """Samples lost, counted per taxel (an array's frames of one cycle share a sequence number)."""
+        last = self._last_seq.get(taxel)
+        if last is not None:
+            self.stats.lost += (seq - last - 1) % 256
+        self._last_seq[taxel] = seq
 
 
 _NAN3 = (math.nan, math.nan, math.nan)
