@@ -18,7 +18,8 @@ here asserts on a time):
    sweep starts below the parts' minimum (at the magnet's diameter plus 0.5 mm) so the field's own limit shows;
    a pitch under the parts' minimum (13 mm for separate tips with their lips, 5.5 mm for a skin) cannot be built.
    Also the magnets' net force on taxel 0 (a corner, an end) and the lateral shift it gives through the softest
-   shear stiffness, at the parts' minimum pitch.
+   shear stiffness, and the most the neighbours' Bz at rest adds to a chip's own (its sign: towards saturation at
+   d_min; the chip's margin there is printed), at the parts' minimum pitch.
 
 It writes ``<out>/crosstalk_bench.json``.
 """
@@ -70,11 +71,16 @@ def coupling_cost(design) -> dict[str, object]:
 
 
 def least_pitches(tol_override: float | None = None) -> list[dict[str, object]]:
-    pred = predict(derive(parse_spec('name = "magone"')))
+    single = derive(parse_spec('name = "magone"'))
+    pred = predict(single)
     out = []
-    print(f"\nLeast pitch, MagOne-sized taxels, tolerance {pred.normal.resolution_mN:.2f} mN (normal resolution)")
+    own = X.fieldmod.exact(X.fieldmod.Magnet.from_spec(single.spec),
+                           np.array([[0.0, 0.0, -(single.spec.sensor.d_min_mm + single.magnet_height_mm / 2)]]))[0, 2]
+    print(f"\nA chip's own Bz at d_min {own:.0f} G, full scale {pred.chip.full_scale_z_G:.0f} G: "
+          f"{pred.chip.full_scale_z_G - own:.0f} G of margin")
+    print(f"Least pitch, MagOne-sized taxels, tolerance {pred.normal.resolution_mN:.2f} mN (normal resolution)")
     print(f"  {'layout':<6} {'skin':<11} {'polarity':<12} {'parts min':>9} {'field':>7} {'compensated':>12} "
-          f"{'pressed only':>13} {'force at min, mN':>17} {'shift um':>9}")
+          f"{'pressed only':>13} {'force at min, mN':>17} {'shift um':>9} {'Bz at min, G':>13}")
     for name, (rows, cols) in LAYOUTS.items():
         for skin in SKINS:
             d = derive(parse_spec(f'name = "b"\n[array]\nrows = {rows}\ncols = {cols}\npitch_mm = 14\nskin = "{skin}"'
@@ -95,14 +101,15 @@ def least_pitches(tol_override: float | None = None) -> list[dict[str, object]]:
                 xy = np.array([[t.x_mm, t.y_mm] for t in d.taxels])
                 xy = xy.mean(axis=0) + (xy - xy.mean(axis=0)) * p / d.array.pitch_mm
                 end = float(np.hypot(*X.magnet_forces(loads, xy, s)[0]))  # taxel 0: a corner, an end
+                bz = float((s * X.layout_errors(loads, xy, s)[2][:, 2]).max())  # towards the own magnet's sign
                 row = {"layout": name, "skin": skin, "polarity": "alternating" if alt else "same",
                        "parts_min_mm": d.array.min_pitch_mm, "field_mm": field, "compensated_mm": comp,
-                       "pressed_only_mm": pressed, "end_force_at_parts_min_mN": end,
+                       "pressed_only_mm": pressed, "end_force_at_parts_min_mN": end, "offset_z_at_parts_min_G": bz,
                        "end_shift_at_parts_min_um": end / loads.shear_stiffness_N_per_mm, "tolerance_mN": tol}
                 out.append(row)
                 f = lambda v: "none" if v is None else f"{v:.1f}"  # noqa: E731
                 print(f"  {name:<6} {skin:<11} {row['polarity']:<12} {d.array.min_pitch_mm:>9.1f} {f(field):>7} "
-                      f"{f(comp):>12} {f(pressed):>13} {end:>17.2f} {row['end_shift_at_parts_min_um']:>9.1f}")
+                      f"{f(comp):>12} {f(pressed):>13} {end:>17.2f} {row['end_shift_at_parts_min_um']:>9.1f} {bz:>+13.1f}")
     return out
 
 

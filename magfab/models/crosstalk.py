@@ -175,6 +175,8 @@ class Crosstalk:
     magnet_forces_mN: np.ndarray  # (N, 2) net lateral force on each magnet at rest from the others (exact)
     predisplacement_mm: np.ndarray  # (N, 2) the lateral shift it gives the magnet through the softest shear stiffness
     shear_travel_mm: float  # the magnet's lateral travel at the shear range (softest), for scale
+    saturation_xy_G: float  # the largest |Bx| or |By|: the neighbours at rest and the own magnet slid its shear travel
+    full_scale_xy_G: float
 
     @property
     def worst_mN(self) -> np.ndarray:
@@ -209,7 +211,8 @@ class Crosstalk:
                 "sweep_mm": r(self.sweep_mm, 3), "sweep_worst_mN": {k: r(v) for k, v in self.sweep_worst_mN.items()},
                 "magnet_force_mN": round(self.force_mN, 3), "magnet_force_exact_mN": round(self.force_exact_mN, 3),
                 "magnet_net_force_mN": r(self.magnet_forces_mN, 3), "predisplacement_mm": r(self.predisplacement_mm, 5),
-                "shear_travel_mm": round(self.shear_travel_mm, 4),
+                "shear_travel_mm": round(self.shear_travel_mm, 4), "saturation_xy_G": round(self.saturation_xy_G, 2),
+                "full_scale_xy_G": round(self.full_scale_xy_G, 2),
                 "dynamic": self.dynamic, "header": list(self.HEADER), "rows": [list(row) for row in self.rows()]}
 
 
@@ -339,12 +342,14 @@ def crosstalk(design: "Design", pred: "Prediction") -> Crosstalk:
     force, exact = _magnet_force(loads, float(dist[i, j]), signs[i] == signs[j])
     net = magnet_forces(loads, xy, signs)
     residual, common_residual = compensated_errors(design, loads, xy, signs)
+    own_slid = abs(fieldmod.exact(magnet, np.array([[-loads.shear_travel_mm, 0.0, loads.z_chip - loads.z_centre]]))[0, 0])
     return Crosstalk(arr.polarity.value, arr.skin.value, arr.pitch_mm, tol, field, residual, common, common_residual,
                      c, mech, rest,
                      float(np.max(np.abs(own_dmin * signs + rest[:, 2]))), pred.chip.full_scale_z_G, least, least_comp,
                      sweep,
                      worst, force, exact, None if curve is None else (curve.r_mm, curve.ratio), depth,
-                     net, net / 1000.0 / loads.shear_stiffness_N_per_mm, loads.shear_travel_mm)
+                     net, net / 1000.0 / loads.shear_stiffness_N_per_mm, loads.shear_travel_mm,
+                     float(np.abs(rest[:, :2]).max() + own_slid), pred.chip.full_scale_xy_G)
 
 
 def findings(design: "Design", xt: Crosstalk) -> list[Finding]:
@@ -368,6 +373,11 @@ def findings(design: "Design", xt: Crosstalk) -> list[Finding]:
         out.append(Finding(Severity.WARNING, "array-saturation",
                            f"with its neighbours' field a chip reads {xt.saturation_G:.0f} G when its magnet is at "
                            f"d_min, past the {xt.full_scale_G:.0f} G full scale", "sensor.d_min_mm"))
+    if xt.saturation_xy_G > xt.full_scale_xy_G:
+        out.append(Finding(Severity.WARNING, "array-saturation",
+                           f"with its neighbours' field a chip reads up to {xt.saturation_xy_G:.0f} G across when its "
+                           f"magnet slides through its shear travel, past the {xt.full_scale_xy_G:.0f} G full scale of "
+                           f"its x and y axes", "array.pitch_mm"))
     shifts = np.hypot(*xt.predisplacement_mm.T)
     shift, k = float(shifts.max()), int(np.argmax(shifts))
     if shift > SHIFT_WARN * xt.shear_travel_mm:

@@ -154,5 +154,17 @@ def test_close_magnets_in_a_skin_warn_of_their_pull():
     found = {f.code: f for f in X.findings(d, xt)}
     assert xt.force_exact_mN < 0 and xt.predisplacement_mm[0, 0] > 0.1 * xt.shear_travel_mm  # pulled together
     assert found["array-magnet-force"].key == "array.pitch_mm" and "pull" in found["array-magnet-force"].message
-    assert found["array-crosstalk"].key == "array.pitch_mm"
+    assert found["array-crosstalk"].key == "array.pitch_mm" and "array-saturation" not in found
+    # four magnets of one polarity 5.5 mm apart (the least a skin allows) add 108 G to a chip whose own magnet at
+    # d_min already reads 995 G: past the 1065 G full scale; at 10 mm they add 3 G
+    loads = X._Loads.of(d, predict(d))
+    own = X.fieldmod.exact(loads.magnet, np.array([[0.0, 0.0, -(d.spec.sensor.d_min_mm + loads.magnet.height_mm / 2)]]))
+    square = np.array([[-1.0, 1.0], [1.0, 1.0], [-1.0, -1.0], [1.0, -1.0]]) / 2
+    for pitch, over in ((5.5, True), (10.0, False)):
+        rest = X.layout_errors(loads, square * pitch, np.ones(4))[2]
+        assert bool(own[0, 2] + rest[:, 2].max() > xt.full_scale_G) is over
+    from dataclasses import replace
+
+    hot = X.findings(d, replace(xt, saturation_G=own[0, 2] + rest[:, 2].max() + 110.0))
+    assert [f.key for f in hot if f.code == "array-saturation"] == ["sensor.d_min_mm"]
 
