@@ -16,7 +16,10 @@ layer's axisymmetric FE); taxel j then reads about c(r) times the load on i.
 The budget is against ``array.crosstalk_mN`` (default: the taxel's normal resolution). The least pitch is found by
 scaling the layout (a grid's pitch, or explicit positions about their centre) over a sweep and bisecting the last
 crossing; for both polarities. The magnets also push on each other (side by side, same polarity repels, opposite
-attracts): the force between the nearest two at rest, by dipoles and checked by the exact field's energy.
+attracts): the force between the nearest two at rest, by dipoles and checked by the exact field's energy, and the net
+force on every magnet with the lateral shift it gives through the softest shear stiffness (a warning past a tenth of
+the shear travel). Saturation: a chip's own magnet at d_min plus its neighbours at rest against the z full scale; the
+neighbours' lateral field plus the own magnet slid through its shear travel against the xy full scale.
 """
 
 from __future__ import annotations

@@ -138,19 +138,30 @@ def test_findings_warn_below_the_least_pitch_only(array_builds):
     assert skin["array-crosstalk"].key == "array.pitch_mm" and "array-crosstalk-budget" in skin
     # the strip of separate tips at 14 mm: the compensation leaves a fraction of a millinewton
     assert "array-crosstalk" not in strip and "array-crosstalk-budget" in strip
-    d = derive(parse_spec('name = "far"\n[array]\nrows = 1\ncols = 2\npitch_mm = 45\ncrosstalk_mN = 5'))
-    from magfab.models.predict import predict
-
-    xt = X.crosstalk(d, predict(d))
-    assert "array-crosstalk" not in {f.code for f in X.findings(d, xt)}
 
 
-def test_close_magnets_in_a_skin_warn_of_their_pull():
+@pytest.fixture(scope="module")
+def close_pair():
     from magfab.models.predict import predict
 
     d = derive(parse_spec('name = "close"\n[array]\nrows = 1\ncols = 2\npitch_mm = 7\nskin = "continuous"\n'
                           'polarity = "alternating"'))
-    xt = X.crosstalk(d, predict(d))
+    return d, X.crosstalk(d, predict(d))
+
+
+def test_the_charts_are_the_same_bytes_twice(close_pair):
+    from magfab.export.crosstalk_figures import figures
+
+    first, second = figures(close_pair[1]), figures(close_pair[1])
+    assert sorted(first) == sorted(f"{n}.{k}" for n in ("crosstalk_map", "crosstalk_pitch", "skin_coupling")
+                                   for k in ("png", "svg"))
+    assert first == second
+
+
+def test_close_magnets_in_a_skin_warn_of_their_pull(close_pair):
+    from magfab.models.predict import predict
+
+    d, xt = close_pair
     found = {f.code: f for f in X.findings(d, xt)}
     assert xt.force_exact_mN < 0 and xt.predisplacement_mm[0, 0] > 0.1 * xt.shear_travel_mm  # pulled together
     assert found["array-magnet-force"].key == "array.pitch_mm" and "pull" in found["array-magnet-force"].message
