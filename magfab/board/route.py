@@ -205,6 +205,10 @@ class RouteError(MagfabError):
     """No path for one connection. The board's rip-up loop catches it and reports what stays unrouted as
     a finding; should one escape, a feasible spec was routed wrong: our bug (exit 1), not the input's."""
 
+    def __init__(self, message: str, enclosed: bool = False) -> None:
+        super().__init__(message)
+        self.enclosed = enclosed  # the search ran out of places to go: a larger window cannot help
+
 
 _DIRS = ((1, 0), (1, 1), (0, 1), (-1, 1), (-1, 0), (-1, -1), (0, -1), (1, -1))
 
@@ -232,6 +236,8 @@ class Router:
         self.ny = int(round((y1 - y0) / self.step)) + 1
         self.xs = x0 + self.step * np.arange(self.nx)
         self.ys = y0 + self.step * np.arange(self.ny)
+        self._masks: dict = {}  # (item, distance) -> :meth:`_near_mask`
+        self._ids: dict = {}  # (item, layer) -> :meth:`_inside_ids`
 
     def node_xy(self, ix: int, iy: int) -> tuple[float, float]:
         return (round(float(self.xs[ix]), 6), round(float(self.ys[iy]), 6))
@@ -256,35 +262,57 @@ class Router:
                 need = self.hole_clearance
             else:
                 need = via_need if (via or is_via(it)) else self.clearance
-            need += grow + GRID_MARGIN_MM
-            bx0, by0, bx1, by1 = it.bbox()
-            i0 = max(0, int(math.floor((bx0 - need - x0) / self.step)))
-            i1 = min(self.nx, int(math.ceil((bx1 + need - x0) / self.step)) + 1)
-            j0 = max(0, int(math.floor((by0 - need - y0) / self.step)))
-            j1 = min(self.ny, int(math.ceil((by1 + need - y0) / self.step)) + 1)
-            if i0 >= i1 or j0 >= j1:
-                continue
-            X, Y = np.meshgrid(self.xs[i0:i1], self.ys[j0:j1])
-            d = _field(it, X, Y)
-            mask = d < need
-            for li, layer in enumerate(LAYERS):
-                if it.hole or layer in it.layers or "*.Cu" in it.layers:
+            hit = self._near_mask(it, need + grow + GRID_MARGIN_MM)
+            if hit is not None:
+                j0, j1, i0, i1, mask, layers = hit
+                for li in layers:
                     out[li, j0:j1, i0:i1] |= mask
         return out
 
+    def _near_mask(self, it: Copper, need: float):
+        """(rows j0:j1, columns i0:i1, mask, layer indices) of the nodes closer than ``need`` to an item's
+        copper, or None when none is: each item's is computed once per router (the pads, holes and stubs stay
+        while connection after connection is routed around them)."""
+        key = (it, need)
+        if key in self._masks:
+            return self._masks[key]
+        x0, y0 = self.bounds[0], self.bounds[1]
+        bx0, by0, bx1, by1 = it.bbox()
+        i0 = max(0, int(math.floor((bx0 - need - x0) / self.step)))
+        i1 = min(self.nx, int(math.ceil((bx1 + need - x0) / self.step)) + 1)
+        j0 = max(0, int(math.floor((by0 - need - y0) / self.step)))
+        j1 = min(self.ny, int(math.ceil((by1 + need - y0) / self.step)) + 1)
+        hit = None
+        if i0 < i1 and j0 < j1:
+            X, Y = np.meshgrid(self.xs[i0:i1], self.ys[j0:j1])
+            layers = tuple(li for li, layer in enumerate(LAYERS)
+                           if it.hole or layer in it.layers or "*.Cu" in it.layers)
+            hit = (j0, j1, i0, i1, _field(it, X, Y) < need, layers)
+        self._masks[key] = hit
+        return hit
+
     def _inside(self, item: Copper, layer_index: int) -> list[int]:
         """Grid nodes (flat ids) inside an item's copper on one layer."""
+        return self._inside_ids(item, layer_index).tolist()
+
+    def _inside_ids(self, item: Copper, layer_index: int) -> np.ndarray:
+        """:meth:`_inside` as an array of flat ids, computed once per item and layer."""
+        key = (item, layer_index)
+        if key in self._ids:
+            return self._ids[key]
         bx0, by0, bx1, by1 = item.bbox()
         x0, y0 = self.bounds[0], self.bounds[1]
         i0 = max(0, int(math.ceil((bx0 - x0) / self.step - 1e-9)))
         i1 = min(self.nx, int(math.floor((bx1 - x0) / self.step + 1e-9)) + 1)
         j0 = max(0, int(math.ceil((by0 - y0) / self.step - 1e-9)))
         j1 = min(self.ny, int(math.floor((by1 - y0) / self.step + 1e-9)) + 1)
-        if i0 >= i1 or j0 >= j1:
-            return []
-        X, Y = np.meshgrid(self.xs[i0:i1], self.ys[j0:j1])
-        jj, ii = np.nonzero(_field(item, X, Y) <= 1e-9)
-        return [int((layer_index * self.ny + j + j0) * self.nx + i + i0) for j, i in zip(jj, ii)]
+        ids = np.zeros(0, dtype=np.int64)
+        if i0 < i1 and j0 < j1:
+            X, Y = np.meshgrid(self.xs[i0:i1], self.ys[j0:j1])
+            jj, ii = np.nonzero(_field(item, X, Y) <= 1e-9)
+            ids = (layer_index * self.ny + jj + j0) * self.nx + ii + i0
+        self._ids[key] = ids
+        return ids
 
     # -- search -----------------------------------------------------------------------------------
 
@@ -298,7 +326,9 @@ class Router:
         """
         try:
             return self._route(items, net, source, target, 4.0, soft)
-        except RouteError:
+        except RouteError as exc:
+            if exc.enclosed:  # the window cut nothing off: the whole board fails the same way
+                raise
             return self._route(items, net, source, target, None, soft)
 
     def congest(self, path: Sequence[Copper], amount: float = 1.0) -> None:
@@ -309,7 +339,7 @@ class Router:
         for c in path:
             for li, layer in enumerate(LAYERS):
                 if layer in c.layers:
-                    self.history[self._inside(c, li)] += amount
+                    self.history[self._inside_ids(c, li)] += amount
 
     def _route(self, items: list[Copper], net: str, source: Copper, target: Copper, window_mm: float | None,
                soft: Sequence[Copper] = ()) -> list[Copper]:
@@ -321,9 +351,10 @@ class Router:
             raise RouteError(f"net {net}: pad {source.owner} or {target.owner} has no grid node inside it")
         window = self._window(source, target, window_mm)
         budget = MAX_EXPANSIONS * (4 if soft else 1)  # crossing soft copper widens the search
-        end, came = self._search(starts, goals, target.bbox(), window, track, extra, via_ok, budget)
+        end, came, enclosed = self._search(starts, goals, target.bbox(), window, track, extra, via_ok, budget)
         if end < 0:
-            raise RouteError(f"net {net}: no path from {source.owner} to {target.owner} with these rules")
+            raise RouteError(f"net {net}: no path from {source.owner} to {target.owner} with these rules",
+                             enclosed=enclosed)
         path = [end // 9]
         s = end
         while s in came:
@@ -343,19 +374,18 @@ class Router:
             extra = self.history if extra is None else extra + self.history
         via = self._blocked(items, net, self.via_diameter / 2, via=True)
         # No vias inside any pad (solder would wick into them).
-        pads = [it for it in items if it.kind == "rect"]
-        for it in pads:
-            grow = self.via_diameter / 2 + self.clearance
-            padded = Copper.rect(it.a[0] - grow, it.a[1] - grow, it.b[0] + grow, it.b[1] + grow, LAYERS, None)
-            for li in range(2):
-                for n in self._inside(padded, li):
-                    via.ravel()[n] = True
+        flat = via.reshape(-1)
+        grow = self.via_diameter / 2 + self.clearance
+        for it in items:
+            if it.kind == "rect":
+                padded = Copper.rect(it.a[0] - grow, it.a[1] - grow, it.b[0] + grow, it.b[1] + grow, LAYERS, None)
+                for li in range(2):
+                    flat[self._inside_ids(padded, li)] = True
         # Drilled holes keep HOLE_TO_HOLE_MM apart, whatever their nets (vias of the same net too).
         for it in items:
             if it.kind == "point" and not it.hole and len(it.layers) == 2:
                 keep = Copper.point(it.a[0], it.a[1], self.via_drill / 2 + self.via_drill / 2 + HOLE_TO_HOLE_MM, LAYERS, None)
-                for n in self._inside(keep, 0):
-                    via.ravel()[n] = True
+                flat[self._inside_ids(keep, 0)] = True
         return track, extra, ~(via[0] | via[1])
 
     def _window(self, source: Copper, target: Copper, window_mm: float | None) -> tuple[int, int, int, int]:
@@ -373,23 +403,34 @@ class Router:
         return wi0, wj0, wi1, wj1
 
     def _search(self, starts: list[int], goals: set[int], target_box, window, track, extra, via_ok,
-                budget: int) -> tuple[int, dict[int, int]]:
+                budget: int) -> tuple[int, dict[int, int], bool]:
         """Weighted A* over (node, direction) states: (goal state or -1 when none within ``budget``
-        expansions, predecessor of each state)."""
+        expansions, predecessor of each state, whether a failed search ran out of states without the window
+        ever cutting one off: the whole board would fail the same way)."""
         plane = self.nx * self.ny
+        nx = self.nx
         tx0, ty0, tx1, ty1 = target_box
         gx0 = (tx0 - self.bounds[0]) / self.step
         gx1 = (tx1 - self.bounds[0]) / self.step
         gy0 = (ty0 - self.bounds[1]) / self.step
         gy1 = (ty1 - self.bounds[1]) / self.step
         wi0, wj0, wi1, wj1 = window
+        # The heuristic's distances to the target box per column and per row (the octile distance of the two).
+        hx = [max(gx0 - i, 0.0, i - gx1) for i in range(self.nx)]
+        hy = [max(gy0 - j, 0.0, j - gy1) for j in range(self.ny)]
+        diag = math.sqrt(2) - 1
+        weight = HEURISTIC_WEIGHT
+        track = track.tolist()
+        extra = extra.tolist() if extra is not None else None
+        via_ok = via_ok.ravel().tolist()
+        steps = [(k, di, dj, dj * nx + di, math.sqrt(2) if di and dj else 1.0) for k, (di, dj) in enumerate(_DIRS)]
+        bend, via_cost, bottom = self.bend_cost, self.via_cost, self.bottom_cost
+        heappush, heappop = heapq.heappush, heapq.heappop
+        inf = math.inf
 
-        def h(n: int) -> float:
-            r = n % plane
-            i, j = r % self.nx, r // self.nx
-            dx = max(gx0 - i, 0.0, i - gx1)
-            dy = max(gy0 - j, 0.0, j - gy1)
-            return max(dx, dy) + (math.sqrt(2) - 1) * min(dx, dy)
+        def h(i: int, j: int) -> float:
+            dx, dy = hx[i], hy[j]
+            return dx + diag * dy if dx >= dy else dy + diag * dx
 
         # State = node * 9 + direction (8: none yet / just changed layer).
         best: dict[int, float] = {}
@@ -398,48 +439,48 @@ class Router:
         for n in sorted(starts):
             s = n * 9 + 8
             best[s] = 0.0
-            heapq.heappush(heap, (h(n), 0.0, s))
-        end = -1
+            r = n % plane
+            heappush(heap, (h(r % nx, r // nx), 0.0, s))
+        clipped = False
         while heap and budget:
             budget -= 1
-            f, g, s = heapq.heappop(heap)
-            if g > best.get(s, math.inf):
+            f, g, s = heappop(heap)
+            if g > best.get(s, inf):
                 continue
             n, d = divmod(s, 9)
             if n in goals:
-                end = s
-                break
-            r = n % plane
-            layer = n // plane
-            i, j = r % self.nx, r // self.nx
-            layer_cost = self.bottom_cost if layer == 1 else 1.0
-            for k, (di, dj) in enumerate(_DIRS):
+                return s, came, False
+            layer, r = divmod(n, plane)
+            j, i = divmod(r, nx)
+            layer_cost = bottom if layer == 1 else 1.0
+            for k, di, dj, dm, length in steps:
                 ii, jj = i + di, j + dj
                 if not (wi0 <= ii <= wi1 and wj0 <= jj <= wj1):
+                    clipped = clipped or (0 <= ii < nx and 0 <= jj < self.ny and not track[n + dm])
                     continue
-                m = layer * plane + jj * self.nx + ii
+                m = n + dm
                 if track[m]:
                     continue
-                cost = (math.sqrt(2) if di and dj else 1.0) * layer_cost
+                cost = length * layer_cost
                 if extra is not None:
                     cost += extra[m]
                 if d != 8 and d != k:
-                    cost += self.bend_cost
+                    cost += bend
                 ng = g + cost
                 ns = m * 9 + k
-                if ng < best.get(ns, math.inf):
+                if ng < best.get(ns, inf):
                     best[ns] = ng
                     came[ns] = s
-                    heapq.heappush(heap, (ng + HEURISTIC_WEIGHT * h(m), ng, ns))
-            if via_ok[j, i]:
+                    heappush(heap, (ng + weight * h(ii, jj), ng, ns))
+            if via_ok[r]:
                 m = (1 - layer) * plane + r
                 ns = m * 9 + 8
-                ng = g + self.via_cost + (extra[m] if extra is not None else 0.0)
-                if not track[m] and ng < best.get(ns, math.inf):
+                ng = g + via_cost + (extra[m] if extra is not None else 0.0)
+                if not track[m] and ng < best.get(ns, inf):
                     best[ns] = ng
                     came[ns] = s
-                    heapq.heappush(heap, (ng + HEURISTIC_WEIGHT * h(m), ng, ns))
-        return end, came
+                    heappush(heap, (ng + weight * h(i, j), ng, ns))
+        return -1, came, not heap and not clipped
 
     def _to_copper(self, path: list[int], net: str) -> list[Copper]:
         plane = self.nx * self.ny
