@@ -74,7 +74,7 @@ NO_RECORD_US = 20_000
 #: and avr-libc versions that made it (``python -m magfab.export.toolchain`` rebuilds both).
 GENERIC_DIR = "generic_image"
 GENERIC_TOOLCHAIN = "toolchain.json"
-CORE_SOURCES = ("mlx90393.c", "mf_sample.c", "mf_nv.c", "mf_calib.c", "mf_frame.c", "mf_app.c")
+CORE_SOURCES = ("mlx90393.c", "mf_sample.c", "mf_nv.c", "mf_calib.c", "mf_frame.c", "mf_app.c", "mf_array.c")
 CORE_DIR = "magfab_readout/src"
 AVR_CFLAGS = ("-mmcu=" + MCU, f"-DF_CPU={F_CPU_HZ}UL", "-Os", "-std=gnu99", "-Wall", "-Wextra",
               "-ffunction-sections", "-fdata-sections")
@@ -250,6 +250,8 @@ def image_settings(design: "Design") -> dict[str, Any]:
     """What the generic image reads from the record besides the calibration (the package's ``eeprom.SETTINGS``,
     docs/bundle.md section 4): every number the build-specific sources carried in mf_config.h, computed here from
     the spec and the chip's recipe. Plain JSON values: build.json carries them for ``magfab-readout upload``.
+    An array's also carry ``taxel_addresses``: every chip's 7-bit address in taxel order (``i2c_address`` is
+    taxel 0's).
     :class:`~magfab.errors.SpecError` for a baud or I2C clock the board cannot make."""
     ee = _eeprom_module()
     chip, fw = chip_config(design), design.spec.firmware
@@ -258,7 +260,9 @@ def image_settings(design: "Design") -> dict[str, Any]:
     flags = ((ee.FLAG_BURST if chip.burst else 0) | (ee.FLAG_TEMPERATURE if chip.temperature else 0)
              | (ee.FLAG_TEXT if _value(fw.output) == "text" else 0) | (ee.FLAG_RAW_SIGNED if chip.raw_signed else 0))
     regs = {reg: (mask, value) for reg, mask, value in chip.registers}
+    array = {} if design.array is None else {"taxel_addresses": [t.i2c_address for t in design.taxels]}
     return {
+        **array,
         "name": design.spec.name, "gain_sel": chip.gain_sel, "resolution": chip.resolution, "osr": chip.osr,
         "dig_filt": chip.dig_filt, "i2c_address": design.i2c_address, "twbr": twbr, "twps_bits": twps,
         "flags": flags, "zyxt": chip.zyxt, "ubrr": ubrr, "baud": int(fw.baud), "i2c_hz": int(fw.i2c_hz),
@@ -273,10 +277,16 @@ def image_settings(design: "Design") -> dict[str, Any]:
 
 def eeprom_record(design: "Design", calibration: Mapping[str, Any]) -> bytes:
     """The EEPROM record of this calibration for this build's settings (docs/bundle.md section 4): what the .eep
-    holds and ``magfab-readout upload`` writes. :class:`FirmwareError` when it does not fit 1 KB."""
+    holds and ``magfab-readout upload`` writes. :class:`FirmwareError` when it does not fit 1 KB.
+
+    An array's (version 3) holds the settings and every chip's address, no calibration (the host computes the
+    forces); ``calibration`` (the build's, the readout package's calibration.json) only gives the info line's
+    hash."""
     ee = _eeprom_module()
     settings = image_settings(design)
     try:
+        if design.array is not None:
+            return ee.pack_array(settings["taxel_addresses"], calibration_sha256(calibration)[:16], settings)
         return ee.pack(_calibration_context(calibration), calibration_sha256(calibration)[:16], settings)
     except ee.EepromError as exc:
         raise FirmwareError(exc.key, exc.value, exc.allowed) from None
@@ -302,10 +312,12 @@ def _bench_points(chip: ChipConfig, cal: dict[str, Any]) -> list[dict[str, Any]]
     return out
 
 
-def info_line(name: str, sha16: str, chip: ChipConfig) -> str:
+def info_line(name: str, sha16: str, chip: ChipConfig, taxels: int = 0) -> str:
     """The firmware's answer to 'i' (docs/bundle.md section 3), checksum and newline included (CRC-16/CCITT-FALSE
-    as the frames'): the reference the tests hold the image's line to."""
+    as the frames'): the reference the tests hold the image's line to. An array's (``taxels`` chips) ends with
+    ``,<taxels>``."""
     body = f"I,magfab,{name},{sha16},{chip.gain_sel},{chip.resolution},{chip.osr},{chip.dig_filt}"
+    body += f",{taxels}" if taxels else ""
     return f"{body}*{binascii.crc_hqx(body.encode('utf-8'), 0xFFFF):04X}\n"
 
 

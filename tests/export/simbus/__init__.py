@@ -7,6 +7,9 @@ shared library and driven through ctypes.
     bus.set_field(bx_uT, by_uT, bz_uT, t_C)
     data = bus.run_us(20_000)                   # UART bytes the image sent in that simulated time
 
+An array: :meth:`Bus.add_chip` puts more chip models on the bus, :meth:`Bus.target` picks the one the per-chip
+calls act on (``bus.target(2).set_field(...)``).
+
 Faults: :meth:`Bus.chip_fault` (inside the chip model: ``error``, ``short``, ``reset``, ``stuck``),
 :meth:`Bus.nack`, :meth:`Bus.all_ff`, :meth:`Bus.hang_us`, :meth:`Bus.absent`, :meth:`Bus.reset_in` (on the bus).
 """
@@ -75,6 +78,7 @@ def _declare(lib: ctypes.CDLL) -> ctypes.CDLL:
         "bus_chip_mode": (ctypes.c_int, [p]), "bus_conversion_us": (d, [p]), "bus_conversions": (u64, [p]),
         "bus_close": (None, [p]), "bus_eeprom_set": (ctypes.c_int, [p, u16, ctypes.c_char_p, u32]),
         "bus_eeprom_get": (ctypes.c_int, [p, u16, ctypes.c_char_p, u32]),
+        "bus_add_chip": (ctypes.c_int, [p, u8]), "bus_target": (None, [p, u8]),
     }
     for name, (restype, argtypes) in signatures.items():
         fn = getattr(lib, name)
@@ -95,6 +99,19 @@ class Bus:
             for address, data in read_intel_hex(Path(eep).read_text()):
                 if self._lib.bus_eeprom_set(self._h, address, data, len(data)) != 0:
                     raise OSError(f"simavr cannot load {eep} into the EEPROM")
+
+    def add_chip(self, addr7: int) -> int:
+        """Another chip model on the bus at ``addr7`` (an array's); its index for :meth:`target`."""
+        k = self._lib.bus_add_chip(self._h, addr7)
+        if k < 0:
+            raise ValueError("the harness holds at most 16 chips")
+        return k
+
+    def target(self, k: int) -> "Bus":
+        """The chip (index: 0 the first, then in :meth:`add_chip` order) that the per-chip calls act on: the
+        field, chip faults, address NACKs, absent, reset_in, clock_scale, register, chip_mode, conversions."""
+        self._lib.bus_target(self._h, k)
+        return self
 
     def eeprom_set(self, offset: int, data: bytes) -> None:
         """Bytes into the EEPROM now (as a programmer would write them)."""

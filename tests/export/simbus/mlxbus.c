@@ -12,7 +12,11 @@
  *    before the firmware sees TWINT (counted: status_fixes; on a fixed simavr it never triggers).
  *  - UART: the byte time is set only when UBRRnL is written (reading U2X as it is then) and always counts a
  *    parity bit; it is recomputed the hardware's way on every write of UCSR0A, UCSR0C and UBRR0L.
- * simavr times I2C at about 9 us per byte (400 kHz takes 22.5 us) and has no clock stretching. */
+ * simavr times I2C at about 9 us per byte (400 kHz takes 22.5 us) and has no clock stretching.
+ *
+ * An array: up to MAX_CHIPS models on the one bus, each at its own address with its own field (bus_add_chip); the
+ * per-chip calls (field, faults inside the chip, address NACKs, absent, reset_in, clock, registers) act on the
+ * chip bus_target chose (0, the first, by default). */
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
@@ -33,6 +37,7 @@
 #define TW_NO_INFO 0xF8
 #define UART_CAP (1u << 20)
 #define REPLY_MAX 16
+#define MAX_CHIPS 16
 
 typedef struct bus {
     avr_t *avr;
@@ -40,7 +45,10 @@ typedef struct bus {
     avr_irq_t *uart_in;
     avr_uart_t *uart0;
     avr_twi_t *twi0;
-    sim_mlx_t chip;
+    sim_mlx_t chips[MAX_CHIPS];
+    uint8_t n_chips;
+    uint8_t target;         /* the chip the per-chip calls act on */
+    sim_mlx_t *on;          /* the chip of the transaction in flight */
     uint64_t now_us;        /* the model's clock: the AVR's cycles in microseconds, synced before each call */
     /* the transaction in flight */
     uint8_t selected;       /* the address byte the chip ACKed; 0: none */
@@ -50,13 +58,14 @@ typedef struct bus {
     uint8_t rbuf[REPLY_MAX];
     uint8_t ridx;
     /* faults on the bus */
-    uint32_t nack_addr;     /* the next n address phases for the chip get no ACK */
+    uint32_t nack_addr[MAX_CHIPS]; /* the next n address phases for each chip get no ACK */
     uint32_t nack_data;     /* the next n written data bytes get no ACK */
     uint32_t ff_reads;      /* the next n reads are ACKed, then every byte reads 0xFF (SDA released) */
     uint64_t hang_for_us;   /* from the next TWI step on, hold the bus this long */
     uint64_t hang_until_us; /* until then every TWI step is held: TWINT is taken back (SCL held low) */
-    uint8_t absent;         /* the chip is off the bus */
-    uint32_t reset_in;      /* the chip restarts at the start of the n-th address phase from now; 0: never */
+    uint8_t absent[MAX_CHIPS]; /* each chip off the bus */
+    uint32_t reset_in;      /* the target restarts at the start of the n-th address phase from now; 0: never */
+    uint8_t reset_chip;
     /* counters */
     uint32_t status_fixes;
     uint32_t phases;        /* address phases seen */
@@ -74,7 +83,7 @@ static void flush_write(bus_t *b)
 {
     if (b->selected && !(b->selected & 1)) {
         sync_time(b);
-        sim_i2c_write(&b->chip, (uint8_t)(b->selected >> 1), b->wbuf, b->wlen);
+        sim_i2c_write(b->on, (uint8_t)(b->selected >> 1), b->wbuf, b->wlen);
     }
     b->wlen = 0;
 }
@@ -87,21 +96,25 @@ static void ack(bus_t *b)
 /* The master sent an address byte (after a START or a repeated START). */
 static void address_phase(bus_t *b, uint8_t addr)
 {
+    uint8_t k;
     flush_write(b);
     b->selected = 0;
     b->sla_w_pending = !(addr & 1);
     ++b->phases;
     if (b->reset_in && --b->reset_in == 0) {
         sync_time(b);
-        sim_fault(&b->chip, SIM_FAULT_RESET, 1);
+        sim_fault(&b->chips[b->reset_chip], SIM_FAULT_RESET, 1);
     }
-    if (b->absent || (addr >> 1) != b->chip.addr) {
+    for (k = 0; k < b->n_chips && b->chips[k].addr != (addr >> 1); ++k) {
+    }
+    if (k == b->n_chips || b->absent[k]) {
         return;
     }
-    if (b->nack_addr) {
-        --b->nack_addr;
+    if (b->nack_addr[k]) {
+        --b->nack_addr[k];
         return;
     }
+    b->on = &b->chips[k];
     b->selected = addr;
     ack(b);
     if (addr & 1) { /* the reply is fixed at SLA+R: the model answers the command written before it */
@@ -111,7 +124,7 @@ static void address_phase(bus_t *b, uint8_t addr)
         if (b->ff_reads) {
             --b->ff_reads;
         } else {
-            sim_i2c_read(&b->chip, (uint8_t)(addr >> 1), b->rbuf, 9);
+            sim_i2c_read(b->on, (uint8_t)(addr >> 1), b->rbuf, 9);
         }
     }
 }
@@ -263,7 +276,9 @@ bus_t *bus_open(const char *hex_path, uint8_t addr7, uint32_t f_cpu_hz)
         }
     }
     free_ihex_chunks(chunk);
-    sim_init(&b->chip, addr7, &b->now_us);
+    sim_init(&b->chips[0], addr7, &b->now_us);
+    b->n_chips = 1;
+    b->on = &b->chips[0];
     hook_up(b);
     return b;
 }
@@ -317,32 +332,45 @@ uint32_t bus_take_uart(bus_t *b, uint8_t *out, uint32_t cap)
     return n;
 }
 
+/* Another chip model on the bus at addr7 (same power-on state as the first); its index, -1 when full. */
+int bus_add_chip(bus_t *b, uint8_t addr7)
+{
+    if (b->n_chips == MAX_CHIPS) {
+        return -1;
+    }
+    sim_init(&b->chips[b->n_chips], addr7, &b->now_us);
+    return b->n_chips++;
+}
+
+/* The chip the per-chip calls below act on. */
+void bus_target(bus_t *b, uint8_t k) { b->target = k < b->n_chips ? k : 0; }
+#define CHIP (&b->chips[b->target])
 void bus_send_uart(bus_t *b, uint8_t c) { avr_raise_irq(b->uart_in, c); }
-void bus_set_field(bus_t *b, double bx, double by, double bz, double t_c) { sim_set_field(&b->chip, bx, by, bz, t_c); }
-void bus_chip_fault(bus_t *b, int fault, uint16_t count) { sync_time(b); sim_fault(&b->chip, (enum sim_fault)fault, count); }
-void bus_nack(bus_t *b, uint32_t addr_phases, uint32_t data_bytes) { b->nack_addr = addr_phases; b->nack_data = data_bytes; }
+void bus_set_field(bus_t *b, double bx, double by, double bz, double t_c) { sim_set_field(CHIP, bx, by, bz, t_c); }
+void bus_chip_fault(bus_t *b, int fault, uint16_t count) { sync_time(b); sim_fault(CHIP, (enum sim_fault)fault, count); }
+void bus_nack(bus_t *b, uint32_t addr_phases, uint32_t data_bytes) { b->nack_addr[b->target] = addr_phases; b->nack_data = data_bytes; }
 void bus_ff_reads(bus_t *b, uint32_t n) { b->ff_reads = n; }
-void bus_reset_in(bus_t *b, uint32_t n) { b->reset_in = n; }
+void bus_reset_in(bus_t *b, uint32_t n) { b->reset_in = n; b->reset_chip = b->target; }
 void bus_hang_us(bus_t *b, uint64_t us) { b->hang_for_us = us; }
-void bus_absent(bus_t *b, int absent) { b->absent = (uint8_t)absent; }
+void bus_absent(bus_t *b, int absent) { b->absent[b->target] = (uint8_t)absent; }
 /* The chip's oscillator: its conversions take this many times the table's time from now on. */
-void bus_clock_scale(bus_t *b, double scale) { b->chip.clock_scale = scale; }
+void bus_clock_scale(bus_t *b, double scale) { CHIP->clock_scale = scale; }
 uint32_t bus_status_fixes(bus_t *b) { return b->status_fixes; }
 uint32_t bus_phases(bus_t *b) { return b->phases; }
 uint32_t bus_held(bus_t *b) { return b->held; }
 uint32_t bus_uart_cycles_per_byte(bus_t *b) { return b->uart0 ? (uint32_t)b->uart0->cycles_per_byte : 0; }
-uint16_t bus_chip_register(bus_t *b, uint8_t reg) { return b->chip.reg[reg & 31]; }
-int bus_chip_mode(bus_t *b) { return b->chip.mode; }
+uint16_t bus_chip_register(bus_t *b, uint8_t reg) { return CHIP->reg[reg & 31]; }
+int bus_chip_mode(bus_t *b) { return CHIP->mode; }
 /* One conversion of the running measurement's channels with the chip's current registers, us. */
-double bus_conversion_us(bus_t *b) { return sim_conversion_us(&b->chip, b->chip.zyxt) * b->chip.clock_scale; }
+double bus_conversion_us(bus_t *b) { return sim_conversion_us(CHIP, CHIP->zyxt) * CHIP->clock_scale; }
 /* Conversions the chip has completed since its burst started. */
 uint64_t bus_conversions(bus_t *b)
 {
     double conv = bus_conversion_us(b);
-    if (b->chip.mode != SIM_BURST || conv <= 0.0) {
+    if (CHIP->mode != SIM_BURST || conv <= 0.0) {
         return 0;
     }
-    return (uint64_t)((double)(bus_time_us(b) - b->chip.t_start) / conv);
+    return (uint64_t)((double)(bus_time_us(b) - CHIP->t_start) / conv);
 }
 
 void bus_close(bus_t *b)

@@ -10,6 +10,10 @@ Horner rows, the hull without its collinear points as a fan with one edge line p
 the I2C address and clock, the baud, the chip's register words, the conversion pace and the count scale, all
 computed by magfab from the spec, so that one generic image serves every build); :func:`intel_hex` writes bytes as
 the Intel HEX an avrdude ``-U eeprom:w:FILE.eep:i`` takes.
+
+An array (version 3, :func:`pack_array`) carries no force calibration: the settings, every chip's I2C address in
+taxel order and the name. The image then reads every chip and sends each one's field; the host computes the
+forces (each taxel's calibration and the neighbours' compensation need every taxel's field).
 """
 
 from __future__ import annotations
@@ -20,6 +24,11 @@ from typing import Any, Dict, List, Sequence, Tuple
 
 MAGIC = b"MF"
 VERSION = 2
+#: An array's record: the settings and the chips' addresses, no calibration.
+VERSION_ARRAY = 3
+#: Chips an array's record may list (one I2C bus, the option codes' four addresses times four straps).
+MAX_TAXELS = 16
+ADDRESSES_OFFSET = 92  # an array record's addresses, after the settings
 #: EEPROM of the ATmega328P, bytes; the record starts at address 0.
 SIZE = 1024
 HEADER = struct.Struct("<2sBBHH16s4B")  # magic, version, order, length, hull points, sha16, chip settings
@@ -205,9 +214,35 @@ def pack(lay: Dict[str, Any], sha16: str, settings: Dict[str, Any]) -> bytes:
     return record + struct.pack("<H", crc16(record))
 
 
+def pack_array(addresses: Sequence[int], sha16: str, settings: Dict[str, Any]) -> bytes:
+    """An array's record (version 3): the header (byte 3 the number of taxels N, bytes 6..7 zero), the image's
+    settings as in :func:`pack` (their ``i2c_address`` taxel 0's), the N chip addresses in taxel order (uint8
+    each), the name, the CRC. ``sha16`` is the info line's hash (of the build's calibration)."""
+    n = len(addresses)
+    if not 1 <= n <= MAX_TAXELS or len(set(addresses)) != n or not all(0x08 <= a <= 0x77 for a in addresses):
+        raise EepromError("taxels", list(addresses), "must be 1 to {} distinct 7-bit addresses from 0x08 to 0x77"
+                          .format(MAX_TAXELS))
+    spec_name = settings["name"].encode("utf-8")
+    if len(spec_name) > NAME_MAX:
+        raise EepromError("name", settings["name"], "must be at most {} bytes of UTF-8 in the record".format(NAME_MAX))
+    block = SETTINGS.pack(*(len(spec_name) if key == "name_len" else settings[key] for key in SETTING_KEYS))
+    body = block + bytes(addresses) + spec_name
+    length = HEADER.size + len(body) + 2
+    chip = (settings["gain_sel"], settings["resolution"], settings["osr"], settings["dig_filt"])
+    record = HEADER.pack(MAGIC, VERSION_ARRAY, n, length, 0, sha16.encode("ascii"), *chip) + body
+    return record + struct.pack("<H", crc16(record))
+
+
+def addresses(data: bytes) -> List[int]:
+    """The chip addresses of an array record (version 3), in taxel order; [] for a single taxel's."""
+    head = unpack_header(data)
+    return list(data[ADDRESSES_OFFSET:ADDRESSES_OFFSET + head["order"]]) if head["version"] == VERSION_ARRAY else []
+
+
 def unpack_header(data: bytes) -> Dict[str, Any]:
     """The header fields of a record read back (no CRC check: see :func:`check`); ``image`` holds the image's
-    settings (:data:`SETTING_KEYS`) when ``data`` reaches past them."""
+    settings (:data:`SETTING_KEYS`) when ``data`` reaches past them. An array's record (version 3) has its number
+    of taxels where a single taxel's has its order."""
     magic, version, order, length, n, sha16, *settings = HEADER.unpack_from(data, 0)
     out = {"magic": magic, "version": version, "order": order, "length": length, "hull_points": n,
            "sha16": sha16.decode("ascii", "replace"), "settings": tuple(settings)}
@@ -222,7 +257,7 @@ def check(data: bytes) -> bool:
         return False
     head = unpack_header(data)
     length = head["length"]
-    return (head["magic"] == MAGIC and head["version"] == VERSION and HEADER.size + 2 <= length <= min(SIZE, len(data))
+    return (head["magic"] == MAGIC and head["version"] in (VERSION, VERSION_ARRAY) and HEADER.size + 2 <= length <= min(SIZE, len(data))
             and struct.unpack_from("<H", data, length - 2)[0] == crc16(data[:length - 2]))
 
 

@@ -5,6 +5,7 @@
  * once, and the grid re-anchors on the retry: the safety net for a chip slower than the table. */
 #include "mf_app.h"
 
+#include "mf_array.h"
 #include "mf_calib.h"
 #include "mf_config.h"
 #include "mf_frame.h"
@@ -14,14 +15,14 @@
 #define MF_READ_MAX 32
 #define MF_NO_RECORD_POLL_US 200UL
 
-static uint32_t now(const mf_app_t *a)
+uint32_t mf_app_now(const mf_app_t *a)
 {
     return a->hal->micros(a->hal->ctx);
 }
 
-static void wait_until(const mf_app_t *a, uint32_t t)
+void mf_app_wait_until(const mf_app_t *a, uint32_t t)
 {
-    int32_t dt = (int32_t)(t - now(a));
+    int32_t dt = (int32_t)(t - mf_app_now(a));
     if (dt > 0) {
         a->hal->delay_us(a->hal->ctx, (uint32_t)dt);
     }
@@ -39,7 +40,7 @@ static uint8_t put_field(char *out, uint8_t n, uint32_t v)
     return (uint8_t)(n + mf_format_uint(&out[n], v));
 }
 
-/* I,magfab,<name>,<hash>,<gain_sel>,<resolution>,<osr>,<dig_filt>: all from the record the image runs now (an
+/* I,magfab,<name>,<hash>,<gain_sel>,<resolution>,<osr>,<dig_filt>[,<taxels>]: all from the record the image runs now (an
  * empty name, sixteen zeros and zeros without a valid one). */
 static void send_info(const mf_app_t *a)
 {
@@ -59,6 +60,9 @@ static void send_info(const mf_app_t *a)
     }
     for (k = 0; k < 4; ++k) {
         n = put_field(line, n, mf_calib_setting(k));
+    }
+    if (mf_calib_taxels() > 0) {
+        n = put_field(line, n, mf_calib_taxels()); /* an array's: how many chips it reads */
     }
     send_line(a, line, n);
 }
@@ -81,7 +85,7 @@ static void eeprom_write_command(mf_app_t *a)
         mf_nv_write(addr, &a->cmd[4], len);
         if (mf_calib_load() == MF_OK) {
             a->lost = 1; /* (re)start the chip now, with the settings of the record just completed */
-            a->t_next = now(a);
+            a->t_next = mf_app_now(a);
         }
     }
     line[0] = 'W';
@@ -137,14 +141,14 @@ static void command_byte(mf_app_t *a, uint8_t c)
 void mf_app_commands(mf_app_t *a)
 {
     int c;
-    if (a->cmd_len > 0 && (uint32_t)(now(a) - a->cmd_t) > MF_CMD_TIMEOUT_US) {
+    if (a->cmd_len > 0 && (uint32_t)(mf_app_now(a) - a->cmd_t) > MF_CMD_TIMEOUT_US) {
         a->cmd_len = 0; /* the rest never came */
     }
     while ((c = a->hal->serial_read(a->hal->ctx)) >= 0) {
         if (a->cmd_len > 0) {
             command_byte(a, (uint8_t)c);
         } else if (c == 'w' || c == 'r') {
-            a->cmd_t = now(a);
+            a->cmd_t = mf_app_now(a);
             command_byte(a, (uint8_t)c);
         } else if (c == 'b') {
             a->text_mode = 0;
@@ -160,7 +164,6 @@ static int start_once(mf_app_t *a)
 {
     int rc;
     uint8_t reg;
-    a->chip.addr = MF_I2C_ADDR; /* the record's (a generic image's address can change with an upload) */
     (void)mlx_command(&a->chip, MLX_CMD_EX); /* from any mode back to idle; rejected when already idle */
     a->hal->delay_us(a->hal->ctx, MF_EXIT_WAIT_US);
     rc = mlx_command(&a->chip, MLX_CMD_RT);
@@ -182,7 +185,7 @@ static int start_once(mf_app_t *a)
         }
     }
     if (!MF_BURST) {
-        a->t_next = now(a);
+        a->t_next = mf_app_now(a);
         return MF_OK;
     }
     rc = mlx_command(&a->chip, (uint8_t)(MLX_CMD_SB | MF_ZYXT));
@@ -192,14 +195,20 @@ static int start_once(mf_app_t *a)
     if (rc != MF_OK) {
         return rc;
     }
-    a->t_next = now(a) + MF_TCONV_US + MF_READ_MARGIN_US;
+    a->t_next = mf_app_now(a) + MF_TCONV_US + MF_READ_MARGIN_US;
     return MF_OK;
 }
 
 int mf_app_start_chip(mf_app_t *a)
 {
+    return mf_app_start_at(a, MF_I2C_ADDR); /* the record's (a generic image's address can change with an upload) */
+}
+
+int mf_app_start_at(mf_app_t *a, uint8_t addr7)
+{
     int rc = MF_E_ARG;
     uint8_t attempt;
+    a->chip.addr = addr7;
     for (attempt = 0; attempt < MF_START_TRIES; ++attempt) {
         rc = start_once(a);
         if (rc == MF_OK) {
@@ -210,19 +219,16 @@ int mf_app_start_chip(mf_app_t *a)
     return rc;
 }
 
-/* RM, once more after MF_RETRY_US if the chip rejects it while still in the measuring mode: the conversion
- * ran late (the chip's oscillator is slower than the table). A second rejection is an error.
- * *t_us is when the last attempt started; *retried says whether there was a second. */
-static int read_measurement(mf_app_t *a, mlx_raw_t *raw, uint8_t mode_bit, uint32_t *t_us, uint8_t *retried)
+int mf_app_read_measurement(mf_app_t *a, mlx_raw_t *raw, uint8_t mode_bit, uint32_t *t_us, uint8_t *retried)
 {
     int rc;
-    *t_us = now(a);
+    *t_us = mf_app_now(a);
     *retried = 0;
     rc = mlx_read_measurement(&a->chip, MF_ZYXT, raw);
     if (rc == MF_E_CHIP && (a->chip.status & mode_bit)) {
         *retried = 1;
         a->hal->delay_us(a->hal->ctx, MF_RETRY_US);
-        *t_us = now(a);
+        *t_us = mf_app_now(a);
         rc = mlx_read_measurement(&a->chip, MF_ZYXT, raw);
     }
     return rc;
@@ -236,17 +242,17 @@ static int acquire(mf_app_t *a, mlx_raw_t *raw, uint32_t *t_us)
     if (!MF_BURST) {
         rc = mlx_command(&a->chip, (uint8_t)(MLX_CMD_SM | MF_ZYXT));
         if (rc != MF_OK) {
-            *t_us = now(a);
+            *t_us = mf_app_now(a);
             return rc;
         }
         a->hal->delay_us(a->hal->ctx, MF_TCONV_US + MF_READ_MARGIN_US);
-        return read_measurement(a, raw, MLX_ST_SM, t_us, &retried);
+        return mf_app_read_measurement(a, raw, MLX_ST_SM, t_us, &retried);
     }
-    if ((int32_t)(now(a) - a->t_next) > (int32_t)MF_TCONV_US) {
-        a->t_next = now(a); /* fell behind by more than a conversion (a stalled host link): catch up, not burst */
+    if ((int32_t)(mf_app_now(a) - a->t_next) > (int32_t)MF_TCONV_US) {
+        a->t_next = mf_app_now(a); /* fell behind by more than a conversion (a stalled host link): catch up, not burst */
     }
-    wait_until(a, a->t_next);
-    rc = read_measurement(a, raw, MLX_ST_BURST, t_us, &retried);
+    mf_app_wait_until(a, a->t_next);
+    rc = mf_app_read_measurement(a, raw, MLX_ST_BURST, t_us, &retried);
     /* the grid: one conversion on from the scheduled read, or from the retry that found a late conversion */
     a->t_next = (retried ? *t_us : a->t_next) + MF_TCONV_US;
     if (rc == MF_OK && !(a->chip.status & MLX_ST_BURST)) {
@@ -261,18 +267,31 @@ void mf_app_process(const mlx_raw_t *raw, mf_sample_t *s)
     mf_calib_forces(s);
 }
 
-void mf_app_emit(mf_app_t *a, const mf_sample_t *s, uint32_t t_us)
+/* A force frame (taxel < 0) or an array's field frame of taxel, in the current mode. */
+static void send_frame(const mf_app_t *a, int16_t taxel, const mf_sample_t *s, uint32_t t_us)
 {
     if (a->text_mode) {
         char line[MF_TEXT_MAX];
-        uint8_t n = mf_frame_text(line, a->seq, t_us - a->t0, s);
+        uint8_t n = taxel < 0 ? mf_frame_text(line, a->seq, t_us - a->t0, s)
+                              : mf_frame_field_text(line, (uint8_t)taxel, a->seq, t_us - a->t0, s);
         a->hal->serial_write(a->hal->ctx, (const uint8_t *)line, n);
     } else {
         uint8_t frame[MF_FRAME_LEN];
-        uint8_t n = mf_frame_binary(frame, a->seq, t_us - a->t0, s);
+        uint8_t n = taxel < 0 ? mf_frame_binary(frame, a->seq, t_us - a->t0, s)
+                              : mf_frame_field(frame, (uint8_t)taxel, a->seq, t_us - a->t0, s);
         a->hal->serial_write(a->hal->ctx, frame, n);
     }
+}
+
+void mf_app_emit(mf_app_t *a, const mf_sample_t *s, uint32_t t_us)
+{
+    send_frame(a, -1, s, t_us);
     a->seq = (uint8_t)(a->seq + 1);
+}
+
+void mf_app_emit_field(const mf_app_t *a, uint8_t taxel, const mf_sample_t *s, uint32_t t_us)
+{
+    send_frame(a, taxel, s, t_us);
 }
 
 void mf_app_init(mf_app_t *a, const mf_hal_t *hal)
@@ -292,13 +311,15 @@ void mf_app_init(mf_app_t *a, const mf_hal_t *hal)
     a->errors = 0;
     a->recoveries = 0;
     a->cmd_len = 0;
-    a->t0 = now(a);
+    a->t0 = mf_app_now(a);
     a->t_next = a->t0;
     if (mf_calib_status() != MF_OK) {
         a->lost = 1; /* no record: the chip is left alone (mf_app_poll) until one is written */
+    } else if (mf_calib_taxels() > 0) {
+        mf_array_start(a, 0);
     } else if (mf_app_start_chip(a) != MF_OK) {
         a->lost = 1;
-        a->t_next = now(a);
+        a->t_next = mf_app_now(a);
     }
 }
 
@@ -309,7 +330,7 @@ void mf_app_poll(mf_app_t *a)
     uint32_t t;
     int rc;
     mf_app_commands(a);
-    while (mf_calib_status() != MF_OK && (int32_t)(a->t_next - now(a)) > 0) {
+    while (mf_calib_status() != MF_OK && (int32_t)(a->t_next - mf_app_now(a)) > 0) {
         a->hal->delay_us(a->hal->ctx, MF_NO_RECORD_POLL_US); /* the host's commands answered while waiting */
         mf_app_commands(a);
     }
@@ -319,21 +340,25 @@ void mf_app_poll(mf_app_t *a)
         a->poll_error = MF_E_CALIB;
         a->last_error = MF_E_CALIB;
         ++a->errors;
-        t = now(a);
+        t = mf_app_now(a);
         mf_app_emit(a, &s, t);
         a->lost = 1; /* started when a valid record is written (mf_app_commands) */
         a->t_next = t + MF_NO_RECORD_US;
         return;
     }
+    if (mf_calib_taxels() > 0) {
+        mf_array_poll(a); /* an array's record: one field frame per chip per cycle */
+        return;
+    }
     if (a->lost) {
-        wait_until(a, a->t_next);
+        mf_app_wait_until(a, a->t_next);
         rc = mf_app_start_chip(a);
         if (rc != MF_OK) {
             mf_sample_fail(&s, rc, MF_STAGE_START);
             a->poll_error = (int8_t)rc;
             a->last_error = (int8_t)rc;
             ++a->errors;
-            t = now(a);
+            t = mf_app_now(a);
             mf_app_emit(a, &s, t);
             a->t_next = t + MF_LOST_RETRY_US;
             return;
@@ -362,7 +387,7 @@ void mf_app_poll(mf_app_t *a)
             ++a->recoveries;
         } else {
             a->lost = 1;
-            a->t_next = now(a) + MF_LOST_RETRY_US;
+            a->t_next = mf_app_now(a) + MF_LOST_RETRY_US;
         }
     }
 }

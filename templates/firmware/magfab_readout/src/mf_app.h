@@ -1,5 +1,6 @@
 /* The readout loop: chip start-up and recovery, paced acquisition, calibration, frames, host commands.
- * One call of mf_app_poll() emits exactly one frame (binary or text). */
+ * One call of mf_app_poll() emits exactly one frame (binary or text); with an array's record one field frame per
+ * chip (mf_array.h). */
 #ifndef MF_APP_H
 #define MF_APP_H
 
@@ -39,14 +40,26 @@ void mf_app_poll(mf_app_t *a);
  * reads out the reset's RS is checked for RS and ERROR, and every register is read back, so a chip that
  * restarts anywhere in the sequence fails the attempt instead of streaming on its power-on settings. */
 int mf_app_start_chip(mf_app_t *a);
+/* The same for the chip at addr7 (an array's chips, one after another). */
+int mf_app_start_at(mf_app_t *a, uint8_t addr7);
+/* RM of the chip at a->chip.addr, once more after MF_RETRY_US if the chip rejects it while still in the measuring
+ * mode (mode_bit: MLX_ST_BURST or MLX_ST_SM): the conversion ran late (the chip's oscillator is slower than the
+ * table). A second rejection is an error. *t_us is when the last attempt started; *retried says whether there
+ * was a second. */
+int mf_app_read_measurement(mf_app_t *a, mlx_raw_t *raw, uint8_t mode_bit, uint32_t *t_us, uint8_t *retried);
 /* Act on every byte the host has sent: 'b' binary, 't' text, 'i' the info line, and the EEPROM commands of
  * docs/bundle.md section 4: 'w' <addr:u16> <n:u8, 1..16> <n bytes> <crc:u16> writes (answered by a W line, the
  * calibration record reloaded), 'r' <addr:u16> <n:u8, 1..32> reads (answered by an R line). */
 void mf_app_commands(mf_app_t *a);
+/* micros() of the HAL, and a wait until it reaches t (no wait when t has passed). */
+uint32_t mf_app_now(const mf_app_t *a);
+void mf_app_wait_until(const mf_app_t *a, uint32_t t);
 /* Sample processing without the bus: counts -> microtesla -> forces, flags. */
 void mf_app_process(const mlx_raw_t *raw, mf_sample_t *s);
 /* Encode and send one frame in the current mode. */
 void mf_app_emit(mf_app_t *a, const mf_sample_t *s, uint32_t t_us);
+/* An array's field frame of taxel in the current mode, with the cycle's sequence number (not advanced). */
+void mf_app_emit_field(const mf_app_t *a, uint8_t taxel, const mf_sample_t *s, uint32_t t_us);
 
 #ifdef __cplusplus
 }

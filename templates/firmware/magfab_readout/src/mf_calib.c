@@ -26,9 +26,10 @@ static struct {
     uint16_t edge_at; /* and of the edge lines: (ex, ey, c) per hull point */
     uint16_t name_at; /* and of the spec name */
     uint8_t name_len;
+    uint8_t taxels; /* an array's record (version 3): its chips; 0 for a single taxel's */
     float f[N_FLOATS];
     float coef[(MF_CAL_MAX_ORDER + 1) * (MF_CAL_MAX_ORDER + 2)]; /* the Horner rows, as in the record */
-} cal = {MF_E_CALIB, 0, 0, 0, 0, 0, 0, {0}, {0}};
+} cal = {MF_E_CALIB, 0, 0, 0, 0, 0, 0, 0, {0}, {0}};
 
 static uint16_t record_crc(uint16_t len)
 {
@@ -88,26 +89,10 @@ static int load_settings(void)
 }
 #endif
 
-int mf_calib_load(void)
+/* The settings of a record whose length and CRC are right: the generic image's loaded (MF_E_CALIB for values no
+ * build writes), a build-specific image's compared with its own chip settings. */
+static int record_settings(void)
 {
-    uint8_t order = mf_nv_byte(3);
-    uint16_t len = mf_nv_u16(4);
-    uint16_t n = mf_nv_u16(6);
-    uint8_t name_len = mf_nv_byte(MF_CAL_IMAGE_AT + 5);
-    uint16_t n_coef = (uint16_t)((order + 1U) * (order + 2U) / 2U);
-    uint16_t fan_at = (uint16_t)(MF_CAL_COEF_AT + 8U * n_coef);
-    uint16_t k;
-    cal.status = MF_E_CALIB;
-#if MF_GENERIC
-    mf_set.ubrr = MF_FALLBACK_UBRR; /* what the UART starts with, unless a valid record says otherwise */
-    mf_set.baud = MF_FALLBACK_BAUD;
-#endif
-    if (mf_nv_byte(0) != MF_CAL_MAGIC0 || mf_nv_byte(1) != MF_CAL_MAGIC1 || mf_nv_byte(2) != MF_CAL_VERSION
-        || order > MF_CAL_MAX_ORDER || n < 3 || n > 200 || len > MF_NV_SIZE || name_len > MF_CAL_NAME_MAX
-        || len != (uint16_t)(fan_at + 20U * n + name_len + 2U)
-        || record_crc((uint16_t)(len - 2)) != mf_nv_u16((uint16_t)(len - 2))) {
-        return MF_E_CALIB;
-    }
 #if MF_GENERIC
     if (load_settings() != MF_OK) {
         mf_set.ubrr = MF_FALLBACK_UBRR;
@@ -120,6 +105,59 @@ int mf_calib_load(void)
         return MF_E_CALIB; /* made for other chip settings: its microtesla would be wrong */
     }
 #endif
+    return MF_OK;
+}
+
+/* An array's record (version 3): the settings, N chip addresses, the name; no calibration. */
+static int load_array(uint16_t len, uint8_t name_len)
+{
+    uint8_t n = mf_nv_byte(3);
+    uint8_t k;
+    if (n == 0 || n > MF_MAX_TAXELS || len != (uint16_t)(MF_CAL_ADDR_AT + 2U + (uint16_t)n + (uint16_t)name_len)
+        || record_crc((uint16_t)(len - 2)) != mf_nv_u16((uint16_t)(len - 2)) || record_settings() != MF_OK) {
+        return MF_E_CALIB;
+    }
+    for (k = 0; k < n; ++k) {
+        uint8_t addr = mf_nv_byte((uint16_t)(MF_CAL_ADDR_AT + k));
+        if (addr < 0x08U || addr > 0x77U) {
+            return MF_E_CALIB;
+        }
+    }
+    cal.taxels = n;
+    cal.name_at = (uint16_t)(MF_CAL_ADDR_AT + n);
+    cal.name_len = name_len;
+    cal.status = MF_OK;
+    return MF_OK;
+}
+
+int mf_calib_load(void)
+{
+    uint8_t order = mf_nv_byte(3);
+    uint16_t len = mf_nv_u16(4);
+    uint16_t n = mf_nv_u16(6);
+    uint8_t name_len = mf_nv_byte(MF_CAL_IMAGE_AT + 5);
+    uint16_t n_coef = (uint16_t)((order + 1U) * (order + 2U) / 2U);
+    uint16_t fan_at = (uint16_t)(MF_CAL_COEF_AT + 8U * n_coef);
+    uint16_t k;
+    cal.status = MF_E_CALIB;
+    cal.taxels = 0;
+#if MF_GENERIC
+    mf_set.ubrr = MF_FALLBACK_UBRR; /* what the UART starts with, unless a valid record says otherwise */
+    mf_set.baud = MF_FALLBACK_BAUD;
+#endif
+    if (mf_nv_byte(0) == MF_CAL_MAGIC0 && mf_nv_byte(1) == MF_CAL_MAGIC1 && mf_nv_byte(2) == MF_CAL_VERSION_ARRAY
+        && len <= MF_NV_SIZE && len >= MF_CAL_ADDR_AT + 3U && name_len <= MF_CAL_NAME_MAX) {
+        return load_array(len, name_len);
+    }
+    if (mf_nv_byte(0) != MF_CAL_MAGIC0 || mf_nv_byte(1) != MF_CAL_MAGIC1 || mf_nv_byte(2) != MF_CAL_VERSION
+        || order > MF_CAL_MAX_ORDER || n < 3 || n > 200 || len > MF_NV_SIZE || name_len > MF_CAL_NAME_MAX
+        || len != (uint16_t)(fan_at + 20U * n + name_len + 2U)
+        || record_crc((uint16_t)(len - 2)) != mf_nv_u16((uint16_t)(len - 2))) {
+        return MF_E_CALIB;
+    }
+    if (record_settings() != MF_OK) {
+        return MF_E_CALIB;
+    }
     for (k = 0; k < N_FLOATS; ++k) {
         cal.f[k] = mf_nv_float((uint16_t)(MF_CAL_FLOATS_AT + 4U * k));
     }
@@ -139,6 +177,16 @@ int mf_calib_load(void)
 int mf_calib_status(void)
 {
     return cal.status;
+}
+
+uint8_t mf_calib_taxels(void)
+{
+    return cal.status == MF_OK ? cal.taxels : 0U;
+}
+
+uint8_t mf_calib_address(uint8_t k)
+{
+    return mf_nv_byte((uint16_t)(MF_CAL_ADDR_AT + k));
 }
 
 char mf_calib_sha(uint8_t k)

@@ -21,6 +21,9 @@ extern "C" {
 #define MF_CAL_MAGIC0 'M'
 #define MF_CAL_MAGIC1 'F'
 #define MF_CAL_VERSION 2
+#define MF_CAL_VERSION_ARRAY 3 /* an array's record: the settings, the chips' addresses, no calibration */
+#define MF_CAL_ADDR_AT 92      /* an array record's chip addresses, one byte each in taxel order */
+#define MF_MAX_TAXELS 16
 #define MF_CAL_SHA_AT 8      /* 16 ASCII hex digits of the calibration's sha256 */
 #define MF_CAL_SETTINGS_AT 24 /* gain_sel, resolution, osr, dig_filt the record was made for */
 #define MF_CAL_IMAGE_AT 28   /* the image's settings: mf_settings_t's fields in order, packed */
@@ -33,6 +36,10 @@ extern "C" {
 int mf_calib_load(void);
 /* MF_OK when the last load found a valid record. */
 int mf_calib_status(void);
+/* An array's valid record: its number of chips (1..MF_MAX_TAXELS); 0 for a single taxel's or none. */
+uint8_t mf_calib_taxels(void);
+/* The 7-bit I2C address of taxel k (k < mf_calib_taxels()). */
+uint8_t mf_calib_address(uint8_t k);
 /* Byte k (0..15) of the record's calibration hash, for the info line ('0' without a valid record). */
 char mf_calib_sha(uint8_t k);
 /* Byte k (0..3) of the chip settings the record was made for: gain_sel, resolution, osr, dig_filt (0 without). */

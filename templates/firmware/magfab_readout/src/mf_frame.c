@@ -53,15 +53,21 @@ static void put_f32(uint8_t *p, float x)
     put_u32(p, bits);
 }
 
-uint8_t mf_frame_binary(uint8_t *out, uint8_t seq, uint32_t t_us, const mf_sample_t *s)
+/* Bytes 0..8 of either frame: sync, type, sequence, flags, time. */
+static void put_head(uint8_t *out, uint8_t kind, uint8_t seq, uint32_t t_us, const mf_sample_t *s)
 {
-    uint8_t k;
     out[0] = MF_FRAME_SYNC0;
     out[1] = MF_FRAME_SYNC1;
-    out[2] = MF_FRAME_FORCE;
+    out[2] = kind;
     out[3] = seq;
     out[4] = s->flags;
     put_u32(&out[5], t_us);
+}
+
+uint8_t mf_frame_binary(uint8_t *out, uint8_t seq, uint32_t t_us, const mf_sample_t *s)
+{
+    uint8_t k;
+    put_head(out, MF_FRAME_FORCE, seq, t_us, s);
     for (k = 0; k < 3; ++k) {
         put_u16(&out[9 + 2 * k], (uint16_t)s->b_counts[k]);
         put_f32(&out[17 + 4 * k], s->f_N[k]);
@@ -179,18 +185,23 @@ uint8_t mf_format_float(char *out, float x, uint8_t decimals)
     return n;
 }
 
-uint8_t mf_frame_text(char *out, uint8_t seq, uint32_t t_us, const mf_sample_t *s)
+/* F,<seq>,... (taxel < 0) or B,<taxel>,<seq>,... without the forces: see mf_frame.h. */
+static uint8_t text_line(char *out, int16_t taxel, uint8_t seq, uint32_t t_us, const mf_sample_t *s)
 {
     uint8_t n = 0;
     uint8_t k;
-    out[n++] = 'F';
+    out[n++] = taxel < 0 ? 'F' : 'B';
+    if (taxel >= 0) {
+        out[n++] = ',';
+        n = (uint8_t)(n + mf_format_uint(&out[n], (uint32_t)taxel));
+    }
     out[n++] = ',';
     n = (uint8_t)(n + mf_format_uint(&out[n], seq));
     out[n++] = ',';
     n = (uint8_t)(n + mf_format_uint(&out[n], t_us));
     out[n++] = ',';
     n = (uint8_t)(n + mf_format_uint(&out[n], s->flags));
-    for (k = 0; k < 3; ++k) {
+    for (k = 0; taxel < 0 && k < 3; ++k) {
         out[n++] = ',';
         n = (uint8_t)(n + mf_format_float(&out[n], s->f_N[k], 4));
     }
@@ -207,4 +218,27 @@ uint8_t mf_frame_text(char *out, uint8_t seq, uint32_t t_us, const mf_sample_t *
     n = put_checksum(out, n);
     out[n++] = '\n';
     return n;
+}
+
+uint8_t mf_frame_text(char *out, uint8_t seq, uint32_t t_us, const mf_sample_t *s)
+{
+    return text_line(out, -1, seq, t_us, s);
+}
+
+uint8_t mf_frame_field_text(char *out, uint8_t taxel, uint8_t seq, uint32_t t_us, const mf_sample_t *s)
+{
+    return text_line(out, taxel, seq, t_us, s);
+}
+
+uint8_t mf_frame_field(uint8_t *out, uint8_t taxel, uint8_t seq, uint32_t t_us, const mf_sample_t *s)
+{
+    uint8_t k;
+    put_head(out, MF_FRAME_FIELD, seq, t_us, s);
+    out[9] = taxel;
+    for (k = 0; k < 3; ++k) {
+        put_u16(&out[10 + 2 * k], (uint16_t)s->b_counts[k]);
+    }
+    put_u16(&out[16], (s->flags & MF_FLAG_CHIP_ERROR) ? s->fault : s->t_raw);
+    put_u16(&out[18], mf_crc16(&out[2], 16));
+    return MF_FIELD_FRAME_LEN;
 }

@@ -14,6 +14,8 @@ extern "C" {
 #define MF_FRAME_SYNC0 0xA5
 #define MF_FRAME_SYNC1 0x5A
 #define MF_FRAME_FORCE 0x01
+#define MF_FRAME_FIELD 0x02 /* an array's: one chip's field and its taxel index, no force */
+#define MF_FIELD_FRAME_LEN 20
 #define MF_TEXT_MAX 176 /* longest text line, checksum and newline included (166: 7 floats of 19 characters) */
 
 /* CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF, no reflection, no final xor). */
@@ -28,6 +30,13 @@ uint8_t mf_frame_binary(uint8_t *out, uint8_t seq, uint32_t t_us, const mf_sampl
  * binary frame's bytes 15..16 on an error frame: MF_STAGE_* << 8 | -MF_E_*); XXXX is mf_crc16 of the bytes before the '*' in upper-case hex.
  * out holds MF_TEXT_MAX bytes; returns the length (no terminator). */
 uint8_t mf_frame_text(char *out, uint8_t seq, uint32_t t_us, const mf_sample_t *s);
+/* An array's field frame: sync, type 0x02, seq (the cycle's), flags, time (uint32), the taxel index, X, Y, Z counts
+ * (int16), the temperature word (the fault word on a chip error), CRC-16 over bytes 2..17; returns
+ * MF_FIELD_FRAME_LEN. */
+uint8_t mf_frame_field(uint8_t *out, uint8_t taxel, uint8_t seq, uint32_t t_us, const mf_sample_t *s);
+/* Its text line: B,<taxel>,<seq>,<t_us>,<status>,<Bx_uT>,<By_uT>,<Bz_uT>,<T_C>[,<fault>]*XXXX\n (as mf_frame_text
+ * without the forces); out holds MF_TEXT_MAX bytes. */
+uint8_t mf_frame_field_text(char *out, uint8_t taxel, uint8_t seq, uint32_t t_us, const mf_sample_t *s);
 /* Ends a text line of n bytes: '*', the CRC of those bytes in four upper-case hex digits, '\n'; returns the
  * new length (out holds n + 6 bytes). */
 uint8_t mf_frame_seal(char *out, uint8_t n);

@@ -1,0 +1,130 @@
+/* An array's readout: see mf_array.h. */
+#include "mf_array.h"
+
+#include "mf_calib.h"
+#include "mf_config.h"
+
+typedef struct mf_taxel {
+    uint8_t lost;      /* its last start failed: tried again every MF_LOST_RETRY_US */
+    uint8_t recovered; /* started since its last frame */
+    int8_t start_rc;   /* the error of its last failed start */
+    int8_t sm_rc;      /* single mode: the error of this cycle's SM */
+    uint32_t t_ready;  /* after a start: when its first conversion is due (the earliest read) */
+    uint32_t t_retry;  /* lost: the next start attempt */
+} mf_taxel_t;
+
+static mf_taxel_t taxel[MF_MAX_TAXELS];
+
+/* Reset, configure and (burst) start chip k; MF_OK, else it is lost. The cycle's grid is kept. */
+static int start(mf_app_t *a, uint8_t k)
+{
+    mf_taxel_t *x = &taxel[k];
+    uint32_t grid = a->t_next;
+    int rc = mf_app_start_at(a, mf_calib_address(k));
+    a->t_next = grid;
+    if (rc == MF_OK) {
+        x->lost = 0;
+        x->recovered = 1;
+        x->t_ready = mf_app_now(a) + (uint32_t)(MF_BURST ? MF_TCONV_US + MF_READ_MARGIN_US : 0UL);
+    } else {
+        x->lost = 1;
+        x->start_rc = (int8_t)rc;
+        x->t_retry = mf_app_now(a) + MF_LOST_RETRY_US;
+    }
+    return rc;
+}
+
+void mf_array_start(mf_app_t *a, uint8_t recovered)
+{
+    uint8_t k;
+    for (k = 0; k < mf_calib_taxels(); ++k) {
+        if (start(a, k) == MF_OK) {
+            taxel[k].recovered = recovered;
+        }
+    }
+    a->lost = 0;
+    a->t_next = mf_app_now(a);
+}
+
+/* RM of chip k (after the SM of this cycle in single mode); *t_us when it was read. */
+static int read_taxel(mf_app_t *a, uint8_t k, mlx_raw_t *raw, uint32_t *t_us)
+{
+    uint8_t mode = MF_BURST ? MLX_ST_BURST : MLX_ST_SM;
+    uint8_t retried;
+    int rc;
+    if (!MF_BURST && taxel[k].sm_rc != MF_OK) {
+        *t_us = mf_app_now(a);
+        return taxel[k].sm_rc;
+    }
+    mf_app_wait_until(a, taxel[k].t_ready); /* just started: its first conversion */
+    a->chip.addr = mf_calib_address(k);
+    rc = mf_app_read_measurement(a, raw, mode, t_us, &retried);
+    if (rc == MF_OK && MF_BURST && !(a->chip.status & MLX_ST_BURST)) {
+        rc = MF_E_MODE;
+    }
+    return rc;
+}
+
+/* Chip k's frame of this cycle: its field, or its fault (then a restart, as a single taxel's chip). */
+static void poll_taxel(mf_app_t *a, uint8_t k)
+{
+    mf_taxel_t *x = &taxel[k];
+    mf_sample_t s;
+    mlx_raw_t raw;
+    uint32_t t;
+    int rc;
+    if (x->lost && (int32_t)(mf_app_now(a) - x->t_retry) >= 0 && start(a, k) == MF_OK) {
+        ++a->recoveries;
+    }
+    if (x->lost) {
+        mf_sample_fail(&s, x->start_rc, MF_STAGE_START);
+        a->start_error = x->start_rc;
+        mf_app_emit_field(a, k, &s, mf_app_now(a));
+        return;
+    }
+    rc = read_taxel(a, k, &raw, &t);
+    if (rc == MF_OK) {
+        mf_sample_convert(&raw, &s);
+    } else {
+        mf_sample_fail(&s, rc, MF_STAGE_READ);
+        a->last_error = (int8_t)rc;
+        ++a->errors;
+    }
+    if (x->recovered) {
+        s.flags |= MF_FLAG_RECOVERED;
+        x->recovered = 0;
+    }
+    mf_app_emit_field(a, k, &s, t);
+    if (rc != MF_OK && start(a, k) == MF_OK) {
+        ++a->recoveries;
+    }
+}
+
+void mf_array_poll(mf_app_t *a)
+{
+    uint8_t n = mf_calib_taxels();
+    uint8_t k;
+    if (a->lost) {
+        mf_array_start(a, 1); /* a new record was written: every chip with its settings */
+    }
+    if (MF_BURST) {
+        if ((int32_t)(mf_app_now(a) - a->t_next) > (int32_t)MF_TCONV_US) {
+            a->t_next = mf_app_now(a); /* behind by more than a conversion (frames or bus slower): no burst of reads */
+        }
+        mf_app_wait_until(a, a->t_next);
+        a->t_next += MF_TCONV_US + MF_READ_MARGIN_US;
+    } else {
+        for (k = 0; k < n; ++k) { /* the conversions run in parallel */
+            if (!taxel[k].lost) {
+                a->chip.addr = mf_calib_address(k);
+                taxel[k].sm_rc = (int8_t)mlx_command(&a->chip, (uint8_t)(MLX_CMD_SM | MF_ZYXT));
+            }
+        }
+        a->hal->delay_us(a->hal->ctx, MF_TCONV_US + MF_READ_MARGIN_US);
+    }
+    a->poll_error = MF_OK;
+    for (k = 0; k < n; ++k) {
+        poll_taxel(a, k);
+    }
+    a->seq = (uint8_t)(a->seq + 1);
+}
