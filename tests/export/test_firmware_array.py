@@ -4,14 +4,19 @@ reading every chip on the simulated bus (tests/export/test_simbus_array.py does 
 from __future__ import annotations
 
 import math
+import struct
+import sys
+from dataclasses import dataclass
+from pathlib import Path
 
 import pytest
 
 from magfab import derive, load_spec
 from magfab.export.readout import render
 
-from conftest import ref_crc16
+from conftest import _missing, ref_crc16, require_tool
 from readout_support import imported, make_calibration
+from simbus import Bus, HarnessUnavailable, build_library
 
 
 @pytest.fixture(scope="module")
@@ -65,3 +70,185 @@ def test_a_corrupt_field_frame_is_refused_and_the_next_decodes(frames):
     decoder = f.Decoder()
     out = decoder.feed(bytes(bad) + good + f.encode_field_frame(0, 3, 20, 0, (1, 2, 3), 0))
     assert [s.taxel for s in out] == [0, 0] and decoder.stats.crc_errors == 1 and decoder.stats.lost == 1
+
+
+# ---- the array's record ---------------------------------------------------------------------------------------
+
+EXAMPLES = Path(__file__).resolve().parents[2] / "magfab" / "examples"
+ARRAYS = ("fingertip_2x2", "strip_1x5")
+
+
+@pytest.fixture(scope="module")
+def designs():
+    return {name: derive(load_spec(EXAMPLES / f"{name}.toml")) for name in ARRAYS}
+
+
+@pytest.mark.parametrize("name", ARRAYS)
+def test_the_array_record_carries_every_address_and_the_settings_no_calibration(designs, name):
+    from magfab.export import firmware
+
+    design, cal = designs[name], make_calibration()
+    record = firmware.eeprom_record(design, cal)
+    addresses = [t.i2c_address for t in design.taxels]
+    settings = firmware.image_settings(design)
+    ee = firmware._eeprom_module()
+    n = len(addresses)
+    assert record[:4] == b"MF\x03" + bytes([n]) and struct.unpack_from("<H", record, 4)[0] == len(record)
+    assert record[8:24].decode() == firmware.calibration_sha256(cal)[:16]
+    assert record[92:92 + n] == bytes(addresses) and settings["taxel_addresses"] == addresses
+    assert record[92 + n:-2] == design.spec.name.encode() and ee.check(record) and ee.addresses(record) == addresses
+    assert int.from_bytes(record[-2:], "little") == ref_crc16(record[:-2])
+    assert ee.unpack_header(record)["image"]["i2c_address"] == addresses[0]
+    assert len(record) == 92 + n + len(design.spec.name.encode()) + 2  # no calibration: ~100 B, not ~450 per taxel
+    assert firmware.render(design, cal)[firmware.EEP_NAME] == ee.intel_hex(record)
+    single = derive(load_spec(None))
+    assert "taxel_addresses" not in firmware.image_settings(single)
+    assert firmware.eeprom_record(single, cal)[2] == 2  # a single taxel's record as before
+    for bad in ([], addresses + addresses[:1], [0x07], list(range(0x20, 0x31))):
+        with pytest.raises(ee.EepromError):
+            ee.pack_array(bad, "0" * 16, settings)
+
+
+# ---- the shipped image reading every chip on the simulated bus -------------------------------------------------
+
+SETTLE_US = 80_000  # every chip started (about 8 ms each: exit, reset, configure, burst) and streaming
+
+
+def chip_field(k: int) -> tuple:
+    """A field per chip, different on every axis, so a frame carrying another chip's counts is caught."""
+    return (150.0 * k - 300.0, 40.0 - 90.0 * k, 21000.0 + 700.0 * k)
+
+
+@dataclass
+class ArraySim:
+    lib: object
+    hex_path: Path
+    eep: Path
+    addresses: list
+    settings: dict
+    frames: object
+
+    def boot(self, eep=None) -> Bus:
+        bus = Bus(self.lib, self.hex_path, self.addresses[0], eep or self.eep)
+        for a in self.addresses[1:]:
+            bus.add_chip(a)
+        for k in range(len(self.addresses)):
+            bus.target(k).set_field(*chip_field(k))
+        return bus.target(0)
+
+    def decoder(self):
+        return self.frames.Decoder(self.settings["lsb_xy_uT"], self.settings["lsb_z_uT"])
+
+    def counts(self, k: int) -> tuple:
+        lsb = (self.settings["lsb_xy_uT"], self.settings["lsb_xy_uT"], self.settings["lsb_z_uT"])
+        return tuple(round(b / q) for b, q in zip(chip_field(k), lsb))
+
+
+def samples_of(decoder, data: bytes) -> list:
+    return [s for s in decoder.feed(data) if isinstance(s, frames_module(decoder).Sample)]
+
+
+def frames_module(decoder):
+    return sys.modules[type(decoder).__module__]
+
+
+def cycles(samples: list) -> list:
+    """The samples grouped by sequence number (one group per cycle), whole cycles only."""
+    out, group = [], []
+    for s in samples:
+        if group and s.seq != group[0].seq:
+            out.append(group)
+            group = []
+        group.append(s)
+    return out[1:]  # the first may have started before the window
+
+
+@pytest.fixture(scope="module")
+def harness(tmp_path_factory, designs, frames):
+    """The shipped image, the harness library, and per example its rendered .eep."""
+    from magfab.export import firmware, toolchain
+
+    require_tool("cc")
+    root = tmp_path_factory.mktemp("array-bus")
+    out = {}
+    for name, design in designs.items():
+        toolchain.write_tree(firmware.render(design, make_calibration()), root / name / "firmware")
+        hex_path = root / name / "firmware" / firmware.HEX_NAME
+        hex_path.write_bytes(firmware.shipped_image()[0])
+        out[name] = (hex_path, design)
+    try:
+        lib = build_library(root / ARRAYS[0], root)
+    except HarnessUnavailable as exc:
+        _missing(str(exc))
+    return {name: ArraySim(lib, hex_path, hex_path.with_suffix(".eep"), [t.i2c_address for t in design.taxels],
+                           firmware.image_settings(design), frames) for name, (hex_path, design) in out.items()}
+
+
+@pytest.mark.parametrize("name", ARRAYS)
+def test_every_chip_is_read_every_cycle_with_its_own_counts(harness, name):
+    sim = harness[name]
+    n = len(sim.addresses)
+    with sim.boot() as bus:
+        decoder = sim.decoder()
+        samples_of(decoder, bus.run_us(SETTLE_US))
+        got = samples_of(decoder, bus.run_us(60_000))
+        bus.send(b"i")
+        infos = [x for x in decoder.feed(bus.run_us(20_000)) if isinstance(x, sim.frames.DeviceInfo)]
+    whole = cycles(got)
+    assert len(whole) >= 10
+    assert all([s.taxel for s in c] == list(range(n)) for c in whole)  # every chip, in taxel order, once
+    assert all(s.counts == sim.counts(s.taxel) and s.status == 0 for s in got)
+    assert all(math.isnan(s.force_N[0]) for s in got) and all(c[0].t_us < c[-1].t_us for c in whole)
+    assert [(i.taxels, i.spec_name) for i in infos] == [(n, name)]
+    assert decoder.stats.lost == 0 and decoder.stats.crc_errors == 0
+
+
+def test_text_mode_sends_a_field_line_per_chip(harness):
+    sim = harness["fingertip_2x2"]
+    with sim.boot() as bus:
+        decoder = sim.decoder()
+        samples_of(decoder, bus.run_us(SETTLE_US))
+        bus.send(b"t")
+        bus.run_us(10_000)
+        got = samples_of(decoder, bus.run_us(30_000))
+    assert got and all(s.source == "text" for s in got)
+    assert {s.taxel for s in got} == {0, 1, 2, 3}
+    lsb = (sim.settings["lsb_xy_uT"], sim.settings["lsb_xy_uT"], sim.settings["lsb_z_uT"])
+    for s in got:
+        assert s.B_uT == pytest.approx([c * q for c, q in zip(sim.counts(s.taxel), lsb)], abs=0.006)
+
+
+ONE_CHIP_FAULTS = {
+    "address NACK": (lambda bus: bus.nack(addr_phases=1), "nack at read", 30_000),
+    "chip reset": (lambda bus: bus.chip_fault("reset"), "chip reset at read", 30_000),
+    "off the bus 150 ms": (lambda bus: bus.absent(True), "nack at read", 150_000),
+}
+
+
+@pytest.mark.parametrize("fault", list(ONE_CHIP_FAULTS))
+@pytest.mark.parametrize("name", ARRAYS)
+def test_a_fault_on_one_chip_flags_only_that_taxel_and_it_recovers(harness, name, fault):
+    """Chip 2 fails (NACKed once, reset in burst, or off the bus for a while): only taxel 2's frames carry the
+    error, every cycle still has a frame of every chip, the others' counts stay right, and taxel 2 comes back
+    flagged recovered with its own counts."""
+    from magfab.export.firmware import LOST_RETRY_US
+
+    inject, named, during_us = ONE_CHIP_FAULTS[fault]
+    sim = harness[name]
+    n = len(sim.addresses)
+    with sim.boot() as bus:
+        decoder = sim.decoder()
+        samples_of(decoder, bus.run_us(SETTLE_US))
+        inject(bus.target(2))
+        during = samples_of(decoder, bus.run_us(during_us))
+        bus.target(2).absent(False)
+        after = samples_of(decoder, bus.run_us(LOST_RETRY_US + 30_000))
+    got = during + after
+    errors = [s for s in got if s.chip_error]
+    assert errors and {s.taxel for s in errors} == {2} and errors[0].fault_name == named
+    assert all(s.counts == sim.counts(s.taxel) for s in got if not s.chip_error)
+    assert all([s.taxel for s in c] == list(range(n)) for c in cycles(got))
+    back = [s for s in got[got.index(errors[-1]):] if s.taxel == 2]
+    assert back[1].recovered and not back[1].chip_error and not any(s.chip_error for s in back[1:])
+    assert not any(s.recovered for s in got if s.taxel != 2)
+    assert decoder.stats.lost == 0 and decoder.stats.crc_errors == 0
