@@ -17,12 +17,13 @@ from .board.connect import NETS_ROUTED, ROUTE_GRID_MM, route_all
 from .board.kicad_files import LIBRARY, files
 from .board.layout import HOLE_CLEARANCE_MM, ORIGIN, SILK_MIN_TEXT_MM, Board, Placed, SilkText
 from .board.placement import label, pad_hull, place, taxel_marks
+from .board.plan import address_plan, table_lines
 from .board.route import Router
 from .board.rules import distance_margin, findings
 from .design import Design
 
-__all__ = ["Board", "Placed", "SilkText", "board", "findings", "files", "distance_margin", "ORIGIN", "LIBRARY",
-           "SILK_MIN_TEXT_MM"]
+__all__ = ["Board", "Placed", "SilkText", "board", "findings", "files", "distance_margin", "address_plan", "ORIGIN",
+           "LIBRARY", "SILK_MIN_TEXT_MM"]
 
 
 def board(design: Design) -> Board:
@@ -42,9 +43,5 @@ def board(design: Design) -> Board:
                   rules, pcb.thickness_mm, design.i2c_address, tuple(unrouted))
     if design.array is None:
         return board
-    table = ("address plan: taxel, chip, I2C address, order code, A1 A0 straps",
-             *(f"T{t.index}  U{t.index + 1}  0x{t.i2c_address:02X}  MLX90393SLW-ABA-{t.option_code}  "
-               + "  ".join(f"{pin}={'3V3' if level else 'GND'}" for pin, level in zip(("A1", "A0"), t.address_straps))
-               for t in design.taxels))
-    board = replace(board, pad_hull=pad_hull(design), address_table=table)
+    board = replace(board, pad_hull=pad_hull(design), address_table=table_lines(design))
     return replace(board, marks=taxel_marks(design, board))

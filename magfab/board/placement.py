@@ -18,6 +18,7 @@ from .footprint import Footprint, chip_footprint, connector_footprint, hole_foot
 from .layout import (GROUND, HOLE_CLEARANCE_MM, ORIGIN, PAD_KEEPOUT_MARGIN_MM, SILK_ADVANCE, SILK_MIN_TEXT_MM,
                      SILK_STROKE_MM, SUPPLY,
                      Box, Placed, SilkText, outline_clear, overlap)
+from .plan import ORDER_CODE
 from .route import distance
 
 __all__ = ["place", "label", "wrap", "pad_hull"]
@@ -96,9 +97,9 @@ def _chips(design: Design, qfn: Footprint) -> list[Placed]:
     its address."""
     ox, oy = ORIGIN
     if design.array is None:
-        return [Placed("U1", f"MLX90393SLW-ABA-{design.spec.sensor.option_code}", qfn, ox, oy,
+        return [Placed("U1", ORDER_CODE.format(design.spec.sensor.option_code), qfn, ox, oy,
                        nets=_chip_nets(design, qfn))]
-    return [Placed(f"U{t.index + 1}", f"MLX90393SLW-ABA-{t.option_code}", qfn, round(ox + t.x_mm, 6),
+    return [Placed(f"U{t.index + 1}", ORDER_CODE.format(t.option_code), qfn, round(ox + t.x_mm, 6),
                    round(oy - t.y_mm, 6), nets=_chip_nets(design, qfn, t.address_straps, f"U{t.index + 1}"))
             for t in design.taxels]
 

@@ -69,3 +69,31 @@ def test_a_board_too_small_for_the_array_is_one_line():
         derived = derive(parse_spec('[array]\nrows = 1\ncols = 5\npitch_mm = 14\n[pcb]\nwidth_mm = 60\nheight_mm = 34'))
         pcb.board(derived)
     assert "pcb.width_mm" in str(err.value) and "76.5 mm" in str(err.value) and "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize("name", EXAMPLES)
+def test_the_address_plan_is_the_board_as_kicad_reads_it(array_builds, inspected, name):
+    design = array_builds[name].design
+    info, _ = inspected[name]
+    parts = {f["ref"]: f for f in info["footprints"]}
+    pins = {v: k.removeprefix("pin_") for k, v in design.chip.texts.items() if k.startswith("pin_")}
+    plan = pcb.address_plan(design)
+    assert [r["taxel"] for r in plan] == [t.index for t in design.taxels]
+    assert len({r["address"] for r in plan}) == len(plan)  # one bus: every address once
+    for r, t in zip(plan, design.taxels):
+        u = parts[r["designator"]]
+        assert (u["x"], u["y"]) == pytest.approx((r["kicad_x_mm"], r["kicad_y_mm"]))
+        assert (r["x_mm"], r["y_mm"], r["address"], r["polarity"]) == (t.x_mm, t.y_mm, t.i2c_address, t.polarity)
+        assert u["value"] == r["order_code"] and r["order_code"].endswith(t.option_code)
+        nets = {p["number"]: p["net"] for p in u["pads"] if p["number"]}
+        assert (nets[pins["A1"]], nets[pins["A0"]]) == (r["a1_net"], r["a0_net"])
+        assert (r["a1"], r["a0"]) == tuple(t.address_straps)
+        for c in r["capacitors"]:
+            assert parts[c]["bottom"] and abs(parts[c]["x"] - u["x"]) < 1e-6 and abs(parts[c]["y"] - u["y"]) < 3.0
+
+
+def test_a_single_taxel_plan_is_its_one_chip():
+    design = derive(parse_spec(""))
+    (row,) = pcb.address_plan(design)
+    assert (row["designator"], row["address"], row["x_mm"], row["y_mm"]) == ("U1", design.i2c_address, 0.0, 0.0)
+    assert (row["a1"], row["a0"]) == tuple(design.address_straps) and row["capacitors"] == ("C1", "C2")
