@@ -11,6 +11,17 @@ Reads the firmware's serial frames, checks them, and gives calibrated force (N),
 
 ``Calibration`` evaluates the embedded calibration (``Calibration.embedded()``) from a field, so the host can
 recompute and cross-check the firmware's forces; ``decode_frames`` and ``Decoder`` decode raw bytes.
+
+An array build's package reads every taxel (docs/bundle.md section 5): the host computes each taxel's force from
+every chip's field::
+
+    from magfab_readout import ArrayReader, Device, SimulatedArray
+
+    with Device(transport=SimulatedArray()) as device:   # Device("/dev/ttyACM0") for the real board
+        reader = ArrayReader(device)                      # this package's array.json and taxel calibrations
+        reader.zero(200)
+        for cycle in reader.cycles(count=5):
+            print([taxel.force_N for taxel in cycle])
 """
 
 from . import _build
@@ -20,14 +31,17 @@ from .device import (CalibrationMismatch, CrcErrorRate, Device, DeviceError, NoD
 from .frames import (Decoder, DecoderStats, DeviceInfo, Sample, crc16_ccitt_false, decode_frames, encode_frame,
                      encode_info_line, encode_text_line)
 from .simulate import PressPattern, RestTip, SimulatedDevice
+from .taxels import ArrayCalibration, ArrayEvaluator, ArrayReader, Cycle, CycleAssembler, TaxelReading, WrongFirmware
+from .array_sim import ArrayPressPattern, SimulatedArray
 
 __version__ = _build.VERSION
 SPEC_NAME = _build.SPEC_NAME
 
 __all__ = [
-    "Calibration", "CalibrationError", "CalibrationMismatch", "CrcErrorRate", "Decoder", "DecoderStats", "Device",
+    "ArrayCalibration", "ArrayEvaluator", "ArrayPressPattern", "ArrayReader", "Calibration", "CalibrationError",
+    "CalibrationMismatch", "CrcErrorRate", "Cycle", "CycleAssembler", "Decoder", "DecoderStats", "Device",
     "DeviceError", "DeviceInfo", "NoData", "PortNotFound", "PressPattern", "RestTip", "SPEC_NAME", "Sample",
-    "SimulatedDevice",
+    "SimulatedArray", "SimulatedDevice", "TaxelReading", "WrongFirmware",
     "__version__", "calibration_sha256", "crc16_ccitt_false", "cross_check", "decode_frames", "encode_frame",
     "encode_info_line", "encode_text_line", "find_port",
 ]

@@ -22,6 +22,7 @@ from . import __version__, _build, acceptance_json, eeprom
 from .calibration import Calibration, CalibrationError
 from .device import Device, DeviceError, NoData, calibration_record, cross_check
 from .simulate import RestTip, SimulatedDevice
+from .taxels import ArrayCalibration
 
 G0 = 9.80665  # m/s^2
 
@@ -62,7 +63,7 @@ def _parser() -> argparse.ArgumentParser:
     stream.add_argument("--raw", action="store_true", help="also print the raw counts and raw temperature (binary only)")
     stream.add_argument("--check", action="store_true",
                         help="also recompute each force from the field on the host and print the difference")
-    stream.add_argument("--count", type=int, metavar="N", help="stop after N samples")
+    stream.add_argument("--count", type=int, metavar="N", help="stop after N samples (an array: N cycles)")
     stream.add_argument("--seconds", type=float, metavar="S", help="stop after S seconds of device time")
 
     record = commands.add_parser("record", parents=[common], help="record the field during a scan, until Ctrl-C",
@@ -185,14 +186,27 @@ class _Interrupt:
     """SIGINT while recording: KeyboardInterrupt while waiting for the device, held back while a row is written."""
 
     requested = writing = False
+    _previous = None
 
     def __call__(self, signum, frame) -> None:
         self.requested = True
         if not self.writing:
             raise KeyboardInterrupt
 
+    def __enter__(self) -> "_Interrupt":
+        try:
+            self._previous = signal.signal(signal.SIGINT, self)
+        except ValueError:  # not the main thread: Ctrl-C stays a KeyboardInterrupt, ended here
+            self._previous = None
+        return self
 
-def _record_header(f, device, info, columns: List[str]) -> None:
+    def __exit__(self, kind, value, traceback) -> bool:
+        if self._previous is not None:
+            signal.signal(signal.SIGINT, self._previous)
+        return kind is KeyboardInterrupt
+
+
+def _record_header(f, device, info, columns: List[str], extra: Tuple[str, ...] = ()) -> None:
     f.write("# magfab-readout {} record\n".format(__version__))
     f.write("# spec: {}\n".format(json.dumps(_build.SPEC_NAME)))
     f.write("# calibration_sha256: {}\n".format(device.calibration.sha256))
@@ -203,7 +217,7 @@ def _record_header(f, device, info, columns: List[str]) -> None:
     f.write("# Fx_sensor_N, Fy_sensor_N, Fz_sensor_N: this sensor's own calibrated force, not a reference; to "
             "calibrate, log a reference force sensor during the scan with time_s on this computer's clock (Unix "
             "time, s) and Fx_N, Fy_N, Fz_N, and pass it: magfab calibrate THIS.csv --reference REFERENCE.csv\n")
-    f.write(",".join(columns) + "\n")
+    f.write("".join(line + "\n" for line in extra) + ",".join(columns) + "\n")
 
 
 def _record(args: argparse.Namespace) -> int:
@@ -219,11 +233,7 @@ def _record(args: argparse.Namespace) -> int:
         stop = _Interrupt()
         with open(args.out, "w", encoding="utf-8", newline="") as f:
             _record_header(f, device, info, columns)
-            try:
-                previous = signal.signal(signal.SIGINT, stop)
-            except ValueError:  # not the main thread: Ctrl-C stays a KeyboardInterrupt, caught below
-                previous = None
-            try:
+            with stop:
                 for sample in device.samples(seconds=args.seconds):
                     stop.writing = True
                     host = time.time()
@@ -241,11 +251,6 @@ def _record(args: argparse.Namespace) -> int:
                     stop.writing = False
                     if stop.requested:
                         break
-            except KeyboardInterrupt:
-                pass
-            finally:
-                if previous is not None:
-                    signal.signal(signal.SIGINT, previous)
         print("magfab-readout: wrote {} rows to {}{} ({} chip-error samples left out)".format(
             written, args.out, " (Ctrl-C)" if stop.requested else "", skipped), file=sys.stderr)
         _summary(device, written + skipped, None)
@@ -564,6 +569,10 @@ def main(argv: Optional[List[str]] = None) -> int:
     """Entry point of the ``magfab-readout`` command."""
     args = _parser().parse_args(argv)
     try:
+        array = ArrayCalibration.embedded() if args.command in ("stream", "record", "info", "check") else None
+        if array is not None:  # an array build's package: every taxel (array_cli)
+            from . import array_cli
+            return array_cli.run(args, array, sys.stdout)
         if args.command == "stream":
             return _stream(args, sys.stdout)
         if args.command == "record":

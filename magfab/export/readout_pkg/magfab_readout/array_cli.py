@@ -1,0 +1,198 @@
+"""``magfab-readout stream``, ``record`` and ``info`` for an array build's package (:mod:`.taxels`): the same
+options as a single taxel's, every taxel of every cycle.
+
+``stream`` prints one line per taxel per cycle (its index in the third column), forces in N, the field as its chip
+read it, and five flag letters (o outside the calibrated region, E chip error, S full scale, R recovered, M the
+frame is missing); ``--count`` counts cycles, ``--zero N`` zeroes each taxel on N of its readings. When this
+computer cannot evaluate every cycle as fast as the board sends them, ``stream`` leaves cycles out to stay live and
+says how many. ``record`` writes one row per taxel reading with a ``taxel`` column (docs/bundle.md section 1) and
+every cycle, however long it takes. ``info`` lists the array: each taxel's position, address, order code, straps,
+magnet and calibration.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from typing import List
+
+from . import __version__, _build
+from .array_sim import SimulatedArray
+from .cli import CSV_COLUMNS, _csv, _Interrupt, _number, _record_header
+from .device import Device, DeviceError
+from .taxels import ArrayCalibration, ArrayReader, Cycle, WrongFirmware
+
+__all__ = ["run", "RECORD_COLUMNS"]
+
+#: ``record``'s columns for an array: a single taxel's, with the taxel after the two clocks.
+RECORD_COLUMNS = CSV_COLUMNS[:2] + ("taxel",) + CSV_COLUMNS[2:]
+#: Lag behind the board after which ``record`` warns (it keeps every cycle), s.
+RECORD_LAG_WARNING_S = 2.0
+
+
+def _device(args: argparse.Namespace, array: ArrayCalibration, text) -> Device:
+    transport = None
+    if args.simulate:
+        transport = SimulatedArray(array, seed=args.simulate_seed, corrupt_fraction=args.simulate_corrupt)
+    elif args.simulate_corrupt or args.simulate_seed:
+        raise DeviceError("--simulate-corrupt and --simulate-seed need --simulate")
+    return Device(args.port, args.baud, text=text, timeout_s=args.timeout, calibration=array.calibrations[0],
+                  transport=transport)
+
+
+def _title(array: ArrayCalibration) -> str:
+    return "array of {} taxels ({}), compensation {} (array.json {})".format(
+        array.taxels, " ".join("0x{:02X}".format(a) for a in array.addresses),
+        "of the neighbours' motion" if array.dynamic else "of the neighbours at rest", array.short_hash)
+
+
+def _row(cycle: Cycle, t, raw: bool) -> str:
+    time_s = t.time_s if t.time_s is not None else cycle.time_s
+    row = [_number(time_s, 10, 4, False), "{:3d}".format(cycle.seq), "{:2d}".format(t.taxel)]
+    row += [_number(f, 8, 4) for f in t.force_N] + [_number(b, 9, 2) for b in t.B_uT]
+    row += [_number(t.temperature_C, 6, 2, False), t.flags, (t.fault_name or "-").replace(" ", "_")]
+    if raw:
+        counts = t.counts or (0, 0, 0)
+        row += ["{:6d}".format(c) for c in counts] + ["{:5d}".format(t.temperature_raw or 0)]
+    return "  ".join(row)
+
+
+def stream(args: argparse.Namespace, array: ArrayCalibration, out) -> int:
+    if args.zero < 0:
+        raise DeviceError("--zero needs a positive number of samples")
+    if args.raw and args.text:
+        raise DeviceError("--raw needs binary frames: text lines carry microtesla, not raw counts")
+    if args.check:
+        raise DeviceError("--check compares the firmware's forces with the host's: an array's firmware sends only "
+                          "fields, and every force is the host's")
+    with _device(args, array, bool(args.text)) as device:
+        reader = ArrayReader(device, array)
+        out.write("# magfab-readout {}: spec {}, {}, {}\n".format(__version__, json.dumps(_build.SPEC_NAME),
+                                                                    _title(array), device.port))
+        if args.zero:
+            for k, offset in enumerate(reader.zero(args.zero)):
+                out.write("# zero: taxel {} offset Fx {:+.4f} N, Fy {:+.4f} N, Fz {:+.4f} N from {} samples\n".format(
+                    k, *offset, args.zero))
+        columns = ["t_s", "seq", "taxel", "Fx_N", "Fy_N", "Fz_N", "Bx_uT", "By_uT", "Bz_uT", "T_C", "flags", "fault"]
+        if args.raw:
+            columns += ["Bx_lsb", "By_lsb", "Bz_lsb", "T_raw"]
+        out.write("# " + " ".join(columns) + "\n")
+        n = 0
+        for cycle in reader.cycles(count=args.count, seconds=args.seconds, keep_up=True):
+            out.write("".join(_row(cycle, t, args.raw) + "\n" for t in cycle))
+            n += 1
+        _summary(reader, n)
+    return 0
+
+
+def _summary(reader: ArrayReader, n: int) -> None:
+    s = reader.device.stats
+    text = "{} cycles of {} taxels; {} incomplete ({} frames missing)".format(
+        n, reader.calibration.taxels, reader.incomplete, reader.missing)
+    if reader.skipped:
+        text += ", {} left out to keep up".format(reader.skipped)
+    if reader.cost is not None:
+        text += "; this computer takes {:.2g} ms a cycle".format(1e3 * reader.cost)
+    text += "; {} lost (sequence gaps), {} CRC errors, {} bad lines, {} bytes skipped".format(
+        s.lost, s.crc_errors, s.bad_lines, s.skipped_bytes)
+    print("magfab-readout: " + text, file=sys.stderr)
+
+
+def record(args: argparse.Namespace, array: ArrayCalibration) -> int:
+    if args.seconds is not None and not args.seconds > 0:
+        raise DeviceError("--seconds must be positive")
+    with _device(args, array, bool(args.text)) as device:
+        info = _checked_info(device, array)
+        temperature = _build.TEMPERATURE_ENABLED
+        columns = [c for c in RECORD_COLUMNS if temperature or c != "temperature_C"]
+        reader = ArrayReader(device, array)
+        written = skipped = 0
+        stop = _Interrupt()
+        warned = False
+        extra = ["# array: {}".format(_title(array)),
+                 "# taxel: the chip each row was read from; Bx_uT, By_uT, Bz_uT as that chip read it (the other "
+                 "magnets' field included); F*_sensor_N that taxel's force after the compensation of array.json"]
+        extra += ["# taxel {} calibration_sha256: {}".format(k, c.sha256) for k, c in enumerate(array.calibrations)]
+        with open(args.out, "w", encoding="utf-8", newline="") as f:
+            _record_header(f, device, info, columns, extra)
+            with stop:
+                for cycle in reader.cycles(seconds=args.seconds):
+                    stop.writing = True
+                    rows = _record_rows(cycle, time.time(), temperature)
+                    f.write("".join(r + "\n" for r in rows))
+                    written += len(rows)
+                    skipped += len(cycle) - len(rows)
+                    stop.writing = False
+                    if reader.lag_s > RECORD_LAG_WARNING_S and not warned:
+                        warned = True
+                        print("magfab-readout: warning: this computer falls behind the board ({:.2g} ms a cycle): "
+                              "the recording keeps every cycle, late".format(1e3 * (reader.cost or 0.0)), file=sys.stderr)
+                    if stop.requested:
+                        break
+        print("magfab-readout: wrote {} rows to {}{} ({} chip-error or missing readings left out)".format(
+            written, args.out, " (Ctrl-C)" if stop.requested else "", skipped), file=sys.stderr)
+        _summary(reader, reader.computed)
+    return 0
+
+
+def _record_rows(cycle: Cycle, host: float, temperature: bool) -> List[str]:
+    rows = []
+    for t in cycle:
+        values = list(t.B_uT) + list(t.force_N)
+        if not t.ok or not all(math.isfinite(v) for v in values) or (temperature and t.temperature_C is None):
+            continue
+        row = [_csv(t.time_s, 6), _csv(host, 6), str(t.taxel)] + [_csv(b, 4) for b in t.B_uT]
+        if temperature:
+            row.append(_csv(t.temperature_C, 3))
+        row += [_csv(x, 6) for x in t.force_N] + [str(t.status), str(t.seq)]
+        rows.append(",".join(row))
+    return rows
+
+
+def _checked_info(device: Device, array: ArrayCalibration, info=None):
+    """The board's info line (``info``, or asked now), refused when it reads another number of chips than the array
+    has; the calibration checked as a single taxel's (taxel 0's, the package's calibration.json)."""
+    info = device.info() if info is None else info
+    if info.taxels != array.taxels:
+        raise WrongFirmware("the board on {} reads {} chip{} but this readout package is for an array of {} taxels: "
+                            "flash this build's firmware, or install the readout package of the board's build".format(
+                                device.port, info.taxels, "" if info.taxels == 1 else "s", array.taxels))
+    for warning in device.check_info(info):
+        print("magfab-readout: warning: " + warning, file=sys.stderr)
+    return info
+
+
+def info(args: argparse.Namespace, array: ArrayCalibration, out) -> int:
+    with _device(args, array, None) as device:
+        line = device.info()
+        out.write("device:  {}\n".format(line.line))
+        out.write("  spec {}, calibration {}, gain_sel {}, resolution {}, osr {}, dig_filt {}, {} taxel(s)\n".format(
+            json.dumps(line.spec_name), line.calibration_hash, *line.settings, line.taxels))
+        out.write("package: magfab-readout {}, spec {}, calibration {}\n".format(
+            __version__, json.dumps(_build.SPEC_NAME), device.calibration.short_hash))
+        out.write("array:   {}\n".format(_title(array)))
+        for t, cal in zip(array.layout, array.calibrations):
+            straps = t.get("address_straps") or ["?", "?"]
+            out.write("  taxel {:2d}  at x {:+6.1f} y {:+6.1f} mm  address 0x{:02X}  option code {}  A1 {} A0 {}  "
+                      "magnet north {}  {} {}\n".format(
+                          t["index"], t.get("x_mm", math.nan), t.get("y_mm", math.nan), t["i2c_address"],
+                          t.get("option_code", "?"), straps[0], straps[1], "up" if t["polarity"] == 1 else "down",
+                          t["calibration"], cal.short_hash))
+        _checked_info(device, array, line)
+        out.write("calibration: match\n")
+    return 0
+
+
+def run(args: argparse.Namespace, array: ArrayCalibration, out) -> int:
+    """``stream``, ``record``, ``info`` or ``check`` (refused) of an array build (``args`` as the command line parsed them)."""
+    if args.command == "stream":
+        return stream(args, array, out)
+    if args.command == "record":
+        return record(args, array)
+    if args.command == "check":
+        raise DeviceError("check, the acceptance test, reads a single taxel: an array's taxels are not checked by it "
+                          "yet (stream --zero 200 shows each taxel at rest and pressed)")
+    return info(args, array, out)

@@ -1,0 +1,176 @@
+"""A simulated array: an array image's field frames (one per chip per cycle, docs/bundle.md section 3) from a press
+pattern, for trying an array's readout without hardware.
+
+The fields are not computed from the magnets here (the package carries no field solver): :class:`ArrayPressPattern`
+moves one magnet at a time and gives every chip's reading through array.json's own tables, the forward model its
+compensation inverts: each chip reads its own magnet (``own_Bz_uT`` and ``own_lateral_uT`` over the magnet's travel
+and lateral offset, with its polarity), the others at rest (``offset_uT``), and what every moved magnet changes at
+it (``array_json.Compensator``: the exact axial tables and the spread moment). So the host's compensation leaves
+almost nothing of a pressed taxel on its neighbours here; magfab's tests feed the readout fields from the exact model
+instead. Anything with ``fields(t_s) -> [(Bx, By, Bz) uT per taxel]`` can stand in for the pattern.
+
+The cycle rate is the chip's conversion rate or what the serial link carries of N field frames, whichever is lower.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import List, Optional, Sequence, Tuple
+
+from . import _build
+from .frames import (FIELD_FRAME_LENGTH, STATUS_CHIP_ERROR, STATUS_FULL_SCALE, STATUS_RECOVERED, encode_field_frame,
+                     encode_field_line, encode_info_line, temperature_C)
+from .simulate import GOLDEN_ANGLE, SIMULATED_FAULT, SimulatedDevice
+from .taxels import ArrayCalibration
+
+__all__ = ["ArrayPressPattern", "SimulatedArray", "cycle_rate_Hz"]
+
+Vector = Tuple[float, float, float]
+
+
+def cycle_rate_Hz(taxels: int, baud: int = _build.BAUD) -> float:
+    """Cycles a second: one conversion per cycle (every chip converts at once), unless the link (10 bits a byte)
+    carries fewer cycles of ``taxels`` binary field frames."""
+    return min(_build.SAMPLE_RATE_HZ, baud / 10.0 / (taxels * FIELD_FRAME_LENGTH))
+
+
+def _interp(x: float, xs: Sequence[float], ys: Sequence[float]) -> Tuple[int, float]:
+    """(index, fraction) of ``x`` in increasing ``xs``, held at the ends (``ys`` unused: the table's row)."""
+    if x <= xs[0]:
+        return 1, 0.0
+    if x >= xs[-1]:
+        return len(xs) - 1, 1.0
+    hi = next(i for i in range(1, len(xs)) if xs[i] >= x)
+    return hi, (x - xs[hi - 1]) / (xs[hi] - xs[hi - 1])
+
+
+class ArrayPressPattern:
+    """At rest for ``rest_s``, then a raised-cosine press of ``press_s`` on one taxel, taxel after taxel: its magnet
+    travels towards its chip and slides sideways (a direction turning from press to press) to a target inside its
+    calibrated region (``reach`` of the tables' travel and offset, shrunk until inside), and back."""
+
+    def __init__(self, calibration: ArrayCalibration, rest_s: float = 1.0, press_s: float = 1.5,
+                 reach: float = 0.6) -> None:
+        self.calibration = calibration
+        self.comp = calibration.compensator
+        self.rest_s, self.press_s = float(rest_s), float(press_s)
+        self.targets = [self._target(k, reach) for k in range(calibration.taxels)]
+
+    def own(self, k: int, motion: Vector) -> Vector:
+        """Chip k's field from its own magnet moved by ``motion`` (mm, board frame; z negative towards the chip)."""
+        comp = self.comp
+        travel, offset = -motion[2], math.hypot(motion[0], motion[1])
+        i, f = _interp(travel, comp.travel, comp.travel)
+        j, g = _interp(offset, comp.lateral, comp.lateral)
+        t = comp.table
+        pair = [(1 - f) * ((1 - g) * t[i - 1][j - 1][a] + g * t[i - 1][j][a])
+                + f * ((1 - g) * t[i][j - 1][a] + g * t[i][j][a]) for a in (0, 1)]
+        s = comp.polarity[k]
+        c, d = (motion[0] / offset, motion[1] / offset) if offset > 0 else (1.0, 0.0)
+        return (s * pair[0] * c, s * pair[0] * d, s * pair[1])
+
+    def readings(self, motions: dict) -> List[Vector]:
+        """Every chip's reading with the magnets of ``motions`` ({taxel: (dx, dy, dz) mm}) moved, the rest at rest."""
+        comp, cal = self.comp, self.calibration
+        out = []
+        for k in range(cal.taxels):
+            b = list(cal.rest_readings[k])
+            if k in motions:
+                own, rest = self.own(k, motions[k]), self.own(k, (0.0, 0.0, 0.0))
+                b = [x + o - r for x, o, r in zip(b, own, rest)]
+            for j, t in motions.items():
+                if j != k:
+                    b = [x + e for x, e in zip(b, comp._from(j, k, t))]
+            out.append((b[0], b[1], b[2]))
+        return out
+
+    def _target(self, k: int, reach: float) -> Tuple[float, float]:
+        """(travel, offset) mm of taxel k's press: inside its calibrated region."""
+        comp, cal = self.comp, self.calibration.calibrations[k]
+        travel, offset = reach * comp.travel[-1], 0.5 * reach * comp.lateral[-1]
+        for _ in range(40):
+            if cal.in_region_B(*self.own(k, (offset, 0.0, -travel))):
+                break
+            travel, offset = 0.85 * travel, 0.85 * offset
+        return travel, offset
+
+    def motion(self, t_s: float) -> Tuple[int, Vector]:
+        """(taxel pressed, its magnet's motion) at ``t_s``."""
+        period = self.rest_s + self.press_s
+        cycle = int(t_s // period)
+        tau = t_s - cycle * period
+        s = math.sin(math.pi * (tau - self.rest_s) / self.press_s) ** 2 if tau > self.rest_s else 0.0
+        k = cycle % self.calibration.taxels
+        travel, offset = self.targets[k]
+        phi = GOLDEN_ANGLE * (cycle + 1)
+        return k, (s * offset * math.cos(phi), s * offset * math.sin(phi), -s * travel)
+
+    def fields(self, t_s: float) -> List[Vector]:
+        k, motion = self.motion(t_s)
+        return self.readings({k: motion} if any(motion) else {})
+
+
+def _clamp16(x: float) -> int:
+    return max(-32768, min(32767, int(round(x))))
+
+
+class SimulatedArray(SimulatedDevice):
+    """Stands in for a serial port with an array's image behind it, as :class:`~magfab_readout.SimulatedDevice` does
+    for a single taxel (whose serial side it shares: ``read``, ``write``, ``close``, pacing, the commands), sending
+    one cycle of field frames where a single taxel sends one force frame; the info line ends with the number of
+    taxels. Faults for testing: ``corrupt_fraction`` of the frames get a bit flipped after the CRC; every
+    ``chip_error_every``-th cycle the chip of taxel ``chip_error_taxel`` reports a chip error (then a recovered
+    flag). ``chunk`` is in cycles; ``rate_Hz`` cycles a second (default :func:`cycle_rate_Hz`)."""
+
+    port = "the simulated array"
+
+    def __init__(self, calibration: Optional[ArrayCalibration] = None, *, seed: int = 0,
+                 rate_Hz: Optional[float] = None, realtime: bool = True, text: Optional[bool] = None,
+                 noise_lsb: float = 0.7, corrupt_fraction: float = 0.0, chip_error_taxel: Optional[int] = None,
+                 chip_error_every: int = 0, chunk: int = 16, spec_name: str = _build.SPEC_NAME,
+                 calibration_hash: Optional[str] = None, pattern=None) -> None:
+        cal = calibration if calibration is not None else ArrayCalibration.embedded()
+        if cal is None:
+            raise ValueError("this package is a single taxel's: simulate it with SimulatedDevice")
+        self.n = cal.taxels
+        super().__init__(cal.calibrations[0], seed=seed, rate_Hz=rate_Hz or cycle_rate_Hz(self.n), realtime=realtime,
+                         text=text, noise_lsb=noise_lsb, corrupt_fraction=corrupt_fraction, chunk=chunk,
+                         spec_name=spec_name, calibration_hash=calibration_hash,
+                         pattern=pattern if pattern is not None else ArrayPressPattern(cal))
+        self.array = cal
+        self.chip_error_taxel, self.chip_error_every = chip_error_taxel, int(chip_error_every)
+        self.info_line = encode_info_line(spec_name, calibration_hash or cal.calibrations[0].short_hash,
+                                          _build.GAIN_SEL, _build.RESOLUTION, _build.OSR, _build.DIG_FILT, self.n)
+        self._recovered_taxel = [False] * self.n
+
+    def _sample_bytes(self, c: int) -> bytes:
+        """Cycle ``c``'s frames, every chip in taxel order (the single taxel's one frame per sample)."""
+        fields = self.pattern.fields(c / self.rate_Hz)
+        return b"".join(self._frame(c, k, fields[k]) for k in range(self.n))
+
+    def _frame(self, c: int, k: int, B: Sequence[float]) -> bytes:
+        t_us = (c * self.period_us + k * (self.period_us // (2 * self.n))) & 0xFFFFFFFF
+        seq = c & 0xFF
+        status = STATUS_RECOVERED if self._recovered_taxel[k] else 0
+        self._recovered_taxel[k] = False
+        nan = float("nan")
+        if self.chip_error_every and k == self.chip_error_taxel and c % self.chip_error_every == self.chip_error_every - 1:
+            self._recovered_taxel[k] = True
+            status |= STATUS_CHIP_ERROR
+            if self.text:
+                return encode_field_line(k, seq, t_us, status, (nan, nan, nan), None, SIMULATED_FAULT)
+            return encode_field_frame(k, seq, t_us, status, (0, 0, 0), SIMULATED_FAULT)
+        lsb = (_build.LSB_XY_UT, _build.LSB_XY_UT, _build.LSB_Z_UT)
+        counts = tuple(_clamp16(b / s + self._noise.gauss(0.0, self.noise_lsb)) for b, s in zip(B, lsb))
+        if max(abs(x) for x in counts) >= _build.FULL_SCALE_COUNTS:
+            status |= STATUS_FULL_SCALE
+        t_raw = int(round(_build.TEMPERATURE_RAW_25C + _build.TEMPERATURE_LSB_PER_C * 0.5 * math.sin(
+            2 * math.pi * c / self.rate_Hz / 60.0))) if _build.TEMPERATURE_ENABLED else 0
+        if self.text:
+            temp = temperature_C(t_raw) if _build.TEMPERATURE_ENABLED else None
+            return encode_field_line(k, seq, t_us, status, tuple(x * s for x, s in zip(counts, lsb)), temp)
+        frame = encode_field_frame(k, seq, t_us, status, counts, t_raw)  # type: ignore[arg-type]
+        if self.corrupt_fraction and self._faults.random() < self.corrupt_fraction:
+            at = self._faults.randrange(2, len(frame))
+            frame = frame[:at] + bytes([frame[at] ^ (1 << self._faults.randrange(8))]) + frame[at + 1:]
+        return frame
