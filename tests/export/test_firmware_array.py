@@ -252,3 +252,54 @@ def test_a_fault_on_one_chip_flags_only_that_taxel_and_it_recovers(harness, name
     assert back[1].recovered and not back[1].chip_error and not any(s.chip_error for s in back[1:])
     assert not any(s.recovered for s in got if s.taxel != 2)
     assert decoder.stats.lost == 0 and decoder.stats.crc_errors == 0
+
+
+# ---- the rate, in simulated time ---------------------------------------------------------------------------------
+
+#: (chips, baud): the 1x1, 2x2 and 1x5 arrays at the default baud, where the UART binds from 3 chips on; five and
+#: sixteen chips at 1 Mbaud (exact with U2X at 16 MHz), where the chips' conversions bind (simavr's TWI takes about
+#: 9 us a byte, faster than a real 400 kHz bus: docs/bundle.md section 3 gives the real bus's bound).
+RATE_CASES = [(1, 250_000), (4, 250_000), (5, 250_000), (5, 1_000_000), (16, 250_000),
+              pytest.param(16, 1_000_000, marks=pytest.mark.slow)]
+FIELD_FRAME_BITS = 20 * 10  # 20 bytes, start and stop bits
+
+
+@pytest.mark.parametrize("chips, baud", RATE_CASES)
+def test_per_taxel_and_total_rate_in_simulated_time(harness, designs, tmp_path, chips, baud):
+    """Every chip's frames at the rate the tightest of three bounds allows: the cycle's pace (one table conversion
+    plus the 5 % read margin, so each read finds a conversion newer than the last), the UART (baud / 200 field
+    frames a second, shared by the chips) and the loop (a chip's read and frame, times the chips: simavr's TWI
+    keeps its own byte time whatever TWBR says); at least 97 % of it, no error, every chip equally often."""
+    from magfab.export import firmware
+
+    ee = firmware._eeprom_module()
+    base = designs["fingertip_2x2"].spec
+    settings = firmware.image_settings(derive(base.model_copy(
+        update={"firmware": base.firmware.model_copy(update={"baud": baud})})))
+    addresses = [0x0C + k for k in range(chips)]  # option codes 011 to 014 with every strap: 0x0C to 0x1B
+    eep = tmp_path / firmware.EEP_NAME
+    eep.write_bytes(ee.intel_hex(ee.pack_array(addresses, "0" * 16, settings)))
+    sim = ArraySim(harness[ARRAYS[0]].lib, harness[ARRAYS[0]].hex_path, eep, addresses, settings,
+                   harness[ARRAYS[0]].frames)
+    with sim.boot() as bus:
+        decoder = sim.decoder()
+        samples_of(decoder, bus.run_us(SETTLE_US + 10_000 * chips))
+        t0, c0 = bus.time_us, [bus.target(k).conversions for k in range(chips)]
+        got = samples_of(decoder, bus.run_us(300_000))
+        elapsed = (bus.time_us - t0) * 1e-6
+        converted = [bus.target(k).conversions - c0[k] for k in range(chips)]
+    counts = [sum(s.taxel == k for s in got) for k in range(chips)]
+    per_taxel = [c / elapsed for c in counts]
+    cycle_hz = 1e6 / (settings["tconv_us"] + settings["read_margin_us"])
+    uart_hz = baud / FIELD_FRAME_BITS / chips
+    gaps = sorted(b.t_us - a.t_us for c in cycles(got) for a, b in zip(c, c[1:]))
+    loop_hz = 1e6 / (gaps[len(gaps) // 2] * chips) if gaps else math.inf  # a read, its frame, the next chip's
+    bound = min(cycle_hz, uart_hz, loop_hz)
+    print(f"{chips} chips at {baud} baud: per taxel {min(per_taxel):.1f} Hz, total {len(got) / elapsed:.0f} frames/s; "
+          f"bounds per taxel: cycle {cycle_hz:.1f} Hz, UART {uart_hz:.1f} Hz, loop {loop_hz:.1f} Hz "
+          f"({gaps[len(gaps) // 2] if gaps else 0} us a chip); chips convert at {converted[0] / elapsed:.1f} Hz "
+          f"({min(per_taxel) * elapsed / converted[0]:.0%} of conversions read)")
+    assert not any(s.chip_error for s in got) and all(s.counts == sim.counts(s.taxel) for s in got)
+    assert max(counts) - min(counts) <= 1  # one frame apart at most: the window's edge
+    assert 0.97 * bound <= min(per_taxel) <= 1.01 * bound
+    assert all(p * elapsed <= c + 1 for p, c in zip(per_taxel, converted))  # never a conversion twice

@@ -9,7 +9,7 @@ typedef struct mf_taxel {
     uint8_t recovered; /* started since its last frame */
     int8_t start_rc;   /* the error of its last failed start */
     int8_t sm_rc;      /* single mode: the error of this cycle's SM */
-    uint32_t t_ready;  /* after a start: when its first conversion is due (the earliest read) */
+    uint32_t t_ready;  /* the earliest next read: a conversion and the margin after its start or its last read */
     uint32_t t_retry;  /* lost: the next start attempt */
 } mf_taxel_t;
 
@@ -56,11 +56,15 @@ static int read_taxel(mf_app_t *a, uint8_t k, mlx_raw_t *raw, uint32_t *t_us)
         *t_us = mf_app_now(a);
         return taxel[k].sm_rc;
     }
-    mf_app_wait_until(a, taxel[k].t_ready); /* just started: its first conversion */
+    mf_app_wait_until(a, taxel[k].t_ready); /* started or read late: a new conversion first */
     a->chip.addr = mf_calib_address(k);
     rc = mf_app_read_measurement(a, raw, mode, t_us, &retried);
     if (rc == MF_OK && MF_BURST && !(a->chip.status & MLX_ST_BURST)) {
         rc = MF_E_MODE;
+    }
+    if (rc == MF_OK && MF_BURST) { /* its next conversion, whatever the cycle: on the chip's own grid when on time */
+        uint32_t late = *t_us - taxel[k].t_ready;
+        taxel[k].t_ready = (late <= MF_READ_MARGIN_US ? taxel[k].t_ready : *t_us) + MF_TCONV_US + MF_READ_MARGIN_US;
     }
     return rc;
 }

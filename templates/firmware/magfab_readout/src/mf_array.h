@@ -3,10 +3,11 @@
  * every taxel's field).
  *
  * Burst mode: every chip converts continuously and in parallel; each cycle reads them in turn (RM), the cycles
- * one conversion of the datasheet's table plus the read margin apart, so each read finds a conversion newer than
- * the last whatever the chips' phases (a chip's start makes its phase; one conversion in 1 / margin is never
- * read). When the frames or the bus take longer than that, the cycle is as long as they take. Single mode: SM
- * to every chip, one conversion's wait, then RM of each.
+ * one conversion of the datasheet's table plus the read margin apart, and no chip read sooner than that after
+ * its start or its last read, so each read finds a conversion newer than the last whatever the chips' phases (a
+ * chip's start makes its phase; about one conversion in 1 / margin is never read). When the frames or the bus
+ * take longer, the cycle is as long as they take. Single mode: SM to every chip, one conversion's wait, then
+ * RM of each.
  *
  * A chip that fails (NACK, ERROR bit, byte count, reset, timeout) gets its error frame, then is reset and
  * restarted at once as a single taxel's chip is; the others go on. A chip that does not start is lost: an error
