@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 import struct
 import sys
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -303,3 +304,48 @@ def test_per_taxel_and_total_rate_in_simulated_time(harness, designs, tmp_path, 
     assert max(counts) - min(counts) <= 1  # one frame apart at most: the window's edge
     assert 0.97 * bound <= min(per_taxel) <= 1.01 * bound
     assert all(p * elapsed <= c + 1 for p, c in zip(per_taxel, converted))  # never a conversion twice
+
+
+# ---- the readout package of an array build: what it knows, and upload ---------------------------------------------
+
+
+@contextmanager
+def other_package(rendered: dict, root: Path):
+    """A second rendered readout package imported while the module's own is loaded (its modules set aside)."""
+    kept = {n: m for n, m in sys.modules.items() if n == "magfab_readout" or n.startswith("magfab_readout.")}
+    for name in kept:
+        del sys.modules[name]
+    try:
+        with imported(rendered, root) as module:
+            yield module
+    finally:
+        sys.modules.update(kept)
+
+
+def test_an_array_build_readout_knows_its_chips_and_uploads_their_record(harness, designs, tmp_path):
+    """The 1x5 build's readout package: its addresses from build.json, the record it packs equal to magfab's .eep,
+    and Device.upload writing it to an erased board over serial, after which every chip streams its own field."""
+    from magfab.export import firmware, readout
+
+    from test_simbus import BusTransport
+
+    sim, design, cal = harness["strip_1x5"], designs["strip_1x5"], make_calibration()
+    with other_package(readout.render(design, cal), tmp_path / "pkg") as pkg:
+        assert pkg.device.TAXEL_ADDRESSES == tuple(sim.addresses) and pkg.device.TAXELS == 5
+        assert pkg.device.calibration_record(cal) == firmware.eeprom_record(design, cal)
+        bus = Bus(sim.lib, sim.hex_path, sim.addresses[0], None)
+        for a in sim.addresses[1:]:
+            bus.add_chip(a)
+        for k in range(5):
+            bus.target(k).set_field(*chip_field(k))
+        with bus:
+            bus.run_us(30_000)
+            info = pkg.device.Device(transport=BusTransport(bus), timeout_s=20.0).upload(cal)
+            assert bus.eeprom(0, 120)[:len(firmware.eeprom_record(design, cal))] == firmware.eeprom_record(design, cal)
+            bus.send(b"b")
+            bus.run_us(20_000)
+            decoder = pkg.frames.Decoder()
+            got = [s for s in decoder.feed(bus.run_us(40_000)) if isinstance(s, pkg.frames.Sample)]
+    assert info.taxels == 5 and info.calibration_hash == firmware.calibration_sha256(cal)[:16]
+    assert {s.taxel for s in got} == set(range(5)) and not any(s.chip_error for s in got)
+    assert all(s.counts == sim.counts(s.taxel) for s in got)

@@ -23,13 +23,20 @@ from .frames import Decoder, DeviceInfo, EepromReply, Sample
 from .simulate import SimulatedDevice
 
 __all__ = ["Device", "DeviceError", "PortNotFound", "NoData", "CrcErrorRate", "CalibrationMismatch", "UploadFailed",
-           "SerialTransport", "PORT_VARIABLE", "default_port", "find_port", "cross_check", "calibration_record"]
+           "SerialTransport", "PORT_VARIABLE", "default_port", "find_port", "cross_check", "calibration_record",
+           "TAXEL_ADDRESSES", "TAXELS"]
 
 RESEND_S = 0.5  # a command sent while the board boots (it resets when the port opens) is lost: send again
 CRC_WINDOW = 500  # frame candidates over which the CRC failure rate is judged
 CRC_MIN_ATTEMPTS = 100  # below this a handful of errors (the boot, a glitch) would judge too soon
 #: The environment variable naming the serial port to use when none is given (``Device(port=None)``, ``--port``).
 PORT_VARIABLE = "MAGFAB_READOUT_PORT"
+#: An array build's chips, 7-bit I2C addresses in taxel order (build.json's image settings); () for a single taxel.
+#: Its firmware sends one field frame per chip per cycle (``Sample.taxel``, ``force_N`` NaN: the host computes the
+#: forces) and its info line ends with the number of chips.
+TAXEL_ADDRESSES = tuple(int(a) for a in _build.IMAGE_SETTINGS.get("taxel_addresses", ()))
+#: Taxels the firmware reads: 1 for a single taxel.
+TAXELS = len(TAXEL_ADDRESSES) or 1
 
 
 class DeviceError(RuntimeError):
@@ -63,7 +70,11 @@ READ_CHUNK = 32  # bytes per EEPROM read command
 
 def calibration_record(calibration: dict) -> bytes:
     """The EEPROM record (docs/bundle.md section 4) of a calibration.json dict with this build's settings: the bytes
-    ``upload`` writes, the same as a build's .eep holds for its own calibration."""
+    ``upload`` writes, the same as a build's .eep holds for its own calibration. An array build's (version 3)
+    carries the chips' addresses and the settings, and of the calibration only its hash (the info line's)."""
+    if TAXEL_ADDRESSES:
+        validate_calibration(calibration)
+        return eeprom.pack_array(TAXEL_ADDRESSES, calibration_sha256(calibration)[:16], _build.IMAGE_SETTINGS)
     return eeprom.pack(eeprom.layout(validate_calibration(calibration)), calibration_sha256(calibration)[:16],
                        _build.IMAGE_SETTINGS)
 
@@ -455,6 +466,8 @@ class Device:
         if info.spec_name != _build.SPEC_NAME:
             warnings.append("the device reports spec {!r}, this package was built for {!r}".format(
                 info.spec_name, _build.SPEC_NAME))
+        if info.taxels != TAXELS:
+            warnings.append("the device reads {} taxel(s), this package was built for {}".format(info.taxels, TAXELS))
         expected = (_build.GAIN_SEL, _build.RESOLUTION, _build.OSR, _build.DIG_FILT)
         if info.settings != expected:
             warnings.append("the device reports gain_sel/resolution/osr/dig_filt {} but this package expects {}: "
