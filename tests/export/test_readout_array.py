@@ -275,3 +275,23 @@ def test_info_lists_the_array(pkg, capsys):
     assert len(lines) == 5 and "address 0x10  option code 012" in lines[4] and "magnet north down" in lines[1]
     assert cli.main(["check", "--simulate", "--yes"]) == 1
     assert "not checked by it yet" in capsys.readouterr().err
+
+
+def test_upload_writes_the_array_record(pkg, array, capsys, tmp_path):
+    """``upload`` writes the array's record (version 3: the settings and every chip's address, no calibration) and
+    the board then reports its chips; a calibration file is refused (an array's board holds none)."""
+    cli = importlib.import_module("magfab_readout.cli")
+    eeprom = importlib.import_module("magfab_readout.eeprom")
+    assert cli.main(["upload", "--simulate"]) == 0
+    out = capsys.readouterr().out
+    assert "read back equal; the board reads 5 chips" in out and array.calibrations[0].short_hash in out
+    sim = pkg.SimulatedArray(array, realtime=False)
+    with pkg.Device(transport=sim) as device:
+        record = eeprom.pack_array(array.addresses, array.calibrations[0].short_hash, {
+            **importlib.import_module("magfab_readout._build").IMAGE_SETTINGS})
+        device.eeprom_write(0, record)
+        assert eeprom.addresses(bytes(sim.eeprom)) == list(array.addresses) and device.info().taxels == 5
+    path = tmp_path / "taxel.json"
+    path.write_text("{}")
+    assert cli.main(["upload", str(path), "--simulate"]) == 1
+    assert "an array's board holds no calibration" in capsys.readouterr().err

@@ -19,10 +19,10 @@ import sys
 import time
 from typing import List
 
-from . import __version__, _build
+from . import __version__, _build, eeprom
 from .array_sim import SimulatedArray
-from .cli import CSV_COLUMNS, _csv, _Interrupt, _number, _record_header
-from .device import Device, DeviceError
+from .cli import CSV_COLUMNS, _csv, _Interrupt, _number, _record_header, at_fallback_baud
+from .device import Device, DeviceError, UploadFailed
 from .taxels import ArrayCalibration, ArrayReader, Cycle, WrongFirmware
 
 __all__ = ["run", "RECORD_COLUMNS"]
@@ -186,12 +186,37 @@ def info(args: argparse.Namespace, array: ArrayCalibration, out) -> int:
     return 0
 
 
+def upload(args: argparse.Namespace, array: ArrayCalibration, out) -> int:
+    """Write the array's record (docs/bundle.md section 4, version 3: the settings and every chip's address, no
+    calibration) into the board's EEPROM, read it back, and check the board's info line."""
+    if args.calibration:
+        raise DeviceError("an array's board holds no calibration (the host computes every force): a new taxel "
+                          "calibration reaches the readout by reinstalling this build's readout package")
+    settings = _build.IMAGE_SETTINGS
+    record = eeprom.pack_array(settings["taxel_addresses"], array.calibrations[0].short_hash, settings)
+
+    def write(device: Device):
+        last = device.eeprom_write(0, record)
+        if device.eeprom_read(0, len(record)) != record:
+            raise UploadFailed("the EEPROM read back differs from the array record written")
+        if last.record != 0:
+            raise UploadFailed("the board does not accept the array record (a firmware older than record version "
+                               "{}?)".format(eeprom.VERSION_ARRAY))
+        return _checked_info(device, array)
+    info = at_fallback_baud(args, out, lambda a: _device(a, array, None), write)
+    out.write("uploaded {} bytes, read back equal; the board reads {} chips (spec {}, calibration {})\n".format(
+        len(record), info.taxels, json.dumps(info.spec_name), info.calibration_hash))
+    return 0
+
+
 def run(args: argparse.Namespace, array: ArrayCalibration, out) -> int:
-    """``stream``, ``record``, ``info`` or ``check`` (refused) of an array build (``args`` as the command line parsed them)."""
+    """``stream``, ``record``, ``info``, ``upload`` or ``check`` (refused) of an array build (``args`` as the command line parsed them)."""
     if args.command == "stream":
         return stream(args, array, out)
     if args.command == "record":
         return record(args, array)
+    if args.command == "upload":
+        return upload(args, array, out)
     if args.command == "check":
         raise DeviceError("check, the acceptance test, reads a single taxel: an array's taxels are not checked by it "
                           "yet (stream --zero 200 shows each taxel at rest and pressed)")

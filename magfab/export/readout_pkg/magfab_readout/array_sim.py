@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 from typing import List, Optional, Sequence, Tuple
 
-from . import _build
+from . import _build, eeprom
 from .frames import (FIELD_FRAME_LENGTH, STATUS_CHIP_ERROR, STATUS_FULL_SCALE, STATUS_RECOVERED, encode_field_frame,
                      encode_field_line, encode_info_line, temperature_C)
 from .simulate import GOLDEN_ANGLE, SIMULATED_FAULT, SimulatedDevice
@@ -137,11 +137,20 @@ class SimulatedArray(SimulatedDevice):
                          text=text, noise_lsb=noise_lsb, corrupt_fraction=corrupt_fraction, chunk=chunk,
                          spec_name=spec_name, calibration_hash=calibration_hash,
                          pattern=pattern if pattern is not None else ArrayPressPattern(cal))
-        self.array = cal
+        self.array, self.spec_name = cal, spec_name
         self.chip_error_taxel, self.chip_error_every = chip_error_taxel, int(chip_error_every)
-        self.info_line = encode_info_line(spec_name, calibration_hash or cal.calibrations[0].short_hash,
-                                          _build.GAIN_SEL, _build.RESOLUTION, _build.OSR, _build.DIG_FILT, self.n)
+        self.hash16 = calibration_hash or cal.calibrations[0].short_hash
+        self.info_line = encode_info_line(spec_name, self.hash16, _build.GAIN_SEL, _build.RESOLUTION, _build.OSR,
+                                          _build.DIG_FILT, self.n)
         self._recovered_taxel = [False] * self.n
+
+    def _eeprom_command(self) -> None:
+        """As the single taxel's, the info line keeping the number of taxels (an array record's hash when valid)."""
+        super()._eeprom_command()
+        data = bytes(self.eeprom)
+        sha16 = eeprom.unpack_header(data)["sha16"] if eeprom.check(data) else self.hash16
+        self.info_line = encode_info_line(self.spec_name, sha16, _build.GAIN_SEL, _build.RESOLUTION, _build.OSR,
+                                          _build.DIG_FILT, self.n)
 
     def _sample_bytes(self, c: int) -> bytes:
         """Cycle ``c``'s frames, every chip in taxel order (the single taxel's one frame per sample)."""

@@ -272,6 +272,21 @@ def _info(args: argparse.Namespace, out) -> int:
     return 0
 
 
+def at_fallback_baud(args: argparse.Namespace, out, open_device, action):
+    """``action(device)`` on the board, and when nothing answers again at the fallback baud, which a board without a
+    valid record speaks (docs/bundle.md section 4)."""
+    try:
+        with open_device(args) as device:
+            return action(device)
+    except NoData:
+        if args.simulate or args.baud == eeprom.FALLBACK_BAUD:
+            raise
+        out.write("no answer at {} baud; trying {} baud (a board without a calibration)\n".format(
+            args.baud, eeprom.FALLBACK_BAUD))
+        with open_device(argparse.Namespace(**{**vars(args), "baud": eeprom.FALLBACK_BAUD})) as device:
+            return action(device)
+
+
 def _upload(args: argparse.Namespace, out) -> int:
     if args.calibration:
         try:
@@ -282,17 +297,7 @@ def _upload(args: argparse.Namespace, out) -> int:
     else:
         data = json.loads(pkgutil.get_data("magfab_readout", "calibration.json").decode("utf-8"))  # type: ignore[union-attr]
     record = calibration_record(data)
-    try:
-        with _device(args, text=None) as device:
-            info = device.upload(data)
-    except NoData:
-        if args.simulate or args.baud == eeprom.FALLBACK_BAUD:
-            raise
-        # a board without a valid record speaks at the fallback baud (docs/bundle.md section 4)
-        out.write("no answer at {} baud; trying {} baud (a board without a calibration)\n".format(
-            args.baud, eeprom.FALLBACK_BAUD))
-        with _device(argparse.Namespace(**{**vars(args), "baud": eeprom.FALLBACK_BAUD}), text=None) as device:
-            info = device.upload(data)
+    info = at_fallback_baud(args, out, lambda a: _device(a, text=None), lambda device: device.upload(data))
     out.write("uploaded {} bytes, read back equal; the board runs calibration {} (spec {})\n".format(
         len(record), info.calibration_hash, json.dumps(info.spec_name)))
     return 0
@@ -569,8 +574,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     """Entry point of the ``magfab-readout`` command."""
     args = _parser().parse_args(argv)
     try:
-        array = ArrayCalibration.embedded() if args.command in ("stream", "record", "info", "check") else None
-        if array is not None:  # an array build's package: every taxel (array_cli)
+        if (array := ArrayCalibration.embedded()) is not None:  # an array build's package: every taxel
             from . import array_cli
             return array_cli.run(args, array, sys.stdout)
         if args.command == "stream":
