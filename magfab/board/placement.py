@@ -214,7 +214,9 @@ def label(design: Design, outline: Box, parts: list[Placed], circle: tuple[float
     address = f"MLX90393 I2C 0x{design.i2c_address:02X}"
     if design.array is not None:
         t = design.taxels
-        address = f"{len(t)} x MLX90393 I2C 0x{t[0].i2c_address:02X}-0x{t[-1].i2c_address:02X}"
+        arr = design.spec.array
+        shape = f"{arr.rows}x{arr.cols}" if arr.positions_mm is None else f"{len(t)}-taxel"
+        address = f"{shape} array: MLX90393 0x{t[0].i2c_address:02X}-0x{t[-1].i2c_address:02X}"
     name = design.spec.name
     pad_top = min(y for _, y in pad_hull(design)) - circle[2]
     room = pad_top - (y0 + edge + 0.5)  # fabs clip silk within ~0.5 mm of the edge
@@ -236,10 +238,11 @@ def label(design: Design, outline: Box, parts: list[Placed], circle: tuple[float
 
 
 def taxel_marks(design: Design, board) -> tuple[SilkText, ...]:
-    """Beside each chip, on the top silk (under the pad once it is glued, there to solder and check by): its taxel
-    and address, "T0 0x0C". Each goes to the first side of its chip (right, left, above, below; each side nearest first) where it clears
-    every top pad, via, courtyard, other mark and the edge (tracks lie under the solder mask); a chip with no such side goes without (the address
-    table on the drawing layer and the checklist carry the plan)."""
+    """Beside each chip, on the top silk (under the pad once it is glued, there to solder and check by): its taxel,
+    address and order-code suffix, "T0 0x0C -011" (or without the suffix where only that fits). Each goes to the
+    first side of its chip (right, left, above, below; each side nearest first) where it clears every top pad, via,
+    courtyard, other mark and the edge (tracks lie under the solder mask); a chip with no such side goes without
+    (the address table on the drawing layer and the checklist carry the plan)."""
     x0, y0, x1, y1 = board.outline
     e = design.spec.pcb.edge_clearance_mm
     # silk may cross tracks (under the solder mask), not pads or vias (bare copper)
@@ -248,22 +251,32 @@ def taxel_marks(design: Design, board) -> tuple[SilkText, ...]:
     yards = [p.box(p.footprint.courtyard) for p in board.parts if not p.bottom and not _is_chip_ref(p.ref)]
     marks: list[SilkText] = []
     for t, u in zip(design.taxels, (p for p in board.parts if _is_chip_ref(p.ref))):
-        text = f"T{t.index} 0x{t.i2c_address:02X}"
-        cy = u.box(u.footprint.courtyard)
-        half_w = SILK_ADVANCE * SILK_MIN_TEXT_MM * len(text) / 2 + 0.3
-        sides = [((cy[2] + half_w + d, u.y), (cy[0] - half_w - d, u.y), (u.x, cy[1] - 0.9 - d), (u.x, cy[3] + 0.9 + d))
-                 for d in (0.0, 0.8, 1.6)]
-        for x, y in (p for three in zip(*sides) for p in three):
-            mark = SilkText(text, round(x, 6), round(y, 6), SILK_MIN_TEXT_MM)
-            box = mark.box()
-            grown = (box[0] - 0.2, box[1] - 0.2, box[2] + 0.2, box[3] + 0.2)
-            if box[0] < x0 + e or box[1] < y0 + e or box[2] > x1 - e or box[3] > y1 - e:
-                continue
-            if any(overlap(grown, c) for c in top + yards) or any(overlap(box, m.box()) for m in marks):
-                continue
-            marks.append(mark)
-            break
+        short = f"T{t.index} 0x{t.i2c_address:02X}"
+        for text in (f"{short} -{t.option_code}", short):
+            mark = _mark_beside(u, text, marks, top + yards, (x0 + e, y0 + e, x1 - e, y1 - e))
+            if mark is not None:
+                marks.append(mark)
+                break
     return tuple(marks)
+
+
+def _mark_beside(u: Placed, text: str, marks: list[SilkText], keep: list[Box], inside: Box) -> SilkText | None:
+    """The first place beside chip ``u`` (right, left, above, below; each side nearest first) where ``text`` clears
+    the boxes ``keep`` by 0.2 mm and the other marks, within ``inside``; None when there is none."""
+    cy = u.box(u.footprint.courtyard)
+    half_w = SILK_ADVANCE * SILK_MIN_TEXT_MM * len(text) / 2 + 0.3
+    sides = [((cy[2] + half_w + d, u.y), (cy[0] - half_w - d, u.y), (u.x, cy[1] - 0.9 - d), (u.x, cy[3] + 0.9 + d))
+             for d in (0.0, 0.8, 1.6)]
+    for x, y in (p for three in zip(*sides) for p in three):
+        mark = SilkText(text, round(x, 6), round(y, 6), SILK_MIN_TEXT_MM)
+        box = mark.box()
+        grown = (box[0] - 0.2, box[1] - 0.2, box[2] + 0.2, box[3] + 0.2)
+        if box[0] < inside[0] or box[1] < inside[1] or box[2] > inside[2] or box[3] > inside[3]:
+            continue
+        if any(overlap(grown, c) for c in keep) or any(overlap(box, m.box()) for m in marks):
+            continue
+        return mark
+    return None
 
 
 def _is_chip_ref(ref: str) -> bool:

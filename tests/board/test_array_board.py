@@ -46,9 +46,11 @@ def test_a_chip_under_every_magnet_on_its_address(array_builds, inspected, name)
         caps = [f for ref, f in parts.items() if ref.startswith("C") and f["bottom"] and abs(f["x"] - u["x"]) < 1e-6
                 and abs(f["y"] - u["y"]) < 3.0]
         assert len(caps) == 2
-        assert f'(gr_text "T{t.index} 0x{t.i2c_address:02X}"' in text  # the mark beside it
+        assert f'(gr_text "T{t.index} 0x{t.i2c_address:02X} -{t.option_code}"' in text  # the mark beside it
         assert f"T{t.index}  U{t.index + 1}  0x{t.i2c_address:02X}  MLX90393SLW-ABA-{t.option_code}" in text  # table
     assert sum(ref.startswith("J") for ref in parts) == 1
+    shape = f"{design.spec.array.rows}x{design.spec.array.cols} array: MLX90393 0x"
+    assert f'(gr_text "{shape}{design.taxels[0].i2c_address:02X}-0x{design.taxels[-1].i2c_address:02X}"' in text
     found = {f.code: f for f in array_builds[name].findings}
     assert "pcb-ok" in found and "every net connected" in found["pcb-ok"].message
     assert not [c for c in found if c.startswith("pcb-") and c != "pcb-ok"]
