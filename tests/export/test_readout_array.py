@@ -106,6 +106,8 @@ def test_the_package_ships_the_array_and_reads_it(pkg, array, rendered, strip):
     for name in ("array.json", "array_json.py", "taxels.py", "array_sim.py", "array_cli.py",
                  *(f"taxel_{k:02d}.json" for k in range(5))):
         assert f"{PKG}/{name}" in rendered
+    readme = rendered["readout/README.md"].decode()
+    assert "## An array of 5 taxels" in readme and "--taxel K" in readme
     assert array.taxels == 5 and array.addresses == (0x0C, 0x0D, 0x0E, 0x0F, 0x10) and array.dynamic
     assert [c.sha256 for c in array.calibrations] == [pkg.Calibration(c).sha256 for c in cals]
     # at rest every chip reads its own magnet plus its neighbours', and the compensation gives back its own
