@@ -230,10 +230,6 @@ def _bundle(design: Design, prediction, scan, acceptance: dict | None, say: Prog
         out += arrayed.artifacts
         found += arrayed.findings
         result, array_doc = arrayed.fits[0], arrayed.doc
-        found.append(Finding(Severity.WARNING, "array-firmware",
-                             f"the firmware image and magfab-readout of this build still read one chip, taxel 0 at "
-                             f"0x{design.taxels[0].i2c_address:02X}: reading every chip of the array is not built yet "
-                             "(the board, parts, crosstalk budget and every taxel's calibration are)", "array"))
     else:
         scan_files, scan, scan_found = _scan(design, prediction, scan, say)
         out += scan_files
