@@ -27,7 +27,8 @@ own file) then takes ``B'[k]`` as a single taxel's calibration takes B.
 from __future__ import annotations
 
 import math
-from typing import List, Sequence, Tuple
+from bisect import bisect_left
+from typing import List, Optional, Sequence, Tuple
 
 from .json_checks import FormatError, finite, is_number, lookup
 
@@ -110,15 +111,20 @@ def validate(data: object) -> "Compensator":
                        finite(data, "moment_uT_mm3", ArrayError, positive=True), data["dynamic"])
 
 
+def _locate(x: float, xs: Sequence[float]) -> Tuple[int, float]:
+    """(i, f) with x = xs[i] + f (xs[i + 1] - xs[i]) in increasing ``xs``, held at the ends (f 0 or 1)."""
+    if x <= xs[0]:
+        return 0, 0.0
+    if x >= xs[-1]:
+        return len(xs) - 2, 1.0
+    hi = bisect_left(xs, x)
+    return hi - 1, (x - xs[hi - 1]) / (xs[hi] - xs[hi - 1])
+
+
 def _interp(x: float, xs: Sequence[float], ys: Sequence[float]) -> float:
     """Linear interpolation in increasing ``xs``, held at the ends."""
-    if x <= xs[0]:
-        return ys[0]
-    if x >= xs[-1]:
-        return ys[-1]
-    hi = next(i for i in range(1, len(xs)) if xs[i] >= x)
-    f = (x - xs[hi - 1]) / (xs[hi] - xs[hi - 1])
-    return ys[hi - 1] + f * (ys[hi] - ys[hi - 1])
+    i, f = _locate(x, xs)
+    return ys[i] + f * (ys[i + 1] - ys[i])
 
 
 def _cylinder_points(radius: float, height: float) -> List[Tuple[float, float, float, float]]:
@@ -152,7 +158,16 @@ class Compensator:
         self.travel, self.own, self.neighbour = travel, own, neighbour
         self.lateral, self.table, (radius, height) = lateral
         self.moment, self.dynamic = moment, dynamic
-        self.points = _cylinder_points(radius, height)
+        self.points = [(x, y, z, moment * w) for x, y, z, w in _cylinder_points(radius, height)]
+        # The tables by column, read once: each lateral offset's Bz over travel (None where not monotonic) and |Bx|;
+        # each chip's and magnet's axial change per axis.
+        self._columns = []
+        for k in range(len(self.lateral)):
+            bz = [row[k][1] for row in self.table]
+            self._columns.append((bz if all(b > a for a, b in zip(bz, bz[1:])) else None,
+                                  [row[k][0] for row in self.table]))
+        self._axial = [[tuple([v[a] for v in self.neighbour[k][j]] for a in range(3)) for j in range(len(chips))]
+                       for k in range(len(chips))]
 
     @property
     def taxels(self) -> int:
@@ -166,10 +181,9 @@ class Compensator:
         if br == 0.0:
             return (0.0, 0.0, -dz)
         prev = None
-        for k, off in enumerate(self.lateral):  # the first offset whose |Bx| (at its own travel) reaches br
-            column_bz = [row[k][1] for row in self.table]
-            z = _interp(bz, column_bz, self.travel) if all(b2 > a2 for a2, b2 in zip(column_bz, column_bz[1:])) else dz
-            r = abs(_interp(z, self.travel, [row[k][0] for row in self.table]))
+        for off, (column_bz, column_bx) in zip(self.lateral, self._columns):  # the first offset whose |Bx| reaches br
+            z = _interp(bz, column_bz, self.travel) if column_bz is not None else dz
+            r = abs(_interp(z, self.travel, column_bx))
             if r >= br and prev is not None:
                 f = (br - prev[2]) / (r - prev[2]) if r != prev[2] else 1.0
                 off, z = prev[0] + f * (off - prev[0]), prev[1] + f * (z - prev[1])
@@ -179,22 +193,33 @@ class Compensator:
         sign = -1.0 if self.table[0][1][0] * s < 0 else 1.0
         return (sign * off * b[0] / br, sign * off * b[1] / br, -z)
 
-    def _from(self, j: int, k: int, t: Vector) -> Vector:
-        """What magnet j moved by ``t`` changes at chip k (uT): the exact axial table, the lateral part by dipole."""
+    def _from(self, j: int, k: int, t: Vector, at: Optional[Tuple[int, float]] = None) -> Vector:
+        """What magnet j moved by ``t`` changes at chip k (uT): the exact axial table (``at``: where -t_z lies in
+        the travel, found when None), the lateral part by the spread moment."""
         c, p = self.centres[j], self.chips[k]
-        axial = [_interp(-t[2], self.travel, [v[a] for v in self.neighbour[k][j]]) for a in range(3)]
+        i, f = at if at is not None else _locate(-t[2], self.travel)
+        axial = [v[i] + f * (v[i + 1] - v[i]) for v in self._axial[k][j]]
         lowered = (p[0] - c[0], p[1] - c[1], p[2] - c[2] - t[2])
+        if t[0] == 0.0 and t[1] == 0.0:  # no lateral motion: the two spread fields are the same
+            return (axial[0], axial[1], axial[2])
         a = self._spread((lowered[0] - t[0], lowered[1] - t[1], lowered[2]))
         b = self._spread(lowered)
         s = self.polarity[j]
         return (axial[0] + s * (a[0] - b[0]), axial[1] + s * (a[1] - b[1]), axial[2] + s * (a[2] - b[2]))
 
     def _spread(self, r: Vector) -> Vector:
-        """The moment spread over the magnet's cylinder (module doc), at displacement ``r`` from its centre."""
+        """The moment spread over the magnet's cylinder (module doc), at displacement ``r`` from its centre (the
+        sum of :func:`dipole_uT` over the points, inlined)."""
         x = y = z = 0.0
-        for px, py, pz, w in self.points:
-            f = dipole_uT(self.moment * w, (r[0] - px, r[1] - py, r[2] - pz))
-            x, y, z = x + f[0], y + f[1], z + f[2]
+        rx, ry, rz = r
+        for px, py, pz, m in self.points:
+            dx, dy, dz = rx - px, ry - py, rz - pz
+            d2 = dx * dx + dy * dy + dz * dz
+            k = m / (d2 * math.sqrt(d2))
+            c = 3.0 * dz / d2
+            x += k * c * dx
+            y += k * c * dy
+            z += k * (c * dz - 1.0)
         return (x, y, z)
 
     def apply(self, readings: Sequence[Sequence[float]]) -> List[Vector]:
@@ -208,8 +233,9 @@ class Compensator:
         own = list(base)
         for _ in range(SWEEPS):
             motion = [self._motion(j, own[j]) for j in range(n)]
+            at = [_locate(-t[2], self.travel) for t in motion]
             own = []
             for k in range(n):
-                extra = [self._from(j, k, motion[j]) for j in range(n) if j != k]
+                extra = [self._from(j, k, motion[j], at[j]) for j in range(n) if j != k]
                 own.append(tuple(base[k][a] - sum(e[a] for e in extra) for a in range(3)))
         return own  # type: ignore[return-value]
