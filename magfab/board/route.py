@@ -207,7 +207,7 @@ class RouteError(MagfabError):
 
     def __init__(self, message: str, enclosed: bool = False) -> None:
         super().__init__(message)
-        self.enclosed = enclosed  # the search ran out of places to go: a larger window cannot help
+        self.enclosed = enclosed  # the window cut the search off nowhere: a larger one makes the same steps
 
 
 _DIRS = ((1, 0), (1, 1), (0, 1), (-1, 1), (-1, 0), (-1, -1), (0, -1), (1, -1))
@@ -405,8 +405,9 @@ class Router:
     def _search(self, starts: list[int], goals: set[int], target_box, window, track, extra, via_ok,
                 budget: int) -> tuple[int, dict[int, int], bool]:
         """Weighted A* over (node, direction) states: (goal state or -1 when none within ``budget``
-        expansions, predecessor of each state, whether a failed search ran out of states without the window
-        ever cutting one off: the whole board would fail the same way)."""
+        expansions, predecessor of each state, whether a failed search never had a state cut off by the window:
+        then the whole board's search would make the very same steps, within the same budget, and fail the same
+        way)."""
         plane = self.nx * self.ny
         nx = self.nx
         tx0, ty0, tx1, ty1 = target_box
@@ -480,7 +481,7 @@ class Router:
                     best[ns] = ng
                     came[ns] = s
                     heappush(heap, (ng + weight * h(i, j), ng, ns))
-        return -1, came, not heap and not clipped
+        return -1, came, not clipped
 
     def _to_copper(self, path: list[int], net: str) -> list[Copper]:
         plane = self.nx * self.ny
