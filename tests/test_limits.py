@@ -162,3 +162,17 @@ def test_an_array_whose_board_would_route_too_long_is_refused():
     with pytest.raises(SpecError) as err:
         derive(parse_spec('[array]\nrows = 3\ncols = 3\npitch_mm = 14'))
     assert str(err.value).startswith("array.rows = 3:") and "at most 8 taxels" in str(err.value)
+
+
+def test_the_largest_array_fits_the_board_budget_and_a_smaller_budget_refuses_it(monkeypatch):
+    """16 chips (the spec's most on one bus) pass the board-routing estimate; were the budget smaller, the array would
+    be refused in one line naming array.rows, the estimate and how many taxels fit."""
+    text = ("[array]\nrows = 4\ncols = 4\npitch_mm = 14\n[mould]\nangular_tolerance_deg = 15\n"
+            "[pcb]\nwidth_mm = 76\nheight_mm = 80\n")
+    assert len(derive(parse_spec(text)).taxels) == 16
+    monkeypatch.setattr(limits, "MAX_BOARD_S", limits.SECONDS_PER_CHIP2 * 9**2)
+    with pytest.raises(SpecError) as info:
+        derive(parse_spec(text))
+    message = str(info.value)
+    assert info.value.key == "array.rows" and "16 taxels" in message and "route" in message
+    assert "at most 9 taxels" in message and "\n" not in message
