@@ -211,7 +211,8 @@ class Crosstalk:
                 "min_pitch_mm": {k: None if v is None else round(v, 3) for k, v in self.min_pitch_mm.items()},
                 "min_pitch_compensated_mm": {k: None if v is None else round(v, 3)
                                              for k, v in self.min_pitch_compensated_mm.items()},
-                "sweep_mm": r(self.sweep_mm, 3), "sweep_worst_mN": {k: r(v) for k, v in self.sweep_worst_mN.items()},
+                "parts_min_pitch_mm": round(float(self.sweep_mm[0]), 3), "sweep_mm": r(self.sweep_mm, 3),
+                "sweep_worst_mN": {k: r(v) for k, v in self.sweep_worst_mN.items()},
                 "magnet_force_mN": round(self.force_mN, 3), "magnet_force_exact_mN": round(self.force_exact_mN, 3),
                 "magnet_net_force_mN": r(self.magnet_forces_mN, 3), "predisplacement_mm": r(self.predisplacement_mm, 5),
                 "shear_travel_mm": round(self.shear_travel_mm, 4), "saturation_xy_G": round(self.saturation_xy_G, 2),
@@ -361,8 +362,7 @@ def findings(design: "Design", xt: Crosstalk) -> list[Finding]:
     out: list[Finding] = []
 
     def least(d: dict[str, float | None]) -> str:
-        return ", ".join(f"{k} polarity {'more than %.0f' % xt.sweep_mm[-1] if v is None else '%.1f' % v} mm"
-                         for k, v in d.items())
+        return ", ".join(f"{k} polarity {_pitch_words(v, xt.sweep_mm)}" for k, v in d.items())
 
     worst = float(xt.worst_mN.max())
     tol = f"{xt.tolerance_mN:.2f} mN"
@@ -398,5 +398,16 @@ def findings(design: "Design", xt: Crosstalk) -> list[Finding]:
                        f"nearest magnets {'repel' if xt.force_exact_mN > 0 else 'attract'} with "
                        f"{abs(xt.force_exact_mN):.1f} mN at rest (dipoles {abs(xt.force_mN):.1f}), which shifts a "
                        f"magnet sideways by up to {shift * 1000:.0f} um ({100 * shift / xt.shear_travel_mm:.1f} % of its "
-                       f"shear travel, a static shift)"))
+                       f"shear travel, a static shift); the least pitch within the {tol} tolerance with the host's "
+                       f"compensation: {least(xt.min_pitch_compensated_mm)} (without it: {least(xt.min_pitch_mm)})"))
     return out
+
+
+def _pitch_words(value: float | None, sweep: np.ndarray) -> str:
+    """A least pitch for a sentence: past the sweep, at the sweep's start (the parts' own minimum: the budget is met
+    wherever the parts fit, so the parts set it, not the crosstalk), or its value."""
+    if value is None:
+        return f"more than {sweep[-1]:.0f} mm"
+    if value <= sweep[0] + 1e-9:
+        return f"{value:.1f} mm (the parts' minimum: within tolerance wherever they fit)"
+    return f"{value:.1f} mm"

@@ -23,6 +23,11 @@ def strip(array_builds):
     return b.design, b.prediction, json.loads((b.out_dir / "array" / "crosstalk.json").read_text())
 
 
+@pytest.fixture(scope="module")
+def strip_findings(array_builds):
+    return json.loads((array_builds["strip_1x5"].out_dir / "findings.json").read_text())
+
+
 def _layout(design):
     xy = np.array([[t.x_mm, t.y_mm] for t in design.taxels])
     return xy, np.array([float(t.polarity) for t in design.taxels])
@@ -46,7 +51,7 @@ def test_neighbours_field_is_magpylibs_superposition(array_builds, name):
     assert rest == pytest.approx(table.sum(axis=1) - np.einsum("iik->ik", table), abs=1e-9)
 
 
-def test_the_least_pitch_is_where_the_budget_crosses_the_tolerance(strip):
+def test_the_least_pitch_is_where_the_budget_crosses_the_tolerance(strip, strip_findings):
     d, pred, doc = strip
     loads = X._Loads.of(d, pred)
     xy, signs = _layout(d)
@@ -60,6 +65,12 @@ def test_the_least_pitch_is_where_the_budget_crosses_the_tolerance(strip):
     assert worst(least * 1.002) <= tol < worst(least * 0.99)
     assert d.array.pitch_mm < least  # the example sits below it: hence the warning and the dynamic compensation
     assert doc["dynamic"] is True and doc["min_pitch_compensated_mm"]["same"] < least
+    # with the compensation the strip is within tolerance wherever its tips fit: the parts set the least pitch, and
+    # the info finding says so rather than give it as the crosstalk's figure
+    assert doc["min_pitch_compensated_mm"]["same"] == doc["parts_min_pitch_mm"] == pytest.approx(d.array.min_pitch_mm)
+    info = next(f["message"] for f in strip_findings if f["code"] == "array-crosstalk-budget")
+    assert f"{d.array.min_pitch_mm:.1f} mm (the parts' minimum" in info
+    assert f"without it: same polarity {least:.1f} mm" in info
 
 
 def test_polarity_changes_every_neighbour_at_once_not_one_alone(array_builds):
