@@ -182,9 +182,11 @@ def test_ctrl_c_at_any_moment_is_exit_130_in_one_line(tmp_path, delay_s):
     _, err = proc.communicate(timeout=120)
     if "init_import_site" in err:  # a very busy machine was still starting the interpreter: not ours to handle
         return
-    assert proc.returncode in (0, 130), err
+    # 130, or killed by SIGINT after our line: CPython ends itself with SIGINT when a KeyboardInterrupt ended code an
+    # extension ran through PyRun_* during an import, even once we caught it; a shell reads both as status 130
+    assert proc.returncode in (0, 130, -signal.SIGINT), err
     assert "Traceback" not in err and "Aborted" not in err
-    if proc.returncode == 130:
+    if proc.returncode != 0:
         assert err.strip().splitlines() == [err.strip().splitlines()[-1]]
         assert "interrupted" in err
         assert not out.exists() or (out / "manifest.json").is_file()
