@@ -156,14 +156,6 @@ def test_a_measured_scan_too_large_for_mls_is_refused_before_any_work(tmp_path):
     assert not (tmp_path / "out").exists()
 
 
-def test_an_array_whose_board_would_route_too_long_is_refused():
-    from magfab import derive, parse_spec
-
-    with pytest.raises(SpecError) as err:
-        derive(parse_spec('[array]\nrows = 3\ncols = 3\npitch_mm = 14'))
-    assert str(err.value).startswith("array.rows = 3:") and "at most 8 taxels" in str(err.value)
-
-
 def test_the_largest_array_fits_the_board_budget_and_a_smaller_budget_refuses_it(monkeypatch):
     """16 chips (the spec's most on one bus) pass the board-routing estimate; were the budget smaller, the array would
     be refused in one line naming array.rows, the estimate and how many taxels fit."""
