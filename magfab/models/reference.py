@@ -7,8 +7,9 @@ what is left is its gradient across the chips' separation.
 
 Where. The reference must not read the sensing magnets: their field there is a constant (removed with the zero),
 but its *change* is not. Along the board's +y (away from the connector edge), from the taxels' hull, the site is the
-nearest point where, for every magnet pressed through its normal travel or slid through its shear travel (the
-:class:`magfab.models.crosstalk` loads), and for the magnets' rest field changing over the environment's temperature
+nearest point where, for every magnet pressed through its normal travel or slid through its shear travel
+(:class:`Travel`: the board places by what the geometry allows, pressed to d_min and slid by the elastomer's radius
+less the magnet's; the prediction reports the change at its predicted travel), and for the magnets' rest field changing over the environment's temperature
 span by the grade's remanence coefficient, the change of every component at the reference stays below the chip's
 own RMS noise on that axis (:func:`magfab.models.predict.noise`). Exact superposition of every magnet
 (:func:`magfab.models.field.exact`). What is subtracted is then below one noise sigma whatever the taxels do.
@@ -48,7 +49,7 @@ if TYPE_CHECKING:
     from ..design import Design
     from .predict import Prediction
 
-__all__ = ["Site", "Rejection", "site", "rejection", "dipole_field_G", "REFERENCE_SHIFT", "noise_growth"]
+__all__ = ["Site", "Rejection", "Travel", "site", "rejection", "dipole_field_G", "REFERENCE_SHIFT", "noise_growth"]
 
 #: The firmware's reference filter: an exponential average with weight 2**-REFERENCE_SHIFT per reading.
 REFERENCE_SHIFT = 3
@@ -112,22 +113,41 @@ def _magnets(design: "Design") -> tuple[np.ndarray, np.ndarray]:
             np.array([float(t.polarity) for t in design.taxels]))
 
 
-def _changes(design: "Design", pred: "Prediction", points: np.ndarray, span_C: float) -> np.ndarray:
-    """(P, 4) the largest motion change (xy, z) and the thermal change (xy, z) at ``points`` (P, 3), G."""
-    from .crosstalk import _Loads
+@dataclass(frozen=True)
+class Travel:
+    """How far each magnet moves (mm): pressed towards its chip, slid sideways."""
 
-    loads = _Loads.of(design, pred)
+    normal_mm: float
+    shear_mm: float
+
+    @classmethod
+    def predicted(cls, design: "Design", pred: "Prediction") -> "Travel":
+        """The prediction's: the normal range's travel, the shear range over the softest material's stiffness."""
+        return cls(pred.normal.travel_mm, pred.shear.range_N / min(pred.shear.stiffness_N_per_mm.values()))
+
+    @classmethod
+    def bound(cls, design: "Design") -> "Travel":
+        """What the geometry allows, before any prediction: pressed to d_min, slid by the elastomer's radius less
+        the magnet's (the tip torn off past that). At least the predicted travel; the board places by this."""
+        s = design.spec.sensor
+        return cls(s.d_max_mm - s.d_min_mm, design.elastomer_radius_mm - design.magnet_radius_mm)
+
+
+def _changes(design: "Design", travel: Travel, points: np.ndarray, span_C: float) -> np.ndarray:
+    """(P, 7) the largest motion change (xy, z), the thermal change (xy, z) and the rest field (3) at ``points``
+    (P, 3), G."""
+    magnet = fieldmod.Magnet.from_spec(design.spec)
     centres, signs = _magnets(design)
-    moves = [(0.0, 0.0, -loads.normal_travel_mm)] + [(sx * loads.shear_travel_mm, sy * loads.shear_travel_mm, 0.0)
-                                                      for sx, sy in ((1, 0), (-1, 0), (0, 1), (0, -1))]
+    moves = [(0.0, 0.0, -travel.normal_mm)] + [(sx * travel.shear_mm, sy * travel.shear_mm, 0.0)
+                                               for sx, sy in ((1, 0), (-1, 0), (0, 1), (0, -1))]
     alpha = abs(_remanence_coefficient(design))
     rest = np.zeros((len(points), 3))
     motion = np.zeros((len(points), 2))
     for c, s in zip(centres, signs):
-        at_rest = s * fieldmod.exact(loads.magnet, points - c)
+        at_rest = s * fieldmod.exact(magnet, points - c)
         rest += at_rest
         for move in moves:
-            d = s * fieldmod.exact(loads.magnet, points - c - np.array(move)) - at_rest
+            d = s * fieldmod.exact(magnet, points - c - np.array(move)) - at_rest
             motion = np.maximum(motion, np.column_stack([np.hypot(d[:, 0], d[:, 1]), np.abs(d[:, 2])]))
     thermal = alpha * span_C * np.column_stack([np.hypot(rest[:, 0], rest[:, 1]), np.abs(rest[:, 2])])
     return np.column_stack([motion, thermal, rest])
@@ -139,10 +159,11 @@ def _remanence_coefficient(design: "Design") -> float:
     return grade["br_temperature_coefficient_pct_per_C"].nominal / 100.0
 
 
-def site(design: "Design", pred: "Prediction", span_C: float, distance_mm: float | None = None) -> Site:
-    """The reference's site (module doc): the nearest along +y from the hull where every change is under the
-    noise, or at ``distance_mm`` from the hull's edge when given (the figures then say how far from quiet it is)."""
-    from .predict import noise, chip_setting
+def site(design: "Design", travel: Travel, span_C: float, distance_mm: float | None = None) -> Site:
+    """The reference's site (module doc) for magnets moving by ``travel``: the nearest along +y from the hull where
+    every change is under the noise, or ``distance_mm`` beyond the hull's edge when given (the figures then say how
+    loud the magnets are there)."""
+    from .predict import chip_setting, noise
 
     n = noise(design, chip_setting(design))
     limit = np.array([n["total_xy_G"], n["total_z_G"]])
@@ -153,7 +174,7 @@ def site(design: "Design", pred: "Prediction", span_C: float, distance_mm: float
         return np.array([[x0, y_edge + s, design.z_sense_mm]])
 
     def excess(s: float) -> float:
-        ch = _changes(design, pred, point(s), span_C)[0]
+        ch = _changes(design, travel, point(s), span_C)[0]
         return float(max(np.max(ch[0:2] / limit), np.max(ch[2:4] / limit)))
 
     if distance_mm is None:
@@ -166,7 +187,7 @@ def site(design: "Design", pred: "Prediction", span_C: float, distance_mm: float
                 lo, hi = (mid, hi) if excess(mid) > 1.0 else (lo, mid)
             distance_mm = math.ceil(hi / SITE_TOL_MM) * SITE_TOL_MM
     p = point(distance_mm)
-    ch = _changes(design, pred, p, span_C)[0]
+    ch = _changes(design, travel, p, span_C)[0]
     chips = np.array([[t.x_mm, t.y_mm] for t in design.taxels])
     sep = float(np.min(np.hypot(*(chips - p[0, :2]).T)))
     return Site((float(p[0, 0]), float(p[0, 1])), sep, tuple(ch[0:2]), tuple(ch[2:4]), tuple(ch[4:7]),

@@ -23,6 +23,8 @@ def test_the_dipole_is_magpylibs():
 def _changes_magpylib(design, pred, xy):
     """The largest change (xy, z) at the point as the magnet is pressed or slid, by magpylib's Cylinder."""
     loads = _Loads.of(design, pred)
+    travel = ref.Travel.predicted(design, pred)
+    assert travel.normal_mm == loads.normal_travel_mm and travel.shear_mm == loads.shear_travel_mm
     m = loads.magnet
     cyl = magpy.magnet.Cylinder(polarization=(0, 0, m.remanence_T), dimension=(2 * m.radius_mm / 1000, m.height_mm / 1000))
     point = np.array([xy[0], xy[1], design.z_sense_mm]) / 1000
@@ -40,7 +42,7 @@ def _changes_magpylib(design, pred, xy):
 
 
 def test_the_site_is_the_nearest_point_where_the_magnet_moves_under_the_noise(design, pred):
-    site = ref.site(design, pred, span_C=20.0)
+    site = ref.site(design, ref.Travel.predicted(design, pred), span_C=20.0)
     n = noise(design, chip_setting(design))
     limit = np.array([n["total_xy_G"], n["total_z_G"]])
     assert np.all(_changes_magpylib(design, pred, site.xy_mm) <= limit * (1 + 1e-6))
@@ -48,16 +50,22 @@ def test_the_site_is_the_nearest_point_where_the_magnet_moves_under_the_noise(de
     assert np.any(_changes_magpylib(design, pred, closer) > limit)
     assert site.xy_mm[0] == 0.0 and site.separation_mm == pytest.approx(site.xy_mm[1])
     assert np.all(np.array(site.thermal_G) < limit)
+    bound = ref.site(design, ref.Travel.bound(design), span_C=20.0)  # what the board places by: never nearer
+    assert bound.separation_mm >= site.separation_mm and ref.Travel.bound(design).shear_mm >= travel_shear(design, pred)
+
+
+def travel_shear(design, pred):
+    return ref.Travel.predicted(design, pred).shear_mm
 
 
 def test_a_fixed_distance_reports_how_loud_the_magnet_is_there(design, pred):
-    near = ref.site(design, pred, span_C=20.0, distance_mm=15.0)
+    near = ref.site(design, ref.Travel.predicted(design, pred), span_C=20.0, distance_mm=15.0)
     n = noise(design, chip_setting(design))
     assert near.separation_mm == 15.0 and max(near.motion_G) > 10 * n["total_z_G"]
 
 
 def test_rejection_uniform_from_the_datasheet_bounds_and_a_dipole_by_its_gradient(design, pred):
-    site = ref.site(design, pred, span_C=20.0)
+    site = ref.site(design, ref.Travel.bound(design), span_C=20.0)
     rej = ref.rejection(design, site, distances_mm=(30.0, 3000.0, 10000.0))
     assert rej.uniform == pytest.approx(1 / (0.06 + 0.01))
     near, far, farther = rej.dipole
