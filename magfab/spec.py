@@ -25,7 +25,7 @@ from .errors import SpecError, _shorten, shown
 from .spec_errors import did_you_mean, translate_error
 from .recipes import catalogue
 
-__all__ = ["Spec", "Tip", "Density", "Printer", "Array", "Skin", "Polarity", "MAX_TAXELS", "load_spec", "parse_spec",
+__all__ = ["Spec", "Tip", "Density", "Printer", "Array", "Environment", "Skin", "Polarity", "MAX_TAXELS", "load_spec", "parse_spec",
            "spec_from_dict", "default_spec_text", "translate_error",
            "spec_schema", "NAME_PATTERN", "is_valid_name"]
 
@@ -386,6 +386,41 @@ class Array(_Section):
         return len(self.positions_mm) if self.positions_mm is not None else self.rows * self.cols
 
 
+class Environment(_Section):
+    """Where the sensor is used, for the drift prediction (magfab.models.drift): the temperature span, how far the
+    sensor turns in the Earth's field and a stray magnetic source nearby. Omit the section for a lab bench (these
+    defaults)."""
+
+    temperature_min_C: float = Field(20.0, ge=-40.0, le=125.0, description="Coldest the sensor gets in use, C.")
+    temperature_max_C: float = Field(30.0, ge=-40.0, le=125.0, description="Warmest the sensor gets in use, C.")
+    calibration_temperature_C: float = Field(
+        25.0, ge=-40.0, le=125.0, description="Temperature the sensor is calibrated at (within the span), C.")
+    temperature_lag_C: float = Field(
+        1.0, ge=0.0, le=50.0, description="Largest difference between the magnet's and the chip's temperature while "
+        "the temperature changes (the compensation reads the chip's), C.")
+    earth_field_G: Optional[float] = Field(
+        None, gt=0.0, le=1.0, description="Local total intensity of the Earth's field (NOAA NCEI's calculator), "
+        "gauss; omit: the strongest on Earth, 0.65 G.")
+    rotation_deg: float = Field(
+        180.0, ge=0.0, le=180.0, description="Largest change of the sensor's orientation in use, deg (180: turned over).")
+    stray_moment_Am2: float = Field(
+        0.0, ge=0.0, le=1.0e4, description="Dipole moment of a stray source nearby (a motor, a magnetised steel part), "
+        "A m^2; 0: none.")
+    stray_distance_mm: float = Field(
+        100.0, ge=10.0, le=1.0e5, description="Distance from the stray source to the chip, mm (a dipole estimate: "
+        "the source much smaller than this).")
+
+    @model_validator(mode="after")
+    def _span(self) -> "Environment":
+        if self.temperature_max_C <= self.temperature_min_C:
+            raise ValueError(f"temperature_max_C {self.temperature_max_C:g} C must be above temperature_min_C "
+                             f"{self.temperature_min_C:g} C")
+        if not self.temperature_min_C <= self.calibration_temperature_C <= self.temperature_max_C:
+            raise ValueError(f"calibration_temperature_C {self.calibration_temperature_C:g} C must lie within the "
+                             f"span {self.temperature_min_C:g}..{self.temperature_max_C:g} C")
+        return self
+
+
 class Build(_Section):
     """Build options."""
 
@@ -409,11 +444,14 @@ class Spec(_Section):
     fabrication: Fabrication = Field(default_factory=Fabrication)
     build: Build = Field(default_factory=Build)
     array: Optional[Array] = Field(None, description="Several taxels on one board (omit for one).")
+    environment: Optional[Environment] = Field(
+        None, description="Where the sensor is used, for the drift prediction (omit: a lab bench).")
 
     def dump(self) -> dict[str, Any]:
-        """Every key, defaults included, as JSON values (spec.json); a single taxel has no ``array`` key, so its
-        spec, hash and build are what they were before arrays existed."""
-        return self.model_dump(mode="json", exclude={"array"} if self.array is None else None)
+        """Every key, defaults included, as JSON values (spec.json); a single taxel has no ``array`` key and a spec
+        without ``[environment]`` none either, so its spec, hash and build are what they were before those existed."""
+        unset = {name for name in ("array", "environment") if getattr(self, name) is None}
+        return self.model_dump(mode="json", exclude=unset or None)
 
     def canonical_json(self) -> str:
         """Every key, defaults included, as sorted JSON: the basis of the spec hash."""

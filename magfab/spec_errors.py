@@ -64,7 +64,7 @@ def _key(loc: tuple[Any, ...]) -> str:
 
 #: Unit suffixes of key names, as a message prints them after a bound.
 _UNITS = {"mm": "mm", "deg": "deg", "kPa": "kPa", "pct": "%", "mN": "mN", "G": "G", "h": "h", "min": "min",
-          "hz": "Hz"}
+          "hz": "Hz", "C": "C", "Am2": "A m^2"}
 _BOUNDS = {"greater_than": ("gt", "greater than"), "greater_than_equal": ("ge", "at least"),
            "less_than": ("lt", "less than"), "less_than_equal": ("le", "at most")}
 

@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import TYPE_CHECKING, Callable, Mapping
 
 import numpy as np
@@ -48,6 +48,7 @@ from ..units import GAUSS_PER_MT, MN_PER_N, UT_PER_GAUSS
 
 if TYPE_CHECKING:
     from ..design import Design
+    from .drift import Drift
 
 G_PER_UT = 1.0 / UT_PER_GAUSS
 N_INDENT = 21  # indentation steps along the normal curve
@@ -323,6 +324,7 @@ class Prediction:
     models: tuple[ModelUse, ...]  # field, mechanics, shear
     arrays: Mapping[str, np.ndarray] = field(default_factory=dict)
     timings_s: Mapping[str, float] = field(default_factory=dict)
+    drift: "Drift | None" = None  # the drift budget (magfab.models.drift); None where the curve has no inverse
 
     @property
     def curves(self) -> Mapping[str, mech.Curve]:
@@ -362,6 +364,7 @@ class Prediction:
             "shear": s.as_json(),
             "noise_G": asdict(self.noise),
             "models": {m.family: m.as_dict() for m in self.models},
+            **({} if self.drift is None else {"drift": self.drift.as_json()}),
         }
 
 
@@ -418,7 +421,18 @@ def predict(design: "Design", elastomer: ElastomerModel | None = None) -> Predic
     arrays = {**normal_arrays, "indentation": nominal.indentation_mm, **shear_arrays}
     timings = {"field_choice": t_field - t0, "mechanics": t_mech - t_field, "chain": t_end - t_mech,
                "total": t_end - t0}
-    return Prediction(field_figures, chip, mus, normal, shear, Noise(**nz), (fuse, muse, shear_use), arrays, timings)
+    pred = Prediction(field_figures, chip, mus, normal, shear, Noise(**nz), (fuse, muse, shear_use), arrays, timings)
+    return replace(pred, drift=_drift(design, pred))
+
+
+def _drift(design: "Design", pred: Prediction) -> "Drift | None":
+    """The drift budget, or None for a normal curve the calibration could not invert (its field not rising)."""
+    from . import drift
+
+    try:
+        return drift.drift(design, pred)
+    except ValueError:
+        return None
 
 
 def indentation_grid(design: "Design") -> np.ndarray:
@@ -506,5 +520,7 @@ def predict_with_findings(design: "Design", elastomer: ElastomerModel | None = N
     except (mech.MechanicsError, fieldmod.FieldModelError) as exc:
         return None, [Finding(Severity.ERROR, "prediction-failed", f"no prediction for this design: {exc}",
                               "predict.mechanics_model" if isinstance(exc, mech.MechanicsError) else "predict.field_model")]
-    return pred, prediction_findings(design, pred)
+    from .drift import findings as drift_findings
+
+    return pred, prediction_findings(design, pred) + ([] if pred.drift is None else drift_findings(design, pred.drift))
 
