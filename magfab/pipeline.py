@@ -167,8 +167,19 @@ def _predictions(design: Design, say: Progress, timings: dict[str, float]):
     for name, data in sorted(plots.figures(design, pred, model_bench()).items()):
         stem, kind = name.rsplit(".", 1)
         out.append(Artifact(f"plots/{name}", data, plots.CAPTIONS[stem] + ", " + kind.upper()))
+    out += _drift_charts(pred)
     timings["plots"] = time.perf_counter() - t
     return out, found, pred
+
+
+def _drift_charts(pred) -> list[Artifact]:
+    """The drift budget's chart (predictions.json's ``drift``), when the prediction has one."""
+    if pred.drift is None:
+        return []
+    from .export import drift_figures
+
+    return [Artifact(f"{drift_figures.FOLDER}{name}", data, drift_figures.CAPTIONS[name.rsplit(".", 1)[0]] + ", "
+                     + name.rsplit(".", 1)[1].upper()) for name, data in sorted(drift_figures.figures(pred.drift).items())]
 
 
 def _acceptance(design: Design, prediction) -> tuple[dict | None, list[Finding]]:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -157,3 +158,26 @@ def test_an_omitted_environment_leaves_the_spec_as_it_was():
     assert spec.environment is None and "environment" not in spec.dump()
     stated = parse_spec("[environment]\nrotation_deg = 90\n")
     assert stated.dump()["environment"]["rotation_deg"] == 90.0 and stated.sha256() != spec.sha256()
+
+
+def test_the_build_ships_the_chart_deterministically(pred):
+    from magfab.pipeline import _drift_charts
+
+    first, again = _drift_charts(pred), _drift_charts(pred)
+    assert [a.path for a in first] == ["drift/drift.png", "drift/drift.svg"]
+    assert [a.data for a in first] == [a.data for a in again]
+    assert first[1].data.lstrip().startswith(b"<?xml") and first[1].description.endswith(", SVG")
+
+
+def test_the_reports_section_lists_every_source_against_the_resolution(design, pred):
+    from magfab.export.report.drift import HEADER, drift_context
+
+    stated = derive(parse_spec("[environment]\nstray_moment_Am2 = 0.1\nstray_distance_mm = 30.0\nrotation_deg = 0.0\n"))
+    p = replace(pred, drift=D.drift(stated, pred))
+    ctx = drift_context(p, lambda folder: [folder])
+    labels = [row[0] for row in ctx["rows"]]
+    assert ctx["figures"] == ["drift/"] and all(len(row) == len(HEADER) for row in ctx["rows"])
+    assert labels[0] == "temperature, per C, uncompensated" and labels[-1].startswith("stray source: a 0.1 A m^2")
+    turn = next(row for row in ctx["rows"] if row[0].startswith("this place"))
+    assert turn[-1] == "within the resolution" and "spec's [environment]" in ctx["summary"]
+    assert drift_context(replace(pred, drift=None), lambda folder: []) is None

@@ -28,6 +28,7 @@ from ... import __version__
 from ...errors import Finding
 from . import tables
 from .array import array_context
+from .drift import drift_context
 from .drawings import board_svg, stackup_figure
 from .render3d import PART_VIEWS, part_figure, section_loops
 from .tables import href
@@ -189,6 +190,7 @@ def render_report(spec: "Spec", design: "Design", findings: Sequence[Finding], a
         board_parts=tables.board_parts(board),
         array=array_context(design, artifacts, lambda folder: _plot_figures(artifacts, folder)),
         tables=tables.prediction_tables(prediction), plots=_plot_figures(artifacts, "plots/"),
+        drift=drift_context(prediction, lambda folder: _plot_figures(artifacts, folder)),
         models=tables.model_rows(prediction), calibration=tables.calibration_summary(calibration, spec.calibration.tolerance_mN),
         calibration_plots=_plot_figures(artifacts, "calibration/"),
         findings=tables.findings_by_severity(findings), spec_sections=tables.spec_sections(spec), files=files,
