@@ -48,7 +48,7 @@ if TYPE_CHECKING:
     from .predict import Prediction
 
 __all__ = ["Coefficients", "coefficients", "environment", "Channel", "normal_channel", "shear_channel",
-           "force_error_mN", "temperature_read_G", "TemperatureBudget", "temperature_budget", "earth_field_G",
+           "force_error_mN", "temperature_read_G", "temperature_error_mN", "TemperatureBudget", "temperature_budget", "earth_field_G",
            "Disturbance", "rotation_error", "dipole_field_G", "dipole_worst_G", "stray_error", "Drift", "drift",
            "findings", "N_TEMPERATURES", "CASES"]
 
@@ -199,6 +199,18 @@ def temperature_read_G(b_G: object, dT_C: object, *, alpha_pct: float, sensitivi
     return read
 
 
+def temperature_error_mN(channel: Channel, force_N: object, dT_C: object, *, alpha_pct: float,
+                         sensitivity_pct: float = 0.0, offset_G_per_C: float = 0.0, magnet_dT_C: object | None = None,
+                         compensation: tuple[float, object] | None = None) -> np.ndarray:
+    """Force error (mN) at the true force ``force_N`` on ``channel`` for given coefficients (not the bands' worst):
+    :func:`temperature_read_G` read through the calibration's inverse; what a simulated run with these coefficients
+    should show."""
+    b = channel.field_at(force_N)
+    read = temperature_read_G(b, dT_C, alpha_pct=alpha_pct, sensitivity_pct=sensitivity_pct,
+                              offset_G_per_C=offset_G_per_C, magnet_dT_C=magnet_dT_C, compensation=compensation)
+    return force_error_mN(channel, force_N, read)
+
+
 def _sensor_error_C(c: Coefficients, t_C: np.ndarray, t_cal_C: float, bow: float) -> np.ndarray:
     """The temperature reading's error relative to the calibration temperature, C: TLIN as a parabola over the
     operating range whose best-fit line leaves +/-TLIN (``bow`` +/-1 picks its sign), plus half an LSB."""
@@ -252,7 +264,8 @@ class TemperatureBudget:
     ``per_C``: for +1 C from the calibration temperature, keys ``normal_rest``, ``normal_end``, ``shear_rest``,
     ``shear_end``, each {case: ...} for :data:`CASES` (with: the coefficients' uncertainty and the offset; fitted: the
     offset; the sensor's error and the lag are not per degree and appear in the span); ``per_C_parts``: the uncompensated normal error at
-    rest per source (magnet, chip_sensitivity, chip_offset); ``temperatures_C`` and ``span``: the same four points
+    rest per source (magnet, chip_sensitivity, chip_offset), and ``per_C_field_G`` the field change each makes, G;
+    ``temperatures_C`` and ``span``: the same four points
     at each temperature of the spec's span, without and with compensation; ``worst``: the largest |error| over the
     span per point and case."""
 
@@ -262,10 +275,12 @@ class TemperatureBudget:
     per_C_parts: Mapping[str, float]
     span: Mapping[str, Mapping[str, tuple[float, ...]]]
     worst: Mapping[str, Mapping[str, float]]
+    per_C_field_G: Mapping[str, float]  # the field change at rest per source for +1 C, G (against the noise)
 
     def as_json(self) -> dict[str, object]:
         return {"calibration_C": self.calibration_C, "per_C_mN": {k: dict(v) for k, v in self.per_C.items()},
-                "per_C_parts_normal_rest_mN": dict(self.per_C_parts), "temperatures_C": list(self.temperatures_C),
+                "per_C_parts_normal_rest_mN": dict(self.per_C_parts),
+                "per_C_parts_normal_rest_field_G": dict(self.per_C_field_G), "temperatures_C": list(self.temperatures_C),
                 "span_mN": {k: {c: list(v) for c, v in d.items()} for k, d in self.span.items()},
                 "worst_over_span_mN": {k: dict(v) for k, v in self.worst.items()}}
 
@@ -302,7 +317,8 @@ def temperature_budget(design: "Design", pred: "Prediction", temperatures_C: obj
              "chip_sensitivity": temperature_read_G(b0, 1.0, alpha_pct=0.0, sensitivity_pct=-c.chip_sensitivity_pct_per_C),
              "chip_offset": temperature_read_G(b0, 1.0, alpha_pct=0.0, offset_G_per_C=-c.chip_offset_z_G_per_C)}
     per_C_parts = {k: float(force_error_mN(normal, 0.0, v)) for k, v in parts.items()}
-    return TemperatureBudget(t_cal, tuple(float(x) for x in t), per_C, per_C_parts, span, worst)
+    per_C_field = {k: float(v - b0) for k, v in parts.items()}
+    return TemperatureBudget(t_cal, tuple(float(x) for x in t), per_C, per_C_parts, span, worst, per_C_field)
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -399,6 +415,11 @@ class Drift:
     noise_G: Mapping[str, float]  # z, xy
     channel: Channel = field(repr=False, compare=False)  # the normal calibration the figures were made with
 
+    def _against_noise(self, x: Disturbance) -> dict[str, object]:
+        """A disturbance's figures, with its field over the chip's RMS noise on z and on x/y."""
+        return {**x.as_json(), "field_over_noise_z": x.field_G / self.noise_G["z"],
+                "field_over_noise_xy": x.field_G / self.noise_G["xy"]}
+
     def as_json(self) -> dict[str, object]:
         c = self.coefficients
         return {
@@ -410,9 +431,9 @@ class Drift:
                              "sensor_linearity_C": c.sensor_linearity_C, "sensor_step_C": c.sensor_step_C,
                              "operating_C": list(c.operating_C)},
             "temperature": self.temperature.as_json(),
-            "rotation": self.rotation.as_json(),
-            "rotation_band": [d.as_json() for d in self.rotation_band],
-            "stray": None if self.stray is None else self.stray.as_json(),
+            "rotation": self._against_noise(self.rotation),
+            "rotation_band": [self._against_noise(d) for d in self.rotation_band],
+            "stray": None if self.stray is None else self._against_noise(self.stray),
             "resolution_mN": dict(self.resolution_mN),
             "noise_G": dict(self.noise_G),
             "calibration_curve": "normal: the stiff material and the weakest magnet (the resolution's worst case); "

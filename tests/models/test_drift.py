@@ -181,3 +181,19 @@ def test_the_reports_section_lists_every_source_against_the_resolution(design, p
     turn = next(row for row in ctx["rows"] if row[0].startswith("this place"))
     assert turn[-1] == "within the resolution" and "spec's [environment]" in ctx["summary"]
     assert drift_context(replace(pred, drift=None), lambda folder: []) is None
+
+
+def test_given_coefficients_give_the_simulated_runs_error(pred):
+    """What a simulated ramp with known coefficients should show: the magnet alone, compensated exactly, is zero; a
+    wrong alpha leaves the difference, which the budget's recipe case bounds."""
+    ch = D.normal_channel(pred)
+    dT = np.array([-5.0, 0.0, 5.0])
+    exact = D.temperature_error_mN(ch, 0.0, dT, alpha_pct=-0.12, compensation=(-0.12, dT))
+    assert np.allclose(exact, 0.0, atol=1e-9)
+    off = D.temperature_error_mN(ch, 0.0, dT, alpha_pct=-0.09, compensation=(-0.12, dT))
+    assert off[1] == 0.0 and off[2] > 0 > off[0]
+    bound = np.abs(pred.drift.temperature.span["normal_rest"]["with"])
+    t = np.asarray(pred.drift.temperature.temperatures_C)
+    assert np.all(np.abs(off[[0, 2]]) <= bound[np.isin(t, [20.0, 30.0])])
+    doc = pred.as_json()["drift"]
+    assert doc["rotation"]["field_over_noise_z"] == pytest.approx(1.3 / pred.noise.total_z_G)
