@@ -9,7 +9,9 @@ What the format allows, and no more (a reader may carry less, e.g. the firmware'
 order 0..12 with the monomials listed in the documented order; finite numbers; scales > 0; shear_sign +1 or
 -1; the hull a convex, counter-clockwise polygon of at least 3 distinct points (a closing repeat of the first
 point and collinear points allowed); ``mls`` (when present, and required by method "mls") of order 0..4 with
-equally long point columns; ``errors``, ``scan`` and ``chip`` objects when present; no NaN or infinity anywhere.
+equally long point columns; ``errors``, ``scan`` and ``chip`` objects when present; ``thermal`` (optional: a file
+without it has no temperature correction) with ``reference_C`` from -40 to 125 and one ``coefficient_per_C`` per
+field axis within +/-:data:`THERMAL_MAX_PER_C`; no NaN or infinity anywhere.
 """
 
 from __future__ import annotations
@@ -22,7 +24,8 @@ from typing import Dict, Optional, Tuple
 
 from .json_checks import FormatError, finite, is_number
 
-__all__ = ["FORMAT", "FORCES", "INPUTS", "MAX_ORDER", "MLS_MAX_ORDER", "CalibrationError", "Checked", "MLSPoints",
+__all__ = ["FORMAT", "FORCES", "INPUTS", "MAX_ORDER", "MLS_MAX_ORDER", "AXES", "THERMAL_MAX_PER_C", "CalibrationError",
+           "Checked", "MLSPoints", "Thermal",
            "calibration_sha256", "canonical_json", "cross", "loads", "monomials", "validate"]
 
 FORMAT = "magfab-calibration/1"
@@ -30,6 +33,14 @@ FORCES = ("Fz_N", "Fr_N")
 INPUTS = ("Bz_uT", "Br_uT")
 MAX_ORDER = 12
 MLS_MAX_ORDER = 4
+#: The field axes of ``thermal.coefficient_per_C``.
+AXES = ("Bx_uT", "By_uT", "Bz_uT")
+#: Largest |coefficient| per degC a thermal correction may carry: ten times NdFeB's -0.12 %/C plus the chip's
+#: drift; beyond it the number is a unit mistake (percent for a fraction), not a field's drift.
+THERMAL_MAX_PER_C = 0.01
+#: The chip's rated operating range, degC (MLX90393 datasheet: -40 to 125): a calibration's temperature outside it
+#: is a mistake.
+THERMAL_REFERENCE_C = (-40.0, 125.0)
 
 Point = Tuple[float, float]
 
@@ -68,6 +79,16 @@ class MLSPoints:
 
 
 @dataclass(frozen=True)
+class Thermal:
+    """The ``thermal`` object: the field is corrected B_k / (1 + a_k (T - reference_C)) per axis before the
+    calibration. ``coefficient_per_C`` (a_x, a_y, a_z) in 1/degC; ``source`` "fit" or "recipe"."""
+
+    reference_C: float
+    coefficient_per_C: Tuple[float, float, float]
+    source: str
+
+
+@dataclass(frozen=True)
 class Checked:
     """A valid calibration.json's values. ``center`` and ``scale`` are (Bz, Br) in uT; ``coefficients`` maps
     Fz_N and Fr_N to one number per monomial; ``box`` is ((Bz lo, hi), (Br lo, hi)) in uT; ``hull`` the convex
@@ -92,6 +113,7 @@ class Checked:
     chip: dict
     canonical: str
     sha256: str
+    thermal: Optional[Thermal] = None
 
 
 def _interval(data: dict, name: str) -> Point:
@@ -158,6 +180,31 @@ def _mls(data: dict) -> MLSPoints:
     return MLSPoints(order, bandwidth, *columns)
 
 
+def _thermal(data: dict) -> Thermal:
+    node = data["thermal"]
+    if not isinstance(node, dict):
+        raise CalibrationError("thermal", node, "must be an object with reference_C and coefficient_per_C")
+    t0 = finite(data, "thermal.reference_C", CalibrationError)
+    lo, hi = THERMAL_REFERENCE_C
+    if not lo <= t0 <= hi:
+        raise CalibrationError("thermal.reference_C", t0, "must be within the chip's rated {:g} to {:g} degC"
+                               .format(lo, hi))
+    coef = node.get("coefficient_per_C")
+    if not isinstance(coef, dict):
+        raise CalibrationError("thermal.coefficient_per_C", coef, "must map {} to numbers".format(", ".join(AXES)))
+    a = []
+    for axis in AXES:
+        x = finite(data, "thermal.coefficient_per_C." + axis, CalibrationError)
+        if not abs(x) <= THERMAL_MAX_PER_C:
+            raise CalibrationError("thermal.coefficient_per_C." + axis, x, "must be within +/-{:g} per degC (a "
+                                   "fraction: -0.12 %/C is -0.0012)".format(THERMAL_MAX_PER_C))
+        a.append(x)
+    source = node.get("source", "")
+    if source not in ("fit", "recipe"):
+        raise CalibrationError("thermal.source", source, "must be 'fit' or 'recipe'")
+    return Thermal(t0, (a[0], a[1], a[2]), source)
+
+
 def _coefficients(data: dict, terms: int) -> Dict[str, Tuple[float, ...]]:
     coefficients = data.get("coefficients")
     if not isinstance(coefficients, dict):
@@ -211,6 +258,7 @@ def validate(data: object) -> Checked:
         if key in data and not isinstance(data[key], dict):
             raise CalibrationError(key, data[key], "must be an object")
     mls = _mls(data) if "mls" in data else None
+    thermal = _thermal(data) if "thermal" in data else None
     if data["method"] == "mls" and mls is None:
         raise CalibrationError("mls", None, "is missing: method 'mls' needs the MLS model and its scan points")
     try:
@@ -220,7 +268,7 @@ def validate(data: object) -> Checked:
     return Checked(data["method"], order, tuple((i, j) for i, j in monomials(order)), center, scale,  # type: ignore[arg-type]
                    coefficients, int(sign), direction_min, tare, box, hull, span, mls,  # type: ignore[arg-type]
                    dict(data.get("errors", {})), dict(data.get("scan", {})), dict(data.get("chip", {})),
-                   canonical, hashlib.sha256(canonical.encode("ascii")).hexdigest())
+                   canonical, hashlib.sha256(canonical.encode("ascii")).hexdigest(), thermal)
 
 
 def loads(text: str) -> Checked:

@@ -38,6 +38,10 @@ and the RMS residual of the fit to all rows, in N.
 is, the most accurate one, with :attr:`FitResult.meets_tolerance` False and a one-line ``message`` for the
 caller to turn into a warning.
 
+**Temperature.** The field is first corrected to the calibration's temperature, B_k / (1 + a_k (T - T0)),
+with coefficients fitted from a scan spanning temperatures or the recipe's (:mod:`.calibration_thermal`);
+calibration.json's ``thermal`` says which, and the firmware applies the same correction.
+
 **The guard.** Readings outside the scanned region of (Bz, Br) -- the range box and the convex hull of the
 scan points (simplified to the least-area enclosing polygon of at most ``HULL_MAX_VERTICES`` vertices, since
 the firmware tests every reading against it) -- are flagged ``in_region = False``; the model's value is still
@@ -60,6 +64,7 @@ from ..errors import InputError, ScanError
 from ..formats import calibration_json
 from ..formats.scan_csv import FORCE_COLUMNS, MIN_ROWS, SCAN_COLUMNS, Scan, check_calibration_scan
 from ..units import UT_PER_GAUSS
+from .calibration_thermal import ThermalFit, correct, fit_thermal
 from .region import HULL_MAX_VERTICES, Scaling, ValidRegion, guard_ops
 
 if TYPE_CHECKING:
@@ -203,6 +208,16 @@ class Calibration:
     chip: Mapping[str, object]
     tare_N: tuple[float, float] = (0.0, 0.0)
     mls: MLSModel | None = None
+    thermal: ThermalFit | None = None
+
+    def corrected(self, B_uT: object, temperature_C: object = None) -> np.ndarray:
+        """Readings B_uT (N, 3) uT as at the calibration's temperature (``thermal``: B_k / (1 + a_k (T - T0)))
+        given the chip temperatures (N,) degC; unchanged without temperatures or without ``thermal``."""
+        b = _readings(B_uT)
+        if temperature_C is None or self.thermal is None:
+            return b
+        t = np.broadcast_to(np.asarray(temperature_C, dtype=float), (len(b),))
+        return correct(b, t, self.thermal.reference_C, self.thermal.coefficient_per_C)
 
     def model(self, B_uT: object, method: str | None = None) -> np.ndarray:
         """Untared (Fz, Fr), N, (N, 2), at field readings B_uT (N, 3) uT, by ``method`` (default: the
@@ -224,15 +239,17 @@ class Calibration:
             raise CalibrationError(f"method must be 'poly' or 'mls'; instead received {method!r}")
         return _basis(u, v, self.order) @ self.coefficients
 
-    def evaluate(self, B_uT: object, method: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def evaluate(self, B_uT: object, method: str | None = None,
+                 temperature_C: object = None) -> tuple[np.ndarray, np.ndarray]:
         """Force (Fx, Fy, Fz) in N, (N, 3), and in_region (N,) bool, from field readings B_uT (N, 3) uT
-        (a single (3,) reading gives (3,) and a bool array of shape ()).
+        (a single (3,) reading gives (3,) and a bool array of shape ()); with the chip's ``temperature_C``
+        (N,) degC the readings are first corrected (:meth:`corrected`).
 
         docs/bundle.md section 2: Fz and Fr from the model, the tare subtracted from each, then the shear
         split Fx = shear_sign Fr Bx / Br, Fy = shear_sign Fr By / Br (0 where Br < direction_min_uT).
         Readings outside the valid region (or not finite) get the model's value and in_region False.
         """
-        b = _readings(B_uT)
+        b = self.corrected(B_uT, temperature_C)
         raw = self.model(b, method)
         fz = raw[:, 0] - self.tare_N[0]
         fr = raw[:, 1] - self.tare_N[1]
@@ -273,6 +290,8 @@ class Calibration:
             "scan": _plain(self.scan),
             "chip": _plain(self.chip),
         }
+        if self.thermal is not None:
+            doc["thermal"] = self.thermal.as_json()
         if self.mls is not None:
             m = self.mls
             doc["mls"] = {
@@ -298,7 +317,21 @@ class Calibration:
             mls = MLSModel(m.order, m.bandwidth, *(np.asarray(x, dtype=float) for x in (m.bz_uT, m.br_uT, m.fz_N, m.fr_N)))
         return cls(c.method, c.order, Scaling(c.center[0], c.scale[0], c.center[1], c.scale[1]),
                    np.column_stack([c.coefficients[f] for f in FORCES]), c.shear_sign, c.direction_min_uT,
-                   ValidRegion(c.box[0], c.box[1], c.hull), c.errors, c.scan, c.chip, c.tare_N, mls)
+                   ValidRegion(c.box[0], c.box[1], c.hull), c.errors, c.scan, c.chip, c.tare_N, mls,
+                   _thermal_of(doc, c.thermal))
+
+
+def _thermal_of(doc: Mapping[str, object], t: calibration_json.Thermal | None) -> ThermalFit | None:
+    """The ``thermal`` object back as a :class:`ThermalFit` (its informative keys when present)."""
+    if t is None:
+        return None
+    node = doc["thermal"]
+    assert isinstance(node, Mapping)
+    unc = node.get("uncertainty_per_C")
+    return ThermalFit(t.reference_C, t.coefficient_per_C, t.source,
+                      tuple(float(unc[a]) for a in calibration_json.AXES) if isinstance(unc, Mapping) else None,  # type: ignore[arg-type]
+                      float(node.get("span_C", 0.0)), float(node.get("recipe_per_C", t.coefficient_per_C[2])),  # type: ignore[arg-type]
+                      str(node.get("note", "")))
 
 
 def _readings(B_uT: object) -> np.ndarray:
@@ -388,6 +421,12 @@ class FitResult:
 
     def candidate(self, label: str) -> Candidate:
         return next(c for c in self.candidates if c.label == label)
+
+    @property
+    def thermal_note(self) -> str:
+        """One line: the temperature correction the calibration carries, fitted or the recipe's, and why."""
+        t = self.calibration.thermal
+        return "" if t is None else f"temperature correction: {t.note}"
 
     def table(self) -> list[dict[str, object]]:
         return [c.as_dict() for c in self.candidates]
@@ -508,6 +547,10 @@ def fit(scan: Scan, design: "Design", *, mls: bool = True) -> FitResult:
         raise ScanError(f"scan {scan.source}: {scan.rows} rows; a calibration needs at least {MIN_ROWS}")
     check_calibration_scan(scan)  # force columns, plausible values, (Bz, Br) spanning an area: before any work
     assert scan.F_N is not None
+    thermal = fit_thermal(scan.B_uT, scan.F_N, scan.temperature_C, design, cal.order)
+    if scan.temperature_C is not None:  # every fit below sees the field as at the calibration's temperature
+        scan = replace(scan, B_uT=correct(scan.B_uT, scan.temperature_C, thermal.reference_C,
+                                          thermal.coefficient_per_C))
     bz, br = scan.B_uT[:, 2], scan.Br_uT
     y = np.column_stack([scan.F_N[:, 2], scan.Fr_N])
     scaling = Scaling.of(bz, br)
@@ -525,7 +568,7 @@ def fit(scan: Scan, design: "Design", *, mls: bool = True) -> FitResult:
     firmware = min((c for c in cands if c.method == "poly" and c.order <= cal.order), key=lambda c: c.worst_rms_N)
     base = Calibration("poly", 0, scaling, np.zeros((1, 2)), _shear_sign(scan), DIRECTION_MIN_SIGMAS * noise_xy_uT,
                        region, {"folds": cal.folds}, {"sha256": scan.sha256, "rows": scan.rows, "source": scan.source},
-                       chip)
+                       chip, thermal=thermal)
     calibration = _calibration_for(base, cands, label, firmware.order)
     message = "" if meets else (
         f"no calibration reaches the held-out RMS tolerance of {cal.tolerance_mN:g} mN; using {label} "

@@ -91,8 +91,21 @@ def _quantise(x: np.ndarray, step: float) -> np.ndarray:
     return np.round(x / step) * step if step > 0 else x
 
 
+def scan_temperature(rows: int, temperature_C: "float | tuple[float, float] | None",
+                     passes: int = 1) -> np.ndarray | None:
+    """The chip temperature (rows * passes,) degC of a simulated scan: None, a constant, or (start, end) ramped
+    linearly over every row of every pass (so a two-pass scan reads each point at two temperatures)."""
+    if temperature_C is None:
+        return None
+    start, end = (float(temperature_C), float(temperature_C)) if np.ndim(temperature_C) == 0 else temperature_C
+    n = rows * passes
+    return start + (end - start) * np.arange(n) / max(n - 1, 1)
+
+
 def simulate_scan(design: "Design", prediction: "Prediction | None" = None, *, ideal: bool = False, polarity: int = 1,
-                  background_uT: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> Scan:
+                  background_uT: tuple[float, float, float] = (0.0, 0.0, 0.0),
+                  temperature_C: "float | tuple[float, float] | None" = None, passes: int = 1,
+                  thermal_per_C: "float | tuple[float, float, float] | None" = None) -> Scan:
     """The simulated calibration scan of ``design`` (module doc): field in uT at the sensing point and the
     reference force in N along :func:`scan_track`.
 
@@ -103,12 +116,19 @@ def simulate_scan(design: "Design", prediction: "Prediction | None" = None, *, i
     ``polarity`` -1 flips the magnet (an array's alternating taxel); ``background_uT`` is a steady field added at
     the chip (an array's neighbours at rest, :mod:`.taxels`).
     Sample times are one chip conversion apart. Deterministic (``calibration.seed``).
+
+    Temperature (:func:`scan_temperature`): ``temperature_C`` None (no column, the model's 25 C), a constant or a
+    (start, end) ramp over the whole scan of ``passes`` repetitions of the track; the field (magnet and
+    background alike) then scales by (1 + a (T - 25)) per axis, a = ``thermal_per_C`` (one value or one per axis,
+    1/degC; default the magnet grade's remanence coefficient plus the chip's nominal drift), and the column is the
+    chip's reading (quantised to its 1/45.2 C step unless ``ideal``).
     """
     from .predict import chip_setting, noise, predict
 
     pred = prediction if prediction is not None else predict(design)
     cal = design.spec.calibration
     y, delta = scan_track(design, pred)
+    y, delta = np.tile(y, passes), np.tile(delta, passes)
     nominal = pred.curves["nominal"]
     u = np.interp(delta, nominal.indentation_mm, nominal.magnet_displacement_mm)  # axial travel, + down
     fz = np.interp(delta, nominal.indentation_mm, nominal.force_N)
@@ -119,6 +139,12 @@ def simulate_scan(design: "Design", prediction: "Prediction | None" = None, *, i
     # point is at (0, -y, -(gap + H/2)).
     points = np.column_stack([np.zeros_like(y), -y, -(gap + magnet.height_mm / 2.0)])
     b = polarity * fieldmod.exact(magnet, points) * UT_PER_GAUSS + np.asarray(background_uT, float)
+    temp = scan_temperature(len(y) // passes, temperature_C, passes)
+    if temp is not None:
+        from .calibration_thermal import DEFAULT_REFERENCE_C, recipe_coefficient_per_C
+
+        a = recipe_coefficient_per_C(design) if thermal_per_C is None else thermal_per_C
+        b = b * (1.0 + np.broadcast_to(np.asarray(a, float), (3,))[None, :] * (temp[:, None] - DEFAULT_REFERENCE_C))
     f = np.column_stack([np.zeros_like(y), k_s * y, fz])
     chip = chip_setting(design)
     if not ideal:
@@ -132,6 +158,9 @@ def simulate_scan(design: "Design", prediction: "Prediction | None" = None, *, i
         full = UT_PER_GAUSS * np.array([chip.full_scale_xy_G, chip.full_scale_xy_G, chip.full_scale_z_G])
         b = np.clip(b, -full, full)
         f = _quantise(f, cal.reference_resolution_mN / 1000.0)
+        if temp is not None:  # the chip's own reading: whole LSB of the temperature channel
+            step = 1.0 / design.chip["temperature_lsb_per_C"].nominal
+            temp = _quantise(temp - DEFAULT_REFERENCE_C, step) + DEFAULT_REFERENCE_C
     t = np.arange(len(y)) * chip.conversion_ms / 1000.0
-    scan = Scan(t, b, f, None, "simulated" if not ideal else "simulated (ideal)", "")
+    scan = Scan(t, b, f, temp, "simulated" if not ideal else "simulated (ideal)", "")
     return replace(scan, sha256=hashlib.sha256(scan_csv(scan).encode("utf-8")).hexdigest())

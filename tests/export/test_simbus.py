@@ -15,6 +15,7 @@ import importlib
 import json
 import math
 import re
+import struct
 import sys
 from dataclasses import dataclass
 
@@ -378,7 +379,11 @@ def test_the_build_eep_holds_its_calibration(sim):
     from magfab.formats.calibration_json import calibration_sha256
 
     data = b"".join(d for _, d in read_intel_hex(sim.hex_path.with_suffix(".eep").read_text()))
-    assert data[:3] == b"MF\x02" and data[8:24].decode() == calibration_sha256(sim.cal)[:16]
+    assert data[:3] == b"MF\x04" and data[8:24].decode() == calibration_sha256(sim.cal)[:16]
+    t0, *a = struct.unpack_from("<4f", data, 164)  # version 4: the thermal block after the floats
+    thermal = sim.cal["thermal"]
+    assert t0 == thermal["reference_C"] and a == pytest.approx([thermal["coefficient_per_C"][k] for k in
+                                                                ("Bx_uT", "By_uT", "Bz_uT")], rel=1e-6)
 
 
 # ---- the generic image: rebuilt from source, and on a machine without avr-gcc ------------------------------------
@@ -440,3 +445,83 @@ def test_a_build_without_avr_gcc_writes_an_image_that_runs(sim, default_build, t
     print(f"pip-only build: {len(samples)} frames in 100 ms simulated, {sum(s.chip_error for s in samples)} errors")
     assert len(samples) > 30 and not any(s.chip_error for s in samples)
     assert sim.wrong(samples, cal=cal) == []
+
+
+# ---- temperature: a ramp on the simulated chip, the shipped image with and without the correction ----------------
+
+RAMP_C = (25.0, 40.0)  # the chip's temperature over the run: a 15 C warm-up
+RAMP_US = 200_000
+
+
+def _rest_field(sim: Sim, default_build) -> tuple:
+    """The field at rest: the simulated scan's unloaded row (y = 0, no indentation)."""
+    from magfab.formats.scan_csv import read_scan_csv
+
+    scan = read_scan_csv(default_build.out_dir / "calibration" / "scan_simulated.csv")
+    k = int(min(range(scan.rows), key=lambda r: abs(scan.F_N[r]).sum() + abs(scan.B_uT[r, :2]).sum()))
+    return tuple(float(x) for x in scan.B_uT[k])
+
+
+def _ramp_slope(sim: Sim, eep, field: tuple, alpha: float) -> tuple:
+    """(dFz/dT, dFr/dT) in N/C of the frames the shipped image sends while the chip warms over RAMP_C with its
+    field scaling by (1 + alpha (T - 25)), and the frames' temperature span."""
+    import numpy as np
+
+    with Bus(sim.lib, sim.hex_path, sim.addr7, eep) as bus:
+        bus.set_field(*field)
+        decoder = sim.frames.Decoder()
+        sim.samples(decoder, bus.run_us(SETTLE_US))
+        bus.ramp(field, RAMP_C[0], (RAMP_C[1] - RAMP_C[0]) / (RAMP_US * 1e-6), alpha)
+        samples = sim.samples(decoder, bus.run_us(RAMP_US))
+    assert len(samples) > 50 and not any(s.chip_error for s in samples)
+    t = np.array([s.temperature_C for s in samples])
+    fz = np.array([s.force_N[2] for s in samples])
+    fr = np.hypot([s.force_N[0] for s in samples], [s.force_N[1] for s in samples])
+    return float(np.polyfit(t, fz, 1)[0]), float(np.polyfit(t, fr, 1)[0]), float(t.max() - t.min())
+
+
+def _predicted_slope(cal: dict, field: tuple, alpha: float) -> tuple:
+    """The uncorrected calibration's force slope, N/C: its force at the field scaled by (1 +/- alpha)."""
+    hi = ref_forces(cal, *(b * (1 + alpha) for b in field))
+    lo = ref_forces(cal, *(b * (1 - alpha) for b in field))
+    return (hi[2] - lo[2]) / 2, (math.hypot(hi[0], hi[1]) - math.hypot(lo[0], lo[1])) / 2
+
+
+@pytest.fixture(scope="module")
+def thermal_runs(sim, default_build, tmp_path_factory):
+    """The shipped image on a warming chip at rest and under FIELD_UT's held load, with the build's .eep (version 4:
+    the recipe's -0.12 %/C, T0 25 C) and with the same calibration without ``thermal`` (version 2: uncorrected)."""
+    from magfab import derive, load_spec
+    from magfab.export import firmware
+
+    assert sim.cal["thermal"]["source"] == "recipe" and sim.cal["thermal"]["reference_C"] == 25.0
+    alpha = sim.cal["thermal"]["coefficient_per_C"]["Bz_uT"]
+    bare = {k: v for k, v in sim.cal.items() if k != "thermal"}
+    record = firmware.eeprom_record(derive(load_spec(None)), bare)
+    assert record[2] == 2  # an old record: no coefficients
+    old = tmp_path_factory.mktemp("thermal") / "v2.eep"
+    old.write_bytes(firmware._eeprom_module().intel_hex(record))
+    out = {}
+    for load, field in (("rest", _rest_field(sim, default_build)), ("held", FIELD_UT)):
+        for name, eep in (("off", old), ("on", sim.hex_path.with_suffix(".eep"))):
+            out[load, name] = _ramp_slope(sim, eep, field, alpha)
+        out[load, "predicted"] = _predicted_slope(sim.cal, field, alpha)
+    print("force error per C on the shipped image, mN/C (Fz, Fr): " + "; ".join(
+        f"{load} {name} {1e3 * v[0]:+.3f} {1e3 * v[1]:+.3f}" for (load, name), v in sorted(out.items())))
+    return out
+
+
+@pytest.mark.parametrize("load", ["rest", "held"])
+def test_a_warming_chip_moves_the_force_by_the_predicted_slope_and_the_correction_removes_it(thermal_runs, load):
+    """A 15 C ramp on the simulated chip (field x (1 - 0.12 %/C)): uncorrected (a version-2 record, as before this
+    change) the image's force drifts by the calibration's own slope (its force at the field scaled by 1 +/- alpha),
+    within 5 %; the build's version-4 record corrects it to under 2 % of that (the temperature's 1/45.2 C step and
+    float32 rounding are what is left)."""
+    off, on, predicted = thermal_runs[load, "off"], thermal_runs[load, "on"], thermal_runs[load, "predicted"]
+    assert off[2] > 10.0 and on[2] > 10.0  # the frames' temperatures span the ramp
+    for k in range(2):
+        if abs(predicted[k]) < 1e-4:  # Fr at rest: no lateral field, nothing to drift
+            assert abs(off[k]) < 1e-4 and abs(on[k]) < 1e-4
+            continue
+        assert off[k] == pytest.approx(predicted[k], rel=0.05)
+        assert abs(on[k]) < 0.02 * abs(predicted[k])

@@ -117,6 +117,57 @@ def test_a_valid_file_round_trips_through_the_model():
     assert Calibration.from_json(doc).to_json() == {**doc, "errors": {"folds": 5}}
 
 
+# ---- thermal: optional, checked when present -------------------------------------------------------------------
+
+
+def thermal() -> dict:
+    return {"reference_C": 25.0, "source": "recipe", "note": "recipe values",
+            "coefficient_per_C": {"Bx_uT": -0.0012, "By_uT": -0.0012, "Bz_uT": -0.0015}}
+
+
+THERMAL_SPOILED = [
+    ("thermal", [], "thermal", "an object"),
+    ("thermal.reference_C", 200.0, "thermal.reference_C", "-40 to 125"),
+    ("thermal.coefficient_per_C.Bz_uT", -0.12, "thermal.coefficient_per_C.Bz_uT", "a fraction"),
+    ("thermal.coefficient_per_C.By_uT", _DELETE, "thermal.coefficient_per_C.By_uT", "is missing"),
+    ("thermal.source", "guess", "thermal.source", "'fit' or 'recipe'"),
+]
+
+
+@pytest.mark.parametrize("path, value, key, reason", THERMAL_SPOILED, ids=[s[2] for s in THERMAL_SPOILED])
+def test_a_thermal_object_is_checked_by_key(design, path, value, key, reason):
+    doc = {**good(), "thermal": thermal()}
+    _set(doc, path, value)
+    with pytest.raises(calibration_json.CalibrationError) as info:
+        calibration_json.validate(doc)
+    assert info.value.key == key and reason in info.value.allowed, str(info.value)
+    with pytest.raises(calibration_json.CalibrationError) as fw:
+        firmware.render(design, copy.deepcopy(doc))
+    assert fw.value.key == key
+
+
+def test_a_calibration_with_and_without_thermal_reads_and_packs():
+    """Without ``thermal`` (every file before it): no correction, a version-2 record; with it the model, the
+    validator and a version-4 record carry the same coefficients; a build that does not convert the temperature
+    packs version 2."""
+    plain = calibration_json.validate(good())
+    assert plain.thermal is None and Calibration.from_json(good()).thermal is None
+    doc = {**good(), "thermal": thermal()}
+    checked = calibration_json.validate(doc)
+    assert checked.thermal == calibration_json.Thermal(25.0, (-0.0012, -0.0012, -0.0015), "recipe")
+    model = Calibration.from_json(doc)
+    assert model.to_json()["thermal"]["coefficient_per_C"] == doc["thermal"]["coefficient_per_C"]
+    design = derive(load_spec(None))
+    assert firmware.eeprom_record(design, good())[2] == 2
+    record = firmware.eeprom_record(design, doc)
+    ee = firmware._eeprom_module()
+    assert record[2] == 4 and ee.check(record) and ee.thermal(record) == pytest.approx((25.0, -0.0012, -0.0012, -0.0015))
+    assert len(record) == len(firmware.eeprom_record(design, good())) + 16
+    cold = derive(load_spec(None).model_copy(update={"firmware": load_spec(None).firmware.model_copy(
+        update={"temperature": False})}))
+    assert firmware.eeprom_record(cold, doc)[2] == 2
+
+
 # ---- acceptance.json ---------------------------------------------------------------------------------------
 
 

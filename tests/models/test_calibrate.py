@@ -397,3 +397,54 @@ def test_the_region_reaches_the_noise_beyond_the_scan(scan, poly4, design):
     _, inside = cal.evaluate(B)
     assert inside.mean() > 0.99
     assert tight.contains(B[:, 2], np.hypot(B[:, 0], B[:, 1])).mean() < 0.9
+
+
+# ---- temperature: the thermal coefficients fitted from a scan spanning temperatures, else the recipe's ----------
+
+TRUE_PER_C = (-0.0012, -0.0012, -0.0020)  # the magnet's -0.12 %/C; the z reading 0.08 %/C more (a chip's drift)
+
+
+@pytest.fixture(scope="module")
+def warm_fit(design, pred):
+    """A scan run twice while the tip warms from 20 to 35 C (each point read at two temperatures 7.5 C apart)."""
+    scan = simulate_scan(design, pred, temperature_C=(20.0, 35.0), passes=2, thermal_per_C=TRUE_PER_C)
+    return scan, C.fit(scan, design, mls=False)
+
+
+def test_calibrate_recovers_the_thermal_coefficients_within_their_uncertainty(warm_fit):
+    """The fit's (a_xy, a_z) are the injected ones (referred to the scan's mean temperature: a / (1 + a (T0 - 25)))
+    within three of their stated sigmas (and the sigmas are small:
+    the z axis is told apart from the recipe's -0.12 %/C); calibration.json says it fitted them and at what
+    temperature; the forces of a reading at 35 C are those of the same point at 20 C."""
+    scan, result = warm_fit
+    t = result.calibration.thermal
+    assert t.source == "fit" and t.span_C == pytest.approx(15.0, abs=0.05)
+    assert t.reference_C == pytest.approx(27.5, abs=0.05)
+    for a, true25, sigma in zip(t.coefficient_per_C, TRUE_PER_C, t.uncertainty_per_C):
+        true = true25 / (1 + true25 * (t.reference_C - 25.0))  # the same line, referred to T0 instead of 25 C
+        assert abs(a - true) <= 3 * sigma and sigma < 0.0002, (a, true, sigma)
+    assert abs(t.coefficient_per_C[2] - t.recipe_per_C) > 5 * t.uncertainty_per_C[2]
+    doc = result.calibration.to_json()
+    assert doc["thermal"]["source"] == "fit" and "fitted over 15 C" in result.thermal_note
+    back = C.Calibration.from_json(json.loads(json.dumps(doc)))
+    assert back.thermal.coefficient_per_C == t.coefficient_per_C
+    n = scan.rows // 2  # the same point in the first pass (cold) and in the second (warm)
+    k = int(np.argmax(scan.F_N[:n, 2]))
+    cold, _ = back.evaluate(scan.B_uT[k], temperature_C=scan.temperature_C[k])
+    warm, _ = back.evaluate(scan.B_uT[k + n], temperature_C=scan.temperature_C[k + n])
+    raw, _ = back.evaluate(scan.B_uT[k + n])
+    assert abs(warm[2] - cold[2]) < 0.1 * abs(raw[2] - cold[2]) and abs(raw[2] - cold[2]) > 0.02
+
+
+def test_without_a_temperature_span_calibrate_uses_the_recipe(design, pred, scan, result):
+    """No temperature column (the default simulated scan): the recipe's -0.12 %/C on every axis at 25 C; a
+    scan held at 30 C: the same coefficients at 30 C; a single warming pass (the temperature follows the
+    position, so the force map absorbs it and a fit would be wrong with a small sigma): the recipe, and why."""
+    t = result.calibration.thermal
+    assert t.source == "recipe" and t.coefficient_per_C == (-0.0012,) * 3 and t.reference_C == 25.0
+    assert "no temperature column" in result.thermal_note
+    held = C.fit(simulate_scan(design, pred, temperature_C=30.0), design, mls=False).calibration.thermal
+    assert held.source == "recipe" and held.reference_C == pytest.approx(30.0, abs=0.02) and held.span_C < 0.05
+    once = C.fit(simulate_scan(design, pred, temperature_C=(20.0, 35.0)), design, mls=False).calibration.thermal
+    assert once.source == "recipe" and "followed the scan's position" in once.note
+    assert once.span_C == pytest.approx(15.0, abs=0.05)

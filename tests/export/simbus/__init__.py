@@ -5,6 +5,7 @@ shared library and driven through ctypes.
     bus = Bus(lib, build_dir / "firmware" / "magfab-atmega328p.hex", addr7=0x0C,
               eep=build_dir / "firmware" / "magfab-atmega328p.eep")   # the EEPROM avrdude would write
     bus.set_field(bx_uT, by_uT, bz_uT, t_C)
+    bus.ramp((bx_uT, by_uT, bz_uT), 20.0, 500.0, -0.0012)   # or a temperature ramp: 500 C per simulated s
     data = bus.run_us(20_000)                   # UART bytes the image sent in that simulated time
 
 An array: :meth:`Bus.add_chip` puts more chip models on the bus, :meth:`Bus.target` picks the one the per-chip
@@ -79,6 +80,7 @@ def _declare(lib: ctypes.CDLL) -> ctypes.CDLL:
         "bus_close": (None, [p]), "bus_eeprom_set": (ctypes.c_int, [p, u16, ctypes.c_char_p, u32]),
         "bus_eeprom_get": (ctypes.c_int, [p, u16, ctypes.c_char_p, u32]),
         "bus_add_chip": (ctypes.c_int, [p, u8]), "bus_target": (None, [p, u8]),
+        "bus_ramp": (None, [p, d, d, d, d, d, d, d]),
     }
     for name, (restype, argtypes) in signatures.items():
         fn = getattr(lib, name)
@@ -151,6 +153,13 @@ class Bus:
 
     def set_field(self, bx_uT: float, by_uT: float, bz_uT: float, t_C: float = 25.0) -> None:
         self._lib.bus_set_field(self._h, bx_uT, by_uT, bz_uT, t_C)
+
+    def ramp(self, b_uT: tuple[float, float, float], t_start_C: float, rate_C_per_s: float, alpha_per_C: float,
+             t_ref_C: float = 25.0) -> None:
+        """A temperature ramp from now on: the chip's temperature t_start_C + rate_C_per_s x elapsed (simulated
+        time) and its field ``b_uT`` x (1 + alpha_per_C (T - t_ref_C)), served whenever the image reads the chip;
+        :meth:`set_field` ends it."""
+        self._lib.bus_ramp(self._h, *b_uT, t_start_C, rate_C_per_s, alpha_per_C, t_ref_C)
 
     def chip_fault(self, name: str, count: int = 1) -> None:
         """A fault inside the chip model: ``error`` (next commands rejected), ``short`` (RM one word short),

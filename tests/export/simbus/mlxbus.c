@@ -16,7 +16,10 @@
  *
  * An array: up to MAX_CHIPS models on the one bus, each at its own address with its own field (bus_add_chip); the
  * per-chip calls (field, faults inside the chip, address NACKs, absent, reset_in, clock, registers) act on the
- * chip bus_target chose (0, the first, by default). */
+ * chip bus_target chose (0, the first, by default).
+ *
+ * A temperature ramp (bus_ramp): the chip's temperature rises at a set rate and the field it serves scales with
+ * (1 + alpha (T - T_ref)), updated whenever the firmware reads it. */
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
@@ -72,7 +75,27 @@ typedef struct bus {
     uint32_t held;          /* TWI steps held */
     uint8_t *uart;
     uint32_t uart_len;
+    /* a temperature ramp per chip (bus_ramp): the field served is base x (1 + alpha (T - t_ref)) at T(now) */
+    struct ramp {
+        uint8_t on;
+        double base[3];
+        double t_start_c, rate_c_per_s, alpha_per_c, t_ref_c;
+        uint64_t t0_us;
+    } ramp[MAX_CHIPS];
 } bus_t;
+
+/* The chip's field and temperature now, on its ramp (the model reads them when the firmware reads the chip). */
+static void ramp_to_now(bus_t *b, sim_mlx_t *chip)
+{
+    struct ramp *r = &b->ramp[chip - b->chips];
+    double t, g;
+    if (!r->on) {
+        return;
+    }
+    t = r->t_start_c + r->rate_c_per_s * (double)(b->now_us - r->t0_us) * 1e-6;
+    g = 1.0 + r->alpha_per_c * (t - r->t_ref_c);
+    sim_set_field(chip, r->base[0] * g, r->base[1] * g, r->base[2] * g, t);
+}
 
 static void sync_time(bus_t *b)
 {
@@ -121,6 +144,7 @@ static void address_phase(bus_t *b, uint8_t addr)
         memset(b->rbuf, 0xFF, sizeof b->rbuf);
         b->ridx = 0;
         sync_time(b);
+        ramp_to_now(b, b->on);
         if (b->ff_reads) {
             --b->ff_reads;
         } else {
@@ -346,7 +370,29 @@ int bus_add_chip(bus_t *b, uint8_t addr7)
 void bus_target(bus_t *b, uint8_t k) { b->target = k < b->n_chips ? k : 0; }
 #define CHIP (&b->chips[b->target])
 void bus_send_uart(bus_t *b, uint8_t c) { avr_raise_irq(b->uart_in, c); }
-void bus_set_field(bus_t *b, double bx, double by, double bz, double t_c) { sim_set_field(CHIP, bx, by, bz, t_c); }
+void bus_set_field(bus_t *b, double bx, double by, double bz, double t_c)
+{
+    b->ramp[b->target].on = 0;
+    sim_set_field(CHIP, bx, by, bz, t_c);
+}
+/* From now on the target's temperature runs t_start_c + rate x elapsed and its field (bx, by, bz) x (1 + alpha
+ * (T - t_ref_c)): the magnet's remanence (and the chip's gain) drifting with it. bus_set_field ends it. */
+void bus_ramp(bus_t *b, double bx, double by, double bz, double t_start_c, double rate_c_per_s, double alpha_per_c,
+              double t_ref_c)
+{
+    struct ramp *r = &b->ramp[b->target];
+    sync_time(b);
+    r->base[0] = bx;
+    r->base[1] = by;
+    r->base[2] = bz;
+    r->t_start_c = t_start_c;
+    r->rate_c_per_s = rate_c_per_s;
+    r->alpha_per_c = alpha_per_c;
+    r->t_ref_c = t_ref_c;
+    r->t0_us = b->now_us;
+    r->on = 1;
+    ramp_to_now(b, CHIP);
+}
 void bus_chip_fault(bus_t *b, int fault, uint16_t count) { sync_time(b); sim_fault(CHIP, (enum sim_fault)fault, count); }
 void bus_nack(bus_t *b, uint32_t addr_phases, uint32_t data_bytes) { b->nack_addr[b->target] = addr_phases; b->nack_data = data_bytes; }
 void bus_ff_reads(bus_t *b, uint32_t n) { b->ff_reads = n; }

@@ -8,6 +8,9 @@ The evaluation follows the bundle format (docs/bundle.md of magfab) step by step
     F  = sum_m coefficients[F][m] * u^i_m * v^j_m - tare_N[F]        for F in Fz_N, Fr_N
     Fx = shear_sign * Fr * Bx / Br,  Fy = shear_sign * Fr * By / Br  (both 0 when Br < direction_min_uT)
 
+With a ``thermal`` object and the chip's temperature T, each field axis is first divided by
+(1 + coefficient_per_C[axis] (T - reference_C)), as the firmware does (docs/bundle.md section 2).
+
 The tare belongs to Fz and Fr (the model's outputs), so it is taken off before Fr is split into Fx and Fy.
 
 ``method`` says what the host uses. "poly" is the global polynomial above, which the firmware always
@@ -90,6 +93,7 @@ class Calibration:
         self._method = checked.method
         self._order = checked.order
         self._monomials = checked.monomials
+        self._thermal = checked.thermal
         self._json = checked.canonical
         self.sha256 = checked.sha256
 
@@ -218,9 +222,25 @@ class Calibration:
         solution = _solve(normal, rhs)
         return solution[0][0], solution[0][1]
 
-    def evaluate(self, Bx_uT: float, By_uT: float, Bz_uT: float, method=None) -> tuple:
-        """(Fx_N, Fy_N, Fz_N) for a field in microtesla (chip axes); ``method`` as in :meth:`model`."""
-        Bx, By = float(Bx_uT), float(By_uT)
+    @property
+    def thermal(self):
+        """The temperature correction (``reference_C``, ``coefficient_per_C`` (x, y, z), ``source``), or None."""
+        return self._thermal
+
+    def corrected(self, Bx_uT: float, By_uT: float, Bz_uT: float, temperature_C=None) -> tuple:
+        """The field as at the calibration's temperature: each axis / (1 + a (T - T0)); unchanged without a
+        temperature (None or NaN) or without ``thermal``."""
+        B = (float(Bx_uT), float(By_uT), float(Bz_uT))
+        t = self._thermal
+        if t is None or temperature_C is None or temperature_C != temperature_C:
+            return B
+        dt = float(temperature_C) - t.reference_C
+        return tuple(b / (1.0 + a * dt) for b, a in zip(B, t.coefficient_per_C))
+
+    def evaluate(self, Bx_uT: float, By_uT: float, Bz_uT: float, method=None, temperature_C=None) -> tuple:
+        """(Fx_N, Fy_N, Fz_N) for a field in microtesla (chip axes) read at the chip's ``temperature_C`` (degC;
+        None: no correction); ``method`` as in :meth:`model`."""
+        Bx, By, Bz_uT = self.corrected(Bx_uT, By_uT, Bz_uT, temperature_C)
         Br = math.sqrt(Bx * Bx + By * By)
         Fz, Fr = self.model(Bz_uT, Br, method=method)
         if Br < self._direction_min or Br == 0.0:

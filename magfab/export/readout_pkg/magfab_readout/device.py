@@ -168,11 +168,11 @@ class SerialTransport:
 
 def cross_check(sample: Sample, calibration: Calibration) -> float:
     """Largest |F_host - F_device| in newton, the host recomputing the force from the sample's field with
-    ``calibration``'s global polynomial (what the firmware evaluates); NaN for a chip-error sample. Binary
-    frames carry exact counts, text lines a rounded field."""
+    ``calibration``'s global polynomial at the sample's temperature (what the firmware evaluates); NaN for a
+    chip-error sample. Binary frames carry exact counts, text lines a rounded field."""
     if sample.chip_error:
         return math.nan
-    host = calibration.evaluate(*sample.B_uT, method="poly")
+    host = calibration.evaluate(*sample.B_uT, method="poly", temperature_C=sample.temperature_C)
     return max(abs(h - d) for h, d in zip(host, sample.device_force_N))
 
 
@@ -445,7 +445,7 @@ class Device:
             raise UploadFailed("the EEPROM read back differs from what was written at byte {}".format(first))
         if last.record != 0:
             raise UploadFailed("the board does not accept the record written (made for other chip settings, or a "
-                               "firmware older than record version {}?)".format(eeprom.VERSION))
+                               "firmware older than record version {}?)".format(record[2]))
         info = self.info()
         if info.calibration_hash.lower() != calibration_sha256(calibration)[:16]:
             raise UploadFailed("the board reports calibration {} after the upload, not {}".format(

@@ -11,6 +11,12 @@ the I2C address and clock, the baud, the chip's register words, the conversion p
 computed by magfab from the spec, so that one generic image serves every build); :func:`intel_hex` writes bytes as
 the Intel HEX an avrdude ``-U eeprom:w:FILE.eep:i`` takes.
 
+A calibration with a ``thermal`` object packs as version 4: version 2's record with a thermal block (the
+calibration's temperature T0 and one coefficient a per field axis, float32 each) between the floats and the Horner
+rows; the image then corrects the field B / (1 + a (T - T0)) before the calibration. Only when the settings
+convert the chip's temperature (``FLAG_TEMPERATURE``, the spec's firmware.temperature): without it the record is
+version 2 and nothing is corrected. Images read both versions.
+
 An array (version 3, :func:`pack_array`) carries no force calibration: the settings, every chip's I2C address in
 taxel order and the name. The image then reads every chip and sends each one's field; the host computes the
 forces (each taxel's calibration and the neighbours' compensation need every taxel's field).
@@ -24,6 +30,9 @@ from typing import Any, Dict, List, Sequence, Tuple
 
 MAGIC = b"MF"
 VERSION = 2
+#: Version 2 with the thermal block (T0, a_x, a_y, a_z) at :data:`COEF_OFFSET`, the Horner rows after it.
+VERSION_THERMAL = 4
+THERMAL = struct.Struct("<4f")
 #: An array's record: the settings and the chips' addresses, no calibration.
 VERSION_ARRAY = 3
 #: Chips an array's record may list (one I2C bus, the option codes' four addresses times four straps).
@@ -184,14 +193,25 @@ def layout(checked: Any) -> Dict[str, Any]:
         "in_bz_lo": inner[0], "in_bz_hi": inner[1], "in_br_lo": inner[2], "in_br_hi": inner[3],
         "p0_bz": hull[0][0], "p0_br": hull[0][1],
         "hull": hull, "fan": [(x - hull[0][0], y - hull[0][1]) for x, y in hull], "edges": edges, "inner": inner,
+        "thermal": _thermal(checked),
     }
+
+
+def _thermal(checked: Any) -> Any:
+    """(T0 degC, a_x, a_y, a_z per degC) of the calibration's ``thermal`` object, None without one."""
+    t = getattr(checked, "thermal", None)
+    if t is None:
+        return None
+    return (_float32("thermal.reference_C", t.reference_C),
+            *(_float32("thermal.coefficient_per_C", a) for a in t.coefficient_per_C))
 
 
 def pack(lay: Dict[str, Any], sha16: str, settings: Dict[str, Any]) -> bytes:
     """The EEPROM record: header (magic, version, order, length, hull points, the calibration hash's first 16 hex
     digits for the info line, the chip settings gain_sel / resolution / osr / dig_filt it was made for), the
     image's settings (``settings``: those four, :data:`SETTING_KEYS` but ``name_len``, and ``name``, the spec
-    name), the floats, the Horner rows (per row its Fz then its Fr coefficients), the hull fan and edge lines, the
+    name), the floats, the thermal block (version 4: a calibration with ``thermal`` and settings that convert the
+    temperature), the Horner rows (per row its Fz then its Fr coefficients), the hull fan and edge lines, the
     name, the CRC. :class:`EepromError` when it does not fit the EEPROM."""
     n = len(lay["hull"])
     spec_name = settings["name"].encode("utf-8")
@@ -199,6 +219,9 @@ def pack(lay: Dict[str, Any], sha16: str, settings: Dict[str, Any]) -> bytes:
         raise EepromError("name", settings["name"], "must be at most {} bytes of UTF-8 in the record".format(NAME_MAX))
     block = SETTINGS.pack(*(len(spec_name) if key == "name_len" else settings[key] for key in SETTING_KEYS))
     body = block + b"".join(struct.pack("<f", lay[name]) for name in FLOATS)
+    thermal = lay.get("thermal") if settings["flags"] & FLAG_TEMPERATURE else None
+    if thermal is not None:
+        body += THERMAL.pack(*thermal)
     for row in lay["rows"]:
         body += struct.pack("<{}f".format(2 * len(row["fz"])), *row["fz"], *row["fr"])
     body += b"".join(struct.pack("<2f", *p) for p in lay["fan"]) + b"".join(struct.pack("<3f", *e) for e in lay["edges"])
@@ -209,7 +232,8 @@ def pack(lay: Dict[str, Any], sha16: str, settings: Dict[str, Any]) -> bytes:
                           "the record takes {} B, the EEPROM holds {} B: use a shorter hull or a lower order"
                           .format(length, SIZE))
     chip = (settings["gain_sel"], settings["resolution"], settings["osr"], settings["dig_filt"])
-    head = HEADER.pack(MAGIC, VERSION, lay["order"], length, n, sha16.encode("ascii"), *chip)
+    version = VERSION if thermal is None else VERSION_THERMAL
+    head = HEADER.pack(MAGIC, version, lay["order"], length, n, sha16.encode("ascii"), *chip)
     record = head + body
     return record + struct.pack("<H", crc16(record))
 
@@ -239,6 +263,13 @@ def addresses(data: bytes) -> List[int]:
     return list(data[ADDRESSES_OFFSET:ADDRESSES_OFFSET + head["order"]]) if head["version"] == VERSION_ARRAY else []
 
 
+def thermal(data: bytes) -> Any:
+    """(T0 degC, a_x, a_y, a_z per degC) of a version-4 record, None for any other."""
+    if len(data) < COEF_OFFSET + THERMAL.size or unpack_header(data)["version"] != VERSION_THERMAL:
+        return None
+    return THERMAL.unpack_from(data, COEF_OFFSET)
+
+
 def unpack_header(data: bytes) -> Dict[str, Any]:
     """The header fields of a record read back (no CRC check: see :func:`check`); ``image`` holds the image's
     settings (:data:`SETTING_KEYS`) when ``data`` reaches past them. An array's record (version 3) has its number
@@ -257,7 +288,7 @@ def check(data: bytes) -> bool:
         return False
     head = unpack_header(data)
     length = head["length"]
-    return (head["magic"] == MAGIC and head["version"] in (VERSION, VERSION_ARRAY) and HEADER.size + 2 <= length <= min(SIZE, len(data))
+    return (head["magic"] == MAGIC and head["version"] in (VERSION, VERSION_THERMAL, VERSION_ARRAY) and HEADER.size + 2 <= length <= min(SIZE, len(data))
             and struct.unpack_from("<H", data, length - 2)[0] == crc16(data[:length - 2]))
 
 

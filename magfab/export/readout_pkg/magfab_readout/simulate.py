@@ -13,6 +13,11 @@ For the acceptance test (``magfab-readout check``) the device runs a :class:`Res
 rest with the field magfab predicted (acceptance.json), and a weight placed on it with :meth:`SimulatedDevice.
 place_weight` raising Bz by the predicted nominal rise. ``scale`` stands for another magnet grade (the field is
 proportional to the remanence) and ``flipped`` for a magnet put in upside down (every component changes sign).
+
+Temperature: the chip reads 25 C with a slow +/-0.5 C wander unless ``temperature`` gives another course (a
+:class:`TemperatureRamp` or any ``t_s -> degC``); the field scales by (1 + a (T - T0)) per axis, a the
+calibration's own ``thermal`` coefficients (or ``thermal_per_C``), and the forces are what the firmware sends:
+the calibration at the field read, corrected with the temperature read when the calibration carries ``thermal``.
 """
 
 from __future__ import annotations
@@ -27,7 +32,7 @@ from .calibration import Calibration
 from .frames import (STATUS_CHIP_ERROR, STATUS_FULL_SCALE, STATUS_OUTSIDE_REGION, STATUS_RECOVERED,
                      encode_frame, encode_info_line, encode_text_line, line_checksum, temperature_C)
 
-__all__ = ["PressPattern", "RestTip", "SimulatedDevice"]
+__all__ = ["PressPattern", "RestTip", "SimulatedDevice", "TemperatureRamp"]
 
 #: The fault word of the simulated device's error samples: a NACK while reading (frames.FAULTS, FAULT_STAGES).
 SIMULATED_FAULT = 1 << 8 | 1
@@ -219,6 +224,27 @@ class RestTip:
         return 0.0, 0.0, sign * self.scale * (self.rest_Bz_uT + self.rise_uT(self.load_g))
 
 
+class TemperatureRamp:
+    """The chip's temperature: ``start_C`` until ``delay_s``, then rising linearly to ``end_C`` over
+    ``duration_s``, then held (a warm-up)."""
+
+    def __init__(self, start_C: float, end_C: float, duration_s: float, delay_s: float = 0.0) -> None:
+        if not (duration_s > 0 and delay_s >= 0):
+            raise ValueError("duration_s must be positive and delay_s at least 0; instead received {!r}, {!r}"
+                             .format(duration_s, delay_s))
+        self.start_C, self.end_C = float(start_C), float(end_C)
+        self.duration_s, self.delay_s = float(duration_s), float(delay_s)
+
+    def __call__(self, t_s: float) -> float:
+        x = min(1.0, max(0.0, (t_s - self.delay_s) / self.duration_s))
+        return self.start_C + x * (self.end_C - self.start_C)
+
+
+def _wander(t_s: float) -> float:
+    """The default course: 25 C with a +/-0.5 C wander over a minute."""
+    return 25.0 + 0.5 * math.sin(2 * math.pi * t_s / 60.0)
+
+
 def _clamp16(x: float) -> int:
     return max(-32768, min(32767, int(round(x))))
 
@@ -232,7 +258,9 @@ class SimulatedDevice:
     (NaN forces) followed by a recovered flag. ``spec_name`` and ``calibration_hash`` set what the info line
     reports (by default what this package embeds). ``pattern`` is what moves the field (anything with
     ``field(t_s) -> (Bx, By, Bz)`` in uT): by default a :class:`PressPattern` over the calibrated region; a
-    :class:`RestTip` for the acceptance test.
+    :class:`RestTip` for the acceptance test. ``temperature`` (``t_s -> degC``, e.g. a :class:`TemperatureRamp`)
+    is the chip's temperature and ``thermal_per_C`` (one value or (x, y, z), 1/degC) how the field follows it,
+    from the calibration's ``reference_C`` (default: the calibration's own coefficients, none without ``thermal``).
     """
 
     port = "the simulated device"
@@ -241,7 +269,7 @@ class SimulatedDevice:
                  rate_Hz: float = _build.SAMPLE_RATE_HZ, realtime: bool = True, text: Optional[bool] = None,
                  noise_lsb: float = 0.7, corrupt_fraction: float = 0.0, chip_error_every: int = 0,
                  chunk: int = 64, spec_name: str = _build.SPEC_NAME, calibration_hash: Optional[str] = None,
-                 pattern=None) -> None:
+                 pattern=None, temperature=None, thermal_per_C=None) -> None:
         if not rate_Hz > 0:
             raise ValueError("rate_Hz must be positive; instead received {!r}".format(rate_Hz))
         if not 0.0 <= corrupt_fraction <= 1.0:
@@ -253,6 +281,13 @@ class SimulatedDevice:
         margin = REST_MARGIN_SIGMAS * noise_lsb * max(_build.LSB_XY_UT, _build.LSB_Z_UT)
         self.pattern = pattern if pattern is not None else PressPattern(self.calibration, margin_uT=margin)
         self.rate_Hz = float(rate_Hz)
+        self.temperature = temperature if temperature is not None else _wander
+        thermal = self.calibration.thermal
+        self.reference_C = thermal.reference_C if thermal is not None else 25.0
+        if thermal_per_C is None:
+            thermal_per_C = thermal.coefficient_per_C if thermal is not None else 0.0
+        self.thermal_per_C = tuple(float(a) for a in (
+            thermal_per_C if isinstance(thermal_per_C, (tuple, list)) else (thermal_per_C,) * 3))
         self.period_us = int(round(1e6 / self.rate_Hz))
         self.realtime = realtime
         self.text = (_build.OUTPUT == "text") if text is None else bool(text)
@@ -369,7 +404,9 @@ class SimulatedDevice:
             if self.text:
                 return encode_text_line(seq, t_us, status, (nan, nan, nan), (nan, nan, nan), None, SIMULATED_FAULT)
             return encode_frame(seq, t_us, status, (0, 0, 0), SIMULATED_FAULT, (nan, nan, nan))
-        Bx, By, Bz = self.pattern.field(t_s)
+        T = self.temperature(t_s)
+        Bx, By, Bz = (b * (1.0 + a * (T - self.reference_C))
+                      for b, a in zip(self.pattern.field(t_s), self.thermal_per_C))
         lsb_xy, lsb_z = _build.LSB_XY_UT, _build.LSB_Z_UT
         counts = (_clamp16(Bx / lsb_xy + self._noise.gauss(0.0, self.noise_lsb)),
                   _clamp16(By / lsb_xy + self._noise.gauss(0.0, self.noise_lsb)),
@@ -377,13 +414,14 @@ class SimulatedDevice:
         if max(abs(c) for c in counts) >= _build.FULL_SCALE_COUNTS:
             status |= STATUS_FULL_SCALE
         B = (counts[0] * lsb_xy, counts[1] * lsb_xy, counts[2] * lsb_z)
-        if not self.calibration.in_region_B(*B):
-            status |= STATUS_OUTSIDE_REGION
-        force = self.calibration.evaluate(*B, method="poly")  # what the firmware computes
         if _build.TEMPERATURE_ENABLED:
-            t_raw = int(round(_build.TEMPERATURE_RAW_25C + _build.TEMPERATURE_LSB_PER_C * 0.5 * math.sin(2 * math.pi * t_s / 60.0)))
+            t_raw = max(0, min(0xFFFF, int(round(_build.TEMPERATURE_RAW_25C + _build.TEMPERATURE_LSB_PER_C * (T - 25.0)))))
         else:
             t_raw = 0
+        read_C = temperature_C(t_raw) if _build.TEMPERATURE_ENABLED else None
+        if not self.calibration.in_region_B(*self.calibration.corrected(*B, temperature_C=read_C)):
+            status |= STATUS_OUTSIDE_REGION
+        force = self.calibration.evaluate(*B, method="poly", temperature_C=read_C)  # what the firmware computes
         if self.text:
             temp = temperature_C(t_raw) if _build.TEMPERATURE_ENABLED else None
             return encode_text_line(seq, t_us, status, force, B, temp)

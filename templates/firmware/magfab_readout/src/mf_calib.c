@@ -1,5 +1,6 @@
 /* Calibration evaluation from the EEPROM record: see mf_calib.h. The record's scalars and coefficients are copied
- * to RAM when it is loaded (every sample needs all of them; 360 B at order 8); the hull tables are read from
+ * to RAM when it is loaded (every sample needs all of them; 360 B at order 8; a version-4 record's thermal block
+ * 16 B more); the hull tables are read from
  * EEPROM as the region test needs them (a few entries per reading, and only near the region's edge). */
 #include "mf_calib.h"
 
@@ -27,9 +28,12 @@ static struct {
     uint16_t name_at; /* and of the spec name */
     uint8_t name_len;
     uint8_t taxels; /* an array's record (version 3): its chips; 0 for a single taxel's */
+    uint8_t thermal; /* a version-4 record: the field is corrected for temperature before the calibration */
+    float t0_C;      /* the calibration's temperature */
+    float a_per_C[3]; /* per axis: the magnet's remanence coefficient plus the chip's sensitivity drift */
     float f[N_FLOATS];
     float coef[(MF_CAL_MAX_ORDER + 1) * (MF_CAL_MAX_ORDER + 2)]; /* the Horner rows, as in the record */
-} cal = {MF_E_CALIB, 0, 0, 0, 0, 0, 0, 0, {0}, {0}};
+} cal = {MF_E_CALIB, 0, 0, 0, 0, 0, 0, 0, 0, 0.0f, {0}, {0}, {0}};
 
 static uint16_t record_crc(uint16_t len)
 {
@@ -132,24 +136,28 @@ static int load_array(uint16_t len, uint8_t name_len)
 
 int mf_calib_load(void)
 {
+    uint8_t version = mf_nv_byte(2);
     uint8_t order = mf_nv_byte(3);
     uint16_t len = mf_nv_u16(4);
     uint16_t n = mf_nv_u16(6);
     uint8_t name_len = mf_nv_byte(MF_CAL_IMAGE_AT + 5);
     uint16_t n_coef = (uint16_t)((order + 1U) * (order + 2U) / 2U);
-    uint16_t fan_at = (uint16_t)(MF_CAL_COEF_AT + 8U * n_coef);
+    uint16_t coef_at = (uint16_t)(MF_CAL_COEF_AT + (version == MF_CAL_VERSION_THERMAL ? MF_CAL_THERMAL_LEN : 0U));
+    uint16_t fan_at = (uint16_t)(coef_at + 8U * n_coef);
     uint16_t k;
     cal.status = MF_E_CALIB;
     cal.taxels = 0;
+    cal.thermal = 0;
 #if MF_GENERIC
     mf_set.ubrr = MF_FALLBACK_UBRR; /* what the UART starts with, unless a valid record says otherwise */
     mf_set.baud = MF_FALLBACK_BAUD;
 #endif
-    if (mf_nv_byte(0) == MF_CAL_MAGIC0 && mf_nv_byte(1) == MF_CAL_MAGIC1 && mf_nv_byte(2) == MF_CAL_VERSION_ARRAY
+    if (mf_nv_byte(0) == MF_CAL_MAGIC0 && mf_nv_byte(1) == MF_CAL_MAGIC1 && version == MF_CAL_VERSION_ARRAY
         && len <= MF_NV_SIZE && len >= MF_CAL_ADDR_AT + 3U && name_len <= MF_CAL_NAME_MAX) {
         return load_array(len, name_len);
     }
-    if (mf_nv_byte(0) != MF_CAL_MAGIC0 || mf_nv_byte(1) != MF_CAL_MAGIC1 || mf_nv_byte(2) != MF_CAL_VERSION
+    if (mf_nv_byte(0) != MF_CAL_MAGIC0 || mf_nv_byte(1) != MF_CAL_MAGIC1
+        || (version != MF_CAL_VERSION && version != MF_CAL_VERSION_THERMAL)
         || order > MF_CAL_MAX_ORDER || n < 3 || n > 200 || len > MF_NV_SIZE || name_len > MF_CAL_NAME_MAX
         || len != (uint16_t)(fan_at + 20U * n + name_len + 2U)
         || record_crc((uint16_t)(len - 2)) != mf_nv_u16((uint16_t)(len - 2))) {
@@ -162,7 +170,14 @@ int mf_calib_load(void)
         cal.f[k] = mf_nv_float((uint16_t)(MF_CAL_FLOATS_AT + 4U * k));
     }
     for (k = 0; k < 2U * n_coef; ++k) {
-        cal.coef[k] = mf_nv_float((uint16_t)(MF_CAL_COEF_AT + 4U * k));
+        cal.coef[k] = mf_nv_float((uint16_t)(coef_at + 4U * k));
+    }
+    if (version == MF_CAL_VERSION_THERMAL) {
+        cal.t0_C = mf_nv_float(MF_CAL_COEF_AT);
+        for (k = 0; k < 3U; ++k) {
+            cal.a_per_C[k] = mf_nv_float((uint16_t)(MF_CAL_COEF_AT + 4U + 4U * k));
+        }
+        cal.thermal = 1;
     }
     cal.order = order;
     cal.hull_n = n;
@@ -276,7 +291,14 @@ void mf_calib_forces(mf_sample_t *s)
     float bx = s->b_uT[0];
     float by = s->b_uT[1];
     float bz = s->b_uT[2];
-    float br = sqrtf(bx * bx + by * by);
+    float br;
+    if (cal.thermal && s->t_C == s->t_C) { /* the field as at the calibration's temperature: B / (1 + a (T - T0)) */
+        float dt = s->t_C - cal.t0_C;
+        bx /= 1.0f + cal.a_per_C[0] * dt;
+        by /= 1.0f + cal.a_per_C[1] * dt;
+        bz /= 1.0f + cal.a_per_C[2] * dt;
+    }
+    br = sqrtf(bx * bx + by * by);
     float fz, fr;
     poly((bz - cal.f[BZ_CENTER]) * cal.f[BZ_INV_SCALE], (br - cal.f[BR_CENTER]) * cal.f[BR_INV_SCALE], &fz, &fr);
     fz -= cal.f[TARE_FZ];

@@ -1,5 +1,6 @@
 /* The force calibration (calibration.json, eq. 12-14 of the brief) evaluated in float32 from the calibration
  * record in EEPROM (docs/bundle.md section 4, mf_nv.h):
+ *   B_k <- B_k / (1 + a_k (T - T0)) for k in x, y, z (a version-4 record with the sample's temperature converted),
  *   Br = sqrt(Bx^2 + By^2), u = (Bz - c_z) / s_z, v = (Br - c_r) / s_r,
  *   F = sum c_ij u^i v^j (Horner form) - tare, for F in Fz, Fr,
  *   Fx = shear_sign Fr Bx / Br, Fy = shear_sign Fr By / Br (0 when Br < direction_min_uT),
@@ -21,6 +22,7 @@ extern "C" {
 #define MF_CAL_MAGIC0 'M'
 #define MF_CAL_MAGIC1 'F'
 #define MF_CAL_VERSION 2
+#define MF_CAL_VERSION_THERMAL 4 /* version 2 with the thermal block at MF_CAL_COEF_AT, the Horner rows after it */
 #define MF_CAL_VERSION_ARRAY 3 /* an array's record: the settings, the chips' addresses, no calibration */
 #define MF_CAL_ADDR_AT 92      /* an array record's chip addresses, one byte each in taxel order */
 #define MF_MAX_TAXELS 16
@@ -29,6 +31,7 @@ extern "C" {
 #define MF_CAL_IMAGE_AT 28   /* the image's settings: mf_settings_t's fields in order, packed */
 #define MF_CAL_FLOATS_AT 92
 #define MF_CAL_COEF_AT 164
+#define MF_CAL_THERMAL_LEN 16 /* version 4: T0 (degC), then a_x, a_y, a_z (1/degC), float32 each */
 #define MF_CAL_MAX_ORDER 8
 #define MF_CAL_NAME_MAX 64
 
@@ -47,7 +50,8 @@ uint8_t mf_calib_setting(uint8_t k);
 /* The spec name's length in bytes and byte k of it (empty without a valid record). */
 uint8_t mf_calib_name_len(void);
 char mf_calib_name(uint8_t k);
-/* Forces of a converted sample (b_uT set); adds MF_FLAG_OUTSIDE outside the calibrated region. Only with a
+/* Forces of a converted sample (b_uT set, left as read); adds MF_FLAG_OUTSIDE outside the calibrated region. A
+ * version-4 record's thermal correction applies when the sample carries a temperature (t_C not NaN). Only with a
  * valid record (mf_calib_status() == MF_OK). */
 void mf_calib_forces(mf_sample_t *s);
 /* 1 when (Bz, Br) in microtesla lies in the calibrated region: inside the box and the hull, edges included. */
