@@ -213,11 +213,12 @@ def temperature_error_mN(channel: Channel, force_N: object, dT_C: object, *, alp
 
 def _sensor_error_C(c: Coefficients, t_C: np.ndarray, t_cal_C: float, bow: float) -> np.ndarray:
     """The temperature reading's error relative to the calibration temperature, C: TLIN as a parabola over the
-    operating range whose best-fit line leaves +/-TLIN (``bow`` +/-1 picks its sign), plus half an LSB."""
+    operating range whose best-fit line leaves +/-TLIN, plus half an LSB, both at their worst (``bow`` +/-1 picks
+    the sign)."""
     lo, hi = c.operating_C
     mid, half = (lo + hi) / 2.0, (hi - lo) / 2.0
     x, x0 = (t_C - mid) / half, (t_cal_C - mid) / half
-    return bow * (2.0 * c.sensor_linearity_C * (x**2 - x0**2) + 0.5 * c.sensor_step_C)
+    return bow * (2.0 * c.sensor_linearity_C * np.abs(x**2 - x0**2) + 0.5 * c.sensor_step_C)
 
 
 def _corners(c: Coefficients, offset_G_per_C: float, lag_C: float, fitted: bool = False) -> np.ndarray:

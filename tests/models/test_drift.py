@@ -197,3 +197,27 @@ def test_given_coefficients_give_the_simulated_runs_error(pred):
     assert np.all(np.abs(off[[0, 2]]) <= bound[np.isin(t, [20.0, 30.0])])
     doc = pred.as_json()["drift"]
     assert doc["rotation"]["field_over_noise_z"] == pytest.approx(1.3 / pred.noise.total_z_G)
+
+
+def test_the_worst_case_bounds_every_draw_within_the_bands(design, pred):
+    """Coefficients drawn anywhere in their bands (magnet alpha, chip sensitivity and offset, lag, temperature
+    reading error) never exceed the budget's compensated bound at any temperature of the span, and come close."""
+    c = D.coefficients(design)
+    t = pred.drift.temperature
+    temps = np.asarray(t.temperatures_C)
+    dT = temps - t.calibration_C
+    ch = D.normal_channel(pred)
+    rng = np.random.default_rng(7)
+    n = 400
+    alpha = rng.uniform(*c.magnet_spread_pct_per_C, size=(n, 1))
+    sens = rng.uniform(-1, 1, size=(n, 1)) * c.chip_sensitivity_pct_per_C
+    offset = rng.uniform(-1, 1, size=(n, 1)) * c.chip_offset_z_G_per_C
+    lag = rng.uniform(-1, 1, size=(n, 1)) * D.environment(design).temperature_lag_C
+    lo, hi = c.operating_C
+    x, x0 = (temps - (lo + hi) / 2) / ((hi - lo) / 2), (t.calibration_C - (lo + hi) / 2) / ((hi - lo) / 2)
+    reading = rng.uniform(-1, 1, size=(n, 1)) * (2 * c.sensor_linearity_C * np.abs(x**2 - x0**2) + 0.5 * c.sensor_step_C)
+    err = D.temperature_error_mN(ch, 0.0, dT, alpha_pct=alpha, sensitivity_pct=sens, offset_G_per_C=offset,
+                                 magnet_dT_C=dT + lag, compensation=(c.magnet_pct_per_C, dT + reading))
+    bound = np.abs(np.asarray(t.span["normal_rest"]["with"]))
+    assert np.all(np.abs(err) <= bound * (1 + 1e-9))
+    assert np.max(np.abs(err)) > 0.6 * np.max(bound)
