@@ -166,6 +166,13 @@ class Design:
             return self.array.taxels
         return (Taxel(0, 0.0, 0.0, 1, self.i2c_address, self.spec.sensor.option_code, self.address_straps),)
 
+    @cached_property
+    def reference(self):
+        """The reference chip (``[reference]``, :mod:`magfab.reference_chip`), or None."""
+        from .reference_chip import reference_chip
+
+        return reference_chip(self)
+
     @property
     def continuous(self) -> bool:
         """True for one cast skin holding every magnet."""
@@ -331,6 +338,7 @@ def derive(spec: Spec) -> Design:
         fields["alignment_holes"] = _array_holes(spec, fields)
     fields.update(_mould(spec, printer, part, pocket["core_base_radius_mm"], fields.get("array")))
     design = Design(spec=spec, printer=printer, chip=chip, **fields)
+    design.reference  # its address and site, refused here (check and build) rather than in the board's branch
     check_limits(design)  # what the build would cost, before any of it: check and build both refuse
     return design
 

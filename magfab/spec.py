@@ -421,6 +421,17 @@ class Environment(_Section):
         return self
 
 
+class Reference(_Section):
+    """A reference MLX90393 on the board that no magnet moves: its reading subtracted in the firmware rejects a
+    stray field that is the same at both chips (the Earth's as the sensor turns, a far motor's). Omit the section
+    for none."""
+
+    distance_mm: Optional[float] = Field(
+        None, gt=0.0, le=200.0, description="From the taxels (the hull's edge) to the reference chip along +y, mm; "
+        "omit: the nearest point where no magnet's press or slide moves the field there by more than the chip's "
+        "noise (computed; MagOne: 42.5 mm), the board made taller to hold it.")
+
+
 class Build(_Section):
     """Build options."""
 
@@ -446,11 +457,13 @@ class Spec(_Section):
     array: Optional[Array] = Field(None, description="Several taxels on one board (omit for one).")
     environment: Optional[Environment] = Field(
         None, description="Where the sensor is used, for the drift prediction (omit: a lab bench).")
+    reference: Optional[Reference] = Field(
+        None, description="A reference chip for stray-field rejection (omit for none).")
 
     def dump(self) -> dict[str, Any]:
         """Every key, defaults included, as JSON values (spec.json); a single taxel has no ``array`` key and a spec
         without ``[environment]`` none either, so its spec, hash and build are what they were before those existed."""
-        unset = {name for name in ("array", "environment") if getattr(self, name) is None}
+        unset = {name for name in ("array", "environment", "reference") if getattr(self, name) is None}
         return self.model_dump(mode="json", exclude=unset or None)
 
     def canonical_json(self) -> str:

@@ -21,7 +21,7 @@ from .layout import (GROUND, HOLE_CLEARANCE_MM, ORIGIN, PAD_KEEPOUT_MARGIN_MM, S
 from .plan import ORDER_CODE
 from .route import distance
 
-__all__ = ["place", "label", "wrap", "pad_hull"]
+__all__ = ["place", "label", "wrap", "pad_hull", "board_size_mm"]
 
 
 def _chip_nets(design: Design, fp: Footprint, straps: tuple[int, int] | None = None, ref: str = "U1") -> dict[str, str]:
@@ -52,7 +52,7 @@ def place(design: Design) -> tuple[list[Placed], Box, tuple[float, float, float]
     pcb = design.spec.pcb
     ox, oy = ORIGIN
     hw, hh = pcb.width_mm / 2, pcb.height_mm / 2
-    outline = (ox - hw, oy - hh, ox + hw, oy + hh)
+    outline = (ox - hw, oy - hh - _reference_room(design), ox + hw, oy + hh)
     if design.array is not None:
         _array_fits(design, hw, hh)
     for key, half in (("pcb.width_mm", hw), ("pcb.height_mm", hh)):
@@ -60,14 +60,14 @@ def place(design: Design) -> tuple[list[Placed], Box, tuple[float, float, float]
             raise SpecError(key, 2 * half, f"must be at least {2 * (design.pad_radius_mm + PAD_KEEPOUT_MARGIN_MM):g} mm "
                             f"so the {2 * design.pad_radius_mm:g} mm mounting pad fits on the board")
     qfn = qfn_footprint(design.chip, pcb.density, clearance=pcb.clearance_mm)
-    placed = _chips(design, qfn)
+    placed = _chips(design, qfn) + _reference(design, qfn)
     gap = _land_gap(placed[0])
     if pcb.clearance_mm > gap + 1e-9:
         raise SpecError("pcb.clearance_mm", pcb.clearance_mm,
                         f"must be at most {gap:g} mm: the MLX90393's lands at density {pcb.density.value} are "
                         f"{gap:g} mm apart, so no board could meet a larger clearance")
     chips = len(placed)
-    placed += _holes(design)
+    placed += _holes(design, outline)
     j1 = _connector(design, outline, placed, chips)
     placed.append(j1)
     placed += _passives(design, qfn, j1, placed[:chips])
@@ -104,7 +104,36 @@ def _chips(design: Design, qfn: Footprint) -> list[Placed]:
             for t in design.taxels]
 
 
-def _holes(design: Design) -> list[Placed]:
+#: Above the reference chip's centre, to the board's top edge: its courtyard and the decoupling capacitor on the
+#: bottom (3.4 mm), then the silk label's three lines at 1 mm and the fabs' silk margin (5.6 mm), mm.
+REFERENCE_TOP_MM = 9.0
+
+
+def _reference_room(design: Design) -> float:
+    """How far the board's top edge moves up (mm) so the reference chip and the label above it fit: 0 without one."""
+    ref = design.reference
+    if ref is None:
+        return 0.0
+    return max(0.0, ref.y_mm + REFERENCE_TOP_MM - design.spec.pcb.height_mm / 2)
+
+
+def board_size_mm(design: Design) -> tuple[float, float]:
+    """The board's width and height, mm: the spec's, taller by what the reference chip needs."""
+    pcb = design.spec.pcb
+    return pcb.width_mm, round(pcb.height_mm + _reference_room(design), 3)
+
+
+def _reference(design: Design, qfn: Footprint) -> list[Placed]:
+    """The reference chip (:mod:`magfab.reference_chip`) where the magnets leave the field quiet, or nothing."""
+    ref = design.reference
+    if ref is None:
+        return []
+    ox, oy = ORIGIN
+    return [Placed(ref.designator, ORDER_CODE.format(ref.option_code), qfn, round(ox + ref.x_mm, 6),
+                   round(oy - ref.y_mm, 6), nets=_chip_nets(design, qfn, ref.address_straps, ref.designator))]
+
+
+def _holes(design: Design, outline: Box) -> list[Placed]:
     """The pad's alignment holes (dowel pins) at the pad's own positions, then the screw holes in the
     corners of the top edge."""
     pcb = design.spec.pcb
@@ -118,9 +147,9 @@ def _holes(design: Design) -> list[Placed]:
         d = pcb.mounting_hole_diameter_mm
         fp = hole_footprint(d, f"MountingHole_{d:g}mm", keepout=max(head / 2 - d / 2, 0.0) + 0.25)
         inset = pcb.mounting_hole_inset_mm
-        hw, hh = pcb.width_mm / 2, pcb.height_mm / 2
+        hw = pcb.width_mm / 2
         for k, sx in enumerate((-1, 1)):
-            out.append(Placed(f"H{k + 3}", "M2 screw", fp, round(ox + sx * (hw - inset), 6), round(oy - hh + inset, 6)))
+            out.append(Placed(f"H{k + 3}", "M2 screw", fp, round(ox + sx * (hw - inset), 6), round(outline[1] + inset, 6)))
     return out
 
 
@@ -217,6 +246,8 @@ def label(design: Design, outline: Box, parts: list[Placed], circle: tuple[float
         arr = design.spec.array
         shape = f"{arr.rows}x{arr.cols}" if arr.positions_mm is None else f"{len(t)}-taxel"
         address = f"{shape} array: MLX90393 0x{t[0].i2c_address:02X}-0x{t[-1].i2c_address:02X}"
+    if design.reference is not None:  # the address that is not a taxel's, said to be the reference's
+        address = address.replace(" I2C", "") + f", ref 0x{design.reference.i2c_address:02X}"
     name = design.spec.name
     pad_top = min(y for _, y in pad_hull(design)) - circle[2]
     room = pad_top - (y0 + edge + 0.5)  # fabs clip silk within ~0.5 mm of the edge

@@ -8,6 +8,7 @@ import io
 import math
 from typing import TYPE_CHECKING, Mapping
 
+from ..board.placement import board_size_mm
 from ..recipes import catalogue
 
 if TYPE_CHECKING:
@@ -44,17 +45,22 @@ def _chip_rows(design: "Design") -> list[dict[str, object]]:
     of more than four chips orders two or more codes (the address plan of design.json)."""
     n = design.spec.fabrication.sensors
     source = "Melexis MLX90393 datasheet, ordering information; recipes/chips.toml"
+    ref = design.reference
+    extra = [] if ref is None else [_row(
+        "Hall sensor IC", f"MLX90393SLW-ABA-{ref.option_code}-RE", f"Melexis MLX90393, QFN-16 3x3 mm, option code "
+        f"{ref.option_code}: {ref.designator}, the reference chip (0x{ref.i2c_address:02X}, reads stray fields, no magnet)",
+        n, "pcs", source)]
     if design.array is None:
         code = design.spec.sensor.option_code
         return [_row("Hall sensor IC", f"MLX90393SLW-ABA-{code}-RE", f"Melexis MLX90393, QFN-16 3x3 mm, option code "
-                     f"{code} (I2C base for address 0x{design.i2c_address:02X})", n, "pcs", source)]
+                     f"{code} (I2C base for address 0x{design.i2c_address:02X})", n, "pcs", source)] + extra
     rows = []
     for code in design.array.option_codes:
         chips = [t for t in design.taxels if t.option_code == code]
         where = ", ".join(f"U{t.index + 1} (taxel {t.index}, 0x{t.i2c_address:02X})" for t in chips)
         rows.append(_row("Hall sensor IC", f"MLX90393SLW-ABA-{code}-RE", f"Melexis MLX90393, QFN-16 3x3 mm, option "
                          f"code {code}: {where}", len(chips) * n, "pcs", source))
-    return rows
+    return rows + extra
 
 
 def _sensor_rows(design: "Design") -> list[dict[str, object]]:
@@ -72,6 +78,8 @@ def _sensor_rows(design: "Design") -> list[dict[str, object]]:
     mag = magnet_recipe(design)
     coating = mag.texts.get("coating", "") if mag is not None else ""
     taxels = len(design.taxels)
+    chips = taxels + (design.reference is not None)
+    width, height = board_size_mm(design)
     rows = _chip_rows(design) + [
         _row("Magnet", f"NdFeB {spec.magnet.grade} disc {spec.magnet.diameter_mm:g} x {spec.magnet.height_mm:g} mm",
              "axially magnetised" + (f", {coating} coated" if coating else "")
@@ -88,7 +96,7 @@ def _sensor_rows(design: "Design") -> list[dict[str, object]]:
              "recipes/adhesives.toml " + release.key),
         _row("Sealer", "clear acrylic spray", "barrier coat in the mould's cavities against cure inhibition", 1, "can",
              "recipes/printers.toml barrier_coat (Smooth-On FAQ 129)"),
-        _row("PCB", f"{spec.name} breakout {pcb.width_mm:g} x {pcb.height_mm:g} mm",
+        _row("PCB", f"{spec.name} breakout {width:g} x {height:g} mm",
              f"2 layers, {pcb.thickness_mm:g} mm FR-4, from pcb/gerbers", n, "pcs", "pcb/gerbers (this build)"),
         _row("Stencil", f"top-side solder-paste stencil, {stencil['thickness_mm'].nominal:g} mm stainless",
              "laser-cut from pcb/gerbers F_Paste, for the chip", 1, "pcs",
@@ -97,8 +105,8 @@ def _sensor_rows(design: "Design") -> list[dict[str, object]]:
              _PASTE_UNIT, "recipes/assembly.toml stencil.paste (Silicon Labs QFN stencil note 9)"),
         _row("Solder wire", catalogue("bench")["solder-wire"].name, "the bottom-side parts, by hand", 1, "reel",
              "recipes/bench.toml solder-wire"),
-        _row("Capacitor", "100 nF 0603 X7R", "C1, C2: VDD and VDDIO decoupling" if taxels == 1 else
-             f"VDD and VDDIO decoupling, two per chip (C1-C{2 * taxels})", 2 * taxels * n, "pcs",
+        _row("Capacitor", "100 nF 0603 X7R", "C1, C2: VDD and VDDIO decoupling" if chips == 1 else
+             f"VDD and VDDIO decoupling, two per chip (C1-C{2 * chips})", 2 * chips * n, "pcs",
              "pcb/ (this build): one on each supply pin"),
     ]
     if pcb.pullups:

@@ -13,6 +13,7 @@ import re
 from dataclasses import asdict, dataclass
 from typing import TYPE_CHECKING, Mapping
 
+from ..board.placement import board_size_mm
 from ..errors import Finding, Severity, SpecError
 from ..recipes import Recipe, catalogue
 from .bom import bom_csv, bom_rows, indenter_disc_mm, magnet_recipe  # bom_*: re-exported: pipeline.py writes bom.csv through this module
@@ -318,7 +319,7 @@ def _solder_section(design: "Design") -> Section:
     coverage = catalogue("land")["tolerances"]["ep_paste_coverage"].nominal
     wire = catalogue("bench")["solder-wire"]
     return _section("Solder the board", [
-        f"Order the board from pcb/gerbers ({spec.pcb.width_mm:g} x {spec.pcb.height_mm:g} mm, 2 layers, "
+        f"Order the board from pcb/gerbers ({' x '.join(f'{v:g}' for v in board_size_mm(design))} mm, 2 layers, "
         f"{spec.pcb.thickness_mm:g} mm) with a {stencil['thickness_mm'].nominal:g} mm stencil for the top side (the "
         f"F_Paste layer). {_t(stencil, 'perimeter_aperture')}",
         f"{_t(stencil, 'paste')} The chip's exposed pad gets its paste in four apertures ({coverage * 100:.0f} % "

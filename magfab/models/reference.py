@@ -22,8 +22,8 @@ What it rejects.
   at opposite ends of that band, so the mismatch taken is twice SENSTHD (an assumption: the bench's rotation
   step measures the real one), and the ratio ``1 / (mismatch + cross-axis)``, worst case.
 * A dipole (a motor, a steel part) at distance D from the sensing chip: the exact difference of its field at the two
-  chips (magpylib's ``Dipole``), at the orientation of its moment and the direction from the board that make it
-  worst, and the median over them. For D much larger than the separation s the ratio is about D / (3 s); for D
+  chips (:func:`magfab.models.drift.dipole_field_G`, tested against magpylib's ``Dipole``), at the orientation of
+  its moment and the direction from the board that make it worst, and the median over them. For D much larger than the separation s the ratio is about D / (3 s); for D
   comparable to s the reference reads a different field and subtracting it can make the error larger (a ratio
   below 1): the finding says so.
 
@@ -37,7 +37,7 @@ Units: lengths mm, fields gauss (the field models' unit), moments A m^2.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -49,7 +49,7 @@ if TYPE_CHECKING:
     from ..design import Design
     from .predict import Prediction
 
-__all__ = ["Site", "Rejection", "Travel", "site", "rejection", "dipole_field_G", "REFERENCE_SHIFT", "noise_growth"]
+__all__ = ["Site", "Rejection", "Travel", "site", "rejection", "budget", "findings", "REFERENCE_SHIFT", "noise_growth"]
 
 #: The firmware's reference filter: an exponential average with weight 2**-REFERENCE_SHIFT per reading.
 REFERENCE_SHIFT = 3
@@ -194,16 +194,6 @@ def site(design: "Design", travel: Travel, span_C: float, distance_mm: float | N
                 tuple(limit))
 
 
-def dipole_field_G(moments_Am2: np.ndarray, at_mm: np.ndarray, point_mm: np.ndarray) -> np.ndarray:
-    """(..., 3) field in G at ``point_mm`` (3,) of point dipoles of moments ``moments_Am2`` (..., 3) A m^2 at
-    ``at_mm`` (..., 3) mm: B = mu0 / 4 pi (3 (m . r) r / r^5 - m / r^3) (tests: against magpylib's Dipole)."""
-    r = (np.asarray(point_mm, float) - np.asarray(at_mm, float)) / 1000.0
-    m = np.asarray(moments_Am2, float)
-    d = np.linalg.norm(r, axis=-1, keepdims=True)
-    b = 1e-7 * (3.0 * np.sum(m * r, axis=-1, keepdims=True) * r / d**5 - m / d**3)
-    return b * 1e4
-
-
 def _directions(n: int) -> np.ndarray:
     """``n`` unit vectors spread over the sphere (a Fibonacci lattice)."""
     k = np.arange(n) + 0.5
@@ -217,6 +207,8 @@ def rejection(design: "Design", where: Site,
               distances_mm: tuple[float, ...] = (30.0, 60.0, 100.0, 300.0, 1000.0)) -> Rejection:
     """The predicted rejection ratios (module doc) for a reference at ``where``: a uniform field, and a dipole at each
     of ``distances_mm`` from the sensing chip (taxel 0's), worst over its direction and orientation."""
+    from .drift import dipole_field_G
+
     chip = catalogue("chips")[design.spec.sensor.chip]
     drift = chip["sensitivity_drift_pct"]
     mismatch = 2.0 * max(abs(drift.low), abs(drift.high)) / 100.0
@@ -237,3 +229,66 @@ def rejection(design: "Design", where: Site,
         medians.append(float(np.median(ratio)))
     return Rejection(1.0 / (mismatch + cross), mismatch, cross, tuple(float(d) for d in distances_mm),
                      tuple(ratios), tuple(medians), noise_growth())
+
+
+def budget(design: "Design", pred: "Prediction", drift_budget) -> dict[str, object] | None:
+    """predictions.json's ``reference``: the placed chip, what the magnets do there at the predicted travel, the
+    predicted rejection, and the drift budget's rotation and stray errors left after it (mN); None without one."""
+    from .drift import rotation_error, stray_error
+
+    chip = design.reference
+    if chip is None:
+        return None
+    env = drift_budget.conditions
+    span = float(env["temperature_max_C"]) - float(env["temperature_min_C"])
+    placed = site(design, Travel.predicted(design, pred), span, distance_mm=chip.distance_mm)
+    distances = (30.0, 100.0, 300.0, 1000.0)
+    stray_mm = float(env["stray_distance_mm"])
+    rej = rejection(design, placed, tuple(sorted(set(distances) | {stray_mm})))
+    turned = replace(rotation_error(design, pred, field_G=float(env["earth_field_G"]) / rej.uniform),
+                     what=f"{drift_budget.rotation.what}, the reference subtracted ({rej.uniform:.0f}x)")
+    out: dict[str, object] = {
+        "chip": chip.as_dict(), "site": placed.as_json(), "rejection": rej.as_json(),
+        "quiet": bool(placed.motion_G[0] <= placed.noise_G[0] and placed.motion_G[1] <= placed.noise_G[1]),
+        "rotation": {"without": drift_budget.rotation.as_json(), "with": turned.as_json()},
+        "stray": None}
+    if drift_budget.stray is not None:
+        k = rej.dipole_mm.index(stray_mm)
+        moment = float(env["stray_moment_Am2"])
+        left = {}
+        for name, ratio in (("with_median", rej.dipole_median[k]), ("with_worst", rej.dipole[k])):
+            left[name] = replace(stray_error(design, pred, moment / ratio, stray_mm), what=(
+                f"{drift_budget.stray.what}, the reference subtracted ({ratio:.2g}x, {name[5:]} over its "
+                "direction and orientation)")).as_json()
+        out["stray"] = {"without": drift_budget.stray.as_json(), **left}
+    return out
+
+
+def findings(design: "Design", section: dict[str, object] | None) -> list:
+    """The reference chip as findings: a warning when the magnets are heard at its place (it would subtract the
+    taxels' own presses), info with what it rejects otherwise."""
+    from ..errors import Finding, Severity
+
+    if section is None:
+        return []
+    chip, where, rej = section["chip"], section["site"], section["rejection"]
+    motion, noise_G = where["motion_G"], where["noise_G"]
+    if not section["quiet"]:
+        quiet = site(design, Travel.bound(design), 0.0)
+        return [Finding(Severity.WARNING, "reference-loud",
+                        f"the magnets move the field at the reference chip {chip['designator']} "
+                        f"({chip['distance_mm']:g} mm beyond the taxels) by up to {motion[0]:.2f} G (x/y) and "
+                        f"{motion[1]:.2f} G (z), above the chip's {noise_G[0]:.2f} / {noise_G[1]:.2f} G noise: its "
+                        "subtraction would take part of each press with it; at least "
+                        f"{quiet.xy_mm[1] - max(t.y_mm for t in design.taxels):g} mm (or omit distance_mm)",
+                        "reference.distance_mm")]
+    turned = section["rotation"]
+    near = [d for d in rej["dipole"] if d["median"] < 1.0]
+    return [Finding(Severity.INFO, "reference",
+                    f"reference chip {chip['designator']} (0x{chip['i2c_address']:02X}) {chip['separation_mm']:g} mm from "
+                    f"the sensing chip, where the magnets move the field by at most {max(motion):.2f} G: a uniform "
+                    f"field is rejected {rej['uniform']:.0f}x (turning the sensor: "
+                    f"{abs(turned['without']['normal_rest_mN']):.1f} -> {abs(turned['with']['normal_rest_mN']):.1f} mN "
+                    f"at rest); a dipole {rej['dipole'][-1]['distance_mm']:g} mm away {rej['dipole'][-1]['median']:.1f}x"
+                    + (f", one {near[-1]['distance_mm']:g} mm away not at all (its field differs at the two chips)"
+                       if near else ""), "reference")]

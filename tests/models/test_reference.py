@@ -12,10 +12,12 @@ from magfab.models.predict import chip_setting, noise
 
 
 def test_the_dipole_is_magpylibs():
+    from magfab.models.drift import dipole_field_G
+
     rng = np.random.default_rng(3)
     for _ in range(5):
         m, at, p = rng.normal(size=3), rng.normal(size=3) * 40, rng.normal(size=3) * 40
-        mine = ref.dipole_field_G(m, at, p)
+        mine = dipole_field_G(m, at, p)
         theirs = magpy.misc.Dipole(moment=m, position=at / 1000).getB(p / 1000) * 1e4  # T -> G
         assert np.allclose(mine, theirs, rtol=1e-9, atol=1e-12)
 

@@ -1,0 +1,72 @@
+"""The optional reference MLX90393 (``[reference]`` in the spec): where it stands on the board and how it is
+addressed, before any prediction (the board is drawn side by side with the physics).
+
+Its site is :func:`magfab.models.reference.site` for the travel the geometry allows (:meth:`Travel.bound`: every
+magnet pressed to d_min or slid by the elastomer's radius less the magnet's), so what the prediction later finds at
+the predicted travel can only be quieter; ``reference.distance_mm`` places it nearer or farther by hand (the
+prediction then says how loud the magnets are there). Its address is the next the taxels' plan leaves (one more chip
+on the bus), its designator the next U.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from .design import Design
+
+__all__ = ["ReferenceChip", "reference_chip", "temperature_span_C"]
+
+
+@dataclass(frozen=True)
+class ReferenceChip:
+    """The reference chip: its centre (design frame, mm, y up), I2C address and straps, the chip to order."""
+
+    index: int  # after the taxels: the firmware reads it last
+    x_mm: float
+    y_mm: float
+    distance_mm: float  # beyond the taxels' hull along +y
+    separation_mm: float  # from the nearest sensing chip
+    i2c_address: int
+    option_code: str
+    address_straps: tuple[int, int]  # (A1, A0): 0 = GND, 1 = supply
+
+    @property
+    def designator(self) -> str:
+        return f"U{self.index + 1}"
+
+    def as_dict(self) -> dict[str, object]:
+        return {"index": self.index, "designator": self.designator, "x_mm": round(self.x_mm, 3),
+                "y_mm": round(self.y_mm, 3), "distance_mm": round(self.distance_mm, 3),
+                "separation_mm": round(self.separation_mm, 3), "i2c_address": self.i2c_address,
+                "option_code": self.option_code, "address_straps": list(self.address_straps)}
+
+
+def temperature_span_C(design: "Design") -> float:
+    """The environment's temperature span (its defaults without an ``[environment]`` section)."""
+    from .spec import Environment
+
+    env = design.spec.environment or Environment()
+    return env.temperature_max_C - env.temperature_min_C
+
+
+def reference_chip(design: "Design") -> ReferenceChip | None:
+    """The reference chip of ``design`` (module doc), or None without a ``[reference]`` section."""
+    spec = design.spec
+    if spec.reference is None:
+        return None
+    from .design import _address_plan
+    from .errors import SpecError
+    from .models.reference import Travel, site
+    from .spec import MAX_TAXELS
+
+    n = len(design.taxels)
+    if n >= MAX_TAXELS:
+        raise SpecError("reference", "present", f"needs one more address on the bus than the {n} taxels use",
+                        f"use at most {MAX_TAXELS - 1} taxels with a reference chip")
+    address, code, straps = _address_plan(spec, design.chip, n + 1)[n]
+    where = site(design, Travel.bound(design), temperature_span_C(design), spec.reference.distance_mm)
+    top = max(t.y_mm for t in design.taxels)
+    return ReferenceChip(n, where.xy_mm[0], where.xy_mm[1], where.xy_mm[1] - top, where.separation_mm, address, code,
+                         straps)
