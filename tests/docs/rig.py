@@ -8,9 +8,13 @@ the MLX90393 breakout on its I2C bus and a tip the test can press.
   the build's own MLX90393 model), its EEPROM empty as a bootloader leaves it, paced to the wall clock so
   ``magfab-readout`` sees the firmware's real rate, its UART bridged to the pseudo-terminal.
 * :meth:`Rig.set_field` is what the magnet does to the chip: the test sets the field a press gives.
+* An array build (design.json's ``array.taxels``) puts one chip model per taxel on the bus, at the build's addresses in
+  taxel order; :meth:`Rig.set_fields` sets every chip's field at once (a press moves one magnet, and its
+  neighbours' chips see it too), ``set_field(..., taxel=k)`` one chip's.
 
-    with Rig(build_dir, lib) as rig:          # rig.port: the serial port to hand to the commands
-        rig.set_field(0, 0, 18763)            # uT
+    with Rig(build_dir, lib, work) as rig:    # rig.port: the serial port to hand to the commands
+        rig.set_field(0, 0, 18763)            # uT, taxel 0's chip (a single taxel's only one)
+        rig.set_fields([(0, 0, 17752)] * 5)   # an array's: one (Bx, By, Bz) per taxel, in taxel order
 """
 
 from __future__ import annotations
@@ -29,7 +33,7 @@ from simbus import Bus, build_library  # noqa: E402
 
 from magfab.export.firmware import _eeprom_module  # noqa: E402  (its intel_hex writes the build's .eep)
 
-__all__ = ["Rig", "Stk500", "build_library"]
+__all__ = ["Rig", "Stk500", "addresses", "build_library"]
 
 _SIGNATURE_M328P = bytes([0x1E, 0x95, 0x0F])
 _INSYNC, _OK, _EOP = 0x14, 0x10, 0x20
@@ -113,7 +117,8 @@ class Rig:
         self._last_rx = 0.0
         self.resets = 0
         self.flashed: Path | None = None
-        self._field = (0.0, 0.0, 0.0, 25.0)
+        self.addresses = addresses(self.build_dir)
+        self._fields = [(0.0, 0.0, 0.0, 25.0)] * len(self.addresses)
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._error: BaseException | None = None
@@ -135,10 +140,18 @@ class Rig:
         if self._error is not None and exc[0] is None:
             raise RuntimeError("the simulated board failed") from self._error
 
-    def set_field(self, bx_uT: float, by_uT: float, bz_uT: float, t_C: float = 25.0) -> None:
-        """The field at the chip from now on (the magnet's, as a press moves it)."""
+    def set_field(self, bx_uT: float, by_uT: float, bz_uT: float, t_C: float = 25.0, *, taxel: int = 0) -> None:
+        """The field at the chip (an array's: taxel ``taxel``'s) from now on (the magnets', as a press moves them)."""
         with self._lock:
-            self._field = (bx_uT, by_uT, bz_uT, t_C)
+            self._fields[taxel] = (bx_uT, by_uT, bz_uT, t_C)
+
+    def set_fields(self, fields, t_C: float = 25.0) -> None:
+        """Every chip's field at once, from now on: one (Bx, By, Bz) in uT per taxel, in taxel order."""
+        fields = [tuple(float(b) for b in f) for f in fields]
+        if len(fields) != len(self.addresses) or any(len(f) != 3 for f in fields):
+            raise ValueError(f"one (Bx, By, Bz) per chip: {len(self.addresses)} chip(s), got {fields!r}")
+        with self._lock:
+            self._fields = [(*f, t_C) for f in fields]
 
     def eeprom(self, size: int) -> bytes:
         with self._lock:
@@ -190,7 +203,9 @@ class Rig:
         self.flashed = self.work / "flashed.hex"
         self.flashed.write_bytes(_eeprom_module().intel_hex(bytes(self.loader.flash[:self.loader.written])))
         with self._lock:
-            self.bus = Bus(self.lib, self.flashed, addr7=_address(self.build_dir))
+            self.bus = Bus(self.lib, self.flashed, addr7=self.addresses[0])
+            for address in self.addresses[1:]:
+                self.bus.add_chip(address)
             if self._eeprom is not None:
                 self.bus.eeprom_set(0, self._eeprom)
         self._t0 = time.monotonic()
@@ -203,7 +218,8 @@ class Rig:
         chunk, self._pending = self._pending[:_CHUNK], self._pending[_CHUNK:]
         with self._lock:
             self.bus.send(chunk)
-            self.bus.set_field(*self._field)
+            for k, f in enumerate(self._fields):
+                self.bus.target(k).set_field(*f)
             dt = min((time.monotonic() - self._t0) * 1e6 - self.bus.time_us, 20_000)
             dt = max(dt, len(chunk) * self._byte_us)
             out = self.bus.run_us(dt) if dt > 0 else b""
@@ -215,8 +231,11 @@ def _spec(build_dir: Path) -> dict:
     return json.loads((build_dir / "spec.json").read_text())
 
 
-def _address(build_dir: Path) -> int:
-    return int(_spec(build_dir)["sensor"]["i2c_address"])
+def addresses(build_dir: Path) -> list[int]:
+    """The chips' 7-bit I2C addresses in taxel order: an array build's design.json ``array.taxels``, else the spec's one."""
+    design = build_dir / "design.json"
+    taxels = (json.loads(design.read_text()).get("array") or {}).get("taxels") if design.is_file() else None
+    return [int(t["i2c_address"]) for t in taxels] if taxels else [int(_spec(build_dir)["sensor"]["i2c_address"])]
 
 
 def _baud(build_dir: Path) -> int:

@@ -6,7 +6,10 @@ installs into) and whose ``magfab`` is the one under test. Where a person would 
 
 * a line whose comment says ``Ctrl-C ends it`` runs until the bench has seen enough, then gets SIGINT;
 * ``magfab-readout record`` runs while :class:`Scan` moves the simulated tip along the build's scan track and
-  logs the reference sensor's forces to ``reference.csv`` (time.time(), Fx_N, Fy_N, Fz_N at 1 kHz);
+  logs the reference sensor's forces to ``reference.csv`` (time.time(), Fx_N, Fy_N, Fz_N at 1 kHz); on an array,
+  the tip of the taxel the line's comment names (``during taxel 0's scan``);
+* ``magfab-readout stream --zero N`` (Ctrl-C'd), when the test gave :attr:`Bench.press`, zeroes at rest, then the
+  press comes on and goes;
 * ``magfab-readout check`` waits for its prompt, then the known weight goes on the tip and Enter is pressed.
 
 The only text changed in a line is the port: ``/dev/ttyACM0`` (the pages' Linux Uno) becomes the rig's
@@ -17,6 +20,7 @@ from __future__ import annotations
 import csv
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -40,27 +44,42 @@ class Ran:
 
 
 class Scan:
-    """The scan track of a build's simulated scan (``calibration/scan_simulated.csv``), subsampled to a
-    serpentine of ``every``-th points, played on the rig: the field follows the tip, and the reference sensor
-    logs the force. Between two points both move linearly (the stage moves), so the sensor's and the
-    reference's timestamps need agree only to a fraction of a step."""
+    """The scan track of a build's simulated scan (``calibration/scan_simulated.csv``; an array's, one per taxel:
+    ``scan_simulated_taxel_NN.csv``), subsampled to a serpentine of ``every``-th points, played on the rig: the field
+    follows the tip, and the reference sensor logs the force. Between two points both move linearly (the stage
+    moves), so the sensor's and the reference's timestamps need agree only to a fraction of a step. On an array the
+    other chips keep their readings at rest (array.json's own field plus the other magnets'): calibrating taxel K
+    reads only taxel K's rows."""
 
     def __init__(self, build_dir: Path, every: int = 5, dwell_s: float = 0.03) -> None:
-        spec = json.loads((build_dir / "spec.json").read_text())["calibration"]
-        n_y = round(spec["scan_y_mm"] / spec["scan_step_mm"]) + 1
-        with open(build_dir / "calibration" / "scan_simulated.csv", newline="") as f:
+        self.spec = json.loads((build_dir / "spec.json").read_text())
+        layout = build_dir / "calibration" / "array.json"
+        if layout.is_file():  # an array: every chip's reading at rest, one track per taxel
+            doc = json.loads(layout.read_text())
+            self.readings = [[a + b for a, b in zip(own, other)] for own, other in zip(doc["rest_uT"], doc["offset_uT"])]
+            names = [f"scan_simulated_taxel_{k:02d}.csv" for k in range(len(self.readings))]
+        else:
+            self.readings, names = None, ["scan_simulated.csv"]
+        self.tracks = [self._track(build_dir / "calibration" / name, every) for name in names]
+        self.dwell_s = dwell_s
+        self.axis = self.tracks[0][1]
+        self.rest = self.field_at(0.0)
+
+    def _track(self, path: Path, every: int) -> tuple[list, list]:
+        """(serpentine of (B, F) points, sorted on-axis (Fz, B) points) of one simulated scan file."""
+        cal = self.spec["calibration"]
+        n_y = round(cal["scan_y_mm"] / cal["scan_step_mm"]) + 1
+        with open(path, newline="") as f:
             rows = [r for r in csv.DictReader(line for line in f if not line.startswith("#"))]
         grid = [rows[k:k + n_y] for k in range(0, len(rows), n_y)]
         points = []
         for i, row in enumerate(grid[::every]):
             row = row[::every]
             points += row if i % 2 == 0 else row[::-1]
-        self.points = [([float(r[k]) for k in ("Bx_uT", "By_uT", "Bz_uT")],
-                        [float(r[k]) for k in ("Fx_N", "Fy_N", "Fz_N")]) for r in points]
-        self.dwell_s = dwell_s
         centre = [row[n_y // 2] for row in grid]  # the track's points on the axis: a press straight down
-        self.axis = sorted((float(r["Fz_N"]), [float(r[k]) for k in ("Bx_uT", "By_uT", "Bz_uT")]) for r in centre)
-        self.rest = self.field_at(0.0)
+        return ([([float(r[k]) for k in ("Bx_uT", "By_uT", "Bz_uT")], [float(r[k]) for k in ("Fx_N", "Fy_N", "Fz_N")])
+                 for r in points],
+                sorted((float(r["Fz_N"]), [float(r[k]) for k in ("Bx_uT", "By_uT", "Bz_uT")]) for r in centre))
 
     def field_at(self, fz_N: float) -> list[float]:
         """The field of an on-axis press of ``fz_N`` (interpolated along the track's on-axis points)."""
@@ -70,18 +89,40 @@ class Scan:
         w = 0.0 if f1 == f0 else (fz_N - f0) / (f1 - f0)
         return [a + w * (b - a) for a, b in zip(b0, b1)]
 
-    def play(self, rig, reference: Path) -> None:
-        """Move the tip along the track, logging the reference at 1 kHz; back to rest at the end."""
+    def at_rest(self, rig) -> None:
+        """Every tip at rest."""
+        if self.readings is None:
+            rig.set_field(*self.rest)
+        else:
+            rig.set_fields(self.readings)
+
+    def _set(self, rig, taxel: int, b: list[float]) -> None:
+        if self.readings is None:
+            rig.set_field(*b)
+        else:
+            rig.set_fields([b if k == taxel else r for k, r in enumerate(self.readings)])
+
+    def play(self, rig, reference: Path, taxel: int = 0) -> None:
+        """Move the tip (an array's: taxel ``taxel``'s) along the track, the reference logging at 1 kHz on its own
+        ticks (a row for every millisecond that passed, however late this thread wakes: a logger's buffer); back
+        to rest at the end."""
+        points = self.tracks[taxel][0]
+        wall0, mono0 = time.time(), time.monotonic()
+        tick = mono0
         with open(reference, "w", newline="") as f:
             out = csv.writer(f)
             out.writerow(["time_s", "Fx_N", "Fy_N", "Fz_N"])
-            for (b0, f0), (b1, f1) in zip(self.points, self.points[1:]):
+            for (b0, f0), (b1, f1) in zip(points, points[1:]):
                 start = time.monotonic()
-                while (w := (time.monotonic() - start) / self.dwell_s) < 1.0:
-                    rig.set_field(*[a + w * (b - a) for a, b in zip(b0, b1)])
-                    out.writerow([f"{time.time():.6f}"] + [f"{a + w * (b - a):.6f}" for a, b in zip(f0, f1)])
+                while (now := time.monotonic()) < start + self.dwell_s:
+                    w = (now - start) / self.dwell_s
+                    self._set(rig, taxel, [a + w * (b - a) for a, b in zip(b0, b1)])
+                    while tick <= now:  # the ticks since the last row, where the stage was then
+                        wt = min(max((tick - start) / self.dwell_s, 0.0), 1.0)
+                        out.writerow([f"{wall0 + tick - mono0:.6f}"] + [f"{a + wt * (b - a):.6f}" for a, b in zip(f0, f1)])
+                        tick += 0.001
                     time.sleep(0.001)
-        rig.set_field(*self.rest)
+        self.at_rest(rig)
 
 
 @dataclass
@@ -93,6 +134,8 @@ class Bench:
     venv: Path
     plug_in: object
     weight_g: float = 50.0
+    press: list | None = None  # every chip's field during a press, held while a Ctrl-C'd ``stream`` runs (zeroed)
+    press_s: float = 0.6
     rig: object = None
     scan: Scan | None = None
     ran: list[Ran] = field(default_factory=list)
@@ -105,6 +148,7 @@ class Bench:
         if self.rig is None and (PAGE_PORT in line or "magfab-readout" in line or "flash.sh" in line):
             self.scan = Scan(self.cwd)
             self.rig = self.plug_in(self.cwd)
+            self.scan.at_rest(self.rig)
 
     def paste(self, line: str, timeout_s: float = 600) -> Ran:
         self._board(line)
@@ -141,7 +185,10 @@ class Bench:
             proc = self._start(line, stdout=out, stderr=err)
             time.sleep(1.5)  # it opens the port and finds the frames
             if " record " in f" {line} ":
-                self.scan.play(self.rig, self.cwd / "reference.csv")
+                taxel = re.search(r"taxel (\d+)", line.partition("#")[2])  # an array's: the taxel the page scans
+                self.scan.play(self.rig, self.cwd / "reference.csv", int(taxel[1]) if taxel else 0)
+            elif " stream " in f" {line} " and "--zero" in line and self.press is not None:
+                self._press_while_streaming(out, timeout_s)
             time.sleep(0.5)
             proc.send_signal(signal.SIGINT)
             try:
@@ -152,9 +199,22 @@ class Bench:
             err.seek(0)
             return Ran(line, self.cwd, proc.returncode, out.read(), err.read())
 
+    def _press_while_streaming(self, out, timeout_s: float) -> None:
+        """Once ``stream`` has zeroed (its ``# zero:`` lines out), hold :attr:`press` for ``press_s``, then rest."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            out.seek(0)
+            if out.read().count("# zero:") >= len(self.press):
+                break
+            time.sleep(0.1)
+        time.sleep(0.3)
+        self.rig.set_fields(self.press)
+        time.sleep(self.press_s)
+        self.scan.at_rest(self.rig)
+
     def _interactive(self, line: str, timeout_s: float) -> Ran:
         """``check``: at rest until it asks for the weight, then the weight's field, then Enter."""
-        self.rig.set_field(*self.scan.rest)
+        self.scan.at_rest(self.rig)
         proc = self._start(line, stdin=subprocess.PIPE)
         err: list[str] = []
         asked = threading.Event()
@@ -180,7 +240,7 @@ class Bench:
         out = proc.stdout.read()
         proc.wait(timeout_s)
         reader.join(5)
-        self.rig.set_field(*self.scan.rest)
+        self.scan.at_rest(self.rig)
         return Ran(line, self.cwd, proc.returncode, out, "".join(err))
 
 
