@@ -221,3 +221,12 @@ def test_the_worst_case_bounds_every_draw_within_the_bands(design, pred):
     bound = np.abs(np.asarray(t.span["normal_rest"]["with"]))
     assert np.all(np.abs(err) <= bound * (1 + 1e-9))
     assert np.max(np.abs(err)) > 0.6 * np.max(bound)
+
+
+def test_the_key_figures_carry_the_drift(design, pred):
+    from magfab.export.report.tables import key_figures
+
+    row = next(r for r in key_figures(design, pred, None, []) if r[0] == "drift")
+    assert row[1] == f"{abs(pred.drift.temperature.per_C['normal_rest']['without']):.1f} mN/C"
+    assert "180 deg" in row[2]
+    assert not [r for r in key_figures(design, replace(pred, drift=None), None, []) if r[0] == "drift"]

@@ -155,6 +155,10 @@ def key_figures(design: "Design", pred: "Prediction", calibration: Mapping[str, 
         ("silicone per part", f"{design.elastomer_volume_mm3 / 1000:.3f} mL",
          f"{design.cavities} cavit{'y' if design.cavities == 1 else 'ies'} per mould"),
     ]
+    if pred.drift is not None:
+        t, turned = pred.drift.temperature, pred.drift.rotation
+        out.append(("drift", f"{abs(t.per_C['normal_rest']['without']):.1f} mN/C",
+                    f"normal at rest, uncompensated; {turned.what}: {abs(turned.normal_rest_mN):.1f} mN"))
     if calibration is not None:
         err = calibration["errors"]
         out.append(("calibration, held-out RMS", f"{1000 * err['Fz_N']['rms_holdout']:.2f} mN (Fz)",
