@@ -325,6 +325,7 @@ class Prediction:
     arrays: Mapping[str, np.ndarray] = field(default_factory=dict)
     timings_s: Mapping[str, float] = field(default_factory=dict)
     drift: "Drift | None" = None  # the drift budget (magfab.models.drift); None where the curve has no inverse
+    reference: Mapping[str, object] | None = None  # the reference chip's site and rejection (magfab.models.reference)
 
     @property
     def curves(self) -> Mapping[str, mech.Curve]:
@@ -365,6 +366,7 @@ class Prediction:
             "noise_G": asdict(self.noise),
             "models": {m.family: m.as_dict() for m in self.models},
             **({} if self.drift is None else {"drift": self.drift.as_json()}),
+            **({} if self.reference is None else {"reference": self.reference}),
         }
 
 
@@ -422,7 +424,12 @@ def predict(design: "Design", elastomer: ElastomerModel | None = None) -> Predic
     timings = {"field_choice": t_field - t0, "mechanics": t_mech - t_field, "chain": t_end - t_mech,
                "total": t_end - t0}
     pred = Prediction(field_figures, chip, mus, normal, shear, Noise(**nz), (fuse, muse, shear_use), arrays, timings)
-    return replace(pred, drift=_drift(design, pred))
+    pred = replace(pred, drift=_drift(design, pred))
+    if pred.drift is not None and design.reference is not None:
+        from .reference import budget
+
+        pred = replace(pred, reference=budget(design, pred, pred.drift))
+    return pred
 
 
 def _drift(design: "Design", pred: Prediction) -> "Drift | None":
@@ -521,6 +528,8 @@ def predict_with_findings(design: "Design", elastomer: ElastomerModel | None = N
         return None, [Finding(Severity.ERROR, "prediction-failed", f"no prediction for this design: {exc}",
                               "predict.mechanics_model" if isinstance(exc, mech.MechanicsError) else "predict.field_model")]
     from .drift import findings as drift_findings
+    from .reference import findings as reference_findings
 
-    return pred, prediction_findings(design, pred) + ([] if pred.drift is None else drift_findings(design, pred.drift))
+    return pred, (prediction_findings(design, pred) + ([] if pred.drift is None else drift_findings(design, pred.drift))
+                  + reference_findings(design, pred.reference))
 
