@@ -350,6 +350,7 @@ def _context(design: "Design", calibration: Mapping[str, Any], generic: bool) ->
         **_image_constants(),
         "generic": int(generic),
         "record": list(record), "record_len": len(record), "sha16": calibration_sha256(calibration)[:16],
+        "thermal": _eeprom_module().thermal(record),  # (T0, a_x, a_y, a_z) of a version-4 record, else None
         "i2c_address": design.i2c_address,
         "sim_address": design.i2c_address,
         "i2c_hz": fw.i2c_hz,

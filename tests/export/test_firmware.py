@@ -374,6 +374,30 @@ def test_forces_equal_python_float64(host):
     assert 50 < outside_seen < 350
 
 
+def test_the_thermal_correction_equals_python_float64(build_host):
+    """A calibration with ``thermal`` (a per axis, T0 25 C): at 40 C the core's forces are the float64 evaluation at
+    the field divided by (1 + a (T - T0)), T the temperature word read back; far from the uncorrected ones."""
+    cal = {**make_calibration(), "thermal": {"reference_C": 25.0, "source": "recipe",
+                                             "coefficient_per_C": {"Bx_uT": -0.0012, "By_uT": -0.0015,
+                                                                   "Bz_uT": -0.002}}}
+    h = build_host("thermal", spec_variant(), cal)
+    assert firmware.eeprom_record(h.design, cal)[2] == 4
+    fields = sample_inside(cal, np.random.default_rng(11), 20)
+    out, _ = h.run("".join(f"B {bx:.3f} {by:.3f} {bz:.3f} 40\nS 1\n" for bx, by, bz in fields))
+    frames = frames_of(out)
+    assert len(frames) == len(fields)
+    a = (-0.0012, -0.0015, -0.002)
+    moved = 0.0
+    for frame in frames:
+        t = 25.0 + (frame["t_raw"] - firmware.TEMPERATURE_RAW_25C) / firmware.TEMPERATURE_LSB_PER_C
+        assert t == pytest.approx(40.0, abs=0.02)
+        b = [c * q for c, q in zip(frame["counts"], h.lsb())]
+        want, scale = py_forces(cal, *(x / (1 + k * (t - 25.0)) for x, k in zip(b, a)))
+        assert np.all(np.abs(frame["forces"] - want) <= 1e-4 * np.maximum(np.abs(want), scale)), (frame, want)
+        moved = max(moved, float(np.max(np.abs(py_forces(cal, *b)[0] - want))))
+    assert moved > 1e-3  # the correction is not a rounding: at least a millinewton somewhere
+
+
 def test_out_of_region_flag(host):
     """Readings outside the box, or inside the box but outside the hull, are flagged; forces still come."""
     region = host.cal["valid_region"]

@@ -339,6 +339,44 @@ def test_simulated_board_sends_the_firmware_format_and_the_embedded_calibration(
     assert sum(f["status"] & 1 for f in frames) < 0.05 * len(frames)  # and mostly within the region
 
 
+THERMAL = {"reference_C": 25.0, "source": "recipe", "coefficient_per_C": {"Bx_uT": -0.0012, "By_uT": -0.0012,
+                                                                          "Bz_uT": -0.0012}}
+
+
+def test_a_warming_simulated_board_and_its_thermal_calibration(pkg, calibration):
+    """A 15 C warm-up on the simulated board whose field follows the magnet's -0.12 %/C: with the calibration's
+    ``thermal`` the forces it sends are the float64 evaluation at the field corrected with the temperature read
+    (what the firmware sends; ``cross_check`` recomputes them to 0) and stay where they were at 25 C; the same
+    board under a calibration without ``thermal`` drifts. ``upload`` of the calibration writes a version-4 record
+    the board accepts."""
+    simulate = sys.modules["magfab_readout.simulate"]
+    warm = pkg.Calibration({**calibration, "thermal": THERMAL})
+    ramp = simulate.TemperatureRamp(25.0, 40.0, duration_s=0.6, delay_s=0.1)
+    build = sys.modules["magfab_readout._build"]
+    lsb = (build.LSB_XY_UT, build.LSB_XY_UT, build.LSB_Z_UT)
+
+    def run(cal, **kw):
+        sim = pkg.SimulatedDevice(cal, realtime=False, chunk=400, text=False, noise_lsb=0.0, temperature=ramp,
+                                  pattern=pkg.RestTip(20000.0), **kw)
+        return pkg.Decoder().feed(sim.read(10**6))
+
+    samples = run(warm)
+    assert samples[-1].temperature_C == pytest.approx(40.0, abs=0.05)
+    for s in samples[::23]:
+        t = s.temperature_C
+        want = ref_forces(calibration, *(c * q / (1 - 0.0012 * (t - 25.0)) for c, q in zip(s.counts, lsb)))
+        assert s.force_N == pytest.approx(tuple(f32(w) for w in want), rel=1e-6, abs=1e-7)
+        assert pkg.cross_check(s, warm) < 1e-6
+    first, last = samples[0].force_N[2], samples[-1].force_N[2]
+    assert abs(last - first) < 2e-3  # the field's quantisation, not the 1.8 % drift
+    bare = run(pkg.Calibration(calibration), thermal_per_C=-0.0012)
+    assert abs(bare[-1].force_N[2] - bare[0].force_N[2]) > 20 * abs(last - first) + 1e-3
+    record = pkg.device.calibration_record({**calibration, "thermal": THERMAL})
+    assert record[2] == 4 and len(record) == len(pkg.device.calibration_record(calibration)) + 16
+    ee = sys.modules["magfab_readout.eeprom"]
+    assert ee.check(record) and ee.thermal(record) == pytest.approx((25.0, -0.0012, -0.0012, -0.0012))
+
+
 def test_simulated_text_mode_and_commands(pkg):
     sim = pkg.SimulatedDevice(realtime=False, chunk=5, text=False)
     sim.write(b"t")
