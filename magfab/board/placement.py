@@ -10,6 +10,7 @@ Everything is in KiCad's frame (:mod:`magfab.board.layout`).
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 from ..design import Design
 from ..errors import SpecError
@@ -156,6 +157,36 @@ def _holes(design: Design, outline: Box) -> list[Placed]:
 def _connector(design: Design, outline: Box, placed: list[Placed], chips: int = 1) -> Placed:
     """The Qwiic connector on the bottom edge, mating face flush with it, as near the centre line as the
     pad's keep-out and the holes allow."""
+    found = _find_connector(design, outline, placed, chips)
+    if found is not None:
+        return found
+    pcb = design.spec.pcb
+    keep_r = design.pad_radius_mm + PAD_KEEPOUT_MARGIN_MM
+    raise SpecError("pcb.width_mm", pcb.width_mm,
+                    f"leaves no room for the Qwiic connector on the bottom edge outside the mounting pad's "
+                    f"{2 * keep_r:g} mm keep-out and clear of the screw holes", _larger_board(design))
+
+
+def _larger_board(design: Design) -> str:
+    """What to change when the connector finds no room: for an array, the least board height (in 0.5 mm steps, at
+    the spec's width) that holds it; for a single taxel, the default pad's sizes."""
+    pcb = design.spec.pcb
+    if design.array is None:
+        return "make the board larger (usually pcb.height_mm: 30 x 28 fits the default pad, 28 x 28 does not)"
+    for k in range(1, 81):  # up to 40 mm taller
+        height = pcb.height_mm + 0.5 * k
+        trial = replace(design, spec=design.spec.model_copy(update={"pcb": pcb.model_copy(update={"height_mm": height})}))
+        ox, oy = ORIGIN
+        outline = (ox - pcb.width_mm / 2, oy - height / 2 - _reference_room(trial), ox + pcb.width_mm / 2, oy + height / 2)
+        placed = _chips(trial, qfn_footprint(design.chip, pcb.density, clearance=pcb.clearance_mm))
+        if _find_connector(trial, outline, placed + _holes(trial, outline), len(placed)) is not None:
+            return (f"make the board taller: {pcb.width_mm:g} x {height:g} mm (pcb.height_mm = {height:g}) holds this "
+                    "array's pad and the connector below it")
+    return "make the board larger: no height up to 40 mm more holds the connector at this width"
+
+
+def _find_connector(design: Design, outline: Box, placed: list[Placed], chips: int) -> Placed | None:
+    """The connector where it fits (see :func:`_connector`), or None."""
     pcb = design.spec.pcb
     ox, oy = ORIGIN
     hw, hh = pcb.width_mm / 2, pcb.height_mm / 2
@@ -179,10 +210,7 @@ def _connector(design: Design, outline: Box, placed: list[Placed], chips: int = 
         if any(overlap(cy, h.box(h.footprint.courtyard)) for h in placed[chips:]):
             continue
         return cand
-    raise SpecError("pcb.width_mm", pcb.width_mm,
-                    f"leaves no room for the Qwiic connector on the bottom edge outside the mounting pad's "
-                    f"{2 * keep_r:g} mm keep-out and clear of the screw holes",
-                    "make the board larger (usually pcb.height_mm: 30 x 28 fits the default pad, 28 x 28 does not)")
+    return None
 
 
 def _passives(design: Design, qfn: Footprint, j1: Placed, chips: list[Placed]) -> list[Placed]:

@@ -99,3 +99,22 @@ def test_a_single_taxel_plan_is_its_one_chip():
     (row,) = pcb.address_plan(design)
     assert (row["designator"], row["address"], row["x_mm"], row["y_mm"]) == ("U1", design.i2c_address, 0.0, 0.0)
     assert (row["a1"], row["a0"]) == tuple(design.address_straps) and row["capacitors"] == ("C1", "C2")
+
+
+def test_no_room_for_the_connector_gives_the_height_that_fits_the_array():
+    """The pad fits but the connector does not (80 mm wide: the screw holes crowd the bottom edge): one line naming
+    the least height that holds this array's pad and connector at that width (not the single taxel's 30 x 28), and
+    that board places."""
+    import re
+
+    from magfab.board.placement import place
+
+    strip = "[array]\nrows = 1\ncols = 5\npitch_mm = 14\n[pcb]\nwidth_mm = 80\nheight_mm = {}"
+    with pytest.raises(SpecError) as err:
+        place(derive(parse_spec(strip.format(22))))
+    text = str(err.value)
+    assert "Qwiic connector" in text and "default pad" not in text and "\n" not in text, text
+    height = float(re.search(r"pcb\.height_mm = ([\d.]+)\)", text)[1])
+    place(derive(parse_spec(strip.format(height))))
+    with pytest.raises(SpecError):
+        place(derive(parse_spec(strip.format(height - 0.5))))
