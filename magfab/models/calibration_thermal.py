@@ -155,8 +155,8 @@ def fit_thermal(B_uT: np.ndarray, F_N: np.ndarray, temperature_C: np.ndarray | N
                           f"recipe values ({100 * recipe:+.3g} %/C): the fit over {span:.3g} C did not determine "
                           f"the coefficients (+/-{100 * max(unc):.2g} %/C); reference {t0:.4g} C")
     return ThermalFit(t0, (axy, axy, az), "fit", unc, span, recipe,
-                      f"fitted over {span:.3g} C: xy {100 * axy:+.3f} +/- {100 * unc[0]:.3f} %/C, z "
-                      f"{100 * az:+.3f} +/- {100 * unc[2]:.3f} %/C (recipe {100 * recipe:+.3g}); reference "
+                      f"fitted over {span:.3g} C: xy {100 * axy:+.4f} +/- {100 * unc[0]:.2g} %/C, z "
+                      f"{100 * az:+.4f} +/- {100 * unc[2]:.2g} %/C (recipe {100 * recipe:+.3g}); reference "
                       f"{t0:.4g} C")
 
 
