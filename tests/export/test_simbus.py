@@ -502,11 +502,16 @@ def thermal_runs(sim, default_build, tmp_path_factory):
     assert record[2] == 2  # an old record: no coefficients
     old = tmp_path_factory.mktemp("thermal") / "v2.eep"
     old.write_bytes(firmware._eeprom_module().intel_hex(record))
+    wrong = {**sim.cal, "thermal": {**sim.cal["thermal"], "coefficient_per_C": {
+        k: 5.0 / 6.0 * v for k, v in sim.cal["thermal"]["coefficient_per_C"].items()}}}
+    short = old.with_name("short.eep")  # a correction a sixth short of the field's drift
+    short.write_bytes(firmware._eeprom_module().intel_hex(firmware.eeprom_record(derive(load_spec(None)), wrong)))
     out = {}
     for load, field in (("rest", _rest_field(sim, default_build)), ("held", FIELD_UT)):
         for name, eep in (("off", old), ("on", sim.hex_path.with_suffix(".eep"))):
             out[load, name] = _ramp_slope(sim, eep, field, alpha)
         out[load, "predicted"] = _predicted_slope(sim.cal, field, alpha)
+    out["rest", "short"] = _ramp_slope(sim, short, _rest_field(sim, default_build), alpha)
     print("force error per C on the shipped image, mN/C (Fz, Fr): " + "; ".join(
         f"{load} {name} {1e3 * v[0]:+.3f} {1e3 * v[1]:+.3f}" for (load, name), v in sorted(out.items())))
     return out
@@ -521,6 +526,13 @@ def test_the_drift_at_rest_is_the_drift_budgets(thermal_runs, pred):
     predicted = float(drift.temperature_error_mN(channel, 0.0, 1.0, alpha_pct=-0.12)) / 1000.0
     assert thermal_runs["rest", "off"][0] == pytest.approx(predicted, rel=0.05)
     assert abs(thermal_runs["rest", "on"][0]) < 0.02 * abs(predicted)
+
+
+def test_a_coefficient_a_sixth_short_leaves_a_sixth_of_the_drift(thermal_runs):
+    """The correction is the law, not a fit to this ramp: a record whose coefficients are 5/6 of the field's true
+    -0.12 %/C leaves 1/6 of the uncorrected drift (within 5 % of it)."""
+    off, short = thermal_runs["rest", "off"][0], thermal_runs["rest", "short"][0]
+    assert short == pytest.approx(off / 6.0, rel=0.05)
 
 
 @pytest.mark.parametrize("load", ["rest", "held"])
