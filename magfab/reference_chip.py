@@ -59,12 +59,11 @@ def reference_chip(design: "Design") -> ReferenceChip | None:
     from .design import _address_plan
     from .errors import SpecError
     from .models.reference import Travel, site
-    from .spec import MAX_TAXELS
 
     n = len(design.taxels)
-    if n >= MAX_TAXELS:
-        raise SpecError("reference", "present", f"needs one more address on the bus than the {n} taxels use",
-                        f"use at most {MAX_TAXELS - 1} taxels with a reference chip")
+    if design.array is not None:
+        raise SpecError("reference", "present", "is for a single taxel: an array's firmware sends every chip's field "
+                        "and its host compensation reads no reference chip yet", "omit [reference] or [array]")
     address, code, straps = _address_plan(spec, design.chip, n + 1)[n]
     where = site(design, Travel.bound(design), temperature_span_C(design), spec.reference.distance_mm)
     top = max(t.y_mm for t in design.taxels)

@@ -74,7 +74,8 @@ NO_RECORD_US = 20_000
 #: and avr-libc versions that made it (``python -m magfab.export.toolchain`` rebuilds both).
 GENERIC_DIR = "generic_image"
 GENERIC_TOOLCHAIN = "toolchain.json"
-CORE_SOURCES = ("mlx90393.c", "mf_sample.c", "mf_nv.c", "mf_calib.c", "mf_frame.c", "mf_app.c", "mf_array.c")
+CORE_SOURCES = ("mlx90393.c", "mf_sample.c", "mf_nv.c", "mf_calib.c", "mf_frame.c", "mf_app.c", "mf_array.c",
+                "mf_reference.c")
 CORE_DIR = "magfab_readout/src"
 AVR_CFLAGS = ("-mmcu=" + MCU, f"-DF_CPU={F_CPU_HZ}UL", "-Os", "-std=gnu99", "-Wall", "-Wextra",
               "-ffunction-sections", "-fdata-sections")
@@ -251,7 +252,8 @@ def image_settings(design: "Design") -> dict[str, Any]:
     docs/bundle.md section 4): every number the build-specific sources carried in mf_config.h, computed here from
     the spec and the chip's recipe. Plain JSON values: build.json carries them for ``magfab-readout upload``.
     An array's also carry ``taxel_addresses``: every chip's 7-bit address in taxel order (``i2c_address`` is
-    taxel 0's).
+    taxel 0's); a build with a reference chip ``reference`` (its 7-bit address) and ``reference_shift`` (its
+    average's, :data:`magfab.models.reference.REFERENCE_SHIFT`).
     :class:`~magfab.errors.SpecError` for a baud or I2C clock the board cannot make."""
     ee = _eeprom_module()
     chip, fw = chip_config(design), design.spec.firmware
@@ -261,6 +263,10 @@ def image_settings(design: "Design") -> dict[str, Any]:
              | (ee.FLAG_TEXT if _value(fw.output) == "text" else 0) | (ee.FLAG_RAW_SIGNED if chip.raw_signed else 0))
     regs = {reg: (mask, value) for reg, mask, value in chip.registers}
     array = {} if design.array is None else {"taxel_addresses": [t.i2c_address for t in design.taxels]}
+    if design.reference is not None:  # the record's reference block (version 5)
+        from ..models.reference import REFERENCE_SHIFT
+
+        array = {"reference": design.reference.i2c_address, "reference_shift": REFERENCE_SHIFT}
     return {
         **array,
         "name": design.spec.name, "gain_sel": chip.gain_sel, "resolution": chip.resolution, "osr": chip.osr,
@@ -350,7 +356,8 @@ def _context(design: "Design", calibration: Mapping[str, Any], generic: bool) ->
         **_image_constants(),
         "generic": int(generic),
         "record": list(record), "record_len": len(record), "sha16": calibration_sha256(calibration)[:16],
-        "thermal": _eeprom_module().thermal(record),  # (T0, a_x, a_y, a_z) of a version-4 record, else None
+        "thermal": _eeprom_module().thermal(record),  # (T0, a_x, a_y, a_z) of a version-4 or -5 record, else None
+        "reference": _eeprom_module().reference(record),  # (address, shift) of a version-5 record, else None
         "i2c_address": design.i2c_address,
         "sim_address": design.i2c_address,
         "i2c_hz": fw.i2c_hz,

@@ -53,11 +53,10 @@ def test_without_the_section_the_board_is_as_before():
     assert design.reference is None and board_size_mm(design) == (30.0, 30.0)
 
 
-def test_a_full_bus_leaves_no_address_for_the_reference():
+def test_an_array_with_a_reference_is_refused_in_one_line():
     with pytest.raises(SpecError) as err:
-        derive(parse_spec("[array]\nrows = 4\ncols = 4\npitch_mm = 14\n[mould]\nangular_tolerance_deg = 15\n"
-                          "[pcb]\nwidth_mm = 76\nheight_mm = 80\n[reference]\n"))
-    assert str(err.value).startswith("reference") and "at most 15 taxels" in str(err.value)
+        derive(parse_spec("[array]\nrows = 1\ncols = 5\npitch_mm = 14\n[pcb]\nwidth_mm = 80\n[reference]\n"))
+    assert str(err.value).startswith("reference") and "single taxel" in str(err.value) and "\n" not in str(err.value)
 
 
 def test_kicad_drc_of_the_board_with_a_reference_is_clean(with_reference, tmp_path):

@@ -33,6 +33,10 @@ VERSION = 2
 #: Version 2 with the thermal block (T0, a_x, a_y, a_z) at :data:`COEF_OFFSET`, the Horner rows after it.
 VERSION_THERMAL = 4
 THERMAL = struct.Struct("<4f")
+#: Version 4 with a reference block after the thermal block (the reference chip's 7-bit address and its average's
+#: shift, two zero bytes), the Horner rows after it.
+VERSION_REFERENCE = 5
+REFERENCE = struct.Struct("<BBxx")
 #: An array's record: the settings and the chips' addresses, no calibration.
 VERSION_ARRAY = 3
 #: Chips an array's record may list (one I2C bus, the option codes' four addresses times four straps).
@@ -220,7 +224,14 @@ def pack(lay: Dict[str, Any], sha16: str, settings: Dict[str, Any]) -> bytes:
     block = SETTINGS.pack(*(len(spec_name) if key == "name_len" else settings[key] for key in SETTING_KEYS))
     body = block + b"".join(struct.pack("<f", lay[name]) for name in FLOATS)
     thermal = lay.get("thermal") if settings["flags"] & FLAG_TEMPERATURE else None
-    if thermal is not None:
+    reference = settings.get("reference")
+    if reference is not None:  # version 5: the thermal block (none: T0 25 C and no correction), then the reference's
+        shift = int(settings["reference_shift"])
+        if not 0x08 <= reference <= 0x77 or reference == settings["i2c_address"] or not 1 <= shift <= 8:
+            raise EepromError("reference", reference, "must be a 7-bit address from 0x08 to 0x77 other than the "
+                              "sensing chip's, with an average's shift from 1 to 8")
+        body += THERMAL.pack(*(thermal or (25.0, 0.0, 0.0, 0.0))) + REFERENCE.pack(reference, shift)
+    elif thermal is not None:
         body += THERMAL.pack(*thermal)
     for row in lay["rows"]:
         body += struct.pack("<{}f".format(2 * len(row["fz"])), *row["fz"], *row["fr"])
@@ -232,7 +243,7 @@ def pack(lay: Dict[str, Any], sha16: str, settings: Dict[str, Any]) -> bytes:
                           "the record takes {} B, the EEPROM holds {} B: use a shorter hull or a lower order"
                           .format(length, SIZE))
     chip = (settings["gain_sel"], settings["resolution"], settings["osr"], settings["dig_filt"])
-    version = VERSION if thermal is None else VERSION_THERMAL
+    version = VERSION_REFERENCE if reference is not None else VERSION if thermal is None else VERSION_THERMAL
     head = HEADER.pack(MAGIC, version, lay["order"], length, n, sha16.encode("ascii"), *chip)
     record = head + body
     return record + struct.pack("<H", crc16(record))
@@ -264,10 +275,19 @@ def addresses(data: bytes) -> List[int]:
 
 
 def thermal(data: bytes) -> Any:
-    """(T0 degC, a_x, a_y, a_z per degC) of a version-4 record, None for any other."""
-    if len(data) < COEF_OFFSET + THERMAL.size or unpack_header(data)["version"] != VERSION_THERMAL:
+    """(T0 degC, a_x, a_y, a_z per degC) of a version-4 or -5 record, None for any other."""
+    if len(data) < COEF_OFFSET + THERMAL.size or unpack_header(data)["version"] not in (VERSION_THERMAL,
+                                                                                          VERSION_REFERENCE):
         return None
     return THERMAL.unpack_from(data, COEF_OFFSET)
+
+
+def reference(data: bytes) -> Any:
+    """(address, shift) of a version-5 record's reference chip, None for any other."""
+    at = COEF_OFFSET + THERMAL.size
+    if len(data) < at + REFERENCE.size or unpack_header(data)["version"] != VERSION_REFERENCE:
+        return None
+    return REFERENCE.unpack_from(data, at)
 
 
 def unpack_header(data: bytes) -> Dict[str, Any]:
@@ -288,7 +308,7 @@ def check(data: bytes) -> bool:
         return False
     head = unpack_header(data)
     length = head["length"]
-    return (head["magic"] == MAGIC and head["version"] in (VERSION, VERSION_THERMAL, VERSION_ARRAY) and HEADER.size + 2 <= length <= min(SIZE, len(data))
+    return (head["magic"] == MAGIC and head["version"] in (VERSION, VERSION_THERMAL, VERSION_REFERENCE, VERSION_ARRAY) and HEADER.size + 2 <= length <= min(SIZE, len(data))
             and struct.unpack_from("<H", data, length - 2)[0] == crc16(data[:length - 2]))
 
 

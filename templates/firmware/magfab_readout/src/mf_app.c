@@ -10,6 +10,7 @@
 #include "mf_config.h"
 #include "mf_frame.h"
 #include "mf_nv.h"
+#include "mf_reference.h"
 
 #define MF_CMD_TIMEOUT_US 50000UL
 #define MF_READ_MAX 32
@@ -86,6 +87,7 @@ static void eeprom_write_command(mf_app_t *a)
         if (mf_calib_load() == MF_OK) {
             a->lost = 1; /* (re)start the chip now, with the settings of the record just completed */
             a->t_next = mf_app_now(a);
+            mf_ref_reset(a); /* and the reference chip, if the record has one */
         }
     }
     line[0] = 'W';
@@ -264,6 +266,7 @@ static int acquire(mf_app_t *a, mlx_raw_t *raw, uint32_t *t_us)
 void mf_app_process(const mlx_raw_t *raw, mf_sample_t *s)
 {
     mf_sample_convert(raw, s);
+    mf_ref_apply(s); /* the reference chip's change, before the temperature correction and the calibration */
     mf_calib_forces(s);
 }
 
@@ -317,9 +320,12 @@ void mf_app_init(mf_app_t *a, const mf_hal_t *hal)
         a->lost = 1; /* no record: the chip is left alone (mf_app_poll) until one is written */
     } else if (mf_calib_taxels() > 0) {
         mf_array_start(a, 0);
-    } else if (mf_app_start_chip(a) != MF_OK) {
-        a->lost = 1;
-        a->t_next = mf_app_now(a);
+    } else {
+        mf_ref_start(a); /* the reference first: the reads' grid is the sensing chip's */
+        if (mf_app_start_chip(a) != MF_OK) {
+            a->lost = 1;
+            a->t_next = mf_app_now(a);
+        }
     }
 }
 
@@ -369,6 +375,7 @@ void mf_app_poll(mf_app_t *a)
     }
     rc = acquire(a, &raw, &t);
     if (rc == MF_OK) {
+        mf_ref_update(a);
         mf_app_process(&raw, &s);
     } else {
         mf_sample_fail(&s, rc, MF_STAGE_READ);

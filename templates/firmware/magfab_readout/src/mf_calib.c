@@ -29,11 +29,13 @@ static struct {
     uint8_t name_len;
     uint8_t taxels; /* an array's record (version 3): its chips; 0 for a single taxel's */
     uint8_t thermal; /* a version-4 record: the field is corrected for temperature before the calibration */
+    uint8_t reference; /* a version-5 record: the reference chip's address (0: none) */
+    uint8_t reference_shift;
     float t0_C;      /* the calibration's temperature */
     float a_per_C[3]; /* per axis: the magnet's remanence coefficient plus the chip's sensitivity drift */
     float f[N_FLOATS];
     float coef[(MF_CAL_MAX_ORDER + 1) * (MF_CAL_MAX_ORDER + 2)]; /* the Horner rows, as in the record */
-} cal = {MF_E_CALIB, 0, 0, 0, 0, 0, 0, 0, 0, 0.0f, {0}, {0}, {0}};
+} cal = {MF_E_CALIB, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0.0f, {0}, {0}, {0}};
 
 static uint16_t record_crc(uint16_t len)
 {
@@ -142,12 +144,15 @@ int mf_calib_load(void)
     uint16_t n = mf_nv_u16(6);
     uint8_t name_len = mf_nv_byte(MF_CAL_IMAGE_AT + 5);
     uint16_t n_coef = (uint16_t)((order + 1U) * (order + 2U) / 2U);
-    uint16_t coef_at = (uint16_t)(MF_CAL_COEF_AT + (version == MF_CAL_VERSION_THERMAL ? MF_CAL_THERMAL_LEN : 0U));
+    uint8_t thermal = (uint8_t)(version == MF_CAL_VERSION_THERMAL || version == MF_CAL_VERSION_REFERENCE);
+    uint16_t coef_at = (uint16_t)(MF_CAL_COEF_AT + (thermal ? MF_CAL_THERMAL_LEN : 0U)
+                                  + (version == MF_CAL_VERSION_REFERENCE ? MF_CAL_REFERENCE_LEN : 0U));
     uint16_t fan_at = (uint16_t)(coef_at + 8U * n_coef);
     uint16_t k;
     cal.status = MF_E_CALIB;
     cal.taxels = 0;
     cal.thermal = 0;
+    cal.reference = 0;
 #if MF_GENERIC
     mf_set.ubrr = MF_FALLBACK_UBRR; /* what the UART starts with, unless a valid record says otherwise */
     mf_set.baud = MF_FALLBACK_BAUD;
@@ -157,7 +162,7 @@ int mf_calib_load(void)
         return load_array(len, name_len);
     }
     if (mf_nv_byte(0) != MF_CAL_MAGIC0 || mf_nv_byte(1) != MF_CAL_MAGIC1
-        || (version != MF_CAL_VERSION && version != MF_CAL_VERSION_THERMAL)
+        || (version != MF_CAL_VERSION && !thermal)
         || order > MF_CAL_MAX_ORDER || n < 3 || n > 200 || len > MF_NV_SIZE || name_len > MF_CAL_NAME_MAX
         || len != (uint16_t)(fan_at + 20U * n + name_len + 2U)
         || record_crc((uint16_t)(len - 2)) != mf_nv_u16((uint16_t)(len - 2))) {
@@ -172,7 +177,16 @@ int mf_calib_load(void)
     for (k = 0; k < 2U * n_coef; ++k) {
         cal.coef[k] = mf_nv_float((uint16_t)(coef_at + 4U * k));
     }
-    if (version == MF_CAL_VERSION_THERMAL) {
+    if (version == MF_CAL_VERSION_REFERENCE) {
+        uint8_t addr = mf_nv_byte(MF_CAL_COEF_AT + MF_CAL_THERMAL_LEN);
+        uint8_t shift = mf_nv_byte(MF_CAL_COEF_AT + MF_CAL_THERMAL_LEN + 1U);
+        if (addr < 0x08U || addr > 0x77U || addr == mf_nv_byte(MF_CAL_IMAGE_AT) || shift < 1U || shift > 8U) {
+            return MF_E_CALIB;
+        }
+        cal.reference = addr;
+        cal.reference_shift = shift;
+    }
+    if (thermal) {
         cal.t0_C = mf_nv_float(MF_CAL_COEF_AT);
         for (k = 0; k < 3U; ++k) {
             cal.a_per_C[k] = mf_nv_float((uint16_t)(MF_CAL_COEF_AT + 4U + 4U * k));
@@ -192,6 +206,16 @@ int mf_calib_load(void)
 int mf_calib_status(void)
 {
     return cal.status;
+}
+
+uint8_t mf_calib_reference(void)
+{
+    return cal.status == MF_OK ? cal.reference : 0U;
+}
+
+uint8_t mf_calib_reference_shift(void)
+{
+    return cal.reference_shift;
 }
 
 uint8_t mf_calib_taxels(void)

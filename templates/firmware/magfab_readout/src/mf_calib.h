@@ -24,6 +24,7 @@ extern "C" {
 #define MF_CAL_VERSION 2
 #define MF_CAL_VERSION_THERMAL 4 /* version 2 with the thermal block at MF_CAL_COEF_AT, the Horner rows after it */
 #define MF_CAL_VERSION_ARRAY 3 /* an array's record: the settings, the chips' addresses, no calibration */
+#define MF_CAL_VERSION_REFERENCE 5 /* version 4 and a reference block after the thermal block, then the Horner rows */
 #define MF_CAL_ADDR_AT 92      /* an array record's chip addresses, one byte each in taxel order */
 #define MF_MAX_TAXELS 16
 #define MF_CAL_SHA_AT 8      /* 16 ASCII hex digits of the calibration's sha256 */
@@ -32,6 +33,7 @@ extern "C" {
 #define MF_CAL_FLOATS_AT 92
 #define MF_CAL_COEF_AT 164
 #define MF_CAL_THERMAL_LEN 16 /* version 4: T0 (degC), then a_x, a_y, a_z (1/degC), float32 each */
+#define MF_CAL_REFERENCE_LEN 4 /* version 5: the reference chip's 7-bit address, the average's shift, two zeros */
 #define MF_CAL_MAX_ORDER 8
 #define MF_CAL_NAME_MAX 64
 
@@ -41,6 +43,9 @@ int mf_calib_load(void);
 int mf_calib_status(void);
 /* An array's valid record: its number of chips (1..MF_MAX_TAXELS); 0 for a single taxel's or none. */
 uint8_t mf_calib_taxels(void);
+/* A version-5 record's reference chip: its 7-bit address (0: none) and its average's shift (1..8). */
+uint8_t mf_calib_reference(void);
+uint8_t mf_calib_reference_shift(void);
 /* The 7-bit I2C address of taxel k (k < mf_calib_taxels()). */
 uint8_t mf_calib_address(uint8_t k);
 /* Byte k (0..15) of the record's calibration hash, for the info line ('0' without a valid record). */
