@@ -199,7 +199,8 @@ def _calibration_finding(result, prefix: str, source: str = "") -> Finding:
     return Finding(Severity.INFO if result.meets_tolerance else Severity.WARNING, "calibration",
                    f"{prefix}{source}{result.chosen}, held-out RMS Fz {1000 * err['Fz_N']['rms_holdout']:.2f} mN, "
                    f"Fr {1000 * err['Fr_N']['rms_holdout']:.2f} mN ({err['folds']}-fold)"
-                   + ("" if result.meets_tolerance else f"; {result.message}"), "calibration.tolerance_mN")
+                   + ("" if result.meets_tolerance else f"; {result.message}")
+                   + (f"; {result.thermal_note}" if result.thermal_note else ""), "calibration.tolerance_mN")
 
 
 def _scan(design: Design, prediction, scan, say: Progress):

@@ -30,7 +30,7 @@ from .device import (CalibrationMismatch, CrcErrorRate, Device, DeviceError, NoD
                      find_port)
 from .frames import (Decoder, DecoderStats, DeviceInfo, Sample, crc16_ccitt_false, decode_frames, encode_frame,
                      encode_info_line, encode_text_line)
-from .simulate import PressPattern, RestTip, SimulatedDevice
+from .simulate import PressPattern, RestTip, SimulatedDevice, TemperatureRamp
 from .taxels import ArrayCalibration, ArrayEvaluator, ArrayReader, Cycle, CycleAssembler, TaxelReading, WrongFirmware
 from .array_sim import ArrayPressPattern, SimulatedArray
 
@@ -41,7 +41,7 @@ __all__ = [
     "ArrayCalibration", "ArrayEvaluator", "ArrayPressPattern", "ArrayReader", "Calibration", "CalibrationError",
     "CalibrationMismatch", "CrcErrorRate", "Cycle", "CycleAssembler", "Decoder", "DecoderStats", "Device",
     "DeviceError", "DeviceInfo", "NoData", "PortNotFound", "PressPattern", "RestTip", "SPEC_NAME", "Sample",
-    "SimulatedArray", "SimulatedDevice", "TaxelReading", "WrongFirmware",
+    "SimulatedArray", "SimulatedDevice", "TaxelReading", "TemperatureRamp", "WrongFirmware",
     "__version__", "calibration_sha256", "crc16_ccitt_false", "cross_check", "decode_frames", "encode_frame",
     "encode_info_line", "encode_text_line", "find_port",
 ]

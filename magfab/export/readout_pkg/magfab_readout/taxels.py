@@ -295,9 +295,10 @@ class ArrayEvaluator:
         force = _NAN3
         if _finite(own):
             cal = self.calibration.calibrations[k]
-            if not cal.in_region_B(*own):
+            if not cal.in_region_B(*cal.corrected(*own, s.temperature_C)):  # the chip's temperature, as one taxel's
                 status |= STATUS_OUTSIDE_REGION
-            force = tuple(f - o for f, o in zip(cal.evaluate(*own, method=self.method), self.offset_N[k]))
+            force = tuple(f - o for f, o in zip(cal.evaluate(*own, method=self.method, temperature_C=s.temperature_C),
+                                                self.offset_N[k]))
         return TaxelReading(k, s.seq, s.time_s, status, s.B_uT, own, force, s.temperature_C,  # type: ignore[arg-type]
                             s.fault, counts=s.counts, temperature_raw=s.temperature_raw)
 
