@@ -79,21 +79,23 @@ def test_rejection_uniform_from_the_datasheet_bounds_and_a_dipole_by_its_gradien
     assert rej.noise_growth == pytest.approx(np.sqrt(1 + 1 / 15))
 
 
-def test_the_prediction_carries_the_reference_budget():
+def test_the_prediction_carries_the_reference_budget(pred):
+    """predictions.json's reference section and its findings; the session's MagOne prediction stands for the same
+    spec with [reference] (the reference chip changes no part of the prediction); predict() wiring it is
+    tests/export/test_simbus_reference.py's setup."""
     from magfab import derive, parse_spec
-    from magfab.models.predict import predict_with_findings
+    from magfab.models import drift
 
     design = derive(parse_spec("[reference]\n[environment]\nstray_moment_Am2 = 0.5\nstray_distance_mm = 300\n"))
-    pred, found = predict_with_findings(design)
-    section = pred.as_json()["reference"]
+    section = ref.budget(design, pred, drift.drift(design, pred))
     assert section["quiet"] and section["chip"]["designator"] == "U2"
     rot = section["rotation"]
     ratio = section["rejection"]["uniform"]
     assert abs(rot["with"]["normal_rest_mN"]) == pytest.approx(abs(rot["without"]["normal_rest_mN"]) / ratio, rel=0.05)
     stray = section["stray"]
     assert abs(stray["with_median"]["normal_rest_mN"]) < abs(stray["without"]["normal_rest_mN"])
-    info = [f for f in found if f.code == "reference"]
-    assert len(info) == 1 and "14x" in info[0].message
+    info = ref.findings(design, section)
+    assert [f.code for f in info] == ["reference"] and "14x" in info[0].message
     loud = derive(parse_spec("[reference]\ndistance_mm = 12\n"))
-    _, found = predict_with_findings(loud)
-    assert [f.key for f in found if f.code == "reference-loud"] == ["reference.distance_mm"]
+    found = ref.findings(loud, ref.budget(loud, pred, drift.drift(loud, pred)))
+    assert [(f.code, f.key) for f in found] == [("reference-loud", "reference.distance_mm")]
