@@ -49,6 +49,19 @@ def _rows(d: "Drift") -> list[tuple[str, ...]]:
     return rows
 
 
+def _reference_rows(section: dict | None, d: "Drift") -> list[tuple[str, ...]]:
+    """The rotation and the stray source again with the reference chip subtracted (predictions.json's
+    ``reference``), or none without one."""
+    if section is None:
+        return []
+    picked = [("the same turn, the reference chip subtracted", section["rotation"]["with"])]
+    if section["stray"] is not None:
+        picked += [(f"the stray source, the reference subtracted ({k[5:]} over its direction)", section["stray"][k])
+                   for k in ("with_median", "with_worst")]
+    return [_row(label, f"{x['field_G']:.3g}", (x["normal_rest_mN"], x["normal_end_mN"], x["shear_mN"]), d)
+            for label, x in picked]
+
+
 def drift_context(prediction: "Prediction", figures: Callable[[str], list]) -> dict | None:
     """What report.html.j2's drift section shows, or None without a budget. ``figures(folder)``: the build's plots
     under a folder, as the report draws them."""
@@ -68,4 +81,11 @@ def drift_context(prediction: "Prediction", figures: Callable[[str], list]) -> d
                f"lag it by {env['temperature_lag_C']:g} C. Resolution {d.resolution_mN['normal']:.2f} mN normal, "
                f"{d.resolution_mN['shear']:.2f} mN shear; field noise {d.noise_G['z']:.3f} G (z), "
                f"{d.noise_G['xy']:.3f} G (x, y) RMS.")
-    return {"summary": summary, "header": HEADER, "rows": _rows(d), "figures": figures(FOLDER)}
+    ref = prediction.reference
+    if ref is not None:
+        chip, rej = ref["chip"], ref["rejection"]
+        summary += (f" A reference chip ({chip['designator']}, 0x{chip['i2c_address']:02X}, {chip['separation_mm']:g} mm "
+                    f"from the sensing chip) is subtracted on the board: a uniform field rejected {rej['uniform']:.0f}x "
+                    f"(the chips' mismatch, {100 * rej['mismatch']:g} % assumed, and {100 * rej['cross_axis']:g} % "
+                    "cross-axis); a dipole as near as the reference is not rejected.")
+    return {"summary": summary, "header": HEADER, "rows": _rows(d) + _reference_rows(ref, d), "figures": figures(FOLDER)}
