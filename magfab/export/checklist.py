@@ -426,6 +426,16 @@ def _calibrate_section(design: "Design", plan: "ScanPlan | None") -> Section:
 
         plan = scan_plan(design)
     disc = indenter_disc_mm(design, plan.y_half_mm)
+    run = Step("From the build folder: start the reference log and the recording (the first line below), run the scan, "
+               "and end both when it is done. The recording's host_time_s column is this computer's clock too, which "
+               "is how calibrate pairs each sample with the reference's force. Then fit the calibration to the "
+               f"reference (order {cal.order}, {cal.method.value}, {cal.folds}-fold held-out error, tolerance "
+               f"{cal.tolerance_mN:g} mN), which updates this build folder, reinstall the reader with the new "
+               "calibration, and upload it into the board's EEPROM (no compiler, no reflash).", CALIBRATE_COMMANDS)
+    if design.array is not None:
+        from .checklist_array import calibrate_step
+
+        run = calibrate_step(design, run)
     return _section("Calibrate", [
         f"Build the rig: the {ref.name} (resolution {cal.reference_resolution_mN:g} mN, the figure the simulated scan "
         f"assumed) on a {_lc(stage.name)} graduated in "
@@ -437,19 +447,18 @@ def _calibrate_section(design: "Design", plan: "ScanPlan | None") -> Section:
         f"The track to scan: {2.0 * plan.y_half_mm:.3g} mm in y centred on the axis (set by {plan.y_end}) and "
         f"{plan.depth_mm:.3g} mm of indentation (set by {plan.depth_end}; the simulated scan and the predicted range "
         f"stop there too), in {plan.step_mm * 1000:g} um steps ({plan.points} points).",
-        Step("From the build folder: start the reference log and the recording (the first line below), run the scan, "
-             "and end both when it is done. The recording's host_time_s column is this computer's clock too, which "
-             "is how calibrate pairs each sample with the reference's force. Then fit the calibration to the "
-             f"reference (order {cal.order}, {cal.method.value}, {cal.folds}-fold held-out error, tolerance "
-             f"{cal.tolerance_mN:g} mN), which updates this build folder, reinstall the reader with the new "
-             "calibration, and upload it into the board's EEPROM (no compiler, no reflash).", CALIBRATE_COMMANDS),
+        run,
     ])
 
 
-def _acceptance_section(acceptance: Mapping[str, object] | None) -> Section:
+def _acceptance_section(acceptance: Mapping[str, object] | None, design: "Design | None" = None) -> Section:
     rest = acceptance.get("rest_Bz_uT") if acceptance else None
     weight = acceptance.get("weight_g") if acceptance else None
     delta = acceptance.get("delta_Bz_uT") if acceptance else None
+    if design is not None and design.array is not None:
+        from .checklist_array import acceptance_steps
+
+        return _section("Acceptance test", acceptance_steps(design, float(weight or 50)))  # type: ignore[arg-type]
     if not (rest and weight and delta):
         return _section("Acceptance test", [
             "This build has no acceptance bands (no calibration/acceptance.json: the prediction gave no weight that "
@@ -474,7 +483,7 @@ def sections(design: "Design", acceptance: Mapping[str, object] | None = None,
     return [_parts_section(design, acceptance)] + _array_sections(design) + [_print_section(design), _prepare_section(design, q),
             _mix_section(design, q), _pour_section(design, q), _magnet_section(design), _solder_section(design),
             _assemble_section(design), _wiring_section(design), _flash_section(design),
-            _calibrate_section(design, plan), _acceptance_section(acceptance)]
+            _calibrate_section(design, plan), _acceptance_section(acceptance, design)]
 
 
 def checklist_md(design: "Design", acceptance: Mapping[str, object] | None = None,

@@ -3,12 +3,23 @@ single taxel's steps that change when one board carries several chips and magnet
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from dataclasses import replace
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from ..design import Design
 
-__all__ = ["address_rows", "ADDRESS_HEADER", "north", "chips_text", "magnets_text"]
+__all__ = ["address_rows", "ADDRESS_HEADER", "north", "chips_text", "magnets_text", "CALIBRATE_COMMANDS",
+           "calibrate_step", "acceptance_steps"]
+
+#: An array's calibration commands: one taxel's scan per recording, --taxel naming it (the readout README's bench
+#: block has the same lines). One command per line.
+CALIBRATE_COMMANDS = (
+    "magfab-readout record scan.csv              # during taxel 0's scan; Ctrl-C ends it",
+    "magfab calibrate scan.csv --reference reference.csv --taxel 0",
+    "pip install ./readout",
+    "magfab-readout upload",
+)
 
 ADDRESS_HEADER = ("taxel", "x, y (mm)", "chip", "order code", "I2C address", "A1, A0", "magnet north")
 
@@ -42,3 +53,21 @@ def magnets_text(design: "Design") -> str:
     return (f"The magnets alternate: taxel(s) {', '.join(downs)} take theirs south face (undotted) first, north down "
             "towards the chip; the others north face first. The address plan's last column says which for each; a "
             "wrong one reads a negative field at rest for a north-up taxel (the acceptance test names it).")
+
+
+def calibrate_step(design: "Design", step: Any) -> Any:
+    """The single taxel's calibration step (a checklist Step) for an array: one taxel scanned per recording."""
+    n = len(design.taxels)
+    text = step.text.replace("upload it into the board's EEPROM", "upload the array's record again, which names it")
+    return replace(step, commands=CALIBRATE_COMMANDS, text=text + (
+        f" Scan one taxel at a time, taxel 0 first, its tip under the disc: the recording holds every chip's field and "
+        f"--taxel names the taxel scanned (the others keep their calibrations). Then the same for taxels 1 to {n - 1}, "
+        "one recording each, with --taxel the taxel scanned."))
+
+
+def acceptance_steps(design: "Design", weight_g: float) -> list[str]:
+    """The acceptance section's words for an array: magfab-readout check reads a single taxel only."""
+    return [f"magfab-readout check does not read an array yet. With the board streaming, zeroed at rest (the last "
+            f"command of the section Flash and read), put the {weight_g:g} g weight on each of the "
+            f"{len(design.taxels)} tips in turn: that taxel's Fz reads about {weight_g * 9.80665e-3:.2f} N and the "
+            "others stay near zero (the host removes each magnet's field from its neighbours')."]

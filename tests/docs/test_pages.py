@@ -123,7 +123,8 @@ def _paste_pages(walked, build, pages, done) -> int:
                 ran += 1
                 continue
             for line in block.commands:
-                if (_command(line.replace("/dev/ttyACM0", walked.rig.port)), walked.cwd) in done:
+                port = walked.rig.port if walked.rig is not None else "/dev/ttyACM0"
+                if (_command(line.replace("/dev/ttyACM0", port)), walked.cwd) in done:
                     continue
                 ran_line = walked.paste(line)
                 _assert_ok(ran_line, block)
@@ -167,3 +168,110 @@ def test_a_recording_is_not_calibrated_against_itself(walked):
     assert ran.returncode == 2 and "Traceback" not in ran.stderr
     assert ran.stderr.count("\n") == 1 and "Fz_sensor_N" in ran.stderr and "--reference" in ran.stderr
     assert (build / "manifest.json").read_bytes() == before
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# The array's pages (issue 17): the 1x5 strip the README's "Arrays" section built in the same walk, on a board of
+# five chips. These run last: the strip's readout replaces the finger's in the walk's environment.
+
+PRESSED, PRESS_N = 2, 0.5  # a press of 0.5 N straight down on the middle taxel while `stream` runs
+
+
+def _press_fields(build: Path, taxel: int, force_N: float) -> list:
+    """Every chip's field (uT, taxel order) with magnet ``taxel`` pressed by ``force_N`` on its axis: its travel from
+    the build's predicted nominal curve (predictions.json), the fields from magfab's exact model of every magnet."""
+    import numpy as np
+
+    from magfab.design import derive
+    from magfab.models import taxels
+    from magfab.spec import load_build_spec
+
+    normal = json.loads((build / "predictions.json").read_text())["normal"]
+    force = [f for _, f in normal["curve"]["nominal"]]
+    travel = float(np.interp(force_N, force, normal["magnet_displacement_mm"]))
+    design = derive(load_build_spec(build))
+    centres = taxels._magnet_centres(design).copy()
+    centres[taxel] += (0.0, 0.0, -travel)  # towards its chip
+    return taxels.field_at_chips(design, centres).sum(axis=1).tolist()
+
+
+@pytest.fixture(scope="module")
+def strip_walked(walked, tmp_path_factory):
+    """The strip's readout/README.md and checklist.md pasted from its build folder (the README walk's build/strip),
+    on a new board with the strip's five chips at their addresses, in the walk's environment; a press on taxel 2
+    while `stream` runs. The bench, after the pages."""
+    strip = walked.cwd.parent / "strip"
+    assert (strip / "calibration" / "array.json").is_file(), "the README's Arrays section builds build/strip"
+    with contextlib.ExitStack() as stack:
+
+        def plug_in(build_dir: Path) -> Rig:
+            lib = build_library(build_dir, tmp_path_factory.mktemp("strip-harness"))
+            return stack.enter_context(Rig(build_dir, lib, tmp_path_factory.mktemp("strip-board")))
+
+        bench = Bench(cwd=strip, venv=walked.venv, plug_in=plug_in, press=_press_fields(strip, PRESSED, PRESS_N))
+        _paste_pages(bench, strip, [("readout/README.md", strip), ("checklist.md", strip)], set())
+        bench.cwd = strip
+        for ran in bench.ran:  # with -s: where the array's pages spend their time
+            print(f"{ran.seconds:6.1f} s  {ran.line}")
+        yield bench
+
+
+def test_the_array_pages_run_as_written(strip_walked):
+    """Flash, install, upload (the version-3 record: every chip's address), info (every taxel), stream, record
+    (the taxel column), calibrate --taxel 0 and upload again, as the strip's pages write them."""
+    bench, build = strip_walked, strip_walked.cwd
+    assert len(bench.ran) >= 9 and bench.rig.resets == 0
+    flashed = _data(bench.rig.flashed.read_text())
+    image = _data((build / "firmware" / "magfab-atmega328p.hex").read_text())
+    assert flashed[:len(image)] == image
+    taxels = json.loads((build / "design.json").read_text())["array"]["taxels"]
+    addresses = [t["i2c_address"] for t in taxels]
+    assert len(addresses) == 5 and bench.rig.addresses == addresses
+    from magfab.export.firmware import _eeprom_module
+
+    ee = _eeprom_module()
+    record = bench.rig.eeprom(1024)
+    assert ee.unpack_header(record)["version"] == ee.VERSION_ARRAY == 3 and ee.addresses(record) == addresses
+    upload = _ran(bench, "magfab-readout upload").stdout
+    assert "read back equal; the board reads 5 chips" in upload, upload
+    info = _ran(bench, "magfab-readout info").stdout
+    listed = [line for line in info.splitlines() if line.lstrip().startswith("taxel ")]
+    assert [int(line.split("address 0x")[1][:2], 16) for line in listed] == addresses, info
+    assert info.rstrip().endswith("calibration: match")
+    with open(build / "scan.csv", newline="") as f:
+        reader = csv.DictReader(line for line in f if not line.startswith("#"))
+        rows = list(reader)
+    assert reader.fieldnames[:3] == ["time_s", "host_time_s", "taxel"] and "Fz_sensor_N" in reader.fieldnames
+    assert {int(r["taxel"]) for r in rows} == set(range(5))  # every chip's reading recorded
+    cal = json.loads((build / "calibration" / "taxel_00.json").read_text())
+    assert cal["scan"]["source"] == "scan.csv + reference.csv" and (build / "calibration" / "scan_taxel_00.csv").is_file()
+    assert "--taxel 0" in _ran(bench, "magfab calibrate").line
+
+
+def test_a_press_on_one_taxel_streams_on_that_taxel_only(strip_walked):
+    """`stream --zero 200` prints every taxel of every cycle; pressed by 0.5 N, taxel 2 reads the press (within its
+    calibration's held-out error) and its neighbours, whose chips see its magnet move, read less than the
+    predicted resolution (the host removes the magnet's field from theirs)."""
+    bench, build = strip_walked, strip_walked.cwd
+    ran = _ran(bench, "magfab-readout stream --zero 200")
+    rows = [line.split() for line in ran.stdout.splitlines() if line.strip() and not line.startswith("#")]
+    cycles: dict[int, dict[int, list]] = {}
+    for r in rows:
+        cycles.setdefault(int(r[1]), {})[int(r[2])] = [float(x) for x in r[3:6]]
+    whole = [c for c in cycles.values() if len(c) == 5]
+    assert len(whole) >= 100 and len(whole) >= len(cycles) - 2, ran.stderr  # a cycle cut by Ctrl-C at most
+    pred = json.loads((build / "predictions.json").read_text())
+    resolution = [pred["shear"]["resolution_mN"] / 1e3] * 2 + [pred["normal"]["resolution_mN"] / 1e3]
+    cal = json.loads((build / "calibration" / f"taxel_{PRESSED:02d}.json").read_text())
+    tolerance = cal["errors"]["Fz_N"]["max_holdout"] + 3 * resolution[2]
+    on = [c[PRESSED][2] > PRESS_N / 2 for c in whole]
+    # The rig's press is a step between two of the board's chip reads: a cycle on either side of the step can hold
+    # chips read before it and chips read after it (a finger's press is continuous), so the edges are left out.
+    pressed = [c for i, c in enumerate(whole) if all(on[max(i - 1, 0):i + 2])]
+    assert len(pressed) >= 20, [c[PRESSED] for c in whole[::20]]
+    for c in pressed:
+        assert abs(c[PRESSED][2] - PRESS_N) < tolerance, (c[PRESSED], PRESS_N, tolerance)
+        for k in set(range(5)) - {PRESSED}:
+            assert all(abs(f) < r for f, r in zip(c[k], resolution)), (k, c[k], resolution)
+    at_rest = [c for c in whole if abs(c[PRESSED][2]) < resolution[2]]
+    assert len(at_rest) >= 20  # zeroed before the press and after it

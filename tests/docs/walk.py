@@ -41,6 +41,7 @@ class Ran:
     returncode: int
     stdout: str
     stderr: str
+    seconds: float = 0.0  # how long it ran (set as it is logged; for -s reports, never asserted)
 
 
 class Scan:
@@ -151,6 +152,7 @@ class Bench:
             self.scan.at_rest(self.rig)
 
     def paste(self, line: str, timeout_s: float = 600) -> Ran:
+        self._started = time.monotonic()
         self._board(line)
         if self.rig is not None:
             line = line.replace(PAGE_PORT, self.rig.port)
@@ -166,11 +168,13 @@ class Bench:
         return self._log(Ran(line, self.cwd, proc.returncode, proc.stdout, proc.stderr))
 
     def python(self, source: str, timeout_s: float = 120) -> Ran:
+        self._started = time.monotonic()
         proc = subprocess.run(["python", "-c", source], cwd=self.cwd, env=self.env, capture_output=True, text=True,
                               timeout=timeout_s)
         return self._log(Ran("python: " + source.splitlines()[0], self.cwd, proc.returncode, proc.stdout, proc.stderr))
 
     def _log(self, ran: Ran) -> Ran:
+        ran.seconds = time.monotonic() - self._started
         self.ran.append(ran)
         return ran
 
