@@ -1,0 +1,309 @@
+"""``magfab-readout check``: the acceptance test at the end of the fabrication checklist, against the bands magfab
+predicted for this build (the package's acceptance.json). Each step prints one PASS or FAIL line with the measured
+and the predicted values; :func:`run` returns 0 when every step passes, 1 otherwise."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import pkgutil
+import sys
+from typing import Optional, Tuple
+
+from . import __version__, _build, acceptance_json
+from .device import Device, DeviceError
+from .simulate import RestTip
+
+G0 = 9.80665  # m/s^2
+
+
+def add_parser(commands, common: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """The ``check`` command and its options, on the command line's subcommands."""
+    check = commands.add_parser(
+        "check", parents=[common], help="acceptance test: the field at rest and under a known weight vs the prediction",
+        description="The acceptance test at the end of the fabrication checklist. With nothing touching the tip it "
+        "averages the field and compares it with the band magfab predicted from the magnet, material and assembly "
+        "tolerances (its sign tells an upside-down magnet); then it asks for a known weight on the tip and compares "
+        "the rise of Bz with the predicted band. Prints PASS or FAIL per step with the measured and predicted values; "
+        "exit status 0 when every step passes, 1 otherwise.")
+    check.add_argument("--weight-g", type=float, metavar="W",
+                       help="the known weight in grams (default: the one the build chose, in acceptance.json)")
+    check.add_argument("--samples", type=int, default=500, metavar="N",
+                       help="samples averaged per reading (default: %(default)s)")
+    check.add_argument("--settle", type=float, default=1.0, metavar="S",
+                       help="seconds of device time to wait after the weight is on before reading (default: %(default)s)")
+    check.add_argument("--no-weight", action="store_true", help="skip the known-weight step")
+    check.add_argument("--yes", "-y", action="store_true",
+                       help="do not wait for Enter (non-interactive): the weight is on the tip when the check asks")
+    sensor = check.add_argument_group("simulated sensor (with --simulate)")
+    sensor.add_argument("--simulate-grade", metavar="GRADE",
+                        help="the simulated magnet's grade (a name from acceptance.json: N35, N42, N45, N52) or "
+                        "its remanence in tesla, instead of the spec's")
+    sensor.add_argument("--simulate-flipped", action="store_true", help="the simulated magnet is upside down")
+    return check
+
+
+class UsageError(ValueError):
+    """A bad option value for ``check`` (exit status 2)."""
+
+
+def load_acceptance() -> Optional[dict]:
+    """The package's acceptance.json, checked by ``acceptance_json`` (the validator magfab ran on it before
+    shipping it), or None when the package was built without one."""
+    try:
+        raw = pkgutil.get_data("magfab_readout", "acceptance.json")
+    except OSError:
+        return None
+    if raw is None:
+        return None
+    try:
+        return acceptance_json.loads(raw)
+    except acceptance_json.AcceptanceError as exc:
+        raise DeviceError("the package's {}: reinstall the readout package from the same magfab build".format(exc)) from None
+
+
+class Bands:
+    """The predicted bands of a validated acceptance.json (:func:`load_acceptance`)."""
+
+    def __init__(self, data: dict) -> None:
+        try:
+            rest = data["rest"]
+            self.rest = tuple(float(rest["Bz_uT"][k]) for k in ("min", "nominal", "max"))
+            self.bxy_max = float(rest["Bxy_max_uT"])
+            self.earth = float(rest["earth_field_uT"])
+            self.inside = [str(g) for g in rest.get("grades_inside_band", [])]
+            weight = data["weight"]
+            self.weight_g = float(weight["weight_g"])
+            self.max_weight_g = float(weight["max_weight_g"])
+            table = weight["table"]
+            self.force = [float(x) for x in table["force_N"]]
+            self.delta = {k: [float(x) for x in table["delta_Bz_{}_uT".format(k)]] for k in ("min", "nominal", "max")}
+            self.noise_z = float(data["measurement"]["noise_z_uT"])
+            self.noise_xy = float(data["measurement"]["noise_xy_uT"])
+            self.sigmas = float(data["measurement"]["allowance_sigmas"])
+            magnet = data["magnet"]
+            self.grade = str(magnet["grade"])
+            self.remanence = tuple(float(magnet["remanence_T"][k]) for k in ("low", "nominal", "high"))
+            self.grades = {str(k): float(v["remanence_T"]) for k, v in data.get("grades", {}).items()}
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:  # the optional grade tables
+            raise DeviceError("the package's acceptance.json garbles {}: reinstall the readout package from "
+                              "the magfab build".format(exc)) from None
+
+    def rise(self, grams: float) -> Tuple[float, float, float]:
+        """(min, nominal, max) predicted rise of Bz in uT under ``grams`` on the tip (linear in the table)."""
+        f = grams * G0 / 1000.0
+        xs = self.force
+        if not (xs[0] <= f <= xs[-1] + 1e-9):
+            raise UsageError("--weight-g {:g}: the prediction covers weights up to {:.0f} g".format(grams, self.max_weight_g))
+        k = max(1, min(len(xs) - 1, next((i for i, x in enumerate(xs) if x >= f), len(xs) - 1)))
+        t = (f - xs[k - 1]) / (xs[k] - xs[k - 1])
+        return tuple(self.delta[c][k - 1] + t * (self.delta[c][k] - self.delta[c][k - 1])  # type: ignore[return-value]
+                     for c in ("min", "nominal", "max"))
+
+    def scale_of(self, grade: str) -> float:
+        """Field scale of a magnet of ``grade`` (a grade name or a remanence in tesla) relative to the spec's."""
+        names = {k.lower(): v for k, v in self.grades.items()}
+        if grade.lower() in names:
+            return names[grade.lower()] / self.remanence[1]
+        try:
+            value = float(grade)
+        except ValueError:
+            value = math.nan
+        if not (0.0 < value < 2.0):
+            raise UsageError("--simulate-grade {!r}: give a grade ({}) or a remanence in tesla (0 to 2)".format(
+                grade, ", ".join(sorted(self.grades)) or "none known"))
+        return value / self.remanence[1]
+
+
+def _mean_field(device: Device, count: int) -> Tuple[Tuple[float, float, float], int]:
+    """Mean (Bx, By, Bz) in uT of ``count`` good samples, and how many of them had an axis at full scale."""
+    total = [0.0, 0.0, 0.0]
+    used = skipped = full = 0
+    for sample in device.samples():
+        if sample.chip_error or not all(math.isfinite(b) for b in sample.B_uT):
+            skipped += 1
+            if skipped > 10 * count + 100:
+                raise DeviceError("{} samples from {} were chip errors: check the sensor board's wiring and "
+                                  "supply".format(skipped, device.port))
+            continue
+        full += bool(sample.full_scale)
+        total = [t + b for t, b in zip(total, sample.B_uT)]
+        used += 1
+        if used == count:
+            break
+    return (total[0] / used, total[1] / used, total[2] / used), full
+
+
+def _ask(prompt: str, yes: bool) -> None:
+    sys.stderr.write(prompt + (" (--yes: not waiting)\n" if yes else ", then press Enter: "))
+    sys.stderr.flush()
+    if not yes and not sys.stdin.readline():
+        raise DeviceError("no answer on stdin (end of input): run the check at a terminal, or pass --yes")
+
+
+class _Steps:
+    """The acceptance test's steps as they are reported: numbered PASS/FAIL lines, and the verdict."""
+
+    def __init__(self, out) -> None:
+        self.out, self.results = out, []  # (name, passed)
+
+    def report(self, name: str, passed: bool, text: str) -> None:
+        self.results.append((name, passed))
+        self.out.write("step {}  {:<26} {}  {}\n".format(len(self.results), name, "PASS" if passed else "FAIL", text))
+        self.out.flush()
+
+    def verdict(self) -> int:
+        failed = [k + 1 for k, (_, passed) in enumerate(self.results) if not passed]
+        if failed:
+            self.out.write("verdict: FAIL (step{} {} of {})\n".format("s" if len(failed) > 1 else "",
+                                                                      ", ".join(map(str, failed)), len(self.results)))
+            return 1
+        self.out.write("verdict: PASS (all {} steps)\n".format(len(self.results)))
+        return 0
+
+
+def _check_options(args: argparse.Namespace, bands: "Bands", data: dict):
+    """The weight, its predicted rise and the simulated tip the options ask for; UsageError when they clash."""
+    if args.samples < 1:
+        raise UsageError("--samples must be at least 1")
+    if not args.settle >= 0:
+        raise UsageError("--settle must be zero or positive")
+    weight = bands.weight_g if args.weight_g is None else float(args.weight_g)
+    rise = None
+    if not args.no_weight:
+        if not (math.isfinite(weight) and weight > 0):
+            raise UsageError("--weight-g must be a positive number of grams")
+        rise = bands.rise(weight)
+    pattern = None
+    if args.simulate:
+        scale = bands.scale_of(args.simulate_grade) if args.simulate_grade else 1.0
+        pattern = RestTip.from_acceptance(data, scale=scale, flipped=args.simulate_flipped)
+    elif args.simulate_grade or args.simulate_flipped:
+        raise UsageError("--simulate-grade and --simulate-flipped need --simulate")
+    return weight, rise, pattern
+
+
+def run(args: argparse.Namespace, out, open_device) -> int:
+    """The check as the command line asks it; ``open_device(args, text, pattern)`` opens the board (or the simulated one)."""
+    data = load_acceptance()
+    if data is None:
+        raise DeviceError("this readout package carries no acceptance.json (it was built without the acceptance "
+                          "bands): rebuild with magfab build and reinstall ./readout")
+    bands = Bands(data)
+    weight, rise, pattern = _check_options(args, bands, data)
+    n = args.samples
+    allow = bands.sigmas * bands.noise_z / math.sqrt(n) + _build.LSB_Z_UT / 2.0
+    steps = _Steps(out)
+    with open_device(args, text=None, pattern=pattern) as device:
+        _check_header(out, device, bands, weight, rise, n)
+        (bx, by, bz), full = _mean_field(device, n)
+        _check_polarity(steps, bz, allow + bands.earth)
+        _check_rest(steps, out, bands, bz, full, allow)
+        _check_lateral(steps, bands, bx, by, bands.sigmas * bands.noise_xy / math.sqrt(n) + _build.LSB_XY_UT / 2.0)
+        if not args.no_weight:
+            _check_weight(steps, out, args, device, bands, weight, rise, bz)
+    return steps.verdict()
+
+
+def _check_header(out, device, bands: "Bands", weight: float, rise, n: int) -> None:
+    lo, nom, hi = bands.rest
+    out.write("# magfab-readout {} check: spec {}, calibration {}, {}\n".format(
+        __version__, json.dumps(_build.SPEC_NAME), device.calibration.short_hash, device.port))
+    out.write("# predicted (worst case over the magnet, material and assembly tolerances; magfab acceptance.json):\n"
+              "#   Bz at rest {:.0f} .. {:.0f} uT (nominal {:.0f}), positive with the north pole away from the "
+              "chip; |Bxy| at rest <= {:.0f} uT\n".format(lo, hi, nom, bands.bxy_max))
+    if rise is not None:
+        out.write("#   a {:g} g weight on the tip raises Bz by {:.0f} .. {:.0f} uT (nominal {:.0f})\n".format(
+            weight, rise[0], rise[2], rise[1]))
+    out.write("# reading {} samples with nothing touching the tip\n".format(n))
+    out.flush()
+
+
+def _check_polarity(steps: _Steps, bz: float, floor: float) -> None:
+    """Step 1, the sign: an upside-down magnet reads the same field negated."""
+    if bz > floor:
+        steps.report("polarity (sign of Bz)", True, "measured {:+.0f} uT: positive, the north pole faces away from the "
+                     "chip as designed".format(bz))
+    elif bz < -floor:
+        steps.report("polarity (sign of Bz)", False, "measured {:+.0f} uT: negative, the magnet is upside down (its "
+                     "north pole faces the chip); push it out of the pocket and turn it over".format(bz))
+    else:
+        steps.report("polarity (sign of Bz)", False, "measured {:+.0f} uT: no field from the magnet (|Bz| under {:.0f} "
+                     "uT); is there a magnet in the fingertip, and is the fingertip on the chip?".format(bz, floor))
+
+
+def _check_rest(steps: _Steps, out, bands: "Bands", bz: float, full: int, allow: float) -> None:
+    """Step 2, the field at rest against the predicted band, and the remanence it implies."""
+    lo, nom, hi = bands.rest
+    text = "measured {:+.0f} uT, predicted {:.0f} .. {:.0f} uT (nominal {:.0f})".format(bz, lo, hi, nom)
+    if full:
+        steps.report("Bz at rest", False, text + ": {} samples had an axis at the chip's full scale (magnet far too "
+                     "close or too strong)".format(full))
+    elif lo - allow <= bz <= hi + allow:
+        steps.report("Bz at rest", True, text)
+    elif bz < 0 and lo - allow <= -bz <= hi + allow:
+        steps.report("Bz at rest", False, text + ": the magnet is upside down (|Bz| is inside the band)")
+    elif bz > hi + allow:
+        steps.report("Bz at rest", False, text + ": stronger than predicted - a stronger grade than {}, a bigger "
+                     "magnet, or the magnet closer to the chip (not pushed home, thin pad or glue)".format(bands.grade))
+    else:
+        steps.report("Bz at rest", False, text + ": weaker than predicted - a weaker or partly demagnetised magnet "
+                     "(heated above 80 C?), a smaller magnet, or the magnet further from the chip (thick glue, pad "
+                     "not seated)")
+    if abs(bz) > allow + bands.earth:
+        implied = abs(bz) / nom * bands.remanence[1]
+        note = "#   at the nominal stack-up this field means a remanence of {:.2f} T ({} is {:.2f} .. {:.2f} T)".format(
+            implied, bands.grade, bands.remanence[0], bands.remanence[2])
+        if len(bands.inside) > 1 and steps.results[-1][1]:
+            note += "; the band also holds the nominal field of grades {}: it cannot tell those apart".format(
+                ", ".join(g for g in bands.inside if g != bands.grade))
+        out.write(note + "\n")
+
+
+def _check_lateral(steps: _Steps, bands: "Bands", bx: float, by: float, allow_xy: float) -> None:
+    """Step 3, the lateral field at rest: the magnet on the chip's axis and level."""
+    bxy = math.hypot(bx, by)
+    text = "measured {:.0f} uT, predicted at most {:.0f} uT".format(bxy, bands.bxy_max)
+    if bxy <= bands.bxy_max + allow_xy:
+        steps.report("|Bxy| at rest", True, text)
+    else:
+        steps.report("|Bxy| at rest", False, text + ": the magnet is off the chip's axis or tilted (check the pad on "
+                     "its pins and the fingertip in the lip), or a magnetic object is near")
+
+
+def _check_weight(steps: _Steps, out, args: argparse.Namespace, device, bands: "Bands", weight: float, rise,
+                  bz: float) -> None:
+    """Step 4, the known weight: the rise of Bz against the band the material and magnet predict."""
+    n = args.samples
+    _ask("place the {:g} g weight on the tip, centred, with nothing else touching".format(weight), args.yes)
+    if args.simulate:
+        device.transport.place_weight(weight)
+    device.drain()
+    start = None
+    for sample in device.samples():
+        start = sample.time_s if start is None else start
+        if sample.time_s - start >= args.settle:
+            break
+    out.write("# reading {} samples with {:g} g on the tip\n".format(n, weight))
+    (_, _, bz_w), full_w = _mean_field(device, n)
+    delta = bz_w - bz
+    allow_d = bands.sigmas * bands.noise_z * math.sqrt(2.0 / n) + _build.LSB_Z_UT
+    name = "rise of Bz under {:g} g".format(weight)
+    text = "measured {:+.0f} uT, predicted {:.0f} .. {:.0f} uT (nominal {:.0f})".format(delta, rise[0], rise[2], rise[1])
+    if full_w:
+        steps.report(name, False, text + ": {} samples had an axis at the chip's full scale".format(full_w))
+    elif rise[0] - allow_d <= delta <= rise[2] + allow_d:
+        steps.report(name, True, text)
+    elif delta < -allow_d:
+        steps.report(name, False, text + ": Bz fell under the weight - the magnet is upside down" if bz < 0 else
+                     text + ": Bz fell under the weight - is the weight on the tip, and the fingertip glued down?")
+    elif delta < rise[0] - allow_d:
+        steps.report(name, False, text + ": a smaller rise than predicted - a stiffer silicone than the recipe's "
+                     "band (mix ratio, cure), the weight off-centre or resting on something else, or the magnet "
+                     "further from the chip")
+    else:
+        steps.report(name, False, text + ": a larger rise than predicted - a softer silicone (under-cured or "
+                     "off-ratio) or the magnet closer to the chip")
+    if not args.yes:
+        sys.stderr.write("take the weight off the tip\n")
