@@ -12,7 +12,7 @@ import math
 
 from .json_checks import FormatError, is_number
 
-__all__ = ["FORMAT", "KEYS", "AcceptanceError", "loads", "validate"]
+__all__ = ["FORMAT", "KEYS", "SECTIONS", "AcceptanceError", "loads", "validate"]
 
 FORMAT = "magfab-acceptance/1"
 
@@ -29,8 +29,18 @@ KEYS = (
     ("magnet.remanence_T.low", "number"), ("magnet.remanence_T.nominal", "number"),
     ("magnet.remanence_T.high", "number"),
 )
+#: The drift steps' sections (issue 18), each optional (a file written before them has none; ``check`` then
+#: leaves the step out), but whole when present. "optional" is a finite number or null.
+SECTIONS = {
+    "rotation": (("rotation.band_uT", "number"), ("rotation.earth_change_uT", "number"),
+                 ("rotation.self_weight_change_uT", "number"), ("rotation.gradient_uT_per_mm", "number"),
+                 ("rotation.self_weight_mN", "number"), ("rotation.predicted_normal_rest_mN", "optional")),
+    "warmup": (("warmup.min_change_C", "number"), ("warmup.per_C_mN.without", "number"),
+               ("warmup.per_C_mN.with", "number"), ("warmup.per_C_mN.fitted", "number"),
+               ("warmup.noise_mN", "number"), ("warmup.magnet_pct_per_C", "number")),
+}
 _WHAT = {"number": "must be a finite number", "text": "must be a string",
-         "numbers": "must be a non-empty list of finite numbers"}
+         "numbers": "must be a non-empty list of finite numbers", "optional": "must be a finite number or null"}
 
 
 class AcceptanceError(FormatError):
@@ -48,12 +58,15 @@ def _kind_ok(node: object, kind: str) -> bool:
         return _finite_number(node)
     if kind == "text":
         return isinstance(node, str)
+    if kind == "optional":
+        return node is None or _finite_number(node)
     return isinstance(node, list) and bool(node) and all(_finite_number(x) for x in node)
 
 
 def validate(data: object) -> dict:
     """``data`` (the parsed file: plain JSON values) itself once it holds the format and every key ``check``
-    reads, with the band table's columns as long as ``force_N`` and increasing; :class:`AcceptanceError`
+    reads (and the keys of each of :data:`SECTIONS` present), with the band table's columns as long as
+    ``force_N`` and increasing; :class:`AcceptanceError`
     naming the first bad key path otherwise."""
     if not isinstance(data, dict):
         raise AcceptanceError("", type(data).__name__, "must be a JSON object (a dict)")
@@ -63,7 +76,8 @@ def validate(data: object) -> dict:
         raise AcceptanceError("", "(contents)", "must be plain JSON with finite numbers ({})".format(exc)) from None
     if data.get("format") != FORMAT:
         raise AcceptanceError("format", data.get("format"), "must be {!r}".format(FORMAT))
-    for path, kind in KEYS:
+    keys = KEYS + tuple(k for name, section in SECTIONS.items() if name in data for k in section)
+    for path, kind in keys:
         node: object = data
         for part in path.split("."):
             node = node.get(part) if isinstance(node, dict) else None

@@ -79,7 +79,7 @@ from ..errors import ModelLimitError
 from ..formats import acceptance_json
 from ..recipes import catalogue
 from ..units import GAUSS_PER_TESLA, UT_PER_GAUSS
-from . import field as fieldmod
+from . import acceptance_steps, field as fieldmod
 
 if TYPE_CHECKING:
     from ..design import Design
@@ -506,6 +506,7 @@ def acceptance(design: "Design", prediction: "Prediction | Mapping[str, Any]", w
     rest_band = [_r(rest_lo_G * UT_PER_GAUSS), _r(rest_hi_G * UT_PER_GAUSS)]
     weight = _weight_section(data, wt)
     noise = data["noise_G"]
+    warmup = acceptance_steps.warmup_section(data)
     return {
         "format": FORMAT,
         "magfab_version": __version__,
@@ -532,6 +533,8 @@ def acceptance(design: "Design", prediction: "Prediction | Mapping[str, Any]", w
             "grades_inside_band": [n for n, g in grade_table.items() if g["inside_rest_band"]],
         },
         "weight": weight,
+        "rotation": acceptance_steps.rotation_section(design, data, weight),
+        **({} if warmup is None else {"warmup": warmup}),
         "magnet": {"grade": spec.magnet.grade,
                    "remanence_T": {"low": inp.br_lo, "nominal": inp.br_nom, "high": inp.br_hi},
                    "diameter_mm": 2 * inp.R, "height_mm": inp.H},

@@ -187,6 +187,45 @@ def test_bxy_bound(acc):
     assert 0.4 * 36.3 * 100 < bound < 0.25 * acc["rest_Bz_uT"][0]
 
 
+def test_rotation_band_is_the_earth_turned_over_plus_the_tips_own_weight(design, pred, acc):
+    """Turned over, the band is twice the Earth band's strongest field (65 uT: 130 uT) plus the fingertip's own
+    weight reversed (the magnet's rho g V and half the silicone's, x the weight table's steepest rise per newton);
+    the check adds the noise terms. A stated weaker place shrinks the Earth part only; the force it is worth scales
+    the drift budget's turned-over figure."""
+    from magfab.models.acceptance_steps import self_weight_N
+
+    rot = acc["rotation"]
+    magnet_N, silicone_N = self_weight_N(design)
+    assert magnet_N == pytest.approx(7.5e-6 * design.magnet_volume_mm3 * G0)
+    table = acc["weight"]["table"]
+    slope = (table["delta_Bz_max_uT"][1] - table["delta_Bz_max_uT"][0]) / table["force_N"][1]
+    own = 2.0 * (magnet_N + silicone_N / 2.0) * slope
+    assert rot["earth_change_uT"] == pytest.approx(2 * 65.0) and rot["self_weight_change_uT"] == pytest.approx(own, rel=1e-3)
+    assert rot["band_uT"] == pytest.approx(130.0 + own, rel=1e-3)
+    assert rot["predicted_normal_rest_mN"] == pytest.approx(abs(pred.drift.rotation_band[1].normal_rest_mN), rel=1e-3)
+    assert rot["gradient_uT_per_mm"] == pytest.approx(pred.field.dBz_dz_rest_G_per_mm * 100, rel=1e-4)
+    from magfab.spec import Environment
+
+    quiet = design.spec.model_copy(update={"environment": Environment(earth_field_G=0.4)})
+    there = acceptance(derive(quiet), pred)["rotation"]
+    assert there["earth_change_uT"] == pytest.approx(80.0) and there["self_weight_change_uT"] == rot["self_weight_change_uT"]
+    assert there["predicted_normal_rest_mN"] == pytest.approx(rot["predicted_normal_rest_mN"] * 80 / 130, rel=1e-3)
+
+
+def test_warmup_band_is_the_drift_budgets_per_degree(pred, acc):
+    """The warm-up's per-degree figures are the drift budget's at rest (with: the recipe coefficients, fitted: a
+    calibration fitted over temperature, without: none), the noise its resolution; the band scales with them."""
+    w = acc["warmup"]
+    per_C = pred.drift.temperature.per_C["normal_rest"]
+    assert w["per_C_mN"] == {k: pytest.approx(abs(per_C[k]), abs=1e-4) for k in ("without", "with", "fitted")}
+    assert w["per_C_mN"]["fitted"] < w["per_C_mN"]["with"] < w["per_C_mN"]["without"]
+    assert w["noise_mN"] == pytest.approx(pred.normal.resolution_mN, abs=1e-4) and w["min_change_C"] == 4.0
+    assert w["magnet_pct_per_C"] == pytest.approx(-0.12)
+    from magfab.models.acceptance_steps import warmup_section
+
+    assert warmup_section({**pred.as_json(), "drift": None}) is None
+
+
 # --- the readout package ----------------------------------------------------------------------------------------
 
 @pytest.fixture(scope="module")
@@ -212,6 +251,9 @@ def test_render_embeds_acceptance_and_stays_compatible(design, acc, rendered):
     (lambda a: a["weight"]["table"]["force_N"].reverse(), "acceptance.json:weight.table.force_N"),
     (lambda a: a["weight"]["table"]["delta_Bz_max_uT"].pop(), "acceptance.json:weight.table"),
     (lambda a: a["magnet"].update(grade=35), "acceptance.json:magnet.grade"),
+    (lambda a: a["rotation"].pop("band_uT"), "acceptance.json:rotation.band_uT"),
+    (lambda a: a["rotation"].update(predicted_normal_rest_mN="40"), "acceptance.json:rotation.predicted_normal_rest_mN"),
+    (lambda a: a["warmup"]["per_C_mN"].pop("fitted"), "acceptance.json:warmup.per_C_mN.fitted"),
 ])
 def test_malformed_acceptance_is_refused_by_key(design, acc, change, key):
     bad = json.loads(json.dumps(acc))
