@@ -37,7 +37,8 @@ SECTIONS = {
                  ("rotation.self_weight_mN", "number"), ("rotation.predicted_normal_rest_mN", "optional")),
     "warmup": (("warmup.min_change_C", "number"), ("warmup.per_C_mN.without", "number"),
                ("warmup.per_C_mN.with", "number"), ("warmup.per_C_mN.fitted", "number"),
-               ("warmup.noise_mN", "number"), ("warmup.magnet_pct_per_C", "number")),
+               ("warmup.noise_mN", "number"), ("warmup.magnet_pct_per_C", "number"),
+               ("warmup.channel_mN_per_uT", "number")),
 }
 _WHAT = {"number": "must be a finite number", "text": "must be a string",
          "numbers": "must be a non-empty list of finite numbers", "optional": "must be a finite number or null"}

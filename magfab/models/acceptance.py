@@ -3,7 +3,9 @@
 The researcher runs it last, on the finished sensor (``magfab-readout check``): the field at rest, its sign,
 the lateral field at rest, and the rise of Bz under a known weight on the tip. :func:`acceptance` computes the
 bands from the design, the prediction and the tolerances below; the readout package embeds the result as
-``acceptance.json`` (format ``magfab-acceptance/1``) and compares its measurements with it.
+``acceptance.json`` (format ``magfab-acceptance/1``) and compares its measurements with it. The two optional
+drift steps (``check --rotation``: turned over; ``--warmup``: warmed) take their bands from
+:mod:`magfab.models.acceptance_steps`.
 
 Fields are in microtesla (the readout's unit; 1 G = 100 uT), in the chip's axes: +z out of the package top,
 towards the magnet. The predictions take the magnet magnetised along +z, i.e. north pole up, away from the

@@ -30,9 +30,14 @@ budget's compensated figure per degree (predictions.json ``drift.temperature.per
 the recipe coefficients, ``fitted`` when the calibration's thermal coefficients were fitted to a scan over
 temperature, ``without`` for a calibration without them) times the temperature change, plus the noise of the
 difference of two means (the resolution, which is the force noise at rest, x sqrt(2 / samples) x the
-allowance sigmas). The figures are worst cases over the coefficients' bands (drift.py), so a correct correction
-passes with any sintered NdFeB in the recipe's spread; a missing or wrong correction, or a magnet of another
-material (ferrite: -0.2 %/C), moves the rest force by about the uncompensated figure instead.
+allowance sigmas). The budget's figures are in force through its worst-case calibration (the stiff material and
+the weakest magnet: the most force per field); the sensor's own calibration is known when the check runs, so the
+check scales both terms by its dFz/dBz at the rest reading over the budget's (``channel_mN_per_uT``, the budget's
+magnet part at rest over the field change it makes): the same field drift, read through this sensor's calibration.
+Without that the band (6.0 mN/C for MagOne with the recipe's coefficients) would hold a nominal MagOne with no
+correction at all (4 mN/C through its calibration). The figures are worst cases over the coefficients' bands (drift.py), so a correct correction
+passes with any sintered NdFeB in the recipe's spread; a missing or wrong correction moves the rest force by about
+the uncompensated figure instead, and a magnet of another material by its own coefficient's.
 """
 
 from __future__ import annotations
@@ -118,13 +123,19 @@ def warmup_section(data: Mapping[str, Any]) -> dict[str, Any] | None:
     drift = data.get("drift")
     if drift is None:
         return None
-    per_C = drift["temperature"]["per_C_mN"]["normal_rest"]
+    temperature = drift["temperature"]
+    per_C = temperature["per_C_mN"]["normal_rest"]
+    # the budget's calibration at rest, mN per uT: the magnet's part of the uncompensated error over its field
+    slope = float(temperature["per_C_parts_normal_rest_mN"]["magnet"]) / (
+        float(temperature["per_C_parts_normal_rest_field_G"]["magnet"]) * UT_PER_GAUSS)
     return {
         "min_change_C": MIN_WARMUP_C,
         "per_C_mN": {case: _r(abs(float(v)), 4) for case, v in per_C.items()},
         "noise_mN": _r(float(drift["resolution_mN"]["normal"]), 4),
+        "channel_mN_per_uT": _r(abs(slope), 6),
         "magnet_pct_per_C": float(drift["coefficients"]["magnet_pct_per_C"]),
-        "note": "warmed by at least min_change_C with nothing touching the tip: |dFz| <= per_C_mN[case] x |dT| + "
-                "allowance_sigmas x noise_mN x sqrt(2 / samples); case: fitted when the calibration's thermal "
-                "coefficients were fitted, with for the recipe's, without for a calibration without them",
+        "note": "warmed by at least min_change_C with nothing touching the tip: |dFz| <= (per_C_mN[case] x |dT| + "
+                "allowance_sigmas x noise_mN x sqrt(2 / samples)) x k, k = the sensor's calibration's dFz/dBz at rest "
+                "over channel_mN_per_uT (the budget's worst-case calibration); case: fitted when the calibration's "
+                "thermal coefficients were fitted, with for the recipe's, without for a calibration without them",
     }

@@ -221,6 +221,10 @@ def test_warmup_band_is_the_drift_budgets_per_degree(pred, acc):
     assert w["per_C_mN"]["fitted"] < w["per_C_mN"]["with"] < w["per_C_mN"]["without"]
     assert w["noise_mN"] == pytest.approx(pred.normal.resolution_mN, abs=1e-4) and w["min_change_C"] == 4.0
     assert w["magnet_pct_per_C"] == pytest.approx(-0.12)
+    # the budget's calibration at rest (mN per uT), which the check rescales to the sensor's own: its inverse's slope
+    ch = pred.drift.channel
+    slope = 1e3 * float(ch.force_N(ch.field_at(0.0) + 0.01) - ch.force_N(ch.field_at(0.0))) / 1.0
+    assert w["channel_mN_per_uT"] == pytest.approx(slope, rel=0.02)
     from magfab.models.acceptance_steps import warmup_section
 
     assert warmup_section({**pred.as_json(), "drift": None}) is None

@@ -25,8 +25,9 @@ def add_parser(commands, common: argparse.ArgumentParser) -> argparse.ArgumentPa
         description="The acceptance test at the end of the fabrication checklist. With nothing touching the tip it "
         "averages the field and compares it with the band magfab predicted from the magnet, material and assembly "
         "tolerances (its sign tells an upside-down magnet); then it asks for a known weight on the tip and compares "
-        "the rise of Bz with the predicted band. Prints PASS or FAIL per step with the measured and predicted values; "
-        "exit status 0 when every step passes, 1 otherwise.")
+        "the rise of Bz with the predicted band. --rotation adds turning the sensor over, --warmup warming it. "
+        "Prints PASS or FAIL per step with the measured and predicted values; exit status 0 when every step passes, "
+        "1 otherwise.")
     check.add_argument("--weight-g", type=float, metavar="W",
                        help="the known weight in grams (default: the one the build chose, in acceptance.json)")
     check.add_argument("--samples", type=int, default=500, metavar="N",
@@ -34,6 +35,14 @@ def add_parser(commands, common: argparse.ArgumentParser) -> argparse.ArgumentPa
     check.add_argument("--settle", type=float, default=1.0, metavar="S",
                        help="seconds of device time to wait after the weight is on before reading (default: %(default)s)")
     check.add_argument("--no-weight", action="store_true", help="skip the known-weight step")
+    check.add_argument("--rotation", action="store_true",
+                       help="add the turn-over step: the whole sensor turned upside down, nothing touching the tip; "
+                       "the field may change by the Earth's field and the fingertip's own weight, no more")
+    check.add_argument("--warmup", action="store_true",
+                       help="add the warm-up step: the chip warmed by a few C, nothing touching the tip; the rest "
+                       "force may move by the predicted compensated drift per C, no more")
+    check.add_argument("--warmup-seconds", type=float, default=600.0, metavar="S",
+                       help="longest wait for the chip to warm, seconds of device time (default: %(default)s)")
     check.add_argument("--yes", "-y", action="store_true",
                        help="do not wait for Enter (non-interactive): the weight is on the tip when the check asks")
     sensor = check.add_argument_group("simulated sensor (with --simulate)")
@@ -41,6 +50,9 @@ def add_parser(commands, common: argparse.ArgumentParser) -> argparse.ArgumentPa
                         help="the simulated magnet's grade (a name from acceptance.json: N35, N42, N45, N52) or "
                         "its remanence in tesla, instead of the spec's")
     sensor.add_argument("--simulate-flipped", action="store_true", help="the simulated magnet is upside down")
+    sensor.add_argument("--simulate-loose", type=float, default=0.0, metavar="MM",
+                        help="the simulated magnet is loose: it slides MM mm away from the chip when the sensor is "
+                        "turned over")
     return check
 
 
@@ -86,6 +98,8 @@ class Bands:
             self.grade = str(magnet["grade"])
             self.remanence = tuple(float(magnet["remanence_T"][k]) for k in ("low", "nominal", "high"))
             self.grades = {str(k): float(v["remanence_T"]) for k, v in data.get("grades", {}).items()}
+            self.rotation = data.get("rotation")  # validated whole when present (acceptance_json.SECTIONS)
+            self.warmup = data.get("warmup")
         except (KeyError, TypeError, ValueError, AttributeError) as exc:  # the optional grade tables
             raise DeviceError("the package's acceptance.json garbles {}: reinstall the readout package from "
                               "the magfab build".format(exc)) from None
@@ -116,10 +130,18 @@ class Bands:
         return value / self.remanence[1]
 
 
-def _mean_field(device: Device, count: int) -> Tuple[Tuple[float, float, float], int]:
-    """Mean (Bx, By, Bz) in uT of ``count`` good samples, and how many of them had an axis at full scale."""
-    total = [0.0, 0.0, 0.0]
-    used = skipped = full = 0
+class _Reading:
+    """Means of ``count`` good samples: ``B`` (Bx, By, Bz) uT, ``force`` (Fx, Fy, Fz) N, ``temperature`` C (None
+    without), ``full`` how many had an axis at full scale, and ``time_s`` the device time of the last."""
+
+    def __init__(self, B, force, temperature, full: int, time_s: float) -> None:
+        self.B, self.force, self.temperature, self.full, self.time_s = B, force, temperature, full, time_s
+
+
+def _mean_reading(device: Device, count: int) -> _Reading:
+    """:class:`_Reading` of the next ``count`` samples without a chip error."""
+    total = [0.0] * 7
+    used = skipped = full = warm = 0
     for sample in device.samples():
         if sample.chip_error or not all(math.isfinite(b) for b in sample.B_uT):
             skipped += 1
@@ -128,11 +150,30 @@ def _mean_field(device: Device, count: int) -> Tuple[Tuple[float, float, float],
                                   "supply".format(skipped, device.port))
             continue
         full += bool(sample.full_scale)
-        total = [t + b for t, b in zip(total, sample.B_uT)]
+        temperature = sample.temperature_C if sample.temperature_C is not None else math.nan
+        warm += math.isfinite(temperature)
+        total = [t + x for t, x in zip(total, tuple(sample.B_uT) + tuple(sample.force_N) + (temperature,))]
         used += 1
         if used == count:
             break
-    return (total[0] / used, total[1] / used, total[2] / used), full
+    mean = [x / used for x in total]
+    return _Reading(tuple(mean[:3]), tuple(mean[3:6]), mean[6] if warm == used else None, full, sample.time_s)
+
+
+def _mean_field(device: Device, count: int) -> Tuple[Tuple[float, float, float], int]:
+    """Mean (Bx, By, Bz) in uT of ``count`` good samples, and how many of them had an axis at full scale."""
+    reading = _mean_reading(device, count)
+    return reading.B, reading.full
+
+
+def _settle(device: Device, seconds: float) -> None:
+    """Drop what the board sent before, then wait ``seconds`` of device time."""
+    device.drain()
+    start = None
+    for sample in device.samples():
+        start = sample.time_s if start is None else start
+        if sample.time_s - start >= seconds:
+            break
 
 
 def _ask(prompt: str, yes: bool) -> None:
@@ -175,13 +216,29 @@ def _check_options(args: argparse.Namespace, bands: "Bands", data: dict):
         if not (math.isfinite(weight) and weight > 0):
             raise UsageError("--weight-g must be a positive number of grams")
         rise = bands.rise(weight)
+    _drift_options(args, bands)
     pattern = None
     if args.simulate:
         scale = bands.scale_of(args.simulate_grade) if args.simulate_grade else 1.0
-        pattern = RestTip.from_acceptance(data, scale=scale, flipped=args.simulate_flipped)
-    elif args.simulate_grade or args.simulate_flipped:
-        raise UsageError("--simulate-grade and --simulate-flipped need --simulate")
+        pattern = RestTip.from_acceptance(data, scale=scale, flipped=args.simulate_flipped, loose_mm=args.simulate_loose)
+    elif args.simulate_grade or args.simulate_flipped or args.simulate_loose:
+        raise UsageError("--simulate-grade, --simulate-flipped and --simulate-loose need --simulate")
     return weight, rise, pattern
+
+
+def _drift_options(args: argparse.Namespace, bands: "Bands") -> None:
+    """UsageError for --rotation, --warmup and their options where this package or build cannot run them."""
+    for wanted, section, name in ((args.rotation, bands.rotation, "--rotation"), (args.warmup, bands.warmup, "--warmup")):
+        if wanted and section is None:
+            raise UsageError("{}: this package's acceptance.json has no band for it (a build before magfab had one, "
+                             "or a design without a drift budget): rebuild with magfab build".format(name))
+    if args.warmup and not _build.TEMPERATURE_ENABLED:
+        raise UsageError("--warmup needs the chip's temperature, which this build's firmware does not read "
+                         "(firmware.temperature = false)")
+    if not (args.warmup_seconds > 0 and math.isfinite(args.warmup_seconds)):
+        raise UsageError("--warmup-seconds must be a positive number of seconds")
+    if not (math.isfinite(args.simulate_loose) and args.simulate_loose >= 0):
+        raise UsageError("--simulate-loose must be zero or a positive number of millimetres")
 
 
 def run(args: argparse.Namespace, out, open_device) -> int:
@@ -203,6 +260,10 @@ def run(args: argparse.Namespace, out, open_device) -> int:
         _check_lateral(steps, bands, bx, by, bands.sigmas * bands.noise_xy / math.sqrt(n) + _build.LSB_XY_UT / 2.0)
         if not args.no_weight:
             _check_weight(steps, out, args, device, bands, weight, rise, bz)
+        if args.rotation:
+            _check_rotation(steps, out, args, device, bands)
+        if args.warmup:
+            _check_warmup(steps, out, args, device, bands)
     return steps.verdict()
 
 
@@ -279,12 +340,7 @@ def _check_weight(steps: _Steps, out, args: argparse.Namespace, device, bands: "
     _ask("place the {:g} g weight on the tip, centred, with nothing else touching".format(weight), args.yes)
     if args.simulate:
         device.transport.place_weight(weight)
-    device.drain()
-    start = None
-    for sample in device.samples():
-        start = sample.time_s if start is None else start
-        if sample.time_s - start >= args.settle:
-            break
+    _settle(device, args.settle)
     out.write("# reading {} samples with {:g} g on the tip\n".format(n, weight))
     (_, _, bz_w), full_w = _mean_field(device, n)
     delta = bz_w - bz
@@ -307,3 +363,125 @@ def _check_weight(steps: _Steps, out, args: argparse.Namespace, device, bands: "
                      "off-ratio) or the magnet closer to the chip")
     if not args.yes:
         sys.stderr.write("take the weight off the tip\n")
+    if args.simulate:
+        device.transport.place_weight(0.0)
+
+
+def _check_rotation(steps: _Steps, out, args: argparse.Namespace, device, bands: "Bands") -> None:
+    """The turn-over step: the field change against the Earth's field turned over and the fingertip's own weight
+    reversed (acceptance.json ``rotation``), and the force it is worth against the drift budget's."""
+    rot, n = bands.rotation, args.samples
+    _ask("turning over: the sensor upright as before, nothing touching the tip", args.yes)
+    _settle(device, args.settle)
+    upright = _mean_reading(device, n)
+    _ask("turn the whole sensor (board and fingertip) upside down, 180 deg about a horizontal axis, with nothing "
+         "touching the tip", args.yes)
+    if args.simulate:
+        device.transport.turn(True)
+    _settle(device, args.settle)
+    out.write("# reading {} samples turned upside down\n".format(n))
+    turned = _mean_reading(device, n)
+    if args.simulate:
+        device.transport.turn(False)
+    if not args.yes:
+        sys.stderr.write("turn the sensor back upright\n")
+    dB = [b - a for a, b in zip(upright.B, turned.B)]
+    change = math.sqrt(sum(d * d for d in dB))
+    per_axis = [bands.sigmas * noise * math.sqrt(2.0 / n) + lsb for noise, lsb in (
+        (bands.noise_xy, _build.LSB_XY_UT), (bands.noise_xy, _build.LSB_XY_UT), (bands.noise_z, _build.LSB_Z_UT))]
+    allow = math.sqrt(sum(a * a for a in per_axis))
+    dF = 1000.0 * (turned.force[2] - upright.force[2])
+    name = "turned over"
+    text = ("measured |dB| {:.0f} uT (dBz {:+.0f}), predicted at most {:.0f} uT (the Earth's field turned over {:.0f}, "
+            "the fingertip's own weight reversed {:.0f}); force {:+.1f} mN (predicted: {} the Earth, {:.1f} the own "
+            "weight)").format(change, dB[2], rot["band_uT"], rot["earth_change_uT"], rot["self_weight_change_uT"], dF,
+                              "n/a" if rot.get("predicted_normal_rest_mN") is None else
+                              "{:.1f}".format(rot["predicted_normal_rest_mN"]), rot["self_weight_mN"])
+    if upright.full or turned.full:
+        steps.report(name, False, text + ": samples had an axis at the chip's full scale")
+    elif change <= rot["band_uT"] + allow:
+        steps.report(name, True, text)
+    else:
+        travel_um = 1000.0 * abs(dB[2]) / rot["gradient_uT_per_mm"]
+        steps.report(name, False, text + ": more than the Earth's field and the fingertip's weight can change - the "
+                     "magnet moved ({:.0f} um at the rest gradient): loose in its pocket, shifting under its own "
+                     "weight (glue it in), or steel or magnetised parts near the sensor turned with it (screws, a "
+                     "clamp, a steel bench: move them away and repeat)".format(travel_um))
+
+
+def _warm(device, args: argparse.Namespace, start_C: float, least_C: float):
+    """Blocks of ``args.samples`` readings until their mean temperature is ``least_C`` above ``start_C`` or
+    ``args.warmup_seconds`` of device time have passed: (the last block's reading, seconds waited, warmed)."""
+    began = reported = None
+    while True:
+        reading = _mean_reading(device, args.samples)
+        began = reading.time_s if began is None else began
+        reported = began if reported is None else reported
+        waited = reading.time_s - began
+        rise = (reading.temperature if reading.temperature is not None else start_C) - start_C
+        if rise >= least_C or waited >= args.warmup_seconds:
+            return reading, waited, rise >= least_C
+        if reading.time_s - reported >= 10.0:
+            reported = reading.time_s
+            sys.stderr.write("chip at {:.1f} C (+{:.1f} C of the {:g} C needed)\n".format(start_C + rise, rise, least_C))
+            sys.stderr.flush()
+
+
+def _thermal_case(device) -> Tuple[str, str]:
+    """Which of the warm-up's per-degree figures applies to this package's calibration, and what it is."""
+    thermal = device.calibration.thermal
+    if thermal is None:
+        return "without", "no temperature correction in this calibration"
+    if thermal.source == "fit":
+        return "fitted", "the calibration's fitted thermal coefficients"
+    return "with", "the recipe's thermal coefficients"
+
+
+def _slope_mN_per_uT(device, reading: "_Reading") -> float:
+    """|dFz/dBz| of the package's calibration at ``reading``'s field and temperature, mN/uT (a central difference
+    over a few counts)."""
+    bx, by, bz = reading.B
+    h = 4.0 * _build.LSB_Z_UT
+    up, down = (device.calibration.evaluate(bx, by, bz + s, method="poly", temperature_C=reading.temperature)[2]
+                for s in (h, -h))
+    return abs(up - down) / (2.0 * h) * 1000.0
+
+
+def _check_warmup(steps: _Steps, out, args: argparse.Namespace, device, bands: "Bands") -> None:
+    """The warm-up step: the rest force's change against the drift budget's compensated figure per degree times
+    the warming (acceptance.json ``warmup``)."""
+    w, n = bands.warmup, args.samples
+    least = float(w["min_change_C"])
+    _ask("warm-up: nothing touching the tip, the sensor where it will stay", args.yes)
+    _settle(device, args.settle)
+    cold = _mean_reading(device, n)
+    _ask("warm the sensor by at least {:g} C with nothing touching the tip: hold the board (not the fingertip) in "
+         "your hand, or power it up from cold; warm it evenly, so the magnet keeps up with the chip".format(least),
+         args.yes)
+    if args.simulate:
+        device.transport.warm(args.simulate_warm if args.simulate_warm is not None else least + 1.0)
+    out.write("# waiting for the chip to warm by {:g} C from {:.1f} C (at most {:g} s)\n".format(
+        least, cold.temperature, args.warmup_seconds))
+    out.flush()
+    warm, waited, warmed = _warm(device, args, cold.temperature, least)
+    dT = warm.temperature - cold.temperature
+    dF = 1000.0 * (warm.force[2] - cold.force[2])
+    case, what = _thermal_case(device)
+    k = _slope_mN_per_uT(device, cold) / float(w["channel_mN_per_uT"])
+    per_C = float(w["per_C_mN"][case]) * k
+    band = per_C * abs(dT) + bands.sigmas * float(w["noise_mN"]) * k * math.sqrt(2.0 / n)
+    name = "warm-up"
+    text = ("measured {:+.1f} mN over {:+.1f} C ({:+.2f} mN/C), predicted at most {:.1f} mN ({:.2f} mN/C with {}; "
+            "uncompensated {:.2f} mN/C; the drift budget's figures x {:.2f}, this calibration's force per field at "
+            "rest over the budget's)").format(dF, dT, dF / dT if dT else math.nan, band, per_C, what,
+                                              float(w["per_C_mN"]["without"]) * k, k)
+    if not warmed:
+        steps.report(name, False, text + ": the chip warmed by only {:.1f} C in {:.0f} s - warm it by at least {:g} C "
+                     "(or give --warmup-seconds more) and repeat".format(dT, waited, least))
+    elif abs(dF) <= band:
+        steps.report(name, True, text)
+    else:
+        steps.report(name, False, text + ": the rest force follows the temperature more than the correction leaves "
+                     "- the board runs a calibration without its thermal block or a wrong one (magfab-readout upload, "
+                     "then info), or the magnet is not the {} NdFeB of the spec, whose remanence falls {:g} %/C (another "
+                     "material drifts at another rate)".format(bands.grade, abs(w["magnet_pct_per_C"])))

@@ -21,7 +21,7 @@ from typing import List, Optional, Tuple
 from . import __version__, _build, check, eeprom
 from .calibration import Calibration, CalibrationError
 from .device import Device, DeviceError, NoData, calibration_record, cross_check
-from .simulate import SimulatedDevice
+from .simulate import WARM_RATE_C_PER_S, SimulatedDevice, TemperatureRamp
 from .taxels import ArrayCalibration
 
 #: ``record``'s columns (docs/bundle.md section 1): host_time_s ties the recording to a reference sensor's log.
@@ -42,6 +42,12 @@ def _parser() -> argparse.ArgumentParser:
     sim.add_argument("--simulate-seed", type=int, default=0, metavar="N", help="noise seed of the simulated board")
     sim.add_argument("--simulate-corrupt", type=float, default=0.0, metavar="FRACTION",
                      help="fraction of simulated frames with a flipped bit (to see the CRC checks at work)")
+    sim.add_argument("--simulate-warm", type=float, metavar="C",
+                     help="the simulated chip warms by C degrees (stream, record: from the first second on, "
+                     "{:g} C/s; check: when the warm-up step asks)".format(WARM_RATE_C_PER_S))
+    sim.add_argument("--simulate-no-thermal", action="store_true",
+                     help="the simulated board runs the calibration without its temperature correction (the "
+                     "field still follows the temperature: a board with an old calibration record)")
 
     parser = argparse.ArgumentParser(
         prog="magfab-readout",
@@ -91,14 +97,37 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _simulated(args: argparse.Namespace, calibration: Calibration, pattern) -> SimulatedDevice:
+    """The simulated board the options ask for: its firmware's calibration without ``thermal`` under
+    --simulate-no-thermal (the field still follows the package calibration's coefficients), warming under
+    --simulate-warm (stream and record: from the first second on)."""
+    firmware = calibration
+    thermal_per_C = None
+    if args.simulate_no_thermal:
+        if calibration.thermal is None:
+            raise check.UsageError("--simulate-no-thermal: this package's calibration carries no temperature "
+                                   "correction to leave out")
+        data = json.loads(pkgutil.get_data("magfab_readout", "calibration.json").decode("utf-8"))  # type: ignore[union-attr]
+        data.pop("thermal")
+        firmware, thermal_per_C = Calibration(data), calibration.thermal.coefficient_per_C
+    temperature = None
+    warm = args.simulate_warm
+    if warm is not None and not math.isfinite(warm):
+        raise check.UsageError("--simulate-warm must be a number of degrees")
+    if warm and args.command != "check":
+        temperature = TemperatureRamp(25.0, 25.0 + warm, duration_s=abs(warm) / WARM_RATE_C_PER_S, delay_s=1.0)
+    return SimulatedDevice(firmware, seed=args.simulate_seed, corrupt_fraction=args.simulate_corrupt, pattern=pattern,
+                           temperature=temperature, thermal_per_C=thermal_per_C)
+
+
 def _device(args: argparse.Namespace, text: Optional[bool], pattern=None) -> Device:
     calibration = Calibration.embedded()
     transport = None
     if args.simulate:
-        transport = SimulatedDevice(calibration, seed=args.simulate_seed, corrupt_fraction=args.simulate_corrupt,
-                                    pattern=pattern)
-    elif args.simulate_corrupt or args.simulate_seed:
-        raise DeviceError("--simulate-corrupt and --simulate-seed need --simulate")
+        transport = _simulated(args, calibration, pattern)
+    elif args.simulate_corrupt or args.simulate_seed or args.simulate_warm is not None or args.simulate_no_thermal:
+        raise DeviceError("--simulate-corrupt, --simulate-seed, --simulate-warm and --simulate-no-thermal need "
+                          "--simulate")
     return Device(args.port, args.baud, text=text, timeout_s=args.timeout, calibration=calibration, transport=transport)
 
 
@@ -287,6 +316,10 @@ def main(argv: Optional[List[str]] = None) -> int:
     try:
         if (array := ArrayCalibration.embedded()) is not None:  # an array build's package: every taxel
             from . import array_cli
+
+            if args.simulate_warm is not None or args.simulate_no_thermal:
+                raise check.UsageError("--simulate-warm and --simulate-no-thermal simulate a single taxel's board; "
+                                       "this package reads an array")
             return array_cli.run(args, array, sys.stdout)
         if args.command == "stream":
             return _stream(args, sys.stdout)

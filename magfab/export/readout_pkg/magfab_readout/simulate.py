@@ -13,6 +13,8 @@ For the acceptance test (``magfab-readout check``) the device runs a :class:`Res
 rest with the field magfab predicted (acceptance.json), and a weight placed on it with :meth:`SimulatedDevice.
 place_weight` raising Bz by the predicted nominal rise. ``scale`` stands for another magnet grade (the field is
 proportional to the remanence) and ``flipped`` for a magnet put in upside down (every component changes sign).
+:meth:`SimulatedDevice.turn` turns the sensor over in an Earth's field (its own weight reversed; ``loose_mm`` a
+magnet loose in its pocket), :meth:`SimulatedDevice.warm` warms the chip.
 
 Temperature: the chip reads 25 C with a slow +/-0.5 C wander unless ``temperature`` gives another course (a
 :class:`TemperatureRamp` or any ``t_s -> degC``); the field scales by (1 + a (T - T0)) per axis, a the
@@ -39,6 +41,9 @@ SIMULATED_FAULT = 1 << 8 | 1
 
 REST_MARGIN_SIGMAS = 3.0  # the press pattern's rest point lies this many noise sigmas inside the valid region
 GOLDEN_ANGLE = math.pi * (3.0 - math.sqrt(5.0))  # turns the press direction evenly round the circle
+#: How fast :meth:`SimulatedDevice.warm` warms the chip, C/s: fast, so a simulated warm-up takes seconds (a hand on
+#: a board warms it by a few C a minute).
+WARM_RATE_C_PER_S = 5.0
 
 
 class PressPattern:
@@ -191,13 +196,37 @@ class RestTip:
         self.scale = float(scale)
         self.flipped = bool(flipped)
         self.load_g = 0.0
+        #: Turned upside down (:meth:`turn`): the Earth's field changes by ``earth_change_uT`` (Bx, By, Bz), the
+        #: fingertip's own weight of ``own_weight_g`` pulls instead of pressing, and a loose magnet moves the field
+        #: on the axis by ``loose_uT`` more (negative: it slides away from the chip).
+        self.turned = False
+        self.earth_change_uT: Tuple[float, float, float] = (0.0, 0.0, 0.0)
+        self.own_weight_g = 0.0
+        self.loose_uT = 0.0
 
     @classmethod
-    def from_acceptance(cls, data: dict, *, scale: float = 1.0, flipped: bool = False) -> "RestTip":
-        """The nominal sensor of an acceptance.json (format magfab-acceptance/1)."""
+    def from_acceptance(cls, data: dict, *, scale: float = 1.0, flipped: bool = False,
+                        loose_mm: float = 0.0) -> "RestTip":
+        """The nominal sensor of an acceptance.json (format magfab-acceptance/1). With its ``rotation`` section,
+        turned over (:meth:`turn`) in an Earth's field of the middle of its band, inclined 60 deg (a mid-latitude
+        place; the turn is about the chip's x axis, across the field's horizontal part), with the fingertip's own
+        weight reversed; ``loose_mm``: the magnet slides that far away from the chip when the sensor is turned."""
         table = data["weight"]["table"]
-        return cls(data["rest"]["Bz_uT"]["nominal"], table["force_N"], table["delta_Bz_nominal_uT"], scale=scale,
-                   flipped=flipped)
+        tip = cls(data["rest"]["Bz_uT"]["nominal"], table["force_N"], table["delta_Bz_nominal_uT"], scale=scale,
+                  flipped=flipped)
+        rotation = data.get("rotation")
+        if rotation is not None:
+            low, high = rotation.get("earth_field_band_uT", (0.0, 0.0))
+            earth, incline = (low + high) / 2.0, math.radians(60.0)
+            # upright (0, E cos I, -E sin I); turned about x: (0, -E cos I, E sin I)
+            tip.earth_change_uT = (0.0, -2.0 * earth * math.cos(incline), 2.0 * earth * math.sin(incline))
+            tip.own_weight_g = rotation["self_weight_mN"] / 2.0 / cls.G0
+            tip.loose_uT = -abs(float(loose_mm)) * rotation["gradient_uT_per_mm"]
+        return tip
+
+    def turn(self, over: bool) -> None:
+        """Turn the sensor upside down (``over``) or back upright."""
+        self.turned = bool(over)
 
     def rise_uT(self, grams: float) -> float:
         """The nominal rise of Bz (uT, before ``scale`` and ``flipped``) under a weight of ``grams``."""
@@ -221,7 +250,12 @@ class RestTip:
     def field(self, t_s: float) -> Tuple[float, float, float]:
         """(Bx, By, Bz) in microtesla, without noise: constant until the load changes."""
         sign = -1.0 if self.flipped else 1.0
-        return 0.0, 0.0, sign * self.scale * (self.rest_Bz_uT + self.rise_uT(self.load_g))
+        bz = self.rest_Bz_uT + self.rise_uT(self.load_g)
+        if not self.turned:
+            return 0.0, 0.0, sign * self.scale * bz
+        bz += -2.0 * self.rise_uT(self.own_weight_g) + self.loose_uT
+        ex, ey, ez = self.earth_change_uT
+        return ex, ey, sign * self.scale * bz + ez
 
 
 class TemperatureRamp:
@@ -380,6 +414,20 @@ class SimulatedDevice:
     def close(self) -> None:
         """Stop the device; further reads fail as on a closed port."""
         self.closed = True
+
+    def turn(self, over: bool) -> None:
+        """Turn the simulated sensor upside down (``over``) or back (a :class:`RestTip` pattern only)."""
+        turn = getattr(self.pattern, "turn", None)
+        if turn is None:
+            raise ValueError("this simulated device runs a press pattern; turning it needs pattern=RestTip(...)")
+        turn(over)
+
+    def warm(self, by_C: float, rate_C_per_s: float = WARM_RATE_C_PER_S) -> None:
+        """Warm the chip by ``by_C`` from the next sample on, at ``rate_C_per_s`` (a :class:`TemperatureRamp`)."""
+        now_s = self._k / self.rate_Hz
+        start = self.temperature(now_s)
+        self.temperature = TemperatureRamp(start, start + by_C, duration_s=max(abs(by_C), 1e-3) / rate_C_per_s,
+                                           delay_s=now_s)
 
     def place_weight(self, grams: float) -> None:
         """Put a weight on the simulated tip (a :class:`RestTip` pattern only): later samples carry its field."""

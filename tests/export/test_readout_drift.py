@@ -1,0 +1,71 @@
+"""The acceptance test's drift steps and the rest tracking (issue 18, item 4), on the readout package the default
+build ships (the session's ``default_build``: its calibration carries the recipe's thermal block, its
+acceptance.json the rotation and warm-up bands), run as ``python -m magfab_readout`` on the simulated board."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+FAST = ("--samples", "150", "--settle", "0.1", "--yes")
+
+
+def readout(build, *args, timeout=60):
+    return subprocess.run([sys.executable, "-m", "magfab_readout", *map(str, args)], capture_output=True, text=True,
+                          timeout=timeout, cwd=build.out_dir / "readout" / "src")
+
+
+def steps(stdout: str) -> dict:
+    return {int(line.split()[1]): line for line in stdout.splitlines() if line.startswith("step ")}
+
+
+@pytest.fixture(scope="module")
+def acc(default_build):
+    return json.loads((default_build.out_dir / "readout" / "src" / "magfab_readout" / "acceptance.json").read_text())
+
+
+def test_a_good_sensor_passes_turning_over_and_warming(default_build, acc):
+    proc = readout(default_build, "check", "--simulate", *FAST, "--rotation", "--warmup")
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    lines = steps(proc.stdout)
+    assert len(lines) == 6 and "verdict: PASS (all 6 steps)" in proc.stdout
+    rot = acc["rotation"]
+    assert "turned over" in lines[5] and f"predicted at most {rot['band_uT']:.0f} uT" in lines[5]
+    assert "warm-up" in lines[6] and "with the recipe's thermal coefficients" in lines[6]
+    assert "turn the whole sensor (board and fingertip) upside down" in proc.stderr
+
+
+def test_a_loose_magnet_fails_turning_over(default_build, acc):
+    """A magnet sliding 0.1 mm in its pocket moves Bz by 0.1 mm x dBz/dz at rest (726 uT for MagOne), far over the
+    band (the Earth turned over, 130 uT, and the tip's own weight reversed, 150 uT)."""
+    proc = readout(default_build, "check", "--simulate", *FAST, "--no-weight", "--rotation", "--simulate-loose", "0.1")
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    line = steps(proc.stdout)[4]
+    assert " FAIL " in line and "loose in its pocket" in line and "steel or magnetised parts" in line
+    change = float(line.split("|dB| ")[1].split(" uT")[0])
+    assert change == pytest.approx(0.1 * acc["rotation"]["gradient_uT_per_mm"], rel=0.05)
+    assert "verdict: FAIL (step 4 of 4)" in proc.stdout
+
+
+def test_a_missing_thermal_correction_fails_warming(default_build):
+    proc = readout(default_build, "check", "--simulate", *FAST, "--no-weight", "--warmup", "--simulate-no-thermal")
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    line = steps(proc.stdout)[4]
+    assert " FAIL " in line and "without its thermal block" in line
+    # a warm-up that does not reach the step's least warming fails and says so
+    proc = readout(default_build, "check", "--simulate", *FAST, "--no-weight", "--warmup", "--simulate-warm", "0.5",
+                   "--warmup-seconds", "0.3")
+    assert proc.returncode == 1 and "warmed by only 0.5 C" in steps(proc.stdout)[4], proc.stdout
+
+
+@pytest.mark.parametrize("args, message", [
+    (("--warmup-seconds", "0"), "--warmup-seconds must be a positive number"),
+    (("--simulate-loose", "-1", "--simulate"), "--simulate-loose must be zero or a positive number"),
+    (("--simulate-loose", "1"), "need --simulate"),
+])
+def test_bad_drift_options_are_one_line_and_exit_2(default_build, args, message):
+    proc = readout(default_build, "check", "--yes", *args)
+    assert proc.returncode == 2 and message in proc.stderr and proc.stderr.count("\n") == 1, proc.stderr
