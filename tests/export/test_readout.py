@@ -76,7 +76,7 @@ def test_render_is_complete_deterministic_and_embeds_the_calibration(design, cal
     expected = {"readout/pyproject.toml", "readout/README.md"} | {
         f"{PKG}/{name}" for name in ("__init__.py", "__main__.py", "_build.py", "acceptance_json.py", "build.json",
                                      "calibration.py", "calibration.json", "calibration_json.py", "check.py", "cli.py",
-                                     "device.py", "eeprom.py", "frames.py", "json_checks.py", "simulate.py",
+                                     "device.py", "eeprom.py", "frames.py", "json_checks.py", "rest.py", "simulate.py",
                                      "taxels.py", "array_sim.py", "array_cli.py")}
     assert set(rendered) == expected and "## An array" not in rendered["readout/README.md"].decode()
     for path, data in rendered.items():

@@ -13,6 +13,7 @@ from typing import Optional, Tuple
 
 from . import __version__, _build, acceptance_json
 from .device import Device, DeviceError
+from .rest import slope_mN_per_uT
 from .simulate import RestTip
 
 G0 = 9.80665  # m/s^2
@@ -437,16 +438,6 @@ def _thermal_case(device) -> Tuple[str, str]:
     return "with", "the recipe's thermal coefficients"
 
 
-def _slope_mN_per_uT(device, reading: "_Reading") -> float:
-    """|dFz/dBz| of the package's calibration at ``reading``'s field and temperature, mN/uT (a central difference
-    over a few counts)."""
-    bx, by, bz = reading.B
-    h = 4.0 * _build.LSB_Z_UT
-    up, down = (device.calibration.evaluate(bx, by, bz + s, method="poly", temperature_C=reading.temperature)[2]
-                for s in (h, -h))
-    return abs(up - down) / (2.0 * h) * 1000.0
-
-
 def _check_warmup(steps: _Steps, out, args: argparse.Namespace, device, bands: "Bands") -> None:
     """The warm-up step: the rest force's change against the drift budget's compensated figure per degree times
     the warming (acceptance.json ``warmup``)."""
@@ -467,7 +458,7 @@ def _check_warmup(steps: _Steps, out, args: argparse.Namespace, device, bands: "
     dT = warm.temperature - cold.temperature
     dF = 1000.0 * (warm.force[2] - cold.force[2])
     case, what = _thermal_case(device)
-    k = _slope_mN_per_uT(device, cold) / float(w["channel_mN_per_uT"])
+    k = slope_mN_per_uT(device.calibration, cold.B, cold.temperature) / float(w["channel_mN_per_uT"])
     per_C = float(w["per_C_mN"][case]) * k
     band = per_C * abs(dT) + bands.sigmas * float(w["noise_mN"]) * k * math.sqrt(2.0 / n)
     name = "warm-up"

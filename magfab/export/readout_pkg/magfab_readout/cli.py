@@ -21,6 +21,7 @@ from typing import List, Optional, Tuple
 from . import __version__, _build, check, eeprom
 from .calibration import Calibration, CalibrationError
 from .device import Device, DeviceError, NoData, calibration_record, cross_check
+from .rest import RestTracker
 from .simulate import WARM_RATE_C_PER_S, SimulatedDevice, TemperatureRamp
 from .taxels import ArrayCalibration
 
@@ -47,7 +48,8 @@ def _parser() -> argparse.ArgumentParser:
                      "{:g} C/s; check: when the warm-up step asks)".format(WARM_RATE_C_PER_S))
     sim.add_argument("--simulate-no-thermal", action="store_true",
                      help="the simulated board runs the calibration without its temperature correction (the "
-                     "field still follows the temperature: a board with an old calibration record)")
+                     "field still follows the temperature: a board with an old calibration record, whose hash "
+                     "record refuses)")
 
     parser = argparse.ArgumentParser(
         prog="magfab-readout",
@@ -60,7 +62,9 @@ def _parser() -> argparse.ArgumentParser:
     stream = commands.add_parser("stream", parents=[common], help="print calibrated forces as they arrive",
                                  description="Print Fx Fy Fz (N), the field B (uT), the temperature and the status "
                                  "flags (o outside the calibrated region, E chip error, S full scale, R recovered), "
-                                 "and on an error row which fault struck where (e.g. nack_at_read).")
+                                 "and on an error row which fault struck where (e.g. nack_at_read). At the end, on "
+                                 "stderr, how the rest level moved while nothing touched the tip (mN, and mN per C "
+                                 "of the chip's temperature): start with nothing touching the tip.")
     stream.add_argument("--text", action="store_true", help="ask the firmware for text lines instead of binary frames")
     stream.add_argument("--zero", type=int, default=0, metavar="N",
                         help="average N samples at rest first and subtract that force from the rest (tare)")
@@ -157,7 +161,9 @@ def _stream(args: argparse.Namespace, out) -> int:
         out.write("# " + " ".join(columns) + "\n")
         worst = 0.0
         n = 0
+        rest = _rest_tracker(device)
         for sample in device.samples(count=args.count, seconds=args.seconds):
+            rest.add(sample)
             row = [_number(sample.time_s, 10, 4, False), "{:3d}".format(sample.seq)]
             row += [_number(f, 8, 4) for f in sample.force_N]
             row += [_number(b, 9, 2) for b in sample.B_uT]
@@ -172,17 +178,26 @@ def _stream(args: argparse.Namespace, out) -> int:
                 row.append("{:.2e}".format(diff) if not math.isnan(diff) else "nan")
             out.write("  ".join(row) + "\n")
             n += 1
-        _summary(device, n, worst if args.check else None)
+        _summary(device, n, worst if args.check else None, rest)
     return 0
 
 
-def _summary(device: Device, n: int, worst: Optional[float]) -> None:
+def _rest_tracker(device: Device) -> RestTracker:
+    """The rest level's tracker (rest.py), its force noise from the predicted field noise (acceptance.json)."""
+    data = check.load_acceptance()
+    noise = float(data["measurement"]["noise_z_uT"]) if data is not None else _build.LSB_Z_UT
+    return RestTracker(device.calibration, noise)
+
+
+def _summary(device: Device, n: int, worst: Optional[float], rest: Optional[RestTracker] = None) -> None:
     s = device.stats
     text = ("{} samples; {} lost (sequence gaps), {} CRC errors, {} bad lines, {} refused values, {} bytes "
             "skipped").format(n, s.lost, s.crc_errors, s.bad_lines, s.refused, s.skipped_bytes)
     if worst is not None:
         text += "; host vs firmware force: max |dF| = {:.3g} N".format(worst)
     print("magfab-readout: " + text, file=sys.stderr)
+    if rest is not None:
+        print("magfab-readout: " + rest.summary(), file=sys.stderr)
 
 
 def _csv(x: Optional[float], decimals: int) -> str:
@@ -238,11 +253,13 @@ def _record(args: argparse.Namespace) -> int:
         columns = [c for c in CSV_COLUMNS if temperature or c != "temperature_C"]
         written = skipped = 0
         stop = _Interrupt()
+        rest = _rest_tracker(device)
         with open(args.out, "w", encoding="utf-8", newline="") as f:
             _record_header(f, device, info, columns)
             with stop:
                 for sample in device.samples(seconds=args.seconds):
                     stop.writing = True
+                    rest.add(sample)
                     host = time.time()
                     values = list(sample.B_uT) + list(sample.force_N)
                     if sample.chip_error or not all(math.isfinite(v) for v in values) or (
@@ -260,7 +277,7 @@ def _record(args: argparse.Namespace) -> int:
                         break
         print("magfab-readout: wrote {} rows to {}{} ({} chip-error samples left out)".format(
             written, args.out, " (Ctrl-C)" if stop.requested else "", skipped), file=sys.stderr)
-        _summary(device, written + skipped, None)
+        _summary(device, written + skipped, None, rest)
     return 0
 
 
