@@ -471,7 +471,36 @@ def _acceptance_section(acceptance: Mapping[str, object] | None, design: "Design
         f"weight raises Bz by {delta[0]:.0f} to {delta[1]:.0f} uT.",  # type: ignore[index]
         "A fail names the step and the measured and predicted values: a weak or strong field points at the magnet grade "
         "or the stack-up, a negative one at an upside-down magnet, a small rise at a stiff batch of silicone.",
-    ])
+    ] + _drift_steps(acceptance))
+
+
+def _drift_steps(acceptance: Mapping[str, object]) -> list[str]:
+    """The check's turn-over and warm-up steps (magfab.models.acceptance_steps), when acceptance.json has them."""
+    rot, warm = acceptance.get("rotation"), acceptance.get("warmup")
+    if not rot and not warm:
+        return []
+    flags = " ".join(f for f, s in (("--rotation", rot), ("--warmup", warm)) if s)
+    out = [f"Drift, by hand (after the weight is off): run the check again with --no-weight {flags} added to its line; "
+           "it asks for each step in turn and waits for Enter."]
+    if rot:
+        force = "" if rot.get("predicted_normal_rest_mN") is None else (
+            f"; the force it reads changes by about {rot['predicted_normal_rest_mN']:.0f} mN from the Earth's field at "
+            f"most and {rot['self_weight_mN']:.0f} mN from the tip's own weight")
+        out.append(f"Turned over: turn the whole sensor (board and fingertip) upside down, nothing touching the tip. "
+                   f"Pass: the field changes by at most {rot['band_uT']:.0f} uT (the Earth's field turned over, "
+                   f"{rot['earth_change_uT']:.0f} uT, and the fingertip's own weight reversed, "
+                   f"{rot['self_weight_change_uT']:.0f} uT){force}. More means the magnet moved: loose in its pocket "
+                   "(glue it in), or steel or magnetised parts near the sensor turned with it.")
+    if warm:
+        per_C = warm["per_C_mN"]
+        out.append(f"Warm-up: warm the sensor by at least {warm['min_change_C']:g} C, nothing touching the tip (hold "
+                   "the board, not the fingertip, in your hand, or power it up from cold). Pass: the rest force moves "
+                   f"by at most {per_C['with']:.1f} mN per C with the recipe's temperature coefficients "
+                   f"({per_C['fitted']:.1f} mN/C when the calibration fitted them; {per_C['without']:.1f} mN/C "
+                   "uncorrected; the drift budget's worst-case calibration, which the check rescales to this one's "
+                   "force per field). More means the board runs a calibration without its temperature correction "
+                   "(upload it again) or a magnet of another material.")
+    return out
 
 
 def sections(design: "Design", acceptance: Mapping[str, object] | None = None,

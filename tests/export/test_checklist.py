@@ -351,3 +351,20 @@ def test_the_bom_holds_what_the_bench_needs(design):
     assert disc >= 2 * design.elastomer_radius_mm + design.spec.calibration.scan_y_mm
     parts = next(s for s in C.sections(design, ACCEPTANCE) if s.title == "Parts")
     assert [r[0] for r in parts.table.rows] == list(rows)
+
+
+def test_the_acceptance_section_describes_the_drift_steps_with_their_bands(default_build):
+    """Turning over and warming (check --rotation --warmup) are described with acceptance.json's bands, as options
+    to the check's one command: the bench walk cannot turn or warm its simulated board, so no new command block."""
+    import json
+
+    out = default_build.out_dir
+    acc = json.loads((out / "calibration" / "acceptance.json").read_text())
+    text = (out / "checklist.md").read_text()
+    rot, warm = acc["rotation"], acc["warmup"]
+    assert "with --no-weight --rotation --warmup added to its line" in text
+    turned = next(s for s in text.splitlines() if "Turned over:" in s)
+    assert f"at most {rot['band_uT']:.0f} uT" in turned and f"{rot['earth_change_uT']:.0f} uT" in turned
+    warmed = next(s for s in text.splitlines() if "Warm-up:" in s)
+    assert f"at least {warm['min_change_C']:g} C" in warmed and f"{warm['per_C_mN']['with']:.1f} mN per C" in warmed
+    assert _blocks(text)[-1] == [f"magfab-readout check --weight-g {acc['weight_g']:g}"]
