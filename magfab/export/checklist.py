@@ -464,9 +464,12 @@ def _acceptance_section(acceptance: Mapping[str, object] | None, design: "Design
             "This build has no acceptance bands (no calibration/acceptance.json: the prediction gave no weight that "
             "fits the range), so there is no check to run; compare the streamed forces with a known weight by hand."])
     w = float(weight)  # type: ignore[arg-type]
+    flags = "".join(f" {flag}" for flag, key in (("--rotation", "rotation"), ("--warmup", "warmup")) if acceptance.get(key))
+    then = " then to turn the sensor over and to warm it (below)," if flags else ""
     return _section("Acceptance test", [
         Step(f"From the build folder, with nothing touching the tip, run the check: it reads the field at rest, then "
-             f"asks you to put the {w:g} g weight on the tip.", (f"magfab-readout check --weight-g {w:g}",)),
+             f"asks you to put the {w:g} g weight on the tip,{then} waiting for Enter at each step.",
+             (f"magfab-readout check --weight-g {w:g}{flags}",)),
         f"Pass: Bz at rest within {rest[0]:.0f} to {rest[1]:.0f} uT (positive: magnet the right way up), and a {w:g} g "  # type: ignore[index]
         f"weight raises Bz by {delta[0]:.0f} to {delta[1]:.0f} uT.",  # type: ignore[index]
         "A fail names the step and the measured and predicted values: a weak or strong field points at the magnet grade "
@@ -479,9 +482,7 @@ def _drift_steps(acceptance: Mapping[str, object]) -> list[str]:
     rot, warm = acceptance.get("rotation"), acceptance.get("warmup")
     if not rot and not warm:
         return []
-    flags = " ".join(f for f, s in (("--rotation", rot), ("--warmup", warm)) if s)
-    out = [f"Drift, by hand (after the weight is off): run the check again with --no-weight {flags} added to its line; "
-           "it asks for each step in turn and waits for Enter."]
+    out = ["Drift (after the weight is off): the check's last steps, each when it asks."]
     if rot:
         force = "" if rot.get("predicted_normal_rest_mN") is None else (
             f"; the force it reads changes by about {rot['predicted_normal_rest_mN']:.0f} mN from the Earth's field at "

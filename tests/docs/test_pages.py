@@ -79,7 +79,10 @@ def test_the_readme_walk_reaches_a_passing_acceptance_test(walked):
     assert flashed[:len(image)] == image and set(flashed[len(image):]) <= {0xFF}
     assert "calibration: match" in _ran(walked, "magfab-readout info").stdout
     check = _ran(walked, "magfab-readout check")
-    assert "FAIL" not in check.stdout and check.stdout.count("PASS") >= 4, check.stdout
+    assert "FAIL" not in check.stdout and check.stdout.count("PASS") >= 6, check.stdout
+    passed = [line.split()[2] for line in check.stdout.splitlines() if line.startswith("step ") and "PASS" in line]
+    assert {"turned", "warm-up"} <= set(passed), check.stdout  # the board turned over and warmed at the prompts
+    print("\n".join(line for line in check.stdout.splitlines() if line.startswith("step ")))  # with -s
     cal = json.loads((build / "calibration" / "calibration.json").read_text())
     assert cal["scan"]["source"] == "scan.csv + reference.csv" and not (build / "calibration" / "scan_simulated.csv").exists()
     fitted = _ran(walked, "magfab calibrate").stdout

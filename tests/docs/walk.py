@@ -10,7 +10,8 @@ installs into) and whose ``magfab`` is the one under test. Where a person would 
   the tip of the taxel the line's comment names (``during taxel 0's scan``);
 * ``magfab-readout stream --zero N`` (Ctrl-C'd), when the test gave :attr:`Bench.press`, zeroes at rest, then the
   press comes on and goes;
-* ``magfab-readout check`` waits for its prompt, then the known weight goes on the tip and Enter is pressed.
+* ``magfab-readout check`` waits for each prompt, then the known weight goes on the tip, the board is turned over or
+  warmed as the prompt asks (:meth:`Bench._do`), and Enter is pressed.
 
 The only text changed in a line is the port: ``/dev/ttyACM0`` (the pages' Linux Uno) becomes the rig's
 pseudo-terminal, which ``MAGFAB_READOUT_PORT`` also names for the commands that take the default port."""
@@ -31,6 +32,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 G = 9.80665
+#: The Earth's vertical field where the walk's bench stands, uT (0.45 G: mid-latitudes), and the magnet's
+#: remanence per C (NdFeB, the recipe's -0.12 %/C), for the check's turn-over and warm-up prompts.
+EARTH_Z_UT, MAGNET_PER_C = 45.0, -0.0012
 PAGE_PORT = "/dev/ttyACM0"
 
 
@@ -217,35 +221,65 @@ class Bench:
         self.scan.at_rest(self.rig)
 
     def _interactive(self, line: str, timeout_s: float) -> Ran:
-        """``check``: at rest until it asks for the weight, then the weight's field, then Enter."""
+        """``check``: at each of its prompts, what a person does (:meth:`_do`), then Enter."""
         self.scan.at_rest(self.rig)
         proc = self._start(line, stdin=subprocess.PIPE)
         err: list[str] = []
+        prompts: list[str] = []
         asked = threading.Event()
 
         def read_err() -> None:
             for chunk in iter(lambda: proc.stderr.read(1), ""):
                 err.append(chunk)
-                if "press Enter" in "".join(err[-80:]):
+                if "".join(err[-13:]) == "press Enter: ":
+                    prompts.append("".join(err).rpartition("\n")[2])
                     asked.set()
 
         reader = threading.Thread(target=read_err, daemon=True)
         reader.start()
         deadline = time.monotonic() + timeout_s
-        while not asked.wait(0.1) and proc.poll() is None and time.monotonic() < deadline:
-            pass
-        if asked.is_set():
-            self.rig.set_field(*self.scan.field_at(self.weight_g * 1e-3 * G))
+        warming = threading.Event()
+        while proc.poll() is None and time.monotonic() < deadline:
+            if not asked.wait(0.1):
+                continue
+            asked.clear()
+            self._do(prompts[-1], warming)
             time.sleep(0.3)
             proc.stdin.write("\n")
             proc.stdin.flush()
-        else:  # it never asked (or the deadline passed): end it, so a broken page fails instead of hanging
+        if proc.poll() is None:  # the deadline passed: end it, so a broken page fails instead of hanging
             proc.kill()
+        warming.set()
+        if getattr(self, "_warming", None) is not None:
+            self._warming.join(5)
+            self._warming = None
         out = proc.stdout.read()
         proc.wait(timeout_s)
         reader.join(5)
         self.scan.at_rest(self.rig)
         return Ran(line, self.cwd, proc.returncode, out, "".join(err))
+
+    def _do(self, prompt: str, stop: threading.Event) -> None:
+        """What a person does at a prompt of ``check``: the weight on the tip; the sensor turned upside down (the
+        vertical component of a 0.45 G Earth field reversed; the tip's own weight is not modelled here); warming it
+        by 6 C over 4 s (the magnet's field falls 0.12 %/C, the chip's temperature rises); else at rest."""
+        if "weight on the tip" in prompt:
+            self.rig.set_field(*self.scan.field_at(self.weight_g * 1e-3 * G))
+        elif "upside down" in prompt:
+            bx, by, bz = self.scan.rest
+            self.rig.set_field(bx, by, bz - 2 * EARTH_Z_UT)
+        elif "warm the sensor" in prompt:
+            self._warming = threading.Thread(target=self._warm, args=(stop,), daemon=True)
+            self._warming.start()
+        else:
+            self.scan.at_rest(self.rig)
+
+    def _warm(self, stop: threading.Event, rise_C: float = 6.0, seconds: float = 4.0) -> None:
+        t0 = time.monotonic()
+        while not stop.is_set():
+            dT = rise_C * min((time.monotonic() - t0) / seconds, 1.0)
+            self.rig.set_field(*(b * (1.0 + MAGNET_PER_C * dT) for b in self.scan.rest), t_C=25.0 + dT)
+            time.sleep(0.05)
 
 
 def bench_env(venv: Path, port: str | None = None) -> dict:

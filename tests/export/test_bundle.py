@@ -206,7 +206,7 @@ magfab-readout record scan.csv              # during the scan; Ctrl-C ends it
 magfab calibrate scan.csv --reference reference.csv
 pip install ./readout
 magfab-readout upload
-magfab-readout check --weight-g 50
+magfab-readout check --weight-g 50 --rotation --warmup
 """
 
 

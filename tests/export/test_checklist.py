@@ -328,7 +328,7 @@ def test_the_built_checklist_commands_match_the_readme(default_build):
     out = default_build.out_dir
     weight = json.loads((out / "calibration" / "acceptance.json").read_text())["weight_g"]
     blocks = _blocks((out / "checklist.md").read_text())
-    assert blocks[-1] == [f"magfab-readout check --weight-g {weight:g}"]
+    assert blocks[-1] == [f"magfab-readout check --weight-g {weight:g} --rotation --warmup"]
     readme = (Path(__file__).parents[2] / "README.md").read_text()
     missing = [c.split("#")[0].strip() for b in blocks for c in b if c.split("#")[0].strip() not in readme]
     assert not missing, f"README lacks {missing}"
@@ -362,9 +362,9 @@ def test_the_acceptance_section_describes_the_drift_steps_with_their_bands(defau
     acc = json.loads((out / "calibration" / "acceptance.json").read_text())
     text = (out / "checklist.md").read_text()
     rot, warm = acc["rotation"], acc["warmup"]
-    assert "with --no-weight --rotation --warmup added to its line" in text
+    assert "then to turn the sensor over and to warm it" in text
     turned = next(s for s in text.splitlines() if "Turned over:" in s)
     assert f"at most {rot['band_uT']:.0f} uT" in turned and f"{rot['earth_change_uT']:.0f} uT" in turned
     warmed = next(s for s in text.splitlines() if "Warm-up:" in s)
     assert f"at least {warm['min_change_C']:g} C" in warmed and f"{warm['per_C_mN']['with']:.1f} mN per C" in warmed
-    assert _blocks(text)[-1] == [f"magfab-readout check --weight-g {acc['weight_g']:g}"]
+    assert _blocks(text)[-1] == [f"magfab-readout check --weight-g {acc['weight_g']:g} --rotation --warmup"]
