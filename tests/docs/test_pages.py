@@ -55,6 +55,8 @@ def walked(tmp_path_factory):
                 _assert_ok(ran, block)
                 if block.lang == "python":
                     break
+        for ran in bench.ran:  # with -s: where the README's walk spends its time
+            print(f"{ran.seconds:6.1f} s  {ran.line}")
         yield bench
 
 

@@ -262,7 +262,7 @@ class Bench:
     def _do(self, prompt: str, stop: threading.Event) -> None:
         """What a person does at a prompt of ``check``: the weight on the tip; the sensor turned upside down (the
         vertical component of a 0.45 G Earth field reversed; the tip's own weight is not modelled here); warming it
-        by 6 C over 4 s (the magnet's field falls 0.12 %/C, the chip's temperature rises); else at rest."""
+        by 6 C over 2 s (the magnet's field falls 0.12 %/C, the chip's temperature rises); else at rest."""
         if "weight on the tip" in prompt:
             self.rig.set_field(*self.scan.field_at(self.weight_g * 1e-3 * G))
         elif "upside down" in prompt:
@@ -274,7 +274,7 @@ class Bench:
         else:
             self.scan.at_rest(self.rig)
 
-    def _warm(self, stop: threading.Event, rise_C: float = 6.0, seconds: float = 4.0) -> None:
+    def _warm(self, stop: threading.Event, rise_C: float = 6.0, seconds: float = 2.0) -> None:
         t0 = time.monotonic()
         while not stop.is_set():
             dT = rise_C * min((time.monotonic() - t0) / seconds, 1.0)
