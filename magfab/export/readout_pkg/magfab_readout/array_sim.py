@@ -120,7 +120,8 @@ class SimulatedArray(SimulatedDevice):
     one cycle of field frames where a single taxel sends one force frame; the info line ends with the number of
     taxels. Faults for testing: ``corrupt_fraction`` of the frames get a bit flipped after the CRC; every
     ``chip_error_every``-th cycle the chip of taxel ``chip_error_taxel`` reports a chip error (then a recovered
-    flag). ``chunk`` is in cycles; ``rate_Hz`` cycles a second (default :func:`cycle_rate_Hz`)."""
+    flag). ``chunk`` is in cycles; ``rate_Hz`` cycles a second (default :func:`cycle_rate_Hz`). ``temperature`` and
+    ``thermal_per_C`` as the single taxel's: every chip reads that temperature and every magnet's field follows it."""
 
     port = "the simulated array"
 
@@ -128,7 +129,7 @@ class SimulatedArray(SimulatedDevice):
                  rate_Hz: Optional[float] = None, realtime: bool = True, text: Optional[bool] = None,
                  noise_lsb: float = 0.7, corrupt_fraction: float = 0.0, chip_error_taxel: Optional[int] = None,
                  chip_error_every: int = 0, chunk: int = 16, spec_name: str = _build.SPEC_NAME,
-                 calibration_hash: Optional[str] = None, pattern=None) -> None:
+                 calibration_hash: Optional[str] = None, pattern=None, temperature=None, thermal_per_C=None) -> None:
         cal = calibration if calibration is not None else ArrayCalibration.embedded()
         if cal is None:
             raise ValueError("this package is a single taxel's: simulate it with SimulatedDevice")
@@ -136,7 +137,8 @@ class SimulatedArray(SimulatedDevice):
         super().__init__(cal.calibrations[0], seed=seed, rate_Hz=rate_Hz or cycle_rate_Hz(self.n), realtime=realtime,
                          text=text, noise_lsb=noise_lsb, corrupt_fraction=corrupt_fraction, chunk=chunk,
                          spec_name=spec_name, calibration_hash=calibration_hash,
-                         pattern=pattern if pattern is not None else ArrayPressPattern(cal))
+                         pattern=pattern if pattern is not None else ArrayPressPattern(cal), temperature=temperature,
+                         thermal_per_C=thermal_per_C)
         self.array, self.spec_name = cal, spec_name
         self.chip_error_taxel, self.chip_error_every = chip_error_taxel, int(chip_error_every)
         self.hash16 = calibration_hash or cal.calibrations[0].short_hash
@@ -169,12 +171,14 @@ class SimulatedArray(SimulatedDevice):
             if self.text:
                 return encode_field_line(k, seq, t_us, status, (nan, nan, nan), None, SIMULATED_FAULT)
             return encode_field_frame(k, seq, t_us, status, (0, 0, 0), SIMULATED_FAULT)
+        T = self.temperature(t_us / 1e6)  # every chip and magnet at the same temperature, the field following it
+        B = tuple(b * (1.0 + a * (T - self.reference_C)) for b, a in zip(B, self.thermal_per_C))
         lsb = (_build.LSB_XY_UT, _build.LSB_XY_UT, _build.LSB_Z_UT)
         counts = tuple(_clamp16(b / s + self._noise.gauss(0.0, self.noise_lsb)) for b, s in zip(B, lsb))
         if max(abs(x) for x in counts) >= _build.FULL_SCALE_COUNTS:
             status |= STATUS_FULL_SCALE
-        t_raw = int(round(_build.TEMPERATURE_RAW_25C + _build.TEMPERATURE_LSB_PER_C * 0.5 * math.sin(
-            2 * math.pi * c / self.rate_Hz / 60.0))) if _build.TEMPERATURE_ENABLED else 0
+        t_raw = int(round(_build.TEMPERATURE_RAW_25C + _build.TEMPERATURE_LSB_PER_C * (T - 25.0))) \
+            if _build.TEMPERATURE_ENABLED else 0
         if self.text:
             temp = temperature_C(t_raw) if _build.TEMPERATURE_ENABLED else None
             return encode_field_line(k, seq, t_us, status, tuple(x * s for x, s in zip(counts, lsb)), temp)
