@@ -7,6 +7,7 @@ unit on the right of ``_PER_`` to get the unit on the left: ``b_G = b_T * GAUSS_
 
 GAUSS_PER_TESLA = 1.0e4
 UT_PER_GAUSS = 100.0  # 1 G = 100 uT
+G0 = 9.80665  # m/s^2, standard gravity (CGPM 1901): a weight of W grams pushes with W * G0 / 1000 N
 GAUSS_PER_MT = 10.0  # 1 mT = 10 G
 UT_PER_TESLA = 1.0e6
 MM_PER_M = 1.0e3

@@ -6,6 +6,8 @@ from __future__ import annotations
 from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
+from ..units import G0
+
 if TYPE_CHECKING:
     from ..design import Design
 
@@ -69,5 +71,5 @@ def acceptance_steps(design: "Design", weight_g: float) -> list[str]:
     """The acceptance section's words for an array: magfab-readout check reads a single taxel only."""
     return [f"magfab-readout check does not read an array yet. With the board streaming, zeroed at rest (the last "
             f"command of the section Flash and read), put the {weight_g:g} g weight on each of the "
-            f"{len(design.taxels)} tips in turn: that taxel's Fz reads about {weight_g * 9.80665e-3:.2f} N and the "
+            f"{len(design.taxels)} tips in turn: that taxel's Fz reads about {weight_g * G0 / 1000.0:.2f} N and the "
             "others stay near zero (the host removes each magnet's field from its neighbours')."]

@@ -80,7 +80,7 @@ from .. import __version__
 from ..errors import ModelLimitError
 from ..formats import acceptance_json
 from ..recipes import catalogue
-from ..units import GAUSS_PER_TESLA, UT_PER_GAUSS
+from ..units import G0, GAUSS_PER_TESLA, UT_PER_GAUSS
 from . import acceptance_steps, field as fieldmod
 
 if TYPE_CHECKING:
@@ -90,7 +90,6 @@ if TYPE_CHECKING:
 __all__ = ["FORMAT", "G0", "DEFAULT_WEIGHT_G", "Tolerances", "SOURCES", "acceptance", "default_weight_g"]
 
 FORMAT = acceptance_json.FORMAT
-G0 = 9.80665  # m/s^2, standard gravity (CGPM 1901)
 DEFAULT_WEIGHT_G = 50.0
 #: The known weight stays at or below this fraction of the softest material's predicted range, so the
 #: magnet stays well inside the range (and the curve) whichever material band the batch turned out in.

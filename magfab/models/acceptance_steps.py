@@ -45,7 +45,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any, Mapping
 
 from ..recipes import catalogue
-from ..units import UT_PER_GAUSS
+from ..units import G0, UT_PER_GAUSS
 from .calibration_thermal import MIN_SPAN_C
 
 if TYPE_CHECKING:
@@ -53,7 +53,6 @@ if TYPE_CHECKING:
 
 __all__ = ["MIN_WARMUP_C", "G0", "self_weight_N", "rotation_section", "warmup_section"]
 
-G0 = 9.80665  # m/s^2, standard gravity (CGPM 1901)
 #: Least warming of the chip, C, for the warm-up step: the span calibration_thermal asks of a scan before it fits
 #: a coefficient (a few degrees, twice the chip's temperature noise band).
 MIN_WARMUP_C = MIN_SPAN_C

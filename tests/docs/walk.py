@@ -31,7 +31,8 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-G = 9.80665
+from magfab.units import G0 as G
+
 #: The Earth's vertical field where the walk's bench stands, uT (0.45 G: mid-latitudes), and the magnet's
 #: remanence per C (NdFeB, the recipe's -0.12 %/C), for the check's turn-over and warm-up prompts.
 EARTH_Z_UT, MAGNET_PER_C = 45.0, -0.0012

@@ -16,7 +16,7 @@ from .device import Device, DeviceError
 from .rest import slope_mN_per_uT
 from .simulate import RestTip
 
-G0 = 9.80665  # m/s^2
+G0 = RestTip.G0  # m/s^2
 
 
 def add_parser(commands, common: argparse.ArgumentParser) -> argparse.ArgumentParser:
