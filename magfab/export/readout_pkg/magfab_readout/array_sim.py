@@ -20,7 +20,7 @@ from typing import List, Optional, Sequence, Tuple
 from . import _build, eeprom
 from .frames import (FIELD_FRAME_LENGTH, STATUS_CHIP_ERROR, STATUS_FULL_SCALE, STATUS_RECOVERED, encode_field_frame,
                      encode_field_line, encode_info_line, temperature_C)
-from .simulate import GOLDEN_ANGLE, SIMULATED_FAULT, SimulatedDevice
+from .simulate import GOLDEN_ANGLE, SIMULATED_FAULT, SimulatedDevice, _temperature_raw
 from .taxels import ArrayCalibration
 
 __all__ = ["ArrayPressPattern", "SimulatedArray", "cycle_rate_Hz"]
@@ -172,13 +172,12 @@ class SimulatedArray(SimulatedDevice):
                 return encode_field_line(k, seq, t_us, status, (nan, nan, nan), None, SIMULATED_FAULT)
             return encode_field_frame(k, seq, t_us, status, (0, 0, 0), SIMULATED_FAULT)
         T = self.temperature(t_us / 1e6)  # every chip and magnet at the same temperature, the field following it
-        B = tuple(b * (1.0 + a * (T - self.reference_C)) for b, a in zip(B, self.thermal_per_C))
+        B = self._at_temperature(B, T)
         lsb = (_build.LSB_XY_UT, _build.LSB_XY_UT, _build.LSB_Z_UT)
         counts = tuple(_clamp16(b / s + self._noise.gauss(0.0, self.noise_lsb)) for b, s in zip(B, lsb))
         if max(abs(x) for x in counts) >= _build.FULL_SCALE_COUNTS:
             status |= STATUS_FULL_SCALE
-        t_raw = int(round(_build.TEMPERATURE_RAW_25C + _build.TEMPERATURE_LSB_PER_C * (T - 25.0))) \
-            if _build.TEMPERATURE_ENABLED else 0
+        t_raw = _temperature_raw(T)
         if self.text:
             temp = temperature_C(t_raw) if _build.TEMPERATURE_ENABLED else None
             return encode_field_line(k, seq, t_us, status, tuple(x * s for x, s in zip(counts, lsb)), temp)

@@ -279,6 +279,13 @@ def _wander(t_s: float) -> float:
     return 25.0 + 0.5 * math.sin(2 * math.pi * t_s / 60.0)
 
 
+def _temperature_raw(T: float) -> int:
+    """The chip's temperature word for ``T`` degC (0 when the build reads no temperature)."""
+    if not _build.TEMPERATURE_ENABLED:
+        return 0
+    return max(0, min(0xFFFF, int(round(_build.TEMPERATURE_RAW_25C + _build.TEMPERATURE_LSB_PER_C * (T - 25.0)))))
+
+
 def _clamp16(x: float) -> int:
     return max(-32768, min(32767, int(round(x))))
 
@@ -438,6 +445,10 @@ class SimulatedDevice:
 
     # --- what the firmware would send -------------------------------------------------------------------
 
+    def _at_temperature(self, B, T: float) -> Tuple[float, float, float]:
+        """The field ``B`` (uT) with the magnet at ``T`` degC: (1 + a (T - T0)) per axis."""
+        return tuple(b * (1.0 + a * (T - self.reference_C)) for b, a in zip(B, self.thermal_per_C))  # type: ignore[return-value]
+
     def _sample_bytes(self, k: int) -> bytes:
         """The wire bytes of sample ``k`` in the current mode; called once per sample, in order (noise, faults)."""
         t_s = k / self.rate_Hz
@@ -453,8 +464,7 @@ class SimulatedDevice:
                 return encode_text_line(seq, t_us, status, (nan, nan, nan), (nan, nan, nan), None, SIMULATED_FAULT)
             return encode_frame(seq, t_us, status, (0, 0, 0), SIMULATED_FAULT, (nan, nan, nan))
         T = self.temperature(t_s)
-        Bx, By, Bz = (b * (1.0 + a * (T - self.reference_C))
-                      for b, a in zip(self.pattern.field(t_s), self.thermal_per_C))
+        Bx, By, Bz = self._at_temperature(self.pattern.field(t_s), T)
         lsb_xy, lsb_z = _build.LSB_XY_UT, _build.LSB_Z_UT
         counts = (_clamp16(Bx / lsb_xy + self._noise.gauss(0.0, self.noise_lsb)),
                   _clamp16(By / lsb_xy + self._noise.gauss(0.0, self.noise_lsb)),
@@ -462,10 +472,7 @@ class SimulatedDevice:
         if max(abs(c) for c in counts) >= _build.FULL_SCALE_COUNTS:
             status |= STATUS_FULL_SCALE
         B = (counts[0] * lsb_xy, counts[1] * lsb_xy, counts[2] * lsb_z)
-        if _build.TEMPERATURE_ENABLED:
-            t_raw = max(0, min(0xFFFF, int(round(_build.TEMPERATURE_RAW_25C + _build.TEMPERATURE_LSB_PER_C * (T - 25.0)))))
-        else:
-            t_raw = 0
+        t_raw = _temperature_raw(T)
         read_C = temperature_C(t_raw) if _build.TEMPERATURE_ENABLED else None
         if not self.calibration.in_region_B(*self.calibration.corrected(*B, temperature_C=read_C)):
             status |= STATUS_OUTSIDE_REGION
