@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Mapping
 
 from ..board.placement import board_size_mm
 from ..errors import Finding, Severity, SpecError
+from ..formats import acceptance_json
 from ..recipes import Recipe, catalogue
 from .bom import bom_csv, bom_rows, indenter_disc_mm, magnet_recipe  # bom_*: re-exported: pipeline.py writes bom.csv through this module
 
@@ -464,7 +465,7 @@ def _acceptance_section(acceptance: Mapping[str, object] | None, design: "Design
             "This build has no acceptance bands (no calibration/acceptance.json: the prediction gave no weight that "
             "fits the range), so there is no check to run; compare the streamed forces with a known weight by hand."])
     w = float(weight)  # type: ignore[arg-type]
-    flags = "".join(f" {flag}" for flag, key in (("--rotation", "rotation"), ("--warmup", "warmup")) if acceptance.get(key))
+    flags = acceptance_json.drift_flags(acceptance)
     then = " then to turn the sensor over and to warm it (below)," if flags else ""
     return _section("Acceptance test", [
         Step(f"From the build folder, with nothing touching the tip, run the check: it reads the field at rest, then "

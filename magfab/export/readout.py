@@ -135,7 +135,7 @@ def _context(build: Mapping[str, object], acceptance: Mapping[str, Any] | None) 
             "weight": f"{acceptance['weight']['weight_g']:g}",
             "delta_lo": f"{acceptance['weight']['delta_Bz_uT']['min']:.0f}",
             "delta_hi": f"{acceptance['weight']['delta_Bz_uT']['max']:.0f}",
-            "drift_flags": "".join(f" --{key}" for key in ("rotation", "warmup") if acceptance.get(key)),
+            "drift_flags": acceptance_json.drift_flags(acceptance),
         },
     }
 

@@ -12,7 +12,7 @@ import math
 
 from .json_checks import FormatError, is_number
 
-__all__ = ["FORMAT", "KEYS", "SECTIONS", "AcceptanceError", "loads", "validate"]
+__all__ = ["FORMAT", "KEYS", "SECTIONS", "AcceptanceError", "drift_flags", "loads", "validate"]
 
 FORMAT = "magfab-acceptance/1"
 
@@ -42,6 +42,11 @@ SECTIONS = {
 }
 _WHAT = {"number": "must be a finite number", "text": "must be a string",
          "numbers": "must be a non-empty list of finite numbers", "optional": "must be a finite number or null"}
+
+
+def drift_flags(data) -> str:
+    """The check's options for the drift steps this acceptance data has (" --rotation --warmup", or less)."""
+    return "".join(f" --{name}" for name in SECTIONS if data.get(name))
 
 
 class AcceptanceError(FormatError):
