@@ -35,8 +35,9 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable, Iterable, Sequence
+from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from magfab.design import Design
@@ -160,7 +161,7 @@ def mould_parts() -> list[tuple[str, Callable]]:
             for stem, module, func, _printed, _what in PARTS if module == "magfab.mould"]
 
 
-def mould_stls(design: "Design") -> dict[str, bytes]:
+def mould_stls(design: Design) -> dict[str, bytes]:
     """Build, tessellate (at the spec's tolerances) and encode the mould parts; STL bytes by file stem."""
     from magfab.export.cad import stl_bytes, tessellate
 
@@ -178,7 +179,7 @@ def write_mould_stls(out_dir: str | Path) -> None:
         (Path(out_dir) / f"{stem}.stl").write_bytes(data)
 
 
-def warm_mould_figures(repeat: int, design: "Design") -> tuple[dict[str, object], dict[str, bytes]]:
+def warm_mould_figures(repeat: int, design: Design) -> tuple[dict[str, object], dict[str, bytes]]:
     """Warm in-process wall times (s) of the mould's build + tessellation + STL encoding, and the STLs."""
     import cadquery  # noqa: F401
 
@@ -200,7 +201,7 @@ def cold_mould_figures(repeat: int, work: Path) -> dict[str, object]:
     return time_repeated(cmd, repeat, work)
 
 
-def exact_volumes_mm3(design: "Design") -> dict[str, float]:
+def exact_volumes_mm3(design: Design) -> dict[str, float]:
     """Volume of each exact (B-rep) mould solid, mm^3, by file stem."""
     return {stem: make(design).val().Volume() for stem, make in mould_parts()}
 
@@ -253,7 +254,7 @@ def arc_points(start: Point, through: Point, end: Point, tol_mm: float, ang_tol_
     return [(max(0.0, cx + r * math.cos(a)), cz + r * math.sin(a)) for a in angles] + [tuple(end)]
 
 
-def cavity_profile(design: "Design", tol_mm: float, ang_tol_deg: float) -> list[Point]:
+def cavity_profile(design: Design, tol_mm: float, ang_tol_deg: float) -> list[Point]:
     """(r, z) outline of a cavity tool, mm: the envelope with its base pushed below z = 0, as mould.py cuts it.
 
     For a hemisphere tip, ``design.envelope_profile`` gives the arc by three points (indices 2, 3, 4);
@@ -267,7 +268,7 @@ def cavity_profile(design: "Design", tol_mm: float, ang_tol_deg: float) -> list[
     return prof
 
 
-def core_profile(design: "Design") -> list[Point]:
+def core_profile(design: Design) -> list[Point]:
     """(r, z) outline of a lid core, mm: ``design.core_profile`` extended into the lid plate (as mould.py)."""
     below = design.core_root_mm
     prof = design.core_profile
@@ -294,7 +295,7 @@ def _radius_max(profile: list[Point]) -> float:
     return max(r for r, _z in profile)
 
 
-def scad_cup(design: "Design", tol_mm: float, ang_tol_deg: float) -> str:
+def scad_cup(design: Design, tol_mm: float, ang_tol_deg: float) -> str:
     """OpenSCAD source of the mould cup (print pose, mm): box minus the inverted cavities, plus the pins."""
     from magfab.mould import OVERLAP_MM
 
@@ -321,9 +322,9 @@ def scad_cup(design: "Design", tol_mm: float, ang_tol_deg: float) -> str:
     return "\n".join(lines) + "\n"
 
 
-def scad_lid(design: "Design", tol_mm: float, ang_tol_deg: float) -> str:
+def scad_lid(design: Design, tol_mm: float, ang_tol_deg: float) -> str:
     """OpenSCAD source of the mould lid (print pose, mm): plate plus cores, minus holes and sprue countersinks."""
-    from magfab.mould import OVERLAP_MM, COUNTERSINK_MM
+    from magfab.mould import COUNTERSINK_MM, OVERLAP_MM
 
     h, t = design.cup_size_mm[2], design.lid_thickness_mm
     lx, ly, _ = design.lid_size_mm
@@ -389,7 +390,7 @@ def mesh_agreement(ours: bytes, theirs: bytes, exact_mm3: float) -> dict[str, ob
     }
 
 
-def openscad_figures(exe: str, design: "Design", repeat: int, out: Path, ours: dict[str, bytes],
+def openscad_figures(exe: str, design: Design, repeat: int, out: Path, ours: dict[str, bytes],
                      exact: dict[str, float]) -> dict[str, object]:
     """Write, render and check the OpenSCAD mould; times in seconds, files in ``out/openscad``."""
     spec = design.spec

@@ -34,8 +34,8 @@ import numpy as np
 from magfab import derive, load_spec
 from magfab.export.calibration_chart import chart
 from magfab.models import calibration as C
-from magfab.models.scan import simulate_scan
 from magfab.models.predict import predict
+from magfab.models.scan import simulate_scan
 
 BENCH_DIR = Path(__file__).resolve().parent
 

@@ -107,7 +107,7 @@ def least_pitches(tol_override: float | None = None) -> list[dict[str, object]]:
                        "pressed_only_mm": pressed, "end_force_at_parts_min_mN": end, "offset_z_at_parts_min_G": bz,
                        "end_shift_at_parts_min_um": end / loads.shear_stiffness_N_per_mm, "tolerance_mN": tol}
                 out.append(row)
-                f = lambda v: "none" if v is None else f"{v:.1f}"  # noqa: E731
+                f = lambda v: "none" if v is None else f"{v:.1f}"
                 print(f"  {name:<6} {skin:<11} {row['polarity']:<12} {d.array.min_pitch_mm:>9.1f} {f(field):>7} "
                       f"{f(comp):>12} {f(pressed):>13} {end:>17.2f} {row['end_shift_at_parts_min_um']:>9.1f} {bz:>+13.1f}")
     return out

@@ -29,15 +29,15 @@ import json
 import math
 import platform
 import sys
+from collections.abc import Sequence
 from dataclasses import asdict
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 
+from magfab import load_spec
 from magfab.models import field as F
 from magfab.models.field.exact import _kernel
-from magfab import load_spec
 
 BENCH_DIR = Path(__file__).resolve().parent
 DEFAULT_OUT = BENCH_DIR / "out"

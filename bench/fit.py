@@ -19,7 +19,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from magfab import derive, load_spec  # noqa: E402
+from magfab import derive, load_spec
 
 
 def occt_route(design, solids):
@@ -65,9 +65,9 @@ def main() -> None:
     spec = load_spec(args.spec)
     design = derive(spec)
 
-    from magfab.pipeline import PARTS, _solid
     from magfab.export.cad import tessellate
     from magfab.fit import mould_fit
+    from magfab.pipeline import PARTS, _solid
 
     solids = {stem: _solid(module, func, design) for stem, module, func, _p, _d in PARTS if stem != "pad"}
     tol, ang = spec.mould.tessellation_tolerance_mm, spec.mould.angular_tolerance_deg
@@ -87,7 +87,7 @@ def main() -> None:
     print(f"{'quantity':34s} {'OCCT (exact solids)':>22s} {'manifold3d (STL meshes)':>24s}")
     for key in ("cup_lid_interference_mm3", "cavity_volume_mm3", "part_outside_mm3", "cavity_outside_mm3",
                 "cup_wall_mm"):
-        print(f"{key:34s} {str(_r(occt[key])):>22s} {str(_r(getattr(mf, key))):>24s}")
+        print(f"{key:34s} {_r(occt[key])!s:>22s} {_r(getattr(mf, key))!s:>24s}")
     print(f"closed-form cast part volume {design.elastomer_volume_mm3:.3f} mm^3; mesh part {mf.part_volume_mm3:.3f}")
     print(f"time (median of {args.repeat}): OCCT 1.00, manifold3d {t_mf / t_occt:.3f} "
           f"({t_occt / t_mf:.1f}x faster)")

@@ -31,8 +31,8 @@ from pathlib import Path
 import numpy as np
 
 from magfab import load_spec
-from magfab.models import mechanics as mech
 from magfab.design import derive
+from magfab.models import mechanics as mech
 
 BENCH_DIR = Path(__file__).resolve().parent
 DEFAULT_OUT = BENCH_DIR / "out"

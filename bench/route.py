@@ -25,8 +25,7 @@ import sys
 import time
 from pathlib import Path
 
-from magfab import derive, parse_spec
-from magfab import pcb
+from magfab import derive, parse_spec, pcb
 from magfab.board import route
 from magfab.errors import Severity, SpecError
 

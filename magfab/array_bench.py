@@ -23,7 +23,7 @@ def measured_scan_path(k: int) -> str:
     return f"calibration/scan_taxel_{k:02d}.csv"
 
 
-def check_taxel(spec: "Spec", taxel: int | None) -> None:
+def check_taxel(spec: Spec, taxel: int | None) -> None:
     """``--taxel`` is required for an array, refused for a single taxel, and must name one of the array's."""
     if spec.array is None:
         raise SpecError("--taxel", shown(taxel), f"the build {spec.name!r} is a single taxel", "omit --taxel")
@@ -35,7 +35,7 @@ def check_taxel(spec: "Spec", taxel: int | None) -> None:
         raise SpecError("--taxel", shown(taxel), f"must be 0 to {n - 1} for the {n} taxels of {spec.name!r}")
 
 
-def taxel_scans(folder: Path | None, spec: "Spec", taxel: int, scan: "Scan") -> dict[int, "Scan"]:
+def taxel_scans(folder: Path | None, spec: Spec, taxel: int, scan: Scan) -> dict[int, Scan]:
     """{k: scan} for the build: ``scan`` for ``taxel`` (refused by guard B when its forces are the sensor's own,
     compared with the taxel's present calibration on the field with the neighbours' removed), and the measured
     scans the folder keeps for the others."""

@@ -103,7 +103,7 @@ def _array_pad_walls(design: Design) -> tuple[float, float]:
     return rim, web
 
 
-def mesh_findings(name: str, mesh: "trimesh.Trimesh", solid_volume_mm3: float, tolerance_mm: float) -> list[Finding]:
+def mesh_findings(name: str, mesh: trimesh.Trimesh, solid_volume_mm3: float, tolerance_mm: float) -> list[Finding]:
     """Integrity of one exported mesh against the exact solid it was made from."""
     out: list[Finding] = []
     if not mesh.is_watertight:

@@ -25,9 +25,9 @@ try:
     import json
     import os
     import warnings
+    from collections.abc import Iterator
     from contextlib import contextmanager
     from pathlib import Path
-    from typing import Iterator
 
     import click
 
@@ -63,7 +63,7 @@ def _handled() -> Iterator[None]:
         if exc.filename is None or os.environ.get("MAGFAB_DEBUG"):
             raise
         _fail(f"{exc.filename}: {exc.strerror}", EXIT_BAD_INPUT)
-    except Exception as exc:  # noqa: BLE001 - the last line of defence: one message, exit 1
+    except Exception as exc:
         if _interrupted:
             _fail("interrupted; nothing was written and any previous output is untouched", EXIT_INTERRUPTED)
         if os.environ.get("MAGFAB_DEBUG"):
@@ -94,7 +94,7 @@ def main() -> None:
     warnings.showwarning = _one_line_warning
 
 
-def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:  # noqa: ANN001
+def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
     """A library's warning as one line on stderr (what and which library), never its source line."""
     origin = Path(filename).parent.name if filename else "?"
     click.echo(f"magfab: warning: {category.__name__}: {message} ({origin})", err=True)

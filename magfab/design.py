@@ -20,11 +20,10 @@ import math
 from dataclasses import dataclass
 from functools import cached_property
 
-from .errors import SpecError
 from . import outline
+from .errors import SpecError, shown
 from .limits import check_limits
 from .recipes import Recipe, catalogue
-from .errors import shown
 from .spec import Polarity, Skin, Spec, Tip
 
 __all__ = ["Design", "Taxel", "ArrayLayout", "derive", "DISTANCE_TOLERANCE_MM"]

@@ -21,7 +21,7 @@ if TYPE_CHECKING:
 __all__ = ["revolve_profile", "outline_prism", "envelope_solid", "core_solid", "elastomer_solid"]
 
 
-def revolve_profile(profile: list[tuple[float, float]], arc_at: int | None = None) -> "cq.Workplane":
+def revolve_profile(profile: list[tuple[float, float]], arc_at: int | None = None) -> cq.Workplane:
     """Revolve a closed (r, z) profile about the z axis.
 
     ``arc_at``: index i such that points i-1, i, i+1 form a circular arc (through point i) instead of
@@ -42,7 +42,7 @@ def revolve_profile(profile: list[tuple[float, float]], arc_at: int | None = Non
     return wp.close().revolve(360.0, (0, 0, 0), (0, 1, 0))
 
 
-def outline_prism(centres: list[tuple[float, float]], radius: float, z0: float, z1: float) -> "cq.Workplane":
+def outline_prism(centres: list[tuple[float, float]], radius: float, z0: float, z1: float) -> cq.Workplane:
     """The centres' hull grown by ``radius`` (:func:`magfab.outline.segments`), from z0 up to z1."""
     import cadquery as cq
 
@@ -57,7 +57,7 @@ def outline_prism(centres: list[tuple[float, float]], radius: float, z0: float, 
     return wp.close().extrude(z1 - z0)
 
 
-def envelope_solid(design: Design, below_mm: float = 0.0) -> "cq.Workplane":
+def envelope_solid(design: Design, below_mm: float = 0.0) -> cq.Workplane:
     """The elastomer's outer shape without the pocket: what a mould cavity is (``below_mm``: its base extended
     that far below z = 0, for a cutting tool)."""
     profile = design.envelope_profile
@@ -68,7 +68,7 @@ def envelope_solid(design: Design, below_mm: float = 0.0) -> "cq.Workplane":
     return revolve_profile(profile, arc_at=3 if len(profile) == 5 else None)
 
 
-def _skin_envelope(design: Design, below_mm: float) -> "cq.Workplane":
+def _skin_envelope(design: Design, below_mm: float) -> cq.Workplane:
     """A continuous skin's outer shape: the slab and a dome over each taxel (fused on the slab's top face)."""
     centres = list(design.part_centres_mm)
     R, hb = design.elastomer_radius_mm, design.base_height_mm
@@ -80,7 +80,7 @@ def _skin_envelope(design: Design, below_mm: float) -> "cq.Workplane":
     return skin.clean()
 
 
-def core_solid(design: Design, extend_below_mm: float = 0.0) -> "cq.Workplane":
+def core_solid(design: Design, extend_below_mm: float = 0.0) -> cq.Workplane:
     """Pocket + funnel + insertion channel, optionally extended below the base (to fuse into a lid)."""
     profile = list(design.core_profile)
     if extend_below_mm > 0.0:
@@ -89,7 +89,7 @@ def core_solid(design: Design, extend_below_mm: float = 0.0) -> "cq.Workplane":
     return revolve_profile(profile)
 
 
-def elastomer_solid(design: Design) -> "cq.Workplane":
+def elastomer_solid(design: Design) -> cq.Workplane:
     """The cast part: envelope less the core (less each taxel's core, for a continuous skin)."""
     part = envelope_solid(design)
     core = core_solid(design)

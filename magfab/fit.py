@@ -19,8 +19,9 @@ OCCT booleans on the exact solids, for time and result.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Mapping
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -48,7 +49,7 @@ class MouldFit:
     cavity_web_mm: float | None  # thinnest wall between neighbouring cavities (None for one cavity)
 
 
-def to_manifold(mesh: "trimesh.Trimesh", matrix: np.ndarray | None = None) -> "manifold3d.Manifold":
+def to_manifold(mesh: trimesh.Trimesh, matrix: np.ndarray | None = None) -> manifold3d.Manifold:
     """A trimesh (optionally moved by a 4x4 ``matrix``) as a manifold3d solid; raises if it is not a manifold."""
     import manifold3d
 
@@ -92,7 +93,7 @@ def _region(design: Design, x_mm: float, radius_mm: float, bottom_mm: float, top
     return manifold3d.Manifold.cylinder(top - bottom_mm, radius_mm, radius_mm, 128).translate((x_mm, 0.0, bottom_mm))
 
 
-def mould_fit(design: Design, meshes: Mapping[str, "trimesh.Trimesh"], tolerance_mm: float) -> MouldFit:
+def mould_fit(design: Design, meshes: Mapping[str, trimesh.Trimesh], tolerance_mm: float) -> MouldFit:
     """Measure the closed mould from the exported meshes (``mould_cup``, ``mould_lid``, ``elastomer``)."""
     import manifold3d
 

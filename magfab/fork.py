@@ -16,8 +16,9 @@ import multiprocessing
 import os
 import sys
 import traceback
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from typing import Any, Callable, Iterator
+from typing import Any
 
 from .errors import BuildError
 
@@ -99,7 +100,7 @@ def _child(conn) -> None:
     reader.close()
     try:
         value = _outcome(fn, args)
-    except BaseException:  # noqa: BLE001 - reported to the parent, which raises it there
+    except BaseException:
         value = ("crash", traceback.format_exc(limit=-8))
     try:
         conn.send(value)

@@ -159,7 +159,7 @@ def facets(radius_mm: float, tolerance_mm: float, angle_deg: float) -> float:
     return max(by_angle, math.pi / math.acos(1.0 - tolerance_mm / radius_mm), 3.0)
 
 
-def triangles(design: "Design") -> int:
+def triangles(design: Design) -> int:
     """Surface triangles over the four parts' STLs (model in the module doc; constants above)."""
     m = design.spec.mould
     tol, ang = m.tessellation_tolerance_mm, m.angular_tolerance_deg
@@ -170,18 +170,18 @@ def triangles(design: "Design") -> int:
     return int(dome + SMALL_FEATURE_TRIANGLES * n_small * (copies + len(design.taxels) - 1) / 2.0)
 
 
-def _profile_area_mm2(design: "Design") -> float:
+def _profile_area_mm2(design: Design) -> float:
     """Area of the elastomer's (r, z) half-profile less the magnet's, mm^2: what the axisymmetric FE meshes."""
     R, hb = design.elastomer_radius_mm, design.base_height_mm
     area = R * hb + (math.pi * R * R / 4.0 if design.tip.value == "hemisphere" else 0.0)
     return max(area - design.magnet_radius_mm * design.magnet_height_mm, 0.0)
 
 
-def fe_triangles(design: "Design", mesh_mm: float) -> int:
+def fe_triangles(design: Design, mesh_mm: float) -> int:
     return int(FE_TRIANGLES_PER_AREA_H2 * _profile_area_mm2(design) / (mesh_mm * mesh_mm)) + FE_EDGE_TRIANGLES
 
 
-def fe_meshes(design: "Design", tolerance_pct: float | None = None) -> tuple[float, ...]:
+def fe_meshes(design: Design, tolerance_pct: float | None = None) -> tuple[float, ...]:
     """The FE meshes (mm) the normal curve is expected to run for ``predict.tolerance_pct`` (or the one given):
     coarse to fine from :data:`magfab.models.predict.FE_MESHES_MM`, at least two, until the estimated error
     C h / R fits the tolerance; none for a closed-form mechanics model."""
@@ -199,7 +199,7 @@ def fe_meshes(design: "Design", tolerance_pct: float | None = None) -> tuple[flo
     return tuple(meshes)
 
 
-def scan_rows(design: "Design") -> int:
+def scan_rows(design: Design) -> int:
     """The most rows the simulated scan can have: the spec's y and z extents over the step, y capped at the
     magnet's radius each side (the lateral range never exceeds it) and z at 1.25 x the travel to d_min (the
     end of the predicted normal curve); see :func:`magfab.models.scan.scan_track`."""
@@ -210,7 +210,7 @@ def scan_rows(design: "Design") -> int:
     return (int(math.floor(2.0 * half / step + 1e-9)) + 1) * (int(math.floor(z / step + 1e-9)) + 1)
 
 
-def estimate(design: "Design") -> Cost:
+def estimate(design: Design) -> Cost:
     """The cost of building ``design`` (module doc), without doing any of the work."""
     meshes = fe_meshes(design)
     return Cost(
@@ -238,7 +238,7 @@ def _round_up(x: float) -> float:
     return math.ceil(x / 10**e - 1e-9) * 10**e
 
 
-def check_limits(design: "Design") -> Cost:
+def check_limits(design: Design) -> Cost:
     """Raise :class:`SpecError` for the first estimate past its limit (naming the key to change and the value
     that would fit); return the estimate otherwise."""
 
@@ -305,7 +305,7 @@ _KNOBS = {
 }
 
 
-def _over_budget(design: "Design", cost: Cost) -> None:
+def _over_budget(design: Design, cost: Cost) -> None:
     """Each part is within its own limit but together they are not: blame the costliest part's key."""
     part = max(cost.parts_s, key=cost.parts_s.get)  # type: ignore[arg-type]
     section, name, lo, hi = _KNOBS[part]
@@ -328,7 +328,7 @@ def _over_budget(design: "Design", cost: Cost) -> None:
                     f"{BUDGET_S:g} s, {BUDGET_MB:g} MB), {cost.parts_s[part]:.0f} s of it for the {part}", fix)
 
 
-def _with(design: "Design", **sections: object) -> "Design":
+def _with(design: Design, **sections: object) -> Design:
     from dataclasses import replace
 
     return replace(design, spec=design.spec.model_copy(update=sections))
@@ -347,7 +347,7 @@ def _bisect(count, lo: float, hi: float, limit: int = MAX_TRIANGLES) -> float | 
     return hi
 
 
-def check_scan(spec: "Spec", scan) -> None:
+def check_scan(spec: Spec, scan) -> None:
     """A measured scan the spec's calibration can afford: moving least squares grows with rows squared, so a
     scan calibrated with ``calibration.method`` "mls" or "auto" may have at most :data:`MAX_MLS_ROWS` rows, and
     any scan at most :data:`MAX_SCAN_ROWS`. :class:`~magfab.errors.ScanError` before any work otherwise."""

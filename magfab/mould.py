@@ -34,17 +34,17 @@ COUNTERSINK_MM = 1.0
 OVERLAP_MM = 0.5
 
 
-def _cavity_tool(design: Design) -> "cq.Workplane":
+def _cavity_tool(design: Design) -> cq.Workplane:
     """The envelope, extended past its base so the cut opens cleanly through the cup's top face."""
     return envelope_solid(design, below_mm=OVERLAP_MM)
 
 
-def _flip_to(solid: "cq.Workplane", x: float, z: float) -> "cq.Workplane":
+def _flip_to(solid: cq.Workplane, x: float, z: float) -> cq.Workplane:
     """Turn an elastomer-frame solid upside down and put its base plane at height z over (x, 0)."""
     return solid.rotate((0, 0, 0), (1, 0, 0), 180).translate((x, 0, z))
 
 
-def cup_solid(design: Design) -> "cq.Workplane":
+def cup_solid(design: Design) -> cq.Workplane:
     import cadquery as cq
 
     lx, ly, h = design.cup_size_mm
@@ -59,7 +59,7 @@ def cup_solid(design: Design) -> "cq.Workplane":
     return cup
 
 
-def lid_solid(design: Design) -> "cq.Workplane":
+def lid_solid(design: Design) -> cq.Workplane:
     """The lid in its print pose (top face on the bed, cores up)."""
     import cadquery as cq
 

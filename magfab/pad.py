@@ -20,7 +20,7 @@ if TYPE_CHECKING:
 __all__ = ["pad_solid"]
 
 
-def pad_solid(design: Design) -> "cq.Workplane":
+def pad_solid(design: Design) -> cq.Workplane:
     import cadquery as cq
 
     if design.array is not None:
@@ -43,7 +43,7 @@ def pad_solid(design: Design) -> "cq.Workplane":
     return pad
 
 
-def _array_pad(design: Design) -> "cq.Workplane":
+def _array_pad(design: Design) -> cq.Workplane:
     import cadquery as cq
 
     from .elastomer import outline_prism

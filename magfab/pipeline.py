@@ -11,9 +11,10 @@ from __future__ import annotations
 import hashlib
 import json
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable
+from typing import TYPE_CHECKING
 
 from . import __version__
 from .check import design_findings, errors_in, mesh_findings, mould_fit_findings
@@ -49,7 +50,7 @@ class BuildResult:
     findings: list[Finding]
     timings_s: dict[str, float] = field(default_factory=dict)
     out_dir: Path | None = None
-    prediction: "Prediction | None" = None
+    prediction: Prediction | None = None
     calibration: dict[str, object] | None = None  # what the CLI summary says of the bundle
 
     def summary(self) -> dict[str, object]:
@@ -119,8 +120,8 @@ def _solid(module: str, func: str, design: Design):
 def _board(design: Design, say: Progress, timings: dict[str, float]):
     """The footprint library, the routed breakout board and, where KiCad is installed, its Gerbers:
     (artifacts, findings, the :class:`magfab.pcb.Board`, which the report draws rather than routing again)."""
-    from .export import kicad
     from . import pcb
+    from .export import kicad
 
     say("placing and routing the board")
     t = time.perf_counter()
@@ -492,7 +493,7 @@ class _PhysicsBranch:
     """What the physics branch hands back (pickled when it ran in the worker)."""
 
     stages: tuple[_Stage, ...]  # predictions, bundle, bench papers, in pipeline order
-    prediction: "Prediction"
+    prediction: Prediction
     calibration: dict[str, object]  # calibration.json as written
     timings: dict[str, float]
 
@@ -501,7 +502,7 @@ def _physics(design: Design, scan) -> _PhysicsBranch:
     """The physics branch: predictions and plots, the acceptance bands, the calibration, firmware and readout
     bundle, and the bench papers. Nothing here needs the CAD kernel."""
     timings: dict[str, float] = {}
-    say: Progress = lambda _stage: None  # noqa: E731 - the main process reports progress
+    say: Progress = lambda _stage: None
     predict_artifacts, predict_findings, prediction = _predictions(design, say, timings)
     acceptance, acceptance_findings = _acceptance(design, prediction)
     bundle_artifacts, bundle_findings, fitted = _bundle(design, prediction, scan, acceptance, say, timings)

@@ -43,7 +43,7 @@ class ReferenceChip:
                 "option_code": self.option_code, "address_straps": list(self.address_straps)}
 
 
-def temperature_span_C(design: "Design") -> float:
+def temperature_span_C(design: Design) -> float:
     """The environment's temperature span (its defaults without an ``[environment]`` section)."""
     from .spec import Environment
 
@@ -51,7 +51,7 @@ def temperature_span_C(design: "Design") -> float:
     return env.temperature_max_C - env.temperature_min_C
 
 
-def reference_chip(design: "Design") -> ReferenceChip | None:
+def reference_chip(design: Design) -> ReferenceChip | None:
     """The reference chip of ``design`` (module doc), or None without a ``[reference]`` section."""
     spec = design.spec
     if spec.reference is None:

@@ -17,13 +17,13 @@ import tomllib
 from enum import Enum
 from importlib import resources
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator, model_validator
 
 from .errors import SpecError, _shorten, shown
-from .spec_errors import did_you_mean, translate_error
 from .recipes import catalogue
+from .spec_errors import did_you_mean, translate_error
 
 __all__ = ["Spec", "Tip", "Density", "Printer", "Array", "Environment", "Skin", "Polarity", "MAX_TAXELS", "load_spec", "parse_spec",
            "spec_from_dict", "default_spec_text", "translate_error",
@@ -97,7 +97,7 @@ class Elastomer(_Section):
     height_mm: float = _mm(7.9, "Total elastomer height H_e, base to the top of the tip on the axis, mm.")
     tip: Tip = Field(Tip.HEMISPHERE, strict=False, description="Top shape: 'hemisphere' (radius D_e/2) or 'flat'.")
     pocket_clearance_mm: float = _mm(0.05, "Clearance between magnet and pocket, on the radius and the height, mm.", ge=0.0, le=1.0)
-    cover_mm: Optional[float] = Field(
+    cover_mm: float | None = Field(
         None,
         gt=0.0,
         le=100.0,
@@ -109,7 +109,7 @@ class Elastomer(_Section):
         "(silicone stretches), mm. Sealed by the glue to the pad.", le=50.0
     )
     min_skin_mm: float = _mm(0.4, "Thinnest silicone allowed between the pocket and the outer surface, mm.", le=10.0)
-    shear_modulus_kPa: Optional[tuple[float, float, float]] = Field(
+    shear_modulus_kPa: tuple[float, float, float] | None = Field(
         None, description="Override the material's neo-Hookean shear modulus band [soft, nominal, stiff], kPa "
         "(e.g. from your own batch's tensile test); omit to use the recipe's.")
 
@@ -126,7 +126,7 @@ class Elastomer(_Section):
 
     @field_validator("shear_modulus_kPa")
     @classmethod
-    def _band(cls, v: Optional[tuple[float, float, float]]) -> Optional[tuple[float, float, float]]:
+    def _band(cls, v: tuple[float, float, float] | None) -> tuple[float, float, float] | None:
         if v is not None and not (0 < v[0] <= v[1] <= v[2] <= 1.0e5):
             raise ValueError("must be three moduli in kPa with 0 < soft <= nominal <= stiff <= 100000")
         return v
@@ -136,7 +136,7 @@ class Sensor(_Section):
     """The Hall chip and where the magnet sits above it."""
 
     chip: str = Field("mlx90393", description="Chip, a key of recipes/chips.toml.")
-    sensing_depth_mm: Optional[float] = Field(
+    sensing_depth_mm: float | None = Field(
         None,
         ge=0.0,
         le=5.0,
@@ -243,7 +243,7 @@ class Predict(_Section):
     mechanics_model: MechanicsModel = Field(
         MechanicsModel.AUTO, strict=False, description="'auto', 'fe', 'hertz_column' or 'column'.")
     noise_G: float = Field(0.1, ge=0.0, le=100.0, description="RMS field noise of the environment at the sensor, gauss.")
-    required_resolution_mN: Optional[float] = Field(
+    required_resolution_mN: float | None = Field(
         None, gt=0.0, le=1.0e4,
         description="Worst-case normal force resolution the application needs, mN (omit: no requirement).")
     # The allowed stretch 2.0 is where the material model's sources end (recipes/materials.toml): every neo-Hookean
@@ -311,9 +311,9 @@ class Fabrication(_Section):
                              "(left in the cup and on the stirrer, overflow from the fill and vent holes).")
     adhesive: str = Field("sil-poxy", description="Adhesive for the magnet seal and the pad, a key of recipes/adhesives.toml.")
     release_agent: str = Field("ease-release-200", description="Mould release, a key of recipes/adhesives.toml.")
-    pot_life_min: Optional[float] = Field(None, gt=0.0, le=10000.0, description="Override the silicone's pot life, min.")
-    cure_time_h: Optional[float] = Field(None, gt=0.0, le=1000.0, description="Override the silicone's cure time, h.")
-    density_g_cm3: Optional[float] = Field(None, gt=0.1, le=10.0, description="Override the silicone's density, g/cm^3.")
+    pot_life_min: float | None = Field(None, gt=0.0, le=10000.0, description="Override the silicone's pot life, min.")
+    cure_time_h: float | None = Field(None, gt=0.0, le=1000.0, description="Override the silicone's cure time, h.")
+    density_g_cm3: float | None = Field(None, gt=0.1, le=10.0, description="Override the silicone's density, g/cm^3.")
 
 
 class Skin(str, Enum):
@@ -341,15 +341,15 @@ class Array(_Section):
 
     rows: int = Field(1, ge=1, le=MAX_TAXELS, description="Rows of the grid (along y).")
     cols: int = Field(1, ge=1, le=MAX_TAXELS, description="Columns of the grid (along x).")
-    pitch_mm: Optional[float] = Field(
+    pitch_mm: float | None = Field(
         None, gt=0.0, le=100.0, description="Centre-to-centre distance of neighbouring taxels in the grid, mm "
         "(required for a grid of more than one taxel).")
-    positions_mm: Optional[tuple[tuple[float, float], ...]] = Field(
+    positions_mm: tuple[tuple[float, float], ...] | None = Field(
         None, description="Explicit taxel centres [[x, y], ...] in the board frame, mm, instead of rows, cols and "
         "pitch_mm (taxel index = order in the list).")
     skin: Skin = Field(Skin.SEPARATE, strict=False, description="'separate' fingertips or one 'continuous' skin.")
     polarity: Polarity = Field(Polarity.SAME, strict=False, description="'same' or 'alternating' magnetisation.")
-    crosstalk_mN: Optional[float] = Field(
+    crosstalk_mN: float | None = Field(
         None, gt=0.0, le=1.0e4, description="Largest force error at a taxel that its neighbours moving through "
         "their range may cause, mN; omit: the taxel's normal force resolution.")
 
@@ -370,7 +370,7 @@ class Array(_Section):
         return tuple((float(x), float(y)) for x, y in v)
 
     @model_validator(mode="after")
-    def _grid(self) -> "Array":
+    def _grid(self) -> Array:
         if self.positions_mm is not None:
             if self.rows != 1 or self.cols != 1 or self.pitch_mm is not None:
                 raise ValueError("give either positions_mm or rows, cols and pitch_mm, not both")
@@ -398,7 +398,7 @@ class Environment(_Section):
     temperature_lag_C: float = Field(
         1.0, ge=0.0, le=50.0, description="Largest difference between the magnet's and the chip's temperature while "
         "the temperature changes (the compensation reads the chip's), C.")
-    earth_field_G: Optional[float] = Field(
+    earth_field_G: float | None = Field(
         None, gt=0.0, le=1.0, description="Local total intensity of the Earth's field (NOAA NCEI's calculator), "
         "gauss; omit: the strongest on Earth, 0.65 G.")
     rotation_deg: float = Field(
@@ -411,7 +411,7 @@ class Environment(_Section):
         "the source much smaller than this).")
 
     @model_validator(mode="after")
-    def _span(self) -> "Environment":
+    def _span(self) -> Environment:
         if self.temperature_max_C <= self.temperature_min_C:
             raise ValueError(f"temperature_max_C {self.temperature_max_C:g} C must be above temperature_min_C "
                              f"{self.temperature_min_C:g} C")
@@ -426,7 +426,7 @@ class Reference(_Section):
     stray field that is the same at both chips (the Earth's as the sensor turns, a far motor's). Omit the section
     for none."""
 
-    distance_mm: Optional[float] = Field(
+    distance_mm: float | None = Field(
         None, gt=0.0, le=200.0, description="From the taxels (the hull's edge) to the reference chip along +y, mm; "
         "omit: the nearest point where no magnet's press or slide moves the field there by more than the chip's "
         "noise (computed; MagOne: 42.5 mm), the board made taller to hold it.")
@@ -454,10 +454,10 @@ class Spec(_Section):
     firmware: Firmware = Field(default_factory=Firmware)
     fabrication: Fabrication = Field(default_factory=Fabrication)
     build: Build = Field(default_factory=Build)
-    array: Optional[Array] = Field(None, description="Several taxels on one board (omit for one).")
-    environment: Optional[Environment] = Field(
+    array: Array | None = Field(None, description="Several taxels on one board (omit for one).")
+    environment: Environment | None = Field(
         None, description="Where the sensor is used, for the drift prediction (omit: a lab bench).")
-    reference: Optional[Reference] = Field(
+    reference: Reference | None = Field(
         None, description="A reference chip for stray-field rejection (omit for none).")
 
     def dump(self) -> dict[str, Any]:

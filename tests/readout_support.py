@@ -16,7 +16,6 @@ from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
-
 from conftest import ref_crc16
 
 PKG = "readout/src/magfab_readout"

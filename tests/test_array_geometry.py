@@ -9,11 +9,11 @@ import math
 import manifold3d
 import pytest
 import trimesh
-
 from conftest import require_tool
+from test_slicer import _slice
+
 from magfab import outline
 from magfab.fit import to_manifold
-from test_slicer import _slice
 
 
 def _solid(build, stem):

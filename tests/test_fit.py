@@ -12,8 +12,8 @@ from magfab.fit import mould_fit
 
 
 def _meshes(design):
-    from magfab.pipeline import PARTS, _solid
     from magfab.export.cad import tessellate
+    from magfab.pipeline import PARTS, _solid
 
     tol, ang = design.spec.mould.tessellation_tolerance_mm, design.spec.mould.angular_tolerance_deg
     return {stem: tessellate(_solid(module, func, design), tol, ang)

@@ -10,8 +10,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from magfab import SpecError, derive, load_spec, parse_spec
-from magfab import limits
+from magfab import SpecError, derive, limits, load_spec, parse_spec
 from magfab.limits import BUDGET_MB, BUDGET_S, MAX_MLS_ROWS, MAX_TRIANGLES, estimate, scan_rows
 
 
@@ -32,7 +31,7 @@ def test_specs_the_build_cannot_survive_are_refused_at_derive(text, key, words):
     assert time.perf_counter() - t < 5.0  # refused before the work, not after it
     message = str(info.value)
     assert info.value.key == key and message.startswith(key) and words in message and "limit" in message
-    assert "\n" not in message and "at least" in message or "smaller" in message or "fewer" in message
+    assert ("\n" not in message and "at least" in message) or "smaller" in message or "fewer" in message
 
 
 def test_the_suggested_value_fits():

@@ -364,7 +364,7 @@ def test_an_error_at_every_step_leaves_a_complete_build_and_no_temporaries(built
             output._step_hook = None
         if raised.type is OutputError:
             assert str(raised.value) == f"cannot write {out}: No space left on device"
-        assert _tree(out) == (old if k < commit else new) or not in_place and _tree(out) == old, f"after {step!r}"
+        assert _tree(out) == (old if k < commit else new) or (not in_place and _tree(out) == old), f"after {step!r}"
         assert _beside(out) == ["out"], f"failed after {step!r}"
         write(out, _fake("old"), in_place=in_place)
 

@@ -10,7 +10,8 @@ import math
 import tomllib
 
 import pytest
-from hypothesis import HealthCheck, event, given, settings, strategies as st
+from hypothesis import HealthCheck, event, given, settings
+from hypothesis import strategies as st
 from pydantic import BaseModel
 
 from magfab import SpecError, derive, parse_spec

@@ -5,8 +5,8 @@ from __future__ import annotations
 import subprocess
 
 import pytest
-
 from conftest import require_tool
+
 from magfab import build, parse_spec
 
 PRINTED = ("mould_cup", "mould_lid", "pad")

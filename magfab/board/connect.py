@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 
 from .layout import GROUND, Placed
-from .route import HOLE_TO_HOLE_MM, LAYERS, Copper, Router, RouteError, distance, touching
+from .route import HOLE_TO_HOLE_MM, LAYERS, Copper, RouteError, Router, distance, touching
 
 __all__ = ["NETS_ROUTED", "ROUTE_GRID_MM", "RIP_UP_LIMIT", "FANOUT_MM", "route_all"]
 

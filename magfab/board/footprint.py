@@ -9,11 +9,11 @@ exposed pad.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, replace
-from typing import Iterable, Mapping
 
-from ..recipes import Recipe, catalogue
 from ..formats.sexpr import Sym, at, render, xy
+from ..recipes import Recipe, catalogue
 from ..spec import Density
 from .ipc import Band, Land, ipc_land
 
@@ -376,7 +376,7 @@ def chip_footprint(part: Recipe, density: Density = Density.NOMINAL, *, prefix: 
 def connector_footprint(part: Recipe, circuits: int = 4) -> Footprint:
     """JST SH side-entry connector on the maker's recommended land; the mating face points to +y."""
     rules = _rules()
-    q = lambda k: part[k].nominal  # noqa: E731
+    q = lambda k: part[k].nominal
     pitch = q("pitch_mm")
     sr = rules.radius_ratio(q("signal_pad_width_mm"), q("signal_pad_length_mm"))
     mr = rules.radius_ratio(q("mount_pad_width_mm"), q("mount_pad_length_mm"))

@@ -32,7 +32,7 @@ class Band:
     max: float
 
     @classmethod
-    def of(cls, q: Quantity) -> "Band":
+    def of(cls, q: Quantity) -> Band:
         return cls(q.low, q.nominal, q.high)
 
     @property

@@ -9,8 +9,8 @@ centre at 0) maps to it by ``X = ORIGIN_x + x``, ``Y = ORIGIN_y - y``.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Mapping
 
 from .footprint import Footprint, flip_layer
 from .route import LAYERS, Copper

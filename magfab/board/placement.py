@@ -16,9 +16,21 @@ from ..design import Design
 from ..errors import SpecError
 from ..recipes import catalogue
 from .footprint import Footprint, chip_footprint, connector_footprint, hole_footprint, qfn_footprint
-from .layout import (GROUND, HOLE_CLEARANCE_MM, ORIGIN, PAD_KEEPOUT_MARGIN_MM, SILK_ADVANCE, SILK_MIN_TEXT_MM,
-                     SILK_STROKE_MM, SUPPLY,
-                     Box, Placed, SilkText, outline_clear, overlap)
+from .layout import (
+    GROUND,
+    HOLE_CLEARANCE_MM,
+    ORIGIN,
+    PAD_KEEPOUT_MARGIN_MM,
+    SILK_ADVANCE,
+    SILK_MIN_TEXT_MM,
+    SILK_STROKE_MM,
+    SUPPLY,
+    Box,
+    Placed,
+    SilkText,
+    outline_clear,
+    overlap,
+)
 from .plan import ORDER_CODE
 from .route import distance
 

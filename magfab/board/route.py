@@ -16,8 +16,8 @@ from __future__ import annotations
 
 import heapq
 import math
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Iterable, Sequence
 
 import numpy as np
 
@@ -48,15 +48,15 @@ class Copper:
     hole: bool = False
 
     @staticmethod
-    def rect(x0: float, y0: float, x1: float, y1: float, layers: Iterable[str], net: str | None, owner: str = "") -> "Copper":
+    def rect(x0: float, y0: float, x1: float, y1: float, layers: Iterable[str], net: str | None, owner: str = "") -> Copper:
         return Copper("rect", (min(x0, x1), min(y0, y1)), (max(x0, x1), max(y0, y1)), 0.0, frozenset(layers), net, owner)
 
     @staticmethod
-    def seg(x0: float, y0: float, x1: float, y1: float, width: float, layer: str, net: str | None, owner: str = "track") -> "Copper":
+    def seg(x0: float, y0: float, x1: float, y1: float, width: float, layer: str, net: str | None, owner: str = "track") -> Copper:
         return Copper("seg", (x0, y0), (x1, y1), width / 2, frozenset({layer}), net, owner)
 
     @staticmethod
-    def point(x: float, y: float, radius: float, layers: Iterable[str], net: str | None, owner: str = "", hole: bool = False) -> "Copper":
+    def point(x: float, y: float, radius: float, layers: Iterable[str], net: str | None, owner: str = "", hole: bool = False) -> Copper:
         return Copper("point", (x, y), (x, y), radius, frozenset(layers), net, owner, hole)
 
     def bbox(self) -> tuple[float, float, float, float]:
@@ -522,7 +522,7 @@ def _field(it: Copper, X: np.ndarray, Y: np.ndarray) -> np.ndarray:
     if it.kind == "rect":
         dx = np.maximum(np.maximum(it.a[0] - X, 0.0), X - it.b[0])
         dy = np.maximum(np.maximum(it.a[1] - Y, 0.0), Y - it.b[1])
-        inside = (X >= it.a[0]) & (X <= it.b[0]) & (Y >= it.a[1]) & (Y <= it.b[1])
+        inside = (it.a[0] <= X) & (it.b[0] >= X) & (it.a[1] <= Y) & (it.b[1] >= Y)
         return np.where(inside, -1e-3, np.hypot(dx, dy))
     ax, ay = it.a
     bx, by = it.b

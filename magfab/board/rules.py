@@ -5,12 +5,21 @@ label, connectivity), measured on the board itself, each broken rule an error-le
 from __future__ import annotations
 
 import math
-from typing import Callable, Mapping
+from collections.abc import Callable, Mapping
 
 from ..errors import Finding, Severity
 from .layout import PAD_KEEPOUT_MARGIN_MM, Board, overlap
-from .route import (HOLE_TO_HOLE_MM, Copper, clearance_violations, connected, distance, is_via, near, touching,
-                    via_clearance)
+from .route import (
+    HOLE_TO_HOLE_MM,
+    Copper,
+    clearance_violations,
+    connected,
+    distance,
+    is_via,
+    near,
+    touching,
+    via_clearance,
+)
 
 __all__ = ["findings", "distance_margin"]
 
@@ -21,7 +30,7 @@ def findings(b: Board) -> list[Finding]:
     """Measure the board: every rule the build promises, as findings (errors stop the build); a clean
     board gets one ``pcb-ok`` note with its track count and smallest clearance margin."""
     out: list[Finding] = []
-    err = lambda code, msg: out.append(Finding(Severity.ERROR, code, msg, "pcb"))  # noqa: E731
+    err = lambda code, msg: out.append(Finding(Severity.ERROR, code, msg, "pcb"))
     for msg in b.unrouted:
         err("pcb-unrouted", msg)
     items = b.copper()

@@ -6,7 +6,8 @@ from __future__ import annotations
 import csv
 import io
 import math
-from typing import TYPE_CHECKING, Mapping
+from collections.abc import Mapping
+from typing import TYPE_CHECKING
 
 from ..board.placement import board_size_mm
 from ..recipes import catalogue
@@ -24,12 +25,12 @@ FIELDS = ("item", "part", "description", "quantity", "unit", "source")
 _PASTE_UNIT = "syringe"
 
 
-def magnet_recipe(design: "Design") -> "Recipe | None":
+def magnet_recipe(design: Design) -> Recipe | None:
     """The magnet grade's entry in recipes/assembly.toml (coating, operating temperature), if it has one."""
     return catalogue("assembly").get(f"magnet-{design.spec.magnet.grade.lower()}")
 
 
-def indenter_disc_mm(design: "Design", y_half_mm: float) -> float:
+def indenter_disc_mm(design: Design, y_half_mm: float) -> float:
     """The least diameter of the flat indenter: it covers the tip over a scan reaching ``y_half_mm`` off the
     axis, with the recipe's margin."""
     return 2.0 * (design.elastomer_radius_mm + y_half_mm + catalogue("bench")["indenter"]["margin_mm"].nominal)
@@ -40,7 +41,7 @@ def _row(item: str, part: str, description: str, quantity: float, unit: str, sou
             "source": source}
 
 
-def _chip_rows(design: "Design") -> list[dict[str, object]]:
+def _chip_rows(design: Design) -> list[dict[str, object]]:
     """The Hall chips, one row per option code: the order number's suffix sets the I2C base address, so an array
     of more than four chips orders two or more codes (the address plan of design.json)."""
     n = design.spec.fabrication.sensors
@@ -63,7 +64,7 @@ def _chip_rows(design: "Design") -> list[dict[str, object]]:
     return rows + extra
 
 
-def _sensor_rows(design: "Design") -> list[dict[str, object]]:
+def _sensor_rows(design: Design) -> list[dict[str, object]]:
     """The parts of the sensor itself: chip, magnet, silicone, glues, board and its parts, prints."""
     spec = design.spec
     n = spec.fabrication.sensors
@@ -132,7 +133,7 @@ def _sensor_rows(design: "Design") -> list[dict[str, object]]:
     return rows
 
 
-def _bench_rows(design: "Design", acceptance: Mapping[str, object] | None) -> list[dict[str, object]]:
+def _bench_rows(design: Design, acceptance: Mapping[str, object] | None) -> list[dict[str, object]]:
     """What reads, wires and calibrates the sensor: microcontroller, level shifter, cable, the calibration rig
     and the acceptance test's weight (when the build has acceptance bands)."""
     n = design.spec.fabrication.sensors
@@ -166,13 +167,13 @@ def _bench_rows(design: "Design", acceptance: Mapping[str, object] | None) -> li
     return rows
 
 
-def bom_rows(design: "Design", acceptance: Mapping[str, object] | None = None) -> list[dict[str, object]]:
+def bom_rows(design: Design, acceptance: Mapping[str, object] | None = None) -> list[dict[str, object]]:
     """The bill of materials: one row per item (:data:`FIELDS`), quantities for ``fabrication.sensors``;
     ``acceptance`` (acceptance.json's content) adds the acceptance test's weight."""
     return _sensor_rows(design) + _bench_rows(design, acceptance)
 
 
-def bom_csv(design: "Design", acceptance: Mapping[str, object] | None = None) -> str:
+def bom_csv(design: Design, acceptance: Mapping[str, object] | None = None) -> str:
     out = io.StringIO()
     w = csv.DictWriter(out, fieldnames=list(FIELDS), lineterminator="\n")
     w.writeheader()

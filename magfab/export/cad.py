@@ -27,7 +27,7 @@ _FILE_NAME = re.compile(rb"FILE_NAME\('[^']*','[^']*'")
 _PRODUCT = re.compile(rb"PRODUCT\('[^']*',\s*'[^']*'")
 
 
-def step_bytes(solid: "cq.Workplane", name: str) -> bytes:
+def step_bytes(solid: cq.Workplane, name: str) -> bytes:
     """The solid as an AP214 STEP file whose header names the part and carries a fixed time stamp."""
     import cadquery as cq
 
@@ -44,7 +44,7 @@ def step_bytes(solid: "cq.Workplane", name: str) -> bytes:
     return data
 
 
-def tessellate(solid: "cq.Workplane", tolerance_mm: float, angular_tolerance_deg: float) -> "trimesh.Trimesh":
+def tessellate(solid: cq.Workplane, tolerance_mm: float, angular_tolerance_deg: float) -> trimesh.Trimesh:
     """Triangulate a solid within ``tolerance_mm`` of its exact surface, merging shared vertices.
 
     The deflection is absolute (mm). CadQuery's own ``tessellate`` asks the kernel for a deflection
@@ -87,7 +87,7 @@ def tessellate(solid: "cq.Workplane", tolerance_mm: float, angular_tolerance_deg
     return mesh
 
 
-def stl_bytes(mesh: "trimesh.Trimesh", name: str) -> bytes:
+def stl_bytes(mesh: trimesh.Trimesh, name: str) -> bytes:
     """Binary STL: 80-byte header with the part's name, then one 50-byte record per triangle."""
     header = f"magfab {name}".encode("ascii", "replace")[:80].ljust(80, b" ")
     tri = mesh.triangles.astype("<f4")

@@ -13,11 +13,11 @@ __all__ = ["chart", "caption"]
 FORCE_STYLE = {"Fz_N": ("o", "#1f77b4"), "Fr_N": ("s", "#ff7f0e")}
 
 
-def _fitted_mls(result: "FitResult") -> bool:
+def _fitted_mls(result: FitResult) -> bool:
     return any(c.method == "mls" for c in result.candidates)
 
 
-def caption(result: "FitResult") -> str:
+def caption(result: FitResult) -> str:
     """What :func:`chart` draws for this fit, in one line (the report's caption and the file table's entry)."""
     what = "held-out force error against evaluation cost, per polynomial order"
     if _fitted_mls(result):
@@ -25,7 +25,7 @@ def caption(result: "FitResult") -> str:
     return what + " (no MLS point: this build's calibration.method did not fit it)"
 
 
-def _legend(fig, result: "FitResult") -> None:
+def _legend(fig, result: FitResult) -> None:
     from matplotlib.lines import Line2D
 
     from .figures import _legend_below
@@ -46,7 +46,7 @@ def _legend(fig, result: "FitResult") -> None:
     _legend_below(fig, handles, ncol=2)
 
 
-def chart(result: "FitResult") -> dict[str, bytes]:
+def chart(result: FitResult) -> dict[str, bytes]:
     """{"calibration_fit.svg": bytes, "calibration_fit.png": bytes}: held-out RMS error (mN) against
     evaluation cost (operations per evaluation), one point per polynomial order and one for MLS when the fit
     tried it, per force; the chosen fit ringed; legend below the axes. Byte-identical for the same fit
@@ -65,7 +65,7 @@ def chart(result: "FitResult") -> dict[str, bytes]:
     return {"calibration_fit.svg": svg, "calibration_fit.png": png}
 
 
-def draw(plt, result: "FitResult"):
+def draw(plt, result: FitResult):
     """The chart as an open matplotlib Figure (for :func:`chart` and the tests)."""
     fig, ax = plt.subplots(figsize=(6.4, 4.8), layout="constrained")
     for f, (marker, colour) in FORCE_STYLE.items():

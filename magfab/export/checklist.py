@@ -10,18 +10,24 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass
-from typing import TYPE_CHECKING, Mapping
+from typing import TYPE_CHECKING
 
 from ..board.placement import board_size_mm
 from ..errors import Finding, Severity, SpecError
 from ..formats import acceptance_json
 from ..recipes import Recipe, catalogue
-from .bom import bom_csv, bom_rows, indenter_disc_mm, magnet_recipe  # bom_*: re-exported: pipeline.py writes bom.csv through this module
+from .bom import (  # bom_*: re-exported: pipeline.py writes bom.csv through this module
+    bom_csv,
+    bom_rows,
+    indenter_disc_mm,
+    magnet_recipe,
+)
 
 if TYPE_CHECKING:
-    from ..models.scan import ScanPlan
     from ..design import Design
+    from ..models.scan import ScanPlan
 
 __all__ = ["Quantities", "quantities", "mix_ratio", "Step", "Table", "Section", "sections", "checklist_md",
            "checklist_html", "bom_rows", "bom_csv", "FLASH_COMMANDS", "CALIBRATE_COMMANDS", "findings"]
@@ -68,7 +74,7 @@ class Quantities:
         return {k: (round(v, 3) if isinstance(v, float) else v) for k, v in asdict(self).items()}
 
 
-def _silicone(design: "Design") -> Recipe:
+def _silicone(design: Design) -> Recipe:
     return catalogue("materials")[design.spec.elastomer.material]
 
 
@@ -81,7 +87,7 @@ def _override(value: float | None, recipe: Recipe, key: str, spec_key: str) -> f
     return recipe[key].nominal
 
 
-def quantities(design: "Design") -> Quantities:
+def quantities(design: Design) -> Quantities:
     """How much silicone to weigh per pour and in all (cavities, the lid's holes, the waste allowance)."""
     spec = design.spec
     fab = spec.fabrication
@@ -108,7 +114,7 @@ def quantities(design: "Design") -> Quantities:
     )
 
 
-def findings(design: "Design") -> list[Finding]:
+def findings(design: Design) -> list[Finding]:
     q = quantities(design)
     out = [Finding(Severity.INFO, "silicone",
                    f"weigh {q.part_a_g:.1f} g part A and {q.part_b_g:.1f} g part B of {q.material} per pour "
@@ -181,7 +187,7 @@ def _q(recipe: Recipe, key: str) -> float | None:
     return recipe[key].nominal if key in recipe.quantities else None
 
 
-def _parts_section(design: "Design", acceptance: Mapping[str, object] | None) -> Section:
+def _parts_section(design: Design, acceptance: Mapping[str, object] | None) -> Section:
     rows = tuple((str(r["item"]), str(r["part"]), f"{r['quantity']:g} {r['unit']}")
                  for r in bom_rows(design, acceptance))
     return _section("Parts", ["Check you have every part in the table before you start (bom.csv lists the same "
@@ -189,7 +195,7 @@ def _parts_section(design: "Design", acceptance: Mapping[str, object] | None) ->
                     Table(("item", "part", "quantity"), rows))
 
 
-def _array_sections(design: "Design") -> list[Section]:
+def _array_sections(design: Design) -> list[Section]:
     """An array's address plan and orientation, before anything is made (none for a single taxel)."""
     if design.array is None:
         return []
@@ -207,7 +213,7 @@ def _array_sections(design: "Design") -> list[Section]:
     ], Table(ADDRESS_HEADER, address_rows(design)))]
 
 
-def _print_section(design: "Design") -> Section:
+def _print_section(design: Design) -> Section:
     printer = design.printer
     n = design.spec.fabrication.sensors
     layer = _q(printer, "layer_height_mm")
@@ -231,7 +237,7 @@ def _print_section(design: "Design") -> Section:
     return _section("Print the mould and the pad", steps)
 
 
-def _prepare_section(design: "Design", q: Quantities) -> Section:
+def _prepare_section(design: Design, q: Quantities) -> Section:
     printer = design.printer
     rec = _silicone(design)
     release = catalogue("adhesives")[design.spec.fabrication.release_agent]
@@ -251,7 +257,7 @@ def _prepare_section(design: "Design", q: Quantities) -> Section:
     return _section("Prepare the mould", steps)
 
 
-def _mix_section(design: "Design", q: Quantities) -> Section:
+def _mix_section(design: Design, q: Quantities) -> Section:
     rec = _silicone(design)
     n = design.spec.fabrication.sensors
     a_name, b_name = ("part A", "part B") if q.ratio[0] == q.ratio[1] else ("base", "curing agent")
@@ -275,7 +281,7 @@ def _mix_section(design: "Design", q: Quantities) -> Section:
     ])
 
 
-def _pour_section(design: "Design", q: Quantities) -> Section:
+def _pour_section(design: Design, q: Quantities) -> Section:
     from ..design import PRY_LIP_MM
 
     cure_at = f" at {q.cure_temperature_C:g} C" if q.cure_temperature_C is not None else ""
@@ -289,7 +295,7 @@ def _pour_section(design: "Design", q: Quantities) -> Section:
     ])
 
 
-def _magnet_section(design: "Design") -> Section:
+def _magnet_section(design: Design) -> Section:
     spec = design.spec
     assembly = catalogue("assembly")
     mag = magnet_recipe(design)
@@ -313,7 +319,7 @@ def _magnet_section(design: "Design") -> Section:
     ])
 
 
-def _solder_section(design: "Design") -> Section:
+def _solder_section(design: Design) -> Section:
     spec = design.spec
     assembly = catalogue("assembly")
     stencil, reflow = assembly["stencil"], assembly["reflow"]
@@ -340,7 +346,7 @@ def _solder_section(design: "Design") -> Section:
     ])
 
 
-def _chips(design: "Design") -> str:
+def _chips(design: Design) -> str:
     if design.array is None:
         return "U1"
     from .checklist_array import chips_text
@@ -348,7 +354,7 @@ def _chips(design: "Design") -> str:
     return f"U1-U{len(design.taxels)} ({chips_text(design)})"
 
 
-def _assemble_section(design: "Design") -> Section:
+def _assemble_section(design: Design) -> Section:
     adhesives = catalogue("adhesives")
     glue = adhesives[design.spec.fabrication.adhesive]
     ca = adhesives["loctite-401"]
@@ -389,7 +395,7 @@ def _wiring_table() -> Table:
     ))
 
 
-def _wiring_section(design: "Design") -> Section:
+def _wiring_section(design: Design) -> Section:
     bench = catalogue("bench")
     ls, uno, jumper = bench["level-shifter"], bench["arduino"], bench["qwiic-jumper"]
     vdd = _t(catalogue("chips")["mlx90393"], "function_VDD", "supply")
@@ -404,7 +410,7 @@ def _wiring_section(design: "Design") -> Section:
     ], _wiring_table())
 
 
-def _flash_section(design: "Design") -> Section:
+def _flash_section(design: Design) -> Section:
     from . import firmware
 
     return _section("Flash and read", [Step(
@@ -418,7 +424,7 @@ def _flash_section(design: "Design") -> Section:
         "it starts.", FLASH_COMMANDS)])
 
 
-def _calibrate_section(design: "Design", plan: "ScanPlan | None") -> Section:
+def _calibrate_section(design: Design, plan: ScanPlan | None) -> Section:
     cal = design.spec.calibration
     bench = catalogue("bench")
     ref, stage = bench["reference-sensor"], bench["stage"]
@@ -452,7 +458,7 @@ def _calibrate_section(design: "Design", plan: "ScanPlan | None") -> Section:
     ])
 
 
-def _acceptance_section(acceptance: Mapping[str, object] | None, design: "Design | None" = None) -> Section:
+def _acceptance_section(acceptance: Mapping[str, object] | None, design: Design | None = None) -> Section:
     rest = acceptance.get("rest_Bz_uT") if acceptance else None
     weight = acceptance.get("weight_g") if acceptance else None
     delta = acceptance.get("delta_Bz_uT") if acceptance else None
@@ -505,8 +511,8 @@ def _drift_steps(acceptance: Mapping[str, object]) -> list[str]:
     return out
 
 
-def sections(design: "Design", acceptance: Mapping[str, object] | None = None,
-             plan: "ScanPlan | None" = None) -> list[Section]:
+def sections(design: Design, acceptance: Mapping[str, object] | None = None,
+             plan: ScanPlan | None = None) -> list[Section]:
     """The checklist as :class:`Section` s of :class:`Step` s: plain text with the spec's, the design's and the
     recipes' numbers filled in; the Markdown and HTML templates only lay it out (and escape it). ``plan``: the
     calibration scan's extent (:func:`magfab.models.scan.scan_plan`; omitted, the spec's)."""
@@ -517,16 +523,16 @@ def sections(design: "Design", acceptance: Mapping[str, object] | None = None,
             _calibrate_section(design, plan), _acceptance_section(acceptance, design)]
 
 
-def checklist_md(design: "Design", acceptance: Mapping[str, object] | None = None,
-                 plan: "ScanPlan | None" = None) -> str:
+def checklist_md(design: Design, acceptance: Mapping[str, object] | None = None,
+                 plan: ScanPlan | None = None) -> str:
     from .templating import render
 
     return render("checklist/checklist.md.j2", spec=design.spec, q=quantities(design),
                   sections=sections(design, acceptance, plan))
 
 
-def checklist_html(design: "Design", acceptance: Mapping[str, object] | None = None,
-                   plan: "ScanPlan | None" = None) -> str:
+def checklist_html(design: Design, acceptance: Mapping[str, object] | None = None,
+                   plan: ScanPlan | None = None) -> str:
     from .templating import render
 
     return render("checklist/checklist.html.j2", spec=design.spec, q=quantities(design),

@@ -31,7 +31,7 @@ def north(polarity: int) -> str:
     return "up (to the tip)" if polarity > 0 else "down (to the chip)"
 
 
-def address_rows(design: "Design") -> tuple[tuple[str, ...], ...]:
+def address_rows(design: Design) -> tuple[tuple[str, ...], ...]:
     """One row per taxel: where it stands (board frame, from the board's centre), its chip, the order code that sets
     the chip's I2C base, its address, the A1/A0 straps the board wires (0 GND, 1 3.3 V), the magnet's north."""
     return tuple((str(t.index), f"{t.x_mm:g}, {t.y_mm:g}", f"U{t.index + 1}", f"MLX90393SLW-ABA-{t.option_code}",
@@ -39,7 +39,7 @@ def address_rows(design: "Design") -> tuple[tuple[str, ...], ...]:
                  for t in design.taxels)
 
 
-def chips_text(design: "Design") -> str:
+def chips_text(design: Design) -> str:
     """The chips to place, by designator and order code (they look alike: the code is on the reel, not the part)."""
     by_code = {}
     for t in design.taxels:
@@ -47,7 +47,7 @@ def chips_text(design: "Design") -> str:
     return "; ".join(f"{', '.join(us)} from the -{code} reel" for code, us in sorted(by_code.items()))
 
 
-def magnets_text(design: "Design") -> str:
+def magnets_text(design: Design) -> str:
     """Which way each magnet goes in, for the magnet step."""
     downs = [str(t.index) for t in design.taxels if t.polarity < 0]
     if not downs:
@@ -57,7 +57,7 @@ def magnets_text(design: "Design") -> str:
             "wrong one reads a negative field at rest for a north-up taxel (the acceptance test names it).")
 
 
-def calibrate_step(design: "Design", step: Any) -> Any:
+def calibrate_step(design: Design, step: Any) -> Any:
     """The single taxel's calibration step (a checklist Step) for an array: one taxel scanned per recording."""
     n = len(design.taxels)
     text = step.text.replace("upload it into the board's EEPROM", "upload the array's record again, which names it")
@@ -67,7 +67,7 @@ def calibrate_step(design: "Design", step: Any) -> Any:
         "one recording each, with --taxel the taxel scanned."))
 
 
-def acceptance_steps(design: "Design", weight_g: float) -> list[str]:
+def acceptance_steps(design: Design, weight_g: float) -> list[str]:
     """The acceptance section's words for an array: magfab-readout check reads a single taxel only."""
     return [f"magfab-readout check does not read an array yet. With the board streaming, zeroed at rest (the last "
             f"command of the section Flash and read), put the {weight_g:g} g weight on each of the "

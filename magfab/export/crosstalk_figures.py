@@ -27,7 +27,7 @@ CAPTIONS = {
 }
 
 
-def _map(plt, xt: "Crosstalk"):
+def _map(plt, xt: Crosstalk):
     fig, ax = plt.subplots(figsize=(4.6, 3.8), layout="constrained")
     data = xt.residual_mN + xt.mechanical_mN
     n = len(data)
@@ -45,7 +45,7 @@ def _map(plt, xt: "Crosstalk"):
     return fig
 
 
-def _pitch(plt, xt: "Crosstalk"):
+def _pitch(plt, xt: Crosstalk):
     fig, ax = plt.subplots(figsize=(5.4, 3.6), layout="constrained")
     for name, style in (("same", "-"), ("alternating", "--")):
         ax.loglog(xt.sweep_mm, np.maximum(xt.sweep_worst_mN[name], 1e-3), style, color="C0" if name == "same" else "C1",
@@ -62,7 +62,7 @@ def _pitch(plt, xt: "Crosstalk"):
     return fig
 
 
-def _coupling(plt, xt: "Crosstalk"):
+def _coupling(plt, xt: Crosstalk):
     from ..models.mechanics.coupling import boussinesq_ratio
 
     r, c = xt.coupling_curve
@@ -79,7 +79,7 @@ def _coupling(plt, xt: "Crosstalk"):
     return fig
 
 
-def figures(xt: "Crosstalk") -> dict[str, bytes]:
+def figures(xt: Crosstalk) -> dict[str, bytes]:
     """{file name: bytes}: each chart as SVG and PNG."""
     import matplotlib
 

@@ -33,7 +33,7 @@ _POINT_COLOUR = {"normal_rest": "#1f77b4", "normal_end": "#d62728"}
 _BAR_COLOUR = {"normal at rest": "#1f77b4", "normal at the end": "#d62728", "shear": "#2ca02c"}
 
 
-def _temperature_panel(ax, d: "Drift") -> list:
+def _temperature_panel(ax, d: Drift) -> list:
     from matplotlib.lines import Line2D
 
     t = d.temperature
@@ -58,9 +58,9 @@ def _temperature_panel(ax, d: "Drift") -> list:
     return handles
 
 
-def _bars_panel(ax, d: "Drift") -> list:
-    from matplotlib.patches import Patch
+def _bars_panel(ax, d: Drift) -> list:
     from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
 
     rows = [(f"turned over, {b.field_G / 2:g} G", b) for b in d.rotation_band]
     stated = d.rotation
@@ -83,7 +83,7 @@ def _bars_panel(ax, d: "Drift") -> list:
         Line2D([], [], color="k", lw=0.8, ls=":", label=f"shear resolution {d.resolution_mN['shear']:.2f} mN")]
 
 
-def _drift(plt, d: "Drift"):
+def _drift(plt, d: Drift):
     fig, (left, right) = plt.subplots(1, 2, figsize=(9.6, 4.4), layout="constrained",
                                       gridspec_kw={"width_ratios": (1.1, 1.0)})
     handles = _temperature_panel(left, d) + _bars_panel(right, d)
@@ -91,7 +91,7 @@ def _drift(plt, d: "Drift"):
     return fig
 
 
-def figures(d: "Drift") -> dict[str, bytes]:
+def figures(d: Drift) -> dict[str, bytes]:
     """{file name: bytes}: the chart as SVG and PNG."""
     import matplotlib
 

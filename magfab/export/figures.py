@@ -7,7 +7,8 @@ from __future__ import annotations
 
 import io
 import math
-from typing import TYPE_CHECKING, Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -85,7 +86,7 @@ def _render(fig) -> tuple[bytes, bytes]:
     return svg.getvalue(), png.getvalue()
 
 
-def _axis_field(plt, design: "Design", pred: "Prediction"):
+def _axis_field(plt, design: Design, pred: Prediction):
     from matplotlib.lines import Line2D
 
     magnet = fieldmod.Magnet.from_spec(design.spec)
@@ -124,7 +125,7 @@ def _nice_log_levels(lo: float, hi: float) -> np.ndarray:
     return steps[max(0, np.searchsorted(steps, lo * (1 + 1e-12), "right") - 1):np.searchsorted(steps, hi * (1 - 1e-12)) + 1]
 
 
-def _contours(plt, design: "Design", pred: "Prediction"):
+def _contours(plt, design: Design, pred: Prediction):
     """|Bz| and |Br| filled on log levels over three decades, each panel with its colour bar; no inline labels
     (they piled up where Bz changes sign), the sign change drawn as its own dotted line."""
     from matplotlib import ticker
@@ -162,7 +163,7 @@ def _contours(plt, design: "Design", pred: "Prediction"):
     return fig
 
 
-def _force(plt, design: "Design", pred: "Prediction"):
+def _force(plt, design: Design, pred: Prediction):
     import textwrap
 
     from matplotlib.lines import Line2D
@@ -187,7 +188,7 @@ def _force(plt, design: "Design", pred: "Prediction"):
     return fig
 
 
-def _sensitivity(plt, design: "Design", pred: "Prediction"):
+def _sensitivity(plt, design: Design, pred: Prediction):
     """Normal (solid) and shear (dashed, dots where solved) against the magnet's axial travel, both panels; the
     resolution is the noise over the sensitivity: Z noise for the normal force, XY noise for the shear."""
     from matplotlib.lines import Line2D
@@ -348,7 +349,7 @@ def _speed_panel(ax, strip, design, family, reference, unit, rows, chosen) -> li
     return [(float(r["time_s"]), float(r["error"]), str(r["label"]).removeprefix(prefix)) for r in measured]
 
 
-def _speed_legend(fig, design: "Design") -> None:
+def _speed_legend(fig, design: Design) -> None:
     from matplotlib.lines import Line2D
 
     grey = {"color": "0.45", "ls": "none", "ms": 6}
@@ -364,7 +365,7 @@ def _speed_legend(fig, design: "Design") -> None:
     ], ncol=2)
 
 
-def _speed_accuracy(plt, design: "Design", pred: "Prediction", table: Sequence[Mapping[str, object]]):
+def _speed_accuracy(plt, design: Design, pred: Prediction, table: Sequence[Mapping[str, object]]):
     used = {m.family: m for m in pred.models}
     mesh = pred.curves["nominal"].mesh_mm
 
@@ -401,7 +402,7 @@ MAKERS: dict[str, Callable] = {"field_axis": _axis_field, "field_contours": _con
                                "sensitivity": _sensitivity}
 
 
-def draw(design: "Design", pred: "Prediction", bench_table: Sequence[Mapping[str, object]] = ()) -> dict[str, object]:
+def draw(design: Design, pred: Prediction, bench_table: Sequence[Mapping[str, object]] = ()) -> dict[str, object]:
     """{file stem: matplotlib Figure}, open (the caller closes them); for :func:`figures` and the tests."""
     import matplotlib
 
@@ -414,7 +415,7 @@ def draw(design: "Design", pred: "Prediction", bench_table: Sequence[Mapping[str
     return out
 
 
-def figures(design: "Design", pred: "Prediction", bench_table: Sequence[Mapping[str, object]] = ()) -> dict[str, bytes]:
+def figures(design: Design, pred: Prediction, bench_table: Sequence[Mapping[str, object]] = ()) -> dict[str, bytes]:
     """{file name: bytes} for every prediction plot, SVG and PNG."""
     import matplotlib
 

@@ -22,14 +22,15 @@ from __future__ import annotations
 
 import binascii
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Mapping
+from typing import TYPE_CHECKING, Any
 
 from ..errors import InputError, SpecError
 from ..formats import calibration_json
 from ..formats.calibration_json import calibration_sha256
-from ..recipes import catalogue
 from ..models.chip import conversion_us  # the chip's pace, shared with the prediction
+from ..recipes import catalogue
 
 if TYPE_CHECKING:
     from ..design import Design
@@ -161,7 +162,7 @@ def _value(option: object) -> str:
     return str(getattr(option, "value", option))
 
 
-def chip_config(design: "Design") -> ChipConfig:
+def chip_config(design: Design) -> ChipConfig:
     """The register words, scale and timing for the spec's sensor and firmware sections."""
     chip, s, fw = design.chip, design.spec.sensor, design.spec.firmware
     temperature = bool(fw.temperature)
@@ -247,7 +248,7 @@ def _calibration_context(cal: Mapping[str, Any]) -> dict[str, Any]:
         raise FirmwareError(exc.key, exc.value, exc.allowed) from None
 
 
-def image_settings(design: "Design") -> dict[str, Any]:
+def image_settings(design: Design) -> dict[str, Any]:
     """What the generic image reads from the record besides the calibration (the package's ``eeprom.SETTINGS``,
     docs/bundle.md section 4): every number the build-specific sources carried in mf_config.h, computed here from
     the spec and the chip's recipe. Plain JSON values: build.json carries them for ``magfab-readout upload``.
@@ -281,7 +282,7 @@ def image_settings(design: "Design") -> dict[str, Any]:
     }
 
 
-def eeprom_record(design: "Design", calibration: Mapping[str, Any]) -> bytes:
+def eeprom_record(design: Design, calibration: Mapping[str, Any]) -> bytes:
     """The EEPROM record of this calibration for this build's settings (docs/bundle.md section 4): what the .eep
     holds and ``magfab-readout upload`` writes. :class:`FirmwareError` when it does not fit 1 KB.
 
@@ -338,7 +339,7 @@ def _image_constants() -> dict[str, Any]:
     }
 
 
-def _context(design: "Design", calibration: Mapping[str, Any], generic: bool) -> dict[str, Any]:
+def _context(design: Design, calibration: Mapping[str, Any], generic: bool) -> dict[str, Any]:
     spec, recipe = design.spec, design.chip
     fw = spec.firmware
     chip = chip_config(design)
@@ -398,7 +399,7 @@ def _context(design: "Design", calibration: Mapping[str, Any], generic: bool) ->
     }
 
 
-def render(design: "Design", calibration: Mapping[str, Any], *, generic: bool = True) -> dict[str, bytes]:
+def render(design: Design, calibration: Mapping[str, Any], *, generic: bool = True) -> dict[str, bytes]:
     """Every firmware file, keyed by its path relative to the bundle's firmware folder.
 
     ``generic`` (the default, what a build ships): the image's sources carry no setting of the spec; it reads them
@@ -418,7 +419,8 @@ def render(design: "Design", calibration: Mapping[str, Any], *, generic: bool = 
 
 def _render_tree(context: Mapping[str, Any], wanted) -> dict[str, bytes]:
     """The firmware templates whose relative path ``wanted`` accepts, rendered with ``context``."""
-    from .templating import render as render_template, templates_dir
+    from .templating import render as render_template
+    from .templating import templates_dir
 
     root = templates_dir() / "firmware"
     out: dict[str, bytes] = {}
@@ -441,7 +443,7 @@ def generic_sources() -> dict[str, bytes]:
     """The sources of the generic image, keyed as in :func:`render` (``avr/main.c`` and the core): rendered
     without a spec, byte-equal to every build's copies (a test holds them to it). :func:`toolchain.build_hex`
     of these is the shipped image."""
-    return _render_tree(_image_constants(), lambda rel: rel.startswith(CORE_DIR + "/") and "mf_nv_image" not in rel
+    return _render_tree(_image_constants(), lambda rel: (rel.startswith(CORE_DIR + "/") and "mf_nv_image" not in rel)
                         or rel == "avr/main.c.j2")
 
 

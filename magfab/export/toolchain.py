@@ -22,13 +22,28 @@ import shutil
 import signal
 import subprocess
 import tempfile
+from collections.abc import Mapping
 from pathlib import Path, PurePosixPath
-from typing import Any, Mapping
+from typing import Any
 
 from ..errors import ToolError
-from .firmware import (AVR_CFLAGS, AVR_LDFLAGS, CORE_DIR, CORE_SOURCES, F_CPU_HZ, FLASH_LIMIT_BYTES, GENERIC_DIR,
-                       GENERIC_TOOLCHAIN, HEX_NAME, HOST_CFLAGS, HOST_PROGRAM, MCU, RAM_LIMIT_BYTES, FirmwareError,
-                       generic_sources)
+from .firmware import (
+    AVR_CFLAGS,
+    AVR_LDFLAGS,
+    CORE_DIR,
+    CORE_SOURCES,
+    F_CPU_HZ,
+    FLASH_LIMIT_BYTES,
+    GENERIC_DIR,
+    GENERIC_TOOLCHAIN,
+    HEX_NAME,
+    HOST_CFLAGS,
+    HOST_PROGRAM,
+    MCU,
+    RAM_LIMIT_BYTES,
+    FirmwareError,
+    generic_sources,
+)
 
 __all__ = ["CompileError", "build_avr_elf", "build_generic", "build_hex", "build_host", "run_simavr", "versions",
            "write_generic_image", "write_tree"]

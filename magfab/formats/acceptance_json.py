@@ -79,9 +79,9 @@ def validate(data: object) -> dict:
     try:
         json.dumps(data, allow_nan=False)
     except (TypeError, ValueError) as exc:
-        raise AcceptanceError("", "(contents)", "must be plain JSON with finite numbers ({})".format(exc)) from None
+        raise AcceptanceError("", "(contents)", f"must be plain JSON with finite numbers ({exc})") from None
     if data.get("format") != FORMAT:
-        raise AcceptanceError("format", data.get("format"), "must be {!r}".format(FORMAT))
+        raise AcceptanceError("format", data.get("format"), f"must be {FORMAT!r}")
     keys = KEYS + tuple(k for name, section in SECTIONS.items() if name in data for k in section)
     for path, kind in keys:
         node: object = data
@@ -106,5 +106,5 @@ def loads(raw: bytes) -> dict:
     try:
         data = json.loads(raw.decode("utf-8"))
     except ValueError as exc:  # UnicodeDecodeError is a ValueError too
-        raise AcceptanceError("", "(contents)", "is not valid JSON ({})".format(exc)) from None
+        raise AcceptanceError("", "(contents)", f"is not valid JSON ({exc})") from None
     return validate(data)

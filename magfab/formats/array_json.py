@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 from bisect import bisect_left
-from typing import List, Optional, Sequence, Tuple
+from collections.abc import Sequence
 
 from .json_checks import FormatError, finite, is_number, lookup
 
@@ -41,7 +41,7 @@ MAX_TAXELS = 16
 #: with the tables, 0.22 after 4, 0.04 after 5; each costs the same again).
 SWEEPS = 4
 
-Vector = Tuple[float, float, float]
+Vector = tuple[float, float, float]
 
 
 class ArrayError(FormatError):
@@ -50,7 +50,7 @@ class ArrayError(FormatError):
     file = "array.json"
 
 
-def _vectors(data: dict, key: str, n: int) -> List[Vector]:
+def _vectors(data: dict, key: str, n: int) -> list[Vector]:
     rows = lookup(data, key, ArrayError)
     if not isinstance(rows, list) or len(rows) != n or not all(
             isinstance(r, list) and len(r) == 3 and all(is_number(x) and math.isfinite(x) for x in r) for r in rows):
@@ -58,7 +58,7 @@ def _vectors(data: dict, key: str, n: int) -> List[Vector]:
     return [(float(r[0]), float(r[1]), float(r[2])) for r in rows]
 
 
-def _table(data: dict, key: str, length: int = 0) -> List[float]:
+def _table(data: dict, key: str, length: int = 0) -> list[float]:
     values = lookup(data, key, ArrayError)
     if not isinstance(values, list) or len(values) < 2 or (length and len(values) != length) or not all(
             is_number(x) and math.isfinite(x) for x in values):
@@ -67,7 +67,7 @@ def _table(data: dict, key: str, length: int = 0) -> List[float]:
     return [float(x) for x in values]
 
 
-def validate(data: object) -> "Compensator":
+def validate(data: object) -> Compensator:
     """The compensation array.json describes, or :class:`ArrayError` naming the key, the value and what is allowed."""
     if not isinstance(data, dict):
         raise ArrayError("", type(data).__name__, "must be a JSON object")
@@ -111,7 +111,7 @@ def validate(data: object) -> "Compensator":
                        finite(data, "moment_uT_mm3", ArrayError, positive=True), data["dynamic"])
 
 
-def _locate(x: float, xs: Sequence[float]) -> Tuple[int, float]:
+def _locate(x: float, xs: Sequence[float]) -> tuple[int, float]:
     """(i, f) with x = xs[i] + f (xs[i + 1] - xs[i]) in increasing ``xs``, held at the ends (f 0 or 1)."""
     if x <= xs[0]:
         return 0, 0.0
@@ -127,7 +127,7 @@ def _interp(x: float, xs: Sequence[float], ys: Sequence[float]) -> float:
     return ys[i] + f * (ys[i + 1] - ys[i])
 
 
-def _cylinder_points(radius: float, height: float) -> List[Tuple[float, float, float, float]]:
+def _cylinder_points(radius: float, height: float) -> list[tuple[float, float, float, float]]:
     """(x, y, z, weight) of 2 x 6 x 2 point dipoles filling a cylinder of unit total weight: Gauss-Legendre nodes in
     r^2 (equal areas) and in z, six angles."""
     g = 1.0 / math.sqrt(3.0)
@@ -193,7 +193,7 @@ class Compensator:
         sign = -1.0 if self.table[0][1][0] * s < 0 else 1.0
         return (sign * off * b[0] / br, sign * off * b[1] / br, -z)
 
-    def _from(self, j: int, k: int, t: Vector, at: Optional[Tuple[int, float]] = None) -> Vector:
+    def _from(self, j: int, k: int, t: Vector, at: tuple[int, float] | None = None) -> Vector:
         """What magnet j moved by ``t`` changes at chip k (uT): the exact axial table (``at``: where -t_z lies in
         the travel, found when None), the lateral part by the spread moment."""
         c, p = self.centres[j], self.chips[k]
@@ -222,7 +222,7 @@ class Compensator:
             z += k * (c * dz - 1.0)
         return (x, y, z)
 
-    def apply(self, readings: Sequence[Sequence[float]]) -> List[Vector]:
+    def apply(self, readings: Sequence[Sequence[float]]) -> list[Vector]:
         """One cycle's readings (one [Bx, By, Bz] uT per taxel, in taxel order) -> each taxel's own field."""
         n = self.taxels
         if len(readings) != n:

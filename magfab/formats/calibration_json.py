@@ -20,7 +20,6 @@ import hashlib
 import json
 import math
 from dataclasses import dataclass
-from typing import Dict, Optional, Tuple
 
 from .json_checks import FormatError, finite, is_number
 
@@ -42,7 +41,7 @@ THERMAL_MAX_PER_C = 0.01
 #: is a mistake.
 THERMAL_REFERENCE_C = (-40.0, 125.0)
 
-Point = Tuple[float, float]
+Point = tuple[float, float]
 
 
 class CalibrationError(FormatError):
@@ -72,10 +71,10 @@ class MLSPoints:
 
     order: int
     bandwidth: float
-    bz_uT: Tuple[float, ...]
-    br_uT: Tuple[float, ...]
-    fz_N: Tuple[float, ...]
-    fr_N: Tuple[float, ...]
+    bz_uT: tuple[float, ...]
+    br_uT: tuple[float, ...]
+    fz_N: tuple[float, ...]
+    fr_N: tuple[float, ...]
 
 
 @dataclass(frozen=True)
@@ -84,7 +83,7 @@ class Thermal:
     calibration. ``coefficient_per_C`` (a_x, a_y, a_z) in 1/degC; ``source`` "fit" or "recipe"."""
 
     reference_C: float
-    coefficient_per_C: Tuple[float, float, float]
+    coefficient_per_C: tuple[float, float, float]
     source: str
 
 
@@ -97,23 +96,23 @@ class Checked:
 
     method: str
     order: int
-    monomials: Tuple[Tuple[int, int], ...]
+    monomials: tuple[tuple[int, int], ...]
     center: Point
     scale: Point
-    coefficients: Dict[str, Tuple[float, ...]]
+    coefficients: dict[str, tuple[float, ...]]
     shear_sign: int
     direction_min_uT: float
     tare_N: Point
-    box: Tuple[Point, Point]
-    hull: Tuple[Point, ...]
+    box: tuple[Point, Point]
+    hull: tuple[Point, ...]
     span: float
-    mls: Optional[MLSPoints]
+    mls: MLSPoints | None
     errors: dict
     scan: dict
     chip: dict
     canonical: str
     sha256: str
-    thermal: Optional[Thermal] = None
+    thermal: Thermal | None = None
 
 
 def _interval(data: dict, name: str) -> Point:
@@ -130,7 +129,7 @@ def cross(o: Point, a: Point, b: Point) -> float:
     return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
 
 
-def _hull(data: dict) -> Tuple[Tuple[Point, ...], float]:
+def _hull(data: dict) -> tuple[tuple[Point, ...], float]:
     path = "valid_region.hull"
     raw = data["valid_region"].get("hull")
     if not isinstance(raw, list):
@@ -138,7 +137,7 @@ def _hull(data: dict) -> Tuple[Tuple[Point, ...], float]:
     points = []
     for n, p in enumerate(raw):
         if not isinstance(p, list) or len(p) != 2 or not all(is_number(x) and math.isfinite(x) for x in p):
-            raise CalibrationError("{}[{}]".format(path, n), p, "must be [Bz_uT, Br_uT], two finite numbers")
+            raise CalibrationError(f"{path}[{n}]", p, "must be [Bz_uT, Br_uT], two finite numbers")
         points.append((float(p[0]), float(p[1])))
     if len(points) > 1 and points[0] == points[-1]:
         points.pop()  # a closed ring: the first point repeated at the end
@@ -150,11 +149,11 @@ def _hull(data: dict) -> Tuple[Tuple[Point, ...], float]:
         raise CalibrationError(path, raw, "must enclose a positive area counter-clockwise (it is clockwise or flat)")
     for k in range(len(points)):
         if cross(points[k - 2], points[k - 1], points[k]) < -1e-9 * span * span:
-            raise CalibrationError(path, raw, "must be convex (it turns clockwise at point {})".format((k - 1) % len(points)))
+            raise CalibrationError(path, raw, f"must be convex (it turns clockwise at point {(k - 1) % len(points)})")
     return tuple(points), span
 
 
-def _column(points: dict, name: str) -> Tuple[float, ...]:
+def _column(points: dict, name: str) -> tuple[float, ...]:
     node = points.get(name)
     if not isinstance(node, list) or not all(is_number(x) and math.isfinite(x) for x in node):
         raise CalibrationError("mls.points." + name, node, "must be a list of finite numbers")
@@ -167,7 +166,7 @@ def _mls(data: dict) -> MLSPoints:
         raise CalibrationError("mls", mls, "must be an object with order, bandwidth and points")
     order = mls.get("order")
     if not isinstance(order, int) or isinstance(order, bool) or not 0 <= order <= MLS_MAX_ORDER:
-        raise CalibrationError("mls.order", order, "must be an integer from 0 to {}".format(MLS_MAX_ORDER))
+        raise CalibrationError("mls.order", order, f"must be an integer from 0 to {MLS_MAX_ORDER}")
     bandwidth = finite(data, "mls.bandwidth", CalibrationError, positive=True)
     points = mls.get("points")
     if not isinstance(points, dict):
@@ -176,7 +175,7 @@ def _mls(data: dict) -> MLSPoints:
     terms = len(monomials(order))
     if len({len(c) for c in columns}) != 1 or len(columns[0]) < terms:
         raise CalibrationError("mls.points", [len(c) for c in columns],
-                               "columns Bz_uT, Br_uT, Fz_N, Fr_N must have the same length, at least {}".format(terms))
+                               f"columns Bz_uT, Br_uT, Fz_N, Fr_N must have the same length, at least {terms}")
     return MLSPoints(order, bandwidth, *columns)
 
 
@@ -187,8 +186,8 @@ def _thermal(data: dict) -> Thermal:
     t0 = finite(data, "thermal.reference_C", CalibrationError)
     lo, hi = THERMAL_REFERENCE_C
     if not lo <= t0 <= hi:
-        raise CalibrationError("thermal.reference_C", t0, "must be within the chip's rated {:g} to {:g} degC"
-                               .format(lo, hi))
+        raise CalibrationError("thermal.reference_C", t0, f"must be within the chip's rated {lo:g} to {hi:g} degC"
+                               )
     coef = node.get("coefficient_per_C")
     if not isinstance(coef, dict):
         raise CalibrationError("thermal.coefficient_per_C", coef, "must map {} to numbers".format(", ".join(AXES)))
@@ -196,8 +195,8 @@ def _thermal(data: dict) -> Thermal:
     for axis in AXES:
         x = finite(data, "thermal.coefficient_per_C." + axis, CalibrationError)
         if not abs(x) <= THERMAL_MAX_PER_C:
-            raise CalibrationError("thermal.coefficient_per_C." + axis, x, "must be within +/-{:g} per degC (a "
-                                   "fraction: -0.12 %/C is -0.0012)".format(THERMAL_MAX_PER_C))
+            raise CalibrationError("thermal.coefficient_per_C." + axis, x, f"must be within +/-{THERMAL_MAX_PER_C:g} per degC (a "
+                                   "fraction: -0.12 %/C is -0.0012)")
         a.append(x)
     source = node.get("source", "")
     if source not in ("fit", "recipe"):
@@ -205,7 +204,7 @@ def _thermal(data: dict) -> Thermal:
     return Thermal(t0, (a[0], a[1], a[2]), source)
 
 
-def _coefficients(data: dict, terms: int) -> Dict[str, Tuple[float, ...]]:
+def _coefficients(data: dict, terms: int) -> dict[str, tuple[float, ...]]:
     coefficients = data.get("coefficients")
     if not isinstance(coefficients, dict):
         raise CalibrationError("coefficients", coefficients, "must map Fz_N and Fr_N to coefficient lists")
@@ -214,10 +213,10 @@ def _coefficients(data: dict, terms: int) -> Dict[str, Tuple[float, ...]]:
         c = coefficients.get(force)
         path = "coefficients." + force
         if not isinstance(c, list) or len(c) != terms:
-            raise CalibrationError(path, c, "must be a list of {} numbers, one per monomial".format(terms))
+            raise CalibrationError(path, c, f"must be a list of {terms} numbers, one per monomial")
         for m, x in enumerate(c):
             if not is_number(x) or not math.isfinite(x):
-                raise CalibrationError("{}[{}]".format(path, m), x, "must be a finite number")
+                raise CalibrationError(f"{path}[{m}]", x, "must be a finite number")
         out[force] = tuple(float(x) for x in c)
     return out
 
@@ -225,11 +224,11 @@ def _coefficients(data: dict, terms: int) -> Dict[str, Tuple[float, ...]]:
 def _order(data: dict) -> int:
     order = data.get("order")
     if not isinstance(order, int) or isinstance(order, bool) or not 0 <= order <= MAX_ORDER:
-        raise CalibrationError("order", order, "must be an integer from 0 to {}".format(MAX_ORDER))
+        raise CalibrationError("order", order, f"must be an integer from 0 to {MAX_ORDER}")
     expected = monomials(order)
     if data.get("monomials") != expected:
         raise CalibrationError("monomials", data.get("monomials"),
-                               "must list the order-{} exponents in the documented order: {}".format(order, expected))
+                               f"must list the order-{order} exponents in the documented order: {expected}")
     return order
 
 
@@ -238,12 +237,12 @@ def validate(data: object) -> Checked:
     if not isinstance(data, dict):
         raise CalibrationError("", type(data).__name__, "must be a JSON object")
     if data.get("format") != FORMAT:
-        raise CalibrationError("format", data.get("format"), "this reader knows only {!r}".format(FORMAT))
+        raise CalibrationError("format", data.get("format"), f"this reader knows only {FORMAT!r}")
     if data.get("method") not in ("poly", "mls"):
         raise CalibrationError("method", data.get("method"), "must be 'poly' or 'mls'")
     order = _order(data)
-    center = tuple(finite(data, "scaling.{}.center".format(k), CalibrationError) for k in INPUTS)
-    scale = tuple(finite(data, "scaling.{}.scale".format(k), CalibrationError, positive=True) for k in INPUTS)
+    center = tuple(finite(data, f"scaling.{k}.center", CalibrationError) for k in INPUTS)
+    scale = tuple(finite(data, f"scaling.{k}.scale", CalibrationError, positive=True) for k in INPUTS)
     coefficients = _coefficients(data, len(monomials(order)))
     sign = data.get("shear_sign")
     if not is_number(sign) or sign not in (1, -1):
@@ -264,7 +263,7 @@ def validate(data: object) -> Checked:
     try:
         canonical = canonical_json(data)
     except (TypeError, ValueError) as exc:  # NaN, infinity or a non-JSON value outside the keys checked above
-        raise CalibrationError("", "(contents)", "must be plain JSON with finite numbers ({})".format(exc)) from None
+        raise CalibrationError("", "(contents)", f"must be plain JSON with finite numbers ({exc})") from None
     return Checked(data["method"], order, tuple((i, j) for i, j in monomials(order)), center, scale,  # type: ignore[arg-type]
                    coefficients, int(sign), direction_min, tare, box, hull, span, mls,  # type: ignore[arg-type]
                    dict(data.get("errors", {})), dict(data.get("scan", {})), dict(data.get("chip", {})),
@@ -276,5 +275,5 @@ def loads(text: str) -> Checked:
     try:
         data = json.loads(text)
     except ValueError as exc:
-        raise CalibrationError("", text[:40], "is not valid JSON ({})".format(exc)) from None
+        raise CalibrationError("", text[:40], f"is not valid JSON ({exc})") from None
     return validate(data)

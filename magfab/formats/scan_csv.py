@@ -19,9 +19,9 @@ import io
 import math
 import os
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 
@@ -132,7 +132,7 @@ def scan_csv(scan: Scan, comments: Sequence[str] = ()) -> str:
     return out.getvalue()
 
 
-def _load(source: "str | os.PathLike[str] | bytes") -> tuple[bytes, str]:
+def _load(source: str | os.PathLike[str] | bytes) -> tuple[bytes, str]:
     """(bytes, name) of a scan: a path, CSV text (a str holding a newline, or a comma and naming no file) or
     CSV bytes."""
     if isinstance(source, bytes):
@@ -162,7 +162,7 @@ def _number(text: str, name: str, line: int, column: str, row: int, band: tuple[
     return x
 
 
-def _lines(source: "str | os.PathLike[str] | bytes") -> tuple[list[tuple[int, str]], str, bytes]:
+def _lines(source: str | os.PathLike[str] | bytes) -> tuple[list[tuple[int, str]], str, bytes]:
     """(numbered lines that are neither blank nor comments, the file's name, its bytes)."""
     raw, name = _load(source)
     try:
@@ -251,7 +251,7 @@ def _enough(lines: list[tuple[int, str]], name: str, what: str) -> None:
                         "are needed")
 
 
-def read_scan_csv(source: "str | os.PathLike[str] | bytes", *, require_force: bool = True,
+def read_scan_csv(source: str | os.PathLike[str] | bytes, *, require_force: bool = True,
                   min_rows: int = MIN_ROWS, taxel: int | None = None) -> Scan:
     """A scan from a CSV file (path), CSV text (a str with a newline) or CSV bytes; docs/bundle.md section 1.
 
@@ -319,7 +319,7 @@ class Reference:
     sha256: str
 
 
-def read_recording(source: "str | os.PathLike[str] | bytes", taxel: int | None = None) -> Recording:
+def read_recording(source: str | os.PathLike[str] | bytes, taxel: int | None = None) -> Recording:
     """A recording (:class:`Recording`) from a file, CSV text or bytes; ScanError (one line) as
     :func:`read_scan_csv`, and for a missing ``host_time_s``. ``taxel``: only that taxel's rows of an array's."""
     lines, name, raw = _lines(source)
@@ -338,7 +338,7 @@ def read_recording(source: "str | os.PathLike[str] | bytes", taxel: int | None =
     return Recording(scan, arr[HOST_TIME_COLUMN], numbers)
 
 
-def read_reference(source: "str | os.PathLike[str] | bytes") -> Reference:
+def read_reference(source: str | os.PathLike[str] | bytes) -> Reference:
     """A reference force sensor's log (:class:`Reference`): columns ``time_s`` (host clock, Unix time, s) and
     ``Fx_N, Fy_N, Fz_N`` (others ignored); ScanError (one line) as :func:`read_scan_csv`."""
     lines, name, raw = _lines(source)

@@ -7,7 +7,8 @@ way KiCad writes them, so the same input always gives the same bytes.
 
 from __future__ import annotations
 
-from typing import Iterable, Union
+from collections.abc import Iterable
+from typing import Union
 
 
 class Sym(str):

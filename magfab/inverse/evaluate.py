@@ -20,8 +20,8 @@ from __future__ import annotations
 
 import os
 import time
-from functools import lru_cache
 import traceback
+from functools import lru_cache
 from typing import Any
 
 from ..check import design_findings, errors_in

@@ -28,7 +28,7 @@ _LABELS = {"normal_resolution_mN": "normal resolution, mN", "shear_resolution_mN
            "diameter_mm": "elastomer diameter, mm", "height_mm": "elastomer height, mm"}
 
 
-def write_outputs(result: "DesignResult", base) -> list[Path]:
+def write_outputs(result: DesignResult, base) -> list[Path]:
     folder = result.folder
     files = write_table(folder, "trials", rows(result.trials))
     extra = [{**{f"screened_{o.value}": s.metrics.get(o.value) for o in result.targets.objectives},
@@ -44,7 +44,7 @@ def write_outputs(result: "DesignResult", base) -> list[Path]:
     return files
 
 
-def write_specs(result: "DesignResult", base) -> list[Path]:
+def write_specs(result: DesignResult, base) -> list[Path]:
     """designs/NAME.toml and NAME.json for each verified front design, and chosen.toml."""
     out = []
     for i in result.front:
@@ -74,7 +74,7 @@ def _remove_stale(folder: Path, written: list[Path]) -> None:
             p.unlink()
 
 
-def plot_front(result: "DesignResult", ext: str) -> bytes:
+def plot_front(result: DesignResult, ext: str) -> bytes:
     """The first objective against each other one: every feasible design the search evaluated (cheap models), the
     infeasible ones, the cheap models' front, and the verified designs (full chain) joined to their screening value,
     the chosen one ringed."""
@@ -149,7 +149,7 @@ def _md(text: object) -> str:
     return s
 
 
-def _parts(result: "DesignResult") -> list[tuple[str, Any]]:
+def _parts(result: DesignResult) -> list[tuple[str, Any]]:
     """The page as (kind, content) parts, rendered to Markdown and HTML alike: h1, p, code, img, table."""
     t = result.targets
     objs = [o.value for o in t.objectives]
@@ -186,7 +186,7 @@ def _parts(result: "DesignResult") -> list[tuple[str, Any]]:
     return parts
 
 
-def page_markdown(result: "DesignResult") -> str:
+def page_markdown(result: DesignResult) -> str:
     out = []
     for kind, c in _parts(result):
         if kind == "h1":
@@ -204,7 +204,7 @@ def page_markdown(result: "DesignResult") -> str:
     return "\n".join(out)
 
 
-def _html(result: "DesignResult") -> str:
+def _html(result: DesignResult) -> str:
     out = []
     for kind, c in _parts(result):
         if kind == "h1":

@@ -17,9 +17,9 @@ full chain (FE), the front of the verified designs, and the files::
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 

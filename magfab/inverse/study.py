@@ -17,9 +17,10 @@ import math
 import os
 import socket
 import warnings
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterable, Iterator, Mapping
+from typing import Any
 
 from ..errors import InputError
 from ..spec import Spec
@@ -56,7 +57,7 @@ class Record:
     errors: list[str] = field(default_factory=list)
 
     @classmethod
-    def of(cls, number: int, point: dict[str, Any], result: Mapping[str, Any]) -> "Record":
+    def of(cls, number: int, point: dict[str, Any], result: Mapping[str, Any]) -> Record:
         """A record from an evaluation's result (or what the store kept of it: :data:`KEPT`)."""
         return cls(number, point, result.get("state") or "failed", result.get("reason") or "",
                    result.get("model") or "", result.get("metrics") or {}, result.get("constraints") or [],

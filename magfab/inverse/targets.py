@@ -40,7 +40,7 @@ import json
 import tomllib
 from enum import Enum
 from pathlib import Path
-from typing import Any, Optional, Union
+from typing import Any, Union
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_serializer, field_validator
 
@@ -79,12 +79,12 @@ Choice = Union[Range, list[float]]  # a [low, high] range or (in a table {values
 class Require(_Table):
     """Requirements every returned design meets (None: no requirement)."""
 
-    normal_resolution_mN: Optional[float] = Field(None, gt=0.0, le=1e4, description="Worst-case normal resolution, at most, mN.")
-    shear_resolution_mN: Optional[float] = Field(None, gt=0.0, le=1e4, description="Worst-case shear resolution, at most, mN.")
-    normal_range_N: Optional[float] = Field(None, gt=0.0, le=1e3, description="Normal force range, at least, N.")
-    shear_range_N: Optional[float] = Field(None, gt=0.0, le=1e3, description="Shear force range, at least, N.")
-    max_diameter_mm: Optional[float] = Field(None, gt=0.0, le=100.0, description="Largest elastomer diameter, mm.")
-    max_height_mm: Optional[float] = Field(None, gt=0.0, le=100.0, description="Largest elastomer height, mm.")
+    normal_resolution_mN: float | None = Field(None, gt=0.0, le=1e4, description="Worst-case normal resolution, at most, mN.")
+    shear_resolution_mN: float | None = Field(None, gt=0.0, le=1e4, description="Worst-case shear resolution, at most, mN.")
+    normal_range_N: float | None = Field(None, gt=0.0, le=1e3, description="Normal force range, at least, N.")
+    shear_range_N: float | None = Field(None, gt=0.0, le=1e3, description="Shear force range, at least, N.")
+    max_diameter_mm: float | None = Field(None, gt=0.0, le=100.0, description="Largest elastomer diameter, mm.")
+    max_height_mm: float | None = Field(None, gt=0.0, le=100.0, description="Largest elastomer height, mm.")
     noise_G: float = Field(0.1, ge=0.0, le=100.0, description="RMS field noise of the environment, gauss.")
 
 
@@ -118,10 +118,10 @@ def _range(v: Any, lo: float, hi: float, what: str) -> Any:
 class Variables(_Table):
     """What the search may change. Numbers: a [low, high] range or {values = [...]}."""
 
-    magnets: Union[str, list[str]] = Field("stock", description="'stock' (every disc of recipes/magnet_stock.toml) "
+    magnets: str | list[str] = Field("stock", description="'stock' (every disc of recipes/magnet_stock.toml) "
                                                                 "or a list of its keys.")
     grades: list[str] = Field(["N35", "N42", "N45", "N52"], description="Magnet grades, keys of recipes/magnets.toml.")
-    materials: Optional[list[str]] = Field(None, description="Silicones, keys of recipes/materials.toml (default: all).")
+    materials: list[str] | None = Field(None, description="Silicones, keys of recipes/materials.toml (default: all).")
     tips: list[Tip] = Field([Tip.FLAT, Tip.HEMISPHERE], description="Tip shapes.")
     d_max_mm: Choice = Field((3.0, 10.0), description="Rest distance magnet to sensing point, mm.")
     d_min_mm: Choice = Field((2.0, 4.0), description="Closest distance under load, mm.")
@@ -141,7 +141,7 @@ class Variables(_Table):
 
     @field_validator("magnets")
     @classmethod
-    def _magnets(cls, v: Union[str, list[str]]) -> Union[str, list[str]]:
+    def _magnets(cls, v: str | list[str]) -> str | list[str]:
         known = sorted(catalogue("magnet_stock"))
         if isinstance(v, str):
             if v != "stock":
@@ -156,7 +156,7 @@ class Variables(_Table):
 
     @field_validator("materials")
     @classmethod
-    def _materials(cls, v: Optional[list[str]]) -> Optional[list[str]]:
+    def _materials(cls, v: list[str] | None) -> list[str] | None:
         return None if v is None else _known(v, sorted(catalogue("materials")), "recipes/materials.toml")
 
     @field_validator("tips", mode="before")
@@ -227,7 +227,7 @@ class Study(_Table):
     models: Models = Field(Models.SURROGATE, strict=False,
                            description="'surrogate' (the elastomer surrogate: milliseconds per design) or 'fe' (the "
                                        "full chain for every design: seconds each).")
-    storage: Optional[str] = Field(None, description="Optuna storage: a database URL (postgresql://..., sqlite:///...) "
+    storage: str | None = Field(None, description="Optuna storage: a database URL (postgresql://..., sqlite:///...) "
                                                      "that many machines share; default: the journal file study.log "
                                                      "in the output folder.")
 
@@ -236,7 +236,7 @@ class Targets(_Table):
     """A whole TARGETS file (module doc)."""
 
     name: str = Field("design", pattern=NAME_PATTERN)
-    base: Optional[str] = Field(None, description="Spec file every candidate starts from, relative to TARGETS.")
+    base: str | None = Field(None, description="Spec file every candidate starts from, relative to TARGETS.")
     objectives: list[Objective] = Field([Objective.NORMAL_RESOLUTION, Objective.DIAMETER])
     require: Require = Field(default_factory=Require)
     variables: Variables = Field(default_factory=Variables)

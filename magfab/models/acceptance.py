@@ -71,8 +71,9 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass
-from typing import TYPE_CHECKING, Any, Mapping
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -81,7 +82,8 @@ from ..errors import ModelLimitError
 from ..formats import acceptance_json
 from ..recipes import catalogue
 from ..units import G0, GAUSS_PER_TESLA, UT_PER_GAUSS
-from . import acceptance_steps, field as fieldmod
+from . import acceptance_steps
+from . import field as fieldmod
 
 if TYPE_CHECKING:
     from ..design import Design
@@ -175,7 +177,7 @@ def default_weight_g(prediction_data: Mapping[str, Any]) -> float:
 
 def _weight_for(range_N: float) -> float:
     limit = WEIGHT_RANGE_FRACTION * range_N / G0 * 1000.0
-    if DEFAULT_WEIGHT_G <= limit:
+    if limit >= DEFAULT_WEIGHT_G:
         return DEFAULT_WEIGHT_G
     k = math.floor(math.log10(limit)) if limit > 0 else -3
     for exponent in (k, k - 1):
@@ -186,7 +188,7 @@ def _weight_for(range_N: float) -> float:
     return float(f"{limit:.3g}")
 
 
-def _data(prediction: "Prediction | Mapping[str, Any]") -> Mapping[str, Any]:
+def _data(prediction: Prediction | Mapping[str, Any]) -> Mapping[str, Any]:
     """predictions.json's content, from a Prediction or as read from the file."""
     return prediction.as_json() if hasattr(prediction, "as_json") else prediction  # type: ignore[return-value]
 
@@ -244,7 +246,7 @@ class _Inputs:
         return max(0.0, self.seating + (self.H - h))
 
 
-def _resolve(design: "Design", data: Mapping[str, Any], tol: Tolerances) -> _Inputs:
+def _resolve(design: Design, data: Mapping[str, Any], tol: Tolerances) -> _Inputs:
     """Every tolerance as a number: the override in ``tol`` or the recipe's and the spec's value."""
     spec = design.spec
     chip, printer = design.chip, design.printer
@@ -295,7 +297,7 @@ def _corners(inp: _Inputs, stack: list[tuple[str, float, float]]) -> list[tuple[
     return corners
 
 
-def _lateral(design: "Design", inp: _Inputs, tol: Tolerances, strongest: tuple[float, float, float, float]
+def _lateral(design: Design, inp: _Inputs, tol: Tolerances, strongest: tuple[float, float, float, float]
              ) -> tuple[list[tuple[str, float]], float, float, float]:
     """(offsets, their sum in mm, tilt in deg, the |Bxy| bound in G): offsets summed, tilt = magnetisation
     angle + the magnet's tilt in its pocket, at the strongest corner, plus the Earth's field."""
@@ -401,7 +403,7 @@ def _item(key: str, band: list, unit: str, effect: tuple[float, float] | None) -
     return out
 
 
-def _assumptions(design: "Design", inp: _Inputs, tol: Tolerances, w: float, nom_uT: float,
+def _assumptions(design: Design, inp: _Inputs, tol: Tolerances, w: float, nom_uT: float,
                  effects: dict[str, tuple[float, float]], stack_effects: dict[str, tuple[float, float]]
                  ) -> list[dict[str, Any]]:
     """Every tolerance with its band, unit, source and what it alone is worth at rest."""
@@ -477,7 +479,7 @@ def _weight_section(data: Mapping[str, Any], wt: _Weight) -> dict[str, Any]:
 
 
 # The steps below are the module doc's, in its order; this only wires them and lays out acceptance.json.
-def acceptance(design: "Design", prediction: "Prediction | Mapping[str, Any]", weight_g: float | None = None,
+def acceptance(design: Design, prediction: Prediction | Mapping[str, Any], weight_g: float | None = None,
                tolerances: Tolerances | None = None) -> dict[str, Any]:
     """The acceptance bands for ``design`` (module doc): a JSON-ready dict, format ``magfab-acceptance/1``.
 

@@ -42,7 +42,8 @@ the uncompensated figure instead, and a magnet of another material by its own co
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any, Mapping
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any
 
 from ..recipes import catalogue
 from ..units import G0, UT_PER_GAUSS
@@ -62,7 +63,7 @@ def _r(x: float, digits: int = 3) -> float:
     return round(float(x), digits) + 0.0
 
 
-def self_weight_N(design: "Design") -> tuple[float, float]:
+def self_weight_N(design: Design) -> tuple[float, float]:
     """(the magnet's weight, the silicone's), N: rho g V with the grade's density (recipes/assembly.toml) and the
     silicone's (the spec's override or recipes/materials.toml)."""
     spec = design.spec
@@ -81,7 +82,7 @@ def _steepest_rise(weight: Mapping[str, Any]) -> float:
     return (rise[1] - rise[0]) / (force[1] - force[0])
 
 
-def rotation_section(design: "Design", data: Mapping[str, Any], weight: Mapping[str, Any]) -> dict[str, Any]:
+def rotation_section(design: Design, data: Mapping[str, Any], weight: Mapping[str, Any]) -> dict[str, Any]:
     """acceptance.json's ``rotation`` (module doc): the band on the field change, uT, and what it is made of."""
     from .drift import earth_field_G
 

@@ -55,8 +55,9 @@ from __future__ import annotations
 import json
 import math
 import time
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING, Mapping, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -262,7 +263,7 @@ class Calibration:
             return f[0], inside[0]
         return f, inside
 
-    def zeroed(self, B_rest_uT: object) -> "Calibration":
+    def zeroed(self, B_rest_uT: object) -> Calibration:
         """The calibration with its tare set to the mean untared (Fz, Fr) over readings taken at rest."""
         raw = self.model(B_rest_uT)
         if not np.isfinite(raw).all():
@@ -307,7 +308,7 @@ class Calibration:
         return json.dumps(self.to_json(), indent=1, sort_keys=True) + "\n"
 
     @classmethod
-    def from_json(cls, doc: Mapping[str, object]) -> "Calibration":
+    def from_json(cls, doc: Mapping[str, object]) -> Calibration:
         """A calibration from a parsed calibration.json; :class:`~magfab.formats.calibration_json.CalibrationError`
         naming the key path of the first value the format does not allow."""
         c = calibration_json.validate(dict(doc) if isinstance(doc, Mapping) else doc)
@@ -528,7 +529,7 @@ def _shear_sign(scan: Scan) -> int:
     return -1 if s < 0 else 1
 
 
-def _chip_json(design: "Design") -> tuple[dict[str, object], float]:
+def _chip_json(design: Design) -> tuple[dict[str, object], float]:
     """The ``chip`` object and the RMS xy field noise (uT) predicted for the spec's chip settings."""
     from .predict import chip_setting, noise
 
@@ -538,7 +539,7 @@ def _chip_json(design: "Design") -> tuple[dict[str, object], float]:
     return doc, noise(design, chip)["total_xy_G"] * UT_PER_GAUSS
 
 
-def fit(scan: Scan, design: "Design", *, mls: bool = True) -> FitResult:
+def fit(scan: Scan, design: Design, *, mls: bool = True) -> FitResult:
     """Fit every candidate (poly of each order in :data:`ORDERS` and up to ``calibration.order``, and MLS
     unless ``mls`` is False) to ``scan``, cross-validate them and build the calibration the spec's
     ``calibration.method`` chooses (module doc). The chip settings recorded are the spec's."""

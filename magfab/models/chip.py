@@ -4,7 +4,8 @@ firmware both read, so importing the firmware renderer does not load the models'
 
 from __future__ import annotations
 
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 __all__ = ["conversion_us"]
 

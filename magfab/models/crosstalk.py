@@ -67,7 +67,7 @@ class _Loads:
     shear_stiffness_N_per_mm: float  # the softest of the material band's lateral stiffness at the magnet
 
     @classmethod
-    def of(cls, design: "Design", pred: "Prediction") -> "_Loads":
+    def of(cls, design: Design, pred: Prediction) -> _Loads:
         stiff = min(pred.shear.stiffness_N_per_mm.values())
         return cls(fieldmod.Magnet.from_spec(design.spec), design.z_sense_mm,
                    design.z_magnet_low_mm + design.magnet_height_mm / 2.0, pred.normal.travel_mm,
@@ -99,7 +99,7 @@ def layout_errors(loads: _Loads, xy: np.ndarray, signs: np.ndarray) -> tuple[np.
     return 1000.0 * pair, 1000.0 * common, rest
 
 
-def compensated_errors(design: "Design", loads: _Loads, xy: np.ndarray,
+def compensated_errors(design: Design, loads: _Loads, xy: np.ndarray,
                        signs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The field error i x j and every neighbour pressed at once (per taxel), in mN, left after the host's compensation (:class:`magfab.formats.array_json.Compensator`
     with its dynamic terms, on the tables :func:`magfab.models.taxels.array_field` makes for this layout): the chips
@@ -201,7 +201,7 @@ class Crosstalk:
                  f"{self.mechanical_mN[i].max():.2f}", f"{self.worst_mN[i]:.2f}") for i in range(len(self.common_mN))]
 
     def as_json(self) -> dict[str, object]:
-        r = lambda a, d=4: np.round(np.asarray(a, dtype=float), d).tolist()  # noqa: E731
+        r = lambda a, d=4: np.round(np.asarray(a, dtype=float), d).tolist()
         return {"format": "magfab-crosstalk/1", "polarity": self.polarity, "skin": self.skin,
                 "pitch_mm": round(self.pitch_mm, 4), "tolerance_mN": round(self.tolerance_mN, 4),
                 "field_mN": r(self.field_mN), "residual_mN": r(self.residual_mN), "common_mN": r(self.common_mN),
@@ -220,7 +220,7 @@ class Crosstalk:
                 "dynamic": self.dynamic, "header": list(self.HEADER), "rows": [list(row) for row in self.rows()]}
 
 
-def _signs(design: "Design", alternating: bool) -> np.ndarray:
+def _signs(design: Design, alternating: bool) -> np.ndarray:
     """Polarities for the layout: the design's own where it alternates, else a checkerboard (by grid cell, or by
     index for explicit positions) when asked to alternate."""
     arr = design.spec.array
@@ -231,7 +231,7 @@ def _signs(design: "Design", alternating: bool) -> np.ndarray:
     return np.array([(-1.0) ** (i // arr.cols + i % arr.cols) for i in range(len(design.taxels))])
 
 
-def _mechanical(design: "Design", loads: _Loads, xy: np.ndarray, curve) -> tuple[np.ndarray, np.ndarray]:
+def _mechanical(design: Design, loads: _Loads, xy: np.ndarray, curve) -> tuple[np.ndarray, np.ndarray]:
     """(coupling i x j, what i reads in mN when j is loaded to the range) for a continuous skin; zeros otherwise."""
     n = len(xy)
     if curve is None:
@@ -266,7 +266,7 @@ def _magnet_force(loads: _Loads, r_mm: float, same: bool) -> tuple[float, float]
     return 1000.0 * sign * dipole, 1000.0 * (exact if same else -exact)
 
 
-def pitch_budget(design: "Design", loads: _Loads, signs: np.ndarray, curve, pitch_mm: float,
+def pitch_budget(design: Design, loads: _Loads, signs: np.ndarray, curve, pitch_mm: float,
                  compensate: bool = False) -> float:
     """The worst taxel's misreading (mN) with ``design``'s layout scaled about its centre to ``pitch_mm`` and
     magnetised ``signs``: the worst neighbour alone (field and, through a continuous skin ``curve``, mechanics) or
@@ -278,7 +278,7 @@ def pitch_budget(design: "Design", loads: _Loads, signs: np.ndarray, curve, pitc
     return float(np.maximum((f + _mechanical(design, loads, scaled, curve)[1]).max(axis=1), cm).max())
 
 
-def least_pitch(design: "Design", loads: _Loads, signs: np.ndarray, curve, sweep: np.ndarray, tol: float,
+def least_pitch(design: Design, loads: _Loads, signs: np.ndarray, curve, sweep: np.ndarray, tol: float,
                 compensate: bool = False, steps: int = 30) -> tuple[np.ndarray, float | None]:
     """(:func:`pitch_budget` over ``sweep``, the least pitch from which it stays within ``tol``: bisected between the
     sweep's last failing and first passing pitch, so a budget that dips and rises again is not crossed early; the
@@ -313,7 +313,7 @@ def magnet_forces(loads: _Loads, xy: np.ndarray, signs: np.ndarray) -> np.ndarra
     return out
 
 
-def crosstalk(design: "Design", pred: "Prediction") -> Crosstalk:
+def crosstalk(design: Design, pred: Prediction) -> Crosstalk:
     """The budget of ``design``'s array (``design.array`` must not be None)."""
     from .mechanics.coupling import coupling
 
@@ -356,7 +356,7 @@ def crosstalk(design: "Design", pred: "Prediction") -> Crosstalk:
                      float(np.abs(rest[:, :2]).max() + own_slid), pred.chip.full_scale_xy_G)
 
 
-def findings(design: "Design", xt: Crosstalk) -> list[Finding]:
+def findings(design: Design, xt: Crosstalk) -> list[Finding]:
     """Warnings when the budget is over the tolerance at this pitch (naming the least pitches) or the neighbours push
     a chip past its full scale; the figures as info."""
     out: list[Finding] = []

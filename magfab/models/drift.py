@@ -33,14 +33,15 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Mapping
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .field.magnet import MU0
 from ..errors import Finding, Severity
 from ..units import GAUSS_PER_TESLA, M_PER_MM, MN_PER_N, UT_PER_GAUSS
+from .field.magnet import MU0
 
 if TYPE_CHECKING:
     from ..design import Design
@@ -79,7 +80,7 @@ class Coefficients:
     operating_C: tuple[float, float]
 
 
-def coefficients(design: "Design") -> Coefficients:
+def coefficients(design: Design) -> Coefficients:
     """:class:`Coefficients` for the design's grade and chip (recipes/magnets.toml, recipes/chips.toml)."""
     from ..recipes import catalogue
 
@@ -105,14 +106,14 @@ def coefficients(design: "Design") -> Coefficients:
     )
 
 
-def environment(design: "Design") -> "Environment":
+def environment(design: Design) -> Environment:
     """The spec's ``[environment]``, or the lab bench its defaults describe when the section is omitted."""
     from ..spec import Environment
 
     return design.spec.environment or Environment()
 
 
-def earth_field_G(design: "Design") -> tuple[float, float, float]:
+def earth_field_G(design: Design) -> tuple[float, float, float]:
     """(least, stated, strongest) total intensity of the Earth's field, G: the recipe's band, and the spec's
     ``environment.earth_field_G`` as the stated value (the band's strongest when omitted)."""
     from ..recipes import catalogue
@@ -149,7 +150,7 @@ class Channel:
         return np.interp(np.asarray(force_N, dtype=float), self.force, self.field_G)
 
 
-def normal_channel(pred: "Prediction", material: str = "stiff", grade: str = "low") -> Channel:
+def normal_channel(pred: Prediction, material: str = "stiff", grade: str = "low") -> Channel:
     """The normal axis: Bz against Fz along the predicted curve for ``material`` and ``grade`` (default the worst
     case the resolution is quoted for), within the normal range. Raises ValueError for a curve whose field does not
     rise with the force (no inverse)."""
@@ -166,7 +167,7 @@ def normal_channel(pred: "Prediction", material: str = "stiff", grade: str = "lo
     return Channel("normal", bz, force, float(force[-1]))
 
 
-def shear_channel(pred: "Prediction") -> Channel:
+def shear_channel(pred: Prediction) -> Channel:
     """The shear axis: linear at the least predicted shear sensitivity (G/N, the worst case) up to the shear
     range."""
     s = float(pred.shear.sensitivity_G_per_N[0])
@@ -286,7 +287,7 @@ class TemperatureBudget:
                 "worst_over_span_mN": {k: dict(v) for k, v in self.worst.items()}}
 
 
-def _points(pred: "Prediction", normal: Channel, shear: Channel, c: Coefficients) -> dict[str, tuple[Channel, float, float]]:
+def _points(pred: Prediction, normal: Channel, shear: Channel, c: Coefficients) -> dict[str, tuple[Channel, float, float]]:
     """The four points the budget is given at: (channel, true force N, offset bound G/C)."""
     return {"normal_rest": (normal, 0.0, c.chip_offset_z_G_per_C),
             "normal_end": (normal, normal.end_N, c.chip_offset_z_G_per_C),
@@ -294,7 +295,7 @@ def _points(pred: "Prediction", normal: Channel, shear: Channel, c: Coefficients
             "shear_end": (shear, shear.end_N, c.chip_offset_xy_G_per_C)}
 
 
-def temperature_budget(design: "Design", pred: "Prediction", temperatures_C: object | None = None,
+def temperature_budget(design: Design, pred: Prediction, temperatures_C: object | None = None,
                        normal: Channel | None = None) -> TemperatureBudget:
     """The temperature part of the drift budget (:class:`TemperatureBudget`) over the spec's span (or
     ``temperatures_C``, chip temperatures in C), for the calibration ``normal`` (default :func:`normal_channel`)."""
@@ -342,7 +343,7 @@ class Disturbance:
                 "normal_end_mN": self.normal_end_mN, "shear_mN": self.shear_mN}
 
 
-def _disturbance(pred: "Prediction", what: str, field_G: float, normal: Channel | None = None) -> Disturbance:
+def _disturbance(pred: Prediction, what: str, field_G: float, normal: Channel | None = None) -> Disturbance:
     """The force errors of a field change ``field_G`` (G) on an axis, at its worst sign."""
     normal = normal or normal_channel(pred)
     shear = shear_channel(pred)
@@ -355,7 +356,7 @@ def _disturbance(pred: "Prediction", what: str, field_G: float, normal: Channel 
     return Disturbance(what, float(field_G), worst(normal, 0.0), worst(normal, normal.end_N), worst(shear, 0.0))
 
 
-def rotation_error(design: "Design", pred: "Prediction", field_G: float | None = None,
+def rotation_error(design: Design, pred: Prediction, field_G: float | None = None,
                    rotation_deg: float | None = None, normal: Channel | None = None) -> Disturbance:
     """Turning the sensor by ``rotation_deg`` (default the spec's) in the Earth's field of ``field_G`` G (default the
     spec's or the strongest): the field on an axis changes by up to 2 |B| sin(theta / 2)."""
@@ -384,7 +385,7 @@ def dipole_worst_G(moment_Am2: float, distance_mm: float) -> float:
     return MU0 * moment_Am2 / (2.0 * math.pi * r**3) * GAUSS_PER_TESLA
 
 
-def stray_error(design: "Design", pred: "Prediction", moment_Am2: float | None = None,
+def stray_error(design: Design, pred: Prediction, moment_Am2: float | None = None,
                 distance_mm: float | None = None, normal: Channel | None = None) -> Disturbance | None:
     """A stray dipole (default the spec's ``environment.stray_*``) at its worst orientation; None when no moment is
     stated (magfab has no sourced typical moment: the user measures or estimates theirs)."""
@@ -442,7 +443,7 @@ class Drift:
         }
 
 
-def drift(design: "Design", pred: "Prediction") -> Drift:
+def drift(design: Design, pred: Prediction) -> Drift:
     """The whole drift budget for ``design`` and its prediction."""
     env = environment(design)
     normal = normal_channel(pred)
@@ -468,7 +469,7 @@ def _severity(error_mN: float, resolution_mN: float) -> Severity:
     return Severity.WARNING if abs(error_mN) > resolution_mN else Severity.INFO
 
 
-def findings(design: "Design", d: Drift) -> list[Finding]:
+def findings(design: Design, d: Drift) -> list[Finding]:
     """The drift budget as findings: a warning where an error under the stated conditions exceeds the resolution,
     info otherwise."""
     res_n, res_s = d.resolution_mN["normal"], d.resolution_mN["shear"]

@@ -32,19 +32,19 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field, replace
-from typing import TYPE_CHECKING, Callable, Mapping
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from . import field as fieldmod
-from . import mechanics as mech
-from .chip import conversion_us
-from .shear_figures import (SHEAR_DESCRIPTION, ShearFigures, _crossing, rest_response, shear_figures,
-                            shear_probe_depths)
 from ..errors import Finding, Severity
 from ..spec import FieldModel
 from ..units import GAUSS_PER_MT, MN_PER_N, UT_PER_GAUSS
+from . import field as fieldmod
+from . import mechanics as mech
+from .chip import conversion_us
+from .shear_figures import SHEAR_DESCRIPTION, ShearFigures, _crossing, rest_response, shear_figures, shear_probe_depths
 
 if TYPE_CHECKING:
     from ..design import Design
@@ -85,7 +85,7 @@ class ChipSetting:
         return 1000.0 / self.conversion_ms
 
 
-def chip_setting(design: "Design") -> ChipSetting:
+def chip_setting(design: Design) -> ChipSetting:
     """Scale, range, noise and conversion time from the chip recipe and the spec's register fields.
 
     Noise: the datasheet gives RMS noise only as curves against conversion time; the recipe holds the plot's
@@ -111,7 +111,7 @@ def chip_setting(design: "Design") -> ChipSetting:
     )
 
 
-def noise(design: "Design", chip: ChipSetting) -> dict[str, float]:
+def noise(design: Design, chip: ChipSetting) -> dict[str, float]:
     """RMS field noise at the sensor, G: environment, chip, quantisation (LSB / sqrt 12), and the totals."""
     env = design.spec.predict.noise_G
     q_xy, q_z = chip.lsb_xy_uT * G_PER_UT / math.sqrt(12), chip.lsb_z_uT * G_PER_UT / math.sqrt(12)
@@ -146,7 +146,7 @@ def _finite(x: float) -> float | None:
     return None if not math.isfinite(x) else float(x)
 
 
-def choose_field(design: "Design", magnet: fieldmod.Magnet) -> ModelUse:
+def choose_field(design: Design, magnet: fieldmod.Magnet) -> ModelUse:
     """The field model: measured against the exact field over this design's working volume (d_min..d_max,
     r 0..R_m) -- cheapest within tolerance for ``auto``, or the spec's choice with its error."""
     p = design.spec.predict
@@ -196,7 +196,7 @@ def _curve_end(curve: mech.Curve, indentation: np.ndarray) -> tuple[str, str]:
     return str(curve.info.get("ends_at", MODEL)), str(curve.info.get("failure", ""))
 
 
-def normal_curve(design: "Design", body: mech.Body, mu: float,
+def normal_curve(design: Design, body: mech.Body, mu: float,
                  indentation: np.ndarray) -> tuple[mech.Curve, ModelUse, mech.ShearResponse | None]:
     """The normal curve at the nominal modulus with the model the spec asks for (see module doc), and for the FE the
     shear response along it (:func:`~.shear_figures.shear_probe_depths`, on the chosen mesh; None for a closed
@@ -243,7 +243,7 @@ def normal_curve(design: "Design", body: mech.Body, mu: float,
                            f"{coarse:g} mm (Richardson, order {FE_ORDER:g})", how), probe.response(mu)
 
 
-def surrogate_curve(design: "Design", body: mech.Body, mu: float,
+def surrogate_curve(design: Design, body: mech.Body, mu: float,
                     indentation: np.ndarray) -> tuple[mech.Curve, ModelUse, mech.ShearResponse]:
     """:func:`normal_curve`'s result from the elastomer FE's surrogate (:mod:`.mechanics.fe_surrogate`), for the design
     search: the curve to the scan depth and the shear response at the preloads the FE probe would solve. Raises
@@ -324,7 +324,7 @@ class Prediction:
     models: tuple[ModelUse, ...]  # field, mechanics, shear
     arrays: Mapping[str, np.ndarray] = field(default_factory=dict)
     timings_s: Mapping[str, float] = field(default_factory=dict)
-    drift: "Drift | None" = None  # the drift budget (magfab.models.drift); None where the curve has no inverse
+    drift: Drift | None = None  # the drift budget (magfab.models.drift); None where the curve has no inverse
     reference: Mapping[str, object] | None = None  # the reference chip's site and rejection (magfab.models.reference)
 
     @property
@@ -374,7 +374,7 @@ def _derivative(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return np.gradient(y, x, edge_order=2)
 
 
-def _band(design: "Design") -> dict[str, float]:
+def _band(design: Design) -> dict[str, float]:
     spec = design.spec
     return dict(zip(MATERIALS, spec.elastomer.shear_modulus_kPa or mech.band(spec.elastomer.material)))
 
@@ -384,7 +384,7 @@ def _band(design: "Design") -> dict[str, float]:
 ElastomerModel = Callable[["Design", mech.Body, float, np.ndarray], tuple[mech.Curve, ModelUse, "mech.ShearResponse | None"]]
 
 
-def predict(design: "Design", elastomer: ElastomerModel | None = None) -> Prediction:
+def predict(design: Design, elastomer: ElastomerModel | None = None) -> Prediction:
     """Sensitivity, resolution and range for ``design`` (module doc). Deterministic. ``elastomer``: the normal curve
     and shear response from another model than the spec's (default :func:`normal_curve`)."""
     t0 = time.perf_counter()
@@ -432,7 +432,7 @@ def predict(design: "Design", elastomer: ElastomerModel | None = None) -> Predic
     return pred
 
 
-def _drift(design: "Design", pred: Prediction) -> "Drift | None":
+def _drift(design: Design, pred: Prediction) -> Drift | None:
     """The drift budget, or None for a normal curve the calibration could not invert (its field not rising)."""
     from . import drift
 
@@ -442,7 +442,7 @@ def _drift(design: "Design", pred: Prediction) -> "Drift | None":
         return None
 
 
-def indentation_grid(design: "Design") -> np.ndarray:
+def indentation_grid(design: Design) -> np.ndarray:
     """The indentations (mm) the normal curve is asked for: a little past the travel to d_min (the magnet lags the
     surface, and the curve must reach d_min), in :data:`N_INDENT` steps graded finer near zero, where a rounded
     tip's force rises as indentation^1.5. The FE solves them up to the scan depth (:func:`_fe_curve`)."""
@@ -450,7 +450,7 @@ def indentation_grid(design: "Design") -> np.ndarray:
     return 1.25 * travel * np.linspace(0.0, 1.0, N_INDENT) ** 1.5
 
 
-def normal_on_mesh(design: "Design", mesh_mm: float, field_model: str = "exact") -> NormalFigures:
+def normal_on_mesh(design: Design, mesh_mm: float, field_model: str = "exact") -> NormalFigures:
     """The normal figures as :func:`predict` makes them, with the FE on the one mesh ``mesh_mm`` and the given
     field model: what a convergence study of the range compares between meshes."""
     body = mech.Body.from_design(design)
@@ -463,7 +463,7 @@ def normal_on_mesh(design: "Design", mesh_mm: float, field_model: str = "exact")
     return _normal(design, chip, noise(design, chip), magnets, field_model, curves, _curve_end(nominal, indentation))[0]
 
 
-def _normal(design: "Design", chip: ChipSetting, nz: Mapping[str, float], magnets: Mapping[str, fieldmod.Magnet],
+def _normal(design: Design, chip: ChipSetting, nz: Mapping[str, float], magnets: Mapping[str, fieldmod.Magnet],
             fmodel: str, curves: Mapping[str, mech.Curve], end: tuple[str, str]) -> tuple[NormalFigures, dict[str, np.ndarray]]:
     """Normal load: the chain along the nominal curve (the magnet's travel does not depend on mu), over the
     material band and the grade's band, and what ends the range (``end``: :func:`_curve_end` of the nominal
@@ -517,7 +517,7 @@ def _normal(design: "Design", chip: ChipSetting, nz: Mapping[str, float], magnet
     return figures, arrays
 
 
-def predict_with_findings(design: "Design", elastomer: ElastomerModel | None = None) -> tuple[Prediction | None, list[Finding]]:
+def predict_with_findings(design: Design, elastomer: ElastomerModel | None = None) -> tuple[Prediction | None, list[Finding]]:
     """:func:`predict` and its design checks; a model that cannot give an answer for this design (the FE
     failing at its first step, a field model refusing every point) is an error finding, not a traceback."""
     from ..check import prediction_findings

@@ -106,7 +106,7 @@ def noise_growth(shift: int = REFERENCE_SHIFT) -> float:
     return math.sqrt(1.0 + k / (2.0 - k))
 
 
-def _magnets(design: "Design") -> tuple[np.ndarray, np.ndarray]:
+def _magnets(design: Design) -> tuple[np.ndarray, np.ndarray]:
     """(N, 3) magnet centres at rest and (N,) polarities, board frame mm."""
     z = design.z_magnet_low_mm + design.magnet_height_mm / 2.0
     return (np.array([[t.x_mm, t.y_mm, z] for t in design.taxels]),
@@ -121,19 +121,19 @@ class Travel:
     shear_mm: float
 
     @classmethod
-    def predicted(cls, design: "Design", pred: "Prediction") -> "Travel":
+    def predicted(cls, design: Design, pred: Prediction) -> Travel:
         """The prediction's: the normal range's travel, the shear range over the softest material's stiffness."""
         return cls(pred.normal.travel_mm, pred.shear.range_N / min(pred.shear.stiffness_N_per_mm.values()))
 
     @classmethod
-    def bound(cls, design: "Design") -> "Travel":
+    def bound(cls, design: Design) -> Travel:
         """What the geometry allows, before any prediction: pressed to d_min, slid by the elastomer's radius less
         the magnet's (the tip torn off past that). At least the predicted travel; the board places by this."""
         s = design.spec.sensor
         return cls(s.d_max_mm - s.d_min_mm, design.elastomer_radius_mm - design.magnet_radius_mm)
 
 
-def _changes(design: "Design", travel: Travel, points: np.ndarray, span_C: float) -> np.ndarray:
+def _changes(design: Design, travel: Travel, points: np.ndarray, span_C: float) -> np.ndarray:
     """(P, 7) the largest motion change (xy, z), the thermal change (xy, z) and the rest field (3) at ``points``
     (P, 3), G."""
     magnet = fieldmod.Magnet.from_spec(design.spec)
@@ -153,13 +153,13 @@ def _changes(design: "Design", travel: Travel, points: np.ndarray, span_C: float
     return np.column_stack([motion, thermal, rest])
 
 
-def _remanence_coefficient(design: "Design") -> float:
+def _remanence_coefficient(design: Design) -> float:
     """The grade's remanence temperature coefficient, per C (magnets.toml)."""
     grade = catalogue("magnets")[design.spec.magnet.grade]
     return grade["br_temperature_coefficient_pct_per_C"].nominal / 100.0
 
 
-def site(design: "Design", travel: Travel, span_C: float, distance_mm: float | None = None) -> Site:
+def site(design: Design, travel: Travel, span_C: float, distance_mm: float | None = None) -> Site:
     """The reference's site (module doc) for magnets moving by ``travel``: the nearest along +y from the hull where
     every change is under the noise, or ``distance_mm`` beyond the hull's edge when given (the figures then say how
     loud the magnets are there)."""
@@ -203,7 +203,7 @@ def _directions(n: int) -> np.ndarray:
     return np.column_stack([r * np.cos(phi), r * np.sin(phi), z])
 
 
-def rejection(design: "Design", where: Site,
+def rejection(design: Design, where: Site,
               distances_mm: tuple[float, ...] = (30.0, 60.0, 100.0, 300.0, 1000.0)) -> Rejection:
     """The predicted rejection ratios (module doc) for a reference at ``where``: a uniform field, and a dipole at each
     of ``distances_mm`` from the sensing chip (taxel 0's), worst over its direction and orientation."""
@@ -231,7 +231,7 @@ def rejection(design: "Design", where: Site,
                      tuple(ratios), tuple(medians), noise_growth())
 
 
-def budget(design: "Design", pred: "Prediction", drift_budget) -> dict[str, object] | None:
+def budget(design: Design, pred: Prediction, drift_budget) -> dict[str, object] | None:
     """predictions.json's ``reference``: the placed chip, what the magnets do there at the predicted travel, the
     predicted rejection, and the drift budget's rotation and stray errors left after it (mN); None without one."""
     from .drift import rotation_error, stray_error
@@ -264,7 +264,7 @@ def budget(design: "Design", pred: "Prediction", drift_budget) -> dict[str, obje
     return out
 
 
-def findings(design: "Design", section: dict[str, object] | None) -> list:
+def findings(design: Design, section: dict[str, object] | None) -> list:
     """The reference chip as findings: a warning when the magnets are heard at its place (it would subtract the
     taxels' own presses), info with what it rejects otherwise."""
     from ..errors import Finding, Severity

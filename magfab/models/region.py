@@ -26,7 +26,7 @@ class Scaling:
     br_scale: float
 
     @classmethod
-    def of(cls, bz: np.ndarray, br: np.ndarray) -> "Scaling":
+    def of(cls, bz: np.ndarray, br: np.ndarray) -> Scaling:
         """Mid-range and half-range of the data (1 uT where the data has no spread), so |u|, |v| <= 1."""
         def axis(x: np.ndarray) -> tuple[float, float]:
             lo, hi = float(np.min(x)), float(np.max(x))
@@ -113,7 +113,7 @@ class ValidRegion:
 
     @classmethod
     def of(cls, bz: np.ndarray, br: np.ndarray, max_vertices: int = HULL_MAX_VERTICES,
-           margin_uT: float = 0.0) -> "ValidRegion":
+           margin_uT: float = 0.0) -> ValidRegion:
         """The region of the scan points, widened by ``margin_uT`` on every side (Br not below 0): a reading
         that differs from a scan point by the chip's noise is still inside. The scan's rest point is a corner
         of the region (least indentation, no lateral load), so without the margin a sensor at rest reads

@@ -52,7 +52,7 @@ class ScanPlan:
         return self.columns * self.rows
 
 
-def scan_plan(design: "Design", prediction: "Prediction | None" = None) -> ScanPlan:
+def scan_plan(design: Design, prediction: Prediction | None = None) -> ScanPlan:
     """The scan's extent (:class:`ScanPlan`): ``scan_y_mm`` centred on the axis, capped at the predicted lateral
     range (the magnet radius or the chip's xy full scale), and 0..``scan_z_mm`` of indentation, capped at the
     indentation where the predicted normal range ends (``normal.travel_mm`` of magnet travel, through the nominal
@@ -77,7 +77,7 @@ def scan_plan(design: "Design", prediction: "Prediction | None" = None) -> ScanP
     return ScanPlan(half, depth, step, columns, rows, depth_end, y_end)
 
 
-def scan_track(design: "Design", prediction: "Prediction") -> tuple[np.ndarray, np.ndarray]:
+def scan_track(design: Design, prediction: Prediction) -> tuple[np.ndarray, np.ndarray]:
     """The y-z track of the scan (:func:`scan_plan`): (y_mm, indentation_mm), each (N,), in raster order (one row
     of y per indentation step, y increasing along each row, indentation increasing row by row)."""
     plan = scan_plan(design, prediction)
@@ -91,7 +91,7 @@ def _quantise(x: np.ndarray, step: float) -> np.ndarray:
     return np.round(x / step) * step if step > 0 else x
 
 
-def scan_temperature(rows: int, temperature_C: "float | tuple[float, float] | None",
+def scan_temperature(rows: int, temperature_C: float | tuple[float, float] | None,
                      passes: int = 1) -> np.ndarray | None:
     """The chip temperature (rows * passes,) degC of a simulated scan: None, a constant, or (start, end) ramped
     linearly over every row of every pass (so a two-pass scan reads each point at two temperatures)."""
@@ -102,10 +102,10 @@ def scan_temperature(rows: int, temperature_C: "float | tuple[float, float] | No
     return start + (end - start) * np.arange(n) / max(n - 1, 1)
 
 
-def simulate_scan(design: "Design", prediction: "Prediction | None" = None, *, ideal: bool = False, polarity: int = 1,
+def simulate_scan(design: Design, prediction: Prediction | None = None, *, ideal: bool = False, polarity: int = 1,
                   background_uT: tuple[float, float, float] = (0.0, 0.0, 0.0),
-                  temperature_C: "float | tuple[float, float] | None" = None, passes: int = 1,
-                  thermal_per_C: "float | tuple[float, float, float] | None" = None) -> Scan:
+                  temperature_C: float | tuple[float, float] | None = None, passes: int = 1,
+                  thermal_per_C: float | tuple[float, float, float] | None = None) -> Scan:
     """The simulated calibration scan of ``design`` (module doc): field in uT at the sensing point and the
     reference force in N along :func:`scan_track`.
 

@@ -18,14 +18,23 @@ from __future__ import annotations
 
 import hashlib
 import math
+from collections.abc import Mapping
 from dataclasses import replace
-from typing import TYPE_CHECKING, Mapping
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..errors import ScanError
-from ..formats.scan_csv import (MIN_ROWS, Recording, Reference, Scan, check_calibration_scan, read_recording,
-                                read_reference, scan_csv)
+from ..formats.scan_csv import (
+    MIN_ROWS,
+    Recording,
+    Reference,
+    Scan,
+    check_calibration_scan,
+    read_recording,
+    read_reference,
+    scan_csv,
+)
 
 if TYPE_CHECKING:
     import os
@@ -64,7 +73,7 @@ _BEYOND = {
 # Guard B: force columns that are the calibration's own output
 
 
-def self_calibration_rms_N(scan: Scan, calibration: "Calibration") -> float:
+def self_calibration_rms_N(scan: Scan, calibration: Calibration) -> float:
     """RMS difference, N, over the rows and the three axes, between the scan's force columns and the global
     polynomial of ``calibration`` (what the firmware sends) evaluated at the scan's field and temperature, each axis's mean
     difference removed first (so a tare does not hide a copy). NaN when no row evaluates to a finite force."""
@@ -79,7 +88,7 @@ def self_calibration_rms_N(scan: Scan, calibration: "Calibration") -> float:
     return float(np.sqrt(np.mean(d * d)))
 
 
-def reject_self_calibrated(scan: Scan, calibration: "Calibration", reference_resolution_mN: float) -> None:
+def reject_self_calibrated(scan: Scan, calibration: Calibration, reference_resolution_mN: float) -> None:
     """:class:`ScanError` (one line) when ``scan``'s force columns reproduce ``calibration``'s own output from its
     field (:func:`self_calibration_rms_N` at most ``SELF_FRACTION`` of ``reference_resolution_mN``, the spec's
     ``calibration.reference_resolution_mN``, or :data:`SELF_FLOOR_N`, whichever is larger): a
@@ -100,12 +109,12 @@ def reject_self_calibrated(scan: Scan, calibration: "Calibration", reference_res
 # Guard C: a scan past the predicted range
 
 
-def _as_json(prediction: "Prediction | Mapping[str, object]") -> Mapping[str, object]:
+def _as_json(prediction: Prediction | Mapping[str, object]) -> Mapping[str, object]:
     as_json = getattr(prediction, "as_json", None)
     return as_json() if callable(as_json) else prediction  # type: ignore[return-value]
 
 
-def scan_depth_warnings(scan: Scan, prediction: "Prediction | Mapping[str, object]") -> list[str]:
+def scan_depth_warnings(scan: Scan, prediction: Prediction | Mapping[str, object]) -> list[str]:
     """Warning lines (none when the scan stays in range) for a scan that went past the predicted ranges.
     ``prediction``: a :class:`~magfab.models.predict.Prediction` or predictions.json's dict.
 
@@ -263,8 +272,8 @@ def _check_gaps(h: np.ndarray, ref: Reference, period_s: float) -> None:
                             "each sample")
 
 
-def merge_reference(recording: "Recording | str | os.PathLike[str] | bytes",
-                    reference: "Reference | str | os.PathLike[str] | bytes") -> Scan:
+def merge_reference(recording: Recording | str | os.PathLike[str] | bytes,
+                    reference: Reference | str | os.PathLike[str] | bytes) -> Scan:
     """A calibration scan (force columns ``Fx_N``...) from a ``magfab-readout record`` recording and a reference
     force sensor's log (each a parsed value or a path, CSV text or bytes; docs/bundle.md section 1): the
     reference's force interpolated linearly at each recorded sample's host-clock time (:func:`host_clock`),

@@ -16,14 +16,15 @@ Units: G, N, mm, rad.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Mapping
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..units import MN_PER_N
 from . import field as fieldmod
 from . import mechanics as mech
-from ..units import MN_PER_N
 
 if TYPE_CHECKING:
     from ..design import Design
@@ -76,7 +77,7 @@ class ShearFigures:
         }
 
 
-def shear_probe_depths(design: "Design", indentation: np.ndarray) -> np.ndarray:
+def shear_probe_depths(design: Design, indentation: np.ndarray) -> np.ndarray:
     """The preloads (mm) the shear response is solved at: every third point of the normal curve's indentation
     grid up to the scan depth, and the scan depth (about 0.5 mm apart on MagOne: 7 mode-1 solves)."""
     depth = float(design.spec.calibration.scan_z_mm)
@@ -84,13 +85,13 @@ def shear_probe_depths(design: "Design", indentation: np.ndarray) -> np.ndarray:
     return np.unique(np.append(d[d <= depth + 1e-9][::3], min(depth, float(d[-1]))))
 
 
-def rest_response(design: "Design", body: mech.Body, mu_kPa: float) -> mech.ShearResponse:
+def rest_response(design: Design, body: mech.Body, mu_kPa: float) -> mech.ShearResponse:
     """The shear response at rest only, on the FE's default mesh: for a normal curve from a closed form (no FE load
     path to probe; the shear is solved by the FE whatever the normal model)."""
     return mech.shear_response(body, mu_kPa, (0.0,), rest_indentation_mm=design.spec.calibration.scan_step_mm)
 
 
-def shear_figures(design: "Design", nz: Mapping[str, float], magnets: Mapping[str, fieldmod.Magnet],
+def shear_figures(design: Design, nz: Mapping[str, float], magnets: Mapping[str, fieldmod.Magnet],
                   full_scale_xy_G: float, fmodel: str, mus: Mapping[str, float], response: mech.ShearResponse,
                   depth_end_mm: float) -> tuple[ShearFigures, dict[str, np.ndarray]]:
     """The shear figures (module doc) from ``response`` (at the nominal modulus ``mus["nominal"]``); preloads deeper

@@ -38,18 +38,18 @@ TABLE_POINTS = 33
 LATERAL_POINTS = 13
 
 
-def _magnet_centres(design: "Design") -> np.ndarray:
+def _magnet_centres(design: Design) -> np.ndarray:
     """(N, 3) magnet centres at rest, board frame, mm."""
     z = design.z_magnet_low_mm + design.magnet_height_mm / 2.0
     return np.array([[t.x_mm, t.y_mm, z] for t in design.taxels])
 
 
-def _chips(design: "Design") -> np.ndarray:
+def _chips(design: Design) -> np.ndarray:
     """(N, 3) sensing points, board frame, mm."""
     return np.array([[t.x_mm, t.y_mm, design.z_sense_mm] for t in design.taxels])
 
 
-def field_at_chips(design: "Design", centres: np.ndarray | None = None) -> np.ndarray:
+def field_at_chips(design: Design, centres: np.ndarray | None = None) -> np.ndarray:
     """(N chips, N magnets, 3) field in uT at each chip from each magnet (its polarity applied), the magnets at
     ``centres`` (N, 3) board frame mm (default: at rest)."""
     magnet = fieldmod.Magnet.from_spec(design.spec)
@@ -78,7 +78,7 @@ class ArrayField:
     moment_uT_mm3: float  # the magnet's dipole moment as mu0 m / 4 pi
 
     def as_json(self) -> dict[str, object]:
-        r = lambda a: np.round(a, 6).tolist()  # noqa: E731 - 1e-6 uT or mm: far below a count, stable text
+        r = lambda a: np.round(a, 6).tolist()
         return {"chips_mm": r(self.chips_mm), "centres_mm": r(self.centres_mm), "offset_uT": r(self.offset_uT),
                 "rest_uT": r(self.rest_uT), "travel_mm": r(self.travel_mm), "own_Bz_uT": r(self.own_Bz_uT),
                 "lateral_mm": r(self.lateral_mm),
@@ -86,7 +86,7 @@ class ArrayField:
                 "moment_uT_mm3": round(self.moment_uT_mm3, 6)}
 
 
-def array_field(design: "Design") -> ArrayField:
+def array_field(design: Design) -> ArrayField:
     """The offsets, rest fields and own-field tables of ``design``'s taxels."""
     B = field_at_chips(design)
     own = np.eye(len(B), dtype=bool)
@@ -108,7 +108,7 @@ def array_field(design: "Design") -> ArrayField:
                       B[own] + 0.0, travel, axis[:, 2] * UT_PER_GAUSS, lateral, table + 0.0, (magnet.radius_mm, magnet.height_mm), neighbour + 0.0, moment)
 
 
-def simulate_taxel_scan(design: "Design", prediction: "Prediction", k: int, field: ArrayField | None = None) -> "Scan":
+def simulate_taxel_scan(design: Design, prediction: Prediction, k: int, field: ArrayField | None = None) -> Scan:
     """The simulated calibration scan of taxel ``k``: the single taxel's scan (:func:`.scan.simulate_scan`, its own
     magnet flipped with the taxel's polarity) plus the neighbours' field at rest, as the chip reads it (the noise
     of its seed ``calibration.seed + k``, quantised, clipped at full scale as the single scan is)."""
@@ -137,23 +137,23 @@ class ArrayCalibration:
     def file_name(self, k: int) -> str:
         return f"taxel_{k:02d}.json"
 
-    def as_json(self, design: "Design") -> dict[str, object]:
+    def as_json(self, design: Design) -> dict[str, object]:
         """calibration/array.json: the taxels (index, address, order code, polarity, position, calibration file),
         and the compensation (offset_uT, rest_uT, K per taxel pair, whether K is applied)."""
         taxels = [{**t.as_dict(), "calibration": self.file_name(t.index)} for t in design.taxels]
         return {"format": ARRAY_FORMAT, "taxels": taxels, "dynamic": self.dynamic, **self.field.as_json()}
 
-    def compensator(self, design: "Design") -> array_json.Compensator:
+    def compensator(self, design: Design) -> array_json.Compensator:
         return array_json.validate(self.as_json(design))
 
 
-def compensated(scan: "Scan", field: ArrayField, k: int) -> "Scan":
+def compensated(scan: Scan, field: ArrayField, k: int) -> Scan:
     """Taxel ``k``'s scan with the neighbours' static field removed (what its calibration is fitted to). A
     calibration scan loads one taxel, so the others rest and their K terms vanish."""
     return replace(scan, B_uT=scan.B_uT - field.offset_uT[k])
 
 
-def calibrate_taxels(design: "Design", prediction: "Prediction", scans: tuple | None = None, *, mls: bool = False,
+def calibrate_taxels(design: Design, prediction: Prediction, scans: tuple | None = None, *, mls: bool = False,
                      dynamic: bool = False) -> ArrayCalibration:
     """Fit every taxel of ``design``: to ``scans`` (one per taxel, as recorded) or to simulated ones."""
     from .calibration import fit

@@ -8,11 +8,11 @@ Every number in a recipe is a table with its ``source``: either ``{value = x, so
 from __future__ import annotations
 
 import tomllib
+from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import cache
 from importlib import resources
 from types import MappingProxyType
-from typing import Mapping
 
 __all__ = ["Quantity", "Recipe", "catalogue", "KINDS"]
 

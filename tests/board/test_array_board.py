@@ -7,10 +7,9 @@ from __future__ import annotations
 import json
 
 import pytest
-
 from conftest import require_kicad
-from magfab import SpecError, derive, parse_spec
-from magfab import pcb
+
+from magfab import SpecError, derive, parse_spec, pcb
 from magfab.board.layout import ORIGIN
 from magfab.export.kicad import run_tool
 

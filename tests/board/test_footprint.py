@@ -14,8 +14,8 @@ from pathlib import Path
 from types import MappingProxyType
 
 import pytest
-
 from conftest import require_kicad, require_kicad_library
+
 from magfab.board.footprint import Band, chip_footprint, connector_footprint, ipc_land, qfn_footprint
 from magfab.export.kicad import run_tool
 from magfab.recipes import Quantity, Recipe, catalogue

@@ -8,14 +8,14 @@ import json
 import re
 
 import pytest
-
 from conftest import require_kicad
-from magfab import SpecError, derive, load_spec, parse_spec
-from magfab import pcb
-from magfab.board.placement import label as place_label, place
+
+from magfab import SpecError, derive, load_spec, parse_spec, pcb
+from magfab.board.placement import label as place_label
+from magfab.board.placement import place
+from magfab.board.route import Copper
 from magfab.errors import Severity
 from magfab.export.kicad import run_tool
-from magfab.board.route import Copper
 
 
 @pytest.fixture(scope="module")

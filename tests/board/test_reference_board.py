@@ -6,10 +6,9 @@ from __future__ import annotations
 import json
 
 import pytest
-
 from conftest import require_kicad
-from magfab import SpecError, derive, parse_spec
-from magfab import pcb
+
+from magfab import SpecError, derive, parse_spec, pcb
 from magfab.board.layout import ORIGIN
 from magfab.board.placement import board_size_mm
 from magfab.export.bom import bom_rows

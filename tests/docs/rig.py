@@ -29,9 +29,9 @@ import tty
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "export"))
-from simbus import Bus, build_library  # noqa: E402
+from simbus import Bus, build_library
 
-from magfab.export.firmware import _eeprom_module  # noqa: E402  (its intel_hex writes the build's .eep)
+from magfab.export.firmware import _eeprom_module
 
 __all__ = ["Rig", "Stk500", "addresses", "build_library"]
 
@@ -124,7 +124,7 @@ class Rig:
         self._error: BaseException | None = None
         self._thread = threading.Thread(target=self._run, name="rig", daemon=True)
 
-    def __enter__(self) -> "Rig":
+    def __enter__(self) -> Rig:
         self._thread.start()
         return self
 
@@ -185,7 +185,7 @@ class Rig:
                         self._boot()
                 else:
                     self._step(data)
-        except BaseException as exc:  # noqa: BLE001 - reported on exit
+        except BaseException as exc:
             self._error = exc
 
     def _reset(self) -> None:

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from pages import install_command  # noqa: E402
+from pages import install_command
 
 ROOT = Path(__file__).resolve().parents[2]
 

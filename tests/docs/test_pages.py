@@ -15,14 +15,13 @@ import sys
 from pathlib import Path
 
 import pytest
-
 from conftest import _missing, require_tool
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from pages import blocks, install_command  # noqa: E402
-from rig import Rig, build_library  # noqa: E402
-from simbus import HarnessUnavailable  # noqa: E402
-from walk import Bench  # noqa: E402
+from pages import blocks, install_command
+from rig import Rig, build_library
+from simbus import HarnessUnavailable
+from walk import Bench
 
 ROOT = Path(__file__).resolve().parents[2]
 README = (ROOT / "README.md").read_text(encoding="utf-8")
@@ -62,7 +61,7 @@ def walked(tmp_path_factory):
 
 def _assert_ok(ran, block) -> None:
     interrupted = "Ctrl-C ends it" in ran.line
-    ok = ran.returncode == 0 or interrupted and ran.returncode == 130
+    ok = ran.returncode == 0 or (interrupted and ran.returncode == 130)
     assert ok and "Traceback" not in ran.stderr, (
         f"{block}: `{ran.line}` in {ran.cwd} exited {ran.returncode}\n{ran.stdout[-3000:]}\n{ran.stderr[-3000:]}")
 

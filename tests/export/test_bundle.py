@@ -16,10 +16,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from readout_support import assert_reads_zero_at_rest, imported, install
 from click.testing import CliRunner
-
 from conftest import require_tool
+from readout_support import assert_reads_zero_at_rest, imported, install
+
 from magfab.cli import main
 from magfab.errors import MagfabError
 from magfab.export import firmware, readout, toolchain
@@ -63,7 +63,7 @@ def test_build_ships_a_flashable_image(bundle):
 def _decoder(out: Path):
     """The build's generated readout package, imported from its folder without leaving it in sys.modules
     (the readout tests import their own rendering under the same name)."""
-    ours = lambda name: name == "magfab_readout" or name.startswith("magfab_readout.")  # noqa: E731
+    ours = lambda name: name == "magfab_readout" or name.startswith("magfab_readout.")
     saved = {name: mod for name, mod in sys.modules.items() if ours(name)}
     for name in saved:
         del sys.modules[name]
@@ -261,8 +261,8 @@ def test_the_readout_readme_gives_the_bench_sequence_from_the_build_folder(bundl
     assert "Fx_sensor_N" in text and "host_time_s" in text and "--reference" in text
     firmware_text = (out / "firmware" / "README.md").read_text()
     assert "from this folder, `firmware/`" in firmware_text
-    assert ["sh flash.sh uno /dev/ttyACM0", "pip install ../readout", "magfab-readout upload",
-            "magfab-readout info"] == _commands(firmware_text)[:4]
+    assert _commands(firmware_text)[:4] == ["sh flash.sh uno /dev/ttyACM0", "pip install ../readout", "magfab-readout upload",
+            "magfab-readout info"]
 
 
 def test_the_firmware_readme_states_the_rate_every_page_states(bundle):

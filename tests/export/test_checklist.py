@@ -9,9 +9,9 @@ import math
 
 import pytest
 
-from magfab.export import checklist as C
 from magfab import derive, load_spec, parse_spec
 from magfab.errors import Severity, SpecError
+from magfab.export import checklist as C
 from magfab.export.templating import md
 
 

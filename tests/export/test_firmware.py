@@ -20,11 +20,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from conftest import _missing, ref_crc16, require_tool
+
 from magfab import derive, load_spec
-from magfab.export import firmware, toolchain
 from magfab.errors import SpecError
+from magfab.export import firmware, toolchain
 from magfab.export.firmware import FirmwareError
 from magfab.formats.calibration_json import CalibrationError
 from magfab.spec import Acquisition, Transport

@@ -11,13 +11,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
-
-from magfab import derive, load_spec
-from magfab.export.readout import render
-
 from conftest import _missing, ref_crc16, require_tool
 from readout_support import imported, make_calibration
 from simbus import Bus, HarnessUnavailable, build_library
+
+from magfab import derive, load_spec
+from magfab.export.readout import render
 
 
 @pytest.fixture(scope="module")
@@ -325,13 +324,13 @@ def other_package(rendered: dict, root: Path):
 def test_an_array_build_readout_knows_its_chips_and_uploads_their_record(harness, designs, tmp_path):
     """The 1x5 build's readout package: its addresses from build.json, the record it packs equal to magfab's .eep,
     and Device.upload writing it to an erased board over serial, after which every chip streams its own field."""
-    from magfab.export import firmware, readout
-
     from test_simbus import BusTransport
+
+    from magfab.export import firmware, readout
 
     sim, design, cal = harness["strip_1x5"], designs["strip_1x5"], make_calibration()
     with other_package(readout.render(design, cal), tmp_path / "pkg") as pkg:
-        assert pkg.device.TAXEL_ADDRESSES == tuple(sim.addresses) and pkg.device.TAXELS == 5
+        assert tuple(sim.addresses) == pkg.device.TAXEL_ADDRESSES and pkg.device.TAXELS == 5
         assert pkg.device.calibration_record(cal) == firmware.eeprom_record(design, cal)
         bus = Bus(sim.lib, sim.hex_path, sim.addresses[0], None)
         for a in sim.addresses[1:]:

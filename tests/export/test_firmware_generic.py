@@ -11,11 +11,11 @@ import hashlib
 import tomllib
 from pathlib import Path
 
+from test_firmware import make_calibration, spec_variant
+
 from magfab import derive, load_spec
 from magfab.export import firmware, toolchain
 from magfab.spec import Acquisition, Transport
-
-from test_firmware import make_calibration, spec_variant
 
 ROOT = Path(__file__).resolve().parents[2]
 

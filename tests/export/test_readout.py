@@ -21,13 +21,23 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
+from readout_support import (
+    PKG,
+    assert_reads_zero_at_rest,
+    f32,
+    imported,
+    install,
+    make_calibration,
+    ref_crc,
+    ref_decode,
+    ref_distance_to_hull,
+    ref_forces,
+    ref_frame,
+    ref_inside,
+)
 
 from magfab import SpecError, derive, load_spec
 from magfab.export.readout import calibration_sha256, render
-
-from readout_support import (PKG, assert_reads_zero_at_rest, f32, imported, install, make_calibration, ref_crc,
-                             ref_decode, ref_distance_to_hull, ref_forces, ref_frame, ref_inside)
-
 
 # --- fixtures -------------------------------------------------------------------------------------------------
 

@@ -15,6 +15,7 @@ import sys
 
 import numpy as np
 import pytest
+from readout_support import PKG, imported
 
 from magfab.design import derive
 from magfab.export.readout import render
@@ -22,8 +23,6 @@ from magfab.models import taxels
 from magfab.models.predict import predict
 from magfab.models.scan import scan_track
 from magfab.spec import parse_spec
-
-from readout_support import PKG, imported
 
 STRIP = '[array]\nrows = 1\ncols = 5\npitch_mm = 14.0\npolarity = "alternating"\n'
 
@@ -265,7 +264,7 @@ def test_record_writes_a_taxel_column_magfab_calibrate_reads(pkg, capsys, tmp_pa
         mine = [r for r in rows if r["taxel"] == str(k)]
         assert len(recording.scan.B_uT) == len(mine)
         assert recording.scan.B_uT[0][2] == pytest.approx(float(mine[0]["Bz_uT"]))
-    assert "wrote {} rows".format(len(rows)) in capsys.readouterr().err
+    assert f"wrote {len(rows)} rows" in capsys.readouterr().err
 
 
 def test_info_lists_the_array(pkg, capsys):

@@ -17,13 +17,13 @@ from urllib.parse import quote, unquote
 
 import numpy as np
 import pytest
-
 from conftest import require_tool
+
 from magfab import pcb
-from magfab.pipeline import PARTS, Artifact
 from magfab.errors import Finding, Severity
 from magfab.export.cad import tessellate
 from magfab.export.report import BENCH_FILES, render_report, section_loops
+from magfab.pipeline import PARTS, Artifact
 
 #: Files the build writes with or after the report: listed and linked by it (those the build does not
 #: already list as artifacts are passed as extra_files).

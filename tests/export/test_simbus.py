@@ -14,17 +14,16 @@ import binascii
 import importlib
 import json
 import math
-import re
 import struct
 import sys
 from dataclasses import dataclass
 
 import pytest
-
 from conftest import _missing, require_tool
 from readout_support import ref_forces
-from magfab.export.firmware import LOST_RETRY_US
 from simbus import Bus, HarnessUnavailable, build_library, read_intel_hex
+
+from magfab.export.firmware import LOST_RETRY_US
 
 FIELD_UT = (1200.0, -800.0, 20000.0)  # inside MagOne's calibrated region (test_streams_the_true_force checks)
 FORCE_TOL_N = 1e-5

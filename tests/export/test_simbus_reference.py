@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from simbus import Bus
 from test_simbus import Sim, sim  # noqa: F401  (the module fixture: the default build on the bus)
 

@@ -14,7 +14,6 @@ import random
 import struct
 
 import pytest
-
 from conftest import ref_crc16
 from test_readout import calibration, design, pkg, rendered  # noqa: F401  (the readout package, rendered once)
 

@@ -12,10 +12,11 @@ import warnings
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, event, given, settings, strategies as st
+from hypothesis import HealthCheck, event, given, settings
+from hypothesis import strategies as st
 
 from magfab.errors import ScanError
-from magfab.formats.scan_csv import BANDS, SCAN_COLUMNS, FORCE_COLUMNS, read_scan_csv
+from magfab.formats.scan_csv import BANDS, FORCE_COLUMNS, SCAN_COLUMNS, read_scan_csv
 
 HEADER = list(SCAN_COLUMNS + FORCE_COLUMNS)
 ROWS = 64

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from magfab import derive, load_spec
-from magfab.spec import default_spec_text, parse_spec
 from magfab.errors import SpecError
 from magfab.inverse.pareto import front_mask, pick_for_verification, ranks
 from magfab.inverse.space import base_point, candidate_spec, grid, latin_hypercube
 from magfab.inverse.targets import parse_targets
+from magfab.spec import default_spec_text, parse_spec
 
 MAGONE = load_spec(None)
 #: MagOne with the grade its 5 x 2 mm magnet is sold in from stock (recipes/magnet_stock.toml has no N35 one).

@@ -13,12 +13,12 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from readout_support import imported, install, make_calibration, ref_decode, write_tree
 
 from magfab import SpecError, derive, parse_spec
+from magfab.export.readout import render, validate_acceptance
 from magfab.models.acceptance import FORMAT, G0, Tolerances, acceptance, default_weight_g
 from magfab.models.field import Magnet, bz_br
-from magfab.export.readout import render, validate_acceptance
-from readout_support import imported, install, make_calibration, ref_decode, write_tree
 
 PKG = "readout/src/magfab_readout"
 

@@ -15,11 +15,11 @@ from magfab.export.calibration_chart import chart
 from magfab.formats import scan_csv as scan_format
 from magfab.formats.scan_csv import read_scan_csv, scan_csv
 from magfab.models import calibration as C
-from magfab.models.scan import scan_track, simulate_scan
 from magfab.models import field as F
-from magfab.models.region import _cross
-from magfab.units import UT_PER_GAUSS
 from magfab.models.predict import chip_setting, noise
+from magfab.models.region import _cross
+from magfab.models.scan import scan_track, simulate_scan
+from magfab.units import UT_PER_GAUSS
 
 
 @pytest.fixture(scope="module")
@@ -347,7 +347,7 @@ def test_chart_is_deterministic(result):
 
 
 def test_the_too_few_rows_message_names_the_largest_fit():
-    assert scan_format.LARGEST_ORDER == C.ORDERS[-1] and scan_format.MIN_ROWS == C.MIN_ROWS
+    assert C.ORDERS[-1] == scan_format.LARGEST_ORDER and scan_format.MIN_ROWS == C.MIN_ROWS
 
 
 
@@ -355,8 +355,8 @@ def test_the_too_few_rows_message_names_the_largest_fit():
 def test_fit_refuses_an_implausible_or_flat_scan_before_any_work(design, scan, change, monkeypatch):
     """Issue 12, finding 4: a scan built in memory (not read from a CSV) meets the same checks at the start of
     the fit: one ScanError line, no RuntimeWarning, and no candidate fitted."""
-    from dataclasses import replace
     import warnings
+    from dataclasses import replace
 
     b, f = scan.B_uT.copy(), scan.F_N.copy()
     if change == "force x 1e300":

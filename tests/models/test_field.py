@@ -15,9 +15,9 @@ import sys
 import numpy as np
 import pytest
 
+from magfab import load_spec
 from magfab.models import field as F
 from magfab.models.field.surrogate import _build_table
-from magfab import load_spec
 
 MAGONE = F.Magnet.from_spec(load_spec(None))
 D_MIN, D_MAX = 2.0, 6.0
@@ -77,8 +77,8 @@ def charge_sheets(magnet, point):
     R, h, br = magnet.radius_mm, magnet.height_mm / 2.0, magnet.remanence_T * 1e4
     x, y, z = point
     r = math.hypot(x, y)
-    radial = lambda rp, ph, dz: r - rp * math.cos(ph)  # noqa: E731 - the source point's offset, in plane
-    axial = lambda rp, ph, dz: dz  # noqa: E731
+    radial = lambda rp, ph, dz: r - rp * math.cos(ph)
+    axial = lambda rp, ph, dz: dz
     b = np.zeros(2)
     for z_face, sign in ((h, 1.0), (-h, -1.0)):
         dz = z - z_face
@@ -271,7 +271,7 @@ def test_scaling_all_lengths_leaves_b_unchanged(model):
 
 @pytest.mark.parametrize("model", ["exact", "surrogate", "dipole"])
 def test_symmetries(model):
-    f = lambda p: F.MODELS[model].func(MAGONE, p, rtol=None)  # noqa: E731
+    f = lambda p: F.MODELS[model].func(MAGONE, p, rtol=None)
     pts = F.working_volume(MAGONE, D_MIN, D_MAX, 9)
     b = f(pts)
     # Bx / By = x / y: the transverse field is radial
@@ -372,7 +372,7 @@ def test_dbz_dz():
     assert np.allclose(F.dbz_dz(MAGONE, d, model="surrogate"), analytic, rtol=2e-3)
     # = -dBz/dd
     h = 1e-4
-    bz = lambda dd: F.bz_br(MAGONE, dd, 1.0)[0]  # noqa: E731
+    bz = lambda dd: F.bz_br(MAGONE, dd, 1.0)[0]
     assert F.dbz_dz(MAGONE, 4.0, 1.0) == pytest.approx(-(bz(4.0 + h) - bz(4.0 - h)) / (2 * h), rel=1e-7)
 
 

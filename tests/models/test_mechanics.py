@@ -6,7 +6,6 @@ Every FE here runs on a coarse mesh; the exhaustive runs are marked slow (``pyte
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 
 import numpy as np
 import pytest

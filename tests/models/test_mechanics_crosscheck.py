@@ -278,5 +278,5 @@ def test_felupe_agrees_on_the_bench_designs_and_finer_meshes(name, mesh_mm):
     the forces scale with mu). Not flat_tip on 0.5 mm: magfab's FE inverts an element there at 2.66 mm."""
     body = _body(name)
     depth = derive(load_spec(None if name is None else f"bench/designs/{name}.toml")).spec.calibration.scan_z_mm
-    ours, theirs = _compare(body, mesh_mm, np.append(DEPTHS_MM[DEPTHS_MM < depth - 1e-9], depth))
+    ours, theirs = _compare(body, mesh_mm, np.append(DEPTHS_MM[depth - 1e-9 > DEPTHS_MM], depth))
     np.testing.assert_array_less(np.abs(theirs / ours - 1.0), TOLERANCE)

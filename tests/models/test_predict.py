@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 from magfab import SpecError, derive, parse_spec
-from magfab.models import field as F
-from magfab.models import mechanics as M
 from magfab.check import prediction_findings
 from magfab.errors import Severity
+from magfab.models import field as F
+from magfab.models import mechanics as M
 from magfab.models.predict import chip_setting, noise, predict
 
 

@@ -17,8 +17,14 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from magfab.formats.scan_csv import (FORCE_COLUMNS, SENSOR_FORCE_COLUMNS, ScanError, read_recording,
-                                     read_scan_csv, scan_csv)
+from magfab.formats.scan_csv import (
+    FORCE_COLUMNS,
+    SENSOR_FORCE_COLUMNS,
+    ScanError,
+    read_recording,
+    read_scan_csv,
+    scan_csv,
+)
 from magfab.models import scan_guards as G
 from magfab.models.calibration import Calibration
 

@@ -18,9 +18,10 @@ draw, so importing this package is cheap.
 from __future__ import annotations
 
 import base64
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import PurePosixPath
-from typing import TYPE_CHECKING, Iterable, Mapping, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -28,8 +29,8 @@ from ... import __version__
 from ...errors import Finding
 from . import tables
 from .array import array_context
-from .drift import drift_context
 from .drawings import board_svg, stackup_figure
+from .drift import drift_context
 from .render3d import PART_VIEWS, part_figure, section_loops
 from .tables import href
 
@@ -37,9 +38,9 @@ if TYPE_CHECKING:
     import trimesh
 
     from ...board.layout import Board
-    from ...output import Artifact
     from ...design import Design
     from ...models.predict import Prediction
+    from ...output import Artifact
     from ...spec import Spec
 
 __all__ = ["render_report", "Figure", "part_figure", "stackup_figure", "board_svg", "section_loops",
@@ -79,7 +80,7 @@ def _svg_uri(data: bytes, where: str) -> str:
 # Figures from the build
 
 
-def _plot_figures(artifacts: Sequence["Artifact"], folder: str) -> list[Figure]:
+def _plot_figures(artifacts: Sequence[Artifact], folder: str) -> list[Figure]:
     """The build's SVG plots under ``folder``, each linked to its SVG and PNG files."""
     paths = {a.path for a in artifacts}
     out = []
@@ -93,7 +94,7 @@ def _plot_figures(artifacts: Sequence["Artifact"], folder: str) -> list[Figure]:
     return out
 
 
-def _part_figures(meshes: Mapping[str, "trimesh.Trimesh"], artifacts: Sequence["Artifact"]) -> list[Figure]:
+def _part_figures(meshes: Mapping[str, trimesh.Trimesh], artifacts: Sequence[Artifact]) -> list[Figure]:
     """Each part whole and cut away (PNG), with its size, volume and triangle count, linked to its files."""
     by_path = {a.path: a for a in artifacts}
     out = []
@@ -111,7 +112,7 @@ def _part_figures(meshes: Mapping[str, "trimesh.Trimesh"], artifacts: Sequence["
     return out
 
 
-def _board_figure(design: "Design", board: "Board", artifacts: Sequence["Artifact"]) -> Figure:
+def _board_figure(design: Design, board: Board, artifacts: Sequence[Artifact]) -> Figure:
     """The routed board from above (SVG), linked to the KiCad board and project."""
     pcb_spec = design.spec.pcb
     pcb = f"pcb/{design.spec.name}.kicad_pcb"
@@ -147,8 +148,8 @@ class Pictures:
     board: Figure
 
 
-def draw_pictures(design: "Design", meshes: Mapping[str, "trimesh.Trimesh"], artifacts: Sequence["Artifact"],
-                  board: "Board") -> Pictures:
+def draw_pictures(design: Design, meshes: Mapping[str, trimesh.Trimesh], artifacts: Sequence[Artifact],
+                  board: Board) -> Pictures:
     """The stack-up (cut from the elastomer and pad meshes), every part whole and cut away, the routed board."""
     missing = {"elastomer", "pad"} - set(meshes)
     if missing:
@@ -160,10 +161,10 @@ def draw_pictures(design: "Design", meshes: Mapping[str, "trimesh.Trimesh"], art
     return Pictures(stack, _part_figures(meshes, artifacts), _board_figure(design, board, artifacts))
 
 
-def render_report(spec: "Spec", design: "Design", findings: Sequence[Finding], artifacts: Sequence["Artifact"],
-                  prediction: "Prediction", calibration: Mapping[str, object] | None,
-                  meshes: Mapping[str, "trimesh.Trimesh"], extra_files: Iterable[tuple[str, str]] = (), *,
-                  board: "Board", pictures: Pictures | None = None) -> bytes:
+def render_report(spec: Spec, design: Design, findings: Sequence[Finding], artifacts: Sequence[Artifact],
+                  prediction: Prediction, calibration: Mapping[str, object] | None,
+                  meshes: Mapping[str, trimesh.Trimesh], extra_files: Iterable[tuple[str, str]] = (), *,
+                  board: Board, pictures: Pictures | None = None) -> bytes:
     """report.html as UTF-8 bytes: one self-contained page for the build (module doc).
 
     ``artifacts``: what the build writes besides the report (``magfab.output.Artifact``: path, data,

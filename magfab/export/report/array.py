@@ -5,7 +5,8 @@ writes (calibration/array.json, calibration/taxel_NN.json, array/crosstalk.json)
 from __future__ import annotations
 
 import json
-from typing import TYPE_CHECKING, Callable, Sequence
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING
 
 from ...units import UT_PER_GAUSS
 
@@ -24,7 +25,7 @@ def _json(by_path: dict, path: str) -> dict | None:
     return None if a is None else json.loads(a.data)
 
 
-def array_context(design: "Design", artifacts: Sequence["Artifact"], figures: Callable[[str], list]) -> dict | None:
+def array_context(design: Design, artifacts: Sequence[Artifact], figures: Callable[[str], list]) -> dict | None:
     """What report.html.j2's array section shows, or None for a single taxel. ``figures(folder)``: the build's
     plots under a folder, as the report draws them."""
     if design.array is None:

@@ -4,7 +4,8 @@ routed board from above (SVG written here), both in millimetres."""
 from __future__ import annotations
 
 import io
-from typing import TYPE_CHECKING, Mapping, Sequence
+from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING
 from xml.sax.saxutils import escape
 
 import numpy as np
@@ -14,8 +15,8 @@ from .render3d import section_loops
 if TYPE_CHECKING:
     import trimesh
 
-    from ...design import Design
     from ...board.layout import Board
+    from ...design import Design
 
 __all__ = ["stackup_figure", "board_svg", "board_half_width", "STACK_STYLE"]
 
@@ -67,7 +68,7 @@ def _style(layer: str) -> dict[str, object]:
 BOARD_MARGIN_SHOWN_MM = 8.0
 
 
-def board_half_width(design: "Design") -> tuple[float, bool]:
+def board_half_width(design: Design) -> tuple[float, bool]:
     """Half the width the board is drawn at, mm, and whether it is broken off: its true half-width
     (``pcb.width_mm`` / 2; the pad is centred on the board) unless that is more than
     ``BOARD_MARGIN_SHOWN_MM`` beyond the pad."""
@@ -76,7 +77,7 @@ def board_half_width(design: "Design") -> tuple[float, bool]:
     return (true, False) if true <= shown else (shown, True)
 
 
-def _dimension_board(ax, design: "Design", half: float, broken: bool) -> None:
+def _dimension_board(ax, design: Design, half: float, broken: bool) -> None:
     """The board's width as a horizontal dimension under it (its true width, also when broken off)."""
     pcb = design.spec.pcb
     z = -pcb.thickness_mm - 0.7
@@ -88,7 +89,7 @@ def _dimension_board(ax, design: "Design", half: float, broken: bool) -> None:
             f"{pcb.thickness_mm:g} mm)", fontsize=7, ha="center", va="top", bbox={"fc": "w", "ec": "none", "pad": 0.5})
 
 
-def _draw_stack(ax, design: "Design", meshes: Mapping[str, "trimesh.Trimesh"]) -> None:
+def _draw_stack(ax, design: Design, meshes: Mapping[str, trimesh.Trimesh]) -> None:
     """The layers in section: board, chip, pad (mesh section), glue, elastomer (mesh section), magnet."""
     from matplotlib.patches import Rectangle
 
@@ -117,7 +118,7 @@ def _draw_stack(ax, design: "Design", meshes: Mapping[str, "trimesh.Trimesh"]) -
     ax.axvline(0.0, color="0.5", lw=0.4, ls="-.")
 
 
-def _dimension_stack(ax, design: "Design") -> None:
+def _dimension_stack(ax, design: Design) -> None:
     """d_rest and cover on the right, d_min (and where the magnet's lower face gets to) on the left, skin."""
     d = design
     top = d.z_elastomer_base_mm + d.elastomer_height_mm
@@ -134,7 +135,7 @@ def _dimension_stack(ax, design: "Design") -> None:
                 arrowprops={"arrowstyle": "->", "lw": 0.6, "color": "k"})
 
 
-def stackup_figure(design: "Design", meshes: Mapping[str, "trimesh.Trimesh"]) -> bytes:
+def stackup_figure(design: Design, meshes: Mapping[str, trimesh.Trimesh]) -> bytes:
     """SVG: the sensor assembled on its board, cut through the axis, with d_rest, d_min, cover and skin.
 
     Board frame (z = 0 on the board's top face); the pad and elastomer outlines are sections of the
@@ -188,7 +189,7 @@ def _copper_svg(c, layer: str) -> str:
     return f'<circle cx="{c.a[0]:.4f}" cy="{c.a[1]:.4f}" r="{c.r:.4f}" fill="{colour}" fill-opacity="{alpha}"/>'
 
 
-def board_svg(board: "Board", via_drill_mm: float) -> bytes:
+def board_svg(board: Board, via_drill_mm: float) -> bytes:
     """SVG of the routed board from above: bottom copper (blue) under top copper (red), vias, drilled
     holes, the mounting pad's disc (dashed), references and the silk label."""
     x0, y0, x1, y1 = board.outline

@@ -4,7 +4,8 @@ resolution) and its chart, from the prediction's drift budget (:mod:`magfab.mode
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Callable
+from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from ...models.drift import Disturbance, Drift
@@ -22,16 +23,16 @@ def _verdict(values: tuple[float, ...], normal_mN: float, shear_mN: float) -> st
     return f"{worst:.1f}x the resolution" if over else "within the resolution"
 
 
-def _row(label: str, field: str, values: tuple[float, ...], d: "Drift") -> tuple[str, ...]:
+def _row(label: str, field: str, values: tuple[float, ...], d: Drift) -> tuple[str, ...]:
     res = d.resolution_mN
     return (label, field, *(f"{abs(v):.1f}" for v in values), _verdict(values, res["normal"], res["shear"]))
 
 
-def _disturbance_row(label: str, x: "Disturbance", d: "Drift") -> tuple[str, ...]:
+def _disturbance_row(label: str, x: Disturbance, d: Drift) -> tuple[str, ...]:
     return _row(label, f"{x.field_G:.3g}", (x.normal_rest_mN, x.normal_end_mN, x.shear_mN), d)
 
 
-def _rows(d: "Drift") -> list[tuple[str, ...]]:
+def _rows(d: Drift) -> list[tuple[str, ...]]:
     t, env = d.temperature, d.conditions
     span = f"{env['temperature_min_C']:g}-{env['temperature_max_C']:g} C"
     per_C = tuple(t.per_C[p]["without"] for p in ("normal_rest", "normal_end")) + (
@@ -49,7 +50,7 @@ def _rows(d: "Drift") -> list[tuple[str, ...]]:
     return rows
 
 
-def _reference_rows(section: dict | None, d: "Drift") -> list[tuple[str, ...]]:
+def _reference_rows(section: dict | None, d: Drift) -> list[tuple[str, ...]]:
     """The rotation and the stray source again with the reference chip subtracted (predictions.json's
     ``reference``), or none without one."""
     if section is None:
@@ -62,7 +63,7 @@ def _reference_rows(section: dict | None, d: "Drift") -> list[tuple[str, ...]]:
             for label, x in picked]
 
 
-def drift_context(prediction: "Prediction", figures: Callable[[str], list]) -> dict | None:
+def drift_context(prediction: Prediction, figures: Callable[[str], list]) -> dict | None:
     """What report.html.j2's drift section shows, or None without a budget. ``figures(folder)``: the build's plots
     under a folder, as the report draws them."""
     d = prediction.drift

@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import io
 import math
-from typing import TYPE_CHECKING, Sequence
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -58,7 +59,7 @@ def _merge_points(points: np.ndarray, tol: float) -> np.ndarray:
     return np.array([root(i) for i in range(len(points))])
 
 
-def section_loops(mesh: "trimesh.Trimesh", y_mm: float = CUT_OFFSET_MM) -> list[np.ndarray]:
+def section_loops(mesh: trimesh.Trimesh, y_mm: float = CUT_OFFSET_MM) -> list[np.ndarray]:
     """The closed outlines where the plane y = ``y_mm`` cuts the mesh, each an (n, 2) array of (x, z) mm."""
     import trimesh
 
@@ -162,7 +163,7 @@ def _facing(triangles: np.ndarray, eye: np.ndarray) -> tuple[np.ndarray, np.ndar
     return triangles[front], n[front]
 
 
-def _cut_away(mesh: "trimesh.Trimesh", y_mm: float = CUT_OFFSET_MM) -> tuple[np.ndarray, np.ndarray]:
+def _cut_away(mesh: trimesh.Trimesh, y_mm: float = CUT_OFFSET_MM) -> tuple[np.ndarray, np.ndarray]:
     """The part behind the plane y = ``y_mm`` as triangles (n, 3, 3), and the cut face as triangles."""
     import trimesh
 
@@ -228,7 +229,7 @@ def _fill_axes(ax, bounds: np.ndarray, fill: float = 0.97) -> None:
     ax.set_box_aspect(aspect, zoom=fill / max(span[0] / box.width, span[1] / box.height))
 
 
-def part_figure(stem: str, mesh: "trimesh.Trimesh") -> bytes:
+def part_figure(stem: str, mesh: trimesh.Trimesh) -> bytes:
     """PNG: the part whole, and cut away at its axis plane (y = 0) with the cut face in red."""
     import matplotlib
 

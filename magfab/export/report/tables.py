@@ -6,16 +6,17 @@ from __future__ import annotations
 
 import json
 import math
-from typing import TYPE_CHECKING, Mapping, Sequence
+from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING
 from urllib.parse import quote
 
 from ...errors import Finding, Severity
 
 if TYPE_CHECKING:
-    from ...output import Artifact
-    from ...design import Design
     from ...board.layout import Board
+    from ...design import Design
     from ...models.predict import Prediction
+    from ...output import Artifact
     from ...spec import Spec
 
 __all__ = ["href", "spec_sections", "stack_rows", "heights", "prediction_tables", "key_figures", "model_rows",
@@ -45,7 +46,7 @@ def _spec_value(value: object, key: str) -> str:
     return repr(value)
 
 
-def spec_sections(spec: "Spec") -> list[dict[str, object]]:
+def spec_sections(spec: Spec) -> list[dict[str, object]]:
     """Every section and key of the spec with its value, meaning and whether it differs from the default."""
     from ...spec import Spec
 
@@ -68,7 +69,7 @@ def spec_sections(spec: "Spec") -> list[dict[str, object]]:
     return sections
 
 
-def stack_rows(design: "Design") -> list[tuple[str, str]]:
+def stack_rows(design: Design) -> list[tuple[str, str]]:
     d, sen = design, design.spec.sensor
     return [
         ("rest distance d_rest, magnet lower face to sensing point", f"{d.d_rest_mm:.3f} mm"),
@@ -84,7 +85,7 @@ def stack_rows(design: "Design") -> list[tuple[str, str]]:
     ]
 
 
-def heights(design: "Design") -> list[tuple[str, str]]:
+def heights(design: Design) -> list[tuple[str, str]]:
     d = design
     return [(name, f"{z:.3f}") for name, z in sorted([
         ("board top face", 0.0), ("Hall sensing point", d.z_sense_mm), ("chip package top", d.chip_height_nominal_mm),
@@ -93,9 +94,9 @@ def heights(design: "Design") -> list[tuple[str, str]]:
         ("elastomer top", d.z_elastomer_base_mm + d.elastomer_height_mm)], key=lambda r: r[1])]
 
 
-def prediction_tables(pred: "Prediction") -> dict[str, list[tuple[str, str]]]:
+def prediction_tables(pred: Prediction) -> dict[str, list[tuple[str, str]]]:
     n, s, f, c, nz = pred.normal, pred.shear, pred.field, pred.chip, pred.noise
-    band = lambda m, fmt: ", ".join(f"{k} {format(v, fmt)}" for k, v in m.items())  # noqa: E731
+    band = lambda m, fmt: ", ".join(f"{k} {format(v, fmt)}" for k, v in m.items())
     return {
         "normal": [
             ("sensitivity over the range", f"{n.sensitivity_G_per_N[0]:.1f} – {n.sensitivity_G_per_N[1]:.1f} G/N"),
@@ -140,7 +141,7 @@ def prediction_tables(pred: "Prediction") -> dict[str, list[tuple[str, str]]]:
     }
 
 
-def key_figures(design: "Design", pred: "Prediction", calibration: Mapping[str, object] | None,
+def key_figures(design: Design, pred: Prediction, calibration: Mapping[str, object] | None,
                  findings: Sequence[Finding]) -> list[tuple[str, str, str]]:
     n, s = pred.normal, pred.shear
     out = [
@@ -169,7 +170,7 @@ def key_figures(design: "Design", pred: "Prediction", calibration: Mapping[str, 
     return out
 
 
-def model_rows(pred: "Prediction") -> list[dict[str, str]]:
+def model_rows(pred: Prediction) -> list[dict[str, str]]:
     return [{"family": m.family, "model": m.name, "chosen_by": m.chosen_by,
              "error": f"{100 * m.error:.2g} %" if math.isfinite(m.error) else "not measured here", "detail": m.detail}
             for m in pred.models]
@@ -199,7 +200,7 @@ def _size(n: int | None) -> str:
     return f"{n} B" if n < 1000 else f"{n / 1000:.1f} kB" if n < 1_000_000 else f"{n / 1e6:.2f} MB"
 
 
-def file_groups(artifacts: Sequence["Artifact"], extra: Sequence[tuple[str, str]]) -> list[dict[str, object]]:
+def file_groups(artifacts: Sequence[Artifact], extra: Sequence[tuple[str, str]]) -> list[dict[str, object]]:
     """The file table grouped by top folder (the build's root first), each row linked relatively."""
     rows = [(a.path, a.description, len(a.data)) for a in artifacts] + [(p, d, None) for p, d in extra]
     seen: set[str] = set()
@@ -217,7 +218,7 @@ def file_groups(artifacts: Sequence["Artifact"], extra: Sequence[tuple[str, str]
     return [{"folder": k, "rows": v} for k, v in groups.items()]
 
 
-def board_parts(board: "Board") -> list[dict[str, str]]:
+def board_parts(board: Board) -> list[dict[str, str]]:
     """What stands on the board: reference, value, side and footprint, in reference order."""
     return [{"ref": p.ref, "value": p.value, "side": "bottom" if p.bottom else "top", "footprint": p.footprint.name}
             for p in sorted(board.parts, key=lambda p: (p.ref[0], int("0" + "".join(filter(str.isdigit, p.ref)))))]

@@ -52,8 +52,15 @@ from __future__ import annotations
 
 from ...units import GAUSS_PER_TESLA
 from .choice import MODELS, Choice, FieldModel, Model, ModelAccuracy, choose, model_error, model_name, working_volume
-from .closed_forms import (axial_multipoles, axis_bz, axis_dbz_dz, dipole, dipole_error_estimate, on_axis,
-                           on_axis_error_estimate)
+from .closed_forms import (
+                           axial_multipoles,
+                           axis_bz,
+                           axis_dbz_dz,
+                           dipole,
+                           dipole_error_estimate,
+                           on_axis,
+                           on_axis_error_estimate,
+)
 from .exact import exact, exact_rounding_estimate, magpylib_cylinder
 from .magnet import DEFAULT_RTOL, EXACT_RTOL, MU0, SURFACE_GAP, FieldModelError, Magnet
 from .sensor import FD_STEP, bz_br, dbz_dz

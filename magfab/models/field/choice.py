@@ -10,9 +10,9 @@ over the points, the figure to quote where |B| itself becomes small.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from types import MappingProxyType
-from typing import Callable, Mapping
 
 import numpy as np
 
@@ -70,14 +70,14 @@ def _errors(b: np.ndarray, ref: np.ndarray) -> ModelAccuracy:
     return ModelAccuracy(float(rel[k]), float(diff.max() / size.max()), k, len(ref))
 
 
-def model_error(model: "FieldModel | str | Callable[[Magnet, np.ndarray], np.ndarray]", magnet: Magnet,
+def model_error(model: FieldModel | str | Callable[[Magnet, np.ndarray], np.ndarray], magnet: Magnet,
                 points_mm: object) -> ModelAccuracy:
     """Error of ``model`` (a :class:`FieldModel` or its name, evaluated with ``rtol=None``, or a callable
     ``f(magnet, points) -> (N, 3) G``) against :func:`exact` at ``points_mm``."""
     p = _points(points_mm)
     if isinstance(model, str):
         entry = MODELS[model_name(model)]
-        func = lambda m, q: entry.func(m, q, rtol=None)  # noqa: E731
+        func = lambda m, q: entry.func(m, q, rtol=None)
     else:
         func = model
     return _errors(np.asarray(func(magnet, p)).reshape(-1, 3), exact(magnet, p))
@@ -107,7 +107,7 @@ MODELS: Mapping[str, Model] = MappingProxyType({
 })
 
 
-def model_name(model: "FieldModel | str") -> str:
+def model_name(model: FieldModel | str) -> str:
     """The registry name of ``model`` (a :class:`FieldModel` other than ``auto``, or its value)."""
     try:
         kind = FieldModel(model)

@@ -147,7 +147,7 @@ def dipole_error_estimate(magnet: Magnet, points_mm: object) -> np.ndarray:
         dip = abs(A[1]) * _multipole_magnitude(1, mu) / D**3
         rest = sum(abs(A[l]) * _multipole_magnitude(l, mu) / D ** (l + 2) for l in (3, 5))
         est = rest / dip
-    return np.where(D > magnet.circumscribed_radius_mm, est, np.inf)
+    return np.where(magnet.circumscribed_radius_mm < D, est, np.inf)
 
 
 def dipole(magnet: Magnet, points_mm: object, *, rtol: float | None = DEFAULT_RTOL) -> np.ndarray:

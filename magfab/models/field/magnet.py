@@ -6,8 +6,9 @@ Lengths in mm, remanence in T; the magnet is centred at the origin, axis on z, m
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Callable
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -52,7 +53,7 @@ class Magnet:
                 raise ValueError(f"Magnet.{name} must be a positive finite number; instead received {value!r}")
 
     @classmethod
-    def from_spec(cls, spec: "Spec", band: str = "nominal") -> "Magnet":
+    def from_spec(cls, spec: Spec, band: str = "nominal") -> Magnet:
         """The spec's magnet, its remanence from recipes/magnets.toml (``band``: low, nominal or high)."""
         from ...recipes import catalogue
 

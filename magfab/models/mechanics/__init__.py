@@ -41,8 +41,8 @@ from .mesh import _body_mesh as _body_mesh  # tests reach it here
 from .options import MaterialLaw, MechanicsModel, OnFailure, ShearEnds, ShearModel
 from .registry import MODELS, band_curves
 from .shear import SHEAR_MODELS, shear_compliance, shear_stiffness
-from .shear_surface import REST_PATCH_INDENTATION_MM, ShearLoad, ShearProbe, ShearResponse, shear_response
 from .shear import _mode1_matrix as _mode1_matrix  # tests reach it here
+from .shear_surface import REST_PATCH_INDENTATION_MM, ShearLoad, ShearProbe, ShearResponse, shear_response
 from .study import _clear_caches as _clear_caches  # cold timings in bench/ and tests
 from .study import convergence, measure
 

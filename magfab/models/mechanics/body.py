@@ -8,9 +8,10 @@ message "Input X must be ...; instead received ...".
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from enum import Enum
-from typing import TYPE_CHECKING, Mapping, Sequence, TypeVar
+from typing import TYPE_CHECKING, TypeVar
 
 import numpy as np
 
@@ -117,7 +118,7 @@ class Body:
                                      f"hemispherical cap of radius {R:g} mm")
 
     @classmethod
-    def from_design(cls, design: "Design") -> "Body":
+    def from_design(cls, design: Design) -> Body:
         """The elastomer of a :class:`magfab.design.Design` (board-frame magnet height moved to the base frame);
         the magnet's edge radius is the magnet recipe's nominal ``edge_radius_mm``, capped at what the magnet
         allows."""
@@ -162,7 +163,7 @@ class Body:
             v -= math.pi * self.magnet_radius_mm**2 * min(max(z - self.magnet_z_mm, 0.0), self.magnet_height_mm)
         return v
 
-    def scaled(self, factor: float) -> "Body":
+    def scaled(self, factor: float) -> Body:
         """The same shape with every length multiplied by ``factor``."""
         return replace(self, radius_mm=self.radius_mm * factor, height_mm=self.height_mm * factor,
                        base_height_mm=self.base_height_mm * factor,
@@ -194,7 +195,7 @@ class Curve:
     mesh_mm: float | None = None
     info: Mapping[str, object] = field(default_factory=dict)
 
-    def scaled(self, mu_kPa: float) -> "Curve":
+    def scaled(self, mu_kPa: float) -> Curve:
         """The same curve for another shear modulus: forces, stiffness and stresses scale with mu (:mod:`.registry`)."""
         k = _check_mu(mu_kPa) / self.mu_kPa
         info = dict(self.info)
@@ -245,7 +246,7 @@ def _newton_per_mu_mm2(mu_kPa: float) -> float:
 # ---- material band -----------------------------------------------------------------------------------------
 
 
-def band(material_recipe: "Recipe | str") -> tuple[float, float, float]:
+def band(material_recipe: Recipe | str) -> tuple[float, float, float]:
     """(soft, nominal, stiff) neo-Hookean shear modulus in kPa from a materials recipe (or its catalogue key)."""
     if isinstance(material_recipe, str):
         from ...recipes import catalogue

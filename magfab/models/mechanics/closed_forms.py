@@ -17,8 +17,8 @@ Evaluated in N and mm (moduli converted from kPa with :data:`magfab.units.N_PER_
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import replace
-from typing import Sequence
 
 import numpy as np
 

@@ -23,7 +23,7 @@ says where and why, for a caller that uses the failure as the range limit.
 from __future__ import annotations
 
 import math
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 

@@ -54,7 +54,7 @@ class _LDL:
     structure; ``version`` says which of its numeric factorisations this is (:attr:`valid`). If QDLDL meets a zero
     pivot, SuperLU with COLAMD takes over."""
 
-    def __init__(self, K, upper=None, owner: "_Reduction | None" = None):
+    def __init__(self, K, upper=None, owner: _Reduction | None = None):
         self.K, self.owner = K, owner
         self._lu = None
         if upper is None:

@@ -14,7 +14,6 @@ import numpy as np
 from .body import MechanicsError, check_option
 from .options import MaterialLaw
 
-
 _G0 = np.array([1.0, 0.0, 0.0, 1.0, 1.0])
 # Second derivatives of J = (F_rr F_zz - F_rz F_zr) F_thth with respect to g (a symmetric constant pattern, times
 # the entries of g listed in _HJ).

@@ -8,7 +8,7 @@ stress proportional to mu. One solve therefore gives the soft, nominal and stiff
 
 from __future__ import annotations
 
-from typing import Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 

@@ -19,7 +19,7 @@ from ...units import N_PER_KPA_MM2
 from .body import Body, MechanicsError, _check_mu, _newton_per_mu_mm2, check_option
 from .discretisation import _pattern, _scalar_p2, _sparse
 from .indentation import _factor
-from .mesh import _AXIS, _BASE, _MAGNET, _Mesh, _body_mesh, mesh_size
+from .mesh import _AXIS, _BASE, _MAGNET, _body_mesh, _Mesh, mesh_size
 from .options import ShearEnds, ShearModel
 
 __all__ = ["shear_stiffness", "shear_compliance", "SHEAR_MODELS"]

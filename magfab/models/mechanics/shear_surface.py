@@ -30,10 +30,10 @@ Lengths in mm, forces in N, mu in kPa, angles in rad.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from enum import Enum
 from functools import lru_cache
-from typing import Mapping, Sequence
 
 import numpy as np
 
@@ -92,7 +92,7 @@ class ShearResponse:
         :func:`~.shear.shear_stiffness` gives for the magnet load at rest)."""
         return 1.0 / self.displacement_mm_per_N
 
-    def scaled(self, mu_kPa: float) -> "ShearResponse":
+    def scaled(self, mu_kPa: float) -> ShearResponse:
         """The same response for another shear modulus: forces and stiffnesses scale with mu, displacements and
         tilts per newton with 1/mu, the magnet's drop not at all."""
         k = _check_mu(mu_kPa) / self.mu_kPa

@@ -109,7 +109,7 @@ class Bus:
             raise ValueError("the harness holds at most 16 chips")
         return k
 
-    def target(self, k: int) -> "Bus":
+    def target(self, k: int) -> Bus:
         """The chip (index: 0 the first, then in :meth:`add_chip` order) that the per-chip calls act on: the
         field, chip faults, address NACKs, absent, reset_in, clock_scale, register, chip_mode, conversions."""
         self._lib.bus_target(self._h, k)
@@ -127,7 +127,7 @@ class Bus:
             raise OSError("simavr cannot read the EEPROM")
         return out.raw
 
-    def __enter__(self) -> "Bus":
+    def __enter__(self) -> Bus:
         return self
 
     def __exit__(self, *exc) -> None:

@@ -25,14 +25,22 @@ every chip's field::
 """
 
 from . import _build
+from .array_sim import ArrayPressPattern, SimulatedArray
 from .calibration import Calibration, CalibrationError, calibration_sha256
-from .device import (CalibrationMismatch, CrcErrorRate, Device, DeviceError, NoData, PortNotFound, cross_check,
-                     find_port)
-from .frames import (Decoder, DecoderStats, DeviceInfo, Sample, crc16_ccitt_false, decode_frames, encode_frame,
-                     encode_info_line, encode_text_line)
+from .device import CalibrationMismatch, CrcErrorRate, Device, DeviceError, NoData, PortNotFound, cross_check, find_port
+from .frames import (
+                     Decoder,
+                     DecoderStats,
+                     DeviceInfo,
+                     Sample,
+                     crc16_ccitt_false,
+                     decode_frames,
+                     encode_frame,
+                     encode_info_line,
+                     encode_text_line,
+)
 from .simulate import PressPattern, RestTip, SimulatedDevice, TemperatureRamp
 from .taxels import ArrayCalibration, ArrayEvaluator, ArrayReader, Cycle, CycleAssembler, TaxelReading, WrongFirmware
-from .array_sim import ArrayPressPattern, SimulatedArray
 
 __version__ = _build.VERSION
 SPEC_NAME = _build.SPEC_NAME

@@ -45,18 +45,18 @@ def _device(args: argparse.Namespace, array: ArrayCalibration, text) -> Device:
 
 def _title(array: ArrayCalibration) -> str:
     return "array of {} taxels ({}), compensation {} (array.json {})".format(
-        array.taxels, " ".join("0x{:02X}".format(a) for a in array.addresses),
+        array.taxels, " ".join(f"0x{a:02X}" for a in array.addresses),
         "of the neighbours' motion" if array.dynamic else "of the neighbours at rest", array.short_hash)
 
 
 def _row(cycle: Cycle, t, raw: bool) -> str:
     time_s = t.time_s if t.time_s is not None else cycle.time_s
-    row = [_number(time_s, 10, 4, False), "{:3d}".format(cycle.seq), "{:2d}".format(t.taxel)]
+    row = [_number(time_s, 10, 4, False), f"{cycle.seq:3d}", f"{t.taxel:2d}"]
     row += [_number(f, 8, 4) for f in t.force_N] + [_number(b, 9, 2) for b in t.B_uT]
     row += [_number(t.temperature_C, 6, 2, False), t.flags, (t.fault_name or "-").replace(" ", "_")]
     if raw:
         counts = t.counts or (0, 0, 0)
-        row += ["{:6d}".format(c) for c in counts] + ["{:5d}".format(t.temperature_raw or 0)]
+        row += [f"{c:6d}" for c in counts] + [f"{t.temperature_raw or 0:5d}"]
     return "  ".join(row)
 
 
@@ -70,8 +70,7 @@ def stream(args: argparse.Namespace, array: ArrayCalibration, out) -> int:
                           "fields, and every force is the host's")
     with _device(args, array, bool(args.text)) as device:
         reader = ArrayReader(device, array)
-        out.write("# magfab-readout {}: spec {}, {}, {}\n".format(__version__, json.dumps(_build.SPEC_NAME),
-                                                                    _title(array), device.port))
+        out.write(f"# magfab-readout {__version__}: spec {json.dumps(_build.SPEC_NAME)}, {_title(array)}, {device.port}\n")
         if args.zero:
             for k, offset in enumerate(reader.zero(args.zero)):
                 out.write("# zero: taxel {} offset Fx {:+.4f} N, Fy {:+.4f} N, Fz {:+.4f} N from {} samples\n".format(
@@ -90,14 +89,12 @@ def stream(args: argparse.Namespace, array: ArrayCalibration, out) -> int:
 
 def _summary(reader: ArrayReader, n: int) -> None:
     s = reader.device.stats
-    text = "{} cycles of {} taxels; {} incomplete ({} frames missing)".format(
-        n, reader.calibration.taxels, reader.incomplete, reader.missing)
+    text = f"{n} cycles of {reader.calibration.taxels} taxels; {reader.incomplete} incomplete ({reader.missing} frames missing)"
     if reader.skipped:
-        text += ", {} left out to keep up".format(reader.skipped)
+        text += f", {reader.skipped} left out to keep up"
     if reader.cost is not None:
-        text += "; this computer takes {:.2g} ms a cycle".format(1e3 * reader.cost)
-    text += "; {} lost (sequence gaps), {} CRC errors, {} bad lines, {} bytes skipped".format(
-        s.lost, s.crc_errors, s.bad_lines, s.skipped_bytes)
+        text += f"; this computer takes {1e3 * reader.cost:.2g} ms a cycle"
+    text += f"; {s.lost} lost (sequence gaps), {s.crc_errors} CRC errors, {s.bad_lines} bad lines, {s.skipped_bytes} bytes skipped"
     print("magfab-readout: " + text, file=sys.stderr)
 
 
@@ -112,10 +109,10 @@ def record(args: argparse.Namespace, array: ArrayCalibration) -> int:
         written = skipped = 0
         stop = _Interrupt()
         warned = False
-        extra = ["# array: {}".format(_title(array)),
+        extra = [f"# array: {_title(array)}",
                  "# taxel: the chip each row was read from; Bx_uT, By_uT, Bz_uT as that chip read it (the other "
                  "magnets' field included); F*_sensor_N that taxel's force after the compensation of array.json"]
-        extra += ["# taxel {} calibration_sha256: {}".format(k, c.sha256) for k, c in enumerate(array.calibrations)]
+        extra += [f"# taxel {k} calibration_sha256: {c.sha256}" for k, c in enumerate(array.calibrations)]
         with open(args.out, "w", encoding="utf-8", newline="") as f:
             _record_header(f, device, info, columns, extra)
             with stop:
@@ -128,8 +125,8 @@ def record(args: argparse.Namespace, array: ArrayCalibration) -> int:
                     stop.writing = False
                     if reader.lag_s > RECORD_LAG_WARNING_S and not warned:
                         warned = True
-                        print("magfab-readout: warning: this computer falls behind the board ({:.2g} ms a cycle): "
-                              "the recording keeps every cycle, late".format(1e3 * (reader.cost or 0.0)), file=sys.stderr)
+                        print(f"magfab-readout: warning: this computer falls behind the board ({1e3 * (reader.cost or 0.0):.2g} ms a cycle): "
+                              "the recording keeps every cycle, late", file=sys.stderr)
                     if stop.requested:
                         break
         print("magfab-readout: wrote {} rows to {}{} ({} chip-error or missing readings left out)".format(
@@ -168,12 +165,11 @@ def _checked_info(device: Device, array: ArrayCalibration, info=None):
 def info(args: argparse.Namespace, array: ArrayCalibration, out) -> int:
     with _device(args, array, None) as device:
         line = device.info()
-        out.write("device:  {}\n".format(line.line))
+        out.write(f"device:  {line.line}\n")
         out.write("  spec {}, calibration {}, gain_sel {}, resolution {}, osr {}, dig_filt {}, {} taxel(s)\n".format(
             json.dumps(line.spec_name), line.calibration_hash, *line.settings, line.taxels))
-        out.write("package: magfab-readout {}, spec {}, calibration {}\n".format(
-            __version__, json.dumps(_build.SPEC_NAME), device.calibration.short_hash))
-        out.write("array:   {}\n".format(_title(array)))
+        out.write(f"package: magfab-readout {__version__}, spec {json.dumps(_build.SPEC_NAME)}, calibration {device.calibration.short_hash}\n")
+        out.write(f"array:   {_title(array)}\n")
         for t, cal in zip(array.layout, array.calibrations):
             straps = t.get("address_straps") or ["?", "?"]
             out.write("  taxel {:2d}  at x {:+6.1f} y {:+6.1f} mm  address 0x{:02X}  option code {}  A1 {} A0 {}  "
@@ -201,11 +197,10 @@ def upload(args: argparse.Namespace, array: ArrayCalibration, out) -> int:
             raise UploadFailed("the EEPROM read back differs from the array record written")
         if last.record != 0:
             raise UploadFailed("the board does not accept the array record (a firmware older than record version "
-                               "{}?)".format(eeprom.VERSION_ARRAY))
+                               f"{eeprom.VERSION_ARRAY}?)")
         return _checked_info(device, array)
     info = at_fallback_baud(args, out, lambda a: _device(a, array, None), write)
-    out.write("uploaded {} bytes, read back equal; the board reads {} chips (spec {}, calibration {})\n".format(
-        len(record), info.taxels, json.dumps(info.spec_name), info.calibration_hash))
+    out.write(f"uploaded {len(record)} bytes, read back equal; the board reads {info.taxels} chips (spec {json.dumps(info.spec_name)}, calibration {info.calibration_hash})\n")
     return 0
 
 

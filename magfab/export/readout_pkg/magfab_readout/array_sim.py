@@ -18,8 +18,16 @@ import math
 from typing import List, Optional, Sequence, Tuple
 
 from . import _build, eeprom
-from .frames import (FIELD_FRAME_LENGTH, STATUS_CHIP_ERROR, STATUS_FULL_SCALE, STATUS_RECOVERED, encode_field_frame,
-                     encode_field_line, encode_info_line, temperature_C)
+from .frames import (
+    FIELD_FRAME_LENGTH,
+    STATUS_CHIP_ERROR,
+    STATUS_FULL_SCALE,
+    STATUS_RECOVERED,
+    encode_field_frame,
+    encode_field_line,
+    encode_info_line,
+    temperature_C,
+)
 from .simulate import GOLDEN_ANGLE, SIMULATED_FAULT, SimulatedDevice, _temperature_raw
 from .taxels import ArrayCalibration
 

@@ -31,8 +31,16 @@ import json
 import math
 import pkgutil
 
-from .calibration_json import (FORCES, FORMAT, CalibrationError, calibration_sha256, canonical_json, cross,
-                               monomials, validate)
+from .calibration_json import (
+    FORCES,
+    FORMAT,
+    CalibrationError,
+    calibration_sha256,
+    canonical_json,
+    cross,
+    monomials,
+    validate,
+)
 
 __all__ = ["FORMAT", "Calibration", "CalibrationError", "canonical_json", "calibration_sha256", "monomials"]
 
@@ -100,22 +108,22 @@ class Calibration:
     # --- construction -------------------------------------------------------------------------------------
 
     @classmethod
-    def from_json(cls, text: str) -> "Calibration":
+    def from_json(cls, text: str) -> Calibration:
         """Parse calibration.json text."""
         try:
             data = json.loads(text)
         except ValueError as exc:
-            raise CalibrationError("", text[:40], "is not valid JSON ({})".format(exc)) from None
+            raise CalibrationError("", text[:40], f"is not valid JSON ({exc})") from None
         return cls(data)
 
     @classmethod
-    def load(cls, path: str) -> "Calibration":
+    def load(cls, path: str) -> Calibration:
         """Read a calibration.json file."""
         with open(path, encoding="utf-8") as f:
             return cls.from_json(f.read())
 
     @classmethod
-    def embedded(cls) -> "Calibration":
+    def embedded(cls) -> Calibration:
         """The calibration this package was built with (the package's calibration.json)."""
         raw = pkgutil.get_data("magfab_readout", "calibration.json")
         if raw is None:
@@ -126,7 +134,7 @@ class Calibration:
         """A fresh copy of the calibration as a JSON-ready dict."""
         return json.loads(self._json)
 
-    def with_tare(self, Fz_N: float, Fr_N: float) -> "Calibration":
+    def with_tare(self, Fz_N: float, Fr_N: float) -> Calibration:
         """The same calibration with ``tare_N`` replaced (the model's Fz and Fr at rest, before any tare)."""
         data = self.to_dict()
         data["tare_N"] = {"Fz_N": float(Fz_N), "Fr_N": float(Fr_N)}
@@ -164,7 +172,7 @@ class Calibration:
     def _method_of(self, method) -> str:
         method = self._method if method is None else method
         if method not in ("poly", "mls"):
-            raise ValueError("method must be 'poly', 'mls' or None; instead received {!r}".format(method))
+            raise ValueError(f"method must be 'poly', 'mls' or None; instead received {method!r}")
         if method == "mls" and self._mls is None:
             raise ValueError("method 'mls' asked of a calibration without an 'mls' model")
         return method
@@ -266,4 +274,4 @@ class Calibration:
         return self.in_region(Bz_uT, math.hypot(float(Bx_uT), float(By_uT)))
 
     def __repr__(self) -> str:
-        return "Calibration(order={}, method={!r}, sha256={}...)".format(self._order, self.method, self.short_hash)
+        return f"Calibration(order={self._order}, method={self.method!r}, sha256={self.short_hash}...)"

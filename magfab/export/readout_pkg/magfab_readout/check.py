@@ -73,7 +73,7 @@ def load_acceptance() -> Optional[dict]:
     try:
         return acceptance_json.loads(raw)
     except acceptance_json.AcceptanceError as exc:
-        raise DeviceError("the package's {}: reinstall the readout package from the same magfab build".format(exc)) from None
+        raise DeviceError(f"the package's {exc}: reinstall the readout package from the same magfab build") from None
 
 
 class Bands:
@@ -91,7 +91,7 @@ class Bands:
             self.max_weight_g = float(weight["max_weight_g"])
             table = weight["table"]
             self.force = [float(x) for x in table["force_N"]]
-            self.delta = {k: [float(x) for x in table["delta_Bz_{}_uT".format(k)]] for k in ("min", "nominal", "max")}
+            self.delta = {k: [float(x) for x in table[f"delta_Bz_{k}_uT"]] for k in ("min", "nominal", "max")}
             self.noise_z = float(data["measurement"]["noise_z_uT"])
             self.noise_xy = float(data["measurement"]["noise_xy_uT"])
             self.sigmas = float(data["measurement"]["allowance_sigmas"])
@@ -102,15 +102,15 @@ class Bands:
             self.rotation = data.get("rotation")  # validated whole when present (acceptance_json.SECTIONS)
             self.warmup = data.get("warmup")
         except (KeyError, TypeError, ValueError, AttributeError) as exc:  # the optional grade tables
-            raise DeviceError("the package's acceptance.json garbles {}: reinstall the readout package from "
-                              "the magfab build".format(exc)) from None
+            raise DeviceError(f"the package's acceptance.json garbles {exc}: reinstall the readout package from "
+                              "the magfab build") from None
 
     def rise(self, grams: float) -> Tuple[float, float, float]:
         """(min, nominal, max) predicted rise of Bz in uT under ``grams`` on the tip (linear in the table)."""
         f = grams * G0 / 1000.0
         xs = self.force
         if not (xs[0] <= f <= xs[-1] + 1e-9):
-            raise UsageError("--weight-g {:g}: the prediction covers weights up to {:.0f} g".format(grams, self.max_weight_g))
+            raise UsageError(f"--weight-g {grams:g}: the prediction covers weights up to {self.max_weight_g:.0f} g")
         k = max(1, min(len(xs) - 1, next((i for i, x in enumerate(xs) if x >= f), len(xs) - 1)))
         t = (f - xs[k - 1]) / (xs[k] - xs[k - 1])
         return tuple(self.delta[c][k - 1] + t * (self.delta[c][k] - self.delta[c][k - 1])  # type: ignore[return-value]
@@ -147,8 +147,8 @@ def _mean_reading(device: Device, count: int) -> _Reading:
         if sample.chip_error or not all(math.isfinite(b) for b in sample.B_uT):
             skipped += 1
             if skipped > 10 * count + 100:
-                raise DeviceError("{} samples from {} were chip errors: check the sensor board's wiring and "
-                                  "supply".format(skipped, device.port))
+                raise DeviceError(f"{skipped} samples from {device.port} were chip errors: check the sensor board's wiring and "
+                                  "supply")
             continue
         full += bool(sample.full_scale)
         temperature = sample.temperature_C if sample.temperature_C is not None else math.nan
@@ -201,11 +201,11 @@ class _Steps:
             self.out.write("verdict: FAIL (step{} {} of {})\n".format("s" if len(failed) > 1 else "",
                                                                       ", ".join(map(str, failed)), len(self.results)))
             return 1
-        self.out.write("verdict: PASS (all {} steps)\n".format(len(self.results)))
+        self.out.write(f"verdict: PASS (all {len(self.results)} steps)\n")
         return 0
 
 
-def _check_options(args: argparse.Namespace, bands: "Bands", data: dict):
+def _check_options(args: argparse.Namespace, bands: Bands, data: dict):
     """The weight, its predicted rise and the simulated tip the options ask for; UsageError when they clash."""
     if args.samples < 1:
         raise UsageError("--samples must be at least 1")
@@ -227,12 +227,12 @@ def _check_options(args: argparse.Namespace, bands: "Bands", data: dict):
     return weight, rise, pattern
 
 
-def _drift_options(args: argparse.Namespace, bands: "Bands") -> None:
+def _drift_options(args: argparse.Namespace, bands: Bands) -> None:
     """UsageError for --rotation, --warmup and their options where this package or build cannot run them."""
     for wanted, section, name in ((args.rotation, bands.rotation, "--rotation"), (args.warmup, bands.warmup, "--warmup")):
         if wanted and section is None:
-            raise UsageError("{}: this package's acceptance.json has no band for it (a build before magfab had one, "
-                             "or a design without a drift budget): rebuild with magfab build".format(name))
+            raise UsageError(f"{name}: this package's acceptance.json has no band for it (a build before magfab had one, "
+                             "or a design without a drift budget): rebuild with magfab build")
     if args.warmup and not _build.TEMPERATURE_ENABLED:
         raise UsageError("--warmup needs the chip's temperature, which this build's firmware does not read "
                          "(firmware.temperature = false)")
@@ -268,65 +268,62 @@ def run(args: argparse.Namespace, out, open_device) -> int:
     return steps.verdict()
 
 
-def _check_header(out, device, bands: "Bands", weight: float, rise, n: int) -> None:
+def _check_header(out, device, bands: Bands, weight: float, rise, n: int) -> None:
     lo, nom, hi = bands.rest
-    out.write("# magfab-readout {} check: spec {}, calibration {}, {}\n".format(
-        __version__, json.dumps(_build.SPEC_NAME), device.calibration.short_hash, device.port))
+    out.write(f"# magfab-readout {__version__} check: spec {json.dumps(_build.SPEC_NAME)}, calibration {device.calibration.short_hash}, {device.port}\n")
     out.write("# predicted (worst case over the magnet, material and assembly tolerances; magfab acceptance.json):\n"
-              "#   Bz at rest {:.0f} .. {:.0f} uT (nominal {:.0f}), positive with the north pole away from the "
-              "chip; |Bxy| at rest <= {:.0f} uT\n".format(lo, hi, nom, bands.bxy_max))
+              f"#   Bz at rest {lo:.0f} .. {hi:.0f} uT (nominal {nom:.0f}), positive with the north pole away from the "
+              f"chip; |Bxy| at rest <= {bands.bxy_max:.0f} uT\n")
     if rise is not None:
-        out.write("#   a {:g} g weight on the tip raises Bz by {:.0f} .. {:.0f} uT (nominal {:.0f})\n".format(
-            weight, rise[0], rise[2], rise[1]))
-    out.write("# reading {} samples with nothing touching the tip\n".format(n))
+        out.write(f"#   a {weight:g} g weight on the tip raises Bz by {rise[0]:.0f} .. {rise[2]:.0f} uT (nominal {rise[1]:.0f})\n")
+    out.write(f"# reading {n} samples with nothing touching the tip\n")
     out.flush()
 
 
 def _check_polarity(steps: _Steps, bz: float, floor: float) -> None:
     """Step 1, the sign: an upside-down magnet reads the same field negated."""
     if bz > floor:
-        steps.report("polarity (sign of Bz)", True, "measured {:+.0f} uT: positive, the north pole faces away from the "
-                     "chip as designed".format(bz))
+        steps.report("polarity (sign of Bz)", True, f"measured {bz:+.0f} uT: positive, the north pole faces away from the "
+                     "chip as designed")
     elif bz < -floor:
-        steps.report("polarity (sign of Bz)", False, "measured {:+.0f} uT: negative, the magnet is upside down (its "
-                     "north pole faces the chip); push it out of the pocket and turn it over".format(bz))
+        steps.report("polarity (sign of Bz)", False, f"measured {bz:+.0f} uT: negative, the magnet is upside down (its "
+                     "north pole faces the chip); push it out of the pocket and turn it over")
     else:
-        steps.report("polarity (sign of Bz)", False, "measured {:+.0f} uT: no field from the magnet (|Bz| under {:.0f} "
-                     "uT); is there a magnet in the fingertip, and is the fingertip on the chip?".format(bz, floor))
+        steps.report("polarity (sign of Bz)", False, f"measured {bz:+.0f} uT: no field from the magnet (|Bz| under {floor:.0f} "
+                     "uT); is there a magnet in the fingertip, and is the fingertip on the chip?")
 
 
-def _check_rest(steps: _Steps, out, bands: "Bands", bz: float, full: int, allow: float) -> None:
+def _check_rest(steps: _Steps, out, bands: Bands, bz: float, full: int, allow: float) -> None:
     """Step 2, the field at rest against the predicted band, and the remanence it implies."""
     lo, nom, hi = bands.rest
-    text = "measured {:+.0f} uT, predicted {:.0f} .. {:.0f} uT (nominal {:.0f})".format(bz, lo, hi, nom)
+    text = f"measured {bz:+.0f} uT, predicted {lo:.0f} .. {hi:.0f} uT (nominal {nom:.0f})"
     if full:
-        steps.report("Bz at rest", False, text + ": {} samples had an axis at the chip's full scale (magnet far too "
-                     "close or too strong)".format(full))
+        steps.report("Bz at rest", False, text + f": {full} samples had an axis at the chip's full scale (magnet far too "
+                     "close or too strong)")
     elif lo - allow <= bz <= hi + allow:
         steps.report("Bz at rest", True, text)
     elif bz < 0 and lo - allow <= -bz <= hi + allow:
         steps.report("Bz at rest", False, text + ": the magnet is upside down (|Bz| is inside the band)")
     elif bz > hi + allow:
-        steps.report("Bz at rest", False, text + ": stronger than predicted - a stronger grade than {}, a bigger "
-                     "magnet, or the magnet closer to the chip (not pushed home, thin pad or glue)".format(bands.grade))
+        steps.report("Bz at rest", False, text + f": stronger than predicted - a stronger grade than {bands.grade}, a bigger "
+                     "magnet, or the magnet closer to the chip (not pushed home, thin pad or glue)")
     else:
         steps.report("Bz at rest", False, text + ": weaker than predicted - a weaker or partly demagnetised magnet "
                      "(heated above 80 C?), a smaller magnet, or the magnet further from the chip (thick glue, pad "
                      "not seated)")
     if abs(bz) > allow + bands.earth:
         implied = abs(bz) / nom * bands.remanence[1]
-        note = "#   at the nominal stack-up this field means a remanence of {:.2f} T ({} is {:.2f} .. {:.2f} T)".format(
-            implied, bands.grade, bands.remanence[0], bands.remanence[2])
+        note = f"#   at the nominal stack-up this field means a remanence of {implied:.2f} T ({bands.grade} is {bands.remanence[0]:.2f} .. {bands.remanence[2]:.2f} T)"
         if len(bands.inside) > 1 and steps.results[-1][1]:
             note += "; the band also holds the nominal field of grades {}: it cannot tell those apart".format(
                 ", ".join(g for g in bands.inside if g != bands.grade))
         out.write(note + "\n")
 
 
-def _check_lateral(steps: _Steps, bands: "Bands", bx: float, by: float, allow_xy: float) -> None:
+def _check_lateral(steps: _Steps, bands: Bands, bx: float, by: float, allow_xy: float) -> None:
     """Step 3, the lateral field at rest: the magnet on the chip's axis and level."""
     bxy = math.hypot(bx, by)
-    text = "measured {:.0f} uT, predicted at most {:.0f} uT".format(bxy, bands.bxy_max)
+    text = f"measured {bxy:.0f} uT, predicted at most {bands.bxy_max:.0f} uT"
     if bxy <= bands.bxy_max + allow_xy:
         steps.report("|Bxy| at rest", True, text)
     else:
@@ -334,22 +331,22 @@ def _check_lateral(steps: _Steps, bands: "Bands", bx: float, by: float, allow_xy
                      "its pins and the fingertip in the lip), or a magnetic object is near")
 
 
-def _check_weight(steps: _Steps, out, args: argparse.Namespace, device, bands: "Bands", weight: float, rise,
+def _check_weight(steps: _Steps, out, args: argparse.Namespace, device, bands: Bands, weight: float, rise,
                   bz: float) -> None:
     """Step 4, the known weight: the rise of Bz against the band the material and magnet predict."""
     n = args.samples
-    _ask("place the {:g} g weight on the tip, centred, with nothing else touching".format(weight), args.yes)
+    _ask(f"place the {weight:g} g weight on the tip, centred, with nothing else touching", args.yes)
     if args.simulate:
         device.transport.place_weight(weight)
     _settle(device, args.settle)
-    out.write("# reading {} samples with {:g} g on the tip\n".format(n, weight))
+    out.write(f"# reading {n} samples with {weight:g} g on the tip\n")
     (_, _, bz_w), full_w = _mean_field(device, n)
     delta = bz_w - bz
     allow_d = bands.sigmas * bands.noise_z * math.sqrt(2.0 / n) + _build.LSB_Z_UT
-    name = "rise of Bz under {:g} g".format(weight)
-    text = "measured {:+.0f} uT, predicted {:.0f} .. {:.0f} uT (nominal {:.0f})".format(delta, rise[0], rise[2], rise[1])
+    name = f"rise of Bz under {weight:g} g"
+    text = f"measured {delta:+.0f} uT, predicted {rise[0]:.0f} .. {rise[2]:.0f} uT (nominal {rise[1]:.0f})"
     if full_w:
-        steps.report(name, False, text + ": {} samples had an axis at the chip's full scale".format(full_w))
+        steps.report(name, False, text + f": {full_w} samples had an axis at the chip's full scale")
     elif rise[0] - allow_d <= delta <= rise[2] + allow_d:
         steps.report(name, True, text)
     elif delta < -allow_d:
@@ -368,7 +365,7 @@ def _check_weight(steps: _Steps, out, args: argparse.Namespace, device, bands: "
         device.transport.place_weight(0.0)
 
 
-def _check_rotation(steps: _Steps, out, args: argparse.Namespace, device, bands: "Bands") -> None:
+def _check_rotation(steps: _Steps, out, args: argparse.Namespace, device, bands: Bands) -> None:
     """The turn-over step: the field change against the Earth's field turned over and the fingertip's own weight
     reversed (acceptance.json ``rotation``), and the force it is worth against the drift budget's."""
     rot, n = bands.rotation, args.samples
@@ -380,7 +377,7 @@ def _check_rotation(steps: _Steps, out, args: argparse.Namespace, device, bands:
     if args.simulate:
         device.transport.turn(True)
     _settle(device, args.settle)
-    out.write("# reading {} samples turned upside down\n".format(n))
+    out.write(f"# reading {n} samples turned upside down\n")
     turned = _mean_reading(device, n)
     if args.simulate:
         device.transport.turn(False)
@@ -405,9 +402,9 @@ def _check_rotation(steps: _Steps, out, args: argparse.Namespace, device, bands:
     else:
         travel_um = 1000.0 * abs(dB[2]) / rot["gradient_uT_per_mm"]
         steps.report(name, False, text + ": more than the Earth's field and the fingertip's weight can change - the "
-                     "magnet moved ({:.0f} um at the rest gradient): loose in its pocket, shifting under its own "
+                     f"magnet moved ({travel_um:.0f} um at the rest gradient): loose in its pocket, shifting under its own "
                      "weight (glue it in), or steel or magnetised parts near the sensor turned with it (screws, a "
-                     "clamp, a steel bench: move them away and repeat)".format(travel_um))
+                     "clamp, a steel bench: move them away and repeat)")
 
 
 def _warm(device, args: argparse.Namespace, start_C: float, least_C: float):
@@ -424,7 +421,7 @@ def _warm(device, args: argparse.Namespace, start_C: float, least_C: float):
             return reading, waited, rise >= least_C
         if reading.time_s - reported >= 10.0:
             reported = reading.time_s
-            sys.stderr.write("chip at {:.1f} C (+{:.1f} C of the {:g} C needed)\n".format(start_C + rise, rise, least_C))
+            sys.stderr.write(f"chip at {start_C + rise:.1f} C (+{rise:.1f} C of the {least_C:g} C needed)\n")
             sys.stderr.flush()
 
 
@@ -438,7 +435,7 @@ def _thermal_case(device) -> Tuple[str, str]:
     return "with", "the recipe's thermal coefficients"
 
 
-def _check_warmup(steps: _Steps, out, args: argparse.Namespace, device, bands: "Bands") -> None:
+def _check_warmup(steps: _Steps, out, args: argparse.Namespace, device, bands: Bands) -> None:
     """The warm-up step: the rest force's change against the drift budget's compensated figure per degree times
     the warming (acceptance.json ``warmup``)."""
     w, n = bands.warmup, args.samples
@@ -446,13 +443,12 @@ def _check_warmup(steps: _Steps, out, args: argparse.Namespace, device, bands: "
     _ask("warm-up: nothing touching the tip, the sensor where it will stay", args.yes)
     _settle(device, args.settle)
     cold = _mean_reading(device, n)
-    _ask("warm the sensor by at least {:g} C with nothing touching the tip: hold the board (not the fingertip) in "
-         "your hand, or power it up from cold; warm it evenly, so the magnet keeps up with the chip".format(least),
+    _ask(f"warm the sensor by at least {least:g} C with nothing touching the tip: hold the board (not the fingertip) in "
+         "your hand, or power it up from cold; warm it evenly, so the magnet keeps up with the chip",
          args.yes)
     if args.simulate:
         device.transport.warm(args.simulate_warm if args.simulate_warm is not None else least + 1.0)
-    out.write("# waiting for the chip to warm by {:g} C from {:.1f} C (at most {:g} s)\n".format(
-        least, cold.temperature, args.warmup_seconds))
+    out.write(f"# waiting for the chip to warm by {least:g} C from {cold.temperature:.1f} C (at most {args.warmup_seconds:g} s)\n")
     out.flush()
     warm, waited, warmed = _warm(device, args, cold.temperature, least)
     dT = warm.temperature - cold.temperature
@@ -467,8 +463,8 @@ def _check_warmup(steps: _Steps, out, args: argparse.Namespace, device, bands: "
             "rest over the budget's)").format(dF, dT, dF / dT if dT else math.nan, band, per_C, what,
                                               float(w["per_C_mN"]["without"]) * k, k)
     if not warmed:
-        steps.report(name, False, text + ": the chip warmed by only {:.1f} C in {:.0f} s - warm it by at least {:g} C "
-                     "(or give --warmup-seconds more) and repeat".format(dT, waited, least))
+        steps.report(name, False, text + f": the chip warmed by only {dT:.1f} C in {waited:.0f} s - warm it by at least {least:g} C "
+                     "(or give --warmup-seconds more) and repeat")
     elif abs(dF) <= band:
         steps.report(name, True, text)
     else:

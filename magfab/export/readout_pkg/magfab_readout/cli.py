@@ -45,7 +45,7 @@ def _parser() -> argparse.ArgumentParser:
                      help="fraction of simulated frames with a flipped bit (to see the CRC checks at work)")
     sim.add_argument("--simulate-warm", type=float, metavar="C",
                      help="the simulated chip warms by C degrees (stream, record: from the first second on, "
-                     "{:g} C/s; check: when the warm-up step asks)".format(WARM_RATE_C_PER_S))
+                     f"{WARM_RATE_C_PER_S:g} C/s; check: when the warm-up step asks)")
     sim.add_argument("--simulate-no-thermal", action="store_true",
                      help="the simulated board runs the calibration without its temperature correction (the "
                      "field still follows the temperature: a board with an old calibration record, whose hash "
@@ -53,10 +53,10 @@ def _parser() -> argparse.ArgumentParser:
 
     parser = argparse.ArgumentParser(
         prog="magfab-readout",
-        description="Host readout for the magfab tactile sensor built from spec {}.".format(json.dumps(_build.SPEC_NAME)),
+        description=f"Host readout for the magfab tactile sensor built from spec {json.dumps(_build.SPEC_NAME)}.",
     )
     parser.add_argument("--version", action="version",
-                        version="magfab-readout {} (calibration {})".format(__version__, _build.CALIBRATION_SHA256[:16]))
+                        version=f"magfab-readout {__version__} (calibration {_build.CALIBRATION_SHA256[:16]})")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     stream = commands.add_parser("stream", parents=[common], help="print calibrated forces as they arrive",
@@ -147,8 +147,7 @@ def _stream(args: argparse.Namespace, out) -> int:
     if args.raw and args.text:
         raise DeviceError("--raw needs binary frames: text lines carry microtesla, not raw counts")
     with _device(args, text=bool(args.text)) as device:
-        out.write("# magfab-readout {}: spec {}, calibration {}, {}\n".format(
-            __version__, json.dumps(_build.SPEC_NAME), device.calibration.short_hash, device.port))
+        out.write(f"# magfab-readout {__version__}: spec {json.dumps(_build.SPEC_NAME)}, calibration {device.calibration.short_hash}, {device.port}\n")
         if args.zero:
             offset = device.zero(args.zero)
             out.write("# zero: offset Fx {:+.4f} N, Fy {:+.4f} N, Fz {:+.4f} N from {} samples\n".format(
@@ -164,18 +163,18 @@ def _stream(args: argparse.Namespace, out) -> int:
         rest = _rest_tracker(device)
         for sample in device.samples(count=args.count, seconds=args.seconds):
             rest.add(sample)
-            row = [_number(sample.time_s, 10, 4, False), "{:3d}".format(sample.seq)]
+            row = [_number(sample.time_s, 10, 4, False), f"{sample.seq:3d}"]
             row += [_number(f, 8, 4) for f in sample.force_N]
             row += [_number(b, 9, 2) for b in sample.B_uT]
             row += [_number(sample.temperature_C, 6, 2, False), sample.flags,
                     (sample.fault_name or "-").replace(" ", "_")]
             if args.raw:
                 counts = sample.counts or (0, 0, 0)
-                row += ["{:6d}".format(c) for c in counts] + ["{:5d}".format(sample.temperature_raw or 0)]
+                row += [f"{c:6d}" for c in counts] + [f"{sample.temperature_raw or 0:5d}"]
             if args.check:
                 diff = cross_check(sample, device.calibration)
                 worst = max(worst, diff) if not math.isnan(diff) else worst
-                row.append("{:.2e}".format(diff) if not math.isnan(diff) else "nan")
+                row.append(f"{diff:.2e}" if not math.isnan(diff) else "nan")
             out.write("  ".join(row) + "\n")
             n += 1
         _summary(device, n, worst if args.check else None, rest)
@@ -191,10 +190,10 @@ def _rest_tracker(device: Device) -> RestTracker:
 
 def _summary(device: Device, n: int, worst: Optional[float], rest: Optional[RestTracker] = None) -> None:
     s = device.stats
-    text = ("{} samples; {} lost (sequence gaps), {} CRC errors, {} bad lines, {} refused values, {} bytes "
-            "skipped").format(n, s.lost, s.crc_errors, s.bad_lines, s.refused, s.skipped_bytes)
+    text = (f"{n} samples; {s.lost} lost (sequence gaps), {s.crc_errors} CRC errors, {s.bad_lines} bad lines, {s.refused} refused values, {s.skipped_bytes} bytes "
+            "skipped")
     if worst is not None:
-        text += "; host vs firmware force: max |dF| = {:.3g} N".format(worst)
+        text += f"; host vs firmware force: max |dF| = {worst:.3g} N"
     print("magfab-readout: " + text, file=sys.stderr)
     if rest is not None:
         print("magfab-readout: " + rest.summary(), file=sys.stderr)
@@ -215,7 +214,7 @@ class _Interrupt:
         if not self.writing:
             raise KeyboardInterrupt
 
-    def __enter__(self) -> "_Interrupt":
+    def __enter__(self) -> _Interrupt:
         try:
             self._previous = signal.signal(signal.SIGINT, self)
         except ValueError:  # not the main thread: Ctrl-C stays a KeyboardInterrupt, ended here
@@ -229,12 +228,11 @@ class _Interrupt:
 
 
 def _record_header(f, device, info, columns: List[str], extra: Tuple[str, ...] = ()) -> None:
-    f.write("# magfab-readout {} record\n".format(__version__))
-    f.write("# spec: {}\n".format(json.dumps(_build.SPEC_NAME)))
-    f.write("# calibration_sha256: {}\n".format(device.calibration.sha256))
-    f.write("# device: {}\n".format(json.dumps(info.line)))
-    f.write("# chip: gain_sel={} resolution={} osr={} dig_filt={} lsb_xy_uT={!r} lsb_z_uT={!r}\n".format(
-        _build.GAIN_SEL, _build.RESOLUTION, _build.OSR, _build.DIG_FILT, _build.LSB_XY_UT, _build.LSB_Z_UT))
+    f.write(f"# magfab-readout {__version__} record\n")
+    f.write(f"# spec: {json.dumps(_build.SPEC_NAME)}\n")
+    f.write(f"# calibration_sha256: {device.calibration.sha256}\n")
+    f.write(f"# device: {json.dumps(info.line)}\n")
+    f.write(f"# chip: gain_sel={_build.GAIN_SEL} resolution={_build.RESOLUTION} osr={_build.OSR} dig_filt={_build.DIG_FILT} lsb_xy_uT={_build.LSB_XY_UT!r} lsb_z_uT={_build.LSB_Z_UT!r}\n")
     f.write("# time_s: the device's clock; host_time_s: this computer's clock (Unix time, s) when the sample was read\n")
     f.write("# Fx_sensor_N, Fy_sensor_N, Fz_sensor_N: this sensor's own calibrated force, not a reference; to "
             "calibrate, log a reference force sensor during the scan with time_s on this computer's clock (Unix "
@@ -284,14 +282,13 @@ def _record(args: argparse.Namespace) -> int:
 def _info(args: argparse.Namespace, out) -> int:
     with _device(args, text=None) as device:
         info = device.info()
-        out.write("device:  {}\n".format(info.line))
+        out.write(f"device:  {info.line}\n")
         out.write("  spec {}, calibration {}, gain_sel {}, resolution {}, osr {}, dig_filt {}\n".format(
             json.dumps(info.spec_name), info.calibration_hash, *info.settings))
-        out.write("package: magfab-readout {}, spec {}, calibration {}\n".format(
-            __version__, json.dumps(_build.SPEC_NAME), device.calibration.short_hash))
+        out.write(f"package: magfab-readout {__version__}, spec {json.dumps(_build.SPEC_NAME)}, calibration {device.calibration.short_hash}\n")
         warnings = device.check_info(info)
         for warning in warnings:
-            out.write("warning: {}\n".format(warning))
+            out.write(f"warning: {warning}\n")
         out.write("calibration: match\n")
     return 0
 
@@ -305,8 +302,7 @@ def at_fallback_baud(args: argparse.Namespace, out, open_device, action):
     except NoData:
         if args.simulate or args.baud == eeprom.FALLBACK_BAUD:
             raise
-        out.write("no answer at {} baud; trying {} baud (a board without a calibration)\n".format(
-            args.baud, eeprom.FALLBACK_BAUD))
+        out.write(f"no answer at {args.baud} baud; trying {eeprom.FALLBACK_BAUD} baud (a board without a calibration)\n")
         with open_device(argparse.Namespace(**{**vars(args), "baud": eeprom.FALLBACK_BAUD})) as device:
             return action(device)
 
@@ -317,13 +313,12 @@ def _upload(args: argparse.Namespace, out) -> int:
             with open(args.calibration, encoding="utf-8") as handle:
                 data = json.load(handle)
         except ValueError as exc:
-            raise CalibrationError("", args.calibration, "is not valid JSON ({})".format(exc)) from None
+            raise CalibrationError("", args.calibration, f"is not valid JSON ({exc})") from None
     else:
         data = json.loads(pkgutil.get_data("magfab_readout", "calibration.json").decode("utf-8"))  # type: ignore[union-attr]
     record = calibration_record(data)
     info = at_fallback_baud(args, out, lambda a: _device(a, text=None), lambda device: device.upload(data))
-    out.write("uploaded {} bytes, read back equal; the board runs calibration {} (spec {})\n".format(
-        len(record), info.calibration_hash, json.dumps(info.spec_name)))
+    out.write(f"uploaded {len(record)} bytes, read back equal; the board runs calibration {info.calibration_hash} (spec {json.dumps(info.spec_name)})\n")
     return 0
 
 
@@ -352,10 +347,10 @@ def main(argv: Optional[List[str]] = None) -> int:
         os.dup2(devnull, sys.stdout.fileno())  # stdout's reader went away (| head): stop quietly
         return 0
     except check.UsageError as exc:
-        print("magfab-readout: error: {}".format(exc), file=sys.stderr)
+        print(f"magfab-readout: error: {exc}", file=sys.stderr)
         return 2
     except (DeviceError, CalibrationError, OSError) as exc:
-        print("magfab-readout: error: {}".format(exc), file=sys.stderr)
+        print(f"magfab-readout: error: {exc}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         return 130

@@ -14,9 +14,8 @@ import time
 from collections import deque
 from typing import Deque, Iterator, List, Optional, Tuple, Union
 
-from . import _build
+from . import _build, eeprom
 from .calibration import Calibration
-from . import eeprom
 from .calibration_json import calibration_sha256
 from .calibration_json import validate as validate_calibration
 from .frames import Decoder, DeviceInfo, EepromReply, Sample
@@ -88,13 +87,13 @@ def _ports() -> list:
 def _describe(ports: list) -> str:
     if not ports:
         return "none"
-    return ", ".join("{} ({})".format(p.device, p.description) if p.description and p.description != "n/a" else p.device
+    return ", ".join(f"{p.device} ({p.description})" if p.description and p.description != "n/a" else p.device
                      for p in ports)
 
 
 def _import_serial():
     try:
-        import serial  # noqa: F401
+        import serial
     except ImportError:
         raise DeviceError("pyserial is not installed: pip install pyserial (or try the simulated device with --simulate)") from None
     return serial
@@ -108,10 +107,9 @@ def find_port() -> str:
     if len(usb) == 1:
         return usb[0].device
     if not usb:
-        raise PortNotFound("no USB serial port found (other ports: {}): plug the board in, or pass --port or set {} "
-                           "(or try --simulate)".format(_describe(ports), PORT_VARIABLE))
-    raise PortNotFound("several USB serial ports found: {}; choose one with --port or {}".format(
-        _describe(usb), PORT_VARIABLE))
+        raise PortNotFound(f"no USB serial port found (other ports: {_describe(ports)}): plug the board in, or pass --port or set {PORT_VARIABLE} "
+                           "(or try --simulate)")
+    raise PortNotFound(f"several USB serial ports found: {_describe(usb)}; choose one with --port or {PORT_VARIABLE}")
 
 
 def _named_port() -> str:
@@ -142,12 +140,12 @@ class SerialTransport:
                     available = _describe(_ports())
                 except Exception:  # listing ports is only a courtesy in this message
                     available = "unknown"
-                raise PortNotFound("serial port {!r} not found (available: {}); pass --port, or try --simulate"
-                                   .format(port, available)) from None
+                raise PortNotFound(f"serial port {port!r} not found (available: {available}); pass --port, or try --simulate"
+                                   ) from None
             if "Permission denied" in text or "PermissionError" in text:
-                raise DeviceError("permission denied opening {!r}: on Linux add your user to the 'dialout' group "
-                                  "and log in again".format(port)) from None
-            raise DeviceError("cannot open serial port {!r} at {} baud: {}".format(port, baud, text)) from None
+                raise DeviceError(f"permission denied opening {port!r}: on Linux add your user to the 'dialout' group "
+                                  "and log in again") from None
+            raise DeviceError(f"cannot open serial port {port!r} at {baud} baud: {text}") from None
 
     def read(self, size: int = 4096, timeout_s: float = 0.05) -> bytes:
         """What has arrived, up to ``size`` bytes; waits up to ``timeout_s`` for the first byte."""
@@ -209,8 +207,8 @@ class Device:
             except PortNotFound as exc:
                 if not named:
                     raise
-                raise PortNotFound("{} (the port named by {}: set it to the board's port, or unset it to use the one "
-                                   "USB serial port present)".format(exc, PORT_VARIABLE)) from None
+                raise PortNotFound(f"{exc} (the port named by {PORT_VARIABLE}: set it to the board's port, or unset it to use the one "
+                                   "USB serial port present)") from None
         self.decoder = Decoder()
         self.offset_N: Tuple[float, float, float] = (0.0, 0.0, 0.0)
         self.last_info: Optional[DeviceInfo] = None
@@ -223,7 +221,7 @@ class Device:
         if text is not None:
             self.set_mode(text)
 
-    def __enter__(self) -> "Device":
+    def __enter__(self) -> Device:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -259,10 +257,10 @@ class Device:
         attempts = good + bad
         if attempts >= CRC_MIN_ATTEMPTS and bad > self.max_crc_error_rate * attempts:
             raise CrcErrorRate(
-                "{} of the last {} frames or lines from {} failed their CRC ({:.0f} %, the limit is {:.0f} %): check "
+                f"{bad} of the last {attempts} frames or lines from {self.port} failed their CRC ({100.0 * bad / attempts:.0f} %, the limit is {100.0 * self.max_crc_error_rate:.0f} %): check "
                 "that the "
-                "baud rate ({}) matches the firmware's, the cable and its length, and that nothing else uses the port"
-                .format(bad, attempts, self.port, 100.0 * bad / attempts, 100.0 * self.max_crc_error_rate, self.baud))
+                f"baud rate ({self.baud}) matches the firmware's, the cable and its length, and that nothing else uses the port"
+                )
         if attempts >= CRC_WINDOW:
             self._crc_mark = mark
 
@@ -271,11 +269,11 @@ class Device:
         if stats.bytes == 0:
             hint = "nothing arrived: is the board plugged in and the firmware flashed?"
         elif stats.samples == 0 and stats.infos == 0:
-            hint = ("{} bytes arrived but none formed a frame or line: check that the baud rate ({}) matches the "
-                    "firmware's".format(stats.bytes, self.baud))
+            hint = (f"{stats.bytes} bytes arrived but none formed a frame or line: check that the baud rate ({self.baud}) matches the "
+                    "firmware's")
         else:
-            hint = "the stream stopped after {} samples: was the board unplugged or reset?".format(received)
-        return NoData("no {} from {} within {:g} s; {}".format(what, self.port, self.timeout_s, hint))
+            hint = f"the stream stopped after {received} samples: was the board unplugged or reset?"
+        return NoData(f"no {what} from {self.port} within {self.timeout_s:g} s; {hint}")
 
     def _stamp(self, sample: Sample) -> Sample:
         if self._last_t_us is not None:
@@ -343,7 +341,7 @@ class Device:
         """Average ``count`` samples at rest (chip-error samples are skipped) and subtract that force from every
         later sample (tare). Returns the offset (Fx, Fy, Fz) in newton."""
         if count < 1:
-            raise ValueError("zero needs at least one sample; instead received {!r}".format(count))
+            raise ValueError(f"zero needs at least one sample; instead received {count!r}")
         self.offset_N = (0.0, 0.0, 0.0)
         total = [0.0, 0.0, 0.0]
         used = skipped = 0
@@ -351,8 +349,8 @@ class Device:
             if sample.chip_error or any(math.isnan(f) for f in sample.device_force_N):
                 skipped += 1
                 if skipped > 10 * count + 100:
-                    raise DeviceError("cannot zero: {} of the last samples from {} were chip errors (check the "
-                                      "sensor board's wiring and supply)".format(skipped, self.port))
+                    raise DeviceError(f"cannot zero: {skipped} of the last samples from {self.port} were chip errors (check the "
+                                      "sensor board's wiring and supply)")
                 continue
             total = [t + f for t, f in zip(total, sample.device_force_N)]
             used += 1
@@ -390,7 +388,7 @@ class Device:
         while True:
             now = time.monotonic()
             if now - start > self.timeout_s:
-                raise self._no_data("answer to the EEPROM command '{}'".format(command[:1].decode()),
+                raise self._no_data(f"answer to the EEPROM command '{command[:1].decode()}'",
                                     self.decoder.stats.samples)
             if now - sent > RESEND_S:
                 self.transport.write(command)
@@ -412,8 +410,7 @@ class Device:
             a = address + len(out)
             reply = self._command(b"r" + bytes((a & 0xFF, a >> 8, n)), "R", a)
             if len(reply.data) != n:
-                raise UploadFailed("the board returned {} bytes of EEPROM at {} instead of {}".format(
-                    len(reply.data), a, n))
+                raise UploadFailed(f"the board returned {len(reply.data)} bytes of EEPROM at {a} instead of {n}")
             out += reply.data
         return out
 
@@ -442,14 +439,13 @@ class Device:
         back = self.eeprom_read(0, len(record))
         if back != record:
             first = next(k for k, (a, b) in enumerate(zip(back, record)) if a != b)
-            raise UploadFailed("the EEPROM read back differs from what was written at byte {}".format(first))
+            raise UploadFailed(f"the EEPROM read back differs from what was written at byte {first}")
         if last.record != 0:
             raise UploadFailed("the board does not accept the record written (made for other chip settings, or a "
-                               "firmware older than record version {}?)".format(record[2]))
+                               f"firmware older than record version {record[2]}?)")
         info = self.info()
         if info.calibration_hash.lower() != calibration_sha256(calibration)[:16]:
-            raise UploadFailed("the board reports calibration {} after the upload, not {}".format(
-                info.calibration_hash, calibration_sha256(calibration)[:16]))
+            raise UploadFailed(f"the board reports calibration {info.calibration_hash} after the upload, not {calibration_sha256(calibration)[:16]}")
         self.calibration = Calibration(dict(calibration))
         return info
 
@@ -459,17 +455,16 @@ class Device:
         mine = self.calibration.short_hash
         if info.calibration_hash.lower() != mine:
             raise CalibrationMismatch(
-                "calibration mismatch: the device on {} runs calibration {} (spec {!r}) but this readout package "
-                "embeds {} (spec {!r}); flash the firmware and install the readout package from the same magfab "
-                "build".format(self.port, info.calibration_hash, info.spec_name, mine, _build.SPEC_NAME))
+                f"calibration mismatch: the device on {self.port} runs calibration {info.calibration_hash} (spec {info.spec_name!r}) but this readout package "
+                f"embeds {mine} (spec {_build.SPEC_NAME!r}); flash the firmware and install the readout package from the same magfab "
+                "build")
         warnings = []
         if info.spec_name != _build.SPEC_NAME:
-            warnings.append("the device reports spec {!r}, this package was built for {!r}".format(
-                info.spec_name, _build.SPEC_NAME))
+            warnings.append(f"the device reports spec {info.spec_name!r}, this package was built for {_build.SPEC_NAME!r}")
         if info.taxels != TAXELS:
-            warnings.append("the device reads {} taxel(s), this package was built for {}".format(info.taxels, TAXELS))
+            warnings.append(f"the device reads {info.taxels} taxel(s), this package was built for {TAXELS}")
         expected = (_build.GAIN_SEL, _build.RESOLUTION, _build.OSR, _build.DIG_FILT)
         if info.settings != expected:
-            warnings.append("the device reports gain_sel/resolution/osr/dig_filt {} but this package expects {}: "
-                            "the field in microtesla will be wrong".format(info.settings, expected))
+            warnings.append(f"the device reports gain_sel/resolution/osr/dig_filt {info.settings} but this package expects {expected}: "
+                            "the field in microtesla will be wrong")
         return warnings

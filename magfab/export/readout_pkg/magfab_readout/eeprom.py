@@ -102,7 +102,7 @@ def clean_hull(checked: Any) -> List[Tuple[float, float]]:
     """The validated hull (convex, counter-clockwise) without its collinear or numerically flat vertices: each
     costs the firmware an edge test on every reading."""
     key = "valid_region.hull"
-    pts = [(_float32("{}[{}][0]".format(key, n), x), _float32("{}[{}][1]".format(key, n), y))
+    pts = [(_float32(f"{key}[{n}][0]", x), _float32(f"{key}[{n}][1]", y))
            for n, (x, y) in enumerate(checked.hull)]
     tol = 1e-9 * checked.span * checked.span
     changed = True
@@ -162,12 +162,12 @@ def layout(checked: Any) -> Dict[str, Any]:
     """What the firmware evaluates, from a validated calibration (``calibration_json.validate``'s result)."""
     order = checked.order
     if order > MAX_ORDER:
-        raise EepromError("order", order, "must be an integer from 0 to {}".format(MAX_ORDER))
+        raise EepromError("order", order, f"must be an integer from 0 to {MAX_ORDER}")
     index = {m: n for n, m in enumerate(checked.monomials)}
     # Horner rows: for i = n down to 0, the coefficients of u^i v^j for j = n - i down to 0.
     rows: List[Dict[str, Any]] = [{"i": i, "fz": [], "fr": []} for i in range(order, -1, -1)]
     for force, name in (("Fz_N", "fz"), ("Fr_N", "fr")):
-        values = [_float32("coefficients.{}[{}]".format(force, m), x)
+        values = [_float32(f"coefficients.{force}[{m}]", x)
                   for m, x in enumerate(checked.coefficients[force])]
         for row in rows:
             row[name] = [values[index[(row["i"], j)]] for j in range(order - row["i"], -1, -1)]
@@ -175,9 +175,9 @@ def layout(checked: Any) -> Dict[str, Any]:
     for k, name in enumerate(INPUTS):
         s = checked.scale[k]
         if not 1e-30 < s < 1e30:
-            raise EepromError("scaling.{}.scale".format(name), s, "must be between 1e-30 and 1e30 (float32 reciprocal)")
-        scale[name] = (_float32("scaling.{}.center".format(name), checked.center[k]), s)
-    box = {name: tuple(_float32("valid_region.{}[{}]".format(name, k), x) for k, x in enumerate(pair))
+            raise EepromError(f"scaling.{name}.scale", s, "must be between 1e-30 and 1e30 (float32 reciprocal)")
+        scale[name] = (_float32(f"scaling.{name}.center", checked.center[k]), s)
+    box = {name: tuple(_float32(f"valid_region.{name}[{k}]", x) for k, x in enumerate(pair))
            for name, pair in zip(INPUTS, checked.box)}
     hull = clean_hull(checked)
     edges = []
@@ -220,7 +220,7 @@ def pack(lay: Dict[str, Any], sha16: str, settings: Dict[str, Any]) -> bytes:
     n = len(lay["hull"])
     spec_name = settings["name"].encode("utf-8")
     if len(spec_name) > NAME_MAX:
-        raise EepromError("name", settings["name"], "must be at most {} bytes of UTF-8 in the record".format(NAME_MAX))
+        raise EepromError("name", settings["name"], f"must be at most {NAME_MAX} bytes of UTF-8 in the record")
     block = SETTINGS.pack(*(len(spec_name) if key == "name_len" else settings[key] for key in SETTING_KEYS))
     body = block + b"".join(struct.pack("<f", lay[name]) for name in FLOATS)
     thermal = lay.get("thermal") if settings["flags"] & FLAG_TEMPERATURE else None
@@ -240,8 +240,8 @@ def pack(lay: Dict[str, Any], sha16: str, settings: Dict[str, Any]) -> bytes:
     length = HEADER.size + len(body) + 2
     if length > SIZE:
         raise EepromError("valid_region.hull", "{} points at order {}".format(n, lay["order"]),
-                          "the record takes {} B, the EEPROM holds {} B: use a shorter hull or a lower order"
-                          .format(length, SIZE))
+                          f"the record takes {length} B, the EEPROM holds {SIZE} B: use a shorter hull or a lower order"
+                          )
     chip = (settings["gain_sel"], settings["resolution"], settings["osr"], settings["dig_filt"])
     version = VERSION_REFERENCE if reference is not None else VERSION if thermal is None else VERSION_THERMAL
     head = HEADER.pack(MAGIC, version, lay["order"], length, n, sha16.encode("ascii"), *chip)
@@ -255,11 +255,11 @@ def pack_array(addresses: Sequence[int], sha16: str, settings: Dict[str, Any]) -
     each), the name, the CRC. ``sha16`` is the info line's hash (of the build's calibration)."""
     n = len(addresses)
     if not 1 <= n <= MAX_TAXELS or len(set(addresses)) != n or not all(0x08 <= a <= 0x77 for a in addresses):
-        raise EepromError("taxels", list(addresses), "must be 1 to {} distinct 7-bit addresses from 0x08 to 0x77"
-                          .format(MAX_TAXELS))
+        raise EepromError("taxels", list(addresses), f"must be 1 to {MAX_TAXELS} distinct 7-bit addresses from 0x08 to 0x77"
+                          )
     spec_name = settings["name"].encode("utf-8")
     if len(spec_name) > NAME_MAX:
-        raise EepromError("name", settings["name"], "must be at most {} bytes of UTF-8 in the record".format(NAME_MAX))
+        raise EepromError("name", settings["name"], f"must be at most {NAME_MAX} bytes of UTF-8 in the record")
     block = SETTINGS.pack(*(len(spec_name) if key == "name_len" else settings[key] for key in SETTING_KEYS))
     body = block + bytes(addresses) + spec_name
     length = HEADER.size + len(body) + 2
@@ -318,6 +318,6 @@ def intel_hex(data: bytes, start: int = 0) -> bytes:
     for k in range(0, len(data), 16):
         chunk = data[k:k + 16]
         rec = struct.pack(">BHB", len(chunk), start + k, 0) + chunk
-        lines.append(":{}{:02X}".format(rec.hex().upper(), (-sum(rec)) & 0xFF))
+        lines.append(f":{rec.hex().upper()}{(-sum(rec)) & 0xFF:02X}")
     lines.append(":00000001FF")
     return ("\n".join(lines) + "\n").encode("ascii")

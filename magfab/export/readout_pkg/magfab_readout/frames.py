@@ -122,8 +122,8 @@ def fault_name(word: Optional[int]) -> Optional[str]:
     if not word:
         return None
     error, stage = word & 0xFF, word >> 8
-    return "{} at {}".format(FAULTS.get(error, "error {}".format(error)),
-                             FAULT_STAGES.get(stage, "stage {}".format(stage)))
+    return "{} at {}".format(FAULTS.get(error, f"error {error}"),
+                             FAULT_STAGES.get(stage, f"stage {stage}"))
 
 
 def flag_letters(status: int) -> str:
@@ -314,10 +314,9 @@ def encode_field_line(taxel: int, seq: int, t_us: int, status: int, B_uT: Tuple[
 def encode_info_line(spec_name: str, calibration_hash: str, gain_sel: int, resolution: int, osr: int,
                      dig_filt: int, taxels: int = 1) -> bytes:
     """The firmware's info line (answer to 'i'), with its checksum; an array's ends with its number of taxels."""
-    body = "I,magfab,{},{},{},{},{},{}".format(spec_name, calibration_hash[:16], gain_sel, resolution, osr,
-                                               dig_filt)
+    body = f"I,magfab,{spec_name},{calibration_hash[:16]},{gain_sel},{resolution},{osr},{dig_filt}"
     if taxels != 1:
-        body += ",{}".format(taxels)
+        body += f",{taxels}"
     return body.encode("utf-8") + line_checksum(body.encode("utf-8")) + b"\n"
 
 

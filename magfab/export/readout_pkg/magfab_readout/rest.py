@@ -102,11 +102,10 @@ class RestTracker:
             return "rest level: {} window{} of {:g} s at rest - too few to see a drift".format(
                 len(self.points), "" if len(self.points) == 1 else "s", WINDOW_S)
         (t0, f0, c0), (t1, f1, c1) = self.points[0], self.points[-1]
-        text = "rest level: {} windows at rest over {:.1f} s, Fz {:+.1f} -> {:+.1f} mN (drift {:+.1f} mN".format(
-            len(self.points), t1 - t0, f0, f1, f1 - f0)
+        text = f"rest level: {len(self.points)} windows at rest over {t1 - t0:.1f} s, Fz {f0:+.1f} -> {f1:+.1f} mN (drift {f1 - f0:+.1f} mN"
         if c0 is not None and c1 is not None:
-            text += ", chip {:.1f} -> {:.1f} C".format(c0, c1)
+            text += f", chip {c0:.1f} -> {c1:.1f} C"
         fit = self.per_C()
         if fit is not None:
             text += "; {:+.2f} mN/C over {:.1f} C".format(*fit)
-        return text + "; force noise {:.2f} mN)".format(self.noise_mN)
+        return text + f"; force noise {self.noise_mN:.2f} mN)"

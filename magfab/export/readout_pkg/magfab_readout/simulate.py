@@ -31,8 +31,17 @@ from typing import Optional, Tuple
 
 from . import _build, eeprom
 from .calibration import Calibration
-from .frames import (STATUS_CHIP_ERROR, STATUS_FULL_SCALE, STATUS_OUTSIDE_REGION, STATUS_RECOVERED,
-                     encode_frame, encode_info_line, encode_text_line, line_checksum, temperature_C)
+from .frames import (
+    STATUS_CHIP_ERROR,
+    STATUS_FULL_SCALE,
+    STATUS_OUTSIDE_REGION,
+    STATUS_RECOVERED,
+    encode_frame,
+    encode_info_line,
+    encode_text_line,
+    line_checksum,
+    temperature_C,
+)
 
 __all__ = ["PressPattern", "RestTip", "SimulatedDevice", "TemperatureRamp"]
 
@@ -189,7 +198,7 @@ class RestTip:
         if len(force) != len(delta) or not force or any(b <= a for a, b in zip(force, force[1:])):
             raise ValueError("force_N must be increasing and as long as delta_Bz_uT")
         if not (math.isfinite(scale) and scale > 0):
-            raise ValueError("scale must be a positive number; instead received {!r}".format(scale))
+            raise ValueError(f"scale must be a positive number; instead received {scale!r}")
         self.rest_Bz_uT = float(rest_Bz_uT)
         self.force_N = force
         self.delta_Bz_uT = delta
@@ -206,7 +215,7 @@ class RestTip:
 
     @classmethod
     def from_acceptance(cls, data: dict, *, scale: float = 1.0, flipped: bool = False,
-                        loose_mm: float = 0.0) -> "RestTip":
+                        loose_mm: float = 0.0) -> RestTip:
         """The nominal sensor of an acceptance.json (format magfab-acceptance/1). With its ``rotation`` section,
         turned over (:meth:`turn`) in an Earth's field of the middle of its band, inclined 60 deg (a mid-latitude
         place; the turn is about the chip's x axis, across the field's horizontal part), with the fingertip's own
@@ -244,7 +253,7 @@ class RestTip:
     def place_weight(self, grams: float) -> None:
         """Put a weight of ``grams`` on the tip (0: take it off)."""
         if not (math.isfinite(grams) and grams >= 0):
-            raise ValueError("grams must be a non-negative number; instead received {!r}".format(grams))
+            raise ValueError(f"grams must be a non-negative number; instead received {grams!r}")
         self.load_g = float(grams)
 
     def field(self, t_s: float) -> Tuple[float, float, float]:
@@ -264,8 +273,8 @@ class TemperatureRamp:
 
     def __init__(self, start_C: float, end_C: float, duration_s: float, delay_s: float = 0.0) -> None:
         if not (duration_s > 0 and delay_s >= 0):
-            raise ValueError("duration_s must be positive and delay_s at least 0; instead received {!r}, {!r}"
-                             .format(duration_s, delay_s))
+            raise ValueError(f"duration_s must be positive and delay_s at least 0; instead received {duration_s!r}, {delay_s!r}"
+                             )
         self.start_C, self.end_C = float(start_C), float(end_C)
         self.duration_s, self.delay_s = float(duration_s), float(delay_s)
 
@@ -312,12 +321,12 @@ class SimulatedDevice:
                  chunk: int = 64, spec_name: str = _build.SPEC_NAME, calibration_hash: Optional[str] = None,
                  pattern=None, temperature=None, thermal_per_C=None) -> None:
         if not rate_Hz > 0:
-            raise ValueError("rate_Hz must be positive; instead received {!r}".format(rate_Hz))
+            raise ValueError(f"rate_Hz must be positive; instead received {rate_Hz!r}")
         if not 0.0 <= corrupt_fraction <= 1.0:
-            raise ValueError("corrupt_fraction must be in [0, 1]; instead received {!r}".format(corrupt_fraction))
+            raise ValueError(f"corrupt_fraction must be in [0, 1]; instead received {corrupt_fraction!r}")
         self.calibration = calibration if calibration is not None else Calibration.embedded()
         if not (math.isfinite(noise_lsb) and noise_lsb >= 0):
-            raise ValueError("noise_lsb must be a non-negative number; instead received {!r}".format(noise_lsb))
+            raise ValueError(f"noise_lsb must be a non-negative number; instead received {noise_lsb!r}")
         # the rest point 3 sigma of the noise inside the region: its readings stay inside it
         margin = REST_MARGIN_SIGMAS * noise_lsb * max(_build.LSB_XY_UT, _build.LSB_Z_UT)
         self.pattern = pattern if pattern is not None else PressPattern(self.calibration, margin_uT=margin)
@@ -357,7 +366,7 @@ class SimulatedDevice:
         cmd = self._command
         address, n = cmd[1] | cmd[2] << 8, cmd[3]
         if cmd[:1] == b"r":
-            body = "R,{},{}".format(address, bytes(self.eeprom[address:address + min(n, 32)]).hex().upper())
+            body = f"R,{address},{bytes(self.eeprom[address:address + min(n, 32)]).hex().upper()}"
         else:
             crc = cmd[4 + n] | cmd[5 + n] << 8
             status = 1 if eeprom.crc16(cmd[:4 + n]) != crc else (2 if address + n > eeprom.SIZE else 0)
@@ -368,7 +377,7 @@ class SimulatedDevice:
             if valid:
                 head = eeprom.unpack_header(bytes(self.eeprom))
                 self.info_line = encode_info_line(self.info_line.decode().split(",")[2], head["sha16"], *settings)
-            body = "W,{},{},{},{}".format(address, n, status, 0 if valid else 10)
+            body = f"W,{address},{n},{status},{0 if valid else 10}"
         self._pending += body.encode("ascii") + line_checksum(body.encode("ascii")) + b"\n"
         self._command = b""
 

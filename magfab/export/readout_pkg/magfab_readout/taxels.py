@@ -74,7 +74,7 @@ class ArrayCalibration:
         n = len(self.layout)
         cals = tuple(c if isinstance(c, Calibration) else Calibration(c) for c in calibrations)
         if len(cals) != n:
-            raise ValueError("{} calibrations for the {} taxels of array.json".format(len(cals), n))
+            raise ValueError(f"{len(cals)} calibrations for the {n} taxels of array.json")
         self.calibrations = cals
         self.dynamic = bool(array["dynamic"])
         self.sha256 = hashlib.sha256(
@@ -85,7 +85,7 @@ class ArrayCalibration:
                                    for k, r in enumerate(rest))
 
     @classmethod
-    def from_files(cls, read) -> "ArrayCalibration":
+    def from_files(cls, read) -> ArrayCalibration:
         """From ``read(name) -> bytes`` (array.json, then the taxel files it names)."""
         array = json.loads(read("array.json").decode("utf-8"))
         names = [t.get("calibration") if isinstance(t, dict) else None for t in array.get("taxels") or []]
@@ -93,7 +93,7 @@ class ArrayCalibration:
                            for name in names])
 
     @classmethod
-    def load(cls, folder: str) -> "ArrayCalibration":
+    def load(cls, folder: str) -> ArrayCalibration:
         """From a folder holding array.json and the taxel files (a build's ``calibration/``)."""
         import os
 
@@ -103,7 +103,7 @@ class ArrayCalibration:
         return cls.from_files(read)
 
     @classmethod
-    def embedded(cls) -> Optional["ArrayCalibration"]:
+    def embedded(cls) -> Optional[ArrayCalibration]:
         """This package's array (array.json and every taxel's calibration), or None: a single taxel's package."""
         try:
             if pkgutil.get_data("magfab_readout", "array.json") is None:
@@ -114,7 +114,7 @@ class ArrayCalibration:
         def read(name: str) -> bytes:
             data = pkgutil.get_data("magfab_readout", name)
             if data is None:
-                raise OSError("the package's {} cannot be read: reinstall it".format(name))
+                raise OSError(f"the package's {name} cannot be read: reinstall it")
             return data
         return cls.from_files(read)
 
@@ -359,9 +359,9 @@ class ArrayReader:
                 self._clock = None  # it waited for the board: caught up, the clocks are compared afresh (drift)
             if _finite(sample.device_force_N):
                 raise WrongFirmware(
-                    "the board on {} sends a single taxel's force frames, but this readout package is for an array "
-                    "of {} taxels: flash the array build's firmware, or install the readout package of the board's "
-                    "build".format(self.device.port, self.calibration.taxels))
+                    f"the board on {self.device.port} sends a single taxel's force frames, but this readout package is for an array "
+                    f"of {self.calibration.taxels} taxels: flash the array build's firmware, or install the readout package of the board's "
+                    "build")
             for slots in self.assembler.feed(sample):
                 if self._track(slots) > MAX_LAG_S and keep_up:
                     self.skipped += 1
@@ -390,7 +390,7 @@ class ArrayReader:
         """Average each taxel's force over ``count`` of its good readings at rest and subtract it from every later
         reading of that taxel (tare). Returns the offsets, (Fx, Fy, Fz) N per taxel."""
         if count < 1:
-            raise ValueError("zero needs at least one sample; instead received {!r}".format(count))
+            raise ValueError(f"zero needs at least one sample; instead received {count!r}")
         n = self.calibration.taxels
         self.evaluator.offset_N = [(0.0, 0.0, 0.0)] * n
         total = [[0.0, 0.0, 0.0] for _ in range(n)]
