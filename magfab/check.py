@@ -167,7 +167,7 @@ _RANGE_LIMIT_KEYS = {"stretch": "predict.max_stretch", "scan depth": "calibratio
 
 
 def prediction_findings(design: Design, pred) -> list[Finding]:
-    """BRIEF eq. 9 as errors and the paper's section 2.6 guidelines as warnings, from a
+    """The design constraints as errors and the design guidelines as warnings (docs/models.md, M9 and M18), from a
     :class:`magfab.models.predict.Prediction`; the predicted figures themselves as info."""
     from .models import field as fieldmod
 
@@ -175,7 +175,7 @@ def prediction_findings(design: Design, pred) -> list[Finding]:
     sen, p = spec.sensor, spec.predict
     chip, normal, shear = pred.chip, pred.normal, pred.shear
     out: list[Finding] = []
-    # eq. 9: B(d_min) <= B_sat at the configured gain and resolution (strongest magnet of the grade).
+    # M9: B(d_min) <= B_sat at the configured gain and resolution (strongest magnet of the grade).
     b_dmin = pred.field.Bz_d_min_strongest_G
     if b_dmin > chip.full_scale_z_G:
         strongest = fieldmod.Magnet.from_spec(spec, "high")
@@ -186,7 +186,7 @@ def prediction_findings(design: Design, pred) -> list[Finding]:
                            f"{chip.resolution}: raise sensor.d_min_mm to at least {math.ceil(d_sat * 100) / 100:.2f} mm"
                            + (", or lower sensor.gain_sel" if chip.gain_sel > 0 else "")
                            + ", or use a weaker or smaller magnet", "sensor.d_min_mm"))
-    # eq. 9: the gradient at d_max must resolve what the user needs (if they said).
+    # M9: the gradient at d_max must resolve what the user needs (if they said).
     need = p.required_resolution_mN
     if need is not None and normal.resolution_mN > need:
         out.append(Finding(E, "resolution-short",
@@ -200,7 +200,7 @@ def prediction_findings(design: Design, pred) -> list[Finding]:
                            f"the normal range ends at {normal.travel_mm:.2f} mm of magnet travel ({normal.range_limit}), "
                            f"before the magnet reaches d_min ({travel['d_min']:.2f} mm of travel)",
                            _RANGE_LIMIT_KEYS.get(normal.range_limit, "")))
-    # Guidelines (paper sec. 2.6).
+    # Guidelines (docs/models.md, M18).
     ratio = spec.magnet.height_mm / spec.magnet.diameter_mm
     if not 0.2 <= ratio <= 0.5:
         out.append(Finding(W, "magnet-aspect", f"magnet height/diameter is {ratio:.2f}; the design guideline is 0.2-0.5",

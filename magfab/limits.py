@@ -66,7 +66,7 @@ MB_PER_TRIANGLE = 0.006  # 233k triangles: 983 MB peak, of which ~550 MB the CAD
 
 # ---- the normal-load FE ---------------------------------------------------------------------------------
 #: Relative FE error per mesh size over the elastomer radius, err ~ C h / R (order 1, as predict.FE_ORDER):
-#: with the magnet's edges rounded and graded (issue 13) MagOne measured 0.0018 at h = 0.75 mm against 1 mm,
+#: with the magnet's edges rounded and the mesh graded there, MagOne measured 0.0018 at h = 0.75 mm against 1 mm,
 #: R = 6 mm (C = 0.014); 2x margin.
 FE_ERROR_PER_H_OVER_R = 0.03
 #: Triangles of the (r, z) profile mesh per (profile area / h^2): equilateral triangles of side h,
@@ -78,7 +78,7 @@ FE_EDGE_TRIANGLES = 900
 #: Indentation steps along the normal curve (predict.N_INDENT); the FE may stop earlier.
 FE_STEPS = 21
 #: Seconds per triangle-step of the nonlinear FE, counting all FE_STEPS although a curve often stops earlier
-#: (QDLDL factorisation, one symbolic factorisation per load path, kernel-averaged stretch; issue 13): the two FE
+#: (QDLDL factorisation, one symbolic factorisation per load path, kernel-averaged stretch): the two FE
 #: curves of a MagOne prediction (1 and 0.75 mm, 1,844 triangles, solved to the 3 mm scan depth, meshes cold) took
 #: 2.1-4.0 s over nine runs on the shared two-core machine, 0.054-0.10 ms per triangle-step, median 0.068 ms;
 #: 1.5x the median, rounded.
@@ -107,7 +107,7 @@ MAX_BOARD_S = 55.0
 MAX_SCAN_ROWS = 40_000
 SECONDS_PER_SCAN_ROW = 2.5e-4
 #: MLS cross-validation grows with rows^2 (11 bandwidths x the folds): 2.7k rows 8.7 s, 10.6k rows 109 s
-#: measured in the issue (1.0-1.2 us per row^2; 3.7 us here under heavy contention). The row count is an upper
+#: measured on an earlier machine (1.0-1.2 us per row^2; 3.7 us here under heavy contention). The row count is an upper
 #: bound (MagOne: 4,941 by its steps, 2,673 in fact), which is the margin; 5,000 rows stay near 30 s.
 SECONDS_PER_MLS_ROW2 = 1.2e-6
 MAX_MLS_ROWS = 5_000

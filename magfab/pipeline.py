@@ -152,7 +152,7 @@ def _board(design: Design, say: Progress, timings: dict[str, float]):
 
 
 def _predictions(design: Design, say: Progress, timings: dict[str, float]):
-    """predictions.json and its plots, and the prediction's design checks (eq. 9 and the guidelines)."""
+    """predictions.json and its plots, and the prediction's design checks (docs/models.md, M9 and M18)."""
     from .export import figures as plots
     from .models.predict import predict_with_findings
 

@@ -248,7 +248,7 @@ class Predict(_Section):
         description="Worst-case normal force resolution the application needs, mN (omit: no requirement).")
     # The allowed stretch 2.0 is where the material model's sources end (recipes/materials.toml): every neo-Hookean
     # band is fitted to tensile data up to 100 % strain, so past it the force curve extrapolates. It is not a fatigue
-    # limit (none was found for casting silicones, issue 13); 100 % strain is a ninth of Ecoflex 00-30's 900 %
+    # limit (none was found for casting silicones); 100 % strain is a ninth of Ecoflex 00-30's 900 %
     # elongation at break. It is compared with the FE's kernel-averaged stretch (models/mechanics/energy.py).
     max_stretch: float = Field(
         2.0, gt=1.0, le=10.0,
@@ -264,7 +264,7 @@ class CalibrationMethod(str, Enum):
 
 
 class Calibration(_Section):
-    """The force calibration (eq. 12-14) and the simulated scan every build ships before a real one exists."""
+    """The force calibration (docs/models.md, M12-M14) and the simulated scan a build ships before a real one exists."""
 
     method: CalibrationMethod = Field(CalibrationMethod.POLY, strict=False,
                                       description="'poly' (order n), 'auto' (cheapest fit within tolerance_mN) or 'mls'.")

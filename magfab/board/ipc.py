@@ -1,7 +1,7 @@
 """The IPC-7351B land calculator: toleranced package dimensions in, land edges out (mm).
 
-The equations (sec. 3.1.5), for a pair of terminals across a body of length L with terminals T long and
-W wide:
+The equations (IPC-7351B sec. 3.1.5; docs/models.md, M24), for a pair of terminals across a body of length L with
+terminals T long and W wide:
 
     Z_max = L_min + 2 J_T + sqrt(C_L^2 + F^2 + P^2)           (outer land edges)
     G_min = S_max,rms - 2 J_H - sqrt(C_S,rms^2 + F^2 + P^2)   (inner land edges), S = L - 2T

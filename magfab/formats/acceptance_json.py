@@ -29,8 +29,8 @@ KEYS = (
     ("magnet.remanence_T.low", "number"), ("magnet.remanence_T.nominal", "number"),
     ("magnet.remanence_T.high", "number"),
 )
-#: The drift steps' sections (issue 18), each optional (a file written before them has none; ``check`` then
-#: leaves the step out), but whole when present. "optional" is a finite number or null.
+#: The drift steps' sections (turning the sensor over, warming it), each optional (a file written before them has
+#: none; ``check`` then leaves the step out), but whole when present. "optional" is a finite number or null.
 SECTIONS = {
     "rotation": (("rotation.band_uT", "number"), ("rotation.earth_change_uT", "number"),
                  ("rotation.self_weight_change_uT", "number"), ("rotation.gradient_uT_per_mm", "number"),

@@ -1,4 +1,5 @@
-"""One design of the search, evaluated: the point's spec, its geometry checks, the model chain and the eq. 9 checks.
+"""One design of the search, evaluated: the point's spec, its geometry checks, the model chain and the design
+constraints (docs/models.md, M9).
 
 :func:`evaluate` is what a Dask worker runs. It takes and returns plain data (the point, the base spec and the
 targets as JSON), never raises, and says which models it used:
@@ -12,7 +13,7 @@ targets as JSON), never raises, and says which models it used:
     picks): what the designs near the front are re-verified with.
 
 A design the spec or the models refuse is ``failed`` with the one-line reason; one that violates a requirement or
-an error-level design check (eq. 9: saturation at d_min, the resolution asked for; the printer's minimums) is
+an error-level design check (M9: saturation at d_min, the resolution asked for; the printer's minimums) is
 ``infeasible``, with its figures and the violations, which Optuna's constrained samplers read.
 """
 

@@ -1,4 +1,4 @@
-"""The acceptance test's two drift steps (issue 18): turning the sensor over, and warming it.
+"""The acceptance test's two drift steps: turning the sensor over, and warming it.
 
 **Rotation.** With nothing touching the tip, the whole sensor (board and fingertip) is turned upside down: 180 deg
 about a horizontal axis. Two things change the field at the chip:

@@ -1,4 +1,4 @@
-"""Force calibration (BRIEF eq. 12-14): scan data in, calibration.json out.
+"""Force calibration (docs/models.md, M12 to M14): scan data in, calibration.json out.
 
 The pipeline::
 
@@ -13,7 +13,7 @@ The pipeline::
 field u = (Bz - c_z) / s_z, v = (Br - c_r) / s_r, Br = sqrt(Bx^2 + By^2), with the centre c and half-width s
 of the scan's own range, so |u|, |v| <= 1 over the scan. Unscaled, the order-6 design matrix holds
 Bz^6 ~ 10^30 uT^6 next to 1 and is numerically singular; scaled its condition number stays below ~10^4
-(the candidates' table carries both). The shear is split by the field's lateral direction (eq. 14) with a
+(the candidates' table carries both). The shear is split by the field's lateral direction (M14) with a
 sign found from the data (below the magnet the radial field points towards the axis, so the chip's and the
 force's lateral directions agree or are opposite depending on how the chip's axes are mounted).
 
@@ -522,7 +522,7 @@ def choose(candidates: Sequence[Candidate], method: str, order: int, tolerance_m
 
 
 def _shear_sign(scan: Scan) -> int:
-    """+1 when the force's lateral direction follows the field's (eq. 14), -1 when opposite: the sign of
+    """+1 when the force's lateral direction follows the field's (docs/models.md, M14), -1 when opposite: the sign of
     sum(Fx Bx + Fy By) over the scan (+1 for a scan without lateral load)."""
     assert scan.F_N is not None
     s = float(np.sum(scan.F_N[:, 0] * scan.B_uT[:, 0] + scan.F_N[:, 1] * scan.B_uT[:, 1]))

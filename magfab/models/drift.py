@@ -1,4 +1,4 @@
-"""Drift: the force errors that come from outside the force model, predicted before building (issue 18).
+"""Drift: the force errors that come from outside the force model, predicted before building.
 
 Three sources move the field the chip reads without a force on the tip:
 

@@ -1,4 +1,4 @@
-"""What the sensor will do: sensitivity, resolution and range, normal and shear (BRIEF eq. 5-11).
+"""What the sensor will do: sensitivity, resolution and range, normal and shear (docs/models.md, M5 to M11).
 
 The chain, for a force on the tip:
 
@@ -6,10 +6,10 @@ The chain, for a force on the tip:
     u --------------------------------> gap d = d_rest - u (normal) or lateral offset r (shear)
     (d, r) ----(field model)----------> (Bz, Br) at the Hall point
 
-    S_B = dB/du          field change per mm of magnet travel             (eq. 5)
-    K_e = dF/du          elastomer stiffness at the magnet                 (eq. 7)
-    S_F = S_B / K_e      field change per newton                           (eq. 10)
-    R   = N_B / S_F      force resolution: field noise over sensitivity    (eq. 11)
+    S_B = dB/du          field change per mm of magnet travel             (M5)
+    K_e = dF/du          elastomer stiffness at the magnet                 (M7)
+    S_F = S_B / K_e      field change per newton                           (M10)
+    R   = N_B / S_F      force resolution: field noise over sensitivity    (M11)
 
 The material is a band (soft / nominal / stiff shear modulus from the recipe) and the magnet's remanence a
 band (the grade's min / nominal / max); every figure is given over the band, and the worst case is the

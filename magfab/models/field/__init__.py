@@ -6,11 +6,11 @@ field comes back in gauss (1 T = 10^4 G). A sensor at axial distance d below the
 offset r sits at (r, 0, -(H/2 + d)). Below the magnet Bz > 0 and the radial component points inwards.
 
 One module per job: :mod:`.magnet` (the magnet, the point checks, :class:`FieldModelError`), :mod:`.exact`,
-:mod:`.closed_forms` (eq. 6, dipole, multipoles), :mod:`.surrogate`, :mod:`.choice` (working volume, error
-against exact, the registry and the choice), :mod:`.sensor` ((Bz, Br) against (d, r)) and :mod:`.timing`.
+:mod:`.closed_forms` (axial closed form, dipole, multipoles), :mod:`.surrogate`, :mod:`.choice` (working volume,
+error against exact, the registry and the choice), :mod:`.sensor` ((Bz, Br) against (d, r)) and :mod:`.timing`.
 Everything public is re-exported here: callers write ``from magfab.models import field; field.exact(...)``.
 
-The models (BRIEF sec. 3), each ``model(magnet, points_mm, *, rtol=...) -> (N, 3)`` gauss, named by
+The models (docs/models.md, M6 and M15), each ``model(magnet, points_mm, *, rtol=...) -> (N, 3)`` gauss, named by
 :class:`magfab.spec.FieldModel` (its ``auto`` is :func:`choose`):
 
 * :func:`exact` -- Derby & Olbert (2010), complete elliptic integrals: magpylib's own kernel
@@ -20,8 +20,8 @@ The models (BRIEF sec. 3), each ``model(magnet, points_mm, *, rtol=...) -> (N, 3
   magpylib's class interface and the tests pin the two together. Our own Derby-Olbert code with
   Bulirsch's cel (bench/field.py) ran at 1.0-1.6x the speed of that kernel under varying machine
   load, so it is not kept here: a second copy of the special functions is not worth that.
-* :func:`on_axis` -- BRIEF eq. 6, Bz on the axis, Bx = By = 0. Exact on the axis (written here in a
-  form without the far-field cancellation of eq. 6 as printed); wrong off it.
+* :func:`on_axis` -- docs/models.md, M6: Bz on the axis, Bx = By = 0. Exact on the axis (written here in a
+  form without the far-field cancellation of the textbook form); wrong off it.
 * :func:`dipole` -- a point dipole of moment m = Br_rem V / mu0. Wrong near the magnet.
 * :func:`surrogate` -- a table of the dimensionless exact field over (r/R, z/R), one per aspect H/R,
   built lazily (~0.1 s) from :func:`exact` and interpolated bilinearly: within 1e-4 of it over the

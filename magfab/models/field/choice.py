@@ -99,7 +99,7 @@ class Model:
 
 MODELS: Mapping[str, Model] = MappingProxyType({
     m.name: m for m in (
-        Model("on_axis", on_axis, "eq. 6: Bz on the axis, Br = 0 (exact on the axis only)", 0),
+        Model("on_axis", on_axis, "Bz on the axis, Br = 0 (docs/models.md, M6; exact on the axis only)", 0),
         Model("dipole", dipole, "point dipole m = Br V / mu0 (far field)", 1),
         Model("surrogate", surrogate, "bilinear table of the exact field in (r/R)^2 and ln|z|, per H/R", 2),
         Model("exact", exact, "Derby & Olbert elliptic integrals (magpylib's kernel)", 3),

@@ -1,5 +1,5 @@
-"""Closed forms: eq. 6 on the axis (and its derivatives), the point dipole and the axial multipoles, each
-with the error estimate the model refuses points by. Fields in G, lengths in mm."""
+"""Closed forms (docs/models.md, M6 and M15): the field on the axis (and its derivatives), the point dipole and the
+axial multipoles, each with the error estimate the model refuses points by. Fields in G, lengths in mm."""
 
 from __future__ import annotations
 
@@ -20,9 +20,9 @@ def _axis_terms(magnet: Magnet, z_mm: np.ndarray) -> tuple[np.ndarray, ...]:
 
 
 def axis_bz(magnet: Magnet, z_mm: object) -> np.ndarray:
-    """Bz on the axis at height z (|z| > H/2), G: eq. 6 without its cancellation.
+    """Bz on the axis at height z (|z| > H/2), G: docs/models.md, M6, without its cancellation.
 
-    eq. 6 is Br_rem/2 [a/sqrt(a^2+R^2) - b/sqrt(b^2+R^2)]; the bracket equals
+    M6 is Br_rem/2 [a/sqrt(a^2+R^2) - b/sqrt(b^2+R^2)]; the bracket equals
     R^2 (a^2 - b^2) / (sa sb (a sb + b sa)) with a^2 - b^2 = 2 H |z| exactly, so it keeps full relative
     precision at any distance (the printed form returns 0 beyond ~10^5 R).
     """
@@ -35,7 +35,7 @@ def axis_bz(magnet: Magnet, z_mm: object) -> np.ndarray:
 def axis_dbz_dz(magnet: Magnet, z_mm: object, order: int = 1) -> np.ndarray:
     """d^n Bz / dz^n on the axis (n = ``order``, 1 or 2), G/mm^n, for |z| > H/2.
 
-    From eq. 6: d/dz [u / sqrt(u^2 + R^2)] = R^2 (u^2 + R^2)^-3/2 and its derivative
+    From M6: d/dz [u / sqrt(u^2 + R^2)] = R^2 (u^2 + R^2)^-3/2 and its derivative
     -3 R^2 u (u^2 + R^2)^-5/2, with u = z + H/2 and z - H/2. Positive below the magnet for n = 1.
     """
     z = np.asarray(z_mm, dtype=float)
@@ -72,7 +72,7 @@ def on_axis_error_estimate(magnet: Magnet, points_mm: object) -> np.ndarray:
 
 
 def on_axis(magnet: Magnet, points_mm: object, *, rtol: float | None = DEFAULT_RTOL) -> np.ndarray:
-    """(0, 0, Bz0(z)) from eq. 6, G, at points near the axis (mm).
+    """(0, 0, Bz0(z)) from the axial closed form (docs/models.md, M6), G, at points near the axis (mm).
 
     Raises :class:`FieldModelError` inside or on the magnet, and (unless ``rtol`` is None) where
     :func:`on_axis_error_estimate` exceeds ``rtol``: off the axis the model ignores Br altogether.
@@ -82,8 +82,8 @@ def on_axis(magnet: Magnet, points_mm: object, *, rtol: float | None = DEFAULT_R
     if rtol is not None:
         est = on_axis_error_estimate(magnet, p)
         _refuse_estimate(p, est, rtol, lambda where, worst: (
-            f"on_axis: {where} are too far off the axis for eq. 6 (estimated relative error {worst} > rtol {rtol:g}; "
-            "it neglects Br = -r/2 dBz/dz); use surrogate or exact"))
+            f"on_axis: {where} are too far off the axis for the axial closed form (estimated relative error {worst} > "
+            f"rtol {rtol:g}; it neglects Br = -r/2 dBz/dz); use surrogate or exact"))
     out = np.zeros_like(p)
     out[:, 2] = axis_bz(magnet, p[:, 2])
     return _shaped(points_mm, out)
@@ -96,7 +96,7 @@ def axial_multipoles(magnet: Magnet, lmax: int = 5) -> dict[int, float]:
     """Coefficients A_l (odd l <= lmax) of the exterior potential, G mm^(l+2).
 
     Outside the circumscribed sphere B = -grad sum_l A_l P_l(cos t) / D^(l+1), so on the axis
-    Bz = sum_l (l + 1) A_l / z^(l+2). Matching the expansion of eq. 6 in 1/z: with
+    Bz = sum_l (l + 1) A_l / z^(l+2). Matching the expansion of the axial field (M6) in 1/z: with
     u/sqrt(u^2+R^2) = sum_n c_n R^2n u^-2n (c_n = binom(-1/2, n)) and (z +- h)^-2n expanded in h/z,
     A_l = Br_rem / (l + 1) * sum_{2n + m = l + 2, m odd} c_n binom(-2n, m) R^2n h^m.
     A_1 = Br_rem R^2 H / 4 is the dipole (m mu0 / 4 pi); A_3 / A_1 = h^2 - 3 R^2 / 4 vanishes at H = sqrt(3) R.

@@ -31,9 +31,9 @@ def exact_rounding_estimate(magnet: Magnet, points_mm: object) -> np.ndarray:
     """Upper estimate of the relative rounding error of the elliptic-integral form at each point, (N,).
 
     Far away the field is the small difference of the two faces' terms, each ~Br_rem, while B ~ Br_rem
-    R^2 H / D^3 (D from the centre): 4 eps D^3 / (R^2 H). Measured against the cancellation-free eq. 6
-    on the axis, where it is worst, for H/R 0.05 to 8 and D = 10 R to 10^5 R: the actual error stays
-    under half of this; off the axis it is ~100x smaller still.
+    R^2 H / D^3 (D from the centre): 4 eps D^3 / (R^2 H). Measured against the cancellation-free axial form
+    (docs/models.md, M6) on the axis, where it is worst, for H/R 0.05 to 8 and D = 10 R to 10^5 R: the actual error
+    stays under half of this; off the axis it is ~100x smaller still.
     """
     p = _points(points_mm)
     d3 = np.sum(p * p, axis=1) ** 1.5

@@ -21,7 +21,7 @@ __all__ = ["FieldModelError", "Magnet", "MU0", "DEFAULT_RTOL", "EXACT_RTOL", "SU
 
 MU0 = 4.0e-7 * math.pi  # T m / A (the pre-2019 defined value; CODATA 2018's differs by 5.5e-10 relative)
 
-#: Default error budget of the approximate models: the issue's 0.1 %.
+#: Default error budget of the approximate models against the exact field: 0.1 %.
 DEFAULT_RTOL = 1e-3
 #: :func:`exact` is the reference the others are checked against, so it must be far better than them.
 EXACT_RTOL = 1e-6

@@ -38,7 +38,7 @@ def _call(name: str, magnet: Magnet, pts: np.ndarray, rtol: float | None) -> np.
 def bz_br(magnet: Magnet, d_mm: object, r_mm: object = 0.0, model: FieldModel | str = FieldModel.EXACT,
           rtol: float | None = DEFAULT_RTOL) -> tuple[np.ndarray, np.ndarray]:
     """(Bz, Br) in G seen by a sensor at axial distance d below the lower face and radial offset r (mm,
-    broadcast together). Br = sqrt(Bx^2 + By^2) >= 0 as in BRIEF eq. 4 (the radial field points inwards
+    broadcast together). Br = sqrt(Bx^2 + By^2) >= 0 as in docs/models.md, M3 (the radial field points inwards
     below the magnet). ``rtol`` goes to the model (ignored by exact, which keeps its own)."""
     name = model_name(model)
     pts, shape = _sensor_points(magnet, d_mm, r_mm)
@@ -51,7 +51,7 @@ def dbz_dz(magnet: Magnet, d_mm: object, r_mm: object = 0.0, model: FieldModel |
     """dBz/dz at the sensor, G/mm: z is the sensor's coordinate along the magnet axis (magnet frame, up),
     so this is the rate at which Bz grows as the gap d closes (= -dBz/dd; positive below the magnet).
 
-    Analytic for ``on_axis`` (eq. 6 differentiated); central differences otherwise (``FD_STEP``).
+    Analytic for ``on_axis`` (docs/models.md, M6, differentiated); central differences otherwise (``FD_STEP``).
     """
     name = model_name(model)
     pts, shape = _sensor_points(magnet, d_mm, r_mm)

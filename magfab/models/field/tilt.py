@@ -1,5 +1,5 @@
-"""The lateral field at the chip from a magnet that moves sideways and tilts (shear, BRIEF sec. 3: "tilt of the
-magnet reads as translation").
+"""The lateral field at the chip from a magnet that moves sideways and tilts (shear: a tilt of the magnet reads as
+translation; docs/models.md, M16).
 
 Frame as :mod:`.magnet`: the magnet at rest centred at the origin, axis on z, magnetised along +z; the chip on the
 axis at ``gap`` below the lower face, (0, 0, -(H/2 + gap)). Under a lateral load along +x the magnet's lower-face
@@ -7,8 +7,9 @@ centre moves by ``shift`` (mm) along +x and the magnet turns by ``tilt`` (rad) a
 centre, positive when its top leans towards +x (the rotation R_y(tilt) takes e_z to (sin tilt, 0, cos tilt));
 the mechanics (:mod:`magfab.models.mechanics.shear_surface`) reports the same two quantities in the same frame.
 
-Linearised (what the sensitivity needs), on the axis, with Bz0(z) the axial field of eq. 6 and Bz0' its derivative
-(positive below the magnet), by the paraxial expansion B_rho = -r/2 Bz0' (so dBx/dx = -Bz0'/2 on the axis):
+Linearised (what the sensitivity needs; docs/models.md, M16), on the axis, with Bz0(z) the axial field (M6) and
+Bz0' its derivative (positive below the magnet), by the paraxial expansion B_rho = -r/2 Bz0' (so dBx/dx = -Bz0'/2 on
+the axis):
 
     dBx/dshift = Bz0'/2                      (the magnet moves, the chip sees it at -shift: dBr/dr at the axis)
     dBx/dtilt  = Bz0 - gap Bz0'/2            (the field vector turns with the magnet, and the chip, seen from the
@@ -41,7 +42,8 @@ def _gap(gap_mm: object) -> np.ndarray:
 
 def lateral_rates(magnet: Magnet, gap_mm: object) -> tuple[np.ndarray, np.ndarray]:
     """(dBx/dshift in G/mm, dBx/dtilt in G/rad) at the chip on the axis, ``gap_mm`` below the lower face (any
-    shape; results broadcast to it). Closed form from eq. 6 (module doc); exact for an axially magnetised cylinder."""
+    shape; results broadcast to it). Closed form from the axial field (module doc); exact for an axially magnetised
+    cylinder."""
     g = _gap(gap_mm)
     z = -(0.5 * magnet.height_mm + g)
     slope = np.asarray(axis_dbz_dz(magnet, z, 1))  # dBz/dz on the axis, > 0 below the magnet

@@ -48,8 +48,8 @@ from .study import convergence, measure
 
 #: What the FE models, for the report (shown beside the stack-up drawing, which shows the pocket).
 #:
-#: Bonded, chosen by measurement (bench/pocket.py; issue 13): the protocol seals the magnet with Sil-Poxy (BRIEF
-#: sec. 6, step 4). Against the bonded model, at 1 mm (0.5 mm) of indentation on a 0.75 mm mesh, nominal mu: a
+#: Bonded, chosen by measurement (bench/pocket.py): the protocol seals the magnet with Sil-Poxy (docs/models.md,
+#: M23, step 4). Against the bonded model, at 1 mm (0.5 mm) of indentation on a 0.75 mm mesh, nominal mu: a
 #: sliding magnet (bilateral frictionless) gives -16.0 % (-21.5 %) force on MagOne, -5.5 % on small_magnet, -5.7 % on
 #: flat_tip, +13 % (+15 %) magnet travel per N on MagOne; the design's channel and funnel left open give -34 %
 #: (-23 %) force and +75 % (+54 %) travel per N on MagOne (-14 % and +32 % on small_magnet, -23 % and +58 % on

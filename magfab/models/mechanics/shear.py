@@ -30,7 +30,7 @@ SHEAR_MODELS = tuple(m.value for m in ShearModel)
 
 def _timoshenko_shear(body: Body, mu_kPa: float, ends: ShearEnds) -> float:
     """G A / h / (1 + c h^2 / (9 R^2)) in N/mm for the column of height h = magnet_z below the magnet; c = 4 with
-    the magnet free to tilt, 1 with it guided (BRIEF sec. 3)."""
+    the magnet free to tilt, 1 with it guided (docs/models.md, M17)."""
     h, R = body.magnet_z_mm, body.radius_mm
     c = 4.0 if ends == ShearEnds.FREE else 1.0
     return mu_kPa * N_PER_KPA_MM2 * body.area_mm2 / h / (1.0 + c * h * h / (9.0 * R * R))

@@ -1,6 +1,6 @@
 """Shear as the bench applies it: a lateral load through the contact patch under a normal preload.
 
-The bench (BRIEF sec. 2, calibration scan) indents the tip by delta and moves the indenter sideways with the
+The bench (the calibration scan, docs/models.md, M22) indents the tip by delta and moves the indenter sideways with the
 silicone stuck to it. :func:`shear_response` follows the axisymmetric large-strain indentation (the FE of
 :mod:`.fe`, the same load path) to each preload delta and solves there the incremental problem for a lateral
 load, linearised about that state: a Fourier-mode-1 displacement (U_r cos t, -U_t sin t, U_z cos t) and pressure
@@ -48,9 +48,9 @@ from .options import MaterialLaw, OnFailure
 __all__ = ["ShearLoad", "ShearResponse", "ShearProbe", "shear_response", "REST_PATCH_INDENTATION_MM"]
 
 #: The patch the indenter holds at delta = 0 on a rounded tip is the surface within the Hertz contact radius
-#: sqrt(R delta) of this indentation: the bench's scan step, 50 um (BRIEF sec. 2; 0.55 mm on MagOne). The magnet's
-#: shift and tilt per newton hardly depend on it (a load at the apex is far from the magnet); the indenter's own
-#: stiffness does (a point load has none), so at rest it is a figure for this patch only.
+#: sqrt(R delta) of this indentation: the bench's scan step, 50 um (docs/models.md, M22; 0.55 mm on MagOne). The
+#: magnet's shift and tilt per newton hardly depend on it (a load at the apex is far from the magnet); the
+#: indenter's own stiffness does (a point load has none), so at rest it is a figure for this patch only.
 REST_PATCH_INDENTATION_MM = 0.05
 
 
