@@ -1,4 +1,4 @@
-/* The force calibration (calibration.json, eq. 12-14 of the brief) evaluated in float32 from the calibration
+/* The force calibration (calibration.json; magfab docs/models.md, M12 to M14) evaluated in float32 from the calibration
  * record in EEPROM (docs/bundle.md section 4, mf_nv.h):
  *   B_k <- B_k / (1 + a_k (T - T0)) for k in x, y, z (a version-4 record with the sample's temperature converted),
  *   Br = sqrt(Bx^2 + By^2), u = (Bz - c_z) / s_z, v = (Br - c_r) / s_r,
