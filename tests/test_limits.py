@@ -1,4 +1,4 @@
-"""Resource limits (issue 12): every spec that check accepts can be built within the budget, estimated before any
+"""Resource limits: every spec that check accepts can be built within the budget, estimated before any
 of the work; the specs that could not are refused with one line naming the key, the estimate and the limit."""
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from magfab.limits import BUDGET_MB, BUDGET_S, MAX_MLS_ROWS, MAX_TRIANGLES, esti
 
 
 @pytest.mark.parametrize("text, key, words", [
-    # The specs the issue found: check accepted them, the build was OOM-killed, ran for minutes or died.
+    # Specs that check once accepted: the build was OOM-killed, ran for minutes or died.
     ("[mould]\ntessellation_tolerance_mm = 0.000001", "mould.tessellation_tolerance_mm", "triangles"),
     ("[mould]\nangular_tolerance_deg = 0.51", "mould.angular_tolerance_deg", "triangles"),
     ('[calibration]\nmethod = "mls"\nscan_step_mm = 0.01', "calibration.scan_step_mm", "rows"),
@@ -44,7 +44,7 @@ def test_the_suggested_value_fits():
 def test_magone_is_well_within_the_budget():
     cost = estimate(derive(load_spec(None)))
     assert cost.seconds < BUDGET_S / 2 and cost.megabytes < BUDGET_MB / 2
-    # What the build's auto choice runs at 1 % (predictions.json): with the magnet's edges rounded and graded (issue 13)
+    # What the build's auto choice runs at 1 % (predictions.json): with the magnet's edges rounded and graded
     # the error constant fell (limits.FE_ERROR_PER_H_OVER_R), so the coarser pair already meets 1 %.
     assert cost.fe_meshes_mm == (1.0, 0.75)
     assert 2673 <= scan_rows(derive(load_spec(None))) <= MAX_MLS_ROWS  # 2,673 rows in the build; an upper bound

@@ -41,6 +41,6 @@ def test_templates_ship_as_magfab_templates(wheel_files):
 
 def test_the_generic_firmware_image_ships(wheel_files):
     """A pip-only machine (no avr-gcc) still writes a ready-to-flash .hex: the generic image and the record of the
-    toolchain that made it are package data (issue 14 item 6)."""
+    toolchain that made it are package data."""
     assert {"magfab/export/generic_image/magfab-atmega328p.hex",
             "magfab/export/generic_image/toolchain.json"} <= wheel_files

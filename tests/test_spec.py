@@ -97,7 +97,7 @@ def test_readme_documents_every_key():
             assert f"`{key}`" in readme, f"README's spec reference lacks {key}"
 
 
-# ---- issue 12: parsers as strict as the formats, messages exact and bounded --------------------------------
+# ---- parsers as strict as the formats, messages exact and bounded -----------------------------------------
 
 
 def _commented_spec_lines():

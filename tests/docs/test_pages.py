@@ -175,7 +175,7 @@ def test_a_recording_is_not_calibrated_against_itself(walked):
 
 
 # ---------------------------------------------------------------------------------------------------------------
-# The array's pages (issue 17): the 1x5 strip the README's "Arrays" section built in the same walk, on a board of
+# The array's pages: the 1x5 strip the README's "Arrays" section built in the same walk, on a board of
 # five chips. These run last: the strip's readout replaces the finger's in the walk's environment.
 
 PRESSED, PRESS_N = 2, 0.5  # a press of 0.5 N straight down on the middle taxel while `stream` runs

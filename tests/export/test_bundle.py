@@ -189,7 +189,7 @@ def test_pip_install_from_a_copy_of_the_build_leaves_it_as_it_was(bundle, tmp_pa
 
 
 def test_the_simulated_board_reads_zero_at_rest_with_the_builds_calibration(bundle):
-    """The build's own calibration: at rest the simulated board read Fx +37 mN until --zero (issue 15)."""
+    """The build's own calibration: at rest the simulated board read Fx +37 mN until --zero."""
     out, cal = bundle
     assert_reads_zero_at_rest(_decoder(out), cal)
 

@@ -170,7 +170,7 @@ def test_flash_commands_name_a_board_flash_sh_accepts(default_build):
 
 
 # ---------------------------------------------------------------------------------------------------
-# The checklist as bench instructions (issue 15): steps say what to do, every number is the recipe's, the
+# The checklist as bench instructions: steps say what to do, every number is the recipe's, the
 # commands are sh blocks, the wiring and the parts are tables.
 
 MATERIALS = ("ecoflex-00-10", "ecoflex-00-30", "ecoflex-00-50", "dragon-skin-10", "dragon-skin-20", "dragon-skin-30",

@@ -523,7 +523,7 @@ def test_text_mode_error_line(host):
 
 
 def test_text_lines_carry_a_checksum(host):
-    """Issue 12, finding 6: every text and info line ends in *XXXX, the CRC-16/CCITT-FALSE of what precedes the
+    """Every text and info line ends in *XXXX, the CRC-16/CCITT-FALSE of what precedes the
     '*' in upper-case hex; a changed byte fails it."""
     out, _ = host.run("C t\nB 900 -400 -2800 25\nS 3\nC i\nS 1\n")
     lines = out.split(b"\n")[:-1]
@@ -538,7 +538,7 @@ def test_text_lines_carry_a_checksum(host):
 @pytest.mark.parametrize("line", ["K 0", "K nan", "K -1", "K inf", "K 1e300", "K", "B nan 0 0 25",
                                   "B 0 0 1e300 25", "B 0 0 100 inf"])
 def test_host_double_refuses_values_outside_its_bands(host, line):
-    """Issue 12, finding 6: K 0, K nan and K -1 were undefined behaviour in the simulator's arithmetic (the cast of
+    """K 0, K nan and K -1 were once undefined behaviour in the simulator's arithmetic (the cast of
     an infinite or NaN conversion count); now a value outside its band is a line that cannot be read (exit 2)."""
     proc = subprocess.run([str(host.exe)], input=f"B 900 -400 -2800 25\nS 1\n{line}\nS 2\n".encode(),
                           capture_output=True, timeout=60)

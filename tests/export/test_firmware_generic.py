@@ -1,4 +1,4 @@
-"""The generic image (issue 14 item 6): one ATmega328P image for every build, its settings and calibration from the
+"""The generic image: one ATmega328P image for every build, its settings and calibration from the
 EEPROM record, shipped ready-built as package data (magfab/export/generic_image) so that a machine without
 avr-gcc still gets a ready-to-flash .hex. Here: its sources carry no setting of any spec, the shipped image is
 the one its sources make (sha256 recorded beside it), and the wheel's package data takes it. Rebuilding it with

@@ -1,4 +1,4 @@
-"""The readout package (issue 5, item 3): rendered from templates/readout, pip-installed into a fresh venv,
+"""The readout package: rendered from templates/readout, pip-installed into a fresh venv,
 checked against independent implementations written here (CRC, frame layout, the calibration's evaluation,
 the region test), and its command line run against the simulated board and through a real pseudo-terminal."""
 
@@ -509,7 +509,7 @@ def test_installed_cli_streams_zeroes_and_checks(installed):
 
 
 def test_pip_install_leaves_the_folder_as_it_was(installed):
-    """``pip install ./readout`` from the folder holding it: no readout/build/, no *.egg-info (issue 15)."""
+    """``pip install ./readout`` from the folder holding it: no readout/build/, no *.egg-info."""
     assert installed.after == installed.before
     assert [p for p, _ in installed.after if p.endswith(".egg-info") or p == "readout/build"] == []
 

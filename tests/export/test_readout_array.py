@@ -1,4 +1,4 @@
-"""An array build's readout package (issue 17, item 5, host side): the package of a 1x5 strip (alternating, 14 mm)
+"""An array build's readout package (the host side): the package of a 1x5 strip (alternating, 14 mm)
 imported from its rendered folder, its simulated array streaming every taxel, a press on taxel 2 computed with
 magfab's exact field model read on taxel 2 and not on its neighbours, a chip error flagging only its taxel, and the
 command line's stream, record (the taxel column, read back by magfab's own recording reader) and info."""

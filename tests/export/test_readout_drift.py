@@ -1,4 +1,4 @@
-"""The acceptance test's drift steps and the rest tracking (issue 18, item 4), on the readout package the default
+"""The acceptance test's drift steps and the rest tracking, on the readout package the default
 build ships (the session's ``default_build``: its calibration carries the recipe's thermal block, its
 acceptance.json the rotation and warm-up bands), run as ``python -m magfab_readout`` on the simulated board."""
 

@@ -1,5 +1,5 @@
-"""The report says what the force model assumes about the magnet's pocket next to the drawing that shows the pocket
-(issue 13 item 2): the stack-up figure's caption carries MODEL_DESCRIPTION, HTML-escaped as the template does."""
+"""The report says what the force model assumes about the magnet's pocket next to the drawing that shows the pocket:
+the stack-up figure's caption carries MODEL_DESCRIPTION, HTML-escaped as the template does."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The wire protected in every mode (issue 12, finding 6 and item 7): single-byte corruptions of the firmware's
+"""The wire protected in every mode: single-byte corruptions of the firmware's
 text lines and binary frames never decode to a different force; values the firmware never means (non-finite,
 beyond the force band, spelled as Python reads but C never prints) are refused even under a right checksum; a
 frame with the chip-error bit never yields a force. Measured on the readout package's own decoder over lines
@@ -100,7 +100,7 @@ GOOD = b"F,9,5000,0,0.1000,0.2000,1.5000,60.08,-3.00,29824.08,25.02"
 @pytest.mark.parametrize("force", [b"inf", b"-inf", b"1e999", b"Infinity", b"1_0", b"nan", b"1e3", b"+1.0",
                                    b" 1.0", b"\xd9\xa1", b"1000.0001", b"-2000.0000", b"1.5e+09", b"0x1"])
 def test_a_force_the_firmware_never_means_is_refused_even_with_a_right_checksum(pkg, force):
-    """Issue 12, finding 6: inf, 1e999, Infinity and 1_0 were accepted as forces. The grammar is what
+    """inf, 1e999, Infinity and 1_0 were once accepted as forces. The grammar is what
     mf_format_float prints; a value beyond FORCE_LIMIT_N or not finite (without the chip-error bit) is refused
     and counted."""
     line = GOOD.replace(b"1.5000", force)
@@ -134,7 +134,7 @@ def frame(status: int, forces) -> bytes:
 
 
 def test_a_chip_error_frame_never_yields_a_force(pkg):
-    """Issue 12, finding 6: a CRC-valid frame with the chip-error bit passed its finite forces through. The host
+    """A CRC-valid frame with the chip-error bit once passed its finite forces through. The host
     gives the sample (sequence, time, flags) with NaN forces and field, whatever the frame carries."""
     for status in (0x02, 0x03, 0x0A, 0xFE):
         (s,) = pkg.Decoder().feed(frame(status, (0.25, -0.5, 1.0)))

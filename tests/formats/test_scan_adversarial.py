@@ -1,4 +1,4 @@
-"""Adversarial scans (issue 12, item 7): hypothesis mutates a good calibration scan CSV -- hostile number
+"""Adversarial scans: hypothesis mutates a good calibration scan CSV -- hostile number
 spellings, huge and tiny magnitudes, stray bytes, short rows, collapsed axes -- and the reader either returns a
 scan every value of which is a finite number inside its column's band and whose (Bz, Br) span an area, or
 refuses it with one ScanError line of bounded length. Never another exception, never a warning.

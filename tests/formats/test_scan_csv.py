@@ -30,13 +30,13 @@ MALFORMED = {
     "empty field": (_edit(7, 6, ""), ["line 7", "'Fz_N'", "empty field"]),
     "nan": (_edit(9, 3, "nan"), ["line 9", "'Bz_uT'", "'nan' is not a finite number"]),
     "infinity": (_edit(10, 4, "-inf"), ["line 10", "'Fx_N'", "-inf"]),
-    # issue 12, finding 5: float() reads these, a CSV must not
+    # float() reads these, a CSV must not
     "underscore": (_edit(11, 3, "20_100"), ["line 11", "'Bz_uT'", "'20_100' is not a decimal number"]),
     "arabic-indic digits": (_edit(13, 1, "\u0661\u0662"), ["line 13", "'Bx_uT'", "not a decimal number", "ASCII"]),
     "Infinity": (_edit(14, 5, "Infinity"), ["line 14", "'Fy_N'", "not a finite number"]),
     "overflow": (_edit(15, 6, "1e999"), ["line 15", "'Fz_N'", "1e999", "outside the plausible band -1000 to 1000 N"]),
     "non-breaking space": (_edit(16, 2, "\u00a05"), ["line 16", "'By_uT'", "not a decimal number"]),
-    # issue 12, finding 4: forces or fields scaled by 1e300 are refused when read, naming the row and band
+    # forces or fields scaled by 1e300 are refused when read, naming the row and band
     "force 1e300": (_edit(17, 6, "3e300"), ["line 17 (row 16)", "'Fz_N'", "-1000 to 1000 N"]),
     "field 1e300": (_edit(18, 3, "2.01e304"), ["line 18 (row 17)", "'Bz_uT'", "-1e+06 to 1e+06 uT"]),
     "temperature": ("\n".join([_good()[0] + ",temperature_C"] + [r + ",25" for r in _good()[1:5]]
@@ -93,7 +93,7 @@ def _scan(bz, br, fz=None):
      ["Br spans only 2e-07 uT"]),
 ])
 def test_a_scan_spanning_no_area_is_refused_when_read(case, bz, br, words):
-    """Issue 12, finding 4: the fit found this only after the whole build (exit 1); the reader finds it."""
+    """The fit once found this only after the whole build (exit 1); the reader finds it."""
     with pytest.raises(ScanError) as info:
         read_scan_csv(_scan(bz, br))
     message = str(info.value)
@@ -123,7 +123,7 @@ def _recording_text(host: bool = True, sensor: bool = True) -> str:
 
 
 def test_guard_a_the_sensors_own_forces_never_stand_in_for_the_reference():
-    """Issue 15: a recording calibrated against itself reported 'held-out RMS Fz 0 mN'; its columns are named
+    """A recording calibrated against itself once reported 'held-out RMS Fz 0 mN'; its columns are named
     for what they are, and the reader says why they cannot be the reference, in one line."""
     with pytest.raises(ScanError) as info:
         read_scan_csv(_recording_text().encode())

@@ -97,7 +97,8 @@ def test_front_and_ranks_against_a_hand_example():
 
 def test_verification_takes_near_feasible_designs_too():
     """A third of the verification budget goes to designs the cheap chain finds just short of a requirement (within
-    NEAR_MARGIN); far misses and other error findings (eq. 9: chip saturation) are never verified."""
+    NEAR_MARGIN); far misses and other error findings (a design constraint, docs/models.md M9: chip saturation) are
+    never verified."""
     from magfab.inverse.run import _near_front
     from magfab.inverse.study import Record
 
@@ -112,6 +113,6 @@ def test_verification_takes_near_feasible_designs_too():
     trials = [rec(0, "ok", 3.0, 1.2), rec(1, "ok", 2.5, 1.1), rec(2, "ok", 3.5, 1.0),
               rec(3, "infeasible", 2.0, 0.97),  # 3 % short: near
               rec(4, "infeasible", 1.0, 0.80),  # 20 % short: far
-              rec(5, "infeasible", 1.5, 0.99, ["chip-saturates: ..."])]  # an eq. 9 error: never
+              rec(5, "infeasible", 1.5, 0.99, ["chip-saturates: ..."])]  # a design-constraint error: never
     picks = _near_front(trials, t)
     assert sorted(picks) == [0, 1, 3]

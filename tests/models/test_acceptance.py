@@ -1,4 +1,4 @@
-"""The acceptance test (issue 6, item 5): magfab.models.acceptance's bands against an independent evaluation of the
+"""The acceptance test: magfab.models.acceptance's bands against an independent evaluation of the
 field over a denser grid than its corners, their response to the tolerances, and the readout package's
 ``check`` command on the simulated sensor (nominal, wrong magnet, upside-down magnet) through the installed
 command line."""
@@ -384,7 +384,7 @@ def test_installed_check_weight_and_usage(installed, acc):
     band = acceptance_band_at(acc, 20.0)
     assert "rise of Bz under 20 g" in line and f"predicted {band[0]:.0f} .. {band[1]:.0f} uT" in line
     # 105 g: the soft material's range, 1.025 N, ended where the stretch 2.0, kernel-averaged over R/30, is reached
-    # just outside the magnet's lower rounded edge (issue 13; converged within 0.5 % over meshes 1 to 0.25 mm)
+    # just outside the magnet's lower rounded edge (converged within 0.5 % over meshes 1 to 0.25 mm)
     for args, message in ((("--weight-g", "500"), "covers weights up to 105 g"),
                           (("--simulate-grade", "N99"), "give a grade (N35, N42, N45, N52) or a remanence"),
                           (("--samples", "0"), "--samples must be at least 1")):

@@ -1,5 +1,5 @@
-"""Calibration (BRIEF eq. 12-14, docs/bundle.md): the scan CSV round trip, the simulated scan's physics, the fit's
-errors against the injected noise, conditioning, the guard, calibration.json round trips and eq. 14's
+"""Calibration (docs/models.md, M12 to M14; docs/bundle.md): the scan CSV round trip, the simulated scan's physics,
+the fit's errors against the injected noise, conditioning, the guard, calibration.json round trips and M14's
 direction split (a law: rotating the scan rotates the forces)."""
 
 from __future__ import annotations
@@ -298,7 +298,7 @@ def test_json_round_trip(poly4, result, design, scan):
     assert not np.array_equal(f_mls, f_poly) and np.abs(f_mls - f_poly).max() < 0.02
 
 
-# ---- eq. 14: the direction split ---------------------------------------------------------------
+# ---- M14: the direction split ------------------------------------------------------------------
 
 
 def _rotated(scan, angle_deg, flip_chip=False):
@@ -326,7 +326,7 @@ def test_direction_split_for_plus_and_minus_y(poly4, scan, ideal):
 @pytest.mark.parametrize("angle, flip", [(90.0, False), (-30.0, False), (0.0, True), (45.0, True)])
 def test_rotating_the_scan_rotates_the_forces(poly4, design, scan, angle, flip):
     """Bz, Br and Fr do not change when the scan is turned about z, so the fitted polynomial is the same and
-    eq. 14 turns the lateral force with the field; a chip mounted the other way round gives shear_sign -1."""
+    M14 turns the lateral force with the field; a chip mounted the other way round gives shear_sign -1."""
     turned = _rotated(scan, angle, flip)
     cal = C.fit(turned, derive(parse_spec('[calibration]\nmethod = "poly"\n')), mls=False).calibration
     assert cal.shear_sign == (-1 if flip else 1)
@@ -353,7 +353,7 @@ def test_the_too_few_rows_message_names_the_largest_fit():
 
 @pytest.mark.parametrize("change", ["force x 1e300", "field x 1e300", "no lateral field", "Br on a line in Bz"])
 def test_fit_refuses_an_implausible_or_flat_scan_before_any_work(design, scan, change, monkeypatch):
-    """Issue 12, finding 4: a scan built in memory (not read from a CSV) meets the same checks at the start of
+    """A scan built in memory (not read from a CSV) meets the same checks at the start of
     the fit: one ScanError line, no RuntimeWarning, and no candidate fitted."""
     import warnings
     from dataclasses import replace

@@ -50,7 +50,7 @@ def test_magnet_rejects_bad_numbers(bad):
 # ---- closed forms ---------------------------------------------------------------------------------
 
 
-def test_eq6_matches_magpylib_on_the_axis():
+def test_m6_matches_magpylib_on_the_axis():
     z = np.concatenate([-(1.0 + np.geomspace(0.01, 50.0, 60)), 1.0 + np.geomspace(0.01, 50.0, 60)])
     pts = np.column_stack([np.zeros_like(z), np.zeros_like(z), z])
     b = F.on_axis(MAGONE, pts)
@@ -59,8 +59,8 @@ def test_eq6_matches_magpylib_on_the_axis():
     assert np.max(rel(b, ref)) < 1e-9
 
 
-def test_eq6_as_printed_in_the_brief():
-    """BRIEF eq. 6 with z measured from the pole face, below the magnet, is what axis_bz returns."""
+def test_m6_as_printed_in_docs_models():
+    """docs/models.md, M6, with z measured from the pole face, below the magnet, is what axis_bz returns."""
     R, H, br = 2.5, 2.0, 1.195e4
     for zf in (0.1, 2.0, 6.0, 20.0):
         printed = br / 2 * ((zf + H) / math.hypot(zf + H, R) - zf / math.hypot(zf, R))
@@ -107,7 +107,7 @@ def test_exact_matches_a_direct_quadrature_of_the_charge_sheets(point):
     assert rel(F.magpylib_cylinder(MAGONE, point), want)[0] < 1e-9  # the class interface, too
 
 
-def test_axis_gradient_is_the_derivative_of_eq6():
+def test_axis_gradient_is_the_derivative_of_m6():
     z = -(1.0 + np.linspace(0.5, 30.0, 40))
     h = 1e-4
     fd = (F.axis_bz(MAGONE, z + h) - F.axis_bz(MAGONE, z - h)) / (2 * h)
@@ -117,7 +117,7 @@ def test_axis_gradient_is_the_derivative_of_eq6():
     assert np.all(F.axis_dbz_dz(MAGONE, z) > 0)  # below the magnet Bz grows towards it
 
 
-def test_multipoles_reproduce_eq6_far_on_the_axis():
+def test_multipoles_reproduce_m6_far_on_the_axis():
     A = F.axial_multipoles(MAGONE, 5)
     assert A[1] == pytest.approx(1.195e4 * 2.5**2 * 2.0 / 4)  # Br R^2 H / 4 = mu0 m / 4 pi
     assert A[3] / A[1] == pytest.approx(1.0 - 0.75 * 2.5**2)  # h^2 - 3 R^2 / 4
@@ -228,7 +228,7 @@ def test_far_field_cancellation_is_detected_and_avoided():
     pts = np.column_stack([0 * z, 0 * z, z])
     stable = F.axis_bz(MAGONE, z)
     dip = F.dipole(MAGONE, pts, rtol=None)[:, 2]
-    # the cancellation-free eq. 6 tends to the dipole at the dipole's own rate, to the farthest point
+    # the cancellation-free axial form (M6) tends to the dipole at the dipole's own rate, to the farthest point
     assert np.allclose(stable[-3:], dip[-3:], rtol=1e-8)
     # the elliptic form loses digits as D^3; its estimate of that is an upper one
     raw = F.exact(MAGONE, pts, rtol=None)[:, 2]

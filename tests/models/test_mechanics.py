@@ -410,7 +410,7 @@ def test_measure_rows(magone):
 def test_mesh_convergence_deeper(magone):
     """Four nested meshes (1 to 0.125 mm, a few minutes): the errors fall, and the order rises as the refinement
     resolves the magnet's rounded edges. With sharp edges the finest triple's order was the singular edge's
-    2 lam = 1.09 (measured 1.01); the rounded edges (issue 13) remove that singularity once the fillet is resolved,
+    2 lam = 1.09 (measured 1.01); the rounded edges remove that singularity once the fillet is resolved,
     leaving the base's bonded outer edge (2 lam ~ 1.18) as the strongest, so the order lies between that, less
     RATE_SLACK, and 2 p = 4. Measured: 1.85 on 1/0.5/0.25 mm, 2.36 on 0.5/0.25/0.125 mm."""
     c = mech.convergence(magone, 23.0, [0.0, 0.5, 1.0], base_mesh_mm=1.0, levels=3)

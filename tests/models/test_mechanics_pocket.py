@@ -1,4 +1,4 @@
-"""The magnet's pocket in the FE (issue 13 item 2): the bonded default unchanged, a sliding magnet and the open
+"""The magnet's pocket in the FE: the bonded default unchanged, a sliding magnet and the open
 insertion channel measured against it (bench/pocket.py prints the full comparison)."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Shear as the bench applies it (issue 13 item 5): the mode-1 increment about the preloaded state, loaded through
+"""Shear as the bench applies it: the mode-1 increment about the preloaded state, loaded through
 the contact patch, and the lateral field of the shifted and tilted magnet.
 
 Laws checked: at rest the operator is the small-strain mode-1 one and a load on the magnet gives today's stiffness;

@@ -22,15 +22,15 @@ def _codes(found, severity=Severity.ERROR):
     return {f.code for f in found if f.severity is severity}
 
 
-def eq6(d, radius, height, br_G):
-    """BRIEF eq. 6: Bz on the axis at distance d below the pole face, in the unit of ``br_G``."""
+def axial_bz(d, radius, height, br_G):
+    """docs/models.md, M6: Bz on the axis at distance d below the pole face, in the unit of ``br_G``."""
     d = np.asarray(d, dtype=float)
     return br_G / 2 * ((d + height) / np.hypot(d + height, radius) - d / np.hypot(d, radius))
 
 
-def test_the_issues_figures_follow_eq10_and_eq11_from_the_published_data(pred, design):
-    """Recomputed from predictions.json alone (curves, travel, remanence band, noise) and eq. 6 written here:
-    S_F = (dBz/du) / (dF/du) (eq. 10) over the range, every material and magnet band; R = N_B / S_F (eq. 11)
+def test_the_figures_follow_m10_and_m11_from_the_published_data(pred, design):
+    """Recomputed from predictions.json alone (curves, travel, remanence band, noise) and M6 written here:
+    S_F = (dBz/du) / (dF/du) (M10) over the range, every material and magnet band; R = N_B / S_F (M11)
     at its worst; the range is the softest curve's force at the binding travel."""
     d = json.loads(json.dumps(pred.as_json()))  # as written
     n, f, noise_G = d["normal"], d["field"], d["noise_G"]
@@ -39,14 +39,14 @@ def test_the_issues_figures_follow_eq10_and_eq11_from_the_published_data(pred, d
     m = F.Magnet.from_spec(design.spec)
     s_f = []
     for br_T in f["remanence_T"].values():
-        s_b = np.gradient(eq6(design.d_rest_mm - u, m.radius_mm, m.height_mm, br_T * 1e4), u, edge_order=2)
+        s_b = np.gradient(axial_bz(design.d_rest_mm - u, m.radius_mm, m.height_mm, br_T * 1e4), u, edge_order=2)
         for curve in n["curve"].values():
             k_e = np.gradient([force for _, force in curve], u, edge_order=2)
             s_f.append((s_b / k_e)[inside])
     lo, hi = n["sensitivity_G_per_N"]
     assert lo == pytest.approx(float(np.min(s_f)), rel=1e-3) and hi == pytest.approx(float(np.max(s_f)), rel=1e-3)
     assert 0 < lo < hi
-    assert n["resolution_mN"] == pytest.approx(1000 * noise_G["total_z_G"] / lo, rel=1e-9)  # eq. 11, worst case
+    assert n["resolution_mN"] == pytest.approx(1000 * noise_G["total_z_G"] / lo, rel=1e-9)  # M11, worst case
     assert noise_G["total_z_G"] == pytest.approx(math.sqrt(sum(noise_G[k] ** 2 for k in (
         "environment_G", "chip_z_G", "quantisation_z_G"))))
     soft = np.asarray([force for _, force in n["curve"]["soft"]])
@@ -66,13 +66,13 @@ def test_the_issues_figures_follow_eq10_and_eq11_from_the_published_data(pred, d
     assert set(d["models"]) == {"field", "mechanics", "shear"}
 
 
-def test_field_at_rest_is_eq6_and_gradient_its_derivative(pred, design):
-    """On the axis the prediction's field is BRIEF eq. 6 with the nominal remanence."""
+def test_field_at_rest_is_m6_and_gradient_its_derivative(pred, design):
+    """On the axis the prediction's field is docs/models.md, M6, with the nominal remanence."""
     m = F.Magnet.from_spec(design.spec)
     d, R, H, br = design.d_rest_mm, m.radius_mm, m.height_mm, m.remanence_T * 1e4
-    assert pred.as_json()["field"]["Bz_rest_G"] == pytest.approx(float(eq6(d, R, H, br)), rel=1e-4)
+    assert pred.as_json()["field"]["Bz_rest_G"] == pytest.approx(float(axial_bz(d, R, H, br)), rel=1e-4)
     h = 1e-4
-    slope = float(eq6(d + h, R, H, br) - eq6(d - h, R, H, br)) / (2 * h)
+    slope = float(axial_bz(d + h, R, H, br) - axial_bz(d - h, R, H, br)) / (2 * h)
     assert pred.as_json()["field"]["dBz_dz_rest_G_per_mm"] == pytest.approx(-slope, rel=1e-5)
 
 
@@ -86,12 +86,12 @@ def test_band_orders_as_physics_says(pred):
     mus = pred.as_json()["material_mu_kPa"]
     k = n["stiffness_at_rest_N_per_mm"]
     assert k["stiff"] / k["soft"] == pytest.approx(mus["stiff"] / mus["soft"], rel=1e-9)
-    # the worst case is the stiff material with the weakest magnet, at rest (BRIEF sec. 3)
+    # the worst case is the stiff material with the weakest magnet, at rest (docs/models.md, M10)
     assert n["resolution_mN"] == pytest.approx(at_rest["stiff"], rel=1e-9)
 
 
 def test_sensitivity_is_field_gradient_over_stiffness(pred, design):
-    """S_F = S_B / K_e (eq. 10) and R = N_B / S_F (eq. 11), recomputed from the arrays."""
+    """S_F = S_B / K_e (M10) and R = N_B / S_F (M11), recomputed from the arrays."""
     a = pred.arrays
     u = a["u"]
     s_b = np.gradient(a["bz_low"], u, edge_order=2)
@@ -108,7 +108,7 @@ def test_noise_combines_environment_chip_and_quantisation(design):
     assert nz["total_z_G"] == pytest.approx(math.sqrt(0.1**2 + chip.noise_z_G**2 + (chip.lsb_z_uT / 100) ** 2 / 12))
     assert chip.lsb_z_uT == pytest.approx(1.210 * 4)  # GAIN_SEL 0, RES 2 (datasheet Table 17)
     assert chip.full_scale_z_G == pytest.approx(22000 * 4.84 / 100)
-    # BRIEF sec. 4: T+X+Y+Z at OSR 0, DIG_FILT 2 takes ~1.84 ms (datasheet Table 19); ours omits the wake-up
+    # T+X+Y+Z at OSR 0, DIG_FILT 2 takes ~1.84 ms (MLX90393 datasheet Table 19); ours omits the wake-up
     assert chip.conversion_ms == pytest.approx(1.84, abs=0.15)
     quiet = derive(parse_spec("[sensor]\nosr = 3\ndig_filt = 7\n"))
     assert chip_setting(quiet).noise_z_G < chip.noise_z_G / 5  # longer averaging, less noise
@@ -123,7 +123,7 @@ def test_range_limits_are_reported_and_consistent(pred, design):
     assert n["range_limit"] == min(limits, key=limits.get)
     u, f = pred.arrays["u"], pred.curves["soft"].force_N
     assert n["range_N"] == pytest.approx(float(np.interp(n["travel_mm"], u, f)))
-    # MagOne's FE reaches the 3 mm scan depth (issue 13): the curve ends there, named so, not as a model failure;
+    # MagOne's FE reaches the 3 mm scan depth: the curve ends there, named so, not as a model failure;
     # the kernel-averaged stretch 2.0 ends the range first (tests/models/test_range_convergence.py)
     nominal = pred.curves["nominal"]
     assert nominal.indentation_mm[-1] == pytest.approx(design.spec.calibration.scan_z_mm)
@@ -148,8 +148,8 @@ def test_a_curve_is_named_by_what_ends_it():
     assert _curve_end(solved, d) == (SCAN_DEPTH, "solved to 1 mm")
 
 
-def test_sensitivity_at_rest_is_eq10_per_material_with_the_nominal_magnet(pred, design):
-    """predictions.json's at-rest sensitivities, recomputed from its own numbers and eq. 6 written here: normal
+def test_sensitivity_at_rest_is_m10_per_material_with_the_nominal_magnet(pred, design):
+    """predictions.json's at-rest sensitivities, recomputed from its own numbers and M6 written here: normal
     S_F = (dBz/du) / (dF/du) at u = 0, shear dBr/dr / k_s + (Bz - d_rest dBr/dr) tilt (the magnet's shift and
     tilt per N), each for the nominal grade and every material."""
     d = json.loads(json.dumps(pred.as_json()))
@@ -157,7 +157,7 @@ def test_sensitivity_at_rest_is_eq10_per_material_with_the_nominal_magnet(pred, 
     u = np.asarray(n["magnet_displacement_mm"])
     m = F.Magnet.from_spec(design.spec)
     br_G = f["remanence_T"]["nominal"] * 1e4
-    s_b = np.gradient(eq6(design.d_rest_mm - u, m.radius_mm, m.height_mm, br_G), u, edge_order=2)[0]
+    s_b = np.gradient(axial_bz(design.d_rest_mm - u, m.radius_mm, m.height_mm, br_G), u, edge_order=2)[0]
     for k in ("soft", "nominal", "stiff"):
         k_e = np.gradient([force for _, force in n["curve"][k]], u, edge_order=2)[0]
         assert n["sensitivity_at_rest_G_per_N"][k] == pytest.approx(s_b / k_e, rel=1e-3)
@@ -189,8 +189,8 @@ def test_shear_uses_the_fe_and_its_range_is_the_magnet_radius(pred, design):
 
 
 def test_saturating_design_is_refused_with_the_distance_to_use():
-    """eq. 9: B(d_min) <= the chip's full scale. The paper's 2 mm (to the package top) is 1.5 mm too close
-    when measured to the sensing point."""
+    """A design constraint (docs/models.md, M9): B(d_min) <= the chip's full scale. The paper's 2 mm (to the package
+    top) is 1.5 mm too close when measured to the sensing point."""
     d = derive(parse_spec("[sensor]\nd_min_mm = 2.0\n"))
     found = prediction_findings(d, predict(d))
     err = [f for f in found if f.code == "chip-saturates"]
@@ -220,8 +220,8 @@ def test_guidelines_warn(design):
 
 
 def test_auto_picks_the_cheapest_field_model_within_tolerance(design):
-    """The working volume runs to r = R_m: eq. 6 and the dipole fail there, the surrogate fits 1 %; a tolerance
-    tighter than the surrogate's own error takes the exact field."""
+    """The working volume runs to r = R_m: the axial form (M6) and the dipole fail there, the surrogate fits 1 %; a
+    tolerance tighter than the surrogate's own error takes the exact field."""
     assert predict(design).as_json()["models"]["field"]["model"] == "surrogate"
     tight = derive(parse_spec("[predict]\ntolerance_pct = 0.0001\nmechanics_model = \"column\"\n"))
     assert predict(tight).as_json()["models"]["field"]["model"] == "exact"

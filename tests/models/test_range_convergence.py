@@ -1,4 +1,4 @@
-"""The normal range converges under mesh refinement (issue 13 item 3).
+"""The normal range converges under mesh refinement.
 
 The range ends where the FE's principal stretch, averaged with a smooth kernel of radius R/30 (0.2 mm on MagOne)
 about each element centroid (models/mechanics/energy.py), reaches predict.max_stretch. Before, the mean over the

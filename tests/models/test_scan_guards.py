@@ -1,4 +1,4 @@
-"""Issue 15 item 3: a recording of the sensor's own forces is never calibrated on (guard A by the column names,
+"""A recording of the sensor's own forces is never calibrated on (guard A by the column names,
 guard B by the numbers), a scan past the predicted range is flagged (guard C), and a recording merged with a
 reference sensor's log on the host clock makes the scan (docs/bundle.md section 1). The recording is made by the
 build's own readout package, Ctrl-C included."""
