@@ -294,7 +294,7 @@ def test_a_kill_at_every_step_of_the_write_then_of_its_recovery(built):
 
 
 def test_a_kill_between_the_two_renames_is_undone_by_the_next_run(built):
-    """Finding 2: killed after the previous build was moved aside, before the new one landed."""
+    """Killed after the previous build was moved aside, before the new one landed."""
     out, user = built
     old = _tree(out)
     pid = os.fork()

@@ -4,7 +4,7 @@ beyond the force band, spelled as Python reads but C never prints) are refused e
 frame with the chip-error bit never yields a force. Measured on the readout package's own decoder over lines
 and frames from its simulated board (which the firmware tests hold byte-identical to the C core's output).
 
-Sized for CI (3,000 corruptions per mode, as the issue measured); ``-m slow`` tries every byte value at every
+Sized for CI (3,000 corruptions per mode, as the unprotected wire was once measured with); ``-m slow`` tries every byte value at every
 position of 40 lines and 40 frames."""
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ def corruptions(pkg, items: list[bytes], trials) -> dict[str, int]:
     """Decode each single-byte corruption of ``items[k]`` between its neighbours; count what came out.
 
     ``trials(k, item)`` yields (position, new byte). 'silent' counts decoded samples whose force (or field,
-    status or time) differs from what was sent under that sequence number: the failure the issue measured."""
+    status or time) differs from what was sent under that sequence number: the failure the unprotected wire showed."""
     originals = pkg.Decoder().feed(b"".join(items))
     sent = {(s.seq, s.t_us): s for s in originals}  # t_us is unique: the sequence number wraps at 256
     assert len(sent) == len(items)
@@ -72,7 +72,7 @@ def every_trial(k, item):
 
 @pytest.mark.parametrize("text", [True, False], ids=["text", "binary"])
 def test_single_byte_corruptions_never_decode_to_a_different_force(pkg, text, record_property):
-    """3,000 random single-byte corruptions of 300 lines (frames): the issue measured 534 of 3,000 text-line
+    """3,000 random single-byte corruptions of 300 lines (frames): before the checksum, 534 of 3,000 text-line
     corruptions decoding silently to a different force; now none may, in either mode."""
     items = stream(pkg, text, 300, chip_error_every=37)
     counts = corruptions(pkg, items, random_trials(12, 10))
