@@ -4,8 +4,8 @@ beyond the force band, spelled as Python reads but C never prints) are refused e
 frame with the chip-error bit never yields a force. Measured on the readout package's own decoder over lines
 and frames from its simulated board (which the firmware tests hold byte-identical to the C core's output).
 
-Sized for CI (3,000 corruptions per mode, as the unprotected wire was once measured with); ``-m slow`` tries every byte value at every
-position of 40 lines and 40 frames."""
+Sized for CI (3,000 corruptions per mode, the sample the unprotected wire was once measured with); ``-m slow`` tries
+every byte value at every position of 40 lines and 40 frames."""
 
 from __future__ import annotations
 
