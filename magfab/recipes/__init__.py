@@ -44,6 +44,14 @@ class Recipe:
     def name(self) -> str:
         return self.texts.get("name", self.key)
 
+    def __reduce__(self):
+        # a mappingproxy does not pickle; a Design holding recipes goes to forked and Dask workers
+        return _recipe, (self.key, dict(self.quantities), dict(self.texts))
+
+
+def _recipe(key: str, quantities: dict[str, Quantity], texts: dict[str, str]) -> Recipe:
+    return Recipe(key, MappingProxyType(quantities), MappingProxyType(texts))
+
 
 class RecipeError(ValueError):
     """A malformed catalogue file: a bug in the package data, never user input."""
