@@ -100,6 +100,8 @@ class Design:
     chip: Recipe
     magnet_grade: resolve.MagnetGrade  # spec.magnet.grade, resolved once (recipes/magnets.toml)
     material: resolve.Material  # spec.elastomer.material, resolved once (recipes/materials.toml)
+    adhesive: Recipe  # spec.fabrication.adhesive (recipes/adhesives.toml)
+    release_agent: Recipe  # spec.fabrication.release_agent (recipes/adhesives.toml)
     # magnet
     magnet_radius_mm: float
     magnet_height_mm: float
@@ -266,7 +268,7 @@ class Design:
         """Every derived number (for design.json), rounded to 1 nm so the text is stable."""
         out: dict[str, object] = {}
         for name in self.__dataclass_fields__:
-            if name in {"spec", "printer", "chip", "magnet_grade", "material", "array"}:
+            if name in {"spec", "printer", "chip", "magnet_grade", "material", "adhesive", "release_agent", "array"}:
                 continue
             out[name] = _rounded(getattr(self, name))
         out["tip"] = self.tip.value
@@ -339,7 +341,9 @@ def derive(spec: Spec) -> Design:
         fields["alignment_holes"] = _array_holes(spec, fields)
     fields.update(_mould(spec, printer, part, pocket["core_base_radius_mm"], fields.get("array")))
     design = Design(spec=spec, printer=printer, chip=chip, magnet_grade=resolve.magnet_grade(spec.magnet.grade),
-                    material=resolve.material(spec.elastomer.material), **fields)
+                    material=resolve.material(spec.elastomer.material),
+                    adhesive=resolve.adhesive(spec.fabrication.adhesive),
+                    release_agent=resolve.adhesive(spec.fabrication.release_agent), **fields)
     design.reference  # its address and site, refused here (check and build) rather than in the board's branch
     check_limits(design)  # what the build would cost, before any of it: check and build both refuse
     return design

@@ -22,26 +22,52 @@ RESOLVER = PACKAGE / "recipes" / "resolve.py"
 RESOLVED = ("magnets", "materials", "chips", "printers")
 
 
+def _is_catalogue(node: ast.AST) -> bool:
+    return isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "catalogue"
+
+
+def _mentions_spec(node: ast.AST) -> bool:
+    return any((isinstance(n, ast.Attribute) and n.attr == "spec") or (isinstance(n, ast.Name) and n.id == "spec")
+               for n in ast.walk(node))
+
+
 def _keyed_lookups(source: str) -> list[int]:
     """Lines of ``catalogue(kind)[key]``, ``catalogue(kind).get(key)`` and ``name = catalogue(kind)`` (then indexed
-    later) for the resolved kinds, or for a kind the code only knows at run time; listing or iterating a whole
-    catalogue (the spec's check of which keys exist, the inverse design's search space, the acceptance table of every
-    grade) is not a lookup."""
+    later) for the resolved kinds, or for a kind the code only knows at run time; and of any catalogue (or a name bound
+    to one) indexed by a spec value. Listing or iterating a whole catalogue (the spec's check of which keys exist, the
+    inverse design's search space, the acceptance table of every grade) is not a lookup."""
     tree = ast.parse(source)
     parents = {child: node for node in ast.walk(tree) for child in ast.iter_child_nodes(node)}
-    found = []
+    bound = {t.id for node in ast.walk(tree) if isinstance(node, ast.Assign)
+             for target, value in _pairs(node) if _is_catalogue(value) for t in [target] if isinstance(t, ast.Name)}
+    found = set()
     for node in ast.walk(tree):
-        if not (isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "catalogue"
-                and node.args):
+        if isinstance(node, ast.Subscript) and _mentions_spec(node.slice) and (
+                _is_catalogue(node.value) or (isinstance(node.value, ast.Name) and node.value.id in bound)):
+            found.add(node.lineno)
+        if not (_is_catalogue(node) and node.args):
             continue
         kind = node.args[0]
         if isinstance(kind, ast.Constant) and kind.value not in RESOLVED:
             continue
         up = parents.get(node)
+        if isinstance(up, ast.Tuple):  # a, b = catalogue(x), catalogue(y)
+            up = parents.get(up)
         if (isinstance(up, ast.Subscript) and up.value is node) or isinstance(up, (ast.Assign, ast.NamedExpr)) or (
                 isinstance(up, ast.Attribute) and up.attr in {"get", "__getitem__"}):
-            found.append(node.lineno)
+            found.add(node.lineno)
     return sorted(found)
+
+
+def _pairs(node: ast.Assign) -> list[tuple[ast.AST, ast.AST]]:
+    """(target, value) of an assignment, tuples unpacked element by element."""
+    out = []
+    for target in node.targets:
+        if isinstance(target, ast.Tuple) and isinstance(node.value, ast.Tuple):
+            out += list(zip(target.elts, node.value.elts))
+        else:
+            out.append((target, node.value))
+    return out
 
 
 def test_only_the_resolver_looks_up_a_grade_material_chip_or_printer_by_key():
@@ -54,8 +80,11 @@ def test_the_lookup_check_sees_a_planted_lookup():
     planted = ('a = catalogue("magnets")[spec.magnet.grade]\n'
                'b = catalogue("chips").get("mlx90393")\n'
                'materials = catalogue("materials")\n'
-               'c = catalogue(kind)[key]\n')
-    assert _keyed_lookups(planted) == [1, 2, 3, 4]
+               'c = catalogue(kind)[key]\n'
+               'd = catalogue("adhesives")[design.spec.fabrication.adhesive]\n'
+               'glues, parts = catalogue("adhesives"), catalogue("parts")\n'
+               'e = glues[spec.fabrication.release_agent]\n')
+    assert _keyed_lookups(planted) == [1, 2, 3, 4, 5, 7]
     listing = ('known = sorted(catalogue("magnets"))\n'
                'for name, g in catalogue("magnets").items(): pass\n'
                'ok = key in catalogue(kind)\n'
@@ -121,9 +150,21 @@ def test_the_design_carries_the_specs_grade_material_chip_and_printer():
     assert F.Magnet.from_spec(d.spec) == F.Magnet.from_design(d)
 
 
+def test_the_design_resolves_every_catalogue_key_the_spec_has():
+    from magfab.spec import _CATALOGUE_KEYS
+
+    d = derive(load_spec(None))
+    held = {("magnet", "grade"): d.magnet_grade.key, ("elastomer", "material"): d.material.key,
+            ("sensor", "chip"): d.chip.key, ("fabrication", "adhesive"): d.adhesive.key,
+            ("fabrication", "release_agent"): d.release_agent.key}
+    assert set(held) == set(_CATALOGUE_KEYS)  # a new catalogue key in the spec needs a home in the Design
+    assert held == {(s, k): getattr(getattr(d.spec, s), k) for s, k in _CATALOGUE_KEYS}
+    assert d.printer.key == d.spec.mould.printer.value  # an Enum in the spec, a recipe in the Design
+
+
 def test_design_json_does_not_change_with_the_typed_values():
     out = derive(load_spec(None)).as_dict()
-    assert "magnet_grade" not in out and "material" not in out and out["chip"] == "mlx90393"
+    assert not {"magnet_grade", "material", "adhesive", "release_agent"} & set(out) and out["chip"] == "mlx90393"
 
 
 def test_a_design_pickles_whole_and_cheaply():

@@ -65,10 +65,9 @@ def _sensor_rows(design: Design) -> list[dict[str, object]]:
     from .checklist import quantities  # checklist re-exports this module, so import it at call time
 
     q = quantities(design)
-    parts, adhesives, assembly = catalogue("parts"), catalogue("adhesives"), catalogue("assembly")
+    parts, assembly = catalogue("parts"), catalogue("assembly")
     pcb = spec.pcb
-    glue, release, ca = (adhesives[spec.fabrication.adhesive], adhesives[spec.fabrication.release_agent],
-                         adhesives["loctite-401"])
+    glue, release, ca = design.adhesive, design.release_agent, catalogue("adhesives")["loctite-401"]
     stencil = assembly["stencil"]
     coating = design.magnet_grade.coating
     taxels = len(design.taxels)

@@ -239,7 +239,7 @@ def _print_section(design: Design) -> Section:
 def _prepare_section(design: Design, q: Quantities) -> Section:
     printer = design.printer
     rec = _silicone(design)
-    release = catalogue("adhesives")[design.spec.fabrication.release_agent]
+    release = design.release_agent
     coats, coat_dry = _q(printer, "barrier_coats"), _q(printer, "barrier_dry_min")
     seal = _t(printer, "barrier_coat")
     if coats is not None and coat_dry is not None:
@@ -354,9 +354,8 @@ def _chips(design: Design) -> str:
 
 
 def _assemble_section(design: Design) -> Section:
-    adhesives = catalogue("adhesives")
-    glue = adhesives[design.spec.fabrication.adhesive]
-    ca = adhesives["loctite-401"]
+    glue = design.adhesive
+    ca = catalogue("adhesives")["loctite-401"]
     fillet = ca["fillet_mm"].nominal
     bead_ul = 0.5 * fillet * fillet * 2.0 * math.pi * design.pad_radius_mm
     pins = " and ".join(f"{d:g} mm" for _, _, d in design.alignment_holes)

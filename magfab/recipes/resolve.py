@@ -1,4 +1,5 @@
-"""The one place a spec's catalogue keys (magnet grade, elastomer material, chip, printer) become recipe values.
+"""The one place a spec's catalogue keys (magnet grade, elastomer material, chip, printer, adhesive and release
+agent) become recipe values.
 
 :func:`magfab.design.derive` calls these once; the models then read typed fields (``design.magnet_grade.remanence_T``,
 ``design.material.density_g_cm3``) and never look a key up again, so a grade or material is resolved in one place and
@@ -14,7 +15,7 @@ from dataclasses import dataclass
 
 from . import Quantity, Recipe, RecipeError, catalogue
 
-__all__ = ["MagnetGrade", "Material", "magnet_grade", "material", "chip", "printer"]
+__all__ = ["MagnetGrade", "Material", "magnet_grade", "material", "chip", "printer", "adhesive"]
 
 
 @dataclass(frozen=True)
@@ -100,3 +101,9 @@ def chip(key: str) -> Recipe:
 def printer(key: str) -> Recipe:
     """The printer ``key`` of recipes/printers.toml."""
     return _entry("printers", key)
+
+
+def adhesive(key: str) -> Recipe:
+    """The adhesive or release agent ``key`` of recipes/adhesives.toml (read as prose and cure times by the bench
+    papers, so left a :class:`Recipe`)."""
+    return _entry("adhesives", key)
