@@ -12,6 +12,7 @@ The values are frozen and picklable (a Design travels to forked and Dask workers
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cache
 
 from . import Quantity, Recipe, RecipeError, catalogue
 
@@ -64,6 +65,7 @@ def _entry(kind: str, key: str) -> Recipe:
     return entries[key]
 
 
+@cache  # frozen values of a cached catalogue: derive (once per design of a search) pays nothing
 def magnet_grade(key: str) -> MagnetGrade:
     """The grade ``key`` of recipes/magnets.toml as a :class:`MagnetGrade`."""
     r = _entry("magnets", key)
@@ -79,6 +81,7 @@ def magnet_grade(key: str) -> MagnetGrade:
     )
 
 
+@cache
 def material(key: str) -> Material:
     """The silicone ``key`` of recipes/materials.toml as a :class:`Material`."""
     r = _entry("materials", key)
@@ -92,17 +95,20 @@ def material(key: str) -> Material:
     )
 
 
+@cache
 def chip(key: str) -> Recipe:
     """The chip ``key`` of recipes/chips.toml. Left a :class:`Recipe`: its readers (footprint, firmware, noise) take
     families of keys by pattern (``sensitivity_z_gain<n>``, ``i2c_base_address_<code>``, ``pin_<n>``)."""
     return _entry("chips", key)
 
 
+@cache
 def printer(key: str) -> Recipe:
     """The printer ``key`` of recipes/printers.toml."""
     return _entry("printers", key)
 
 
+@cache
 def adhesive(key: str) -> Recipe:
     """The adhesive or release agent ``key`` of recipes/adhesives.toml (read as prose and cure times by the bench
     papers, so left a :class:`Recipe`)."""
