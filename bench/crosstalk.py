@@ -74,7 +74,7 @@ def least_pitches(tol_override: float | None = None) -> list[dict[str, object]]:
     single = derive(parse_spec('name = "magone"'))
     pred = predict(single)
     out = []
-    own = X.fieldmod.exact(X.fieldmod.Magnet.from_spec(single.spec),
+    own = X.fieldmod.exact(X.fieldmod.Magnet.from_design(single),
                            np.array([[0.0, 0.0, -(single.spec.sensor.d_min_mm + single.magnet_height_mm / 2)]]))[0, 2]
     print(f"\nA chip's own Bz at d_min {own:.0f} G, full scale {pred.chip.full_scale_z_G:.0f} G: "
           f"{pred.chip.full_scale_z_G - own:.0f} G of margin")

@@ -171,7 +171,7 @@ def main(argv: list[str] | None = None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     design = derive(load_spec(None))
     body = mech.Body.from_design(design)
-    band = mech.band(design.spec.elastomer.material)
+    band = mech.band(design.material)
     print(f"Body: {body}\n")
     t0 = time.perf_counter()
     sa = speed_accuracy(body, band[1], args.reference_mesh)

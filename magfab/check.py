@@ -178,7 +178,7 @@ def prediction_findings(design: Design, pred) -> list[Finding]:
     # M9: B(d_min) <= B_sat at the configured gain and resolution (strongest magnet of the grade).
     b_dmin = pred.field.Bz_d_min_strongest_G
     if b_dmin > chip.full_scale_z_G:
-        strongest = fieldmod.Magnet.from_spec(spec, "high")
+        strongest = fieldmod.Magnet.from_design(design, "high")
         d_sat = _saturation_gap(strongest, chip.full_scale_z_G, sen.d_min_mm, design.d_rest_mm)
         out.append(Finding(E, "chip-saturates",
                            f"Bz at d_min = {sen.d_min_mm:g} mm is {b_dmin:.0f} G with the grade's strongest magnet, above "

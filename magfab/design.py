@@ -23,7 +23,7 @@ from functools import cached_property
 from . import outline
 from .errors import SpecError, shown
 from .limits import check_limits
-from .recipes import Recipe, catalogue
+from .recipes import Recipe, resolve
 from .spec import Polarity, Skin, Spec, Tip
 
 __all__ = ["Design", "Taxel", "ArrayLayout", "derive", "DISTANCE_TOLERANCE_MM"]
@@ -98,6 +98,10 @@ class Design:
     spec: Spec
     printer: Recipe
     chip: Recipe
+    magnet_grade: resolve.MagnetGrade  # spec.magnet.grade, resolved once (recipes/magnets.toml)
+    material: resolve.Material  # spec.elastomer.material, resolved once (recipes/materials.toml)
+    adhesive: Recipe  # spec.fabrication.adhesive (recipes/adhesives.toml)
+    release_agent: Recipe  # spec.fabrication.release_agent (recipes/adhesives.toml)
     # magnet
     magnet_radius_mm: float
     magnet_height_mm: float
@@ -264,7 +268,7 @@ class Design:
         """Every derived number (for design.json), rounded to 1 nm so the text is stable."""
         out: dict[str, object] = {}
         for name in self.__dataclass_fields__:
-            if name in {"spec", "printer", "chip", "array"}:
+            if name in {"spec", "printer", "chip", "magnet_grade", "material", "adhesive", "release_agent", "array"}:
                 continue
             out[name] = _rounded(getattr(self, name))
         out["tip"] = self.tip.value
@@ -326,8 +330,8 @@ def derive(spec: Spec) -> Design:
     In the order a person would design it: the magnet and its pocket in the elastomer, the stack from the
     chip's sensing point up, where the pocket sits so that the rest distance is d_max, the pad, the chip's
     address, the mould round the part; then what all that would cost to build (:mod:`magfab.limits`)."""
-    chip = catalogue("chips")[spec.sensor.chip]
-    printer = catalogue("printers")[spec.mould.printer.value]
+    chip = resolve.chip(spec.sensor.chip)
+    printer = resolve.printer(spec.mould.printer.value)
     part = _elastomer(spec)
     stack = _stack(spec, chip)
     pocket = _pocket(spec, part, stack)
@@ -336,7 +340,10 @@ def derive(spec: Spec) -> Design:
         fields["array"] = _array(spec, chip, printer, fields)
         fields["alignment_holes"] = _array_holes(spec, fields)
     fields.update(_mould(spec, printer, part, pocket["core_base_radius_mm"], fields.get("array")))
-    design = Design(spec=spec, printer=printer, chip=chip, **fields)
+    design = Design(spec=spec, printer=printer, chip=chip, magnet_grade=resolve.magnet_grade(spec.magnet.grade),
+                    material=resolve.material(spec.elastomer.material),
+                    adhesive=resolve.adhesive(spec.fabrication.adhesive),
+                    release_agent=resolve.adhesive(spec.fabrication.release_agent), **fields)
     design.reference  # its address and site, refused here (check and build) rather than in the board's branch
     check_limits(design)  # what the build would cost, before any of it: check and build both refuse
     return design

@@ -55,10 +55,7 @@ class BuildResult:
 
     def summary(self) -> dict[str, object]:
         """What ``magfab build --json`` prints."""
-        from .recipes import catalogue
-
         d = self.design
-        material = catalogue("materials")[self.spec.elastomer.material]
         return {
             "spec": self.spec.name,
             "out_dir": str(self.out_dir) if self.out_dir else None,
@@ -68,7 +65,7 @@ class BuildResult:
                 "cover_mm": round(d.cover_mm, 4),
                 "skin_mm": round(d.skin_mm, 4),
                 "cavity_volume_mL": round(d.elastomer_volume_mm3 / 1000.0, 4),
-                "silicone_per_part_g": round(d.elastomer_volume_mm3 / 1000.0 * material["density_g_cm3"].nominal, 3),
+                "silicone_per_part_g": round(d.elastomer_volume_mm3 / 1000.0 * d.material.density_g_cm3.nominal, 3),
                 "cavities": d.cavities,
                 **self._array_summary(),
             },

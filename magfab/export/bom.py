@@ -14,7 +14,6 @@ from ..recipes import catalogue
 
 if TYPE_CHECKING:
     from ..design import Design
-    from ..recipes import Recipe
 
 __all__ = ["FIELDS", "bom_rows", "bom_csv"]
 
@@ -23,11 +22,6 @@ FIELDS = ("item", "part", "description", "quantity", "unit", "source")
 #: Solder paste per board: a 0.125 mm stencil over the chip's lands prints a few mm3; a syringe is the
 #: smallest unit sold, so the BOM asks for one syringe whatever the count.
 _PASTE_UNIT = "syringe"
-
-
-def magnet_recipe(design: Design) -> Recipe | None:
-    """The magnet grade's entry in recipes/assembly.toml (coating, operating temperature), if it has one."""
-    return catalogue("assembly").get(f"magnet-{design.spec.magnet.grade.lower()}")
 
 
 def indenter_disc_mm(design: Design, y_half_mm: float) -> float:
@@ -71,13 +65,11 @@ def _sensor_rows(design: Design) -> list[dict[str, object]]:
     from .checklist import quantities  # checklist re-exports this module, so import it at call time
 
     q = quantities(design)
-    parts, adhesives, assembly = catalogue("parts"), catalogue("adhesives"), catalogue("assembly")
+    parts, assembly = catalogue("parts"), catalogue("assembly")
     pcb = spec.pcb
-    glue, release, ca = (adhesives[spec.fabrication.adhesive], adhesives[spec.fabrication.release_agent],
-                         adhesives["loctite-401"])
+    glue, release, ca = design.adhesive, design.release_agent, catalogue("adhesives")["loctite-401"]
     stencil = assembly["stencil"]
-    mag = magnet_recipe(design)
-    coating = mag.texts.get("coating", "") if mag is not None else ""
+    coating = design.magnet_grade.coating
     taxels = len(design.taxels)
     chips = taxels + (design.reference is not None)
     width, height = board_size_mm(design)

@@ -22,7 +22,6 @@ from .bom import (  # bom_*: re-exported: pipeline.py writes bom.csv through thi
     bom_csv,
     bom_rows,
     indenter_disc_mm,
-    magnet_recipe,
 )
 
 if TYPE_CHECKING:
@@ -75,7 +74,7 @@ class Quantities:
 
 
 def _silicone(design: Design) -> Recipe:
-    return catalogue("materials")[design.spec.elastomer.material]
+    return design.material.recipe
 
 
 def _override(value: float | None, recipe: Recipe, key: str, spec_key: str) -> float:
@@ -240,7 +239,7 @@ def _print_section(design: Design) -> Section:
 def _prepare_section(design: Design, q: Quantities) -> Section:
     printer = design.printer
     rec = _silicone(design)
-    release = catalogue("adhesives")[design.spec.fabrication.release_agent]
+    release = design.release_agent
     coats, coat_dry = _q(printer, "barrier_coats"), _q(printer, "barrier_dry_min")
     seal = _t(printer, "barrier_coat")
     if coats is not None and coat_dry is not None:
@@ -298,8 +297,8 @@ def _pour_section(design: Design, q: Quantities) -> Section:
 def _magnet_section(design: Design) -> Section:
     spec = design.spec
     assembly = catalogue("assembly")
-    mag = magnet_recipe(design)
-    t_max = _q(mag, "max_operating_temp_C") if mag is not None else None
+    grade = design.magnet_grade
+    t_max = grade.max_operating_temp_C.nominal if grade.max_operating_temp_C is not None else None
     if design.array is not None:
         from .checklist_array import magnets_text
 
@@ -308,7 +307,7 @@ def _magnet_section(design: Design) -> Section:
         array = []
     return _section("Insert the magnet" + ("s" if array else ""), array + [
         f"Magnet: NdFeB {spec.magnet.grade}, {spec.magnet.diameter_mm:g} mm diameter x {spec.magnet.height_mm:g} mm, "
-        "axially magnetised" + (f", {_t(mag, 'coating')} coated" if mag is not None and _t(mag, "coating") else "") + ".",
+        "axially magnetised" + (f", {grade.coating} coated" if grade.coating else "") + ".",
         "Polarity: " + _lc(_t(assembly["polarity-check"], "method", "mark each magnet's north face.")),
         _t(assembly["magnet-handling"], "heat", "Keep magnets away from hot steps.")
         + (f" {spec.magnet.grade} is rated {t_max:g} C." if t_max is not None else ""),
@@ -355,9 +354,8 @@ def _chips(design: Design) -> str:
 
 
 def _assemble_section(design: Design) -> Section:
-    adhesives = catalogue("adhesives")
-    glue = adhesives[design.spec.fabrication.adhesive]
-    ca = adhesives["loctite-401"]
+    glue = design.adhesive
+    ca = catalogue("adhesives")["loctite-401"]
     fillet = ca["fillet_mm"].nominal
     bead_ul = 0.5 * fillet * fillet * 2.0 * math.pi * design.pad_radius_mm
     pins = " and ".join(f"{d:g} mm" for _, _, d in design.alignment_holes)
@@ -398,7 +396,7 @@ def _wiring_table() -> Table:
 def _wiring_section(design: Design) -> Section:
     bench = catalogue("bench")
     ls, uno, jumper = bench["level-shifter"], bench["arduino"], bench["qwiic-jumper"]
-    vdd = _t(catalogue("chips")["mlx90393"], "function_VDD", "supply")
+    vdd = _t(design.chip, "function_VDD", "supply")
     return _section("Wire the board", [
         f"Wire the breakout to the {uno.name} through the {ls.name}, as in the table: the {jumper.name.split(',')[0]} "
         f"into J1, its pins into the shifter's low side, jumper wires from the high side to the Arduino.",

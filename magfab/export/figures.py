@@ -89,7 +89,7 @@ def _render(fig) -> tuple[bytes, bytes]:
 def _axis_field(plt, design: Design, pred: Prediction):
     from matplotlib.lines import Line2D
 
-    magnet = fieldmod.Magnet.from_spec(design.spec)
+    magnet = fieldmod.Magnet.from_design(design)
     sen = design.spec.sensor
     d = np.linspace(max(0.3, 0.25 * sen.d_min_mm), 1.5 * design.d_rest_mm, 300)
     bz = fieldmod.bz_br(magnet, d, 0.0, model=fieldmod.FieldModel.EXACT)[0]
@@ -132,7 +132,7 @@ def _contours(plt, design: Design, pred: Prediction):
     from matplotlib.colors import LogNorm
     from matplotlib.lines import Line2D
 
-    magnet = fieldmod.Magnet.from_spec(design.spec)
+    magnet = fieldmod.Magnet.from_design(design)
     sen = design.spec.sensor
     rm = design.magnet_radius_mm
     d = np.linspace(0.5 * sen.d_min_mm, 1.3 * design.d_rest_mm, 90)

@@ -30,7 +30,7 @@ from ..errors import InputError, SpecError
 from ..formats import calibration_json
 from ..formats.calibration_json import calibration_sha256
 from ..models.chip import conversion_us  # the chip's pace, shared with the prediction
-from ..recipes import catalogue
+from ..recipes import resolve
 
 if TYPE_CHECKING:
     from ..design import Design
@@ -90,8 +90,9 @@ HOST_PROGRAM = "host/magfab_host"
 #: HALLCONF the firmware programs: the setting the datasheet's sensitivity table (recipe) is given for.
 HALLCONF = 0xC
 #: Temperature channel, TCMP off: T = 25 C + (raw - T25) / TRES, both from recipes/chips.toml (datasheet Table 7).
-TEMPERATURE_RAW_25C = int(catalogue("chips")["mlx90393"]["temperature_raw_25C"].nominal)
-TEMPERATURE_LSB_PER_C = catalogue("chips")["mlx90393"]["temperature_lsb_per_C"].nominal
+#: The register code is written for this chip, so these are its figures by name, not by a spec key.
+TEMPERATURE_RAW_25C = int(resolve.chip("mlx90393")["temperature_raw_25C"].nominal)
+TEMPERATURE_LSB_PER_C = resolve.chip("mlx90393")["temperature_lsb_per_C"].nominal
 #: How long after a conversion is due (the datasheet's table) the firmware reads it, as a fraction of the conversion.
 #: Assumption: covers the read's own start-up and the timer's granularity; the reads then follow on a fixed grid one
 #: conversion apart, so the margin does not accumulate and every conversion is read once. A chip slower than the

@@ -250,7 +250,6 @@ def _resolve(design: Design, data: Mapping[str, Any], tol: Tolerances) -> _Input
     """Every tolerance as a number: the override in ``tol`` or the recipe's and the spec's value."""
     spec = design.spec
     chip, printer = design.chip, design.printer
-    grade = catalogue("magnets")[spec.magnet.grade]
     rem = data["field"]["remanence_T"]
     br_lo, br_hi = tol.remanence_T if tol.remanence_T is not None else (rem["low"], rem["high"])
     br_nom = float(rem["nominal"])
@@ -263,7 +262,7 @@ def _resolve(design: Design, data: Mapping[str, Any], tol: Tolerances) -> _Input
         depth.nominal - depth.low, depth.high - depth.nominal)
     sens = tol.sensitivity_pct if tol.sensitivity_pct is not None else (
         -chip["sensitivity_drift_pct"].low, chip["sensitivity_drift_pct"].high)
-    alpha = grade["br_temperature_coefficient_pct_per_C"].nominal / 100.0
+    alpha = design.magnet_grade.br_temperature_coefficient_pct_per_C.nominal / 100.0
     temp = sorted(1.0 + alpha * (t - BR_REFERENCE_C) for t in tol.ambient_C)
     gain = ((1.0 - sens[0] / 100.0) * temp[0], (1.0 + sens[1] / 100.0) * temp[1])
     return _Inputs(

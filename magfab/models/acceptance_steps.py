@@ -45,7 +45,6 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
-from ..recipes import catalogue
 from ..units import G0, UT_PER_GAUSS
 from .calibration_thermal import MIN_SPAN_C
 
@@ -64,13 +63,12 @@ def _r(x: float, digits: int = 3) -> float:
 
 
 def self_weight_N(design: Design) -> tuple[float, float]:
-    """(the magnet's weight, the silicone's), N: rho g V with the grade's density (recipes/assembly.toml) and the
+    """(the magnet's weight, the silicone's), N: rho g V with the grade's density (recipes/magnets.toml) and the
     silicone's (the spec's override or recipes/materials.toml)."""
-    spec = design.spec
-    magnet = catalogue("assembly")["magnet-" + spec.magnet.grade.lower()]["density_g_cm3"].nominal
-    silicone = spec.fabrication.density_g_cm3
+    magnet = design.magnet_grade.density_g_cm3.nominal
+    silicone = design.spec.fabrication.density_g_cm3
     if silicone is None:
-        silicone = catalogue("materials")[spec.elastomer.material]["density_g_cm3"].nominal
+        silicone = design.material.density_g_cm3.nominal
     # g/cm^3 x mm^3 = 1e-3 g; x 1e-3 kg/g x g0
     return (magnet * design.magnet_volume_mm3 * 1e-6 * G0, float(silicone) * design.elastomer_volume_mm3 * 1e-6 * G0)
 

@@ -33,7 +33,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..formats.calibration_json import AXES
-from ..recipes import catalogue
 
 __all__ = ["MIN_SPAN_C", "MIN_INDEPENDENT_C", "DEFAULT_REFERENCE_C", "ThermalFit", "recipe_coefficient_per_C", "fit_thermal", "correct"]
 
@@ -78,7 +77,7 @@ class ThermalFit:
 
 def recipe_coefficient_per_C(design) -> float:
     """The magnet grade's remanence coefficient plus the chip's nominal sensitivity drift, 1/degC."""
-    magnet = catalogue("magnets")[design.spec.magnet.grade]["br_temperature_coefficient_pct_per_C"].nominal
+    magnet = design.magnet_grade.br_temperature_coefficient_pct_per_C.nominal
     # sensitivity_drift_pct is a band over the whole range (+/-3 %, nominal 0): its nominal adds nothing
     chip = design.chip["sensitivity_drift_pct"].nominal
     return (magnet + chip) / 100.0

@@ -69,7 +69,7 @@ class _Loads:
     @classmethod
     def of(cls, design: Design, pred: Prediction) -> _Loads:
         stiff = min(pred.shear.stiffness_N_per_mm.values())
-        return cls(fieldmod.Magnet.from_spec(design.spec), design.z_sense_mm,
+        return cls(fieldmod.Magnet.from_design(design), design.z_sense_mm,
                    design.z_magnet_low_mm + design.magnet_height_mm / 2.0, pred.normal.travel_mm,
                    pred.shear.range_N / stiff, min(pred.normal.sensitivity_G_per_N),
                    min(pred.shear.sensitivity_G_per_N), pred.normal.range_N, stiff)

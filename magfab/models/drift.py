@@ -82,12 +82,10 @@ class Coefficients:
 
 def coefficients(design: Design) -> Coefficients:
     """:class:`Coefficients` for the design's grade and chip (recipes/magnets.toml, recipes/chips.toml)."""
-    from ..recipes import catalogue
-
-    grade = catalogue("magnets")[design.spec.magnet.grade]
+    grade = design.magnet_grade
     chip = design.chip
     span = chip["sensitivity_drift_span_C"].nominal
-    spread = grade["br_temperature_coefficient_spread_pct_per_C"]
+    spread = grade.br_temperature_coefficient_spread_pct_per_C
     drift_lsb = max(abs(chip["offset_thermal_drift_lsb"].low), abs(chip["offset_thermal_drift_lsb"].high))
     gain = int(chip["offset_thermal_drift_gain_sel"].nominal)  # the datasheet's OFFSTHD is in LSB at this gain, RES 0
     lsb_xy = chip[f"sensitivity_xy_gain{gain}_uT_per_lsb"].nominal / UT_PER_GAUSS
@@ -95,7 +93,7 @@ def coefficients(design: Design) -> Coefficients:
     sens = max(abs(chip["sensitivity_drift_pct"].low), abs(chip["sensitivity_drift_pct"].high))
     tlin = chip["temperature_linearity_C"]
     return Coefficients(
-        magnet_pct_per_C=grade["br_temperature_coefficient_pct_per_C"].nominal,
+        magnet_pct_per_C=grade.br_temperature_coefficient_pct_per_C.nominal,
         magnet_spread_pct_per_C=(spread.low, spread.high),
         chip_sensitivity_pct_per_C=sens / span,
         chip_offset_xy_G_per_C=drift_lsb * lsb_xy / span,

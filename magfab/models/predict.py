@@ -376,7 +376,7 @@ def _derivative(x: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 def _band(design: Design) -> dict[str, float]:
     spec = design.spec
-    return dict(zip(MATERIALS, spec.elastomer.shear_modulus_kPa or mech.band(spec.elastomer.material)))
+    return dict(zip(MATERIALS, spec.elastomer.shear_modulus_kPa or mech.band(design.material)))
 
 
 #: What replaces :func:`normal_curve` in :func:`predict`: (design, body, mu_kPa, indentation) -> (nominal curve, its
@@ -392,7 +392,7 @@ def predict(design: Design, elastomer: ElastomerModel | None = None) -> Predicti
     sen = spec.sensor
     chip = chip_setting(design)
     nz = noise(design, chip)
-    magnets = {band: fieldmod.Magnet.from_spec(spec, band) for band in GRADE_BAND}
+    magnets = {band: fieldmod.Magnet.from_design(design, band) for band in GRADE_BAND}
     fuse = choose_field(design, magnets["nominal"])
     t_field = time.perf_counter()
 
@@ -459,7 +459,7 @@ def normal_on_mesh(design: Design, mesh_mm: float, field_model: str = "exact") -
     nominal = _fe_curve(body, mus["nominal"], indentation, mesh_mm, float(design.spec.calibration.scan_z_mm))
     curves = {k: nominal.scaled(mu) if k != "nominal" else nominal for k, mu in mus.items()}
     chip = chip_setting(design)
-    magnets = {band: fieldmod.Magnet.from_spec(design.spec, band) for band in GRADE_BAND}
+    magnets = {band: fieldmod.Magnet.from_design(design, band) for band in GRADE_BAND}
     return _normal(design, chip, noise(design, chip), magnets, field_model, curves, _curve_end(nominal, indentation))[0]
 
 

@@ -42,7 +42,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..recipes import catalogue
 from . import field as fieldmod
 
 if TYPE_CHECKING:
@@ -136,7 +135,7 @@ class Travel:
 def _changes(design: Design, travel: Travel, points: np.ndarray, span_C: float) -> np.ndarray:
     """(P, 7) the largest motion change (xy, z), the thermal change (xy, z) and the rest field (3) at ``points``
     (P, 3), G."""
-    magnet = fieldmod.Magnet.from_spec(design.spec)
+    magnet = fieldmod.Magnet.from_design(design)
     centres, signs = _magnets(design)
     moves = [(0.0, 0.0, -travel.normal_mm)] + [(sx * travel.shear_mm, sy * travel.shear_mm, 0.0)
                                                for sx, sy in ((1, 0), (-1, 0), (0, 1), (0, -1))]
@@ -155,8 +154,7 @@ def _changes(design: Design, travel: Travel, points: np.ndarray, span_C: float) 
 
 def _remanence_coefficient(design: Design) -> float:
     """The grade's remanence temperature coefficient, per C (magnets.toml)."""
-    grade = catalogue("magnets")[design.spec.magnet.grade]
-    return grade["br_temperature_coefficient_pct_per_C"].nominal / 100.0
+    return design.magnet_grade.br_temperature_coefficient_pct_per_C.nominal / 100.0
 
 
 def site(design: Design, travel: Travel, span_C: float, distance_mm: float | None = None) -> Site:
@@ -209,7 +207,7 @@ def rejection(design: Design, where: Site,
     of ``distances_mm`` from the sensing chip (taxel 0's), worst over its direction and orientation."""
     from .drift import dipole_field_G
 
-    chip = catalogue("chips")[design.spec.sensor.chip]
+    chip = design.chip
     drift = chip["sensitivity_drift_pct"]
     mismatch = 2.0 * max(abs(drift.low), abs(drift.high)) / 100.0
     cross = chip["cross_axis_sensitivity_pct"].nominal / 100.0

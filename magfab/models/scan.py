@@ -133,7 +133,7 @@ def simulate_scan(design: Design, prediction: Prediction | None = None, *, ideal
     u = np.interp(delta, nominal.indentation_mm, nominal.magnet_displacement_mm)  # axial travel, + down
     fz = np.interp(delta, nominal.indentation_mm, nominal.force_N)
     k_s = pred.shear.stiffness_N_per_mm["nominal"]
-    magnet = fieldmod.Magnet.from_spec(design.spec)
+    magnet = fieldmod.Magnet.from_design(design)
     gap = design.d_rest_mm - u
     # The sensor at the origin, the magnet's centre at (0, y, gap + H/2): in the magnet's frame the sensing
     # point is at (0, -y, -(gap + H/2)).

@@ -52,7 +52,7 @@ def _chips(design: Design) -> np.ndarray:
 def field_at_chips(design: Design, centres: np.ndarray | None = None) -> np.ndarray:
     """(N chips, N magnets, 3) field in uT at each chip from each magnet (its polarity applied), the magnets at
     ``centres`` (N, 3) board frame mm (default: at rest)."""
-    magnet = fieldmod.Magnet.from_spec(design.spec)
+    magnet = fieldmod.Magnet.from_design(design)
     centres = _magnet_centres(design) if centres is None else centres
     chips = _chips(design)
     out = np.zeros((len(chips), len(centres), 3))
@@ -90,7 +90,7 @@ def array_field(design: Design) -> ArrayField:
     """The offsets, rest fields and own-field tables of ``design``'s taxels."""
     B = field_at_chips(design)
     own = np.eye(len(B), dtype=bool)
-    magnet = fieldmod.Magnet.from_spec(design.spec)
+    magnet = fieldmod.Magnet.from_design(design)
     travel = np.linspace(0.0, design.d_rest_mm - design.spec.sensor.d_min_mm, TABLE_POINTS)
     below = -(design.d_rest_mm - travel + magnet.height_mm / 2.0)  # the chip in the magnet's frame
     axis = fieldmod.exact(magnet, np.column_stack([np.zeros_like(travel), np.zeros_like(travel), below]))

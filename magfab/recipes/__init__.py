@@ -3,6 +3,9 @@ kit), read from the TOML files beside this module.
 
 Every number in a recipe is a table with its ``source``: either ``{value = x, source = "..."}`` or
 ``{min = a, nominal = b, max = c, source = "..."}``. Numbers are parsed by TOML, never evaluated.
+
+The entries a spec names (magnet grade, material, chip, printer, adhesives) are taken by key in one place,
+:mod:`magfab.recipes.resolve`, when the design is derived; everything downstream reads the Design's values.
 """
 
 from __future__ import annotations
@@ -43,6 +46,14 @@ class Recipe:
     @property
     def name(self) -> str:
         return self.texts.get("name", self.key)
+
+    def __reduce__(self):
+        # a mappingproxy does not pickle; a Design holding recipes goes to forked and Dask workers
+        return _recipe, (self.key, dict(self.quantities), dict(self.texts))
+
+
+def _recipe(key: str, quantities: dict[str, Quantity], texts: dict[str, str]) -> Recipe:
+    return Recipe(key, MappingProxyType(quantities), MappingProxyType(texts))
 
 
 class RecipeError(ValueError):

@@ -95,7 +95,7 @@ def test_simulated_scan_physics(design, pred, ideal):
     y, delta = scan_track(design, pred)
     centre = (delta == 0) & (np.abs(y) < 1e-12)
     # at rest on the axis: the predicted rest field, no lateral field, no force
-    magnet = F.Magnet.from_spec(design.spec)
+    magnet = F.Magnet.from_design(design)
     exact_rest = F.bz_br(magnet, design.d_rest_mm, 0.0, model="exact")[0] * UT_PER_GAUSS
     assert ideal.B_uT[centre, 2][0] == pytest.approx(exact_rest, rel=1e-12)
     # the prediction's own figure comes from its chosen (faster) field model

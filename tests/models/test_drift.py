@@ -28,7 +28,7 @@ def test_the_magnets_error_per_degree_is_the_field_recomputed_with_a_warmer_magn
     """Br scaled by (1 + alpha) for +1 C, the field recomputed with magpylib (not the prediction's field model) at the
     rest point, and read through the calibration's inverse."""
     alpha = D.coefficients(design).magnet_pct_per_C / 100.0
-    cold = F.Magnet.from_spec(design.spec, "low")
+    cold = F.Magnet.from_design(design, "low")
     warm = F.Magnet(cold.radius_mm, cold.height_mm, cold.remanence_T * (1.0 + alpha))
     point = np.array([[0.0, 0.0, -(cold.height_mm / 2.0 + design.d_rest_mm)]])
     shift = F.magpylib_cylinder(warm, point)[0, 2] - F.magpylib_cylinder(cold, point)[0, 2]

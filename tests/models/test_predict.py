@@ -36,7 +36,7 @@ def test_the_figures_follow_m10_and_m11_from_the_published_data(pred, design):
     n, f, noise_G = d["normal"], d["field"], d["noise_G"]
     u = np.asarray(n["magnet_displacement_mm"])
     inside = u <= n["travel_mm"] + 1e-9
-    m = F.Magnet.from_spec(design.spec)
+    m = F.Magnet.from_design(design)
     s_f = []
     for br_T in f["remanence_T"].values():
         s_b = np.gradient(axial_bz(design.d_rest_mm - u, m.radius_mm, m.height_mm, br_T * 1e4), u, edge_order=2)
@@ -68,7 +68,7 @@ def test_the_figures_follow_m10_and_m11_from_the_published_data(pred, design):
 
 def test_field_at_rest_is_m6_and_gradient_its_derivative(pred, design):
     """On the axis the prediction's field is docs/models.md, M6, with the nominal remanence."""
-    m = F.Magnet.from_spec(design.spec)
+    m = F.Magnet.from_design(design)
     d, R, H, br = design.d_rest_mm, m.radius_mm, m.height_mm, m.remanence_T * 1e4
     assert pred.as_json()["field"]["Bz_rest_G"] == pytest.approx(float(axial_bz(d, R, H, br)), rel=1e-4)
     h = 1e-4
@@ -155,7 +155,7 @@ def test_sensitivity_at_rest_is_m10_per_material_with_the_nominal_magnet(pred, d
     d = json.loads(json.dumps(pred.as_json()))
     n, s, f = d["normal"], d["shear"], d["field"]
     u = np.asarray(n["magnet_displacement_mm"])
-    m = F.Magnet.from_spec(design.spec)
+    m = F.Magnet.from_design(design)
     br_G = f["remanence_T"]["nominal"] * 1e4
     s_b = np.gradient(axial_bz(design.d_rest_mm - u, m.radius_mm, m.height_mm, br_G), u, edge_order=2)[0]
     for k in ("soft", "nominal", "stiff"):

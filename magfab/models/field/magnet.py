@@ -15,6 +15,8 @@ import numpy as np
 from ...errors import ModelLimitError
 
 if TYPE_CHECKING:
+    from ...design import Design
+    from ...recipes.resolve import MagnetGrade
     from ...spec import Spec
 
 __all__ = ["FieldModelError", "Magnet", "MU0", "DEFAULT_RTOL", "EXACT_RTOL", "SURFACE_GAP"]
@@ -53,14 +55,23 @@ class Magnet:
                 raise ValueError(f"Magnet.{name} must be a positive finite number; instead received {value!r}")
 
     @classmethod
-    def from_spec(cls, spec: Spec, band: str = "nominal") -> Magnet:
-        """The spec's magnet, its remanence from recipes/magnets.toml (``band``: low, nominal or high)."""
-        from ...recipes import catalogue
-
-        br = catalogue("magnets")[spec.magnet.grade]["remanence_T"]
+    def of(cls, spec: Spec, grade: MagnetGrade, band: str = "nominal") -> Magnet:
+        """The spec's magnet disc with the remanence of ``grade`` (``band``: low, nominal or high)."""
         if band not in ("low", "nominal", "high"):
             raise ValueError(f"band must be 'low', 'nominal' or 'high'; instead received {band!r}")
-        return cls(spec.magnet.diameter_mm / 2.0, spec.magnet.height_mm, getattr(br, band))
+        return cls(spec.magnet.diameter_mm / 2.0, spec.magnet.height_mm, getattr(grade.remanence_T, band))
+
+    @classmethod
+    def from_design(cls, design: Design, band: str = "nominal") -> Magnet:
+        """The design's magnet, its remanence from the grade the design resolved (``band``: low, nominal or high)."""
+        return cls.of(design.spec, design.magnet_grade, band)
+
+    @classmethod
+    def from_spec(cls, spec: Spec, band: str = "nominal") -> Magnet:
+        """The spec's magnet, for scripts that hold a spec and no Design (the models take :meth:`from_design`)."""
+        from ...recipes.resolve import magnet_grade
+
+        return cls.of(spec, magnet_grade(spec.magnet.grade), band)
 
     @property
     def aspect(self) -> float:

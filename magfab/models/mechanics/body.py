@@ -21,7 +21,7 @@ from ...units import N_PER_KPA_MM2
 
 if TYPE_CHECKING:
     from ...design import Design
-    from ...recipes import Recipe
+    from ...recipes.resolve import Material
 
 __all__ = ["MechanicsError", "Body", "Curve", "Convergence", "band", "check_option"]
 
@@ -122,10 +122,8 @@ class Body:
         """The elastomer of a :class:`magfab.design.Design` (board-frame magnet height moved to the base frame);
         the magnet's edge radius is the magnet recipe's nominal ``edge_radius_mm``, capped at what the magnet
         allows."""
-        from ...recipes import catalogue
-
         rm, hm = design.magnet_radius_mm, design.magnet_height_mm
-        edge = catalogue("magnets")[design.spec.magnet.grade]["edge_radius_mm"].nominal
+        edge = design.magnet_grade.edge_radius_mm.nominal
         return cls(radius_mm=design.elastomer_radius_mm, height_mm=design.elastomer_height_mm,
                    base_height_mm=design.base_height_mm, tip=design.tip,
                    magnet_radius_mm=rm, magnet_height_mm=hm,
@@ -246,18 +244,16 @@ def _newton_per_mu_mm2(mu_kPa: float) -> float:
 # ---- material band -----------------------------------------------------------------------------------------
 
 
-def band(material_recipe: Recipe | str) -> tuple[float, float, float]:
-    """(soft, nominal, stiff) neo-Hookean shear modulus in kPa from a materials recipe (or its catalogue key)."""
-    if isinstance(material_recipe, str):
-        from ...recipes import catalogue
+def band(material: Material | str) -> tuple[float, float, float]:
+    """(soft, nominal, stiff) neo-Hookean shear modulus in kPa of a material (a design's ``design.material``, or for
+    scripts its key in recipes/materials.toml)."""
+    if isinstance(material, str):
+        from ...recipes.resolve import material as resolve_material
 
-        materials = catalogue("materials")
-        if material_recipe not in materials:
-            raise MechanicsError(f"Input material must be one of {', '.join(sorted(materials))}; "
-                                 f"instead received {material_recipe!r}")
-        material_recipe = materials[material_recipe]
-    if "shear_modulus_kPa" not in material_recipe.quantities:
-        raise MechanicsError(f"Input material {material_recipe.key!r} must give shear_modulus_kPa")
-    q = material_recipe["shear_modulus_kPa"]
+        try:
+            material = resolve_material(material)
+        except KeyError as exc:
+            raise MechanicsError(f"Input material {exc.args[0]}") from None
+    q = material.shear_modulus_kPa
     return (q.low, q.nominal, q.high)
 
