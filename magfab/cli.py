@@ -256,14 +256,14 @@ def _print_findings(findings: list) -> None:
 def check(spec: Path | None, as_json: bool) -> None:
     """Validate SPEC and run the design checks, predictions included; writes nothing."""
     with _handled():
-        from .check import design_findings, errors_in
+        from .check import design_findings, errors_in, predict_with_findings, preflight
         from .design import derive
         from .errors import BuildError
-        from .models.predict import predict_with_findings
         from .spec import load_spec
 
         loaded = load_spec(spec)
         design = derive(loaded)
+        preflight(design)  # the reference chip's site and the build's cost, refused as the build refuses them
         findings = design_findings(design)
         findings += predict_with_findings(design)[1]
         if as_json:

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import io
 import math
+import re
+import textwrap
 from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING
 
@@ -164,8 +166,6 @@ def _contours(plt, design: Design, pred: Prediction):
 
 
 def _force(plt, design: Design, pred: Prediction):
-    import textwrap
-
     from matplotlib.lines import Line2D
 
     fig, axes = plt.subplots(1, 2, figsize=(9.0, 4.6), layout="constrained")
@@ -251,8 +251,6 @@ def pareto_front(points: Sequence[tuple[float, float]]) -> list[tuple[float, flo
 
 def _plain_unit(unit: str) -> str:
     """'per 10^5 points' -> 'per 100,000 points' (no mathtext)."""
-    import re
-
     return re.sub(r"10\^(\d+)", lambda m: f"{10 ** int(m[1]):,}", unit)
 
 

@@ -19,7 +19,7 @@ from .tables import rows, write_table
 from .targets import OBJECTIVES, Models
 
 if TYPE_CHECKING:
-    from .run import DesignResult
+    from .result import DesignResult
 
 __all__ = ["write_outputs", "write_specs", "plot_front"]
 

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ...errors import ModelLimitError
+from ...recipes import catalogue
 
 if TYPE_CHECKING:
     from ...spec import Spec
@@ -55,8 +56,6 @@ class Magnet:
     @classmethod
     def from_spec(cls, spec: Spec, band: str = "nominal") -> Magnet:
         """The spec's magnet, its remanence from recipes/magnets.toml (``band``: low, nominal or high)."""
-        from ...recipes import catalogue
-
         br = catalogue("magnets")[spec.magnet.grade]["remanence_T"]
         if band not in ("low", "nominal", "high"):
             raise ValueError(f"band must be 'low', 'nominal' or 'high'; instead received {band!r}")

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, TypeVar
 import numpy as np
 
 from ...errors import ModelLimitError
+from ...recipes import catalogue
 from ...spec import Tip
 from ...units import N_PER_KPA_MM2
 
@@ -122,8 +123,6 @@ class Body:
         """The elastomer of a :class:`magfab.design.Design` (board-frame magnet height moved to the base frame);
         the magnet's edge radius is the magnet recipe's nominal ``edge_radius_mm``, capped at what the magnet
         allows."""
-        from ...recipes import catalogue
-
         rm, hm = design.magnet_radius_mm, design.magnet_height_mm
         edge = catalogue("magnets")[design.spec.magnet.grade]["edge_radius_mm"].nominal
         return cls(radius_mm=design.elastomer_radius_mm, height_mm=design.elastomer_height_mm,
@@ -249,8 +248,6 @@ def _newton_per_mu_mm2(mu_kPa: float) -> float:
 def band(material_recipe: Recipe | str) -> tuple[float, float, float]:
     """(soft, nominal, stiff) neo-Hookean shear modulus in kPa from a materials recipe (or its catalogue key)."""
     if isinstance(material_recipe, str):
-        from ...recipes import catalogue
-
         materials = catalogue("materials")
         if material_recipe not in materials:
             raise MechanicsError(f"Input material must be one of {', '.join(sorted(materials))}; "
