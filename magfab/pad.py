@@ -18,6 +18,9 @@ from .elastomer import outline_prism
 if TYPE_CHECKING:
     import cadquery as cq
 
+# Imported lazily, inside the functions that use it, for speed: CadQuery takes a
+# noticeable time to import, and importing this module should not.
+
 __all__ = ["pad_solid"]
 
 

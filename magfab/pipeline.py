@@ -54,6 +54,9 @@ from .spec import Spec
 if TYPE_CHECKING:
     from .models.predict import Prediction
 
+# CadQuery and trimesh are imported lazily, in the CAD branch, for speed: importing the pipeline stays cheap, and the
+# kernel's load is timed on its own (with Ctrl-C deferred while VTK initialises).
+
 __all__ = ["Artifact", "BuildResult", "OutputError", "plan", "write", "build", "check_target", "PARTS",
            "default_out_dir"]
 

@@ -9,6 +9,9 @@ from .figures import RC, _legend_below, _render
 if TYPE_CHECKING:
     from ..models.calibration import FitResult
 
+# Imported lazily, inside the functions that use it, for speed: matplotlib takes a
+# noticeable time to import, and importing this module should not.
+
 __all__ = ["chart", "caption"]
 
 #: Per force: marker and colour (the polynomials joined by a line, moving least squares a lone star).

@@ -20,6 +20,9 @@ if TYPE_CHECKING:
     from ..design import Design
     from ..models.predict import Prediction
 
+# Imported lazily, inside the functions that use it, for speed: matplotlib takes a
+# noticeable time to import, and importing this module should not.
+
 BAND_COLOURS = {"soft": "#1f77b4", "nominal": "#2ca02c", "stiff": "#d62728"}
 
 #: What each plot shows, by file stem: the report's captions and the file table's descriptions. Each says what

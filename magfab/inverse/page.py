@@ -21,6 +21,9 @@ from .targets import OBJECTIVES, Models
 if TYPE_CHECKING:
     from .result import DesignResult
 
+# Imported lazily, inside the functions that use it, for speed: matplotlib takes a
+# noticeable time to import, and importing this module should not.
+
 __all__ = ["write_outputs", "write_specs", "plot_front"]
 
 _LABELS = {"normal_resolution_mN": "normal resolution, mN", "shear_resolution_mN": "shear resolution, mN",

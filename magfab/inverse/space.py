@@ -26,6 +26,9 @@ from ..recipes import catalogue
 from ..spec import Spec, spec_from_dict
 from .targets import Targets, Variables
 
+# Imported lazily, inside the functions that use it, for speed: scipy takes a
+# noticeable time to import, and importing this module should not.
+
 __all__ = ["NUMERIC", "CATEGORICAL", "stock_disc", "candidate_spec", "suggest", "grid", "latin_hypercube",
            "base_point"]
 

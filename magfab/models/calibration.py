@@ -72,6 +72,9 @@ from .region import HULL_MAX_VERTICES, Scaling, ValidRegion, guard_ops
 if TYPE_CHECKING:
     from ..design import Design
 
+# Imported lazily, inside the functions that use it, for speed: scipy takes a
+# noticeable time to import, and importing this module should not.
+
 __all__ = [
     "FORMAT", "MIN_ROWS", "ORDERS", "MLS_ORDER", "SCAN_COLUMNS", "FORCE_COLUMNS", "HULL_MAX_VERTICES",
     "CalibrationError", "ScanError", "Scan",

@@ -19,6 +19,9 @@ if TYPE_CHECKING:
     from ...board.layout import Board
     from ...design import Design
 
+# Imported lazily, inside the functions that use it, for speed: matplotlib takes a
+# noticeable time to import, and importing this module should not.
+
 __all__ = ["stackup_figure", "board_svg", "board_half_width", "STACK_STYLE"]
 
 

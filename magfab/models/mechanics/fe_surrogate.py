@@ -43,6 +43,9 @@ from .fe import fe
 from .options import OnFailure
 from .shear_surface import ShearProbe, ShearResponse
 
+# Imported lazily, inside the functions that use it, for speed: scipy takes a
+# noticeable time to import, and importing this module should not.
+
 __all__ = ["OutsideRegion", "BOX", "GRID", "in_region", "curve", "normal_and_shear", "held_out_error", "description",
            "ratios", "body_of", "run", "fit_data"]
 
