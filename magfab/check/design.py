@@ -11,7 +11,7 @@ from ..errors import Finding, Severity
 
 __all__ = ["design_findings"]
 
-E, W, I = Severity.ERROR, Severity.WARNING, Severity.INFO
+E, W, INFO = Severity.ERROR, Severity.WARNING, Severity.INFO
 
 
 def _f(x: float) -> str:
@@ -55,20 +55,20 @@ def design_findings(design: Design) -> list[Finding]:
         out.append(Finding(W, "thin-skin", f"only {_f(design.skin_mm)} mm of silicone between the pocket's rim and the "
                            "surface; thin skins tear when the magnet is pushed in", "elastomer.min_skin_mm"))
 
-    out.append(Finding(I, "pocket-fit", f"pocket {_f(2 * design.pocket_radius_mm)} x {_f(design.pocket_height_mm)} mm "
-                       f"holds the {_f(2 * design.magnet_radius_mm)} x {_f(design.magnet_height_mm)} mm magnet with "
+    out.append(Finding(INFO, "pocket-fit", f"pocket {_f(2 * design.pocket_radius_mm)} x {_f(design.pocket_height_mm)} "
+                       f"mm holds the {_f(2 * design.magnet_radius_mm)} x {_f(design.magnet_height_mm)} mm magnet with "
                        f"{_f(design.spec.elastomer.pocket_clearance_mm)} mm clearance; "
                        f"{_f(design.skin_mm)} mm skin at its rim, {_f(design.cover_mm)} mm cover on the axis"))
-    out.append(Finding(I, "recess-fit", f"chip recess {_f(design.recess_side_mm)} x {_f(design.recess_side_mm)} x "
+    out.append(Finding(INFO, "recess-fit", f"chip recess {_f(design.recess_side_mm)} x {_f(design.recess_side_mm)} x "
                        f"{_f(design.recess_depth_mm)} mm holds the package (max {_f(design.chip_body_max_mm)} x "
                        f"{_f(design.chip_body_max_mm)} x {_f(design.chip_height_max_mm)} mm)"))
-    out.append(Finding(I, "stack", f"magnet lower face {_f(design.d_rest_mm)} mm above the sensing point "
+    out.append(Finding(INFO, "stack", f"magnet lower face {_f(design.d_rest_mm)} mm above the sensing point "
                        f"(which is {_f(design.sensing_depth_mm)} mm below the package top)"))
-    out.append(Finding(I, "cavity-volume", f"cavity volume {design.elastomer_volume_mm3 / 1000:.3f} mL of silicone per "
-                       f"part, {design.cavities} cavit{'y' if design.cavities == 1 else 'ies'} per mould"))
+    out.append(Finding(INFO, "cavity-volume", f"cavity volume {design.elastomer_volume_mm3 / 1000:.3f} mL of silicone "
+                       f"per part, {design.cavities} cavit{'y' if design.cavities == 1 else 'ies'} per mould"))
     if design.array is not None:
         arr = design.array
-        out.append(Finding(I, "array", f"{len(arr.taxels)} taxels {_f(arr.pitch_mm)} mm apart ({arr.skin.value} "
+        out.append(Finding(INFO, "array", f"{len(arr.taxels)} taxels {_f(arr.pitch_mm)} mm apart ({arr.skin.value} "
                            f"{'skin' if design.continuous else 'tips'}; the parts allow {_f(arr.min_pitch_mm)} mm): "
                            f"{_f(arr.pitch_mm - design.recess_side_mm)} mm of pad between chip recesses" +
                            (f", {_f(arr.pitch_mm - 2 * design.pocket_radius_mm)} mm of silicone between pockets"

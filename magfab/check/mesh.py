@@ -15,7 +15,7 @@ if TYPE_CHECKING:
 
 __all__ = ["mesh_findings", "mould_fit_findings"]
 
-E, I = Severity.ERROR, Severity.INFO
+E, INFO = Severity.ERROR, Severity.INFO
 
 
 def mesh_findings(name: str, mesh: trimesh.Trimesh, solid_volume_mm3: float, tolerance_mm: float) -> list[Finding]:
@@ -63,7 +63,7 @@ def mould_fit_findings(design: Design, fit: MouldFit) -> list[Finding]:
                                f"{design.printer.key} printer's minimum of {min_wall:.2f} mm", key))
     worst = max(a + b for a, b in zip(fit.part_outside_mm3, fit.cavity_outside_mm3))
     web = "" if fit.cavity_web_mm is None else f", {fit.cavity_web_mm:.2f} mm between cavities"
-    out.append(Finding(I, "mould-fit", f"closed mould checked on the STL meshes: {len(fit.cavity_volume_mm3)} "
+    out.append(Finding(INFO, "mould-fit", f"closed mould checked on the STL meshes: {len(fit.cavity_volume_mm3)} "
                        f"cavit{'y' if len(fit.cavity_volume_mm3) == 1 else 'ies'} equal to the cast part within "
                        f"{worst:.2g} mm^3 (allowed {allowed:.2g}), interference {fit.cup_lid_interference_mm3:.2g} mm^3, "
                        f"thinnest cup wall {fit.cup_wall_mm:.2f} mm{web}"))

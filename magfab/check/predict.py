@@ -16,7 +16,7 @@ from .reference import reference_findings
 
 __all__ = ["prediction_findings", "predict_with_findings"]
 
-E, W, I = Severity.ERROR, Severity.WARNING, Severity.INFO
+E, W, INFO = Severity.ERROR, Severity.WARNING, Severity.INFO
 
 
 #: The spec key that moves each normal range limit (predict.py's labels); d_min and the chip's full scale have theirs
@@ -52,7 +52,7 @@ def prediction_findings(design: Design, pred: Prediction) -> list[Finding]:
                            "softer elastomer.material or a stronger magnet", "predict.required_resolution_mN"))
     if normal.range_limit != "d_min":
         travel = normal.range_limits_travel_mm
-        out.append(Finding(I, "range-limit",
+        out.append(Finding(INFO, "range-limit",
                            f"the normal range ends at {normal.travel_mm:.2f} mm of magnet travel ({normal.range_limit}), "
                            f"before the magnet reaches d_min ({travel['d_min']:.2f} mm of travel)",
                            _RANGE_LIMIT_KEYS.get(normal.range_limit, "")))
@@ -90,7 +90,7 @@ def prediction_findings(design: Design, pred: Prediction) -> list[Finding]:
                                f"the {family} model '{m.name}' has an estimated error of {100 * err:.2g} %, more than "
                                f"predict.tolerance_pct = {p.tolerance_pct:g} %", f"predict.{family}_model"
                                if family in ("field", "mechanics") else "predict.tolerance_pct"))
-    out.append(Finding(I, "prediction",
+    out.append(Finding(INFO, "prediction",
                        f"normal: {normal.sensitivity_G_per_N[0]:.0f}-{normal.sensitivity_G_per_N[1]:.0f} G/N, "
                        f"resolution {normal.resolution_mN:.1f} mN, range {normal.range_N:.2f} N; shear: "
                        f"{shear.sensitivity_G_per_N[0]:.0f}-{shear.sensitivity_G_per_N[1]:.0f} G/N, resolution "
