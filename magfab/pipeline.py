@@ -33,9 +33,8 @@ from .check import (
 )
 from .design import Design, derive
 from .errors import BuildError, Finding, ModelLimitError, OutputError, Severity
-from .export import bom, calibration_chart, checklist, crosstalk_figures, drift_figures, firmware, kicad, readout
+from .export import bom, cad, calibration_chart, checklist, crosstalk_figures, drift_figures, firmware, kicad, readout
 from .export import figures as plots
-from .export.cad import step_bytes, stl_bytes, tessellate
 from .export.report import draw_pictures, render_report
 from .fit import mould_fit
 from .fork import deferred_interrupt, side_branch
@@ -460,12 +459,13 @@ def _cad(design: Design, say: Progress, timings: dict[str, float]):
         solid = _solid(module, func, design)
         timings[f"solid:{stem}"] = time.perf_counter() - t
         t = time.perf_counter()
-        mesh = tessellate(solid, tol, ang)
+        mesh = cad.tessellate(solid, tol, ang)
         meshes[stem] = mesh
         findings += mesh_findings(stem, mesh, solid.val().Volume(), tol)
-        artifacts.append(Artifact(f"{stem}.stl", stl_bytes(mesh, f"{spec.name} {stem}"), description + ", STL"))
+        artifacts.append(Artifact(f"{stem}.stl", cad.stl_bytes(mesh, f"{spec.name} {stem}"), description + ", STL"))
         if spec.build.step:
-            artifacts.append(Artifact(f"{stem}.step", step_bytes(solid, f"{spec.name}-{stem}"), description + ", STEP"))
+            artifacts.append(Artifact(f"{stem}.step", cad.step_bytes(solid, f"{spec.name}-{stem}"),
+                                      description + ", STEP"))
         timings[f"export:{stem}"] = time.perf_counter() - t
     if not errors_in(findings, strict=False):  # booleans need sound meshes
         t = time.perf_counter()
