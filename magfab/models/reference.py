@@ -11,7 +11,7 @@ nearest point where, for every magnet pressed through its normal travel or slid 
 (:class:`Travel`: the board places by what the geometry allows, pressed to d_min and slid by the elastomer's radius
 less the magnet's; the prediction reports the change at its predicted travel), and for the magnets' rest field changing over the environment's temperature
 span by the grade's remanence coefficient, the change of every component at the reference stays below the chip's
-own RMS noise on that axis (:func:`magfab.models.predict.noise`). Exact superposition of every magnet
+own RMS noise on that axis (:func:`magfab.models.chip.noise`). Exact superposition of every magnet
 (:func:`magfab.models.field.exact`). What is subtracted is then below one noise sigma whatever the taxels do.
 
 What it rejects.
