@@ -18,9 +18,9 @@ MLS work                   scan rows, calibration.method ('mls' or 'auto')     r
 
 The constants were measured on the MagOne design and variants of it, on a shared two-core machine that was
 busy at the time (so ratios more than absolute times), and carry a margin of about 1.5-2x; the figures are in
-the constants' comments. :func:`check_limits` is called by :func:`magfab.check.preflight` right after derive, so ``magfab check`` and
-``magfab build`` both refuse an over-budget spec with one :class:`~magfab.errors.SpecError` that names the key,
-its value, the estimate and the limit, and the value that would fit.
+the constants' comments. :func:`check_limits` is called by :func:`magfab.check.preflight` right after derive, so
+``magfab check`` and ``magfab build`` both refuse an over-budget spec with one :class:`~magfab.errors.SpecError` that
+names the key, its value, the estimate and the limit, and the value that would fit.
 """
 
 from __future__ import annotations
