@@ -10,8 +10,8 @@ from conftest import require_kicad
 
 from magfab import SpecError, derive, parse_spec, pcb
 from magfab.board.layout import ORIGIN
-from magfab.check import preflight
 from magfab.board.placement import board_size_mm
+from magfab.check import preflight
 from magfab.export.bom import bom_rows
 from magfab.export.kicad import run_tool
 from magfab.models.reference import Travel, site
