@@ -34,7 +34,8 @@ from test_mechanics_crosscheck import FElupeIndentation  # noqa: E402
 from magfab import load_spec  # noqa: E402
 from magfab.design import derive  # noqa: E402
 from magfab.models import mechanics as mech  # noqa: E402
-from magfab.models.predict import FE_MESHES_MM, _band  # noqa: E402
+from magfab.models.mechanics.schedule import FE_MESHES_MM  # noqa: E402
+from magfab.models.predict import _band  # noqa: E402
 
 DESIGNS = (("MagOne", None), ("small_magnet", BENCH_DIR / "designs" / "small_magnet.toml"),
            ("stiff_material", BENCH_DIR / "designs" / "stiff_material.toml"),

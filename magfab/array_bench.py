@@ -6,10 +6,13 @@ scan, made again by the build)."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from .errors import SpecError, shown
+from .formats.scan_csv import read_scan_csv
+from .models.scan_guards import reject_self_calibrated_file
 
 if TYPE_CHECKING:
     from .formats.scan_csv import Scan
@@ -39,9 +42,6 @@ def taxel_scans(folder: Path | None, spec: Spec, taxel: int, scan: Scan) -> dict
     """{k: scan} for the build: ``scan`` for ``taxel`` (refused by guard B when its forces are the sensor's own,
     compared with the taxel's present calibration on the field with the neighbours' removed), and the measured
     scans the folder keeps for the others."""
-    from dataclasses import replace
-
-    from .formats.scan_csv import read_scan_csv
 
     scans = {}
     if folder is not None:
@@ -52,8 +52,6 @@ def taxel_scans(folder: Path | None, spec: Spec, taxel: int, scan: Scan) -> dict
         present = folder / "calibration" / f"taxel_{taxel:02d}.json"
         layout = folder / "calibration" / "array.json"
         if present.is_file() and layout.is_file():
-            from .models.scan_guards import reject_self_calibrated_file
-
             offset = json.loads(layout.read_text(encoding="utf-8"))["offset_uT"][taxel]
             reject_self_calibrated_file(replace(scan, B_uT=scan.B_uT - offset), present,
                                         spec.calibration.reference_resolution_mN)

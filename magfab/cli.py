@@ -32,9 +32,15 @@ try:
     import click
 
     from . import __version__
+    from .errors import BuildError, InputError, SpecError, shown
 except KeyboardInterrupt:
     sys.stderr.write("magfab: error: interrupted; nothing was written\n")
     raise SystemExit(130) from None
+
+# Imported lazily, inside the commands that use them, for speed: ``magfab --help`` and every command load only what
+# they run. magfab's own modules (the pipeline, the checks, the design search) pull in numpy, pydantic and the
+# models, magfab.output and importlib.resources the archive, hashing and temporary-file modules; rich draws the progress
+# bars. Only magfab.errors (dataclasses and enum) is imported above.
 
 EXIT_BAD_INPUT = 2
 EXIT_INTERNAL = 1
@@ -51,8 +57,6 @@ def _handled() -> Iterator[None]:
     """Turn errors into one line and an exit code by their type in :mod:`magfab.errors`: the user's input or
     environment (InputError, a missing or unreadable file) exits 2; anything else is our bug and exits 1;
     an interrupt exits 130. Never a traceback, unless MAGFAB_DEBUG is set."""
-    from .errors import InputError
-
     try:
         yield
     except InputError as exc:
@@ -145,7 +149,6 @@ def _calibration_target(spec_path: Path | None, out_dir: Path | None, scan_path:
     in, else the one we stand in (so a scan recorded into build/x/ never makes build/x/build/x/); the spec
     is --spec, else that folder's spec.json (or, for --out a new folder, the spec of the build the scan is in or
     we stand in), else the embedded MagOne design."""
-    from .errors import SpecError, shown
     from .pipeline import default_out_dir
     from .spec import load_build_spec, load_spec
 
@@ -256,14 +259,13 @@ def _print_findings(findings: list) -> None:
 def check(spec: Path | None, as_json: bool) -> None:
     """Validate SPEC and run the design checks, predictions included; writes nothing."""
     with _handled():
-        from .check import design_findings, errors_in
+        from .check import design_findings, errors_in, predict_with_findings, preflight
         from .design import derive
-        from .errors import BuildError
-        from .models.predict import predict_with_findings
         from .spec import load_spec
 
         loaded = load_spec(spec)
         design = derive(loaded)
+        preflight(design)  # the reference chip's site and the build's cost, refused as the build refuses them
         findings = design_findings(design)
         findings += predict_with_findings(design)[1]
         if as_json:
@@ -295,7 +297,6 @@ def init(path: Path | None, force: bool, targets: bool, example: str) -> None:
     with _handled():
         from importlib import resources
 
-        from .errors import SpecError, shown
         from .spec import NAME_PATTERN, default_spec_text, is_valid_name
 
         path = path or Path("targets.toml" if targets else "spec.toml")

@@ -20,9 +20,11 @@ import math
 from dataclasses import dataclass
 from functools import cached_property
 
+import numpy as np
+
 from . import outline
 from .errors import SpecError, shown
-from .limits import check_limits
+from .errors import number_text as _fmt
 from .recipes import Recipe, resolve
 from .spec import Polarity, Skin, Spec, Tip
 
@@ -40,12 +42,6 @@ ARRAY_CAVITIES_DEFAULT_MAX = 5
 SPRUE_MAX_MM = 3.0  # fill/overflow hole per cavity
 VENT_MIN_MM = 1.0  # vent hole per cavity at the rim, at least this or the printer's minimum hole
 SECOND_HOLE_EXTRA_MM = 0.5  # the pad's second alignment hole is larger by this: one way round only
-
-
-def _fmt(x: float) -> str:
-    """A derived bound for a message: exact to 1e-9 mm (no '6 mm' for 6.0004), without float noise."""
-    r = round(x, 9) + 0.0
-    return str(int(r)) if r.is_integer() else repr(r)
 
 
 @dataclass(frozen=True)
@@ -168,13 +164,6 @@ class Design:
         if self.array is not None:
             return self.array.taxels
         return (Taxel(0, 0.0, 0.0, 1, self.i2c_address, self.spec.sensor.option_code, self.address_straps),)
-
-    @cached_property
-    def reference(self):
-        """The reference chip (``[reference]``, :mod:`magfab.reference_chip`), or None."""
-        from .reference_chip import reference_chip
-
-        return reference_chip(self)
 
     @property
     def continuous(self) -> bool:
@@ -311,7 +300,6 @@ def _skin_volume(centres: tuple[tuple[float, float], ...], R: float, hb: float, 
     pitch = min((math.dist(a, b) for i, a in enumerate(centres) for b in centres[i + 1:]), default=math.inf)
     if pitch >= 2.0 * R:
         return v + len(centres) * (2.0 / 3.0) * math.pi * R**3
-    import numpy as np
 
     step = 0.02
     xs, ys = [c[0] for c in centres], [c[1] for c in centres]
@@ -329,7 +317,8 @@ def derive(spec: Spec) -> Design:
 
     In the order a person would design it: the magnet and its pocket in the elastomer, the stack from the
     chip's sensing point up, where the pocket sits so that the rest distance is d_max, the pad, the chip's
-    address, the mould round the part; then what all that would cost to build (:mod:`magfab.limits`)."""
+    address, the mould round the part. Geometry only: the reference chip's site and what the build would cost
+    (:func:`magfab.check.preflight`) are checked by the stage above, ``magfab check`` and the pipeline's plan."""
     chip = resolve.chip(spec.sensor.chip)
     printer = resolve.printer(spec.mould.printer.value)
     part = _elastomer(spec)
@@ -340,13 +329,10 @@ def derive(spec: Spec) -> Design:
         fields["array"] = _array(spec, chip, printer, fields)
         fields["alignment_holes"] = _array_holes(spec, fields)
     fields.update(_mould(spec, printer, part, pocket["core_base_radius_mm"], fields.get("array")))
-    design = Design(spec=spec, printer=printer, chip=chip, magnet_grade=resolve.magnet_grade(spec.magnet.grade),
-                    material=resolve.material(spec.elastomer.material),
-                    adhesive=resolve.adhesive(spec.fabrication.adhesive),
-                    release_agent=resolve.adhesive(spec.fabrication.release_agent), **fields)
-    design.reference  # its address and site, refused here (check and build) rather than in the board's branch
-    check_limits(design)  # what the build would cost, before any of it: check and build both refuse
-    return design
+    return Design(spec=spec, printer=printer, chip=chip, magnet_grade=resolve.magnet_grade(spec.magnet.grade),
+                  material=resolve.material(spec.elastomer.material),
+                  adhesive=resolve.adhesive(spec.fabrication.adhesive),
+                  release_agent=resolve.adhesive(spec.fabrication.release_agent), **fields)
 
 
 def _elastomer(spec: Spec) -> dict[str, object]:

@@ -18,6 +18,9 @@ from .design import Design
 if TYPE_CHECKING:
     import cadquery as cq
 
+# Imported lazily, inside the functions that use it, for speed: CadQuery takes a
+# noticeable time to import, and importing this module should not.
+
 __all__ = ["revolve_profile", "outline_prism", "envelope_solid", "core_solid", "elastomer_solid"]
 
 

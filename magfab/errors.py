@@ -99,6 +99,18 @@ def shown(value: object) -> _Shown:
     return value if isinstance(value, _Shown) else _Shown(value)
 
 
+def number_text(x: float) -> str:
+    """A number for a message: an int with thousands separators; a float exact to 1e-9 without float noise (a
+    derived bound prints '6' for 6.0 and '6.0004' for 6.0004, a suggested value '0.0012' for 0.0012000000000000001),
+    whole and with separators from 10,000 up."""
+    if isinstance(x, int):
+        return f"{x:,}"
+    r = round(x, 9) + 0.0
+    if abs(r) >= 1e4:
+        return f"{r:,.0f}"
+    return str(int(r)) if r.is_integer() else repr(r)
+
+
 class Severity(str, Enum):
     """How bad a finding is: errors stop a build, warnings are reported."""
 

@@ -32,6 +32,9 @@ if TYPE_CHECKING:
     import manifold3d
     import trimesh
 
+# manifold3d is imported lazily, inside the functions that use it: an optional mesh-boolean library only the CAD branch
+# needs.
+
 __all__ = ["MouldFit", "mould_fit", "to_manifold", "lid_to_cast_pose", "part_to_cavity"]
 
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import signal
 import sys
 import traceback
 from collections.abc import Callable, Iterator
@@ -125,8 +126,6 @@ def deferred_interrupt() -> Iterator[None]:
     """Hold Ctrl-C (SIGINT) back for the block and deliver it after: for imports of extension modules that are not
     safe to interrupt half-way (VTK, loaded by the CAD kernel, crashed the process with a segmentation fault when
     the CLI's KeyboardInterrupt landed inside its initialisation). Where signal masks do not exist, a no-op."""
-    import signal
-
     mask = getattr(signal, "pthread_sigmask", None)
     if mask is None:
         yield

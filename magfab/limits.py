@@ -18,24 +18,26 @@ MLS work                   scan rows, calibration.method ('mls' or 'auto')     r
 
 The constants were measured on the MagOne design and variants of it, on a shared two-core machine that was
 busy at the time (so ratios more than absolute times), and carry a margin of about 1.5-2x; the figures are in
-the constants' comments. :func:`check_limits` is called by :func:`magfab.design.derive`, so ``magfab check`` and
-``magfab build`` both refuse an over-budget spec with one :class:`~magfab.errors.SpecError` that names the key,
-its value, the estimate and the limit, and the value that would fit.
+the constants' comments. :func:`check_limits` is called by :func:`magfab.check.preflight` right after derive, so
+``magfab check`` and ``magfab build`` both refuse an over-budget spec with one :class:`~magfab.errors.SpecError` that
+names the key, its value, the estimate and the limit, and the value that would fit.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
-from .errors import SpecError
+from .errors import ScanError, SpecError
+from .errors import number_text as _fmt
+from .models.mechanics.schedule import FE_ERROR_PER_H_OVER_R, fe_meshes
 
 if TYPE_CHECKING:
     from .design import Design
     from .spec import Spec
 
-__all__ = ["BUDGET_S", "BUDGET_MB", "Cost", "estimate", "check_limits", "fe_meshes", "scan_rows", "triangles",
+__all__ = ["BUDGET_S", "BUDGET_MB", "Cost", "estimate", "check_limits", "scan_rows", "triangles",
            "MAX_TRIANGLES", "MAX_FE_WORK", "MAX_SCAN_ROWS", "MAX_MLS_ROWS"]
 
 #: What any valid spec may take to build, on two cores.
@@ -65,10 +67,6 @@ SECONDS_PER_TRIANGLE = 4.0e-4  # tessellation, STL/STEP, mould fit, report pictu
 MB_PER_TRIANGLE = 0.006  # 233k triangles: 983 MB peak, of which ~550 MB the CAD kernel
 
 # ---- the normal-load FE ---------------------------------------------------------------------------------
-#: Relative FE error per mesh size over the elastomer radius, err ~ C h / R (order 1, as predict.FE_ORDER):
-#: with the magnet's edges rounded and the mesh graded there, MagOne measured 0.0018 at h = 0.75 mm against 1 mm,
-#: R = 6 mm (C = 0.014); 2x margin.
-FE_ERROR_PER_H_OVER_R = 0.03
 #: Triangles of the (r, z) profile mesh per (profile area / h^2): equilateral triangles of side h,
 #: 1 / (sqrt(3) / 4) = 2.31, away from the magnet's edges.
 FE_TRIANGLES_PER_AREA_H2 = 2.4
@@ -84,7 +82,7 @@ FE_STEPS = 21
 #: 1.5x the median, rounded.
 SECONDS_PER_FE_WORK = 0.1e-3
 #: FE work (triangles x steps, summed over the meshes tried): 9 s at the rate above, three of the graded meshes
-#: (all four of predict.FE_MESHES_MM, 101k, are refused: no spec needs them). MagOne runs 1 and 0.75 mm at 1 %
+#: (all four of the schedule's FE_MESHES_MM, 101k, are refused: no spec needs them). MagOne runs 1 and 0.75 mm at 1 %
 #: (2,030 estimated triangles, 43k triangle-steps, ~4 s).
 MAX_FE_WORK = 90_000
 MB_PER_FE_TRIANGLE = 0.1  # 1,299 triangles: 221 MB peak, with ~100 MB of Python and numpy
@@ -181,24 +179,6 @@ def fe_triangles(design: Design, mesh_mm: float) -> int:
     return int(FE_TRIANGLES_PER_AREA_H2 * _profile_area_mm2(design) / (mesh_mm * mesh_mm)) + FE_EDGE_TRIANGLES
 
 
-def fe_meshes(design: Design, tolerance_pct: float | None = None) -> tuple[float, ...]:
-    """The FE meshes (mm) the normal curve is expected to run for ``predict.tolerance_pct`` (or the one given):
-    coarse to fine from :data:`magfab.models.predict.FE_MESHES_MM`, at least two, until the estimated error
-    C h / R fits the tolerance; none for a closed-form mechanics model."""
-    from .models.predict import FE_MESHES_MM
-
-    p = design.spec.predict
-    if p.mechanics_model.value in ("column", "hertz_column"):
-        return ()
-    tol = (p.tolerance_pct if tolerance_pct is None else tolerance_pct) / 100.0
-    meshes: list[float] = []
-    for h in FE_MESHES_MM:
-        meshes.append(h)
-        if len(meshes) >= 2 and FE_ERROR_PER_H_OVER_R * h / design.elastomer_radius_mm <= tol:
-            break
-    return tuple(meshes)
-
-
 def scan_rows(design: Design) -> int:
     """The most rows the simulated scan can have: the spec's y and z extents over the step, y capped at the
     magnet's radius each side (the lateral range never exceeds it) and z at 1.25 x the travel to d_min (the
@@ -224,10 +204,6 @@ def estimate(design: Design) -> Cost:
 
 
 # ---- the limits -----------------------------------------------------------------------------------------
-
-
-def _fmt(x: float) -> str:
-    return f"{x:,}" if isinstance(x, int) else (f"{x:.3g}" if x < 1e4 else f"{x:,.0f}")
 
 
 def _round_up(x: float) -> float:
@@ -329,8 +305,6 @@ def _over_budget(design: Design, cost: Cost) -> None:
 
 
 def _with(design: Design, **sections: object) -> Design:
-    from dataclasses import replace
-
     return replace(design, spec=design.spec.model_copy(update=sections))
 
 
@@ -351,8 +325,6 @@ def check_scan(spec: Spec, scan) -> None:
     """A measured scan the spec's calibration can afford: moving least squares grows with rows squared, so a
     scan calibrated with ``calibration.method`` "mls" or "auto" may have at most :data:`MAX_MLS_ROWS` rows, and
     any scan at most :data:`MAX_SCAN_ROWS`. :class:`~magfab.errors.ScanError` before any work otherwise."""
-    from .errors import ScanError
-
     method = spec.calibration.method.value
     if method != "poly" and scan.rows > MAX_MLS_ROWS:
         raise ScanError(f"scan {scan.source}: {scan.rows:,} rows; calibration.method = {method!r} fits moving least "

@@ -26,6 +26,9 @@ from .elastomer import core_solid, envelope_solid
 if TYPE_CHECKING:
     import cadquery as cq
 
+# Imported lazily, inside the functions that use it, for speed: CadQuery takes a
+# noticeable time to import, and importing this module should not.
+
 __all__ = ["cup_solid", "lid_solid", "COUNTERSINK_MM", "OVERLAP_MM"]
 
 #: Depth of the pouring countersink on top of each sprue.

@@ -13,9 +13,13 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from .design import Design
+from .elastomer import outline_prism
 
 if TYPE_CHECKING:
     import cadquery as cq
+
+# Imported lazily, inside the functions that use it, for speed: CadQuery takes a
+# noticeable time to import, and importing this module should not.
 
 __all__ = ["pad_solid"]
 
@@ -46,7 +50,6 @@ def pad_solid(design: Design) -> cq.Workplane:
 def _array_pad(design: Design) -> cq.Workplane:
     import cadquery as cq
 
-    from .elastomer import outline_prism
 
     t, lip_h = design.pad_thickness_mm, design.lip_height_mm
     centres = [(tx.x_mm, tx.y_mm) for tx in design.taxels]

@@ -9,24 +9,51 @@ the previous good one.
 from __future__ import annotations
 
 import hashlib
+import importlib
 import json
+import re
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from importlib.resources import files
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from . import __version__
-from .check import design_findings, errors_in, mesh_findings, mould_fit_findings
+from . import __version__, pcb
+from .array_bench import measured_scan_path
+from .check import (
+    crosstalk_findings,
+    design_findings,
+    errors_in,
+    fabrication_findings,
+    mesh_findings,
+    mould_fit_findings,
+    predict_with_findings,
+    preflight,
+)
 from .design import Design, derive
 from .errors import BuildError, Finding, ModelLimitError, OutputError, Severity
+from .export import bom, cad, calibration_chart, checklist, crosstalk_figures, drift_figures, firmware, kicad, readout
+from .export import figures as plots
+from .export.report import draw_pictures, render_report
+from .fit import mould_fit
 from .fork import deferred_interrupt, side_branch
+from .formats.scan_csv import scan_csv
 from .limits import check_scan
+from .models import calibration as calibrate
+from .models import crosstalk
+from .models.acceptance import acceptance
+from .models.scan import scan_plan, simulate_scan
+from .models.scan_guards import MERGED, merged_csv, scan_depth_warnings
+from .models.taxels import array_field, calibrate_taxels, compensated, simulate_taxel_scan
 from .output import Artifact, check_target, write
 from .spec import Spec
 
 if TYPE_CHECKING:
     from .models.predict import Prediction
+
+# CadQuery and trimesh are imported lazily, in the CAD branch, for speed: importing the pipeline stays cheap, and the
+# kernel's load is timed on its own (with Ctrl-C deferred while VTK initialises).
 
 __all__ = ["Artifact", "BuildResult", "OutputError", "plan", "write", "build", "check_target", "PARTS",
            "default_out_dir"]
@@ -109,17 +136,12 @@ def _json_bytes(obj: object) -> bytes:
 
 
 def _solid(module: str, func: str, design: Design):
-    import importlib
-
     return getattr(importlib.import_module(module), func)(design)
 
 
 def _board(design: Design, say: Progress, timings: dict[str, float]):
     """The footprint library, the routed breakout board and, where KiCad is installed, its Gerbers:
     (artifacts, findings, the :class:`magfab.pcb.Board`, which the report draws rather than routing again)."""
-    from . import pcb
-    from .export import kicad
-
     say("placing and routing the board")
     t = time.perf_counter()
     board = pcb.board(design)
@@ -150,9 +172,6 @@ def _board(design: Design, say: Progress, timings: dict[str, float]):
 
 def _predictions(design: Design, say: Progress, timings: dict[str, float]):
     """predictions.json and its plots, and the prediction's design checks (docs/models.md, M9 and M18)."""
-    from .export import figures as plots
-    from .models.predict import predict_with_findings
-
     say("predicting sensitivity, resolution and range")
     t = time.perf_counter()
     pred, found = predict_with_findings(design)
@@ -174,7 +193,6 @@ def _drift_charts(pred) -> list[Artifact]:
     """The drift budget's chart (predictions.json's ``drift``), when the prediction has one."""
     if pred.drift is None:
         return []
-    from .export import drift_figures
 
     return [Artifact(f"{drift_figures.FOLDER}{name}", data, drift_figures.CAPTIONS[name.rsplit(".", 1)[0]] + ", "
                      + name.rsplit(".", 1)[1].upper()) for name, data in sorted(drift_figures.figures(pred.drift).items())]
@@ -182,8 +200,6 @@ def _drift_charts(pred) -> list[Artifact]:
 
 def _acceptance(design: Design, prediction) -> tuple[dict | None, list[Finding]]:
     """The acceptance test's bands (magfab.models.acceptance), for the readout package and the checklist."""
-    from .models.acceptance import acceptance
-
     try:
         return acceptance(design, prediction), []
     except ModelLimitError as exc:  # e.g. no weight fits the predicted range: the bundle ships without the check
@@ -204,10 +220,6 @@ def _calibration_finding(result, prefix: str, source: str = "") -> Finding:
 def _scan(design: Design, prediction, scan, say: Progress):
     """The scan a single taxel's calibration is fitted to: ``scan`` (with the depth warnings, and the merged file kept
     when it was merged in memory) or a simulated one. Returns (artifacts, scan, findings)."""
-    from .formats.scan_csv import scan_csv
-    from .models.scan import simulate_scan
-    from .models.scan_guards import MERGED, merged_csv, scan_depth_warnings
-
     if scan is None:
         say("simulating a calibration scan")
         scan = simulate_scan(design, prediction)
@@ -226,9 +238,6 @@ def _bundle(design: Design, prediction, scan, acceptance: dict | None, say: Prog
     """The firmware-plus-calibration bundle: calibration.json (from ``scan``, or a simulated scan when there
     is none yet), its chart, the firmware sources, the generic AVR image with the .eep of its settings and
     calibration, the flash scripts and the readout package."""
-    from .export import calibration_chart, firmware, readout
-    from .models import calibration as calibrate
-
     out: list[Artifact] = []
     found: list[Finding] = []
     t = time.perf_counter()
@@ -290,16 +299,13 @@ class _Arrayed:
 def _crosstalk(design: Design, prediction) -> tuple[list[Artifact], list[Finding], bool]:
     """The array's crosstalk budget (:mod:`magfab.models.crosstalk`): array/crosstalk.json, its charts, its
     findings, and whether the host is to remove a moving neighbour's field (the budget is over without it)."""
-    from .export import crosstalk_figures
-    from .models import crosstalk
-
     xt = crosstalk.crosstalk(design, prediction)
     out = [Artifact("array/crosstalk.json", _json_bytes(xt.as_json()), "the crosstalk budget: each taxel's misreading "
                     "as its neighbours move, with and without the host's compensation, the least pitch per polarity")]
     for name, data in sorted(crosstalk_figures.figures(xt).items()):
         stem, kind = name.rsplit(".", 1)
         out.append(Artifact(f"array/{name}", data, crosstalk_figures.CAPTIONS[stem] + ", " + kind.upper()))
-    return out, crosstalk.findings(design, xt), xt.dynamic
+    return out, crosstalk_findings(design, xt), xt.dynamic
 
 
 def _taxel_calibrations(design: Design, prediction, scans: dict | None, mls: bool) -> _Arrayed:
@@ -307,11 +313,6 @@ def _taxel_calibrations(design: Design, prediction, scans: dict | None, mls: boo
     neighbours' field), its fit to the scan with the neighbours' field removed, and calibration/array.json
     (:mod:`magfab.models.taxels`). A measured scan is kept in the build (:mod:`magfab.array_bench`) so the next
     taxel's calibration refits it."""
-    from .array_bench import measured_scan_path
-    from .formats.scan_csv import scan_csv
-    from .models.scan_guards import scan_depth_warnings
-    from .models.taxels import array_field, calibrate_taxels, compensated, simulate_taxel_scan
-
     scans = scans or {}
     field = array_field(design)
     every = tuple(scans.get(t.index) or simulate_taxel_scan(design, prediction, t.index, field) for t in design.taxels)
@@ -340,9 +341,6 @@ def _taxel_calibrations(design: Design, prediction, scans: dict | None, mls: boo
 def _fabrication(design: Design, prediction, acceptance: dict | None, say: Progress, timings: dict[str, float]):
     """The bench papers: checklist.md, checklist.html (tick boxes, printable) and bom.csv. The checklist's scan
     step spans the simulated scan's extent (one depth for the scan, the checklist and the predicted range)."""
-    from .export import checklist
-    from .models.scan import scan_plan
-
     say("writing the checklist and the bill of materials")
     t = time.perf_counter()
     plan = scan_plan(design, prediction)
@@ -351,17 +349,15 @@ def _fabrication(design: Design, prediction, acceptance: dict | None, say: Progr
                  "fabrication checklist with the quantities filled in (Markdown)"),
         Artifact("checklist.html", checklist.checklist_html(design, acceptance, plan).encode(),
                  "the same checklist with tick boxes, to print"),
-        Artifact("bom.csv", checklist.bom_csv(design, acceptance).encode(),
+        Artifact("bom.csv", bom.bom_csv(design, acceptance).encode(),
                  f"bill of materials for {design.spec.fabrication.sensors} sensor(s)"),
     ]
     timings["checklist"] = time.perf_counter() - t
-    return out, checklist.findings(design)
+    return out, fabrication_findings(design)
 
 
 def model_bench() -> list[dict[str, object]]:
     """The speed-accuracy table bench/models.py last measured (shipped with the package), or []."""
-    from importlib.resources import files
-
     try:
         text = files("magfab").joinpath("model_bench.json").read_text()
     except FileNotFoundError:
@@ -383,6 +379,7 @@ def plan(spec: Spec, progress: Progress | None = None, scan=None, parallel: bool
         check_scan(spec, measured)
     say("deriving the design")
     design = derive(spec)
+    preflight(design)  # the reference chip's site and the build's cost: refused before any work
     findings = design_findings(design)
     timings["derive"] = time.perf_counter() - t0
     _stop(findings, spec)
@@ -392,7 +389,6 @@ def plan(spec: Spec, progress: Progress | None = None, scan=None, parallel: bool
         _stop(findings + cad_findings, spec)
         say("drawing the parts and the board for the report")
         t = time.perf_counter()
-        from .export.report import draw_pictures, render_report
 
         pictures = draw_pictures(design, meshes, cad_artifacts, routed)
         timings["report-pictures"] = time.perf_counter() - t
@@ -449,8 +445,6 @@ def _cad(design: Design, say: Progress, timings: dict[str, float]):
         import cadquery  # noqa: F401  - timed on its own, not charged to the first part
         import trimesh  # noqa: F401
 
-    from .export.cad import step_bytes, stl_bytes, tessellate
-    from .fit import mould_fit
 
     timings["import"] = time.perf_counter() - t
     artifacts: list[Artifact] = []
@@ -463,12 +457,13 @@ def _cad(design: Design, say: Progress, timings: dict[str, float]):
         solid = _solid(module, func, design)
         timings[f"solid:{stem}"] = time.perf_counter() - t
         t = time.perf_counter()
-        mesh = tessellate(solid, tol, ang)
+        mesh = cad.tessellate(solid, tol, ang)
         meshes[stem] = mesh
         findings += mesh_findings(stem, mesh, solid.val().Volume(), tol)
-        artifacts.append(Artifact(f"{stem}.stl", stl_bytes(mesh, f"{spec.name} {stem}"), description + ", STL"))
+        artifacts.append(Artifact(f"{stem}.stl", cad.stl_bytes(mesh, f"{spec.name} {stem}"), description + ", STL"))
         if spec.build.step:
-            artifacts.append(Artifact(f"{stem}.step", step_bytes(solid, f"{spec.name}-{stem}"), description + ", STEP"))
+            artifacts.append(Artifact(f"{stem}.step", cad.step_bytes(solid, f"{spec.name}-{stem}"),
+                                      description + ", STEP"))
         timings[f"export:{stem}"] = time.perf_counter() - t
     if not errors_in(findings, strict=False):  # booleans need sound meshes
         t = time.perf_counter()
@@ -543,8 +538,6 @@ def default_out_dir(spec: Spec) -> Path:
 
 def _kicad_version(artifacts: list[Artifact]) -> str | None:
     """The KiCad that plotted the Gerbers, as it signs them (None when no Gerbers were plotted)."""
-    import re
-
     for a in artifacts:
         if a.path.endswith(".gbr"):
             m = re.search(rb"%TF\.GenerationSoftware,KiCad,Pcbnew,([^*]*)\*%", a.data)

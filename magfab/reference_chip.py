@@ -10,43 +10,16 @@ on the bus), its designator the next U.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from .design import Design, _address_plan
+from .errors import SpecError
+from .models.reference import ReferenceChip, Travel, site
+from .spec import Environment
 
-if TYPE_CHECKING:
-    from .design import Design
-
-__all__ = ["ReferenceChip", "reference_chip", "temperature_span_C"]
-
-
-@dataclass(frozen=True)
-class ReferenceChip:
-    """The reference chip: its centre (design frame, mm, y up), I2C address and straps, the chip to order."""
-
-    index: int  # after the taxels: the firmware reads it last
-    x_mm: float
-    y_mm: float
-    distance_mm: float  # beyond the taxels' hull along +y
-    separation_mm: float  # from the nearest sensing chip
-    i2c_address: int
-    option_code: str
-    address_straps: tuple[int, int]  # (A1, A0): 0 = GND, 1 = supply
-
-    @property
-    def designator(self) -> str:
-        return f"U{self.index + 1}"
-
-    def as_dict(self) -> dict[str, object]:
-        return {"index": self.index, "designator": self.designator, "x_mm": round(self.x_mm, 3),
-                "y_mm": round(self.y_mm, 3), "distance_mm": round(self.distance_mm, 3),
-                "separation_mm": round(self.separation_mm, 3), "i2c_address": self.i2c_address,
-                "option_code": self.option_code, "address_straps": list(self.address_straps)}
+__all__ = ["reference_chip", "temperature_span_C"]
 
 
 def temperature_span_C(design: Design) -> float:
     """The environment's temperature span (its defaults without an ``[environment]`` section)."""
-    from .spec import Environment
-
     env = design.spec.environment or Environment()
     return env.temperature_max_C - env.temperature_min_C
 
@@ -56,10 +29,6 @@ def reference_chip(design: Design) -> ReferenceChip | None:
     spec = design.spec
     if spec.reference is None:
         return None
-    from .design import _address_plan
-    from .errors import SpecError
-    from .models.reference import Travel, site
-
     n = len(design.taxels)
     if design.array is not None:
         raise SpecError("reference", "present", "is for a single taxel: an array's firmware sends every chip's field "

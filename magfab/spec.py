@@ -555,7 +555,7 @@ def _validated(raw: dict[str, Any]) -> Spec:
     try:
         spec = Spec.model_validate(raw)
     except ValidationError as exc:
-        raise translate_error(exc, raw) from None
+        raise translate_error(exc, raw, Spec) from None
     for (section, key), kind in _CATALOGUE_KEYS.items():
         value = getattr(getattr(spec, section), key)
         known = sorted(catalogue(kind))

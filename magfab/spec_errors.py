@@ -16,10 +16,8 @@ from .errors import SHOWN_MAX_CHARS, SpecError, _shorten, shown
 __all__ = ["translate_error", "did_you_mean"]
 
 
-def _model_at(loc: tuple[Any, ...], root: type[BaseModel] | None = None) -> type[BaseModel] | None:
-    from .spec import Spec
-
-    model: type[BaseModel] = root or Spec
+def _model_at(loc: tuple[Any, ...], root: type[BaseModel]) -> type[BaseModel] | None:
+    model = root
     for part in loc:
         field = model.model_fields.get(str(part))
         annotation = field and next((a for a in (field.annotation, *get_args(field.annotation))
@@ -74,10 +72,10 @@ def _number(x: object) -> str:
     return repr(x) if isinstance(x, float) else str(x)
 
 
-def translate_error(exc: ValidationError, raw: dict[str, Any], root: type[BaseModel] | None = None) -> SpecError:
+def translate_error(exc: ValidationError, raw: dict[str, Any], root: type[BaseModel]) -> SpecError:
     """Turn pydantic's first error into our one-line message: the key, the value exactly and bounded in
     length (:func:`shown`), and what is allowed with its bound printed as the model holds it. ``root``: the model
-    validated (default :class:`Spec`; the design search's targets use it too)."""
+    validated (:class:`magfab.spec.Spec`, or the design search's targets)."""
     err = exc.errors(include_url=False)[0]
     loc = tuple(err["loc"])
     key = _key(loc)

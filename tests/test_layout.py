@@ -3,6 +3,11 @@
 from __future__ import annotations
 
 import ast
+import graphlib
+import io
+import re
+import tokenize
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
@@ -75,3 +80,168 @@ def test_imports_point_down_the_pipeline(path):
             assert not bad, f"{name} imports {bad}"
     if name != "magfab.cli":
         assert not {m for m in imported if m.split(".")[0] in PRINTING}, f"{name} prints: only magfab.cli may"
+
+
+# ---- the import graph: no cycle, no upward import, function-level imports counted -------------------------------
+#
+# Every ``import`` in a module is an edge, inside functions too (an import put in a function to dodge a cycle is still
+# the cycle); imports under ``if TYPE_CHECKING:`` are not, since they never run. The readout package is a separate
+# distribution (standard library only) with its own graph.
+
+#: The pipeline's layers, bottom first: a module may import its own layer and those below, never one above. A module
+#: belongs to the layer of its longest matching prefix.
+LAYERS = (
+    ("magfab", "magfab.units", "magfab.errors", "magfab.recipes", "magfab.outline", "magfab.fork"),
+    ("magfab.spec_errors",),
+    ("magfab.spec",),
+    ("magfab.formats",),  # file formats: standard library (and magfab.errors), shipped in the readout package too
+    ("magfab.design",),
+    ("magfab.elastomer", "magfab.mould", "magfab.pad", "magfab.fit"),  # the CAD solids and the mould's fit
+    ("magfab.models", "magfab.reference_chip"),  # the reference chip is placed by the physics, read by the board
+    ("magfab.limits",),
+    ("magfab.check",),
+    ("magfab.board", "magfab.pcb"),
+    ("magfab.export", "magfab.output", "magfab.array_bench"),
+    ("magfab.pipeline",),
+    ("magfab.inverse",),
+    ("magfab.cli",),
+)
+#: Libraries slow enough to import that a function may import them where it needs them (with the reason in a comment
+#: saying "lazy" or "lazily", in the function or at module level); any other function-level import goes to the top.
+HEAVY = {"cadquery", "OCP", "trimesh", "manifold3d", "matplotlib", "mpl_toolkits", "skfem", "magpylib", "optuna",
+         "dask", "distributed", "pyarrow", "pcbnew", "scipy", "sqlalchemy", "PIL", "jinja2", "rich", "qdldl",
+         "triangle"}
+#: The entry point may defer anything, magfab's own modules included, so that ``magfab --help`` stays fast.
+ENTRY_POINTS = {"magfab.cli"}
+_LAZY = re.compile(r"\blaz(y|ily)\b", re.IGNORECASE)
+
+
+@dataclass(frozen=True)
+class Import:
+    module: str  # the importing module
+    target: str  # what it imports: a module of the set when it names one, else the dotted name as written
+    line: int
+    in_function: str  # the enclosing function's name, "" at module level
+    reason: bool  # a comment saying why it is lazy: in the enclosing function, or at module level
+
+
+def _graph_imports(name: str, source: str, is_package: bool, modules: set[str]) -> list[Import]:
+    """Every import of one module (see above), relative ones resolved against ``name``."""
+    tree = ast.parse(source)
+    package = name if is_package else name.rsplit(".", 1)[0]
+    comments = {tok.start[0]: tok.string for tok in tokenize.generate_tokens(io.StringIO(source).readline)
+                if tok.type == tokenize.COMMENT}
+    spans = [(n.lineno, n.end_lineno) for n in ast.walk(tree) if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef))]
+    module_note = any(_LAZY.search(text) for line, text in comments.items()
+                      if not any(a <= line <= b for a, b in spans))
+    out: list[Import] = []
+
+    def visit(node: ast.AST, function: ast.AST | None) -> None:
+        if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
+            for child in node.orelse:
+                visit(child, function)
+            return
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and function is None:
+            function = node
+        if isinstance(node, (ast.Import, ast.ImportFrom)):
+            reason = module_note or (function is not None and any(
+                _LAZY.search(t) for line, t in comments.items() if function.lineno <= line <= function.end_lineno))
+            where = function.name if function is not None else ""
+            if isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            else:
+                base = package.split(".")[: len(package.split(".")) - node.level + 1] if node.level else []
+                mod = ".".join(base + ([node.module] if node.module else []))
+                targets = [f"{mod}.{a.name}" if f"{mod}.{a.name}" in modules else mod for a in node.names]
+            out.extend(Import(name, t, node.lineno, where, reason) for t in dict.fromkeys(targets))
+        for child in ast.iter_child_nodes(node):
+            visit(child, function)
+
+    visit(tree, None)
+    return out
+
+
+def _package_imports(root: Path, skip: str = "readout_pkg") -> list[Import]:
+    paths = {_name(p): p for p in root.rglob("*.py") if "__pycache__" not in p.parts and skip not in p.parts}
+    return [i for name, p in sorted(paths.items())
+            for i in _graph_imports(name, p.read_text(), p.name == "__init__.py", set(paths))]
+
+
+def _layer(module: str) -> int:
+    found = [(len(prefix), i) for i, layer in enumerate(LAYERS) for prefix in layer
+             if module == prefix or module.startswith(prefix + ".")]
+    assert found, f"{module} is in no layer: add it to LAYERS"
+    return max(found)[1]
+
+
+def _cycle(imports: list[Import]) -> list[str]:
+    """One import cycle among the modules of ``imports`` (graphlib names it), or []."""
+    modules = {i.module for i in imports}
+    graph: dict[str, set[str]] = {m: set() for m in modules}
+    for i in imports:
+        if i.target in modules and i.target != i.module:
+            graph[i.module].add(i.target)
+    try:
+        graphlib.TopologicalSorter(graph).prepare()
+    except graphlib.CycleError as exc:
+        return list(exc.args[1])
+    return []
+
+
+def _upward(imports: list[Import]) -> list[str]:
+    modules = {i.module for i in imports}
+    return [f"{i.module}:{i.line} imports {i.target}" for i in imports
+            if i.target in modules and _layer(i.target) > _layer(i.module)]
+
+
+def _unjustified(imports: list[Import]) -> list[str]:
+    """Function-level imports that are not a heavy library's (or the entry point's), or that give no reason."""
+    bad = []
+    for i in imports:
+        if not i.in_function:
+            continue
+        allowed = i.target.split(".")[0] in HEAVY or i.module in ENTRY_POINTS
+        if not (allowed and i.reason):
+            why = "no reason given" if allowed else "a light or magfab module: import it at the top"
+            bad.append(f"{i.module}:{i.line} ({i.in_function}) imports {i.target}: {why}")
+    return bad
+
+
+def test_no_import_cycle():
+    assert _cycle(_package_imports(PACKAGE)) == []
+
+
+@pytest.mark.xfail(reason="the readout package's cycles (cli <-> array_cli; its __init__ <-> taxels) are its own "
+                          "branch's to break", strict=False)
+def test_no_import_cycle_in_the_readout_package():
+    readout = PACKAGE / "export" / "readout_pkg"
+    assert _cycle(_package_imports(readout, skip="__pycache__")) == []
+
+
+def test_imports_point_down_the_layers():
+    assert _upward(_package_imports(PACKAGE)) == []
+
+
+def test_function_level_imports_are_heavy_libraries_with_a_reason():
+    assert _unjustified(_package_imports(PACKAGE)) == []
+
+
+def test_the_checks_see_a_planted_cycle_an_upward_import_and_an_unexplained_lazy_import():
+    """Negative control: a small synthetic package with each fault once, and the allowed forms beside them."""
+    sources = {
+        "magfab.design": "import json\n\ndef derive():\n    from .pipeline import plan\n    import re\n",
+        "magfab.pipeline": "from .design import derive\n",
+        "magfab.models.a": "from . import b\n\ndef f():\n    import scipy.sparse  # lazy: slow to import\n",
+        "magfab.models.b": "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from ..pipeline import plan\n\n"
+                           "def g():\n    from .a import f\n\n\ndef h():\n    import matplotlib\n",
+    }
+    names = set(sources)
+    imports = [i for n, s in sources.items() for i in _graph_imports(n, s, False, names)]
+    assert set(_cycle(imports)) in ({"magfab.design", "magfab.pipeline"}, {"magfab.models.a", "magfab.models.b"})
+    assert _upward(imports) == ["magfab.design:4 imports magfab.pipeline"]  # the TYPE_CHECKING one is not counted
+    bad = _unjustified(imports)
+    assert [b.split(" (")[0] for b in bad] == ["magfab.design:4", "magfab.design:5", "magfab.models.b:6",
+                                               "magfab.models.b:10"], bad
+    assert "no reason given" in bad[-1] and "import it at the top" in bad[0]
+    acyclic = [i for i in imports if i.module != "magfab.pipeline" and i.module != "magfab.models.b"]
+    assert _cycle(acyclic) == []

@@ -11,6 +11,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from magfab import SpecError, derive, limits, load_spec, parse_spec
+from magfab.check import preflight
 from magfab.limits import BUDGET_MB, BUDGET_S, MAX_MLS_ROWS, MAX_TRIANGLES, estimate, scan_rows
 
 
@@ -23,11 +24,11 @@ from magfab.limits import BUDGET_MB, BUDGET_S, MAX_MLS_ROWS, MAX_TRIANGLES, esti
     ("[elastomer]\nheight_mm = 100\n[predict]\ntolerance_pct = 0.01", "elastomer.height_mm", "FE"),
     ("[predict]\ntolerance_pct = 0.01", "predict.tolerance_pct", "FE meshes"),
 ])
-def test_specs_the_build_cannot_survive_are_refused_at_derive(text, key, words):
+def test_specs_the_build_cannot_survive_are_refused_before_the_work(text, key, words):
     spec = parse_spec(text)
     t = time.perf_counter()
     with pytest.raises(SpecError) as info:
-        derive(spec)
+        preflight(derive(spec))
     assert time.perf_counter() - t < 5.0  # refused before the work, not after it
     message = str(info.value)
     assert info.value.key == key and message.startswith(key) and words in message and "limit" in message
@@ -36,7 +37,7 @@ def test_specs_the_build_cannot_survive_are_refused_at_derive(text, key, words):
 
 def test_the_suggested_value_fits():
     with pytest.raises(SpecError) as info:
-        derive(parse_spec("[mould]\ntessellation_tolerance_mm = 0.0001"))
+        preflight(derive(parse_spec("[mould]\ntessellation_tolerance_mm = 0.0001")))
     need = str(info.value).rsplit("at least ", 1)[1].rstrip(")")
     estimate(derive(parse_spec(f"[mould]\ntessellation_tolerance_mm = {need}")))
 
@@ -94,6 +95,7 @@ def _toml(values: dict) -> str:
 def test_fuzzed_specs_are_refused_with_a_key_or_within_budget(values):
     try:
         design = derive(parse_spec(_toml(values)))
+        preflight(design)
     except SpecError as exc:
         message = str(exc)
         assert "\n" not in message and len(message) < 400 and message.startswith(exc.key)
@@ -163,7 +165,7 @@ def test_the_largest_array_fits_the_board_budget_and_a_smaller_budget_refuses_it
     assert len(derive(parse_spec(text)).taxels) == 16
     monkeypatch.setattr(limits, "MAX_BOARD_S", limits.SECONDS_PER_CHIP2 * 9**2)
     with pytest.raises(SpecError) as info:
-        derive(parse_spec(text))
+        preflight(derive(parse_spec(text)))
     message = str(info.value)
     assert info.value.key == "array.rows" and "16 taxels" in message and "route" in message
     assert "at most 9 taxels" in message and "\n" not in message

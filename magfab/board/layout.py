@@ -12,6 +12,7 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
+from .. import outline
 from .footprint import Footprint, flip_layer
 from .route import LAYERS, Copper
 
@@ -133,8 +134,6 @@ class Board:
 def outline_clear(box: Box, hull, r: float) -> bool:
     """Whether an axis-aligned box lies wholly outside a convex hull (KiCad frame) grown by ``r``: the box's
     distance from the hull (zero where they meet) is at least r."""
-    from .. import outline
-
     if len(hull) == 1:
         return disc_clear(box, hull[0][0], hull[0][1], r)
     corners = [(box[0], box[1]), (box[2], box[1]), (box[2], box[3]), (box[0], box[3])]
@@ -148,8 +147,6 @@ def outline_clear(box: Box, hull, r: float) -> bool:
 
 def _segments_apart(a, b, p, q, r: float) -> bool:
     """Whether two segments are at least r apart (zero if they cross; else the least end-to-segment distance)."""
-    from .. import outline
-
     def side(o, u, v) -> float:
         return (u[0] - o[0]) * (v[1] - o[1]) - (u[1] - o[1]) * (v[0] - o[0])
 

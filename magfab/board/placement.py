@@ -15,6 +15,7 @@ from dataclasses import replace
 from ..design import Design
 from ..errors import SpecError
 from ..recipes import catalogue
+from ..reference_chip import reference_chip
 from .footprint import Footprint, chip_footprint, connector_footprint, hole_footprint, qfn_footprint
 from .layout import (
     GROUND,
@@ -124,7 +125,7 @@ REFERENCE_TOP_MM = 9.0
 
 def _reference_room(design: Design) -> float:
     """How far the board's top edge moves up (mm) so the reference chip and the label above it fit: 0 without one."""
-    ref = design.reference
+    ref = reference_chip(design)
     if ref is None:
         return 0.0
     return max(0.0, ref.y_mm + REFERENCE_TOP_MM - design.spec.pcb.height_mm / 2)
@@ -138,7 +139,7 @@ def board_size_mm(design: Design) -> tuple[float, float]:
 
 def _reference(design: Design, qfn: Footprint) -> list[Placed]:
     """The reference chip (:mod:`magfab.reference_chip`) where the magnets leave the field quiet, or nothing."""
-    ref = design.reference
+    ref = reference_chip(design)
     if ref is None:
         return []
     ox, oy = ORIGIN
@@ -286,8 +287,9 @@ def label(design: Design, outline: Box, parts: list[Placed], circle: tuple[float
         arr = design.spec.array
         shape = f"{arr.rows}x{arr.cols}" if arr.positions_mm is None else f"{len(t)}-taxel"
         address = f"{shape} array: MLX90393 0x{t[0].i2c_address:02X}-0x{t[-1].i2c_address:02X}"
-    if design.reference is not None:  # the address that is not a taxel's, said to be the reference's
-        address = address.replace(" I2C", "") + f", ref 0x{design.reference.i2c_address:02X}"
+    ref = reference_chip(design)
+    if ref is not None:  # the address that is not a taxel's, said to be the reference's
+        address = address.replace(" I2C", "") + f", ref 0x{ref.i2c_address:02X}"
     name = design.spec.name
     pad_top = min(y for _, y in pad_hull(design)) - circle[2]
     room = pad_top - (y0 + edge + 0.5)  # fabs clip silk within ~0.5 mm of the edge

@@ -10,7 +10,9 @@ from collections.abc import Mapping
 from typing import TYPE_CHECKING
 
 from ..board.placement import board_size_mm
+from ..models.silicone import quantities
 from ..recipes import catalogue
+from ..reference_chip import reference_chip
 
 if TYPE_CHECKING:
     from ..design import Design
@@ -40,7 +42,7 @@ def _chip_rows(design: Design) -> list[dict[str, object]]:
     of more than four chips orders two or more codes (the address plan of design.json)."""
     n = design.spec.fabrication.sensors
     source = "Melexis MLX90393 datasheet, ordering information; recipes/chips.toml"
-    ref = design.reference
+    ref = reference_chip(design)
     extra = [] if ref is None else [_row(
         "Hall sensor IC", f"MLX90393SLW-ABA-{ref.option_code}-RE", f"Melexis MLX90393, QFN-16 3x3 mm, option code "
         f"{ref.option_code}: {ref.designator}, the reference chip (0x{ref.i2c_address:02X}, reads stray fields, no magnet)",
@@ -62,8 +64,6 @@ def _sensor_rows(design: Design) -> list[dict[str, object]]:
     """The parts of the sensor itself: chip, magnet, silicone, glues, board and its parts, prints."""
     spec = design.spec
     n = spec.fabrication.sensors
-    from .checklist import quantities  # checklist re-exports this module, so import it at call time
-
     q = quantities(design)
     parts, assembly = catalogue("parts"), catalogue("assembly")
     pcb = spec.pcb
@@ -71,7 +71,7 @@ def _sensor_rows(design: Design) -> list[dict[str, object]]:
     stencil = assembly["stencil"]
     coating = design.magnet_grade.coating
     taxels = len(design.taxels)
-    chips = taxels + (design.reference is not None)
+    chips = taxels + (design.spec.reference is not None)
     width, height = board_size_mm(design)
     rows = _chip_rows(design) + [
         _row("Magnet", f"NdFeB {spec.magnet.grade} disc {spec.magnet.diameter_mm:g} x {spec.magnet.height_mm:g} mm",

@@ -18,6 +18,9 @@ if TYPE_CHECKING:
     import cadquery as cq
     import trimesh
 
+# Imported lazily, inside the functions that use them, for speed: CadQuery, trimesh and OCP take a
+# noticeable time to import, and importing this module should not.
+
 __all__ = ["step_bytes", "tessellate", "stl_bytes", "FIXED_STEP_TIME"]
 
 #: STEP requires a time stamp; ours is fixed so the same spec gives the same bytes.

@@ -4,8 +4,13 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+from .figures import RC, _legend_below, _render
+
 if TYPE_CHECKING:
     from ..models.calibration import FitResult
+
+# Imported lazily, inside the functions that use it, for speed: matplotlib takes a
+# noticeable time to import, and importing this module should not.
 
 __all__ = ["chart", "caption"]
 
@@ -28,7 +33,6 @@ def caption(result: FitResult) -> str:
 def _legend(fig, result: FitResult) -> None:
     from matplotlib.lines import Line2D
 
-    from .figures import _legend_below
 
     mls = _fitted_mls(result)
     handles = [Line2D([], [], marker=m, color=c, lw=0.8, ms=6, label=f"{f[:2]}, polynomial (number: order)")
@@ -56,7 +60,6 @@ def chart(result: FitResult) -> dict[str, bytes]:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .figures import RC, _render
 
     with matplotlib.rc_context(RC):
         fig = draw(plt, result)

@@ -1,6 +1,6 @@
-"""What a person holds at the bench: silicone quantities, the fabrication checklist (Markdown and printable
-HTML with tick boxes), with the spec's and the recipes' numbers filled in; the bill of materials is in
-:mod:`magfab.export.bom` (re-exported here).
+"""What a person holds at the bench: the fabrication checklist (Markdown and printable HTML with tick boxes), with
+the spec's and the recipes' numbers filled in; the silicone quantities are :mod:`magfab.models.silicone`'s, the bill
+of materials is in :mod:`magfab.export.bom`.
 
 Everything here is a pure function of the Design (and the chip's I2C address, the prediction's acceptance
 figures); the templates are in ``templates/checklist/``.
@@ -9,123 +9,35 @@ figures); the templates are in ``templates/checklist/``.
 from __future__ import annotations
 
 import math
-import re
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from ..board.placement import board_size_mm
-from ..errors import Finding, Severity, SpecError
+from ..design import PRY_LIP_MM
 from ..formats import acceptance_json
-from ..recipes import Recipe, catalogue
-from .bom import (  # bom_*: re-exported: pipeline.py writes bom.csv through this module
-    bom_csv,
-    bom_rows,
-    indenter_disc_mm,
+from ..models.scan import scan_plan
+from ..models.silicone import (
+    DEGAS_MIN,
+    MIN_BATCH_G,
+    MIX_MIN,
+    POUR_MIN_PER_CAVITY,
+    Quantities,
+    quantities,
+    silicone_recipe,
 )
+from ..recipes import Recipe, catalogue
+from . import firmware
+from .bom import bom_rows, indenter_disc_mm
+from .checklist_array import ADDRESS_HEADER, acceptance_steps, address_rows, calibrate_step, chips_text, magnets_text
+from .templating import render
 
 if TYPE_CHECKING:
     from ..design import Design
     from ..models.scan import ScanPlan
 
-__all__ = ["Quantities", "quantities", "mix_ratio", "Step", "Table", "Section", "sections", "checklist_md",
-           "checklist_html", "bom_rows", "bom_csv", "FLASH_COMMANDS", "CALIBRATE_COMMANDS", "findings"]
-
-#: Minutes at the bench per pour, before the silicone is in the mould: weigh and mix (3), degas (5), pour
-#: and close the lid (2 per cavity). Our estimate of a careful first-timer; checked against the pot life.
-MIX_MIN, DEGAS_MIN, POUR_MIN_PER_CAVITY = 3.0, 5.0, 2.0
-#: Lowest total mass weighed per batch: a 0.1 g kitchen scale then errs by at most 1 % per part.
-MIN_BATCH_G = 10.0
-
-
-def mix_ratio(text: str, where: str) -> tuple[float, float]:
-    """(A, B) parts by weight from a recipe's ratio text: "1A:1B", "10:1 (base : curing agent)", "100A:42B"."""
-    m = re.match(r"\s*(\d+(?:\.\d+)?)\s*A?\s*:\s*(\d+(?:\.\d+)?)", text)
-    if not m:
-        raise SpecError(where, text, "must start with a ratio like 1A:1B or 10:1")
-    return float(m.group(1)), float(m.group(2))
-
-
-@dataclass(frozen=True)
-class Quantities:
-    """Silicone per pour and in all, g; times, min."""
-
-    material: str
-    sensors: int
-    cavities: int
-    pours: int
-    part_volume_mL: float  # one cast part (the cavity minus the pocket core)
-    holes_volume_mL: float  # the lid's fill and vent holes, filled to the top, per pour
-    mould_holds_mL: float  # per pour
-    density_g_cm3: float
-    waste_pct: float
-    batch_g: float  # mixed per pour
-    part_a_g: float
-    part_b_g: float
-    ratio: tuple[float, float]
-    total_g: float  # over all pours
-    pot_life_min: float
-    bench_time_min: float  # weigh, mix, degas and pour one batch
-    cure_time_h: float
-    cure_temperature_C: float | None
-
-    def as_dict(self) -> dict[str, object]:
-        return {k: (round(v, 3) if isinstance(v, float) else v) for k, v in asdict(self).items()}
-
-
-def _silicone(design: Design) -> Recipe:
-    return design.material.recipe
-
-
-def _override(value: float | None, recipe: Recipe, key: str, spec_key: str) -> float:
-    if value is not None:
-        return float(value)
-    if key not in recipe.quantities:
-        raise SpecError(spec_key, "(recipe)", f"is needed: recipes/materials.toml gives no {key} for "
-                        f"{recipe.key!r}, so set it in the spec")
-    return recipe[key].nominal
-
-
-def quantities(design: Design) -> Quantities:
-    """How much silicone to weigh per pour and in all (cavities, the lid's holes, the waste allowance)."""
-    spec = design.spec
-    fab = spec.fabrication
-    rec = _silicone(design)
-    density = _override(fab.density_g_cm3, rec, "density_g_cm3", "fabrication.density_g_cm3")
-    pot = _override(fab.pot_life_min, rec, "pot_life_min", "fabrication.pot_life_min")
-    cure = _override(fab.cure_time_h, rec, "cure_time_h", "fabrication.cure_time_h")
-    ratio = mix_ratio(rec.texts.get("mix_ratio_by_weight", ""), f"recipes/materials.toml:{rec.key}.mix_ratio_by_weight")
-    cavities = design.cavities
-    holes = [d for x, y, d in design.lid_holes[len(design.pin_positions_x_mm):]]  # sprues and vents
-    holes_mm3 = sum(math.pi * d * d / 4 * design.lid_thickness_mm for d in holes)
-    part_mm3 = design.elastomer_volume_mm3
-    holds_mm3 = cavities * part_mm3 + holes_mm3
-    batch = max(holds_mm3 / 1000.0 * density * (1 + fab.waste_pct / 100.0), MIN_BATCH_G)
-    a, b = ratio
-    pours = math.ceil(fab.sensors * design.parts_per_sensor / cavities)
-    temp = rec["cure_temperature_C"].nominal if "cure_temperature_C" in rec.quantities else None
-    return Quantities(
-        material=rec.name, sensors=fab.sensors, cavities=cavities, pours=pours, part_volume_mL=part_mm3 / 1000.0,
-        holes_volume_mL=holes_mm3 / 1000.0, mould_holds_mL=holds_mm3 / 1000.0, density_g_cm3=density,
-        waste_pct=fab.waste_pct, batch_g=batch, part_a_g=batch * a / (a + b), part_b_g=batch * b / (a + b),
-        ratio=ratio, total_g=batch * pours, pot_life_min=pot,
-        bench_time_min=MIX_MIN + DEGAS_MIN + POUR_MIN_PER_CAVITY * cavities, cure_time_h=cure, cure_temperature_C=temp,
-    )
-
-
-def findings(design: Design) -> list[Finding]:
-    q = quantities(design)
-    out = [Finding(Severity.INFO, "silicone",
-                   f"weigh {q.part_a_g:.1f} g part A and {q.part_b_g:.1f} g part B of {q.material} per pour "
-                   f"({q.pours} pour(s), {q.total_g:.1f} g in all): the mould holds {q.mould_holds_mL:.2f} mL, plus "
-                   f"{q.waste_pct:g} % waste", "fabrication.waste_pct")]
-    if q.bench_time_min > 0.8 * q.pot_life_min:
-        out.append(Finding(Severity.WARNING, "pot-life",
-                           f"weighing, mixing, degassing and pouring {q.cavities} cavities takes about "
-                           f"{q.bench_time_min:g} min, more than 80 % of the {q.pot_life_min:g} min pot life: pour "
-                           "fewer cavities per batch or choose a slower silicone", "mould.cavities"))
-    return out
-
+__all__ = ["Step", "Table", "Section", "sections", "checklist_md", "checklist_html", "FLASH_COMMANDS",
+           "CALIBRATE_COMMANDS"]
 
 # ---------------------------------------------------------------------------------------------------
 # Rendering: sections of imperative steps; a step may end in a ```sh block of commands (run from the build
@@ -198,7 +110,6 @@ def _array_sections(design: Design) -> list[Section]:
     """An array's address plan and orientation, before anything is made (none for a single taxel)."""
     if design.array is None:
         return []
-    from .checklist_array import ADDRESS_HEADER, address_rows, chips_text
 
     arr = design.array
     return [_section(f"The array: {len(design.taxels)} taxels, address plan", [
@@ -238,7 +149,7 @@ def _print_section(design: Design) -> Section:
 
 def _prepare_section(design: Design, q: Quantities) -> Section:
     printer = design.printer
-    rec = _silicone(design)
+    rec = silicone_recipe(design)
     release = design.release_agent
     coats, coat_dry = _q(printer, "barrier_coats"), _q(printer, "barrier_dry_min")
     seal = _t(printer, "barrier_coat")
@@ -257,7 +168,7 @@ def _prepare_section(design: Design, q: Quantities) -> Section:
 
 
 def _mix_section(design: Design, q: Quantities) -> Section:
-    rec = _silicone(design)
+    rec = silicone_recipe(design)
     n = design.spec.fabrication.sensors
     a_name, b_name = ("part A", "part B") if q.ratio[0] == q.ratio[1] else ("base", "curing agent")
     cup, inhg, extra = (_q(rec, k) for k in ("degas_cup_ratio", "degas_vacuum_inHg", "degas_extra_min"))
@@ -281,8 +192,6 @@ def _mix_section(design: Design, q: Quantities) -> Section:
 
 
 def _pour_section(design: Design, q: Quantities) -> Section:
-    from ..design import PRY_LIP_MM
-
     cure_at = f" at {q.cure_temperature_C:g} C" if q.cure_temperature_C is not None else ""
     return _section("Pour, cure and demould", [
         "Pour slowly in a thin stream into one side of each cavity, filling it to the brim.",
@@ -300,8 +209,6 @@ def _magnet_section(design: Design) -> Section:
     grade = design.magnet_grade
     t_max = grade.max_operating_temp_C.nominal if grade.max_operating_temp_C is not None else None
     if design.array is not None:
-        from .checklist_array import magnets_text
-
         array = [f"Insert {len(design.taxels)} magnets, one per pocket, as below. " + magnets_text(design)]
     else:
         array = []
@@ -348,7 +255,6 @@ def _solder_section(design: Design) -> Section:
 def _chips(design: Design) -> str:
     if design.array is None:
         return "U1"
-    from .checklist_array import chips_text
 
     return f"U1-U{len(design.taxels)} ({chips_text(design)})"
 
@@ -409,8 +315,6 @@ def _wiring_section(design: Design) -> Section:
 
 
 def _flash_section(design: Design) -> Section:
-    from . import firmware
-
     return _section("Flash and read", [Step(
         "Plug the Arduino into this computer and run these from the build folder (the folder holding this "
         f"checklist). They flash firmware/{firmware.HEX_NAME} with avrdude (a Uno as shown; a Nano: nano, or nano-old "
@@ -427,7 +331,6 @@ def _calibrate_section(design: Design, plan: ScanPlan | None) -> Section:
     bench = catalogue("bench")
     ref, stage = bench["reference-sensor"], bench["stage"]
     if plan is None:  # no prediction to cap it: the spec's extent
-        from ..models.scan import scan_plan
 
         plan = scan_plan(design)
     disc = indenter_disc_mm(design, plan.y_half_mm)
@@ -438,8 +341,6 @@ def _calibrate_section(design: Design, plan: ScanPlan | None) -> Section:
                f"{cal.tolerance_mN:g} mN), which updates this build folder, reinstall the reader with the new "
                "calibration, and upload it into the board's EEPROM (no compiler, no reflash).", CALIBRATE_COMMANDS)
     if design.array is not None:
-        from .checklist_array import calibrate_step
-
         run = calibrate_step(design, run)
     return _section("Calibrate", [
         f"Build the rig: the {ref.name} (resolution {cal.reference_resolution_mN:g} mN, the figure the simulated scan "
@@ -461,8 +362,6 @@ def _acceptance_section(acceptance: Mapping[str, object] | None, design: Design 
     weight = acceptance.get("weight_g") if acceptance else None
     delta = acceptance.get("delta_Bz_uT") if acceptance else None
     if design is not None and design.array is not None:
-        from .checklist_array import acceptance_steps
-
         return _section("Acceptance test", acceptance_steps(design, float(weight or 50)))  # type: ignore[arg-type]
     if not (rest and weight and delta):
         return _section("Acceptance test", [
@@ -523,15 +422,11 @@ def sections(design: Design, acceptance: Mapping[str, object] | None = None,
 
 def checklist_md(design: Design, acceptance: Mapping[str, object] | None = None,
                  plan: ScanPlan | None = None) -> str:
-    from .templating import render
-
     return render("checklist/checklist.md.j2", spec=design.spec, q=quantities(design),
                   sections=sections(design, acceptance, plan))
 
 
 def checklist_html(design: Design, acceptance: Mapping[str, object] | None = None,
                    plan: ScanPlan | None = None) -> str:
-    from .templating import render
-
     return render("checklist/checklist.html.j2", spec=design.spec, q=quantities(design),
                   sections=sections(design, acceptance, plan))

@@ -8,10 +8,14 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..models.mechanics.coupling import boussinesq_ratio
 from .figures import RC, _render
 
 if TYPE_CHECKING:
     from ..models.crosstalk import Crosstalk
+
+# Imported lazily, inside the functions that use it, for speed: matplotlib takes a
+# noticeable time to import, and importing this module should not.
 
 __all__ = ["figures", "CAPTIONS"]
 
@@ -63,8 +67,6 @@ def _pitch(plt, xt: Crosstalk):
 
 
 def _coupling(plt, xt: Crosstalk):
-    from ..models.mechanics.coupling import boussinesq_ratio
-
     r, c = xt.coupling_curve
     depth = xt.coupling_depth_mm
     fig, ax = plt.subplots(figsize=(5.4, 3.4), layout="constrained")

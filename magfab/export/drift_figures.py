@@ -14,6 +14,9 @@ from .figures import RC, _legend_below, _render
 if TYPE_CHECKING:
     from ..models.drift import Drift
 
+# Imported lazily, inside the functions that use it, for speed: matplotlib takes a
+# noticeable time to import, and importing this module should not.
+
 __all__ = ["figures", "CAPTIONS", "FOLDER"]
 
 #: Where the chart goes in the build.

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import io
 import math
+import re
+import textwrap
 from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING
 
@@ -17,6 +19,9 @@ from ..models import field as fieldmod
 if TYPE_CHECKING:
     from ..design import Design
     from ..models.predict import Prediction
+
+# Imported lazily, inside the functions that use it, for speed: matplotlib takes a
+# noticeable time to import, and importing this module should not.
 
 BAND_COLOURS = {"soft": "#1f77b4", "nominal": "#2ca02c", "stiff": "#d62728"}
 
@@ -164,8 +169,6 @@ def _contours(plt, design: Design, pred: Prediction):
 
 
 def _force(plt, design: Design, pred: Prediction):
-    import textwrap
-
     from matplotlib.lines import Line2D
 
     fig, axes = plt.subplots(1, 2, figsize=(9.0, 4.6), layout="constrained")
@@ -251,8 +254,6 @@ def pareto_front(points: Sequence[tuple[float, float]]) -> list[tuple[float, flo
 
 def _plain_unit(unit: str) -> str:
     """'per 10^5 points' -> 'per 100,000 points' (no mathtext)."""
-    import re
-
     return re.sub(r"10\^(\d+)", lambda m: f"{10 ** int(m[1]):,}", unit)
 
 

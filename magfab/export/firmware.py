@@ -21,16 +21,25 @@ the named constants below, each with its source or marked as an assumption. The 
 from __future__ import annotations
 
 import binascii
+import importlib.util
+import json
 import math
+import sys
 from collections.abc import Mapping
 from dataclasses import dataclass
+from importlib.resources import files
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ..errors import InputError, SpecError
 from ..formats import calibration_json
 from ..formats.calibration_json import calibration_sha256
 from ..models.chip import conversion_us  # the chip's pace, shared with the prediction
+from ..models.reference import REFERENCE_SHIFT
 from ..recipes import resolve
+from ..reference_chip import reference_chip
+from .templating import render as render_template
+from .templating import templates_dir
 
 if TYPE_CHECKING:
     from ..design import Design
@@ -224,10 +233,6 @@ def twi_settings(hz: int) -> tuple[int, int, int]:
 def _eeprom_module():
     """The package's ``eeprom`` module (one implementation: the build's .eep and ``magfab-readout upload`` both
     pack with it), loaded as a file because the package's ``__init__`` needs a build's build.json."""
-    import importlib.util
-    import sys
-    from pathlib import Path
-
     name = "magfab.export._readout_eeprom"
     if name not in sys.modules:
         path = Path(__file__).parent / "readout_pkg" / "magfab_readout" / "eeprom.py"
@@ -265,10 +270,9 @@ def image_settings(design: Design) -> dict[str, Any]:
              | (ee.FLAG_TEXT if _value(fw.output) == "text" else 0) | (ee.FLAG_RAW_SIGNED if chip.raw_signed else 0))
     regs = {reg: (mask, value) for reg, mask, value in chip.registers}
     array = {} if design.array is None else {"taxel_addresses": [t.i2c_address for t in design.taxels]}
-    if design.reference is not None:  # the record's reference block (version 5)
-        from ..models.reference import REFERENCE_SHIFT
-
-        array = {"reference": design.reference.i2c_address, "reference_shift": REFERENCE_SHIFT}
+    ref = reference_chip(design)
+    if ref is not None:  # the record's reference block (version 5)
+        array = {"reference": ref.i2c_address, "reference_shift": REFERENCE_SHIFT}
     return {
         **array,
         "name": design.spec.name, "gain_sel": chip.gain_sel, "resolution": chip.resolution, "osr": chip.osr,
@@ -420,9 +424,6 @@ def render(design: Design, calibration: Mapping[str, Any], *, generic: bool = Tr
 
 def _render_tree(context: Mapping[str, Any], wanted) -> dict[str, bytes]:
     """The firmware templates whose relative path ``wanted`` accepts, rendered with ``context``."""
-    from .templating import render as render_template
-    from .templating import templates_dir
-
     root = templates_dir() / "firmware"
     out: dict[str, bytes] = {}
     for path in sorted(p for p in root.rglob("*") if p.is_file() and "__pycache__" not in p.parts):
@@ -452,8 +453,5 @@ def shipped_image() -> tuple[bytes, dict[str, Any]]:
     """The generic image in the package (Intel HEX bytes) and ``toolchain.json``: the avr-gcc and avr-libc versions
     that built it, its flash and RAM, the sha256 of the image and of :func:`generic_sources`. One image for every
     build and machine, with or without avr-gcc: the settings and calibration come from the build's .eep."""
-    import json
-    from importlib.resources import files
-
     folder = files("magfab.export").joinpath(GENERIC_DIR)
     return folder.joinpath(HEX_NAME).read_bytes(), json.loads(folder.joinpath(GENERIC_TOOLCHAIN).read_text())

@@ -25,9 +25,13 @@ from importlib import resources
 from typing import Any
 
 from .. import __version__
+from ..design import Design
 from ..errors import SpecError
 from ..formats import acceptance_json, calibration_json
 from ..formats.json_checks import FormatError
+
+# TEMPERATURE_*, re-exported: MLX90393 temperature (TCMP off), T = 25 C + (raw - T25) / TRES, from recipes/chips.toml.
+from .firmware import TEMPERATURE_LSB_PER_C, TEMPERATURE_RAW_25C, chip_config, image_settings
 from .templating import render as render_template
 from .templating import templates_dir
 
@@ -40,8 +44,6 @@ TEMPLATES = "readout"  # folder under templates/; every file in it ends in .j2 a
 RUNTIME = ("readout_pkg", PACKAGE)
 #: magfab's format validators the package runs too, copied verbatim from magfab/formats/.
 SHARED = ("json_checks.py", "calibration_json.py", "acceptance_json.py")
-# MLX90393 temperature (TCMP off): T = 25 C + (raw - T25) / TRES, from recipes/chips.toml.
-from .firmware import TEMPERATURE_LSB_PER_C, TEMPERATURE_RAW_25C  # noqa: E402 - from recipes/chips.toml
 
 
 def _plain(value: object) -> object:
@@ -93,8 +95,6 @@ def calibration_sha256(calibration: Mapping[str, Any]) -> str:
 
 def _build_data(design, checked: calibration_json.Checked) -> dict[str, object]:
     """build.json: what the package's ``_build`` module reads (the spec, the firmware's settings, the hash)."""
-    from .firmware import chip_config, image_settings
-
     spec = design.spec
     chip = chip_config(design)  # the firmware's own: its rate is one frame per conversion (the datasheet's table)
     limit = design.chip[f"output_limit_res{spec.sensor.resolution}_lsb"].nominal
@@ -169,8 +169,6 @@ def render(design, calibration: Mapping[str, Any], acceptance: Mapping[str, Any]
     calibration the readout cannot evaluate or malformed acceptance data, TypeError for a ``design`` of the
     wrong type.
     """
-    from ..design import Design
-
     if not isinstance(design, Design):
         raise TypeError(f"design must be a magfab Design (from magfab.derive); instead received {type(design).__name__}")
     checked = validate_calibration(calibration)

@@ -15,6 +15,9 @@ from functools import lru_cache
 from importlib.resources import files
 from pathlib import Path
 
+# Imported lazily, inside the functions that use it, for speed: jinja2 takes a
+# noticeable time to import, and importing this module should not.
+
 __all__ = ["templates_dir", "environment", "render"]
 
 

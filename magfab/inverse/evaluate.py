@@ -25,9 +25,12 @@ import traceback
 from functools import lru_cache
 from typing import Any
 
-from ..check import design_findings, errors_in
+from ..check import design_findings, errors_in, predict_with_findings, preflight
 from ..design import derive
 from ..errors import InputError, ModelLimitError, Severity
+from ..models import mechanics as mech
+from ..models.mechanics import fe_surrogate
+from ..models.predict import surrogate_curve
 from ..spec import FieldModel, Spec
 from .space import candidate_spec
 from .targets import Models, Objective, Targets
@@ -79,10 +82,6 @@ def _constraints(targets: Targets, m: dict[str, float], errors: list[str]) -> li
 
 def _elastomer_model(design) -> tuple[Any, str]:
     """The surrogate's elastomer model for ``design``, or (None, why not) outside its validated region."""
-    from ..models import mechanics as mech
-    from ..models.mechanics import fe_surrogate
-    from ..models.predict import surrogate_curve
-
     body = mech.Body.from_design(design)
     if not fe_surrogate.in_region(body):
         return None, "fe (outside surrogate region)"
@@ -116,12 +115,11 @@ def evaluate(point: dict[str, Any], base_json: str, targets_json: str, fidelity:
 
 
 def _run(point: dict[str, Any], base: Spec, targets: Targets, fidelity: str, name: str, out: dict[str, Any]) -> None:
-    from ..models.predict import predict_with_findings
-
     spec = candidate_spec(point, base, targets, name)
     if fidelity == SURROGATE:  # the exact field: no per-aspect surrogate table to build for each new magnet (0.3 s)
         spec = spec.model_copy(update={"predict": spec.predict.model_copy(update={"field_model": FieldModel.EXACT})})
     design = derive(spec)
+    preflight(design)  # a candidate the build would refuse (its cost past a limit) fails as the build would
     model, label = (None, FE)
     if fidelity == SURROGATE:
         model, label = _elastomer_model(design)

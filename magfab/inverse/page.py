@@ -19,7 +19,10 @@ from .tables import rows, write_table
 from .targets import OBJECTIVES, Models
 
 if TYPE_CHECKING:
-    from .run import DesignResult
+    from .result import DesignResult
+
+# Imported lazily, inside the functions that use it, for speed: matplotlib takes a
+# noticeable time to import, and importing this module should not.
 
 __all__ = ["write_outputs", "write_specs", "plot_front"]
 

@@ -18,40 +18,23 @@ full chain (FE), the front of the verified designs, and the files::
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import InputError
 from .evaluate import FE, SURROGATE
+from .page import write_outputs
 from .pareto import front_mask, pick_for_verification, values_of
+from .result import DesignResult
 from .space import grid, latin_hypercube
 from .study import KEPT, Record, client, evaluate_all, records, run_study
 from .tables import rows, write_table
 from .targets import Models, Targets, load_targets
 
-__all__ = ["DesignResult", "design", "sweep", "default_folder"]
+__all__ = ["design", "sweep", "default_folder"]
 
 Progress = Callable[[str, int, int], None]
-
-
-@dataclass
-class DesignResult:
-    """What ``magfab design`` found: every trial, the verified designs, the front among them and the chosen one."""
-
-    targets: Targets
-    folder: Path
-    trials: list[Record]
-    verified: list[Record]  # the full chain's results, in verification order
-    screened: list[Record]  # the same designs' cheap-model results
-    front: list[int]  # indices into verified: feasible and non-dominated by the full chain
-    chosen: int | None  # index into verified
-    names: list[str] = field(default_factory=list)  # design names of the verified designs
-    files: list[Path] = field(default_factory=list)
-
-    def objective_values(self, recs: list[Record]) -> np.ndarray:
-        return values_of(recs, [o.value for o in self.targets.objectives])
 
 
 def default_folder(targets: Targets) -> Path:
@@ -91,8 +74,6 @@ def design(targets_path: Path, out: Path | None = None, scheduler: str | None = 
     names = [f"{targets.name}-{r.number}" for r in screened]
     result = DesignResult(targets, folder, trials, verified, screened, [], None, names)
     _front(result)
-    from .page import write_outputs
-
     result.files = write_outputs(result, base)
     return result
 

@@ -20,11 +20,15 @@ from typing import Any
 
 import numpy as np
 
+from ..check import preflight
 from ..design import SECOND_HOLE_EXTRA_MM, derive
 from ..errors import SpecError
 from ..recipes import catalogue
 from ..spec import Spec, spec_from_dict
 from .targets import Targets, Variables
+
+# Imported lazily, inside the functions that use it, for speed: scipy takes a
+# noticeable time to import, and importing this module should not.
 
 __all__ = ["NUMERIC", "CATEGORICAL", "stock_disc", "candidate_spec", "suggest", "grid", "latin_hypercube",
            "base_point"]
@@ -119,6 +123,7 @@ def base_point(base: Spec, variables: Variables) -> dict[str, Any] | None:
     if not keys or f"{keys[0]}:{m.grade}" not in magnets(variables):
         return None
     design = derive(base)
+    preflight(design)  # a base the build would refuse (its cost, its reference chip) stops the study before it starts
     point = {"magnet": keys[0], "grade": m.grade, "material": base.elastomer.material, "tip": base.elastomer.tip.value,
              "d_max_mm": base.sensor.d_max_mm, "d_min_mm": base.sensor.d_min_mm,
              "elastomer_diameter_mm": base.elastomer.diameter_mm, "cover_mm": round(design.cover_mm, 9)}

@@ -28,6 +28,9 @@ from .evaluate import constraint_names, evaluate
 from .space import base_point, params_of, point_of, suggest
 from .targets import Sampler, Targets
 
+# Imported lazily, inside the functions that use them, for speed: Dask, Optuna and SQLAlchemy take a
+# noticeable time to import, and importing this module should not.
+
 __all__ = ["Record", "tally", "StudyError", "client", "open_study", "run_study", "tell", "evaluate_all", "records"]
 
 #: Designs kept in flight per worker: enough to hide the scheduler's round trip, few enough that the sampler sees

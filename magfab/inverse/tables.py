@@ -13,6 +13,9 @@ from .space import CATEGORICAL, NUMERIC
 from .study import Record
 from .targets import Objective
 
+# Imported lazily, inside the functions that use it, for speed: pyarrow takes a
+# noticeable time to import, and importing this module should not.
+
 __all__ = ["COLUMNS", "rows", "write_table"]
 
 FIGURES = tuple(o.value for o in Objective) + ("normal_sensitivity_at_rest_G_per_N", "Bz_rest_G", "range_limit")

@@ -89,6 +89,9 @@ if TYPE_CHECKING:
     from ..design import Design
     from .predict import Prediction
 
+# Imported lazily, inside the functions that use it, for speed: magpylib takes a
+# noticeable time to import, and importing this module should not.
+
 __all__ = ["FORMAT", "G0", "DEFAULT_WEIGHT_G", "Tolerances", "SOURCES", "acceptance", "default_weight_g"]
 
 FORMAT = acceptance_json.FORMAT

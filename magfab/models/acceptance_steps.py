@@ -47,6 +47,7 @@ from typing import TYPE_CHECKING, Any
 
 from ..units import G0, UT_PER_GAUSS
 from .calibration_thermal import MIN_SPAN_C
+from .drift import earth_field_G
 
 if TYPE_CHECKING:
     from ..design import Design
@@ -82,8 +83,6 @@ def _steepest_rise(weight: Mapping[str, Any]) -> float:
 
 def rotation_section(design: Design, data: Mapping[str, Any], weight: Mapping[str, Any]) -> dict[str, Any]:
     """acceptance.json's ``rotation`` (module doc): the band on the field change, uT, and what it is made of."""
-    from .drift import earth_field_G
-
     low, stated, high = earth_field_G(design)
     reference = data.get("reference")
     rejection = float(reference["rejection"]["uniform"]) if reference else None

@@ -66,10 +66,14 @@ from ..formats import calibration_json
 from ..formats.scan_csv import FORCE_COLUMNS, MIN_ROWS, SCAN_COLUMNS, Scan, check_calibration_scan
 from ..units import UT_PER_GAUSS
 from .calibration_thermal import ThermalFit, correct, fit_thermal
+from .chip import chip_setting, noise
 from .region import HULL_MAX_VERTICES, Scaling, ValidRegion, guard_ops
 
 if TYPE_CHECKING:
     from ..design import Design
+
+# Imported lazily, inside the functions that use it, for speed: scipy takes a
+# noticeable time to import, and importing this module should not.
 
 __all__ = [
     "FORMAT", "MIN_ROWS", "ORDERS", "MLS_ORDER", "SCAN_COLUMNS", "FORCE_COLUMNS", "HULL_MAX_VERTICES",
@@ -531,8 +535,6 @@ def _shear_sign(scan: Scan) -> int:
 
 def _chip_json(design: Design) -> tuple[dict[str, object], float]:
     """The ``chip`` object and the RMS xy field noise (uT) predicted for the spec's chip settings."""
-    from .predict import chip_setting, noise
-
     chip = chip_setting(design)
     doc = {"gain_sel": chip.gain_sel, "resolution": chip.resolution, "osr": chip.osr, "dig_filt": chip.dig_filt,
            "lsb_xy_uT": chip.lsb_xy_uT, "lsb_z_uT": chip.lsb_z_uT}

@@ -39,7 +39,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..errors import Finding, Severity
+from ..recipes import catalogue
+from ..spec import Environment
 from ..units import GAUSS_PER_TESLA, M_PER_MM, MN_PER_N, UT_PER_GAUSS
 from .field.magnet import MU0
 
@@ -51,7 +52,7 @@ if TYPE_CHECKING:
 __all__ = ["Coefficients", "coefficients", "environment", "Channel", "normal_channel", "shear_channel",
            "force_error_mN", "temperature_read_G", "temperature_error_mN", "TemperatureBudget", "temperature_budget", "earth_field_G",
            "Disturbance", "rotation_error", "dipole_field_G", "dipole_worst_G", "stray_error", "Drift", "drift",
-           "findings", "N_TEMPERATURES", "CASES"]
+           "N_TEMPERATURES", "CASES"]
 
 #: Temperatures the span is evaluated at (the calibration temperature is added).
 N_TEMPERATURES = 21
@@ -106,16 +107,12 @@ def coefficients(design: Design) -> Coefficients:
 
 def environment(design: Design) -> Environment:
     """The spec's ``[environment]``, or the lab bench its defaults describe when the section is omitted."""
-    from ..spec import Environment
-
     return design.spec.environment or Environment()
 
 
 def earth_field_G(design: Design) -> tuple[float, float, float]:
     """(least, stated, strongest) total intensity of the Earth's field, G: the recipe's band, and the spec's
     ``environment.earth_field_G`` as the stated value (the band's strongest when omitted)."""
-    from ..recipes import catalogue
-
     band = catalogue("bench")["environment"]["earth_field_G"]
     stated = environment(design).earth_field_G
     return band.low, band.high if stated is None else float(stated), band.high
@@ -461,39 +458,3 @@ def drift(design: Design, pred: Prediction) -> Drift:
                  "chip_z": float(pred.noise.chip_z_G), "chip_xy": float(pred.noise.chip_xy_G)},
         channel=normal,
     )
-
-
-def _severity(error_mN: float, resolution_mN: float) -> Severity:
-    return Severity.WARNING if abs(error_mN) > resolution_mN else Severity.INFO
-
-
-def findings(design: Design, d: Drift) -> list[Finding]:
-    """The drift budget as findings: a warning where an error under the stated conditions exceeds the resolution,
-    info otherwise."""
-    res_n, res_s = d.resolution_mN["normal"], d.resolution_mN["shear"]
-    t = d.temperature
-    compensated = bool(design.spec.firmware.temperature)
-    case = "with" if compensated else "without"
-    worst_n = max(t.worst["normal_rest"][case], t.worst["normal_end"][case])
-    env = d.conditions
-    span = f"{env['temperature_min_C']:g}-{env['temperature_max_C']:g} C"
-    out = [Finding(
-        _severity(worst_n, res_n), "drift-temperature",
-        f"temperature: {abs(t.per_C['normal_rest']['without']):.1f} mN/C at rest and "
-        f"{abs(t.per_C['normal_end']['without']):.1f} mN/C at the end of the normal range uncompensated; over "
-        f"{span} (calibrated at {t.calibration_C:g} C) up to {max(t.worst['normal_rest']['without'], t.worst['normal_end']['without']):.0f} mN "
-        f"without and {max(t.worst['normal_rest']['with'], t.worst['normal_end']['with']):.1f} mN with the chip-temperature "
-        f"compensation{'' if compensated else ' (off: firmware.temperature is false)'}, against a {res_n:.1f} mN "
-        "resolution", "environment.temperature_max_C")]
-    r = d.rotation
-    out.append(Finding(_severity(max(abs(r.normal_rest_mN), abs(r.normal_end_mN)), res_n), "drift-rotation",
-                       f"{r.what}: {r.field_G:.2f} G on an axis, {abs(r.normal_rest_mN):.1f} mN normal at rest, "
-                       f"{abs(r.normal_end_mN):.1f} mN at the end of the range, {abs(r.shear_mN):.1f} mN shear, against "
-                       f"{res_n:.1f} / {res_s:.1f} mN resolution (normal / shear)", "environment.rotation_deg"))
-    if d.stray is not None:
-        s = d.stray
-        out.append(Finding(_severity(max(abs(s.normal_rest_mN), abs(s.normal_end_mN)), res_n), "drift-stray",
-                           f"{s.what}: {s.field_G:.3g} G on an axis, {abs(s.normal_rest_mN):.1f} mN normal at rest, "
-                           f"{abs(s.shear_mN):.1f} mN shear, against {res_n:.1f} / {res_s:.1f} mN resolution",
-                           "environment.stray_distance_mm"))
-    return out

@@ -38,89 +38,25 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..errors import Finding, Severity
+from ..fork import side_branch
+from ..reference_chip import reference_chip
 from ..spec import FieldModel
-from ..units import GAUSS_PER_MT, MN_PER_N, UT_PER_GAUSS
+from ..units import MN_PER_N
+from . import drift
 from . import field as fieldmod
 from . import mechanics as mech
-from .chip import conversion_us
+from .chip import ChipSetting, chip_setting, noise
+from .mechanics import fe_surrogate
+from .mechanics.schedule import FE_ORDER, fe_meshes  # the meshes the spec's cost limits were checked against
+from .reference import budget
 from .shear_figures import SHEAR_DESCRIPTION, ShearFigures, _crossing, rest_response, shear_figures, shear_probe_depths
 
 if TYPE_CHECKING:
     from ..design import Design
     from .drift import Drift
 
-G_PER_UT = 1.0 / UT_PER_GAUSS
 N_INDENT = 21  # indentation steps along the normal curve
-#: Mesh sizes (mm) the automatic FE choice tries, coarse to fine; each is checked against the next finer.
-FE_MESHES_MM = (1.0, 0.75, 0.5, 0.35)
-#: Observed convergence order of the FE force under refinement (bench/mechanics.py measures it).
-FE_ORDER = 1.0
 SHEAR_STEP_MM = 0.01  # finite-difference step for dBr/dr at the axis
-
-
-# ---------------------------------------------------------------------------------------------------
-# The chip
-
-
-@dataclass(frozen=True)
-class ChipSetting:
-    """The MLX90393 at the spec's GAIN_SEL / RES / OSR / DIG_FILT: scale, full scale, noise, timing."""
-
-    gain_sel: int
-    resolution: int
-    osr: int
-    dig_filt: int
-    lsb_xy_uT: float
-    lsb_z_uT: float
-    full_scale_xy_G: float
-    full_scale_z_G: float
-    saturation_onset_G: float
-    noise_xy_G: float  # chip's own RMS noise (upper bound, see recipe), without quantisation
-    noise_z_G: float
-    conversion_ms: float  # one T+X+Y+Z measurement
-
-    @property
-    def rate_Hz(self) -> float:
-        return 1000.0 / self.conversion_ms
-
-
-def chip_setting(design: Design) -> ChipSetting:
-    """Scale, range, noise and conversion time from the chip recipe and the spec's register fields.
-
-    Noise: the datasheet gives RMS noise only as curves against conversion time; the recipe holds the plot's
-    axis end at the shortest conversion as an upper bound, and white noise averaged over a longer conversion
-    falls as 1/sqrt(conversion time).
-    """
-    chip = design.chip
-    s = design.spec.sensor
-    scale = 2 ** s.resolution
-    lsb_xy = chip[f"sensitivity_xy_gain{s.gain_sel}_uT_per_lsb"].nominal * scale
-    lsb_z = chip[f"sensitivity_z_gain{s.gain_sel}_uT_per_lsb"].nominal * scale
-    limit = chip[f"output_limit_res{s.resolution}_lsb"].nominal
-    t_axis = chip["tconvm_offset_us"].nominal + chip["tconvm_step_us"].nominal * 2 ** s.osr * (2 + 2 ** s.dig_filt)
-    tconv_us = conversion_us(chip, s.osr, s.dig_filt, bool(design.spec.firmware.temperature))  # the firmware's pace
-    averaging = math.sqrt(chip["noise_reference_conversion_us"].nominal / t_axis)
-    return ChipSetting(
-        s.gain_sel, s.resolution, s.osr, s.dig_filt, lsb_xy, lsb_z,
-        full_scale_xy_G=limit * lsb_xy * G_PER_UT, full_scale_z_G=limit * lsb_z * G_PER_UT,
-        saturation_onset_G=chip["saturation_onset_mT"].nominal * GAUSS_PER_MT,
-        noise_xy_G=chip["noise_xy_bound_uT"].nominal * G_PER_UT * averaging,
-        noise_z_G=chip["noise_z_bound_uT"].nominal * G_PER_UT * averaging,
-        conversion_ms=tconv_us / 1000.0,
-    )
-
-
-def noise(design: Design, chip: ChipSetting) -> dict[str, float]:
-    """RMS field noise at the sensor, G: environment, chip, quantisation (LSB / sqrt 12), and the totals."""
-    env = design.spec.predict.noise_G
-    q_xy, q_z = chip.lsb_xy_uT * G_PER_UT / math.sqrt(12), chip.lsb_z_uT * G_PER_UT / math.sqrt(12)
-    return {
-        "environment_G": env, "chip_xy_G": chip.noise_xy_G, "chip_z_G": chip.noise_z_G,
-        "quantisation_xy_G": q_xy, "quantisation_z_G": q_z,
-        "total_xy_G": math.sqrt(env**2 + chip.noise_xy_G**2 + q_xy**2),
-        "total_z_G": math.sqrt(env**2 + chip.noise_z_G**2 + q_z**2),
-    }
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -209,9 +145,6 @@ def normal_curve(design: Design, body: mech.Body, mu: float,
         return curve, ModelUse("mechanics", name, math.nan,
                                "closed form; its error against the FE model is charted by bench/mechanics.py",
                                "spec"), None
-    from ..fork import side_branch
-    from ..limits import fe_meshes  # the meshes the spec's cost limits were checked against
-
     chosen = None
     depth = float(design.spec.calibration.scan_z_mm)  # the deepest indentation the design is used over
     depths, rest = shear_probe_depths(design, indentation), design.spec.calibration.scan_step_mm
@@ -248,8 +181,6 @@ def surrogate_curve(design: Design, body: mech.Body, mu: float,
     """:func:`normal_curve`'s result from the elastomer FE's surrogate (:mod:`.mechanics.fe_surrogate`), for the design
     search: the curve to the scan depth and the shear response at the preloads the FE probe would solve. Raises
     :class:`~.mechanics.fe_surrogate.OutsideRegion` for a body outside its validated region."""
-    from .mechanics import fe_surrogate
-
     depth = float(design.spec.calibration.scan_z_mm)
     curve, response = fe_surrogate.normal_and_shear(body, mu, indentation, depth,
                                                     shear_probe_depths(design, indentation),
@@ -425,17 +356,14 @@ def predict(design: Design, elastomer: ElastomerModel | None = None) -> Predicti
                "total": t_end - t0}
     pred = Prediction(field_figures, chip, mus, normal, shear, Noise(**nz), (fuse, muse, shear_use), arrays, timings)
     pred = replace(pred, drift=_drift(design, pred))
-    if pred.drift is not None and design.reference is not None:
-        from .reference import budget
-
-        pred = replace(pred, reference=budget(design, pred, pred.drift))
+    ref = reference_chip(design)
+    if pred.drift is not None and ref is not None:
+        pred = replace(pred, reference=budget(design, pred, pred.drift, ref))
     return pred
 
 
 def _drift(design: Design, pred: Prediction) -> Drift | None:
     """The drift budget, or None for a normal curve the calibration could not invert (its field not rising)."""
-    from . import drift
-
     try:
         return drift.drift(design, pred)
     except ValueError:
@@ -515,21 +443,3 @@ def _normal(design: Design, chip: ChipSetting, nz: Mapping[str, float], magnets:
               **{f"sb_{b}": v for b, v in s_b.items()}, **{f"ke_{k}": v for k, v in k_e.items()},
               **{f"sf_{k}_{b}": v for (k, b), v in s_f.items()}, **{f"res_{k}_{b}": v for (k, b), v in res_mN.items()}}
     return figures, arrays
-
-
-def predict_with_findings(design: Design, elastomer: ElastomerModel | None = None) -> tuple[Prediction | None, list[Finding]]:
-    """:func:`predict` and its design checks; a model that cannot give an answer for this design (the FE
-    failing at its first step, a field model refusing every point) is an error finding, not a traceback."""
-    from ..check import prediction_findings
-
-    try:
-        pred = predict(design, elastomer)
-    except (mech.MechanicsError, fieldmod.FieldModelError) as exc:
-        return None, [Finding(Severity.ERROR, "prediction-failed", f"no prediction for this design: {exc}",
-                              "predict.mechanics_model" if isinstance(exc, mech.MechanicsError) else "predict.field_model")]
-    from .drift import findings as drift_findings
-    from .reference import findings as reference_findings
-
-    return pred, (prediction_findings(design, pred) + ([] if pred.drift is None else drift_findings(design, pred.drift))
-                  + reference_findings(design, pred.reference))
-

@@ -11,7 +11,7 @@ nearest point where, for every magnet pressed through its normal travel or slid 
 (:class:`Travel`: the board places by what the geometry allows, pressed to d_min and slid by the elastomer's radius
 less the magnet's; the prediction reports the change at its predicted travel), and for the magnets' rest field changing over the environment's temperature
 span by the grade's remanence coefficient, the change of every component at the reference stays below the chip's
-own RMS noise on that axis (:func:`magfab.models.predict.noise`). Exact superposition of every magnet
+own RMS noise on that axis (:func:`magfab.models.chip.noise`). Exact superposition of every magnet
 (:func:`magfab.models.field.exact`). What is subtracted is then below one noise sigma whatever the taxels do.
 
 What it rejects.
@@ -43,12 +43,15 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from . import field as fieldmod
+from .chip import chip_setting, noise
+from .drift import dipole_field_G, rotation_error, stray_error
 
 if TYPE_CHECKING:
     from ..design import Design
+    from .drift import Drift
     from .predict import Prediction
 
-__all__ = ["Site", "Rejection", "Travel", "site", "rejection", "budget", "findings", "REFERENCE_SHIFT", "noise_growth"]
+__all__ = ["ReferenceChip", "Site", "Rejection", "Travel", "site", "rejection", "budget", "REFERENCE_SHIFT", "noise_growth"]
 
 #: The firmware's reference filter: an exponential average with weight 2**-REFERENCE_SHIFT per reading.
 REFERENCE_SHIFT = 3
@@ -152,6 +155,30 @@ def _changes(design: Design, travel: Travel, points: np.ndarray, span_C: float) 
     return np.column_stack([motion, thermal, rest])
 
 
+@dataclass(frozen=True)
+class ReferenceChip:
+    """The reference chip: its centre (design frame, mm, y up), I2C address and straps, the chip to order."""
+
+    index: int  # after the taxels: the firmware reads it last
+    x_mm: float
+    y_mm: float
+    distance_mm: float  # beyond the taxels' hull along +y
+    separation_mm: float  # from the nearest sensing chip
+    i2c_address: int
+    option_code: str
+    address_straps: tuple[int, int]  # (A1, A0): 0 = GND, 1 = supply
+
+    @property
+    def designator(self) -> str:
+        return f"U{self.index + 1}"
+
+    def as_dict(self) -> dict[str, object]:
+        return {"index": self.index, "designator": self.designator, "x_mm": round(self.x_mm, 3),
+                "y_mm": round(self.y_mm, 3), "distance_mm": round(self.distance_mm, 3),
+                "separation_mm": round(self.separation_mm, 3), "i2c_address": self.i2c_address,
+                "option_code": self.option_code, "address_straps": list(self.address_straps)}
+
+
 def _remanence_coefficient(design: Design) -> float:
     """The grade's remanence temperature coefficient, per C (magnets.toml)."""
     return design.magnet_grade.br_temperature_coefficient_pct_per_C.nominal / 100.0
@@ -161,8 +188,6 @@ def site(design: Design, travel: Travel, span_C: float, distance_mm: float | Non
     """The reference's site (module doc) for magnets moving by ``travel``: the nearest along +y from the hull where
     every change is under the noise, or ``distance_mm`` beyond the hull's edge when given (the figures then say how
     loud the magnets are there)."""
-    from .predict import chip_setting, noise
-
     n = noise(design, chip_setting(design))
     limit = np.array([n["total_xy_G"], n["total_z_G"]])
     xs = [t.x_mm for t in design.taxels]
@@ -205,8 +230,6 @@ def rejection(design: Design, where: Site,
               distances_mm: tuple[float, ...] = (30.0, 60.0, 100.0, 300.0, 1000.0)) -> Rejection:
     """The predicted rejection ratios (module doc) for a reference at ``where``: a uniform field, and a dipole at each
     of ``distances_mm`` from the sensing chip (taxel 0's), worst over its direction and orientation."""
-    from .drift import dipole_field_G
-
     chip = design.chip
     drift = chip["sensitivity_drift_pct"]
     mismatch = 2.0 * max(abs(drift.low), abs(drift.high)) / 100.0
@@ -229,14 +252,10 @@ def rejection(design: Design, where: Site,
                      tuple(ratios), tuple(medians), noise_growth())
 
 
-def budget(design: Design, pred: Prediction, drift_budget) -> dict[str, object] | None:
-    """predictions.json's ``reference``: the placed chip, what the magnets do there at the predicted travel, the
-    predicted rejection, and the drift budget's rotation and stray errors left after it (mN); None without one."""
-    from .drift import rotation_error, stray_error
-
-    chip = design.reference
-    if chip is None:
-        return None
+def budget(design: Design, pred: Prediction, drift_budget: Drift, chip: ReferenceChip) -> dict[str, object]:
+    """predictions.json's ``reference``: the placed ``chip`` (:func:`magfab.reference_chip.reference_chip`), what
+    the magnets do there at the predicted travel, the predicted rejection, and the drift budget's rotation and stray
+    errors left after it (mN)."""
     env = drift_budget.conditions
     span = float(env["temperature_max_C"]) - float(env["temperature_min_C"])
     placed = site(design, Travel.predicted(design, pred), span, distance_mm=chip.distance_mm)
@@ -260,33 +279,3 @@ def budget(design: Design, pred: Prediction, drift_budget) -> dict[str, object] 
                 "direction and orientation)")).as_json()
         out["stray"] = {"without": drift_budget.stray.as_json(), **left}
     return out
-
-
-def findings(design: Design, section: dict[str, object] | None) -> list:
-    """The reference chip as findings: a warning when the magnets are heard at its place (it would subtract the
-    taxels' own presses), info with what it rejects otherwise."""
-    from ..errors import Finding, Severity
-
-    if section is None:
-        return []
-    chip, where, rej = section["chip"], section["site"], section["rejection"]
-    motion, noise_G = where["motion_G"], where["noise_G"]
-    if not section["quiet"]:
-        quiet = site(design, Travel.bound(design), 0.0)
-        return [Finding(Severity.WARNING, "reference-loud",
-                        f"the magnets move the field at the reference chip {chip['designator']} "
-                        f"({chip['distance_mm']:g} mm beyond the taxels) by up to {motion[0]:.2f} G (x/y) and "
-                        f"{motion[1]:.2f} G (z), above the chip's {noise_G[0]:.2f} / {noise_G[1]:.2f} G noise: its "
-                        "subtraction would take part of each press with it; at least "
-                        f"{quiet.xy_mm[1] - max(t.y_mm for t in design.taxels):g} mm (or omit distance_mm)",
-                        "reference.distance_mm")]
-    turned = section["rotation"]
-    near = [d for d in rej["dipole"] if d["median"] < 1.0]
-    return [Finding(Severity.INFO, "reference",
-                    f"reference chip {chip['designator']} (0x{chip['i2c_address']:02X}) {chip['separation_mm']:g} mm from "
-                    f"the sensing chip, where the magnets move the field by at most {max(motion):.2f} G: a uniform "
-                    f"field is rejected {rej['uniform']:.0f}x (turning the sensor: "
-                    f"{abs(turned['without']['normal_rest_mN']):.1f} -> {abs(turned['with']['normal_rest_mN']):.1f} mN "
-                    f"at rest); a dipole {rej['dipole'][-1]['distance_mm']:g} mm away {rej['dipole'][-1]['median']:.1f}x"
-                    + (f", one {near[-1]['distance_mm']:g} mm away not at all (its field differs at the two chips)"
-                       if near else ""), "reference")]

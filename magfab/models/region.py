@@ -13,6 +13,9 @@ import numpy as np
 
 from ..errors import ScanError
 
+# Imported lazily, inside the functions that use it, for speed: scipy takes a
+# noticeable time to import, and importing this module should not.
+
 __all__ = ["HULL_MAX_VERTICES", "Scaling", "ValidRegion", "guard_ops"]
 
 

@@ -23,6 +23,9 @@ import numpy as np
 from ..formats.scan_csv import Scan, scan_csv
 from ..units import UT_PER_GAUSS
 from . import field as fieldmod
+from .calibration_thermal import DEFAULT_REFERENCE_C, recipe_coefficient_per_C
+from .chip import chip_setting, noise
+from .predict import predict
 
 if TYPE_CHECKING:
     from ..design import Design
@@ -123,8 +126,6 @@ def simulate_scan(design: Design, prediction: Prediction | None = None, *, ideal
     1/degC; default the magnet grade's remanence coefficient plus the chip's nominal drift), and the column is the
     chip's reading (quantised to its 1/45.2 C step unless ``ideal``).
     """
-    from .predict import chip_setting, noise, predict
-
     pred = prediction if prediction is not None else predict(design)
     cal = design.spec.calibration
     y, delta = scan_track(design, pred)
@@ -141,8 +142,6 @@ def simulate_scan(design: Design, prediction: Prediction | None = None, *, ideal
     b = polarity * fieldmod.exact(magnet, points) * UT_PER_GAUSS + np.asarray(background_uT, float)
     temp = scan_temperature(len(y) // passes, temperature_C, passes)
     if temp is not None:
-        from .calibration_thermal import DEFAULT_REFERENCE_C, recipe_coefficient_per_C
-
         a = recipe_coefficient_per_C(design) if thermal_per_C is None else thermal_per_C
         b = b * (1.0 + np.broadcast_to(np.asarray(a, float), (3,))[None, :] * (temp[:, None] - DEFAULT_REFERENCE_C))
     f = np.column_stack([np.zeros_like(y), k_s * y, fz])

@@ -17,9 +17,11 @@ Units: force N, field uT, time s.
 from __future__ import annotations
 
 import hashlib
+import json
 import math
 from collections.abc import Mapping
 from dataclasses import replace
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -35,6 +37,7 @@ from ..formats.scan_csv import (
     read_reference,
     scan_csv,
 )
+from .calibration import Calibration
 
 if TYPE_CHECKING:
     import os
@@ -308,10 +311,6 @@ def merged_csv(scan: Scan) -> bytes:
 def reject_self_calibrated_file(scan: Scan, path: object, reference_resolution_mN: float) -> None:
     """Guard B against the calibration.json at ``path`` (a build's present one); skipped when that file has gone
     bad: the rebuild replaces it, and there is nothing to compare with."""
-    import json
-    from pathlib import Path
-
-    from .calibration import Calibration
 
     try:
         calibration = Calibration.from_json(json.loads(Path(path).read_text(encoding="utf-8")))

@@ -23,6 +23,8 @@ import numpy as np
 from ..formats import array_json
 from ..units import UT_PER_GAUSS
 from . import field as fieldmod
+from .calibration import fit
+from .scan import simulate_scan
 
 if TYPE_CHECKING:
     from ..design import Design
@@ -112,8 +114,6 @@ def simulate_taxel_scan(design: Design, prediction: Prediction, k: int, field: A
     """The simulated calibration scan of taxel ``k``: the single taxel's scan (:func:`.scan.simulate_scan`, its own
     magnet flipped with the taxel's polarity) plus the neighbours' field at rest, as the chip reads it (the noise
     of its seed ``calibration.seed + k``, quantised, clipped at full scale as the single scan is)."""
-    from .scan import simulate_scan
-
     field = field or array_field(design)
     taxel = design.taxels[k]
     seeded = design.spec.model_copy(update={"calibration": design.spec.calibration.model_copy(
@@ -156,8 +156,6 @@ def compensated(scan: Scan, field: ArrayField, k: int) -> Scan:
 def calibrate_taxels(design: Design, prediction: Prediction, scans: tuple | None = None, *, mls: bool = False,
                      dynamic: bool = False) -> ArrayCalibration:
     """Fit every taxel of ``design``: to ``scans`` (one per taxel, as recorded) or to simulated ones."""
-    from .calibration import fit
-
     field = array_field(design)  # 30 ms for five taxels: cheaper to make again than to pass along
     if scans is None:
         scans = tuple(simulate_taxel_scan(design, prediction, t.index, field) for t in design.taxels)

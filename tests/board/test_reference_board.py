@@ -11,9 +11,11 @@ from conftest import require_kicad
 from magfab import SpecError, derive, parse_spec, pcb
 from magfab.board.layout import ORIGIN
 from magfab.board.placement import board_size_mm
+from magfab.check import preflight
 from magfab.export.bom import bom_rows
 from magfab.export.kicad import run_tool
 from magfab.models.reference import Travel, site
+from magfab.reference_chip import reference_chip
 
 
 @pytest.fixture(scope="module")
@@ -24,7 +26,7 @@ def with_reference():
 
 def test_the_reference_stands_where_no_magnet_is_heard_on_the_next_address(with_reference):
     design, board = with_reference
-    ref = design.reference
+    ref = reference_chip(design)
     quiet = site(design, Travel.bound(design), 10.0)
     assert (ref.x_mm, ref.y_mm) == quiet.xy_mm and max(quiet.motion_G) <= max(quiet.noise_G)
     assert ref.designator == "U2" and ref.i2c_address == design.i2c_address + 1 and ref.address_straps == (0, 1)
@@ -49,12 +51,12 @@ def test_the_reference_stands_where_no_magnet_is_heard_on_the_next_address(with_
 
 def test_without_the_section_the_board_is_as_before():
     design = derive(parse_spec(""))
-    assert design.reference is None and board_size_mm(design) == (30.0, 30.0)
+    assert reference_chip(design) is None and board_size_mm(design) == (30.0, 30.0)
 
 
 def test_an_array_with_a_reference_is_refused_in_one_line():
     with pytest.raises(SpecError) as err:
-        derive(parse_spec("[array]\nrows = 1\ncols = 5\npitch_mm = 14\n[pcb]\nwidth_mm = 80\n[reference]\n"))
+        preflight(derive(parse_spec("[array]\nrows = 1\ncols = 5\npitch_mm = 14\n[pcb]\nwidth_mm = 80\n[reference]\n")))
     assert str(err.value).startswith("reference") and "single taxel" in str(err.value) and "\n" not in str(err.value)
 
 

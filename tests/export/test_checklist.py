@@ -10,9 +10,12 @@ import math
 import pytest
 
 from magfab import derive, load_spec, parse_spec
+from magfab.check import fabrication_findings
 from magfab.errors import Severity, SpecError
+from magfab.export import bom
 from magfab.export import checklist as C
 from magfab.export.templating import md
+from magfab.models import silicone as S
 
 
 @pytest.fixture(scope="module")
@@ -21,30 +24,30 @@ def design():
 
 
 def _bom(design):
-    return {row["item"]: row for row in csv.DictReader(io.StringIO(C.bom_csv(design)))}
+    return {row["item"]: row for row in csv.DictReader(io.StringIO(bom.bom_csv(design)))}
 
 
 def test_quantities_come_from_the_cast_solid(design):
     """One part's silicone is the elastomer solid's volume (the cavity less the pocket core), exactly."""
     from magfab.elastomer import elastomer_solid
 
-    q = C.quantities(design)
+    q = S.quantities(design)
     assert q.part_volume_mL == pytest.approx(elastomer_solid(design).val().Volume() / 1000.0, rel=1e-6)
     holes = [d for _, _, d in design.lid_holes[2:]]
     assert len(holes) == 3 * design.spec.mould.cavities  # a sprue and two vents per cavity
     assert q.holes_volume_mL == pytest.approx(sum(math.pi * d * d / 4 * design.lid_thickness_mm for d in holes) / 1000)
     grams = q.mould_holds_mL * q.density_g_cm3 * (1 + q.waste_pct / 100)
-    assert q.batch_g == pytest.approx(max(grams, C.MIN_BATCH_G))
+    assert q.batch_g == pytest.approx(max(grams, S.MIN_BATCH_G))
     assert q.part_a_g + q.part_b_g == pytest.approx(q.batch_g)
     assert q.part_a_g == pytest.approx(q.part_b_g)  # Ecoflex is 1A:1B by weight
 
 
 def test_more_cavities_and_sensors_scale_the_pours():
     d = derive(parse_spec("[mould]\ncavities = 4\n[fabrication]\nsensors = 10\nwaste_pct = 10\n"))
-    q = C.quantities(d)
+    q = S.quantities(d)
     assert q.pours == 3 and q.cavities == 4
     assert q.batch_g == pytest.approx(max((4 * q.part_volume_mL + q.holes_volume_mL) * q.density_g_cm3 * 1.1,
-                                          C.MIN_BATCH_G))
+                                          S.MIN_BATCH_G))
     assert q.total_g == pytest.approx(3 * q.batch_g)
     bom = _bom(d)
     assert bom["Hall sensor IC"]["quantity"] == "10" and bom["Capacitor"]["quantity"] == "20"
@@ -53,7 +56,7 @@ def test_more_cavities_and_sensors_scale_the_pours():
 
 def test_material_changes_the_ratio_the_times_and_the_papers():
     d = derive(parse_spec('[elastomer]\nmaterial = "sylgard-184"\n[mould]\ncavities = 8\n'))
-    q = C.quantities(d)
+    q = S.quantities(d)
     assert q.ratio == (10.0, 1.0) and q.part_a_g == pytest.approx(10 * q.part_b_g)
     assert q.cure_time_h == 48 and q.pot_life_min == 90
     text = C.checklist_md(d)
@@ -64,9 +67,9 @@ def test_material_changes_the_ratio_the_times_and_the_papers():
 def test_overrides_win_over_the_recipe():
     d = derive(parse_spec("[fabrication]\ndensity_g_cm3 = 2.14\npot_life_min = 5\ncure_time_h = 1.5\nwaste_pct = 0\n"
                           "[mould]\ncavities = 8\n"))
-    q = C.quantities(d)
+    q = S.quantities(d)
     assert q.density_g_cm3 == 2.14 and q.cure_time_h == 1.5
-    assert any(f.code == "pot-life" and f.severity is Severity.WARNING for f in C.findings(d))
+    assert any(f.code == "pot-life" and f.severity is Severity.WARNING for f in fabrication_findings(d))
 
 
 def test_address_and_option_code_reach_the_bom_and_the_checklist():
@@ -96,13 +99,13 @@ def test_checklist_covers_the_protocol(design):
     assert at == sorted(at) and len(titles) == len(order)
     html = C.checklist_html(design)
     assert html.count('type="checkbox"') == sum(len(s.steps) for s in C.sections(design))
-    q = C.quantities(design)
+    q = S.quantities(design)
     assert f"{q.part_a_g:.1f} g" in C.checklist_md(design)
 
 
 def test_a_ratio_that_cannot_be_read_is_a_clear_error():
     with pytest.raises(SpecError) as e:
-        C.mix_ratio("by eye", "recipes/materials.toml:x.mix_ratio_by_weight")
+        S.mix_ratio("by eye", "recipes/materials.toml:x.mix_ratio_by_weight")
     assert "1A:1B" in str(e.value)
 
 
@@ -119,7 +122,6 @@ def test_the_build_quotes_its_own_acceptance_bands_and_bom(default_build):
     assert 0 < lo < acc["rest"]["Bz_uT"]["nominal"] < hi and 0 < d_lo < d_hi
     line = next(s for s in (out / "checklist.md").read_text().splitlines() if "Pass:" in s)
     assert f"within {lo:.0f} to {hi:.0f} uT" in line and f"a {w:g} g weight raises Bz by {d_lo:.0f} to {d_hi:.0f} uT" in line
-    assert C.bom_csv is bom.bom_csv
     assert (out / "bom.csv").read_text() == bom.bom_csv(default_build.design, acc)
 
 
@@ -231,7 +233,7 @@ def test_process_numbers_are_the_recipe_values(variant):
     rec = catalogue("materials")[variant.spec.elastomer.material]
     printer = variant.printer
     steps = _steps(C.sections(variant, ACCEPTANCE))
-    q = C.quantities(variant)
+    q = S.quantities(variant)
     assert q.pot_life_min == rec["pot_life_min"].nominal and q.cure_time_h == rec["cure_time_h"].nominal
     degas = next(s for s in steps if s.startswith("Degas:"))
     assert f"pull {rec['degas_vacuum_inHg'].nominal:g} inHg" in degas
@@ -338,7 +340,7 @@ def test_the_bom_holds_what_the_bench_needs(design):
     from magfab.export import bom
     from magfab.recipes import catalogue
 
-    rows = {r["item"]: r for r in csv.DictReader(io.StringIO(C.bom_csv(design, ACCEPTANCE)))}
+    rows = {r["item"]: r for r in csv.DictReader(io.StringIO(bom.bom_csv(design, ACCEPTANCE)))}
     for item in ("Level shifter", "Solder paste", "Stencil", "Cable", "Reference force sensor", "Indenter", "Stage",
                  "Pad adhesive", "Microcontroller", "Test weight"):
         assert item in rows, item

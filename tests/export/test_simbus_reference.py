@@ -9,6 +9,8 @@ import pytest
 from simbus import Bus
 from test_simbus import Sim, sim  # noqa: F401  (the module fixture: the default build on the bus)
 
+from magfab.reference_chip import reference_chip
+
 REF_ADDR = 0x0D
 SAMPLE_US = 2_000  # a field step per simulated 2 ms: slower than a sample (1.84 ms), as a real disturbance
 FRAME_S = 1.84e-3  # MagOne's frame period (one conversion)
@@ -101,7 +103,7 @@ def test_a_dipole_passing_by(sim, setup):  # noqa: F811
 
     records, design, section = setup
     sense = np.array([0.0, 0.0, design.z_sense_mm])
-    ref = np.array([design.reference.x_mm, design.reference.y_mm, design.z_sense_mm])
+    ref = np.array([reference_chip(design).x_mm, reference_chip(design).y_mm, design.z_sense_mm])
 
     def where(t: float) -> np.ndarray:
         return np.array([-150.0 + 900.0 * (t - START_S), -100.0, 0.0])  # 0.9 m/s along x

@@ -16,7 +16,7 @@ from magfab.formats import scan_csv as scan_format
 from magfab.formats.scan_csv import read_scan_csv, scan_csv
 from magfab.models import calibration as C
 from magfab.models import field as F
-from magfab.models.predict import chip_setting, noise
+from magfab.models.chip import chip_setting, noise
 from magfab.models.region import _cross
 from magfab.models.scan import scan_track, simulate_scan
 from magfab.units import UT_PER_GAUSS

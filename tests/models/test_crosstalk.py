@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from magfab import derive, parse_spec
+from magfab.check import crosstalk_findings
 from magfab.models import crosstalk as X
 from magfab.models.mechanics.coupling import boussinesq_ratio, coupling
 from magfab.models.taxels import field_at_chips
@@ -173,7 +174,7 @@ def test_close_magnets_in_a_skin_warn_of_their_pull(close_pair):
     from magfab.models.predict import predict
 
     d, xt = close_pair
-    found = {f.code: f for f in X.findings(d, xt)}
+    found = {f.code: f for f in crosstalk_findings(d, xt)}
     assert xt.force_exact_mN < 0 and xt.predisplacement_mm[0, 0] > 0.1 * xt.shear_travel_mm  # pulled together
     assert found["array-magnet-force"].key == "array.pitch_mm" and "pull" in found["array-magnet-force"].message
     assert found["array-crosstalk"].key == "array.pitch_mm" and "array-saturation" not in found
@@ -187,6 +188,6 @@ def test_close_magnets_in_a_skin_warn_of_their_pull(close_pair):
         assert bool(own[0, 2] + rest[:, 2].max() > xt.full_scale_G) is over
     from dataclasses import replace
 
-    hot = X.findings(d, replace(xt, saturation_G=own[0, 2] + rest[:, 2].max() + 110.0))
+    hot = crosstalk_findings(d, replace(xt, saturation_G=own[0, 2] + rest[:, 2].max() + 110.0))
     assert [f.key for f in hot if f.code == "array-saturation"] == ["sensor.d_min_mm"]
 

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from magfab import SpecError, derive, parse_spec
+from magfab.check import drift_findings
 from magfab.errors import Severity
 from magfab.models import drift as D
 from magfab.models import field as F
@@ -116,15 +117,15 @@ def test_a_stated_stray_source_is_in_the_budget_and_none_is_not(design, pred):
     assert s is not None and s.field_G == pytest.approx(D.dipole_worst_G(0.1, 30.0))
     nearer = D.stray_error(stated, pred, distance_mm=15.0)
     assert abs(nearer.shear_mN) == pytest.approx(8 * abs(s.shear_mN), rel=1e-9)  # 1/r^3
-    codes = {f.code: f for f in D.findings(stated, D.drift(stated, pred))}
+    codes = {f.code: f for f in drift_findings(stated, D.drift(stated, pred))}
     assert codes["drift-stray"].key == "environment.stray_distance_mm"
 
 
 def test_findings_warn_only_where_an_error_exceeds_the_resolution(design, pred):
-    found = {f.code: f for f in D.findings(design, pred.drift)}
+    found = {f.code: f for f in drift_findings(design, pred.drift)}
     assert found["drift-rotation"].severity is Severity.WARNING  # 1.3 G against ~0.1 G of noise
     still = derive(parse_spec("[environment]\nrotation_deg = 0.0\n"))
-    found = {f.code: f for f in D.findings(still, D.drift(still, pred))}
+    found = {f.code: f for f in drift_findings(still, D.drift(still, pred))}
     assert found["drift-rotation"].severity is Severity.INFO
 
 

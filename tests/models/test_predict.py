@@ -11,11 +11,12 @@ import numpy as np
 import pytest
 
 from magfab import SpecError, derive, parse_spec
-from magfab.check import prediction_findings
+from magfab.check import predict_with_findings, prediction_findings
 from magfab.errors import Severity
 from magfab.models import field as F
 from magfab.models import mechanics as M
-from magfab.models.predict import chip_setting, noise, predict
+from magfab.models.chip import chip_setting, noise
+from magfab.models.predict import predict
 
 
 def _codes(found, severity=Severity.ERROR):
@@ -276,7 +277,7 @@ def test_a_model_that_cannot_answer_is_a_finding_not_a_traceback(design, monkeyp
         raise M.MechanicsError("fe (mesh 0.75 mm): element inversion at indentation 0.01 mm")
 
     monkeypatch.setattr(P.mech, "fe", broken)
-    pred, found = P.predict_with_findings(design)
+    pred, found = predict_with_findings(design)
     assert pred is None
     assert [(f.code, f.severity, f.key) for f in found] == [
         ("prediction-failed", Severity.ERROR, "predict.mechanics_model")]

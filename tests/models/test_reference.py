@@ -6,9 +6,11 @@ import magpylib as magpy
 import numpy as np
 import pytest
 
+from magfab.check import reference_findings
 from magfab.models import reference as ref
+from magfab.models.chip import chip_setting, noise
 from magfab.models.crosstalk import _Loads
-from magfab.models.predict import chip_setting, noise
+from magfab.reference_chip import reference_chip
 
 
 def test_the_dipole_is_magpylibs():
@@ -87,15 +89,15 @@ def test_the_prediction_carries_the_reference_budget(pred):
     from magfab.models import drift
 
     design = derive(parse_spec("[reference]\n[environment]\nstray_moment_Am2 = 0.5\nstray_distance_mm = 300\n"))
-    section = ref.budget(design, pred, drift.drift(design, pred))
+    section = ref.budget(design, pred, drift.drift(design, pred), reference_chip(design))
     assert section["quiet"] and section["chip"]["designator"] == "U2"
     rot = section["rotation"]
     ratio = section["rejection"]["uniform"]
     assert abs(rot["with"]["normal_rest_mN"]) == pytest.approx(abs(rot["without"]["normal_rest_mN"]) / ratio, rel=0.05)
     stray = section["stray"]
     assert abs(stray["with_median"]["normal_rest_mN"]) < abs(stray["without"]["normal_rest_mN"])
-    info = ref.findings(design, section)
+    info = reference_findings(design, section)
     assert [f.code for f in info] == ["reference"] and "14x" in info[0].message
     loud = derive(parse_spec("[reference]\ndistance_mm = 12\n"))
-    found = ref.findings(loud, ref.budget(loud, pred, drift.drift(loud, pred)))
+    found = reference_findings(loud, ref.budget(loud, pred, drift.drift(loud, pred), reference_chip(loud)))
     assert [(f.code, f.key) for f in found] == [("reference-loud", "reference.distance_mm")]

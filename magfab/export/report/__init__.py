@@ -27,6 +27,7 @@ import numpy as np
 
 from ... import __version__
 from ...errors import Finding
+from ..templating import render
 from . import tables
 from .array import array_context
 from .drawings import board_svg, stackup_figure
@@ -174,8 +175,6 @@ def render_report(spec: Spec, design: Design, findings: Sequence[Finding], artif
     ``elastomer`` and ``pad`` (the stack-up is drawn from their sections); ``board`` the routed board
     the build wrote (``magfab.pcb.board(design)``), drawn as it is, never routed again here; ``pictures``
     what :func:`draw_pictures` drew from them already (drawn here when not given)."""
-    from ..templating import render
-
     if pictures is None:
         pictures = draw_pictures(design, meshes, artifacts, board)
     extra = [(str(p), str(d)) for p, d in extra_files]

@@ -9,6 +9,7 @@ from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
 from ...units import UT_PER_GAUSS
+from ..checklist_array import ADDRESS_HEADER, address_rows
 
 if TYPE_CHECKING:
     from ...design import Design
@@ -30,7 +31,6 @@ def array_context(design: Design, artifacts: Sequence[Artifact], figures: Callab
     plots under a folder, as the report draws them."""
     if design.array is None:
         return None
-    from ..checklist_array import ADDRESS_HEADER, address_rows
 
     by_path = {a.path: a for a in artifacts}
     doc = _json(by_path, "calibration/array.json") or {}

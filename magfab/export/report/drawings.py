@@ -10,6 +10,7 @@ from xml.sax.saxutils import escape
 
 import numpy as np
 
+from ... import outline
 from .render3d import section_loops
 
 if TYPE_CHECKING:
@@ -17,6 +18,9 @@ if TYPE_CHECKING:
 
     from ...board.layout import Board
     from ...design import Design
+
+# Imported lazily, inside the functions that use it, for speed: matplotlib takes a
+# noticeable time to import, and importing this module should not.
 
 __all__ = ["stackup_figure", "board_svg", "board_half_width", "STACK_STYLE"]
 
@@ -210,7 +214,6 @@ def board_svg(board: Board, via_drill_mm: float) -> bytes:
             'stroke-width="0.08"/>' for h in holes]
     cx, cy, r = board.pad_circle
     if board.pad_hull:  # an array's pad: the taxels' hull grown by the pad radius
-        from ... import outline
 
         pts = " ".join(f"{x:.4f},{y:.4f}" for x, y in outline.polygon(list(board.pad_hull), r, 72))
         out.append(f'<polygon points="{pts}" fill="none" stroke="#fff" stroke-width="0.12" stroke-dasharray="0.6 0.4"/>')

@@ -7,6 +7,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
+from ..drift_figures import FOLDER
+
 if TYPE_CHECKING:
     from ...models.drift import Disturbance, Drift
     from ...models.predict import Prediction
@@ -69,7 +71,6 @@ def drift_context(prediction: Prediction, figures: Callable[[str], list]) -> dic
     d = prediction.drift
     if d is None:
         return None
-    from ..drift_figures import FOLDER
 
     c, env, p = d.coefficients, d.conditions, d.temperature.per_C_parts
     stated = "the spec's [environment]" if env["stated"] else "a lab bench (no [environment] in the spec)"

@@ -17,6 +17,9 @@ import numpy as np
 if TYPE_CHECKING:
     import trimesh
 
+# Imported lazily, inside the functions that use them, for speed: scipy, trimesh, matplotlib and Pillow take a
+# noticeable time to import, and importing this module should not.
+
 __all__ = ["section_loops", "part_figure", "PART_VIEWS", "CUT_COLOUR", "CUT_OFFSET_MM"]
 
 #: Part pictures: stem -> (title, surface colour). Cut faces are drawn in CUT_COLOUR, as CAD sections are.

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 from urllib.parse import quote
 
 from ...errors import Finding, Severity
+from ...spec import Spec
 
 if TYPE_CHECKING:
     from ...board.layout import Board
@@ -48,8 +49,6 @@ def _spec_value(value: object, key: str) -> str:
 
 def spec_sections(spec: Spec) -> list[dict[str, object]]:
     """Every section and key of the spec with its value, meaning and whether it differs from the default."""
-    from ...spec import Spec
-
     values, defaults = spec.dump(), Spec().model_dump(mode="json")
     general = {"title": "general", "doc": "", "rows": []}
     sections = [general]

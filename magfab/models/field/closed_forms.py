@@ -4,6 +4,7 @@ axial multipoles, each with the error estimate the model refuses points by. Fiel
 from __future__ import annotations
 
 import numpy as np
+from numpy.polynomial import legendre
 
 from ...units import GAUSS_PER_TESLA
 from .magnet import DEFAULT_RTOL, Magnet, _points, _refuse_estimate, _refuse_inside, _shaped
@@ -124,8 +125,6 @@ def _binom(a: float, k: int) -> float:
 
 def _multipole_magnitude(l: int, mu: np.ndarray) -> np.ndarray:
     """|B_l| D^(l+2) / |A_l| = sqrt((l+1)^2 P_l^2 + (1 - mu^2) P_l'^2) at mu = cos t."""
-    from numpy.polynomial import legendre
-
     c = np.zeros(l + 1)
     c[l] = 1.0
     pl = legendre.legval(mu, c)

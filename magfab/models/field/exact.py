@@ -13,6 +13,9 @@ import numpy as np
 from ...units import GAUSS_PER_TESLA
 from .magnet import EXACT_RTOL, FieldModelError, Magnet, _cartesian, _points, _refuse_inside, _shaped, _where
 
+# Imported lazily, inside the functions that use it, for speed: magpylib takes a
+# noticeable time to import, and importing this module should not.
+
 __all__ = ["exact", "exact_rounding_estimate", "magpylib_cylinder"]
 
 _EPS = float(np.finfo(float).eps)

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ...errors import ModelLimitError
+from ...recipes.resolve import magnet_grade
 
 if TYPE_CHECKING:
     from ...design import Design
@@ -69,8 +70,6 @@ class Magnet:
     @classmethod
     def from_spec(cls, spec: Spec, band: str = "nominal") -> Magnet:
         """The spec's magnet, for scripts that hold a spec and no Design (the models take :meth:`from_design`)."""
-        from ...recipes.resolve import magnet_grade
-
         return cls.of(spec, magnet_grade(spec.magnet.grade), band)
 
     @property

@@ -20,6 +20,9 @@ from .closed_forms import axis_dbz_dz
 from .exact import _kernel, exact
 from .magnet import DEFAULT_RTOL, FieldModelError, Magnet, _points, _shaped, _where
 
+# Imported lazily, inside the functions that use it, for speed: magpylib takes a
+# noticeable time to import, and importing this module should not.
+
 __all__ = ["SURROGATE_BUILD_RTOL", "SurrogateDomain", "SurrogateTable", "surrogate_table", "surrogate"]
 
 

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, TypeVar
 import numpy as np
 
 from ...errors import ModelLimitError
+from ...recipes.resolve import material as resolve_material
 from ...spec import Tip
 from ...units import N_PER_KPA_MM2
 
@@ -248,8 +249,6 @@ def band(material: Material | str) -> tuple[float, float, float]:
     """(soft, nominal, stiff) neo-Hookean shear modulus in kPa of a material (a design's ``design.material``, or for
     scripts its key in recipes/materials.toml)."""
     if isinstance(material, str):
-        from ...recipes.resolve import material as resolve_material
-
         try:
             material = resolve_material(material)
         except KeyError as exc:

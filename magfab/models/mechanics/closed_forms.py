@@ -25,6 +25,9 @@ import numpy as np
 from ...units import N_PER_KPA_MM2
 from .body import FLAT, Body, Curve, MechanicsError, _check_indentation, _check_mu
 
+# Imported lazily, inside the functions that use it, for speed: scipy takes a
+# noticeable time to import, and importing this module should not.
+
 __all__ = ["column", "hertz_column"]
 
 

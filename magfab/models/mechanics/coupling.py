@@ -25,6 +25,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+# Imported lazily, inside the functions that use them, for speed: scikit-fem and scipy take a
+# noticeable time to import, and importing this module should not.
+
 __all__ = ["Coupling", "coupling", "boussinesq_ratio", "POISSON"]
 
 #: Poisson's ratio of the layer: silicone rubber is nearly incompressible (0.49-0.5); 0.49 keeps quadratic

@@ -12,6 +12,9 @@ import numpy as np
 
 from .mesh import _Mesh
 
+# Imported lazily, inside the functions that use them, for speed: scikit-fem and scipy take a
+# noticeable time to import, and importing this module should not.
+
 
 @dataclass(eq=False)
 class _Axisym:

@@ -10,6 +10,9 @@ import numpy as np
 from .discretisation import _Axisym, _sparse
 from .material import _G0, _Material, _stretches
 
+# Imported lazily, inside the functions that use them, for speed: scikit-fem and scipy take a
+# noticeable time to import, and importing this module should not.
+
 #: Radius ``a`` of the kernel the FE averages principal stretches with, as a fraction of the elastomer radius (0.2 mm
 #: on MagOne, the magnet's edge radius there: the scale of the stress concentration the range criterion looks at).
 #: A stretch at a point of a corner grows without bound under refinement wherever the geometry keeps a re-entrant

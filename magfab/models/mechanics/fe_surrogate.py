@@ -39,7 +39,12 @@ import numpy as np
 
 from ...spec import Tip
 from .body import Body, Curve, MechanicsError
+from .fe import fe
+from .options import OnFailure
 from .shear_surface import ShearProbe, ShearResponse
+
+# Imported lazily, inside the functions that use it, for speed: scipy takes a
+# noticeable time to import, and importing this module should not.
 
 __all__ = ["OutsideRegion", "BOX", "GRID", "in_region", "curve", "normal_and_shear", "held_out_error", "description",
            "ratios", "body_of", "run", "fit_data"]
@@ -116,9 +121,6 @@ def _refusal(body: Body) -> str:
 def run(x: dict[str, float]) -> dict[str, object]:
     """One FE run of the table: the body of ratios ``x`` at R_TABLE, its curve on GRID and its shear response on
     PROBED, per unit modulus, as plain lists (NaN where the FE stopped), with the seconds it took."""
-    from .fe import fe
-    from .options import OnFailure
-
     body = body_of(x)
     d = GRID * R_TABLE
     probe = ShearProbe(depths_mm=d[PROBED], rest_indentation_mm=REST_TABLE)

@@ -19,6 +19,9 @@ from .energy import STRETCH_AVERAGING_FRACTION, _Energy
 from .material import _Material
 from .mesh import _AXIS, _BASE, _MAGNET, _OUTER, _magnet_normals
 
+# Imported lazily, inside the functions that use them, for speed: scipy's sparse module takes a noticeable time to
+# import, and importing this module should not; qdldl is optional (scipy's splu without it).
+
 
 class MagnetInterface(str, Enum):
     """How the silicone holds the rigid magnet: bonded (glued: every surface node moves with it), or sliding

@@ -19,6 +19,9 @@ import numpy as np
 
 from .body import FLAT, Body, MechanicsError
 
+# Imported lazily, inside the functions that use them, for speed: triangle and scikit-fem take a
+# noticeable time to import, and importing this module should not.
+
 __all__ = ["BUILD_MESH_FRACTION", "mesh_size", "channel_wall", "Wall"]
 
 #: Default FE mesh size for a build, as a fraction of the elastomer radius (0.5 mm for MagOne).

@@ -22,6 +22,9 @@ from .indentation import _factor
 from .mesh import _AXIS, _BASE, _MAGNET, _body_mesh, _Mesh, mesh_size
 from .options import ShearEnds, ShearModel
 
+# Imported lazily, inside the functions that use it, for speed: scipy takes a
+# noticeable time to import, and importing this module should not.
+
 __all__ = ["shear_stiffness", "shear_compliance", "SHEAR_MODELS"]
 
 #: Shear models by name, for shear_stiffness(model=...).

@@ -45,6 +45,9 @@ from .material import _Material, _material
 from .mesh import _AXIS, _BASE, _MAGNET, _body_mesh, mesh_size
 from .options import MaterialLaw, OnFailure
 
+# Imported lazily, inside the functions that use it, for speed: scipy takes a
+# noticeable time to import, and importing this module should not.
+
 __all__ = ["ShearLoad", "ShearResponse", "ShearProbe", "shear_response", "REST_PATCH_INDENTATION_MM"]
 
 #: The patch the indenter holds at delta = 0 on a rounded tip is the surface within the Hertz contact radius

@@ -10,20 +10,20 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
+from . import fe_surrogate
 from .body import Body, Convergence, Curve, MechanicsError
 from .closed_forms import column, hertz_column
 from .discretisation import _axisym
 from .fe import fe
 from .mesh import _body_mesh, _unit_mesh
 from .shear import _mode1_matrix
+from .shear_surface import _operator
 
 __all__ = ["convergence", "measure"]
 
 
 def _clear_caches() -> None:
     """Forget meshes and discretisations (for cold timings)."""
-    from .shear_surface import _operator
-
     for f in (_body_mesh, _unit_mesh, _axisym, _mode1_matrix, _operator):
         f.cache_clear()
 
@@ -86,7 +86,6 @@ def measure(body: Body, mu_kPa: float, delta_max_mm: float, mesh_sizes_mm: Seque
         raise MechanicsError(f"measure: the reference FE (mesh {reference_mesh_mm:g} mm) failed at once: "
                              f"{ref.info.get('failure')}")
     scale = float(np.max(np.abs(ref.force_N)))
-    from . import fe_surrogate
 
     runs: list[tuple[str, float | None, Callable[[np.ndarray], Curve]]] = [
         ("column", None, lambda dd: column(body, mu_kPa, dd)),
