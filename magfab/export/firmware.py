@@ -11,7 +11,7 @@ constants both share.
 
 The calibration is checked by :func:`magfab.formats.calibration_json.validate` (the one validator of the file);
 on top, :class:`FirmwareError` refuses what the EEPROM record cannot hold (float32 range, order above
-``MAX_ORDER`` of readout_pkg/magfab_readout/eeprom.py, a record over the 1 KB EEPROM).
+``MAX_ORDER`` of readout/src/magfab_readout/eeprom.py, a record over the 1 KB EEPROM).
 
 Every chip number comes from the recipe (``magfab/recipes/chips.toml``); the few the recipe does not carry are
 the named constants below, each with its source or marked as an assumption. The serial formats are those of
@@ -221,20 +221,11 @@ def twi_settings(hz: int) -> tuple[int, int, int]:
 
 
 def _eeprom_module():
-    """The package's ``eeprom`` module (one implementation: the build's .eep and ``magfab-readout upload`` both
-    pack with it), loaded as a file because the package's ``__init__`` needs a build's build.json."""
-    import importlib.util
-    import sys
-    from pathlib import Path
+    """The readout package's ``eeprom`` module (one implementation: the build's .eep and ``magfab-readout upload``
+    both pack with it)."""
+    from ..readout.src.magfab_readout import eeprom
 
-    name = "magfab.export._readout_eeprom"
-    if name not in sys.modules:
-        path = Path(__file__).parent / "readout_pkg" / "magfab_readout" / "eeprom.py"
-        spec = importlib.util.spec_from_file_location(name, path)
-        module = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]
-        sys.modules[name] = module
-        spec.loader.exec_module(module)  # type: ignore[union-attr]
-    return sys.modules[name]
+    return eeprom
 
 
 def _calibration_context(cal: Mapping[str, Any]) -> dict[str, Any]:

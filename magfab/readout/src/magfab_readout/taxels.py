@@ -67,7 +67,7 @@ class ArrayCalibration:
     taxel's package)."""
 
     def __init__(self, array: dict, calibrations: Sequence) -> None:
-        from . import array_json  # shipped only in an array build's package
+        from . import array_json  # an array build's compensation (docs/bundle.md section 5)
 
         self.compensator = array_json.validate(array)
         self.layout = tuple(dict(t) for t in array["taxels"])
