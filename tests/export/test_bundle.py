@@ -91,7 +91,8 @@ def test_the_readout_is_its_source_tree_plus_data_files(bundle):
     data = {f"src/magfab_readout/{name}" for name in ("build.json", "calibration.json", "acceptance.json")}
     assert set(shipped) - set(tree) == {"README.md"} | data
     package = out / "readout" / "src" / "magfab_readout"
-    assert json.loads((package / "build.json").read_text())["calibration_sha256"] == calibration_json.calibration_sha256(
+    build = json.loads((package / "build.json").read_text())
+    assert build["calibration_sha256"] == calibration_json.calibration_sha256(
         json.loads((package / "calibration.json").read_text()))
 
 
