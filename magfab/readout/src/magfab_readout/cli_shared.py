@@ -7,7 +7,7 @@ import argparse
 import json
 import math
 import signal
-from typing import List, Optional, Tuple
+from typing import Any, List, Optional, Sequence
 
 from . import _build, eeprom
 from .device import NoData
@@ -33,7 +33,7 @@ class Interrupt:
     """SIGINT while recording: KeyboardInterrupt while waiting for the device, held back while a row is written."""
 
     requested = writing = False
-    _previous = None
+    _previous: Any = None  # the handler to restore (a function, an int or None)
 
     def __call__(self, signum, frame) -> None:
         self.requested = True
@@ -53,13 +53,15 @@ class Interrupt:
         return kind is KeyboardInterrupt
 
 
-def record_header(f, device, info, columns: List[str], extra: Tuple[str, ...] = ()) -> None:
+def record_header(f, device, info, columns: List[str], extra: Sequence[str] = ()) -> None:
     f.write(f"# magfab-readout {_build.VERSION} record\n")
     f.write(f"# spec: {json.dumps(_build.SPEC_NAME)}\n")
     f.write(f"# calibration_sha256: {device.calibration.sha256}\n")
     f.write(f"# device: {json.dumps(info.line)}\n")
-    f.write(f"# chip: gain_sel={_build.GAIN_SEL} resolution={_build.RESOLUTION} osr={_build.OSR} dig_filt={_build.DIG_FILT} lsb_xy_uT={_build.LSB_XY_UT!r} lsb_z_uT={_build.LSB_Z_UT!r}\n")
-    f.write("# time_s: the device's clock; host_time_s: this computer's clock (Unix time, s) when the sample was read\n")
+    f.write(f"# chip: gain_sel={_build.GAIN_SEL} resolution={_build.RESOLUTION} osr={_build.OSR} "
+            f"dig_filt={_build.DIG_FILT} lsb_xy_uT={_build.LSB_XY_UT!r} lsb_z_uT={_build.LSB_Z_UT!r}\n")
+    f.write("# time_s: the device's clock; host_time_s: this computer's clock (Unix time, s) when the sample was "
+            "read\n")
     f.write("# Fx_sensor_N, Fy_sensor_N, Fz_sensor_N: this sensor's own calibrated force, not a reference; to "
             "calibrate, log a reference force sensor during the scan with time_s on this computer's clock (Unix "
             "time, s) and Fx_N, Fy_N, Fz_N, and pass it: magfab calibrate THIS.csv --reference REFERENCE.csv\n")
@@ -75,6 +77,7 @@ def at_fallback_baud(args: argparse.Namespace, out, open_device, action):
     except NoData:
         if args.simulate or args.baud == eeprom.FALLBACK_BAUD:
             raise
-        out.write(f"no answer at {args.baud} baud; trying {eeprom.FALLBACK_BAUD} baud (a board without a calibration)\n")
+        out.write(f"no answer at {args.baud} baud; trying {eeprom.FALLBACK_BAUD} baud (a board without a "
+                  "calibration)\n")
         with open_device(argparse.Namespace(**{**vars(args), "baud": eeprom.FALLBACK_BAUD})) as device:
             return action(device)
