@@ -30,14 +30,16 @@ from ..formats import acceptance_json, calibration_json
 from ..formats.json_checks import FormatError
 from .templating import environment
 
-__all__ = ["PACKAGE", "SOURCE", "TEMPLATE_SUFFIX", "render", "source_files", "data_files", "calibration_sha256",
-           "validate_calibration", "validate_acceptance", "TEMPERATURE_RAW_25C", "TEMPERATURE_LSB_PER_C"]
+__all__ = ["PACKAGE", "SOURCE", "TEMPLATE_SUFFIX", "TREE_FILES", "render", "source_files", "data_files",
+           "calibration_sha256", "validate_calibration", "validate_acceptance", "TEMPERATURE_RAW_25C", "TEMPERATURE_LSB_PER_C"]
 
 PACKAGE = "magfab_readout"
 #: The package's source tree: this folder of magfab (shipped in magfab's wheel), copied verbatim into readout/.
 SOURCE = "readout"
 #: A file of the tree ending in it is a jinja2 template of the build's file without it (README.md.j2 -> README.md).
 TEMPLATE_SUFFIX = ".j2"
+#: The tree's files beside ``src/magfab_readout/*.py`` (pyproject.toml's package-data of magfab.readout lists both).
+TREE_FILES = ("pyproject.toml", "README.md.j2")
 # MLX90393 temperature (TCMP off): T = 25 C + (raw - T25) / TRES, from recipes/chips.toml.
 from .firmware import TEMPERATURE_LSB_PER_C, TEMPERATURE_RAW_25C  # noqa: E402 - from recipes/chips.toml
 
@@ -140,20 +142,14 @@ def _context(build: Mapping[str, object], acceptance: Mapping[str, Any] | None) 
 
 
 def source_files() -> dict[str, bytes]:
-    """The package's source tree as every build ships it, ``{path relative to the tree: bytes}``, sorted: every
-    file under ``magfab/readout/`` but Python's caches (templates included, as they are in the tree)."""
-    out: dict[str, bytes] = {}
-
-    def walk(folder, prefix: str) -> None:
-        for entry in folder.iterdir():
-            if entry.name == "__pycache__" or entry.name.endswith(".pyc"):
-                continue
-            if entry.is_dir():
-                walk(entry, f"{prefix}{entry.name}/")
-            else:
-                out[prefix + entry.name] = entry.read_bytes()
-
-    walk(resources.files("magfab").joinpath(SOURCE), "")
+    """The package's source tree as every build ships it, ``{path relative to the tree: bytes}``, sorted: its
+    top-level :data:`TREE_FILES` and every module of ``src/magfab_readout/`` (what magfab's wheel ships of the
+    folder; a tool's cache or a local build beside them is not the package)."""
+    root = resources.files("magfab").joinpath(SOURCE)
+    out = {name: root.joinpath(name).read_bytes() for name in TREE_FILES}
+    modules = root.joinpath("src", PACKAGE)
+    out.update({f"src/{PACKAGE}/{entry.name}": entry.read_bytes() for entry in modules.iterdir()
+                if entry.name.endswith(".py") and entry.is_file()})
     return dict(sorted(out.items()))
 
 
