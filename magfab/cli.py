@@ -19,9 +19,7 @@ def _on_interrupt(signum: int, frame: object) -> None:
 
 
 _interrupted = False
-if __name__ in ("__main__", "magfab.cli"):  # the command line, from its first line: Ctrl-C is exit 130, no traceback
-    signal.signal(signal.SIGINT, _on_interrupt)
-try:
+try:  # Ctrl-C while these load is Python's KeyboardInterrupt, ended here as exit 130 (no handler needed yet)
     import json
     import os
     import warnings
@@ -91,10 +89,22 @@ def _progress(enabled: bool) -> Iterator[object]:
         yield lambda stage: live.update(Text(f"magfab: {stage}..."), refresh=True)
 
 
+def _catch_interrupts(ctx: click.Context) -> None:
+    """Ctrl-C is exit 130 and one line for the command's run, never a traceback: installed when a command runs
+    (importing this module leaves the process's handlers alone), the previous handler back when it ends."""
+    try:
+        previous = signal.signal(signal.SIGINT, _on_interrupt)
+    except ValueError:  # not the main thread (a test's runner): Ctrl-C stays Python's KeyboardInterrupt
+        return
+    ctx.call_on_close(lambda: signal.signal(signal.SIGINT, previous))
+
+
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="magfab")
-def main() -> None:
+@click.pass_context
+def main(ctx: click.Context) -> None:
     """Turn one design spec into the files to make a magnetic soft tactile sensor."""
+    _catch_interrupts(ctx)
     warnings.showwarning = _one_line_warning
 
 

@@ -166,6 +166,12 @@ def test_help_is_fast_to_import():
     assert subprocess.run([sys.executable, "-c", code]).returncode == 0
 
 
+def test_importing_the_cli_leaves_sigint_alone():
+    """The handler that makes Ctrl-C exit 130 is installed when a command runs, not as a side effect of import."""
+    code = "import signal, magfab.cli; assert signal.getsignal(signal.SIGINT) is signal.default_int_handler"
+    assert subprocess.run([sys.executable, "-c", code]).returncode == 0
+
+
 @pytest.mark.parametrize("delay_s", [0.3, 1.0, 2.5])
 def test_ctrl_c_at_any_moment_is_exit_130_in_one_line(tmp_path, delay_s):
     """Ctrl-C while the libraries load, while the branches run or while files are written: exit 130 and one

@@ -44,3 +44,11 @@ def test_the_generic_firmware_image_ships(wheel_files):
     toolchain that made it are package data."""
     assert {"magfab/export/generic_image/magfab-atmega328p.hex",
             "magfab/export/generic_image/toolchain.json"} <= wheel_files
+
+
+def test_the_readout_source_tree_ships(wheel_files):
+    """The readout package's one source tree, which every build copies verbatim: templates included."""
+    tree = ROOT / "magfab" / "readout"
+    wanted = {str(p.relative_to(ROOT)) for p in tree.rglob("*") if p.is_file() and "__pycache__" not in p.parts}
+    assert "magfab/readout/README.md.j2" in wanted and "magfab/readout/pyproject.toml" in wanted
+    assert wanted - wheel_files == set()

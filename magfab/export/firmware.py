@@ -11,7 +11,7 @@ constants both share.
 
 The calibration is checked by :func:`magfab.formats.calibration_json.validate` (the one validator of the file);
 on top, :class:`FirmwareError` refuses what the EEPROM record cannot hold (float32 range, order above
-``MAX_ORDER`` of readout_pkg/magfab_readout/eeprom.py, a record over the 1 KB EEPROM).
+``MAX_ORDER`` of readout/src/magfab_readout/eeprom.py, a record over the 1 KB EEPROM).
 
 Every chip number comes from the recipe (``magfab/recipes/chips.toml``); the few the recipe does not carry are
 the named constants below, each with its source or marked as an assumption. The serial formats are those of
@@ -21,14 +21,11 @@ the named constants below, each with its source or marked as an assumption. The 
 from __future__ import annotations
 
 import binascii
-import importlib.util
 import json
 import math
-import sys
 from collections.abc import Mapping
 from dataclasses import dataclass
 from importlib.resources import files
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ..errors import InputError, SpecError
@@ -36,6 +33,7 @@ from ..formats import calibration_json
 from ..formats.calibration_json import calibration_sha256
 from ..models.chip import conversion_us  # the chip's pace, shared with the prediction
 from ..models.reference import REFERENCE_SHIFT
+from ..readout.src.magfab_readout import eeprom
 from ..recipes import resolve
 from ..reference_chip import reference_chip
 from .templating import render as render_template
@@ -231,16 +229,9 @@ def twi_settings(hz: int) -> tuple[int, int, int]:
 
 
 def _eeprom_module():
-    """The package's ``eeprom`` module (one implementation: the build's .eep and ``magfab-readout upload`` both
-    pack with it), loaded as a file because the package's ``__init__`` needs a build's build.json."""
-    name = "magfab.export._readout_eeprom"
-    if name not in sys.modules:
-        path = Path(__file__).parent / "readout_pkg" / "magfab_readout" / "eeprom.py"
-        spec = importlib.util.spec_from_file_location(name, path)
-        module = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]
-        sys.modules[name] = module
-        spec.loader.exec_module(module)  # type: ignore[union-attr]
-    return sys.modules[name]
+    """The readout package's ``eeprom`` module (one implementation: the build's .eep and ``magfab-readout upload``
+    both pack with it)."""
+    return eeprom
 
 
 def _calibration_context(cal: Mapping[str, Any]) -> dict[str, Any]:

@@ -1,11 +1,11 @@
 """The host readout package of a build: ``magfab_readout``, pip-installable.
 
-Its modules are ordinary Python files (``magfab/export/readout_pkg/magfab_readout/`` and the format validators
-of ``magfab/formats/``), copied verbatim into every build; only data is generated: ``build.json`` (spec name,
-baud rate, chip register fields, microtesla per count, the calibration's hash), calibration.json, acceptance.json,
-and from ``templates/readout/`` the package's pyproject.toml and README.md. The package decodes the firmware's
-frames (docs/bundle.md), evaluates the calibration in Python, and has a ``magfab-readout`` command with a
-simulated device.
+The package is one source tree, ``magfab/readout/`` (its pyproject.toml, the README's template and
+``src/magfab_readout/``, the format validators included), which every build copies verbatim into ``readout/``;
+only data is generated: ``build.json`` (spec name, baud rate, chip register fields, microtesla per count, the
+calibration's hash), calibration.json, acceptance.json, for an array array.json and each taxel's calibration, and
+README.md from the tree's README.md.j2. The package decodes the firmware's frames (docs/bundle.md), evaluates the
+calibration in Python, and has a ``magfab-readout`` command with a simulated device.
 
 calibration.json and acceptance.json are checked by :mod:`magfab.formats.calibration_json` and
 :mod:`magfab.formats.acceptance_json`, the validators the package itself runs, so the build and the host refuse
@@ -32,18 +32,18 @@ from ..formats.json_checks import FormatError
 
 # TEMPERATURE_*, re-exported: MLX90393 temperature (TCMP off), T = 25 C + (raw - T25) / TRES, from recipes/chips.toml.
 from .firmware import TEMPERATURE_LSB_PER_C, TEMPERATURE_RAW_25C, chip_config, image_settings
-from .templating import render as render_template
-from .templating import templates_dir
+from .templating import environment
 
-__all__ = ["PACKAGE", "TEMPLATES", "RUNTIME", "SHARED", "render", "runtime_files", "calibration_sha256",
-           "validate_calibration", "validate_acceptance", "TEMPERATURE_RAW_25C", "TEMPERATURE_LSB_PER_C"]
+__all__ = ["PACKAGE", "SOURCE", "TEMPLATE_SUFFIX", "TREE_FILES", "render", "source_files", "data_files",
+           "calibration_sha256", "validate_calibration", "validate_acceptance", "TEMPERATURE_RAW_25C", "TEMPERATURE_LSB_PER_C"]
 
 PACKAGE = "magfab_readout"
-TEMPLATES = "readout"  # folder under templates/; every file in it ends in .j2 and renders to readout/<path>
-#: The package's modules, ordinary Python files under magfab/export/, copied verbatim into readout/src/.
-RUNTIME = ("readout_pkg", PACKAGE)
-#: magfab's format validators the package runs too, copied verbatim from magfab/formats/.
-SHARED = ("json_checks.py", "calibration_json.py", "acceptance_json.py")
+#: The package's source tree: this folder of magfab (shipped in magfab's wheel), copied verbatim into readout/.
+SOURCE = "readout"
+#: A file of the tree ending in it is a jinja2 template of the build's file without it (README.md.j2 -> README.md).
+TEMPLATE_SUFFIX = ".j2"
+#: The tree's files beside ``src/magfab_readout/*.py`` (pyproject.toml's package-data of magfab.readout lists both).
+TREE_FILES = ("pyproject.toml", "README.md.j2")
 
 
 def _plain(value: object) -> object:
@@ -126,7 +126,7 @@ def _build_data(design, checked: calibration_json.Checked) -> dict[str, object]:
 
 
 def _context(build: Mapping[str, object], acceptance: Mapping[str, Any] | None) -> dict[str, object]:
-    """What templates/readout/ (pyproject.toml, README.md) are rendered with."""
+    """What the tree's templates (README.md.j2) are rendered with."""
     return {
         **build,
         "description": f"Host readout for the magfab tactile sensor {build['spec_name']}",
@@ -141,13 +141,15 @@ def _context(build: Mapping[str, object], acceptance: Mapping[str, Any] | None) 
     }
 
 
-def runtime_files() -> dict[str, bytes]:
-    """The package's modules as every build ships them, ``{file name: bytes}``: the runtime's own
-    (magfab/export/readout_pkg/magfab_readout/) and magfab's format validators, byte for byte."""
-    runtime = resources.files(__package__).joinpath(*RUNTIME)
-    out = {entry.name: entry.read_bytes() for entry in runtime.iterdir() if entry.name.endswith(".py")}
-    formats = resources.files(calibration_json.__package__)
-    out.update({name: formats.joinpath(name).read_bytes() for name in SHARED})
+def source_files() -> dict[str, bytes]:
+    """The package's source tree as every build ships it, ``{path relative to the tree: bytes}``, sorted: its
+    top-level :data:`TREE_FILES` and every module of ``src/magfab_readout/`` (what magfab's wheel ships of the
+    folder; a tool's cache or a local build beside them is not the package)."""
+    root = resources.files("magfab").joinpath(SOURCE)
+    out = {name: root.joinpath(name).read_bytes() for name in TREE_FILES}
+    modules = root.joinpath("src", PACKAGE)
+    out.update({f"src/{PACKAGE}/{entry.name}": entry.read_bytes() for entry in modules.iterdir()
+                if entry.name.endswith(".py") and entry.is_file()})
     return dict(sorted(out.items()))
 
 
@@ -174,23 +176,27 @@ def render(design, calibration: Mapping[str, Any], acceptance: Mapping[str, Any]
     checked = validate_calibration(calibration)
     accepted = None if acceptance is None else validate_acceptance(acceptance)
     build = _build_data(design, checked)
+    files = {f"readout/{path}": data for path, data in source_files().items()}
     context = _context(build, accepted)
-    root = templates_dir() / TEMPLATES
-    files: dict[str, bytes] = {}
-    for path in sorted(root.rglob("*.j2")):
-        relative = path.relative_to(root).as_posix()
-        text = render_template(f"{TEMPLATES}/{relative}", **context)
-        files[f"readout/{relative[:-len('.j2')]}"] = text.encode("utf-8")
+    for path in [p for p in files if p.endswith(TEMPLATE_SUFFIX)]:  # the build's README.md in its template's place
+        text = environment().from_string(files.pop(path).decode("utf-8")).render(**context)
+        files[path[:-len(TEMPLATE_SUFFIX)]] = text.encode("utf-8")
+    files.update(data_files(build, checked, accepted, array, taxel_calibrations))
+    return dict(sorted(files.items()))
+
+
+def data_files(build: Mapping[str, object], checked: calibration_json.Checked, accepted: Mapping[str, Any] | None,
+               array: Mapping[str, Any] | None, taxel_calibrations: tuple) -> dict[str, bytes]:
+    """The build's data files beside the package's modules, ``{"readout/src/magfab_readout/<name>": bytes}``:
+    build.json, calibration.json, acceptance.json (when given), and for an array array.json and every taxel's
+    calibration under the names array.json gives them."""
     package = f"readout/src/{PACKAGE}"
-    files.update({f"{package}/{name}": data for name, data in runtime_files().items()})
-    files[f"{package}/build.json"] = _json_file(build)
-    files[f"{package}/calibration.json"] = _json_file(json.loads(checked.canonical))
+    files = {f"{package}/build.json": _json_file(build),
+             f"{package}/calibration.json": _json_file(json.loads(checked.canonical))}
     if accepted is not None:
         files[f"{package}/acceptance.json"] = _json_file(accepted)
-    if array is not None:  # the compensation of docs/bundle.md section 5, the same file magfab computes it with
-        files[f"{package}/array_json.py"] = resources.files(calibration_json.__package__).joinpath(
-            "array_json.py").read_bytes()
+    if array is not None:  # the compensation of docs/bundle.md section 5 (the package's array_json.py)
         files[f"{package}/array.json"] = _json_file(array)
         for taxel, cal in zip(array["taxels"], taxel_calibrations, strict=True):
             files[f"{package}/{taxel['calibration']}"] = _json_file(json.loads(validate_calibration(cal).canonical))
-    return dict(sorted(files.items()))
+    return files

@@ -1,61 +1,7 @@
-"""What the JSON format validators share: the error naming file, key path, value and what is allowed, and the
-checks of one value.
+"""What the JSON format validators share (:class:`FormatError`, the checks of one value): the readout package's
+module (``magfab/readout/src/magfab_readout/json_checks.py``), the one copy, which every build ships verbatim.
+Inside magfab its errors are :class:`~magfab.errors.CalibrationFormatError`."""
 
-Standard library only, and no import of magfab outside this folder: this module, calibration_json.py and
-acceptance_json.py are copied byte for byte into every build's readout package, so the build and the host
-refuse exactly the same files.
-"""
-
-from __future__ import annotations
-
-import math
-
-try:  # inside magfab: an InputError (exit 2); in the readout package, where magfab.errors is absent: ValueError
-    from ..errors import CalibrationFormatError as _Base
-except ImportError:
-    _Base = ValueError  # type: ignore[misc, assignment]
+from ..readout.src.magfab_readout.json_checks import FormatError, finite, is_number, lookup
 
 __all__ = ["FormatError", "is_number", "lookup", "finite"]
-
-
-class FormatError(_Base):  # type: ignore[valid-type, misc]
-    """A file that does not hold what its format requires: ``file``, the dotted ``key`` path inside it (empty for
-    the whole document), the offending ``value`` and what is ``allowed``."""
-
-    file = "a JSON file"
-
-    def __init__(self, key: str, value: object, allowed: str) -> None:
-        self.key = key
-        self.value = value
-        self.allowed = allowed
-        shown = repr(value)
-        if len(shown) > 80:
-            shown = shown[:77] + "..."
-        super().__init__("{}: {} = {}: {}".format(self.file, key or "(top level)", shown, allowed))
-
-
-def is_number(x: object) -> bool:
-    """A JSON number (bool is not one)."""
-    return isinstance(x, (int, float)) and not isinstance(x, bool)
-
-
-def lookup(data: dict, path: str, error: type) -> object:
-    """The value at the dotted ``path``; ``error(path, None, "is missing")`` where a step is absent."""
-    node: object = data
-    for part in path.split("."):
-        if not isinstance(node, dict) or part not in node:
-            raise error(path, None, "is missing")
-        node = node[part]
-    return node
-
-
-def finite(data: dict, path: str, error: type, *, positive: bool = False, nonnegative: bool = False) -> float:
-    """The finite number at the dotted ``path`` (optionally > 0 or >= 0), else ``error`` naming the path."""
-    node = lookup(data, path, error)
-    if not is_number(node) or not math.isfinite(node):  # type: ignore[arg-type]
-        raise error(path, node, "must be a finite number")
-    if positive and not node > 0:  # type: ignore[operator]
-        raise error(path, node, "must be greater than 0")
-    if nonnegative and node < 0:  # type: ignore[operator]
-        raise error(path, node, "must be at least 0")
-    return float(node)  # type: ignore[arg-type]

@@ -74,20 +74,28 @@ def _decoder(out: Path):
         sys.modules.update(saved)
 
 
-def test_the_readout_runtime_is_shipped_verbatim(bundle):
-    """The package's modules are magfab's files byte for byte (the runtime's own and the format validators):
-    one implementation, no template; only data (build.json, calibration.json, acceptance.json) is generated."""
+def test_the_readout_is_its_source_tree_plus_data_files(bundle):
+    """A build's readout/ is the package's one source tree (magfab/readout/: modules, format validators,
+    pyproject.toml) byte for byte, its README template rendered in its place, plus only data files; no module is
+    generated or gathered from elsewhere."""
     out, _ = bundle
+    tree = readout.source_files()
+    tree_root = Path(readout.__file__).resolve().parents[1] / readout.SOURCE
+    tracked = subprocess.run(["git", "ls-files", "."], cwd=tree_root, capture_output=True, text=True)
+    if tracked.returncode == 0 and tracked.stdout:  # a checkout: every file of the folder is the package's
+        assert set(tracked.stdout.split()) == set(tree)
+    assert all((tree_root / p).read_bytes() == data for p, data in tree.items())
+    shipped = {p.relative_to(out / "readout").as_posix(): p.read_bytes() for p in (out / "readout").rglob("*")
+               if p.is_file() and "__pycache__" not in p.parts}
+    templates = {p for p in tree if p.endswith(readout.TEMPLATE_SUFFIX)}
+    assert templates == {"README.md.j2"}
+    assert {p: d for p, d in shipped.items() if p in tree} == {p: d for p, d in tree.items() if p not in templates}
+    data = {f"src/magfab_readout/{name}" for name in ("build.json", "calibration.json", "acceptance.json")}
+    assert set(shipped) - set(tree) == {"README.md"} | data
     package = out / "readout" / "src" / "magfab_readout"
-    shipped = {p.name: p.read_bytes() for p in package.iterdir() if p.is_file()}
-    runtime = Path(readout.__file__).parent.joinpath(*readout.RUNTIME)
-    formats = Path(calibration_json.__file__).parent
-    sources = {p.name: p.read_bytes() for p in runtime.glob("*.py")}
-    sources.update({name: (formats / name).read_bytes() for name in readout.SHARED})
-    assert {n: d for n, d in shipped.items() if n.endswith(".py")} == sources == readout.runtime_files()
-    assert set(shipped) - set(sources) == {"build.json", "calibration.json", "acceptance.json"}
-    assert json.loads(shipped["build.json"])["calibration_sha256"] == calibration_json.calibration_sha256(
-        json.loads(shipped["calibration.json"]))
+    build = json.loads((package / "build.json").read_text())
+    assert build["calibration_sha256"] == calibration_json.calibration_sha256(
+        json.loads((package / "calibration.json").read_text()))
 
 
 def test_the_readout_runtime_passes_pyflakes(bundle):

@@ -1,6 +1,7 @@
-"""The readout package: rendered from templates/readout, pip-installed into a fresh venv,
-checked against independent implementations written here (CRC, frame layout, the calibration's evaluation,
-the region test), and its command line run against the simulated board and through a real pseudo-terminal."""
+"""The readout package: its source tree (magfab/readout/) plus a build's data, pip-installed into
+a fresh venv, checked against independent implementations written here (CRC, frame layout, the calibration's
+evaluation, the region test), and its command line run against the simulated board and through a real
+pseudo-terminal."""
 
 from __future__ import annotations
 
@@ -87,7 +88,8 @@ def test_render_is_complete_deterministic_and_embeds_the_calibration(design, cal
         f"{PKG}/{name}" for name in ("__init__.py", "__main__.py", "_build.py", "acceptance_json.py", "build.json",
                                      "calibration.py", "calibration.json", "calibration_json.py", "check.py", "cli.py",
                                      "device.py", "eeprom.py", "frames.py", "json_checks.py", "rest.py", "simulate.py",
-                                     "taxels.py", "array_sim.py", "array_cli.py")}
+                                     "taxels.py", "array_sim.py", "array_cli.py", "array_json.py",
+                                     "cli_shared.py")}
     assert set(rendered) == expected and "## An array" not in rendered["readout/README.md"].decode()
     for path, data in rendered.items():
         assert isinstance(data, bytes) and not Path(path).is_absolute()
@@ -117,7 +119,6 @@ def test_spec_name_with_quotes_backslashes_and_newlines_renders_valid_python(des
         if path.endswith(".py"):
             compile(data, path, "exec")
     assert json.loads(files[f"{PKG}/build.json"])["spec_name"] == name
-    assert name in tomllib.loads(files["readout/pyproject.toml"].decode())["project"]["description"]
     assert json.dumps(name) in files["readout/README.md"].decode()
 
 

@@ -224,7 +224,7 @@ def _rows(stdout):
 
 
 def test_stream_prints_every_taxel_of_every_cycle(pkg, capsys):
-    cli = sys.modules["magfab_readout.cli"]
+    cli = importlib.import_module("magfab_readout.cli")
     assert cli.main(["stream", "--simulate", "--count", "12", "--zero", "10", "--raw"]) == 0
     out, err = capsys.readouterr()
     assert "array of 5 taxels (0x0C 0x0D 0x0E 0x0F 0x10)" in out
@@ -251,7 +251,7 @@ def test_stream_in_text_mode_through_the_installed_command(rendered, folder):
 def test_record_writes_a_taxel_column_magfab_calibrate_reads(pkg, capsys, tmp_path):
     from magfab.formats.scan_csv import read_recording
 
-    cli = sys.modules["magfab_readout.cli"]
+    cli = importlib.import_module("magfab_readout.cli")
     out = tmp_path / "strip.csv"
     assert cli.main(["record", str(out), "--simulate", "--seconds", "0.06"]) == 0
     text = out.read_text()
@@ -268,7 +268,7 @@ def test_record_writes_a_taxel_column_magfab_calibrate_reads(pkg, capsys, tmp_pa
 
 
 def test_info_lists_the_array(pkg, capsys):
-    cli = sys.modules["magfab_readout.cli"]
+    cli = importlib.import_module("magfab_readout.cli")
     assert cli.main(["info", "--simulate"]) == 0
     out = capsys.readouterr().out
     assert "I,magfab,strip," in out and out.rstrip().endswith("calibration: match") and "5 taxel(s)" in out

@@ -19,9 +19,9 @@ import sys
 import time
 from typing import List
 
-from . import __version__, _build, eeprom
+from . import _build, eeprom
 from .array_sim import SimulatedArray
-from .cli import CSV_COLUMNS, _csv, _Interrupt, _number, _record_header, at_fallback_baud
+from .cli_shared import CSV_COLUMNS, Interrupt, at_fallback_baud, format_csv, format_number, record_header
 from .device import Device, DeviceError, UploadFailed
 from .taxels import ArrayCalibration, ArrayReader, Cycle, WrongFirmware
 
@@ -51,9 +51,9 @@ def _title(array: ArrayCalibration) -> str:
 
 def _row(cycle: Cycle, t, raw: bool) -> str:
     time_s = t.time_s if t.time_s is not None else cycle.time_s
-    row = [_number(time_s, 10, 4, False), f"{cycle.seq:3d}", f"{t.taxel:2d}"]
-    row += [_number(f, 8, 4) for f in t.force_N] + [_number(b, 9, 2) for b in t.B_uT]
-    row += [_number(t.temperature_C, 6, 2, False), t.flags, (t.fault_name or "-").replace(" ", "_")]
+    row = [format_number(time_s, 10, 4, False), f"{cycle.seq:3d}", f"{t.taxel:2d}"]
+    row += [format_number(f, 8, 4) for f in t.force_N] + [format_number(b, 9, 2) for b in t.B_uT]
+    row += [format_number(t.temperature_C, 6, 2, False), t.flags, (t.fault_name or "-").replace(" ", "_")]
     if raw:
         counts = t.counts or (0, 0, 0)
         row += [f"{c:6d}" for c in counts] + [f"{t.temperature_raw or 0:5d}"]
@@ -70,7 +70,7 @@ def stream(args: argparse.Namespace, array: ArrayCalibration, out) -> int:
                           "fields, and every force is the host's")
     with _device(args, array, bool(args.text)) as device:
         reader = ArrayReader(device, array)
-        out.write(f"# magfab-readout {__version__}: spec {json.dumps(_build.SPEC_NAME)}, {_title(array)}, {device.port}\n")
+        out.write(f"# magfab-readout {_build.VERSION}: spec {json.dumps(_build.SPEC_NAME)}, {_title(array)}, {device.port}\n")
         if args.zero:
             for k, offset in enumerate(reader.zero(args.zero)):
                 out.write("# zero: taxel {} offset Fx {:+.4f} N, Fy {:+.4f} N, Fz {:+.4f} N from {} samples\n".format(
@@ -107,14 +107,14 @@ def record(args: argparse.Namespace, array: ArrayCalibration) -> int:
         columns = [c for c in RECORD_COLUMNS if temperature or c != "temperature_C"]
         reader = ArrayReader(device, array)
         written = skipped = 0
-        stop = _Interrupt()
+        stop = Interrupt()
         warned = False
         extra = [f"# array: {_title(array)}",
                  "# taxel: the chip each row was read from; Bx_uT, By_uT, Bz_uT as that chip read it (the other "
                  "magnets' field included); F*_sensor_N that taxel's force after the compensation of array.json"]
         extra += [f"# taxel {k} calibration_sha256: {c.sha256}" for k, c in enumerate(array.calibrations)]
         with open(args.out, "w", encoding="utf-8", newline="") as f:
-            _record_header(f, device, info, columns, extra)
+            record_header(f, device, info, columns, extra)
             with stop:
                 for cycle in reader.cycles(seconds=args.seconds):
                     stop.writing = True
@@ -141,10 +141,10 @@ def _record_rows(cycle: Cycle, host: float, temperature: bool) -> List[str]:
         values = list(t.B_uT) + list(t.force_N)
         if not t.ok or not all(math.isfinite(v) for v in values) or (temperature and t.temperature_C is None):
             continue
-        row = [_csv(t.time_s, 6), _csv(host, 6), str(t.taxel)] + [_csv(b, 4) for b in t.B_uT]
+        row = [format_csv(t.time_s, 6), format_csv(host, 6), str(t.taxel)] + [format_csv(b, 4) for b in t.B_uT]
         if temperature:
-            row.append(_csv(t.temperature_C, 3))
-        row += [_csv(x, 6) for x in t.force_N] + [str(t.status), str(t.seq)]
+            row.append(format_csv(t.temperature_C, 3))
+        row += [format_csv(x, 6) for x in t.force_N] + [str(t.status), str(t.seq)]
         rows.append(",".join(row))
     return rows
 
@@ -168,7 +168,7 @@ def info(args: argparse.Namespace, array: ArrayCalibration, out) -> int:
         out.write(f"device:  {line.line}\n")
         out.write("  spec {}, calibration {}, gain_sel {}, resolution {}, osr {}, dig_filt {}, {} taxel(s)\n".format(
             json.dumps(line.spec_name), line.calibration_hash, *line.settings, line.taxels))
-        out.write(f"package: magfab-readout {__version__}, spec {json.dumps(_build.SPEC_NAME)}, calibration {device.calibration.short_hash}\n")
+        out.write(f"package: magfab-readout {_build.VERSION}, spec {json.dumps(_build.SPEC_NAME)}, calibration {device.calibration.short_hash}\n")
         out.write(f"array:   {_title(array)}\n")
         for t, cal in zip(array.layout, array.calibrations):
             straps = t.get("address_straps") or ["?", "?"]

@@ -29,11 +29,13 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import os
 import pkgutil
 import time
 from dataclasses import dataclass
 from typing import Iterator, List, Optional, Sequence, Tuple
 
+from . import array_json  # an array build's compensation (docs/bundle.md section 5)
 from .calibration import Calibration
 from .device import DeviceError
 from .frames import STATUS_CHIP_ERROR, STATUS_OUTSIDE_REGION, Sample, fault_name, flag_letters
@@ -67,8 +69,6 @@ class ArrayCalibration:
     taxel's package)."""
 
     def __init__(self, array: dict, calibrations: Sequence) -> None:
-        from . import array_json  # shipped only in an array build's package
-
         self.compensator = array_json.validate(array)
         self.layout = tuple(dict(t) for t in array["taxels"])
         n = len(self.layout)
@@ -95,8 +95,6 @@ class ArrayCalibration:
     @classmethod
     def load(cls, folder: str) -> ArrayCalibration:
         """From a folder holding array.json and the taxel files (a build's ``calibration/``)."""
-        import os
-
         def read(name: str) -> bytes:
             with open(os.path.join(folder, os.path.basename(name)), "rb") as f:
                 return f.read()

@@ -11,7 +11,7 @@ import pkgutil
 import sys
 from typing import Optional, Tuple
 
-from . import __version__, _build, acceptance_json
+from . import _build, acceptance_json
 from .device import Device, DeviceError
 from .rest import slope_mN_per_uT
 from .simulate import RestTip
@@ -270,7 +270,7 @@ def run(args: argparse.Namespace, out, open_device) -> int:
 
 def _check_header(out, device, bands: Bands, weight: float, rise, n: int) -> None:
     lo, nom, hi = bands.rest
-    out.write(f"# magfab-readout {__version__} check: spec {json.dumps(_build.SPEC_NAME)}, calibration {device.calibration.short_hash}, {device.port}\n")
+    out.write(f"# magfab-readout {_build.VERSION} check: spec {json.dumps(_build.SPEC_NAME)}, calibration {device.calibration.short_hash}, {device.port}\n")
     out.write("# predicted (worst case over the magnet, material and assembly tolerances; magfab acceptance.json):\n"
               f"#   Bz at rest {lo:.0f} .. {hi:.0f} uT (nominal {nom:.0f}), positive with the north pole away from the "
               f"chip; |Bxy| at rest <= {bands.bxy_max:.0f} uT\n")

@@ -79,7 +79,7 @@ def calibration_record(calibration: dict) -> bytes:
 
 
 def _ports() -> list:
-    from serial.tools import list_ports
+    from serial.tools import list_ports  # lazy: pyserial is optional (--simulate runs without it)
 
     return sorted(list_ports.comports(), key=lambda p: p.device)
 
@@ -93,7 +93,7 @@ def _describe(ports: list) -> str:
 
 def _import_serial():
     try:
-        import serial
+        import serial  # lazy: pyserial is optional (--simulate runs without it)
     except ImportError:
         raise DeviceError("pyserial is not installed: pip install pyserial (or try the simulated device with --simulate)") from None
     return serial

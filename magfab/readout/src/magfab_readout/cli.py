@@ -13,21 +13,17 @@ import json
 import math
 import os
 import pkgutil
-import signal
 import sys
 import time
-from typing import List, Optional, Tuple
+from typing import List, Optional
 
-from . import __version__, _build, check, eeprom
+from . import _build, array_cli, check
 from .calibration import Calibration, CalibrationError
-from .device import Device, DeviceError, NoData, calibration_record, cross_check
+from .cli_shared import CSV_COLUMNS, Interrupt, at_fallback_baud, format_csv, format_number, record_header
+from .device import Device, DeviceError, calibration_record, cross_check
 from .rest import RestTracker
 from .simulate import WARM_RATE_C_PER_S, SimulatedDevice, TemperatureRamp
 from .taxels import ArrayCalibration
-
-#: ``record``'s columns (docs/bundle.md section 1): host_time_s ties the recording to a reference sensor's log.
-CSV_COLUMNS = ("time_s", "host_time_s", "Bx_uT", "By_uT", "Bz_uT", "temperature_C", "Fx_sensor_N", "Fy_sensor_N",
-               "Fz_sensor_N", "status", "seq")
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -56,7 +52,7 @@ def _parser() -> argparse.ArgumentParser:
         description=f"Host readout for the magfab tactile sensor built from spec {json.dumps(_build.SPEC_NAME)}.",
     )
     parser.add_argument("--version", action="version",
-                        version=f"magfab-readout {__version__} (calibration {_build.CALIBRATION_SHA256[:16]})")
+                        version=f"magfab-readout {_build.VERSION} (calibration {_build.CALIBRATION_SHA256[:16]})")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     stream = commands.add_parser("stream", parents=[common], help="print calibrated forces as they arrive",
@@ -135,19 +131,13 @@ def _device(args: argparse.Namespace, text: Optional[bool], pattern=None) -> Dev
     return Device(args.port, args.baud, text=text, timeout_s=args.timeout, calibration=calibration, transport=transport)
 
 
-def _number(x: Optional[float], width: int, decimals: int, sign: bool = True) -> str:
-    if x is None or math.isnan(x):
-        return "nan".rjust(width)
-    return "{:{}{}.{}f}".format(x, "+" if sign else "", width, decimals)
-
-
 def _stream(args: argparse.Namespace, out) -> int:
     if args.zero < 0:
         raise DeviceError("--zero needs a positive number of samples")
     if args.raw and args.text:
         raise DeviceError("--raw needs binary frames: text lines carry microtesla, not raw counts")
     with _device(args, text=bool(args.text)) as device:
-        out.write(f"# magfab-readout {__version__}: spec {json.dumps(_build.SPEC_NAME)}, calibration {device.calibration.short_hash}, {device.port}\n")
+        out.write(f"# magfab-readout {_build.VERSION}: spec {json.dumps(_build.SPEC_NAME)}, calibration {device.calibration.short_hash}, {device.port}\n")
         if args.zero:
             offset = device.zero(args.zero)
             out.write("# zero: offset Fx {:+.4f} N, Fy {:+.4f} N, Fz {:+.4f} N from {} samples\n".format(
@@ -163,10 +153,10 @@ def _stream(args: argparse.Namespace, out) -> int:
         rest = _rest_tracker(device)
         for sample in device.samples(count=args.count, seconds=args.seconds):
             rest.add(sample)
-            row = [_number(sample.time_s, 10, 4, False), f"{sample.seq:3d}"]
-            row += [_number(f, 8, 4) for f in sample.force_N]
-            row += [_number(b, 9, 2) for b in sample.B_uT]
-            row += [_number(sample.temperature_C, 6, 2, False), sample.flags,
+            row = [format_number(sample.time_s, 10, 4, False), f"{sample.seq:3d}"]
+            row += [format_number(f, 8, 4) for f in sample.force_N]
+            row += [format_number(b, 9, 2) for b in sample.B_uT]
+            row += [format_number(sample.temperature_C, 6, 2, False), sample.flags,
                     (sample.fault_name or "-").replace(" ", "_")]
             if args.raw:
                 counts = sample.counts or (0, 0, 0)
@@ -199,47 +189,6 @@ def _summary(device: Device, n: int, worst: Optional[float], rest: Optional[Rest
         print("magfab-readout: " + rest.summary(), file=sys.stderr)
 
 
-def _csv(x: Optional[float], decimals: int) -> str:
-    return "{:.{}f}".format(x, decimals)
-
-
-class _Interrupt:
-    """SIGINT while recording: KeyboardInterrupt while waiting for the device, held back while a row is written."""
-
-    requested = writing = False
-    _previous = None
-
-    def __call__(self, signum, frame) -> None:
-        self.requested = True
-        if not self.writing:
-            raise KeyboardInterrupt
-
-    def __enter__(self) -> _Interrupt:
-        try:
-            self._previous = signal.signal(signal.SIGINT, self)
-        except ValueError:  # not the main thread: Ctrl-C stays a KeyboardInterrupt, ended here
-            self._previous = None
-        return self
-
-    def __exit__(self, kind, value, traceback) -> bool:
-        if self._previous is not None:
-            signal.signal(signal.SIGINT, self._previous)
-        return kind is KeyboardInterrupt
-
-
-def _record_header(f, device, info, columns: List[str], extra: Tuple[str, ...] = ()) -> None:
-    f.write(f"# magfab-readout {__version__} record\n")
-    f.write(f"# spec: {json.dumps(_build.SPEC_NAME)}\n")
-    f.write(f"# calibration_sha256: {device.calibration.sha256}\n")
-    f.write(f"# device: {json.dumps(info.line)}\n")
-    f.write(f"# chip: gain_sel={_build.GAIN_SEL} resolution={_build.RESOLUTION} osr={_build.OSR} dig_filt={_build.DIG_FILT} lsb_xy_uT={_build.LSB_XY_UT!r} lsb_z_uT={_build.LSB_Z_UT!r}\n")
-    f.write("# time_s: the device's clock; host_time_s: this computer's clock (Unix time, s) when the sample was read\n")
-    f.write("# Fx_sensor_N, Fy_sensor_N, Fz_sensor_N: this sensor's own calibrated force, not a reference; to "
-            "calibrate, log a reference force sensor during the scan with time_s on this computer's clock (Unix "
-            "time, s) and Fx_N, Fy_N, Fz_N, and pass it: magfab calibrate THIS.csv --reference REFERENCE.csv\n")
-    f.write("".join(line + "\n" for line in extra) + ",".join(columns) + "\n")
-
-
 def _record(args: argparse.Namespace) -> int:
     if args.seconds is not None and not args.seconds > 0:
         raise DeviceError("--seconds must be positive")
@@ -250,10 +199,10 @@ def _record(args: argparse.Namespace) -> int:
         temperature = _build.TEMPERATURE_ENABLED
         columns = [c for c in CSV_COLUMNS if temperature or c != "temperature_C"]
         written = skipped = 0
-        stop = _Interrupt()
+        stop = Interrupt()
         rest = _rest_tracker(device)
         with open(args.out, "w", encoding="utf-8", newline="") as f:
-            _record_header(f, device, info, columns)
+            record_header(f, device, info, columns)
             with stop:
                 for sample in device.samples(seconds=args.seconds):
                     stop.writing = True
@@ -264,10 +213,11 @@ def _record(args: argparse.Namespace) -> int:
                             temperature and sample.temperature_C is None):
                         skipped += 1
                     else:
-                        row = [_csv(sample.time_s, 6), _csv(host, 6)] + [_csv(b, 4) for b in sample.B_uT]
+                        row = [format_csv(sample.time_s, 6), format_csv(host, 6)]
+                        row += [format_csv(b, 4) for b in sample.B_uT]
                         if temperature:
-                            row.append(_csv(sample.temperature_C, 3))
-                        row += [_csv(x, 6) for x in sample.force_N] + [str(sample.status), str(sample.seq)]
+                            row.append(format_csv(sample.temperature_C, 3))
+                        row += [format_csv(x, 6) for x in sample.force_N] + [str(sample.status), str(sample.seq)]
                         f.write(",".join(row) + "\n")
                         written += 1
                     stop.writing = False
@@ -285,26 +235,12 @@ def _info(args: argparse.Namespace, out) -> int:
         out.write(f"device:  {info.line}\n")
         out.write("  spec {}, calibration {}, gain_sel {}, resolution {}, osr {}, dig_filt {}\n".format(
             json.dumps(info.spec_name), info.calibration_hash, *info.settings))
-        out.write(f"package: magfab-readout {__version__}, spec {json.dumps(_build.SPEC_NAME)}, calibration {device.calibration.short_hash}\n")
+        out.write(f"package: magfab-readout {_build.VERSION}, spec {json.dumps(_build.SPEC_NAME)}, calibration {device.calibration.short_hash}\n")
         warnings = device.check_info(info)
         for warning in warnings:
             out.write(f"warning: {warning}\n")
         out.write("calibration: match\n")
     return 0
-
-
-def at_fallback_baud(args: argparse.Namespace, out, open_device, action):
-    """``action(device)`` on the board, and when nothing answers again at the fallback baud, which a board without a
-    valid record speaks (docs/bundle.md section 4)."""
-    try:
-        with open_device(args) as device:
-            return action(device)
-    except NoData:
-        if args.simulate or args.baud == eeprom.FALLBACK_BAUD:
-            raise
-        out.write(f"no answer at {args.baud} baud; trying {eeprom.FALLBACK_BAUD} baud (a board without a calibration)\n")
-        with open_device(argparse.Namespace(**{**vars(args), "baud": eeprom.FALLBACK_BAUD})) as device:
-            return action(device)
 
 
 def _upload(args: argparse.Namespace, out) -> int:
@@ -327,8 +263,6 @@ def main(argv: Optional[List[str]] = None) -> int:
     args = _parser().parse_args(argv)
     try:
         if (array := ArrayCalibration.embedded()) is not None:  # an array build's package: every taxel
-            from . import array_cli
-
             if args.simulate_warm is not None or args.simulate_no_thermal:
                 raise check.UsageError("--simulate-warm and --simulate-no-thermal simulate a single taxel's board; "
                                        "this package reads an array")

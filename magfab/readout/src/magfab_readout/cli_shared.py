@@ -1,0 +1,83 @@
+"""What the single taxel's commands (:mod:`.cli`) and an array's (:mod:`.array_cli`) share: the columns and number
+formats of ``stream`` and ``record``, ``record``'s header and its Ctrl-C, and the retry at the fallback baud."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import signal
+from typing import Any, List, Optional, Sequence
+
+from . import _build, eeprom
+from .device import NoData
+
+__all__ = ["CSV_COLUMNS", "Interrupt", "at_fallback_baud", "format_csv", "format_number", "record_header"]
+
+#: ``record``'s columns (docs/bundle.md section 1): host_time_s ties the recording to a reference sensor's log.
+CSV_COLUMNS = ("time_s", "host_time_s", "Bx_uT", "By_uT", "Bz_uT", "temperature_C", "Fx_sensor_N", "Fy_sensor_N",
+               "Fz_sensor_N", "status", "seq")
+
+
+def format_number(x: Optional[float], width: int, decimals: int, sign: bool = True) -> str:
+    if x is None or math.isnan(x):
+        return "nan".rjust(width)
+    return "{:{}{}.{}f}".format(x, "+" if sign else "", width, decimals)
+
+
+def format_csv(x: Optional[float], decimals: int) -> str:
+    return "{:.{}f}".format(x, decimals)
+
+
+class Interrupt:
+    """SIGINT while recording: KeyboardInterrupt while waiting for the device, held back while a row is written."""
+
+    requested = writing = False
+    _previous: Any = None  # the handler to restore (a function, an int or None)
+
+    def __call__(self, signum, frame) -> None:
+        self.requested = True
+        if not self.writing:
+            raise KeyboardInterrupt
+
+    def __enter__(self) -> Interrupt:
+        try:
+            self._previous = signal.signal(signal.SIGINT, self)
+        except ValueError:  # not the main thread: Ctrl-C stays a KeyboardInterrupt, ended here
+            self._previous = None
+        return self
+
+    def __exit__(self, kind, value, traceback) -> bool:
+        if self._previous is not None:
+            signal.signal(signal.SIGINT, self._previous)
+        return kind is KeyboardInterrupt
+
+
+def record_header(f, device, info, columns: List[str], extra: Sequence[str] = ()) -> None:
+    f.write(f"# magfab-readout {_build.VERSION} record\n")
+    f.write(f"# spec: {json.dumps(_build.SPEC_NAME)}\n")
+    f.write(f"# calibration_sha256: {device.calibration.sha256}\n")
+    f.write(f"# device: {json.dumps(info.line)}\n")
+    f.write(f"# chip: gain_sel={_build.GAIN_SEL} resolution={_build.RESOLUTION} osr={_build.OSR} "
+            f"dig_filt={_build.DIG_FILT} lsb_xy_uT={_build.LSB_XY_UT!r} lsb_z_uT={_build.LSB_Z_UT!r}\n")
+    f.write("# time_s: the device's clock; host_time_s: this computer's clock (Unix time, s) when the sample was "
+            "read\n")
+    f.write("# Fx_sensor_N, Fy_sensor_N, Fz_sensor_N: this sensor's own calibrated force, not a reference; to "
+            "calibrate, log a reference force sensor during the scan with time_s on this computer's clock (Unix "
+            "time, s) and Fx_N, Fy_N, Fz_N, and pass it: magfab calibrate THIS.csv --reference REFERENCE.csv\n")
+    f.write("".join(line + "\n" for line in extra) + ",".join(columns) + "\n")
+
+
+def at_fallback_baud(args: argparse.Namespace, out, open_device, action):
+    """``action(device)`` on the board, and when nothing answers again at the fallback baud, which a board without a
+    valid record speaks (docs/bundle.md section 4)."""
+    try:
+        with open_device(args) as device:
+            return action(device)
+    except NoData:
+        if args.simulate or args.baud == eeprom.FALLBACK_BAUD:
+            raise
+        out.write(f"no answer at {args.baud} baud; trying {eeprom.FALLBACK_BAUD} baud (a board without a "
+                  "calibration)\n")
+        with open_device(argparse.Namespace(**{**vars(args), "baud": eeprom.FALLBACK_BAUD})) as device:
+            return action(device)

@@ -1,0 +1,61 @@
+"""What the JSON format validators share: the error naming file, key path, value and what is allowed, and the
+checks of one value.
+
+Standard library only: this module and the validators beside it (calibration_json.py, acceptance_json.py,
+array_json.py) are the readout package's own, shipped verbatim in every build, and magfab imports the same files
+(``magfab.formats``), so the build and the host refuse exactly the same files.
+"""
+
+from __future__ import annotations
+
+import math
+
+if __name__.startswith("magfab."):  # magfab's import of this file (magfab.formats): an InputError, exit 2
+    from magfab.errors import CalibrationFormatError as _Base
+else:  # the readout package on the user's Python, where magfab is not needed
+    _Base = ValueError  # type: ignore[misc, assignment]
+
+__all__ = ["FormatError", "is_number", "lookup", "finite"]
+
+
+class FormatError(_Base):  # type: ignore[valid-type, misc]
+    """A file that does not hold what its format requires: ``file``, the dotted ``key`` path inside it (empty for
+    the whole document), the offending ``value`` and what is ``allowed``."""
+
+    file = "a JSON file"
+
+    def __init__(self, key: str, value: object, allowed: str) -> None:
+        self.key = key
+        self.value = value
+        self.allowed = allowed
+        shown = repr(value)
+        if len(shown) > 80:
+            shown = shown[:77] + "..."
+        super().__init__("{}: {} = {}: {}".format(self.file, key or "(top level)", shown, allowed))
+
+
+def is_number(x: object) -> bool:
+    """A JSON number (bool is not one)."""
+    return isinstance(x, (int, float)) and not isinstance(x, bool)
+
+
+def lookup(data: dict, path: str, error: type) -> object:
+    """The value at the dotted ``path``; ``error(path, None, "is missing")`` where a step is absent."""
+    node: object = data
+    for part in path.split("."):
+        if not isinstance(node, dict) or part not in node:
+            raise error(path, None, "is missing")
+        node = node[part]
+    return node
+
+
+def finite(data: dict, path: str, error: type, *, positive: bool = False, nonnegative: bool = False) -> float:
+    """The finite number at the dotted ``path`` (optionally > 0 or >= 0), else ``error`` naming the path."""
+    node = lookup(data, path, error)
+    if not is_number(node) or not math.isfinite(node):  # type: ignore[arg-type]
+        raise error(path, node, "must be a finite number")
+    if positive and not node > 0:  # type: ignore[operator]
+        raise error(path, node, "must be greater than 0")
+    if nonnegative and node < 0:  # type: ignore[operator]
+        raise error(path, node, "must be at least 0")
+    return float(node)  # type: ignore[arg-type]
