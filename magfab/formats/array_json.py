@@ -229,7 +229,7 @@ class Compensator:
             raise ValueError(f"{len(readings)} readings for {n} taxels")
         base = [tuple(float(r[a]) - self.offset[k][a] for a in range(3)) for k, r in enumerate(readings)]
         if not self.dynamic:
-            return base  # type: ignore[return-value]
+            return base
         own = list(base)
         for _ in range(SWEEPS):
             motion = [self._motion(j, own[j]) for j in range(n)]
@@ -238,4 +238,4 @@ class Compensator:
             for k in range(n):
                 extra = [self._from(j, k, motion[j], at[j]) for j in range(n) if j != k]
                 own.append(tuple(base[k][a] - sum(e[a] for e in extra) for a in range(3)))
-        return own  # type: ignore[return-value]
+        return own
