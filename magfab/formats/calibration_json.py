@@ -20,6 +20,7 @@ import hashlib
 import json
 import math
 from dataclasses import dataclass
+from typing import Tuple
 
 from .json_checks import FormatError, finite, is_number
 
@@ -41,7 +42,7 @@ THERMAL_MAX_PER_C = 0.01
 #: is a mistake.
 THERMAL_REFERENCE_C = (-40.0, 125.0)
 
-Point = tuple[float, float]
+Point = Tuple[float, float]  # evaluated at import: the readout's Python 3.8 has no tuple[...]
 
 
 class CalibrationError(FormatError):

@@ -12,7 +12,7 @@ import math
 
 try:  # inside magfab: an InputError (exit 2); in the readout package, where magfab.errors is absent: ValueError
     from ..errors import CalibrationFormatError as _Base
-except ImportError:
+except (ImportError, ValueError):  # Python 3.8 raises ValueError for a relative import above the top package
     _Base = ValueError  # type: ignore[misc, assignment]
 
 __all__ = ["FormatError", "is_number", "lookup", "finite"]
