@@ -4,13 +4,15 @@ firmware both read, so importing the firmware renderer does not load the models'
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import Any
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from ..recipes import Recipe
 
 __all__ = ["conversion_us"]
 
 
-def conversion_us(chip: Mapping[str, Any], osr: int, dig_filt: int, temperature: bool, axes: int = 3) -> float:
+def conversion_us(chip: Recipe, osr: int, dig_filt: int, temperature: bool, axes: int = 3) -> float:
     """One measurement of ``axes`` magnetic axes (and T), us, from the datasheet's table of full (ZYXT)
     measurements in the recipe (``tconv_osr<o>_dig_filt<d>_ms``); fewer channels take off the Table 8 formula's
     per-channel time (TCONVM per axis, TCONVT for T at OSR2 = 0)."""

@@ -184,12 +184,14 @@ def force_error_mN(channel: Channel, force_N: object, field_read_G: object) -> n
 # Temperature
 
 
-def temperature_read_G(b_G: object, dT_C: object, *, alpha_pct: float, sensitivity_pct: float = 0.0,
-                       offset_G_per_C: float = 0.0, magnet_dT_C: object | None = None,
+def temperature_read_G(b_G: object, dT_C: object, *, alpha_pct: float | np.ndarray,
+                       sensitivity_pct: float | np.ndarray = 0.0, offset_G_per_C: float | np.ndarray = 0.0,
+                       magnet_dT_C: object | None = None,
                        compensation: tuple[float, object] | None = None) -> np.ndarray:
     """The field read at a chip temperature ``dT_C`` from the calibration's, G, for a field ``b_G`` at the
     calibration temperature: the magnet (at ``magnet_dT_C``, default the chip's) scaled by 1 + alpha dT, the chip's
-    sensitivity by 1 + s dT and its offset o dT (coefficients in %/C and G/C). ``compensation`` = (alpha_pct the
+    sensitivity by 1 + s dT and its offset o dT (coefficients in %/C and G/C: numbers, or arrays that broadcast
+    against the field, one row per corner of the bands). ``compensation`` = (alpha_pct the
     firmware uses, the temperature difference it reads): the reading divided by 1 + alpha dT_read."""
     b, dT = np.asarray(b_G, dtype=float), np.asarray(dT_C, dtype=float)
     dTm = dT if magnet_dT_C is None else np.asarray(magnet_dT_C, dtype=float)

@@ -37,8 +37,9 @@ Units: lengths mm, fields gauss (the field models' unit), moments A m^2.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -257,14 +258,16 @@ def budget(design: Design, pred: Prediction, drift_budget) -> dict[str, object] 
         moment = float(env["stray_moment_Am2"])
         left = {}
         for name, ratio in (("with_median", rej.dipole_median[k]), ("with_worst", rej.dipole[k])):
-            left[name] = replace(stray_error(design, pred, moment / ratio, stray_mm), what=(
+            reduced = stray_error(design, pred, moment / ratio, stray_mm)
+            assert reduced is not None  # the budget's stray moment is > 0, and stays so divided by a rejection
+            left[name] = replace(reduced, what=(
                 f"{drift_budget.stray.what}, the reference subtracted ({ratio:.2g}x, {name[5:]} over its "
                 "direction and orientation)")).as_json()
         out["stray"] = {"without": drift_budget.stray.as_json(), **left}
     return out
 
 
-def findings(design: Design, section: dict[str, object] | None) -> list:
+def findings(design: Design, section: Mapping[str, Any] | None) -> list:
     """The reference chip as findings: a warning when the magnets are heard at its place (it would subtract the
     taxels' own presses), info with what it rejects otherwise."""
     from ..errors import Finding, Severity

@@ -148,7 +148,7 @@ class ShearProbe:
     rounded tip's patch is the surface within the Hertz radius sqrt(R rest_indentation_mm) of the axis (default
     :data:`REST_PATCH_INDENTATION_MM`; a build may pass its scan step)."""
 
-    def __init__(self, load: ShearLoad | str = ShearLoad.SURFACE, depths_mm: Sequence[float] | None = None,
+    def __init__(self, load: ShearLoad | str = ShearLoad.SURFACE, depths_mm: Sequence[float] | np.ndarray | None = None,
                  rest_indentation_mm: float = REST_PATCH_INDENTATION_MM):
         self.load = check_option(ShearLoad, load, "load")
         self.rest = float(rest_indentation_mm)
