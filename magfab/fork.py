@@ -40,8 +40,10 @@ class Branch:
     """The side branch's result: :meth:`result` returns it, or raises what the branch raised."""
 
     def __init__(self, fn: Callable[..., Any], args: tuple[Any, ...], forked: bool) -> None:
-        self._done, self._value = False, None
-        self._process = self._conn = None
+        self._done = False
+        self._value: tuple[str, Any] | None = None  # (kind, payload) once done
+        self._process: multiprocessing.context.ForkProcess | None = None
+        self._conn: multiprocessing.connection.Connection | None = None
         self.forked = forked
         if forked:
             global _JOB
@@ -60,6 +62,7 @@ class Branch:
 
     def result(self) -> Any:
         if not self._done:
+            assert self._conn is not None and self._process is not None  # not done yet: the branch was forked
             try:
                 self._value = self._conn.recv()
             except EOFError:  # the worker died without a word (killed, out of memory)
@@ -68,6 +71,7 @@ class Branch:
                                         f"{self._process.exitcode})")
             self._done = True
             self._process.join()
+        assert self._value is not None
         kind, payload = self._value
         if kind == "ok":
             return payload

@@ -263,7 +263,7 @@ def image_settings(design: Design) -> dict[str, Any]:
     flags = ((ee.FLAG_BURST if chip.burst else 0) | (ee.FLAG_TEMPERATURE if chip.temperature else 0)
              | (ee.FLAG_TEXT if _value(fw.output) == "text" else 0) | (ee.FLAG_RAW_SIGNED if chip.raw_signed else 0))
     regs = {reg: (mask, value) for reg, mask, value in chip.registers}
-    array = {} if design.array is None else {"taxel_addresses": [t.i2c_address for t in design.taxels]}
+    array: dict[str, object] = {} if design.array is None else {"taxel_addresses": [t.i2c_address for t in design.taxels]}
     if design.reference is not None:  # the record's reference block (version 5)
         from ..models.reference import REFERENCE_SHIFT
 

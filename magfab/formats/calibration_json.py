@@ -20,7 +20,7 @@ import hashlib
 import json
 import math
 from dataclasses import dataclass
-from typing import Tuple
+from typing import Any, Mapping, Tuple
 
 from .json_checks import FormatError, finite, is_number
 
@@ -56,12 +56,12 @@ def monomials(order: int) -> list:
     return [[i, k - i] for k in range(order + 1) for i in range(k, -1, -1)]
 
 
-def canonical_json(data: dict) -> str:
+def canonical_json(data: Mapping[str, Any]) -> str:
     """The calibration as canonical JSON (sorted keys, no spaces, ASCII, finite numbers only)."""
-    return json.dumps(data, sort_keys=True, separators=(",", ":"), ensure_ascii=True, allow_nan=False)
+    return json.dumps(dict(data), sort_keys=True, separators=(",", ":"), ensure_ascii=True, allow_nan=False)
 
 
-def calibration_sha256(data: dict) -> str:
+def calibration_sha256(data: Mapping[str, Any]) -> str:
     """SHA-256 (hex) of :func:`canonical_json`: the hash the firmware reports in its info line (first 16 hex)."""
     return hashlib.sha256(canonical_json(data).encode("ascii")).hexdigest()
 
