@@ -29,6 +29,7 @@ from __future__ import annotations
 import math
 from bisect import bisect_left
 from collections.abc import Sequence
+from typing import Tuple
 
 from .json_checks import FormatError, finite, is_number, lookup
 
@@ -41,7 +42,7 @@ MAX_TAXELS = 16
 #: with the tables, 0.22 after 4, 0.04 after 5; each costs the same again).
 SWEEPS = 4
 
-Vector = tuple[float, float, float]
+Vector = Tuple[float, float, float]  # evaluated at import: the readout's Python 3.8 has no tuple[...]
 
 
 class ArrayError(FormatError):
