@@ -10,10 +10,12 @@ from __future__ import annotations
 
 import math
 
+# This file is type-checked twice: inside magfab, where the import resolves and the fallback's type differs, and
+# in the readout package as shipped, where there is no parent package; each ignore is for one of the two.
 try:  # inside magfab: an InputError (exit 2); in the readout package, where magfab.errors is absent: ValueError
-    from ..errors import CalibrationFormatError as _Base
+    from ..errors import CalibrationFormatError as _Base  # type: ignore[import-not-found, unused-ignore]
 except (ImportError, ValueError):  # Python 3.8 raises ValueError for a relative import above the top package
-    _Base = ValueError  # type: ignore[misc, assignment]
+    _Base = ValueError  # type: ignore[misc, assignment, unused-ignore]
 
 __all__ = ["FormatError", "is_number", "lookup", "finite"]
 
