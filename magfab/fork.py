@@ -98,7 +98,8 @@ def _outcome(fn: Callable[..., Any], args: tuple[Any, ...]) -> tuple[str, Any]:
 
 
 def _child(conn) -> None:
-    fn, args, reader = _JOB  # type: ignore[misc]
+    assert _JOB is not None  # the parent sets it just before it forks this child
+    fn, args, reader = _JOB
     # The child's copy of the parent's end: closed, so a parent that died (a crash, a kill) makes the send below fail
     # at once instead of blocking on a full pipe nobody reads, which left the worker holding the terminal's pipes.
     reader.close()

@@ -307,7 +307,7 @@ _KNOBS = {
 
 def _over_budget(design: Design, cost: Cost) -> None:
     """Each part is within its own limit but together they are not: blame the costliest part's key."""
-    part = max(cost.parts_s, key=cost.parts_s.get)  # type: ignore[arg-type]
+    part = max(cost.parts_s, key=lambda k: cost.parts_s[k])
     section, name, lo, hi = _KNOBS[part]
     current = getattr(getattr(design.spec, section), name)
 

@@ -187,12 +187,13 @@ def chip_config(design: Design) -> ChipConfig:
 
 def raw_words(chip: ChipConfig, b_uT: tuple[float, float, float], t_C: float = 25.0) -> tuple[int, int, int, int]:
     """(T, X, Y, Z) words the chip would send for a field in microtesla (rounded, clipped at the output limit)."""
-    words = []
+    words: list[int] = []
     for value, lsb in zip(b_uT, (chip.lsb_xy_uT, chip.lsb_xy_uT, chip.lsb_z_uT)):
         c = max(-chip.raw_limit, min(chip.raw_limit, round(value / lsb)))
         words.append(c & 0xFFFF if chip.raw_signed else chip.raw_zero + c)
     t = min(0xFFFF, max(0, round(TEMPERATURE_RAW_25C + (t_C - 25.0) * TEMPERATURE_LSB_PER_C)))
-    return (t if chip.temperature else 0, *words)  # type: ignore[return-value]
+    x, y, z = words
+    return (t if chip.temperature else 0, x, y, z)
 
 
 def _uart(baud: int) -> tuple[int, float]:
@@ -231,9 +232,11 @@ def _eeprom_module():
     if name not in sys.modules:
         path = Path(__file__).parent / "readout_pkg" / "magfab_readout" / "eeprom.py"
         spec = importlib.util.spec_from_file_location(name, path)
-        module = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]
+        if spec is None or spec.loader is None:
+            raise ImportError(f"cannot load the readout's EEPROM module from {path}")
+        module = importlib.util.module_from_spec(spec)
         sys.modules[name] = module
-        spec.loader.exec_module(module)  # type: ignore[union-attr]
+        spec.loader.exec_module(module)
     return sys.modules[name]
 
 

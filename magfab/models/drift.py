@@ -458,7 +458,8 @@ def drift(design: Design, pred: Prediction) -> Drift:
         coefficients=coefficients(design), conditions=conditions,
         temperature=temperature_budget(design, pred, normal=normal),
         rotation=rotation_error(design, pred, normal=normal),
-        rotation_band=tuple(rotation_error(design, pred, b, 180.0, normal) for b in (low, high)),  # type: ignore[arg-type]
+        rotation_band=(rotation_error(design, pred, low, 180.0, normal),
+                       rotation_error(design, pred, high, 180.0, normal)),
         stray=stray_error(design, pred, normal=normal),
         resolution_mN={"normal": float(pred.normal.resolution_mN), "shear": float(pred.shear.resolution_mN)},
         noise_G={"z": float(pred.noise.total_z_G), "xy": float(pred.noise.total_xy_G),
