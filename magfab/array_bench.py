@@ -45,7 +45,7 @@ def taxel_scans(folder: Path | None, spec: Spec, taxel: int, scan: Scan) -> dict
 
     scans = {}
     if folder is not None:
-        for k in range(spec.array.taxels):
+        for k in range(spec.array.taxels if spec.array is not None else 1):
             path = folder / measured_scan_path(k)
             if k != taxel and path.is_file():
                 scans[k] = replace(read_scan_csv(path), source=path.name)

@@ -23,9 +23,10 @@ try:  # Ctrl-C while these load is Python's KeyboardInterrupt, ended here as exi
     import json
     import os
     import warnings
-    from collections.abc import Iterator
+    from collections.abc import Callable, Iterator, Mapping
     from contextlib import contextmanager
     from pathlib import Path
+    from typing import TYPE_CHECKING, Any
 
     import click
 
@@ -34,6 +35,9 @@ try:  # Ctrl-C while these load is Python's KeyboardInterrupt, ended here as exi
 except KeyboardInterrupt:
     sys.stderr.write("magfab: error: interrupted; nothing was written\n")
     raise SystemExit(130) from None
+
+if TYPE_CHECKING:
+    from rich.progress import TaskID
 
 # Imported lazily, inside the commands that use them, for speed: ``magfab --help`` and every command load only what
 # they run. magfab's own modules (the pipeline, the checks, the design search) pull in numpy, pydantic and the
@@ -74,7 +78,7 @@ def _handled() -> Iterator[None]:
 
 
 @contextmanager
-def _progress(enabled: bool) -> Iterator[object]:
+def _progress(enabled: bool) -> Iterator[Callable[[str], None] | None]:
     """The current build stage on one line of a terminal; silent otherwise. Redrawn only when the stage
     changes, so no refresh thread runs while the build forks its worker process."""
     if not enabled:
@@ -190,8 +194,8 @@ def _run_build(spec: Path | None, out_dir: Path | None, as_json: bool, scan_path
             loaded, out_dir = _calibration_target(spec, out_dir, scan_path)
             scan = _read_scan(scan_path, reference, out_dir, loaded, taxel)
         with _progress(sys.stderr.isatty() and not as_json) as progress:
-            result = run_build(loaded, out_dir, progress, scan)  # type: ignore[arg-type]
-        summary = result.summary()
+            result = run_build(loaded, out_dir, progress, scan)
+        summary: Mapping[str, Any] = result.summary()  # JSON values, read by key below
         if as_json:
             click.echo(json.dumps(summary, indent=2, sort_keys=True))
             return
@@ -221,7 +225,7 @@ def _run_build(spec: Path | None, out_dir: Path | None, as_json: bool, scan_path
             click.echo(f"  calibration ({cal['source']}): {cal['method']} order {cal['order']}, held-out RMS "
                        f"Fz {cal['rms_holdout_Fz_mN']:g} mN, Fr {cal['rms_holdout_Fr_mN']:g} mN; firmware image: "
                        f"{cal['image'] or 'not built (no avr-gcc)'}")
-        if scan_path is not None:
+        if scan_path is not None and result.out_dir is not None:  # a command line build is always written out
             readout = os.path.relpath(result.out_dir / "readout")
             click.echo(f"next: pip install {readout if readout.startswith('.') else './' + readout} && "
                        "magfab-readout upload   (the new calibration into the reader and the board's EEPROM)")
@@ -247,6 +251,7 @@ def _read_scan(scan_path: Path, reference: Path | None, build_dir: Path | None, 
     if spec.array is not None:
         from .array_bench import taxel_scans
 
+        assert taxel is not None  # check_taxel refused an array's scan that names no taxel
         return taxel_scans(folder, spec, taxel, scan)
     present = None if folder is None else folder / "calibration" / "calibration.json"
     if present is not None and present.is_file():
@@ -328,7 +333,7 @@ def init(path: Path | None, force: bool, targets: bool, example: str) -> None:
 
 
 @contextmanager
-def _bar(enabled: bool) -> Iterator[object]:
+def _bar(enabled: bool) -> Iterator[Callable[[str, int, int], None] | None]:
     """A progress bar per phase of a study (search, verify, sweep) on a terminal's stderr; silent otherwise."""
     if not enabled:
         yield None
@@ -336,7 +341,7 @@ def _bar(enabled: bool) -> Iterator[object]:
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
-    tasks: dict[str, object] = {}
+    tasks: dict[str, TaskID] = {}
     with Progress(TextColumn("magfab: {task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
                   console=Console(stderr=True), transient=True) as bar:
         def update(phase: str, done: int, total: int) -> None:

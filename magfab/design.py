@@ -23,10 +23,11 @@ from functools import cached_property
 import numpy as np
 
 from . import outline
+from .design_fields import Address, Mould, Pad, Part, Pocket, Stack
 from .errors import SpecError, shown
 from .errors import number_text as _fmt
 from .recipes import Recipe, resolve
-from .spec import Polarity, Skin, Spec, Tip
+from .spec import Array, Polarity, Skin, Spec, Tip
 
 __all__ = ["Design", "Taxel", "ArrayLayout", "derive", "DISTANCE_TOLERANCE_MM"]
 
@@ -173,7 +174,7 @@ class Design:
     @property
     def part_centres_mm(self) -> tuple[tuple[float, float], ...]:
         """The magnets' axes in one cast part's frame (one at the origin unless the part is a continuous skin)."""
-        return self.array.part_centres_mm if self.continuous else ((0.0, 0.0),)
+        return self.array.part_centres_mm if self.array is not None and self.continuous else ((0.0, 0.0),)
 
     @property
     def parts_per_sensor(self) -> int:
@@ -324,18 +325,20 @@ def derive(spec: Spec) -> Design:
     part = _elastomer(spec)
     stack = _stack(spec, chip)
     pocket = _pocket(spec, part, stack)
-    fields = {**part, **stack, **pocket, **_pad(spec), **_address(spec, chip)}
+    pad = _pad(spec)
+    array = None
     if spec.array is not None and spec.array.taxels > 1:
-        fields["array"] = _array(spec, chip, printer, fields)
-        fields["alignment_holes"] = _array_holes(spec, fields)
-    fields.update(_mould(spec, printer, part, pocket["core_base_radius_mm"], fields.get("array")))
+        array = _array(spec, spec.array, chip, printer, _min_pitch(spec, spec.array.skin, printer, part, stack, pad))
+        pad["alignment_holes"] = _array_holes(spec, array)
+    mould = _mould(spec, printer, part, pocket["core_base_radius_mm"], array)
     return Design(spec=spec, printer=printer, chip=chip, magnet_grade=resolve.magnet_grade(spec.magnet.grade),
                   material=resolve.material(spec.elastomer.material),
                   adhesive=resolve.adhesive(spec.fabrication.adhesive),
-                  release_agent=resolve.adhesive(spec.fabrication.release_agent), **fields)
+                  release_agent=resolve.adhesive(spec.fabrication.release_agent),
+                  **part, **stack, **pocket, **pad, **_address(spec, chip), **mould, array=array)
 
 
-def _elastomer(spec: Spec) -> dict[str, object]:
+def _elastomer(spec: Spec) -> Part:
     """The magnet, the elastomer's envelope and the pocket's size, checked against each other."""
     mag, el = spec.magnet, spec.elastomer
     R_m, H_m = mag.diameter_mm / 2.0, mag.height_mm
@@ -354,12 +357,12 @@ def _elastomer(spec: Spec) -> dict[str, object]:
     if r_ch > R_p:
         raise SpecError("elastomer.insert_channel_diameter_mm", shown(el.insert_channel_diameter_mm),
                         f"must be at most the pocket diameter {_fmt(2 * R_p)} mm")
-    return dict(magnet_radius_mm=R_m, magnet_height_mm=H_m, elastomer_radius_mm=R_e, elastomer_height_mm=H_e,
+    return Part(magnet_radius_mm=R_m, magnet_height_mm=H_m, elastomer_radius_mm=R_e, elastomer_height_mm=H_e,
                 base_height_mm=H_e - R_e if el.tip is Tip.HEMISPHERE else H_e, tip=el.tip,
                 pocket_radius_mm=R_p, pocket_height_mm=h_p, channel_radius_mm=r_ch)
 
 
-def _stack(spec: Spec, chip) -> dict[str, float]:
+def _stack(spec: Spec, chip) -> Stack:
     """Heights in the board frame (board top face at z = 0): the sensing point, the pad, the elastomer's base."""
     sen, pad = spec.sensor, spec.pad
     body_max, h_nom, h_max = chip["body_mm"].high, chip["height_mm"].nominal, chip["height_mm"].high
@@ -371,14 +374,14 @@ def _stack(spec: Spec, chip) -> dict[str, float]:
         raise SpecError("pad.thickness_mm", shown(pad.thickness_mm),
                         f"must exceed the chip recess depth {_fmt(recess_depth)} mm (package height max "
                         f"{_fmt(h_max)} mm + recess clearance)")
-    return dict(chip_body_max_mm=body_max, chip_height_nominal_mm=h_nom, chip_height_max_mm=h_max,
+    return Stack(chip_body_max_mm=body_max, chip_height_nominal_mm=h_nom, chip_height_max_mm=h_max,
                 sensing_depth_mm=depth, z_sense_mm=h_nom - depth, z_pad_top_mm=pad.thickness_mm,
                 z_elastomer_base_mm=pad.thickness_mm + pad.glue_thickness_mm,
                 recess_side_mm=body_max + 2.0 * pad.recess_clearance_mm, recess_depth_mm=recess_depth,
                 pad_roof_mm=pad.thickness_mm - recess_depth, pad_thickness_mm=pad.thickness_mm)
 
 
-def _pocket(spec: Spec, part: dict[str, object], stack: dict[str, float]) -> dict[str, object]:
+def _pocket(spec: Spec, part: Part, stack: Stack) -> Pocket:
     """Where the pocket's roof sits so that the magnet's lower face is d_max above the sensing point, within
     what the skin allows; the funnel and channel below it; d_min checked against the stack."""
     el, sen = spec.elastomer, spec.sensor
@@ -422,13 +425,13 @@ def _pocket(spec: Spec, part: dict[str, object], stack: dict[str, float]) -> dic
         skin = min(R_e - R_p, R_e - math.hypot(R_p, max(0.0, roof - base_h)))
     else:
         skin = min(R_e - R_p, H_e - roof)
-    return dict(pocket_roof_z_mm=roof, pocket_floor_z_mm=floor, funnel_bottom_z_mm=max(funnel_bottom, 0.0),
+    return Pocket(pocket_roof_z_mm=roof, pocket_floor_z_mm=floor, funnel_bottom_z_mm=max(funnel_bottom, 0.0),
                 core_base_radius_mm=r_ch if funnel_bottom >= 0.0 else R_p - floor, cover_mm=H_e - roof, skin_mm=skin,
                 z_magnet_low_mm=z_base + roof - H_m, z_magnet_top_mm=z_base + roof, d_rest_mm=d_of_roof(roof),
                 d_rest_range_mm=(d_lo, d_hi))
 
 
-def _pad(spec: Spec) -> dict[str, object]:
+def _pad(spec: Spec) -> Pad:
     """The pad's disc, centring lip and the two alignment holes (of different sizes: it fits one way round)."""
     pad, R_e = spec.pad, spec.elastomer.diameter_mm / 2.0
     lip_inner = R_e + pad.lip_clearance_mm
@@ -444,11 +447,11 @@ def _pad(spec: Spec) -> dict[str, object]:
         raise SpecError("pad.alignment_hole_spacing_mm", shown(pad.alignment_hole_spacing_mm),
                         f"must place both holes (diameters {_fmt(d1)} and {_fmt(d2)} mm) between the lip "
                         f"(radius {_fmt(lip_outer)} mm) and the pad's edge (radius {_fmt(R_pad)} mm)")
-    return dict(pad_radius_mm=R_pad, lip_inner_radius_mm=lip_inner, lip_outer_radius_mm=lip_outer,
+    return Pad(pad_radius_mm=R_pad, lip_inner_radius_mm=lip_inner, lip_outer_radius_mm=lip_outer,
                 lip_height_mm=pad.lip_height_mm, alignment_holes=((-sx, 0.0, d1), (sx, 0.0, d2)))
 
 
-def _address(spec: Spec, chip) -> dict[str, object]:
+def _address(spec: Spec, chip) -> Address:
     """The I2C address: the option code's base plus the A1/A0 straps; and the chip's refused OSR/DIG_FILT pairs."""
     sen = spec.sensor
     codes = sorted(k.rsplit("_", 1)[1] for k in chip.quantities if k.startswith("i2c_base_address_"))
@@ -467,12 +470,11 @@ def _address(spec: Spec, chip) -> dict[str, object]:
                         f"is not allowed with sensor.osr = {sen.osr} (the chip refuses OSR/DIG_FILT pairs "
                         + ", ".join(f"{a}/{b}" for a, b in sorted(forbidden)) + ")",
                         "raise sensor.dig_filt or sensor.osr")
-    return dict(i2c_address=sen.i2c_address,
+    return Address(i2c_address=sen.i2c_address,
                 address_straps=((sen.i2c_address - base) >> 1 & 1, (sen.i2c_address - base) & 1))
 
 
-def _mould(spec: Spec, printer, part: dict[str, object], core_base_r: float,
-           array: ArrayLayout | None) -> dict[str, object]:
+def _mould(spec: Spec, printer, part: Part, core_base_r: float, array: ArrayLayout | None) -> Mould:
     """A cup holding N inverted cavities in a row along x, and a lid carrying the cores, fill and vent holes. A
     cavity is one tip, or one continuous skin; an array's default count is the parts it needs (a tip per taxel)."""
     R_e, H_e = part["elastomer_radius_mm"], part["elastomer_height_mm"]
@@ -496,7 +498,7 @@ def _mould(spec: Spec, printer, part: dict[str, object], core_base_r: float,
         raise SpecError("elastomer.diameter_mm", shown(spec.elastomer.diameter_mm),
                         "leaves no room between the insertion channel and the cavity wall for the fill and vent "
                         "holes", "use a larger elastomer or a narrower insert channel")
-    return dict(
+    return Mould(
         cavity_centres_x_mm=tuple((i - (n - 1) / 2.0) * pitch for i in range(n)), cavity_pitch_mm=pitch,
         wall_mm=wall, cup_size_mm=cup, lid_thickness_mm=lid_t, lid_size_mm=(cup[0] + 2.0 * PRY_LIP_MM, cup[1], lid_t),
         pin_diameter_mm=pin_d, pin_hole_diameter_mm=pin_d + 2 * printer["fit_clearance_mm"].nominal,
@@ -506,22 +508,22 @@ def _mould(spec: Spec, printer, part: dict[str, object], core_base_r: float,
     )
 
 
-def _array(spec: Spec, chip, printer, fields: dict[str, object]) -> ArrayLayout:
-    """The array's taxels: their centres (a grid centred on the origin, row 0 at +y, index row by row; or the
-    explicit positions), polarity, and one I2C address each; checked against the smallest pitch the parts allow."""
-    arr = spec.array
+def _array(spec: Spec, arr: Array, chip, printer, minimum: float) -> ArrayLayout:
+    """The array's taxels (``arr``, the spec's [array]): their centres (a grid centred on the origin, row 0 at +y,
+    index row by row; or the explicit positions), polarity, and one I2C address each; checked against the smallest
+    pitch the parts allow (``minimum``, mm)."""
     if arr.positions_mm is not None:
         centres, key = list(arr.positions_mm), "array.positions_mm"
         signs = [(-1) ** i for i in range(len(centres))]
     else:
         p, key = arr.pitch_mm, "array.pitch_mm"
+        assert p is not None  # the spec requires pitch_mm for a grid of more than one taxel
         cells = [(r, c) for r in range(arr.rows) for c in range(arr.cols)]
         centres = [((c - (arr.cols - 1) / 2.0) * p, ((arr.rows - 1) / 2.0 - r) * p) for r, c in cells]
         signs = [(-1) ** (r + c) for r, c in cells]
     if arr.polarity is Polarity.SAME:
         signs = [1] * len(centres)
     pitch = min(math.dist(a, b) for i, a in enumerate(centres) for b in centres[i + 1:])
-    minimum = _min_pitch(spec, printer, fields)
     if pitch + 1e-9 < minimum:
         raise SpecError(key, shown(arr.pitch_mm if arr.positions_mm is None else arr.positions_mm),
                         f"puts two taxels {_fmt(pitch)} mm apart: at least {_fmt(minimum)} mm for "
@@ -539,14 +541,14 @@ def _array(spec: Spec, chip, printer, fields: dict[str, object]) -> ArrayLayout:
                        (min(xs) - R, min(ys) - R, max(xs) + R, max(ys) + R), part)
 
 
-def _min_pitch(spec: Spec, printer, fields: dict[str, object]) -> float:
+def _min_pitch(spec: Spec, skin: Skin, printer, part: Part, stack: Stack, pad: Pad) -> float:
     """The closest two taxels' centres may be: separate fingertips share one lip wall between them; a continuous
     skin keeps the minimum skin between two pockets; the pad keeps its minimum wall between two chip recesses."""
-    recesses = fields["recess_side_mm"] + printer["min_wall_mm"].nominal
-    if spec.array.skin is Skin.SEPARATE:
-        return max(2.0 * fields["lip_inner_radius_mm"] + (spec.pad.lip_width_mm if spec.pad.lip_height_mm > 0 else 0.0),
+    recesses = stack["recess_side_mm"] + printer["min_wall_mm"].nominal
+    if skin is Skin.SEPARATE:
+        return max(2.0 * pad["lip_inner_radius_mm"] + (spec.pad.lip_width_mm if spec.pad.lip_height_mm > 0 else 0.0),
                    recesses)
-    return max(2.0 * fields["pocket_radius_mm"] + spec.elastomer.min_skin_mm, recesses)
+    return max(2.0 * part["pocket_radius_mm"] + spec.elastomer.min_skin_mm, recesses)
 
 
 def _address_plan(spec: Spec, chip, n: int) -> list[tuple[int, str, tuple[int, int]]]:
@@ -568,10 +570,10 @@ def _address_plan(spec: Spec, chip, n: int) -> list[tuple[int, str, tuple[int, i
     return plan[:n]
 
 
-def _array_holes(spec: Spec, fields: dict[str, object]) -> tuple[tuple[float, float, float], ...]:
+def _array_holes(spec: Spec, array: ArrayLayout) -> tuple[tuple[float, float, float], ...]:
     """The pad's two alignment holes beyond the outermost taxels along x, at pad.alignment_hole_spacing_mm / 2 from
     them (the smaller one at -x): inside the pad's outline (the taxels' hull grown by the pad radius)."""
-    taxels = fields["array"].taxels
+    taxels = array.taxels
     d1 = spec.pad.alignment_hole_diameter_mm
     sx = spec.pad.alignment_hole_spacing_mm / 2.0
     lo, hi = min(t.x_mm for t in taxels), max(t.x_mm for t in taxels)

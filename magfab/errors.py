@@ -84,7 +84,7 @@ class _Shown:
     def __eq__(self, other: object) -> bool:
         return self.raw == (other.raw if isinstance(other, _Shown) else other)
 
-    __hash__ = None  # type: ignore[assignment]
+    __hash__ = None  # type: ignore[assignment]  # unhashable, the documented way; typeshed types __hash__ as a method
 
 
 def _shorten(text: str, limit: int = SHOWN_MAX_CHARS) -> str:

@@ -41,8 +41,10 @@ class Branch:
     """The side branch's result: :meth:`result` returns it, or raises what the branch raised."""
 
     def __init__(self, fn: Callable[..., Any], args: tuple[Any, ...], forked: bool) -> None:
-        self._done, self._value = False, None
-        self._process = self._conn = None
+        self._done = False
+        self._value: tuple[str, Any] | None = None  # (kind, payload) once done
+        self._process: multiprocessing.context.ForkProcess | None = None
+        self._conn: multiprocessing.connection.Connection | None = None
         self.forked = forked
         if forked:
             global _JOB
@@ -61,6 +63,7 @@ class Branch:
 
     def result(self) -> Any:
         if not self._done:
+            assert self._conn is not None and self._process is not None  # not done yet: the branch was forked
             try:
                 self._value = self._conn.recv()
             except EOFError:  # the worker died without a word (killed, out of memory)
@@ -69,6 +72,7 @@ class Branch:
                                         f"{self._process.exitcode})")
             self._done = True
             self._process.join()
+        assert self._value is not None
         kind, payload = self._value
         if kind == "ok":
             return payload
@@ -95,7 +99,8 @@ def _outcome(fn: Callable[..., Any], args: tuple[Any, ...]) -> tuple[str, Any]:
 
 
 def _child(conn) -> None:
-    fn, args, reader = _JOB  # type: ignore[misc]
+    assert _JOB is not None  # the parent sets it just before it forks this child
+    fn, args, reader = _JOB
     # The child's copy of the parent's end: closed, so a parent that died (a crash, a kill) makes the send below fail
     # at once instead of blocking on a full pipe nobody reads, which left the worker holding the terminal's pipes.
     reader.close()

@@ -233,7 +233,7 @@ def check_limits(design: Design) -> Cost:
                 raise SpecError(key, getattr(m, name), what, f"raise {key} to at least {_fmt(_round_up(need))}")
         raise SpecError("mould.cavities", design.cavities, what, "use fewer cavities per mould")
     chips = len(design.taxels) + (spec.reference is not None)  # the reference chip is one more on the board
-    if SECONDS_PER_CHIP2 * chips**2 > MAX_BOARD_S:
+    if spec.array is not None and SECONDS_PER_CHIP2 * chips**2 > MAX_BOARD_S:
         most = int(math.sqrt(MAX_BOARD_S / SECONDS_PER_CHIP2))
         key = "array.rows" if spec.array.positions_mm is None else "array.positions_mm"
         raise SpecError(key, getattr(spec.array, key.split(".")[1]),
@@ -283,7 +283,7 @@ _KNOBS = {
 
 def _over_budget(design: Design, cost: Cost) -> None:
     """Each part is within its own limit but together they are not: blame the costliest part's key."""
-    part = max(cost.parts_s, key=cost.parts_s.get)  # type: ignore[arg-type]
+    part = max(cost.parts_s, key=lambda k: cost.parts_s[k])
     section, name, lo, hi = _KNOBS[part]
     current = getattr(getattr(design.spec, section), name)
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 
 from .layout import GROUND, Placed
-from .route import HOLE_TO_HOLE_MM, LAYERS, Copper, RouteError, Router, distance, touching
+from .route import HOLE_TO_HOLE_MM, LAYERS, Copper, Point, RouteError, Router, distance, touching
 
 __all__ = ["NETS_ROUTED", "ROUTE_GRID_MM", "RIP_UP_LIMIT", "FANOUT_MM", "route_all"]
 
@@ -35,7 +35,7 @@ def _mst(pads: list[Copper]) -> list[tuple[Copper, Copper]]:
     return edges
 
 
-def _stub_ends(u1: Placed, c: Copper, epc: Copper, h: float):
+def _stub_ends(u1: Placed, c: Copper, epc: Copper, h: float) -> tuple[Point, Point, Point]:
     """For a land ``c`` of the chip: (outer end of its escape stub, start of a stub on the land, inner end
     of a diagonal stub onto the exposed pad ``epc``), (x, y) mm each, for a stub of half-width ``h``."""
     cx, cy = (c.a[0] + c.b[0]) / 2, (c.a[1] + c.b[1]) / 2

@@ -97,7 +97,8 @@ def _drawing_nodes(b: Board) -> list[tuple]:
     """The outline on Edge.Cuts, the rigid pad's outline on Dwgs.User, and the label lines as top silk."""
     x0, y0, x1, y1 = b.outline
     cx, cy, r = b.pad_circle
-    out = [("gr_rect", ("start", x0, y0), ("end", x1, y1), ("layer", "Edge.Cuts"), ("width", 0.1), ("fill", Sym("none")))]
+    out: list[tuple] = [("gr_rect", ("start", x0, y0), ("end", x1, y1), ("layer", "Edge.Cuts"), ("width", 0.1),
+                         ("fill", Sym("none")))]
     if b.pad_hull:
         pts = outline.polygon(list(b.pad_hull), r, 72)
         out.append(("gr_poly", ("pts", *[("xy", round(x, 4), round(y, 4)) for x, y in pts]), ("layer", "Dwgs.User"),

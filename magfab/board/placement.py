@@ -68,7 +68,7 @@ def place(design: Design) -> tuple[list[Placed], Box, tuple[float, float, float]
     hw, hh = pcb.width_mm / 2, pcb.height_mm / 2
     outline = (ox - hw, oy - hh - _reference_room(design), ox + hw, oy + hh)
     if design.array is not None:
-        _array_fits(design, hw, hh)
+        _array_fits(design.array.pad_extent_mm, hw, hh)
     for key, half in (("pcb.width_mm", hw), ("pcb.height_mm", hh)):
         if half < design.pad_radius_mm + PAD_KEEPOUT_MARGIN_MM:
             raise SpecError(key, 2 * half, f"must be at least {2 * (design.pad_radius_mm + PAD_KEEPOUT_MARGIN_MM):g} mm "
@@ -96,9 +96,10 @@ def pad_hull(design: Design) -> tuple[tuple[float, float], ...]:
     return tuple((round(ox + x, 6), round(oy - y, 6)) for x, y in hull)
 
 
-def _array_fits(design: Design, hw: float, hh: float) -> None:
-    """An array's pad (the hull grown by its radius) and the margin fit on the board, or one SpecError."""
-    x0, y0, x1, y1 = design.array.pad_extent_mm
+def _array_fits(pad_extent_mm: tuple[float, float, float, float], hw: float, hh: float) -> None:
+    """An array's pad (the hull grown by its radius, ``pad_extent_mm``) and the margin fit on the board, or one
+    SpecError."""
+    x0, y0, x1, y1 = pad_extent_mm
     m = PAD_KEEPOUT_MARGIN_MM
     for key, half, need in (("pcb.width_mm", hw, max(-x0, x1) + m), ("pcb.height_mm", hh, max(-y0, y1) + m)):
         if half < need:
@@ -285,6 +286,7 @@ def label(design: Design, outline: Box, parts: list[Placed], circle: tuple[float
     if design.array is not None:
         t = design.taxels
         arr = design.spec.array
+        assert arr is not None  # an array layout is derived from the spec's array only
         shape = f"{arr.rows}x{arr.cols}" if arr.positions_mm is None else f"{len(t)}-taxel"
         address = f"{shape} array: MLX90393 0x{t[0].i2c_address:02X}-0x{t[-1].i2c_address:02X}"
     ref = reference_chip(design)

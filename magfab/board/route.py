@@ -33,6 +33,8 @@ SOFT_COST = 2.0  # per grid step through another connection's track, in a rip-up
 MAX_EXPANSIONS = 80_000  # a search that needs more is treated as blocked (fails in well under 1 s)
 HEURISTIC_WEIGHT = 1.5  # weighted A*: paths within 1.5x of the cheapest, an order of magnitude fewer nodes
 
+Point = tuple[float, float]  # (x, y) mm
+
 
 @dataclass(frozen=True)
 class Copper:
@@ -97,7 +99,7 @@ def _pt_rect(px: float, py: float, lo, hi) -> float:
     return math.hypot(dx, dy)
 
 
-def _seg_rect(a, b, lo, hi) -> float:
+def _seg_rect(a: Point, b: Point, lo: Point, hi: Point) -> float:
     if _pt_rect(*a, lo, hi) == 0.0 or _pt_rect(*b, lo, hi) == 0.0:
         return 0.0
     corners = [lo, (hi[0], lo[1]), hi, (lo[0], hi[1])]

@@ -79,6 +79,7 @@ def design_findings(design: Design) -> list[Finding]:
 def _array_pad_walls(design: Design) -> tuple[float, float]:
     """An array pad's thinnest wall outside an alignment hole (to the pad's outline, the taxels' hull grown by the
     pad radius) and web between a hole and a centring lip (round each tip, or round the skin)."""
+    assert design.array is not None  # called for an array only
     hull = list(design.array.hull_mm)
     rim = web = math.inf
     for x, y, d in design.alignment_holes:

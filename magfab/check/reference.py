@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from typing import Any
+
 from ..design import Design
 from ..errors import Finding, Severity
 from ..models.reference import Travel, site
@@ -9,7 +12,7 @@ from ..models.reference import Travel, site
 __all__ = ["reference_findings"]
 
 
-def reference_findings(design: Design, section: dict[str, object] | None) -> list[Finding]:
+def reference_findings(design: Design, section: Mapping[str, Any] | None) -> list[Finding]:
     """The reference chip as findings: a warning when the magnets are heard at its place (it would subtract the
     taxels' own presses), info with what it rejects otherwise."""
     if section is None:

@@ -7,7 +7,7 @@ import csv
 import io
 import math
 from collections.abc import Mapping
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from ..board.placement import board_size_mm
 from ..models.silicone import quantities
@@ -125,7 +125,7 @@ def _sensor_rows(design: Design) -> list[dict[str, object]]:
     return rows
 
 
-def _bench_rows(design: Design, acceptance: Mapping[str, object] | None) -> list[dict[str, object]]:
+def _bench_rows(design: Design, acceptance: Mapping[str, Any] | None) -> list[dict[str, object]]:
     """What reads, wires and calibrates the sensor: microcontroller, level shifter, cable, the calibration rig
     and the acceptance test's weight (when the build has acceptance bands)."""
     n = design.spec.fabrication.sensors
@@ -154,7 +154,7 @@ def _bench_rows(design: Design, acceptance: Mapping[str, object] | None) -> list
     ]
     weight = acceptance.get("weight_g") if acceptance else None
     if weight:
-        rows.append(_row("Test weight", f"{float(weight):g} g calibration weight",  # type: ignore[arg-type]
+        rows.append(_row("Test weight", f"{float(weight):g} g calibration weight",
                          "the acceptance test's known weight", 1, "pcs", "calibration/acceptance.json weight_g (this build)"))
     return rows
 

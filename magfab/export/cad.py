@@ -53,6 +53,7 @@ def tessellate(solid: cq.Workplane, tolerance_mm: float, angular_tolerance_deg: 
     The deflection is absolute (mm). CadQuery's own ``tessellate`` asks the kernel for a deflection
     *relative* to each edge's size, which on a 12 mm cavity let facets stray ~2x further than asked.
     """
+    import cadquery as cq
     import trimesh
     from OCP.BRep import BRep_Tool
     from OCP.BRepMesh import BRepMesh_IncrementalMesh
@@ -61,7 +62,10 @@ def tessellate(solid: cq.Workplane, tolerance_mm: float, angular_tolerance_deg: 
     from OCP.TopLoc import TopLoc_Location
     from OCP.TopoDS import TopoDS
 
-    shape = solid.val().wrapped
+    value = solid.val()
+    if not isinstance(value, cq.Shape):  # val() may be any CadQuery object; only a shape can be meshed
+        raise TypeError(f"tessellate needs a solid, not a workplane holding a {type(value).__name__}")
+    shape = value.wrapped
     BRepMesh_IncrementalMesh(shape, tolerance_mm, False, math.radians(angular_tolerance_deg), False)
     vertices: list[np.ndarray] = []
     faces: list[np.ndarray] = []

@@ -9,9 +9,9 @@ figures); the templates are in ``templates/checklist/``.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from ..board.placement import board_size_mm
 from ..design import PRY_LIP_MM
@@ -81,7 +81,7 @@ class Section:
     table: Table | None = None  # shown before the steps
 
 
-def _section(title: str, steps: list[str | Step], table: Table | None = None) -> Section:
+def _section(title: str, steps: Sequence[str | Step], table: Table | None = None) -> Section:
     return Section(title, tuple(s if isinstance(s, Step) else Step(s) for s in steps), table)
 
 
@@ -98,7 +98,7 @@ def _q(recipe: Recipe, key: str) -> float | None:
     return recipe[key].nominal if key in recipe.quantities else None
 
 
-def _parts_section(design: Design, acceptance: Mapping[str, object] | None) -> Section:
+def _parts_section(design: Design, acceptance: Mapping[str, Any] | None) -> Section:
     rows = tuple((str(r["item"]), str(r["part"]), f"{r['quantity']:g} {r['unit']}")
                  for r in bom_rows(design, acceptance))
     return _section("Parts", ["Check you have every part in the table before you start (bom.csv lists the same "
@@ -357,31 +357,31 @@ def _calibrate_section(design: Design, plan: ScanPlan | None) -> Section:
     ])
 
 
-def _acceptance_section(acceptance: Mapping[str, object] | None, design: Design | None = None) -> Section:
-    rest = acceptance.get("rest_Bz_uT") if acceptance else None
-    weight = acceptance.get("weight_g") if acceptance else None
-    delta = acceptance.get("delta_Bz_uT") if acceptance else None
+def _acceptance_section(acceptance: Mapping[str, Any] | None, design: Design | None = None) -> Section:
+    doc = acceptance or {}
+    rest, weight, delta = doc.get("rest_Bz_uT"), doc.get("weight_g"), doc.get("delta_Bz_uT")
     if design is not None and design.array is not None:
-        return _section("Acceptance test", acceptance_steps(design, float(weight or 50)))  # type: ignore[arg-type]
+        return _section("Acceptance test", acceptance_steps(design, float(weight or 50)))
     if not (rest and weight and delta):
         return _section("Acceptance test", [
             "This build has no acceptance bands (no calibration/acceptance.json: the prediction gave no weight that "
             "fits the range), so there is no check to run; compare the streamed forces with a known weight by hand."])
-    w = float(weight)  # type: ignore[arg-type]
-    flags = acceptance_json.drift_flags(acceptance)
+    w = float(weight)
+    flags = acceptance_json.drift_flags(doc)
     then = " then to turn the sensor over and to warm it (below)," if flags else ""
     return _section("Acceptance test", [
         Step(f"From the build folder, with nothing touching the tip, run the check: it reads the field at rest, then "
              f"asks you to put the {w:g} g weight on the tip,{then} waiting for Enter at each step.",
              (f"magfab-readout check --weight-g {w:g}{flags}",)),
-        f"Pass: Bz at rest within {rest[0]:.0f} to {rest[1]:.0f} uT (positive: magnet the right way up), and a {w:g} g "  # type: ignore[index]
-        f"weight raises Bz by {delta[0]:.0f} to {delta[1]:.0f} uT.",  # type: ignore[index]
+        f"Pass: Bz at rest within {rest[0]:.0f} to {rest[1]:.0f} uT (positive: magnet the right way up), and a {w:g} g "
+        f"weight raises Bz by {delta[0]:.0f} to {delta[1]:.0f} uT.",
         "A fail names the step and the measured and predicted values: a weak or strong field points at the magnet grade "
         "or the stack-up, a negative one at an upside-down magnet, a small rise at a stiff batch of silicone.",
-    ] + _drift_steps(acceptance))
+        *_drift_steps(doc),
+    ])
 
 
-def _drift_steps(acceptance: Mapping[str, object]) -> list[str]:
+def _drift_steps(acceptance: Mapping[str, Any]) -> list[str]:
     """The check's turn-over and warm-up steps (magfab.models.acceptance_steps), when acceptance.json has them."""
     rot, warm = acceptance.get("rotation"), acceptance.get("warmup")
     if not rot and not warm:
@@ -408,7 +408,7 @@ def _drift_steps(acceptance: Mapping[str, object]) -> list[str]:
     return out
 
 
-def sections(design: Design, acceptance: Mapping[str, object] | None = None,
+def sections(design: Design, acceptance: Mapping[str, Any] | None = None,
              plan: ScanPlan | None = None) -> list[Section]:
     """The checklist as :class:`Section` s of :class:`Step` s: plain text with the spec's, the design's and the
     recipes' numbers filled in; the Markdown and HTML templates only lay it out (and escape it). ``plan``: the
@@ -420,13 +420,13 @@ def sections(design: Design, acceptance: Mapping[str, object] | None = None,
             _calibrate_section(design, plan), _acceptance_section(acceptance, design)]
 
 
-def checklist_md(design: Design, acceptance: Mapping[str, object] | None = None,
+def checklist_md(design: Design, acceptance: Mapping[str, Any] | None = None,
                  plan: ScanPlan | None = None) -> str:
     return render("checklist/checklist.md.j2", spec=design.spec, q=quantities(design),
                   sections=sections(design, acceptance, plan))
 
 
-def checklist_html(design: Design, acceptance: Mapping[str, object] | None = None,
+def checklist_html(design: Design, acceptance: Mapping[str, Any] | None = None,
                    plan: ScanPlan | None = None) -> str:
     return render("checklist/checklist.html.j2", spec=design.spec, q=quantities(design),
                   sections=sections(design, acceptance, plan))

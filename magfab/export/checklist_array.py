@@ -41,7 +41,7 @@ def address_rows(design: Design) -> tuple[tuple[str, ...], ...]:
 
 def chips_text(design: Design) -> str:
     """The chips to place, by designator and order code (they look alike: the code is on the reel, not the part)."""
-    by_code = {}
+    by_code: dict[str, list[str]] = {}
     for t in design.taxels:
         by_code.setdefault(t.option_code, []).append(f"U{t.index + 1}")
     return "; ".join(f"{', '.join(us)} from the -{code} reel" for code, us in sorted(by_code.items()))

@@ -67,6 +67,8 @@ def _pitch(plt, xt: Crosstalk):
 
 
 def _coupling(plt, xt: Crosstalk):
+    if xt.coupling_curve is None:
+        raise ValueError("separate skins have no coupling curve to draw")
     r, c = xt.coupling_curve
     depth = xt.coupling_depth_mm
     fig, ax = plt.subplots(figsize=(5.4, 3.4), layout="constrained")

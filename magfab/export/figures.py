@@ -10,13 +10,16 @@ import math
 import re
 import textwrap
 from collections.abc import Callable, Mapping, Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..models import field as fieldmod
 
 if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+    from matplotlib.typing import RcKeyType
+
     from ..design import Design
     from ..models.predict import Prediction
 
@@ -65,7 +68,7 @@ def _plain_log_ticks(fig) -> None:
 
 #: matplotlib settings every plot is drawn and saved under: the SVG's ids from a fixed salt (byte-identical
 #: rebuilds), text as paths (no font needed to view it).
-RC = {"svg.hashsalt": "magfab", "svg.fonttype": "path", "path.simplify": True}
+RC: dict[RcKeyType, object] = {"svg.hashsalt": "magfab", "svg.fonttype": "path", "path.simplify": True}
 
 
 def _legend_below(fig, handles: Sequence, ncol: int, fontsize: float = 7.5) -> None:
@@ -238,7 +241,7 @@ def bench_panels(table: Sequence[Mapping[str, object]]) -> list[tuple[str, str, 
     return [(*key, rows) for key, rows in panels.items()]
 
 
-def is_reference(row: Mapping[str, object]) -> bool:
+def is_reference(row: Mapping[str, Any]) -> bool:
     """A reference row: its error is 0 by definition (it is what the others are measured against)."""
     return float(row["error"]) == 0.0
 
@@ -303,8 +306,10 @@ def _place_labels(fig, ax, items: Sequence[tuple[float, float, str]]) -> None:
                     ann.remove()
                 if best[0] == 0.0:
                     break
+            assert best is not None  # the ring's first place is always taken
             if best[0] == 0.0:
                 break
+        assert best is not None
         placed.append(best[2])
 
 
@@ -353,10 +358,10 @@ def _speed_panel(ax, strip, design, family, reference, unit, rows, chosen) -> li
 def _speed_legend(fig, design: Design) -> None:
     from matplotlib.lines import Line2D
 
-    grey = {"color": "0.45", "ls": "none", "ms": 6}
     _legend_below(fig, [
-        Line2D([], [], marker="o", label="closed form or surrogate, measured", **grey),
-        Line2D([], [], marker="s", label="finite element (its mesh in the label), measured", **grey),
+        Line2D([], [], marker="o", label="closed form or surrogate, measured", color="0.45", ls="none", ms=6),
+        Line2D([], [], marker="s", label="finite element (its mesh in the label), measured", color="0.45", ls="none",
+               ms=6),
         Line2D([], [], marker="o", mfc="none", mec="k", mew=1.6, ls="none", ms=7, label="ringed: used in this build"),
         Line2D([], [], marker="*", color="#e6a800", mec="k", mew=0.5, ls="none", ms=9,
                label="the reference: error 0 by definition, its time only"),
@@ -403,7 +408,7 @@ MAKERS: dict[str, Callable] = {"field_axis": _axis_field, "field_contours": _con
                                "sensitivity": _sensitivity}
 
 
-def draw(design: Design, pred: Prediction, bench_table: Sequence[Mapping[str, object]] = ()) -> dict[str, object]:
+def draw(design: Design, pred: Prediction, bench_table: Sequence[Mapping[str, object]] = ()) -> dict[str, Figure]:
     """{file stem: matplotlib Figure}, open (the caller closes them); for :func:`figures` and the tests."""
     import matplotlib
 

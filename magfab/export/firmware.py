@@ -195,12 +195,13 @@ def chip_config(design: Design) -> ChipConfig:
 
 def raw_words(chip: ChipConfig, b_uT: tuple[float, float, float], t_C: float = 25.0) -> tuple[int, int, int, int]:
     """(T, X, Y, Z) words the chip would send for a field in microtesla (rounded, clipped at the output limit)."""
-    words = []
+    words: list[int] = []
     for value, lsb in zip(b_uT, (chip.lsb_xy_uT, chip.lsb_xy_uT, chip.lsb_z_uT)):
         c = max(-chip.raw_limit, min(chip.raw_limit, round(value / lsb)))
         words.append(c & 0xFFFF if chip.raw_signed else chip.raw_zero + c)
     t = min(0xFFFF, max(0, round(TEMPERATURE_RAW_25C + (t_C - 25.0) * TEMPERATURE_LSB_PER_C)))
-    return (t if chip.temperature else 0, *words)  # type: ignore[return-value]
+    x, y, z = words
+    return (t if chip.temperature else 0, x, y, z)
 
 
 def _uart(baud: int) -> tuple[int, float]:
@@ -260,7 +261,8 @@ def image_settings(design: Design) -> dict[str, Any]:
     flags = ((ee.FLAG_BURST if chip.burst else 0) | (ee.FLAG_TEMPERATURE if chip.temperature else 0)
              | (ee.FLAG_TEXT if _value(fw.output) == "text" else 0) | (ee.FLAG_RAW_SIGNED if chip.raw_signed else 0))
     regs = {reg: (mask, value) for reg, mask, value in chip.registers}
-    array = {} if design.array is None else {"taxel_addresses": [t.i2c_address for t in design.taxels]}
+    array: dict[str, object] = {} if design.array is None else {
+        "taxel_addresses": [t.i2c_address for t in design.taxels]}
     ref = reference_chip(design)
     if ref is not None:  # the record's reference block (version 5)
         array = {"reference": ref.i2c_address, "reference_shift": REFERENCE_SHIFT}

@@ -13,6 +13,7 @@ import json
 import os
 import re
 import sys
+from collections.abc import Callable
 
 import pcbnew
 
@@ -115,4 +116,5 @@ def footprint(lib, name):
 
 if __name__ == "__main__":
     command, args = sys.argv[1], sys.argv[2:]
-    {"plot": plot, "inspect": inspect, "drc": drc, "footprint": footprint}[command](*args)
+    commands: dict[str, Callable[..., None]] = {"plot": plot, "inspect": inspect, "drc": drc, "footprint": footprint}
+    commands[command](*args)

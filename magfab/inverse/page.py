@@ -16,7 +16,7 @@ from .pareto import front_mask
 from .space import candidate_spec
 from .study import tally
 from .tables import rows, write_table
-from .targets import OBJECTIVES, Models
+from .targets import OBJECTIVES, Models, Objective
 
 if TYPE_CHECKING:
     from .result import DesignResult
@@ -137,7 +137,7 @@ def _zoom(ax, v: np.ndarray, a: int, b: int) -> None:
 
 
 def _arrow(objective: str) -> str:
-    return " (lower is better)" if OBJECTIVES[objective] == "minimize" else " (higher is better)"
+    return " (lower is better)" if OBJECTIVES[Objective(objective)] == "minimize" else " (higher is better)"
 
 
 def _fmt(v: Any) -> str:
@@ -166,7 +166,7 @@ def _parts(result: DesignResult) -> list[tuple[str, Any]]:
     parts: list[tuple[str, Any]] = [
         ("h1", f"Design study: {t.name}"),
         ("p", "Requirements: " + ", ".join(f"{k} = {v:g}" for k, v in req.items()) + ". Objectives: "
-         + ", ".join(f"{o} ({OBJECTIVES[o]})" for o in objs) + "."),
+         + ", ".join(f"{o} ({OBJECTIVES[Objective(o)]})" for o in objs) + "."),
         ("p", f"The search evaluated {len(result.trials)} designs with {how}: {states['ok']} meet every requirement, "
               f"{states['infeasible']} do not, {states['failed']} could not be evaluated (trials.csv gives each "
               f"reason). {again}"),

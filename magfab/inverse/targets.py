@@ -40,7 +40,7 @@ import json
 import tomllib
 from enum import Enum
 from pathlib import Path
-from typing import Any, Union
+from typing import Any, Literal, Union
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_serializer, field_validator
 
@@ -62,10 +62,12 @@ class Objective(str, Enum):
     HEIGHT = "height_mm"
 
 
+Direction = Literal["minimize", "maximize"]
 #: Objective -> "minimize" or "maximize".
-OBJECTIVES = {Objective.NORMAL_RESOLUTION: "minimize", Objective.SHEAR_RESOLUTION: "minimize",
-              Objective.NORMAL_RANGE: "maximize", Objective.SHEAR_RANGE: "maximize",
-              Objective.DIAMETER: "minimize", Objective.HEIGHT: "minimize"}
+OBJECTIVES: dict[Objective, Direction] = {
+    Objective.NORMAL_RESOLUTION: "minimize", Objective.SHEAR_RESOLUTION: "minimize",
+    Objective.NORMAL_RANGE: "maximize", Objective.SHEAR_RANGE: "maximize",
+    Objective.DIAMETER: "minimize", Objective.HEIGHT: "minimize"}
 
 
 class _Table(BaseModel):
@@ -197,10 +199,12 @@ def _known(values: list[str], known: list[str], where: str) -> list[str]:
 class Chip(_Table):
     """Register fields every candidate uses: the spec's [sensor] fields themselves (defaults, bounds, descriptions)."""
 
-    gain_sel: int = Sensor.model_fields["gain_sel"]
-    resolution: int = Sensor.model_fields["resolution"]
-    osr: int = Sensor.model_fields["osr"]
-    dig_filt: int = Sensor.model_fields["dig_filt"]
+    # pydantic takes a FieldInfo as the field's whole definition; mypy sees only an int declared as a FieldInfo.
+
+    gain_sel: int = Sensor.model_fields["gain_sel"]  # type: ignore[assignment]
+    resolution: int = Sensor.model_fields["resolution"]  # type: ignore[assignment]
+    osr: int = Sensor.model_fields["osr"]  # type: ignore[assignment]
+    dig_filt: int = Sensor.model_fields["dig_filt"]  # type: ignore[assignment]
 
 
 class Sampler(str, Enum):
@@ -251,7 +255,7 @@ class Targets(_Table):
             raise ValueError("must name distinct objectives")
         return names
 
-    def directions(self) -> list[str]:
+    def directions(self) -> list[Direction]:
         return [OBJECTIVES[o] for o in self.objectives]
 
     def sha256(self) -> str:

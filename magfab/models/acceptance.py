@@ -76,6 +76,7 @@ from dataclasses import asdict, dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .. import __version__
 from ..errors import ModelLimitError
@@ -193,10 +194,10 @@ def _weight_for(range_N: float) -> float:
 
 def _data(prediction: Prediction | Mapping[str, Any]) -> Mapping[str, Any]:
     """predictions.json's content, from a Prediction or as read from the file."""
-    return prediction.as_json() if hasattr(prediction, "as_json") else prediction  # type: ignore[return-value]
+    return prediction.as_json() if hasattr(prediction, "as_json") else prediction
 
 
-def _bz(radius: float, height: float, br: float, d: np.ndarray) -> np.ndarray:
+def _bz(radius: float, height: float, br: float, d: ArrayLike) -> np.ndarray:
     """Bz in G on the axis, at distances ``d`` (mm) below the magnet's lower face."""
     d = np.asarray(d, dtype=float)
     if np.any(d <= 0.05):

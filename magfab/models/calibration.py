@@ -60,6 +60,7 @@ from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..errors import InputError, ScanError
 from ..formats import calibration_json
@@ -215,7 +216,7 @@ class Calibration:
     mls: MLSModel | None = None
     thermal: ThermalFit | None = None
 
-    def corrected(self, B_uT: object, temperature_C: object = None) -> np.ndarray:
+    def corrected(self, B_uT: ArrayLike, temperature_C: ArrayLike | None = None) -> np.ndarray:
         """Readings B_uT (N, 3) uT as at the calibration's temperature (``thermal``: B_k / (1 + a_k (T - T0)))
         given the chip temperatures (N,) degC; unchanged without temperatures or without ``thermal``."""
         b = _readings(B_uT)
@@ -224,7 +225,7 @@ class Calibration:
         t = np.broadcast_to(np.asarray(temperature_C, dtype=float), (len(b),))
         return correct(b, t, self.thermal.reference_C, self.thermal.coefficient_per_C)
 
-    def model(self, B_uT: object, method: str | None = None) -> np.ndarray:
+    def model(self, B_uT: ArrayLike, method: str | None = None) -> np.ndarray:
         """Untared (Fz, Fr), N, (N, 2), at field readings B_uT (N, 3) uT, by ``method`` (default: the
         calibration's own; "poly" gives what the firmware computes)."""
         b = _readings(B_uT)
@@ -244,8 +245,8 @@ class Calibration:
             raise CalibrationError(f"method must be 'poly' or 'mls'; instead received {method!r}")
         return _basis(u, v, self.order) @ self.coefficients
 
-    def evaluate(self, B_uT: object, method: str | None = None,
-                 temperature_C: object = None) -> tuple[np.ndarray, np.ndarray]:
+    def evaluate(self, B_uT: ArrayLike, method: str | None = None,
+                 temperature_C: ArrayLike | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Force (Fx, Fy, Fz) in N, (N, 3), and in_region (N,) bool, from field readings B_uT (N, 3) uT
         (a single (3,) reading gives (3,) and a bool array of shape ()); with the chip's ``temperature_C``
         (N,) degC the readings are first corrected (:meth:`corrected`).
@@ -267,7 +268,7 @@ class Calibration:
             return f[0], inside[0]
         return f, inside
 
-    def zeroed(self, B_rest_uT: object) -> Calibration:
+    def zeroed(self, B_rest_uT: ArrayLike) -> Calibration:
         """The calibration with its tare set to the mean untared (Fz, Fr) over readings taken at rest."""
         raw = self.model(B_rest_uT)
         if not np.isfinite(raw).all():
@@ -335,11 +336,11 @@ def _thermal_of(doc: Mapping[str, object], t: calibration_json.Thermal | None) -
     unc = node.get("uncertainty_per_C")
     return ThermalFit(t.reference_C, t.coefficient_per_C, t.source,
                       tuple(float(unc[a]) for a in calibration_json.AXES) if isinstance(unc, Mapping) else None,  # type: ignore[arg-type]
-                      float(node.get("span_C", 0.0)), float(node.get("recipe_per_C", t.coefficient_per_C[2])),  # type: ignore[arg-type]
+                      float(node.get("span_C", 0.0)), float(node.get("recipe_per_C", t.coefficient_per_C[2])),
                       str(node.get("note", "")))
 
 
-def _readings(B_uT: object) -> np.ndarray:
+def _readings(B_uT: ArrayLike) -> np.ndarray:
     b = np.asarray(B_uT, dtype=float)
     if b.ndim == 1 and b.shape[0] == 3:
         b = b[None, :]
@@ -536,8 +537,8 @@ def _shear_sign(scan: Scan) -> int:
 def _chip_json(design: Design) -> tuple[dict[str, object], float]:
     """The ``chip`` object and the RMS xy field noise (uT) predicted for the spec's chip settings."""
     chip = chip_setting(design)
-    doc = {"gain_sel": chip.gain_sel, "resolution": chip.resolution, "osr": chip.osr, "dig_filt": chip.dig_filt,
-           "lsb_xy_uT": chip.lsb_xy_uT, "lsb_z_uT": chip.lsb_z_uT}
+    doc: dict[str, object] = {"gain_sel": chip.gain_sel, "resolution": chip.resolution, "osr": chip.osr,
+                              "dig_filt": chip.dig_filt, "lsb_xy_uT": chip.lsb_xy_uT, "lsb_z_uT": chip.lsb_z_uT}
     return doc, noise(design, chip)["total_xy_G"] * UT_PER_GAUSS
 
 
@@ -549,13 +550,14 @@ def fit(scan: Scan, design: Design, *, mls: bool = True) -> FitResult:
     if scan.rows < MIN_ROWS:
         raise ScanError(f"scan {scan.source}: {scan.rows} rows; a calibration needs at least {MIN_ROWS}")
     check_calibration_scan(scan)  # force columns, plausible values, (Bz, Br) spanning an area: before any work
-    assert scan.F_N is not None
-    thermal = fit_thermal(scan.B_uT, scan.F_N, scan.temperature_C, design, cal.order)
+    F_N = scan.F_N  # the scan's forces: the temperature correction below replaces only its field
+    assert F_N is not None
+    thermal = fit_thermal(scan.B_uT, F_N, scan.temperature_C, design, cal.order)
     if scan.temperature_C is not None:  # every fit below sees the field as at the calibration's temperature
         scan = replace(scan, B_uT=correct(scan.B_uT, scan.temperature_C, thermal.reference_C,
                                           thermal.coefficient_per_C))
     bz, br = scan.B_uT[:, 2], scan.Br_uT
-    y = np.column_stack([scan.F_N[:, 2], scan.Fr_N])
+    y = np.column_stack([F_N[:, 2], scan.Fr_N])
     scaling = Scaling.of(bz, br)
     u, v = scaling(bz, br)
     chip, noise_xy_uT = _chip_json(design)

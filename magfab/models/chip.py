@@ -6,21 +6,21 @@ read, and the firmware too, so importing the firmware renderer does not load the
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from ..units import GAUSS_PER_MT, UT_PER_GAUSS
 
 if TYPE_CHECKING:
     from ..design import Design
+    from ..recipes import Recipe
 
 __all__ = ["ChipSetting", "chip_setting", "conversion_us", "noise"]
 
 G_PER_UT = 1.0 / UT_PER_GAUSS
 
 
-def conversion_us(chip: Mapping[str, Any], osr: int, dig_filt: int, temperature: bool, axes: int = 3) -> float:
+def conversion_us(chip: Recipe, osr: int, dig_filt: int, temperature: bool, axes: int = 3) -> float:
     """One measurement of ``axes`` magnetic axes (and T), us, from the datasheet's table of full (ZYXT)
     measurements in the recipe (``tconv_osr<o>_dig_filt<d>_ms``); fewer channels take off the Table 8 formula's
     per-channel time (TCONVM per axis, TCONVT for T at OSR2 = 0)."""

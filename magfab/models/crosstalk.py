@@ -37,7 +37,8 @@ from .mechanics.coupling import coupling
 from .taxels import array_field
 
 if TYPE_CHECKING:
-    from ..design import Design
+    from ..design import ArrayLayout, Design
+    from ..spec import Array
     from .predict import Prediction
 
 __all__ = ["Crosstalk", "crosstalk", "layout_errors", "compensated_errors", "pitch_budget", "least_pitch",
@@ -105,7 +106,7 @@ def compensated_errors(design: Design, loads: _Loads, xy: np.ndarray,
 
     taxels = tuple(replace(t, x_mm=float(x), y_mm=float(y), polarity=int(sg))
                    for t, (x, y), sg in zip(design.taxels, xy, signs))
-    field = array_field(replace(design, array=replace(design.array, taxels=taxels)))
+    field = array_field(replace(design, array=replace(_arrays(design)[0], taxels=taxels)))
     doc = {"format": array_json.FORMAT, "dynamic": True, **field.as_json(),
            "taxels": [{"index": t.index, "polarity": t.polarity, "i2c_address": t.i2c_address, "calibration": "-"}
                       for t in taxels]}
@@ -215,7 +216,7 @@ class Crosstalk:
 def _signs(design: Design, alternating: bool) -> np.ndarray:
     """Polarities for the layout: the design's own where it alternates, else a checkerboard (by grid cell, or by
     index for explicit positions) when asked to alternate."""
-    arr = design.spec.array
+    arr = _arrays(design)[1]
     if not alternating:
         return np.ones(len(design.taxels))
     if arr.positions_mm is not None:
@@ -265,7 +266,7 @@ def pitch_budget(design: Design, loads: _Loads, signs: np.ndarray, curve, pitch_
     every neighbour pressed at once; ``compensate``: what the host's compensation leaves of the field part."""
     xy = np.array([[t.x_mm, t.y_mm] for t in design.taxels])
     centre = xy.mean(axis=0)
-    scaled = centre + (xy - centre) * (pitch_mm / design.array.pitch_mm)
+    scaled = centre + (xy - centre) * (pitch_mm / _arrays(design)[0].pitch_mm)
     f, cm = compensated_errors(design, loads, scaled, signs) if compensate else layout_errors(loads, scaled, signs)[:2]
     return float(np.maximum((f + _mechanical(design, loads, scaled, curve)[1]).max(axis=1), cm).max())
 
@@ -305,13 +306,20 @@ def magnet_forces(loads: _Loads, xy: np.ndarray, signs: np.ndarray) -> np.ndarra
     return out
 
 
+def _arrays(design: Design) -> tuple[ArrayLayout, Array]:
+    """The design's array layout and the spec's [array] section; ValueError for a single taxel's design."""
+    if design.array is None or design.spec.array is None:
+        raise ValueError(f"{design.spec.name!r} is a single taxel: crosstalk is an array's")
+    return design.array, design.spec.array
+
+
 def crosstalk(design: Design, pred: Prediction) -> Crosstalk:
     """The budget of ``design``'s array (``design.array`` must not be None)."""
-    arr = design.array
+    arr, spec_arr = _arrays(design)
     loads = _Loads.of(design, pred)
     xy = np.array([[t.x_mm, t.y_mm] for t in design.taxels])
     signs = np.array([float(t.polarity) for t in design.taxels])
-    tol = design.spec.array.crosstalk_mN or pred.normal.resolution_mN
+    tol = spec_arr.crosstalk_mN or pred.normal.resolution_mN
     sweep = np.geomspace(arr.min_pitch_mm, max(4.0 * arr.pitch_mm, 60.0), SWEEP_POINTS)
     span = float(_distances(xy).max()) / arr.pitch_mm
     curve, depth = None, 0.0

@@ -35,7 +35,7 @@ import itertools
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -179,12 +179,14 @@ def force_error_mN(channel: Channel, force_N: object, field_read_G: object) -> n
 # Temperature
 
 
-def temperature_read_G(b_G: object, dT_C: object, *, alpha_pct: float, sensitivity_pct: float = 0.0,
-                       offset_G_per_C: float = 0.0, magnet_dT_C: object | None = None,
+def temperature_read_G(b_G: object, dT_C: object, *, alpha_pct: float | np.ndarray,
+                       sensitivity_pct: float | np.ndarray = 0.0, offset_G_per_C: float | np.ndarray = 0.0,
+                       magnet_dT_C: object | None = None,
                        compensation: tuple[float, object] | None = None) -> np.ndarray:
     """The field read at a chip temperature ``dT_C`` from the calibration's, G, for a field ``b_G`` at the
     calibration temperature: the magnet (at ``magnet_dT_C``, default the chip's) scaled by 1 + alpha dT, the chip's
-    sensitivity by 1 + s dT and its offset o dT (coefficients in %/C and G/C). ``compensation`` = (alpha_pct the
+    sensitivity by 1 + s dT and its offset o dT (coefficients in %/C and G/C: numbers, or arrays that broadcast
+    against the field, one row per corner of the bands). ``compensation`` = (alpha_pct the
     firmware uses, the temperature difference it reads): the reading divided by 1 + alpha dT_read."""
     b, dT = np.asarray(b_G, dtype=float), np.asarray(dT_C, dtype=float)
     dTm = dT if magnet_dT_C is None else np.asarray(magnet_dT_C, dtype=float)
@@ -403,7 +405,7 @@ class Drift:
     (mN) and the chip's noise (G RMS)."""
 
     coefficients: Coefficients
-    conditions: Mapping[str, object]
+    conditions: Mapping[str, Any]  # the [environment] table as JSON values, the Earth field filled in
     temperature: TemperatureBudget
     rotation: Disturbance
     rotation_band: tuple[Disturbance, Disturbance]
@@ -451,7 +453,8 @@ def drift(design: Design, pred: Prediction) -> Drift:
         coefficients=coefficients(design), conditions=conditions,
         temperature=temperature_budget(design, pred, normal=normal),
         rotation=rotation_error(design, pred, normal=normal),
-        rotation_band=tuple(rotation_error(design, pred, b, 180.0, normal) for b in (low, high)),  # type: ignore[arg-type]
+        rotation_band=(rotation_error(design, pred, low, 180.0, normal),
+                       rotation_error(design, pred, high, 180.0, normal)),
         stray=stray_error(design, pred, normal=normal),
         resolution_mN={"normal": float(pred.normal.resolution_mN), "shear": float(pred.shear.resolution_mN)},
         noise_G={"z": float(pred.noise.total_z_G), "xy": float(pred.noise.total_xy_G),

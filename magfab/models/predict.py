@@ -30,10 +30,11 @@ Richardson). :class:`Prediction` records which models were used and their errors
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -141,7 +142,7 @@ def normal_curve(design: Design, body: mech.Body, mu: float,
     tol = p.tolerance_pct / 100.0
     name = p.mechanics_model.value
     if name in ("column", "hertz_column"):
-        curve = mech.MODELS[name](body, mu, indentation)
+        curve = mech.MODELS[mech.MechanicsModel(name)](body, mu, indentation)
         return curve, ModelUse("mechanics", name, math.nan,
                                "closed form; its error against the FE model is charted by bench/mechanics.py",
                                "spec"), None
@@ -253,8 +254,9 @@ class Prediction:
     shear: ShearFigures
     noise: Noise
     models: tuple[ModelUse, ...]  # field, mechanics, shear
-    arrays: Mapping[str, np.ndarray] = field(default_factory=dict)
-    timings_s: Mapping[str, float] = field(default_factory=dict)
+    # dataclasses.field by its full name: in this class, `field` is the attribute above
+    arrays: Mapping[str, np.ndarray] = dataclasses.field(default_factory=dict)
+    timings_s: Mapping[str, float] = dataclasses.field(default_factory=dict)
     drift: Drift | None = None  # the drift budget (magfab.models.drift); None where the curve has no inverse
     reference: Mapping[str, object] | None = None  # the reference chip's site and rejection (magfab.models.reference)
 
@@ -417,7 +419,7 @@ def _normal(design: Design, chip: ChipSetting, nz: Mapping[str, float], magnets:
     end_label, limit_note = end
     if end_label:
         limits[end_label] = float(u[-1])
-    binding = min(limits, key=limits.get)
+    binding = min(limits, key=lambda k: limits[k])
     u_max = limits[binding]
     in_range = (u <= u_max + 1e-9) & keep
     f_range = {k: float(np.interp(u_max, u, c.force_N)) for k, c in curves.items()}

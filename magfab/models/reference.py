@@ -274,7 +274,9 @@ def budget(design: Design, pred: Prediction, drift_budget: Drift, chip: Referenc
         moment = float(env["stray_moment_Am2"])
         left = {}
         for name, ratio in (("with_median", rej.dipole_median[k]), ("with_worst", rej.dipole[k])):
-            left[name] = replace(stray_error(design, pred, moment / ratio, stray_mm), what=(
+            reduced = stray_error(design, pred, moment / ratio, stray_mm)
+            assert reduced is not None  # the budget's stray moment is > 0, and stays so divided by a rejection
+            left[name] = replace(reduced, what=(
                 f"{drift_budget.stray.what}, the reference subtracted ({ratio:.2g}x, {name[5:]} over its "
                 "direction and orientation)")).as_json()
         out["stray"] = {"without": drift_budget.stray.as_json(), **left}

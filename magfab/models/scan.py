@@ -100,7 +100,7 @@ def scan_temperature(rows: int, temperature_C: float | tuple[float, float] | Non
     linearly over every row of every pass (so a two-pass scan reads each point at two temperatures)."""
     if temperature_C is None:
         return None
-    start, end = (float(temperature_C), float(temperature_C)) if np.ndim(temperature_C) == 0 else temperature_C
+    start, end = np.broadcast_to(np.asarray(temperature_C, dtype=float), (2,))  # a constant: start = end
     n = rows * passes
     return start + (end - start) * np.arange(n) / max(n - 1, 1)
 

@@ -22,7 +22,7 @@ import math
 from collections.abc import Mapping
 from dataclasses import replace
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -112,9 +112,9 @@ def reject_self_calibrated(scan: Scan, calibration: Calibration, reference_resol
 # Guard C: a scan past the predicted range
 
 
-def _as_json(prediction: Prediction | Mapping[str, object]) -> Mapping[str, object]:
-    as_json = getattr(prediction, "as_json", None)
-    return as_json() if callable(as_json) else prediction  # type: ignore[return-value]
+def _as_json(prediction: Prediction | Mapping[str, object]) -> Mapping[str, Any]:
+    """predictions.json's content (JSON values: read by key, their shape is the file format's)."""
+    return prediction.as_json() if hasattr(prediction, "as_json") else prediction
 
 
 def scan_depth_warnings(scan: Scan, prediction: Prediction | Mapping[str, object]) -> list[str]:
@@ -131,7 +131,7 @@ def scan_depth_warnings(scan: Scan, prediction: Prediction | Mapping[str, object
     doc = _as_json(prediction)
     out = []
     travel = _travel(scan, doc)
-    normal, shear = doc["normal"], doc["shear"]  # type: ignore[index]
+    normal, shear = doc["normal"], doc["shear"]
     if travel is not None:
         ratio, end, beyond = travel
         if beyond:
@@ -146,10 +146,10 @@ def scan_depth_warnings(scan: Scan, prediction: Prediction | Mapping[str, object
             for line in out]
 
 
-def _past_stiffest(force: np.ndarray, axis: str, key: str, figures: Mapping[str, object], rows: int) -> list[str]:
+def _past_stiffest(force: np.ndarray, axis: str, key: str, figures: Mapping[str, Any], rows: int) -> list[str]:
     """A line when ``force`` passes the range of even the stiffest silicone of the band."""
     ranges = {str(k): float(v) for k, v in figures.get("range_by_material_N", {}).items()} or \
-        {"predicted": float(figures["range_N"])}  # type: ignore[union-attr, arg-type]
+        {"predicted": float(figures["range_N"])}
     name, limit_N = max(ranges.items(), key=lambda kv: kv[1])
     beyond = int(np.count_nonzero(force > limit_N))
     if not beyond:
@@ -160,15 +160,15 @@ def _past_stiffest(force: np.ndarray, axis: str, key: str, figures: Mapping[str,
             + _BEYOND.get(ends, "lie outside the predicted range")]
 
 
-def _travel(scan: Scan, doc: Mapping[str, object]) -> tuple[float, float, int] | None:
+def _travel(scan: Scan, doc: Mapping[str, Any]) -> tuple[float, float, int] | None:
     """(|Bz| at its highest over |Bz| at rest in the scan, the same ratio at the end of the normal range, rows
     past it), or None without a rest reading (rows with no force) or the prediction's field at the range's end.
     The ratio does not depend on the magnet's strength (the field scales with its remanence) nor on the
     silicone (the travel at the range's end is the same for every modulus of a neo-Hookean band)."""
-    field = doc.get("field", {})  # type: ignore[union-attr]
+    field = doc.get("field", {})
     end_G, rest_G = field.get("Bz_range_end_strongest_G"), field.get("Bz_rest_G")
     remanence = field.get("remanence_T", {})
-    if end_G is None or not rest_G or not remanence.get("nominal"):
+    if end_G is None or not rest_G or not remanence.get("nominal") or scan.F_N is None:
         return None
     end = float(end_G) / (float(rest_G) * float(remanence["high"]) / float(remanence["nominal"]))
     quiet = (np.abs(scan.F_N[:, 2]) <= 0.02 * max(float(np.max(np.abs(scan.F_N[:, 2]))), 1e-9)) & \
@@ -308,7 +308,7 @@ def merged_csv(scan: Scan) -> bytes:
                            "clock)"]).encode("utf-8")
 
 
-def reject_self_calibrated_file(scan: Scan, path: object, reference_resolution_mN: float) -> None:
+def reject_self_calibrated_file(scan: Scan, path: str | os.PathLike[str], reference_resolution_mN: float) -> None:
     """Guard B against the calibration.json at ``path`` (a build's present one); skipped when that file has gone
     bad: the rebuild replaces it, and there is nothing to compare with."""
 

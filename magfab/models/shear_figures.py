@@ -114,7 +114,7 @@ def shear_figures(design: Design, nz: Mapping[str, float], magnets: Mapping[str,
     over = np.nonzero(br_high > full_scale_xy_G)[0]
     if over.size:
         limits["chip full scale"] = _crossing(r, br_high, full_scale_xy_G, int(over[0]))
-    binding = min(limits, key=limits.get)
+    binding = min(limits, key=lambda k: limits[k])
     shear_range = {k: float(v * limits[binding]) for k, v in ks.items()}
 
     def per_material(values: Mapping[str, np.ndarray]) -> dict[str, tuple[float, ...]]:

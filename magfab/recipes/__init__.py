@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from functools import cache
 from importlib import resources
 from types import MappingProxyType
+from typing import TypeGuard
 
 __all__ = ["Quantity", "Recipe", "catalogue", "KINDS"]
 
@@ -60,7 +61,7 @@ class RecipeError(ValueError):
     """A malformed catalogue file: a bug in the package data, never user input."""
 
 
-def _number(x: object) -> bool:
+def _number(x: object) -> TypeGuard[int | float]:
     return isinstance(x, (int, float)) and not isinstance(x, bool)
 
 

@@ -21,7 +21,7 @@ import base64
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import PurePosixPath
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -163,7 +163,7 @@ def draw_pictures(design: Design, meshes: Mapping[str, trimesh.Trimesh], artifac
 
 
 def render_report(spec: Spec, design: Design, findings: Sequence[Finding], artifacts: Sequence[Artifact],
-                  prediction: Prediction, calibration: Mapping[str, object] | None,
+                  prediction: Prediction, calibration: Mapping[str, Any] | None,
                   meshes: Mapping[str, trimesh.Trimesh], extra_files: Iterable[tuple[str, str]] = (), *,
                   board: Board, pictures: Pictures | None = None) -> bytes:
     """report.html as UTF-8 bytes: one self-contained page for the build (module doc).

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import io
 from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, TypedDict
 from xml.sax.saxutils import escape
 
 import numpy as np
@@ -63,7 +63,16 @@ STACK_STYLE = {
 }
 
 
-def _style(layer: str) -> dict[str, object]:
+class _PatchStyle(TypedDict):
+    """A layer's matplotlib patch keywords: face and edge colours, hatch, line width."""
+
+    fc: str
+    ec: str
+    hatch: str | None
+    lw: float
+
+
+def _style(layer: str) -> _PatchStyle:
     fc, ec, hatch = STACK_STYLE[layer]
     return {"fc": fc, "ec": ec, "hatch": hatch, "lw": 0.7}
 

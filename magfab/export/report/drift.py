@@ -4,8 +4,8 @@ resolution) and its chart, from the prediction's drift budget (:mod:`magfab.mode
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from typing import TYPE_CHECKING
+from collections.abc import Callable, Mapping
+from typing import TYPE_CHECKING, Any
 
 from ..drift_figures import FOLDER
 
@@ -52,7 +52,7 @@ def _rows(d: Drift) -> list[tuple[str, ...]]:
     return rows
 
 
-def _reference_rows(section: dict | None, d: Drift) -> list[tuple[str, ...]]:
+def _reference_rows(section: Mapping[str, Any] | None, d: Drift) -> list[tuple[str, ...]]:
     """The rotation and the stray source again with the reference chip subtracted (predictions.json's
     ``reference``), or none without one."""
     if section is None:
@@ -83,7 +83,7 @@ def drift_context(prediction: Prediction, figures: Callable[[str], list]) -> dic
                f"lag it by {env['temperature_lag_C']:g} C. Resolution {d.resolution_mN['normal']:.2f} mN normal, "
                f"{d.resolution_mN['shear']:.2f} mN shear; field noise {d.noise_G['z']:.3f} G (z), "
                f"{d.noise_G['xy']:.3f} G (x, y) RMS.")
-    ref = prediction.reference
+    ref: Mapping[str, Any] | None = prediction.reference  # the reference section of predictions.json
     if ref is not None:
         chip, rej = ref["chip"], ref["rejection"]
         summary += (f" A reference chip ({chip['designator']}, 0x{chip['i2c_address']:02X}, {chip['separation_mm']:g} mm "

@@ -238,6 +238,7 @@ def part_figure(stem: str, mesh: trimesh.Trimesh) -> bytes:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
 
     colour = PART_VIEWS.get(stem, (stem, "#b0b0b0"))[1]
     bounds = np.asarray(mesh.bounds, dtype=float)
@@ -249,8 +250,11 @@ def part_figure(stem: str, mesh: trimesh.Trimesh) -> bytes:
                "cut at the axis plane y = 0 (cut face red)")
     fig.subplots_adjust(left=0.0, right=1.0, bottom=0.0, top=0.93, wspace=0.0)
     fig.set_dpi(PART_DPI * SUPERSAMPLE)
-    fig.canvas.draw()
-    pixels = np.asarray(fig.canvas.buffer_rgba())[:, :, :3]  # uint8, a view: no float copy of the big canvas
+    canvas = fig.canvas
+    if not isinstance(canvas, FigureCanvasAgg):  # only Agg's canvas lends its pixels (the backend chosen above)
+        raise TypeError(f"matplotlib drew on a {type(canvas).__name__}, not Agg's canvas")
+    canvas.draw()
+    pixels = np.asarray(canvas.buffer_rgba())[:, :, :3]  # uint8, a view: no float copy of the big canvas
     plt.close(fig)
     return _png(_squeeze_blank_rows(_downsample(pixels, SUPERSAMPLE)))
 
@@ -262,8 +266,9 @@ def _downsample(pixels: np.ndarray, k: int) -> np.ndarray:
     never exactly half-way), at a fraction of the cost of a float copy of the whole canvas."""
     h, w = (pixels.shape[0] // k) * k, (pixels.shape[1] // k) * k
     image = pixels[:h, :w].astype(np.uint32)
-    rows = sum(image[i::k] for i in range(k))  # strided adds: far faster than a reduce over a reshaped view
-    sums = sum(rows[:, j::k] for j in range(k))
+    # strided adds: far faster than a reduce over a reshaped view
+    rows = sum((image[i::k] for i in range(1, k)), start=image[0::k])
+    sums = sum((rows[:, j::k] for j in range(1, k)), start=rows[:, 0::k])
     return ((2 * sums + k * k) // (2 * k * k)).astype(np.uint8)
 
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, TypedDict
 from urllib.parse import quote
 
 from ...errors import Finding, Severity
@@ -50,7 +50,7 @@ def _spec_value(value: object, key: str) -> str:
 def spec_sections(spec: Spec) -> list[dict[str, object]]:
     """Every section and key of the spec with its value, meaning and whether it differs from the default."""
     values, defaults = spec.dump(), Spec().model_dump(mode="json")
-    general = {"title": "general", "doc": "", "rows": []}
+    general: dict[str, Any] = {"title": "general", "doc": "", "rows": []}
     sections = [general]
     for name, info in type(spec).model_fields.items():
         if name not in values:  # a single taxel's spec has no [array]
@@ -140,7 +140,7 @@ def prediction_tables(pred: Prediction) -> dict[str, list[tuple[str, str]]]:
     }
 
 
-def key_figures(design: Design, pred: Prediction, calibration: Mapping[str, object] | None,
+def key_figures(design: Design, pred: Prediction, calibration: Mapping[str, Any] | None,
                  findings: Sequence[Finding]) -> list[tuple[str, str, str]]:
     n, s = pred.normal, pred.shear
     out = [
@@ -175,7 +175,7 @@ def model_rows(pred: Prediction) -> list[dict[str, str]]:
             for m in pred.models]
 
 
-def calibration_summary(calibration: Mapping[str, object] | None, tolerance_mN: float) -> dict[str, object] | None:
+def calibration_summary(calibration: Mapping[str, Any] | None, tolerance_mN: float) -> dict[str, object] | None:
     if calibration is None:
         return None
     err = calibration["errors"]
@@ -199,7 +199,23 @@ def _size(n: int | None) -> str:
     return f"{n} B" if n < 1000 else f"{n / 1000:.1f} kB" if n < 1_000_000 else f"{n / 1e6:.2f} MB"
 
 
-def file_groups(artifacts: Sequence[Artifact], extra: Sequence[tuple[str, str]]) -> list[dict[str, object]]:
+class FileRow(TypedDict):
+    """One file of the report's file table (its size as text, empty for an extra file)."""
+
+    path: str
+    href: str
+    description: str
+    size: str
+
+
+class FileGroup(TypedDict):
+    """The files under one top folder ("" for the build's root)."""
+
+    folder: str
+    rows: list[FileRow]
+
+
+def file_groups(artifacts: Sequence[Artifact], extra: Sequence[tuple[str, str]]) -> list[FileGroup]:
     """The file table grouped by top folder (the build's root first), each row linked relatively."""
     rows = [(a.path, a.description, len(a.data)) for a in artifacts] + [(p, d, None) for p, d in extra]
     seen: set[str] = set()
@@ -209,7 +225,7 @@ def file_groups(artifacts: Sequence[Artifact], extra: Sequence[tuple[str, str]])
         if path.startswith("/") or any(part in {"", ".", ".."} for part in path.split("/")) or "\\" in path:
             raise ValueError(f"file {path!r} must be a relative POSIX path inside the build folder")
         seen.add(path)
-    groups: dict[str, list[dict[str, object]]] = {}
+    groups: dict[str, list[FileRow]] = {}
     for path, description, size in sorted(rows, key=lambda r: ("/" in r[0], r[0])):
         folder = path.split("/", 1)[0] + "/" if "/" in path else ""
         groups.setdefault(folder, []).append({"path": path, "href": href(path), "description": description,

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from types import MappingProxyType
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ...spec import FieldModel
 from .closed_forms import dipole, on_axis
@@ -41,9 +42,9 @@ def working_volume(magnet: Magnet, d_min_mm: float, d_max_mm: float, n: int = 24
     r_max = magnet.radius_mm if r_max_mm is None else r_max_mm
     if not (0 <= r_max < math.inf):
         raise ValueError(f"r_max_mm must be finite and >= 0; instead received {r_max_mm!r}")
-    d, r = np.meshgrid(np.linspace(d_min_mm, d_max_mm, n), np.linspace(0.0, r_max, n), indexing="ij")
+    d, r_grid = np.meshgrid(np.linspace(d_min_mm, d_max_mm, n), np.linspace(0.0, r_max, n), indexing="ij")
     phi = np.arange(n * n) * (math.pi * (3.0 - math.sqrt(5.0)))
-    r = r.ravel()
+    r = r_grid.ravel()
     return np.column_stack([r * np.cos(phi), r * np.sin(phi), -(magnet.height_mm / 2.0 + d.ravel())])
 
 
@@ -71,7 +72,7 @@ def _errors(b: np.ndarray, ref: np.ndarray) -> ModelAccuracy:
 
 
 def model_error(model: FieldModel | str | Callable[[Magnet, np.ndarray], np.ndarray], magnet: Magnet,
-                points_mm: object) -> ModelAccuracy:
+                points_mm: ArrayLike) -> ModelAccuracy:
     """Error of ``model`` (a :class:`FieldModel` or its name, evaluated with ``rtol=None``, or a callable
     ``f(magnet, points) -> (N, 3) G``) against :func:`exact` at ``points_mm``."""
     p = _points(points_mm)
@@ -139,7 +140,7 @@ def _sample(p: np.ndarray, size: int) -> np.ndarray:
     return p[sorted(idx)]
 
 
-def choose(magnet: Magnet, points_mm: object, tolerance: float, sample: int = 256) -> Choice:
+def choose(magnet: Magnet, points_mm: ArrayLike, tolerance: float, sample: int = 256) -> Choice:
     """The cheapest model (by ``cost_rank``) whose relative error against :func:`exact`, measured on a
     deterministic sample of ``points_mm`` (at most ``sample`` points plus the extreme ones), is at most
     ``tolerance``. :func:`exact` itself always qualifies (error 0)."""

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.polynomial import legendre
+from numpy.typing import ArrayLike
 
 from ...units import GAUSS_PER_TESLA
 from .magnet import DEFAULT_RTOL, Magnet, _points, _refuse_estimate, _refuse_inside, _shaped
@@ -20,7 +21,7 @@ def _axis_terms(magnet: Magnet, z_mm: np.ndarray) -> tuple[np.ndarray, ...]:
     return az, a, b, np.sqrt(a * a + R2), np.sqrt(b * b + R2)
 
 
-def axis_bz(magnet: Magnet, z_mm: object) -> np.ndarray:
+def axis_bz(magnet: Magnet, z_mm: ArrayLike) -> np.ndarray:
     """Bz on the axis at height z (|z| > H/2), G: docs/models.md, M6, without its cancellation.
 
     M6 is Br_rem/2 [a/sqrt(a^2+R^2) - b/sqrt(b^2+R^2)]; the bracket equals
@@ -33,7 +34,7 @@ def axis_bz(magnet: Magnet, z_mm: object) -> np.ndarray:
     return 0.5 * magnet.remanence_T * GAUSS_PER_TESLA * bracket
 
 
-def axis_dbz_dz(magnet: Magnet, z_mm: object, order: int = 1) -> np.ndarray:
+def axis_dbz_dz(magnet: Magnet, z_mm: ArrayLike, order: int = 1) -> np.ndarray:
     """d^n Bz / dz^n on the axis (n = ``order``, 1 or 2), G/mm^n, for |z| > H/2.
 
     From M6: d/dz [u / sqrt(u^2 + R^2)] = R^2 (u^2 + R^2)^-3/2 and its derivative
@@ -56,7 +57,7 @@ def axis_dbz_dz(magnet: Magnet, z_mm: object, order: int = 1) -> np.ndarray:
     return 0.5 * magnet.remanence_T * GAUSS_PER_TESLA * val
 
 
-def on_axis_error_estimate(magnet: Magnet, points_mm: object) -> np.ndarray:
+def on_axis_error_estimate(magnet: Magnet, points_mm: ArrayLike) -> np.ndarray:
     """Leading-order relative error of :func:`on_axis` at each point, (N,).
 
     Paraxial expansion of an axisymmetric field: B_rho = -r/2 Bz0'(z), Bz = Bz0(z) - r^2/4 Bz0''(z) + ...
@@ -72,7 +73,7 @@ def on_axis_error_estimate(magnet: Magnet, points_mm: object) -> np.ndarray:
     return np.hypot(e1, e2) / np.abs(bz0)
 
 
-def on_axis(magnet: Magnet, points_mm: object, *, rtol: float | None = DEFAULT_RTOL) -> np.ndarray:
+def on_axis(magnet: Magnet, points_mm: ArrayLike, *, rtol: float | None = DEFAULT_RTOL) -> np.ndarray:
     """(0, 0, Bz0(z)) from the axial closed form (docs/models.md, M6), G, at points near the axis (mm).
 
     Raises :class:`FieldModelError` inside or on the magnet, and (unless ``rtol`` is None) where
@@ -132,7 +133,7 @@ def _multipole_magnitude(l: int, mu: np.ndarray) -> np.ndarray:
     return np.sqrt((l + 1) ** 2 * pl * pl + (1.0 - mu * mu) * dpl * dpl)
 
 
-def dipole_error_estimate(magnet: Magnet, points_mm: object) -> np.ndarray:
+def dipole_error_estimate(magnet: Magnet, points_mm: ArrayLike) -> np.ndarray:
     """Relative error of :func:`dipole` from the next two multipoles (l = 3, 5), (N,).
 
     Asymptotically exact far away (error ~ (R/D)^2); ``inf`` inside the circumscribed sphere, where
@@ -149,7 +150,7 @@ def dipole_error_estimate(magnet: Magnet, points_mm: object) -> np.ndarray:
     return np.where(magnet.circumscribed_radius_mm < D, est, np.inf)
 
 
-def dipole(magnet: Magnet, points_mm: object, *, rtol: float | None = DEFAULT_RTOL) -> np.ndarray:
+def dipole(magnet: Magnet, points_mm: ArrayLike, *, rtol: float | None = DEFAULT_RTOL) -> np.ndarray:
     """Point-dipole field, G, m = Br_rem V / mu0 along +z at the centre: B = A_1 (3 z r / D^5 - e_z / D^3).
 
     Raises :class:`FieldModelError` inside or on the magnet, and (unless ``rtol`` is None) inside the

@@ -9,6 +9,7 @@ special functions. magpylib is imported inside the functions, so importing this 
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ...units import GAUSS_PER_TESLA
 from .magnet import EXACT_RTOL, FieldModelError, Magnet, _cartesian, _points, _refuse_inside, _shaped, _where
@@ -30,7 +31,7 @@ def _kernel(magnet: Magnet, rho_mm: np.ndarray, z_mm: np.ndarray) -> tuple[np.nd
     return b[2], b[0]
 
 
-def exact_rounding_estimate(magnet: Magnet, points_mm: object) -> np.ndarray:
+def exact_rounding_estimate(magnet: Magnet, points_mm: ArrayLike) -> np.ndarray:
     """Upper estimate of the relative rounding error of the elliptic-integral form at each point, (N,).
 
     Far away the field is the small difference of the two faces' terms, each ~Br_rem, while B ~ Br_rem
@@ -43,7 +44,7 @@ def exact_rounding_estimate(magnet: Magnet, points_mm: object) -> np.ndarray:
     return 4.0 * _EPS * d3 / (magnet.radius_mm**2 * magnet.height_mm)
 
 
-def exact(magnet: Magnet, points_mm: object, *, rtol: float | None = EXACT_RTOL) -> np.ndarray:
+def exact(magnet: Magnet, points_mm: ArrayLike, *, rtol: float | None = EXACT_RTOL) -> np.ndarray:
     """Exact field (Bx, By, Bz), G, shape of ``points_mm`` ((N, 3) or (3,), mm).
 
     Raises :class:`FieldModelError` at points inside or on the magnet, and (unless ``rtol`` is None)
@@ -66,7 +67,7 @@ def exact(magnet: Magnet, points_mm: object, *, rtol: float | None = EXACT_RTOL)
     return _shaped(points_mm, _cartesian(p, bz, brho) * (magnet.remanence_T * GAUSS_PER_TESLA))
 
 
-def magpylib_cylinder(magnet: Magnet, points_mm: object) -> np.ndarray:
+def magpylib_cylinder(magnet: Magnet, points_mm: ArrayLike) -> np.ndarray:
     """The reference: ``magpylib.magnet.Cylinder(...).getB`` in SI, returned in G, no checks."""
     import magpylib
 

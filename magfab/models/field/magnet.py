@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ...errors import ModelLimitError
 from ...recipes.resolve import magnet_grade
@@ -95,7 +96,7 @@ class Magnet:
 # ---- points ---------------------------------------------------------------------------------------
 
 
-def _points(points_mm: object) -> np.ndarray:
+def _points(points_mm: ArrayLike) -> np.ndarray:
     """``points_mm`` as a float (N, 3) array (a single (3,) point becomes (1, 3))."""
     p = np.asarray(points_mm, dtype=float)
     if p.ndim == 1 and p.shape[0] == 3:
@@ -107,7 +108,7 @@ def _points(points_mm: object) -> np.ndarray:
     return p
 
 
-def _shaped(points_mm: object, field: np.ndarray) -> np.ndarray:
+def _shaped(points_mm: ArrayLike, field: np.ndarray) -> np.ndarray:
     """Give ``field`` (N, 3) the shape of the caller's points ((3,) in, (3,) out)."""
     return field[0] if np.ndim(points_mm) == 1 else field
 

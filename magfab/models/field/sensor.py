@@ -4,6 +4,7 @@ the radial offset r, in G and G/mm, with any model of the registry."""
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ...spec import FieldModel
 from .choice import MODELS, model_name
@@ -19,7 +20,7 @@ __all__ = ["bz_br", "dbz_dz", "FD_STEP"]
 FD_STEP = {FieldModel.EXACT.value: 1e-4, FieldModel.DIPOLE.value: 1e-4, FieldModel.SURROGATE.value: 0.05}
 
 
-def _sensor_points(magnet: Magnet, d_mm: object, r_mm: object) -> tuple[np.ndarray, tuple[int, ...]]:
+def _sensor_points(magnet: Magnet, d_mm: ArrayLike, r_mm: ArrayLike) -> tuple[np.ndarray, tuple[int, ...]]:
     d, r = np.broadcast_arrays(np.asarray(d_mm, dtype=float), np.asarray(r_mm, dtype=float))
     if (r < 0).any() or not np.isfinite(r).all():
         raise ValueError(f"r_mm must be finite and >= 0; instead received {r_mm!r}")
@@ -35,7 +36,7 @@ def _call(name: str, magnet: Magnet, pts: np.ndarray, rtol: float | None) -> np.
     return MODELS[name].func(magnet, pts, rtol=rtol)
 
 
-def bz_br(magnet: Magnet, d_mm: object, r_mm: object = 0.0, model: FieldModel | str = FieldModel.EXACT,
+def bz_br(magnet: Magnet, d_mm: ArrayLike, r_mm: ArrayLike = 0.0, model: FieldModel | str = FieldModel.EXACT,
           rtol: float | None = DEFAULT_RTOL) -> tuple[np.ndarray, np.ndarray]:
     """(Bz, Br) in G seen by a sensor at axial distance d below the lower face and radial offset r (mm,
     broadcast together). Br = sqrt(Bx^2 + By^2) >= 0 as in docs/models.md, M3 (the radial field points inwards
@@ -46,7 +47,7 @@ def bz_br(magnet: Magnet, d_mm: object, r_mm: object = 0.0, model: FieldModel | 
     return b[:, 2].reshape(shape)[()], np.hypot(b[:, 0], b[:, 1]).reshape(shape)[()]
 
 
-def dbz_dz(magnet: Magnet, d_mm: object, r_mm: object = 0.0, model: FieldModel | str = FieldModel.EXACT,
+def dbz_dz(magnet: Magnet, d_mm: ArrayLike, r_mm: ArrayLike = 0.0, model: FieldModel | str = FieldModel.EXACT,
            rtol: float | None = DEFAULT_RTOL) -> np.ndarray:
     """dBz/dz at the sensor, G/mm: z is the sensor's coordinate along the magnet axis (magnet frame, up),
     so this is the rate at which Bz grows as the gap d closes (= -dBz/dd; positive below the magnet).

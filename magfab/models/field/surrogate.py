@@ -14,6 +14,7 @@ from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ...units import GAUSS_PER_TESLA
 from .closed_forms import axis_dbz_dz
@@ -213,7 +214,7 @@ def _refuse_outside(t: SurrogateTable, p: np.ndarray, radius: float) -> None:
         f"{d.gap_min:g} R to {d.gap_max:g} R); use exact, or dipole far away")
 
 
-def surrogate(magnet: Magnet, points_mm: object, *, rtol: float | None = DEFAULT_RTOL,
+def surrogate(magnet: Magnet, points_mm: ArrayLike, *, rtol: float | None = DEFAULT_RTOL,
               domain: SurrogateDomain = SurrogateDomain()) -> np.ndarray:
     """Field (Bx, By, Bz), G, interpolated from the dimensionless table of the magnet's aspect.
 

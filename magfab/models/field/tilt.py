@@ -25,6 +25,7 @@ kernel; the tests pin both against magpylib's rotated ``Cylinder``. Fields in G,
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .closed_forms import axis_bz, axis_dbz_dz
 from .exact import exact
@@ -33,14 +34,14 @@ from .magnet import Magnet
 __all__ = ["lateral_rates", "lateral_field", "tilted_field"]
 
 
-def _gap(gap_mm: object) -> np.ndarray:
+def _gap(gap_mm: ArrayLike) -> np.ndarray:
     g = np.asarray(gap_mm, dtype=float)
     if not np.all(np.isfinite(g)) or np.any(g <= 0.0):
         raise ValueError(f"gap_mm must be finite and > 0; instead received {gap_mm!r}")
     return g
 
 
-def lateral_rates(magnet: Magnet, gap_mm: object) -> tuple[np.ndarray, np.ndarray]:
+def lateral_rates(magnet: Magnet, gap_mm: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """(dBx/dshift in G/mm, dBx/dtilt in G/rad) at the chip on the axis, ``gap_mm`` below the lower face (any
     shape; results broadcast to it). Closed form from the axial field (module doc); exact for an axially magnetised
     cylinder."""
@@ -52,7 +53,7 @@ def lateral_rates(magnet: Magnet, gap_mm: object) -> tuple[np.ndarray, np.ndarra
     return d_shift[()], d_tilt[()]
 
 
-def lateral_field(magnet: Magnet, gap_mm: object, shift_mm: object, tilt_rad: object) -> np.ndarray:
+def lateral_field(magnet: Magnet, gap_mm: ArrayLike, shift_mm: ArrayLike, tilt_rad: ArrayLike) -> np.ndarray:
     """Lateral field Bx at the chip, G, to first order in the magnet's lateral displacement ``shift_mm`` (mm, of its
     lower-face centre) and its tilt ``tilt_rad`` (rad) at axial gap ``gap_mm`` (mm); inputs broadcast together.
 
@@ -61,7 +62,7 @@ def lateral_field(magnet: Magnet, gap_mm: object, shift_mm: object, tilt_rad: ob
     return (d_shift * np.asarray(shift_mm, dtype=float) + d_tilt * np.asarray(tilt_rad, dtype=float))[()]
 
 
-def tilted_field(magnet: Magnet, gap_mm: object, shift_mm: object = 0.0, tilt_rad: object = 0.0) -> np.ndarray:
+def tilted_field(magnet: Magnet, gap_mm: ArrayLike, shift_mm: ArrayLike = 0.0, tilt_rad: ArrayLike = 0.0) -> np.ndarray:
     """Exact field (Bx, By, Bz) in G at the chip (0, 0, -(H/2 + gap)) of the magnet moved by ``shift_mm`` along +x
     and turned by ``tilt_rad`` about the y axis through its moved lower-face centre; inputs broadcast together,
     result of their shape + (3,). B(p) = Rot B0(Rot^T (p - c) + c0), c0 = (0, 0, -H/2) and c = c0 + shift e_x."""

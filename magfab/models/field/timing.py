@@ -50,7 +50,8 @@ def measure(magnet: Magnet, d_min_mm: float, d_max_mm: float, n: int = 317, repe
     """
     pts = working_volume(magnet, d_min_mm, d_max_mm, n)
     table_s = surrogate_table(magnet.aspect).build_s
-    runs = [("magpylib", "magpylib.magnet.Cylinder(...).getB, the reference", magpylib_cylinder)]
+    runs: list[tuple[str, str, Callable[[Magnet, np.ndarray], np.ndarray]]] = [
+        ("magpylib", "magpylib.magnet.Cylinder(...).getB, the reference", magpylib_cylinder)]
     runs += [(m.name, m.description, (lambda f: lambda mg, q: f(mg, q, rtol=None))(m.func))
              for m in sorted(MODELS.values(), key=lambda m: m.cost_rank)]
     runs += list(extra)

@@ -8,7 +8,7 @@ message "Input X must be ...; instead received ...".
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from enum import Enum
 from typing import TYPE_CHECKING, TypeVar
@@ -192,7 +192,7 @@ class Curve:
     max_stretch: np.ndarray
     max_stress_kPa: np.ndarray
     mesh_mm: float | None = None
-    info: Mapping[str, object] = field(default_factory=dict)
+    info: dict[str, object] = field(default_factory=dict)
 
     def scaled(self, mu_kPa: float) -> Curve:
         """The same curve for another shear modulus: forces, stiffness and stresses scale with mu (:mod:`.registry`)."""

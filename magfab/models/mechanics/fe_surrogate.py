@@ -30,7 +30,7 @@ from __future__ import annotations
 import json
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from functools import lru_cache
 from importlib import resources
@@ -170,7 +170,8 @@ class _Column:
     """The interpolator at one grid point: every output there, for the runs that reached it."""
 
     keys: tuple[str, ...]
-    rbf: object | None  # scipy RBFInterpolator, or None where fewer runs reached it than it needs
+    # scipy's RBFInterpolator, or None where fewer runs reached it than it needs
+    rbf: Callable[[np.ndarray], np.ndarray] | None
 
 
 class _Model:
@@ -248,13 +249,13 @@ def _errors(model: _Model, held_out: Sequence[dict]) -> dict[str, float]:
                 errs[key] += list(np.abs(guess[both] - truth[both]) / (truth[both] - 1.0 + 1e-12))
             else:
                 errs[key] += list(np.abs(guess[both] - truth[both]) / np.abs(truth[both]))
-    out = {}
-    for key, e in errs.items():
-        e = np.array(e, dtype=float)
-        out[f"{key}_max"] = float(e.max()) if e.size else math.nan
-        out[f"{key}_rms"] = float(np.sqrt(np.mean(e**2))) if e.size else math.nan
-        out[f"{key}_p90"] = float(np.percentile(e, 90)) if e.size else math.nan
-    return out
+    summary: dict[str, float] = {}
+    for key, values in errs.items():
+        e = np.array(values, dtype=float)
+        summary[f"{key}_max"] = float(e.max()) if e.size else math.nan
+        summary[f"{key}_rms"] = float(np.sqrt(np.mean(e**2))) if e.size else math.nan
+        summary[f"{key}_p90"] = float(np.percentile(e, 90)) if e.size else math.nan
+    return summary
 
 
 def description() -> str:

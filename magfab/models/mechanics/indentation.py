@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from enum import Enum
+from typing import Any
 
 import numpy as np
 
@@ -46,7 +47,7 @@ class _State:
     iterations: int
     R: np.ndarray
     K: object
-    lu: object
+    lu: _LDL | None
 
 
 class _LDL:
@@ -59,7 +60,7 @@ class _LDL:
 
     def __init__(self, K, upper=None, owner: _Reduction | None = None):
         self.K, self.owner = K, owner
-        self._lu = None
+        self._lu: Any = None  # qdldl's Solver, or scipy's SuperLU where qdldl cannot factor
         if upper is None:
             from scipy.sparse import triu
 
@@ -289,8 +290,7 @@ class _Indentation:
             vals += [-self.slide_normal[1], self.slide_normal[0]]
             prescribed[self.slide] = False
             n += self.slide.size
-        rows, cols, vals = np.concatenate(rows), np.concatenate(cols), np.concatenate(vals)
-        T = csr_matrix((vals, (rows, cols)), shape=(self.ndof, n))
+        T = csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(self.ndof, n))
         return T, g, prescribed, load
 
     # -- one load step --

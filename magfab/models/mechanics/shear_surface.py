@@ -151,7 +151,7 @@ class ShearProbe:
     rounded tip's patch is the surface within the Hertz radius sqrt(R rest_indentation_mm) of the axis (default
     :data:`REST_PATCH_INDENTATION_MM`; a build may pass its scan step)."""
 
-    def __init__(self, load: ShearLoad | str = ShearLoad.SURFACE, depths_mm: Sequence[float] | None = None,
+    def __init__(self, load: ShearLoad | str = ShearLoad.SURFACE, depths_mm: Sequence[float] | np.ndarray | None = None,
                  rest_indentation_mm: float = REST_PATCH_INDENTATION_MM):
         self.load = check_option(ShearLoad, load, "load")
         self.rest = float(rest_indentation_mm)
@@ -267,10 +267,9 @@ class _Operator:
         self.s_col, self.phi_col, self.n = n, n + 1, n + 2
         m = idx[mag]
         lever = z[m] - body.magnet_z_mm
-        rows = [free, N + tie, m, N + m, m, N + m, 2 * N + m]
-        cols = [col[free], col[tie], np.full(2 * m.size, n), np.full(3 * m.size, n + 1)]
-        vals = [np.ones(free.size + tie.size + 2 * m.size), lever, lever, -r[m]]
-        rows, cols, vals = np.concatenate(rows), np.concatenate(cols), np.concatenate(vals)
+        rows = np.concatenate([free, N + tie, m, N + m, m, N + m, 2 * N + m])
+        cols = np.concatenate([col[free], col[tie], np.full(2 * m.size, n), np.full(3 * m.size, n + 1)])
+        vals = np.concatenate([np.ones(free.size + tie.size + 2 * m.size), lever, lever, -r[m]])
         keep = vals != 0.0
         self.T = csr_matrix((vals[keep], (rows[keep], cols[keep])), shape=(self.ndof, self.n))
 

@@ -7,6 +7,8 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Sequence
+from functools import partial
+from typing import Any
 
 import numpy as np
 
@@ -29,7 +31,7 @@ def _clear_caches() -> None:
 
 
 def convergence(body: Body, mu_kPa: float, indentation_mm: Sequence[float] | np.ndarray,
-                base_mesh_mm: float | None = None, levels: int = 3, **options: object) -> Convergence:
+                base_mesh_mm: float | None = None, levels: int = 3, **options: Any) -> Convergence:
     """FE on nested meshes (a base mesh, then ``levels`` uniform refinements halving the size) against the finest.
 
     ``error[k]`` = max over the curve of |F_k - F_finest| / max |F_finest|; ``rate`` the observed order of the
@@ -40,19 +42,21 @@ def convergence(body: Body, mu_kPa: float, indentation_mm: Sequence[float] | np.
         raise MechanicsError(f"Input levels must be at least 2 (three meshes give one rate); "
                              f"instead received {levels!r}")
     h0 = float(base_mesh_mm) if base_mesh_mm is not None else body.radius_mm / 6.0
-    forces, times, sizes = [], [], []
+    forces, times = [], []
+    sizes_mm: list[float] = []
     for k in range(int(levels) + 1):
         _clear_caches()
         t0 = time.perf_counter()
         c = fe(body, mu_kPa, indentation_mm, mesh_mm=h0, refine=k, **options)
         times.append(time.perf_counter() - t0)
         forces.append(c.force_N)
-        sizes.append(c.mesh_mm)
+        assert c.mesh_mm is not None  # an FE curve records the mesh it was computed on
+        sizes_mm.append(c.mesh_mm)
     F = np.array(forces)
     err = np.max(np.abs(F[:-1] - F[-1]), axis=1) / np.max(np.abs(F[-1]))
     diffs = np.max(np.abs(np.diff(F, axis=0)), axis=1)
     rates = np.log2(diffs[:-1] / diffs[1:])
-    return Convergence(np.array(sizes), F, err, float(rates[-1]), rates, sizes[-1], np.array(times))
+    return Convergence(np.array(sizes_mm), F, err, float(rates[-1]), rates, sizes_mm[-1], np.array(times))
 
 
 def measure(body: Body, mu_kPa: float, delta_max_mm: float, mesh_sizes_mm: Sequence[float] = (1.0, 0.75, 0.5, 0.35),
@@ -94,8 +98,8 @@ def measure(body: Body, mu_kPa: float, delta_max_mm: float, mesh_sizes_mm: Seque
     if fe_surrogate.in_region(body):  # the design search's stand-in for the FE (its table loaded before the clock)
         fe_surrogate.held_out_error()
         runs.append(("surrogate", None, lambda dd: fe_surrogate.curve(body, mu_kPa, dd)))
-    for h in sorted((float(v) for v in mesh_sizes_mm), reverse=True):
-        runs.append(("fe", h, lambda dd, h=h: fe(body, mu_kPa, dd, mesh_mm=h)))
+    for mesh in sorted((float(v) for v in mesh_sizes_mm), reverse=True):
+        runs.append(("fe", mesh, partial(fe, body, mu_kPa, mesh_mm=mesh)))
     rows: list[dict[str, object]] = []
     for name, h, fn in runs:
         c, t, failure = timed(fn, reached)

@@ -57,7 +57,7 @@ class AcceptanceError(FormatError):
 
 
 def _finite_number(x: object) -> bool:
-    return is_number(x) and math.isfinite(x)  # type: ignore[arg-type]
+    return is_number(x) and math.isfinite(x)
 
 
 def _kind_ok(node: object, kind: str) -> bool:

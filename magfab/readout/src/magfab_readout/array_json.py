@@ -30,6 +30,7 @@ from __future__ import annotations
 import math
 from bisect import bisect_left
 from collections.abc import Sequence
+from typing import Tuple
 
 from .json_checks import FormatError, finite, is_number, lookup
 
@@ -42,7 +43,7 @@ MAX_TAXELS = 16
 #: with the tables, 0.22 after 4, 0.04 after 5; each costs the same again).
 SWEEPS = 4
 
-Vector = tuple[float, float, float]
+Vector = Tuple[float, float, float]  # evaluated at import: the readout's Python 3.8 has no tuple[...]
 
 
 class ArrayError(FormatError):
@@ -230,7 +231,7 @@ class Compensator:
             raise ValueError(f"{len(readings)} readings for {n} taxels")
         base = [tuple(float(r[a]) - self.offset[k][a] for a in range(3)) for k, r in enumerate(readings)]
         if not self.dynamic:
-            return base  # type: ignore[return-value]
+            return base
         own = list(base)
         for _ in range(SWEEPS):
             motion = [self._motion(j, own[j]) for j in range(n)]
@@ -239,4 +240,4 @@ class Compensator:
             for k in range(n):
                 extra = [self._from(j, k, motion[j], at[j]) for j in range(n) if j != k]
                 own.append(tuple(base[k][a] - sum(e[a] for e in extra) for a in range(3)))
-        return own  # type: ignore[return-value]
+        return own

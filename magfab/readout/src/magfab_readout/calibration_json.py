@@ -21,6 +21,7 @@ import hashlib
 import json
 import math
 from dataclasses import dataclass
+from typing import Any, Mapping, Tuple
 
 from .json_checks import FormatError, finite, is_number
 
@@ -42,7 +43,7 @@ THERMAL_MAX_PER_C = 0.01
 #: is a mistake.
 THERMAL_REFERENCE_C = (-40.0, 125.0)
 
-Point = tuple[float, float]
+Point = Tuple[float, float]  # evaluated at import: the readout's Python 3.8 has no tuple[...]
 
 
 class CalibrationError(FormatError):
@@ -56,12 +57,12 @@ def monomials(order: int) -> list:
     return [[i, k - i] for k in range(order + 1) for i in range(k, -1, -1)]
 
 
-def canonical_json(data: dict) -> str:
+def canonical_json(data: Mapping[str, Any]) -> str:
     """The calibration as canonical JSON (sorted keys, no spaces, ASCII, finite numbers only)."""
-    return json.dumps(data, sort_keys=True, separators=(",", ":"), ensure_ascii=True, allow_nan=False)
+    return json.dumps(dict(data), sort_keys=True, separators=(",", ":"), ensure_ascii=True, allow_nan=False)
 
 
-def calibration_sha256(data: dict) -> str:
+def calibration_sha256(data: Mapping[str, Any]) -> str:
     """SHA-256 (hex) of :func:`canonical_json`: the hash the firmware reports in its info line (first 16 hex)."""
     return hashlib.sha256(canonical_json(data).encode("ascii")).hexdigest()
 

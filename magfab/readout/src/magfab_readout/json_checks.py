@@ -9,6 +9,10 @@ array_json.py) are the readout package's own, shipped verbatim in every build, a
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # typing.TypeGuard is new in 3.10; the readout runs from 3.8, where this is never imported
+    from typing import TypeGuard
 
 if __name__.startswith("magfab."):  # magfab's import of this file (magfab.formats): an InputError, exit 2
     from magfab.errors import CalibrationFormatError as _Base
@@ -34,7 +38,7 @@ class FormatError(_Base):  # type: ignore[valid-type, misc]
         super().__init__("{}: {} = {}: {}".format(self.file, key or "(top level)", shown, allowed))
 
 
-def is_number(x: object) -> bool:
+def is_number(x: object) -> TypeGuard[int | float]:
     """A JSON number (bool is not one)."""
     return isinstance(x, (int, float)) and not isinstance(x, bool)
 
@@ -52,10 +56,10 @@ def lookup(data: dict, path: str, error: type) -> object:
 def finite(data: dict, path: str, error: type, *, positive: bool = False, nonnegative: bool = False) -> float:
     """The finite number at the dotted ``path`` (optionally > 0 or >= 0), else ``error`` naming the path."""
     node = lookup(data, path, error)
-    if not is_number(node) or not math.isfinite(node):  # type: ignore[arg-type]
+    if not is_number(node) or not math.isfinite(node):
         raise error(path, node, "must be a finite number")
-    if positive and not node > 0:  # type: ignore[operator]
+    if positive and not node > 0:
         raise error(path, node, "must be greater than 0")
-    if nonnegative and node < 0:  # type: ignore[operator]
+    if nonnegative and node < 0:
         raise error(path, node, "must be at least 0")
-    return float(node)  # type: ignore[arg-type]
+    return float(node)
