@@ -153,12 +153,10 @@ def warm_plan_figures(repeat: int) -> dict[str, object]:
 
 def mould_parts() -> list[tuple[str, Callable]]:
     """(file stem, builder) of the mould's parts, taken from ``magfab.pipeline.PARTS``."""
-    import importlib
-
+    from magfab.mould import cup_solid, lid_solid
     from magfab.pipeline import PARTS
 
-    return [(stem, getattr(importlib.import_module(module), func))
-            for stem, module, func, _printed, _what in PARTS if module == "magfab.mould"]
+    return [(part.stem, part.make) for part in PARTS if part.make in (cup_solid, lid_solid)]
 
 
 def mould_stls(design: Design) -> dict[str, bytes]:

@@ -14,29 +14,59 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from . import __version__
 from .check import design_findings, errors_in, mesh_findings, mould_fit_findings
 from .design import Design, derive
+from .elastomer import elastomer_solid
 from .errors import BuildError, Finding, ModelLimitError, OutputError, Severity
 from .fork import deferred_interrupt, side_branch
 from .limits import check_scan
+from .mould import cup_solid, lid_solid
 from .output import Artifact, check_target, write
+from .pad import pad_solid
 from .spec import Spec
+from .stages import (
+    AcceptanceStage,
+    ArrayStage,
+    BoardStage,
+    BundleStage,
+    CadStage,
+    CrosstalkStage,
+    PredictionStage,
+    ScanStage,
+    Stage,
+)
 
 if TYPE_CHECKING:
+    import cadquery as cq
+    import trimesh
+
+    from .formats.scan_csv import Scan
+    from .models.calibration import FitResult
     from .models.predict import Prediction
 
-__all__ = ["Artifact", "BuildResult", "OutputError", "plan", "write", "build", "check_target", "PARTS",
-           "default_out_dir"]
+__all__ = ["Artifact", "BuildResult", "OutputError", "plan", "write", "build", "check_target", "PARTS", "Part",
+           "Stage", "default_out_dir"]
 
-#: Solid parts: file stem, builder (module, function), whether it is printed, what it is for.
+
+@dataclass(frozen=True)
+class Part:
+    """A solid the build makes: ``make`` is its builder (the part modules import the CAD kernel inside it, so
+    holding it here costs nothing until a build calls it)."""
+
+    stem: str  # file stem of its STL and STEP
+    make: Callable[[Design], cq.Workplane]
+    printed: bool
+    description: str
+
+
 PARTS = (
-    ("elastomer", "magfab.elastomer", "elastomer_solid", False, "the cast silicone part, with its magnet pocket (reference)"),
-    ("mould_cup", "magfab.mould", "cup_solid", True, "mould cup with the cavities, print pose"),
-    ("mould_lid", "magfab.mould", "lid_solid", True, "mould lid with the pocket cores, fill and vent holes, print pose"),
-    ("pad", "magfab.pad", "pad_solid", True, "mounting pad: chip recess below, centring lip above, print pose"),
+    Part("elastomer", elastomer_solid, False, "the cast silicone part, with its magnet pocket (reference)"),
+    Part("mould_cup", cup_solid, True, "mould cup with the cavities, print pose"),
+    Part("mould_lid", lid_solid, True, "mould lid with the pocket cores, fill and vent holes, print pose"),
+    Part("pad", pad_solid, True, "mounting pad: chip recess below, centring lip above, print pose"),
 )
 
 Progress = Callable[[str], None]
@@ -111,15 +141,8 @@ def _json_bytes(obj: object) -> bytes:
     return (json.dumps(obj, indent=2, sort_keys=True) + "\n").encode()
 
 
-def _solid(module: str, func: str, design: Design):
-    import importlib
-
-    return getattr(importlib.import_module(module), func)(design)
-
-
-def _board(design: Design, say: Progress, timings: dict[str, float]):
-    """The footprint library, the routed breakout board and, where KiCad is installed, its Gerbers:
-    (artifacts, findings, the :class:`magfab.pcb.Board`, which the report draws rather than routing again)."""
+def _board(design: Design, say: Progress, timings: dict[str, float]) -> BoardStage:
+    """The footprint library, the routed breakout board and, where KiCad is installed, its Gerbers."""
     from . import pcb
     from .export import kicad
 
@@ -135,23 +158,23 @@ def _board(design: Design, say: Progress, timings: dict[str, float]):
     out = [Artifact(f"pcb/{rel}", data, next(v for k, v in what.items() if rel.endswith(k)))
            for rel, data in sorted(files.items())]
     if errors_in(found, strict=False):
-        return out, found, board
+        return BoardStage(artifacts=out, findings=found, board=board)
     if kicad.kicad_python() is None:
         found.append(Finding(Severity.INFO, "pcb-gerbers-skipped",
                              "KiCad (Debian package 'kicad') is not installed, so no Gerbers were plotted: open "
                              f"pcb/{design.spec.name}.kicad_pcb in KiCad and plot them, or install KiCad and rebuild",
                              "pcb"))
-        return out, found, board
+        return BoardStage(artifacts=out, findings=found, board=board)
     say("plotting Gerbers with KiCad")
     t = time.perf_counter()
     for name, data in sorted(kicad.plot_gerbers(files, design.spec.name).items()):
         kind = "drill file (Excellon)" if name.endswith(".drl") else "Gerber (plotted by KiCad)"
         out.append(Artifact(f"pcb/gerbers/{name}", data, kind))
     timings["gerbers"] = time.perf_counter() - t
-    return out, found, board
+    return BoardStage(artifacts=out, findings=found, board=board)
 
 
-def _predictions(design: Design, say: Progress, timings: dict[str, float]):
+def _predictions(design: Design, say: Progress, timings: dict[str, float]) -> PredictionStage:
     """predictions.json and its plots, and the prediction's design checks (eq. 9 and the guidelines)."""
     from .export import figures as plots
     from .models.predict import predict_with_findings
@@ -170,10 +193,10 @@ def _predictions(design: Design, say: Progress, timings: dict[str, float]):
         out.append(Artifact(f"plots/{name}", data, plots.CAPTIONS[stem] + ", " + kind.upper()))
     out += _drift_charts(pred)
     timings["plots"] = time.perf_counter() - t
-    return out, found, pred
+    return PredictionStage(artifacts=out, findings=found, prediction=pred)
 
 
-def _drift_charts(pred) -> list[Artifact]:
+def _drift_charts(pred: Prediction) -> list[Artifact]:
     """The drift budget's chart (predictions.json's ``drift``), when the prediction has one."""
     if pred.drift is None:
         return []
@@ -183,18 +206,18 @@ def _drift_charts(pred) -> list[Artifact]:
                      + name.rsplit(".", 1)[1].upper()) for name, data in sorted(drift_figures.figures(pred.drift).items())]
 
 
-def _acceptance(design: Design, prediction) -> tuple[dict | None, list[Finding]]:
+def _acceptance(design: Design, prediction: Prediction) -> AcceptanceStage:
     """The acceptance test's bands (magfab.models.acceptance), for the readout package and the checklist."""
     from .models.acceptance import acceptance
 
     try:
-        return acceptance(design, prediction), []
+        return AcceptanceStage(bands=acceptance(design, prediction))
     except ModelLimitError as exc:  # e.g. no weight fits the predicted range: the bundle ships without the check
-        return None, [Finding(Severity.WARNING, "acceptance", f"the readout package has no acceptance test for "
-                              f"this design: {exc}", "predict.max_stretch")]
+        return AcceptanceStage(bands=None, findings=[Finding(Severity.WARNING, "acceptance", "the readout package "
+                               f"has no acceptance test for this design: {exc}", "predict.max_stretch")])
 
 
-def _calibration_finding(result, prefix: str, source: str = "") -> Finding:
+def _calibration_finding(result: FitResult, prefix: str, source: str = "") -> Finding:
     """The calibration's held-out errors, a warning when they miss the tolerance."""
     err = result.calibration.to_json()["errors"]
     return Finding(Severity.INFO if result.meets_tolerance else Severity.WARNING, "calibration",
@@ -204,9 +227,9 @@ def _calibration_finding(result, prefix: str, source: str = "") -> Finding:
                    + (f"; {result.thermal_note}" if result.thermal_note else ""), "calibration.tolerance_mN")
 
 
-def _scan(design: Design, prediction, scan, say: Progress):
+def _scan(design: Design, prediction: Prediction | None, scan: Scan | None, say: Progress) -> ScanStage:
     """The scan a single taxel's calibration is fitted to: ``scan`` (with the depth warnings, and the merged file kept
-    when it was merged in memory) or a simulated one. Returns (artifacts, scan, findings)."""
+    when it was merged in memory) or a simulated one."""
     from .formats.scan_csv import scan_csv
     from .models.scan import simulate_scan
     from .models.scan_guards import MERGED, merged_csv, scan_depth_warnings
@@ -214,18 +237,20 @@ def _scan(design: Design, prediction, scan, say: Progress):
     if scan is None:
         say("simulating a calibration scan")
         scan = simulate_scan(design, prediction)
-        return [Artifact("calibration/scan_simulated.csv", scan_csv(scan).encode(),
-                         "the simulated y-z scan behind the provisional calibration (scan CSV format)")], scan, []
+        made = Artifact("calibration/scan_simulated.csv", scan_csv(scan).encode(),
+                        "the simulated y-z scan behind the provisional calibration (scan CSV format)")
+        return ScanStage(artifacts=[made], scan=scan)
     out = []
     if MERGED in scan.source:  # made in memory from a recording and a reference log: keep what was fitted
         out.append(Artifact("calibration/scan_merged.csv", merged_csv(scan),
                             "the recording merged with the reference log, as fitted (scan CSV format)"))
     found = [] if prediction is None else [Finding(Severity.WARNING, "scan-range", text, "calibration.scan_z_mm")
                                            for text in scan_depth_warnings(scan, prediction)]
-    return out, scan, found
+    return ScanStage(artifacts=out, findings=found, scan=scan)
 
 
-def _bundle(design: Design, prediction, scan, acceptance: dict | None, say: Progress, timings: dict[str, float]):
+def _bundle(design: Design, prediction: Prediction | None, scan: Scan | dict[int, Scan] | None,
+            acceptance: dict[str, Any] | None, say: Progress, timings: dict[str, float]) -> BundleStage:
     """The firmware-plus-calibration bundle: calibration.json (from ``scan``, or a simulated scan when there
     is none yet), its chart, the firmware sources, the generic AVR image with the .eep of its settings and
     calibration, the flash scripts and the readout package."""
@@ -244,11 +269,11 @@ def _bundle(design: Design, prediction, scan, acceptance: dict | None, say: Prog
         found += arrayed.findings
         result, array_doc = arrayed.fits[0], arrayed.doc
     else:
-        scan_files, scan, scan_found = _scan(design, prediction, scan, say)
-        out += scan_files
-        found += scan_found
+        scanned = _scan(design, prediction, scan, say)
+        out += scanned.artifacts
+        found += scanned.findings
         say("fitting the calibration")
-        result = calibrate.fit(scan, design, mls=mls)
+        result = calibrate.fit(scanned.scan, design, mls=mls)
     cal = result.calibration.to_json()
     timings["calibrate"] = time.perf_counter() - t
     if array_doc is None:
@@ -279,18 +304,10 @@ def _bundle(design: Design, prediction, scan, acceptance: dict | None, say: Prog
                         f"ready-to-flash image for Arduino Uno/Nano (ATmega328P, 16 MHz), the same for every build: "
                         f"settings and calibration from the .eep; flash {made['flash_bytes']} B, RAM "
                         f"{made['ram_bytes']} B ({made['toolchain']['avr-gcc']}, avr-libc {made['toolchain']['avr-libc']})"))
-    return out, found, result
+    return BundleStage(artifacts=out, findings=found, fit=result)
 
 
-@dataclass(frozen=True)
-class _Arrayed:
-    fits: tuple  # FitResult per taxel
-    doc: dict  # calibration/array.json
-    artifacts: list
-    findings: list
-
-
-def _crosstalk(design: Design, prediction) -> tuple[list[Artifact], list[Finding], bool]:
+def _crosstalk(design: Design, prediction: Prediction | None) -> CrosstalkStage:
     """The array's crosstalk budget (:mod:`magfab.models.crosstalk`): array/crosstalk.json, its charts, its
     findings, and whether the host is to remove a moving neighbour's field (the budget is over without it)."""
     from .export import crosstalk_figures
@@ -302,10 +319,11 @@ def _crosstalk(design: Design, prediction) -> tuple[list[Artifact], list[Finding
     for name, data in sorted(crosstalk_figures.figures(xt).items()):
         stem, kind = name.rsplit(".", 1)
         out.append(Artifact(f"array/{name}", data, crosstalk_figures.CAPTIONS[stem] + ", " + kind.upper()))
-    return out, crosstalk.findings(design, xt), xt.dynamic
+    return CrosstalkStage(artifacts=out, findings=crosstalk.findings(design, xt), dynamic=xt.dynamic)
 
 
-def _taxel_calibrations(design: Design, prediction, scans: dict | None, mls: bool) -> _Arrayed:
+def _taxel_calibrations(design: Design, prediction: Prediction | None, scans: dict[int, Scan] | None,
+                        mls: bool) -> ArrayStage:
     """An array's calibrations: each taxel's scan (measured, from ``scans`` {taxel: Scan}, or simulated with its
     neighbours' field), its fit to the scan with the neighbours' field removed, and calibration/array.json
     (:mod:`magfab.models.taxels`). A measured scan is kept in the build (:mod:`magfab.array_bench`) so the next
@@ -318,8 +336,9 @@ def _taxel_calibrations(design: Design, prediction, scans: dict | None, mls: boo
     scans = scans or {}
     field = array_field(design)
     every = tuple(scans.get(t.index) or simulate_taxel_scan(design, prediction, t.index, field) for t in design.taxels)
-    out, found, dynamic = _crosstalk(design, prediction)
-    arrayed = calibrate_taxels(design, prediction, every, mls=mls, dynamic=dynamic)
+    xt = _crosstalk(design, prediction)
+    out, found = list(xt.artifacts), list(xt.findings)
+    arrayed = calibrate_taxels(design, prediction, every, mls=mls, dynamic=xt.dynamic)
     doc = arrayed.as_json(design)
     out += [Artifact("calibration/array.json", _json_bytes(doc), "the array: each taxel's address, order code, "
                     "polarity, position and calibration file, and the neighbours' field the host removes")]
@@ -337,10 +356,11 @@ def _taxel_calibrations(design: Design, prediction, scans: dict | None, mls: boo
                                 f"the simulated scan of taxel {k}, as its chip reads it (scan CSV format)"))
         found.append(_calibration_finding(fitted, f"taxel {k}: ", f"{'measured' if k in scans else 'simulated'} "
                                           "scan, "))
-    return _Arrayed(arrayed.fits, doc, out, found)
+    return ArrayStage(artifacts=out, findings=found, fits=tuple(arrayed.fits), doc=doc)
 
 
-def _fabrication(design: Design, prediction, acceptance: dict | None, say: Progress, timings: dict[str, float]):
+def _fabrication(design: Design, prediction: Prediction, acceptance: dict[str, Any] | None, say: Progress,
+                 timings: dict[str, float]) -> Stage:
     """The bench papers: checklist.md, checklist.html (tick boxes, printable) and bom.csv. The checklist's scan
     step spans the simulated scan's extent (one depth for the scan, the checklist and the predicted range)."""
     from .export import checklist
@@ -358,7 +378,7 @@ def _fabrication(design: Design, prediction, acceptance: dict | None, say: Progr
                  f"bill of materials for {design.spec.fabrication.sensors} sensor(s)"),
     ]
     timings["checklist"] = time.perf_counter() - t
-    return out, checklist.findings(design)
+    return Stage(artifacts=out, findings=checklist.findings(design))
 
 
 def model_bench() -> list[dict[str, object]]:
@@ -391,21 +411,21 @@ def plan(spec: Spec, progress: Progress | None = None, scan=None, parallel: bool
     _stop(findings, spec)
 
     with side_branch(_physics, design, scan, parallel=parallel) as physics:
-        cad_artifacts, cad_findings, meshes, routed = _cad(design, say, timings)
-        _stop(findings + cad_findings, spec)
+        cad = _cad(design, say, timings)
+        _stop(findings + cad.findings, spec)
         say("drawing the parts and the board for the report")
         t = time.perf_counter()
         from .export.report import draw_pictures, render_report
 
-        pictures = draw_pictures(design, meshes, cad_artifacts, routed)
+        pictures = draw_pictures(design, cad.meshes, cad.artifacts, cad.board)
         timings["report-pictures"] = time.perf_counter() - t
         say("waiting for the predictions and the bundle")
         t = time.perf_counter()
         branch = physics.result()
         if physics.forked:  # how long the CAD branch waited for the worker
             timings["wait-physics"] = time.perf_counter() - t
-    findings += cad_findings
-    artifacts = cad_artifacts
+    findings += cad.findings
+    artifacts = list(cad.artifacts)
     for stage in branch.stages:  # predictions, bundle, bench papers: each stops the build in turn
         findings += stage.findings
         _stop(findings, spec)
@@ -422,7 +442,7 @@ def plan(spec: Spec, progress: Progress | None = None, scan=None, parallel: bool
     report_files = [("report.html", "this page: the whole build on one page"),
                     ("manifest.json", "what made what: hashes, versions")]
     artifacts.append(Artifact("report.html", render_report(spec, design, findings, list(artifacts), prediction, cal,
-                                                           meshes, extra_files=report_files, board=routed,
+                                                           cad.meshes, extra_files=report_files, board=cad.board,
                                                            pictures=pictures),
                               "the whole build on one page, for a browser"))
     timings["report"] = time.perf_counter() - t
@@ -442,9 +462,9 @@ def _stop(findings: list[Finding], spec: Spec) -> None:
         raise BuildError(stop)
 
 
-def _cad(design: Design, say: Progress, timings: dict[str, float]):
-    """The CAD branch: every solid as STL (and STEP), the mesh checks, the closed mould's fit, the board.
-    Returns (artifacts, findings, meshes, board); stops at the first stage with an error."""
+def _cad(design: Design, say: Progress, timings: dict[str, float]) -> CadStage:
+    """The CAD branch: every solid as STL (and STEP), the mesh checks, the closed mould's fit, the board; stops at
+    the first stage with an error."""
     spec = design.spec
     say("loading the CAD kernel")
     t = time.perf_counter()
@@ -458,12 +478,13 @@ def _cad(design: Design, say: Progress, timings: dict[str, float]):
     timings["import"] = time.perf_counter() - t
     artifacts: list[Artifact] = []
     findings: list[Finding] = []
-    meshes: dict[str, object] = {}
+    meshes: dict[str, trimesh.Trimesh] = {}
     tol, ang = spec.mould.tessellation_tolerance_mm, spec.mould.angular_tolerance_deg
-    for stem, module, func, _printed, description in PARTS:
+    for part in PARTS:
+        stem, description = part.stem, part.description
         say(f"modelling {stem}")
         t = time.perf_counter()
-        solid = _solid(module, func, design)
+        solid = part.make(design)
         timings[f"solid:{stem}"] = time.perf_counter() - t
         t = time.perf_counter()
         mesh = tessellate(solid, tol, ang)
@@ -478,39 +499,33 @@ def _cad(design: Design, say: Progress, timings: dict[str, float]):
         findings += mould_fit_findings(design, mould_fit(design, meshes, tol))
         timings["mould-fit"] = time.perf_counter() - t
     _stop(findings, spec)
-    board_artifacts, board_findings, routed = _board(design, say, timings)
-    return artifacts + board_artifacts, findings + board_findings, meshes, routed
-
-
-@dataclass(frozen=True)
-class _Stage:
-    artifacts: list[Artifact]
-    findings: list[Finding]
+    board = _board(design, say, timings)
+    return CadStage(artifacts=artifacts + board.artifacts, findings=findings + board.findings, meshes=meshes,
+                    board=board.board)
 
 
 @dataclass(frozen=True)
 class _PhysicsBranch:
     """What the physics branch hands back (pickled when it ran in the worker)."""
 
-    stages: tuple[_Stage, ...]  # predictions, bundle, bench papers, in pipeline order
+    stages: tuple[Stage, ...]  # predictions, bundle, bench papers, in pipeline order
     prediction: Prediction
     calibration: dict[str, object]  # calibration.json as written
     timings: dict[str, float]
 
 
-def _physics(design: Design, scan) -> _PhysicsBranch:
+def _physics(design: Design, scan: Scan | dict[int, Scan] | None) -> _PhysicsBranch:
     """The physics branch: predictions and plots, the acceptance bands, the calibration, firmware and readout
     bundle, and the bench papers. Nothing here needs the CAD kernel."""
     timings: dict[str, float] = {}
     say: Progress = lambda _stage: None
-    predict_artifacts, predict_findings, prediction = _predictions(design, say, timings)
-    acceptance, acceptance_findings = _acceptance(design, prediction)
-    bundle_artifacts, bundle_findings, fitted = _bundle(design, prediction, scan, acceptance, say, timings)
-    fab_artifacts, fab_findings = _fabrication(design, prediction, acceptance, say, timings)
-    stages = (_Stage(predict_artifacts, predict_findings),
-              _Stage(bundle_artifacts, acceptance_findings + bundle_findings),
-              _Stage(fab_artifacts, fab_findings))
-    return _PhysicsBranch(stages, prediction, fitted.calibration.to_json(), timings)
+    predicted = _predictions(design, say, timings)
+    prediction = predicted.prediction
+    accepted = _acceptance(design, prediction)
+    bundle = _bundle(design, prediction, scan, accepted.bands, say, timings)
+    papers = _fabrication(design, prediction, accepted.bands, say, timings)
+    stages = (predicted, Stage(artifacts=bundle.artifacts, findings=accepted.findings + bundle.findings), papers)
+    return _PhysicsBranch(stages, prediction, bundle.fit.calibration.to_json(), timings)
 
 
 def _manifest(spec: Spec, design: Design, artifacts: list[Artifact], models: dict[str, object]) -> bytes:
