@@ -30,12 +30,14 @@ __all__ = ["Branch", "side_branch", "parallel_available", "deferred_interrupt", 
 
 _JOB: tuple[Callable[..., Any], tuple[Any, ...], Any] | None = None  # what the forked child runs, and the parent's
 # end of the pipe (inherited, not pickled)
+_IN_WORKER = False  # set in a forked worker: its own side branches run in-process unless asked for by name
 
 
 def parallel_available() -> bool:
     """True where a second branch can run in a forked worker: Linux, two or more cores, MAGFAB_JOBS not 1, and not
-    already inside a worker (a build's physics branch runs its prediction in-process: its cores are taken)."""
-    if os.environ.get("MAGFAB_JOBS", "").strip() == "1" or multiprocessing.current_process().daemon:
+    already inside a worker (a build's physics branch runs its prediction in-process: its cores are taken). A worker
+    may still fork one branch it names (``side_branch(..., parallel=True)``): the build's plots do."""
+    if os.environ.get("MAGFAB_JOBS", "").strip() == "1" or _IN_WORKER:
         return False
     return sys.platform.startswith("linux") and (os.cpu_count() or 1) >= 2
 
@@ -53,7 +55,8 @@ class Branch:
             self._conn, child = ctx.Pipe(duplex=False)
             _JOB = (fn, args, self._conn)
             try:
-                self._process = ctx.Process(target=_child, args=(child,), daemon=True)
+                # not a daemon, so that a worker may fork one of its own; side_branch kills it on every way out
+                self._process = ctx.Process(target=_child, args=(child,))
                 self._process.start()
             finally:
                 _JOB = None
@@ -98,6 +101,9 @@ def _outcome(fn: Callable[..., Any], args: tuple[Any, ...]) -> tuple[str, Any]:
 
 
 def _child(conn) -> None:
+    global _IN_WORKER
+    _IN_WORKER = True
+    _die_with_parent()
     fn, args, reader = _JOB  # type: ignore[misc]
     # The child's copy of the parent's end: closed, so a parent that died (a crash, a kill) makes the send below fail
     # at once instead of blocking on a full pipe nobody reads, which left the worker holding the terminal's pipes.
@@ -111,6 +117,17 @@ def _child(conn) -> None:
     finally:
         conn.close()
         os._exit(0)  # no atexit handlers, no buffers flushed twice: the parent owns those
+
+
+def _die_with_parent() -> None:
+    """Ask Linux to kill this worker when its parent dies: a worker's own worker would otherwise finish its work for
+    nobody after a Ctrl-C or a kill of the build (the parent's cancel reaches only its direct child)."""
+    import ctypes
+    import signal
+    from contextlib import suppress
+
+    with suppress(OSError, AttributeError):  # not Linux's libc: the worker lives on a little, as it did
+        ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL))  # 1: PR_SET_PDEATHSIG
 
 
 @contextmanager

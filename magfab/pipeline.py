@@ -12,7 +12,7 @@ import hashlib
 import json
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -21,7 +21,7 @@ from .check import design_findings, errors_in, mesh_findings, mould_fit_findings
 from .design import Design, derive
 from .elastomer import elastomer_solid
 from .errors import BuildError, Finding, ModelLimitError, OutputError, Severity
-from .fork import deferred_interrupt, side_branch
+from .fork import deferred_interrupt, parallel_available, side_branch
 from .limits import check_scan
 from .mould import cup_solid, lid_solid
 from .output import Artifact, check_target, write
@@ -141,12 +141,13 @@ def _json_bytes(obj: object) -> bytes:
     return (json.dumps(obj, indent=2, sort_keys=True) + "\n").encode()
 
 
-def _board(design: Design, say: Progress, timings: dict[str, float]) -> BoardStage:
+def _board(design: Design, say: Progress = lambda _stage: None) -> BoardStage:
     """The footprint library, the routed breakout board and, where KiCad is installed, its Gerbers."""
     from . import pcb
     from .export import kicad
 
     say("placing and routing the board")
+    timings: dict[str, float] = {}
     t = time.perf_counter()
     board = pcb.board(design)
     found = pcb.findings(board)
@@ -158,25 +159,25 @@ def _board(design: Design, say: Progress, timings: dict[str, float]) -> BoardSta
     out = [Artifact(f"pcb/{rel}", data, next(v for k, v in what.items() if rel.endswith(k)))
            for rel, data in sorted(files.items())]
     if errors_in(found, strict=False):
-        return BoardStage(artifacts=out, findings=found, board=board)
+        return BoardStage(artifacts=out, findings=found, board=board, timings_s=timings)
     if kicad.kicad_python() is None:
         found.append(Finding(Severity.INFO, "pcb-gerbers-skipped",
                              "KiCad (Debian package 'kicad') is not installed, so no Gerbers were plotted: open "
                              f"pcb/{design.spec.name}.kicad_pcb in KiCad and plot them, or install KiCad and rebuild",
                              "pcb"))
-        return BoardStage(artifacts=out, findings=found, board=board)
+        return BoardStage(artifacts=out, findings=found, board=board, timings_s=timings)
     say("plotting Gerbers with KiCad")
     t = time.perf_counter()
     for name, data in sorted(kicad.plot_gerbers(files, design.spec.name).items()):
         kind = "drill file (Excellon)" if name.endswith(".drl") else "Gerber (plotted by KiCad)"
         out.append(Artifact(f"pcb/gerbers/{name}", data, kind))
     timings["gerbers"] = time.perf_counter() - t
-    return BoardStage(artifacts=out, findings=found, board=board)
+    return BoardStage(artifacts=out, findings=found, board=board, timings_s=timings)
 
 
 def _predictions(design: Design, say: Progress, timings: dict[str, float]) -> PredictionStage:
-    """predictions.json and its plots, and the prediction's design checks (eq. 9 and the guidelines)."""
-    from .export import figures as plots
+    """predictions.json and the prediction's design checks (eq. 9 and the guidelines); its plots are
+    :func:`_plots`'."""
     from .models.predict import predict_with_findings
 
     say("predicting sensitivity, resolution and range")
@@ -185,15 +186,20 @@ def _predictions(design: Design, say: Progress, timings: dict[str, float]) -> Pr
     timings["predict"] = time.perf_counter() - t
     if pred is None:
         raise BuildError(found)
-    t = time.perf_counter()
     out = [Artifact("predictions.json", _json_bytes(pred.as_json()), "predicted field, force curve, sensitivity, "
                     "resolution, range and noise, with the models used")]
-    for name, data in sorted(plots.figures(design, pred, model_bench()).items()):
+    return PredictionStage(artifacts=out, findings=found, prediction=pred)
+
+
+def _plots(drawn: dict[str, bytes], pred: Prediction) -> list[Artifact]:
+    """The prediction's plots (``drawn``: :func:`magfab.export.figures.figures`' files) and the drift chart."""
+    from .export import figures as plots
+
+    out = []
+    for name, data in sorted(drawn.items()):
         stem, kind = name.rsplit(".", 1)
         out.append(Artifact(f"plots/{name}", data, plots.CAPTIONS[stem] + ", " + kind.upper()))
-    out += _drift_charts(pred)
-    timings["plots"] = time.perf_counter() - t
-    return PredictionStage(artifacts=out, findings=found, prediction=pred)
+    return out + _drift_charts(pred)
 
 
 def _drift_charts(pred: Prediction) -> list[Artifact]:
@@ -410,8 +416,9 @@ def plan(spec: Spec, progress: Progress | None = None, scan=None, parallel: bool
     timings["derive"] = time.perf_counter() - t0
     _stop(findings, spec)
 
-    with side_branch(_physics, design, scan, parallel=parallel) as physics:
-        cad = _cad(design, say, timings)
+    parallel = parallel_available() if parallel is None else parallel
+    with side_branch(_physics, design, scan, parallel, parallel=parallel) as physics:
+        cad = _cad(design, say, timings, parallel)
         _stop(findings + cad.findings, spec)
         say("drawing the parts and the board for the report")
         t = time.perf_counter()
@@ -462,9 +469,26 @@ def _stop(findings: list[Finding], spec: Spec) -> None:
         raise BuildError(stop)
 
 
-def _cad(design: Design, say: Progress, timings: dict[str, float]) -> CadStage:
+def _cad(design: Design, say: Progress, timings: dict[str, float], parallel: bool = False) -> CadStage:
     """The CAD branch: every solid as STL (and STEP), the mesh checks, the closed mould's fit, the board; stops at
-    the first stage with an error."""
+    the first stage with an error. The board needs no CAD kernel: where the build forks (``parallel``), it is
+    routed and plotted in a worker while this process loads the kernel (a third of this branch's time) and models
+    the parts."""
+    say("placing and routing the board" + (" beside the CAD kernel" if parallel else ""))
+    with side_branch(_board, design, parallel=parallel) as board:
+        solids = _solids(design, say, timings)  # raises on an error: the board's worker is ended with the block
+        t = time.perf_counter()
+        routed: BoardStage = board.result()
+        if board.forked:
+            timings["wait-board"] = time.perf_counter() - t
+    timings.update(routed.timings_s)
+    return CadStage(artifacts=solids.artifacts + routed.artifacts, findings=solids.findings + routed.findings,
+                    meshes=solids.meshes, board=routed.board)
+
+
+def _solids(design: Design, say: Progress, timings: dict[str, float]) -> CadStage:
+    """Every solid as STL (and STEP), the mesh checks and the closed mould's fit (no board yet); raises where they
+    find an error."""
     spec = design.spec
     say("loading the CAD kernel")
     t = time.perf_counter()
@@ -499,9 +523,7 @@ def _cad(design: Design, say: Progress, timings: dict[str, float]) -> CadStage:
         findings += mould_fit_findings(design, mould_fit(design, meshes, tol))
         timings["mould-fit"] = time.perf_counter() - t
     _stop(findings, spec)
-    board = _board(design, say, timings)
-    return CadStage(artifacts=artifacts + board.artifacts, findings=findings + board.findings, meshes=meshes,
-                    board=board.board)
+    return CadStage(artifacts=artifacts, findings=findings, meshes=meshes, board=None)
 
 
 @dataclass(frozen=True)
@@ -514,16 +536,30 @@ class _PhysicsBranch:
     timings: dict[str, float]
 
 
-def _physics(design: Design, scan: Scan | dict[int, Scan] | None) -> _PhysicsBranch:
+def _physics(design: Design, scan: Scan | dict[int, Scan] | None, parallel: bool = False) -> _PhysicsBranch:
     """The physics branch: predictions and plots, the acceptance bands, the calibration, firmware and readout
-    bundle, and the bench papers. Nothing here needs the CAD kernel."""
+    bundle, and the bench papers. Nothing here needs the CAD kernel.
+
+    It is the build's longest branch, and the speed-accuracy chart is half its plots' time: where the build forks
+    (``parallel``), that chart is drawn in a worker of its own while this one draws the others and fits the bundle."""
+    from .export import figures
+
     timings: dict[str, float] = {}
     say: Progress = lambda _stage: None
     predicted = _predictions(design, say, timings)
     prediction = predicted.prediction
-    accepted = _acceptance(design, prediction)
-    bundle = _bundle(design, prediction, scan, accepted.bands, say, timings)
-    papers = _fabrication(design, prediction, accepted.bands, say, timings)
+    t = time.perf_counter()
+    with side_branch(figures.speed_accuracy_figure, design, prediction, model_bench(), parallel=parallel) as speed:
+        drawn = figures.figures(design, prediction)  # without the bench table: the speed-accuracy chart is beside
+        timings["plots"] = time.perf_counter() - t  # the speed-accuracy chart's too where it was drawn in-process
+        accepted = _acceptance(design, prediction)
+        bundle = _bundle(design, prediction, scan, accepted.bands, say, timings)
+        papers = _fabrication(design, prediction, accepted.bands, say, timings)
+        t = time.perf_counter()
+        drawn |= speed.result()
+        if speed.forked:
+            timings["wait-speed-accuracy"] = time.perf_counter() - t
+    predicted = replace(predicted, artifacts=predicted.artifacts + _plots(drawn, prediction))
     stages = (predicted, Stage(artifacts=bundle.artifacts, findings=accepted.findings + bundle.findings), papers)
     return _PhysicsBranch(stages, prediction, bundle.fit.calibration.to_json(), timings)
 

@@ -34,7 +34,8 @@ class Stage:
 
 @dataclass(frozen=True, kw_only=True)
 class BoardStage(Stage):
-    board: Board  # the routed board, which the report draws rather than routing again
+    board: Board | None  # the routed board, which the report draws rather than routing again (None: not routed yet)
+    timings_s: dict[str, float] = field(default_factory=dict)  # routing and plotting, s (it may run in a worker)
 
 
 @dataclass(frozen=True, kw_only=True)
