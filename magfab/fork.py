@@ -30,14 +30,15 @@ __all__ = ["Branch", "side_branch", "parallel_available", "deferred_interrupt", 
 
 _JOB: tuple[Callable[..., Any], tuple[Any, ...], Any] | None = None  # what the forked child runs, and the parent's
 # end of the pipe (inherited, not pickled)
-_IN_WORKER = False  # set in a forked worker: its own side branches run in-process unless asked for by name
+_DEPTH = 0  # how many forks deep this process is: 0 in the main process
 
 
 def parallel_available() -> bool:
     """True where a second branch can run in a forked worker: Linux, two or more cores, MAGFAB_JOBS not 1, and not
-    already inside a worker (a build's physics branch runs its prediction in-process: its cores are taken). A worker
-    may still fork one branch it names (``side_branch(..., parallel=True)``): the build's plots do."""
-    if os.environ.get("MAGFAB_JOBS", "").strip() == "1" or _IN_WORKER:
+    a worker's worker. A build's workers fork once more (the physics branch's prediction solves its reference mesh
+    beside the chosen one): the branches are uneven, and the operating system gives a core that one of them left idle
+    to whichever process is runnable, so more, shorter chains finish sooner on the same cores."""
+    if os.environ.get("MAGFAB_JOBS", "").strip() == "1" or _DEPTH >= 2:
         return False
     return sys.platform.startswith("linux") and (os.cpu_count() or 1) >= 2
 
@@ -101,8 +102,8 @@ def _outcome(fn: Callable[..., Any], args: tuple[Any, ...]) -> tuple[str, Any]:
 
 
 def _child(conn) -> None:
-    global _IN_WORKER
-    _IN_WORKER = True
+    global _DEPTH
+    _DEPTH += 1
     _die_with_parent()
     fn, args, reader = _JOB  # type: ignore[misc]
     # The child's copy of the parent's end: closed, so a parent that died (a crash, a kill) makes the send below fail

@@ -12,7 +12,7 @@ import hashlib
 import json
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -31,6 +31,7 @@ from .stages import (
     AcceptanceStage,
     ArrayStage,
     BoardStage,
+    BuildResult,
     BundleStage,
     CadStage,
     CrosstalkStage,
@@ -70,71 +71,6 @@ PARTS = (
 )
 
 Progress = Callable[[str], None]
-
-
-@dataclass
-class BuildResult:
-    spec: Spec
-    design: Design
-    artifacts: list[Artifact]
-    findings: list[Finding]
-    timings_s: dict[str, float] = field(default_factory=dict)
-    out_dir: Path | None = None
-    prediction: Prediction | None = None
-    calibration: dict[str, object] | None = None  # what the CLI summary says of the bundle
-
-    def summary(self) -> dict[str, object]:
-        """What ``magfab build --json`` prints."""
-        from .recipes import catalogue
-
-        d = self.design
-        material = catalogue("materials")[self.spec.elastomer.material]
-        return {
-            "spec": self.spec.name,
-            "out_dir": str(self.out_dir) if self.out_dir else None,
-            "artifacts": [a.path for a in self.artifacts],
-            "figures": {
-                "d_rest_mm": round(d.d_rest_mm, 4),
-                "cover_mm": round(d.cover_mm, 4),
-                "skin_mm": round(d.skin_mm, 4),
-                "cavity_volume_mL": round(d.elastomer_volume_mm3 / 1000.0, 4),
-                "silicone_per_part_g": round(d.elastomer_volume_mm3 / 1000.0 * material["density_g_cm3"].nominal, 3),
-                "cavities": d.cavities,
-                **self._array_summary(),
-            },
-            "predictions": self._prediction_summary(),
-            "calibration": self.calibration,
-            "findings": [f.as_dict() for f in self.findings],
-            "timings_s": {k: round(v, 3) for k, v in self.timings_s.items()},
-        }
-
-    def _array_summary(self) -> dict[str, object]:
-        """An array's taxels (none for a single taxel, whose summary is what it was)."""
-        arr = self.design.array
-        if arr is None:
-            return {}
-        return {"taxels": len(arr.taxels), "pitch_mm": round(arr.pitch_mm, 4), "skin": arr.skin.value,
-                "polarity": arr.polarity.value, "addresses": [f"0x{t.i2c_address:02X}" for t in arr.taxels],
-                "option_codes": list(arr.option_codes)}
-
-    def _prediction_summary(self) -> dict[str, object] | None:
-        p = self.prediction
-        if p is None:
-            return None
-        n, s = p.normal, p.shear
-        return {
-            "Bz_rest_G": round(p.field.Bz_rest_G, 1),
-            "dBz_dz_rest_G_per_mm": round(p.field.dBz_dz_rest_G_per_mm, 1),
-            "normal_sensitivity_G_per_N": [round(x, 1) for x in n.sensitivity_G_per_N],
-            "normal_resolution_mN": round(n.resolution_mN, 2),
-            "normal_range_N": round(n.range_N, 3),
-            "normal_range_limit": n.range_limit,
-            "shear_sensitivity_G_per_N": [round(x, 1) for x in s.sensitivity_G_per_N],
-            "shear_resolution_mN": round(s.resolution_mN, 2),
-            "shear_range_N": round(s.range_N, 3),
-            "noise_G": round(p.noise.total_z_G, 3),
-            "models": {m.family: m.name for m in p.models},
-        }
 
 
 def _json_bytes(obj: object) -> bytes:
@@ -424,7 +360,12 @@ def plan(spec: Spec, progress: Progress | None = None, scan=None, parallel: bool
         t = time.perf_counter()
         from .export.report import draw_pictures, render_report
 
-        pictures = draw_pictures(design, cad.meshes, cad.artifacts, cad.board)
+        # the mould's two views are half the pictures' time: drawn in a worker beside the others where the build forks
+        mould = tuple(p.stem for p in PARTS if p.make in (cup_solid, lid_solid))
+        with side_branch(_part_views, cad.meshes, mould, parallel=parallel) as beside:
+            views = _part_views(cad.meshes, tuple(stem for stem in cad.meshes if stem not in mould))
+            views |= beside.result()
+        pictures = draw_pictures(design, cad.meshes, cad.artifacts, cad.board, views)
         timings["report-pictures"] = time.perf_counter() - t
         say("waiting for the predictions and the bundle")
         t = time.perf_counter()
@@ -461,6 +402,13 @@ def plan(spec: Spec, progress: Progress | None = None, scan=None, parallel: bool
                    "rms_holdout_Fz_mN": round(1000 * cal["errors"]["Fz_N"]["rms_holdout"], 2),
                    "rms_holdout_Fr_mN": round(1000 * cal["errors"]["Fr_N"]["rms_holdout"], 2), "image": image}
     return BuildResult(spec, design, artifacts, findings, timings, prediction=prediction, calibration=calibration)
+
+
+def _part_views(meshes: dict[str, trimesh.Trimesh], stems: tuple[str, ...]) -> dict[str, bytes]:
+    """The report's PNG of each part in ``stems``, whole and cut away."""
+    from .export.report import part_figure
+
+    return {stem: part_figure(stem, meshes[stem]) for stem in stems}
 
 
 def _stop(findings: list[Finding], spec: Spec) -> None:
