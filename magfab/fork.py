@@ -22,7 +22,7 @@ import sys
 import traceback
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from typing import Any
+from typing import Any, cast
 
 from .errors import BuildError
 
@@ -68,6 +68,7 @@ class Branch:
 
     def result(self) -> Any:
         if not self._done:
+            assert self._conn is not None and self._process is not None  # forked: both were made with it
             try:
                 self._value = self._conn.recv()
             except EOFError:  # the worker died without a word (killed, out of memory)
@@ -76,7 +77,7 @@ class Branch:
                                         f"{self._process.exitcode})")
             self._done = True
             self._process.join()
-        kind, payload = self._value
+        kind, payload = cast(tuple[str, Any], self._value)
         if kind == "ok":
             return payload
         if kind == "build-error":

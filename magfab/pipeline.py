@@ -16,7 +16,7 @@ import types
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 from . import __version__
 from .check import design_findings, errors_in, mesh_findings, mould_fit_findings
@@ -39,6 +39,7 @@ from .stages import (
     CrosstalkStage,
     PredictionStage,
     ScanStage,
+    SolidsStage,
     Stage,
 )
 
@@ -163,7 +164,7 @@ def _acceptance(design: Design, prediction: Prediction) -> AcceptanceStage:
 
 def _calibration_finding(result: FitResult, prefix: str, source: str = "") -> Finding:
     """The calibration's held-out errors, a warning when they miss the tolerance."""
-    err = result.calibration.to_json()["errors"]
+    err: Any = result.calibration.to_json()["errors"]
     return Finding(Severity.INFO if result.meets_tolerance else Severity.WARNING, "calibration",
                    f"{prefix}{source}{result.chosen}, held-out RMS Fz {1000 * err['Fz_N']['rms_holdout']:.2f} mN, "
                    f"Fr {1000 * err['Fr_N']['rms_holdout']:.2f} mN ({err['folds']}-fold)"
@@ -208,17 +209,18 @@ def _bundle(design: Design, prediction: Prediction | None, scan: Scan | dict[int
     array_doc = None
     if design.array is not None:
         say("fitting every taxel's calibration")
-        arrayed = _taxel_calibrations(design, prediction, scan, mls)  # scan: None or {taxel: Scan}
+        assert prediction is not None, "an array's calibration needs the prediction (its neighbours' field)"
+        arrayed = _taxel_calibrations(design, prediction, cast("dict[int, Scan] | None", scan), mls)
         out += arrayed.artifacts
         found += arrayed.findings
         result, array_doc = arrayed.fits[0], arrayed.doc
     else:
-        scanned = _scan(design, prediction, scan, say)
+        scanned = _scan(design, prediction, cast("Scan | None", scan), say)
         out += scanned.artifacts
         found += scanned.findings
         say("fitting the calibration")
         result = calibrate.fit(scanned.scan, design, mls=mls)
-    cal = result.calibration.to_json()
+    cal: dict[str, Any] = result.calibration.to_json()
     timings["calibrate"] = time.perf_counter() - t
     if array_doc is None:
         found.append(_calibration_finding(result, "", f"calibration from the {cal['scan']['source']} scan "
@@ -251,7 +253,7 @@ def _bundle(design: Design, prediction: Prediction | None, scan: Scan | dict[int
     return BundleStage(artifacts=out, findings=found, fit=result)
 
 
-def _crosstalk(design: Design, prediction: Prediction | None) -> CrosstalkStage:
+def _crosstalk(design: Design, prediction: Prediction) -> CrosstalkStage:
     """The array's crosstalk budget (:mod:`magfab.models.crosstalk`): array/crosstalk.json, its charts, its
     findings, and whether the host is to remove a moving neighbour's field (the budget is over without it)."""
     from .export import crosstalk_figures
@@ -266,7 +268,7 @@ def _crosstalk(design: Design, prediction: Prediction | None) -> CrosstalkStage:
     return CrosstalkStage(artifacts=out, findings=crosstalk.findings(design, xt), dynamic=xt.dynamic)
 
 
-def _taxel_calibrations(design: Design, prediction: Prediction | None, scans: dict[int, Scan] | None,
+def _taxel_calibrations(design: Design, prediction: Prediction, scans: dict[int, Scan] | None,
                         mls: bool) -> ArrayStage:
     """An array's calibrations: each taxel's scan (measured, from ``scans`` {taxel: Scan}, or simulated with its
     neighbours' field), its fit to the scan with the neighbours' field removed, and calibration/array.json
@@ -455,7 +457,7 @@ def _cad(design: Design, say: Progress, timings: dict[str, float], parallel: boo
                     meshes=solids.meshes, board=routed.board)
 
 
-def _solids(design: Design, say: Progress, timings: dict[str, float]) -> CadStage:
+def _solids(design: Design, say: Progress, timings: dict[str, float]) -> SolidsStage:
     """Every solid as STL (and STEP), the mesh checks and the closed mould's fit (no board yet); raises where they
     find an error."""
     spec = design.spec
@@ -482,7 +484,7 @@ def _solids(design: Design, say: Progress, timings: dict[str, float]) -> CadStag
         t = time.perf_counter()
         mesh = tessellate(solid, tol, ang)
         meshes[stem] = mesh
-        findings += mesh_findings(stem, mesh, solid.val().Volume(), tol)
+        findings += mesh_findings(stem, mesh, cast("cq.Shape", solid.val()).Volume(), tol)
         artifacts.append(Artifact(f"{stem}.stl", stl_bytes(mesh, f"{spec.name} {stem}"), description + ", STL"))
         if spec.build.step:
             artifacts.append(Artifact(f"{stem}.step", step_bytes(solid, f"{spec.name}-{stem}"), description + ", STEP"))
@@ -492,7 +494,7 @@ def _solids(design: Design, say: Progress, timings: dict[str, float]) -> CadStag
         findings += mould_fit_findings(design, mould_fit(design, meshes, tol))
         timings["mould-fit"] = time.perf_counter() - t
     _stop(findings, spec)
-    return CadStage(artifacts=artifacts, findings=findings, meshes=meshes, board=None)
+    return SolidsStage(artifacts=artifacts, findings=findings, meshes=meshes)
 
 
 @dataclass(frozen=True)
@@ -533,14 +535,15 @@ def _physics(design: Design, scan: Scan | dict[int, Scan] | None, parallel: bool
     return _PhysicsBranch(stages, prediction, bundle.fit.calibration.to_json(), timings)
 
 
-def _manifest(spec: Spec, design: Design, artifacts: list[Artifact], models: dict[str, object]) -> bytes:
+def _manifest(spec: Spec, design: Design, artifacts: list[Artifact], models: dict[str, Any]) -> bytes:
+    made: dict[str, Any] = {"geometry": "cadquery-occt", "land_patterns": f"IPC-7351B {spec.pcb.density.value}",
+                            "board": "magfab grid router", "gerbers": _kicad_version(artifacts)}
     return _json_bytes({
         "magfab_version": __version__,
         "spec_name": spec.name,
         "spec_sha256": spec.sha256(),
         "printer": design.printer.key,
-        "models": {"geometry": "cadquery-occt", "land_patterns": f"IPC-7351B {spec.pcb.density.value}",
-                   "board": "magfab grid router", "gerbers": _kicad_version(artifacts), **models},
+        "models": made | models,
         "artifacts": [
             {"path": a.path, "sha256": hashlib.sha256(a.data).hexdigest(), "bytes": len(a.data), "description": a.description}
             for a in artifacts

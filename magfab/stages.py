@@ -24,7 +24,7 @@ if TYPE_CHECKING:
     from .pcb import Board
     from .spec import Spec
 
-__all__ = ["Stage", "BoardStage", "CadStage", "PredictionStage", "AcceptanceStage", "ScanStage", "CrosstalkStage",
+__all__ = ["Stage", "BoardStage", "SolidsStage", "CadStage", "PredictionStage", "AcceptanceStage", "ScanStage", "CrosstalkStage",
            "ArrayStage", "BundleStage", "BuildResult"]
 
 
@@ -38,12 +38,19 @@ class Stage:
 
 @dataclass(frozen=True, kw_only=True)
 class BoardStage(Stage):
-    board: Board | None  # the routed board, which the report draws rather than routing again (None: not routed yet)
+    board: Board  # the routed board, which the report draws rather than routing again
     timings_s: dict[str, float] = field(default_factory=dict)  # routing and plotting, s (it may run in a worker)
 
 
 @dataclass(frozen=True, kw_only=True)
+class SolidsStage(Stage):
+    meshes: dict[str, trimesh.Trimesh]  # by part stem
+
+
+@dataclass(frozen=True, kw_only=True)
 class CadStage(BoardStage):
+    """The CAD branch whole: the solids and the board."""
+
     meshes: dict[str, trimesh.Trimesh]  # by part stem
 
 
