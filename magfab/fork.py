@@ -7,6 +7,11 @@ main process, so it inherits the derived design without pickling it and imports 
 Its result comes back pickled through a pipe. Where ``fork`` is not the platform's way (Windows, macOS) or
 ``MAGFAB_JOBS=1`` is set, the branch runs in-process, first, with the same result.
 
+Each branch forks smaller ones of its own where they are independent (the board beside the CAD kernel's import;
+the speed-accuracy chart, the prediction's reference mesh and the mould's report views beside the rest): the
+branches are uneven, and more, shorter chains let the operating system keep both cores busy to the end. A worker
+may fork once more; its worker may not.
+
 Results are the same bytes either way (tests compare the two): each branch is deterministic on its own.
 
 While the branches run side by side each uses one BLAS thread (:func:`blas_threads`): OpenBLAS's worker threads
