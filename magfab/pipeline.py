@@ -511,8 +511,9 @@ def _physics(design: Design, scan: Scan | dict[int, Scan] | None, parallel: bool
     """The physics branch: predictions and plots, the acceptance bands, the calibration, firmware and readout
     bundle, and the bench papers. Nothing here needs the CAD kernel.
 
-    It is the build's longest branch, and the speed-accuracy chart is half its plots' time: where the build forks
-    (``parallel``), that chart is drawn in a worker of its own while this one draws the others and fits the bundle."""
+    It is the build's longest branch, and its plots the longest part of it: where the build forks (``parallel``), the
+    speed-accuracy chart and the field contours are drawn in a worker of its own while this one draws the others and
+    fits the bundle."""
     from .export import figures
 
     timings: dict[str, float] = {}
@@ -520,16 +521,18 @@ def _physics(design: Design, scan: Scan | dict[int, Scan] | None, parallel: bool
     predicted = _predictions(design, say, timings)
     prediction = predicted.prediction
     t = time.perf_counter()
-    with side_branch(figures.speed_accuracy_figure, design, prediction, model_bench(), parallel=parallel) as speed:
-        drawn = figures.figures(design, prediction)  # without the bench table: the speed-accuracy chart is beside
-        timings["plots"] = time.perf_counter() - t  # the speed-accuracy chart's too where it was drawn in-process
+    beside = ("field_contours", "speed_accuracy")  # the worker's share: they took just over half the plots' CPU
+    mine = tuple(name for name in figures.MAKERS if name not in beside)
+    with side_branch(figures.figures, design, prediction, model_bench(), beside, parallel=parallel) as worker:
+        drawn = figures.figures(design, prediction, (), mine)
+        timings["plots"] = time.perf_counter() - t  # the worker's plots too where they were drawn in-process
         accepted = _acceptance(design, prediction)
         bundle = _bundle(design, prediction, scan, accepted.bands, say, timings)
         papers = _fabrication(design, prediction, accepted.bands, say, timings)
         t = time.perf_counter()
-        drawn |= speed.result()
-        if speed.forked:
-            timings["wait-speed-accuracy"] = time.perf_counter() - t
+        drawn |= worker.result()
+        if worker.forked:
+            timings["wait-plots"] = time.perf_counter() - t
     predicted = replace(predicted, artifacts=predicted.artifacts + _plots(drawn, prediction))
     stages = (predicted, Stage(artifacts=bundle.artifacts, findings=accepted.findings + bundle.findings), papers)
     return _PhysicsBranch(stages, prediction, bundle.fit.calibration.to_json(), timings)

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import io
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -402,34 +402,25 @@ MAKERS: dict[str, Callable] = {"field_axis": _axis_field, "field_contours": _con
                                "sensitivity": _sensitivity}
 
 
-def draw(design: Design, pred: Prediction, bench_table: Sequence[Mapping[str, object]] = ()) -> dict[str, object]:
-    """{file stem: matplotlib Figure}, open (the caller closes them); for :func:`figures` and the tests."""
+def draw(design: Design, pred: Prediction, bench_table: Sequence[Mapping[str, object]] = (),
+         names: Collection[str] | None = None) -> dict[str, object]:
+    """{file stem: matplotlib Figure} (``names``: those stems only), open (the caller closes them); for
+    :func:`figures` and the tests."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    out = {name: make(plt, design, pred) for name, make in MAKERS.items()}
-    if bench_table:
+    out = {name: make(plt, design, pred) for name, make in MAKERS.items() if names is None or name in names}
+    if bench_table and (names is None or "speed_accuracy" in names):
         out["speed_accuracy"] = _speed_accuracy(plt, design, pred, bench_table)
     return out
 
 
-def figures(design: Design, pred: Prediction, bench_table: Sequence[Mapping[str, object]] = ()) -> dict[str, bytes]:
-    """{file name: bytes} for every prediction plot, SVG and PNG."""
-    return _rendered(lambda plt: draw(design, pred, bench_table))
-
-
-def speed_accuracy_figure(design: Design, pred: Prediction,
-                          bench_table: Sequence[Mapping[str, object]]) -> dict[str, bytes]:
-    """{file name: bytes} of the speed-accuracy chart alone (the same bytes :func:`figures` makes of it): half the
-    plots' time, so a build renders it beside the others."""
-    return _rendered(lambda plt: {"speed_accuracy": _speed_accuracy(plt, design, pred, bench_table)} if bench_table
-                     else {})
-
-
-def _rendered(make: Callable[..., dict[str, object]]) -> dict[str, bytes]:
-    """Draw ``make(plt)``'s figures under :data:`RC` and render each to SVG and PNG, closing it."""
+def figures(design: Design, pred: Prediction, bench_table: Sequence[Mapping[str, object]] = (),
+            names: Collection[str] | None = None) -> dict[str, bytes]:
+    """{file name: bytes} for every prediction plot (``names``: those file stems only), SVG and PNG. Each plot's bytes
+    are the same whichever others are drawn with it, so a build draws them in two processes."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -437,7 +428,7 @@ def _rendered(make: Callable[..., dict[str, object]]) -> dict[str, bytes]:
 
     out: dict[str, bytes] = {}
     with matplotlib.rc_context(RC):
-        for name, fig in make(plt).items():
+        for name, fig in draw(design, pred, bench_table, names).items():
             out[f"{name}.svg"], out[f"{name}.png"] = _render(fig)
             plt.close(fig)
     return out
