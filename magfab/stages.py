@@ -24,8 +24,8 @@ if TYPE_CHECKING:
     from .pcb import Board
     from .spec import Spec
 
-__all__ = ["Stage", "BoardStage", "SolidsStage", "CadStage", "PredictionStage", "AcceptanceStage", "ScanStage", "CrosstalkStage",
-           "ArrayStage", "BundleStage", "BuildResult"]
+__all__ = ["Stage", "BoardStage", "SolidsStage", "CadStage", "PredictionStage", "AcceptanceStage", "ScanStage",
+           "CrosstalkStage", "ArrayStage", "BundleStage", "BuildResult"]
 
 
 @dataclass(frozen=True, kw_only=True)
