@@ -16,7 +16,12 @@ What it measures (all times are wall-clock seconds, from :func:`time.perf_counte
    is on the PATH, the same mould is written as OpenSCAD scripts from the same ``Design`` numbers,
    rendered with ``openscad -o <part>.stl <part>.scad`` (CGAL), checked against magfab's STLs (volume,
    bounding box, centroid), and the OpenSCAD time is compared with magfab's.
-4. A table on stdout, ``<out>/build_bench.json`` and, if matplotlib is importable, ``<out>/build_bench.png``.
+4. **Side by side**: the default build as a cold process against OpenSCAD rendering the same mould (cup + lid),
+   interleaved run by run so that a shared machine's load falls on both alike, as the ratio OpenSCAD / build.
+   ``--compare DIR`` (repeatable) adds the build of another checkout of magfab (``PYTHONPATH=DIR``, e.g. the
+   commit before a change) to the same rounds, so before and after are read against the same baseline.
+   ``--only side-by-side`` runs this section alone.
+5. A table on stdout, ``<out>/build_bench.json`` and, if matplotlib is importable, ``<out>/build_bench.png``.
 
 Nothing here asserts on a time: the figures are for reading, not for failing.
 """
@@ -153,12 +158,10 @@ def warm_plan_figures(repeat: int) -> dict[str, object]:
 
 def mould_parts() -> list[tuple[str, Callable]]:
     """(file stem, builder) of the mould's parts, taken from ``magfab.pipeline.PARTS``."""
-    import importlib
-
+    from magfab.mould import cup_solid, lid_solid
     from magfab.pipeline import PARTS
 
-    return [(stem, getattr(importlib.import_module(module), func))
-            for stem, module, func, _printed, _what in PARTS if module == "magfab.mould"]
+    return [(part.stem, part.make) for part in PARTS if part.make in (cup_solid, lid_solid)]
 
 
 def mould_stls(design: Design) -> dict[str, bytes]:
@@ -452,7 +455,79 @@ def mould_figures(repeat: int, work: Path, out: Path) -> dict[str, object]:
     return result
 
 
-# ---- 4. report ------------------------------------------------------------------------------------
+# ---- 4. side by side: the build against OpenSCAD, in the same rounds ---------------------------------
+
+
+def time_build(tree: Path | None, out: Path, work: Path) -> tuple[float, dict[str, float]]:
+    """Wall seconds of a cold ``magfab build --json`` of the default spec with magfab from ``tree`` (None: this
+    interpreter's own), and the stage timings the build reports (``timings_s``, seconds)."""
+    env = dict(os.environ)
+    if tree is not None:
+        env["PYTHONPATH"] = os.pathsep.join([str(tree)] + [p for p in [env.get("PYTHONPATH")] if p])
+    cmd = [sys.executable, "-m", "magfab.cli", "build", "--json", "--out", str(out)]
+    t = time.perf_counter()
+    proc = subprocess.run(cmd, cwd=work, env=env, stdin=subprocess.DEVNULL, capture_output=True, text=True)
+    elapsed = time.perf_counter() - t
+    if proc.returncode != 0:
+        raise RuntimeError(f"{' '.join(cmd)} exited with {proc.returncode}:\n{proc.stderr.strip()}")
+    return elapsed, json.loads(proc.stdout).get("timings_s", {})
+
+
+def side_by_side(repeat: int, work: Path, out: Path, trees: Sequence[Path]) -> dict[str, object]:
+    """Rounds of: the default build (this magfab, then each of ``trees``), OpenSCAD's cup, OpenSCAD's lid; seconds.
+
+    The ratio of each build is OpenSCAD's cup + lid (sum of medians) over the build's median: above 1, the whole
+    build is faster than OpenSCAD rendering the mould alone.
+    """
+    import magfab
+
+    builds: dict[str, list[float]] = {"this": []} | {str(t): [] for t in trees}
+    stages: dict[str, list[dict[str, float]]] = {k: [] for k in builds}
+    exe = shutil.which("openscad")
+    scad: dict[str, Path] = {}
+    if exe is not None:
+        design = magfab.derive(magfab.load_spec(None))
+        tol, ang = design.spec.mould.tessellation_tolerance_mm, design.spec.mould.angular_tolerance_deg
+        folder = out / "openscad"
+        folder.mkdir(parents=True, exist_ok=True)
+        for stem, source in (("mould_cup", scad_cup(design, tol, ang)), ("mould_lid", scad_lid(design, tol, ang))):
+            scad[stem] = folder / f"{stem}.scad"
+            scad[stem].write_text(source, encoding="utf-8")
+    renders: dict[str, list[float]] = {stem: [] for stem in scad}
+    for i in range(repeat):
+        for k, name in enumerate(builds):
+            elapsed, timings = time_build(None if name == "this" else Path(name), work / f"side-{i}-{k}", work)
+            builds[name].append(elapsed)
+            stages[name].append(timings)
+        for stem, path in scad.items():
+            renders[stem].append(time_command([exe, "-o", str(path.with_suffix(".stl")), str(path)], path.parent))
+    result: dict[str, object] = {"builds": {k: summarise(v) | {"stages_s": stages[k]} for k, v in builds.items()}}
+    if scad:
+        total = sum(statistics.median(v) for v in renders.values())
+        result["openscad"] = {"version": openscad_version(exe), "render": {k: summarise(v) for k, v in renders.items()},
+                              "total_median_s": total}
+        result["ratio_openscad_over_build"] = {k: total / statistics.median(v) for k, v in builds.items()}
+    else:
+        result["openscad_note"] = "openscad not on PATH: no baseline"
+    return result
+
+
+def format_side_by_side(sbs: dict[str, object]) -> list[str]:
+    """The side-by-side section of the table."""
+    out = ["", "side by side (cold processes, interleaved round by round)"]
+    for name, fig in sbs["builds"].items():
+        out.append(_cold_line(f"magfab build, {'this checkout' if name == 'this' else name}", fig))
+    scad = sbs.get("openscad")
+    if scad is None:
+        return [*out, "  " + sbs.get("openscad_note", "no OpenSCAD baseline")]
+    out += [_cold_line(f"OpenSCAD render {part} (cold process)", r) for part, r in scad["render"].items()]
+    out.append(_line("OpenSCAD cup + lid (sum of medians)", _ms(scad["total_median_s"])))
+    for name, ratio in sbs["ratio_openscad_over_build"].items():
+        out.append(_line(f"OpenSCAD / build, {'this checkout' if name == 'this' else name}", f"{ratio:8.3g} x"))
+    return out
+
+
+# ---- 5. report ------------------------------------------------------------------------------------
 
 
 def environment() -> dict[str, object]:
@@ -490,8 +565,12 @@ def format_report(res: dict[str, object]) -> str:
     n = res["repeat"]
     env = res["environment"]
     out = [f"magfab {env['magfab']} build benchmark: {n} repeats, median (min); cadquery {env['cadquery']}, "
-           f"Python {env['python']}, {env['cpu_count']} CPUs",
-           "", "cold (fresh process each time; OS file cache warm)"]
+           f"Python {env['python']}, {env['cpu_count']} CPUs"]
+    if "side_by_side" in res:
+        out += format_side_by_side(res["side_by_side"])
+    if "cold" not in res:
+        return "\n".join(out)
+    out += ["", "cold (fresh process each time; OS file cache warm)"]
     cold = res["cold"]
     out += [_cold_line("python -c pass", cold["python_startup"]),
             _cold_line('python -c "import magfab"', cold["import_magfab"]),
@@ -593,14 +672,18 @@ def _barh(ax, values: dict[str, float], title: str, colours: list[str]) -> None:
 # ---- main -----------------------------------------------------------------------------------------
 
 
-def run(repeat: int, out: Path) -> dict[str, object]:
-    """Every figure of the benchmark, as a JSON-ready dict (seconds, mm, mm^3)."""
+def run(repeat: int, out: Path, trees: Sequence[Path] = (), only: str | None = None) -> dict[str, object]:
+    """Every figure of the benchmark (``only="side-by-side"``: that section alone), as a JSON-ready dict (seconds,
+    mm, mm^3); ``trees`` are other checkouts whose build joins the side-by-side rounds."""
+    res: dict[str, object] = {"repeat": repeat, "environment": environment()}
     with tempfile.TemporaryDirectory(prefix="magfab-bench-") as tmp:
         work = Path(tmp)
-        cold = cold_figures(repeat, work)
-        warm = warm_plan_figures(repeat)
-        mould = mould_figures(repeat, work, out)
-    return {"repeat": repeat, "environment": environment(), "cold": cold, "warm_plan": warm, "mould": mould}
+        res["side_by_side"] = side_by_side(repeat, work, out, trees)
+        if only is None:
+            res["cold"] = cold_figures(repeat, work)
+            res["warm_plan"] = warm_plan_figures(repeat)
+            res["mould"] = mould_figures(repeat, work, out)
+    return res
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -608,16 +691,21 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--repeat", type=int, default=3, help="runs per figure (default 3)")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help="output folder (default bench/out)")
+    parser.add_argument("--compare", type=Path, action="append", default=[], metavar="DIR",
+                        help="another checkout of magfab whose build joins the side-by-side rounds (repeatable)")
+    parser.add_argument("--only", choices=["side-by-side"], help="run that section alone")
     args = parser.parse_args(argv)
     if args.repeat < 1:
         parser.error("--repeat must be at least 1")
     out = args.out.resolve()
     out.mkdir(parents=True, exist_ok=True)
-    res = run(args.repeat, out)
+    res = run(args.repeat, out, [t.resolve() for t in args.compare], args.only)
     print(format_report(res))
     write_json(res, out / JSON_NAME)
     print(f"\nwrote {out / JSON_NAME}")
-    if write_chart(res, out / CHART_NAME):
+    if "warm_plan" not in res:
+        pass  # the chart draws the warm stages and the mould section: not run
+    elif write_chart(res, out / CHART_NAME):
         print(f"wrote {out / CHART_NAME}")
     else:
         print("matplotlib is not importable: no chart (nothing was installed)")

@@ -67,9 +67,9 @@ def main() -> None:
 
     from magfab.export.cad import tessellate
     from magfab.fit import mould_fit
-    from magfab.pipeline import PARTS, _solid
+    from magfab.pipeline import PARTS
 
-    solids = {stem: _solid(module, func, design) for stem, module, func, _p, _d in PARTS if stem != "pad"}
+    solids = {part.stem: part.make(design) for part in PARTS if part.stem != "pad"}
     tol, ang = spec.mould.tessellation_tolerance_mm, spec.mould.angular_tolerance_deg
     meshes = {stem: tessellate(s, tol, ang) for stem, s in solids.items()}
 

@@ -9,15 +9,14 @@ the previous good one.
 from __future__ import annotations
 
 import hashlib
-import importlib
 import json
 import re
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, replace
 from importlib.resources import files
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, cast
 
 from . import __version__, pcb
 from .array_bench import measured_scan_path
@@ -32,12 +31,24 @@ from .check import (
     preflight,
 )
 from .design import Design, derive
+from .elastomer import elastomer_solid
 from .errors import BuildError, Finding, ModelLimitError, OutputError, Severity
-from .export import bom, cad, calibration_chart, checklist, crosstalk_figures, drift_figures, firmware, kicad, readout
+from .export import (
+    bom,
+    calibration_chart,
+    checklist,
+    crosstalk_figures,
+    drift_figures,
+    figures,
+    firmware,
+    kicad,
+    readout,
+)
+from .export import cad as cad_files
 from .export import figures as plots
-from .export.report import draw_pictures, render_report
+from .export.report import draw_pictures, part_figure, render_report
 from .fit import mould_fit
-from .fork import deferred_interrupt, side_branch
+from .fork import deferred_interrupt, parallel_available, side_branch
 from .formats.scan_csv import scan_csv
 from .limits import check_scan
 from .models import calibration as calibrate
@@ -46,103 +57,69 @@ from .models.acceptance import acceptance
 from .models.scan import scan_plan, simulate_scan
 from .models.scan_guards import MERGED, merged_csv, scan_depth_warnings
 from .models.taxels import array_field, calibrate_taxels, compensated, simulate_taxel_scan
+from .mould import cup_solid, lid_solid
 from .output import Artifact, check_target, write
+from .pad import pad_solid
 from .spec import Spec
+from .stages import (
+    AcceptanceStage,
+    ArrayStage,
+    BoardStage,
+    BuildResult,
+    BundleStage,
+    CadStage,
+    CrosstalkStage,
+    PredictionStage,
+    ScanStage,
+    SolidsStage,
+    Stage,
+)
 
 if TYPE_CHECKING:
+    import cadquery as cq
+    import trimesh
+
+    from .formats.scan_csv import Scan
+    from .models.calibration import FitResult
     from .models.predict import Prediction
 
 # CadQuery and trimesh are imported lazily, in the CAD branch, for speed: importing the pipeline stays cheap, and the
 # kernel's load is timed on its own (with Ctrl-C deferred while VTK initialises).
 
-__all__ = ["Artifact", "BuildResult", "OutputError", "plan", "write", "build", "check_target", "PARTS",
-           "default_out_dir"]
 
-#: Solid parts: file stem, builder (module, function), whether it is printed, what it is for.
+__all__ = ["Artifact", "BuildResult", "OutputError", "plan", "write", "build", "check_target", "PARTS", "Part",
+           "Stage", "default_out_dir"]
+
+
+@dataclass(frozen=True)
+class Part:
+    """A solid the build makes: ``make`` is its builder (the part modules import the CAD kernel inside it, so
+    holding it here costs nothing until a build calls it)."""
+
+    stem: str  # file stem of its STL and STEP
+    make: Callable[[Design], cq.Workplane]
+    printed: bool
+    description: str
+
+
 PARTS = (
-    ("elastomer", "magfab.elastomer", "elastomer_solid", False, "the cast silicone part, with its magnet pocket (reference)"),
-    ("mould_cup", "magfab.mould", "cup_solid", True, "mould cup with the cavities, print pose"),
-    ("mould_lid", "magfab.mould", "lid_solid", True, "mould lid with the pocket cores, fill and vent holes, print pose"),
-    ("pad", "magfab.pad", "pad_solid", True, "mounting pad: chip recess below, centring lip above, print pose"),
+    Part("elastomer", elastomer_solid, False, "the cast silicone part, with its magnet pocket (reference)"),
+    Part("mould_cup", cup_solid, True, "mould cup with the cavities, print pose"),
+    Part("mould_lid", lid_solid, True, "mould lid with the pocket cores, fill and vent holes, print pose"),
+    Part("pad", pad_solid, True, "mounting pad: chip recess below, centring lip above, print pose"),
 )
 
 Progress = Callable[[str], None]
-
-
-@dataclass
-class BuildResult:
-    spec: Spec
-    design: Design
-    artifacts: list[Artifact]
-    findings: list[Finding]
-    timings_s: dict[str, float] = field(default_factory=dict)
-    out_dir: Path | None = None
-    prediction: Prediction | None = None
-    calibration: dict[str, object] | None = None  # what the CLI summary says of the bundle
-
-    def summary(self) -> dict[str, object]:
-        """What ``magfab build --json`` prints."""
-        d = self.design
-        return {
-            "spec": self.spec.name,
-            "out_dir": str(self.out_dir) if self.out_dir else None,
-            "artifacts": [a.path for a in self.artifacts],
-            "figures": {
-                "d_rest_mm": round(d.d_rest_mm, 4),
-                "cover_mm": round(d.cover_mm, 4),
-                "skin_mm": round(d.skin_mm, 4),
-                "cavity_volume_mL": round(d.elastomer_volume_mm3 / 1000.0, 4),
-                "silicone_per_part_g": round(d.elastomer_volume_mm3 / 1000.0 * d.material.density_g_cm3.nominal, 3),
-                "cavities": d.cavities,
-                **self._array_summary(),
-            },
-            "predictions": self._prediction_summary(),
-            "calibration": self.calibration,
-            "findings": [f.as_dict() for f in self.findings],
-            "timings_s": {k: round(v, 3) for k, v in self.timings_s.items()},
-        }
-
-    def _array_summary(self) -> dict[str, object]:
-        """An array's taxels (none for a single taxel, whose summary is what it was)."""
-        arr = self.design.array
-        if arr is None:
-            return {}
-        return {"taxels": len(arr.taxels), "pitch_mm": round(arr.pitch_mm, 4), "skin": arr.skin.value,
-                "polarity": arr.polarity.value, "addresses": [f"0x{t.i2c_address:02X}" for t in arr.taxels],
-                "option_codes": list(arr.option_codes)}
-
-    def _prediction_summary(self) -> dict[str, object] | None:
-        p = self.prediction
-        if p is None:
-            return None
-        n, s = p.normal, p.shear
-        return {
-            "Bz_rest_G": round(p.field.Bz_rest_G, 1),
-            "dBz_dz_rest_G_per_mm": round(p.field.dBz_dz_rest_G_per_mm, 1),
-            "normal_sensitivity_G_per_N": [round(x, 1) for x in n.sensitivity_G_per_N],
-            "normal_resolution_mN": round(n.resolution_mN, 2),
-            "normal_range_N": round(n.range_N, 3),
-            "normal_range_limit": n.range_limit,
-            "shear_sensitivity_G_per_N": [round(x, 1) for x in s.sensitivity_G_per_N],
-            "shear_resolution_mN": round(s.resolution_mN, 2),
-            "shear_range_N": round(s.range_N, 3),
-            "noise_G": round(p.noise.total_z_G, 3),
-            "models": {m.family: m.name for m in p.models},
-        }
 
 
 def _json_bytes(obj: object) -> bytes:
     return (json.dumps(obj, indent=2, sort_keys=True) + "\n").encode()
 
 
-def _solid(module: str, func: str, design: Design):
-    return getattr(importlib.import_module(module), func)(design)
-
-
-def _board(design: Design, say: Progress, timings: dict[str, float]):
-    """The footprint library, the routed breakout board and, where KiCad is installed, its Gerbers:
-    (artifacts, findings, the :class:`magfab.pcb.Board`, which the report draws rather than routing again)."""
+def _board(design: Design, say: Progress = lambda _stage: None) -> BoardStage:
+    """The footprint library, the routed breakout board and, where KiCad is installed, its Gerbers."""
     say("placing and routing the board")
+    timings: dict[str, float] = {}
     t = time.perf_counter()
     board = pcb.board(design)
     found = pcb.findings(board)
@@ -154,62 +131,65 @@ def _board(design: Design, say: Progress, timings: dict[str, float]):
     out = [Artifact(f"pcb/{rel}", data, next(v for k, v in what.items() if rel.endswith(k)))
            for rel, data in sorted(files.items())]
     if errors_in(found, strict=False):
-        return out, found, board
+        return BoardStage(artifacts=out, findings=found, board=board, timings_s=timings)
     if kicad.kicad_python() is None:
         found.append(Finding(Severity.INFO, "pcb-gerbers-skipped",
                              "KiCad (Debian package 'kicad') is not installed, so no Gerbers were plotted: open "
                              f"pcb/{design.spec.name}.kicad_pcb in KiCad and plot them, or install KiCad and rebuild",
                              "pcb"))
-        return out, found, board
+        return BoardStage(artifacts=out, findings=found, board=board, timings_s=timings)
     say("plotting Gerbers with KiCad")
     t = time.perf_counter()
     for name, data in sorted(kicad.plot_gerbers(files, design.spec.name).items()):
         kind = "drill file (Excellon)" if name.endswith(".drl") else "Gerber (plotted by KiCad)"
         out.append(Artifact(f"pcb/gerbers/{name}", data, kind))
     timings["gerbers"] = time.perf_counter() - t
-    return out, found, board
+    return BoardStage(artifacts=out, findings=found, board=board, timings_s=timings)
 
 
-def _predictions(design: Design, say: Progress, timings: dict[str, float]):
-    """predictions.json and its plots, and the prediction's design checks (docs/models.md, M9 and M18)."""
+def _predictions(design: Design, say: Progress, timings: dict[str, float]) -> PredictionStage:
+    """predictions.json and the prediction's design checks (docs/models.md, M9 and M18); its plots are
+    :func:`_plots`'."""
     say("predicting sensitivity, resolution and range")
     t = time.perf_counter()
     pred, found = predict_with_findings(design)
     timings["predict"] = time.perf_counter() - t
     if pred is None:
         raise BuildError(found)
-    t = time.perf_counter()
     out = [Artifact("predictions.json", _json_bytes(pred.as_json()), "predicted field, force curve, sensitivity, "
                     "resolution, range and noise, with the models used")]
-    for name, data in sorted(plots.figures(design, pred, model_bench()).items()):
+    return PredictionStage(artifacts=out, findings=found, prediction=pred)
+
+
+def _plots(drawn: dict[str, bytes], pred: Prediction) -> list[Artifact]:
+    """The prediction's plots (``drawn``: :func:`magfab.export.figures.figures`' files) and the drift chart."""
+    out = []
+    for name, data in sorted(drawn.items()):
         stem, kind = name.rsplit(".", 1)
         out.append(Artifact(f"plots/{name}", data, plots.CAPTIONS[stem] + ", " + kind.upper()))
-    out += _drift_charts(pred)
-    timings["plots"] = time.perf_counter() - t
-    return out, found, pred
+    return out + _drift_charts(pred)
 
 
-def _drift_charts(pred) -> list[Artifact]:
+def _drift_charts(pred: Prediction) -> list[Artifact]:
     """The drift budget's chart (predictions.json's ``drift``), when the prediction has one."""
     if pred.drift is None:
         return []
-
     return [Artifact(f"{drift_figures.FOLDER}{name}", data, drift_figures.CAPTIONS[name.rsplit(".", 1)[0]] + ", "
                      + name.rsplit(".", 1)[1].upper()) for name, data in sorted(drift_figures.figures(pred.drift).items())]
 
 
-def _acceptance(design: Design, prediction) -> tuple[dict | None, list[Finding]]:
+def _acceptance(design: Design, prediction: Prediction) -> AcceptanceStage:
     """The acceptance test's bands (magfab.models.acceptance), for the readout package and the checklist."""
     try:
-        return acceptance(design, prediction), []
+        return AcceptanceStage(bands=acceptance(design, prediction))
     except ModelLimitError as exc:  # e.g. no weight fits the predicted range: the bundle ships without the check
-        return None, [Finding(Severity.WARNING, "acceptance", f"the readout package has no acceptance test for "
-                              f"this design: {exc}", "predict.max_stretch")]
+        return AcceptanceStage(bands=None, findings=[Finding(Severity.WARNING, "acceptance", "the readout package "
+                               f"has no acceptance test for this design: {exc}", "predict.max_stretch")])
 
 
-def _calibration_finding(result, prefix: str, source: str = "") -> Finding:
+def _calibration_finding(result: FitResult, prefix: str, source: str = "") -> Finding:
     """The calibration's held-out errors, a warning when they miss the tolerance."""
-    err = result.calibration.to_json()["errors"]
+    err: Any = result.calibration.to_json()["errors"]
     return Finding(Severity.INFO if result.meets_tolerance else Severity.WARNING, "calibration",
                    f"{prefix}{source}{result.chosen}, held-out RMS Fz {1000 * err['Fz_N']['rms_holdout']:.2f} mN, "
                    f"Fr {1000 * err['Fr_N']['rms_holdout']:.2f} mN ({err['folds']}-fold)"
@@ -217,24 +197,26 @@ def _calibration_finding(result, prefix: str, source: str = "") -> Finding:
                    + (f"; {result.thermal_note}" if result.thermal_note else ""), "calibration.tolerance_mN")
 
 
-def _scan(design: Design, prediction, scan, say: Progress):
+def _scan(design: Design, prediction: Prediction | None, scan: Scan | None, say: Progress) -> ScanStage:
     """The scan a single taxel's calibration is fitted to: ``scan`` (with the depth warnings, and the merged file kept
-    when it was merged in memory) or a simulated one. Returns (artifacts, scan, findings)."""
+    when it was merged in memory) or a simulated one."""
     if scan is None:
         say("simulating a calibration scan")
         scan = simulate_scan(design, prediction)
-        return [Artifact("calibration/scan_simulated.csv", scan_csv(scan).encode(),
-                         "the simulated y-z scan behind the provisional calibration (scan CSV format)")], scan, []
+        made = Artifact("calibration/scan_simulated.csv", scan_csv(scan).encode(),
+                        "the simulated y-z scan behind the provisional calibration (scan CSV format)")
+        return ScanStage(artifacts=[made], scan=scan)
     out = []
     if MERGED in scan.source:  # made in memory from a recording and a reference log: keep what was fitted
         out.append(Artifact("calibration/scan_merged.csv", merged_csv(scan),
                             "the recording merged with the reference log, as fitted (scan CSV format)"))
     found = [] if prediction is None else [Finding(Severity.WARNING, "scan-range", text, "calibration.scan_z_mm")
                                            for text in scan_depth_warnings(scan, prediction)]
-    return out, scan, found
+    return ScanStage(artifacts=out, findings=found, scan=scan)
 
 
-def _bundle(design: Design, prediction, scan, acceptance: dict | None, say: Progress, timings: dict[str, float]):
+def _bundle(design: Design, prediction: Prediction | None, scan: Scan | dict[int, Scan] | None,
+            acceptance: dict[str, Any] | None, say: Progress, timings: dict[str, float]) -> BundleStage:
     """The firmware-plus-calibration bundle: calibration.json (from ``scan``, or a simulated scan when there
     is none yet), its chart, the firmware sources, the generic AVR image with the .eep of its settings and
     calibration, the flash scripts and the readout package."""
@@ -245,17 +227,18 @@ def _bundle(design: Design, prediction, scan, acceptance: dict | None, say: Prog
     array_doc = None
     if design.array is not None:
         say("fitting every taxel's calibration")
-        arrayed = _taxel_calibrations(design, prediction, scan, mls)  # scan: None or {taxel: Scan}
+        assert prediction is not None, "an array's calibration needs the prediction (its neighbours' field)"
+        arrayed = _taxel_calibrations(design, prediction, cast("dict[int, Scan] | None", scan), mls)
         out += arrayed.artifacts
         found += arrayed.findings
         result, array_doc = arrayed.fits[0], arrayed.doc
     else:
-        scan_files, scan, scan_found = _scan(design, prediction, scan, say)
-        out += scan_files
-        found += scan_found
+        scanned = _scan(design, prediction, cast("Scan | None", scan), say)
+        out += scanned.artifacts
+        found += scanned.findings
         say("fitting the calibration")
-        result = calibrate.fit(scan, design, mls=mls)
-    cal = result.calibration.to_json()
+        result = calibrate.fit(scanned.scan, design, mls=mls)
+    cal: dict[str, Any] = result.calibration.to_json()
     timings["calibrate"] = time.perf_counter() - t
     if array_doc is None:
         found.append(_calibration_finding(result, "", f"calibration from the {cal['scan']['source']} scan "
@@ -285,18 +268,10 @@ def _bundle(design: Design, prediction, scan, acceptance: dict | None, say: Prog
                         f"ready-to-flash image for Arduino Uno/Nano (ATmega328P, 16 MHz), the same for every build: "
                         f"settings and calibration from the .eep; flash {made['flash_bytes']} B, RAM "
                         f"{made['ram_bytes']} B ({made['toolchain']['avr-gcc']}, avr-libc {made['toolchain']['avr-libc']})"))
-    return out, found, result
+    return BundleStage(artifacts=out, findings=found, fit=result)
 
 
-@dataclass(frozen=True)
-class _Arrayed:
-    fits: tuple  # FitResult per taxel
-    doc: dict  # calibration/array.json
-    artifacts: list
-    findings: list
-
-
-def _crosstalk(design: Design, prediction) -> tuple[list[Artifact], list[Finding], bool]:
+def _crosstalk(design: Design, prediction: Prediction) -> CrosstalkStage:
     """The array's crosstalk budget (:mod:`magfab.models.crosstalk`): array/crosstalk.json, its charts, its
     findings, and whether the host is to remove a moving neighbour's field (the budget is over without it)."""
     xt = crosstalk.crosstalk(design, prediction)
@@ -305,10 +280,11 @@ def _crosstalk(design: Design, prediction) -> tuple[list[Artifact], list[Finding
     for name, data in sorted(crosstalk_figures.figures(xt).items()):
         stem, kind = name.rsplit(".", 1)
         out.append(Artifact(f"array/{name}", data, crosstalk_figures.CAPTIONS[stem] + ", " + kind.upper()))
-    return out, crosstalk_findings(design, xt), xt.dynamic
+    return CrosstalkStage(artifacts=out, findings=crosstalk_findings(design, xt), dynamic=xt.dynamic)
 
 
-def _taxel_calibrations(design: Design, prediction, scans: dict | None, mls: bool) -> _Arrayed:
+def _taxel_calibrations(design: Design, prediction: Prediction, scans: dict[int, Scan] | None,
+                        mls: bool) -> ArrayStage:
     """An array's calibrations: each taxel's scan (measured, from ``scans`` {taxel: Scan}, or simulated with its
     neighbours' field), its fit to the scan with the neighbours' field removed, and calibration/array.json
     (:mod:`magfab.models.taxels`). A measured scan is kept in the build (:mod:`magfab.array_bench`) so the next
@@ -316,8 +292,9 @@ def _taxel_calibrations(design: Design, prediction, scans: dict | None, mls: boo
     scans = scans or {}
     field = array_field(design)
     every = tuple(scans.get(t.index) or simulate_taxel_scan(design, prediction, t.index, field) for t in design.taxels)
-    out, found, dynamic = _crosstalk(design, prediction)
-    arrayed = calibrate_taxels(design, prediction, every, mls=mls, dynamic=dynamic)
+    xt = _crosstalk(design, prediction)
+    out, found = list(xt.artifacts), list(xt.findings)
+    arrayed = calibrate_taxels(design, prediction, every, mls=mls, dynamic=xt.dynamic)
     doc = arrayed.as_json(design)
     out += [Artifact("calibration/array.json", _json_bytes(doc), "the array: each taxel's address, order code, "
                     "polarity, position and calibration file, and the neighbours' field the host removes")]
@@ -335,10 +312,11 @@ def _taxel_calibrations(design: Design, prediction, scans: dict | None, mls: boo
                                 f"the simulated scan of taxel {k}, as its chip reads it (scan CSV format)"))
         found.append(_calibration_finding(fitted, f"taxel {k}: ", f"{'measured' if k in scans else 'simulated'} "
                                           "scan, "))
-    return _Arrayed(arrayed.fits, doc, out, found)
+    return ArrayStage(artifacts=out, findings=found, fits=tuple(arrayed.fits), doc=doc)
 
 
-def _fabrication(design: Design, prediction, acceptance: dict | None, say: Progress, timings: dict[str, float]):
+def _fabrication(design: Design, prediction: Prediction, acceptance: dict[str, Any] | None, say: Progress,
+                 timings: dict[str, float]) -> Stage:
     """The bench papers: checklist.md, checklist.html (tick boxes, printable) and bom.csv. The checklist's scan
     step spans the simulated scan's extent (one depth for the scan, the checklist and the predicted range)."""
     say("writing the checklist and the bill of materials")
@@ -353,7 +331,7 @@ def _fabrication(design: Design, prediction, acceptance: dict | None, say: Progr
                  f"bill of materials for {design.spec.fabrication.sensors} sensor(s)"),
     ]
     timings["checklist"] = time.perf_counter() - t
-    return out, fabrication_findings(design)
+    return Stage(artifacts=out, findings=fabrication_findings(design))
 
 
 def model_bench() -> list[dict[str, object]]:
@@ -384,21 +362,26 @@ def plan(spec: Spec, progress: Progress | None = None, scan=None, parallel: bool
     timings["derive"] = time.perf_counter() - t0
     _stop(findings, spec)
 
-    with side_branch(_physics, design, scan, parallel=parallel) as physics:
-        cad_artifacts, cad_findings, meshes, routed = _cad(design, say, timings)
-        _stop(findings + cad_findings, spec)
+    parallel = parallel_available() if parallel is None else parallel
+    with side_branch(_physics, design, scan, parallel, parallel=parallel) as physics:
+        cad = _cad(design, say, timings, parallel)
+        _stop(findings + cad.findings, spec)
         say("drawing the parts and the board for the report")
         t = time.perf_counter()
-
-        pictures = draw_pictures(design, meshes, cad_artifacts, routed)
+        # the mould's two views are half the pictures' time: drawn in a worker beside the others where the build forks
+        mould = tuple(p.stem for p in PARTS if p.make in (cup_solid, lid_solid))
+        with side_branch(_part_views, cad.meshes, mould, parallel=parallel) as beside:
+            views = _part_views(cad.meshes, tuple(stem for stem in cad.meshes if stem not in mould))
+            views |= beside.result()
+        pictures = draw_pictures(design, cad.meshes, cad.artifacts, cad.board, views)
         timings["report-pictures"] = time.perf_counter() - t
         say("waiting for the predictions and the bundle")
         t = time.perf_counter()
         branch = physics.result()
         if physics.forked:  # how long the CAD branch waited for the worker
             timings["wait-physics"] = time.perf_counter() - t
-    findings += cad_findings
-    artifacts = cad_artifacts
+    findings += cad.findings
+    artifacts = list(cad.artifacts)
     for stage in branch.stages:  # predictions, bundle, bench papers: each stops the build in turn
         findings += stage.findings
         _stop(findings, spec)
@@ -415,7 +398,7 @@ def plan(spec: Spec, progress: Progress | None = None, scan=None, parallel: bool
     report_files = [("report.html", "this page: the whole build on one page"),
                     ("manifest.json", "what made what: hashes, versions")]
     artifacts.append(Artifact("report.html", render_report(spec, design, findings, list(artifacts), prediction, cal,
-                                                           meshes, extra_files=report_files, board=routed,
+                                                           cad.meshes, extra_files=report_files, board=cad.board,
                                                            pictures=pictures),
                               "the whole build on one page, for a browser"))
     timings["report"] = time.perf_counter() - t
@@ -429,40 +412,62 @@ def plan(spec: Spec, progress: Progress | None = None, scan=None, parallel: bool
     return BuildResult(spec, design, artifacts, findings, timings, prediction=prediction, calibration=calibration)
 
 
+def _part_views(meshes: dict[str, trimesh.Trimesh], stems: tuple[str, ...]) -> dict[str, bytes]:
+    """The report's PNG of each part in ``stems``, whole and cut away."""
+    return {stem: part_figure(stem, meshes[stem]) for stem in stems}
+
+
 def _stop(findings: list[Finding], spec: Spec) -> None:
     stop = errors_in(findings, spec.build.strict)
     if stop:
         raise BuildError(stop)
 
 
-def _cad(design: Design, say: Progress, timings: dict[str, float]):
-    """The CAD branch: every solid as STL (and STEP), the mesh checks, the closed mould's fit, the board.
-    Returns (artifacts, findings, meshes, board); stops at the first stage with an error."""
+def _cad(design: Design, say: Progress, timings: dict[str, float], parallel: bool = False) -> CadStage:
+    """The CAD branch: every solid as STL (and STEP), the mesh checks, the closed mould's fit, the board; stops at
+    the first stage with an error. The board needs no CAD kernel: where the build forks (``parallel``), it is
+    routed and plotted in a worker while this process loads the kernel (a third of this branch's time) and models
+    the parts."""
+    say("placing and routing the board" + (" beside the CAD kernel" if parallel else ""))
+    with side_branch(_board, design, parallel=parallel) as board:
+        solids = _solids(design, say, timings)  # raises on an error: the board's worker is ended with the block
+        t = time.perf_counter()
+        routed: BoardStage = board.result()
+        if board.forked:
+            timings["wait-board"] = time.perf_counter() - t
+    timings.update(routed.timings_s)
+    return CadStage(artifacts=solids.artifacts + routed.artifacts, findings=solids.findings + routed.findings,
+                    meshes=solids.meshes, board=routed.board)
+
+
+def _solids(design: Design, say: Progress, timings: dict[str, float]) -> SolidsStage:
+    """Every solid as STL (and STEP), the mesh checks and the closed mould's fit (no board yet); raises where they
+    find an error."""
     spec = design.spec
     say("loading the CAD kernel")
     t = time.perf_counter()
     with deferred_interrupt():  # a Ctrl-C inside VTK's initialisation crashed the process: deliver it after
-        import cadquery  # noqa: F401  - timed on its own, not charged to the first part
+        import cadquery  # noqa: F401 - lazy: the CAD kernel, timed on its own, not charged to the first part
         import trimesh  # noqa: F401
-
 
     timings["import"] = time.perf_counter() - t
     artifacts: list[Artifact] = []
     findings: list[Finding] = []
-    meshes: dict[str, object] = {}
+    meshes: dict[str, trimesh.Trimesh] = {}
     tol, ang = spec.mould.tessellation_tolerance_mm, spec.mould.angular_tolerance_deg
-    for stem, module, func, _printed, description in PARTS:
+    for part in PARTS:
+        stem, description = part.stem, part.description
         say(f"modelling {stem}")
         t = time.perf_counter()
-        solid = _solid(module, func, design)
+        solid = part.make(design)
         timings[f"solid:{stem}"] = time.perf_counter() - t
         t = time.perf_counter()
-        mesh = cad.tessellate(solid, tol, ang)
+        mesh = cad_files.tessellate(solid, tol, ang)
         meshes[stem] = mesh
-        findings += mesh_findings(stem, mesh, solid.val().Volume(), tol)
-        artifacts.append(Artifact(f"{stem}.stl", cad.stl_bytes(mesh, f"{spec.name} {stem}"), description + ", STL"))
+        findings += mesh_findings(stem, mesh, cast("cq.Shape", solid.val()).Volume(), tol)
+        artifacts.append(Artifact(f"{stem}.stl", cad_files.stl_bytes(mesh, f"{spec.name} {stem}"), description + ", STL"))
         if spec.build.step:
-            artifacts.append(Artifact(f"{stem}.step", cad.step_bytes(solid, f"{spec.name}-{stem}"),
+            artifacts.append(Artifact(f"{stem}.step", cad_files.step_bytes(solid, f"{spec.name}-{stem}"),
                                       description + ", STEP"))
         timings[f"export:{stem}"] = time.perf_counter() - t
     if not errors_in(findings, strict=False):  # booleans need sound meshes
@@ -470,49 +475,57 @@ def _cad(design: Design, say: Progress, timings: dict[str, float]):
         findings += mould_fit_findings(design, mould_fit(design, meshes, tol))
         timings["mould-fit"] = time.perf_counter() - t
     _stop(findings, spec)
-    board_artifacts, board_findings, routed = _board(design, say, timings)
-    return artifacts + board_artifacts, findings + board_findings, meshes, routed
-
-
-@dataclass(frozen=True)
-class _Stage:
-    artifacts: list[Artifact]
-    findings: list[Finding]
+    return SolidsStage(artifacts=artifacts, findings=findings, meshes=meshes)
 
 
 @dataclass(frozen=True)
 class _PhysicsBranch:
     """What the physics branch hands back (pickled when it ran in the worker)."""
 
-    stages: tuple[_Stage, ...]  # predictions, bundle, bench papers, in pipeline order
+    stages: tuple[Stage, ...]  # predictions, bundle, bench papers, in pipeline order
     prediction: Prediction
     calibration: dict[str, object]  # calibration.json as written
     timings: dict[str, float]
 
 
-def _physics(design: Design, scan) -> _PhysicsBranch:
+def _physics(design: Design, scan: Scan | dict[int, Scan] | None, parallel: bool = False) -> _PhysicsBranch:
     """The physics branch: predictions and plots, the acceptance bands, the calibration, firmware and readout
-    bundle, and the bench papers. Nothing here needs the CAD kernel."""
+    bundle, and the bench papers. Nothing here needs the CAD kernel.
+
+    It is the build's longest branch, and its plots the longest part of it: where the build forks (``parallel``), the
+    speed-accuracy chart and the field contours are drawn in a worker of its own while this one draws the others and
+    fits the bundle."""
     timings: dict[str, float] = {}
     say: Progress = lambda _stage: None
-    predict_artifacts, predict_findings, prediction = _predictions(design, say, timings)
-    acceptance, acceptance_findings = _acceptance(design, prediction)
-    bundle_artifacts, bundle_findings, fitted = _bundle(design, prediction, scan, acceptance, say, timings)
-    fab_artifacts, fab_findings = _fabrication(design, prediction, acceptance, say, timings)
-    stages = (_Stage(predict_artifacts, predict_findings),
-              _Stage(bundle_artifacts, acceptance_findings + bundle_findings),
-              _Stage(fab_artifacts, fab_findings))
-    return _PhysicsBranch(stages, prediction, fitted.calibration.to_json(), timings)
+    predicted = _predictions(design, say, timings)
+    prediction = predicted.prediction
+    t = time.perf_counter()
+    beside = ("field_contours", "speed_accuracy")  # the worker's share: they took just over half the plots' CPU
+    mine = tuple(name for name in figures.MAKERS if name not in beside)
+    with side_branch(figures.figures, design, prediction, model_bench(), beside, parallel=parallel) as worker:
+        drawn = figures.figures(design, prediction, (), mine)
+        timings["plots"] = time.perf_counter() - t  # the worker's plots too where they were drawn in-process
+        accepted = _acceptance(design, prediction)
+        bundle = _bundle(design, prediction, scan, accepted.bands, say, timings)
+        papers = _fabrication(design, prediction, accepted.bands, say, timings)
+        t = time.perf_counter()
+        drawn |= worker.result()
+        if worker.forked:
+            timings["wait-plots"] = time.perf_counter() - t
+    predicted = replace(predicted, artifacts=predicted.artifacts + _plots(drawn, prediction))
+    stages = (predicted, Stage(artifacts=bundle.artifacts, findings=accepted.findings + bundle.findings), papers)
+    return _PhysicsBranch(stages, prediction, bundle.fit.calibration.to_json(), timings)
 
 
-def _manifest(spec: Spec, design: Design, artifacts: list[Artifact], models: dict[str, object]) -> bytes:
+def _manifest(spec: Spec, design: Design, artifacts: list[Artifact], models: dict[str, Any]) -> bytes:
+    made: dict[str, Any] = {"geometry": "cadquery-occt", "land_patterns": f"IPC-7351B {spec.pcb.density.value}",
+                            "board": "magfab grid router", "gerbers": _kicad_version(artifacts)}
     return _json_bytes({
         "magfab_version": __version__,
         "spec_name": spec.name,
         "spec_sha256": spec.sha256(),
         "printer": design.printer.key,
-        "models": {"geometry": "cadquery-occt", "land_patterns": f"IPC-7351B {spec.pcb.density.value}",
-                   "board": "magfab grid router", "gerbers": _kicad_version(artifacts), **models},
+        "models": made | models,
         "artifacts": [
             {"path": a.path, "sha256": hashlib.sha256(a.data).hexdigest(), "bytes": len(a.data), "description": a.description}
             for a in artifacts

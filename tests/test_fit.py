@@ -13,11 +13,10 @@ from magfab.fit import mould_fit
 
 def _meshes(design):
     from magfab.export.cad import tessellate
-    from magfab.pipeline import PARTS, _solid
+    from magfab.pipeline import PARTS
 
     tol, ang = design.spec.mould.tessellation_tolerance_mm, design.spec.mould.angular_tolerance_deg
-    return {stem: tessellate(_solid(module, func, design), tol, ang)
-            for stem, module, func, _printed, _what in PARTS if stem != "pad"}
+    return {part.stem: tessellate(part.make(design), tol, ang) for part in PARTS if part.stem != "pad"}
 
 
 @pytest.fixture(scope="module")

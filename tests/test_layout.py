@@ -102,7 +102,7 @@ LAYERS = (
     ("magfab.check",),
     ("magfab.board", "magfab.pcb"),
     ("magfab.export", "magfab.output", "magfab.array_bench"),
-    ("magfab.pipeline",),
+    ("magfab.pipeline", "magfab.stages"),
     ("magfab.inverse",),
     ("magfab.cli",),
 )

@@ -9,7 +9,7 @@ import io
 import math
 import re
 import textwrap
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -408,21 +408,25 @@ MAKERS: dict[str, Callable] = {"field_axis": _axis_field, "field_contours": _con
                                "sensitivity": _sensitivity}
 
 
-def draw(design: Design, pred: Prediction, bench_table: Sequence[Mapping[str, object]] = ()) -> dict[str, Figure]:
-    """{file stem: matplotlib Figure}, open (the caller closes them); for :func:`figures` and the tests."""
+def draw(design: Design, pred: Prediction, bench_table: Sequence[Mapping[str, object]] = (),
+         names: Collection[str] | None = None) -> dict[str, Figure]:
+    """{file stem: matplotlib Figure} (``names``: those stems only), open (the caller closes them); for
+    :func:`figures` and the tests."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    out = {name: make(plt, design, pred) for name, make in MAKERS.items()}
-    if bench_table:
+    out = {name: make(plt, design, pred) for name, make in MAKERS.items() if names is None or name in names}
+    if bench_table and (names is None or "speed_accuracy" in names):
         out["speed_accuracy"] = _speed_accuracy(plt, design, pred, bench_table)
     return out
 
 
-def figures(design: Design, pred: Prediction, bench_table: Sequence[Mapping[str, object]] = ()) -> dict[str, bytes]:
-    """{file name: bytes} for every prediction plot, SVG and PNG."""
+def figures(design: Design, pred: Prediction, bench_table: Sequence[Mapping[str, object]] = (),
+            names: Collection[str] | None = None) -> dict[str, bytes]:
+    """{file name: bytes} for every prediction plot (``names``: those file stems only), SVG and PNG. Each plot's bytes
+    are the same whichever others are drawn with it, so a build draws them in two processes."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -430,7 +434,7 @@ def figures(design: Design, pred: Prediction, bench_table: Sequence[Mapping[str,
 
     out: dict[str, bytes] = {}
     with matplotlib.rc_context(RC):
-        for name, fig in draw(design, pred, bench_table).items():
+        for name, fig in draw(design, pred, bench_table, names).items():
             out[f"{name}.svg"], out[f"{name}.png"] = _render(fig)
             plt.close(fig)
     return out

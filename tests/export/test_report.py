@@ -73,11 +73,8 @@ class Page(HTMLParser):
 def inputs(default_build):
     r = default_build
     spec, design = r.spec, r.design
-    import importlib
-
-    meshes = {stem: tessellate(getattr(importlib.import_module(module), func)(design),
-                               spec.mould.tessellation_tolerance_mm, spec.mould.angular_tolerance_deg)
-              for stem, module, func, _, _ in PARTS}
+    meshes = {part.stem: tessellate(part.make(design), spec.mould.tessellation_tolerance_mm,
+                                    spec.mould.angular_tolerance_deg) for part in PARTS}
     paths = {a.path for a in r.artifacts}
     calibration = json.loads(next(a.data for a in r.artifacts if a.path == "calibration/calibration.json"))
     return {"spec": spec, "design": design, "findings": list(r.findings), "artifacts": [a for a in r.artifacts

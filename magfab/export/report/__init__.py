@@ -95,8 +95,10 @@ def _plot_figures(artifacts: Sequence[Artifact], folder: str) -> list[Figure]:
     return out
 
 
-def _part_figures(meshes: Mapping[str, trimesh.Trimesh], artifacts: Sequence[Artifact]) -> list[Figure]:
-    """Each part whole and cut away (PNG), with its size, volume and triangle count, linked to its files."""
+def _part_figures(meshes: Mapping[str, trimesh.Trimesh], artifacts: Sequence[Artifact],
+                  drawn: Mapping[str, bytes]) -> list[Figure]:
+    """Each part whole and cut away (PNG; ``drawn``'s where it has the part's), with its size, volume and triangle
+    count, linked to its files."""
     by_path = {a.path: a for a in artifacts}
     out = []
     for stem in [s for s in PART_VIEWS if s in meshes] + sorted(set(meshes) - set(PART_VIEWS)):
@@ -109,7 +111,7 @@ def _part_figures(meshes: Mapping[str, trimesh.Trimesh], artifacts: Sequence[Art
                    f"{'' if mesh.is_watertight else ', NOT watertight'}.")
         links = tuple((href(p), p.rsplit('.', 1)[1].upper()) for p in (f"{stem}.stl", f"{stem}.step") if p in by_path)
         out.append(Figure(f"part-{stem}", PART_VIEWS.get(stem, (stem, ""))[0], caption,
-                          _data_uri(part_figure(stem, mesh), "image/png"), links))
+                          _data_uri(drawn.get(stem) or part_figure(stem, mesh), "image/png"), links))
     return out
 
 
@@ -150,8 +152,9 @@ class Pictures:
 
 
 def draw_pictures(design: Design, meshes: Mapping[str, trimesh.Trimesh], artifacts: Sequence[Artifact],
-                  board: Board) -> Pictures:
-    """The stack-up (cut from the elastomer and pad meshes), every part whole and cut away, the routed board."""
+                  board: Board, parts: Mapping[str, bytes] | None = None) -> Pictures:
+    """The stack-up (cut from the elastomer and pad meshes), every part whole and cut away (``parts``: the
+    :func:`part_figure` PNGs by part stem, drawn already), the routed board."""
     missing = {"elastomer", "pad"} - set(meshes)
     if missing:
         raise ValueError(f"the report needs the meshes of {', '.join(sorted(missing))} "
@@ -159,7 +162,7 @@ def draw_pictures(design: Design, meshes: Mapping[str, trimesh.Trimesh], artifac
     stack = Figure("stackup", "Stack-up", "The assembled sensor at rest, cut through its axis (board frame). The "
                    "magnet rests against the pocket roof, north pole up; the dashed line is where its lower face "
                    "sits at d_min.", _data_uri(stackup_figure(design, meshes), "image/svg+xml"))
-    return Pictures(stack, _part_figures(meshes, artifacts), _board_figure(design, board, artifacts))
+    return Pictures(stack, _part_figures(meshes, artifacts, parts or {}), _board_figure(design, board, artifacts))
 
 
 def render_report(spec: Spec, design: Design, findings: Sequence[Finding], artifacts: Sequence[Artifact],
