@@ -28,7 +28,7 @@ from .taxels import ArrayCalibration, ArrayReader, Cycle, WrongFirmware
 __all__ = ["run", "RECORD_COLUMNS"]
 
 #: ``record``'s columns for an array: a single taxel's, with the taxel after the two clocks.
-RECORD_COLUMNS = CSV_COLUMNS[:2] + ("taxel",) + CSV_COLUMNS[2:]
+RECORD_COLUMNS = (*CSV_COLUMNS[:2], "taxel", *CSV_COLUMNS[2:])
 #: Lag behind the board after which ``record`` warns (it keeps every cycle), s.
 RECORD_LAG_WARNING_S = 2.0
 

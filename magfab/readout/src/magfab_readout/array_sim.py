@@ -119,7 +119,7 @@ class ArrayPressPattern:
 
 
 def _clamp16(x: float) -> int:
-    return max(-32768, min(32767, int(round(x))))
+    return max(-32768, min(32767, round(x)))
 
 
 class SimulatedArray(SimulatedDevice):

@@ -406,7 +406,7 @@ class Decoder:
         return FRAME_LENGTH
 
     def _field_frame(self, frame: bytes, out: list) -> int:
-        kind, seq, status, t_us, taxel, bx, by, bz, t_raw = _FIELD_BODY.unpack_from(frame, 2)
+        _kind, seq, status, t_us, taxel, bx, by, bz, t_raw = _FIELD_BODY.unpack_from(frame, 2)
         self._sequence(seq, taxel)
         self.stats.frames += 1
         if status & STATUS_CHIP_ERROR:

@@ -49,7 +49,7 @@ class RestTracker:
     def __init__(self, calibration, noise_uT: float, rate_Hz: float = _build.SAMPLE_RATE_HZ) -> None:
         self.calibration = calibration
         self.noise_uT = float(noise_uT)
-        self.size = max(2, int(round(WINDOW_S * rate_Hz)))
+        self.size = max(2, round(WINDOW_S * rate_Hz))
         self.noise_mN: Optional[float] = None
         self.level: Optional[float] = None
         self.points: List[Tuple[float, float, Optional[float]]] = []  # (time s, rest Fz mN, temperature C)

@@ -292,11 +292,11 @@ def _temperature_raw(T: float) -> int:
     """The chip's temperature word for ``T`` degC (0 when the build reads no temperature)."""
     if not _build.TEMPERATURE_ENABLED:
         return 0
-    return max(0, min(0xFFFF, int(round(_build.TEMPERATURE_RAW_25C + _build.TEMPERATURE_LSB_PER_C * (T - 25.0)))))
+    return max(0, min(0xFFFF, round(_build.TEMPERATURE_RAW_25C + _build.TEMPERATURE_LSB_PER_C * (T - 25.0))))
 
 
 def _clamp16(x: float) -> int:
-    return max(-32768, min(32767, int(round(x))))
+    return max(-32768, min(32767, round(x)))
 
 
 class SimulatedDevice:
@@ -338,7 +338,7 @@ class SimulatedDevice:
             thermal_per_C = thermal.coefficient_per_C if thermal is not None else 0.0
         self.thermal_per_C = tuple(float(a) for a in (
             thermal_per_C if isinstance(thermal_per_C, (tuple, list)) else (thermal_per_C,) * 3))
-        self.period_us = int(round(1e6 / self.rate_Hz))
+        self.period_us = round(1e6 / self.rate_Hz)
         self.realtime = realtime
         self.text = (_build.OUTPUT == "text") if text is None else bool(text)
         self.noise_lsb = float(noise_lsb)

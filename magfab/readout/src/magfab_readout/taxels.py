@@ -393,9 +393,7 @@ class ArrayReader:
         self.evaluator.offset_N = [(0.0, 0.0, 0.0)] * n
         total = [[0.0, 0.0, 0.0] for _ in range(n)]
         used = [0] * n
-        cycles = 0
-        for cycle in self.cycles():
-            cycles += 1
+        for cycles, cycle in enumerate(self.cycles(), start=1):
             for t in cycle:
                 if t.ok and used[t.taxel] < count and _finite(t.force_N):
                     total[t.taxel] = [a + f for a, f in zip(total[t.taxel], t.force_N)]
