@@ -173,7 +173,8 @@ class SimulatedArray(SimulatedDevice):
         status = STATUS_RECOVERED if self._recovered_taxel[k] else 0
         self._recovered_taxel[k] = False
         nan = float("nan")
-        if self.chip_error_every and k == self.chip_error_taxel and c % self.chip_error_every == self.chip_error_every - 1:
+        if (self.chip_error_every and k == self.chip_error_taxel
+                and c % self.chip_error_every == self.chip_error_every - 1):
             self._recovered_taxel[k] = True
             status |= STATUS_CHIP_ERROR
             if self.text:

@@ -517,7 +517,8 @@ class Decoder:
         if parts[0] == "W" and len(parts) == 5 and all(_INT.fullmatch(p) for p in parts[1:]):
             self.stats.replies += 1
             return EepromReply("W", *(int(p) for p in parts[1:]))  # type: ignore[arg-type]
-        if parts[0] == "R" and len(parts) == 3 and _INT.fullmatch(parts[1]) and re.fullmatch(r"([0-9A-F]{2})*", parts[2]):
+        if (parts[0] == "R" and len(parts) == 3 and _INT.fullmatch(parts[1])
+                and re.fullmatch(r"([0-9A-F]{2})*", parts[2])):
             self.stats.replies += 1
             data = bytes.fromhex(parts[2])
             return EepromReply("R", int(parts[1]), len(data), data=data)

@@ -102,7 +102,8 @@ class RestTracker:
             return "rest level: {} window{} of {:g} s at rest - too few to see a drift".format(
                 len(self.points), "" if len(self.points) == 1 else "s", WINDOW_S)
         (t0, f0, c0), (t1, f1, c1) = self.points[0], self.points[-1]
-        text = f"rest level: {len(self.points)} windows at rest over {t1 - t0:.1f} s, Fz {f0:+.1f} -> {f1:+.1f} mN (drift {f1 - f0:+.1f} mN"
+        text = (f"rest level: {len(self.points)} windows at rest over {t1 - t0:.1f} s, Fz {f0:+.1f} -> {f1:+.1f} mN "
+                f"(drift {f1 - f0:+.1f} mN")
         if c0 is not None and c1 is not None:
             text += f", chip {c0:.1f} -> {c1:.1f} C"
         fit = self.per_C()

@@ -273,8 +273,8 @@ class TemperatureRamp:
 
     def __init__(self, start_C: float, end_C: float, duration_s: float, delay_s: float = 0.0) -> None:
         if not (duration_s > 0 and delay_s >= 0):
-            raise ValueError(f"duration_s must be positive and delay_s at least 0; instead received {duration_s!r}, {delay_s!r}"
-                             )
+            raise ValueError("duration_s must be positive and delay_s at least 0; instead received "
+                             f"{duration_s!r}, {delay_s!r}")
         self.start_C, self.end_C = float(start_C), float(end_C)
         self.duration_s, self.delay_s = float(duration_s), float(delay_s)
 
@@ -373,7 +373,8 @@ class SimulatedDevice:
             if status == 0:
                 self.eeprom[address:address + n] = cmd[4:4 + n]
             settings = (_build.GAIN_SEL, _build.RESOLUTION, _build.OSR, _build.DIG_FILT)
-            valid = eeprom.check(bytes(self.eeprom)) and eeprom.unpack_header(bytes(self.eeprom))["settings"] == settings
+            valid = (eeprom.check(bytes(self.eeprom))
+                     and eeprom.unpack_header(bytes(self.eeprom))["settings"] == settings)
             if valid:
                 head = eeprom.unpack_header(bytes(self.eeprom))
                 self.info_line = encode_info_line(self.info_line.decode().split(",")[2], head["sha16"], *settings)
@@ -387,7 +388,8 @@ class SimulatedDevice:
         for byte in bytes(data):
             if self._command:
                 self._command += bytes((byte,))
-                if len(self._command) >= 4 and (self._command[:1] == b"r" or len(self._command) == 6 + self._command[3]):
+                if len(self._command) >= 4 and (self._command[:1] == b"r"
+                                                or len(self._command) == 6 + self._command[3]):
                     self._eeprom_command()
                 continue
             if byte in (ord("w"), ord("r")):
@@ -492,5 +494,6 @@ class SimulatedDevice:
         frame = encode_frame(seq, t_us, status, counts, t_raw, force)
         if self.corrupt_fraction and self._faults.random() < self.corrupt_fraction:
             position = self._faults.randrange(2, len(frame))
-            frame = frame[:position] + bytes([frame[position] ^ (1 << self._faults.randrange(8))]) + frame[position + 1:]
+            frame = (frame[:position] + bytes([frame[position] ^ (1 << self._faults.randrange(8))])
+                     + frame[position + 1:])
         return frame

@@ -43,7 +43,8 @@ from .frames import STATUS_CHIP_ERROR, STATUS_OUTSIDE_REGION, Sample, fault_name
 __all__ = ["HOLD_S", "ArrayCalibration", "TaxelReading", "Cycle", "CycleAssembler", "ArrayEvaluator", "ArrayReader",
            "WrongFirmware"]
 
-#: Largest lag behind the board's clock a live view (``cycles(keep_up=True)``) lets build up before leaving cycles out, s.
+#: Largest lag behind the board's clock a live view (``cycles(keep_up=True)``) lets build up before leaving cycles
+#: out, s.
 MAX_LAG_S = 0.25
 #: A wait this long for the next sample means the host has caught up with the board.
 CAUGHT_UP_S = 0.002
@@ -357,9 +358,9 @@ class ArrayReader:
                 self._clock = None  # it waited for the board: caught up, the clocks are compared afresh (drift)
             if _finite(sample.device_force_N):
                 raise WrongFirmware(
-                    f"the board on {self.device.port} sends a single taxel's force frames, but this readout package is for an array "
-                    f"of {self.calibration.taxels} taxels: flash the array build's firmware, or install the readout package of the board's "
-                    "build")
+                    f"the board on {self.device.port} sends a single taxel's force frames, but this readout package "
+                    f"is for an array of {self.calibration.taxels} taxels: flash the array build's firmware, or "
+                    "install the readout package of the board's build")
             for slots in self.assembler.feed(sample):
                 if self._track(slots) > MAX_LAG_S and keep_up:
                     self.skipped += 1
@@ -402,8 +403,8 @@ class ArrayReader:
                 break
             if cycles > 10 * count + 100:
                 failing = [k for k in range(n) if used[k] < count]
-                raise DeviceError("cannot zero: taxel(s) {} gave {} good readings in {} cycles from {} (check the chips' "
-                              "wiring and addresses: magfab-readout info)".format(
-                                  ", ".join(map(str, failing)), min(used), cycles, self.device.port))
+                raise DeviceError("cannot zero: taxel(s) {} gave {} good readings in {} cycles from {} (check the "
+                                  "chips' wiring and addresses: magfab-readout info)".format(
+                                      ", ".join(map(str, failing)), min(used), cycles, self.device.port))
         self.evaluator.offset_N = [tuple(x / used[k] for x in total[k]) for k in range(n)]  # type: ignore[misc]
         return list(self.evaluator.offset_N)
