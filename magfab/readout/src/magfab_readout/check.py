@@ -9,7 +9,7 @@ import json
 import math
 import pkgutil
 import sys
-from typing import Optional, Tuple
+from typing import List, Optional, Tuple
 
 from . import _build, acceptance_json
 from .device import Device, DeviceError
@@ -159,6 +159,7 @@ def _mean_reading(device: Device, count: int) -> _Reading:
         if used == count:
             break
     mean = [x / used for x in total]
+    assert sample.time_s is not None, "Device.samples stamps every sample with its device time"
     return _Reading(tuple(mean[:3]), tuple(mean[3:6]), mean[6] if warm == used else None, full, sample.time_s)
 
 
@@ -173,6 +174,7 @@ def _settle(device: Device, seconds: float) -> None:
     device.drain()
     start = None
     for sample in device.samples():
+        assert sample.time_s is not None, "Device.samples stamps every sample with its device time"
         start = sample.time_s if start is None else start
         if sample.time_s - start >= seconds:
             break
@@ -189,7 +191,8 @@ class _Steps:
     """The acceptance test's steps as they are reported: numbered PASS/FAIL lines, and the verdict."""
 
     def __init__(self, out) -> None:
-        self.out, self.results = out, []  # (name, passed)
+        self.out = out
+        self.results: List[Tuple[str, bool]] = []  # (name, passed)
 
     def report(self, name: str, passed: bool, text: str) -> None:
         self.results.append((name, passed))
@@ -377,6 +380,7 @@ def _check_rotation(steps: _Steps, out, args: argparse.Namespace, device, bands:
     """The turn-over step: the field change against the Earth's field turned over and the fingertip's own weight
     reversed (acceptance.json ``rotation``), and the force it is worth against the drift budget's."""
     rot, n = bands.rotation, args.samples
+    assert rot is not None, "_drift_options refuses --rotation without acceptance.json's rotation section"
     _ask("turning over: the sensor upright as before, nothing touching the tip", args.yes)
     _settle(device, args.settle)
     upright = _mean_reading(device, n)
@@ -447,6 +451,7 @@ def _check_warmup(steps: _Steps, out, args: argparse.Namespace, device, bands: B
     """The warm-up step: the rest force's change against the drift budget's compensated figure per degree times
     the warming (acceptance.json ``warmup``)."""
     w, n = bands.warmup, args.samples
+    assert w is not None, "_drift_options refuses --warmup without acceptance.json's warmup section"
     least = float(w["min_change_C"])
     _ask("warm-up: nothing touching the tip, the sensor where it will stay", args.yes)
     _settle(device, args.settle)

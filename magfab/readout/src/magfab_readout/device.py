@@ -172,6 +172,7 @@ def cross_check(sample: Sample, calibration: Calibration) -> float:
     if sample.chip_error:
         return math.nan
     host = calibration.evaluate(*sample.B_uT, method="poly", temperature_C=sample.temperature_C)
+    assert sample.device_force_N is not None, "Sample.__post_init__ sets it"
     return max(abs(h - d) for h, d in zip(host, sample.device_force_N))
 
 
@@ -281,7 +282,9 @@ class Device:
             delta = (sample.t_us - self._last_t_us) % 2**32
             self._elapsed_us += delta if delta < 2**31 else 0  # a backwards step is a board reset, not a wrap
         self._last_t_us = sample.t_us
-        force = tuple(f - o for f, o in zip(sample.device_force_N, self.offset_N))
+        device_force, offset = sample.device_force_N, self.offset_N
+        assert device_force is not None, "Sample.__post_init__ sets it"
+        force = (device_force[0] - offset[0], device_force[1] - offset[1], device_force[2] - offset[2])
         return dataclasses.replace(sample, time_s=self._elapsed_us * 1e-6, force_N=force,
                                    device_force_N=sample.device_force_N)
 
@@ -307,6 +310,7 @@ class Device:
             if self.text is not None and (item.source == "text") != self.text and last - self._mode_sent > RESEND_S:
                 self.set_mode(self.text)
             sample = self._stamp(item)
+            assert sample.time_s is not None, "_stamp sets the device time"
             if start is None:
                 start = sample.time_s
             if seconds is not None and sample.time_s - start > seconds:
@@ -347,13 +351,15 @@ class Device:
         total = [0.0, 0.0, 0.0]
         used = skipped = 0
         for sample in self.samples():
-            if sample.chip_error or any(math.isnan(f) for f in sample.device_force_N):
+            device_force = sample.device_force_N
+            assert device_force is not None, "Sample.__post_init__ sets it"
+            if sample.chip_error or any(math.isnan(f) for f in device_force):
                 skipped += 1
                 if skipped > 10 * count + 100:
                     raise DeviceError(f"cannot zero: {skipped} of the last samples from {self.port} were chip errors "
                                       "(check the sensor board's wiring and supply)")
                 continue
-            total = [t + f for t, f in zip(total, sample.device_force_N)]
+            total = [t + f for t, f in zip(total, device_force)]
             used += 1
             if used == count:
                 break

@@ -463,7 +463,7 @@ class Decoder:
         if status & STATUS_CHIP_ERROR:
             self.stats.lines += 1
             return Sample(seq, t_us, status, _NAN3, _NAN3, None, "text", fault=int(fault) if fault else None)
-        force, B, temp = tuple(values[0:3]), tuple(values[3:6]), values[6]
+        force, B, temp = (values[0], values[1], values[2]), (values[3], values[4], values[5]), values[6]
         if not _plausible(force) or not all(abs(b) <= FIELD_LIMIT_UT for b in B):
             self.stats.refused += 1
             return _REFUSED
@@ -483,7 +483,8 @@ class Decoder:
                 self.stats.infos += 1
                 values = [int(x) for x in settings]
                 taxels = values.pop() if count == 6 else 1
-                return DeviceInfo(name, calibration_hash.lower(), *values, text, taxels)  # type: ignore[call-arg]
+                gain_sel, resolution, osr, dig_filt = values
+                return DeviceInfo(name, calibration_hash.lower(), gain_sel, resolution, osr, dig_filt, text, taxels)
         return None
 
     def _field_line(self, text: str) -> Union[Sample, object, None]:

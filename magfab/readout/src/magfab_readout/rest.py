@@ -70,12 +70,14 @@ class RestTracker:
             self._window = []
 
     def _close(self, window) -> None:
+        noise_mN = self.noise_mN
+        assert noise_mN is not None, "add() sets the noise before it closes a window"
         forces = [f for _, f, _ in window]
         mean = sum(forces) / len(forces)
         spread = math.sqrt(sum((f - mean) ** 2 for f in forces) / (len(forces) - 1))
-        if spread > QUIET_SIGMAS * self.noise_mN:
+        if spread > QUIET_SIGMAS * noise_mN:
             return
-        if self.level is not None and abs(mean - self.level) > CAPTURE_SIGMAS * self.noise_mN:
+        if self.level is not None and abs(mean - self.level) > CAPTURE_SIGMAS * noise_mN:
             return
         temps = [t for _, _, t in window]
         temperature = sum(temps) / len(temps) if all(t is not None for t in temps) else None

@@ -458,7 +458,7 @@ class SimulatedDevice:
 
     def _at_temperature(self, B, T: float) -> Tuple[float, float, float]:
         """The field ``B`` (uT) with the magnet at ``T`` degC: (1 + a (T - T0)) per axis."""
-        return tuple(b * (1.0 + a * (T - self.reference_C)) for b, a in zip(B, self.thermal_per_C))  # type: ignore[return-value]
+        return tuple(b * (1.0 + a * (T - self.reference_C)) for b, a in zip(B, self.thermal_per_C))
 
     def _sample_bytes(self, k: int) -> bytes:
         """The wire bytes of sample ``k`` in the current mode; called once per sample, in order (noise, faults)."""

@@ -219,7 +219,7 @@ class CycleAssembler:
         self._last = -1
 
     def feed(self, sample: Sample) -> List[List[Optional[Sample]]]:
-        out = []
+        out: List[List[Optional[Sample]]] = []
         k = sample.taxel
         if not 0 <= k < self.n:
             self.foreign += 1
@@ -273,9 +273,9 @@ class ArrayEvaluator:
         now = min(_time(s) for s in present) if present else None
         readings, held = [], []
         for k, s in enumerate(slots):
-            if good[k]:
-                readings.append(s.B_uT)  # type: ignore[union-attr]
-                self._last[k] = (_time(s), s.B_uT)  # type: ignore[arg-type]
+            if s is not None and good[k]:  # good[k]: s is a sample
+                readings.append(s.B_uT)
+                self._last[k] = (_time(s), s.B_uT)
                 continue
             last = self._last[k]
             fresh = last is not None and now is not None and now - last[0] <= self.hold_s
@@ -298,7 +298,7 @@ class ArrayEvaluator:
                 status |= STATUS_OUTSIDE_REGION
             force = tuple(f - o for f, o in zip(cal.evaluate(*own, method=self.method, temperature_C=s.temperature_C),
                                                 self.offset_N[k]))
-        return TaxelReading(k, s.seq, s.time_s, status, s.B_uT, own, force, s.temperature_C,  # type: ignore[arg-type]
+        return TaxelReading(k, s.seq, s.time_s, status, s.B_uT, own, force, s.temperature_C,
                             s.fault, counts=s.counts, temperature_raw=s.temperature_raw)
 
 
@@ -374,7 +374,8 @@ class ArrayReader:
                 self.incomplete += bool(lost)
                 self.missing += lost
                 start = cycle.time_s if start is None else start
-                if seconds is not None and cycle.time_s is not None and cycle.time_s - start > seconds:
+                if (seconds is not None and cycle.time_s is not None and start is not None
+                        and cycle.time_s - start > seconds):
                     return
                 n += 1
                 yield cycle
