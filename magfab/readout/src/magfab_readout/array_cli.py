@@ -28,7 +28,7 @@ from .taxels import ArrayCalibration, ArrayReader, Cycle, WrongFirmware
 __all__ = ["run", "RECORD_COLUMNS"]
 
 #: ``record``'s columns for an array: a single taxel's, with the taxel after the two clocks.
-RECORD_COLUMNS = CSV_COLUMNS[:2] + ("taxel",) + CSV_COLUMNS[2:]
+RECORD_COLUMNS = (*CSV_COLUMNS[:2], "taxel", *CSV_COLUMNS[2:])
 #: Lag behind the board after which ``record`` warns (it keeps every cycle), s.
 RECORD_LAG_WARNING_S = 2.0
 
@@ -70,7 +70,8 @@ def stream(args: argparse.Namespace, array: ArrayCalibration, out) -> int:
                           "fields, and every force is the host's")
     with _device(args, array, bool(args.text)) as device:
         reader = ArrayReader(device, array)
-        out.write(f"# magfab-readout {_build.VERSION}: spec {json.dumps(_build.SPEC_NAME)}, {_title(array)}, {device.port}\n")
+        out.write(f"# magfab-readout {_build.VERSION}: spec {json.dumps(_build.SPEC_NAME)}, {_title(array)}, "
+                  f"{device.port}\n")
         if args.zero:
             for k, offset in enumerate(reader.zero(args.zero)):
                 out.write("# zero: taxel {} offset Fx {:+.4f} N, Fy {:+.4f} N, Fz {:+.4f} N from {} samples\n".format(
@@ -89,12 +90,14 @@ def stream(args: argparse.Namespace, array: ArrayCalibration, out) -> int:
 
 def _summary(reader: ArrayReader, n: int) -> None:
     s = reader.device.stats
-    text = f"{n} cycles of {reader.calibration.taxels} taxels; {reader.incomplete} incomplete ({reader.missing} frames missing)"
+    text = (f"{n} cycles of {reader.calibration.taxels} taxels; {reader.incomplete} incomplete "
+            f"({reader.missing} frames missing)")
     if reader.skipped:
         text += f", {reader.skipped} left out to keep up"
     if reader.cost is not None:
         text += f"; this computer takes {1e3 * reader.cost:.2g} ms a cycle"
-    text += f"; {s.lost} lost (sequence gaps), {s.crc_errors} CRC errors, {s.bad_lines} bad lines, {s.skipped_bytes} bytes skipped"
+    text += (f"; {s.lost} lost (sequence gaps), {s.crc_errors} CRC errors, {s.bad_lines} bad lines, "
+             f"{s.skipped_bytes} bytes skipped")
     print("magfab-readout: " + text, file=sys.stderr)
 
 
@@ -125,8 +128,9 @@ def record(args: argparse.Namespace, array: ArrayCalibration) -> int:
                     stop.writing = False
                     if reader.lag_s > RECORD_LAG_WARNING_S and not warned:
                         warned = True
-                        print(f"magfab-readout: warning: this computer falls behind the board ({1e3 * (reader.cost or 0.0):.2g} ms a cycle): "
-                              "the recording keeps every cycle, late", file=sys.stderr)
+                        print("magfab-readout: warning: this computer falls behind the board "
+                              f"({1e3 * (reader.cost or 0.0):.2g} ms a cycle): the recording keeps every cycle, late",
+                              file=sys.stderr)
                     if stop.requested:
                         break
         print("magfab-readout: wrote {} rows to {}{} ({} chip-error or missing readings left out)".format(
@@ -168,7 +172,8 @@ def info(args: argparse.Namespace, array: ArrayCalibration, out) -> int:
         out.write(f"device:  {line.line}\n")
         out.write("  spec {}, calibration {}, gain_sel {}, resolution {}, osr {}, dig_filt {}, {} taxel(s)\n".format(
             json.dumps(line.spec_name), line.calibration_hash, *line.settings, line.taxels))
-        out.write(f"package: magfab-readout {_build.VERSION}, spec {json.dumps(_build.SPEC_NAME)}, calibration {device.calibration.short_hash}\n")
+        out.write(f"package: magfab-readout {_build.VERSION}, spec {json.dumps(_build.SPEC_NAME)}, "
+                  f"calibration {device.calibration.short_hash}\n")
         out.write(f"array:   {_title(array)}\n")
         for t, cal in zip(array.layout, array.calibrations):
             straps = t.get("address_straps") or ["?", "?"]
@@ -200,12 +205,14 @@ def upload(args: argparse.Namespace, array: ArrayCalibration, out) -> int:
                                f"{eeprom.VERSION_ARRAY}?)")
         return _checked_info(device, array)
     info = at_fallback_baud(args, out, lambda a: _device(a, array, None), write)
-    out.write(f"uploaded {len(record)} bytes, read back equal; the board reads {info.taxels} chips (spec {json.dumps(info.spec_name)}, calibration {info.calibration_hash})\n")
+    out.write(f"uploaded {len(record)} bytes, read back equal; the board reads {info.taxels} chips "
+              f"(spec {json.dumps(info.spec_name)}, calibration {info.calibration_hash})\n")
     return 0
 
 
 def run(args: argparse.Namespace, array: ArrayCalibration, out) -> int:
-    """``stream``, ``record``, ``info``, ``upload`` or ``check`` (refused) of an array build (``args`` as the command line parsed them)."""
+    """``stream``, ``record``, ``info``, ``upload`` or ``check`` (refused) of an array build (``args`` as the command
+    line parsed them)."""
     if args.command == "stream":
         return stream(args, array, out)
     if args.command == "record":

@@ -15,7 +15,7 @@ The cycle rate is the chip's conversion rate or what the serial link carries of 
 from __future__ import annotations
 
 import math
-from typing import List, Optional, Sequence, Tuple
+from typing import List, Optional, Protocol, Sequence, Tuple
 
 from . import _build, eeprom
 from .frames import (
@@ -119,7 +119,13 @@ class ArrayPressPattern:
 
 
 def _clamp16(x: float) -> int:
-    return max(-32768, min(32767, int(round(x))))
+    return max(-32768, min(32767, round(x)))
+
+
+class _ArrayPattern(Protocol):
+    """What a simulated array's ``pattern`` is: every taxel's field (Bx, By, Bz) uT at device time ``t_s``."""
+
+    def fields(self, t_s: float) -> List[Vector]: ...
 
 
 class SimulatedArray(SimulatedDevice):
@@ -132,6 +138,7 @@ class SimulatedArray(SimulatedDevice):
     ``thermal_per_C`` as the single taxel's: every chip reads that temperature and every magnet's field follows it."""
 
     port = "the simulated array"
+    pattern: _ArrayPattern  # an ArrayPressPattern unless the caller gives another with every taxel's fields
 
     def __init__(self, calibration: Optional[ArrayCalibration] = None, *, seed: int = 0,
                  rate_Hz: Optional[float] = None, realtime: bool = True, text: Optional[bool] = None,
@@ -173,7 +180,8 @@ class SimulatedArray(SimulatedDevice):
         status = STATUS_RECOVERED if self._recovered_taxel[k] else 0
         self._recovered_taxel[k] = False
         nan = float("nan")
-        if self.chip_error_every and k == self.chip_error_taxel and c % self.chip_error_every == self.chip_error_every - 1:
+        if (self.chip_error_every and k == self.chip_error_taxel
+                and c % self.chip_error_every == self.chip_error_every - 1):
             self._recovered_taxel[k] = True
             status |= STATUS_CHIP_ERROR
             if self.text:
@@ -182,14 +190,17 @@ class SimulatedArray(SimulatedDevice):
         T = self.temperature(t_us / 1e6)  # every chip and magnet at the same temperature, the field following it
         B = self._at_temperature(B, T)
         lsb = (_build.LSB_XY_UT, _build.LSB_XY_UT, _build.LSB_Z_UT)
-        counts = tuple(_clamp16(b / s + self._noise.gauss(0.0, self.noise_lsb)) for b, s in zip(B, lsb))
+        counts = (_clamp16(B[0] / lsb[0] + self._noise.gauss(0.0, self.noise_lsb)),
+                  _clamp16(B[1] / lsb[1] + self._noise.gauss(0.0, self.noise_lsb)),
+                  _clamp16(B[2] / lsb[2] + self._noise.gauss(0.0, self.noise_lsb)))
         if max(abs(x) for x in counts) >= _build.FULL_SCALE_COUNTS:
             status |= STATUS_FULL_SCALE
         t_raw = _temperature_raw(T)
         if self.text:
             temp = temperature_C(t_raw) if _build.TEMPERATURE_ENABLED else None
-            return encode_field_line(k, seq, t_us, status, tuple(x * s for x, s in zip(counts, lsb)), temp)
-        frame = encode_field_frame(k, seq, t_us, status, counts, t_raw)  # type: ignore[arg-type]
+            return encode_field_line(k, seq, t_us, status, (counts[0] * lsb[0], counts[1] * lsb[1], counts[2] * lsb[2]),
+                                     temp)
+        frame = encode_field_frame(k, seq, t_us, status, counts, t_raw)
         if self.corrupt_fraction and self._faults.random() < self.corrupt_fraction:
             at = self._faults.randrange(2, len(frame))
             frame = frame[:at] + bytes([frame[at] ^ (1 << self._faults.randrange(8))]) + frame[at + 1:]

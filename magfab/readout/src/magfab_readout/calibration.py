@@ -197,6 +197,7 @@ class Calibration:
         return out[0], out[1]
 
     def _moving_least_squares(self, uq: float, vq: float) -> tuple:
+        assert self._mls is not None, "called only for the 'mls' method, which _method_of refuses without the model"
         order, h, terms, u, v, fz, fr = self._mls
         d2 = [((a - uq) / h) ** 2 + ((b - vq) / h) ** 2 for a, b in zip(u, v)]
         nearest = min(d2)

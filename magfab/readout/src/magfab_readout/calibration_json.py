@@ -146,7 +146,8 @@ def _hull(data: dict) -> tuple[tuple[Point, ...], float]:
     if len(points) < 3:
         raise CalibrationError(path, raw, "must have at least 3 distinct points")
     area2 = sum(points[k - 1][0] * points[k][1] - points[k][0] * points[k - 1][1] for k in range(len(points)))
-    span = max(max(p[0] for p in points) - min(p[0] for p in points), max(p[1] for p in points) - min(p[1] for p in points))
+    span = max(max(p[0] for p in points) - min(p[0] for p in points),
+               max(p[1] for p in points) - min(p[1] for p in points))
     if not area2 > 1e-12 * span * span:
         raise CalibrationError(path, raw, "must enclose a positive area counter-clockwise (it is clockwise or flat)")
     for k in range(len(points)):
@@ -197,8 +198,9 @@ def _thermal(data: dict) -> Thermal:
     for axis in AXES:
         x = finite(data, "thermal.coefficient_per_C." + axis, CalibrationError)
         if not abs(x) <= THERMAL_MAX_PER_C:
-            raise CalibrationError("thermal.coefficient_per_C." + axis, x, f"must be within +/-{THERMAL_MAX_PER_C:g} per degC (a "
-                                   "fraction: -0.12 %/C is -0.0012)")
+            raise CalibrationError("thermal.coefficient_per_C." + axis, x,
+                                   f"must be within +/-{THERMAL_MAX_PER_C:g} per degC (a fraction: -0.12 %/C is "
+                                   "-0.0012)")
         a.append(x)
     source = node.get("source", "")
     if source not in ("fit", "recipe"):

@@ -9,7 +9,7 @@ import json
 import math
 import pkgutil
 import sys
-from typing import Optional, Tuple
+from typing import List, Optional, Tuple
 
 from . import _build, acceptance_json
 from .device import Device, DeviceError
@@ -34,7 +34,8 @@ def add_parser(commands, common: argparse.ArgumentParser) -> argparse.ArgumentPa
     check.add_argument("--samples", type=int, default=500, metavar="N",
                        help="samples averaged per reading (default: %(default)s)")
     check.add_argument("--settle", type=float, default=1.0, metavar="S",
-                       help="seconds of device time to wait after the weight is on before reading (default: %(default)s)")
+                       help="seconds of device time to wait after the weight is on before reading "
+                            "(default: %(default)s)")
     check.add_argument("--no-weight", action="store_true", help="skip the known-weight step")
     check.add_argument("--rotation", action="store_true",
                        help="add the turn-over step: the whole sensor turned upside down, nothing touching the tip; "
@@ -147,8 +148,8 @@ def _mean_reading(device: Device, count: int) -> _Reading:
         if sample.chip_error or not all(math.isfinite(b) for b in sample.B_uT):
             skipped += 1
             if skipped > 10 * count + 100:
-                raise DeviceError(f"{skipped} samples from {device.port} were chip errors: check the sensor board's wiring and "
-                                  "supply")
+                raise DeviceError(f"{skipped} samples from {device.port} were chip errors: check the sensor board's "
+                                  "wiring and supply")
             continue
         full += bool(sample.full_scale)
         temperature = sample.temperature_C if sample.temperature_C is not None else math.nan
@@ -158,6 +159,7 @@ def _mean_reading(device: Device, count: int) -> _Reading:
         if used == count:
             break
     mean = [x / used for x in total]
+    assert sample.time_s is not None, "Device.samples stamps every sample with its device time"
     return _Reading(tuple(mean[:3]), tuple(mean[3:6]), mean[6] if warm == used else None, full, sample.time_s)
 
 
@@ -172,6 +174,7 @@ def _settle(device: Device, seconds: float) -> None:
     device.drain()
     start = None
     for sample in device.samples():
+        assert sample.time_s is not None, "Device.samples stamps every sample with its device time"
         start = sample.time_s if start is None else start
         if sample.time_s - start >= seconds:
             break
@@ -188,7 +191,8 @@ class _Steps:
     """The acceptance test's steps as they are reported: numbered PASS/FAIL lines, and the verdict."""
 
     def __init__(self, out) -> None:
-        self.out, self.results = out, []  # (name, passed)
+        self.out = out
+        self.results: List[Tuple[str, bool]] = []  # (name, passed)
 
     def report(self, name: str, passed: bool, text: str) -> None:
         self.results.append((name, passed))
@@ -221,7 +225,8 @@ def _check_options(args: argparse.Namespace, bands: Bands, data: dict):
     pattern = None
     if args.simulate:
         scale = bands.scale_of(args.simulate_grade) if args.simulate_grade else 1.0
-        pattern = RestTip.from_acceptance(data, scale=scale, flipped=args.simulate_flipped, loose_mm=args.simulate_loose)
+        pattern = RestTip.from_acceptance(data, scale=scale, flipped=args.simulate_flipped,
+                                          loose_mm=args.simulate_loose)
     elif args.simulate_grade or args.simulate_flipped or args.simulate_loose:
         raise UsageError("--simulate-grade, --simulate-flipped and --simulate-loose need --simulate")
     return weight, rise, pattern
@@ -229,10 +234,11 @@ def _check_options(args: argparse.Namespace, bands: Bands, data: dict):
 
 def _drift_options(args: argparse.Namespace, bands: Bands) -> None:
     """UsageError for --rotation, --warmup and their options where this package or build cannot run them."""
-    for wanted, section, name in ((args.rotation, bands.rotation, "--rotation"), (args.warmup, bands.warmup, "--warmup")):
+    for wanted, section, name in ((args.rotation, bands.rotation, "--rotation"),
+                                  (args.warmup, bands.warmup, "--warmup")):
         if wanted and section is None:
-            raise UsageError(f"{name}: this package's acceptance.json has no band for it (a build before magfab had one, "
-                             "or a design without a drift budget): rebuild with magfab build")
+            raise UsageError(f"{name}: this package's acceptance.json has no band for it (a build before magfab had "
+                             "one, or a design without a drift budget): rebuild with magfab build")
     if args.warmup and not _build.TEMPERATURE_ENABLED:
         raise UsageError("--warmup needs the chip's temperature, which this build's firmware does not read "
                          "(firmware.temperature = false)")
@@ -243,7 +249,8 @@ def _drift_options(args: argparse.Namespace, bands: Bands) -> None:
 
 
 def run(args: argparse.Namespace, out, open_device) -> int:
-    """The check as the command line asks it; ``open_device(args, text, pattern)`` opens the board (or the simulated one)."""
+    """The check as the command line asks it; ``open_device(args, text, pattern)`` opens the board (or the simulated
+    one)."""
     data = load_acceptance()
     if data is None:
         raise DeviceError("this readout package carries no acceptance.json (it was built without the acceptance "
@@ -270,12 +277,14 @@ def run(args: argparse.Namespace, out, open_device) -> int:
 
 def _check_header(out, device, bands: Bands, weight: float, rise, n: int) -> None:
     lo, nom, hi = bands.rest
-    out.write(f"# magfab-readout {_build.VERSION} check: spec {json.dumps(_build.SPEC_NAME)}, calibration {device.calibration.short_hash}, {device.port}\n")
+    out.write(f"# magfab-readout {_build.VERSION} check: spec {json.dumps(_build.SPEC_NAME)}, "
+              f"calibration {device.calibration.short_hash}, {device.port}\n")
     out.write("# predicted (worst case over the magnet, material and assembly tolerances; magfab acceptance.json):\n"
               f"#   Bz at rest {lo:.0f} .. {hi:.0f} uT (nominal {nom:.0f}), positive with the north pole away from the "
               f"chip; |Bxy| at rest <= {bands.bxy_max:.0f} uT\n")
     if rise is not None:
-        out.write(f"#   a {weight:g} g weight on the tip raises Bz by {rise[0]:.0f} .. {rise[2]:.0f} uT (nominal {rise[1]:.0f})\n")
+        out.write(f"#   a {weight:g} g weight on the tip raises Bz by {rise[0]:.0f} .. {rise[2]:.0f} uT "
+                  f"(nominal {rise[1]:.0f})\n")
     out.write(f"# reading {n} samples with nothing touching the tip\n")
     out.flush()
 
@@ -283,14 +292,15 @@ def _check_header(out, device, bands: Bands, weight: float, rise, n: int) -> Non
 def _check_polarity(steps: _Steps, bz: float, floor: float) -> None:
     """Step 1, the sign: an upside-down magnet reads the same field negated."""
     if bz > floor:
-        steps.report("polarity (sign of Bz)", True, f"measured {bz:+.0f} uT: positive, the north pole faces away from the "
-                     "chip as designed")
+        steps.report("polarity (sign of Bz)", True,
+                     f"measured {bz:+.0f} uT: positive, the north pole faces away from the chip as designed")
     elif bz < -floor:
         steps.report("polarity (sign of Bz)", False, f"measured {bz:+.0f} uT: negative, the magnet is upside down (its "
                      "north pole faces the chip); push it out of the pocket and turn it over")
     else:
-        steps.report("polarity (sign of Bz)", False, f"measured {bz:+.0f} uT: no field from the magnet (|Bz| under {floor:.0f} "
-                     "uT); is there a magnet in the fingertip, and is the fingertip on the chip?")
+        steps.report("polarity (sign of Bz)", False,
+                     f"measured {bz:+.0f} uT: no field from the magnet (|Bz| under {floor:.0f} uT); is there a magnet "
+                     "in the fingertip, and is the fingertip on the chip?")
 
 
 def _check_rest(steps: _Steps, out, bands: Bands, bz: float, full: int, allow: float) -> None:
@@ -298,22 +308,23 @@ def _check_rest(steps: _Steps, out, bands: Bands, bz: float, full: int, allow: f
     lo, nom, hi = bands.rest
     text = f"measured {bz:+.0f} uT, predicted {lo:.0f} .. {hi:.0f} uT (nominal {nom:.0f})"
     if full:
-        steps.report("Bz at rest", False, text + f": {full} samples had an axis at the chip's full scale (magnet far too "
-                     "close or too strong)")
+        steps.report("Bz at rest", False, text + f": {full} samples had an axis at the chip's full scale (magnet far "
+                     "too close or too strong)")
     elif lo - allow <= bz <= hi + allow:
         steps.report("Bz at rest", True, text)
     elif bz < 0 and lo - allow <= -bz <= hi + allow:
         steps.report("Bz at rest", False, text + ": the magnet is upside down (|Bz| is inside the band)")
     elif bz > hi + allow:
-        steps.report("Bz at rest", False, text + f": stronger than predicted - a stronger grade than {bands.grade}, a bigger "
-                     "magnet, or the magnet closer to the chip (not pushed home, thin pad or glue)")
+        steps.report("Bz at rest", False, text + f": stronger than predicted - a stronger grade than {bands.grade}, a "
+                     "bigger magnet, or the magnet closer to the chip (not pushed home, thin pad or glue)")
     else:
         steps.report("Bz at rest", False, text + ": weaker than predicted - a weaker or partly demagnetised magnet "
                      "(heated above 80 C?), a smaller magnet, or the magnet further from the chip (thick glue, pad "
                      "not seated)")
     if abs(bz) > allow + bands.earth:
         implied = abs(bz) / nom * bands.remanence[1]
-        note = f"#   at the nominal stack-up this field means a remanence of {implied:.2f} T ({bands.grade} is {bands.remanence[0]:.2f} .. {bands.remanence[2]:.2f} T)"
+        note = (f"#   at the nominal stack-up this field means a remanence of {implied:.2f} T ({bands.grade} is "
+                f"{bands.remanence[0]:.2f} .. {bands.remanence[2]:.2f} T)")
         if len(bands.inside) > 1 and steps.results[-1][1]:
             note += "; the band also holds the nominal field of grades {}: it cannot tell those apart".format(
                 ", ".join(g for g in bands.inside if g != bands.grade))
@@ -369,6 +380,7 @@ def _check_rotation(steps: _Steps, out, args: argparse.Namespace, device, bands:
     """The turn-over step: the field change against the Earth's field turned over and the fingertip's own weight
     reversed (acceptance.json ``rotation``), and the force it is worth against the drift budget's."""
     rot, n = bands.rotation, args.samples
+    assert rot is not None, "_drift_options refuses --rotation without acceptance.json's rotation section"
     _ask("turning over: the sensor upright as before, nothing touching the tip", args.yes)
     _settle(device, args.settle)
     upright = _mean_reading(device, n)
@@ -402,8 +414,8 @@ def _check_rotation(steps: _Steps, out, args: argparse.Namespace, device, bands:
     else:
         travel_um = 1000.0 * abs(dB[2]) / rot["gradient_uT_per_mm"]
         steps.report(name, False, text + ": more than the Earth's field and the fingertip's weight can change - the "
-                     f"magnet moved ({travel_um:.0f} um at the rest gradient): loose in its pocket, shifting under its own "
-                     "weight (glue it in), or steel or magnetised parts near the sensor turned with it (screws, a "
+                     f"magnet moved ({travel_um:.0f} um at the rest gradient): loose in its pocket, shifting under its "
+                     "own weight (glue it in), or steel or magnetised parts near the sensor turned with it (screws, a "
                      "clamp, a steel bench: move them away and repeat)")
 
 
@@ -439,16 +451,18 @@ def _check_warmup(steps: _Steps, out, args: argparse.Namespace, device, bands: B
     """The warm-up step: the rest force's change against the drift budget's compensated figure per degree times
     the warming (acceptance.json ``warmup``)."""
     w, n = bands.warmup, args.samples
+    assert w is not None, "_drift_options refuses --warmup without acceptance.json's warmup section"
     least = float(w["min_change_C"])
     _ask("warm-up: nothing touching the tip, the sensor where it will stay", args.yes)
     _settle(device, args.settle)
     cold = _mean_reading(device, n)
-    _ask(f"warm the sensor by at least {least:g} C with nothing touching the tip: hold the board (not the fingertip) in "
-         "your hand, or power it up from cold; warm it evenly, so the magnet keeps up with the chip",
+    _ask(f"warm the sensor by at least {least:g} C with nothing touching the tip: hold the board (not the fingertip) "
+         "in your hand, or power it up from cold; warm it evenly, so the magnet keeps up with the chip",
          args.yes)
     if args.simulate:
         device.transport.warm(args.simulate_warm if args.simulate_warm is not None else least + 1.0)
-    out.write(f"# waiting for the chip to warm by {least:g} C from {cold.temperature:.1f} C (at most {args.warmup_seconds:g} s)\n")
+    out.write(f"# waiting for the chip to warm by {least:g} C from {cold.temperature:.1f} C "
+              f"(at most {args.warmup_seconds:g} s)\n")
     out.flush()
     warm, waited, warmed = _warm(device, args, cold.temperature, least)
     dT = warm.temperature - cold.temperature
@@ -463,12 +477,12 @@ def _check_warmup(steps: _Steps, out, args: argparse.Namespace, device, bands: B
             "rest over the budget's)").format(dF, dT, dF / dT if dT else math.nan, band, per_C, what,
                                               float(w["per_C_mN"]["without"]) * k, k)
     if not warmed:
-        steps.report(name, False, text + f": the chip warmed by only {dT:.1f} C in {waited:.0f} s - warm it by at least {least:g} C "
-                     "(or give --warmup-seconds more) and repeat")
+        steps.report(name, False, text + f": the chip warmed by only {dT:.1f} C in {waited:.0f} s - warm it by at "
+                     f"least {least:g} C (or give --warmup-seconds more) and repeat")
     elif abs(dF) <= band:
         steps.report(name, True, text)
     else:
         steps.report(name, False, text + ": the rest force follows the temperature more than the correction leaves "
                      "- the board runs a calibration without its thermal block or a wrong one (magfab-readout upload, "
-                     "then info), or the magnet is not the {} NdFeB of the spec, whose remanence falls {:g} %/C (another "
-                     "material drifts at another rate)".format(bands.grade, abs(w["magnet_pct_per_C"])))
+                     "then info), or the magnet is not the {} NdFeB of the spec, whose remanence falls {:g} %/C "
+                     "(another material drifts at another rate)".format(bands.grade, abs(w["magnet_pct_per_C"])))

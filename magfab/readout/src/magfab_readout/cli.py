@@ -35,7 +35,8 @@ def _parser() -> argparse.ArgumentParser:
     link.add_argument("--timeout", type=float, default=3.0, metavar="S",
                       help="seconds to wait for data before giving up (default: %(default)s)")
     sim = common.add_argument_group("simulated device")
-    sim.add_argument("--simulate", action="store_true", help="no hardware: a simulated board sends the firmware's frames")
+    sim.add_argument("--simulate", action="store_true",
+                     help="no hardware: a simulated board sends the firmware's frames")
     sim.add_argument("--simulate-seed", type=int, default=0, metavar="N", help="noise seed of the simulated board")
     sim.add_argument("--simulate-corrupt", type=float, default=0.0, metavar="FRACTION",
                      help="fraction of simulated frames with a flipped bit (to see the CRC checks at work)")
@@ -64,7 +65,8 @@ def _parser() -> argparse.ArgumentParser:
     stream.add_argument("--text", action="store_true", help="ask the firmware for text lines instead of binary frames")
     stream.add_argument("--zero", type=int, default=0, metavar="N",
                         help="average N samples at rest first and subtract that force from the rest (tare)")
-    stream.add_argument("--raw", action="store_true", help="also print the raw counts and raw temperature (binary only)")
+    stream.add_argument("--raw", action="store_true",
+                        help="also print the raw counts and raw temperature (binary only)")
     stream.add_argument("--check", action="store_true",
                         help="also recompute each force from the field on the host and print the difference")
     stream.add_argument("--count", type=int, metavar="N", help="stop after N samples (an array: N cycles)")
@@ -83,7 +85,8 @@ def _parser() -> argparse.ArgumentParser:
     record.add_argument("--text", action="store_true", help="ask the firmware for text lines instead of binary frames")
 
     commands.add_parser("info", parents=[common], help="ask the board which spec and calibration it runs",
-                        description="Send 'i', print the board's answer and check its calibration against this package's.")
+                        description="Send 'i', print the board's answer and check its calibration against this "
+                                    "package's.")
 
     upload = commands.add_parser(
         "upload", parents=[common], help="write a calibration into the board's EEPROM (no compiler, no reflash)",
@@ -137,7 +140,8 @@ def _stream(args: argparse.Namespace, out) -> int:
     if args.raw and args.text:
         raise DeviceError("--raw needs binary frames: text lines carry microtesla, not raw counts")
     with _device(args, text=bool(args.text)) as device:
-        out.write(f"# magfab-readout {_build.VERSION}: spec {json.dumps(_build.SPEC_NAME)}, calibration {device.calibration.short_hash}, {device.port}\n")
+        out.write(f"# magfab-readout {_build.VERSION}: spec {json.dumps(_build.SPEC_NAME)}, "
+                  f"calibration {device.calibration.short_hash}, {device.port}\n")
         if args.zero:
             offset = device.zero(args.zero)
             out.write("# zero: offset Fx {:+.4f} N, Fy {:+.4f} N, Fz {:+.4f} N from {} samples\n".format(
@@ -180,8 +184,8 @@ def _rest_tracker(device: Device) -> RestTracker:
 
 def _summary(device: Device, n: int, worst: Optional[float], rest: Optional[RestTracker] = None) -> None:
     s = device.stats
-    text = (f"{n} samples; {s.lost} lost (sequence gaps), {s.crc_errors} CRC errors, {s.bad_lines} bad lines, {s.refused} refused values, {s.skipped_bytes} bytes "
-            "skipped")
+    text = (f"{n} samples; {s.lost} lost (sequence gaps), {s.crc_errors} CRC errors, {s.bad_lines} bad lines, "
+            f"{s.refused} refused values, {s.skipped_bytes} bytes skipped")
     if worst is not None:
         text += f"; host vs firmware force: max |dF| = {worst:.3g} N"
     print("magfab-readout: " + text, file=sys.stderr)
@@ -235,7 +239,8 @@ def _info(args: argparse.Namespace, out) -> int:
         out.write(f"device:  {info.line}\n")
         out.write("  spec {}, calibration {}, gain_sel {}, resolution {}, osr {}, dig_filt {}\n".format(
             json.dumps(info.spec_name), info.calibration_hash, *info.settings))
-        out.write(f"package: magfab-readout {_build.VERSION}, spec {json.dumps(_build.SPEC_NAME)}, calibration {device.calibration.short_hash}\n")
+        out.write(f"package: magfab-readout {_build.VERSION}, spec {json.dumps(_build.SPEC_NAME)}, "
+                  f"calibration {device.calibration.short_hash}\n")
         warnings = device.check_info(info)
         for warning in warnings:
             out.write(f"warning: {warning}\n")
@@ -254,7 +259,8 @@ def _upload(args: argparse.Namespace, out) -> int:
         data = json.loads(pkgutil.get_data("magfab_readout", "calibration.json").decode("utf-8"))  # type: ignore[union-attr]
     record = calibration_record(data)
     info = at_fallback_baud(args, out, lambda a: _device(a, text=None), lambda device: device.upload(data))
-    out.write(f"uploaded {len(record)} bytes, read back equal; the board runs calibration {info.calibration_hash} (spec {json.dumps(info.spec_name)})\n")
+    out.write(f"uploaded {len(record)} bytes, read back equal; the board runs calibration {info.calibration_hash} "
+              f"(spec {json.dumps(info.spec_name)})\n")
     return 0
 
 

@@ -95,7 +95,8 @@ def _import_serial():
     try:
         import serial  # lazy: pyserial is optional (--simulate runs without it)
     except ImportError:
-        raise DeviceError("pyserial is not installed: pip install pyserial (or try the simulated device with --simulate)") from None
+        raise DeviceError("pyserial is not installed: pip install pyserial (or try the simulated device with "
+                          "--simulate)") from None
     return serial
 
 
@@ -107,8 +108,8 @@ def find_port() -> str:
     if len(usb) == 1:
         return usb[0].device
     if not usb:
-        raise PortNotFound(f"no USB serial port found (other ports: {_describe(ports)}): plug the board in, or pass --port or set {PORT_VARIABLE} "
-                           "(or try --simulate)")
+        raise PortNotFound(f"no USB serial port found (other ports: {_describe(ports)}): plug the board in, or pass "
+                           f"--port or set {PORT_VARIABLE} (or try --simulate)")
     raise PortNotFound(f"several USB serial ports found: {_describe(usb)}; choose one with --port or {PORT_VARIABLE}")
 
 
@@ -140,8 +141,8 @@ class SerialTransport:
                     available = _describe(_ports())
                 except Exception:  # listing ports is only a courtesy in this message
                     available = "unknown"
-                raise PortNotFound(f"serial port {port!r} not found (available: {available}); pass --port, or try --simulate"
-                                   ) from None
+                raise PortNotFound(f"serial port {port!r} not found (available: {available}); pass --port, or try "
+                                   "--simulate") from None
             if "Permission denied" in text or "PermissionError" in text:
                 raise DeviceError(f"permission denied opening {port!r}: on Linux add your user to the 'dialout' group "
                                   "and log in again") from None
@@ -171,6 +172,7 @@ def cross_check(sample: Sample, calibration: Calibration) -> float:
     if sample.chip_error:
         return math.nan
     host = calibration.evaluate(*sample.B_uT, method="poly", temperature_C=sample.temperature_C)
+    assert sample.device_force_N is not None, "Sample.__post_init__ sets it"
     return max(abs(h - d) for h, d in zip(host, sample.device_force_N))
 
 
@@ -207,8 +209,8 @@ class Device:
             except PortNotFound as exc:
                 if not named:
                     raise
-                raise PortNotFound(f"{exc} (the port named by {PORT_VARIABLE}: set it to the board's port, or unset it to use the one "
-                                   "USB serial port present)") from None
+                raise PortNotFound(f"{exc} (the port named by {PORT_VARIABLE}: set it to the board's port, or unset "
+                                   "it to use the one USB serial port present)") from None
         self.decoder = Decoder()
         self.offset_N: Tuple[float, float, float] = (0.0, 0.0, 0.0)
         self.last_info: Optional[DeviceInfo] = None
@@ -257,10 +259,10 @@ class Device:
         attempts = good + bad
         if attempts >= CRC_MIN_ATTEMPTS and bad > self.max_crc_error_rate * attempts:
             raise CrcErrorRate(
-                f"{bad} of the last {attempts} frames or lines from {self.port} failed their CRC ({100.0 * bad / attempts:.0f} %, the limit is {100.0 * self.max_crc_error_rate:.0f} %): check "
-                "that the "
-                f"baud rate ({self.baud}) matches the firmware's, the cable and its length, and that nothing else uses the port"
-                )
+                f"{bad} of the last {attempts} frames or lines from {self.port} failed their CRC "
+                f"({100.0 * bad / attempts:.0f} %, the limit is {100.0 * self.max_crc_error_rate:.0f} %): check that "
+                f"the baud rate ({self.baud}) matches the firmware's, the cable and its length, and that nothing else "
+                "uses the port")
         if attempts >= CRC_WINDOW:
             self._crc_mark = mark
 
@@ -269,8 +271,8 @@ class Device:
         if stats.bytes == 0:
             hint = "nothing arrived: is the board plugged in and the firmware flashed?"
         elif stats.samples == 0 and stats.infos == 0:
-            hint = (f"{stats.bytes} bytes arrived but none formed a frame or line: check that the baud rate ({self.baud}) matches the "
-                    "firmware's")
+            hint = (f"{stats.bytes} bytes arrived but none formed a frame or line: check that the baud rate "
+                    f"({self.baud}) matches the firmware's")
         else:
             hint = f"the stream stopped after {received} samples: was the board unplugged or reset?"
         return NoData(f"no {what} from {self.port} within {self.timeout_s:g} s; {hint}")
@@ -280,7 +282,9 @@ class Device:
             delta = (sample.t_us - self._last_t_us) % 2**32
             self._elapsed_us += delta if delta < 2**31 else 0  # a backwards step is a board reset, not a wrap
         self._last_t_us = sample.t_us
-        force = tuple(f - o for f, o in zip(sample.device_force_N, self.offset_N))
+        device_force, offset = sample.device_force_N, self.offset_N
+        assert device_force is not None, "Sample.__post_init__ sets it"
+        force = (device_force[0] - offset[0], device_force[1] - offset[1], device_force[2] - offset[2])
         return dataclasses.replace(sample, time_s=self._elapsed_us * 1e-6, force_N=force,
                                    device_force_N=sample.device_force_N)
 
@@ -306,6 +310,7 @@ class Device:
             if self.text is not None and (item.source == "text") != self.text and last - self._mode_sent > RESEND_S:
                 self.set_mode(self.text)
             sample = self._stamp(item)
+            assert sample.time_s is not None, "_stamp sets the device time"
             if start is None:
                 start = sample.time_s
             if seconds is not None and sample.time_s - start > seconds:
@@ -346,13 +351,15 @@ class Device:
         total = [0.0, 0.0, 0.0]
         used = skipped = 0
         for sample in self.samples():
-            if sample.chip_error or any(math.isnan(f) for f in sample.device_force_N):
+            device_force = sample.device_force_N
+            assert device_force is not None, "Sample.__post_init__ sets it"
+            if sample.chip_error or any(math.isnan(f) for f in device_force):
                 skipped += 1
                 if skipped > 10 * count + 100:
-                    raise DeviceError(f"cannot zero: {skipped} of the last samples from {self.port} were chip errors (check the "
-                                      "sensor board's wiring and supply)")
+                    raise DeviceError(f"cannot zero: {skipped} of the last samples from {self.port} were chip errors "
+                                      "(check the sensor board's wiring and supply)")
                 continue
-            total = [t + f for t, f in zip(total, sample.device_force_N)]
+            total = [t + f for t, f in zip(total, device_force)]
             used += 1
             if used == count:
                 break
@@ -445,7 +452,8 @@ class Device:
                                f"firmware older than record version {record[2]}?)")
         info = self.info()
         if info.calibration_hash.lower() != calibration_sha256(calibration)[:16]:
-            raise UploadFailed(f"the board reports calibration {info.calibration_hash} after the upload, not {calibration_sha256(calibration)[:16]}")
+            raise UploadFailed(f"the board reports calibration {info.calibration_hash} after the upload, "
+                               f"not {calibration_sha256(calibration)[:16]}")
         self.calibration = Calibration(dict(calibration))
         return info
 
@@ -455,16 +463,17 @@ class Device:
         mine = self.calibration.short_hash
         if info.calibration_hash.lower() != mine:
             raise CalibrationMismatch(
-                f"calibration mismatch: the device on {self.port} runs calibration {info.calibration_hash} (spec {info.spec_name!r}) but this readout package "
-                f"embeds {mine} (spec {_build.SPEC_NAME!r}); flash the firmware and install the readout package from the same magfab "
-                "build")
+                f"calibration mismatch: the device on {self.port} runs calibration {info.calibration_hash} "
+                f"(spec {info.spec_name!r}) but this readout package embeds {mine} (spec {_build.SPEC_NAME!r}); flash "
+                "the firmware and install the readout package from the same magfab build")
         warnings = []
         if info.spec_name != _build.SPEC_NAME:
-            warnings.append(f"the device reports spec {info.spec_name!r}, this package was built for {_build.SPEC_NAME!r}")
+            warnings.append(f"the device reports spec {info.spec_name!r}, this package was built for "
+                            f"{_build.SPEC_NAME!r}")
         if info.taxels != TAXELS:
             warnings.append(f"the device reads {info.taxels} taxel(s), this package was built for {TAXELS}")
         expected = (_build.GAIN_SEL, _build.RESOLUTION, _build.OSR, _build.DIG_FILT)
         if info.settings != expected:
-            warnings.append(f"the device reports gain_sel/resolution/osr/dig_filt {info.settings} but this package expects {expected}: "
-                            "the field in microtesla will be wrong")
+            warnings.append(f"the device reports gain_sel/resolution/osr/dig_filt {info.settings} but this package "
+                            f"expects {expected}: the field in microtesla will be wrong")
         return warnings

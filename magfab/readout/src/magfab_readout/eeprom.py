@@ -235,7 +235,8 @@ def pack(lay: Dict[str, Any], sha16: str, settings: Dict[str, Any]) -> bytes:
         body += THERMAL.pack(*thermal)
     for row in lay["rows"]:
         body += struct.pack("<{}f".format(2 * len(row["fz"])), *row["fz"], *row["fr"])
-    body += b"".join(struct.pack("<2f", *p) for p in lay["fan"]) + b"".join(struct.pack("<3f", *e) for e in lay["edges"])
+    body += (b"".join(struct.pack("<2f", *p) for p in lay["fan"])
+             + b"".join(struct.pack("<3f", *e) for e in lay["edges"]))
     body += spec_name
     length = HEADER.size + len(body) + 2
     if length > SIZE:
@@ -255,8 +256,8 @@ def pack_array(addresses: Sequence[int], sha16: str, settings: Dict[str, Any]) -
     each), the name, the CRC. ``sha16`` is the info line's hash (of the build's calibration)."""
     n = len(addresses)
     if not 1 <= n <= MAX_TAXELS or len(set(addresses)) != n or not all(0x08 <= a <= 0x77 for a in addresses):
-        raise EepromError("taxels", list(addresses), f"must be 1 to {MAX_TAXELS} distinct 7-bit addresses from 0x08 to 0x77"
-                          )
+        raise EepromError("taxels", list(addresses),
+                          f"must be 1 to {MAX_TAXELS} distinct 7-bit addresses from 0x08 to 0x77")
     spec_name = settings["name"].encode("utf-8")
     if len(spec_name) > NAME_MAX:
         raise EepromError("name", settings["name"], f"must be at most {NAME_MAX} bytes of UTF-8 in the record")
@@ -308,7 +309,8 @@ def check(data: bytes) -> bool:
         return False
     head = unpack_header(data)
     length = head["length"]
-    return (head["magic"] == MAGIC and head["version"] in (VERSION, VERSION_THERMAL, VERSION_REFERENCE, VERSION_ARRAY) and HEADER.size + 2 <= length <= min(SIZE, len(data))
+    return (head["magic"] == MAGIC and head["version"] in (VERSION, VERSION_THERMAL, VERSION_REFERENCE, VERSION_ARRAY)
+            and HEADER.size + 2 <= length <= min(SIZE, len(data))
             and struct.unpack_from("<H", data, length - 2)[0] == crc16(data[:length - 2]))
 
 

@@ -406,7 +406,7 @@ class Decoder:
         return FRAME_LENGTH
 
     def _field_frame(self, frame: bytes, out: list) -> int:
-        kind, seq, status, t_us, taxel, bx, by, bz, t_raw = _FIELD_BODY.unpack_from(frame, 2)
+        _kind, seq, status, t_us, taxel, bx, by, bz, t_raw = _FIELD_BODY.unpack_from(frame, 2)
         self._sequence(seq, taxel)
         self.stats.frames += 1
         if status & STATUS_CHIP_ERROR:
@@ -463,7 +463,7 @@ class Decoder:
         if status & STATUS_CHIP_ERROR:
             self.stats.lines += 1
             return Sample(seq, t_us, status, _NAN3, _NAN3, None, "text", fault=int(fault) if fault else None)
-        force, B, temp = tuple(values[0:3]), tuple(values[3:6]), values[6]
+        force, B, temp = (values[0], values[1], values[2]), (values[3], values[4], values[5]), values[6]
         if not _plausible(force) or not all(abs(b) <= FIELD_LIMIT_UT for b in B):
             self.stats.refused += 1
             return _REFUSED
@@ -483,7 +483,8 @@ class Decoder:
                 self.stats.infos += 1
                 values = [int(x) for x in settings]
                 taxels = values.pop() if count == 6 else 1
-                return DeviceInfo(name, calibration_hash.lower(), *values, text, taxels)  # type: ignore[call-arg]
+                gain_sel, resolution, osr, dig_filt = values
+                return DeviceInfo(name, calibration_hash.lower(), gain_sel, resolution, osr, dig_filt, text, taxels)
         return None
 
     def _field_line(self, text: str) -> Union[Sample, object, None]:
@@ -517,7 +518,8 @@ class Decoder:
         if parts[0] == "W" and len(parts) == 5 and all(_INT.fullmatch(p) for p in parts[1:]):
             self.stats.replies += 1
             return EepromReply("W", *(int(p) for p in parts[1:]))  # type: ignore[arg-type]
-        if parts[0] == "R" and len(parts) == 3 and _INT.fullmatch(parts[1]) and re.fullmatch(r"([0-9A-F]{2})*", parts[2]):
+        if (parts[0] == "R" and len(parts) == 3 and _INT.fullmatch(parts[1])
+                and re.fullmatch(r"([0-9A-F]{2})*", parts[2])):
             self.stats.replies += 1
             data = bytes.fromhex(parts[2])
             return EepromReply("R", int(parts[1]), len(data), data=data)

@@ -22,7 +22,7 @@ else:  # the readout package on the user's Python, where magfab is not needed
 __all__ = ["FormatError", "is_number", "lookup", "finite"]
 
 
-class FormatError(_Base):  # type: ignore[valid-type, misc]
+class FormatError(_Base):
     """A file that does not hold what its format requires: ``file``, the dotted ``key`` path inside it (empty for
     the whole document), the offending ``value`` and what is ``allowed``."""
 

@@ -49,7 +49,7 @@ class RestTracker:
     def __init__(self, calibration, noise_uT: float, rate_Hz: float = _build.SAMPLE_RATE_HZ) -> None:
         self.calibration = calibration
         self.noise_uT = float(noise_uT)
-        self.size = max(2, int(round(WINDOW_S * rate_Hz)))
+        self.size = max(2, round(WINDOW_S * rate_Hz))
         self.noise_mN: Optional[float] = None
         self.level: Optional[float] = None
         self.points: List[Tuple[float, float, Optional[float]]] = []  # (time s, rest Fz mN, temperature C)
@@ -70,12 +70,14 @@ class RestTracker:
             self._window = []
 
     def _close(self, window) -> None:
+        noise_mN = self.noise_mN
+        assert noise_mN is not None, "add() sets the noise before it closes a window"
         forces = [f for _, f, _ in window]
         mean = sum(forces) / len(forces)
         spread = math.sqrt(sum((f - mean) ** 2 for f in forces) / (len(forces) - 1))
-        if spread > QUIET_SIGMAS * self.noise_mN:
+        if spread > QUIET_SIGMAS * noise_mN:
             return
-        if self.level is not None and abs(mean - self.level) > CAPTURE_SIGMAS * self.noise_mN:
+        if self.level is not None and abs(mean - self.level) > CAPTURE_SIGMAS * noise_mN:
             return
         temps = [t for _, _, t in window]
         temperature = sum(temps) / len(temps) if all(t is not None for t in temps) else None
@@ -102,7 +104,8 @@ class RestTracker:
             return "rest level: {} window{} of {:g} s at rest - too few to see a drift".format(
                 len(self.points), "" if len(self.points) == 1 else "s", WINDOW_S)
         (t0, f0, c0), (t1, f1, c1) = self.points[0], self.points[-1]
-        text = f"rest level: {len(self.points)} windows at rest over {t1 - t0:.1f} s, Fz {f0:+.1f} -> {f1:+.1f} mN (drift {f1 - f0:+.1f} mN"
+        text = (f"rest level: {len(self.points)} windows at rest over {t1 - t0:.1f} s, Fz {f0:+.1f} -> {f1:+.1f} mN "
+                f"(drift {f1 - f0:+.1f} mN")
         if c0 is not None and c1 is not None:
             text += f", chip {c0:.1f} -> {c1:.1f} C"
         fit = self.per_C()

@@ -273,8 +273,8 @@ class TemperatureRamp:
 
     def __init__(self, start_C: float, end_C: float, duration_s: float, delay_s: float = 0.0) -> None:
         if not (duration_s > 0 and delay_s >= 0):
-            raise ValueError(f"duration_s must be positive and delay_s at least 0; instead received {duration_s!r}, {delay_s!r}"
-                             )
+            raise ValueError("duration_s must be positive and delay_s at least 0; instead received "
+                             f"{duration_s!r}, {delay_s!r}")
         self.start_C, self.end_C = float(start_C), float(end_C)
         self.duration_s, self.delay_s = float(duration_s), float(delay_s)
 
@@ -292,11 +292,11 @@ def _temperature_raw(T: float) -> int:
     """The chip's temperature word for ``T`` degC (0 when the build reads no temperature)."""
     if not _build.TEMPERATURE_ENABLED:
         return 0
-    return max(0, min(0xFFFF, int(round(_build.TEMPERATURE_RAW_25C + _build.TEMPERATURE_LSB_PER_C * (T - 25.0)))))
+    return max(0, min(0xFFFF, round(_build.TEMPERATURE_RAW_25C + _build.TEMPERATURE_LSB_PER_C * (T - 25.0))))
 
 
 def _clamp16(x: float) -> int:
-    return max(-32768, min(32767, int(round(x))))
+    return max(-32768, min(32767, round(x)))
 
 
 class SimulatedDevice:
@@ -338,7 +338,7 @@ class SimulatedDevice:
             thermal_per_C = thermal.coefficient_per_C if thermal is not None else 0.0
         self.thermal_per_C = tuple(float(a) for a in (
             thermal_per_C if isinstance(thermal_per_C, (tuple, list)) else (thermal_per_C,) * 3))
-        self.period_us = int(round(1e6 / self.rate_Hz))
+        self.period_us = round(1e6 / self.rate_Hz)
         self.realtime = realtime
         self.text = (_build.OUTPUT == "text") if text is None else bool(text)
         self.noise_lsb = float(noise_lsb)
@@ -373,7 +373,8 @@ class SimulatedDevice:
             if status == 0:
                 self.eeprom[address:address + n] = cmd[4:4 + n]
             settings = (_build.GAIN_SEL, _build.RESOLUTION, _build.OSR, _build.DIG_FILT)
-            valid = eeprom.check(bytes(self.eeprom)) and eeprom.unpack_header(bytes(self.eeprom))["settings"] == settings
+            valid = (eeprom.check(bytes(self.eeprom))
+                     and eeprom.unpack_header(bytes(self.eeprom))["settings"] == settings)
             if valid:
                 head = eeprom.unpack_header(bytes(self.eeprom))
                 self.info_line = encode_info_line(self.info_line.decode().split(",")[2], head["sha16"], *settings)
@@ -387,7 +388,8 @@ class SimulatedDevice:
         for byte in bytes(data):
             if self._command:
                 self._command += bytes((byte,))
-                if len(self._command) >= 4 and (self._command[:1] == b"r" or len(self._command) == 6 + self._command[3]):
+                if len(self._command) >= 4 and (self._command[:1] == b"r"
+                                                or len(self._command) == 6 + self._command[3]):
                     self._eeprom_command()
                 continue
             if byte in (ord("w"), ord("r")):
@@ -456,7 +458,7 @@ class SimulatedDevice:
 
     def _at_temperature(self, B, T: float) -> Tuple[float, float, float]:
         """The field ``B`` (uT) with the magnet at ``T`` degC: (1 + a (T - T0)) per axis."""
-        return tuple(b * (1.0 + a * (T - self.reference_C)) for b, a in zip(B, self.thermal_per_C))  # type: ignore[return-value]
+        return tuple(b * (1.0 + a * (T - self.reference_C)) for b, a in zip(B, self.thermal_per_C))
 
     def _sample_bytes(self, k: int) -> bytes:
         """The wire bytes of sample ``k`` in the current mode; called once per sample, in order (noise, faults)."""
@@ -492,5 +494,6 @@ class SimulatedDevice:
         frame = encode_frame(seq, t_us, status, counts, t_raw, force)
         if self.corrupt_fraction and self._faults.random() < self.corrupt_fraction:
             position = self._faults.randrange(2, len(frame))
-            frame = frame[:position] + bytes([frame[position] ^ (1 << self._faults.randrange(8))]) + frame[position + 1:]
+            frame = (frame[:position] + bytes([frame[position] ^ (1 << self._faults.randrange(8))])
+                     + frame[position + 1:])
         return frame

@@ -43,7 +43,8 @@ from .frames import STATUS_CHIP_ERROR, STATUS_OUTSIDE_REGION, Sample, fault_name
 __all__ = ["HOLD_S", "ArrayCalibration", "TaxelReading", "Cycle", "CycleAssembler", "ArrayEvaluator", "ArrayReader",
            "WrongFirmware"]
 
-#: Largest lag behind the board's clock a live view (``cycles(keep_up=True)``) lets build up before leaving cycles out, s.
+#: Largest lag behind the board's clock a live view (``cycles(keep_up=True)``) lets build up before leaving cycles
+#: out, s.
 MAX_LAG_S = 0.25
 #: A wait this long for the next sample means the host has caught up with the board.
 CAUGHT_UP_S = 0.002
@@ -218,7 +219,7 @@ class CycleAssembler:
         self._last = -1
 
     def feed(self, sample: Sample) -> List[List[Optional[Sample]]]:
-        out = []
+        out: List[List[Optional[Sample]]] = []
         k = sample.taxel
         if not 0 <= k < self.n:
             self.foreign += 1
@@ -272,9 +273,9 @@ class ArrayEvaluator:
         now = min(_time(s) for s in present) if present else None
         readings, held = [], []
         for k, s in enumerate(slots):
-            if good[k]:
-                readings.append(s.B_uT)  # type: ignore[union-attr]
-                self._last[k] = (_time(s), s.B_uT)  # type: ignore[arg-type]
+            if s is not None and good[k]:  # good[k]: s is a sample
+                readings.append(s.B_uT)
+                self._last[k] = (_time(s), s.B_uT)
                 continue
             last = self._last[k]
             fresh = last is not None and now is not None and now - last[0] <= self.hold_s
@@ -297,7 +298,7 @@ class ArrayEvaluator:
                 status |= STATUS_OUTSIDE_REGION
             force = tuple(f - o for f, o in zip(cal.evaluate(*own, method=self.method, temperature_C=s.temperature_C),
                                                 self.offset_N[k]))
-        return TaxelReading(k, s.seq, s.time_s, status, s.B_uT, own, force, s.temperature_C,  # type: ignore[arg-type]
+        return TaxelReading(k, s.seq, s.time_s, status, s.B_uT, own, force, s.temperature_C,
                             s.fault, counts=s.counts, temperature_raw=s.temperature_raw)
 
 
@@ -357,9 +358,9 @@ class ArrayReader:
                 self._clock = None  # it waited for the board: caught up, the clocks are compared afresh (drift)
             if _finite(sample.device_force_N):
                 raise WrongFirmware(
-                    f"the board on {self.device.port} sends a single taxel's force frames, but this readout package is for an array "
-                    f"of {self.calibration.taxels} taxels: flash the array build's firmware, or install the readout package of the board's "
-                    "build")
+                    f"the board on {self.device.port} sends a single taxel's force frames, but this readout package "
+                    f"is for an array of {self.calibration.taxels} taxels: flash the array build's firmware, or "
+                    "install the readout package of the board's build")
             for slots in self.assembler.feed(sample):
                 if self._track(slots) > MAX_LAG_S and keep_up:
                     self.skipped += 1
@@ -373,7 +374,8 @@ class ArrayReader:
                 self.incomplete += bool(lost)
                 self.missing += lost
                 start = cycle.time_s if start is None else start
-                if seconds is not None and cycle.time_s is not None and cycle.time_s - start > seconds:
+                if (seconds is not None and cycle.time_s is not None and start is not None
+                        and cycle.time_s - start > seconds):
                     return
                 n += 1
                 yield cycle
@@ -393,9 +395,7 @@ class ArrayReader:
         self.evaluator.offset_N = [(0.0, 0.0, 0.0)] * n
         total = [[0.0, 0.0, 0.0] for _ in range(n)]
         used = [0] * n
-        cycles = 0
-        for cycle in self.cycles():
-            cycles += 1
+        for cycles, cycle in enumerate(self.cycles(), start=1):
             for t in cycle:
                 if t.ok and used[t.taxel] < count and _finite(t.force_N):
                     total[t.taxel] = [a + f for a, f in zip(total[t.taxel], t.force_N)]
@@ -404,8 +404,8 @@ class ArrayReader:
                 break
             if cycles > 10 * count + 100:
                 failing = [k for k in range(n) if used[k] < count]
-                raise DeviceError("cannot zero: taxel(s) {} gave {} good readings in {} cycles from {} (check the chips' "
-                              "wiring and addresses: magfab-readout info)".format(
-                                  ", ".join(map(str, failing)), min(used), cycles, self.device.port))
+                raise DeviceError("cannot zero: taxel(s) {} gave {} good readings in {} cycles from {} (check the "
+                                  "chips' wiring and addresses: magfab-readout info)".format(
+                                      ", ".join(map(str, failing)), min(used), cycles, self.device.port))
         self.evaluator.offset_N = [tuple(x / used[k] for x in total[k]) for k in range(n)]  # type: ignore[misc]
         return list(self.evaluator.offset_N)
