@@ -187,7 +187,7 @@ def scan_rows(design: Design) -> int:
     step = cal.scan_step_mm
     half = min(cal.scan_y_mm / 2.0, design.magnet_radius_mm)
     z = min(cal.scan_z_mm, 1.25 * max(design.d_rest_mm - sen.d_min_mm, 0.0))
-    return (int(math.floor(2.0 * half / step + 1e-9)) + 1) * (int(math.floor(z / step + 1e-9)) + 1)
+    return (math.floor(2.0 * half / step + 1e-9) + 1) * (math.floor(z / step + 1e-9) + 1)
 
 
 def estimate(design: Design) -> Cost:
@@ -228,7 +228,7 @@ def check_limits(design: Design) -> Cost:
             knobs.reverse()  # blame first the key whose own facet count is the finer
         what = f"would need about {_fmt(cost.triangles)} triangles (limit {_fmt(MAX_TRIANGLES)})"
         for key, name, lo, hi in knobs:
-            need = _bisect(lambda x: triangles(_with(design, mould=m.model_copy(update={name: x}))), lo, hi)
+            need = _bisect(lambda x, name=name: triangles(_with(design, mould=m.model_copy(update={name: x}))), lo, hi)
             if need is not None:
                 raise SpecError(key, getattr(m, name), what, f"raise {key} to at least {_fmt(_round_up(need))}")
         raise SpecError("mould.cavities", design.cavities, what, "use fewer cavities per mould")

@@ -121,7 +121,7 @@ class Footprint:
             text = reference if t.kind == "reference" else t.text
             effects: tuple = ("effects", ("font", ("size", t.size, t.size), ("thickness", t.thickness)))
             if bottom:
-                effects = effects + (("justify", Sym("mirror")),)
+                effects = (*effects, ("justify", Sym("mirror")))
             out.append(("fp_text", Sym(t.kind), text, at(t.x, my * t.y, angle), ("layer", side(t.layer)), effects))
         for ln in self.lines:
             out.append(("fp_line", ("start", ln.x1, my * ln.y1), ("end", ln.x2, my * ln.y2),

@@ -264,7 +264,7 @@ def wrap(name: str, chars: int) -> list[str]:
         cut = max((i + 1 for i, ch in enumerate(rest[:chars]) if ch in "._-" and i + 1 >= chars // 2), default=chars)
         lines.append(rest[:cut])
         rest = rest[cut:]
-    return lines + [rest]
+    return [*lines, rest]
 
 
 def label(design: Design, outline: Box, parts: list[Placed], circle: tuple[float, float, float]) -> tuple[SilkText, ...]:

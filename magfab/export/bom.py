@@ -50,7 +50,7 @@ def _chip_rows(design: Design) -> list[dict[str, object]]:
     if design.array is None:
         code = design.spec.sensor.option_code
         return [_row("Hall sensor IC", f"MLX90393SLW-ABA-{code}-RE", f"Melexis MLX90393, QFN-16 3x3 mm, option code "
-                     f"{code} (I2C base for address 0x{design.i2c_address:02X})", n, "pcs", source)] + extra
+                     f"{code} (I2C base for address 0x{design.i2c_address:02X})", n, "pcs", source), *extra]
     rows = []
     for code in design.array.option_codes:
         chips = [t for t in design.taxels if t.option_code == code]
@@ -73,7 +73,8 @@ def _sensor_rows(design: Design) -> list[dict[str, object]]:
     taxels = len(design.taxels)
     chips = taxels + (design.spec.reference is not None)
     width, height = board_size_mm(design)
-    rows = _chip_rows(design) + [
+    rows = [
+        *_chip_rows(design),
         _row("Magnet", f"NdFeB {spec.magnet.grade} disc {spec.magnet.diameter_mm:g} x {spec.magnet.height_mm:g} mm",
              "axially magnetised" + (f", {coating} coated" if coating else "")
              + (f"; {taxels} per sensor" if taxels > 1 else ""), taxels * n, "pcs",

@@ -212,7 +212,8 @@ def _magnet_section(design: Design) -> Section:
         array = [f"Insert {len(design.taxels)} magnets, one per pocket, as below. " + magnets_text(design)]
     else:
         array = []
-    return _section("Insert the magnet" + ("s" if array else ""), array + [
+    return _section("Insert the magnet" + ("s" if array else ""), [
+        *array,
         f"Magnet: NdFeB {spec.magnet.grade}, {spec.magnet.diameter_mm:g} mm diameter x {spec.magnet.height_mm:g} mm, "
         "axially magnetised" + (f", {grade.coating} coated" if grade.coating else "") + ".",
         "Polarity: " + _lc(_t(assembly["polarity-check"], "method", "mark each magnet's north face.")),
@@ -414,9 +415,9 @@ def sections(design: Design, acceptance: Mapping[str, Any] | None = None,
     recipes' numbers filled in; the Markdown and HTML templates only lay it out (and escape it). ``plan``: the
     calibration scan's extent (:func:`magfab.models.scan.scan_plan`; omitted, the spec's)."""
     q = quantities(design)
-    return [_parts_section(design, acceptance)] + _array_sections(design) + [_print_section(design), _prepare_section(design, q),
-            _mix_section(design, q), _pour_section(design, q), _magnet_section(design), _solder_section(design),
-            _assemble_section(design), _wiring_section(design), _flash_section(design),
+    return [_parts_section(design, acceptance), *_array_sections(design), _print_section(design),
+            _prepare_section(design, q), _mix_section(design, q), _pour_section(design, q), _magnet_section(design),
+            _solder_section(design), _assemble_section(design), _wiring_section(design), _flash_section(design),
             _calibrate_section(design, plan), _acceptance_section(acceptance, design)]
 
 

@@ -116,7 +116,7 @@ def _build_data(design, checked: calibration_json.Checked) -> dict[str, object]:
         "dig_filt": int(chip.dig_filt),
         "lsb_xy_uT": float(chip.lsb_xy_uT),
         "lsb_z_uT": float(chip.lsb_z_uT),
-        "full_scale_counts": int(round(limit)),
+        "full_scale_counts": round(float(limit)),
         "sample_rate_Hz": round(float(chip.sample_rate_Hz), 6),
         "temperature_raw_25C": TEMPERATURE_RAW_25C,
         "temperature_lsb_per_C": TEMPERATURE_LSB_PER_C,

@@ -40,7 +40,7 @@ import json
 import tomllib
 from enum import Enum
 from pathlib import Path
-from typing import Any, Literal, Union
+from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_serializer, field_validator
 
@@ -75,7 +75,7 @@ class _Table(BaseModel):
 
 
 Range = tuple[float, float]
-Choice = Union[Range, list[float]]  # a [low, high] range or (in a table {values = [...]}) listed values
+Choice = Range | list[float]  # a [low, high] range or (in a table {values = [...]}) listed values
 
 
 class Require(_Table):

@@ -445,7 +445,7 @@ def drift(design: Design, pred: Prediction) -> Drift:
     env = environment(design)
     normal = normal_channel(pred)
     low, stated, high = earth_field_G(design)
-    conditions = {k: v for k, v in env.model_dump(mode="json").items()}
+    conditions = dict(env.model_dump(mode="json"))
     conditions["earth_field_G"] = stated
     conditions["earth_field_band_G"] = [low, high]
     conditions["stated"] = design.spec.environment is not None

@@ -38,7 +38,7 @@ def _fill_loops(ax, loops: Sequence[np.ndarray], dz: float, **style) -> None:
         return
     verts, codes = [], []
     for loop in loops:
-        pts = np.vstack([loop, loop[:1]]) + [0.0, dz]
+        pts = np.vstack([loop, loop[:1]]) + np.array([0.0, dz])
         verts.append(pts)
         codes += [Path.MOVETO] + [Path.LINETO] * (len(loop) - 1) + [Path.CLOSEPOLY]
     ax.add_patch(PathPatch(Path(np.vstack(verts), codes), **style))

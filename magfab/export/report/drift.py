@@ -37,8 +37,8 @@ def _disturbance_row(label: str, x: Disturbance, d: Drift) -> tuple[str, ...]:
 def _rows(d: Drift) -> list[tuple[str, ...]]:
     t, env = d.temperature, d.conditions
     span = f"{env['temperature_min_C']:g}-{env['temperature_max_C']:g} C"
-    per_C = tuple(t.per_C[p]["without"] for p in ("normal_rest", "normal_end")) + (
-        max(t.per_C["shear_rest"]["without"], t.per_C["shear_end"]["without"], key=abs),)
+    per_C = (*(t.per_C[p]["without"] for p in ("normal_rest", "normal_end")),
+             max(t.per_C["shear_rest"]["without"], t.per_C["shear_end"]["without"], key=abs))
     rows = [_row("temperature, per C, uncompensated", "-", per_C, d)]
     for case, what in (("without", "uncompensated"), ("with", "compensated, recipe coefficients"),
                        ("fitted", "compensated, fitted coefficients")):

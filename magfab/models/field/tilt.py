@@ -75,4 +75,4 @@ def tilted_field(magnet: Magnet, gap_mm: ArrayLike, shift_mm: ArrayLike = 0.0, t
     local = np.column_stack([dx * cos - dz * sin, np.zeros_like(g), dx * sin + dz * cos - 0.5 * magnet.height_mm])
     b = exact(magnet, local)
     out = np.column_stack([b[:, 0] * cos + b[:, 2] * sin, b[:, 1], -b[:, 0] * sin + b[:, 2] * cos])
-    return out.reshape(shape + (3,))
+    return out.reshape((*shape, 3))
