@@ -51,15 +51,19 @@ class Copper:
     hole: bool = False
 
     @staticmethod
-    def rect(x0: float, y0: float, x1: float, y1: float, layers: Iterable[str], net: str | None, owner: str = "") -> Copper:
-        return Copper("rect", (min(x0, x1), min(y0, y1)), (max(x0, x1), max(y0, y1)), 0.0, frozenset(layers), net, owner)
+    def rect(x0: float, y0: float, x1: float, y1: float, layers: Iterable[str], net: str | None,
+             owner: str = "") -> Copper:
+        return Copper("rect", (min(x0, x1), min(y0, y1)), (max(x0, x1), max(y0, y1)), 0.0, frozenset(layers), net,
+                      owner)
 
     @staticmethod
-    def seg(x0: float, y0: float, x1: float, y1: float, width: float, layer: str, net: str | None, owner: str = "track") -> Copper:
+    def seg(x0: float, y0: float, x1: float, y1: float, width: float, layer: str, net: str | None,
+            owner: str = "track") -> Copper:
         return Copper("seg", (x0, y0), (x1, y1), width / 2, frozenset({layer}), net, owner)
 
     @staticmethod
-    def point(x: float, y: float, radius: float, layers: Iterable[str], net: str | None, owner: str = "", hole: bool = False) -> Copper:
+    def point(x: float, y: float, radius: float, layers: Iterable[str], net: str | None, owner: str = "",
+              hole: bool = False) -> Copper:
         return Copper("point", (x, y), (x, y), radius, frozenset(layers), net, owner, hole)
 
     def bbox(self) -> tuple[float, float, float, float]:
@@ -384,7 +388,8 @@ class Router:
         # Drilled holes keep HOLE_TO_HOLE_MM apart, whatever their nets (vias of the same net too).
         for it in items:
             if it.kind == "point" and not it.hole and len(it.layers) == 2:
-                keep = Copper.point(it.a[0], it.a[1], self.via_drill / 2 + self.via_drill / 2 + HOLE_TO_HOLE_MM, LAYERS, None)
+                keep = Copper.point(it.a[0], it.a[1], self.via_drill / 2 + self.via_drill / 2 + HOLE_TO_HOLE_MM,
+                                    LAYERS, None)
                 flat[self._inside_ids(keep, 0)] = True
         return track, extra, ~(via[0] | via[1])
 

@@ -72,7 +72,8 @@ def inspect(board_path):
         for p in fp.Pads():
             pos, size = p.GetPosition(), p.GetSize()
             pads.append({"number": p.GetNumber(), "x": mm(pos.x), "y": mm(pos.y), "w": mm(size.x), "h": mm(size.y),
-                         "net": p.GetNetname(), "angle": p.GetOrientationDegrees(), "layers": p.GetLayerSet().Seq().__len__()})
+                         "net": p.GetNetname(), "angle": p.GetOrientationDegrees(),
+                         "layers": p.GetLayerSet().Seq().__len__()})
         pos = fp.GetPosition()
         fps.append({"ref": fp.GetReference(), "value": fp.GetValue(), "fpid": fp.GetFPIDAsString(),
                     "x": mm(pos.x), "y": mm(pos.y), "bottom": fp.IsFlipped(), "pads": pads})

@@ -35,7 +35,8 @@ from .firmware import TEMPERATURE_LSB_PER_C, TEMPERATURE_RAW_25C, chip_config, i
 from .templating import environment
 
 __all__ = ["PACKAGE", "SOURCE", "TEMPLATE_SUFFIX", "TREE_FILES", "render", "source_files", "data_files",
-           "calibration_sha256", "validate_calibration", "validate_acceptance", "TEMPERATURE_RAW_25C", "TEMPERATURE_LSB_PER_C"]
+           "calibration_sha256", "validate_calibration", "validate_acceptance", "TEMPERATURE_RAW_25C",
+           "TEMPERATURE_LSB_PER_C"]
 
 PACKAGE = "magfab_readout"
 #: The package's source tree: this folder of magfab (shipped in magfab's wheel), copied verbatim into readout/.
@@ -131,7 +132,8 @@ def _context(build: Mapping[str, object], acceptance: Mapping[str, Any] | None) 
         **build,
         "description": f"Host readout for the magfab tactile sensor {build['spec_name']}",
         "acceptance": None if acceptance is None else {
-            "rest_lo": f"{acceptance['rest']['Bz_uT']['min']:.0f}", "rest_hi": f"{acceptance['rest']['Bz_uT']['max']:.0f}",
+            "rest_lo": f"{acceptance['rest']['Bz_uT']['min']:.0f}",
+            "rest_hi": f"{acceptance['rest']['Bz_uT']['max']:.0f}",
             "rest_nominal": f"{acceptance['rest']['Bz_uT']['nominal']:.0f}",
             "weight": f"{acceptance['weight']['weight_g']:g}",
             "delta_lo": f"{acceptance['weight']['delta_Bz_uT']['min']:.0f}",

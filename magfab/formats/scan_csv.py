@@ -27,8 +27,9 @@ import numpy as np
 
 from ..errors import ScanError, shown
 
-__all__ = ["SCAN_COLUMNS", "FORCE_COLUMNS", "SENSOR_FORCE_COLUMNS", "HOST_TIME_COLUMN", "TAXEL_COLUMN", "REFERENCE_COLUMNS",
-           "TEMPERATURE_COLUMN", "MIN_ROWS", "BANDS", "HOST_TIME_BAND", "MIN_SPAN_UT", "MIN_THICKNESS", "ScanError",
+__all__ = ["SCAN_COLUMNS", "FORCE_COLUMNS", "SENSOR_FORCE_COLUMNS", "HOST_TIME_COLUMN", "TAXEL_COLUMN",
+           "REFERENCE_COLUMNS", "TEMPERATURE_COLUMN", "MIN_ROWS", "BANDS", "HOST_TIME_BAND", "MIN_SPAN_UT",
+           "MIN_THICKNESS", "ScanError",
            "Scan", "Recording", "Reference", "scan_csv", "read_scan_csv", "read_recording", "read_reference",
            "check_calibration_scan"]
 
@@ -157,8 +158,8 @@ def _number(text: str, name: str, line: int, column: str, row: int, band: tuple[
     x = float(stripped)
     lo, hi, unit = band
     if not lo <= x <= hi:  # also an overflow to inf, e.g. 1e999
-        raise ScanError(f"{name}: line {line} (row {row}), column {column!r}: {shown(stripped)} is outside the plausible "
-                        f"band {lo:g} to {hi:g} {unit}; check the column's unit and scaling")
+        raise ScanError(f"{name}: line {line} (row {row}), column {column!r}: {shown(stripped)} is outside the "
+                        f"plausible band {lo:g} to {hi:g} {unit}; check the column's unit and scaling")
     return x
 
 
@@ -278,8 +279,8 @@ def read_scan_csv(source: str | os.PathLike[str] | bytes, *, require_force: bool
     if rows < min_rows:
         end = lines[-1][0]
         raise ScanError(f"{name}: line {end}: the scan ends after {rows} data rows; a calibration needs at "
-                        f"least {min_rows} (the order-{LARGEST_ORDER} fit has {(LARGEST_ORDER + 1) * (LARGEST_ORDER + 2) // 2} "
-                        "coefficients and is cross-validated)")
+                        f"least {min_rows} (the order-{LARGEST_ORDER} fit has "
+                        f"{(LARGEST_ORDER + 1) * (LARGEST_ORDER + 2) // 2} coefficients and is cross-validated)")
     forces = np.column_stack([arr[c] for c in FORCE_COLUMNS]) if FORCE_COLUMNS[0] in arr else None
     if sensor and forces is not None:
         own = np.column_stack([arr[c] for c in SENSOR_FORCE_COLUMNS])

@@ -81,8 +81,10 @@ Choice = Range | list[float]  # a [low, high] range or (in a table {values = [..
 class Require(_Table):
     """Requirements every returned design meets (None: no requirement)."""
 
-    normal_resolution_mN: float | None = Field(None, gt=0.0, le=1e4, description="Worst-case normal resolution, at most, mN.")
-    shear_resolution_mN: float | None = Field(None, gt=0.0, le=1e4, description="Worst-case shear resolution, at most, mN.")
+    normal_resolution_mN: float | None = Field(None, gt=0.0, le=1e4,
+                                               description="Worst-case normal resolution, at most, mN.")
+    shear_resolution_mN: float | None = Field(None, gt=0.0, le=1e4,
+                                              description="Worst-case shear resolution, at most, mN.")
     normal_range_N: float | None = Field(None, gt=0.0, le=1e3, description="Normal force range, at least, N.")
     shear_range_N: float | None = Field(None, gt=0.0, le=1e3, description="Shear force range, at least, N.")
     max_diameter_mm: float | None = Field(None, gt=0.0, le=100.0, description="Largest elastomer diameter, mm.")

@@ -51,7 +51,8 @@ if TYPE_CHECKING:
     from .drift import Drift
     from .predict import Prediction
 
-__all__ = ["ReferenceChip", "Site", "Rejection", "Travel", "site", "rejection", "budget", "REFERENCE_SHIFT", "noise_growth"]
+__all__ = ["ReferenceChip", "Site", "Rejection", "Travel", "site", "rejection", "budget", "REFERENCE_SHIFT",
+           "noise_growth"]
 
 #: The firmware's reference filter: an exponential average with weight 2**-REFERENCE_SHIFT per reading.
 REFERENCE_SHIFT = 3
