@@ -73,7 +73,8 @@ class ArrayLayout:
     pitch_mm: float  # the smallest centre-to-centre distance
     min_pitch_mm: float  # the smallest the geometry allows (lips, pockets, recesses); the crosstalk budget may ask more
     hull_mm: tuple[tuple[float, float], ...]  # convex hull of the taxel centres, counter-clockwise (1 or 2 points too)
-    pad_extent_mm: tuple[float, float, float, float]  # (x_min, y_min, x_max, y_max) of the pad: the hull grown by its radius
+    # (x_min, y_min, x_max, y_max) of the pad: the hull grown by its radius
+    pad_extent_mm: tuple[float, float, float, float]
     part_centres_mm: tuple[tuple[float, float], ...]  # the magnets in one cast part's frame: every taxel of a
     # continuous skin (its outline's extent centred on the origin), or one tip's axis for separate tips
 
@@ -387,7 +388,8 @@ def _pocket(spec: Spec, part: Part, stack: Stack) -> Pocket:
     what the skin allows; the funnel and channel below it; d_min checked against the stack."""
     el, sen = spec.elastomer, spec.sensor
     R_e, H_e, base_h = part["elastomer_radius_mm"], part["elastomer_height_mm"], part["base_height_mm"]
-    R_p, h_p, r_ch, H_m = part["pocket_radius_mm"], part["pocket_height_mm"], part["channel_radius_mm"], part["magnet_height_mm"]
+    R_p, h_p, r_ch, H_m = (part["pocket_radius_mm"], part["pocket_height_mm"], part["channel_radius_mm"],
+                           part["magnet_height_mm"])
     z_base, z_sense, skin_min = stack["z_elastomer_base_mm"], stack["z_sense_mm"], el.min_skin_mm
     roof_max = base_h + math.sqrt((R_e - skin_min) ** 2 - R_p**2) if el.tip is Tip.HEMISPHERE else H_e - skin_min
     roof_max = min(roof_max, H_e - skin_min)

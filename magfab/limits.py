@@ -250,7 +250,8 @@ def check_limits(design: Design) -> Cost:
                             f"{_fmt(design.elastomer_radius_mm * 2)} mm elastomer, about {_fmt(cost.fe_work)} "
                             f"element-steps (limit {_fmt(MAX_FE_WORK)})",
                             f"raise predict.tolerance_pct to at least {_fmt(_round_up(need))}")
-        key = "elastomer.height_mm" if design.elastomer_height_mm >= design.elastomer_radius_mm * 2 else "elastomer.diameter_mm"
+        key = ("elastomer.height_mm" if design.elastomer_height_mm >= design.elastomer_radius_mm * 2
+               else "elastomer.diameter_mm")
         raise SpecError(key, getattr(spec.elastomer, key.split(".")[1]),
                         f"is too large for the FE model: about {_fmt(cost.fe_work)} element-steps even on the "
                         f"coarsest meshes (limit {_fmt(MAX_FE_WORK)})",

@@ -38,7 +38,8 @@ def did_you_mean(word: str, choices: list[str]) -> str:
 def _lookup(raw: dict[str, Any], loc: tuple[Any, ...]) -> Any:
     value: Any = raw
     for part in loc:
-        if (isinstance(value, dict) and part in value) or (isinstance(value, (list, tuple)) and isinstance(part, int) and 0 <= part < len(value)):
+        if (isinstance(value, dict) and part in value) or (isinstance(value, (list, tuple)) and isinstance(part, int)
+                                                           and 0 <= part < len(value)):
             value = value[part]
         else:
             return "<missing>"

@@ -1,5 +1,6 @@
 """The prediction checked: the design constraints as errors and the guidelines as warnings (docs/models.md,
-M9, M18); with the drift budget's and the reference chip's findings, what :func:`predict_with_findings` returns beside the prediction."""
+M9, M18); with the drift budget's and the reference chip's findings, what :func:`predict_with_findings` returns
+beside the prediction."""
 
 from __future__ import annotations
 

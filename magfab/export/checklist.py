@@ -183,7 +183,8 @@ def _mix_section(design: Design, q: Quantities) -> Section:
         f"Why that much: one part is {q.part_volume_mL:.3f} mL, the lid's fill and vent holes {q.holes_volume_mL:.3f} "
         f"mL, so the mould holds {q.mould_holds_mL:.3f} mL = {q.mould_holds_mL * q.density_g_cm3:.2f} g at "
         f"{q.density_g_cm3:g} g/cm3, plus {q.waste_pct:g} % for the cup, the stirrer and the overflow"
-        + (f" (raised to the {MIN_BATCH_G:g} g smallest batch a 0.1 g scale weighs to 1 %)" if q.batch_g <= MIN_BATCH_G else "")
+        + (f" (raised to the {MIN_BATCH_G:g} g smallest batch a 0.1 g scale weighs to 1 %)"
+           if q.batch_g <= MIN_BATCH_G else "")
         + ".",
         f"Pot life {q.pot_life_min:g} min: you have about {q.bench_time_min:g} min of work (mix {MIX_MIN:g}, degas "
         f"{DEGAS_MIN:g}, pour {POUR_MIN_PER_CAVITY:g} per cavity). Start the clock when the {b_name} meets the "

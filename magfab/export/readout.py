@@ -174,7 +174,8 @@ def render(design, calibration: Mapping[str, Any], acceptance: Mapping[str, Any]
     wrong type.
     """
     if not isinstance(design, Design):
-        raise TypeError(f"design must be a magfab Design (from magfab.derive); instead received {type(design).__name__}")
+        raise TypeError("design must be a magfab Design (from magfab.derive); instead received "
+                        f"{type(design).__name__}")
     checked = validate_calibration(calibration)
     accepted = None if acceptance is None else validate_acceptance(acceptance)
     build = _build_data(design, checked)

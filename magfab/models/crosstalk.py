@@ -100,10 +100,10 @@ def layout_errors(loads: _Loads, xy: np.ndarray, signs: np.ndarray) -> tuple[np.
 
 def compensated_errors(design: Design, loads: _Loads, xy: np.ndarray,
                        signs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The field error i x j and every neighbour pressed at once (per taxel), in mN, left after the host's compensation (:class:`magfab.formats.array_json.Compensator`
-    with its dynamic terms, on the tables :func:`magfab.models.taxels.array_field` makes for this layout): the chips
-    read every magnet exactly, neighbour j moved as in :func:`layout_errors`, and the compensated field of chip i
-    is compared with its own magnet's."""
+    """The field error i x j and every neighbour pressed at once (per taxel), in mN, left after the host's compensation
+    (:class:`magfab.formats.array_json.Compensator` with its dynamic terms, on the tables
+    :func:`magfab.models.taxels.array_field` makes for this layout): the chips read every magnet exactly, neighbour j
+    moved as in :func:`layout_errors`, and the compensated field of chip i is compared with its own magnet's."""
 
     taxels = tuple(replace(t, x_mm=float(x), y_mm=float(y), polarity=int(sg))
                    for t, (x, y), sg in zip(design.taxels, xy, signs))

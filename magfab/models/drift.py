@@ -262,9 +262,9 @@ class TemperatureBudget:
 
     ``per_C``: for +1 C from the calibration temperature, keys ``normal_rest``, ``normal_end``, ``shear_rest``,
     ``shear_end``, each {case: ...} for :data:`CASES` (with: the coefficients' uncertainty and the offset; fitted: the
-    offset; the sensor's error and the lag are not per degree and appear in the span); ``per_C_parts``: the uncompensated normal error at
-    rest per source (magnet, chip_sensitivity, chip_offset), and ``per_C_field_G`` the field change each makes, G;
-    ``temperatures_C`` and ``span``: the same four points
+    offset; the sensor's error and the lag are not per degree and appear in the span); ``per_C_parts``: the
+    uncompensated normal error at rest per source (magnet, chip_sensitivity, chip_offset), and ``per_C_field_G`` the
+    field change each makes, G; ``temperatures_C`` and ``span``: the same four points
     at each temperature of the spec's span, without and with compensation; ``worst``: the largest |error| over the
     span per point and case."""
 

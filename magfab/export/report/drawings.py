@@ -225,7 +225,8 @@ def board_svg(board: Board, via_drill_mm: float) -> bytes:
     if board.pad_hull:  # an array's pad: the taxels' hull grown by the pad radius
 
         pts = " ".join(f"{x:.4f},{y:.4f}" for x, y in outline.polygon(list(board.pad_hull), r, 72))
-        out.append(f'<polygon points="{pts}" fill="none" stroke="#fff" stroke-width="0.12" stroke-dasharray="0.6 0.4"/>')
+        out.append(f'<polygon points="{pts}" fill="none" stroke="#fff" stroke-width="0.12" '
+                   'stroke-dasharray="0.6 0.4"/>')
     else:
         out.append(f'<circle cx="{cx}" cy="{cy}" r="{r}" fill="none" stroke="#fff" stroke-width="0.12" '
                    'stroke-dasharray="0.6 0.4"/>')
