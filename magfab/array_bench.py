@@ -32,7 +32,8 @@ def check_taxel(spec: Spec, taxel: int | None) -> None:
         raise SpecError("--taxel", shown(taxel), f"the build {spec.name!r} is a single taxel", "omit --taxel")
     n = spec.array.taxels
     if taxel is None:
-        raise SpecError("--taxel", "<missing>", f"the build {spec.name!r} is an array of {n} taxels: give the taxel the "
+        raise SpecError("--taxel", "<missing>",
+                        f"the build {spec.name!r} is an array of {n} taxels: give the taxel the "
                         f"scan pressed, 0 to {n - 1} (the address plan in checklist.md)")
     if taxel >= n:
         raise SpecError("--taxel", shown(taxel), f"must be 0 to {n - 1} for the {n} taxels of {spec.name!r}")

@@ -356,7 +356,8 @@ _STUDY_OPTIONS = [
     click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
                  help="Study folder (default: ./design/<targets name>); running again resumes its study."),
     click.option("--scheduler", help="Address of an existing Dask scheduler (default: a local cluster)."),
-    click.option("--workers", type=click.IntRange(1, 256), help="Local cluster's worker processes (default: the cores)."),
+    click.option("--workers", type=click.IntRange(1, 256),
+                 help="Local cluster's worker processes (default: the cores)."),
 ]
 
 
@@ -390,7 +391,8 @@ def design(targets: Path, out_dir: Path | None, scheduler: str | None, workers: 
             click.echo("magfab: warning: no verified design meets every requirement: see README.md there; relax a "
                        "requirement, widen the variables or raise study.trials and run again", err=True)
             return
-        click.echo(f"chosen: {r.names[r.chosen]}; build it: magfab build {r.folder / 'designs' / r.names[r.chosen]}.toml")
+        click.echo(f"chosen: {r.names[r.chosen]}; build it: magfab build "
+                   f"{r.folder / 'designs' / r.names[r.chosen]}.toml")
 
 
 @main.command()

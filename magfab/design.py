@@ -73,7 +73,8 @@ class ArrayLayout:
     pitch_mm: float  # the smallest centre-to-centre distance
     min_pitch_mm: float  # the smallest the geometry allows (lips, pockets, recesses); the crosstalk budget may ask more
     hull_mm: tuple[tuple[float, float], ...]  # convex hull of the taxel centres, counter-clockwise (1 or 2 points too)
-    pad_extent_mm: tuple[float, float, float, float]  # (x_min, y_min, x_max, y_max) of the pad: the hull grown by its radius
+    # (x_min, y_min, x_max, y_max) of the pad: the hull grown by its radius
+    pad_extent_mm: tuple[float, float, float, float]
     part_centres_mm: tuple[tuple[float, float], ...]  # the magnets in one cast part's frame: every taxel of a
     # continuous skin (its outline's extent centred on the origin), or one tip's axis for separate tips
 
@@ -347,7 +348,8 @@ def _elastomer(spec: Spec) -> Part:
     R_p, h_p = R_m + c, H_m + c
     r_ch = el.insert_channel_diameter_mm / 2.0
     if el.tip is Tip.HEMISPHERE and H_e < R_e:
-        raise SpecError("elastomer.height_mm", shown(H_e), f"must be at least the tip radius {_fmt(R_e)} mm for a hemisphere tip",
+        raise SpecError("elastomer.height_mm", shown(H_e),
+                        f"must be at least the tip radius {_fmt(R_e)} mm for a hemisphere tip",
                         "or use tip = \"flat\"")
     if R_p + skin_min > R_e:
         limit = 2.0 * (R_e - skin_min - c)
@@ -386,7 +388,8 @@ def _pocket(spec: Spec, part: Part, stack: Stack) -> Pocket:
     what the skin allows; the funnel and channel below it; d_min checked against the stack."""
     el, sen = spec.elastomer, spec.sensor
     R_e, H_e, base_h = part["elastomer_radius_mm"], part["elastomer_height_mm"], part["base_height_mm"]
-    R_p, h_p, r_ch, H_m = part["pocket_radius_mm"], part["pocket_height_mm"], part["channel_radius_mm"], part["magnet_height_mm"]
+    R_p, h_p, r_ch, H_m = (part["pocket_radius_mm"], part["pocket_height_mm"], part["channel_radius_mm"],
+                           part["magnet_height_mm"])
     z_base, z_sense, skin_min = stack["z_elastomer_base_mm"], stack["z_sense_mm"], el.min_skin_mm
     roof_max = base_h + math.sqrt((R_e - skin_min) ** 2 - R_p**2) if el.tip is Tip.HEMISPHERE else H_e - skin_min
     roof_max = min(roof_max, H_e - skin_min)
@@ -414,7 +417,8 @@ def _pocket(spec: Spec, part: Part, stack: Stack) -> Pocket:
                         f"{_fmt(z_base - z_sense)} mm above the sensing point, a {_fmt(H_e)} mm elastomer, "
                         f"{_fmt(skin_min)} mm minimum skin)")
     if sen.d_min_mm >= sen.d_max_mm:
-        raise SpecError("sensor.d_min_mm", shown(sen.d_min_mm), f"must be less than sensor.d_max_mm = {_fmt(sen.d_max_mm)} mm")
+        raise SpecError("sensor.d_min_mm", shown(sen.d_min_mm),
+                        f"must be less than sensor.d_max_mm = {_fmt(sen.d_max_mm)} mm")
     if sen.d_min_mm <= z_base - z_sense:
         raise SpecError("sensor.d_min_mm", shown(sen.d_min_mm),
                         f"must exceed {_fmt(z_base - z_sense)} mm: the elastomer's base (pad + glue) is that far "
@@ -456,7 +460,8 @@ def _address(spec: Spec, chip) -> Address:
     sen = spec.sensor
     codes = sorted(k.rsplit("_", 1)[1] for k in chip.quantities if k.startswith("i2c_base_address_"))
     if sen.option_code not in codes:
-        raise SpecError("sensor.option_code", shown(sen.option_code), "must be one of " + ", ".join(repr(c) for c in codes)
+        raise SpecError("sensor.option_code", shown(sen.option_code),
+                        "must be one of " + ", ".join(repr(c) for c in codes)
                         + f" for {chip.key}")
     base = int(chip[f"i2c_base_address_{sen.option_code}"].nominal)
     if not base <= sen.i2c_address <= base + 3:
@@ -464,7 +469,8 @@ def _address(spec: Spec, chip) -> Address:
         raise SpecError("sensor.i2c_address", shown(sen.i2c_address),
                         f"must be one of {allowed} for option code {sen.option_code} (base plus the A1/A0 straps)",
                         "or change sensor.option_code")
-    forbidden = {tuple(int(v) for v in pair.split("/")) for pair in chip.texts.get("forbidden_osr_dig_filt", "").split()}
+    forbidden = {tuple(int(v) for v in pair.split("/"))
+                 for pair in chip.texts.get("forbidden_osr_dig_filt", "").split()}
     if (sen.osr, sen.dig_filt) in forbidden:
         raise SpecError("sensor.dig_filt", shown(sen.dig_filt),
                         f"is not allowed with sensor.osr = {sen.osr} (the chip refuses OSR/DIG_FILT pairs "

@@ -77,7 +77,7 @@ def _skin_envelope(design: Design, below_mm: float) -> cq.Workplane:
     R, hb = design.elastomer_radius_mm, design.base_height_mm
     skin = outline_prism(centres, R, -below_mm, hb)
     if len(design.envelope_profile) == 5:
-        dome = revolve_profile([(0.0, hb)] + design.envelope_profile[2:], arc_at=2)
+        dome = revolve_profile([(0.0, hb), *design.envelope_profile[2:]], arc_at=2)
         for x, y in centres:
             skin = skin.union(dome.translate((x, y, 0.0)))
     return skin.clean()
@@ -88,7 +88,7 @@ def core_solid(design: Design, extend_below_mm: float = 0.0) -> cq.Workplane:
     profile = list(design.core_profile)
     if extend_below_mm > 0.0:
         r0 = profile[1][0]
-        profile = [(0.0, -extend_below_mm), (r0, -extend_below_mm)] + profile[1:]
+        profile = [(0.0, -extend_below_mm), (r0, -extend_below_mm), *profile[1:]]
     return revolve_profile(profile)
 
 

@@ -70,7 +70,7 @@ class _Shown:
         self.raw = raw
         if isinstance(raw, bool):
             text = "true" if raw else "false"
-        elif isinstance(raw, float) or isinstance(raw, str):
+        elif isinstance(raw, (float, str)):
             text = repr(raw)
         else:
             text = str(raw)

@@ -187,7 +187,7 @@ def scan_rows(design: Design) -> int:
     step = cal.scan_step_mm
     half = min(cal.scan_y_mm / 2.0, design.magnet_radius_mm)
     z = min(cal.scan_z_mm, 1.25 * max(design.d_rest_mm - sen.d_min_mm, 0.0))
-    return (int(math.floor(2.0 * half / step + 1e-9)) + 1) * (int(math.floor(z / step + 1e-9)) + 1)
+    return (math.floor(2.0 * half / step + 1e-9) + 1) * (math.floor(z / step + 1e-9) + 1)
 
 
 def estimate(design: Design) -> Cost:
@@ -228,7 +228,7 @@ def check_limits(design: Design) -> Cost:
             knobs.reverse()  # blame first the key whose own facet count is the finer
         what = f"would need about {_fmt(cost.triangles)} triangles (limit {_fmt(MAX_TRIANGLES)})"
         for key, name, lo, hi in knobs:
-            need = _bisect(lambda x: triangles(_with(design, mould=m.model_copy(update={name: x}))), lo, hi)
+            need = _bisect(lambda x, name=name: triangles(_with(design, mould=m.model_copy(update={name: x}))), lo, hi)
             if need is not None:
                 raise SpecError(key, getattr(m, name), what, f"raise {key} to at least {_fmt(_round_up(need))}")
         raise SpecError("mould.cavities", design.cavities, what, "use fewer cavities per mould")
@@ -250,7 +250,8 @@ def check_limits(design: Design) -> Cost:
                             f"{_fmt(design.elastomer_radius_mm * 2)} mm elastomer, about {_fmt(cost.fe_work)} "
                             f"element-steps (limit {_fmt(MAX_FE_WORK)})",
                             f"raise predict.tolerance_pct to at least {_fmt(_round_up(need))}")
-        key = "elastomer.height_mm" if design.elastomer_height_mm >= design.elastomer_radius_mm * 2 else "elastomer.diameter_mm"
+        key = ("elastomer.height_mm" if design.elastomer_height_mm >= design.elastomer_radius_mm * 2
+               else "elastomer.diameter_mm")
         raise SpecError(key, getattr(spec.elastomer, key.split(".")[1]),
                         f"is too large for the FE model: about {_fmt(cost.fe_work)} element-steps even on the "
                         f"coarsest meshes (limit {_fmt(MAX_FE_WORK)})",

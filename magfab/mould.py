@@ -57,7 +57,8 @@ def cup_solid(design: Design) -> cq.Workplane:
         cup = cup.cut(_flip_to(tool, x, h))
     pin_h = design.pin_height_mm
     for x in design.pin_positions_x_mm:
-        pin = cq.Workplane("XY", origin=(x, 0, h - OVERLAP_MM)).circle(design.pin_diameter_mm / 2).extrude(pin_h + OVERLAP_MM)
+        pin = (cq.Workplane("XY", origin=(x, 0, h - OVERLAP_MM)).circle(design.pin_diameter_mm / 2)
+               .extrude(pin_h + OVERLAP_MM))
         cup = cup.union(pin)
     return cup
 

@@ -38,7 +38,8 @@ def board(design: Design) -> Board:
                     pcb.clearance_mm, HOLE_CLEARANCE_MM, pcb.edge_clearance_mm)
     tracks, unrouted = route_all(router, parts, NETS_ROUTED)
     rules = {"clearance": pcb.clearance_mm, "track_width": pcb.track_width_mm, "via_diameter": pcb.via_diameter_mm,
-             "via_drill": pcb.via_drill_mm, "edge_clearance": pcb.edge_clearance_mm, "hole_clearance": HOLE_CLEARANCE_MM}
+             "via_drill": pcb.via_drill_mm, "edge_clearance": pcb.edge_clearance_mm,
+             "hole_clearance": HOLE_CLEARANCE_MM}
     board = Board(design.spec.name, outline, tuple(parts), tuple(tracks), circle, label(design, outline, parts, circle),
                   rules, pcb.thickness_mm, design.i2c_address, tuple(unrouted))
     if design.array is None:

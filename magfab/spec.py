@@ -25,8 +25,8 @@ from .errors import SpecError, _shorten, shown
 from .recipes import catalogue
 from .spec_errors import did_you_mean, translate_error
 
-__all__ = ["Spec", "Tip", "Density", "Printer", "Array", "Environment", "Skin", "Polarity", "MAX_TAXELS", "load_spec", "parse_spec",
-           "spec_from_dict", "default_spec_text", "translate_error",
+__all__ = ["Spec", "Tip", "Density", "Printer", "Array", "Environment", "Skin", "Polarity", "MAX_TAXELS", "load_spec",
+           "parse_spec", "spec_from_dict", "default_spec_text", "translate_error",
            "spec_schema", "NAME_PATTERN", "is_valid_name"]
 
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
@@ -96,7 +96,8 @@ class Elastomer(_Section):
     diameter_mm: float = _mm(12.0, "Elastomer diameter D_e, mm.")
     height_mm: float = _mm(7.9, "Total elastomer height H_e, base to the top of the tip on the axis, mm.")
     tip: Tip = Field(Tip.HEMISPHERE, strict=False, description="Top shape: 'hemisphere' (radius D_e/2) or 'flat'.")
-    pocket_clearance_mm: float = _mm(0.05, "Clearance between magnet and pocket, on the radius and the height, mm.", ge=0.0, le=1.0)
+    pocket_clearance_mm: float = _mm(0.05, "Clearance between magnet and pocket, on the radius and the height, mm.",
+                                     ge=0.0, le=1.0)
     cover_mm: float | None = Field(
         None,
         gt=0.0,
@@ -154,7 +155,8 @@ class Sensor(_Section):
         description="7-bit I2C address: the option code's base plus the A1/A0 pin straps the board wires.",
     )
     gain_sel: int = Field(0, ge=0, le=7, description="GAIN_SEL register field, 0 (least sensitive, widest range) to 7.")
-    resolution: int = Field(2, ge=0, le=3, description="RES_XYZ register field (all axes), 0-3: each step doubles the uT per LSB.")
+    resolution: int = Field(2, ge=0, le=3,
+                            description="RES_XYZ register field (all axes), 0-3: each step doubles the uT per LSB.")
     osr: int = Field(0, ge=0, le=3, description="OSR register field (ADC oversampling 2^OSR), 0-3.")
     dig_filt: int = Field(2, ge=0, le=7, description="DIG_FILT register field (averaging 2^DIG_FILT), 0-7.")
 
@@ -175,7 +177,8 @@ class Pad(_Section):
         1.0, "Diameter of the first alignment hole (dowel pin into the board); the second is 0.5 mm larger "
         "so the pad only fits one way round, mm.", le=10.0
     )
-    alignment_hole_spacing_mm: float = _mm(16.5, "Centre-to-centre spacing of the two alignment holes, on the x axis, mm.")
+    alignment_hole_spacing_mm: float = _mm(16.5,
+                                           "Centre-to-centre spacing of the two alignment holes, on the x axis, mm.")
 
 
 class Pcb(_Section):
@@ -204,14 +207,16 @@ class Pcb(_Section):
 class Mould(_Section):
     """The printed casting mould: a cup with the cavities and a lid that carries the pocket cores."""
 
-    printer: Printer = Field(Printer.SLA, strict=False, description="Printer kind: 'sla' or 'fdm' (recipes/printers.toml).")
+    printer: Printer = Field(Printer.SLA, strict=False,
+                             description="Printer kind: 'sla' or 'fdm' (recipes/printers.toml).")
     wall_mm: float = _mm(2.0, "Wall around and below each cavity and between cavities, mm.", le=50.0)
     cavities: int = Field(1, ge=1, le=16, description="Cavities per mould, in a row.")
     tessellation_tolerance_mm: float = _mm(
         0.01, "Largest distance between an STL and the exact surface, mm.", le=1.0
     )
     angular_tolerance_deg: float = Field(
-        10.0, gt=0.5, le=45.0, description="Largest angle between neighbouring STL facet normals on curved faces, degrees."
+        10.0, gt=0.5, le=45.0,
+        description="Largest angle between neighbouring STL facet normals on curved faces, degrees."
     )
 
 
@@ -238,11 +243,14 @@ class MechanicsModel(str, Enum):
 class Predict(_Section):
     """Predicted sensitivity, resolution and range, and the models behind them."""
 
-    tolerance_pct: float = Field(1.0, gt=0.0, le=50.0, description="Model error the predictions may carry, % of the value.")
-    field_model: FieldModel = Field(FieldModel.AUTO, strict=False, description="'auto', 'exact', 'surrogate', 'dipole' or 'on_axis'.")
+    tolerance_pct: float = Field(1.0, gt=0.0, le=50.0,
+                                 description="Model error the predictions may carry, % of the value.")
+    field_model: FieldModel = Field(FieldModel.AUTO, strict=False,
+                                    description="'auto', 'exact', 'surrogate', 'dipole' or 'on_axis'.")
     mechanics_model: MechanicsModel = Field(
         MechanicsModel.AUTO, strict=False, description="'auto', 'fe', 'hertz_column' or 'column'.")
-    noise_G: float = Field(0.1, ge=0.0, le=100.0, description="RMS field noise of the environment at the sensor, gauss.")
+    noise_G: float = Field(0.1, ge=0.0, le=100.0,
+                           description="RMS field noise of the environment at the sensor, gauss.")
     required_resolution_mN: float | None = Field(
         None, gt=0.0, le=1.0e4,
         description="Worst-case normal force resolution the application needs, mN (omit: no requirement).")
@@ -267,12 +275,15 @@ class Calibration(_Section):
     """The force calibration (docs/models.md, M12-M14) and the simulated scan a build ships before a real one exists."""
 
     method: CalibrationMethod = Field(CalibrationMethod.POLY, strict=False,
-                                      description="'poly' (order n), 'auto' (cheapest fit within tolerance_mN) or 'mls'.")
+                                      description="'poly' (order n), 'auto' (cheapest fit within tolerance_mN) or "
+                                                  "'mls'.")
     order: int = Field(4, ge=1, le=8, description="Polynomial order n in (Bz, Br); 'auto' may pick a lower one.")
-    tolerance_mN: float = Field(5.0, gt=0.0, le=1.0e4, description="Held-out RMS force error the fit must reach, mN (a warning if not).")
+    tolerance_mN: float = Field(5.0, gt=0.0, le=1.0e4,
+                                description="Held-out RMS force error the fit must reach, mN (a warning if not).")
     folds: int = Field(5, ge=2, le=20, description="Folds of the k-fold cross-validation behind the held-out errors.")
     scan_y_mm: float = _mm(4.0, "Lateral (y) extent of the simulated scan track, centred on the axis, mm.", le=50.0)
-    scan_z_mm: float = _mm(3.0, "Indentation (z) extent of the simulated scan track, mm (capped at the predicted range).", le=50.0)
+    scan_z_mm: float = _mm(3.0, "Indentation (z) extent of the simulated scan track, mm (capped at the predicted "
+                                "range).", le=50.0)
     scan_step_mm: float = _mm(0.05, "Step of the simulated scan in y and z, mm.", le=5.0)
     reference_resolution_mN: float = Field(
         6.25, ge=0.0, le=1.0e4, description="Resolution of the reference force sensor (ATI Nano17: 6.25 mN), mN.")
@@ -297,9 +308,12 @@ class Firmware(_Section):
     """The readout firmware for an ATmega328P board (Arduino Uno / Nano, 16 MHz)."""
 
     baud: int = Field(250000, ge=9600, le=2000000, description="Serial baud rate.")
-    output: Transport = Field(Transport.BINARY, strict=False, description="'binary' frames (with CRC) or 'text' lines at start-up.")
-    acquisition: Acquisition = Field(Acquisition.BURST, strict=False, description="'burst' or 'single' measurement mode.")
-    i2c_hz: int = Field(400000, ge=10000, le=1000000, description="I2C clock, Hz (the MLX90393 allows up to 400 kHz fast mode).")
+    output: Transport = Field(Transport.BINARY, strict=False,
+                              description="'binary' frames (with CRC) or 'text' lines at start-up.")
+    acquisition: Acquisition = Field(Acquisition.BURST, strict=False,
+                                     description="'burst' or 'single' measurement mode.")
+    i2c_hz: int = Field(400000, ge=10000, le=1000000,
+                        description="I2C clock, Hz (the MLX90393 allows up to 400 kHz fast mode).")
     temperature: bool = Field(True, description="Also convert and report the chip temperature.")
 
 
@@ -309,7 +323,8 @@ class Fabrication(_Section):
     sensors: int = Field(1, ge=1, le=1000, description="Sensors to make: sets the pours and the bill of materials.")
     waste_pct: float = Field(30.0, ge=0.0, le=300.0, description="Extra silicone mixed beyond what the mould holds, % "
                              "(left in the cup and on the stirrer, overflow from the fill and vent holes).")
-    adhesive: str = Field("sil-poxy", description="Adhesive for the magnet seal and the pad, a key of recipes/adhesives.toml.")
+    adhesive: str = Field("sil-poxy",
+                          description="Adhesive for the magnet seal and the pad, a key of recipes/adhesives.toml.")
     release_agent: str = Field("ease-release-200", description="Mould release, a key of recipes/adhesives.toml.")
     pot_life_min: float | None = Field(None, gt=0.0, le=10000.0, description="Override the silicone's pot life, min.")
     cure_time_h: float | None = Field(None, gt=0.0, le=1000.0, description="Override the silicone's cure time, h.")
@@ -402,7 +417,8 @@ class Environment(_Section):
         None, gt=0.0, le=1.0, description="Local total intensity of the Earth's field (NOAA NCEI's calculator), "
         "gauss; omit: the strongest on Earth, 0.65 G.")
     rotation_deg: float = Field(
-        180.0, ge=0.0, le=180.0, description="Largest change of the sensor's orientation in use, deg (180: turned over).")
+        180.0, ge=0.0, le=180.0,
+        description="Largest change of the sensor's orientation in use, deg (180: turned over).")
     stray_moment_Am2: float = Field(
         0.0, ge=0.0, le=1.0e4, description="Dipole moment of a stray source nearby (a motor, a magnetised steel part), "
         "A m^2; 0: none.")
@@ -442,7 +458,8 @@ class Build(_Section):
 class Spec(_Section):
     """A whole design: what ``magfab build`` turns into files. Frozen; make variants with ``model_copy(update=...)``."""
 
-    name: str = Field("magone", pattern=NAME_PATTERN, description="Design name: letters, digits, '.', '_', '-'; names the output folder.")
+    name: str = Field("magone", pattern=NAME_PATTERN,
+                      description="Design name: letters, digits, '.', '_', '-'; names the output folder.")
     magnet: Magnet = Field(default_factory=Magnet)
     elastomer: Elastomer = Field(default_factory=Elastomer)
     sensor: Sensor = Field(default_factory=Sensor)
@@ -560,7 +577,8 @@ def _validated(raw: dict[str, Any]) -> Spec:
         value = getattr(getattr(spec, section), key)
         known = sorted(catalogue(kind))
         if value not in known:
-            raise SpecError(f"{section}.{key}", shown(value), "must be one of " + ", ".join(known), did_you_mean(value, known))
+            raise SpecError(f"{section}.{key}", shown(value), "must be one of " + ", ".join(known),
+                            did_you_mean(value, known))
     return spec
 
 

@@ -38,7 +38,8 @@ def did_you_mean(word: str, choices: list[str]) -> str:
 def _lookup(raw: dict[str, Any], loc: tuple[Any, ...]) -> Any:
     value: Any = raw
     for part in loc:
-        if (isinstance(value, dict) and part in value) or (isinstance(value, (list, tuple)) and isinstance(part, int) and 0 <= part < len(value)):
+        if (isinstance(value, dict) and part in value) or (isinstance(value, (list, tuple)) and isinstance(part, int)
+                                                           and 0 <= part < len(value)):
             value = value[part]
         else:
             return "<missing>"
@@ -51,7 +52,8 @@ def _key_part(part: object) -> str:
     if isinstance(part, int):
         return f"[{part}]"
     text = str(part)
-    return text if re.fullmatch(r"[A-Za-z0-9_-]+", text) and len(text) <= SHOWN_MAX_CHARS else _shorten(json.dumps(text))
+    return (text if re.fullmatch(r"[A-Za-z0-9_-]+", text) and len(text) <= SHOWN_MAX_CHARS
+            else _shorten(json.dumps(text)))
 
 
 def _key(loc: tuple[Any, ...]) -> str:
@@ -87,7 +89,8 @@ def translate_error(exc: ValidationError, raw: dict[str, Any], root: type[BaseMo
         parent = _model_at(loc[:-1], root)
         allowed = sorted(parent.model_fields) if parent else []
         what = "unknown section" if len(loc) == 1 and value == "{...}" else "unknown key"
-        return SpecError(key, shown(value), f"{what}; allowed: {', '.join(allowed)}", did_you_mean(str(loc[-1]), allowed))
+        return SpecError(key, shown(value), f"{what}; allowed: {', '.join(allowed)}",
+                         did_you_mean(str(loc[-1]), allowed))
     if kind == "missing":
         return SpecError(key, "<missing>", "required key is missing")
     if kind == "model_type":

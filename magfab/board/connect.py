@@ -117,9 +117,9 @@ def _chip_order(owner: str) -> tuple:
 
 def _clash(a: Copper, b: Copper, clearance: float, via_drill: float) -> bool:
     """Would two pieces of routed copper of different nets break a rule (clearance, hole spacing)?"""
-    if a.kind == "point" and b.kind == "point" and len(a.layers) == 2 == len(b.layers):
-        if math.dist(a.a, b.a) - via_drill < HOLE_TO_HOLE_MM - 1e-6:
-            return True
+    if (a.kind == "point" and b.kind == "point" and len(a.layers) == 2 == len(b.layers)
+            and math.dist(a.a, b.a) - via_drill < HOLE_TO_HOLE_MM - 1e-6):
+        return True
     return bool(a.layers & b.layers) and distance(a, b) < clearance - 1e-6
 
 

@@ -71,7 +71,8 @@ def place(design: Design) -> tuple[list[Placed], Box, tuple[float, float, float]
         _array_fits(design.array.pad_extent_mm, hw, hh)
     for key, half in (("pcb.width_mm", hw), ("pcb.height_mm", hh)):
         if half < design.pad_radius_mm + PAD_KEEPOUT_MARGIN_MM:
-            raise SpecError(key, 2 * half, f"must be at least {2 * (design.pad_radius_mm + PAD_KEEPOUT_MARGIN_MM):g} mm "
+            raise SpecError(key, 2 * half,
+                            f"must be at least {2 * (design.pad_radius_mm + PAD_KEEPOUT_MARGIN_MM):g} mm "
                             f"so the {2 * design.pad_radius_mm:g} mm mounting pad fits on the board")
     qfn = qfn_footprint(design.chip, pcb.density, clearance=pcb.clearance_mm)
     placed = _chips(design, qfn) + _reference(design, qfn)
@@ -164,7 +165,8 @@ def _holes(design: Design, outline: Box) -> list[Placed]:
         inset = pcb.mounting_hole_inset_mm
         hw = pcb.width_mm / 2
         for k, sx in enumerate((-1, 1)):
-            out.append(Placed(f"H{k + 3}", "M2 screw", fp, round(ox + sx * (hw - inset), 6), round(outline[1] + inset, 6)))
+            out.append(Placed(f"H{k + 3}", "M2 screw", fp, round(ox + sx * (hw - inset), 6),
+                              round(outline[1] + inset, 6)))
     return out
 
 
@@ -189,9 +191,11 @@ def _larger_board(design: Design) -> str:
         return "make the board larger (usually pcb.height_mm: 30 x 28 fits the default pad, 28 x 28 does not)"
     for k in range(1, 81):  # up to 40 mm taller
         height = pcb.height_mm + 0.5 * k
-        trial = replace(design, spec=design.spec.model_copy(update={"pcb": pcb.model_copy(update={"height_mm": height})}))
+        trial = replace(design,
+                        spec=design.spec.model_copy(update={"pcb": pcb.model_copy(update={"height_mm": height})}))
         ox, oy = ORIGIN
-        outline = (ox - pcb.width_mm / 2, oy - height / 2 - _reference_room(trial), ox + pcb.width_mm / 2, oy + height / 2)
+        outline = (ox - pcb.width_mm / 2, oy - height / 2 - _reference_room(trial), ox + pcb.width_mm / 2,
+                   oy + height / 2)
         placed = _chips(trial, qfn_footprint(design.chip, pcb.density, clearance=pcb.clearance_mm))
         if _find_connector(trial, outline, placed + _holes(trial, outline), len(placed)) is not None:
             return (f"make the board taller: {pcb.width_mm:g} x {height:g} mm (pcb.height_mm = {height:g}) holds this "
@@ -238,7 +242,8 @@ def _passives(design: Design, qfn: Footprint, j1: Placed, chips: list[Placed]) -
     # reference text on the side away from its neighbour.
     out = []
     for k, u in enumerate(chips):
-        out += [Placed(f"C{2 * k + 1}", "100nF", cap, u.x, round(u.y - off, 6), 180.0, True, {"1": SUPPLY, "2": GROUND}),
+        out += [Placed(f"C{2 * k + 1}", "100nF", cap, u.x, round(u.y - off, 6), 180.0, True,
+                       {"1": SUPPLY, "2": GROUND}),
                 Placed(f"C{2 * k + 2}", "100nF", cap, u.x, round(u.y + off, 6), 0.0, True, {"1": SUPPLY, "2": GROUND})]
     if pcb.pullups:
         res = chip_footprint(parts["chip-0603"], pcb.density, prefix="R")
@@ -264,10 +269,11 @@ def wrap(name: str, chars: int) -> list[str]:
         cut = max((i + 1 for i, ch in enumerate(rest[:chars]) if ch in "._-" and i + 1 >= chars // 2), default=chars)
         lines.append(rest[:cut])
         rest = rest[cut:]
-    return lines + [rest]
+    return [*lines, rest]
 
 
-def label(design: Design, outline: Box, parts: list[Placed], circle: tuple[float, float, float]) -> tuple[SilkText, ...]:
+def label(design: Design, outline: Box, parts: list[Placed],
+          circle: tuple[float, float, float]) -> tuple[SilkText, ...]:
     """The design name and I2C address in silk along the top edge, between the screw holes and above
     the pad's disc: the largest text from 1.0 down to SILK_MIN_TEXT_MM mm that fits, the name wrapped
     onto at most two lines (cut short with '..' only if even that does not fit)."""

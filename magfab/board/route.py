@@ -15,6 +15,7 @@ exactly by :func:`clearance_violations`, which is what the build trusts.
 from __future__ import annotations
 
 import heapq
+import itertools
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
@@ -50,15 +51,19 @@ class Copper:
     hole: bool = False
 
     @staticmethod
-    def rect(x0: float, y0: float, x1: float, y1: float, layers: Iterable[str], net: str | None, owner: str = "") -> Copper:
-        return Copper("rect", (min(x0, x1), min(y0, y1)), (max(x0, x1), max(y0, y1)), 0.0, frozenset(layers), net, owner)
+    def rect(x0: float, y0: float, x1: float, y1: float, layers: Iterable[str], net: str | None,
+             owner: str = "") -> Copper:
+        return Copper("rect", (min(x0, x1), min(y0, y1)), (max(x0, x1), max(y0, y1)), 0.0, frozenset(layers), net,
+                      owner)
 
     @staticmethod
-    def seg(x0: float, y0: float, x1: float, y1: float, width: float, layer: str, net: str | None, owner: str = "track") -> Copper:
+    def seg(x0: float, y0: float, x1: float, y1: float, width: float, layer: str, net: str | None,
+            owner: str = "track") -> Copper:
         return Copper("seg", (x0, y0), (x1, y1), width / 2, frozenset({layer}), net, owner)
 
     @staticmethod
-    def point(x: float, y: float, radius: float, layers: Iterable[str], net: str | None, owner: str = "", hole: bool = False) -> Copper:
+    def point(x: float, y: float, radius: float, layers: Iterable[str], net: str | None, owner: str = "",
+              hole: bool = False) -> Copper:
         return Copper("point", (x, y), (x, y), radius, frozenset(layers), net, owner, hole)
 
     def bbox(self) -> tuple[float, float, float, float]:
@@ -234,8 +239,8 @@ class Router:
 
     def __post_init__(self) -> None:
         x0, y0, x1, y1 = self.bounds
-        self.nx = int(round((x1 - x0) / self.step)) + 1
-        self.ny = int(round((y1 - y0) / self.step)) + 1
+        self.nx = round(float((x1 - x0) / self.step)) + 1
+        self.ny = round(float((y1 - y0) / self.step)) + 1
         self.xs = x0 + self.step * np.arange(self.nx)
         self.ys = y0 + self.step * np.arange(self.ny)
         self._masks: dict = {}  # (item, distance) -> :meth:`_near_mask`
@@ -260,10 +265,7 @@ class Router:
         for it in items:
             if it.net == net and not it.hole:
                 continue
-            if it.hole:
-                need = self.hole_clearance
-            else:
-                need = via_need if (via or is_via(it)) else self.clearance
+            need = self.hole_clearance if it.hole else (via_need if (via or is_via(it)) else self.clearance)
             hit = self._near_mask(it, need + grow + GRID_MARGIN_MM)
             if hit is not None:
                 j0, j1, i0, i1, mask, layers = hit
@@ -280,10 +282,10 @@ class Router:
             return self._masks[key]
         x0, y0 = self.bounds[0], self.bounds[1]
         bx0, by0, bx1, by1 = it.bbox()
-        i0 = max(0, int(math.floor((bx0 - need - x0) / self.step)))
-        i1 = min(self.nx, int(math.ceil((bx1 + need - x0) / self.step)) + 1)
-        j0 = max(0, int(math.floor((by0 - need - y0) / self.step)))
-        j1 = min(self.ny, int(math.ceil((by1 + need - y0) / self.step)) + 1)
+        i0 = max(0, math.floor((bx0 - need - x0) / self.step))
+        i1 = min(self.nx, math.ceil((bx1 + need - x0) / self.step) + 1)
+        j0 = max(0, math.floor((by0 - need - y0) / self.step))
+        j1 = min(self.ny, math.ceil((by1 + need - y0) / self.step) + 1)
         hit = None
         if i0 < i1 and j0 < j1:
             X, Y = np.meshgrid(self.xs[i0:i1], self.ys[j0:j1])
@@ -304,10 +306,10 @@ class Router:
             return self._ids[key]
         bx0, by0, bx1, by1 = item.bbox()
         x0, y0 = self.bounds[0], self.bounds[1]
-        i0 = max(0, int(math.ceil((bx0 - x0) / self.step - 1e-9)))
-        i1 = min(self.nx, int(math.floor((bx1 - x0) / self.step + 1e-9)) + 1)
-        j0 = max(0, int(math.ceil((by0 - y0) / self.step - 1e-9)))
-        j1 = min(self.ny, int(math.floor((by1 - y0) / self.step + 1e-9)) + 1)
+        i0 = max(0, math.ceil((bx0 - x0) / self.step - 1e-9))
+        i1 = min(self.nx, math.floor((bx1 - x0) / self.step + 1e-9) + 1)
+        j0 = max(0, math.ceil((by0 - y0) / self.step - 1e-9))
+        j1 = min(self.ny, math.floor((by1 - y0) / self.step + 1e-9) + 1)
         ids = np.zeros(0, dtype=np.int64)
         if i0 < i1 and j0 < j1:
             X, Y = np.meshgrid(self.xs[i0:i1], self.ys[j0:j1])
@@ -386,7 +388,8 @@ class Router:
         # Drilled holes keep HOLE_TO_HOLE_MM apart, whatever their nets (vias of the same net too).
         for it in items:
             if it.kind == "point" and not it.hole and len(it.layers) == 2:
-                keep = Copper.point(it.a[0], it.a[1], self.via_drill / 2 + self.via_drill / 2 + HOLE_TO_HOLE_MM, LAYERS, None)
+                keep = Copper.point(it.a[0], it.a[1], self.via_drill / 2 + self.via_drill / 2 + HOLE_TO_HOLE_MM,
+                                    LAYERS, None)
                 flat[self._inside_ids(keep, 0)] = True
         return track, extra, ~(via[0] | via[1])
 
@@ -447,7 +450,7 @@ class Router:
         clipped = False
         while heap and budget:
             budget -= 1
-            f, g, s = heappop(heap)
+            _f, g, s = heappop(heap)
             if g > best.get(s, inf):
                 continue
             n, d = divmod(s, 9)
@@ -501,7 +504,7 @@ class Router:
                 if (b[0] - a[0]) * (c[1] - b[1]) != (b[1] - a[1]) * (c[0] - b[0]):
                     pts.append(b)
             pts.append(run[-1])
-            for (i0, j0), (i1, j1) in zip(pts, pts[1:]):
+            for (i0, j0), (i1, j1) in itertools.pairwise(pts):
                 (xa, ya), (xb, yb) = self.node_xy(i0, j0), self.node_xy(i1, j1)
                 out.append(Copper.seg(xa, ya, xb, yb, self.width, LAYERS[layer], net))
 

@@ -120,8 +120,8 @@ def _silk_rules(b: Board, err: Report) -> None:
         clear = clear and not any(overlap(box, o.box()) for o in b.label if o is not t)
         if not inside or not clear:
             err("pcb-silk", f"the silk label {t.text!r} ({box[2] - box[0]:.1f} mm wide) does not fit between the "
-                            "screw holes, inside the edge, clear of the pad's disc and the other lines: make pcb.width_mm larger or "
-                            "the name shorter")
+                            "screw holes, inside the edge, clear of the pad's disc and the other lines: make "
+                            "pcb.width_mm larger or the name shorter")
 
 
 def distance_margin(items: list[Copper], rules: Mapping[str, float]) -> list[float]:
@@ -135,6 +135,7 @@ def distance_margin(items: list[Copper], rules: Mapping[str, float]) -> list[flo
             need = rules["clearance"]
             for v in (p, q):
                 if is_via(v):
-                    need = max(need, via_clearance(rules["clearance"], rules["hole_clearance"], v.r, rules["via_drill"]))
+                    need = max(need,
+                               via_clearance(rules["clearance"], rules["hole_clearance"], v.r, rules["via_drill"]))
             out.append(distance(p, q) - need)
     return out

@@ -28,8 +28,8 @@ def crosstalk_findings(design: Design, xt: Crosstalk) -> list[Finding]:
     tol = f"{xt.tolerance_mN:.2f} mN"
     if worst > xt.tolerance_mN:
         out.append(Finding(Severity.WARNING, "array-crosstalk",
-                           f"a neighbour moving through its range makes a taxel misread up to {worst:.1f} mN (after the "
-                           f"host's compensation), more than the {tol} tolerance at {xt.pitch_mm:g} mm pitch; the "
+                           f"a neighbour moving through its range makes a taxel misread up to {worst:.1f} mN (after "
+                           f"the host's compensation), more than the {tol} tolerance at {xt.pitch_mm:g} mm pitch; the "
                            f"least pitch within it: {least(xt.min_pitch_compensated_mm)} (without the dynamic "
                            f"compensation: {least(xt.min_pitch_mm)}); or raise array.crosstalk_mN", "array.pitch_mm"))
     if xt.saturation_G > xt.full_scale_G:
@@ -48,8 +48,8 @@ def crosstalk_findings(design: Design, xt: Crosstalk) -> list[Finding]:
                            f"the other magnets {'pull' if xt.force_exact_mN < 0 else 'push'} taxel {k}'s magnet "
                            f"sideways with {np.hypot(*xt.magnet_forces_mN[k]):.0f} mN at rest, about {shift:.2f} mm "
                            f"through the softest shear stiffness ({100 * shift / xt.shear_travel_mm:.0f} % of its "
-                           f"{xt.shear_travel_mm:.1f} mm shear travel): the tip rests off centre and its shear range is "
-                           f"that much shorter on one side; widen the pitch", "array.pitch_mm"))
+                           f"{xt.shear_travel_mm:.1f} mm shear travel): the tip rests off centre and its shear range "
+                           f"is that much shorter on one side; widen the pitch", "array.pitch_mm"))
     mech = f"; through the skin up to {xt.mechanical_mN.max():.1f} mN" if xt.coupling_curve is not None else ""
     out.append(Finding(Severity.INFO, "array-crosstalk-budget",
                        f"crosstalk: a moving neighbour reads as up to {xt.field_mN.max():.1f} mN, "
@@ -57,8 +57,8 @@ def crosstalk_findings(design: Design, xt: Crosstalk) -> list[Finding]:
                        f"{xt.common_mN.max():.1f} mN ({xt.common_residual_mN.max():.2f} compensated){mech}; the "
                        f"nearest magnets {'repel' if xt.force_exact_mN > 0 else 'attract'} with "
                        f"{abs(xt.force_exact_mN):.1f} mN at rest (dipoles {abs(xt.force_mN):.1f}), which shifts a "
-                       f"magnet sideways by up to {shift * 1000:.0f} um ({100 * shift / xt.shear_travel_mm:.1f} % of its "
-                       f"shear travel, a static shift); the least pitch within the {tol} tolerance with the host's "
+                       f"magnet sideways by up to {shift * 1000:.0f} um ({100 * shift / xt.shear_travel_mm:.1f} % of "
+                       f"its shear travel, a static shift); the least pitch within the {tol} tolerance with the host's "
                        f"compensation: {least(xt.min_pitch_compensated_mm)} (without it: {least(xt.min_pitch_mm)})"))
     return out
 

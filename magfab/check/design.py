@@ -44,7 +44,8 @@ def design_findings(design: Design) -> list[Finding]:
         web = (design.alignment_holes[0][0] * -1 - design.alignment_holes[0][2] / 2) - design.lip_outer_radius_mm
     else:
         rim, web = _array_pad_walls(design)
-    need(rim, min_wall, E, "pad-rim", "the pad's wall outside the larger alignment hole", "pad.alignment_hole_spacing_mm")
+    need(rim, min_wall, E, "pad-rim", "the pad's wall outside the larger alignment hole",
+         "pad.alignment_hole_spacing_mm")
     need(web, min_wall, W, "pad-web", "the pad's web between lip and alignment hole", "pad.alignment_hole_spacing_mm")
     if design.lip_height_mm > 0:
         need(design.lip_outer_radius_mm - design.lip_inner_radius_mm, min_wall, W, "pad-lip", "the centring lip",

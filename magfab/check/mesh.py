@@ -44,12 +44,14 @@ def mould_fit_findings(design: Design, fit: MouldFit) -> list[Finding]:
     out: list[Finding] = []
     allowed = fit.allowed_mm3
     if fit.cup_lid_interference_mm3 > allowed:
-        out.append(Finding(E, "mould-interference", f"the closed lid overlaps the cup by {fit.cup_lid_interference_mm3:.3f} "
+        out.append(Finding(E, "mould-interference",
+                           f"the closed lid overlaps the cup by {fit.cup_lid_interference_mm3:.3f} "
                            f"mm^3 (more than the {allowed:.3f} mm^3 tessellation allows): it will not close"))
     for i, (cavity, over, under) in enumerate(zip(fit.cavity_volume_mm3, fit.part_outside_mm3,
                                                   fit.cavity_outside_mm3), start=1):
         if over > allowed:
-            out.append(Finding(E, "mould-part-overlap", f"cavity {i}: {over:.3f} mm^3 of the cast part lies outside the "
+            out.append(Finding(E, "mould-part-overlap",
+                               f"cavity {i}: {over:.3f} mm^3 of the cast part lies outside the "
                                "closed mould's cavity (the cores or the cup overlap the part)"))
         if under > allowed:
             out.append(Finding(E, "mould-cavity", f"cavity {i} of the closed mould holds {cavity:.3f} mm^3, "
@@ -65,6 +67,6 @@ def mould_fit_findings(design: Design, fit: MouldFit) -> list[Finding]:
     web = "" if fit.cavity_web_mm is None else f", {fit.cavity_web_mm:.2f} mm between cavities"
     out.append(Finding(INFO, "mould-fit", f"closed mould checked on the STL meshes: {len(fit.cavity_volume_mm3)} "
                        f"cavit{'y' if len(fit.cavity_volume_mm3) == 1 else 'ies'} equal to the cast part within "
-                       f"{worst:.2g} mm^3 (allowed {allowed:.2g}), interference {fit.cup_lid_interference_mm3:.2g} mm^3, "
-                       f"thinnest cup wall {fit.cup_wall_mm:.2f} mm{web}"))
+                       f"{worst:.2g} mm^3 (allowed {allowed:.2g}), interference {fit.cup_lid_interference_mm3:.2g} "
+                       f"mm^3, thinnest cup wall {fit.cup_wall_mm:.2f} mm{web}"))
     return out

@@ -1,5 +1,6 @@
 """The prediction checked: the design constraints as errors and the guidelines as warnings (docs/models.md,
-M9, M18); with the drift budget's and the reference chip's findings, what :func:`predict_with_findings` returns beside the prediction."""
+M9, M18); with the drift budget's and the reference chip's findings, what :func:`predict_with_findings` returns
+beside the prediction."""
 
 from __future__ import annotations
 
@@ -37,8 +38,8 @@ def prediction_findings(design: Design, pred: Prediction) -> list[Finding]:
         strongest = fieldmod.Magnet.from_design(design, "high")
         d_sat = _saturation_gap(strongest, chip.full_scale_z_G, sen.d_min_mm, design.d_rest_mm)
         out.append(Finding(E, "chip-saturates",
-                           f"Bz at d_min = {sen.d_min_mm:g} mm is {b_dmin:.0f} G with the grade's strongest magnet, above "
-                           f"the chip's {chip.full_scale_z_G:.0f} G full scale at GAIN_SEL {chip.gain_sel} / RES "
+                           f"Bz at d_min = {sen.d_min_mm:g} mm is {b_dmin:.0f} G with the grade's strongest magnet, "
+                           f"above the chip's {chip.full_scale_z_G:.0f} G full scale at GAIN_SEL {chip.gain_sel} / RES "
                            f"{chip.resolution}: raise sensor.d_min_mm to at least {math.ceil(d_sat * 100) / 100:.2f} mm"
                            + (", or lower sensor.gain_sel" if chip.gain_sel > 0 else "")
                            + ", or use a weaker or smaller magnet", "sensor.d_min_mm"))
@@ -46,20 +47,22 @@ def prediction_findings(design: Design, pred: Prediction) -> list[Finding]:
     need = p.required_resolution_mN
     if need is not None and normal.resolution_mN > need:
         out.append(Finding(E, "resolution-short",
-                           f"worst-case normal resolution {normal.resolution_mN:.2f} mN (stiff material, weakest magnet, "
-                           f"at rest) is coarser than the {need:g} mN asked for: dBz/dz at d_max = "
+                           f"worst-case normal resolution {normal.resolution_mN:.2f} mN (stiff material, weakest "
+                           f"magnet, at rest) is coarser than the {need:g} mN asked for: dBz/dz at d_max = "
                            f"{pred.field.dBz_dz_rest_G_per_mm:.0f} G/mm is too shallow; reduce sensor.d_max_mm, use a "
                            "softer elastomer.material or a stronger magnet", "predict.required_resolution_mN"))
     if normal.range_limit != "d_min":
         travel = normal.range_limits_travel_mm
         out.append(Finding(INFO, "range-limit",
-                           f"the normal range ends at {normal.travel_mm:.2f} mm of magnet travel ({normal.range_limit}), "
-                           f"before the magnet reaches d_min ({travel['d_min']:.2f} mm of travel)",
+                           f"the normal range ends at {normal.travel_mm:.2f} mm of magnet travel "
+                           f"({normal.range_limit}), before the magnet reaches d_min ({travel['d_min']:.2f} mm of "
+                           "travel)",
                            _RANGE_LIMIT_KEYS.get(normal.range_limit, "")))
     # Guidelines (docs/models.md, M18).
     ratio = spec.magnet.height_mm / spec.magnet.diameter_mm
     if not 0.2 <= ratio <= 0.5:
-        out.append(Finding(W, "magnet-aspect", f"magnet height/diameter is {ratio:.2f}; the design guideline is 0.2-0.5",
+        out.append(Finding(W, "magnet-aspect",
+                           f"magnet height/diameter is {ratio:.2f}; the design guideline is 0.2-0.5",
                            "magnet.height_mm"))
     reach = design.d_rest_mm / spec.magnet.diameter_mm
     if not 1.0 <= reach <= 2.0:
@@ -76,7 +79,8 @@ def prediction_findings(design: Design, pred: Prediction) -> list[Finding]:
     if not 0.2 <= kn / ks <= 5.0:
         out.append(Finding(W, "stiffness-balance",
                            f"normal stiffness at rest {kn:.3f} N/mm and shear stiffness {ks:.3f} N/mm differ by "
-                           f"{max(kn / ks, ks / kn):.1f}x; the guideline wants them comparable (elastomer.diameter_mm sets both)",
+                           f"{max(kn / ks, ks / kn):.1f}x; the guideline wants them comparable (elastomer.diameter_mm "
+                           "sets both)",
                            "elastomer.diameter_mm"))
     slender = design.elastomer_height_mm / (2 * design.elastomer_radius_mm)
     if slender > 1.5:
@@ -110,13 +114,15 @@ def _saturation_gap(magnet, full_scale_G: float, lo: float, hi: float) -> float:
     return hi
 
 
-def predict_with_findings(design: Design, elastomer: ElastomerModel | None = None) -> tuple[Prediction | None, list[Finding]]:
+def predict_with_findings(design: Design,
+                          elastomer: ElastomerModel | None = None) -> tuple[Prediction | None, list[Finding]]:
     """:func:`predict` and its design checks; a model that cannot give an answer for this design (the FE
     failing at its first step, a field model refusing every point) is an error finding, not a traceback."""
     try:
         pred = predict(design, elastomer)
     except (mech.MechanicsError, fieldmod.FieldModelError) as exc:
         return None, [Finding(Severity.ERROR, "prediction-failed", f"no prediction for this design: {exc}",
-                              "predict.mechanics_model" if isinstance(exc, mech.MechanicsError) else "predict.field_model")]
+                              "predict.mechanics_model" if isinstance(exc, mech.MechanicsError)
+                              else "predict.field_model")]
     return pred, (prediction_findings(design, pred) + ([] if pred.drift is None else drift_findings(design, pred.drift))
                   + reference_findings(design, pred.reference))

@@ -32,8 +32,8 @@ def reference_findings(design: Design, section: Mapping[str, Any] | None) -> lis
     near = [d for d in rej["dipole"] if d["median"] < 1.0]
     return [Finding(Severity.INFO, "reference",
                     f"reference chip {chip['designator']} (0x{chip['i2c_address']:02X}) {chip['separation_mm']:g} mm "
-                    f"from the sensing chip, where the magnets move the field by at most {max(motion):.2f} G: a uniform "
-                    f"field is rejected {rej['uniform']:.0f}x (turning the sensor: "
+                    f"from the sensing chip, where the magnets move the field by at most {max(motion):.2f} G: a "
+                    f"uniform field is rejected {rej['uniform']:.0f}x (turning the sensor: "
                     f"{abs(turned['without']['normal_rest_mN']):.1f} -> {abs(turned['with']['normal_rest_mN']):.1f} mN "
                     f"at rest); a dipole {rej['dipole'][-1]['distance_mm']:g} mm away "
                     f"{rej['dipole'][-1]['median']:.1f}x"

@@ -1,1 +1,2 @@
-"""Renderers from values to bytes (CAD, KiCad, firmware, readout, checklist, BOM, figures, report) and the toolchain drivers."""
+"""Renderers from values to bytes (CAD, KiCad, firmware, readout, checklist, BOM, figures, report) and the toolchain
+drivers."""

@@ -45,12 +45,13 @@ def _chip_rows(design: Design) -> list[dict[str, object]]:
     ref = reference_chip(design)
     extra = [] if ref is None else [_row(
         "Hall sensor IC", f"MLX90393SLW-ABA-{ref.option_code}-RE", f"Melexis MLX90393, QFN-16 3x3 mm, option code "
-        f"{ref.option_code}: {ref.designator}, the reference chip (0x{ref.i2c_address:02X}, reads stray fields, no magnet)",
+        f"{ref.option_code}: {ref.designator}, the reference chip (0x{ref.i2c_address:02X}, reads stray fields, no "
+        "magnet)",
         n, "pcs", source)]
     if design.array is None:
         code = design.spec.sensor.option_code
         return [_row("Hall sensor IC", f"MLX90393SLW-ABA-{code}-RE", f"Melexis MLX90393, QFN-16 3x3 mm, option code "
-                     f"{code} (I2C base for address 0x{design.i2c_address:02X})", n, "pcs", source)] + extra
+                     f"{code} (I2C base for address 0x{design.i2c_address:02X})", n, "pcs", source), *extra]
     rows = []
     for code in design.array.option_codes:
         chips = [t for t in design.taxels if t.option_code == code]
@@ -73,7 +74,8 @@ def _sensor_rows(design: Design) -> list[dict[str, object]]:
     taxels = len(design.taxels)
     chips = taxels + (design.spec.reference is not None)
     width, height = board_size_mm(design)
-    rows = _chip_rows(design) + [
+    rows = [
+        *_chip_rows(design),
         _row("Magnet", f"NdFeB {spec.magnet.grade} disc {spec.magnet.diameter_mm:g} x {spec.magnet.height_mm:g} mm",
              "axially magnetised" + (f", {coating} coated" if coating else "")
              + (f"; {taxels} per sensor" if taxels > 1 else ""), taxels * n, "pcs",
@@ -111,7 +113,8 @@ def _sensor_rows(design: Design) -> list[dict[str, object]]:
              "recipes/parts.toml jst-sh-4 (JST SH catalogue)"),
         _row("Dowel pins", "; ".join(f"{d:g} mm x {pcb.thickness_mm + design.pad_thickness_mm:g} mm"
                                      for _, _, d in design.alignment_holes),
-             "align the pad on the board (one hole of each size)", n, "sets", "design.json alignment holes (this build)"),
+             "align the pad on the board (one hole of each size)", n, "sets",
+             "design.json alignment holes (this build)"),
     ]
     if pcb.mounting_hole_diameter_mm > 0:
         rows.append(_row("Screws", "M2 x 6 mm", "mount the board (H3, H4)", 2 * n, "pcs",
@@ -139,8 +142,8 @@ def _bench_rows(design: Design, acceptance: Mapping[str, Any] | None) -> list[di
              "pcs", "recipes/bench.toml level-shifter (Pololu 2595; NXP AN10441 circuit)"),
         _row("Cable", bench["qwiic-jumper"].name, "from J1 to the level shifter's low side", n, "pcs",
              "recipes/bench.toml qwiic-jumper (SparkFun Qwiic connect system)"),
-        _row("Jumper wires", "male-female 0.1 in jumper wires", "level shifter's high side to the Arduino", 4 * n, "pcs",
-             "the wiring table in checklist.md"),
+        _row("Jumper wires", "male-female 0.1 in jumper wires", "level shifter's high side to the Arduino", 4 * n,
+             "pcs", "the wiring table in checklist.md"),
         _row("Reference force sensor", bench["reference-sensor"].name,
              f"the calibration's reference, resolution {cal.reference_resolution_mN:g} mN", 1, "pcs",
              "recipes/bench.toml reference-sensor (ATI Nano17 calibration table)"),
@@ -155,7 +158,8 @@ def _bench_rows(design: Design, acceptance: Mapping[str, Any] | None) -> list[di
     weight = acceptance.get("weight_g") if acceptance else None
     if weight:
         rows.append(_row("Test weight", f"{float(weight):g} g calibration weight",
-                         "the acceptance test's known weight", 1, "pcs", "calibration/acceptance.json weight_g (this build)"))
+                         "the acceptance test's known weight", 1, "pcs",
+                         "calibration/acceptance.json weight_g (this build)"))
     return rows
 
 

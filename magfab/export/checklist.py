@@ -127,7 +127,8 @@ def _print_section(design: Design) -> Section:
     printer = design.printer
     n = design.spec.fabrication.sensors
     layer = _q(printer, "layer_height_mm")
-    wash, post, post_t = _q(printer, "wash_time_min"), _q(printer, "post_cure_time_min"), _q(printer, "post_cure_temperature_C")
+    wash, post, post_t = (_q(printer, "wash_time_min"), _q(printer, "post_cure_time_min"),
+                          _q(printer, "post_cure_temperature_C"))
     dry = _q(printer, "dry_time_min")
     steps = [
         f"Print mould_cup.stl and mould_lid.stl once, and pad.stl {n} time(s), on the {printer.name}, in the poses the "
@@ -179,13 +180,15 @@ def _mix_section(design: Design, q: Quantities) -> Section:
         f"Per pour ({q.pours} pour(s) for {n} sensor(s), {q.cavities} cavit{'y' if q.cavities == 1 else 'ies'} each): "
         f"weigh {q.part_a_g:.1f} g of {a_name} and {q.part_b_g:.1f} g of {b_name} of {q.material} "
         f"({q.ratio[0]:g}:{q.ratio[1]:g} by weight; {q.batch_g:.1f} g in all).",
-        f"Why that much: one part is {q.part_volume_mL:.3f} mL, the lid's fill and vent holes {q.holes_volume_mL:.3f} mL, "
-        f"so the mould holds {q.mould_holds_mL:.3f} mL = {q.mould_holds_mL * q.density_g_cm3:.2f} g at "
+        f"Why that much: one part is {q.part_volume_mL:.3f} mL, the lid's fill and vent holes {q.holes_volume_mL:.3f} "
+        f"mL, so the mould holds {q.mould_holds_mL:.3f} mL = {q.mould_holds_mL * q.density_g_cm3:.2f} g at "
         f"{q.density_g_cm3:g} g/cm3, plus {q.waste_pct:g} % for the cup, the stirrer and the overflow"
-        + (f" (raised to the {MIN_BATCH_G:g} g smallest batch a 0.1 g scale weighs to 1 %)" if q.batch_g <= MIN_BATCH_G else "")
+        + (f" (raised to the {MIN_BATCH_G:g} g smallest batch a 0.1 g scale weighs to 1 %)"
+           if q.batch_g <= MIN_BATCH_G else "")
         + ".",
         f"Pot life {q.pot_life_min:g} min: you have about {q.bench_time_min:g} min of work (mix {MIX_MIN:g}, degas "
-        f"{DEGAS_MIN:g}, pour {POUR_MIN_PER_CAVITY:g} per cavity). Start the clock when the {b_name} meets the {a_name}.",
+        f"{DEGAS_MIN:g}, pour {POUR_MIN_PER_CAVITY:g} per cavity). Start the clock when the {b_name} meets the "
+        f"{a_name}.",
         f"Mix for {MIX_MIN:g} min, scraping the sides and the bottom of the cup.",
         degas,
     ])
@@ -212,7 +215,8 @@ def _magnet_section(design: Design) -> Section:
         array = [f"Insert {len(design.taxels)} magnets, one per pocket, as below. " + magnets_text(design)]
     else:
         array = []
-    return _section("Insert the magnet" + ("s" if array else ""), array + [
+    return _section("Insert the magnet" + ("s" if array else ""), [
+        *array,
         f"Magnet: NdFeB {spec.magnet.grade}, {spec.magnet.diameter_mm:g} mm diameter x {spec.magnet.height_mm:g} mm, "
         "axially magnetised" + (f", {grade.coating} coated" if grade.coating else "") + ".",
         "Polarity: " + _lc(_t(assembly["polarity-check"], "method", "mark each magnet's north face.")),
@@ -238,8 +242,9 @@ def _solder_section(design: Design) -> Section:
         f"{_t(stencil, 'paste')} The chip's exposed pad gets its paste in four apertures ({coverage * 100:.0f} % "
         "coverage) so the chip does not float.",
         f"Print the paste, place {_chips(design)} (pin 1 at the silk arrow) and reflow. {_t(reflow, 'soak')} Peak at "
-        f"{reflow['peak_C'].nominal:g} C (never above the package's {reflow['package_classification_peak_C'].nominal:g} C), "
-        f"{reflow['time_above_liquidus_s'].nominal:g} s above liquidus.",
+        f"{reflow['peak_C'].nominal:g} C (never above the package's "
+        f"{reflow['package_classification_peak_C'].nominal:g} C), {reflow['time_above_liquidus_s'].nominal:g} s above "
+        "liquidus.",
         f"Without a reflow oven, use hot air: {_lc(_t(reflow, 'hot_air_rework'))}",
         "Inspect the chip's sides for bridges. Then solder "
         + ("C1, C2 (100 nF) on the bottom, under the chip" if design.array is None else
@@ -306,11 +311,11 @@ def _wiring_section(design: Design) -> Section:
     return _section("Wire the board", [
         f"Wire the breakout to the {uno.name} through the {ls.name}, as in the table: the {jumper.name.split(',')[0]} "
         f"into J1, its pins into the shifter's low side, jumper wires from the high side to the Arduino.",
-        f"The breakout is a 3.3 V board (the MLX90393's VDD takes {vdd.removeprefix('supply, ')}): its 3V3 and the shifter's {_t(ls, 'lv_pin')} take the "
-        f"Arduino's {_t(uno, 'v3_pin')} pin, the shifter's {_t(ls, 'hv_pin')} its {_t(uno, 'v5_pin')} pin. Do not "
-        "connect SDA and SCL straight to the Arduino: at 5 V the ATmega328P's I2C inputs need "
-        f"{uno['vih_fraction'].nominal:g} x 5 V = {uno['vih_fraction'].nominal * 5:.2g} V to read a high, more than "
-        "the 3.3 V bus gives.",
+        f"The breakout is a 3.3 V board (the MLX90393's VDD takes {vdd.removeprefix('supply, ')}): its 3V3 and the "
+        f"shifter's {_t(ls, 'lv_pin')} take the Arduino's {_t(uno, 'v3_pin')} pin, the shifter's {_t(ls, 'hv_pin')} "
+        f"its {_t(uno, 'v5_pin')} pin. Do not connect SDA and SCL straight to the Arduino: at 5 V the ATmega328P's I2C "
+        f"inputs need {uno['vih_fraction'].nominal:g} x 5 V = {uno['vih_fraction'].nominal * 5:.2g} V to read a high, "
+        f"more than the 3.3 V bus gives.",
     ], _wiring_table())
 
 
@@ -321,9 +326,9 @@ def _flash_section(design: Design) -> Section:
         "for the old bootloader; the last argument is the Arduino's serial port, a COM port on Windows with "
         "firmware\\flash.bat), install the reader with this build's calibration, write that calibration into the "
         "board's EEPROM (the bootloader leaves the EEPROM empty, and until then the board sends only text error "
-        "lines naming the missing calibration), check that the board reports the same calibration hash, and stream calibrated "
-        f"forces at {design.spec.firmware.baud} baud, zeroed on the first 200 samples: keep the tip untouched while "
-        "it starts.", FLASH_COMMANDS)])
+        "lines naming the missing calibration), check that the board reports the same calibration hash, and stream "
+        f"calibrated forces at {design.spec.firmware.baud} baud, zeroed on the first 200 samples: keep the tip "
+        f"untouched while it starts.", FLASH_COMMANDS)])
 
 
 def _calibrate_section(design: Design, plan: ScanPlan | None) -> Section:
@@ -375,8 +380,8 @@ def _acceptance_section(acceptance: Mapping[str, Any] | None, design: Design | N
              (f"magfab-readout check --weight-g {w:g}{flags}",)),
         f"Pass: Bz at rest within {rest[0]:.0f} to {rest[1]:.0f} uT (positive: magnet the right way up), and a {w:g} g "
         f"weight raises Bz by {delta[0]:.0f} to {delta[1]:.0f} uT.",
-        "A fail names the step and the measured and predicted values: a weak or strong field points at the magnet grade "
-        "or the stack-up, a negative one at an upside-down magnet, a small rise at a stiff batch of silicone.",
+        "A fail names the step and the measured and predicted values: a weak or strong field points at the magnet "
+        "grade or the stack-up, a negative one at an upside-down magnet, a small rise at a stiff batch of silicone.",
         *_drift_steps(doc),
     ])
 
@@ -414,9 +419,9 @@ def sections(design: Design, acceptance: Mapping[str, Any] | None = None,
     recipes' numbers filled in; the Markdown and HTML templates only lay it out (and escape it). ``plan``: the
     calibration scan's extent (:func:`magfab.models.scan.scan_plan`; omitted, the spec's)."""
     q = quantities(design)
-    return [_parts_section(design, acceptance)] + _array_sections(design) + [_print_section(design), _prepare_section(design, q),
-            _mix_section(design, q), _pour_section(design, q), _magnet_section(design), _solder_section(design),
-            _assemble_section(design), _wiring_section(design), _flash_section(design),
+    return [_parts_section(design, acceptance), *_array_sections(design), _print_section(design),
+            _prepare_section(design, q), _mix_section(design, q), _pour_section(design, q), _magnet_section(design),
+            _solder_section(design), _assemble_section(design), _wiring_section(design), _flash_section(design),
             _calibrate_section(design, plan), _acceptance_section(acceptance, design)]
 
 

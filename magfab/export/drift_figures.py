@@ -73,7 +73,7 @@ def _bars_panel(ax, d: Drift) -> list:
         rows.append((f"stray dipole ({d.stray.field_G:.2g} G)", d.stray))
     y = np.arange(len(rows))
     h = 0.26
-    for k, (label, colour) in enumerate(_BAR_COLOUR.items()):
+    for k, colour in enumerate(_BAR_COLOUR.values()):
         values = [abs([r.normal_rest_mN, r.normal_end_mN, r.shear_mN][k]) for _, r in rows]
         ax.barh(y + (k - 1) * h, values, height=h, color=colour)
     ax.axvline(d.resolution_mN["normal"], color="k", lw=0.8)

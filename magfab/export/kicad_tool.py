@@ -72,14 +72,15 @@ def inspect(board_path):
         for p in fp.Pads():
             pos, size = p.GetPosition(), p.GetSize()
             pads.append({"number": p.GetNumber(), "x": mm(pos.x), "y": mm(pos.y), "w": mm(size.x), "h": mm(size.y),
-                         "net": p.GetNetname(), "angle": p.GetOrientationDegrees(), "layers": p.GetLayerSet().Seq().__len__()})
+                         "net": p.GetNetname(), "angle": p.GetOrientationDegrees(),
+                         "layers": p.GetLayerSet().Seq().__len__()})
         pos = fp.GetPosition()
         fps.append({"ref": fp.GetReference(), "value": fp.GetValue(), "fpid": fp.GetFPIDAsString(),
                     "x": mm(pos.x), "y": mm(pos.y), "bottom": fp.IsFlipped(), "pads": pads})
     bbox = board.GetBoardEdgesBoundingBox()
     out = {
         "footprints": sorted(fps, key=lambda f: f["ref"]),
-        "nets": sorted(str(n) for n in board.GetNetsByName().keys() if str(n)),
+        "nets": sorted(str(n) for n in board.GetNetsByName().keys() if str(n)),  # noqa: SIM118 - a KiCad (SWIG) map, not a dict
         "tracks": sum(1 for t in board.GetTracks() if t.GetClass() == "PCB_TRACK"),
         "vias": sum(1 for t in board.GetTracks() if t.GetClass() == "PCB_VIA"),
         "zones": [{"net": z.GetNetname(), "layer": z.GetLayerName()} for z in board.Zones()],
@@ -93,7 +94,8 @@ def drc(board_path, report):
     board = pcbnew.LoadBoard(board_path)
     fill(board)
     ok = pcbnew.WriteDRCReport(board, report, pcbnew.EDA_UNITS_MILLIMETRES, True)
-    text = open(report, encoding="utf-8").read()
+    with open(report, encoding="utf-8") as f:
+        text = f.read()
     counts = {}
     for key in ("violations", "unconnected pads", "footprint errors"):
         pattern = r"\*\* Found (\d+) DRC " + key if key == "violations" else r"\*\* Found (\d+) " + key
@@ -110,7 +112,7 @@ def footprint(lib, name):
     for p in fp.Pads():
         pos, size = p.GetPosition(), p.GetSize()
         pads.append({"number": p.GetNumber(), "x": mm(pos.x), "y": mm(pos.y), "w": mm(size.x), "h": mm(size.y),
-                     "shape": p.GetShape(), "layers": [pcbnew.LayerName(l) for l in p.GetLayerSet().Seq()]})
+                     "shape": p.GetShape(), "layers": [pcbnew.LayerName(layer) for layer in p.GetLayerSet().Seq()]})
     print(json.dumps({"name": fp.GetFPID().GetLibItemName().wx_str(), "pads": pads}, sort_keys=True))
 
 

@@ -35,7 +35,8 @@ from .firmware import TEMPERATURE_LSB_PER_C, TEMPERATURE_RAW_25C, chip_config, i
 from .templating import environment
 
 __all__ = ["PACKAGE", "SOURCE", "TEMPLATE_SUFFIX", "TREE_FILES", "render", "source_files", "data_files",
-           "calibration_sha256", "validate_calibration", "validate_acceptance", "TEMPERATURE_RAW_25C", "TEMPERATURE_LSB_PER_C"]
+           "calibration_sha256", "validate_calibration", "validate_acceptance", "TEMPERATURE_RAW_25C",
+           "TEMPERATURE_LSB_PER_C"]
 
 PACKAGE = "magfab_readout"
 #: The package's source tree: this folder of magfab (shipped in magfab's wheel), copied verbatim into readout/.
@@ -116,7 +117,7 @@ def _build_data(design, checked: calibration_json.Checked) -> dict[str, object]:
         "dig_filt": int(chip.dig_filt),
         "lsb_xy_uT": float(chip.lsb_xy_uT),
         "lsb_z_uT": float(chip.lsb_z_uT),
-        "full_scale_counts": int(round(limit)),
+        "full_scale_counts": round(float(limit)),
         "sample_rate_Hz": round(float(chip.sample_rate_Hz), 6),
         "temperature_raw_25C": TEMPERATURE_RAW_25C,
         "temperature_lsb_per_C": TEMPERATURE_LSB_PER_C,
@@ -131,7 +132,8 @@ def _context(build: Mapping[str, object], acceptance: Mapping[str, Any] | None) 
         **build,
         "description": f"Host readout for the magfab tactile sensor {build['spec_name']}",
         "acceptance": None if acceptance is None else {
-            "rest_lo": f"{acceptance['rest']['Bz_uT']['min']:.0f}", "rest_hi": f"{acceptance['rest']['Bz_uT']['max']:.0f}",
+            "rest_lo": f"{acceptance['rest']['Bz_uT']['min']:.0f}",
+            "rest_hi": f"{acceptance['rest']['Bz_uT']['max']:.0f}",
             "rest_nominal": f"{acceptance['rest']['Bz_uT']['nominal']:.0f}",
             "weight": f"{acceptance['weight']['weight_g']:g}",
             "delta_lo": f"{acceptance['weight']['delta_Bz_uT']['min']:.0f}",
@@ -172,7 +174,8 @@ def render(design, calibration: Mapping[str, Any], acceptance: Mapping[str, Any]
     wrong type.
     """
     if not isinstance(design, Design):
-        raise TypeError(f"design must be a magfab Design (from magfab.derive); instead received {type(design).__name__}")
+        raise TypeError("design must be a magfab Design (from magfab.derive); instead received "
+                        f"{type(design).__name__}")
     checked = validate_calibration(calibration)
     accepted = None if acceptance is None else validate_acceptance(acceptance)
     build = _build_data(design, checked)

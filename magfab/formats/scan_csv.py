@@ -27,8 +27,9 @@ import numpy as np
 
 from ..errors import ScanError, shown
 
-__all__ = ["SCAN_COLUMNS", "FORCE_COLUMNS", "SENSOR_FORCE_COLUMNS", "HOST_TIME_COLUMN", "TAXEL_COLUMN", "REFERENCE_COLUMNS",
-           "TEMPERATURE_COLUMN", "MIN_ROWS", "BANDS", "HOST_TIME_BAND", "MIN_SPAN_UT", "MIN_THICKNESS", "ScanError",
+__all__ = ["SCAN_COLUMNS", "FORCE_COLUMNS", "SENSOR_FORCE_COLUMNS", "HOST_TIME_COLUMN", "TAXEL_COLUMN",
+           "REFERENCE_COLUMNS", "TEMPERATURE_COLUMN", "MIN_ROWS", "BANDS", "HOST_TIME_BAND", "MIN_SPAN_UT",
+           "MIN_THICKNESS", "ScanError",
            "Scan", "Recording", "Reference", "scan_csv", "read_scan_csv", "read_recording", "read_reference",
            "check_calibration_scan"]
 
@@ -42,7 +43,7 @@ SENSOR_FORCE_COLUMNS = ("Fx_sensor_N", "Fy_sensor_N", "Fz_sensor_N")
 TAXEL_COLUMN = "taxel"
 HOST_TIME_COLUMN = "host_time_s"
 #: A reference force sensor's log: ``time_s`` on the host clock of the recording's ``host_time_s``, and its force.
-REFERENCE_COLUMNS = ("time_s",) + FORCE_COLUMNS
+REFERENCE_COLUMNS = ("time_s", *FORCE_COLUMNS)
 TEMPERATURE_COLUMN = "temperature_C"
 #: Smallest scan a calibration accepts: the order-6 fit has 28 coefficients and is cross-validated.
 MIN_ROWS = 50
@@ -157,8 +158,8 @@ def _number(text: str, name: str, line: int, column: str, row: int, band: tuple[
     x = float(stripped)
     lo, hi, unit = band
     if not lo <= x <= hi:  # also an overflow to inf, e.g. 1e999
-        raise ScanError(f"{name}: line {line} (row {row}), column {column!r}: {shown(stripped)} is outside the plausible "
-                        f"band {lo:g} to {hi:g} {unit}; check the column's unit and scaling")
+        raise ScanError(f"{name}: line {line} (row {row}), column {column!r}: {shown(stripped)} is outside the "
+                        f"plausible band {lo:g} to {hi:g} {unit}; check the column's unit and scaling")
     return x
 
 
@@ -241,7 +242,7 @@ def _taxel_rows(lines: list[tuple[int, str]], names: list[str], taxel: int | Non
     if not rows:
         seen = sorted({s.split(",")[at].strip() for _, s in lines[1:] if len(s.split(",")) == len(names)})
         raise ScanError(f"{name}: no rows of taxel {taxel}; the file holds taxel(s) {', '.join(seen) or 'none'}")
-    return [lines[0]] + rows
+    return [lines[0], *rows]
 
 
 def _enough(lines: list[tuple[int, str]], name: str, what: str) -> None:
@@ -272,14 +273,14 @@ def read_scan_csv(source: str | os.PathLike[str] | bytes, *, require_force: bool
     _require(names, SCAN_COLUMNS + (FORCE_COLUMNS if with_force else ()), name, hline,
              f"any order; {TEMPERATURE_COLUMN} optional, others ignored")
     sensor = with_force and all(c in names for c in SENSOR_FORCE_COLUMNS)
-    wanted = [c for c in SCAN_COLUMNS + (TEMPERATURE_COLUMN,) + FORCE_COLUMNS if c in names]
+    wanted = [c for c in (*SCAN_COLUMNS, TEMPERATURE_COLUMN, *FORCE_COLUMNS) if c in names]
     arr, _ = _values(lines, names, wanted + list(SENSOR_FORCE_COLUMNS if sensor else ()), name, BANDS)
     rows = len(lines) - 1
     if rows < min_rows:
         end = lines[-1][0]
         raise ScanError(f"{name}: line {end}: the scan ends after {rows} data rows; a calibration needs at "
-                        f"least {min_rows} (the order-{LARGEST_ORDER} fit has {(LARGEST_ORDER + 1) * (LARGEST_ORDER + 2) // 2} "
-                        "coefficients and is cross-validated)")
+                        f"least {min_rows} (the order-{LARGEST_ORDER} fit has "
+                        f"{(LARGEST_ORDER + 1) * (LARGEST_ORDER + 2) // 2} coefficients and is cross-validated)")
     forces = np.column_stack([arr[c] for c in FORCE_COLUMNS]) if FORCE_COLUMNS[0] in arr else None
     if sensor and forces is not None:
         own = np.column_stack([arr[c] for c in SENSOR_FORCE_COLUMNS])
@@ -325,11 +326,11 @@ def read_recording(source: str | os.PathLike[str] | bytes, taxel: int | None = N
     lines, name, raw = _lines(source)
     hline, names = _header(lines, name)
     lines = _taxel_rows(lines, names, taxel, name)
-    _require(names, SCAN_COLUMNS + (HOST_TIME_COLUMN,), name, hline, "any order; a recording of magfab-readout "
+    _require(names, (*SCAN_COLUMNS, HOST_TIME_COLUMN), name, hline, "any order; a recording of magfab-readout "
              "record has host_time_s, the host's clock, which ties it to the reference's log: record again "
              f"with a current readout package; {TEMPERATURE_COLUMN} and {', '.join(SENSOR_FORCE_COLUMNS)} optional")
-    optional = [c for c in (TEMPERATURE_COLUMN,) + SENSOR_FORCE_COLUMNS if c in names]
-    arr, numbers = _values(lines, names, list(SCAN_COLUMNS) + [HOST_TIME_COLUMN] + optional, name, BANDS)
+    optional = [c for c in (TEMPERATURE_COLUMN, *SENSOR_FORCE_COLUMNS) if c in names]
+    arr, numbers = _values(lines, names, [*SCAN_COLUMNS, HOST_TIME_COLUMN, *optional], name, BANDS)
     _enough(lines, name, "recording")
     own = (np.column_stack([arr[c] for c in SENSOR_FORCE_COLUMNS])
            if all(c in arr for c in SENSOR_FORCE_COLUMNS) else None)

@@ -8,14 +8,13 @@ way KiCad writes them, so the same input always gives the same bytes.
 from __future__ import annotations
 
 from collections.abc import Iterable
-from typing import Union
 
 
 class Sym(str):
     """A bare S-expression word (``smd``, ``roundrect``, ``yes``), written without quotes."""
 
 
-Node = Union[tuple, Sym, str, float, int]
+Node = tuple | Sym | str | float | int
 
 
 def num(x: float) -> str:

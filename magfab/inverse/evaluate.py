@@ -45,7 +45,7 @@ def constraint_names(targets: Targets) -> list[str]:
     r = targets.require
     names = [n for n in ("normal_resolution_mN", "shear_resolution_mN", "normal_range_N", "shear_range_N",
                          "max_diameter_mm", "max_height_mm") if getattr(r, n) is not None]
-    return names + ["error_findings"]
+    return [*names, "error_findings"]
 
 
 def metrics_of(pred, design) -> dict[str, float]:
@@ -77,7 +77,7 @@ def _constraints(targets: Targets, m: dict[str, float], errors: list[str]) -> li
             out.append((m[name] - need) / need)
         else:
             out.append((need - m[name]) / need)
-    return out + [float(len(errors))]
+    return [*out, float(len(errors))]
 
 
 def _elastomer_model(design) -> tuple[Any, str]:

@@ -100,7 +100,7 @@ def plot_front(result: DesignResult, ext: str) -> bytes:
         ax.scatter(v_bad[:, a], v_bad[:, b], s=8, marker="x", color="#e8a0a0", label="infeasible (search)")
         ax.scatter(v_ok[:, a], v_ok[:, b], s=8, color="#b0b0b0", label="feasible (search)")
         ax.scatter(front[:, a], front[:, b], s=22, color="#1f77b4", label="front of the search")
-        for k, i in enumerate(ver):
+        for k in range(len(ver)):
             ax.plot([v_scr[k, a], v_ver[k, a]], [v_scr[k, b], v_ver[k, b]], color="#555555", lw=0.8)
         on = np.array([i in result.front for i in ver], dtype=bool)
         if len(v_ver):
@@ -179,8 +179,8 @@ def _parts(result: DesignResult) -> list[tuple[str, Any]]:
         parts += [("p", f"Chosen: {result.names[result.chosen]}, the best on {objs[0]} (its spec is also "
                         "chosen.toml). Build it from this folder:"),
                   ("code", f"magfab build designs/{result.names[result.chosen]}.toml")]
-    head = ["design"] + objs + ["magnet", "grade", "material", "tip", "d_max_mm", "d_min_mm",
-                                "elastomer_diameter_mm", "cover_mm"]
+    head = ["design", *objs, "magnet", "grade", "material", "tip", "d_max_mm", "d_min_mm",
+            "elastomer_diameter_mm", "cover_mm"]
     body = [[result.names[i]] + [_fmt(result.verified[i].metrics[o]) for o in objs]
             + [_fmt(result.verified[i].point[k]) for k in head[1 + len(objs):]] for i in result.front]
     parts += [("table", (head, body)),

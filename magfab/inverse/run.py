@@ -104,7 +104,7 @@ def _near_front(trials: list[Record], targets: Targets) -> list[int]:
     ok = [i for i, r in enumerate(trials) if r.state == "ok"]
     near = [i for i, r in enumerate(trials) if _near_feasible(r)]
     k = targets.study.verify
-    k_near = min(len(near), int(round(k * NEAR_SHARE))) if ok else min(len(near), k)
+    k_near = min(len(near), round(k * NEAR_SHARE)) if ok else min(len(near), k)
     return _picks(trials, ok, targets, k - k_near) + _picks(trials, near, targets, k_near)
 
 

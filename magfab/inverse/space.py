@@ -62,7 +62,8 @@ def magnets(variables: Variables) -> list[str]:
 
 def choices(variables: Variables) -> dict[str, list[Any]]:
     """The categorical variables' choices (the magnet as "DISC:GRADE": the grades a disc is sold in)."""
-    return {"magnet": magnets(variables), "material": variables.material_keys(), "tip": [t.value for t in variables.tips]}
+    return {"magnet": magnets(variables), "material": variables.material_keys(),
+            "tip": [t.value for t in variables.tips]}
 
 
 def point_of(params: dict[str, Any]) -> dict[str, Any]:
@@ -181,4 +182,5 @@ def _pad_for(base: Spec, d_e: float) -> dict[str, float]:
     half = max(pad.alignment_hole_spacing_mm / 2.0, lip_outer + d1 / 2.0 + _HOLE_MARGIN_MM)
     d2 = d1 + SECOND_HOLE_EXTRA_MM
     radius = max(pad.diameter_mm / 2.0, half + d2 / 2.0 + _RIM_MARGIN_MM)
-    return {"alignment_hole_spacing_mm": round(2.0 * half, 6), "diameter_mm": round(2.0 * math.ceil(radius * 10) / 10, 6)}
+    return {"alignment_hole_spacing_mm": round(2.0 * half, 6),
+            "diameter_mm": round(2.0 * math.ceil(radius * 10) / 10, 6)}

@@ -102,7 +102,8 @@ def _sampler(targets: Targets):
     if s.sampler is Sampler.NSGA2:
         population = max(8, min(50, s.trials // 10))
         return optuna.samplers.NSGAIISampler(population_size=population, seed=s.seed)
-    return optuna.samplers.TPESampler(seed=s.seed, multivariate=True, n_startup_trials=min(max(10, s.trials // 10), 100))
+    return optuna.samplers.TPESampler(seed=s.seed, multivariate=True,
+                                      n_startup_trials=min(max(10, s.trials // 10), 100))
 
 
 def storage_of(where: str | Path):
@@ -196,7 +197,8 @@ def tell(study, trial, result: dict[str, Any], targets: Targets) -> None:
     study.tell(trial, values)
 
 
-def run_study(targets: Targets, base: Spec, storage: str | Path, dask_client, progress: Callable[[int, int], None] | None = None,
+def run_study(targets: Targets, base: Spec, storage: str | Path, dask_client,
+              progress: Callable[[int, int], None] | None = None,
               ) -> Any:
     """Run the study to ``targets.study.trials`` evaluated designs (counting those a previous run stored)."""
     from distributed import as_completed
@@ -222,7 +224,8 @@ def run_study(targets: Targets, base: Spec, storage: str | Path, dask_client, pr
         trial = study.ask()
         trial.set_user_attr(RUNNER, runner)
         point = suggest(trial, targets.variables)
-        fut = dask_client.submit(evaluate, point, *args, targets.study.models.value, f"{targets.name}-{trial.number}", pure=False)
+        fut = dask_client.submit(evaluate, point, *args, targets.study.models.value, f"{targets.name}-{trial.number}",
+                                 pure=False)
         pending[fut] = trial
         queue.add(fut)
 

@@ -18,8 +18,8 @@ from .targets import Objective
 
 __all__ = ["COLUMNS", "rows", "write_table"]
 
-FIGURES = tuple(o.value for o in Objective) + ("normal_sensitivity_at_rest_G_per_N", "Bz_rest_G", "range_limit")
-COLUMNS = ("design", "state", "model") + CATEGORICAL + NUMERIC + FIGURES + ("reason",)
+FIGURES = (*(o.value for o in Objective), "normal_sensitivity_at_rest_G_per_N", "Bz_rest_G", "range_limit")
+COLUMNS = ("design", "state", "model", *CATEGORICAL, *NUMERIC, *FIGURES, "reason")
 
 
 def _cell(v: Any) -> Any:

@@ -40,7 +40,7 @@ import json
 import tomllib
 from enum import Enum
 from pathlib import Path
-from typing import Any, Literal, Union
+from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_serializer, field_validator
 
@@ -75,14 +75,16 @@ class _Table(BaseModel):
 
 
 Range = tuple[float, float]
-Choice = Union[Range, list[float]]  # a [low, high] range or (in a table {values = [...]}) listed values
+Choice = Range | list[float]  # a [low, high] range or (in a table {values = [...]}) listed values
 
 
 class Require(_Table):
     """Requirements every returned design meets (None: no requirement)."""
 
-    normal_resolution_mN: float | None = Field(None, gt=0.0, le=1e4, description="Worst-case normal resolution, at most, mN.")
-    shear_resolution_mN: float | None = Field(None, gt=0.0, le=1e4, description="Worst-case shear resolution, at most, mN.")
+    normal_resolution_mN: float | None = Field(None, gt=0.0, le=1e4,
+                                               description="Worst-case normal resolution, at most, mN.")
+    shear_resolution_mN: float | None = Field(None, gt=0.0, le=1e4,
+                                              description="Worst-case shear resolution, at most, mN.")
     normal_range_N: float | None = Field(None, gt=0.0, le=1e3, description="Normal force range, at least, N.")
     shear_range_N: float | None = Field(None, gt=0.0, le=1e3, description="Shear force range, at least, N.")
     max_diameter_mm: float | None = Field(None, gt=0.0, le=100.0, description="Largest elastomer diameter, mm.")

@@ -530,7 +530,7 @@ def acceptance(design: Design, prediction: Prediction | Mapping[str, Any], weigh
                            "Bz means the magnet is upside down.",
             "Bxy_max_uT": _r(bxy_max_G * UT_PER_GAUSS),
             "lateral_offset_mm": _r(offset, 4),
-            "lateral_offsets": {name: v for name, v in offsets},
+            "lateral_offsets": dict(offsets),
             "tilt_deg": _r(tilt, 3),
             "distance_mm": {"min": _r(min(d_all), 4), "nominal": _r(inp.d_rest, 4), "max": _r(max(d_all), 4)},
             "stack_mm": {name: [_r(lo, 4), _r(hi, 4)] for name, lo, hi in stack},

@@ -35,9 +35,10 @@ the weakest magnet: the most force per field); the sensor's own calibration is k
 check scales both terms by its dFz/dBz at the rest reading over the budget's (``channel_mN_per_uT``, the budget's
 magnet part at rest over the field change it makes): the same field drift, read through this sensor's calibration.
 Without that the band (6.0 mN/C for MagOne with the recipe's coefficients) would hold a nominal MagOne with no
-correction at all (4 mN/C through its calibration). The figures are worst cases over the coefficients' bands (drift.py), so a correct correction
-passes with any sintered NdFeB in the recipe's spread; a missing or wrong correction moves the rest force by about
-the uncompensated figure instead, and a magnet of another material by its own coefficient's.
+correction at all (4 mN/C through its calibration). The figures are worst cases over the coefficients' bands
+(drift.py), so a correct correction passes with any sintered NdFeB in the recipe's spread; a missing or wrong correction
+moves the rest force by about the uncompensated figure instead, and a magnet of another material by its own
+coefficient's.
 """
 
 from __future__ import annotations
@@ -95,7 +96,8 @@ def rotation_section(design: Design, data: Mapping[str, Any], weight: Mapping[st
     predicted = None
     if drift is not None:  # the budget's turned-over figure in the strongest field, scaled to this change
         strongest = drift["rotation_band"][1]
-        predicted = _r(abs(float(strongest["normal_rest_mN"])) * earth_change / (float(strongest["field_G"]) * UT_PER_GAUSS))
+        predicted = _r(abs(float(strongest["normal_rest_mN"])) * earth_change
+                       / (float(strongest["field_G"]) * UT_PER_GAUSS))
     return {
         "turn_deg": 180.0,
         "earth_field_uT": _r(stated * UT_PER_GAUSS),

@@ -320,7 +320,8 @@ class Calibration:
         mls = None
         if c.method == "mls" and c.mls is not None:
             m = c.mls
-            mls = MLSModel(m.order, m.bandwidth, *(np.asarray(x, dtype=float) for x in (m.bz_uT, m.br_uT, m.fz_N, m.fr_N)))
+            mls = MLSModel(m.order, m.bandwidth,
+                           *(np.asarray(x, dtype=float) for x in (m.bz_uT, m.br_uT, m.fz_N, m.fr_N)))
         return cls(c.method, c.order, Scaling(c.center[0], c.scale[0], c.center[1], c.scale[1]),
                    np.column_stack([c.coefficients[f] for f in FORCES]), c.shear_sign, c.direction_min_uT,
                    ValidRegion(c.box[0], c.box[1], c.hull), c.errors, c.scan, c.chip, c.tare_N, mls,

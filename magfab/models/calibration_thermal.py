@@ -37,7 +37,8 @@ from ..formats.calibration_json import AXES
 # Imported lazily, inside the functions that use it, for speed: scipy takes a
 # noticeable time to import, and importing this module should not.
 
-__all__ = ["MIN_SPAN_C", "MIN_INDEPENDENT_C", "DEFAULT_REFERENCE_C", "ThermalFit", "recipe_coefficient_per_C", "fit_thermal", "correct"]
+__all__ = ["MIN_SPAN_C", "MIN_INDEPENDENT_C", "DEFAULT_REFERENCE_C", "ThermalFit", "recipe_coefficient_per_C",
+           "fit_thermal", "correct"]
 
 #: Least temperature span, degC, a scan needs before its coefficients are fitted: a few degrees, twice the
 #: chip's temperature noise band; below it the force residual cannot see a 0.1 %/C drift.

@@ -88,7 +88,8 @@ def layout_errors(loads: _Loads, xy: np.ndarray, signs: np.ndarray) -> tuple[np.
         rest += np.where(others[:, j, None], at_rest, 0.0)
         for k, move in enumerate(moves):
             dB = signs[j] * fieldmod.exact(loads.magnet, chips - centres[j] - move) - at_rest
-            read = np.maximum(np.abs(dB[:, 2]) / loads.normal_G_per_N, np.hypot(dB[:, 0], dB[:, 1]) / loads.shear_G_per_N)
+            read = np.maximum(np.abs(dB[:, 2]) / loads.normal_G_per_N,
+                              np.hypot(dB[:, 0], dB[:, 1]) / loads.shear_G_per_N)
             pair[:, j] = np.maximum(pair[:, j], np.where(others[:, j], read, 0.0))
             if k == 0:
                 pressed += np.where(others[:, j, None], dB, 0.0)
@@ -99,10 +100,10 @@ def layout_errors(loads: _Loads, xy: np.ndarray, signs: np.ndarray) -> tuple[np.
 
 def compensated_errors(design: Design, loads: _Loads, xy: np.ndarray,
                        signs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The field error i x j and every neighbour pressed at once (per taxel), in mN, left after the host's compensation (:class:`magfab.formats.array_json.Compensator`
-    with its dynamic terms, on the tables :func:`magfab.models.taxels.array_field` makes for this layout): the chips
-    read every magnet exactly, neighbour j moved as in :func:`layout_errors`, and the compensated field of chip i
-    is compared with its own magnet's."""
+    """The field error i x j and every neighbour pressed at once (per taxel), in mN, left after the host's compensation
+    (:class:`magfab.formats.array_json.Compensator` with its dynamic terms, on the tables
+    :func:`magfab.models.taxels.array_field` makes for this layout): the chips read every magnet exactly, neighbour j
+    moved as in :func:`layout_errors`, and the compensated field of chip i is compared with its own magnet's."""
 
     taxels = tuple(replace(t, x_mm=float(x), y_mm=float(y), polarity=int(sg))
                    for t, (x, y), sg in zip(design.taxels, xy, signs))
@@ -338,13 +339,15 @@ def crosstalk(design: Design, pred: Prediction) -> Crosstalk:
         if len(xy) <= COMPENSATED_SWEEP_MAX:
             least_comp[name] = least_pitch(design, loads, s, curve, sweep[::3], tol, compensate=True, steps=12)[1]
     magnet = loads.magnet
-    own_dmin = fieldmod.exact(magnet, np.array([[0.0, 0.0, -(design.spec.sensor.d_min_mm + magnet.height_mm / 2)]]))[0, 2]
+    own_dmin = fieldmod.exact(magnet,
+                              np.array([[0.0, 0.0, -(design.spec.sensor.d_min_mm + magnet.height_mm / 2)]]))[0, 2]
     dist = _distances(xy) + np.eye(len(xy)) * 1e9
     i, j = np.unravel_index(np.argmin(dist), dist.shape)
     force, exact = _magnet_force(loads, float(dist[i, j]), signs[i] == signs[j])
     net = magnet_forces(loads, xy, signs)
     residual, common_residual = compensated_errors(design, loads, xy, signs)
-    own_slid = abs(fieldmod.exact(magnet, np.array([[-loads.shear_travel_mm, 0.0, loads.z_chip - loads.z_centre]]))[0, 0])
+    own_slid = abs(fieldmod.exact(magnet,
+                                  np.array([[-loads.shear_travel_mm, 0.0, loads.z_chip - loads.z_centre]]))[0, 0])
     return Crosstalk(arr.polarity.value, arr.skin.value, arr.pitch_mm, tol, field, residual, common, common_residual,
                      c, mech, rest,
                      float(np.max(np.abs(own_dmin * signs + rest[:, 2]))), pred.chip.full_scale_z_G, least, least_comp,

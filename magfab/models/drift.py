@@ -50,9 +50,9 @@ if TYPE_CHECKING:
     from .predict import Prediction
 
 __all__ = ["Coefficients", "coefficients", "environment", "Channel", "normal_channel", "shear_channel",
-           "force_error_mN", "temperature_read_G", "temperature_error_mN", "TemperatureBudget", "temperature_budget", "earth_field_G",
-           "Disturbance", "rotation_error", "dipole_field_G", "dipole_worst_G", "stray_error", "Drift", "drift",
-           "N_TEMPERATURES", "CASES"]
+           "force_error_mN", "temperature_read_G", "temperature_error_mN", "TemperatureBudget", "temperature_budget",
+           "earth_field_G", "Disturbance", "rotation_error", "dipole_field_G", "dipole_worst_G", "stray_error", "Drift",
+           "drift", "N_TEMPERATURES", "CASES"]
 
 #: Temperatures the span is evaluated at (the calibration temperature is added).
 N_TEMPERATURES = 21
@@ -262,9 +262,9 @@ class TemperatureBudget:
 
     ``per_C``: for +1 C from the calibration temperature, keys ``normal_rest``, ``normal_end``, ``shear_rest``,
     ``shear_end``, each {case: ...} for :data:`CASES` (with: the coefficients' uncertainty and the offset; fitted: the
-    offset; the sensor's error and the lag are not per degree and appear in the span); ``per_C_parts``: the uncompensated normal error at
-    rest per source (magnet, chip_sensitivity, chip_offset), and ``per_C_field_G`` the field change each makes, G;
-    ``temperatures_C`` and ``span``: the same four points
+    offset; the sensor's error and the lag are not per degree and appear in the span); ``per_C_parts``: the
+    uncompensated normal error at rest per source (magnet, chip_sensitivity, chip_offset), and ``per_C_field_G`` the
+    field change each makes, G; ``temperatures_C`` and ``span``: the same four points
     at each temperature of the spec's span, without and with compensation; ``worst``: the largest |error| over the
     span per point and case."""
 
@@ -279,12 +279,14 @@ class TemperatureBudget:
     def as_json(self) -> dict[str, object]:
         return {"calibration_C": self.calibration_C, "per_C_mN": {k: dict(v) for k, v in self.per_C.items()},
                 "per_C_parts_normal_rest_mN": dict(self.per_C_parts),
-                "per_C_parts_normal_rest_field_G": dict(self.per_C_field_G), "temperatures_C": list(self.temperatures_C),
+                "per_C_parts_normal_rest_field_G": dict(self.per_C_field_G),
+                "temperatures_C": list(self.temperatures_C),
                 "span_mN": {k: {c: list(v) for c, v in d.items()} for k, d in self.span.items()},
                 "worst_over_span_mN": {k: dict(v) for k, v in self.worst.items()}}
 
 
-def _points(pred: Prediction, normal: Channel, shear: Channel, c: Coefficients) -> dict[str, tuple[Channel, float, float]]:
+def _points(pred: Prediction, normal: Channel, shear: Channel,
+            c: Coefficients) -> dict[str, tuple[Channel, float, float]]:
     """The four points the budget is given at: (channel, true force N, offset bound G/C)."""
     return {"normal_rest": (normal, 0.0, c.chip_offset_z_G_per_C),
             "normal_end": (normal, normal.end_N, c.chip_offset_z_G_per_C),
@@ -313,7 +315,8 @@ def temperature_budget(design: Design, pred: Prediction, temperatures_C: object 
         worst[name] = {case: float(np.max(np.abs(v))) for case, v in span[name].items()}
     b0 = normal.field_at(0.0)
     parts = {"magnet": temperature_read_G(b0, 1.0, alpha_pct=c.magnet_pct_per_C),
-             "chip_sensitivity": temperature_read_G(b0, 1.0, alpha_pct=0.0, sensitivity_pct=-c.chip_sensitivity_pct_per_C),
+             "chip_sensitivity": temperature_read_G(b0, 1.0, alpha_pct=0.0,
+                                                    sensitivity_pct=-c.chip_sensitivity_pct_per_C),
              "chip_offset": temperature_read_G(b0, 1.0, alpha_pct=0.0, offset_G_per_C=-c.chip_offset_z_G_per_C)}
     per_C_parts = {k: float(force_error_mN(normal, 0.0, v)) for k, v in parts.items()}
     per_C_field = {k: float(v - b0) for k, v in parts.items()}
@@ -423,7 +426,8 @@ class Drift:
         c = self.coefficients
         return {
             "conditions": dict(self.conditions),
-            "coefficients": {"magnet_pct_per_C": c.magnet_pct_per_C, "magnet_spread_pct_per_C": list(c.magnet_spread_pct_per_C),
+            "coefficients": {"magnet_pct_per_C": c.magnet_pct_per_C,
+                             "magnet_spread_pct_per_C": list(c.magnet_spread_pct_per_C),
                              "chip_sensitivity_pct_per_C": c.chip_sensitivity_pct_per_C,
                              "chip_offset_xy_G_per_C": c.chip_offset_xy_G_per_C,
                              "chip_offset_z_G_per_C": c.chip_offset_z_G_per_C,
@@ -445,7 +449,7 @@ def drift(design: Design, pred: Prediction) -> Drift:
     env = environment(design)
     normal = normal_channel(pred)
     low, stated, high = earth_field_G(design)
-    conditions = {k: v for k, v in env.model_dump(mode="json").items()}
+    conditions = dict(env.model_dump(mode="json"))
     conditions["earth_field_G"] = stated
     conditions["earth_field_band_G"] = [low, high]
     conditions["stated"] = design.spec.environment is not None

@@ -271,7 +271,8 @@ class Prediction:
         """predictions.json: plain numbers, lists and dicts."""
         n, s, c = self.normal, self.shear, self.chip
         normal: dict[str, object] = {
-            "curve": {k: [[float(d), float(f)] for d, f in zip(cv.indentation_mm, cv.force_N)] for k, cv in n.curves.items()},
+            "curve": {k: [[float(d), float(f)] for d, f in zip(cv.indentation_mm, cv.force_N)]
+                      for k, cv in n.curves.items()},
             "curve_columns": ["indentation_mm", "force_N"],
             "magnet_displacement_mm": list(n.magnet_displacement_mm),
             "sensitivity_G_per_N": list(n.sensitivity_G_per_N),
@@ -314,7 +315,8 @@ def _band(design: Design) -> dict[str, float]:
 
 #: What replaces :func:`normal_curve` in :func:`predict`: (design, body, mu_kPa, indentation) -> (nominal curve, its
 #: ModelUse, the shear response along it or None). The design search passes the elastomer surrogate's.
-ElastomerModel = Callable[["Design", mech.Body, float, np.ndarray], tuple[mech.Curve, ModelUse, "mech.ShearResponse | None"]]
+ElastomerModel = Callable[["Design", mech.Body, float, np.ndarray],
+                          tuple[mech.Curve, ModelUse, "mech.ShearResponse | None"]]
 
 
 def predict(design: Design, elastomer: ElastomerModel | None = None) -> Prediction:
@@ -394,7 +396,8 @@ def normal_on_mesh(design: Design, mesh_mm: float, field_model: str = "exact") -
 
 
 def _normal(design: Design, chip: ChipSetting, nz: Mapping[str, float], magnets: Mapping[str, fieldmod.Magnet],
-            fmodel: str, curves: Mapping[str, mech.Curve], end: tuple[str, str]) -> tuple[NormalFigures, dict[str, np.ndarray]]:
+            fmodel: str, curves: Mapping[str, mech.Curve],
+            end: tuple[str, str]) -> tuple[NormalFigures, dict[str, np.ndarray]]:
     """Normal load: the chain along the nominal curve (the magnet's travel does not depend on mu), over the
     material band and the grade's band, and what ends the range (``end``: :func:`_curve_end` of the nominal
     curve)."""

@@ -9,10 +9,11 @@ Where. The reference must not read the sensing magnets: their field there is a c
 but its *change* is not. Along the board's +y (away from the connector edge), from the taxels' hull, the site is the
 nearest point where, for every magnet pressed through its normal travel or slid through its shear travel
 (:class:`Travel`: the board places by what the geometry allows, pressed to d_min and slid by the elastomer's radius
-less the magnet's; the prediction reports the change at its predicted travel), and for the magnets' rest field changing over the environment's temperature
-span by the grade's remanence coefficient, the change of every component at the reference stays below the chip's
-own RMS noise on that axis (:func:`magfab.models.chip.noise`). Exact superposition of every magnet
-(:func:`magfab.models.field.exact`). What is subtracted is then below one noise sigma whatever the taxels do.
+less the magnet's; the prediction reports the change at its predicted travel), and for the magnets' rest field changing
+over the environment's temperature span by the grade's remanence coefficient, the change of every component at the
+reference stays below the chip's own RMS noise on that axis (:func:`magfab.models.chip.noise`). Exact superposition of
+every magnet (:func:`magfab.models.field.exact`). What is subtracted is then below one noise sigma whatever the taxels
+do.
 
 What it rejects.
 
@@ -23,9 +24,9 @@ What it rejects.
   step measures the real one), and the ratio ``1 / (mismatch + cross-axis)``, worst case.
 * A dipole (a motor, a steel part) at distance D from the sensing chip: the exact difference of its field at the two
   chips (:func:`magfab.models.drift.dipole_field_G`, tested against magpylib's ``Dipole``), at the orientation of
-  its moment and the direction from the board that make it worst, and the median over them. For D much larger than the separation s the ratio is about D / (3 s); for D
-  comparable to s the reference reads a different field and subtracting it can make the error larger (a ratio
-  below 1): the finding says so.
+  its moment and the direction from the board that make it worst, and the median over them. For D much larger than the
+  separation s the ratio is about D / (3 s); for D comparable to s the reference reads a different field and subtracting
+  it can make the error larger (a ratio below 1): the finding says so.
 
 The reference's own noise adds to the sensing chip's; the firmware low-passes the reference (an exponential average
 of ``2**REFERENCE_SHIFT`` readings, which a stray field changing slower than a few hertz passes) so the noise grows
@@ -51,7 +52,8 @@ if TYPE_CHECKING:
     from .drift import Drift
     from .predict import Prediction
 
-__all__ = ["ReferenceChip", "Site", "Rejection", "Travel", "site", "rejection", "budget", "REFERENCE_SHIFT", "noise_growth"]
+__all__ = ["ReferenceChip", "Site", "Rejection", "Travel", "site", "rejection", "budget", "REFERENCE_SHIFT",
+           "noise_growth"]
 
 #: The firmware's reference filter: an exponential average with weight 2**-REFERENCE_SHIFT per reading.
 REFERENCE_SHIFT = 3

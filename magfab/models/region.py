@@ -7,6 +7,7 @@ it. Field values in microtesla.
 
 from __future__ import annotations
 
+import contextlib
 from dataclasses import dataclass
 
 import numpy as np
@@ -132,10 +133,9 @@ class ValidRegion:
                                    "a calibration needs a 2-D scan (normal and lateral load)") from None
         poly = _enclosing(scaled[idx], max_vertices)
         if margin_uT > 0:
-            try:
+            # two neighbouring edges parallel: keep the polygon as it is (the box still widens)
+            with contextlib.suppress(np.linalg.LinAlgError):
                 poly = _widened(poly, margin_uT / sc.bz_scale, margin_uT / sc.br_scale)
-            except np.linalg.LinAlgError:  # two neighbouring edges parallel: keep the polygon as it is (the box
-                pass                       # still widens)
         hull = tuple((sc.bz_center + sc.bz_scale * float(u), sc.br_center + sc.br_scale * float(v)) for u, v in poly)
         m = max(margin_uT, 0.0)
         return cls((float(bz.min()) - m, float(bz.max()) + m), (max(float(br.min()) - m, 0.0), float(br.max()) + m),

@@ -75,8 +75,8 @@ def scan_plan(design: Design, prediction: Prediction | None = None) -> ScanPlan:
             half, y_end = lateral_end, f"the predicted shear range ({shear.range_limit})"
         if delta_end < depth - 1e-9:
             depth, depth_end = delta_end, f"the predicted normal range ({prediction.normal.range_limit})"
-    columns = int(math.floor(2.0 * half / step + 1e-9)) + 1
-    rows = int(math.floor(depth / step + 1e-9)) + 1
+    columns = math.floor(2.0 * half / step + 1e-9) + 1
+    rows = math.floor(depth / step + 1e-9) + 1
     return ScanPlan(half, depth, step, columns, rows, depth_end, y_end)
 
 

@@ -78,8 +78,8 @@ _BEYOND = {
 
 def self_calibration_rms_N(scan: Scan, calibration: Calibration) -> float:
     """RMS difference, N, over the rows and the three axes, between the scan's force columns and the global
-    polynomial of ``calibration`` (what the firmware sends) evaluated at the scan's field and temperature, each axis's mean
-    difference removed first (so a tare does not hide a copy). NaN when no row evaluates to a finite force."""
+    polynomial of ``calibration`` (what the firmware sends) evaluated at the scan's field and temperature, each axis's
+    mean difference removed first (so a tare does not hide a copy). NaN when no row evaluates to a finite force."""
     if scan.F_N is None:
         raise ScanError(f"scan {scan.source}: no force columns to compare with the calibration")
     own, _ = calibration.evaluate(scan.B_uT, "poly", temperature_C=scan.temperature_C)  # as the board corrects

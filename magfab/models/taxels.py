@@ -84,7 +84,8 @@ class ArrayField:
         return {"chips_mm": r(self.chips_mm), "centres_mm": r(self.centres_mm), "offset_uT": r(self.offset_uT),
                 "rest_uT": r(self.rest_uT), "travel_mm": r(self.travel_mm), "own_Bz_uT": r(self.own_Bz_uT),
                 "lateral_mm": r(self.lateral_mm),
-                "own_lateral_uT": r(self.own_lateral_uT), "magnet_mm": r(self.magnet_mm), "neighbour_uT": r(self.neighbour_uT),
+                "own_lateral_uT": r(self.own_lateral_uT), "magnet_mm": r(self.magnet_mm),
+                "neighbour_uT": r(self.neighbour_uT),
                 "moment_uT_mm3": round(self.moment_uT_mm3, 6)}
 
 
@@ -107,7 +108,8 @@ def array_field(design: Design) -> ArrayField:
     grid = np.array([[-s, 0.0, z] for z in below for s in lateral])
     table = fieldmod.exact(magnet, grid)[:, [0, 2]].reshape(len(travel), len(lateral), 2) * UT_PER_GAUSS
     return ArrayField(_chips(design), centres, np.where(own[:, :, None], 0.0, B).sum(axis=1) + 0.0,
-                      B[own] + 0.0, travel, axis[:, 2] * UT_PER_GAUSS, lateral, table + 0.0, (magnet.radius_mm, magnet.height_mm), neighbour + 0.0, moment)
+                      B[own] + 0.0, travel, axis[:, 2] * UT_PER_GAUSS, lateral, table + 0.0,
+                      (magnet.radius_mm, magnet.height_mm), neighbour + 0.0, moment)
 
 
 def simulate_taxel_scan(design: Design, prediction: Prediction, k: int, field: ArrayField | None = None) -> Scan:

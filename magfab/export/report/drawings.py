@@ -38,7 +38,7 @@ def _fill_loops(ax, loops: Sequence[np.ndarray], dz: float, **style) -> None:
         return
     verts, codes = [], []
     for loop in loops:
-        pts = np.vstack([loop, loop[:1]]) + [0.0, dz]
+        pts = np.vstack([loop, loop[:1]]) + np.array([0.0, dz])
         verts.append(pts)
         codes += [Path.MOVETO] + [Path.LINETO] * (len(loop) - 1) + [Path.CLOSEPOLY]
     ax.add_patch(PathPatch(Path(np.vstack(verts), codes), **style))
@@ -225,7 +225,8 @@ def board_svg(board: Board, via_drill_mm: float) -> bytes:
     if board.pad_hull:  # an array's pad: the taxels' hull grown by the pad radius
 
         pts = " ".join(f"{x:.4f},{y:.4f}" for x, y in outline.polygon(list(board.pad_hull), r, 72))
-        out.append(f'<polygon points="{pts}" fill="none" stroke="#fff" stroke-width="0.12" stroke-dasharray="0.6 0.4"/>')
+        out.append(f'<polygon points="{pts}" fill="none" stroke="#fff" stroke-width="0.12" '
+                   'stroke-dasharray="0.6 0.4"/>')
     else:
         out.append(f'<circle cx="{cx}" cy="{cy}" r="{r}" fill="none" stroke="#fff" stroke-width="0.12" '
                    'stroke-dasharray="0.6 0.4"/>')

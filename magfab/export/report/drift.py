@@ -37,8 +37,8 @@ def _disturbance_row(label: str, x: Disturbance, d: Drift) -> tuple[str, ...]:
 def _rows(d: Drift) -> list[tuple[str, ...]]:
     t, env = d.temperature, d.conditions
     span = f"{env['temperature_min_C']:g}-{env['temperature_max_C']:g} C"
-    per_C = tuple(t.per_C[p]["without"] for p in ("normal_rest", "normal_end")) + (
-        max(t.per_C["shear_rest"]["without"], t.per_C["shear_end"]["without"], key=abs),)
+    per_C = (*(t.per_C[p]["without"] for p in ("normal_rest", "normal_end")),
+             max(t.per_C["shear_rest"]["without"], t.per_C["shear_end"]["without"], key=abs))
     rows = [_row("temperature, per C, uncompensated", "-", per_C, d)]
     for case, what in (("without", "uncompensated"), ("with", "compensated, recipe coefficients"),
                        ("fitted", "compensated, fitted coefficients")):
@@ -76,9 +76,9 @@ def drift_context(prediction: Prediction, figures: Callable[[str], list]) -> dic
     stated = "the spec's [environment]" if env["stated"] else "a lab bench (no [environment] in the spec)"
     summary = (f"Errors the force model does not see, under the conditions of {stated}; worst cases over the "
                f"coefficients' bands, read through the calibration's inverse (the stiff material, the weakest magnet). "
-               f"Per C at rest: the magnet {abs(p['magnet']):.1f} mN (alpha(Br) {c.magnet_pct_per_C:g} %/C), the chip's "
-               f"sensitivity {abs(p['chip_sensitivity']):.1f} mN (+/-{c.chip_sensitivity_pct_per_C:.2g} %/C) and "
-               f"offset {abs(p['chip_offset']):.1f} mN (+/-{c.chip_offset_z_G_per_C:.2g} G/C). Compensation reads "
+               f"Per C at rest: the magnet {abs(p['magnet']):.1f} mN (alpha(Br) {c.magnet_pct_per_C:g} %/C), the "
+               f"chip's sensitivity {abs(p['chip_sensitivity']):.1f} mN (+/-{c.chip_sensitivity_pct_per_C:.2g} %/C) "
+               f"and offset {abs(p['chip_offset']):.1f} mN (+/-{c.chip_offset_z_G_per_C:.2g} G/C). Compensation reads "
                f"the chip's temperature (+/-{c.sensor_linearity_C:g} C linearity over its range) and the magnet may "
                f"lag it by {env['temperature_lag_C']:g} C. Resolution {d.resolution_mN['normal']:.2f} mN normal, "
                f"{d.resolution_mN['shear']:.2f} mN shear; field noise {d.noise_G['z']:.3f} G (z), "
@@ -86,8 +86,9 @@ def drift_context(prediction: Prediction, figures: Callable[[str], list]) -> dic
     ref: Mapping[str, Any] | None = prediction.reference  # the reference section of predictions.json
     if ref is not None:
         chip, rej = ref["chip"], ref["rejection"]
-        summary += (f" A reference chip ({chip['designator']}, 0x{chip['i2c_address']:02X}, {chip['separation_mm']:g} mm "
-                    f"from the sensing chip) is subtracted on the board: a uniform field rejected {rej['uniform']:.0f}x "
-                    f"(the chips' mismatch, {100 * rej['mismatch']:g} % assumed, and {100 * rej['cross_axis']:g} % "
-                    "cross-axis); a dipole as near as the reference is not rejected.")
-    return {"summary": summary, "header": HEADER, "rows": _rows(d) + _reference_rows(ref, d), "figures": figures(FOLDER)}
+        summary += (f" A reference chip ({chip['designator']}, 0x{chip['i2c_address']:02X}, {chip['separation_mm']:g} "
+                    "mm from the sensing chip) is subtracted on the board: a uniform field rejected "
+                    f"{rej['uniform']:.0f}x (the chips' mismatch, {100 * rej['mismatch']:g} % assumed, and "
+                    f"{100 * rej['cross_axis']:g} % cross-axis); a dipole as near as the reference is not rejected.")
+    return {"summary": summary, "header": HEADER, "rows": _rows(d) + _reference_rows(ref, d),
+            "figures": figures(FOLDER)}

@@ -116,7 +116,7 @@ def _cap(loops: Sequence[np.ndarray], spacing: float) -> np.ndarray:
     for loop in loops:
         nxt = np.roll(loop, -1, axis=0)
         for p, q in zip(loop, nxt):
-            n = max(1, int(math.ceil(np.hypot(*(q - p)) / (0.5 * spacing))))
+            n = max(1, math.ceil(np.hypot(*(q - p)) / (0.5 * spacing)))
             rim.append(p + (q - p) * (np.arange(n)[:, None] / n))
     rim_pts = np.vstack(rim)
     lo, hi = rim_pts.min(axis=0), rim_pts.max(axis=0)

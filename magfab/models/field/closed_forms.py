@@ -106,13 +106,13 @@ def axial_multipoles(magnet: Magnet, lmax: int = 5) -> dict[int, float]:
     R, h = magnet.radius_mm, magnet.height_mm / 2.0
     br = magnet.remanence_T * GAUSS_PER_TESLA
     out = {}
-    for l in range(1, lmax + 1, 2):
+    for order in range(1, lmax + 1, 2):
         total = 0.0
-        for n in range(1, (l + 1) // 2 + 1):
-            m = l + 2 - 2 * n
+        for n in range(1, (order + 1) // 2 + 1):
+            m = order + 2 - 2 * n
             if m % 2 == 1 and m > 0:
                 total += _binom(-0.5, n) * _binom(-2.0 * n, m) * R ** (2 * n) * h**m
-        out[l] = br * total / (l + 1)
+        out[order] = br * total / (order + 1)
     return out
 
 
@@ -124,13 +124,13 @@ def _binom(a: float, k: int) -> float:
     return out
 
 
-def _multipole_magnitude(l: int, mu: np.ndarray) -> np.ndarray:
-    """|B_l| D^(l+2) / |A_l| = sqrt((l+1)^2 P_l^2 + (1 - mu^2) P_l'^2) at mu = cos t."""
-    c = np.zeros(l + 1)
-    c[l] = 1.0
+def _multipole_magnitude(order: int, mu: np.ndarray) -> np.ndarray:
+    """|B_l| D^(l+2) / |A_l| = sqrt((l+1)^2 P_l^2 + (1 - mu^2) P_l'^2) at mu = cos t, for l = ``order``."""
+    c = np.zeros(order + 1)
+    c[order] = 1.0
     pl = legendre.legval(mu, c)
     dpl = legendre.legval(mu, legendre.legder(c))
-    return np.sqrt((l + 1) ** 2 * pl * pl + (1.0 - mu * mu) * dpl * dpl)
+    return np.sqrt((order + 1) ** 2 * pl * pl + (1.0 - mu * mu) * dpl * dpl)
 
 
 def dipole_error_estimate(magnet: Magnet, points_mm: ArrayLike) -> np.ndarray:
@@ -145,7 +145,7 @@ def dipole_error_estimate(magnet: Magnet, points_mm: ArrayLike) -> np.ndarray:
     A = axial_multipoles(magnet, 5)
     with np.errstate(divide="ignore", invalid="ignore"):
         dip = abs(A[1]) * _multipole_magnitude(1, mu) / D**3
-        rest = sum(abs(A[l]) * _multipole_magnitude(l, mu) / D ** (l + 2) for l in (3, 5))
+        rest = sum(abs(A[order]) * _multipole_magnitude(order, mu) / D ** (order + 2) for order in (3, 5))
         est = rest / dip
     return np.where(magnet.circumscribed_radius_mm < D, est, np.inf)
 

@@ -18,8 +18,9 @@ the axis):
 The two terms of dBx/dtilt have opposite signs. Far from the magnet the second wins (a dipole's ratio
 gap Bz0'/(2 Bz0) is 3 gap / (2 D), D = gap + H/2: above 1 once gap > H), so a magnet leaning along the load cancels
 part of the field its translation makes; close to it the first wins and the tilt adds. MagOne's crossover is at a
-gap of 4.2 mm (1.7 R): at rest (6 mm) the tilt cancels, at the end of a 3 mm scan (gap 3.8 mm) it adds a little. :func:`tilted_field` is the exact (non-linear) field of the moved magnet, from the exact
-kernel; the tests pin both against magpylib's rotated ``Cylinder``. Fields in G, lengths in mm, angles in rad.
+gap of 4.2 mm (1.7 R): at rest (6 mm) the tilt cancels, at the end of a 3 mm scan (gap 3.8 mm) it adds a little.
+:func:`tilted_field` is the exact (non-linear) field of the moved magnet, from the exact kernel; the tests pin both
+against magpylib's rotated ``Cylinder``. Fields in G, lengths in mm, angles in rad.
 """
 
 from __future__ import annotations
@@ -75,4 +76,4 @@ def tilted_field(magnet: Magnet, gap_mm: ArrayLike, shift_mm: ArrayLike = 0.0, t
     local = np.column_stack([dx * cos - dz * sin, np.zeros_like(g), dx * sin + dz * cos - 0.5 * magnet.height_mm])
     b = exact(magnet, local)
     out = np.column_stack([b[:, 0] * cos + b[:, 2] * sin, b[:, 1], -b[:, 0] * sin + b[:, 2] * cos])
-    return out.reshape(shape + (3,))
+    return out.reshape((*shape, 3))

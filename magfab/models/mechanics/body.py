@@ -211,7 +211,8 @@ class Curve:
 
 @dataclass(frozen=True, eq=False)
 class Convergence:
-    """Mesh study (:func:`~.study.convergence`): FE curves on nested meshes, errors against the finest, observed orders."""
+    """Mesh study (:func:`~.study.convergence`): FE curves on nested meshes, errors against the finest, observed
+    orders."""
 
     mesh_mm: np.ndarray
     force_N: np.ndarray  # (n_mesh, n_indentation)

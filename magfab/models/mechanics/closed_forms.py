@@ -68,10 +68,8 @@ def column(body: Body, mu_kPa: float, indentation_mm: Sequence[float] | np.ndarr
     faces = 2 if body.magnet_is_top_plate else 1  # a rigid magnet plate on top is a second bonded face
     force, stiffness = _column_law(mu, A, Hc, body.radius_mm, faces)
     F = force(lam)
-    if body.has_magnet:
-        um = d * body.silicone_volume_below_mm3(body.magnet_z_mm) / A / Hc
-    else:
-        um = np.full_like(d, np.nan)
+    um = (d * body.silicone_volume_below_mm3(body.magnet_z_mm) / A / Hc if body.has_magnet
+          else np.full_like(d, np.nan))
     stress = F / A * lam * 1e3  # Cauchy axial stress magnitude: N/mm^2 = MPa -> kPa; the area grows as 1/lam
     return Curve("column", mu, d, F, um, stiffness(lam), lam**-0.5, stress,
                  info={"column_height_mm": Hc, "shape_factor": _shape_factor(body.radius_mm, Hc, faces)})
@@ -131,9 +129,9 @@ def hertz_column(body: Body, mu_kPa: float, indentation_mm: Sequence[float] | np
             K[i] = 1.5 * c_hertz * math.sqrt(delta)
             continue
 
-        def gap(l: float) -> float:  # total approach at column stretch l, minus the target
-            f = float(col_force(np.float64(l)))
-            return (f / c_hertz) ** (2.0 / 3.0) + (1.0 - l) * hc - delta
+        def gap(stretch: float, delta: float = delta) -> float:  # total approach at this stretch, minus the target
+            f = float(col_force(np.float64(stretch)))
+            return (f / c_hertz) ** (2.0 / 3.0) + (1.0 - stretch) * hc - delta
 
         lo = 1e-6
         if gap(lo) < 0.0:
@@ -150,8 +148,8 @@ def hertz_column(body: Body, mu_kPa: float, indentation_mm: Sequence[float] | np
         z_low = min(body.magnet_z_mm, body.base_height_mm)
         frac = body.silicone_volume_below_mm3(z_low) / A / hc if hc > 0 else 0.0
         depth = body.height_mm - (body.magnet_z_mm + 0.5 * body.magnet_height_mm)
-        um = np.array([(1.0 - l) * hc * frac + float(_hertz_axis_displacement(f, ai, np.array(depth), mu))
-                       for l, f, ai in zip(lam, F, a)])
+        um = np.array([(1.0 - stretch) * hc * frac + float(_hertz_axis_displacement(f, ai, np.array(depth), mu))
+                       for stretch, f, ai in zip(lam, F, a)])
     else:
         um = np.full_like(d, np.nan)
     return Curve("hertz_column", mu, d, F, um, K, lam**-0.5, np.maximum(p0, col_stress),

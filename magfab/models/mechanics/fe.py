@@ -152,7 +152,7 @@ class _LoadPath:
                                      f"{trial:.4g} mm: principal stretches {lmin:.3g} to {lmax:.3g} leave "
                                      f"[1/{self.stretch_limit:g}, {self.stretch_limit:g}]")
             self.state, self.current, self.rate, self.extremes = new, trial, None, extremes
-            self.hist = (self.hist + [(self.current, self.state.x)])[-2:]
+            self.hist = [*self.hist, (self.current, self.state.x)][-2:]
 
     def record(self, delta: float) -> tuple[float, float, float, float, float, float]:
         """(force, tangent, magnet displacement, largest averaged stretch, largest |stress|, largest pointwise

@@ -261,9 +261,9 @@ def _errors(model: _Model, held_out: Sequence[dict]) -> dict[str, float]:
 def description() -> str:
     """One line for the report and the ModelUse: what the surrogate is and its held-out error."""
     e = held_out_error()
-    return (f"Surrogate of the elastomer FE over dimensionless geometry (RBF over 4 ratios, {len(_shipped()[1]['runs'])}"
-            f" FE runs); held-out error: force RMS {100 * e['force_rms']:.1f} % (90th percentile "
-            f"{100 * e['force_p90']:.1f} %), magnet travel RMS {100 * e['travel_rms']:.1f} %")
+    return ("Surrogate of the elastomer FE over dimensionless geometry (RBF over 4 ratios, "
+            f"{len(_shipped()[1]['runs'])} FE runs); held-out error: force RMS {100 * e['force_rms']:.1f} % (90th "
+            f"percentile {100 * e['force_p90']:.1f} %), magnet travel RMS {100 * e['travel_rms']:.1f} %")
 
 
 def _interpolate(x: np.ndarray, y: np.ndarray, at: np.ndarray, log: bool) -> np.ndarray:

@@ -257,8 +257,9 @@ class _Indentation:
 
         Admissible states are x = T y + g: T (ndof x nfree) maps the unknowns (free dofs, the magnet's common
         axial displacement w, and for a sliding magnet each surface node's slide s along the tangent t = (-n_z, n_r)
-        of its reference normal n: u = w e_z + s t, so (u - w e_z) . n = 0) to all dofs; g holds the prescribed values on the ``prescribed`` dofs (the bonded base,
-        the axis, the magnet's radial displacement, the nodes touching the indenter); ``load`` is d g / d delta.
+        of its reference normal n: u = w e_z + s t, so (u - w e_z) . n = 0) to all dofs; g holds the prescribed values
+        on the ``prescribed`` dofs (the bonded base, the axis, the magnet's radial displacement, the nodes touching the
+        indenter); ``load`` is d g / d delta.
         """
         from scipy.sparse import csr_matrix
 

@@ -11,6 +11,7 @@ clear the caches for cold timings).
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 from functools import lru_cache
@@ -151,7 +152,7 @@ def _boundary_pieces(body: Body, void: Wall | None = None) -> list[tuple[str, tu
         if re > 0.0:
             pieces.append(("arc", (rm - re, zm + re, re, -0.5 * math.pi, 0.0), _MAGNET))
             pieces.append(("arc", (rm - re, zt - re, re, 0.0, 0.5 * math.pi), _MAGNET))
-    for (r0, z0), (r1, z1) in zip(void[:-1], void[1:]) if void else ():
+    for (r0, z0), (r1, z1) in itertools.pairwise(void) if void else ():
         pieces.append(("seg", (r0, z0, r1, z1), _VOID))
     return pieces
 
@@ -164,7 +165,7 @@ def channel_wall(body: Body, core_profile: list[tuple[float, float]]) -> Wall:
     pts = np.array(core_profile[1:-1], dtype=float)  # the wall: base, channel, funnel, pocket side up to the roof
     zm, rc = body.magnet_z_mm, body.magnet_radius_mm - body.magnet_edge_radius_mm
     zs = [z for z in pts[:, 1] if z < zm] + [zm]
-    for (r0, z0), (r1, z1) in zip(pts[:-1], pts[1:]):
+    for (r0, z0), (r1, z1) in itertools.pairwise(pts):
         if (r0 - rc) * (r1 - rc) < 0.0:  # the wall crosses the edge's start radius: a corner of the clipped wall
             zs.append(z0 + (rc - r0) * (z1 - z0) / (r1 - r0))
     wall: list[tuple[float, float]] = []
@@ -246,7 +247,7 @@ def _graded_mesh(body: Body, h: float, void: Wall | None = None) -> _Mesh:
     index: dict[tuple[int, int], int] = {}
     verts: list[tuple[float, float]] = []
     segs: list[tuple[int, int]] = []
-    for kind, geo, _tag_ in _boundary_pieces(body, void):
+    for kind, geo, _tag in _boundary_pieces(body, void):
         ids = []
         for r, z in _sample_piece(body, kind, geo, h).T:
             k = (round(r / key), round(z / key))
@@ -254,7 +255,7 @@ def _graded_mesh(body: Body, h: float, void: Wall | None = None) -> _Mesh:
                 index[k] = len(verts)
                 verts.append((r, z))
             ids.append(index[k])
-        segs.extend((a, b) for a, b in zip(ids[:-1], ids[1:]) if a != b)
+        segs.extend((a, b) for a, b in itertools.pairwise(ids) if a != b)
     pslg: dict[str, np.ndarray] = {"vertices": np.array(verts), "segments": np.array(segs, dtype=np.int32)}
     if body.has_magnet:
         pslg["holes"] = np.array([[0.5 * body.magnet_radius_mm, body.magnet_z_mm + 0.5 * body.magnet_height_mm]])
@@ -339,7 +340,7 @@ def _tag(body: Body, p: np.ndarray, on_boundary: np.ndarray, void: Wall | None =
 def _wall_distance(void: Wall, r: np.ndarray, z: np.ndarray) -> np.ndarray:
     """Distance (mm) from points (r, z) to the void's wall polyline."""
     best = np.full(np.shape(r), np.inf)
-    for (r0, z0), (r1, z1) in zip(void[:-1], void[1:]):
+    for (r0, z0), (r1, z1) in itertools.pairwise(void):
         dr, dz = r1 - r0, z1 - z0
         s = np.clip(((r - r0) * dr + (z - z0) * dz) / max(dr * dr + dz * dz, 1e-300), 0.0, 1.0)
         best = np.minimum(best, np.hypot(r - r0 - s * dr, z - z0 - s * dz))

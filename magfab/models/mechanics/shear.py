@@ -48,7 +48,7 @@ def _mode1_matrix(mesh: _Mesh):
     U_t,z + U_z/r); energy pi * integral of [e_rr^2 + e_tt^2 + e_zz^2 + (g_rz^2 + g_rt^2 + g_tz^2)/2] r dr dz
     with the constraint that the divergence e_rr + e_tt + e_zz vanishes (P as its multiplier).
     """
-    m, sb, pb, phi, grad, psi, rq, tags = _scalar_p2(mesh)
+    _m, sb, pb, phi, grad, psi, rq, tags = _scalar_p2(mesh)
     nel, nq = rq.shape
     B = np.zeros((nel, nq, 6, 18))
     ur, ut, uz = slice(0, 6), slice(6, 12), slice(12, 18)

@@ -213,7 +213,7 @@ def _sin_block(g: np.ndarray, q: np.ndarray, f1: np.ndarray) -> np.ndarray:
     derivatives of J = det F in those entries are -F_zz (rt, tr), F_zr (rt, tz), F_rz (tr, zt), -F_rr (tz, zt)
     (the axisymmetric F has no sin entries, so neither W_11 F (x) F nor j (x) j reaches this block)."""
     a, b, c, d = (g[..., i] for i in range(4))
-    D = np.zeros(g.shape[:-1] + (4, 4))
+    D = np.zeros((*g.shape[:-1], 4, 4))
     for i in range(4):
         D[..., i, i] = 2.0 * f1
     for (i, k), v in (((0, 1), -d), ((0, 2), c), ((1, 3), b), ((2, 3), -a)):
