@@ -24,7 +24,7 @@ def _mesh(result, stem):
     return trimesh.load(io.BytesIO(data), file_type="stl")
 
 
-@pytest.mark.parametrize("stem", ("elastomer",) + PRINTED)
+@pytest.mark.parametrize("stem", ["elastomer", *PRINTED])
 def test_every_stl_is_a_closed_oriented_solid(default_build, stem):
     mesh = _mesh(default_build, stem)
     assert mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0
@@ -57,7 +57,7 @@ def test_cup_and_lid_boxes_and_volumes():
 
 
 def test_step_files_reimport_with_the_same_volume(default_build, tmp_path):
-    for stem in ("elastomer",) + PRINTED:
+    for stem in ("elastomer", *PRINTED):
         path = tmp_path / f"{stem}.step"
         path.write_bytes(next(a.data for a in default_build.artifacts if a.path == f"{stem}.step"))
         solid = cq.importers.importStep(str(path)).val()

@@ -125,7 +125,7 @@ def _cli_build_is_all_or_nothing(raw, tmp_path_factory):
         assert leftovers == ["out", "spec.toml"] and (out / "manifest.json").is_file()
 
 
-_CLI = dict(deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+_CLI = {"deadline": None, "suppress_health_check": [HealthCheck.too_slow, HealthCheck.function_scoped_fixture]}
 
 
 @settings(max_examples=5, **_CLI)

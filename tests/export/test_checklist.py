@@ -195,7 +195,8 @@ def _blocks(markdown: str) -> list[list[str]]:
     return [b.splitlines() for b in re.findall(r"^```sh\n(.*?)^```$", markdown, re.M | re.S)]
 
 
-@pytest.fixture(scope="module", params=[(m, p) for m in MATERIALS for p in ("sla", "fdm")][::3] + [("ecoflex-00-30", "fdm")],
+@pytest.fixture(scope="module",
+                params=[*[(m, p) for m in MATERIALS for p in ("sla", "fdm")][::3], ("ecoflex-00-30", "fdm")],
                 ids=lambda mp: "-".join(mp))
 def variant(request):
     material, printer = request.param
@@ -263,7 +264,7 @@ def test_the_pad_is_fixed_to_the_board_before_the_elastomer_is_glued_onto_it(des
     assert pins < fix < glue
     assert ca.name in texts[fix] and f"{ca['fixture_time_s'].nominal:g} s" in texts[fix]
     assert f"{ca['cure_time_full_h'].nominal:g} h" in texts[fix] and " uL" in texts[fix]
-    assert "loctite-401" in [k for k in catalogue("adhesives")] and ca["fixture_time_s"].source.startswith("LOCTITE 401")
+    assert "loctite-401" in list(catalogue("adhesives")) and ca["fixture_time_s"].source.startswith("LOCTITE 401")
 
 
 def test_the_magnet_goes_in_after_demoulding_north_face_first(design):

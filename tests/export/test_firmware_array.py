@@ -3,6 +3,7 @@ reading every chip on the simulated bus (tests/export/test_simbus_array.py does 
 
 from __future__ import annotations
 
+import itertools
 import math
 import struct
 import sys
@@ -292,7 +293,7 @@ def test_per_taxel_and_total_rate_in_simulated_time(harness, designs, tmp_path, 
     per_taxel = [c / elapsed for c in counts]
     cycle_hz = 1e6 / (settings["tconv_us"] + settings["read_margin_us"])
     uart_hz = baud / FIELD_FRAME_BITS / chips
-    gaps = sorted(b.t_us - a.t_us for c in cycles(got) for a, b in zip(c, c[1:]))
+    gaps = sorted(b.t_us - a.t_us for c in cycles(got) for a, b in itertools.pairwise(c))
     loop_hz = 1e6 / (gaps[len(gaps) // 2] * chips) if gaps else math.inf  # a read, its frame, the next chip's
     bound = min(cycle_hz, uart_hz, loop_hz)
     print(f"{chips} chips at {baud} baud: per taxel {min(per_taxel):.1f} Hz, total {len(got) / elapsed:.0f} frames/s; "

@@ -8,6 +8,7 @@ from __future__ import annotations
 import csv
 import hashlib
 import io
+import itertools
 import json
 import math
 import os
@@ -18,7 +19,7 @@ import sys
 import threading
 import time
 import tomllib
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from pathlib import Path
 
 import pytest
@@ -245,9 +246,9 @@ def test_crc_is_ccitt_false(pkg):
 
 def _frames(n, start=0):
     rng = random.Random(11)
-    return [dict(seq=(start + k) & 0xFF, t_us=(4_294_960_000 + 1712 * k) & 0xFFFFFFFF, status=k % 16,
-                 counts=(rng.randint(-32768, 32767), rng.randint(-9000, 9000), rng.randint(0, 22000)),
-                 t_raw=46244 + k, forces=(rng.uniform(-1, 1), rng.uniform(-1, 1), rng.uniform(0, 5)))
+    return [{"seq": (start + k) & 0xFF, "t_us": (4_294_960_000 + 1712 * k) & 0xFFFFFFFF, "status": k % 16,
+             "counts": (rng.randint(-32768, 32767), rng.randint(-9000, 9000), rng.randint(0, 22000)),
+             "t_raw": 46244 + k, "forces": (rng.uniform(-1, 1), rng.uniform(-1, 1), rng.uniform(0, 5))}
             for k in range(n)]
 
 
@@ -541,7 +542,7 @@ def test_installed_cli_records_a_scan_csv(installed, calibration, tmp_path):
     assert set(field + sensor) <= set(rows[0]) and not {"Fx_N", "Fy_N", "Fz_N"} & set(rows[0])
     assert 0.4 * 543.5 * 0.9 < len(rows) < 0.4 * 543.5 * 1.1  # 1 / 1.84 ms
     times = [float(r["time_s"]) for r in rows]
-    assert times[0] == 0.0 and all(b >= a for a, b in zip(times, times[1:]))
+    assert times[0] == 0.0 and all(b >= a for a, b in itertools.pairwise(times))
     host = [float(r["host_time_s"]) for r in rows]
     assert started <= host[0] <= host[-1] <= time.time()
     for r in rows:
@@ -596,15 +597,11 @@ def pseudo_terminal(pkg, feed: bool):
     def run():
         while not stop.is_set():
             if select.select([master], [], [], 0.005)[0]:
-                try:
+                with suppress(OSError):
                     sim.write(os.read(master, 256))
-                except OSError:
-                    pass
             data = sim.read(4096, 0.005)
-            try:
+            with suppress(OSError):  # nobody reads: the data is lost, as on a UART
                 os.write(master, data)
-            except OSError:  # nobody reads: the data is lost, as on a UART
-                pass
 
     thread = threading.Thread(target=run, daemon=True)
     if feed:

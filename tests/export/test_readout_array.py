@@ -167,7 +167,7 @@ def test_a_press_on_taxel_2_reads_on_taxel_2_only(pkg, array, strip):
     static = pkg.ArrayCalibration(dict(doc, dynamic=False), cals)
     worst_static = 0.0
     for motion, force in _press_points(design, pred):
-        cycles, reader = _pressed(pkg, array, design, motion)
+        cycles, _reader = _pressed(pkg, array, design, motion)
         assert cycles and all(c.complete for c in cycles)
         for c in cycles:
             got = c[2].force_N
@@ -232,7 +232,7 @@ def test_stream_prints_every_taxel_of_every_cycle(pkg, capsys):
     assert "# t_s seq taxel Fx_N Fy_N Fz_N Bx_uT By_uT Bz_uT T_C flags fault Bx_lsb By_lsb Bz_lsb T_raw" in out
     rows = _rows(out)
     assert len(rows) == 60 and [int(r[2]) for r in rows] == list(range(5)) * 12
-    assert all(len(set(r[1] for r in rows[5 * c:5 * c + 5])) == 1 for c in range(12))  # one sequence per cycle
+    assert all(len({r[1] for r in rows[5 * c:5 * c + 5]}) == 1 for c in range(12))  # one sequence per cycle
     assert max(abs(float(x)) for r in rows for x in r[3:6]) < 0.02 and {r[10] for r in rows} == {"-----"}
     assert "12 cycles of 5 taxels; 0 incomplete" in err
     assert cli.main(["stream", "--simulate", "--count", "1", "--check"]) == 1

@@ -43,7 +43,7 @@ MALFORMED = {
                                + [_good()[5] + ",2500"] + [r + ",25" for r in _good()[6:]]),
                     ["line 6 (row 5)", "'temperature_C'", "-100 to 250 degC"]),
     "decreasing time": (_edit(12, 0, "0.05"), ["line 12", "'time_s'", "non-decreasing", "line 11"]),
-    "short row": ("\n".join(_good()[:20] + ["0.5,1,2"] + _good()[20:]), ["line 21", "3 values", "7 columns"]),
+    "short row": ("\n".join([*_good()[:20], "0.5,1,2", *_good()[20:]]), ["line 21", "3 values", "7 columns"]),
     "duplicate column": ("\n".join([_good()[0] + ",Bz_uT"] + [r + ",1" for r in _good()[1:]]),
                          ["line 1", "'Bz_uT' appears twice"]),
     "too few rows": ("\n".join(_good(10)), ["line 11", "10 data rows", f"at least {MIN_ROWS}"]),
@@ -72,7 +72,7 @@ def test_unreadable_inputs(tmp_path):
 
 
 def test_plain_decimal_forms_are_read():
-    text = "\n".join(_good()[:3] + ["+0.03,1.,-.5,2e4,0,1E-3,0.0"] + _good()[4:]) + "\n"
+    text = "\n".join([*_good()[:3], "+0.03,1.,-.5,2e4,0,1E-3,0.0", *_good()[4:]]) + "\n"
     scan = read_scan_csv(text.encode("utf-8"))
     assert scan.B_uT[2].tolist() == [1.0, -0.5, 2e4] and scan.F_N[2, 1] == 1e-3
 

@@ -68,7 +68,7 @@ def test_designs_at_least_as_good_as_magone(study, magone_prediction):
 
 
 def test_the_files_a_user_gets(study):
-    cwd, folder, run = study
+    _cwd, folder, run = study
     for name in ("study.log", "trials.csv", "trials.parquet", "pareto.csv", "pareto.parquet", "pareto.svg",
                  "pareto.png", "README.md", "index.html"):
         assert (folder / name).stat().st_size > 0, name
@@ -89,7 +89,7 @@ def test_the_files_a_user_gets(study):
 
 
 def test_running_again_resumes(study):
-    cwd, folder, run = study
+    cwd, _folder, run = study
     again = magfab("design", "targets.toml", "--workers", "2", cwd=cwd)
     assert again.returncode == 0, again.stderr
     assert "searched 120 designs" in again.stdout

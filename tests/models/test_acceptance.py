@@ -112,8 +112,8 @@ def test_distance_band_is_the_sum_of_the_stack_up(design, acc):
     # one with its top at the roof
     assert dist["min"] == pytest.approx(design.d_rest_mm + sum(v[0] for v in stack.values()) - 0.05, abs=1e-9)
     assert dist["max"] == pytest.approx(design.d_rest_mm + sum(v[1] for v in stack.values()) + 0.05, abs=1e-9)
-    assert [a for a in acc["assumptions"] if a["name"] == "chip_height_mm"][0]["rest_Bz_uT"][0] == \
-        [a for a in acc["assumptions"] if a["name"] == "chip_height_mm"][0]["rest_Bz_uT"][1]  # no effect (doc)
+    assert next(a for a in acc["assumptions"] if a["name"] == "chip_height_mm")["rest_Bz_uT"][0] == \
+        next(a for a in acc["assumptions"] if a["name"] == "chip_height_mm")["rest_Bz_uT"][1]  # no effect (doc)
 
 
 ZERO = Tolerances(magnet_diameter_mm=0.0, magnet_height_mm=0.0, printer_mm=0.0, glue_fraction=0.0,
@@ -140,8 +140,8 @@ def test_band_widths_follow_the_tolerances(design, pred, acc):
     assert wider["delta_Bz_uT"][0] < grade["delta_Bz_uT"][0] and wider["delta_Bz_uT"][1] > grade["delta_Bz_uT"][1]
     # Every tolerance widens both bands; the Earth's field widens the rest band by twice itself and not the rise.
     base = width(acc)
-    for change in (dict(magnet_height_mm=0.1), dict(printer_mm=0.2), dict(glue_fraction=1.0),
-                   dict(sensitivity_pct=(5.0, 5.0)), dict(sensing_depth_mm=(0.3, 0.3)), dict(seating_mm=0.2)):
+    for change in ({"magnet_height_mm": 0.1}, {"printer_mm": 0.2}, {"glue_fraction": 1.0},
+                   {"sensitivity_pct": (5.0, 5.0)}, {"sensing_depth_mm": (0.3, 0.3)}, {"seating_mm": 0.2}):
         w = width(acceptance(design, pred, tolerances=replace(Tolerances(), **change)))
         assert w[0] > base[0] and w[1] > base[1], change
     earthy = acceptance(design, pred, tolerances=Tolerances(earth_field_uT=165.0))

@@ -96,7 +96,7 @@ def test_polarity_changes_every_neighbour_at_once_not_one_alone(array_builds):
 def test_the_magnets_push_the_strips_ends_out_or_pull_them_in(strip):
     d, pred, doc = strip
     loads = X._Loads.of(d, pred)
-    xy, same = _layout(d)
+    xy, _same = _layout(d)
     net = np.array(doc["magnet_net_force_mN"])
     assert net[0, 0] < 0 < net[-1, 0] and net[0, 0] == pytest.approx(-net[-1, 0], rel=1e-3)
     assert abs(net[2, 0]) < 1e-3 and np.abs(net[:, 1]).max() < 1e-3  # the middle one is balanced; nothing across

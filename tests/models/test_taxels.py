@@ -96,7 +96,7 @@ def test_one_taxel_is_calibrated_from_its_rows_of_a_recording(strip, tmp_path):
     header = lines[0][0] + ",taxel"
     rows = [f"{line},{k}" for k, rows in enumerate(lines) for line in rows[1:] if not line.startswith("#")]
     path = tmp_path / "rec.csv"
-    path.write_text("\n".join([header] + rows) + "\n")
+    path.write_text("\n".join([header, *rows]) + "\n")
     scan = read_scan_csv(path, taxel=2)
     np.testing.assert_allclose(scan.B_uT, measured[2].B_uT, atol=1e-3)
     with pytest.raises(ScanError, match="no rows of taxel 7; the file holds taxel"):
