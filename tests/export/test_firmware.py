@@ -330,7 +330,7 @@ def test_raw_counts_to_microtesla(build_host, res):
     field = (0.9 * limit * lsb[0], -1234.5, -0.5 * limit * lsb[2])
     out, _ = h.run(f"B {field[0]} {field[1]} {field[2]} 25\nS 2\n")
     frame = frames_of(out)[-1]
-    assert list(frame["counts"]) == [round(b / l) for b, l in zip(field, lsb)]
+    assert list(frame["counts"]) == [round(b / per_count) for b, per_count in zip(field, lsb)]
     assert frame["status"] & SATURATED == 0
 
 
@@ -346,7 +346,7 @@ def test_forces_equal_python_float64(host):
     lsb = host.lsb()
     worst = 0.0
     for frame in frames:
-        b = [c * l for c, l in zip(frame["counts"], lsb)]
+        b = [c * per_count for c, per_count in zip(frame["counts"], lsb)]
         want, scale = py_forces(host.cal, *b)
         err = np.abs(frame["forces"] - want) / np.maximum(np.abs(want), scale)
         worst = max(worst, float(err.max()))
@@ -511,7 +511,7 @@ def test_text_mode_info_and_switching(host):
         np.testing.assert_allclose(forces, binary["forces"], atol=5.1e-5)
         lsb = host.lsb()
         np.testing.assert_allclose([float(x) for x in fields[7:10]],
-                                   [c * l for c, l in zip(binary["counts"], lsb)], atol=5.1e-3)
+                                   [c * per_count for c, per_count in zip(binary["counts"], lsb)], atol=5.1e-3)
         assert abs(float(fields[10]) - 31.5) < 0.03
 
 
@@ -613,7 +613,7 @@ def test_render_rejects_what_the_firmware_cannot_carry():
     with pytest.raises(FirmwareError, match=re.escape("calibration.coefficients.Fz_N[4] = 1e+39: must be finite and "
                                                       "within float32 range")):
         firmware.render(design, cal)
-    with pytest.raises(SpecError, match="firmware.baud"):
+    with pytest.raises(SpecError, match=r"firmware\.baud"):
         firmware.render(derive(spec_variant(firmware_baud=230400)), make_calibration())
 
 

@@ -444,7 +444,7 @@ class Silent:
 
 
 def test_device_errors_say_what_to_do(pkg):
-    with pytest.raises(pkg.NoData, match="no frames from the test port within 0.2 s; nothing arrived"):
+    with pytest.raises(pkg.NoData, match=r"no frames from the test port within 0\.2 s; nothing arrived"):
         pkg.Device(transport=Silent(), timeout_s=0.2).read(1)
     with pytest.raises(pkg.NoData, match="none formed a frame or line: check that the baud rate"):
         pkg.Device(transport=Silent(bytes(range(0, 200, 7))), timeout_s=0.2).read(1)
@@ -536,7 +536,7 @@ def test_installed_cli_records_a_scan_csv(installed, calibration, tmp_path):
     comments = [line for line in text.splitlines() if line.startswith("#")]
     assert '# spec: "magone"' in comments
     assert f"# calibration_sha256: {calibration_sha256(calibration)}" in comments
-    rows = list(csv.DictReader(io.StringIO("\n".join(l for l in text.splitlines() if not l.startswith("#")))))
+    rows = list(csv.DictReader(io.StringIO("\n".join(line for line in text.splitlines() if not line.startswith("#")))))
     sensor = ("Fx_sensor_N", "Fy_sensor_N", "Fz_sensor_N")
     field = ("time_s", "host_time_s", "Bx_uT", "By_uT", "Bz_uT", "temperature_C")
     assert set(field + sensor) <= set(rows[0]) and not {"Fx_N", "Fy_N", "Fz_N"} & set(rows[0])

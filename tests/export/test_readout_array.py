@@ -256,7 +256,7 @@ def test_record_writes_a_taxel_column_magfab_calibrate_reads(pkg, capsys, tmp_pa
     assert cli.main(["record", str(out), "--simulate", "--seconds", "0.06"]) == 0
     text = out.read_text()
     assert "# array: array of 5 taxels" in text and "# taxel 4 calibration_sha256: " in text
-    rows = list(csv.DictReader(io.StringIO("\n".join(l for l in text.splitlines() if not l.startswith("#")))))
+    rows = list(csv.DictReader(io.StringIO("\n".join(line for line in text.splitlines() if not line.startswith("#")))))
     assert list(rows[0])[:3] == ["time_s", "host_time_s", "taxel"] and "Fz_sensor_N" in rows[0]
     assert [int(r["taxel"]) for r in rows] == list(range(5)) * (len(rows) // 5) and len(rows) >= 50
     for k in (0, 2):

@@ -144,7 +144,7 @@ def test_recording_and_reference_readers():
     rec = read_recording(_recording_text().encode())
     assert rec.scan.rows == 60 and rec.host_time_s[1] == 1.7e9 + 0.002 and rec.scan.F_N[2, 2] == 0.02
     assert rec.lines[0] == 2
-    with pytest.raises(ScanError, match="missing column 'host_time_s'.*record again"):
+    with pytest.raises(ScanError, match=r"missing column 'host_time_s'.*record again"):
         read_recording(_recording_text(host=False).encode())
     ref = read_reference(b"# a log\nFz_N,time_s,Fx_N,Fy_N\n0.5,1700000000.25,0,0.1\n0.6,1700000000.5,0,0.2\n")
     assert ref.time_s.tolist() == [1700000000.25, 1700000000.5] and ref.F_N[1].tolist() == [0.0, 0.2, 0.6]
@@ -152,5 +152,5 @@ def test_recording_and_reference_readers():
     # a recording passed as the reference is refused by the same guard
     with pytest.raises(ScanError, match="own calibrated forces"):
         read_reference(_recording_text().encode())
-    with pytest.raises(ScanError, match="line 3.*'time_s'.*non-decreasing"):
+    with pytest.raises(ScanError, match=r"line 3.*'time_s'.*non-decreasing"):
         read_reference(b"time_s,Fx_N,Fy_N,Fz_N\n2,0,0,0\n1,0,0,0\n")

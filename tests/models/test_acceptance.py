@@ -157,7 +157,7 @@ def test_the_weight_and_its_limits(design, pred, acc):
     bands = [acceptance(design, pred, weight_g=w)["delta_Bz_uT"] for w in (20.0, 50.0, 100.0)]
     assert bands[1] == acc["delta_Bz_uT"]
     assert bands[0][0] < bands[1][0] < bands[2][0] and bands[0][1] < bands[1][1] < bands[2][1]
-    with pytest.raises(ValueError, match="beyond the predicted range .* use a lighter weight"):
+    with pytest.raises(ValueError, match=r"beyond the predicted range .* use a lighter weight"):
         acceptance(design, pred, weight_g=500.0)
     with pytest.raises(ValueError, match="positive number of grams"):
         acceptance(design, pred, weight_g=-1.0)
