@@ -112,7 +112,8 @@ def main(argv: list[str] | None = None) -> int:
     per = _surrogate_seconds(S, held)
     err = data["held_out_error"]
     for k in ("force", "travel", "stretch", "disp", "reach"):
-        print(f"{k:8s} RMS {100 * err[k + '_rms']:.2f} %  p90 {100 * err[k + '_p90']:.2f} %  max {100 * err[k + '_max']:.2f} %")
+        print(f"{k:8s} RMS {100 * err[k + '_rms']:.2f} %  p90 {100 * err[k + '_p90']:.2f} %  "
+              f"max {100 * err[k + '_max']:.2f} %")
     print(f"speed: FE {fe_s:.2f} s per run (the runs made now), surrogate {1e3 * per:.2f} ms: {fe_s / per:.0f}x")
     return 0
 
