@@ -74,10 +74,12 @@ def _intersection_volume(a, b) -> float:
 def test_pocket_holds_the_magnet_at_the_rest_position():
     d = derive(load_spec(None))
     top = d.pocket_roof_z_mm
-    magnet = cq.Workplane("XY", origin=(0, 0, top - d.magnet_height_mm)).circle(d.magnet_radius_mm).extrude(d.magnet_height_mm)
+    magnet = (cq.Workplane("XY", origin=(0, 0, top - d.magnet_height_mm))
+              .circle(d.magnet_radius_mm).extrude(d.magnet_height_mm))
     assert _intersection_volume(elastomer_solid(d), magnet) == pytest.approx(0.0, abs=1e-6)
     # ... and any larger magnet than the clearance allows would collide.
-    fat = cq.Workplane("XY", origin=(0, 0, top - d.magnet_height_mm)).circle(d.pocket_radius_mm + 0.02).extrude(d.magnet_height_mm)
+    fat = (cq.Workplane("XY", origin=(0, 0, top - d.magnet_height_mm))
+           .circle(d.pocket_radius_mm + 0.02).extrude(d.magnet_height_mm))
     assert _intersection_volume(elastomer_solid(d), fat) > 0.0
 
 

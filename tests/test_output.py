@@ -44,7 +44,8 @@ def _tree(folder) -> dict[str, bytes | str | None]:
             if os.path.islink(path):
                 found[key] = "-> " + os.readlink(path)
             elif os.path.isfile(path):
-                found[key] = open(path, "rb").read()
+                with open(path, "rb") as fh:
+                    found[key] = fh.read()
             elif not os.listdir(path):
                 found[key] = None
     return found
@@ -482,7 +483,8 @@ def test_a_read_only_folder_is_one_line_naming_it_and_nothing_is_lost(built, mon
     real = {"lock": os.open, "mkdir": os.mkdir, "rename": os.rename}[fail]
 
     def denied(path, *args, **kwargs):
-        if os.path.dirname(os.path.abspath(path)) == str(out.parent) and (fail != "lock" or str(path).endswith(".lock")):
+        if os.path.dirname(os.path.abspath(path)) == str(out.parent) and \
+                (fail != "lock" or str(path).endswith(".lock")):
             raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(path))
         return real(path, *args, **kwargs)
 

@@ -97,7 +97,7 @@ def test_spec_and_design_never_crash(raw):
         design = derive(parse_spec(text))
     except SpecError as exc:
         event("infeasible or invalid")
-        assert exc.key and str(exc).startswith(exc.key) and "\n" not in str(exc)
+        assert exc.key and str(exc).startswith(exc.key) and "\n" not in str(exc)  # noqa: PT017 - refusing is one allowed outcome, not the expected one
         return
     assert design.d_rest_mm == pytest.approx(design.spec.sensor.d_max_mm, abs=1e-3)
     assert design.skin_mm >= design.spec.elastomer.min_skin_mm - 1e-9

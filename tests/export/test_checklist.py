@@ -84,7 +84,8 @@ def test_markdown_and_html_escape_what_they_carry(design, monkeypatch):
     hostile = "<script>alert(1)</script> *bold* [link](x) a_b | c"
     assert "<" not in md(hostile) and "\\*bold\\*" in md(hostile) and "\\[link\\]" in md(hostile)
     table = C.Table(("h " + hostile,), ((hostile,),))
-    monkeypatch.setattr(C, "sections", lambda d, a=None, p=None: [C.Section("Step " + hostile, (C.Step(hostile),), table)])
+    monkeypatch.setattr(C, "sections",
+                        lambda d, a=None, p=None: [C.Section("Step " + hostile, (C.Step(hostile),), table)])
     html = C.checklist_html(design)
     assert "<script>" not in html and html.count("&lt;script&gt;alert(1)&lt;/script&gt;") == 4
     text = C.checklist_md(design)
@@ -121,7 +122,8 @@ def test_the_build_quotes_its_own_acceptance_bands_and_bom(default_build):
     (lo, hi), w, (d_lo, d_hi) = acc["rest_Bz_uT"], acc["weight_g"], acc["delta_Bz_uT"]
     assert 0 < lo < acc["rest"]["Bz_uT"]["nominal"] < hi and 0 < d_lo < d_hi
     line = next(s for s in (out / "checklist.md").read_text().splitlines() if "Pass:" in s)
-    assert f"within {lo:.0f} to {hi:.0f} uT" in line and f"a {w:g} g weight raises Bz by {d_lo:.0f} to {d_hi:.0f} uT" in line
+    assert f"within {lo:.0f} to {hi:.0f} uT" in line and \
+        f"a {w:g} g weight raises Bz by {d_lo:.0f} to {d_hi:.0f} uT" in line
     assert (out / "bom.csv").read_text() == bom.bom_csv(default_build.design, acc)
 
 

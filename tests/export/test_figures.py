@@ -110,7 +110,8 @@ def test_speed_accuracy_point_labels_do_not_overlap(drawn):
         frame = _bbox(ax, fig)
         assert boxes
         for i, a in enumerate(boxes):
-            assert frame.x0 - 0.5 <= a.x0 and a.x1 <= frame.x1 + 0.5 and frame.y0 - 0.5 <= a.y0 and a.y1 <= frame.y1 + 0.5
+            assert frame.x0 - 0.5 <= a.x0 and a.x1 <= frame.x1 + 0.5 and \
+                frame.y0 - 0.5 <= a.y0 and a.y1 <= frame.y1 + 0.5
             assert not any(_overlaps(a, b) for b in boxes[i + 1:]), f"{ax.get_label()}: labels overlap"
 
 

@@ -58,7 +58,8 @@ def test_field_frames_decode_to_samples_with_their_taxel_mixed_with_text_and_noi
     assert d.chip_error and d.fault_name == "chip ERROR bit at read" and d.source == "text"
     assert e.force_N == pytest.approx((0.1, 0.2, 0.3)) and e.taxel == 0
     infos = [x for x in out if isinstance(x, f.DeviceInfo)]
-    assert [(i.spec_name, i.taxels, i.settings) for i in infos] == [("strip,x", 5, (7, 0, 0, 2)), ("one", 1, (7, 0, 0, 2))]
+    assert [(i.spec_name, i.taxels, i.settings) for i in infos] == [("strip,x", 5, (7, 0, 0, 2)),
+                                                                    ("one", 1, (7, 0, 0, 2))]
     assert decoder.stats.frames == 3 and decoder.stats.lines == 2 and decoder.stats.crc_errors == 0
     assert decoder.stats.lost == 0  # one sequence per taxel: 7 and 8 on different taxels lose nothing
 

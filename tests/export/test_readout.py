@@ -101,7 +101,8 @@ def test_render_is_complete_deterministic_and_embeds_the_calibration(design, cal
     assert project["project"]["scripts"] == {"magfab-readout": "magfab_readout.cli:main"}
     assert [d.split(">")[0] for d in project["project"]["dependencies"]] == ["pyserial"]
     # a backend that builds out of tree: setuptools wrote readout/build/ and *.egg-info into the build folder
-    assert project["build-system"]["build-backend"] == "flit_core.buildapi" and "setuptools" not in project.get("tool", {})
+    assert project["build-system"]["build-backend"] == "flit_core.buildapi" and \
+        "setuptools" not in project.get("tool", {})
     assert project["tool"]["flit"]["module"]["name"] == "magfab_readout"
     assert json.loads(rendered[f"{PKG}/calibration.json"]) == calibration
     sha = hashlib.sha256(json.dumps(calibration, sort_keys=True, separators=(",", ":")).encode()).hexdigest()

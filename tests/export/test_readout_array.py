@@ -178,7 +178,8 @@ def test_a_press_on_taxel_2_reads_on_taxel_2_only(pkg, array, strip):
         readings = Exact(design, motion=motion).pressed.tolist()
         rest = static.forces(Exact(design).rest.tolist())
         moved = static.forces(readings)
-        worst_static = max(worst_static, *(abs(moved[k][a] - rest[k][a]) / resolution[a] for k in (1, 3) for a in range(3)))
+        worst_static = max(worst_static,
+                           *(abs(moved[k][a] - rest[k][a]) / resolution[a] for k in (1, 3) for a in range(3)))
     assert worst_static > 1.0
 
 
@@ -210,13 +211,13 @@ def test_a_missing_neighbour_is_held_in_the_compensation(pkg, array, strip):
 
 def test_a_single_taxels_firmware_is_refused(pkg, array):
     single = pkg.SimulatedDevice(array.calibrations[0], realtime=False, chunk=20)
-    with pkg.Device(transport=single) as device:
-        with pytest.raises(pkg.WrongFirmware, match="sends a single taxel's force frames"):
-            pkg.ArrayReader(device, array).read(1)
+    with pkg.Device(transport=single) as device, \
+            pytest.raises(pkg.WrongFirmware, match="sends a single taxel's force frames"):
+        pkg.ArrayReader(device, array).read(1)
     array_cli = importlib.import_module("magfab_readout.array_cli")
-    with pkg.Device(transport=pkg.SimulatedDevice(array.calibrations[0], realtime=False)) as device:
-        with pytest.raises(pkg.WrongFirmware, match="reads 1 chip but this readout package is for an array of 5"):
-            array_cli._checked_info(device, array)
+    with pkg.Device(transport=pkg.SimulatedDevice(array.calibrations[0], realtime=False)) as device, \
+            pytest.raises(pkg.WrongFirmware, match="reads 1 chip but this readout package is for an array of 5"):
+        array_cli._checked_info(device, array)
 
 
 def _rows(stdout):
@@ -326,4 +327,5 @@ def test_a_warming_array_is_corrected_taxel_by_taxel(pkg, array, strip):
     drift = [warmed(bare)[-1][k].force_N[2] for k in range(5)]
     assert all(abs(fz) > 5 * resolution[2] for fz in drift), drift
     worst = max(abs(c[k].force_N[2]) for c in hot for k in range(5))
-    print(f"after +10 C: corrected |Fz| <= {1e3 * worst:.2f} mN, uncorrected Fz {[round(1e3 * fz, 1) for fz in drift]} mN")
+    print(f"after +10 C: corrected |Fz| <= {1e3 * worst:.2f} mN, "
+          f"uncorrected Fz {[round(1e3 * fz, 1) for fz in drift]} mN")

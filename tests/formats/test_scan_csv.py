@@ -117,7 +117,8 @@ def _recording_text(host: bool = True, sensor: bool = True) -> str:
     rows = [",".join(names)]
     for i in range(60):
         row = [f"{0.00184 * i:.6f}"] + ([f"{1.7e9 + 0.002 * i:.6f}"] if host else [])
-        row += [str(i % 8), str(-i), str(20000 + 10 * i)] + (["0.0", f"{0.001 * i:.3f}", f"{0.01 * i:.2f}"] if sensor else [])
+        row += [str(i % 8), str(-i), str(20000 + 10 * i)]
+        row += ["0.0", f"{0.001 * i:.3f}", f"{0.01 * i:.2f}"] if sensor else []
         rows.append(",".join(row))
     return "\n".join(rows) + "\n"
 

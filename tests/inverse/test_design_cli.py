@@ -63,7 +63,8 @@ def test_designs_at_least_as_good_as_magone(study, magone_prediction):
     assert front
     better = [r for r in front if float(r["normal_resolution_mN"]) <= magone[0]
               and float(r["normal_range_N"]) >= magone[1] and float(r["diameter_mm"]) <= magone[2]]
-    assert better, f"no front design dominates MagOne {magone}: {[(r['design'], r['normal_resolution_mN'], r['normal_range_N'], r['diameter_mm']) for r in front]}"
+    shown = [(r["design"], r["normal_resolution_mN"], r["normal_range_N"], r["diameter_mm"]) for r in front]
+    assert better, f"no front design dominates MagOne {magone}: {shown}"
     assert all(r["model"] == "fe" for r in front)  # re-verified by the full chain
 
 
@@ -72,7 +73,8 @@ def test_the_files_a_user_gets(study):
     for name in ("study.log", "trials.csv", "trials.parquet", "pareto.csv", "pareto.parquet", "pareto.svg",
                  "pareto.png", "README.md", "index.html"):
         assert (folder / name).stat().st_size > 0, name
-    trials = list(csv.DictReader(open(folder / "trials.csv", newline="")))
+    with open(folder / "trials.csv", newline="") as fh:
+        trials = list(csv.DictReader(fh))
     assert len(trials) == 120
     assert all(t["reason"] for t in trials if t["state"] != "ok")  # every failure and violation says why
     import pyarrow.parquet as pq

@@ -200,7 +200,8 @@ def test_rotation_band_is_the_earth_turned_over_plus_the_tips_own_weight(design,
     table = acc["weight"]["table"]
     slope = (table["delta_Bz_max_uT"][1] - table["delta_Bz_max_uT"][0]) / table["force_N"][1]
     own = 2.0 * (magnet_N + silicone_N / 2.0) * slope
-    assert rot["earth_change_uT"] == pytest.approx(2 * 65.0) and rot["self_weight_change_uT"] == pytest.approx(own, rel=1e-3)
+    assert rot["earth_change_uT"] == pytest.approx(2 * 65.0) and \
+        rot["self_weight_change_uT"] == pytest.approx(own, rel=1e-3)
     assert rot["band_uT"] == pytest.approx(130.0 + own, rel=1e-3)
     assert rot["predicted_normal_rest_mN"] == pytest.approx(abs(pred.drift.rotation_band[1].normal_rest_mN), rel=1e-3)
     assert rot["gradient_uT_per_mm"] == pytest.approx(pred.field.dBz_dz_rest_G_per_mm * 100, rel=1e-4)
@@ -208,7 +209,8 @@ def test_rotation_band_is_the_earth_turned_over_plus_the_tips_own_weight(design,
 
     quiet = design.spec.model_copy(update={"environment": Environment(earth_field_G=0.4)})
     there = acceptance(derive(quiet), pred)["rotation"]
-    assert there["earth_change_uT"] == pytest.approx(80.0) and there["self_weight_change_uT"] == rot["self_weight_change_uT"]
+    assert there["earth_change_uT"] == pytest.approx(80.0) and \
+        there["self_weight_change_uT"] == rot["self_weight_change_uT"]
     assert there["predicted_normal_rest_mN"] == pytest.approx(rot["predicted_normal_rest_mN"] * 80 / 130, rel=1e-3)
 
 
@@ -256,7 +258,8 @@ def test_render_embeds_acceptance_and_stays_compatible(design, acc, rendered):
     (lambda a: a["weight"]["table"]["delta_Bz_max_uT"].pop(), "acceptance.json:weight.table"),
     (lambda a: a["magnet"].update(grade=35), "acceptance.json:magnet.grade"),
     (lambda a: a["rotation"].pop("band_uT"), "acceptance.json:rotation.band_uT"),
-    (lambda a: a["rotation"].update(predicted_normal_rest_mN="40"), "acceptance.json:rotation.predicted_normal_rest_mN"),
+    (lambda a: a["rotation"].update(predicted_normal_rest_mN="40"),
+     "acceptance.json:rotation.predicted_normal_rest_mN"),
     (lambda a: a["warmup"]["per_C_mN"].pop("fitted"), "acceptance.json:warmup.per_C_mN.fitted"),
 ])
 def test_malformed_acceptance_is_refused_by_key(design, acc, change, key):

@@ -42,7 +42,8 @@ def test_neighbours_field_is_magpylibs_superposition(array_builds, name):
     _, _, rest = X.layout_errors(loads, xy, signs)
     m = loads.magnet
     for i, (x, y) in enumerate(xy):
-        mags = [magpylib.magnet.Cylinder(polarization=(0, 0, s * m.remanence_T), dimension=(2 * m.radius_mm, m.height_mm),
+        mags = [magpylib.magnet.Cylinder(polarization=(0, 0, s * m.remanence_T),
+                                         dimension=(2 * m.radius_mm, m.height_mm),
                                          position=(px, py, loads.z_centre)) for j, ((px, py), s) in
                 enumerate(zip(xy, signs)) if j != i]
         B = magpylib.getB(mags, (x, y, loads.z_chip), sumup=True) * 1e4  # T -> G

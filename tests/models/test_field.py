@@ -389,7 +389,7 @@ def test_choose_picks_the_cheapest_model_within_tolerance():
     tight = F.choose(MAGONE, volume, 1e-6)
     assert (tight.model, tight.error) == ("exact", 0.0)
     assert F.choose(MAGONE, volume, 1e-3) == c  # deterministic
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="tolerance must be positive"):
         F.choose(MAGONE, volume, 0.0)
 
 

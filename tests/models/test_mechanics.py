@@ -384,7 +384,7 @@ def test_shear_needs_a_magnet():
         mech.shear_stiffness(_cylinder(3.0, 3.0), 10.0)
 
 
-# ---- registry and measurement -----------------------------------------------------------------------------------------
+# ---- registry and measurement ----------------------------------------------------------------------------------------
 
 
 def test_registry_models_share_one_signature(magone):
