@@ -45,8 +45,8 @@ from pathlib import Path
 BENCH_DIR = Path(__file__).resolve().parent
 sys.path.insert(0, str(BENCH_DIR.parent))
 
-from magfab import derive, load_spec  # noqa: E402
-from magfab.export import firmware, toolchain  # noqa: E402
+from magfab import derive, load_spec  # noqa: E402 - imported after sys.path points at the repository
+from magfab.export import firmware, toolchain  # noqa: E402 - imported after sys.path points at the repository
 
 DEFAULT_OUT = BENCH_DIR / "out"
 JSON_NAME = "firmware_bench.json"

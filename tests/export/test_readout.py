@@ -473,7 +473,7 @@ def test_device_errors_say_what_to_do(pkg):
 
 def test_missing_port_is_named(pkg):
     try:
-        import serial  # noqa: F401
+        import serial  # noqa: F401 - imported only to learn whether pyserial is installed
     except ImportError:
         with pytest.raises(pkg.DeviceError, match="pyserial is not installed"):
             pkg.Device("/dev/does-not-exist")
