@@ -29,13 +29,13 @@ BENCH_DIR = Path(__file__).resolve().parent
 sys.path.insert(0, str(BENCH_DIR.parent))
 sys.path.insert(0, str(BENCH_DIR.parent / "tests" / "models"))  # the FElupe model lives with its test
 
-from test_mechanics_crosscheck import FElupeIndentation  # noqa: E402
+from test_mechanics_crosscheck import FElupeIndentation  # noqa: E402 - imported after sys.path points at its test folder
 
-from magfab import load_spec  # noqa: E402
-from magfab.design import derive  # noqa: E402
-from magfab.models import mechanics as mech  # noqa: E402
-from magfab.models.mechanics.schedule import FE_MESHES_MM  # noqa: E402
-from magfab.models.predict import _band  # noqa: E402
+from magfab import load_spec  # noqa: E402 - imported after sys.path points at the repository
+from magfab.design import derive  # noqa: E402 - imported after sys.path points at the repository
+from magfab.models import mechanics as mech  # noqa: E402 - imported after sys.path points at the repository
+from magfab.models.mechanics.schedule import FE_MESHES_MM  # noqa: E402 - imported after sys.path points at the repository
+from magfab.models.predict import _band  # noqa: E402 - imported after sys.path points at the repository
 
 DESIGNS = (("MagOne", None), ("small_magnet", BENCH_DIR / "designs" / "small_magnet.toml"),
            ("stiff_material", BENCH_DIR / "designs" / "stiff_material.toml"),

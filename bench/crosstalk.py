@@ -109,7 +109,8 @@ def least_pitches(tol_override: float | None = None) -> list[dict[str, object]]:
                 out.append(row)
                 f = lambda v: "none" if v is None else f"{v:.1f}"
                 print(f"  {name:<6} {skin:<11} {row['polarity']:<12} {d.array.min_pitch_mm:>9.1f} {f(field):>7} "
-                      f"{f(comp):>12} {f(pressed):>13} {end:>17.2f} {row['end_shift_at_parts_min_um']:>9.1f} {bz:>+13.1f}")
+                      f"{f(comp):>12} {f(pressed):>13} {end:>17.2f} "
+                      f"{row['end_shift_at_parts_min_um']:>9.1f} {bz:>+13.1f}")
     return out
 
 

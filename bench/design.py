@@ -106,7 +106,8 @@ def main(argv: list[str] | None = None) -> int:
     targets, base = _targets()
     points = latin_hypercube(targets.variables, a.surrogate_designs, seed=7)
     fe_points = points[:a.fe_designs]
-    result: dict[str, object] = {"cores": os.cpu_count(), "surrogate_designs": len(points), "fe_designs": len(fe_points)}
+    result: dict[str, object] = {"cores": os.cpu_count(), "surrogate_designs": len(points),
+                                 "fe_designs": len(fe_points)}
     rates: dict[str, dict[int, float]] = {"surrogate": {}, "fe": {}}
     recs: dict[str, list] = {}
     overheads = []
@@ -153,7 +154,8 @@ def main(argv: list[str] | None = None) -> int:
         paper[str(n)] = {"sweep_hours": sweep_h, "sweep_bound": "scheduler" if 1e6 * per_task > compute else "workers",
                          "search_hours": max(sweep_h, 1e6 * loop / 3600.0)}
     result["study_1e6_on_paper"] = paper
-    print(f"surrogate vs FE speed ratio (1 worker): {speed_ratio:.0f}x; scheduler overhead {1e3 * per_task:.2f} ms/task")
+    print(f"surrogate vs FE speed ratio (1 worker): {speed_ratio:.0f}x; "
+          f"scheduler overhead {1e3 * per_task:.2f} ms/task")
     for f, e in result["error_vs_full_chain"].items():
         print(f"  {f:22s} median {100 * e['median']:.1f} %  p90 {100 * e['p90']:.1f} %  max {100 * e['max']:.1f} % "
               f"(n={e['n']})")

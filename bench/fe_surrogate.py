@@ -18,6 +18,7 @@ Run from the repository::
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import multiprocessing
 import os
@@ -70,10 +71,8 @@ def _surrogate_seconds(S, held: list[dict[str, float]]) -> float:
     d = S.GRID * S.R_TABLE
     t1 = time.perf_counter()
     for body in bodies_:
-        try:
+        with contextlib.suppress(S.OutsideRegion):
             S.normal_and_shear(body, 1.0, d[d <= 3.0], 3.0, d[S.PROBED][d[S.PROBED] <= 3.0], S.REST_TABLE)
-        except S.OutsideRegion:
-            pass
     return (time.perf_counter() - t1) / max(len(bodies_), 1)
 
 
@@ -113,7 +112,8 @@ def main(argv: list[str] | None = None) -> int:
     per = _surrogate_seconds(S, held)
     err = data["held_out_error"]
     for k in ("force", "travel", "stretch", "disp", "reach"):
-        print(f"{k:8s} RMS {100 * err[k + '_rms']:.2f} %  p90 {100 * err[k + '_p90']:.2f} %  max {100 * err[k + '_max']:.2f} %")
+        print(f"{k:8s} RMS {100 * err[k + '_rms']:.2f} %  p90 {100 * err[k + '_p90']:.2f} %  "
+              f"max {100 * err[k + '_max']:.2f} %")
     print(f"speed: FE {fe_s:.2f} s per run (the runs made now), surrogate {1e3 * per:.2f} ms: {fe_s / per:.0f}x")
     return 0
 

@@ -45,8 +45,8 @@ from pathlib import Path
 BENCH_DIR = Path(__file__).resolve().parent
 sys.path.insert(0, str(BENCH_DIR.parent))
 
-from magfab import derive, load_spec  # noqa: E402
-from magfab.export import firmware, toolchain  # noqa: E402
+from magfab import derive, load_spec  # noqa: E402 - imported after sys.path points at the repository
+from magfab.export import firmware, toolchain  # noqa: E402 - imported after sys.path points at the repository
 
 DEFAULT_OUT = BENCH_DIR / "out"
 JSON_NAME = "firmware_bench.json"
@@ -144,7 +144,8 @@ def generic_vs_own(design, calibration: dict, f_mhz: float) -> dict:
     g, o = out["generic"], out["own"]
     print(f"generic image (settings from EEPROM) against build-specific (order {calibration['order']}): "
           f"{g['sample_cycles']} vs {o['sample_cycles']} cycles per sample "
-          f"({(g['sample_cycles'] - o['sample_cycles']) / f_mhz:+.0f} us, {g['sample_cycles'] / o['sample_cycles'] - 1:+.1%}), "
+          f"({(g['sample_cycles'] - o['sample_cycles']) / f_mhz:+.0f} us, "
+          f"{g['sample_cycles'] / o['sample_cycles'] - 1:+.1%}), "
           f"flash {g['flash_bytes']} vs {o['flash_bytes']} B, RAM {g['ram_bytes']} vs {o['ram_bytes']} B")
     return out
 
@@ -155,7 +156,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--calibration", type=Path, help="a calibration.json to time instead of synthetic ones")
     parser.add_argument("--orders", default="1,2,3,4,5,6", help="polynomial orders of the synthetic calibrations")
     parser.add_argument("--hull", type=int, default=28,
-                        help="points on the synthetic hull (the EEPROM record holds 1 KB: 28 fit up to order 6 with the settings)")
+                        help="points on the synthetic hull (the EEPROM record holds 1 KB: 28 fit up to order 6 "
+                             "with the settings)")
     parser.add_argument("--build", type=Path, help="an existing build folder to measure (default: build the spec)")
     parser.add_argument("--no-rate", action="store_true", help="skip the shipped build's rate on the simulated bus")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)

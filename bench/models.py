@@ -74,7 +74,8 @@ def rows(repeat: int, reference_mesh_mm: float) -> tuple[list[dict], dict]:
     t_b = time.perf_counter() - t
     for label, k, dt, mesh in (("timoshenko", k_t, t_t, None), ("fe build mesh", k_b, t_b, None),
                                (f"fe {reference_mesh_mm:g} mm", k_fe, t_fe, reference_mesh_mm)):
-        out.append({"family": "shear", "model": label.split()[0], "label": f"shear {label}", "error": abs(k - k_fe) / k_fe,
+        out.append({"family": "shear", "model": label.split()[0], "label": f"shear {label}",
+                    "error": abs(k - k_fe) / k_fe,
                     "time_s": dt, "unit": "per stiffness", "reference": f"shear fe {reference_mesh_mm:g} mm",
                     "ratio_to_reference_time": dt / t_fe, "mesh_mm": mesh})
     # Shear as the build applies it (through the contact patch; the magnet shifts and tilts): the chip's lateral
@@ -115,7 +116,8 @@ def main(argv: list[str] | None = None) -> int:
     table, extra = rows(args.repeat, args.reference_mesh)
     print(f"{'family':10} {'model':18} {'max rel. error':>15} {'time':>12}  {'x ref. time':>11}  unit")
     for r in table:
-        print(f"{r['family']:10} {r['label']:18} {r['error']:15.3g} {r['time_s']:10.4f} s  {r['ratio_to_reference_time']:11.4f}"
+        print(f"{r['family']:10} {r['label']:18} {r['error']:15.3g} {r['time_s']:10.4f} s  "
+              f"{r['ratio_to_reference_time']:11.4f}"
               f"  {r['unit']} (reference: {r['reference']})")
     print(f"whole MagOne prediction (band included): median {extra['prediction_s']:.2f} s, "
           f"min {extra['prediction_min_s']:.2f} s over {args.repeat} runs; models {extra['models_chosen']}")

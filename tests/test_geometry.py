@@ -24,7 +24,7 @@ def _mesh(result, stem):
     return trimesh.load(io.BytesIO(data), file_type="stl")
 
 
-@pytest.mark.parametrize("stem", ("elastomer",) + PRINTED)
+@pytest.mark.parametrize("stem", ["elastomer", *PRINTED])
 def test_every_stl_is_a_closed_oriented_solid(default_build, stem):
     mesh = _mesh(default_build, stem)
     assert mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0
@@ -57,7 +57,7 @@ def test_cup_and_lid_boxes_and_volumes():
 
 
 def test_step_files_reimport_with_the_same_volume(default_build, tmp_path):
-    for stem in ("elastomer",) + PRINTED:
+    for stem in ("elastomer", *PRINTED):
         path = tmp_path / f"{stem}.step"
         path.write_bytes(next(a.data for a in default_build.artifacts if a.path == f"{stem}.step"))
         solid = cq.importers.importStep(str(path)).val()
@@ -74,10 +74,12 @@ def _intersection_volume(a, b) -> float:
 def test_pocket_holds_the_magnet_at_the_rest_position():
     d = derive(load_spec(None))
     top = d.pocket_roof_z_mm
-    magnet = cq.Workplane("XY", origin=(0, 0, top - d.magnet_height_mm)).circle(d.magnet_radius_mm).extrude(d.magnet_height_mm)
+    magnet = (cq.Workplane("XY", origin=(0, 0, top - d.magnet_height_mm))
+              .circle(d.magnet_radius_mm).extrude(d.magnet_height_mm))
     assert _intersection_volume(elastomer_solid(d), magnet) == pytest.approx(0.0, abs=1e-6)
     # ... and any larger magnet than the clearance allows would collide.
-    fat = cq.Workplane("XY", origin=(0, 0, top - d.magnet_height_mm)).circle(d.pocket_radius_mm + 0.02).extrude(d.magnet_height_mm)
+    fat = (cq.Workplane("XY", origin=(0, 0, top - d.magnet_height_mm))
+           .circle(d.pocket_radius_mm + 0.02).extrude(d.magnet_height_mm))
     assert _intersection_volume(elastomer_solid(d), fat) > 0.0
 
 

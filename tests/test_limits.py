@@ -98,7 +98,7 @@ def test_fuzzed_specs_are_refused_with_a_key_or_within_budget(values):
         preflight(design)
     except SpecError as exc:
         message = str(exc)
-        assert "\n" not in message and len(message) < 400 and message.startswith(exc.key)
+        assert "\n" not in message and len(message) < 400 and message.startswith(exc.key)  # noqa: PT017 - refusing is one allowed outcome, not the expected one
         return
     cost = estimate(design)
     assert cost.seconds <= BUDGET_S and cost.megabytes <= BUDGET_MB and cost.triangles <= MAX_TRIANGLES

@@ -31,7 +31,7 @@ def _fake(tag: str, *extra: str) -> list[Artifact]:
     files += [Artifact(p, f"{tag} {p}".encode(), "") for p in extra]
     listing = [{"path": a.path, "sha256": "", "bytes": len(a.data), "description": ""} for a in files]
     manifest = json.dumps({"magfab_version": "test", "tag": tag, "artifacts": listing}).encode()
-    return files + [Artifact("manifest.json", manifest, "")]
+    return [*files, Artifact("manifest.json", manifest, "")]
 
 
 def _tree(folder) -> dict[str, bytes | str | None]:
@@ -44,7 +44,8 @@ def _tree(folder) -> dict[str, bytes | str | None]:
             if os.path.islink(path):
                 found[key] = "-> " + os.readlink(path)
             elif os.path.isfile(path):
-                found[key] = open(path, "rb").read()
+                with open(path, "rb") as fh:
+                    found[key] = fh.read()
             elif not os.listdir(path):
                 found[key] = None
     return found
@@ -92,11 +93,11 @@ def test_user_files_survive_build_and_rebuild(built):
 
 
 def test_a_user_file_where_the_build_writes_stops_it_before_anything_changes(built):
-    out, user = built
+    out, _user = built
     before = _tree(out)
     for clash in (_fake("new", "scan.csv"), _fake("new", "empty"), _fake("new", "scan.csv/inner"),
                   _fake("new", "latest.csv")):
-        with pytest.raises(OutputError, match="scan.csv|empty|latest.csv.* is not magfab's"):
+        with pytest.raises(OutputError, match=r"(scan\.csv|empty|latest\.csv).* is not magfab's"):
             write(out, clash)
         assert _tree(out) == before and _beside(out) == ["out"]
 
@@ -143,7 +144,7 @@ def test_a_manifest_without_a_list_marks_every_file_as_magfabs(tmp_path):
 def test_an_output_folder_under_a_file_is_refused(tmp_path):
     (tmp_path / "file").write_text("x")
     for call in (lambda: check_target(tmp_path / "file" / "out"), lambda: write(tmp_path / "file" / "out", _fake("a"))):
-        with pytest.raises(OutputError, match="cannot write .*file"):
+        with pytest.raises(OutputError, match=r"cannot write .*file"):
             call()
     assert _beside(tmp_path / "file") == ["file"]
 
@@ -295,7 +296,7 @@ def test_a_kill_at_every_step_of_the_write_then_of_its_recovery(built):
 
 def test_a_kill_between_the_two_renames_is_undone_by_the_next_run(built):
     """Killed after the previous build was moved aside, before the new one landed."""
-    out, user = built
+    out, _user = built
     old = _tree(out)
     pid = os.fork()
     if pid == 0:  # pragma: no cover - the child
@@ -352,7 +353,7 @@ def test_an_error_at_every_step_leaves_a_complete_build_and_no_temporaries(built
     for k, step in enumerate(steps):
         count = iter(range(len(steps) * 3))
 
-        def hook(what, k=k):
+        def hook(what, k=k, count=count):
             if next(count) == k:
                 raise error
 
@@ -370,7 +371,7 @@ def test_an_error_at_every_step_leaves_a_complete_build_and_no_temporaries(built
 
 
 def test_stale_temporaries_are_removed_and_others_kept(built, tmp_path):
-    out, user = built
+    out, _user = built
     old = _tree(out)
     for name in (".out.tmp-0123456789abcdef", ".out.old-fedcba9876543210", ".out.tmp-abcd_123"):
         (tmp_path / name / "parts").mkdir(parents=True)
@@ -429,7 +430,7 @@ def test_concurrent_writers_to_one_folder_all_finish_with_a_complete_build(built
 
 
 def test_a_second_writer_that_cannot_wait_is_refused_naming_the_first(built):
-    out, user = built
+    out, _user = built
     before = _tree(out)
     fd = os.open(out.parent / ".out.lock", os.O_RDWR | os.O_CREAT)
     try:
@@ -446,7 +447,7 @@ def test_a_second_writer_that_cannot_wait_is_refused_naming_the_first(built):
 # ---- a full disk, a read-only folder ----
 
 def test_a_full_disk_is_one_line_naming_the_file_and_nothing_is_lost(built, monkeypatch):
-    out, user = built
+    out, _user = built
     before = _tree(out)
     real_open = open
 
@@ -477,12 +478,13 @@ def test_a_full_disk_is_one_line_naming_the_file_and_nothing_is_lost(built, monk
 @pytest.mark.parametrize("fail", ["lock", "mkdir", "rename"])
 def test_a_read_only_folder_is_one_line_naming_it_and_nothing_is_lost(built, monkeypatch, fail):
     """Simulated (root ignores permissions): the first call that needs the parent writable fails with EACCES."""
-    out, user = built
+    out, _user = built
     before = _tree(out)
     real = {"lock": os.open, "mkdir": os.mkdir, "rename": os.rename}[fail]
 
     def denied(path, *args, **kwargs):
-        if os.path.dirname(os.path.abspath(path)) == str(out.parent) and (fail != "lock" or str(path).endswith(".lock")):
+        if os.path.dirname(os.path.abspath(path)) == str(out.parent) and \
+                (fail != "lock" or str(path).endswith(".lock")):
             raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(path))
         return real(path, *args, **kwargs)
 
@@ -497,7 +499,7 @@ def test_a_read_only_folder_is_one_line_naming_it_and_nothing_is_lost(built, mon
 
 @pytest.mark.parametrize("which", ["parent", "out"])
 def test_a_read_only_folder_is_refused_before_any_work(built, monkeypatch, which):
-    out, user = built
+    out, _user = built
     folder = out.parent if which == "parent" else out
     real_access = os.access
     monkeypatch.setattr(os, "access", lambda p, mode, **kw: str(p) != str(folder) and real_access(p, mode, **kw))
@@ -508,7 +510,7 @@ def test_a_read_only_folder_is_refused_before_any_work(built, monkeypatch, which
 @pytest.mark.skipif(os.geteuid() == 0, reason="root ignores folder permissions (the simulated tests cover it)")
 @pytest.mark.parametrize("which", ["parent", "out"])
 def test_a_really_read_only_folder(built, which):
-    out, user = built
+    out, _user = built
     before = _tree(out)
     folder = out.parent if which == "parent" else out
     folder.chmod(0o555)

@@ -16,8 +16,9 @@ def _slice(slicer: str, stl, technology: str, tmp_path):
     if technology == "sla":
         args = [slicer, "--printer-technology", "SLA", "--export-sla", "--output", str(tmp_path / f"{stl.stem}.sl1")]
     else:
-        args = [slicer, "--printer-technology", "FFF", "--export-gcode", "--output", str(tmp_path / f"{stl.stem}.gcode")]
-    proc = subprocess.run(args + [str(stl)], capture_output=True, text=True, timeout=600)
+        args = [slicer, "--printer-technology", "FFF", "--export-gcode", "--output",
+                str(tmp_path / f"{stl.stem}.gcode")]
+    proc = subprocess.run([*args, str(stl)], capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
     out = tmp_path / (stl.stem + (".sl1" if technology == "sla" else ".gcode"))
     assert out.stat().st_size > 1000

@@ -6,6 +6,7 @@ import json
 from importlib import resources
 
 import pytest
+from pydantic import ValidationError
 
 from magfab import SpecError, load_spec, parse_spec
 from magfab.recipes import KINDS, catalogue
@@ -76,7 +77,7 @@ def test_name_defaults_to_the_file_stem(tmp_path):
 
 def test_spec_is_frozen_and_hash_follows_content():
     spec = load_spec(None)
-    with pytest.raises(Exception):
+    with pytest.raises(ValidationError, match="Instance is frozen"):
         spec.name = "other"  # type: ignore[misc]
     variant = spec.model_copy(update={"name": "other"})
     assert variant.sha256() != spec.sha256() and load_spec(None).sha256() == spec.sha256()
@@ -129,7 +130,8 @@ def test_every_commented_line_of_the_shipped_spec_parses_when_uncommented(sectio
 
 
 def test_shear_modulus_takes_an_array_of_three_numbers():
-    assert parse_spec("[elastomer]\nshear_modulus_kPa = [15, 23.0, 39]").elastomer.shear_modulus_kPa == (15.0, 23.0, 39.0)
+    assert parse_spec("[elastomer]\nshear_modulus_kPa = [15, 23.0, 39]").elastomer.shear_modulus_kPa == \
+        (15.0, 23.0, 39.0)
     for bad in ("[15.0, 23.0]", "[15.0, 23.0, \"x\"]", "[39.0, 23.0, 15.0]", "[true, 1.0, 2.0]"):
         with pytest.raises(SpecError) as info:
             parse_spec(f"[elastomer]\nshear_modulus_kPa = {bad}")

@@ -67,8 +67,8 @@ def test_kicad_drc_of_the_built_board_is_clean(array_builds, name, tmp_path):
 
 def test_a_board_too_small_for_the_array_is_one_line():
     with pytest.raises(SpecError) as err:
-        derived = derive(parse_spec('[array]\nrows = 1\ncols = 5\npitch_mm = 14\n[pcb]\nwidth_mm = 60\nheight_mm = 34'))
-        pcb.board(derived)
+        pcb.board(derive(parse_spec('[array]\nrows = 1\ncols = 5\npitch_mm = 14\n'
+                                    '[pcb]\nwidth_mm = 60\nheight_mm = 34')))
     assert "pcb.width_mm" in str(err.value) and "76.5 mm" in str(err.value) and "\n" not in str(err.value)
 
 

@@ -44,7 +44,8 @@ def test_ipc_equations_by_hand():
     # S_max,rms = 2.5 - (0.6 - sqrt(0.12))/2 = 2.3732;  G = 2.3732 - sqrt(0.12 + 0.0125) = 2.0092 -> 2.00
     # X = 0.18 - 0.08 + sqrt(0.12^2 + 0.0125) = 0.2640 -> 0.25
     land = catalogue("land")
-    got = ipc_land(Band(2.9, 3.0, 3.1), Band(0.3, 0.4, 0.5), Band(0.18, 0.25, 0.3), land["qfn-nominal"], land["tolerances"])
+    got = ipc_land(Band(2.9, 3.0, 3.1), Band(0.3, 0.4, 0.5), Band(0.18, 0.25, 0.3), land["qfn-nominal"],
+                   land["tolerances"])
     assert (got.z_max, got.g_min, got.x_max) == (3.75, 2.0, 0.25)
     s_rms = math.sqrt(0.2**2 + 2 * 0.2**2)
     raw_g = 2.5 - (0.6 - s_rms) / 2 - math.sqrt(s_rms**2 + 0.1**2 + 0.05**2)

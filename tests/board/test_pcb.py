@@ -107,7 +107,7 @@ def test_check_catches_a_clearance_violation(board):
     gnd = next(c for c in board.copper() if c.net == "GND" and c.owner == "U1.13")
     x = (gnd.a[0] + gnd.b[0]) / 2
     bad = Copper.seg(x, gnd.a[1] - 0.2, x, gnd.a[1] - 1.0, 0.25, "F.Cu", "SDA")
-    assert "pcb-clearance" in _codes(pcb.findings(dataclasses.replace(board, tracks=board.tracks + (bad,))))
+    assert "pcb-clearance" in _codes(pcb.findings(dataclasses.replace(board, tracks=(*board.tracks, bad))))
 
 
 def test_check_catches_a_missing_track(board):

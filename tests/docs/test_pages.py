@@ -85,7 +85,8 @@ def test_the_readme_walk_reaches_a_passing_acceptance_test(walked):
     assert {"turned", "warm-up"} <= set(passed), check.stdout  # the board turned over and warmed at the prompts
     print("\n".join(line for line in check.stdout.splitlines() if line.startswith("step ")))  # with -s
     cal = json.loads((build / "calibration" / "calibration.json").read_text())
-    assert cal["scan"]["source"] == "scan.csv + reference.csv" and not (build / "calibration" / "scan_simulated.csv").exists()
+    assert cal["scan"]["source"] == "scan.csv + reference.csv" and \
+        not (build / "calibration" / "scan_simulated.csv").exists()
     fitted = _ran(walked, "magfab calibrate").stdout
     print(next(line for line in fitted.splitlines() if "calibration (" in line))  # the bench scan's fit, with -s
     merged = (build / "calibration" / "scan_merged.csv").read_bytes()  # what was fitted, by its hash
@@ -248,7 +249,8 @@ def test_the_array_pages_run_as_written(strip_walked):
     assert reader.fieldnames[:3] == ["time_s", "host_time_s", "taxel"] and "Fz_sensor_N" in reader.fieldnames
     assert {int(r["taxel"]) for r in rows} == set(range(5))  # every chip's reading recorded
     cal = json.loads((build / "calibration" / "taxel_00.json").read_text())
-    assert cal["scan"]["source"] == "scan.csv + reference.csv" and (build / "calibration" / "scan_taxel_00.csv").is_file()
+    assert cal["scan"]["source"] == "scan.csv + reference.csv" and \
+        (build / "calibration" / "scan_taxel_00.csv").is_file()
     assert "--taxel 0" in _ran(bench, "magfab calibrate").line
 
 

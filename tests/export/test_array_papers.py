@@ -23,7 +23,8 @@ def strip():
 def test_the_bom_orders_every_chip_by_its_option_code(strip):
     rows = list(csv.DictReader(io.StringIO(bom_csv(strip))))
     chips = {r["part"]: r for r in rows if r["item"] == "Hall sensor IC"}
-    assert {p: int(r["quantity"]) for p, r in chips.items()} == {"MLX90393SLW-ABA-011-RE": 8, "MLX90393SLW-ABA-012-RE": 2}
+    assert {p: int(r["quantity"]) for p, r in chips.items()} == \
+        {"MLX90393SLW-ABA-011-RE": 8, "MLX90393SLW-ABA-012-RE": 2}
     assert "U5 (taxel 4, 0x10)" in chips["MLX90393SLW-ABA-012-RE"]["description"]
     by_item = {r["item"]: r for r in rows}
     assert int(by_item["Magnet"]["quantity"]) == 10 and int(by_item["Capacitor"]["quantity"]) == 20

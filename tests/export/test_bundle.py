@@ -269,8 +269,8 @@ def test_the_readout_readme_gives_the_bench_sequence_from_the_build_folder(bundl
     assert "Fx_sensor_N" in text and "host_time_s" in text and "--reference" in text
     firmware_text = (out / "firmware" / "README.md").read_text()
     assert "from this folder, `firmware/`" in firmware_text
-    assert _commands(firmware_text)[:4] == ["sh flash.sh uno /dev/ttyACM0", "pip install ../readout", "magfab-readout upload",
-            "magfab-readout info"]
+    assert _commands(firmware_text)[:4] == ["sh flash.sh uno /dev/ttyACM0", "pip install ../readout",
+                                            "magfab-readout upload", "magfab-readout info"]
 
 
 def test_the_firmware_readme_states_the_rate_every_page_states(bundle):

@@ -84,7 +84,8 @@ def test_markdown_and_html_escape_what_they_carry(design, monkeypatch):
     hostile = "<script>alert(1)</script> *bold* [link](x) a_b | c"
     assert "<" not in md(hostile) and "\\*bold\\*" in md(hostile) and "\\[link\\]" in md(hostile)
     table = C.Table(("h " + hostile,), ((hostile,),))
-    monkeypatch.setattr(C, "sections", lambda d, a=None, p=None: [C.Section("Step " + hostile, (C.Step(hostile),), table)])
+    monkeypatch.setattr(C, "sections",
+                        lambda d, a=None, p=None: [C.Section("Step " + hostile, (C.Step(hostile),), table)])
     html = C.checklist_html(design)
     assert "<script>" not in html and html.count("&lt;script&gt;alert(1)&lt;/script&gt;") == 4
     text = C.checklist_md(design)
@@ -121,7 +122,8 @@ def test_the_build_quotes_its_own_acceptance_bands_and_bom(default_build):
     (lo, hi), w, (d_lo, d_hi) = acc["rest_Bz_uT"], acc["weight_g"], acc["delta_Bz_uT"]
     assert 0 < lo < acc["rest"]["Bz_uT"]["nominal"] < hi and 0 < d_lo < d_hi
     line = next(s for s in (out / "checklist.md").read_text().splitlines() if "Pass:" in s)
-    assert f"within {lo:.0f} to {hi:.0f} uT" in line and f"a {w:g} g weight raises Bz by {d_lo:.0f} to {d_hi:.0f} uT" in line
+    assert f"within {lo:.0f} to {hi:.0f} uT" in line and \
+        f"a {w:g} g weight raises Bz by {d_lo:.0f} to {d_hi:.0f} uT" in line
     assert (out / "bom.csv").read_text() == bom.bom_csv(default_build.design, acc)
 
 
@@ -195,7 +197,8 @@ def _blocks(markdown: str) -> list[list[str]]:
     return [b.splitlines() for b in re.findall(r"^```sh\n(.*?)^```$", markdown, re.M | re.S)]
 
 
-@pytest.fixture(scope="module", params=[(m, p) for m in MATERIALS for p in ("sla", "fdm")][::3] + [("ecoflex-00-30", "fdm")],
+@pytest.fixture(scope="module",
+                params=[*[(m, p) for m in MATERIALS for p in ("sla", "fdm")][::3], ("ecoflex-00-30", "fdm")],
                 ids=lambda mp: "-".join(mp))
 def variant(request):
     material, printer = request.param
@@ -263,7 +266,7 @@ def test_the_pad_is_fixed_to_the_board_before_the_elastomer_is_glued_onto_it(des
     assert pins < fix < glue
     assert ca.name in texts[fix] and f"{ca['fixture_time_s'].nominal:g} s" in texts[fix]
     assert f"{ca['cure_time_full_h'].nominal:g} h" in texts[fix] and " uL" in texts[fix]
-    assert "loctite-401" in [k for k in catalogue("adhesives")] and ca["fixture_time_s"].source.startswith("LOCTITE 401")
+    assert "loctite-401" in list(catalogue("adhesives")) and ca["fixture_time_s"].source.startswith("LOCTITE 401")
 
 
 def test_the_magnet_goes_in_after_demoulding_north_face_first(design):

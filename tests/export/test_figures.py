@@ -67,7 +67,7 @@ def test_speed_accuracy_has_one_panel_per_family_and_unit_with_front_and_toleran
     table = model_bench()
     panels = F.bench_panels(table)
     assert {p[0] for p in panels} == {str(r["family"]) for r in table}  # every family the bench holds
-    for family, reference, unit, rows in panels:
+    for _family, _reference, _unit, rows in panels:
         assert len({r["unit"] for r in rows}) == 1
     fig = drawn["speed_accuracy"]
     main = [ax for ax in fig.axes if ax.get_label().startswith("speed:")]
@@ -77,7 +77,7 @@ def test_speed_accuracy_has_one_panel_per_family_and_unit_with_front_and_toleran
     units = [strip.get_xlabel() for strip in strips]
     assert len(set(units)) == len(units) or len({(p[0], p[2]) for p in panels}) < len(panels)
     assert not any("elastomer" in u and "points" in u for u in units)  # no axis mixes two cost units
-    for ax, (family, reference, unit, rows) in zip(main, panels):
+    for ax, (family, reference, _unit, rows) in zip(main, panels):
         assert ax.get_label() == f"speed:{family}:{reference}"
         assert any(np.allclose(line.get_ydata(), tol) for line in ax.lines), f"{family}: no tolerance line"
         measured = [r for r in rows if float(r["error"]) > 0]
@@ -110,7 +110,8 @@ def test_speed_accuracy_point_labels_do_not_overlap(drawn):
         frame = _bbox(ax, fig)
         assert boxes
         for i, a in enumerate(boxes):
-            assert frame.x0 - 0.5 <= a.x0 and a.x1 <= frame.x1 + 0.5 and frame.y0 - 0.5 <= a.y0 and a.y1 <= frame.y1 + 0.5
+            assert frame.x0 - 0.5 <= a.x0 and a.x1 <= frame.x1 + 0.5 and \
+                frame.y0 - 0.5 <= a.y0 and a.y1 <= frame.y1 + 0.5
             assert not any(_overlaps(a, b) for b in boxes[i + 1:]), f"{ax.get_label()}: labels overlap"
 
 
@@ -136,7 +137,7 @@ def test_each_filled_contour_has_its_colour_bar_and_no_inline_labels(drawn):
 
 def test_sensitivity_draws_normal_and_shear_in_both_panels_with_plain_ticks(drawn, magone_prediction):
     fig = drawn["sensitivity"]
-    sens, res = [ax for ax in fig.axes]
+    sens, res = list(fig.axes)
     for ax in (sens, res):
         dashed = [line for line in ax.lines if line.get_linestyle() == "--"]
         solid = [line for line in ax.lines if line.get_linestyle() == "-"]
@@ -166,7 +167,7 @@ def test_calibration_chart_draws_what_its_caption_says(magone_design, magone_pre
         plt.close(fig)
     fake_mls = C.Candidate("mls", "mls", 2, result.candidates[0].rms_holdout_N, result.candidates[0].max_holdout_N,
                            result.candidates[0].rms_fit_N, 10 ** 5)
-    with_mls = type(result)(result.calibration, result.candidates + (fake_mls,), result.chosen,
+    with_mls = type(result)(result.calibration, (*result.candidates, fake_mls), result.chosen,
                             result.tolerance_mN, result.meets_tolerance)
     fig = calibration_chart.draw(plt, with_mls)
     try:

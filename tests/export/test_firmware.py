@@ -122,7 +122,7 @@ def parse_stream(data: bytes) -> list[tuple[str, object]]:
     while i < len(data):
         if data[i:i + 2] == b"\xa5\x5a":
             assert i + 31 <= len(data), "truncated frame"
-            s0, s1, kind, seq, status, t, bx, by, bz, traw, fx, fy, fz, crc = FRAME.unpack_from(data, i)
+            _s0, _s1, kind, seq, status, t, bx, by, bz, traw, fx, fy, fz, crc = FRAME.unpack_from(data, i)
             assert kind == 0x01
             assert crc == crc16_ccitt_false(data[i + 2:i + 29]), "CRC mismatch"
             out.append(("frame", {"seq": seq, "status": status, "t_us": t, "counts": (bx, by, bz), "t_raw": traw,
@@ -288,7 +288,7 @@ def test_single_mode_and_no_temperature(build_host):
     assert not any(w[0] & 0xF0 == 0x10 for w in writes)
     commands = [w[0] for w in writes if w[0] in (0x3E, 0x4E)]
     assert commands == [0x3E, 0x4E] * 3
-    wr1 = [w for w in writes if w[0] == 0x60 and w[3] >> 2 == 1][0]
+    wr1 = next(w for w in writes if w[0] == 0x60 and w[3] >> 2 == 1)
     assert ((wr1[1] << 8 | wr1[2]) >> 6) & 0xF == 0b1110
     frames = frames_of(out)
     assert [f["status"] for f in frames] == [0, 0, 0]
@@ -323,14 +323,14 @@ def test_raw_counts_to_microtesla(build_host, res):
         assert math.isclose(float(row[8]), 25.0, abs_tol=1e-6)
     if res < 2:  # words that are negative only as two's complement
         _, events = h.run("U 46696 32768 65535 32767\n")
-        row = [e for e in events if e[0] == "U"][0]
+        row = next(e for e in events if e[0] == "U")
         assert [int(v) for v in row[2:5]] == [-32768, -1, 32767] and int(row[1]) & SATURATED
         assert math.isclose(float(row[8]), 35.0, abs_tol=1e-4)
     # through the simulated chip: the counts in the frames are the field over the recipe's LSB
     field = (0.9 * limit * lsb[0], -1234.5, -0.5 * limit * lsb[2])
     out, _ = h.run(f"B {field[0]} {field[1]} {field[2]} 25\nS 2\n")
     frame = frames_of(out)[-1]
-    assert list(frame["counts"]) == [round(b / l) for b, l in zip(field, lsb)]
+    assert list(frame["counts"]) == [round(b / per_count) for b, per_count in zip(field, lsb)]
     assert frame["status"] & SATURATED == 0
 
 
@@ -346,14 +346,14 @@ def test_forces_equal_python_float64(host):
     lsb = host.lsb()
     worst = 0.0
     for frame in frames:
-        b = [c * l for c, l in zip(frame["counts"], lsb)]
+        b = [c * per_count for c, per_count in zip(frame["counts"], lsb)]
         want, scale = py_forces(host.cal, *b)
         err = np.abs(frame["forces"] - want) / np.maximum(np.abs(want), scale)
         worst = max(worst, float(err.max()))
         assert frame["status"] == 0
     assert worst < 1e-4, worst
     # many more points straight from raw words (no bus), inside and outside the region
-    (zl, zh), (rl, rh) = host.cal["valid_region"]["Bz_uT"], host.cal["valid_region"]["Br_uT"]
+    (zl, zh), (_rl, rh) = host.cal["valid_region"]["Bz_uT"], host.cal["valid_region"]["Br_uT"]
     words, wanted = [], []
     for _ in range(400):
         bz, br, phi = rng.uniform(zl - 500, zh + 500), rng.uniform(0, rh + 500), rng.uniform(0, 2 * math.pi)
@@ -401,7 +401,7 @@ def test_the_thermal_correction_equals_python_float64(build_host):
 def test_out_of_region_flag(host):
     """Readings outside the box, or inside the box but outside the hull, are flagged; forces still come."""
     region = host.cal["valid_region"]
-    (zl, zh), (rl, rh) = region["Bz_uT"], region["Br_uT"]
+    (zl, zh), (rl, _rh) = region["Bz_uT"], region["Br_uT"]
     corner = (zl + 50.0, rl + 50.0)  # in the box, outside the elliptical hull
     assert py_inside(host.cal, *corner)[0] is False
     centre = (-3000.0, 2000.0)
@@ -511,7 +511,7 @@ def test_text_mode_info_and_switching(host):
         np.testing.assert_allclose(forces, binary["forces"], atol=5.1e-5)
         lsb = host.lsb()
         np.testing.assert_allclose([float(x) for x in fields[7:10]],
-                                   [c * l for c, l in zip(binary["counts"], lsb)], atol=5.1e-3)
+                                   [c * per_count for c, per_count in zip(binary["counts"], lsb)], atol=5.1e-3)
         assert abs(float(fields[10]) - 31.5) < 0.03
 
 
@@ -613,7 +613,7 @@ def test_render_rejects_what_the_firmware_cannot_carry():
     with pytest.raises(FirmwareError, match=re.escape("calibration.coefficients.Fz_N[4] = 1e+39: must be finite and "
                                                       "within float32 range")):
         firmware.render(design, cal)
-    with pytest.raises(SpecError, match="firmware.baud"):
+    with pytest.raises(SpecError, match=r"firmware\.baud"):
         firmware.render(derive(spec_variant(firmware_baud=230400)), make_calibration())
 
 

@@ -3,6 +3,7 @@ reading every chip on the simulated bus (tests/export/test_simbus_array.py does 
 
 from __future__ import annotations
 
+import itertools
 import math
 import struct
 import sys
@@ -57,7 +58,8 @@ def test_field_frames_decode_to_samples_with_their_taxel_mixed_with_text_and_noi
     assert d.chip_error and d.fault_name == "chip ERROR bit at read" and d.source == "text"
     assert e.force_N == pytest.approx((0.1, 0.2, 0.3)) and e.taxel == 0
     infos = [x for x in out if isinstance(x, f.DeviceInfo)]
-    assert [(i.spec_name, i.taxels, i.settings) for i in infos] == [("strip,x", 5, (7, 0, 0, 2)), ("one", 1, (7, 0, 0, 2))]
+    assert [(i.spec_name, i.taxels, i.settings) for i in infos] == [("strip,x", 5, (7, 0, 0, 2)),
+                                                                    ("one", 1, (7, 0, 0, 2))]
     assert decoder.stats.frames == 3 and decoder.stats.lines == 2 and decoder.stats.crc_errors == 0
     assert decoder.stats.lost == 0  # one sequence per taxel: 7 and 8 on different taxels lose nothing
 
@@ -292,7 +294,7 @@ def test_per_taxel_and_total_rate_in_simulated_time(harness, designs, tmp_path, 
     per_taxel = [c / elapsed for c in counts]
     cycle_hz = 1e6 / (settings["tconv_us"] + settings["read_margin_us"])
     uart_hz = baud / FIELD_FRAME_BITS / chips
-    gaps = sorted(b.t_us - a.t_us for c in cycles(got) for a, b in zip(c, c[1:]))
+    gaps = sorted(b.t_us - a.t_us for c in cycles(got) for a, b in itertools.pairwise(c))
     loop_hz = 1e6 / (gaps[len(gaps) // 2] * chips) if gaps else math.inf  # a read, its frame, the next chip's
     bound = min(cycle_hz, uart_hz, loop_hz)
     print(f"{chips} chips at {baud} baud: per taxel {min(per_taxel):.1f} Hz, total {len(got) / elapsed:.0f} frames/s; "

@@ -23,9 +23,10 @@ ROOT = Path(__file__).resolve().parents[2]
 def test_every_build_renders_the_generic_sources():
     """Builds that differ in every setting the image uses (name, baud, I2C clock, acquisition, output, OSR,
     DIG_FILT, resolution, gain, temperature) render byte-equal image sources: the settings live in the .eep only."""
-    other = spec_variant("zq-other-build", firmware_baud=115200, firmware_i2c_hz=100000, firmware_acquisition=Acquisition.SINGLE,
-                         firmware_output=Transport.TEXT, firmware_temperature=False, sensor_osr=1, sensor_dig_filt=1,
-                         sensor_resolution=1, sensor_gain_sel=5)
+    other = spec_variant("zq-other-build", firmware_baud=115200, firmware_i2c_hz=100000,
+                         firmware_acquisition=Acquisition.SINGLE, firmware_output=Transport.TEXT,
+                         firmware_temperature=False, sensor_osr=1, sensor_dig_filt=1, sensor_resolution=1,
+                         sensor_gain_sel=5)
     generic = firmware.generic_sources()
     assert "avr/main.c" in generic and "magfab_readout/src/mf_config.h" in generic
     for spec in (load_spec(None), other):
@@ -55,5 +56,6 @@ def test_the_wheel_takes_the_shipped_image():
     data = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["package-data"]["magfab.export"]
     folder = ROOT / "magfab" / "export" / firmware.GENERIC_DIR
     shipped = sorted(p.relative_to(folder.parent).as_posix() for p in folder.iterdir() if p.is_file())
-    assert shipped == [f"{firmware.GENERIC_DIR}/{firmware.HEX_NAME}", f"{firmware.GENERIC_DIR}/{firmware.GENERIC_TOOLCHAIN}"]
+    assert shipped == [f"{firmware.GENERIC_DIR}/{firmware.HEX_NAME}",
+                       f"{firmware.GENERIC_DIR}/{firmware.GENERIC_TOOLCHAIN}"]
     assert all(any(fnmatch.fnmatch(rel, pattern) for pattern in data) for rel in shipped)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import csv
 import hashlib
 import io
+import itertools
 import json
 import math
 import os
@@ -18,7 +19,7 @@ import sys
 import threading
 import time
 import tomllib
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from pathlib import Path
 
 import pytest
@@ -100,7 +101,8 @@ def test_render_is_complete_deterministic_and_embeds_the_calibration(design, cal
     assert project["project"]["scripts"] == {"magfab-readout": "magfab_readout.cli:main"}
     assert [d.split(">")[0] for d in project["project"]["dependencies"]] == ["pyserial"]
     # a backend that builds out of tree: setuptools wrote readout/build/ and *.egg-info into the build folder
-    assert project["build-system"]["build-backend"] == "flit_core.buildapi" and "setuptools" not in project.get("tool", {})
+    assert project["build-system"]["build-backend"] == "flit_core.buildapi" and \
+        "setuptools" not in project.get("tool", {})
     assert project["tool"]["flit"]["module"]["name"] == "magfab_readout"
     assert json.loads(rendered[f"{PKG}/calibration.json"]) == calibration
     sha = hashlib.sha256(json.dumps(calibration, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
@@ -245,9 +247,9 @@ def test_crc_is_ccitt_false(pkg):
 
 def _frames(n, start=0):
     rng = random.Random(11)
-    return [dict(seq=(start + k) & 0xFF, t_us=(4_294_960_000 + 1712 * k) & 0xFFFFFFFF, status=k % 16,
-                 counts=(rng.randint(-32768, 32767), rng.randint(-9000, 9000), rng.randint(0, 22000)),
-                 t_raw=46244 + k, forces=(rng.uniform(-1, 1), rng.uniform(-1, 1), rng.uniform(0, 5)))
+    return [{"seq": (start + k) & 0xFF, "t_us": (4_294_960_000 + 1712 * k) & 0xFFFFFFFF, "status": k % 16,
+             "counts": (rng.randint(-32768, 32767), rng.randint(-9000, 9000), rng.randint(0, 22000)),
+             "t_raw": 46244 + k, "forces": (rng.uniform(-1, 1), rng.uniform(-1, 1), rng.uniform(0, 5))}
             for k in range(n)]
 
 
@@ -443,7 +445,7 @@ class Silent:
 
 
 def test_device_errors_say_what_to_do(pkg):
-    with pytest.raises(pkg.NoData, match="no frames from the test port within 0.2 s; nothing arrived"):
+    with pytest.raises(pkg.NoData, match=r"no frames from the test port within 0\.2 s; nothing arrived"):
         pkg.Device(transport=Silent(), timeout_s=0.2).read(1)
     with pytest.raises(pkg.NoData, match="none formed a frame or line: check that the baud rate"):
         pkg.Device(transport=Silent(bytes(range(0, 200, 7))), timeout_s=0.2).read(1)
@@ -471,7 +473,7 @@ def test_device_errors_say_what_to_do(pkg):
 
 def test_missing_port_is_named(pkg):
     try:
-        import serial  # noqa: F401
+        import serial  # noqa: F401 - imported only to learn whether pyserial is installed
     except ImportError:
         with pytest.raises(pkg.DeviceError, match="pyserial is not installed"):
             pkg.Device("/dev/does-not-exist")
@@ -535,13 +537,13 @@ def test_installed_cli_records_a_scan_csv(installed, calibration, tmp_path):
     comments = [line for line in text.splitlines() if line.startswith("#")]
     assert '# spec: "magone"' in comments
     assert f"# calibration_sha256: {calibration_sha256(calibration)}" in comments
-    rows = list(csv.DictReader(io.StringIO("\n".join(l for l in text.splitlines() if not l.startswith("#")))))
+    rows = list(csv.DictReader(io.StringIO("\n".join(line for line in text.splitlines() if not line.startswith("#")))))
     sensor = ("Fx_sensor_N", "Fy_sensor_N", "Fz_sensor_N")
     field = ("time_s", "host_time_s", "Bx_uT", "By_uT", "Bz_uT", "temperature_C")
     assert set(field + sensor) <= set(rows[0]) and not {"Fx_N", "Fy_N", "Fz_N"} & set(rows[0])
     assert 0.4 * 543.5 * 0.9 < len(rows) < 0.4 * 543.5 * 1.1  # 1 / 1.84 ms
     times = [float(r["time_s"]) for r in rows]
-    assert times[0] == 0.0 and all(b >= a for a, b in zip(times, times[1:]))
+    assert times[0] == 0.0 and all(b >= a for a, b in itertools.pairwise(times))
     host = [float(r["host_time_s"]) for r in rows]
     assert started <= host[0] <= host[-1] <= time.time()
     for r in rows:
@@ -596,15 +598,11 @@ def pseudo_terminal(pkg, feed: bool):
     def run():
         while not stop.is_set():
             if select.select([master], [], [], 0.005)[0]:
-                try:
+                with suppress(OSError):
                     sim.write(os.read(master, 256))
-                except OSError:
-                    pass
             data = sim.read(4096, 0.005)
-            try:
+            with suppress(OSError):  # nobody reads: the data is lost, as on a UART
                 os.write(master, data)
-            except OSError:  # nobody reads: the data is lost, as on a UART
-                pass
 
     thread = threading.Thread(target=run, daemon=True)
     if feed:

@@ -167,7 +167,7 @@ def test_a_press_on_taxel_2_reads_on_taxel_2_only(pkg, array, strip):
     static = pkg.ArrayCalibration(dict(doc, dynamic=False), cals)
     worst_static = 0.0
     for motion, force in _press_points(design, pred):
-        cycles, reader = _pressed(pkg, array, design, motion)
+        cycles, _reader = _pressed(pkg, array, design, motion)
         assert cycles and all(c.complete for c in cycles)
         for c in cycles:
             got = c[2].force_N
@@ -178,7 +178,8 @@ def test_a_press_on_taxel_2_reads_on_taxel_2_only(pkg, array, strip):
         readings = Exact(design, motion=motion).pressed.tolist()
         rest = static.forces(Exact(design).rest.tolist())
         moved = static.forces(readings)
-        worst_static = max(worst_static, *(abs(moved[k][a] - rest[k][a]) / resolution[a] for k in (1, 3) for a in range(3)))
+        worst_static = max(worst_static,
+                           *(abs(moved[k][a] - rest[k][a]) / resolution[a] for k in (1, 3) for a in range(3)))
     assert worst_static > 1.0
 
 
@@ -210,13 +211,13 @@ def test_a_missing_neighbour_is_held_in_the_compensation(pkg, array, strip):
 
 def test_a_single_taxels_firmware_is_refused(pkg, array):
     single = pkg.SimulatedDevice(array.calibrations[0], realtime=False, chunk=20)
-    with pkg.Device(transport=single) as device:
-        with pytest.raises(pkg.WrongFirmware, match="sends a single taxel's force frames"):
-            pkg.ArrayReader(device, array).read(1)
+    with pkg.Device(transport=single) as device, \
+            pytest.raises(pkg.WrongFirmware, match="sends a single taxel's force frames"):
+        pkg.ArrayReader(device, array).read(1)
     array_cli = importlib.import_module("magfab_readout.array_cli")
-    with pkg.Device(transport=pkg.SimulatedDevice(array.calibrations[0], realtime=False)) as device:
-        with pytest.raises(pkg.WrongFirmware, match="reads 1 chip but this readout package is for an array of 5"):
-            array_cli._checked_info(device, array)
+    with pkg.Device(transport=pkg.SimulatedDevice(array.calibrations[0], realtime=False)) as device, \
+            pytest.raises(pkg.WrongFirmware, match="reads 1 chip but this readout package is for an array of 5"):
+        array_cli._checked_info(device, array)
 
 
 def _rows(stdout):
@@ -232,7 +233,7 @@ def test_stream_prints_every_taxel_of_every_cycle(pkg, capsys):
     assert "# t_s seq taxel Fx_N Fy_N Fz_N Bx_uT By_uT Bz_uT T_C flags fault Bx_lsb By_lsb Bz_lsb T_raw" in out
     rows = _rows(out)
     assert len(rows) == 60 and [int(r[2]) for r in rows] == list(range(5)) * 12
-    assert all(len(set(r[1] for r in rows[5 * c:5 * c + 5])) == 1 for c in range(12))  # one sequence per cycle
+    assert all(len({r[1] for r in rows[5 * c:5 * c + 5]}) == 1 for c in range(12))  # one sequence per cycle
     assert max(abs(float(x)) for r in rows for x in r[3:6]) < 0.02 and {r[10] for r in rows} == {"-----"}
     assert "12 cycles of 5 taxels; 0 incomplete" in err
     assert cli.main(["stream", "--simulate", "--count", "1", "--check"]) == 1
@@ -256,7 +257,7 @@ def test_record_writes_a_taxel_column_magfab_calibrate_reads(pkg, capsys, tmp_pa
     assert cli.main(["record", str(out), "--simulate", "--seconds", "0.06"]) == 0
     text = out.read_text()
     assert "# array: array of 5 taxels" in text and "# taxel 4 calibration_sha256: " in text
-    rows = list(csv.DictReader(io.StringIO("\n".join(l for l in text.splitlines() if not l.startswith("#")))))
+    rows = list(csv.DictReader(io.StringIO("\n".join(line for line in text.splitlines() if not line.startswith("#")))))
     assert list(rows[0])[:3] == ["time_s", "host_time_s", "taxel"] and "Fz_sensor_N" in rows[0]
     assert [int(r["taxel"]) for r in rows] == list(range(5)) * (len(rows) // 5) and len(rows) >= 50
     for k in (0, 2):
@@ -326,4 +327,5 @@ def test_a_warming_array_is_corrected_taxel_by_taxel(pkg, array, strip):
     drift = [warmed(bare)[-1][k].force_N[2] for k in range(5)]
     assert all(abs(fz) > 5 * resolution[2] for fz in drift), drift
     worst = max(abs(c[k].force_N[2]) for c in hot for k in range(5))
-    print(f"after +10 C: corrected |Fz| <= {1e3 * worst:.2f} mN, uncorrected Fz {[round(1e3 * fz, 1) for fz in drift]} mN")
+    print(f"after +10 C: corrected |Fz| <= {1e3 * worst:.2f} mN, "
+          f"uncorrected Fz {[round(1e3 * fz, 1) for fz in drift]} mN")

@@ -94,6 +94,7 @@ def test_stream_reports_the_rest_drift_of_a_warming_board(default_build, pred, t
     print(f"rest drift, no correction: {measured:+.2f} mN/C measured, {predicted:+.2f} mN/C predicted")
     assert measured == pytest.approx(predicted, rel=0.2)
     assert "chip 25.0 -> 30.0 C" in proc.stderr
-    proc = readout(default_build, "record", tmp_path / "warm.csv", "--simulate", "--simulate-warm", "5", "--seconds", "3")
+    proc = readout(default_build, "record", tmp_path / "warm.csv", "--simulate", "--simulate-warm", "5",
+                   "--seconds", "3")
     assert proc.returncode == 0, proc.stderr
     assert abs(_per_C(proc.stderr)) < 0.1 * abs(predicted)

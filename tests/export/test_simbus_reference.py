@@ -73,7 +73,7 @@ def test_a_uniform_field_turned_on(sim, setup, step_uT):  # noqa: F811
     held is the chips' 6 % mismatch (within the predicted rejection, 1 / (mismatch + cross-axis)), plus a count's
     rounding on each chip (4.84 uT on z at MagOne's gain: at 130 uT as large as the mismatch); while it turns, the
     average's lag (8 readings every other sample, about 30 ms) adds rate x lag."""
-    records, design, section = setup
+    records, _design, section = setup
     step = np.array([0.0, 0.0, step_uT])
 
     def turn(t: float):
@@ -101,7 +101,7 @@ def test_a_dipole_passing_by(sim, setup):  # noqa: F811
     (the model's rejection for that pass)."""
     from magfab.models.drift import dipole_field_G
 
-    records, design, section = setup
+    records, design, _section = setup
     sense = np.array([0.0, 0.0, design.z_sense_mm])
     ref = np.array([reference_chip(design).x_mm, reference_chip(design).y_mm, design.z_sense_mm])
 

@@ -18,9 +18,9 @@ from conftest import ref_crc16
 from test_readout import calibration, design, pkg, rendered  # noqa: F401  (the readout package, rendered once)
 
 
-def stream(pkg, text: bool, n: int, chip_error_every: int = 0) -> list[bytes]:
+def stream(readout, text: bool, n: int, chip_error_every: int = 0) -> list[bytes]:
     """``n`` samples of the simulated board, one wire item (line or frame) each."""
-    sim = pkg.SimulatedDevice(realtime=False, chunk=1, text=text, chip_error_every=chip_error_every)
+    sim = readout.SimulatedDevice(realtime=False, chunk=1, text=text, chip_error_every=chip_error_every)
     return [sim._sample_bytes(k) for k in range(n)]
 
 
@@ -28,12 +28,12 @@ def _same(a, b) -> bool:
     return all((x == y) or (math.isnan(x) and math.isnan(y)) for x, y in zip(a, b))
 
 
-def corruptions(pkg, items: list[bytes], trials) -> dict[str, int]:
+def corruptions(readout, items: list[bytes], trials) -> dict[str, int]:
     """Decode each single-byte corruption of ``items[k]`` between its neighbours; count what came out.
 
     ``trials(k, item)`` yields (position, new byte). 'silent' counts decoded samples whose force (or field,
     status or time) differs from what was sent under that sequence number: the failure the unprotected wire showed."""
-    originals = pkg.Decoder().feed(b"".join(items))
+    originals = readout.Decoder().feed(b"".join(items))
     sent = {(s.seq, s.t_us): s for s in originals}  # t_us is unique: the sequence number wraps at 256
     assert len(sent) == len(items)
     counts = {"tried": 0, "silent": 0, "silent_force": 0, "lost": 0, "intact": 0}
@@ -41,14 +41,14 @@ def corruptions(pkg, items: list[bytes], trials) -> dict[str, int]:
         before, after = items[k - 1] if k else b"", items[k + 1] if k + 1 < len(items) else b""
         for pos, value in trials(k, item):
             bad = item[:pos] + bytes([value]) + item[pos + 1:]
-            got = [s for s in pkg.Decoder().feed(before + bad + after) if isinstance(s, pkg.Sample)]
+            got = [s for s in readout.Decoder().feed(before + bad + after) if isinstance(s, readout.Sample)]
             counts["tried"] += 1
             wrong = [s for s in got if (s.seq, s.t_us) not in sent or not (
                 _same(s.force_N, sent[s.seq, s.t_us].force_N) and _same(s.B_uT, sent[s.seq, s.t_us].B_uT)
                 and s.status == sent[s.seq, s.t_us].status)]
             counts["silent"] += bool(wrong)
-            counts["silent_force"] += any((s.seq, s.t_us) not in sent or not _same(s.force_N, sent[s.seq, s.t_us].force_N)
-                                          for s in wrong)
+            counts["silent_force"] += any((s.seq, s.t_us) not in sent
+                                          or not _same(s.force_N, sent[s.seq, s.t_us].force_N) for s in wrong)
             counts["lost" if len(got) < 2 + bool(before and after) else "intact"] += not wrong
     return counts
 
@@ -71,7 +71,7 @@ def every_trial(k, item):
 
 
 @pytest.mark.parametrize("text", [True, False], ids=["text", "binary"])
-def test_single_byte_corruptions_never_decode_to_a_different_force(pkg, text, record_property):
+def test_single_byte_corruptions_never_decode_to_a_different_force(pkg, text, record_property):  # noqa: F811 - pkg: the fixture imported from test_readout.py
     """3,000 random single-byte corruptions of 300 lines (frames): before the checksum, 534 of 3,000 text-line
     corruptions decoding silently to a different force; now none may, in either mode."""
     items = stream(pkg, text, 300, chip_error_every=37)
@@ -83,7 +83,7 @@ def test_single_byte_corruptions_never_decode_to_a_different_force(pkg, text, re
 
 @pytest.mark.slow
 @pytest.mark.parametrize("text", [True, False], ids=["text", "binary"])
-def test_every_single_byte_corruption_exhaustive(pkg, text):
+def test_every_single_byte_corruption_exhaustive(pkg, text):  # noqa: F811 - pkg: the fixture imported from test_readout.py
     items = stream(pkg, text, 40, chip_error_every=7)
     counts = corruptions(pkg, items, every_trial)
     print(("text" if text else "binary"), counts)
@@ -99,7 +99,7 @@ GOOD = b"F,9,5000,0,0.1000,0.2000,1.5000,60.08,-3.00,29824.08,25.02"
 
 @pytest.mark.parametrize("force", [b"inf", b"-inf", b"1e999", b"Infinity", b"1_0", b"nan", b"1e3", b"+1.0",
                                    b" 1.0", b"\xd9\xa1", b"1000.0001", b"-2000.0000", b"1.5e+09", b"0x1"])
-def test_a_force_the_firmware_never_means_is_refused_even_with_a_right_checksum(pkg, force):
+def test_a_force_the_firmware_never_means_is_refused_even_with_a_right_checksum(pkg, force):  # noqa: F811 - pkg: the fixture imported from test_readout.py
     """inf, 1e999, Infinity and 1_0 were once accepted as forces. The grammar is what
     mf_format_float prints; a value beyond FORCE_LIMIT_N or not finite (without the chip-error bit) is refused
     and counted."""
@@ -113,7 +113,7 @@ def test_a_force_the_firmware_never_means_is_refused_even_with_a_right_checksum(
         assert decoder.stats.bad_lines + decoder.stats.refused == 1
 
 
-def test_lines_without_a_right_checksum_are_refused(pkg):
+def test_lines_without_a_right_checksum_are_refused(pkg):  # noqa: F811 - pkg: the fixture imported from test_readout.py
     decoder = pkg.Decoder()
     body = GOOD
     cases = [body + b"\n", body + b"*\n", body + b"*12\n", checked(body).replace(b"*", b"*0", 1),
@@ -133,7 +133,7 @@ def frame(status: int, forces) -> bytes:
     return b"\xa5\x5a" + body + struct.pack("<H", ref_crc16(body))
 
 
-def test_a_chip_error_frame_never_yields_a_force(pkg):
+def test_a_chip_error_frame_never_yields_a_force(pkg):  # noqa: F811 - pkg: the fixture imported from test_readout.py
     """A CRC-valid frame with the chip-error bit once passed its finite forces through. The host
     gives the sample (sequence, time, flags) with NaN forces and field, whatever the frame carries."""
     for status in (0x02, 0x03, 0x0A, 0xFE):
@@ -148,7 +148,7 @@ def test_a_chip_error_frame_never_yields_a_force(pkg):
 
 @pytest.mark.parametrize("forces", [(math.inf, 0.0, 0.0), (0.0, -math.inf, 0.0), (0.0, 0.0, math.nan),
                                     (1000.5, 0.0, 0.0), (0.0, 0.0, -3.4e38)])
-def test_a_frame_with_a_force_out_of_band_is_refused(pkg, forces):
+def test_a_frame_with_a_force_out_of_band_is_refused(pkg, forces):  # noqa: F811 - pkg: the fixture imported from test_readout.py
     decoder = pkg.Decoder()
     assert decoder.feed(frame(0x00, forces) + frame(0x04, (0.0, 0.0, 1000.0))) != []
     assert decoder.stats.refused == 1 and decoder.stats.frames == 1 and decoder.stats.crc_errors == 0

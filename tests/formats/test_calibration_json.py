@@ -161,7 +161,8 @@ def test_a_calibration_with_and_without_thermal_reads_and_packs():
     assert firmware.eeprom_record(design, good())[2] == 2
     record = firmware.eeprom_record(design, doc)
     ee = firmware._eeprom_module()
-    assert record[2] == 4 and ee.check(record) and ee.thermal(record) == pytest.approx((25.0, -0.0012, -0.0012, -0.0015))
+    assert record[2] == 4 and ee.check(record) and \
+        ee.thermal(record) == pytest.approx((25.0, -0.0012, -0.0012, -0.0015))
     assert len(record) == len(firmware.eeprom_record(design, good())) + 16
     cold = derive(load_spec(None).model_copy(update={"firmware": load_spec(None).firmware.model_copy(
         update={"temperature": False})}))

@@ -102,7 +102,7 @@ def check(data: bytes) -> str:
     return "accepted"
 
 
-SETTINGS = dict(deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
+SETTINGS = {"deadline": None, "derandomize": True, "suppress_health_check": [HealthCheck.too_slow]}
 
 
 @settings(max_examples=300, **SETTINGS)

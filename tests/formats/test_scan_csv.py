@@ -43,7 +43,7 @@ MALFORMED = {
                                + [_good()[5] + ",2500"] + [r + ",25" for r in _good()[6:]]),
                     ["line 6 (row 5)", "'temperature_C'", "-100 to 250 degC"]),
     "decreasing time": (_edit(12, 0, "0.05"), ["line 12", "'time_s'", "non-decreasing", "line 11"]),
-    "short row": ("\n".join(_good()[:20] + ["0.5,1,2"] + _good()[20:]), ["line 21", "3 values", "7 columns"]),
+    "short row": ("\n".join([*_good()[:20], "0.5,1,2", *_good()[20:]]), ["line 21", "3 values", "7 columns"]),
     "duplicate column": ("\n".join([_good()[0] + ",Bz_uT"] + [r + ",1" for r in _good()[1:]]),
                          ["line 1", "'Bz_uT' appears twice"]),
     "too few rows": ("\n".join(_good(10)), ["line 11", "10 data rows", f"at least {MIN_ROWS}"]),
@@ -72,7 +72,7 @@ def test_unreadable_inputs(tmp_path):
 
 
 def test_plain_decimal_forms_are_read():
-    text = "\n".join(_good()[:3] + ["+0.03,1.,-.5,2e4,0,1E-3,0.0"] + _good()[4:]) + "\n"
+    text = "\n".join([*_good()[:3], "+0.03,1.,-.5,2e4,0,1E-3,0.0", *_good()[4:]]) + "\n"
     scan = read_scan_csv(text.encode("utf-8"))
     assert scan.B_uT[2].tolist() == [1.0, -0.5, 2e4] and scan.F_N[2, 1] == 1e-3
 
@@ -117,7 +117,8 @@ def _recording_text(host: bool = True, sensor: bool = True) -> str:
     rows = [",".join(names)]
     for i in range(60):
         row = [f"{0.00184 * i:.6f}"] + ([f"{1.7e9 + 0.002 * i:.6f}"] if host else [])
-        row += [str(i % 8), str(-i), str(20000 + 10 * i)] + (["0.0", f"{0.001 * i:.3f}", f"{0.01 * i:.2f}"] if sensor else [])
+        row += [str(i % 8), str(-i), str(20000 + 10 * i)]
+        row += ["0.0", f"{0.001 * i:.3f}", f"{0.01 * i:.2f}"] if sensor else []
         rows.append(",".join(row))
     return "\n".join(rows) + "\n"
 
@@ -144,7 +145,7 @@ def test_recording_and_reference_readers():
     rec = read_recording(_recording_text().encode())
     assert rec.scan.rows == 60 and rec.host_time_s[1] == 1.7e9 + 0.002 and rec.scan.F_N[2, 2] == 0.02
     assert rec.lines[0] == 2
-    with pytest.raises(ScanError, match="missing column 'host_time_s'.*record again"):
+    with pytest.raises(ScanError, match=r"missing column 'host_time_s'.*record again"):
         read_recording(_recording_text(host=False).encode())
     ref = read_reference(b"# a log\nFz_N,time_s,Fx_N,Fy_N\n0.5,1700000000.25,0,0.1\n0.6,1700000000.5,0,0.2\n")
     assert ref.time_s.tolist() == [1700000000.25, 1700000000.5] and ref.F_N[1].tolist() == [0.0, 0.2, 0.6]
@@ -152,5 +153,5 @@ def test_recording_and_reference_readers():
     # a recording passed as the reference is refused by the same guard
     with pytest.raises(ScanError, match="own calibrated forces"):
         read_reference(_recording_text().encode())
-    with pytest.raises(ScanError, match="line 3.*'time_s'.*non-decreasing"):
+    with pytest.raises(ScanError, match=r"line 3.*'time_s'.*non-decreasing"):
         read_reference(b"time_s,Fx_N,Fy_N,Fz_N\n2,0,0,0\n1,0,0,0\n")

@@ -63,16 +63,18 @@ def test_designs_at_least_as_good_as_magone(study, magone_prediction):
     assert front
     better = [r for r in front if float(r["normal_resolution_mN"]) <= magone[0]
               and float(r["normal_range_N"]) >= magone[1] and float(r["diameter_mm"]) <= magone[2]]
-    assert better, f"no front design dominates MagOne {magone}: {[(r['design'], r['normal_resolution_mN'], r['normal_range_N'], r['diameter_mm']) for r in front]}"
+    shown = [(r["design"], r["normal_resolution_mN"], r["normal_range_N"], r["diameter_mm"]) for r in front]
+    assert better, f"no front design dominates MagOne {magone}: {shown}"
     assert all(r["model"] == "fe" for r in front)  # re-verified by the full chain
 
 
 def test_the_files_a_user_gets(study):
-    cwd, folder, run = study
+    _cwd, folder, run = study
     for name in ("study.log", "trials.csv", "trials.parquet", "pareto.csv", "pareto.parquet", "pareto.svg",
                  "pareto.png", "README.md", "index.html"):
         assert (folder / name).stat().st_size > 0, name
-    trials = list(csv.DictReader(open(folder / "trials.csv", newline="")))
+    with open(folder / "trials.csv", newline="") as fh:
+        trials = list(csv.DictReader(fh))
     assert len(trials) == 120
     assert all(t["reason"] for t in trials if t["state"] != "ok")  # every failure and violation says why
     import pyarrow.parquet as pq
@@ -89,7 +91,7 @@ def test_the_files_a_user_gets(study):
 
 
 def test_running_again_resumes(study):
-    cwd, folder, run = study
+    cwd, _folder, run = study
     again = magfab("design", "targets.toml", "--workers", "2", cwd=cwd)
     assert again.returncode == 0, again.stderr
     assert "searched 120 designs" in again.stdout

@@ -73,7 +73,8 @@ def test_a_point_that_cannot_be_a_spec_names_the_key():
 
 
 def test_grid_and_hypercube_cover_the_variables():
-    t = parse_targets('[variables]\nmagnets = ["d5_h2", "d4_h2"]\ngrades = ["N45", "N52"]\nmaterials = ["ecoflex-00-30"]\n'
+    t = parse_targets('[variables]\nmagnets = ["d5_h2", "d4_h2"]\ngrades = ["N45", "N52"]\n'
+                      'materials = ["ecoflex-00-30"]\n'
                       'tips = ["hemisphere"]\nd_max_mm = [4.0, 8.0]\nd_min_mm = {values = [2.5]}\n'
                       'elastomer_diameter_mm = [10.0, 12.0]\ncover_mm = {values = [1.0, 2.0]}')
     g = list(grid(t.variables, 3))

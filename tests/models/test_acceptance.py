@@ -112,8 +112,8 @@ def test_distance_band_is_the_sum_of_the_stack_up(design, acc):
     # one with its top at the roof
     assert dist["min"] == pytest.approx(design.d_rest_mm + sum(v[0] for v in stack.values()) - 0.05, abs=1e-9)
     assert dist["max"] == pytest.approx(design.d_rest_mm + sum(v[1] for v in stack.values()) + 0.05, abs=1e-9)
-    assert [a for a in acc["assumptions"] if a["name"] == "chip_height_mm"][0]["rest_Bz_uT"][0] == \
-        [a for a in acc["assumptions"] if a["name"] == "chip_height_mm"][0]["rest_Bz_uT"][1]  # no effect (doc)
+    assert next(a for a in acc["assumptions"] if a["name"] == "chip_height_mm")["rest_Bz_uT"][0] == \
+        next(a for a in acc["assumptions"] if a["name"] == "chip_height_mm")["rest_Bz_uT"][1]  # no effect (doc)
 
 
 ZERO = Tolerances(magnet_diameter_mm=0.0, magnet_height_mm=0.0, printer_mm=0.0, glue_fraction=0.0,
@@ -140,8 +140,8 @@ def test_band_widths_follow_the_tolerances(design, pred, acc):
     assert wider["delta_Bz_uT"][0] < grade["delta_Bz_uT"][0] and wider["delta_Bz_uT"][1] > grade["delta_Bz_uT"][1]
     # Every tolerance widens both bands; the Earth's field widens the rest band by twice itself and not the rise.
     base = width(acc)
-    for change in (dict(magnet_height_mm=0.1), dict(printer_mm=0.2), dict(glue_fraction=1.0),
-                   dict(sensitivity_pct=(5.0, 5.0)), dict(sensing_depth_mm=(0.3, 0.3)), dict(seating_mm=0.2)):
+    for change in ({"magnet_height_mm": 0.1}, {"printer_mm": 0.2}, {"glue_fraction": 1.0},
+                   {"sensitivity_pct": (5.0, 5.0)}, {"sensing_depth_mm": (0.3, 0.3)}, {"seating_mm": 0.2}):
         w = width(acceptance(design, pred, tolerances=replace(Tolerances(), **change)))
         assert w[0] > base[0] and w[1] > base[1], change
     earthy = acceptance(design, pred, tolerances=Tolerances(earth_field_uT=165.0))
@@ -157,7 +157,7 @@ def test_the_weight_and_its_limits(design, pred, acc):
     bands = [acceptance(design, pred, weight_g=w)["delta_Bz_uT"] for w in (20.0, 50.0, 100.0)]
     assert bands[1] == acc["delta_Bz_uT"]
     assert bands[0][0] < bands[1][0] < bands[2][0] and bands[0][1] < bands[1][1] < bands[2][1]
-    with pytest.raises(ValueError, match="beyond the predicted range .* use a lighter weight"):
+    with pytest.raises(ValueError, match=r"beyond the predicted range .* use a lighter weight"):
         acceptance(design, pred, weight_g=500.0)
     with pytest.raises(ValueError, match="positive number of grams"):
         acceptance(design, pred, weight_g=-1.0)
@@ -200,7 +200,8 @@ def test_rotation_band_is_the_earth_turned_over_plus_the_tips_own_weight(design,
     table = acc["weight"]["table"]
     slope = (table["delta_Bz_max_uT"][1] - table["delta_Bz_max_uT"][0]) / table["force_N"][1]
     own = 2.0 * (magnet_N + silicone_N / 2.0) * slope
-    assert rot["earth_change_uT"] == pytest.approx(2 * 65.0) and rot["self_weight_change_uT"] == pytest.approx(own, rel=1e-3)
+    assert rot["earth_change_uT"] == pytest.approx(2 * 65.0) and \
+        rot["self_weight_change_uT"] == pytest.approx(own, rel=1e-3)
     assert rot["band_uT"] == pytest.approx(130.0 + own, rel=1e-3)
     assert rot["predicted_normal_rest_mN"] == pytest.approx(abs(pred.drift.rotation_band[1].normal_rest_mN), rel=1e-3)
     assert rot["gradient_uT_per_mm"] == pytest.approx(pred.field.dBz_dz_rest_G_per_mm * 100, rel=1e-4)
@@ -208,7 +209,8 @@ def test_rotation_band_is_the_earth_turned_over_plus_the_tips_own_weight(design,
 
     quiet = design.spec.model_copy(update={"environment": Environment(earth_field_G=0.4)})
     there = acceptance(derive(quiet), pred)["rotation"]
-    assert there["earth_change_uT"] == pytest.approx(80.0) and there["self_weight_change_uT"] == rot["self_weight_change_uT"]
+    assert there["earth_change_uT"] == pytest.approx(80.0) and \
+        there["self_weight_change_uT"] == rot["self_weight_change_uT"]
     assert there["predicted_normal_rest_mN"] == pytest.approx(rot["predicted_normal_rest_mN"] * 80 / 130, rel=1e-3)
 
 
@@ -256,7 +258,8 @@ def test_render_embeds_acceptance_and_stays_compatible(design, acc, rendered):
     (lambda a: a["weight"]["table"]["delta_Bz_max_uT"].pop(), "acceptance.json:weight.table"),
     (lambda a: a["magnet"].update(grade=35), "acceptance.json:magnet.grade"),
     (lambda a: a["rotation"].pop("band_uT"), "acceptance.json:rotation.band_uT"),
-    (lambda a: a["rotation"].update(predicted_normal_rest_mN="40"), "acceptance.json:rotation.predicted_normal_rest_mN"),
+    (lambda a: a["rotation"].update(predicted_normal_rest_mN="40"),
+     "acceptance.json:rotation.predicted_normal_rest_mN"),
     (lambda a: a["warmup"]["per_C_mN"].pop("fitted"), "acceptance.json:warmup.per_C_mN.fitted"),
 ])
 def test_malformed_acceptance_is_refused_by_key(design, acc, change, key):

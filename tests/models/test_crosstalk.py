@@ -42,7 +42,8 @@ def test_neighbours_field_is_magpylibs_superposition(array_builds, name):
     _, _, rest = X.layout_errors(loads, xy, signs)
     m = loads.magnet
     for i, (x, y) in enumerate(xy):
-        mags = [magpylib.magnet.Cylinder(polarization=(0, 0, s * m.remanence_T), dimension=(2 * m.radius_mm, m.height_mm),
+        mags = [magpylib.magnet.Cylinder(polarization=(0, 0, s * m.remanence_T),
+                                         dimension=(2 * m.radius_mm, m.height_mm),
                                          position=(px, py, loads.z_centre)) for j, ((px, py), s) in
                 enumerate(zip(xy, signs)) if j != i]
         B = magpylib.getB(mags, (x, y, loads.z_chip), sumup=True) * 1e4  # T -> G
@@ -96,7 +97,7 @@ def test_polarity_changes_every_neighbour_at_once_not_one_alone(array_builds):
 def test_the_magnets_push_the_strips_ends_out_or_pull_them_in(strip):
     d, pred, doc = strip
     loads = X._Loads.of(d, pred)
-    xy, same = _layout(d)
+    xy, _same = _layout(d)
     net = np.array(doc["magnet_net_force_mN"])
     assert net[0, 0] < 0 < net[-1, 0] and net[0, 0] == pytest.approx(-net[-1, 0], rel=1e-3)
     assert abs(net[2, 0]) < 1e-3 and np.abs(net[:, 1]).max() < 1e-3  # the middle one is balanced; nothing across

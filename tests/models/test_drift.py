@@ -216,7 +216,8 @@ def test_the_worst_case_bounds_every_draw_within_the_bands(design, pred):
     lag = rng.uniform(-1, 1, size=(n, 1)) * D.environment(design).temperature_lag_C
     lo, hi = c.operating_C
     x, x0 = (temps - (lo + hi) / 2) / ((hi - lo) / 2), (t.calibration_C - (lo + hi) / 2) / ((hi - lo) / 2)
-    reading = rng.uniform(-1, 1, size=(n, 1)) * (2 * c.sensor_linearity_C * np.abs(x**2 - x0**2) + 0.5 * c.sensor_step_C)
+    reading = rng.uniform(-1, 1, size=(n, 1)) * (2 * c.sensor_linearity_C * np.abs(x**2 - x0**2)
+                                                 + 0.5 * c.sensor_step_C)
     err = D.temperature_error_mN(ch, 0.0, dT, alpha_pct=alpha, sensitivity_pct=sens, offset_G_per_C=offset,
                                  magnet_dT_C=dT + lag, compensation=(c.magnet_pct_per_C, dT + reading))
     bound = np.abs(np.asarray(t.span["normal_rest"]["with"]))

@@ -55,7 +55,8 @@ def test_magone_against_the_builds_fe(magone_design, magone_prediction):
     np.testing.assert_allclose(curve.max_stretch[1:n] - 1.0, fe.max_stretch[1:n] - 1.0, rtol=2.0 * e["stretch_p90"])
     np.testing.assert_allclose(curve.stiffness_N_per_mm[3:n], fe.stiffness_N_per_mm[3:n], rtol=max(band, 0.02))
     assert resp.displacement_mm_per_N[0] == pytest.approx(
-        magone_prediction.shear.stiffness_N_per_mm["nominal"] ** -1, rel=max(2.0 * S.held_out_error()["disp_p90"], 0.03))
+        magone_prediction.shear.stiffness_N_per_mm["nominal"] ** -1,
+        rel=max(2.0 * S.held_out_error()["disp_p90"], 0.03))
 
 
 @pytest.mark.parametrize("change, words", [

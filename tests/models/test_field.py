@@ -83,7 +83,7 @@ def charge_sheets(magnet, point):
     for z_face, sign in ((h, 1.0), (-h, -1.0)):
         dz = z - z_face
         for k, comp in enumerate((radial, axial)):
-            def f(ph, rp):
+            def f(ph, rp, comp=comp, dz=dz):  # bound: dblquad calls it in this iteration
                 return rp * comp(rp, ph, dz) / (r * r + rp * rp - 2.0 * r * rp * math.cos(ph) + dz * dz) ** 1.5
             val, _ = integrate.dblquad(f, 0.0, R, 0.0, math.pi, epsabs=1e-13, epsrel=1e-10)
             b[k] += sign * 2.0 * val  # the half-disc 0..pi, mirrored
@@ -122,7 +122,7 @@ def test_multipoles_reproduce_m6_far_on_the_axis():
     assert A[1] == pytest.approx(1.195e4 * 2.5**2 * 2.0 / 4)  # Br R^2 H / 4 = mu0 m / 4 pi
     assert A[3] / A[1] == pytest.approx(1.0 - 0.75 * 2.5**2)  # h^2 - 3 R^2 / 4
     for z in (20.0, 50.0, 200.0):
-        series = sum((l + 1) * A[l] / z ** (l + 2) for l in (1, 3, 5))
+        series = sum((order + 1) * A[order] / z ** (order + 2) for order in (1, 3, 5))
         assert series == pytest.approx(float(F.axis_bz(MAGONE, z)), rel=3 * (2.7 / z) ** 6)
 
 
@@ -152,7 +152,7 @@ def test_dipole_special_aspect_has_no_octupole():
 def test_dipole_refuses_near_the_magnet():
     inside_sphere = np.array([[0.0, 0.0, -1.5]])  # outside the magnet, inside r = 2.69 mm
     assert np.isinf(F.dipole_error_estimate(MAGONE, inside_sphere)).all()
-    with pytest.raises(F.FieldModelError, match="too close to the magnet.*unbounded"):
+    with pytest.raises(F.FieldModelError, match=r"too close to the magnet.*unbounded"):
         F.dipole(MAGONE, inside_sphere)
     near = F.working_volume(MAGONE, D_MIN, D_MAX, 8)  # 20-100 % wrong there
     with pytest.raises(F.FieldModelError, match=r"dipole: \d+ of 64 points"):
@@ -236,7 +236,7 @@ def test_far_field_cancellation_is_detected_and_avoided():
     assert actual[-1] > 1e-3  # at 10^5 R the elliptic form is wrong in the 3rd digit or worse
     estimate = F.exact_rounding_estimate(MAGONE, pts)
     assert np.all(actual <= estimate + 1e-15) and np.all(actual[-4:] > estimate[-4:] / 50)
-    with pytest.raises(F.FieldModelError, match="cancellation.*use the dipole"):
+    with pytest.raises(F.FieldModelError, match=r"cancellation.*use the dipole"):
         F.exact(MAGONE, pts)
     F.exact(MAGONE, pts[z > -1000.0])  # within ~400 R the default rtol is met
 
@@ -315,7 +315,7 @@ def test_surrogate_other_aspect_ratios(h_over_d):
 def test_surrogate_refuses_outside_its_table_and_beyond_its_accuracy():
     R = MAGONE.radius_mm
     for p in [(2.01 * R, 0, -7.0), (0, 0, -(1.0 + 0.19 * R)), (0, 0, -(1.0 + 10.1 * R)), (0, 0, 1.0 + 11 * R)]:
-        with pytest.raises(F.FieldModelError, match="surrogate: 1 of 2 points.*outside its table"):
+        with pytest.raises(F.FieldModelError, match=r"surrogate: 1 of 2 points.*outside its table"):
             F.surrogate(MAGONE, [p, (0.0, 0.0, -7.0)])
     edge = [(2 * R, 0, -(1.0 + 0.2 * R)), (0, 0, 1.0 + 10 * R)]  # the table's own corners are inside
     assert np.isfinite(F.surrogate(MAGONE, edge)).all()
@@ -389,7 +389,7 @@ def test_choose_picks_the_cheapest_model_within_tolerance():
     tight = F.choose(MAGONE, volume, 1e-6)
     assert (tight.model, tight.error) == ("exact", 0.0)
     assert F.choose(MAGONE, volume, 1e-3) == c  # deterministic
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="tolerance must be positive"):
         F.choose(MAGONE, volume, 0.0)
 
 

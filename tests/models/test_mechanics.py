@@ -50,12 +50,12 @@ def test_silicone_volume_is_the_closed_form(magone):
 
 
 @pytest.mark.parametrize("kwargs, key", [
-    (dict(radius_mm=6, height_mm=7.9, base_height_mm=2.0, tip="hemisphere"), "base_height_mm"),
-    (dict(radius_mm=6, height_mm=7.9, base_height_mm=1.9, tip="cone"), "tip"),
-    (dict(radius_mm=6, height_mm=7.9, base_height_mm=1.9, magnet_radius_mm=2.5, magnet_height_mm=2,
-          magnet_z_mm=5.5), "magnet"),
-    (dict(radius_mm=6, height_mm=7.9, base_height_mm=1.9, magnet_radius_mm=2.5), "magnet_radius_mm"),
-    (dict(radius_mm=-1, height_mm=7.9, base_height_mm=1.9), "radius_mm"),
+    ({"radius_mm": 6, "height_mm": 7.9, "base_height_mm": 2.0, "tip": "hemisphere"}, "base_height_mm"),
+    ({"radius_mm": 6, "height_mm": 7.9, "base_height_mm": 1.9, "tip": "cone"}, "tip"),
+    ({"radius_mm": 6, "height_mm": 7.9, "base_height_mm": 1.9, "magnet_radius_mm": 2.5, "magnet_height_mm": 2,
+      "magnet_z_mm": 5.5}, "magnet"),
+    ({"radius_mm": 6, "height_mm": 7.9, "base_height_mm": 1.9, "magnet_radius_mm": 2.5}, "magnet_radius_mm"),
+    ({"radius_mm": -1, "height_mm": 7.9, "base_height_mm": 1.9}, "radius_mm"),
 ])
 def test_bad_bodies_name_the_input(kwargs, key):
     with pytest.raises(MechanicsError, match=key):
@@ -303,13 +303,13 @@ def test_column_fully_compressed_raises(magone):
 
 
 @pytest.mark.parametrize("args, key", [
-    (dict(mu_kPa=-1.0), "mu_kPa"),
-    (dict(indentation_mm=[0.0, 1.0, 0.5]), "indentation_mm"),
-    (dict(mesh_mm=0.0), "mesh_mm"),
-    (dict(material="mooney"), "material"),
+    ({"mu_kPa": -1.0}, "mu_kPa"),
+    ({"indentation_mm": [0.0, 1.0, 0.5]}, "indentation_mm"),
+    ({"mesh_mm": 0.0}, "mesh_mm"),
+    ({"material": "mooney"}, "material"),
 ])
 def test_bad_fe_inputs(magone, args, key):
-    kw = dict(mu_kPa=23.0, indentation_mm=[0.0, 0.5], mesh_mm=1.0) | args
+    kw = {"mu_kPa": 23.0, "indentation_mm": [0.0, 0.5], "mesh_mm": 1.0} | args
     with pytest.raises(MechanicsError, match=key):
         mech.fe(magone, **kw)
 
@@ -384,7 +384,7 @@ def test_shear_needs_a_magnet():
         mech.shear_stiffness(_cylinder(3.0, 3.0), 10.0)
 
 
-# ---- registry and measurement -----------------------------------------------------------------------------------------
+# ---- registry and measurement ----------------------------------------------------------------------------------------
 
 
 def test_registry_models_share_one_signature(magone):

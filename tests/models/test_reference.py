@@ -30,7 +30,8 @@ def _changes_magpylib(design, pred, xy):
     travel = ref.Travel.predicted(design, pred)
     assert travel.normal_mm == loads.normal_travel_mm and travel.shear_mm == loads.shear_travel_mm
     m = loads.magnet
-    cyl = magpy.magnet.Cylinder(polarization=(0, 0, m.remanence_T), dimension=(2 * m.radius_mm / 1000, m.height_mm / 1000))
+    cyl = magpy.magnet.Cylinder(polarization=(0, 0, m.remanence_T),
+                                dimension=(2 * m.radius_mm / 1000, m.height_mm / 1000))
     point = np.array([xy[0], xy[1], design.z_sense_mm]) / 1000
     centre = np.array([0.0, 0.0, loads.z_centre])
     moves = [(0, 0, -loads.normal_travel_mm)] + [(sx * loads.shear_travel_mm, sy * loads.shear_travel_mm, 0)
@@ -75,7 +76,8 @@ def test_rejection_uniform_from_the_datasheet_bounds_and_a_dipole_by_its_gradien
     near, far, farther = rej.dipole
     assert near < 1.0  # a motor about as far as the reference: subtracting it can make things worse
     s = site.separation_mm
-    for d, r in zip((3000.0, 10000.0), (far, farther)):  # far away: the gradient, D / (3 s) on the axis, a bit less off it
+    # far away: the gradient, D / (3 s) on the axis, a bit less off it
+    for d, r in zip((3000.0, 10000.0), (far, farther)):
         assert 0.6 * d / (3 * s) < r < 1.1 * d / (3 * s)
     assert farther > far > near and all(m >= w for m, w in zip(rej.dipole_median, rej.dipole))
     assert rej.noise_growth == pytest.approx(np.sqrt(1 + 1 / 15))

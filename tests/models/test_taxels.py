@@ -70,7 +70,8 @@ def test_each_taxel_is_fitted_to_its_compensated_scan(strip):
     assert np.median(scans[0].B_uT[:, 2]) > 0 > np.median(scans[1].B_uT[:, 2])  # alternating polarity
     assert scans[0].sha256 != scans[1].sha256  # own noise seed per taxel
     plain = fit(scans[0], design, mls=False).calibration.errors["Fr_N"]["rms_holdout"]
-    compensated = fit(taxels.compensated(scans[0], field, 0), design, mls=False).calibration.errors["Fr_N"]["rms_holdout"]
+    compensated = fit(taxels.compensated(scans[0], field, 0), design,
+                      mls=False).calibration.errors["Fr_N"]["rms_holdout"]
     assert compensated < 0.6 * plain  # the neighbours' lateral field bends the axisymmetric fit until removed
     whole = taxels.calibrate_taxels(design, pred, tuple(scans) + tuple(
         taxels.simulate_taxel_scan(design, pred, k, field) for k in (2, 3, 4)))
@@ -96,7 +97,7 @@ def test_one_taxel_is_calibrated_from_its_rows_of_a_recording(strip, tmp_path):
     header = lines[0][0] + ",taxel"
     rows = [f"{line},{k}" for k, rows in enumerate(lines) for line in rows[1:] if not line.startswith("#")]
     path = tmp_path / "rec.csv"
-    path.write_text("\n".join([header] + rows) + "\n")
+    path.write_text("\n".join([header, *rows]) + "\n")
     scan = read_scan_csv(path, taxel=2)
     np.testing.assert_allclose(scan.B_uT, measured[2].B_uT, atol=1e-3)
     with pytest.raises(ScanError, match="no rows of taxel 7; the file holds taxel"):
