@@ -153,6 +153,11 @@ class Rig:
         with self._lock:
             self._fields = [(*f, t_C) for f in fields]
 
+    @property
+    def error(self) -> BaseException | None:
+        """What stopped the board's thread (None while it runs); raised again when the rig closes."""
+        return self._error
+
     def eeprom(self, size: int) -> bytes:
         with self._lock:
             return self.bus.eeprom(0, size) if self.bus is not None else b""

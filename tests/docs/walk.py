@@ -142,6 +142,7 @@ class Bench:
     weight_g: float = 50.0
     press: list | None = None  # every chip's field during a press, held while a Ctrl-C'd ``stream`` runs (zeroed)
     press_s: float = 0.6
+    zero_s: float = 120.0  # how long ``stream --zero N`` may take to zero before the walk fails (a loaded CI machine)
     rig: object = None
     scan: Scan | None = None
     ran: list[Ran] = field(default_factory=list)
@@ -192,29 +193,36 @@ class Bench:
         goes to files, as to a terminal that never stops reading (a pipe nobody reads would stall it)."""
         with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
             proc = self._start(line, stdout=out, stderr=err)
-            time.sleep(1.5)  # it opens the port and finds the frames
-            if " record " in f" {line} ":
-                taxel = re.search(r"taxel (\d+)", line.partition("#")[2])  # an array's: the taxel the page scans
-                self.scan.play(self.rig, self.cwd / "reference.csv", int(taxel[1]) if taxel else 0)
-            elif " stream " in f" {line} " and "--zero" in line and self.press is not None:
-                self._press_while_streaming(out, timeout_s)
-            time.sleep(0.5)
-            proc.send_signal(signal.SIGINT)
             try:
+                time.sleep(1.5)  # it opens the port and finds the frames
+                if " record " in f" {line} ":
+                    taxel = re.search(r"taxel (\d+)", line.partition("#")[2])  # an array's: the taxel the page scans
+                    self.scan.play(self.rig, self.cwd / "reference.csv", int(taxel[1]) if taxel else 0)
+                elif " stream " in f" {line} " and "--zero" in line and self.press is not None:
+                    self._press_while_streaming(line, proc, out, err)
+                time.sleep(0.5)
+                proc.send_signal(signal.SIGINT)
                 proc.wait(timeout_s)
             finally:
-                proc.kill()
+                proc.kill()  # a no-op once it has ended; else (a failure above) it must not outlive the walk
             out.seek(0)
             err.seek(0)
             return Ran(line, self.cwd, proc.returncode, out.read(), err.read())
 
-    def _press_while_streaming(self, out, timeout_s: float) -> None:
-        """Once ``stream`` has zeroed (its ``# zero:`` lines out), hold :attr:`press` for ``press_s``, then rest."""
-        deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline:
-            out.seek(0)
-            if out.read().count("# zero:") >= len(self.press):
-                break
+    def _press_while_streaming(self, line: str, proc: subprocess.Popen, out, err) -> None:
+        """Once ``stream`` has zeroed (its ``# zero:`` lines out), hold :attr:`press` for ``press_s``, then rest.
+        It fails at once if the command ends first or the board stops, and after :attr:`zero_s` in any case: its
+        ``--zero N`` takes N of the board's cycles, a few seconds, so a stream that has not zeroed by then never will
+        (the walk would otherwise wait out the whole command's deadline)."""
+        deadline = time.monotonic() + self.zero_s
+        while (zeroed := _text(out).count("# zero:")) < len(self.press):
+            problem = (f"it exited {proc.returncode}" if proc.poll() is not None else
+                       f"the simulated board stopped: {self.rig.error!r}" if self.rig.error is not None else
+                       f"still running after {self.zero_s:g} s" if time.monotonic() > deadline else None)
+            if problem:
+                raise AssertionError(f"`{line}` printed {zeroed} of its {len(self.press)} `# zero:` lines and "
+                                     f"{problem} (the board was reset {self.rig.resets} time(s)):\n"
+                                     f"{_text(out)[-3000:]}\n{_text(err)[-3000:]}")
             time.sleep(0.1)
         time.sleep(0.3)
         self.rig.set_fields(self.press)
@@ -281,6 +289,15 @@ class Bench:
             dT = rise_C * min((time.monotonic() - t0) / seconds, 1.0)
             self.rig.set_field(*(b * (1.0 + MAGNET_PER_C * dT) for b in self.scan.rest), t_C=25.0 + dT)
             time.sleep(0.05)
+
+
+def _text(file) -> str:
+    """All a running command has written to ``file`` so far, read without moving the file's offset: the command
+    shares it (its stdout is this file), and after a ``seek(0)`` here its next write would land at the start, over
+    the lines it wrote first (how a stream's ``# zero:`` lines were lost and the walk waited for them until its
+    deadline)."""
+    fd = file.fileno()
+    return os.pread(fd, os.fstat(fd).st_size, 0).decode(errors="replace")
 
 
 def bench_env(venv: Path, port: str | None = None) -> dict:
