@@ -141,8 +141,8 @@ class Bench:
     plug_in: object
     weight_g: float = 50.0
     press: list | None = None  # every chip's field during a press, held while a Ctrl-C'd ``stream`` runs (zeroed)
-    press_s: float = 0.6
-    zero_s: float = 120.0  # how long ``stream --zero N`` may take to zero before the walk fails (a loaded CI machine)
+    press_cycles: int = 40  # the board's cycles before, during and after that press, each
+    wait_s: float = 120.0  # how long the walk waits for a stream's output (its zeroing, each of those phases)
     rig: object = None
     scan: Scan | None = None
     ran: list[Ran] = field(default_factory=list)
@@ -210,24 +210,34 @@ class Bench:
             return Ran(line, self.cwd, proc.returncode, out.read(), err.read())
 
     def _press_while_streaming(self, line: str, proc: subprocess.Popen, out, err) -> None:
-        """Once ``stream`` has zeroed (its ``# zero:`` lines out), hold :attr:`press` for ``press_s``, then rest.
-        It fails at once if the command ends first or the board stops, and after :attr:`zero_s` in any case: its
-        ``--zero N`` takes N of the board's cycles, a few seconds, so a stream that has not zeroed by then never will
-        (the walk would otherwise wait out the whole command's deadline)."""
-        deadline = time.monotonic() + self.zero_s
-        while (zeroed := _text(out).count("# zero:")) < len(self.press):
+        """Once ``stream`` has zeroed (its ``# zero:`` lines out): :attr:`press_cycles` of the board's cycles at rest,
+        as many with :attr:`press` held, as many at rest again. Counted in the rows it prints (a taxel's a row), not
+        in seconds: a loaded machine runs the simulated board slower than the clock, and a press held for a time
+        then spans too few cycles to be read."""
+        taxels = len(self.press)
+        self._await(line, proc, out, err, "its `# zero:` lines", lambda text: text.count("# zero:") >= taxels)
+        for fields in (None, self.press, None):
+            if fields is None:
+                self.scan.at_rest(self.rig)
+            else:
+                self.rig.set_fields(fields)
+            rows = _rows(_text(out)) + self.press_cycles * taxels
+            self._await(line, proc, out, err, f"{self.press_cycles} more cycles",
+                        lambda text, rows=rows: _rows(text) >= rows)
+
+    def _await(self, line: str, proc: subprocess.Popen, out, err, what: str, seen) -> None:
+        """Until ``seen(its output so far)``; fails at once if the command ends first or the board stops, and after
+        :attr:`wait_s` in any case (a stream's ``--zero N`` takes N of the board's cycles, a few seconds: one that has
+        not zeroed by then never will, and the walk would otherwise wait out the whole command's deadline)."""
+        deadline = time.monotonic() + self.wait_s
+        while not seen(_text(out)):
             problem = (f"it exited {proc.returncode}" if proc.poll() is not None else
                        f"the simulated board stopped: {self.rig.error!r}" if self.rig.error is not None else
-                       f"still running after {self.zero_s:g} s" if time.monotonic() > deadline else None)
+                       f"still running after {self.wait_s:g} s" if time.monotonic() > deadline else None)
             if problem:
-                raise AssertionError(f"`{line}` printed {zeroed} of its {len(self.press)} `# zero:` lines and "
-                                     f"{problem} (the board was reset {self.rig.resets} time(s)):\n"
-                                     f"{_text(out)[-3000:]}\n{_text(err)[-3000:]}")
+                raise AssertionError(f"`{line}` did not print {what} and {problem} (the board was reset "
+                                     f"{self.rig.resets} time(s)):\n{_text(out)[-3000:]}\n{_text(err)[-3000:]}")
             time.sleep(0.1)
-        time.sleep(0.3)
-        self.rig.set_fields(self.press)
-        time.sleep(self.press_s)
-        self.scan.at_rest(self.rig)
 
     def _interactive(self, line: str, timeout_s: float) -> Ran:
         """``check``: at each of its prompts, what a person does (:meth:`_do`), then Enter."""
@@ -289,6 +299,11 @@ class Bench:
             dT = rise_C * min((time.monotonic() - t0) / seconds, 1.0)
             self.rig.set_field(*(b * (1.0 + MAGNET_PER_C * dT) for b in self.scan.rest), t_C=25.0 + dT)
             time.sleep(0.05)
+
+
+def _rows(text: str) -> int:
+    """The data rows in a stream's output (its comments and blank lines left out)."""
+    return sum(1 for row in text.splitlines() if row.strip() and not row.startswith("#"))
 
 
 def _text(file) -> str:
