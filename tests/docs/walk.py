@@ -141,7 +141,7 @@ class Bench:
     plug_in: object
     weight_g: float = 50.0
     press: list | None = None  # every chip's field during a press, held while a Ctrl-C'd ``stream`` runs (zeroed)
-    press_cycles: int = 40  # the board's cycles before, during and after that press, each
+    press_s: float = 0.6  # how long that press is held, in the board's (simulated) time
     wait_s: float = 120.0  # how long the walk waits for a stream's output (its zeroing, each of those phases)
     rig: object = None
     scan: Scan | None = None
@@ -210,20 +210,20 @@ class Bench:
             return Ran(line, self.cwd, proc.returncode, out.read(), err.read())
 
     def _press_while_streaming(self, line: str, proc: subprocess.Popen, out, err) -> None:
-        """Once ``stream`` has zeroed (its ``# zero:`` lines out): :attr:`press_cycles` of the board's cycles at rest,
-        as many with :attr:`press` held, as many at rest again. Counted in the rows it prints (a taxel's a row), not
-        in seconds: a loaded machine runs the simulated board slower than the clock, and a press held for a time
-        then spans too few cycles to be read."""
+        """Once ``stream`` has zeroed (its ``# zero:`` lines out): 0.3 s at rest, :attr:`press` held for
+        :attr:`press_s`, then 0.5 s at rest, each timed by the board's own (simulated) clock, not the wall clock: a
+        loaded machine runs the simulated board slower, and a press held for a wall-clock time then spans too few of
+        its cycles to be read."""
         taxels = len(self.press)
         self._await(line, proc, out, err, "its `# zero:` lines", lambda text: text.count("# zero:") >= taxels)
-        for fields in (None, self.press, None):
+        for fields, seconds in ((None, 0.3), (self.press, self.press_s), (None, 0.5)):
             if fields is None:
                 self.scan.at_rest(self.rig)
             else:
                 self.rig.set_fields(fields)
-            rows = _rows(_text(out)) + self.press_cycles * taxels
-            self._await(line, proc, out, err, f"{self.press_cycles} more cycles",
-                        lambda text, rows=rows: _rows(text) >= rows)
+            until = self.rig.board_s + seconds
+            self._await(line, proc, out, err, f"the board to run {seconds:g} s more",
+                        lambda _, until=until: self.rig.board_s >= until)
 
     def _await(self, line: str, proc: subprocess.Popen, out, err, what: str, seen) -> None:
         """Until ``seen(its output so far)``; fails at once if the command ends first or the board stops, and after
@@ -235,7 +235,7 @@ class Bench:
                        f"the simulated board stopped: {self.rig.error!r}" if self.rig.error is not None else
                        f"still running after {self.wait_s:g} s" if time.monotonic() > deadline else None)
             if problem:
-                raise AssertionError(f"`{line}` did not print {what} and {problem} (the board was reset "
+                raise AssertionError(f"`{line}`: waiting for {what}, {problem} (the board was reset "
                                      f"{self.rig.resets} time(s)):\n{_text(out)[-3000:]}\n{_text(err)[-3000:]}")
             time.sleep(0.1)
 
@@ -299,11 +299,6 @@ class Bench:
             dT = rise_C * min((time.monotonic() - t0) / seconds, 1.0)
             self.rig.set_field(*(b * (1.0 + MAGNET_PER_C * dT) for b in self.scan.rest), t_C=25.0 + dT)
             time.sleep(0.05)
-
-
-def _rows(text: str) -> int:
-    """The data rows in a stream's output (its comments and blank lines left out)."""
-    return sum(1 for row in text.splitlines() if row.strip() and not row.startswith("#"))
 
 
 def _text(file) -> str:
