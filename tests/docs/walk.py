@@ -141,7 +141,9 @@ class Bench:
     plug_in: object
     weight_g: float = 50.0
     press: list | None = None  # every chip's field during a press, held while a Ctrl-C'd ``stream`` runs (zeroed)
-    press_s: float = 0.6  # how long that press is held, in the board's (simulated) time
+    # How long that press is held, in the board's (simulated) time: ~160 of a 5-chip board's cycles, of which the
+    # readout prints fewer when it falls behind and leaves cycles out (11 of 0.6 s's ~65 under a load of 7 on 2 cores).
+    press_s: float = 1.5
     wait_s: float = 120.0  # how long the walk waits for a stream's output (its zeroing, each of those phases)
     rig: object = None
     scan: Scan | None = None
