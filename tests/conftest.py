@@ -1,11 +1,21 @@
 """Shared fixtures. Tests that need a Debian tool call :func:`require_tool`: it skips with a reason when
-the tool is missing, and fails instead when MAGFAB_REQUIRE_TOOLS=1 (set by .ci/run), so CI always runs them."""
+the tool is missing, and fails instead when MAGFAB_REQUIRE_TOOLS=1 (set by .ci/run), so CI always runs them.
+
+The suite runs in parallel (pytest-xdist, the README's test command): ``--dist loadfile`` gives each test module
+to one worker, so a module's fixtures are made once, as in a serial run; a session fixture, though, runs on every
+worker, so the session's builds (:func:`default_build`, :func:`array_builds`) are made once per run by whichever
+worker asks first and loaded by the others (:func:`_once_per_run`)."""
 
 from __future__ import annotations
 
+import copyreg
+import fcntl
+import io
 import os
+import pickle
 import shutil
 from pathlib import Path
+from types import MappingProxyType
 
 import pytest
 
@@ -74,11 +84,42 @@ def pred(magone_prediction):
     return magone_prediction
 
 
+def _mapping_proxy(mapping: dict) -> MappingProxyType:
+    return MappingProxyType(mapping)
+
+
+def _dumps(value) -> bytes:
+    """``pickle.dumps`` that also takes the recipes' read-only tables (``MappingProxyType``, which pickle refuses)."""
+    buffer = io.BytesIO()
+    pickler = pickle.Pickler(buffer, protocol=pickle.HIGHEST_PROTOCOL)
+    pickler.dispatch_table = {**copyreg.dispatch_table, MappingProxyType: lambda m: (_mapping_proxy, (dict(m),))}
+    pickler.dump(value)
+    return buffer.getvalue()
+
+
+def _once_per_run(tmp_path_factory, name: str, make):
+    """``make(folder)``, once per test run. Under xdist every worker runs a session fixture itself; here the first
+    worker to ask makes it in the run's shared temporary folder while holding a lock, and the others, once it is
+    done, load the result it saved beside it (each worker gets its own copy of the objects; the folder is shared,
+    and read only). Without xdist: ``make`` in this session's temporary folder."""
+    if "PYTEST_XDIST_WORKER" not in os.environ:
+        return make(tmp_path_factory.mktemp(name))
+    shared = tmp_path_factory.getbasetemp().parent / "shared"  # the run's folder, above every worker's own
+    shared.mkdir(exist_ok=True)
+    saved = shared / f"{name}.pickle"
+    with open(shared / f"{name}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes, also when ``make`` raises
+        if saved.is_file():
+            return pickle.loads(saved.read_bytes())
+        result = make(shared / name)
+        saved.write_bytes(_dumps(result))
+        return result
+
+
 @pytest.fixture(scope="session")
 def default_build(tmp_path_factory):
-    """The default (MagOne) build, written once per session."""
-    out = tmp_path_factory.mktemp("default") / "magone"
-    return build(load_spec(None), out)
+    """The default (MagOne) build, written once per run (read only: a test that changes it works on a copy)."""
+    return _once_per_run(tmp_path_factory, "default", lambda folder: build(load_spec(None), folder / "magone"))
 
 
 def ref_crc16(data: bytes) -> int:
@@ -91,7 +132,6 @@ def ref_crc16(data: bytes) -> int:
     return crc
 
 
-
 EXAMPLES = Path(__file__).resolve().parents[1] / "magfab" / "examples"
 
 
@@ -99,5 +139,9 @@ EXAMPLES = Path(__file__).resolve().parents[1] / "magfab" / "examples"
 def array_builds(tmp_path_factory):
     """The two array examples built once per session: ``{"fingertip_2x2": BuildResult, "strip_1x5": ...}`` (a 2x2
     continuous skin at 10 mm, alternating; a 1x5 strip of separate tips at 14 mm, same polarity)."""
-    root = tmp_path_factory.mktemp("arrays")
-    return {name: build(load_spec(EXAMPLES / f"{name}.toml"), root / name) for name in ("fingertip_2x2", "strip_1x5")}
+
+    def make(root: Path) -> dict:
+        names = ("fingertip_2x2", "strip_1x5")
+        return {name: build(load_spec(EXAMPLES / f"{name}.toml"), root / name) for name in names}
+
+    return _once_per_run(tmp_path_factory, "arrays", make)

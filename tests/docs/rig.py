@@ -153,6 +153,18 @@ class Rig:
         with self._lock:
             self._fields = [(*f, t_C) for f in fields]
 
+    @property
+    def error(self) -> BaseException | None:
+        """What stopped the board's thread (None while it runs); raised again when the rig closes."""
+        return self._error
+
+    @property
+    def board_s(self) -> float:
+        """The board's own clock, s: the simulated time it has run since it was flashed (0 before). Paced to the wall
+        clock, it falls behind it when the machine is too loaded to simulate the board in real time."""
+        with self._lock:
+            return self.bus.time_us / 1e6 if self.bus is not None else 0.0
+
     def eeprom(self, size: int) -> bytes:
         with self._lock:
             return self.bus.eeprom(0, size) if self.bus is not None else b""

@@ -141,7 +141,10 @@ class Bench:
     plug_in: object
     weight_g: float = 50.0
     press: list | None = None  # every chip's field during a press, held while a Ctrl-C'd ``stream`` runs (zeroed)
-    press_s: float = 0.6
+    # How long that press is held, in the board's (simulated) time: ~160 of a 5-chip board's cycles, of which the
+    # readout prints fewer when it falls behind and leaves cycles out (11 of 0.6 s's ~65 under a load of 7 on 2 cores).
+    press_s: float = 1.5
+    wait_s: float = 120.0  # how long the walk waits for a stream's output (its zeroing, each of those phases)
     rig: object = None
     scan: Scan | None = None
     ran: list[Ran] = field(default_factory=list)
@@ -192,34 +195,51 @@ class Bench:
         goes to files, as to a terminal that never stops reading (a pipe nobody reads would stall it)."""
         with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
             proc = self._start(line, stdout=out, stderr=err)
-            time.sleep(1.5)  # it opens the port and finds the frames
-            if " record " in f" {line} ":
-                taxel = re.search(r"taxel (\d+)", line.partition("#")[2])  # an array's: the taxel the page scans
-                self.scan.play(self.rig, self.cwd / "reference.csv", int(taxel[1]) if taxel else 0)
-            elif " stream " in f" {line} " and "--zero" in line and self.press is not None:
-                self._press_while_streaming(out, timeout_s)
-            time.sleep(0.5)
-            proc.send_signal(signal.SIGINT)
             try:
+                time.sleep(1.5)  # it opens the port and finds the frames
+                if " record " in f" {line} ":
+                    taxel = re.search(r"taxel (\d+)", line.partition("#")[2])  # an array's: the taxel the page scans
+                    self.scan.play(self.rig, self.cwd / "reference.csv", int(taxel[1]) if taxel else 0)
+                elif " stream " in f" {line} " and "--zero" in line and self.press is not None:
+                    self._press_while_streaming(line, proc, out, err)
+                time.sleep(0.5)
+                proc.send_signal(signal.SIGINT)
                 proc.wait(timeout_s)
             finally:
-                proc.kill()
+                proc.kill()  # a no-op once it has ended; else (a failure above) it must not outlive the walk
             out.seek(0)
             err.seek(0)
             return Ran(line, self.cwd, proc.returncode, out.read(), err.read())
 
-    def _press_while_streaming(self, out, timeout_s: float) -> None:
-        """Once ``stream`` has zeroed (its ``# zero:`` lines out), hold :attr:`press` for ``press_s``, then rest."""
-        deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline:
-            out.seek(0)
-            if out.read().count("# zero:") >= len(self.press):
-                break
+    def _press_while_streaming(self, line: str, proc: subprocess.Popen, out, err) -> None:
+        """Once ``stream`` has zeroed (its ``# zero:`` lines out): 0.3 s at rest, :attr:`press` held for
+        :attr:`press_s`, then 0.5 s at rest, each timed by the board's own (simulated) clock, not the wall clock: a
+        loaded machine runs the simulated board slower, and a press held for a wall-clock time then spans too few of
+        its cycles to be read."""
+        taxels = len(self.press)
+        self._await(line, proc, out, err, "its `# zero:` lines", lambda text: text.count("# zero:") >= taxels)
+        for fields, seconds in ((None, 0.3), (self.press, self.press_s), (None, 0.5)):
+            if fields is None:
+                self.scan.at_rest(self.rig)
+            else:
+                self.rig.set_fields(fields)
+            until = self.rig.board_s + seconds
+            self._await(line, proc, out, err, f"the board to run {seconds:g} s more",
+                        lambda _, until=until: self.rig.board_s >= until)
+
+    def _await(self, line: str, proc: subprocess.Popen, out, err, what: str, seen) -> None:
+        """Until ``seen(its output so far)``; fails at once if the command ends first or the board stops, and after
+        :attr:`wait_s` in any case (a stream's ``--zero N`` takes N of the board's cycles, a few seconds: one that has
+        not zeroed by then never will, and the walk would otherwise wait out the whole command's deadline)."""
+        deadline = time.monotonic() + self.wait_s
+        while not seen(_text(out)):
+            problem = (f"it exited {proc.returncode}" if proc.poll() is not None else
+                       f"the simulated board stopped: {self.rig.error!r}" if self.rig.error is not None else
+                       f"still running after {self.wait_s:g} s" if time.monotonic() > deadline else None)
+            if problem:
+                raise AssertionError(f"`{line}`: waiting for {what}, {problem} (the board was reset "
+                                     f"{self.rig.resets} time(s)):\n{_text(out)[-3000:]}\n{_text(err)[-3000:]}")
             time.sleep(0.1)
-        time.sleep(0.3)
-        self.rig.set_fields(self.press)
-        time.sleep(self.press_s)
-        self.scan.at_rest(self.rig)
 
     def _interactive(self, line: str, timeout_s: float) -> Ran:
         """``check``: at each of its prompts, what a person does (:meth:`_do`), then Enter."""
@@ -281,6 +301,15 @@ class Bench:
             dT = rise_C * min((time.monotonic() - t0) / seconds, 1.0)
             self.rig.set_field(*(b * (1.0 + MAGNET_PER_C * dT) for b in self.scan.rest), t_C=25.0 + dT)
             time.sleep(0.05)
+
+
+def _text(file) -> str:
+    """All a running command has written to ``file`` so far, read without moving the file's offset: the command
+    shares it (its stdout is this file), and after a ``seek(0)`` here its next write would land at the start, over
+    the lines it wrote first (how a stream's ``# zero:`` lines were lost and the walk waited for them until its
+    deadline)."""
+    fd = file.fileno()
+    return os.pread(fd, os.fstat(fd).st_size, 0).decode(errors="replace")
 
 
 def bench_env(venv: Path, port: str | None = None) -> dict:
