@@ -122,7 +122,7 @@ def cold_figures(repeat: int, work: Path) -> dict[str, dict[str, object]]:
         "python_startup": time_repeated(lambda i: [sys.executable, "-c", "pass"], repeat, work),
         "import_magfab": time_repeated(lambda i: [sys.executable, "-c", "import magfab"], repeat, work),
         "import_cadquery": time_repeated(lambda i: [sys.executable, "-c", "import cadquery"], repeat, work),
-        "magfab_help": time_repeated(lambda i: magfab_command() + ["--help"], repeat, work),
+        "magfab_help": time_repeated(lambda i: [*magfab_command(), "--help"], repeat, work),
         "build": time_repeated(
             lambda i: [sys.executable, "-m", "magfab.cli", "build", "--out", str(builds / f"run{i}")], repeat, work
         ),
@@ -275,7 +275,7 @@ def core_profile(design: Design) -> list[Point]:
     """(r, z) outline of a lid core, mm: ``design.core_profile`` extended into the lid plate (as mould.py)."""
     below = design.core_root_mm
     prof = design.core_profile
-    return [(0.0, -below), (prof[1][0], -below)] + prof[1:]
+    return [(0.0, -below), (prof[1][0], -below), *prof[1:]]
 
 
 def _num(x: float) -> str:

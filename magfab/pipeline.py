@@ -174,8 +174,9 @@ def _drift_charts(pred: Prediction) -> list[Artifact]:
     """The drift budget's chart (predictions.json's ``drift``), when the prediction has one."""
     if pred.drift is None:
         return []
+    drawn = sorted(drift_figures.figures(pred.drift).items())
     return [Artifact(f"{drift_figures.FOLDER}{name}", data, drift_figures.CAPTIONS[name.rsplit(".", 1)[0]] + ", "
-                     + name.rsplit(".", 1)[1].upper()) for name, data in sorted(drift_figures.figures(pred.drift).items())]
+                     + name.rsplit(".", 1)[1].upper()) for name, data in drawn]
 
 
 def _acceptance(design: Design, prediction: Prediction) -> AcceptanceStage:
@@ -267,7 +268,8 @@ def _bundle(design: Design, prediction: Prediction | None, scan: Scan | dict[int
     out.append(Artifact(f"firmware/{firmware.HEX_NAME}", hex_bytes,
                         f"ready-to-flash image for Arduino Uno/Nano (ATmega328P, 16 MHz), the same for every build: "
                         f"settings and calibration from the .eep; flash {made['flash_bytes']} B, RAM "
-                        f"{made['ram_bytes']} B ({made['toolchain']['avr-gcc']}, avr-libc {made['toolchain']['avr-libc']})"))
+                        f"{made['ram_bytes']} B ({made['toolchain']['avr-gcc']}, "
+                        f"avr-libc {made['toolchain']['avr-libc']})"))
     return BundleStage(artifacts=out, findings=found, fit=result)
 
 
@@ -403,7 +405,8 @@ def plan(spec: Spec, progress: Progress | None = None, scan=None, parallel: bool
                               "the whole build on one page, for a browser"))
     timings["report"] = time.perf_counter() - t
     models = {f"{m.family}_model": m.as_dict() for m in prediction.models}
-    artifacts.append(Artifact("manifest.json", _manifest(spec, design, artifacts, models), "what made what: hashes, versions"))
+    artifacts.append(Artifact("manifest.json", _manifest(spec, design, artifacts, models),
+                              "what made what: hashes, versions"))
     timings["total"] = time.perf_counter() - t0
     image = next((a.path for a in artifacts if a.path.endswith(".hex")), None)
     calibration = {"source": cal["scan"]["source"], "method": cal["method"], "order": cal["order"],
@@ -465,7 +468,8 @@ def _solids(design: Design, say: Progress, timings: dict[str, float]) -> SolidsS
         mesh = cad_files.tessellate(solid, tol, ang)
         meshes[stem] = mesh
         findings += mesh_findings(stem, mesh, cast("cq.Shape", solid.val()).Volume(), tol)
-        artifacts.append(Artifact(f"{stem}.stl", cad_files.stl_bytes(mesh, f"{spec.name} {stem}"), description + ", STL"))
+        artifacts.append(Artifact(f"{stem}.stl", cad_files.stl_bytes(mesh, f"{spec.name} {stem}"),
+                                  description + ", STL"))
         if spec.build.step:
             artifacts.append(Artifact(f"{stem}.step", cad_files.step_bytes(solid, f"{spec.name}-{stem}"),
                                       description + ", STEP"))
@@ -527,7 +531,8 @@ def _manifest(spec: Spec, design: Design, artifacts: list[Artifact], models: dic
         "printer": design.printer.key,
         "models": made | models,
         "artifacts": [
-            {"path": a.path, "sha256": hashlib.sha256(a.data).hexdigest(), "bytes": len(a.data), "description": a.description}
+            {"path": a.path, "sha256": hashlib.sha256(a.data).hexdigest(), "bytes": len(a.data),
+             "description": a.description}
             for a in artifacts
         ],
     })

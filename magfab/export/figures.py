@@ -120,7 +120,8 @@ def _axis_field(plt, design: Design, pred: Prediction):
                  f"{design.spec.magnet.diameter_mm:g} x {design.spec.magnet.height_mm:g} mm)", fontsize=10)
     _legend_below(fig, [Line2D([], [], color="#1f77b4", label="Bz (left axis)"),
                         Line2D([], [], color="#ff7f0e", label="|dBz/dz| (right axis)"),
-                        Line2D([], [], color="0.4", lw=0.8, ls=":", label=f"chip Z full scale {chip.full_scale_z_G:g} G"),
+                        Line2D([], [], color="0.4", lw=0.8, ls=":",
+                               label=f"chip Z full scale {chip.full_scale_z_G:g} G"),
                         Line2D([], [], color="k", lw=0.8, ls="--", label="d_min, d_max (spec, design)")], ncol=2)
     return fig
 
@@ -130,7 +131,8 @@ def _nice_log_levels(lo: float, hi: float) -> np.ndarray:
     the colour bar reads in round numbers."""
     decades = range(math.floor(math.log10(lo)) - 1, math.ceil(math.log10(hi)) + 1)
     steps = np.array([m * 10.0 ** e for e in decades for m in (1.0, 2.0, 5.0)])
-    return steps[max(0, np.searchsorted(steps, lo * (1 + 1e-12), "right") - 1):np.searchsorted(steps, hi * (1 - 1e-12)) + 1]
+    first = max(0, np.searchsorted(steps, lo * (1 + 1e-12), "right") - 1)
+    return steps[first:np.searchsorted(steps, hi * (1 - 1e-12)) + 1]
 
 
 def _contours(plt, design: Design, pred: Prediction):
@@ -166,7 +168,8 @@ def _contours(plt, design: Design, pred: Prediction):
     axes[0].invert_yaxis()  # shared: once inverts both
     _legend_below(fig, [Line2D([], [], color="r", lw=1.2, ls="--", label="the magnet's travel envelope "
                                "(r up to its radius, d from d_min to d_max)"),
-                        Line2D([], [], color="0.3", lw=1.0, ls=":", label="Bz = 0 (Bz changes sign; white in the panel)")],
+                        Line2D([], [], color="0.3", lw=1.0, ls=":",
+                               label="Bz = 0 (Bz changes sign; white in the panel)")],
                   ncol=1)
     return fig
 
@@ -187,7 +190,8 @@ def _force(plt, design: Design, pred: Prediction):
     axes[1].set_ylabel("dF/d(indentation), N/mm")
     m = pred.model("mechanics")
     fig.suptitle(textwrap.fill(f"Elastomer ({design.spec.elastomer.material}): {m.name}, {m.detail}", 150), fontsize=7)
-    handles = [Line2D([], [], color=BAND_COLOURS[k], label=f"{k} (mu {c.mu_kPa:g} kPa)") for k, c in pred.curves.items()]
+    handles = [Line2D([], [], color=BAND_COLOURS[k], label=f"{k} (mu {c.mu_kPa:g} kPa)")
+               for k, c in pred.curves.items()]
     handles.append(Line2D([], [], color="k", lw=0.8, ls="--", label=f"normal range ends ({pred.normal.range_limit}, "
                                                                      f"{idx:.2f} mm)"))
     _legend_below(fig, handles, ncol=4)
@@ -263,7 +267,8 @@ def _plain_unit(unit: str) -> str:
 def _place_labels(fig, ax, items: Sequence[tuple[float, float, str]]) -> None:
     """Label each (x, y) point with its text where the text overlaps no other label and no marker and stays in
     the axes and, beside the point, nearer it than any other point: the first of a ring of offsets that fits, farther
-    rings with a leader line to the point, else the least overlapping. Deterministic; needs the final layout (:func:`_freeze_layout`)."""
+    rings with a leader line to the point, else the least overlapping. Deterministic; needs the final layout
+    (:func:`_freeze_layout`)."""
     from matplotlib.text import Text
 
     renderer = fig.canvas.get_renderer()
@@ -296,7 +301,8 @@ def _place_labels(fig, ax, items: Sequence[tuple[float, float, str]]) -> None:
                 box = (e.x0, e.y0, e.x1, e.y1)
                 outside = overlap(box, (frame.x0, frame.y0, frame.x1, frame.y1)) < e.width * e.height - 1e-6
                 cost = sum(overlap(box, b) for b in placed + markers[:i] + markers[i + 1:]) + (1e9 if outside else 0)
-                if scale == 4.0 and any(gap(box, q) < 2.0 * gap(box, pts[i]) + 6 * px for j, q in enumerate(pts) if j != i):
+                crowded = any(gap(box, q) < 2.0 * gap(box, pts[i]) + 6 * px for j, q in enumerate(pts) if j != i)
+                if scale == 4.0 and crowded:
                     cost += 1e6  # without a leader line the text would read as another point's
                 if best is None or cost < best[0]:
                     if best is not None:

@@ -26,7 +26,9 @@ import sys
 import threading
 import time
 import tty
+from contextlib import suppress
 from pathlib import Path
+from typing import ClassVar
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "export"))
 from simbus import Bus, build_library
@@ -48,8 +50,8 @@ class Stk500:
     leaves programming mode; ``flash`` is the program memory written so far."""
 
     # command -> bytes that follow it before Sync_CRC_EOP (None: its own length rule)
-    _ARGS = {0x30: 0, 0x41: 1, 0x40: 2, 0x42: 20, 0x45: None, 0x50: 0, 0x51: 0, 0x55: 2, 0x56: 4, 0x64: None,
-             0x74: 3, 0x75: 0}
+    _ARGS: ClassVar[dict[int, int | None]] = {0x30: 0, 0x41: 1, 0x40: 2, 0x42: 20, 0x45: None, 0x50: 0, 0x51: 0,
+                                              0x55: 2, 0x56: 4, 0x64: None, 0x74: 3, 0x75: 0}
 
     def __init__(self) -> None:
         self.buf = bytearray()
@@ -171,10 +173,8 @@ class Rig:
 
     def _send(self, data: bytes) -> None:
         """To the host; dropped when nobody reads the port and its buffer is full, as a USB serial line drops."""
-        try:
+        with suppress(BlockingIOError):
             os.write(self.master, data)
-        except BlockingIOError:
-            pass
 
     def _receive(self) -> bytes:
         try:
@@ -244,7 +244,8 @@ def _spec(build_dir: Path) -> dict:
 
 
 def addresses(build_dir: Path) -> list[int]:
-    """The chips' 7-bit I2C addresses in taxel order: an array build's design.json ``array.taxels``, else the spec's one."""
+    """The chips' 7-bit I2C addresses in taxel order: an array build's design.json ``array.taxels``, else the spec's
+    one."""
     design = build_dir / "design.json"
     taxels = (json.loads(design.read_text()).get("array") or {}).get("taxels") if design.is_file() else None
     return [int(t["i2c_address"]) for t in taxels] if taxels else [int(_spec(build_dir)["sensor"]["i2c_address"])]

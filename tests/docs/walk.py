@@ -19,6 +19,7 @@ pseudo-terminal, which ``MAGFAB_READOUT_PORT`` also names for the commands that 
 from __future__ import annotations
 
 import csv
+import itertools
 import json
 import os
 import re
@@ -62,7 +63,8 @@ class Scan:
         layout = build_dir / "calibration" / "array.json"
         if layout.is_file():  # an array: every chip's reading at rest, one track per taxel
             doc = json.loads(layout.read_text())
-            self.readings = [[a + b for a, b in zip(own, other)] for own, other in zip(doc["rest_uT"], doc["offset_uT"])]
+            self.readings = [[a + b for a, b in zip(own, other)]
+                             for own, other in zip(doc["rest_uT"], doc["offset_uT"])]
             names = [f"scan_simulated_taxel_{k:02d}.csv" for k in range(len(self.readings))]
         else:
             self.readings, names = None, ["scan_simulated.csv"]
@@ -76,7 +78,7 @@ class Scan:
         cal = self.spec["calibration"]
         n_y = round(cal["scan_y_mm"] / cal["scan_step_mm"]) + 1
         with open(path, newline="") as f:
-            rows = [r for r in csv.DictReader(line for line in f if not line.startswith("#"))]
+            rows = list(csv.DictReader(line for line in f if not line.startswith("#")))
         grid = [rows[k:k + n_y] for k in range(0, len(rows), n_y)]
         points = []
         for i, row in enumerate(grid[::every]):
@@ -118,14 +120,15 @@ class Scan:
         with open(reference, "w", newline="") as f:
             out = csv.writer(f)
             out.writerow(["time_s", "Fx_N", "Fy_N", "Fz_N"])
-            for (b0, f0), (b1, f1) in zip(points, points[1:]):
+            for (b0, f0), (b1, f1) in itertools.pairwise(points):
                 start = time.monotonic()
                 while (now := time.monotonic()) < start + self.dwell_s:
                     w = (now - start) / self.dwell_s
                     self._set(rig, taxel, [a + w * (b - a) for a, b in zip(b0, b1)])
                     while tick <= now:  # the ticks since the last row, where the stage was then
                         wt = min(max((tick - start) / self.dwell_s, 0.0), 1.0)
-                        out.writerow([f"{wall0 + tick - mono0:.6f}"] + [f"{a + wt * (b - a):.6f}" for a, b in zip(f0, f1)])
+                        forces = (f"{a + wt * (b - a):.6f}" for a, b in zip(f0, f1))
+                        out.writerow([f"{wall0 + tick - mono0:.6f}", *forces])
                         tick += 0.001
                     time.sleep(0.001)
         self.at_rest(rig)

@@ -225,7 +225,8 @@ def variant_eep(sim, tmp_path_factory):
 
     def build(osr: int, dig_filt: int):
         default = load_spec(None)
-        spec = default.model_copy(update={"sensor": default.sensor.model_copy(update={"osr": osr, "dig_filt": dig_filt})})
+        sensor = default.sensor.model_copy(update={"osr": osr, "dig_filt": dig_filt})
+        spec = default.model_copy(update={"sensor": sensor})
         design = derive(spec)
         if (osr, dig_filt) == (default.sensor.osr, default.sensor.dig_filt):
             return sim.hex_path.with_suffix(".eep"), firmware.chip_config(design)
