@@ -14,12 +14,18 @@ import io
 import os
 import pickle
 import shutil
+import signal
 from pathlib import Path
 from types import MappingProxyType
 
 import pytest
 
 from magfab import build, load_spec
+
+# An xdist worker ignores SIGINT (the controller takes Ctrl-C), and every process it starts inherits that: a command
+# the tests Ctrl-C (`magfab-readout stream`, the Ctrl-C tests) would never stop. Its children get the default back.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def _missing(reason: str):
