@@ -45,7 +45,6 @@ from .export import (
     readout,
 )
 from .export import cad as cad_files
-from .export import figures as plots
 from .export.report import draw_pictures, part_figure, render_report
 from .fit import mould_fit
 from .fork import deferred_interrupt, parallel_available, side_branch
@@ -161,22 +160,25 @@ def _predictions(design: Design, say: Progress, timings: dict[str, float]) -> Pr
     return PredictionStage(artifacts=out, findings=found, prediction=pred)
 
 
-def _plots(drawn: dict[str, bytes], pred: Prediction) -> list[Artifact]:
-    """The prediction's plots (``drawn``: :func:`magfab.export.figures.figures`' files) and the drift chart."""
+def _charts(folder: str, drawn: dict[str, bytes], captions: dict[str, str]) -> list[Artifact]:
+    """Drawn chart files ({name: bytes}) as artifacts in ``folder``, each described by its caption and format."""
     out = []
     for name, data in sorted(drawn.items()):
         stem, kind = name.rsplit(".", 1)
-        out.append(Artifact(f"plots/{name}", data, plots.CAPTIONS[stem] + ", " + kind.upper()))
-    return out + _drift_charts(pred)
+        out.append(Artifact(f"{folder}{name}", data, captions[stem] + ", " + kind.upper()))
+    return out
+
+
+def _plots(drawn: dict[str, bytes], pred: Prediction) -> list[Artifact]:
+    """The prediction's plots (``drawn``: :func:`magfab.export.figures.figures`' files) and the drift chart."""
+    return _charts("plots/", drawn, figures.CAPTIONS) + _drift_charts(pred)
 
 
 def _drift_charts(pred: Prediction) -> list[Artifact]:
     """The drift budget's chart (predictions.json's ``drift``), when the prediction has one."""
     if pred.drift is None:
         return []
-    drawn = sorted(drift_figures.figures(pred.drift).items())
-    return [Artifact(f"{drift_figures.FOLDER}{name}", data, drift_figures.CAPTIONS[name.rsplit(".", 1)[0]] + ", "
-                     + name.rsplit(".", 1)[1].upper()) for name, data in drawn]
+    return _charts(drift_figures.FOLDER, drift_figures.figures(pred.drift), drift_figures.CAPTIONS)
 
 
 def _acceptance(design: Design, prediction: Prediction) -> AcceptanceStage:
@@ -279,9 +281,7 @@ def _crosstalk(design: Design, prediction: Prediction) -> CrosstalkStage:
     xt = crosstalk.crosstalk(design, prediction)
     out = [Artifact("array/crosstalk.json", _json_bytes(xt.as_json()), "the crosstalk budget: each taxel's misreading "
                     "as its neighbours move, with and without the host's compensation, the least pitch per polarity")]
-    for name, data in sorted(crosstalk_figures.figures(xt).items()):
-        stem, kind = name.rsplit(".", 1)
-        out.append(Artifact(f"array/{name}", data, crosstalk_figures.CAPTIONS[stem] + ", " + kind.upper()))
+    out += _charts("array/", crosstalk_figures.figures(xt), crosstalk_figures.CAPTIONS)
     return CrosstalkStage(artifacts=out, findings=crosstalk_findings(design, xt), dynamic=xt.dynamic)
 
 
