@@ -426,5 +426,9 @@ def schema() -> None:
     click.echo(json.dumps(spec_schema(), indent=2, sort_keys=True))
 
 
+from .sensor_cli import register as _register_sensor  # noqa: E402  (the commands beside their engine, magfab.sensors)
+
+_register_sensor(main, _handled)
+
 if __name__ == "__main__":  # pragma: no cover
     main()

@@ -27,6 +27,8 @@ FORBIDDEN = {
     "magfab.export": ("magfab.pipeline", "magfab.cli"),
 }
 PRINTING = ("click", "rich")  # only the CLI prints
+#: The command line: magfab.cli and the command groups it registers, each beside the engine it calls.
+CLI_MODULES = {"magfab.cli", "magfab.sensor_cli"}
 
 
 def _modules():
@@ -78,7 +80,7 @@ def test_imports_point_down_the_pipeline(path):
         if name == folder or name.startswith(folder + "."):
             bad = sorted(m for m in imported if any(m == f or m.startswith(f + ".") for f in forbidden))
             assert not bad, f"{name} imports {bad}"
-    if name != "magfab.cli":
+    if name not in CLI_MODULES:
         assert not {m for m in imported if m.split(".")[0] in PRINTING}, f"{name} prints: only magfab.cli may"
 
 
@@ -102,8 +104,9 @@ LAYERS = (
     ("magfab.check",),
     ("magfab.board", "magfab.pcb"),
     ("magfab.export", "magfab.output", "magfab.array_bench"),
-    ("magfab.pipeline", "magfab.stages"),
+    ("magfab.pipeline", "magfab.stages", "magfab.sensors"),
     ("magfab.inverse",),
+    ("magfab.sensor_cli",),
     ("magfab.cli",),
 )
 #: Libraries slow enough to import that a function may import them where it needs them (with the reason in a comment
@@ -114,7 +117,7 @@ HEAVY = {"cadquery", "OCP", "trimesh", "manifold3d", "matplotlib", "mpl_toolkits
 #: Optional dependencies, imported where they are needed so that the package works without them.
 OPTIONAL = {"serial"}
 #: The entry point may defer anything, magfab's own modules included, so that ``magfab --help`` stays fast.
-ENTRY_POINTS = {"magfab.cli"}
+ENTRY_POINTS = CLI_MODULES
 _LAZY = re.compile(r"\blaz(y|ily)\b", re.IGNORECASE)
 
 

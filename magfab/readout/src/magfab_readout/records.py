@@ -33,7 +33,7 @@ import os
 import re
 import secrets
 from pathlib import Path
-from typing import Any, Dict, Iterator, List, Mapping, Optional, Tuple
+from typing import Any, Dict, Iterator, List, Mapping, Optional, Sequence, Tuple
 
 __all__ = ["EVENT_KINDS", "FORMAT", "ID_PATTERN", "MARKER", "ROOT_ENV", "RecordError", "Sensor", "check_id", "create",
            "find_root", "init_root", "list_sensors", "now_utc", "open_sensor", "owner_of", "parse_date",
@@ -219,9 +219,12 @@ def open_sensor(root: Path, sensor_id: str) -> Sensor:
 
 
 def create(root: Path, sensor_id: str, info: Mapping[str, Any], files: Mapping[str, bytes], *,
-           date: Optional[str] = None) -> Sensor:
+           date: Optional[str] = None, then: Sequence[Tuple[str, Mapping[str, Any], Mapping[str, bytes]]] = ()
+           ) -> Sensor:
     """A new record: ``sensor.json`` (``info`` with the ID and the date) and its first event, ``added``, keeping
-    ``files`` (role -> bytes, e.g. ``{"spec.json": ...}``). :class:`RecordError` when the ID has a record."""
+    ``files`` (role -> bytes, e.g. ``{"spec.json": ...}``), then the events ``then`` ((kind, data, files) each: what
+    the record starts with, such as a calibration measured before it existed). ``sensor.json`` is written last, so
+    the ID has a record only once every one of them is there. :class:`RecordError` when the ID has a record."""
     check_id(sensor_id)
     root = init_root(root)
     sensor = Sensor(root, sensor_id)
@@ -231,10 +234,18 @@ def create(root: Path, sensor_id: str, info: Mapping[str, Any], files: Mapping[s
     (sensor.path / "events").mkdir(parents=True, exist_ok=True)
     (sensor.path / "files").mkdir(exist_ok=True)
     when = date or now_utc()
-    # the added event first: a kill before sensor.json leaves a folder that is not yet a record, and a retry
-    # finds the event already there
-    if not sensor.events():
-        sensor.append("added", dict(info), files, date=when)
+    # the events first: a kill before sensor.json leaves a folder that is not yet a record, and a retry finds the
+    # events already there, in order, and appends the rest
+    planned = [("added", dict(info), files), *((kind, dict(data), kept) for kind, data, kept in then)]
+    done = sensor.events()
+    for k, (kind, data, kept) in enumerate(planned):
+        if k < len(done):
+            if done[k]["kind"] != kind or any(done[k].get(key) != value for key, value in data.items()):
+                raise RecordError("sensor", sensor_id, f"has a folder in {root} left by another command that was "
+                                  f"stopped (events/{done[k]['number']:06d}-{done[k]['kind']}.json differs from what "
+                                  "this one adds): remove that folder, or pick another ID")
+            continue
+        sensor.append(kind, data, kept, date=when)
     head = dict(info, format=FORMAT, id=sensor_id, added=when)
     if not _write_new(sensor.path / "sensor.json", _json_bytes(head)):
         raise RecordError("sensor", sensor_id, "was added by another command at the same time: run it again")
