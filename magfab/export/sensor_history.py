@@ -17,24 +17,26 @@ from .figures import RC, _legend_below, _render
 __all__ = ["CAPTION", "chart"]
 
 CAPTION = ("against the date: the normal and shear sensitivities at rest; the field Bz at rest, the design's band "
-           "shaded; each calibration's held-out RMS error, Fz and Fr; each check's verdict; a new skin dashed")
+           "shaded; each calibration's held-out RMS error and each check's error; each check's verdict; a new skin "
+           "dashed, each line broken there")
 
-_COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf")
+#: The lines' colours (green and red kept for the verdicts).
+_COLOURS = ("#1f77b4", "#ff7f0e", "#9467bd", "#8c564b", "#17becf", "#e377c2", "#7f7f7f", "#bcbd22")
 
 
 def _when(text: str) -> dt.datetime:
     return dt.datetime.fromisoformat(text[:-1] + "+00:00" if text.endswith("Z") else text)
 
 
-def _series(events: Sequence[Mapping[str, Any]], kind: str, value) -> dict[Any, tuple[list, list]]:
-    """{taxel: (dates, values)} of ``value(event)`` over the events of ``kind`` where it is a number."""
-    out: dict[Any, tuple[list, list]] = {}
+def _series(events: Sequence[Mapping[str, Any]], kind: str, value) -> dict[Any, list[tuple[int, dt.datetime, float]]]:
+    """{taxel: [(skin epoch, date, value)]} of ``value(event)`` over the events of ``kind`` where it is a number."""
+    out: dict[Any, list[tuple[int, dt.datetime, float]]] = {}
+    epoch = 0
     for e in events:
+        epoch += e["kind"] == "reskin"
         y = value(e) if e["kind"] == kind else None
         if isinstance(y, (int, float)) and not isinstance(y, bool):
-            dates, ys = out.setdefault(e.get("taxel"), ([], []))
-            dates.append(_when(e["date"]))
-            ys.append(float(y))
+            out.setdefault(e.get("taxel"), []).append((epoch, _when(e["date"]), float(y)))
     return out
 
 
@@ -43,15 +45,19 @@ def _label(name: str, taxel: Any, many: bool) -> str:
 
 
 def _lines(ax, events, specs, unit: str) -> None:
-    """One line per (quantity, taxel): ``specs`` is [(name, kind, value(event), marker)]."""
+    """One line per (quantity, taxel), broken at each new skin: ``specs`` is [(name, kind, value(event), marker)]."""
     k = 0
     for name, kind, value, marker in specs:
         series = _series(events, kind, value)
-        for taxel, (dates, ys) in sorted(series.items(), key=lambda t: -1 if t[0] is None else t[0]):
-            ax.plot(dates, ys, marker=marker, color=_COLOURS[k % len(_COLOURS)], lw=1.2, ms=5,
-                    label=_label(name, taxel, len(series) > 1))
+        for taxel, points in sorted(series.items(), key=lambda t: -1 if t[0] is None else t[0]):
+            colour = _COLOURS[k % len(_COLOURS)]
+            for n, epoch in enumerate(sorted({p[0] for p in points})):
+                ax.plot([p[1] for p in points if p[0] == epoch], [p[2] for p in points if p[0] == epoch],
+                        marker=marker, color=colour, lw=1.2, ms=5,
+                        label=_label(name, taxel, len(series) > 1) if n == 0 else None)
             k += 1
     ax.set_ylabel(unit, fontsize=8)
+    ax.margins(y=0.15)
     if k:
         ax.legend(fontsize=7, loc="best", frameon=False)
 
@@ -101,15 +107,18 @@ def chart(sensor_id: str, events: Sequence[Mapping[str, Any]], bands: Mapping[st
         _lines(rest, events, [("calibration", "calibration", _rest, "o"),
                               ("check", "check", lambda e: (e.get("figures") or {}).get("rest_Bz_uT"), "D")], "uT")
         rest.set_title("field Bz at rest", fontsize=9, loc="left")
-        _lines(err, events, [("Fz", "calibration", lambda e: e.get("rms_holdout_Fz_mN"), "o"),
-                             ("Fr", "calibration", lambda e: e.get("rms_holdout_Fr_mN"), "s")], "mN")
-        err.set_title("held-out RMS error of each calibration", fontsize=9, loc="left")
+        _lines(err, events, [("calibration, Fz held out", "calibration", lambda e: e.get("rms_holdout_Fz_mN"), "o"),
+                             ("calibration, Fr held out", "calibration", lambda e: e.get("rms_holdout_Fr_mN"), "s"),
+                             ("check", "check", lambda e: (e.get("figures") or {}).get("error_mN"), "D")], "mN")
+        err.set_title("force error: each calibration's held-out RMS, each check's", fontsize=9, loc="left")
         err.set_ylim(bottom=0)
         _checks(checks, events)
         for e in events:
             if e["kind"] == "reskin":
                 for ax in axes:
                     ax.axvline(_when(e["date"]), color="0.35", ls="--", lw=1)
+                sens.annotate("new skin", (_when(e["date"]), 0.0), xycoords=("data", "axes fraction"), xytext=(3, 4),
+                              textcoords="offset points", fontsize=7, color="0.35")
         for ax in axes:
             ax.grid(True, color="0.9", lw=0.6)
             ax.tick_params(labelsize=7)
