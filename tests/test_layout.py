@@ -101,7 +101,7 @@ LAYERS = (
     ("magfab.limits",),
     ("magfab.check",),
     ("magfab.board", "magfab.pcb"),
-    ("magfab.export", "magfab.output", "magfab.array_bench"),
+    ("magfab.export", "magfab.output", "magfab.array_bench", "magfab.sensor_calibration"),
     ("magfab.pipeline", "magfab.stages"),
     ("magfab.inverse",),
     ("magfab.cli",),
