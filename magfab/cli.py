@@ -123,9 +123,12 @@ def _one_line_warning(message, category, filename, lineno, file=None, line=None)
 @click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
               help="Output directory (default: ./build/<spec name>).")
 @click.option("--json", "as_json", is_flag=True, help="Print a machine-readable summary on stdout.")
-def build(spec: Path | None, out_dir: Path | None, as_json: bool) -> None:
+@click.option("--discard-calibration", is_flag=True,
+              help="Replace a measured calibration the build folder holds though no sensor record keeps it (by "
+                   "default the build refuses: keep it first with `magfab sensor add ID --build DIR`).")
+def build(spec: Path | None, out_dir: Path | None, as_json: bool, discard_calibration: bool) -> None:
     """Build SPEC (default: the embedded MagOne reference design)."""
-    _run_build(spec, out_dir, as_json, None)
+    _run_build(spec, out_dir, as_json, None, discard=discard_calibration)
 
 
 @main.command()
@@ -139,16 +142,30 @@ def build(spec: Path | None, out_dir: Path | None, as_json: bool) -> None:
               help="Build folder to update (default: the build folder SCAN is in, or the one you are in).")
 @click.option("--taxel", type=click.IntRange(min=0), default=None,
               help="For an array: the taxel SCAN pressed (its rows of the recording's taxel column are fitted).")
+@click.option("--sensor", "sensor_id", metavar="ID",
+              help="The sensor SCAN was recorded on: append the calibration to its record (`magfab sensor add`) and "
+                   "leave the build folder as it is; `magfab-readout upload --sensor ID` then puts it on the board.")
+@click.option("--sensors", "sensors_root", type=click.Path(file_okay=False, path_type=Path),
+              help="The folder of sensor records (default: $MAGFAB_SENSORS, else the nearest sensors/ folder).")
+@click.option("--date", help="With --sensor: when the scan was taken (ISO 8601, UTC unless it names a zone; default: "
+                             "now).")
 @click.option("--json", "as_json", is_flag=True, help="Print a machine-readable summary on stdout.")
 def calibrate(scan: Path, reference: Path | None, spec: Path | None, out_dir: Path | None, taxel: int | None,
-              as_json: bool) -> None:
-    """Fit the force calibration to SCAN (a CSV, see docs/bundle.md) and update the build with it:
-    calibration.json, the firmware's EEPROM record and the readout package carry the new coefficients.
+              sensor_id: str | None, sensors_root: Path | None, date: str | None, as_json: bool) -> None:
+    """Fit the force calibration to SCAN (a CSV, see docs/bundle.md). With --sensor ID, append it to that
+    sensor's record, which no build touches; without, update the build with it: calibration.json, the firmware's
+    EEPROM record and the readout package carry the new coefficients.
 
     Inside a build folder no option is needed: `magfab calibrate scan.csv --reference reference.csv` updates
     that build from its own spec.json, file by file (your shell stays where it is). An array is calibrated one
-    taxel at a time (`--taxel K`); the other taxels keep the scans they were fitted to."""
-    _run_build(spec, out_dir, as_json, scan, reference, taxel)
+    taxel at a time (`--taxel K`); the other taxels keep the scans they were fitted to. A scan whose field at rest
+    is outside the design's acceptance band is refused (the wrong sensor or build, or a misassembled sensor)."""
+    if sensor_id is None:
+        if date is not None:
+            _fail("--date dates a sensor's calibration: give it with --sensor ID", EXIT_BAD_INPUT)
+        _run_build(spec, out_dir, as_json, scan, reference, taxel)
+        return
+    _calibrate_sensor(scan, reference, spec, out_dir, taxel, sensor_id, sensors_root, date, as_json)
 
 
 def _build_folder(*candidates: Path | None) -> Path | None:
@@ -182,17 +199,25 @@ def _calibration_target(spec_path: Path | None, out_dir: Path | None, scan_path:
 
 
 def _run_build(spec: Path | None, out_dir: Path | None, as_json: bool, scan_path: Path | None = None,
-               reference: Path | None = None, taxel: int | None = None) -> None:
+               reference: Path | None = None, taxel: int | None = None, discard: bool = False) -> None:
     with _handled():  # every import inside: Ctrl-C while a heavy library loads is still exit 130
+        from .output import is_build
         from .pipeline import build as run_build
+        from .pipeline import default_out_dir
         from .spec import load_spec
 
         scan = None
         if scan_path is None:
             loaded = load_spec(spec)
+            target = out_dir if out_dir is not None else default_out_dir(loaded)
+            if not discard and is_build(target):
+                from .sensor_calibration import refuse_discarding
+
+                refuse_discarding(target, [Path.cwd(), Path(target)] + ([spec.parent] if spec is not None else []))
         else:
             loaded, out_dir = _calibration_target(spec, out_dir, scan_path)
             scan = _read_scan(scan_path, reference, out_dir, loaded, taxel)
+            _check_rest(scan, loaded, out_dir if out_dir is not None and is_build(out_dir) else None, taxel)
         with _progress(sys.stderr.isatty() and not as_json) as progress:
             result = run_build(loaded, out_dir, progress, scan)
         summary: Mapping[str, Any] = result.summary()  # JSON values, read by key below
@@ -222,13 +247,123 @@ def _run_build(spec: Path | None, out_dir: Path | None, as_json: bool, scan_path
                        + ", ".join(f"{k} {v}" for k, v in sorted(pred["models"].items())) + ")")
         cal = summary.get("calibration")
         if cal:
-            click.echo(f"  calibration ({cal['source']}): {cal['method']} order {cal['order']}, held-out RMS "
+            source = "provisional, simulated scan" if cal["source"] == "simulated" else cal["source"]
+            click.echo(f"  calibration ({source}): {cal['method']} order {cal['order']}, held-out RMS "
                        f"Fz {cal['rms_holdout_Fz_mN']:g} mN, Fr {cal['rms_holdout_Fr_mN']:g} mN; firmware image: "
                        f"{cal['image'] or 'not built (no avr-gcc)'}")
         if scan_path is not None and result.out_dir is not None:  # a command line build is always written out
             readout = os.path.relpath(result.out_dir / "readout")
             click.echo(f"next: pip install {readout if readout.startswith('.') else './' + readout} && "
                        "magfab-readout upload   (the new calibration into the reader and the board's EEPROM)")
+
+
+def _check_rest(scan, spec, folder: Path | None, taxel: int | None, sensor=None):
+    """The new scan's rest field (a scan dict of an array: taxel ``taxel``'s), refused outside the design's
+    acceptance band (magfab.sensor_calibration.check_rest); the bands of the record, the build folder or the
+    design."""
+    from .design import derive
+    from .models.rest_guard import rest_field
+    from .sensor_calibration import acceptance_bands, check_rest
+
+    new = scan[taxel] if isinstance(scan, dict) else scan
+    design = derive(spec)
+    bands, where = acceptance_bands(spec, design, folder, sensor)
+    return rest_field(new) if bands is None else check_rest(new, design, bands, where, taxel)
+
+
+def _calibrate_sensor(scan_path: Path, reference: Path | None, spec_path: Path | None, out_dir: Path | None,
+                      taxel: int | None, sensor_id: str, root: Path | None, date: str | None, as_json: bool) -> None:
+    """``magfab calibrate SCAN --sensor ID``: every guard, then the fit appended to the sensor's record; the build
+    folder is left as it is (its calibration stays the provisional one, fitted to the simulated scan)."""
+    with _handled():
+        from .design import derive
+        from .formats import sensor_records as records
+        from .models.scan_guards import MERGED, merged_csv
+        from .output import is_build
+        from .sensor_calibration import (
+            calibrate_record,
+            check_owner,
+            check_spec,
+            open_record,
+            record_errors,
+            spec_of_record,
+        )
+        from .spec import load_spec
+
+        sensor = open_record(root, sensor_id)
+        with record_errors():
+            when = None if date is None else records.parse_date(date)
+        found = _build_folder(out_dir) if out_dir is not None else _build_folder(scan_path.parent, Path.cwd())
+        if spec_path is None and found is None:  # no build at hand: the spec the sensor was made from
+            loaded = spec_of_record(sensor) or load_spec(None)
+        else:
+            loaded, _ = _calibration_target(spec_path, out_dir, scan_path)
+        folder = found if found is not None and is_build(found) else None
+        check_spec(sensor, loaded)
+        scans = _read_scan(scan_path, reference, folder, loaded, taxel)
+        scan = scans[taxel] if isinstance(scans, dict) else scans
+        rest = _check_rest(scan, loaded, folder, taxel, sensor)
+        files = {"scan.csv": scan_path.read_bytes()}
+        if reference is not None:
+            files["reference.csv"] = reference.read_bytes()
+        if MERGED in scan.source:
+            files["scan_merged.csv"] = merged_csv(scan)
+        check_owner(sensor, files)
+        _reject_own_forces(sensor, scan, loaded, taxel)
+        design = derive(loaded)
+        for line in _depth_warnings(scan, loaded, folder, design, taxel):
+            click.echo(f"warning: {line} [calibration.scan_z_mm]", err=True)
+        done = calibrate_record(sensor, loaded, design, scan, rest, files, taxel, when)
+        event = done.event
+        if as_json:
+            click.echo(json.dumps(event, indent=2, sort_keys=True))
+            return
+        if not done.fit.meets_tolerance:
+            click.echo(f"warning: {done.fit.message} [calibration.tolerance_mN]", err=True)
+        which = "" if taxel is None else f" (taxel {taxel})"
+        click.echo(f"calibrated sensor {sensor_id}{which} from {event['source']}: {event['method']} order "
+                   f"{event['order']}, held-out RMS Fz {event['rms_holdout_Fz_mN']:g} mN, Fr "
+                   f"{event['rms_holdout_Fr_mN']:g} mN")
+        click.echo(f"  at rest Bz {event['rest_field_uT'][2]:.0f} uT; sensitivity "
+                   f"{event['sensitivity_normal_uT_per_N']} uT/N normal, "
+                   f"{event['sensitivity_shear_uT_per_N']} uT/N shear; calibrated to "
+                   f"{event['range_normal_N']:g} N normal, {event['range_shear_N']:g} N shear")
+        path = sensor.path / "events" / f"{event['number']:06d}-calibration.json"
+        click.echo(f"  kept in {os.path.relpath(path)} (no build folder was changed)")
+        click.echo(f"next: magfab-readout upload --sensor {sensor_id}   (this calibration into the sensor's board)")
+
+
+def _reject_own_forces(sensor, scan, spec, taxel: int | None) -> None:
+    """Guard B against the sensor's current calibration (the one its board may have run while recording)."""
+    from .formats import sensor_records as records
+    from .models.calibration import Calibration
+    from .models.scan_guards import reject_self_calibrated
+
+    try:
+        _, doc = sensor.current_calibration(taxel)
+    except records.RecordError:
+        return  # none yet
+    if spec.array is not None and taxel is not None:
+        from .design import derive
+        from .models.taxels import array_field, compensated
+
+        scan = compensated(scan, array_field(derive(spec)), taxel)
+    reject_self_calibrated(scan, Calibration.from_json(doc), spec.calibration.reference_resolution_mN)
+
+
+def _depth_warnings(scan, spec, folder: Path | None, design, taxel: int | None) -> list[str]:
+    """Guard C's lines, against the build folder's predictions.json when it is a build of this spec (none without:
+    the prediction would cost more than the fit)."""
+    from .models.scan_guards import scan_depth_warnings
+    from .sensor_calibration import build_of
+
+    if folder is None or not build_of(folder, spec) or not (folder / "predictions.json").is_file():
+        return []
+    if design.array is not None and taxel is not None:
+        from .models.taxels import array_field, compensated
+
+        scan = compensated(scan, array_field(design), taxel)
+    return scan_depth_warnings(scan, json.loads((folder / "predictions.json").read_text(encoding="utf-8")))
 
 
 def _read_scan(scan_path: Path, reference: Path | None, build_dir: Path | None, spec, taxel: int | None = None):

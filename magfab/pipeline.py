@@ -202,14 +202,16 @@ def _calibration_finding(result: FitResult, prefix: str, source: str = "") -> Fi
 
 def _scan(design: Design, prediction: Prediction | None, scan: Scan | None, say: Progress) -> ScanStage:
     """The scan a single taxel's calibration is fitted to: ``scan`` (with the depth warnings, and the merged file kept
-    when it was merged in memory) or a simulated one."""
+    when it was merged in memory) or a simulated one. The simulated scan is shipped either way (it is deterministic,
+    and a measured calibration may have been fitted to it: ``magfab calibrate calibration/scan_simulated.csv``
+    must not remove its own input)."""
+    say("simulating a calibration scan")
+    simulated = simulate_scan(design, prediction)
+    made = Artifact("calibration/scan_simulated.csv", scan_csv(simulated).encode(),
+                    "the simulated y-z scan behind the provisional calibration (scan CSV format)")
     if scan is None:
-        say("simulating a calibration scan")
-        scan = simulate_scan(design, prediction)
-        made = Artifact("calibration/scan_simulated.csv", scan_csv(scan).encode(),
-                        "the simulated y-z scan behind the provisional calibration (scan CSV format)")
-        return ScanStage(artifacts=[made], scan=scan)
-    out = []
+        return ScanStage(artifacts=[made], scan=simulated)
+    out = [made]
     if MERGED in scan.source:  # made in memory from a recording and a reference log: keep what was fitted
         out.append(Artifact("calibration/scan_merged.csv", merged_csv(scan),
                             "the recording merged with the reference log, as fitted (scan CSV format)"))
@@ -293,7 +295,8 @@ def _taxel_calibrations(design: Design, prediction: Prediction, scans: dict[int,
     taxel's calibration refits it."""
     scans = scans or {}
     field = array_field(design)
-    every = tuple(scans.get(t.index) or simulate_taxel_scan(design, prediction, t.index, field) for t in design.taxels)
+    simulated = tuple(simulate_taxel_scan(design, prediction, t.index, field) for t in design.taxels)
+    every = tuple(scans.get(t.index) or simulated[t.index] for t in design.taxels)
     xt = _crosstalk(design, prediction)
     out, found = list(xt.artifacts), list(xt.findings)
     arrayed = calibrate_taxels(design, prediction, every, mls=mls, dynamic=xt.dynamic)
@@ -304,14 +307,13 @@ def _taxel_calibrations(design: Design, prediction: Prediction, scans: dict[int,
         k = taxel.index
         out.append(Artifact(f"calibration/{arrayed.file_name(k)}", _json_bytes(fitted.calibration.to_json()),
                             f"force calibration of taxel {k} (fitted to its scan with the neighbours' field removed)"))
-        if k in scans:
+        out.append(Artifact(f"calibration/scan_simulated_taxel_{k:02d}.csv", scan_csv(simulated[k]).encode(),
+                            f"the simulated scan of taxel {k}, as its chip reads it (scan CSV format)"))
+        if k in scans:  # the simulated one stays too: it may be the measured one's source (calibrate's own input)
             out.append(Artifact(measured_scan_path(k), scan_csv(scan, [f"taxel {k}, measured: {scan.source}"]).encode(),
                                 f"the measured scan taxel {k}'s calibration is fitted to (scan CSV format)"))
             found += [Finding(Severity.WARNING, "scan-range", f"taxel {k}: {text}", "calibration.scan_z_mm")
                       for text in scan_depth_warnings(compensated(scan, field, k), prediction)]
-        else:
-            out.append(Artifact(f"calibration/scan_simulated_taxel_{k:02d}.csv", scan_csv(scan).encode(),
-                                f"the simulated scan of taxel {k}, as its chip reads it (scan CSV format)"))
         found.append(_calibration_finding(fitted, f"taxel {k}: ", f"{'measured' if k in scans else 'simulated'} "
                                           "scan, "))
     return ArrayStage(artifacts=out, findings=found, fits=tuple(arrayed.fits), doc=doc)

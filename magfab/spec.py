@@ -26,7 +26,7 @@ from .recipes import catalogue
 from .spec_errors import did_you_mean, translate_error
 
 __all__ = ["Spec", "Tip", "Density", "Printer", "Array", "Environment", "Skin", "Polarity", "MAX_TAXELS", "load_spec",
-           "parse_spec", "spec_from_dict", "default_spec_text", "translate_error",
+           "spec_from_json", "parse_spec", "spec_from_dict", "default_spec_text", "translate_error",
            "spec_schema", "NAME_PATTERN", "is_valid_name"]
 
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
@@ -552,8 +552,14 @@ def load_build_spec(folder: str | Path) -> Spec:
         raise SpecError("spec", str(path), "file not found: not a magfab build folder") from None
     except (OSError, UnicodeDecodeError, ValueError) as exc:
         raise SpecError("spec", str(path), f"cannot read it as JSON: {_shorten(str(exc), 200)}") from None
+    return spec_from_json(raw, str(path))
+
+
+def spec_from_json(raw: object, where: str = "spec.json") -> Spec:
+    """A spec as a build's (or a sensor record's) ``spec.json`` holds it, parsed: every default filled in, nulls for
+    omitted keys; validated like a TOML spec. ``where`` names it in the :class:`SpecError`."""
     if not isinstance(raw, dict):
-        raise SpecError("spec", str(path), "must hold a JSON object (the build's spec)")
+        raise SpecError("spec", where, "must hold a JSON object (the build's spec)")
     return _validated(_without_nulls(raw))
 
 

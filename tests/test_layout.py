@@ -103,7 +103,7 @@ LAYERS = (
     ("magfab.limits",),
     ("magfab.check",),
     ("magfab.board", "magfab.pcb"),
-    ("magfab.export", "magfab.output", "magfab.array_bench"),
+    ("magfab.export", "magfab.output", "magfab.array_bench", "magfab.sensor_calibration"),
     ("magfab.pipeline", "magfab.stages", "magfab.sensors"),
     ("magfab.inverse",),
     ("magfab.sensor_cli",),

@@ -1,0 +1,55 @@
+"""What the calibrate tests share: a project folder with a copy of the session's default build, a sensor root beside
+it, and ``magfab calibrate``/``build`` whose plan is the session's build (as tests/test_output.py does), so each
+command takes about a second. Uses only what main had before the sensor commands (the defect tests run against it)."""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import json
+import shutil
+from pathlib import Path
+
+from click.testing import CliRunner
+
+from magfab import derive
+from magfab.cli import main
+from magfab.formats import sensor_records as records
+from magfab.models.scan import simulate_scan
+
+
+def tree(folder: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def make_bench(default_build, tmp_path, monkeypatch):
+    """A project folder: a copy of the default build in build/magone, no sensor root yet, and the magfab command
+    whose plan is the session's build. Returns (project, build folder, plan calls, run)."""
+    project = tmp_path / "project"
+    out = project / "build" / "magone"
+    shutil.copytree(default_build.out_dir, out)
+    calls = []
+
+    def plan(spec, progress=None, scan=None):
+        calls.append((spec, scan))
+        return dataclasses.replace(default_build, out_dir=None, timings_s=dict(default_build.timings_s))
+
+    monkeypatch.setattr(importlib.import_module("magfab.pipeline"), "plan", plan)
+    monkeypatch.chdir(project)
+    monkeypatch.delenv(records.ROOT_ENV, raising=False)
+    return project, out, calls, lambda *args: CliRunner().invoke(main, [*args])
+
+
+def add(project: Path, out: Path, sensor_id: str, spec_sha256: str | None = None) -> records.Sensor:
+    """A record as ``magfab sensor add ID --build OUT`` makes it (the agreed added event)."""
+    sha = spec_sha256 or json.loads((out / "manifest.json").read_text())["spec_sha256"]
+    files = {"spec.json": (out / "spec.json").read_bytes(), "design.json": (out / "design.json").read_bytes(),
+             "acceptance.json": (out / "calibration" / "acceptance.json").read_bytes()}
+    return records.create(project / "sensors", sensor_id, {"spec_sha256": sha}, files)
+
+
+def n52_scan(magone_design, magone_prediction):
+    """The MagOne fingertip with an N52 magnet (another grade: 20 % more field at rest), scanned."""
+    spec = magone_design.spec
+    other = derive(spec.model_copy(update={"magnet": spec.magnet.model_copy(update={"grade": "N52"})}))
+    return simulate_scan(other, magone_prediction)
