@@ -38,8 +38,8 @@ def add_options(parser: argparse.ArgumentParser, what: str) -> None:
                        f"{records.ROOT_ENV} when set, else the nearest sensors/ folder here or above)")
 
 
-def _root(args: argparse.Namespace, must_exist: bool = True) -> Path:
-    return records.find_root(Path(args.sensors) if getattr(args, "sensors", None) else None, must_exist=must_exist)
+def _root(args: argparse.Namespace) -> Path:
+    return records.find_root(Path(args.sensors) if getattr(args, "sensors", None) else None)
 
 
 def open_record(args: argparse.Namespace, sensor_id: str) -> records.Sensor:
@@ -105,8 +105,8 @@ def link(device: Device, info: DeviceInfo, args: argparse.Namespace) -> Link:
         refuse_other_sensor(device, found, wanted, "connect that sensor's board, or name this one's")
     elif found is not None:
         try:
-            sensor = records.open_sensor(_root(args, must_exist=False), found.sensor_id)
-        except records.RecordError:
+            sensor = records.open_sensor(_root(args), found.sensor_id)
+        except records.RecordError:  # no root here, or none holding that sensor's record
             return Link(found, None, None)
     else:
         return Link(None, None, None)
