@@ -1,4 +1,4 @@
-"""``magfab-readout`` with sensor records (issue 28): ``upload --sensor ID`` writes the sensor's current calibration
+"""``magfab-readout`` with sensor records: ``upload --sensor ID`` writes the sensor's current calibration
 and its identity, ``info`` names the sensor, ``check --sensor ID`` appends its verdict, and the guards refuse with
 exit status 2, one line, and nothing written to the board or the record. Run as ``python -m magfab_readout`` on the
 default build's package against the simulated board, whose EEPROM a file keeps between commands
