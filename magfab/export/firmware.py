@@ -11,7 +11,8 @@ constants both share.
 
 The calibration is checked by :func:`magfab.formats.calibration_json.validate` (the one validator of the file);
 on top, :class:`FirmwareError` refuses what the EEPROM record cannot hold (float32 range, order above
-``MAX_ORDER`` of readout/src/magfab_readout/eeprom.py, a record over the 1 KB EEPROM).
+``MAX_ORDER`` of readout/src/magfab_readout/eeprom.py, a record over the EEPROM's 960 bytes before the sensor
+identity).
 
 Every chip number comes from the recipe (``magfab/recipes/chips.toml``); the few the recipe does not carry are
 the named constants below, each with its source or marked as an assumption. The serial formats are those of
@@ -282,7 +283,8 @@ def image_settings(design: Design) -> dict[str, Any]:
 
 def eeprom_record(design: Design, calibration: Mapping[str, Any]) -> bytes:
     """The EEPROM record of this calibration for this build's settings (docs/bundle.md section 4): what the .eep
-    holds and ``magfab-readout upload`` writes. :class:`FirmwareError` when it does not fit 1 KB.
+    holds and ``magfab-readout upload`` writes. :class:`FirmwareError` when it does not fit the EEPROM's first
+    960 bytes (``eeprom.RECORD_MAX``: the last 64 hold the sensor identity).
 
     An array's (version 3) holds the settings and every chip's address, no calibration (the host computes the
     forces); ``calibration`` (the build's, the readout package's calibration.json) only gives the info line's

@@ -549,3 +549,34 @@ def test_a_warming_chip_moves_the_force_by_the_predicted_slope_and_the_correctio
             continue
         assert off[k] == pytest.approx(predicted[k], rel=0.05)
         assert abs(on[k]) < 0.02 * abs(predicted[k])
+
+
+# ---- the sensor identity block at the EEPROM's end (docs/bundle.md section 4) ----------------------------------
+
+
+def test_the_sensor_identity_survives_the_eep_and_an_upload_through_the_real_image(sim):
+    """The identity block written through the image's generic EEPROM commands reads back through them; loading the
+    build's .eep as avrdude writes it (its records' bytes only) and uploading a new calibration over serial both
+    leave it as written, and the image streams the new calibration's true forces beside it."""
+    from magfab import derive
+    from magfab.export import firmware
+
+    identity = importlib.import_module("magfab_readout.identity")
+    ident = identity.Identity("finger-01", "2026-11-28T20:15:00Z", "0123456789abcdef")
+    new = retared(sim.cal, 0.25)
+    with sim.boot(eep=None) as bus:
+        device = sim.frames.device.Device(transport=BusTransport(bus), timeout_s=20.0)
+        assert device.read_identity() is None  # erased
+        device.write_identity(ident)
+        assert bus.eeprom(identity.ADDRESS, identity.SIZE) == identity.pack(ident)
+        for address, data in read_intel_hex(sim.hex_path.with_suffix(".eep").read_text()):
+            assert address + len(data) <= identity.ADDRESS
+            bus.eeprom_set(address, data)  # what avrdude -U eeprom:w:...eep:i writes
+        assert device.read_identity() == ident
+        device.upload(new)
+        record = firmware.eeprom_record(derive(load_spec_default()), new)
+        assert bus.eeprom(0, len(record)) == record and device.read_identity() == ident
+        bus.send(b"b")
+        bus.run_us(5000)
+        samples = sim.samples(sim.frames.Decoder(), bus.run_us(40_000))
+        assert samples and sim.wrong(samples, cal=new) == []

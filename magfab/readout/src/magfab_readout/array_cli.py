@@ -36,9 +36,10 @@ RECORD_LAG_WARNING_S = 2.0
 def _device(args: argparse.Namespace, array: ArrayCalibration, text) -> Device:
     transport = None
     if args.simulate:
-        transport = SimulatedArray(array, seed=args.simulate_seed, corrupt_fraction=args.simulate_corrupt)
-    elif args.simulate_corrupt or args.simulate_seed:
-        raise DeviceError("--simulate-corrupt and --simulate-seed need --simulate")
+        transport = SimulatedArray(array, seed=args.simulate_seed, corrupt_fraction=args.simulate_corrupt,
+                                   eeprom_file=args.simulate_eeprom)
+    elif args.simulate_corrupt or args.simulate_seed or args.simulate_eeprom:
+        raise DeviceError("--simulate-corrupt, --simulate-seed and --simulate-eeprom need --simulate")
     return Device(args.port, args.baud, text=text, timeout_s=args.timeout, calibration=array.calibrations[0],
                   transport=transport)
 

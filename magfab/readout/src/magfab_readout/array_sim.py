@@ -144,7 +144,8 @@ class SimulatedArray(SimulatedDevice):
                  rate_Hz: Optional[float] = None, realtime: bool = True, text: Optional[bool] = None,
                  noise_lsb: float = 0.7, corrupt_fraction: float = 0.0, chip_error_taxel: Optional[int] = None,
                  chip_error_every: int = 0, chunk: int = 16, spec_name: str = _build.SPEC_NAME,
-                 calibration_hash: Optional[str] = None, pattern=None, temperature=None, thermal_per_C=None) -> None:
+                 calibration_hash: Optional[str] = None, pattern=None, temperature=None, thermal_per_C=None,
+                 eeprom_file: Optional[str] = None) -> None:
         cal = calibration if calibration is not None else ArrayCalibration.embedded()
         if cal is None:
             raise ValueError("this package is a single taxel's: simulate it with SimulatedDevice")
@@ -153,21 +154,25 @@ class SimulatedArray(SimulatedDevice):
                          text=text, noise_lsb=noise_lsb, corrupt_fraction=corrupt_fraction, chunk=chunk,
                          spec_name=spec_name, calibration_hash=calibration_hash,
                          pattern=pattern if pattern is not None else ArrayPressPattern(cal), temperature=temperature,
-                         thermal_per_C=thermal_per_C)
+                         thermal_per_C=thermal_per_C, eeprom_file=eeprom_file)
         self.array, self.spec_name = cal, spec_name
         self.chip_error_taxel, self.chip_error_every = chip_error_taxel, int(chip_error_every)
         self.hash16 = calibration_hash or cal.calibrations[0].short_hash
         self.info_line = encode_info_line(spec_name, self.hash16, _build.GAIN_SEL, _build.RESOLUTION, _build.OSR,
                                           _build.DIG_FILT, self.n)
         self._recovered_taxel = [False] * self.n
+        self._reload()
 
-    def _eeprom_command(self) -> None:
+    def _reload(self) -> bool:
         """As the single taxel's, the info line keeping the number of taxels (an array record's hash when valid)."""
-        super()._eeprom_command()
         data = bytes(self.eeprom)
+        valid = super()._reload()
+        if not hasattr(self, "hash16"):  # the single taxel's __init__ loading an eeprom_file: ours reloads after it
+            return valid
         sha16 = eeprom.unpack_header(data)["sha16"] if eeprom.check(data) else self.hash16
         self.info_line = encode_info_line(self.spec_name, sha16, _build.GAIN_SEL, _build.RESOLUTION, _build.OSR,
                                           _build.DIG_FILT, self.n)
+        return valid
 
     def _sample_bytes(self, c: int) -> bytes:
         """Cycle ``c``'s frames, every chip in taxel order (the single taxel's one frame per sample)."""

@@ -9,9 +9,10 @@ import json
 import math
 import pkgutil
 import sys
-from typing import List, Optional, Tuple
+from typing import Any, Dict, List, Optional, Tuple
 
-from . import _build, acceptance_json
+from . import _build, acceptance_json, board_sensor
+from .cli_shared import UsageError
 from .device import Device, DeviceError
 from .rest import slope_mN_per_uT
 from .simulate import RestTip
@@ -56,10 +57,6 @@ def add_parser(commands, common: argparse.ArgumentParser) -> argparse.ArgumentPa
                         help="the simulated magnet is loose: it slides MM mm away from the chip when the sensor is "
                         "turned over")
     return check
-
-
-class UsageError(ValueError):
-    """A bad option value for ``check`` (exit status 2)."""
 
 
 def load_acceptance() -> Optional[dict]:
@@ -193,9 +190,16 @@ class _Steps:
     def __init__(self, out) -> None:
         self.out = out
         self.results: List[Tuple[str, bool]] = []  # (name, passed)
+        self.texts: List[str] = []
+        #: What was measured, by name with its unit (the sensor record's check event keeps them).
+        self.figures: Dict[str, Optional[float]] = {}
+
+    def figure(self, **values: float) -> None:
+        self.figures.update({k: float(v) if math.isfinite(v) else None for k, v in values.items()})
 
     def report(self, name: str, passed: bool, text: str) -> None:
         self.results.append((name, passed))
+        self.texts.append(text)
         self.out.write("step {}  {:<26} {}  {}\n".format(len(self.results), name, "PASS" if passed else "FAIL", text))
         self.out.flush()
 
@@ -207,6 +211,18 @@ class _Steps:
             return 1
         self.out.write(f"verdict: PASS (all {len(self.results)} steps)\n")
         return 0
+
+    def event(self, calibration_sha256: str, simulated: bool) -> Dict[str, Any]:
+        """The sensor record's ``check`` event data (docs/sensors.md): the verdict, the figures, every step."""
+        passed = all(ok for _, ok in self.results)
+        data: Dict[str, Any] = {
+            "taxel": None, "verdict": "pass" if passed else "fail", "calibration_sha256": calibration_sha256,
+            "figures": dict(self.figures),
+            "steps": [{"name": name, "verdict": "pass" if ok else "fail", "text": text}
+                      for (name, ok), text in zip(self.results, self.texts)]}
+        if simulated:
+            data["simulated"] = True
+        return data
 
 
 def _check_options(args: argparse.Namespace, bands: Bands, data: dict):
@@ -261,8 +277,10 @@ def run(args: argparse.Namespace, out, open_device) -> int:
     allow = bands.sigmas * bands.noise_z / math.sqrt(n) + _build.LSB_Z_UT / 2.0
     steps = _Steps(out)
     with open_device(args, text=None, pattern=pattern) as device:
+        linked = _link(args, device)
         _check_header(out, device, bands, weight, rise, n)
         (bx, by, bz), full = _mean_field(device, n)
+        steps.figure(Bx_rest_uT=bx, By_rest_uT=by, Bz_rest_uT=bz, Bxy_rest_uT=math.hypot(bx, by), samples=n)
         _check_polarity(steps, bz, allow + bands.earth)
         _check_rest(steps, out, bands, bz, full, allow)
         _check_lateral(steps, bands, bx, by, bands.sigmas * bands.noise_xy / math.sqrt(n) + _build.LSB_XY_UT / 2.0)
@@ -272,7 +290,23 @@ def run(args: argparse.Namespace, out, open_device) -> int:
             _check_rotation(steps, out, args, device, bands)
         if args.warmup:
             _check_warmup(steps, out, args, device, bands)
-    return steps.verdict()
+        sha = device.calibration.sha256
+    verdict = steps.verdict()
+    if args.sensor and linked.sensor is not None:
+        event = linked.sensor.append("check", steps.event(sha, bool(args.simulate)))
+        out.write(f"record: check {event['number']} of sensor {linked.sensor.id} in {linked.sensor.path}\n")
+    return verdict
+
+
+def _link(args: argparse.Namespace, device) -> board_sensor.Link:
+    """The sensor on the board (``--sensor ID``, or the one its EEPROM names) and its current calibration as the
+    device's; with ``--sensor`` the board must run that calibration (or, not calibrated yet, the package's)."""
+    info = device.info()
+    linked = board_sensor.link(device, info, args)
+    if args.sensor:
+        for warning in device.check_info(info):
+            sys.stderr.write(f"magfab-readout: warning: {warning}\n")
+    return linked
 
 
 def _check_header(out, device, bands: Bands, weight: float, rise, n: int) -> None:
@@ -353,6 +387,7 @@ def _check_weight(steps: _Steps, out, args: argparse.Namespace, device, bands: B
     out.write(f"# reading {n} samples with {weight:g} g on the tip\n")
     (_, _, bz_w), full_w = _mean_field(device, n)
     delta = bz_w - bz
+    steps.figure(weight_g=weight, Bz_rise_uT=delta)
     allow_d = bands.sigmas * bands.noise_z * math.sqrt(2.0 / n) + _build.LSB_Z_UT
     name = f"rise of Bz under {weight:g} g"
     text = f"measured {delta:+.0f} uT, predicted {rise[0]:.0f} .. {rise[2]:.0f} uT (nominal {rise[1]:.0f})"
@@ -401,6 +436,7 @@ def _check_rotation(steps: _Steps, out, args: argparse.Namespace, device, bands:
         (bands.noise_xy, _build.LSB_XY_UT), (bands.noise_xy, _build.LSB_XY_UT), (bands.noise_z, _build.LSB_Z_UT))]
     allow = math.sqrt(sum(a * a for a in per_axis))
     dF = 1000.0 * (turned.force[2] - upright.force[2])
+    steps.figure(turned_dB_uT=change, turned_dBz_uT=dB[2], turned_dFz_mN=dF)
     name = "turned over"
     text = ("measured |dB| {:.0f} uT (dBz {:+.0f}), predicted at most {:.0f} uT (the Earth's field turned over {:.0f}, "
             "the fingertip's own weight reversed {:.0f}); force {:+.1f} mN (predicted: {} the Earth, {:.1f} the own "
@@ -467,6 +503,7 @@ def _check_warmup(steps: _Steps, out, args: argparse.Namespace, device, bands: B
     warm, waited, warmed = _warm(device, args, cold.temperature, least)
     dT = warm.temperature - cold.temperature
     dF = 1000.0 * (warm.force[2] - cold.force[2])
+    steps.figure(warmup_dT_C=dT, warmup_dFz_mN=dF)
     case, what = _thermal_case(device)
     k = slope_mN_per_uT(device.calibration, cold.B, cold.temperature) / float(w["channel_mN_per_uT"])
     per_C = float(w["per_C_mN"][case]) * k

@@ -17,10 +17,12 @@ import sys
 import time
 from typing import List, Optional
 
-from . import _build, array_cli, check
-from .calibration import Calibration, CalibrationError
-from .cli_shared import CSV_COLUMNS, Interrupt, at_fallback_baud, format_csv, format_number, record_header
+from . import _build, array_cli, board_sensor, check, identity, records
+from .calibration import Calibration, CalibrationError, calibration_sha256
+from .cli_shared import CSV_COLUMNS, Interrupt, UsageError, at_fallback_baud, format_csv, format_number, record_header
 from .device import Device, DeviceError, calibration_record, cross_check
+from .eeprom import EepromError
+from .identity import Identity
 from .rest import RestTracker
 from .simulate import WARM_RATE_C_PER_S, SimulatedDevice, TemperatureRamp
 from .taxels import ArrayCalibration
@@ -47,6 +49,9 @@ def _parser() -> argparse.ArgumentParser:
                      help="the simulated board runs the calibration without its temperature correction (the "
                      "field still follows the temperature: a board with an old calibration record, whose hash "
                      "record refuses)")
+    sim.add_argument("--simulate-eeprom", metavar="FILE",
+                     help="keep the simulated board's EEPROM in FILE between commands (upload, then info or check, as "
+                     "on a board; created when missing)")
 
     parser = argparse.ArgumentParser(
         prog="magfab-readout",
@@ -71,6 +76,7 @@ def _parser() -> argparse.ArgumentParser:
                         help="also recompute each force from the field on the host and print the difference")
     stream.add_argument("--count", type=int, metavar="N", help="stop after N samples (an array: N cycles)")
     stream.add_argument("--seconds", type=float, metavar="S", help="stop after S seconds of device time")
+    board_sensor.add_options(stream, _SENSOR_HELP + " (with --check)")
 
     record = commands.add_parser("record", parents=[common], help="record the field during a scan, until Ctrl-C",
                                  description="Write the device's and the host's time, the field, the temperature and "
@@ -83,10 +89,14 @@ def _parser() -> argparse.ArgumentParser:
     record.add_argument("--seconds", type=float, metavar="S",
                         help="stop after S seconds of device time (default: record until Ctrl-C)")
     record.add_argument("--text", action="store_true", help="ask the firmware for text lines instead of binary frames")
+    board_sensor.add_options(record, _SENSOR_HELP)
 
-    commands.add_parser("info", parents=[common], help="ask the board which spec and calibration it runs",
-                        description="Send 'i', print the board's answer and check its calibration against this "
-                                    "package's.")
+    info = commands.add_parser("info", parents=[common],
+                               help="ask the board which sensor, spec and calibration it runs",
+                               description="Send 'i', print the board's answer and the sensor its EEPROM names, and "
+                               "check its calibration against this package's (or the sensor's current one, from its "
+                               "record).")
+    board_sensor.add_options(info, _SENSOR_HELP)
 
     upload = commands.add_parser(
         "upload", parents=[common], help="write a calibration into the board's EEPROM (no compiler, no reflash)",
@@ -95,9 +105,18 @@ def _parser() -> argparse.ArgumentParser:
         "calibration (what the build's .eep holds).")
     upload.add_argument("calibration", nargs="?", metavar="CALIBRATION.json",
                         help="the calibration to write (default: the one embedded in this package)")
+    board_sensor.add_options(upload, "write this sensor's current calibration from its record (not the package's) "
+                             "and its ID (docs/bundle.md section 4), and note the upload in its record")
+    upload.add_argument("--force", action="store_true",
+                        help="with --sensor: write it even when the board names another sensor")
 
-    check.add_parser(commands, common)
+    board_sensor.add_options(check.add_parser(commands, common), _SENSOR_HELP + "; the check's result is appended "
+                             "to its record")
     return parser
+
+
+_SENSOR_HELP = ("the sensor on the board: check the board against its current calibration from its record "
+                "(default: the sensor the board's EEPROM names, when its record is found)")
 
 
 def _simulated(args: argparse.Namespace, calibration: Calibration, pattern) -> SimulatedDevice:
@@ -108,7 +127,7 @@ def _simulated(args: argparse.Namespace, calibration: Calibration, pattern) -> S
     thermal_per_C = None
     if args.simulate_no_thermal:
         if calibration.thermal is None:
-            raise check.UsageError("--simulate-no-thermal: this package's calibration carries no temperature "
+            raise UsageError("--simulate-no-thermal: this package's calibration carries no temperature "
                                    "correction to leave out")
         data = json.loads(pkgutil.get_data("magfab_readout", "calibration.json").decode("utf-8"))  # type: ignore[union-attr]
         data.pop("thermal")
@@ -116,11 +135,11 @@ def _simulated(args: argparse.Namespace, calibration: Calibration, pattern) -> S
     temperature = None
     warm = args.simulate_warm
     if warm is not None and not math.isfinite(warm):
-        raise check.UsageError("--simulate-warm must be a number of degrees")
+        raise UsageError("--simulate-warm must be a number of degrees")
     if warm and args.command != "check":
         temperature = TemperatureRamp(25.0, 25.0 + warm, duration_s=abs(warm) / WARM_RATE_C_PER_S, delay_s=1.0)
     return SimulatedDevice(firmware, seed=args.simulate_seed, corrupt_fraction=args.simulate_corrupt, pattern=pattern,
-                           temperature=temperature, thermal_per_C=thermal_per_C)
+                           temperature=temperature, thermal_per_C=thermal_per_C, eeprom_file=args.simulate_eeprom)
 
 
 def _device(args: argparse.Namespace, text: Optional[bool], pattern=None) -> Device:
@@ -128,9 +147,10 @@ def _device(args: argparse.Namespace, text: Optional[bool], pattern=None) -> Dev
     transport = None
     if args.simulate:
         transport = _simulated(args, calibration, pattern)
-    elif args.simulate_corrupt or args.simulate_seed or args.simulate_warm is not None or args.simulate_no_thermal:
-        raise DeviceError("--simulate-corrupt, --simulate-seed, --simulate-warm and --simulate-no-thermal need "
-                          "--simulate")
+    elif (args.simulate_corrupt or args.simulate_seed or args.simulate_warm is not None or args.simulate_no_thermal
+          or args.simulate_eeprom):
+        raise DeviceError("--simulate-corrupt, --simulate-seed, --simulate-warm, --simulate-no-thermal and "
+                          "--simulate-eeprom need --simulate")
     return Device(args.port, args.baud, text=text, timeout_s=args.timeout, calibration=calibration, transport=transport)
 
 
@@ -140,6 +160,8 @@ def _stream(args: argparse.Namespace, out) -> int:
     if args.raw and args.text:
         raise DeviceError("--raw needs binary frames: text lines carry microtesla, not raw counts")
     with _device(args, text=bool(args.text)) as device:
+        if args.check or args.sensor:  # the host's forces need the calibration the board runs
+            board_sensor.link(device, device.info(), args)
         out.write(f"# magfab-readout {_build.VERSION}: spec {json.dumps(_build.SPEC_NAME)}, "
                   f"calibration {device.calibration.short_hash}, {device.port}\n")
         if args.zero:
@@ -198,15 +220,17 @@ def _record(args: argparse.Namespace) -> int:
         raise DeviceError("--seconds must be positive")
     with _device(args, text=bool(args.text)) as device:
         info = device.info()
+        linked = board_sensor.link(device, info, args)
         for warning in device.check_info(info):
             print("magfab-readout: warning: " + warning, file=sys.stderr)
+        sensor = [] if linked.sensor is None else [f"# sensor: {linked.sensor.id}"]
         temperature = _build.TEMPERATURE_ENABLED
         columns = [c for c in CSV_COLUMNS if temperature or c != "temperature_C"]
         written = skipped = 0
         stop = Interrupt()
         rest = _rest_tracker(device)
         with open(args.out, "w", encoding="utf-8", newline="") as f:
-            record_header(f, device, info, columns)
+            record_header(f, device, info, columns, sensor)
             with stop:
                 for sample in device.samples(seconds=args.seconds):
                     stop.writing = True
@@ -241,14 +265,35 @@ def _info(args: argparse.Namespace, out) -> int:
             json.dumps(info.spec_name), info.calibration_hash, *info.settings))
         out.write(f"package: magfab-readout {_build.VERSION}, spec {json.dumps(_build.SPEC_NAME)}, "
                   f"calibration {device.calibration.short_hash}\n")
+        linked = board_sensor.link(device, info, args)
+        out.write(_sensor_line(linked.identity, info.calibration_hash))
         warnings = device.check_info(info)
         for warning in warnings:
             out.write(f"warning: {warning}\n")
-        out.write("calibration: match\n")
+        if linked.event is not None and linked.sensor is not None:
+            out.write(f"calibration: match (sensor {linked.sensor.id}'s current calibration of "
+                      f"{linked.event.get('date', '?')}, from its record in {linked.sensor.root})\n")
+        else:
+            out.write("calibration: match\n")
     return 0
 
 
+def _sensor_line(found: Optional[Identity], running: str) -> str:
+    """``info``'s line naming the sensor the board's EEPROM names, and its calibration's date."""
+    if found is None:
+        return "sensor:  no sensor ID on this board (upload --sensor ID)\n"
+    line = f"sensor:  {found.sensor_id}, calibration of {found.calibration_date} ({found.calibration_sha16})"
+    if found.calibration_sha16 != running.lower():
+        line += (f"; the board runs calibration {running} since, not that one (magfab-readout upload --sensor "
+                 f"{found.sensor_id} writes the sensor's current one)")
+    return line + "\n"
+
+
 def _upload(args: argparse.Namespace, out) -> int:
+    if args.sensor:
+        return _upload_sensor(args, out)
+    if args.force:
+        raise UsageError("--force goes with --sensor ID (a board that names another sensor)")
     if args.calibration:
         try:
             with open(args.calibration, encoding="utf-8") as handle:
@@ -264,14 +309,52 @@ def _upload(args: argparse.Namespace, out) -> int:
     return 0
 
 
+def _upload_sensor(args: argparse.Namespace, out) -> int:
+    """``upload --sensor ID``: the sensor's current calibration from its record and its identity onto the board,
+    then an ``upload`` event in the record. Every guard runs before anything is written."""
+    if args.calibration:
+        raise UsageError("upload takes a CALIBRATION.json or --sensor ID, not both")
+    sensor = board_sensor.open_record(args, args.sensor)
+    event, data = board_sensor.current_calibration(sensor)
+    record = calibration_record(data)  # what the EEPROM cannot hold is refused before the board is touched
+    sha = calibration_sha256(data)
+    ident = Identity(sensor.id, str(event.get("date")), sha[:16])
+    try:
+        identity.pack(ident)  # checks the block's fields before anything is written
+    except identity.IdentityError as exc:
+        raise UsageError(f"sensor {sensor.id}: {exc}") from None
+
+    def write(device: Device):
+        found = device.read_identity()
+        if not args.force:
+            board_sensor.refuse_other_sensor(device, found, sensor.id, f"connect sensor {sensor.id}'s board, or "
+                                             "pass --force to make this board carry it")
+        info = device.upload(data)
+        device.write_identity(ident)
+        return info, found
+
+    info, found = at_fallback_baud(args, out, lambda a: _device(a, text=None), write)
+    note: dict = {"calibration_sha256": sha, "taxel": None}
+    if found is not None and found.sensor_id != sensor.id:
+        note["replaced_sensor"] = found.sensor_id
+    sensor.append("upload", note)
+    out.write(f"uploaded {len(record)} bytes, read back equal; the board runs calibration {info.calibration_hash} "
+              f"(spec {json.dumps(info.spec_name)}) and carries sensor {sensor.id}'s ID, calibration of "
+              f"{ident.calibration_date}; noted in {sensor.path}\n")
+    return 0
+
+
 def main(argv: Optional[List[str]] = None) -> int:
     """Entry point of the ``magfab-readout`` command."""
     args = _parser().parse_args(argv)
     try:
         if (array := ArrayCalibration.embedded()) is not None:  # an array build's package: every taxel
             if args.simulate_warm is not None or args.simulate_no_thermal:
-                raise check.UsageError("--simulate-warm and --simulate-no-thermal simulate a single taxel's board; "
-                                       "this package reads an array")
+                raise UsageError("--simulate-warm and --simulate-no-thermal simulate a single taxel's board; this "
+                                 "package reads an array")
+            if getattr(args, "sensor", None):
+                raise UsageError("--sensor: an array board's sensor record (one calibration per taxel) is not read by "
+                                 "magfab-readout yet; leave --sensor out")
             return array_cli.run(args, array, sys.stdout)
         if args.command == "stream":
             return _stream(args, sys.stdout)
@@ -286,10 +369,10 @@ def main(argv: Optional[List[str]] = None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())  # stdout's reader went away (| head): stop quietly
         return 0
-    except check.UsageError as exc:
+    except UsageError as exc:
         print(f"magfab-readout: error: {exc}", file=sys.stderr)
         return 2
-    except (DeviceError, CalibrationError, OSError) as exc:
+    except (DeviceError, CalibrationError, EepromError, records.RecordError, OSError) as exc:
         print(f"magfab-readout: error: {exc}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:

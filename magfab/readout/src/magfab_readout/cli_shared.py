@@ -12,11 +12,16 @@ from typing import Any, List, Optional, Sequence
 from . import _build, eeprom
 from .device import NoData
 
-__all__ = ["CSV_COLUMNS", "Interrupt", "at_fallback_baud", "format_csv", "format_number", "record_header"]
+__all__ = ["CSV_COLUMNS", "Interrupt", "UsageError", "at_fallback_baud", "format_csv", "format_number",
+           "record_header"]
 
 #: ``record``'s columns (docs/bundle.md section 1): host_time_s ties the recording to a reference sensor's log.
 CSV_COLUMNS = ("time_s", "host_time_s", "Bx_uT", "By_uT", "Bz_uT", "temperature_C", "Fx_sensor_N", "Fy_sensor_N",
                "Fz_sensor_N", "status", "seq")
+
+
+class UsageError(ValueError):
+    """A bad option value, or a command that would write the wrong thing (exit status 2, nothing written)."""
 
 
 def format_number(x: Optional[float], width: int, decimals: int, sign: bool = True) -> str:

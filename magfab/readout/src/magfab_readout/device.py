@@ -14,7 +14,7 @@ import time
 from collections import deque
 from typing import Deque, Iterator, List, Optional, Tuple, Union
 
-from . import _build, eeprom
+from . import _build, eeprom, identity
 from .calibration import Calibration
 from .calibration_json import calibration_sha256
 from .calibration_json import validate as validate_calibration
@@ -456,6 +456,19 @@ class Device:
                                f"not {calibration_sha256(calibration)[:16]}")
         self.calibration = Calibration(dict(calibration))
         return info
+
+    def read_identity(self) -> Optional[identity.Identity]:
+        """The sensor identity the board's EEPROM holds (docs/bundle.md section 4), None when it holds none."""
+        return identity.unpack(self.eeprom_read(identity.ADDRESS, identity.SIZE))
+
+    def write_identity(self, ident: identity.Identity) -> None:
+        """Write the sensor identity block into the board's EEPROM (after the calibration record, which it leaves
+        alone) and read it back; :class:`UploadFailed` when it reads back otherwise."""
+        block = identity.pack(ident)
+        self.eeprom_write(identity.ADDRESS, block)
+        if self.eeprom_read(identity.ADDRESS, identity.SIZE) != block:
+            raise UploadFailed(f"the sensor identity read back from EEPROM address {identity.ADDRESS} differs from "
+                               "what was written")
 
     def check_info(self, info: DeviceInfo) -> List[str]:
         """Raise :class:`CalibrationMismatch` unless the device runs this package's calibration; return warnings

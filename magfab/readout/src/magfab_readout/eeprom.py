@@ -44,6 +44,9 @@ MAX_TAXELS = 16
 ADDRESSES_OFFSET = 92  # an array record's addresses, after the settings
 #: EEPROM of the ATmega328P, bytes; the record starts at address 0.
 SIZE = 1024
+#: The most a record may take: the EEPROM's last 64 bytes hold the board's sensor identity (identity.py), which
+#: ``upload --sensor ID`` writes and no record, .eep or ``upload`` of a record overwrites.
+RECORD_MAX = SIZE - 64
 HEADER = struct.Struct("<2sBBHH16s4B")  # magic, version, order, length, hull points, sha16, chip settings
 #: The image's settings after the header (docs/bundle.md section 4), in this order; the spec name (NAME_LEN bytes
 #: of UTF-8) goes at the record's end, before the CRC.
@@ -216,7 +219,7 @@ def pack(lay: Dict[str, Any], sha16: str, settings: Dict[str, Any]) -> bytes:
     image's settings (``settings``: those four, :data:`SETTING_KEYS` but ``name_len``, and ``name``, the spec
     name), the floats, the thermal block (version 4: a calibration with ``thermal`` and settings that convert the
     temperature), the Horner rows (per row its Fz then its Fr coefficients), the hull fan and edge lines, the
-    name, the CRC. :class:`EepromError` when it does not fit the EEPROM."""
+    name, the CRC. :class:`EepromError` when it does not fit before the sensor identity (:data:`RECORD_MAX`)."""
     n = len(lay["hull"])
     spec_name = settings["name"].encode("utf-8")
     if len(spec_name) > NAME_MAX:
@@ -239,10 +242,10 @@ def pack(lay: Dict[str, Any], sha16: str, settings: Dict[str, Any]) -> bytes:
              + b"".join(struct.pack("<3f", *e) for e in lay["edges"]))
     body += spec_name
     length = HEADER.size + len(body) + 2
-    if length > SIZE:
+    if length > RECORD_MAX:
         raise EepromError("valid_region.hull", "{} points at order {}".format(n, lay["order"]),
-                          f"the record takes {length} B, the EEPROM holds {SIZE} B: use a shorter hull or a lower order"
-                          )
+                          f"the record takes {length} B, the EEPROM holds {RECORD_MAX} B before the sensor identity: "
+                          "use a shorter hull or a lower order")
     chip = (settings["gain_sel"], settings["resolution"], settings["osr"], settings["dig_filt"])
     version = VERSION_REFERENCE if reference is not None else VERSION if thermal is None else VERSION_THERMAL
     head = HEADER.pack(MAGIC, version, lay["order"], length, n, sha16.encode("ascii"), *chip)

@@ -25,6 +25,7 @@ the calibration at the field read, corrected with the temperature read when the 
 from __future__ import annotations
 
 import math
+import os
 import random
 import time
 from typing import Optional, Tuple
@@ -311,6 +312,8 @@ class SimulatedDevice:
     :class:`RestTip` for the acceptance test. ``temperature`` (``t_s -> degC``, e.g. a :class:`TemperatureRamp`)
     is the chip's temperature and ``thermal_per_C`` (one value or (x, y, z), 1/degC) how the field follows it,
     from the calibration's ``reference_C`` (default: the calibration's own coefficients, none without ``thermal``).
+    ``eeprom_file`` keeps the board's EEPROM between runs (``--simulate-eeprom``): read at the start, written after
+    every 'w' command, as a board keeps it between commands.
     """
 
     port = "the simulated device"
@@ -319,7 +322,7 @@ class SimulatedDevice:
                  rate_Hz: float = _build.SAMPLE_RATE_HZ, realtime: bool = True, text: Optional[bool] = None,
                  noise_lsb: float = 0.7, corrupt_fraction: float = 0.0, chip_error_every: int = 0,
                  chunk: int = 64, spec_name: str = _build.SPEC_NAME, calibration_hash: Optional[str] = None,
-                 pattern=None, temperature=None, thermal_per_C=None) -> None:
+                 pattern=None, temperature=None, thermal_per_C=None, eeprom_file: Optional[str] = None) -> None:
         if not rate_Hz > 0:
             raise ValueError(f"rate_Hz must be positive; instead received {rate_Hz!r}")
         if not 0.0 <= corrupt_fraction <= 1.0:
@@ -355,9 +358,12 @@ class SimulatedDevice:
         self._start: Optional[float] = None
         self.closed = False
         self._command = b""
-        #: The board's EEPROM as the simulated firmware sees it: erased, then written by 'w' commands
-        #: (``magfab-readout upload``); the info line's hash follows a valid record written there.
+        #: The board's EEPROM as the simulated firmware sees it: erased (or as ``eeprom_file`` keeps it from an
+        #: earlier run), then written by 'w' commands (``magfab-readout upload``); the info line's hash follows a
+        #: valid record there.
         self.eeprom = bytearray(b"\xff" * eeprom.SIZE)
+        self.eeprom_file = eeprom_file
+        self._load_eeprom()
 
     # --- the serial port's interface ---------------------------------------------------------------------
 
@@ -372,15 +378,33 @@ class SimulatedDevice:
             status = 1 if eeprom.crc16(cmd[:4 + n]) != crc else (2 if address + n > eeprom.SIZE else 0)
             if status == 0:
                 self.eeprom[address:address + n] = cmd[4:4 + n]
-            settings = (_build.GAIN_SEL, _build.RESOLUTION, _build.OSR, _build.DIG_FILT)
-            valid = (eeprom.check(bytes(self.eeprom))
-                     and eeprom.unpack_header(bytes(self.eeprom))["settings"] == settings)
-            if valid:
-                head = eeprom.unpack_header(bytes(self.eeprom))
-                self.info_line = encode_info_line(self.info_line.decode().split(",")[2], head["sha16"], *settings)
-            body = f"W,{address},{n},{status},{0 if valid else 10}"
+                self._save_eeprom()
+            body = f"W,{address},{n},{status},{0 if self._reload() else 10}"
         self._pending += body.encode("ascii") + line_checksum(body.encode("ascii")) + b"\n"
         self._command = b""
+
+    def _reload(self) -> bool:
+        """Whether the EEPROM holds a valid record for this build's chip settings; the info line's hash follows it."""
+        settings = (_build.GAIN_SEL, _build.RESOLUTION, _build.OSR, _build.DIG_FILT)
+        valid = eeprom.check(bytes(self.eeprom)) and eeprom.unpack_header(bytes(self.eeprom))["settings"] == settings
+        if valid:
+            head = eeprom.unpack_header(bytes(self.eeprom))
+            self.info_line = encode_info_line(self.info_line.decode().split(",")[2], head["sha16"], *settings)
+        return valid
+
+    def _load_eeprom(self) -> None:
+        """The EEPROM as ``eeprom_file`` keeps it (erased when the file does not exist yet)."""
+        if self.eeprom_file is None or not os.path.exists(self.eeprom_file):
+            return
+        with open(self.eeprom_file, "rb") as f:
+            data = f.read(eeprom.SIZE)
+        self.eeprom[:len(data)] = data
+        self._reload()
+
+    def _save_eeprom(self) -> None:
+        if self.eeprom_file is not None:
+            with open(self.eeprom_file, "wb") as f:
+                f.write(bytes(self.eeprom))
 
     def write(self, data: bytes) -> int:
         """Commands from the host: 'b' binary frames, 't' text lines, 'i' one info line, and the EEPROM commands

@@ -1,0 +1,135 @@
+"""Which physical sensor a board carries, and the calibration it runs: the sensor records (:mod:`.records`) as the
+readout's commands use them.
+
+``upload --sensor ID`` writes the sensor's current calibration (from its record, not the package's) and the
+identity block (:mod:`.identity`) naming the sensor; ``info``, ``record``, ``stream --check`` and ``check`` then read
+that block, and when the board runs the current calibration of the sensor it names (or of ``--sensor ID``), that
+calibration is the one the host checks the board against and computes with, where otherwise only the package's
+embedded one is. ``check --sensor ID`` appends its verdict to the record.
+
+The guards are usage errors (:class:`~.cli_shared.UsageError`, exit status 2, nothing written): no record or no
+calibration yet, a calibration fitted to another design than this package's, a board that names another sensor.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+from pathlib import Path
+from typing import Any, Dict, Optional, Tuple
+
+from . import _build, records
+from .calibration import Calibration
+from .calibration_json import calibration_sha256
+from .cli_shared import UsageError
+from .device import CalibrationMismatch, Device
+from .frames import DeviceInfo
+from .identity import Identity
+
+__all__ = ["Link", "add_options", "current_calibration", "link", "open_record", "refuse_other_design",
+           "refuse_other_sensor"]
+
+
+def add_options(parser: argparse.ArgumentParser, what: str) -> None:
+    """``--sensor ID`` (meaning ``what``) and ``--sensors ROOT`` on a command's parser."""
+    group = parser.add_argument_group("sensor record")
+    group.add_argument("--sensor", metavar="ID", help=what)
+    group.add_argument("--sensors", metavar="ROOT", help="the sensor records' root folder (default: $"
+                       f"{records.ROOT_ENV} when set, else the nearest sensors/ folder here or above)")
+
+
+def _root(args: argparse.Namespace) -> Path:
+    return records.find_root(Path(args.sensors) if getattr(args, "sensors", None) else None)
+
+
+def open_record(args: argparse.Namespace, sensor_id: str) -> records.Sensor:
+    """The record of ``sensor_id`` under the root the options name; :class:`UsageError` when there is none."""
+    try:
+        return records.open_sensor(_root(args), sensor_id)
+    except records.RecordError as exc:
+        raise UsageError(str(exc)) from None
+
+
+def current_calibration(sensor: records.Sensor, taxel: Optional[int] = None) -> Tuple[Dict[str, Any], dict]:
+    """(calibration event, calibration.json) of the sensor's current calibration, fitted to this package's design;
+    :class:`UsageError` when it has none yet or when it was fitted to another design (spec hash)."""
+    try:
+        event, data = sensor.current_calibration(taxel)
+    except records.RecordError as exc:
+        raise UsageError(str(exc)) from None
+    refuse_other_design(sensor, event)
+    return event, data
+
+
+def refuse_other_design(sensor: records.Sensor, event: Dict[str, Any]) -> None:
+    """:class:`UsageError` when the calibration ``event`` was fitted to another design than this package's."""
+    try:
+        spec = event.get("spec_sha256") or sensor.info.get("spec_sha256")
+    except records.RecordError as exc:
+        raise UsageError(str(exc)) from None
+    if spec != _build.SPEC_SHA256:
+        raise UsageError("sensor {}: its calibration of {} was fitted to another design (spec {}) than this readout "
+                         "package's (spec {}, {}): install the readout package of the sensor's build".format(
+                             sensor.id, event.get("date", "?"), str(spec)[:16], _build.SPEC_SHA256[:16],
+                             _build.SPEC_NAME))
+
+
+def refuse_other_sensor(device: Device, found: Optional[Identity], sensor_id: str, hint: str) -> None:
+    """:class:`UsageError` when the board's identity names another sensor than ``sensor_id``."""
+    if found is not None and found.sensor_id != sensor_id:
+        raise UsageError(f"the board on {device.port} reports sensor {found.sensor_id}, not {sensor_id}: {hint}")
+
+
+@dataclasses.dataclass(frozen=True)
+class Link:
+    """What :func:`link` found: the board's ``identity`` (None without one), the ``sensor`` whose record applies
+    (None: the package's calibration), and its current calibration ``event`` when the board runs it."""
+
+    identity: Optional[Identity]
+    sensor: Optional[records.Sensor]
+    event: Optional[Dict[str, Any]]
+
+
+def link(device: Device, info: DeviceInfo, args: argparse.Namespace) -> Link:
+    """Read the board's identity and, when the board runs the current calibration of the sensor it names (or of
+    ``args.sensor``), make that calibration ``device.calibration`` (what ``check_info`` and the host's forces use).
+
+    With ``--sensor ID``: :class:`UsageError` when the record is missing, or the board names another sensor, or
+    the calibration was fitted to another design; :class:`~.device.CalibrationMismatch` when the sensor has a
+    calibration and the board runs another. Without it, a board's sensor without a record here leaves the package's
+    calibration in place."""
+    found = device.read_identity()
+    wanted = getattr(args, "sensor", None)
+    if wanted:
+        sensor: Optional[records.Sensor] = open_record(args, wanted)
+        refuse_other_sensor(device, found, wanted, "connect that sensor's board, or name this one's")
+    elif found is not None:
+        try:
+            sensor = records.open_sensor(_root(args), found.sensor_id)
+        except records.RecordError:  # no root here, or none holding that sensor's record
+            return Link(found, None, None)
+    else:
+        return Link(None, None, None)
+    assert sensor is not None
+    try:
+        event, data = sensor.current_calibration()
+    except records.RecordError as exc:
+        if wanted and exc.what != "sensor":  # a record that cannot be read, not one without a calibration yet
+            raise UsageError(str(exc)) from None
+        return Link(found, sensor if wanted else None, None)  # the board runs the package's calibration
+    try:
+        refuse_other_design(sensor, event)
+    except UsageError:
+        if wanted:
+            raise
+        return Link(found, None, None)
+    sha = calibration_sha256(data)
+    if sha[:16] == info.calibration_hash.lower():
+        device.calibration = Calibration(data)
+        return Link(found, sensor, event)
+    if wanted:
+        raise CalibrationMismatch(
+            f"the board on {device.port} runs calibration {info.calibration_hash}, not sensor {sensor.id}'s current "
+            f"calibration {sha[:16]} (of {event.get('date', '?')}): write it with magfab-readout upload --sensor "
+            f"{sensor.id}")
+    return Link(found, None, None)

@@ -1,0 +1,186 @@
+"""``magfab-readout`` with sensor records: ``upload --sensor ID`` writes the sensor's current calibration
+and its identity, ``info`` names the sensor, ``check --sensor ID`` appends its verdict, and the guards refuse with
+exit status 2, one line, and nothing written to the board or the record. Run as ``python -m magfab_readout`` on the
+default build's package against the simulated board, whose EEPROM a file keeps between commands
+(``--simulate-eeprom``); the real image's side: tests/export/test_simbus.py::test_the_sensor_identity_*."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from magfab.formats import sensor_records as rec
+from magfab.formats.calibration_json import calibration_sha256
+
+FAST = ("--samples", "150", "--settle", "0.1", "--yes")
+DATE = "2026-11-28T20:15:00Z"
+
+
+def _build_data(build) -> dict:
+    return json.loads((build.out_dir / "readout" / "src" / "magfab_readout" / "build.json").read_text())
+
+
+def _calibration(build) -> dict:
+    return json.loads((build.out_dir / "readout" / "src" / "magfab_readout" / "calibration.json").read_text())
+
+
+@pytest.fixture
+def bench(default_build, tmp_path):
+    """A sensor root with finger-01 (calibrated, this design) and its own calibration: the package's with another
+    tare, so its hash differs from the package's."""
+    spec = _build_data(default_build)["spec_sha256"]
+    cal = _calibration(default_build)
+    cal["tare_N"]["Fz_N"] += 0.01
+    root = tmp_path / "lab" / "sensors"  # not above the working folder
+    sensor = rec.create(root, "finger-01", {"spec_sha256": spec}, {})
+    sensor.append("calibration", {"taxel": None, "spec_sha256": spec},
+                  {"calibration.json": json.dumps(cal).encode()}, date=DATE)
+    bench = tmp_path / "bench"  # the working folder: no sensors/ in it or above
+    bench.mkdir()
+    return {"build": default_build, "root": root, "sensor": sensor, "cal": cal, "spec": spec,
+            "eeprom": tmp_path / "board.eeprom", "cwd": bench}
+
+
+def readout(bench, *args, timeout=120):
+    env = {k: v for k, v in os.environ.items() if k != rec.ROOT_ENV}
+    env["PYTHONPATH"] = str(bench["build"].out_dir / "readout" / "src")
+    return subprocess.run([sys.executable, "-m", "magfab_readout", *map(str, args), "--simulate", "--simulate-eeprom",
+                           str(bench["eeprom"])], capture_output=True, text=True, timeout=timeout, env=env,
+                          cwd=bench["cwd"])
+
+
+def _snapshot(root: Path) -> dict:
+    return {str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}
+
+
+def _board(bench) -> bytes:
+    return bench["eeprom"].read_bytes() if bench["eeprom"].exists() else b""
+
+
+def test_upload_info_check_round_trip(bench):
+    """An erased board names no sensor; ``upload --sensor`` writes the record's calibration (not the package's) and
+    the ID; ``info`` then names the sensor and its calibration's date and accepts the board's calibration as the
+    sensor's current one; ``check --sensor`` appends its verdict, figures and steps to the record."""
+    root, sensor = bench["root"], bench["sensor"]
+    sha = calibration_sha256(bench["cal"])
+    proc = readout(bench, "info", "--sensors", root)
+    assert proc.returncode == 0, proc.stderr
+    assert "sensor:  no sensor ID on this board (upload --sensor ID)" in proc.stdout
+
+    proc = readout(bench, "upload", "--sensor", "finger-01", "--sensors", root)
+    assert proc.returncode == 0, proc.stderr
+    assert f"the board runs calibration {sha[:16]}" in proc.stdout and "carries sensor finger-01's ID" in proc.stdout
+    upload = sensor.events()[-1]
+    assert upload["kind"] == "upload" and upload["calibration_sha256"] == sha and upload["taxel"] is None
+
+    proc = readout(bench, "info", "--sensors", root)
+    assert proc.returncode == 0, proc.stderr
+    assert f"sensor:  finger-01, calibration of {DATE} ({sha[:16]})" in proc.stdout
+    assert "calibration: match (sensor finger-01's current calibration" in proc.stdout
+
+    proc = readout(bench, "check", "--sensor", "finger-01", "--sensors", root, *FAST)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert f"calibration {sha[:16]}" in proc.stdout.splitlines()[0]
+    check = sensor.events()[-1]
+    assert check["kind"] == "check" and check["verdict"] == "pass" and check["calibration_sha256"] == sha
+    assert check["taxel"] is None and check["simulated"] is True
+    assert [s["name"] for s in check["steps"]] == ["polarity (sign of Bz)", "Bz at rest", "|Bxy| at rest",
+                                                   "rise of Bz under 50 g"]
+    assert all(s["verdict"] == "pass" for s in check["steps"])
+    stated = float(check["steps"][1]["text"].split("measured ")[1].split(" uT")[0])
+    assert check["figures"]["Bz_rest_uT"] == pytest.approx(stated, abs=0.5)
+    assert check["figures"]["weight_g"] == 50.0 and check["figures"]["Bz_rise_uT"] > 0
+    assert f"record: check {check['number']} of sensor finger-01" in proc.stdout
+
+
+def test_without_the_record_the_board_of_a_sensor_is_a_mismatch(bench):
+    """The board runs the sensor's calibration; without its record (no --sensors, none found from the working
+    folder) the host has only the package's calibration, and ``info`` keeps refusing the mismatch."""
+    assert readout(bench, "upload", "--sensor", "finger-01", "--sensors", bench["root"]).returncode == 0
+    proc = readout(bench, "info")
+    assert proc.returncode == 1 and "calibration mismatch" in proc.stderr
+    assert "sensor:  finger-01" in proc.stdout
+    (bench["cwd"] / "sensors").symlink_to(bench["root"])  # found from the working folder
+    assert "calibration: match (sensor finger-01's" in readout(bench, "info").stdout
+    proc = readout(bench, "record", bench["cwd"] / "scan.csv", "--seconds", "0.1", "--sensors", bench["root"])
+    assert proc.returncode == 0, proc.stderr
+    header = (bench["cwd"] / "scan.csv").read_text()
+    assert "# sensor: finger-01" in header and calibration_sha256(bench["cal"]) in header
+
+
+def _other_design(bench):
+    sensor = rec.open_sensor(bench["root"], "finger-01")
+    sensor.append("calibration", {"taxel": None, "spec_sha256": "ab" * 32},
+                  {"calibration.json": json.dumps(_calibration(bench["build"])).encode()})
+
+
+def _another_sensor_on_the_board(bench):
+    other = rec.create(bench["root"], "finger-02", {"spec_sha256": bench["spec"]}, {})
+    other.append("calibration", {"taxel": None, "spec_sha256": bench["spec"]},
+                 {"calibration.json": json.dumps(_calibration(bench["build"])).encode()})
+    assert readout(bench, "upload", "--sensor", "finger-02", "--sensors", bench["root"]).returncode == 0
+
+
+def _not_calibrated(bench):
+    rec.create(bench["root"], "finger-03", {"spec_sha256": bench["spec"]}, {})
+
+
+GUARDS = {
+    "another design": (_other_design, "finger-01", "was fitted to another design"),
+    "the board names another sensor": (_another_sensor_on_the_board, "finger-01",
+                                       "reports sensor finger-02, not finger-01"),
+    "an unknown sensor": (None, "finger-09", "has no record in"),
+    "no calibration yet": (_not_calibrated, "finger-03", "has no calibration yet"),
+}
+
+
+@pytest.mark.parametrize("case", list(GUARDS))
+def test_upload_guards_exit_2_with_one_line_and_write_nothing(bench, case):
+    prepare, sid, message = GUARDS[case]
+    if prepare is not None:
+        prepare(bench)
+    board, record = _board(bench), _snapshot(bench["root"])
+    proc = readout(bench, "upload", "--sensor", sid, "--sensors", bench["root"])
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert len(proc.stderr.splitlines()) == 1 and proc.stderr.startswith("magfab-readout: error: ")
+    assert message in proc.stderr
+    assert _board(bench) == board and _snapshot(bench["root"]) == record
+
+
+def test_force_writes_over_another_sensors_board_and_says_so(bench):
+    _another_sensor_on_the_board(bench)
+    proc = readout(bench, "upload", "--sensor", "finger-01", "--sensors", bench["root"], "--force")
+    assert proc.returncode == 0, proc.stderr
+    event = bench["sensor"].events()[-1]
+    assert event["kind"] == "upload" and event["replaced_sensor"] == "finger-02"
+    assert "sensor:  finger-01" in readout(bench, "info", "--sensors", bench["root"]).stdout
+
+
+def test_check_of_another_sensors_board_or_calibration_writes_nothing(bench):
+    """``check --sensor ID`` on a board naming another sensor: exit 2; on an erased board running the package's
+    calibration while the sensor has its own: the mismatch (exit 1) naming the upload; the record unchanged."""
+    record = _snapshot(bench["root"])
+    proc = readout(bench, "check", "--sensor", "finger-01", "--sensors", bench["root"], *FAST)
+    assert proc.returncode == 1 and "upload --sensor finger-01" in proc.stderr, proc.stderr
+    assert _snapshot(bench["root"]) == record
+    _another_sensor_on_the_board(bench)
+    record, board = _snapshot(bench["root"]), _board(bench)
+    proc = readout(bench, "check", "--sensor", "finger-01", "--sensors", bench["root"], *FAST)
+    assert proc.returncode == 2 and "reports sensor finger-02, not finger-01" in proc.stderr
+    assert len(proc.stderr.splitlines()) == 1
+    assert _snapshot(bench["root"]) == record and _board(bench) == board
+
+
+def test_upload_takes_a_file_or_a_sensor_and_force_only_with_a_sensor(bench, tmp_path):
+    path = tmp_path / "cal.json"
+    path.write_text(json.dumps(bench["cal"]))
+    proc = readout(bench, "upload", path, "--sensor", "finger-01", "--sensors", bench["root"])
+    assert proc.returncode == 2 and "not both" in proc.stderr
+    proc = readout(bench, "upload", "--force")
+    assert proc.returncode == 2 and "--force goes with --sensor" in proc.stderr
+    assert _board(bench) == b""
