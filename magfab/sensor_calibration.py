@@ -27,19 +27,19 @@ from .models.acceptance import acceptance
 from .models.calibration import fit
 from .models.chip import chip_setting
 from .models.predict import predict
-from .models.rest_guard import calibrated_range_N, check_rest_band, sensitivity_uT_per_N
+from .models.rest_guard import RestField, calibrated_range_N, check_rest_band, rest_field, sensitivity_uT_per_N
 from .models.taxels import array_field, compensated
 from .spec import spec_from_json
 
 if TYPE_CHECKING:
     from .design import Design
     from .formats.scan_csv import Scan
-    from .models.calibration import FitResult
-    from .models.rest_guard import RestField
+    from .models.calibration import Calibration, FitResult
     from .spec import Spec
 
 __all__ = ["RecordInputError", "record_errors", "build_of", "acceptance_bands", "check_rest", "open_record",
            "spec_of_record", "check_spec", "check_owner", "fit_taxel", "SensorCalibration", "calibrate_record",
+           "calibration_figures",
            "unkept_calibrations", "refuse_discarding"]
 
 
@@ -196,28 +196,37 @@ def calibrate_record(sensor: records.Sensor, spec: Spec, design: Design, scan: S
 
     result = fit_taxel(scan, design, taxel)
     cal = result.calibration.to_json()
-    offset: tuple[float, ...] = (0.0, 0.0, 0.0)
-    if design.array is not None and taxel is not None:
-        field = array_field(design)
-        offset = tuple(float(x) for x in field.offset_uT[taxel])
-        fitted_scan = compensated(scan, field, taxel)
-    else:
-        fitted_scan = scan
-    rest_fitted = [float(b - o) for b, o in zip(rest.B_uT, offset)]
-    normal, shear = sensitivity_uT_per_N(result.calibration, rest_fitted, rest.temperature_C)
-    range_normal, range_shear = calibrated_range_N(fitted_scan, result.calibration)
     err: Any = cal["errors"]
     data = {
         "taxel": taxel, "spec_sha256": spec.sha256(), "source": scan.source, "method": cal["method"],
         "order": cal["order"], "rms_holdout_Fz_mN": round(1000 * err["Fz_N"]["rms_holdout"], 2),
         "rms_holdout_Fr_mN": round(1000 * err["Fr_N"]["rms_holdout"], 2), "calibration_sha256": calibration_sha256(cal),
-        "rest_field_uT": [round(float(b), 3) for b in rest.B_uT],
-        "sensitivity_normal_uT_per_N": _rounded(normal), "sensitivity_shear_uT_per_N": _rounded(shear),
-        "range_normal_N": round(range_normal, 6), "range_shear_N": round(range_shear, 6), "provisional": False,
+        **calibration_figures(scan, result.calibration, design, taxel, rest), "provisional": False,
     }
     with record_errors():
         event = sensor.append("calibration", data, {**files, "calibration.json": _json_bytes(cal)}, date=date)
     return SensorCalibration(event, result, sensor)
+
+
+def calibration_figures(scan: Scan, calibration: Calibration, design: Design, taxel: int | None,
+                        rest: RestField | None = None) -> dict[str, Any]:
+    """What a calibration event says of the sensor (docs/sensors.md section 3): its field at rest
+    ``rest_field_uT`` [Bx, By, Bz] (``rest``, else the scan's own), the sensitivities at rest from the fitted
+    calibration (:func:`~magfab.models.rest_guard.sensitivity_uT_per_N`) and the calibrated ranges
+    (:func:`~magfab.models.rest_guard.calibrated_range_N`); an array taxel's with its neighbours' field removed."""
+    rest = rest if rest is not None else rest_field(scan)
+    offset: tuple[float, ...] = (0.0, 0.0, 0.0)
+    fitted_scan = scan
+    if design.array is not None and taxel is not None:
+        field = array_field(design)
+        offset = tuple(float(x) for x in field.offset_uT[taxel])
+        fitted_scan = compensated(scan, field, taxel)
+    rest_fitted = [float(b - o) for b, o in zip(rest.B_uT, offset)]
+    normal, shear = sensitivity_uT_per_N(calibration, rest_fitted, rest.temperature_C)
+    range_normal, range_shear = calibrated_range_N(fitted_scan, calibration)
+    return {"rest_field_uT": [round(float(b), 3) for b in rest.B_uT],
+            "sensitivity_normal_uT_per_N": _rounded(normal), "sensitivity_shear_uT_per_N": _rounded(shear),
+            "range_normal_N": round(range_normal, 6), "range_shear_N": round(range_shear, 6)}
 
 
 def _rounded(x: float) -> float | None:

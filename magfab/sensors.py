@@ -15,16 +15,19 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from . import __version__
+from .design import Design, derive
 from .errors import InputError
 from .formats import sensor_records as rec
+from .formats.calibration_json import calibration_sha256
 from .formats.scan_csv import ScanError, read_scan_csv
+from .models.calibration import Calibration
 from .models.scan_guards import MERGED
 from .output import is_build
+from .sensor_calibration import calibration_figures
+from .spec import spec_from_json
 
-__all__ = ["SensorError", "add_from_build", "calibration_figures", "comparisons", "history", "is_measured",
+__all__ = ["SensorError", "add_from_build", "comparisons", "history", "is_measured",
            "records_checked", "summary", "bands"]
 
 
@@ -58,38 +61,6 @@ def _read(path: Path) -> bytes:
         raise SensorError(f"{path}: {exc.strerror}: the build folder is incomplete; rebuild it") from None
 
 
-def calibration_figures(scan_bytes: bytes) -> dict[str, Any]:
-    """The figures a calibration event carries, measured from its scan (docs/sensors.md section 3): the field at rest
-    ``rest_field_uT`` [Bx, By, Bz] (the mean over the rows under the least force), the sensitivities at rest
-    (uT/N: the slope of Bz on Fz over the lower quarter of the normal forces with little shear, and of the lateral
-    field's change on the shear force over its lower half with little normal force) and the scanned ranges (N).
-    Values a scan cannot give (no such rows) are None."""
-    scan = read_scan_csv(scan_bytes)
-    assert scan.F_N is not None  # read_scan_csv requires the force columns
-    fz, fr, b = scan.F_N[:, 2], scan.Fr_N, scan.B_uT
-    magnitude = np.hypot(fz, fr)
-    still = magnitude <= max(float(magnitude.min()), 0.02 * float(magnitude.max()))
-    rest = b[still].mean(axis=0)
-
-    def slope(x: np.ndarray, y: np.ndarray) -> float | None:
-        if x.size < 3 or float(np.ptp(x)) <= 0.0:
-            return None
-        return float(np.polyfit(x, y, 1)[0])
-
-    fz_max, fr_max = float(fz.max()), float(fr.max())
-    normal = (fz >= 0) & (fz <= 0.25 * fz_max) & (fr <= 0.05 * max(fr_max, 1e-12) + 0.05 * fz_max)
-    shear = (fr <= 0.5 * fr_max) & (np.abs(fz) <= 0.05 * max(fz_max, 1e-12) + 0.05 * fr_max)
-    lateral = np.hypot(b[:, 0] - rest[0], b[:, 1] - rest[1])
-    return {"rest_field_uT": [round(float(v), 3) for v in rest],
-            "sensitivity_normal_uT_per_N": _rounded(slope(fz[normal], b[normal, 2] - rest[2])),
-            "sensitivity_shear_uT_per_N": _rounded(slope(fr[shear], lateral[shear])),
-            "range_normal_N": round(fz_max, 4), "range_shear_N": round(fr_max, 4)}
-
-
-def _rounded(x: float | None, digits: int = 1) -> float | None:
-    return None if x is None or not math.isfinite(x) else round(x, digits)
-
-
 @dataclass(frozen=True)
 class Adopted:
     """A measured calibration found in a build folder: its event's data and files."""
@@ -114,7 +85,7 @@ def _scan_files(folder: Path, source: str, sha256: str, kept: str | None) -> dic
     return files
 
 
-def _adopt(folder: Path, rel: str, taxel: int | None, spec_sha256: str, kept: str | None) -> Adopted | None:
+def _adopt(folder: Path, rel: str, taxel: int | None, design: Design, kept: str | None) -> Adopted | None:
     path = folder / rel
     if not path.is_file():
         return None
@@ -127,15 +98,16 @@ def _adopt(folder: Path, rel: str, taxel: int | None, spec_sha256: str, kept: st
     files = {"calibration.json": raw, **_scan_files(folder, source, str(scan.get("sha256", "")), kept)}
     fitted = files.get("scan_merged.csv", files.get("scan.csv"))
     try:
-        figures = calibration_figures(fitted) if fitted is not None else {}
-    except ScanError:
+        figures = ({} if fitted is None else
+                   calibration_figures(read_scan_csv(fitted), Calibration.from_json(cal), design, taxel))
+    except (ScanError, ValueError, KeyError):  # a scan or calibration the figures cannot be read from: kept without
         figures = {}
     err = cal.get("errors", {})
-    data = {"taxel": taxel, "spec_sha256": spec_sha256, "source": f"adopted from the build folder: {source}",
+    data = {"taxel": taxel, "spec_sha256": design.spec.sha256(), "source": f"adopted from the build folder: {source}",
             "method": cal.get("method"), "order": cal.get("order"),
             "rms_holdout_Fz_mN": _mN(err.get("Fz_N", {}).get("rms_holdout")),
             "rms_holdout_Fr_mN": _mN(err.get("Fr_N", {}).get("rms_holdout")),
-            "calibration_sha256": rec.sha256_hex(raw), "provisional": False,
+            "calibration_sha256": calibration_sha256(cal), "provisional": False,
             **{k: figures.get(k) for k in ("rest_field_uT", "sensitivity_normal_uT_per_N",
                                            "sensitivity_shear_uT_per_N", "range_normal_N", "range_shear_N")}}
     return Adopted(data, files)
@@ -145,13 +117,13 @@ def _mN(x: object) -> float | None:
     return round(1000.0 * x, 3) if isinstance(x, (int, float)) and math.isfinite(x) else None
 
 
-def measured_calibrations(folder: Path, taxels: int | None, spec_sha256: str) -> list[Adopted]:
+def measured_calibrations(folder: Path, taxels: int | None, design: Design) -> list[Adopted]:
     """Every calibration a lab measured into the build folder ``folder`` (one for a single taxel, one per measured
     taxel of an array), as calibration events to append."""
     if taxels is None:
-        found = [_adopt(folder, "calibration/calibration.json", None, spec_sha256, "calibration/scan_merged.csv")]
+        found = [_adopt(folder, "calibration/calibration.json", None, design, "calibration/scan_merged.csv")]
     else:
-        found = [_adopt(folder, f"calibration/taxel_{k:02d}.json", k, spec_sha256,
+        found = [_adopt(folder, f"calibration/taxel_{k:02d}.json", k, design,
                         f"calibration/scan_taxel_{k:02d}.csv") for k in range(taxels)]
     return [a for a in found if a is not None]
 
@@ -184,7 +156,7 @@ def add_from_build(root: Path, sensor_id: str, folder: Path, date: str | None = 
             if (folder / rel).is_file():
                 files[role] = (folder / rel).read_bytes()
         spec_sha = str(manifest.get("spec_sha256") or rec.sha256_hex(spec_raw))
-        adopted = measured_calibrations(folder, taxels, spec_sha)
+        adopted = measured_calibrations(folder, taxels, derive(spec_from_json(spec, str(folder / "spec.json"))))
         info = {"spec_name": spec.get("name"), "spec_sha256": spec_sha, "design_sha256": rec.sha256_hex(design_raw),
                 "magfab_version": manifest.get("magfab_version", __version__), "taxels": taxels, "build": str(folder)}
         when = rec.parse_date(date) if date else rec.now_utc()

@@ -28,7 +28,8 @@ from .simulate import WARM_RATE_C_PER_S, SimulatedDevice, TemperatureRamp
 from .taxels import ArrayCalibration
 
 
-def _parser() -> argparse.ArgumentParser:
+def _common() -> argparse.ArgumentParser:
+    """The options every command that talks to a board takes: the serial link and the simulated board."""
     common = argparse.ArgumentParser(add_help=False)
     link = common.add_argument_group("connection")
     link.add_argument("--port", help="serial port (default: $MAGFAB_READOUT_PORT when set, else the one USB serial "
@@ -52,7 +53,11 @@ def _parser() -> argparse.ArgumentParser:
     sim.add_argument("--simulate-eeprom", metavar="FILE",
                      help="keep the simulated board's EEPROM in FILE between commands (upload, then info or check, as "
                      "on a board; created when missing)")
+    return common
 
+
+def _parser() -> argparse.ArgumentParser:
+    common = _common()
     parser = argparse.ArgumentParser(
         prog="magfab-readout",
         description=f"Host readout for the magfab tactile sensor built from spec {json.dumps(_build.SPEC_NAME)}.",
