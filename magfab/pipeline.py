@@ -263,7 +263,8 @@ def _bundle(design: Design, prediction: Prediction | None, scan: Scan | dict[int
                      "(docs/bundle.md section 4)" if rel == firmware.EEP_NAME else "firmware source")
             for rel, data in sorted(fw.items())]
     rd = readout.render(design, cal, acceptance, array_doc,
-                        () if array_doc is None else tuple(f.calibration.to_json() for f in arrayed.fits))
+                        () if array_doc is None else tuple(f.calibration.to_json() for f in arrayed.fits),
+                        None if array_doc is None else _artifact_json(arrayed.artifacts, "array/crosstalk.json"))
     out += [Artifact(rel, data, "readout package (pip install ./readout)") for rel, data in sorted(rd.items())]
     timings["render"] = time.perf_counter() - t
     # the generic image shipped in the package, on every machine (avr-gcc or not): its settings and calibration
@@ -275,6 +276,11 @@ def _bundle(design: Design, prediction: Prediction | None, scan: Scan | dict[int
                         f"{made['ram_bytes']} B ({made['toolchain']['avr-gcc']}, "
                         f"avr-libc {made['toolchain']['avr-libc']})"))
     return BundleStage(artifacts=out, findings=found, fit=result)
+
+
+def _artifact_json(artifacts, path: str) -> dict[str, Any] | None:
+    """The JSON file ``path`` among ``artifacts`` (None when it is not there)."""
+    return next((json.loads(a.data) for a in artifacts if a.path == path), None)
 
 
 def _crosstalk(design: Design, prediction: Prediction) -> CrosstalkStage:

@@ -161,7 +161,8 @@ def _json_file(data: object) -> bytes:
 
 
 def render(design, calibration: Mapping[str, Any], acceptance: Mapping[str, Any] | None = None,
-           array: Mapping[str, Any] | None = None, taxel_calibrations: tuple = ()) -> dict[str, bytes]:
+           array: Mapping[str, Any] | None = None, taxel_calibrations: tuple = (),
+           crosstalk: Mapping[str, Any] | None = None) -> dict[str, bytes]:
     """Every file of the readout package: ``{"readout/<relative path>": bytes}``, sorted, deterministic.
 
     ``design`` is a :class:`~magfab.design.Design` (from :func:`magfab.derive`); ``calibration`` is the parsed
@@ -169,7 +170,8 @@ def render(design, calibration: Mapping[str, Any], acceptance: Mapping[str, Any]
     is :func:`magfab.models.acceptance.acceptance`'s result, embedded as acceptance.json for the ``check`` command
     (None: the package has no acceptance data and ``check`` says so). For an array, ``array`` is
     calibration/array.json and ``taxel_calibrations`` every taxel's calibration.json, embedded under the names
-    array.json gives them (``calibration`` is then taxel 0's). Raises :class:`SpecError` for a
+    array.json gives them (``calibration`` is then taxel 0's), and ``crosstalk`` array/crosstalk.json, the budget
+    the array's ``check`` judges the neighbours against. Raises :class:`SpecError` for a
     calibration the readout cannot evaluate or malformed acceptance data, TypeError for a ``design`` of the
     wrong type.
     """
@@ -184,15 +186,16 @@ def render(design, calibration: Mapping[str, Any], acceptance: Mapping[str, Any]
     for path in [p for p in files if p.endswith(TEMPLATE_SUFFIX)]:  # the build's README.md in its template's place
         text = environment().from_string(files.pop(path).decode("utf-8")).render(**context)
         files[path[:-len(TEMPLATE_SUFFIX)]] = text.encode("utf-8")
-    files.update(data_files(build, checked, accepted, array, taxel_calibrations))
+    files.update(data_files(build, checked, accepted, array, taxel_calibrations, crosstalk))
     return dict(sorted(files.items()))
 
 
 def data_files(build: Mapping[str, object], checked: calibration_json.Checked, accepted: Mapping[str, Any] | None,
-               array: Mapping[str, Any] | None, taxel_calibrations: tuple) -> dict[str, bytes]:
+               array: Mapping[str, Any] | None, taxel_calibrations: tuple,
+               crosstalk: Mapping[str, Any] | None = None) -> dict[str, bytes]:
     """The build's data files beside the package's modules, ``{"readout/src/magfab_readout/<name>": bytes}``:
-    build.json, calibration.json, acceptance.json (when given), and for an array array.json and every taxel's
-    calibration under the names array.json gives them."""
+    build.json, calibration.json, acceptance.json (when given), and for an array array.json, every taxel's
+    calibration under the names array.json gives them, and crosstalk.json (when given: the array's check)."""
     package = f"readout/src/{PACKAGE}"
     files = {f"{package}/build.json": _json_file(build),
              f"{package}/calibration.json": _json_file(json.loads(checked.canonical))}
@@ -202,4 +205,6 @@ def data_files(build: Mapping[str, object], checked: calibration_json.Checked, a
         files[f"{package}/array.json"] = _json_file(array)
         for taxel, cal in zip(array["taxels"], taxel_calibrations, strict=True):
             files[f"{package}/{taxel['calibration']}"] = _json_file(json.loads(validate_calibration(cal).canonical))
+        if crosstalk is not None:
+            files[f"{package}/crosstalk.json"] = _json_file(json.loads(json.dumps(dict(crosstalk), default=_plain)))
     return files

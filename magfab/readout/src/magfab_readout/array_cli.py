@@ -19,11 +19,11 @@ import sys
 import time
 from typing import List
 
-from . import _build, eeprom
+from . import _build, array_check, array_sensor, board_sensor, eeprom, identity
 from .array_sim import SimulatedArray
-from .cli_shared import CSV_COLUMNS, Interrupt, at_fallback_baud, format_csv, format_number, record_header
+from .cli_shared import CSV_COLUMNS, Interrupt, UsageError, at_fallback_baud, format_csv, format_number, record_header
 from .device import Device, DeviceError, UploadFailed
-from .taxels import ArrayCalibration, ArrayReader, Cycle, WrongFirmware
+from .taxels import ArrayCalibration, ArrayReader, Cycle
 
 __all__ = ["run", "RECORD_COLUMNS"]
 
@@ -33,11 +33,11 @@ RECORD_COLUMNS = (*CSV_COLUMNS[:2], "taxel", *CSV_COLUMNS[2:])
 RECORD_LAG_WARNING_S = 2.0
 
 
-def _device(args: argparse.Namespace, array: ArrayCalibration, text) -> Device:
+def _device(args: argparse.Namespace, array: ArrayCalibration, text, pattern=None) -> Device:
     transport = None
     if args.simulate:
         transport = SimulatedArray(array, seed=args.simulate_seed, corrupt_fraction=args.simulate_corrupt,
-                                   eeprom_file=args.simulate_eeprom)
+                                   eeprom_file=args.simulate_eeprom, pattern=pattern)
     elif args.simulate_corrupt or args.simulate_seed or args.simulate_eeprom:
         raise DeviceError("--simulate-corrupt, --simulate-seed and --simulate-eeprom need --simulate")
     return Device(args.port, args.baud, text=text, timeout_s=args.timeout, calibration=array.calibrations[0],
@@ -70,9 +70,11 @@ def stream(args: argparse.Namespace, array: ArrayCalibration, out) -> int:
         raise DeviceError("--check compares the firmware's forces with the host's: an array's firmware sends only "
                           "fields, and every force is the host's")
     with _device(args, array, bool(args.text)) as device:
+        linked = array_sensor.link(device, device.info(), args, array)
+        array = linked.array
         reader = ArrayReader(device, array)
         out.write(f"# magfab-readout {_build.VERSION}: spec {json.dumps(_build.SPEC_NAME)}, {_title(array)}, "
-                  f"{device.port}\n")
+                  f"{device.port}{_sensor_note(linked)}\n")
         if args.zero:
             for k, offset in enumerate(reader.zero(args.zero)):
                 out.write("# zero: taxel {} offset Fx {:+.4f} N, Fy {:+.4f} N, Fz {:+.4f} N from {} samples\n".format(
@@ -106,7 +108,10 @@ def record(args: argparse.Namespace, array: ArrayCalibration) -> int:
     if args.seconds is not None and not args.seconds > 0:
         raise DeviceError("--seconds must be positive")
     with _device(args, array, bool(args.text)) as device:
-        info = _checked_info(device, array)
+        info = device.info()
+        linked = array_sensor.link(device, info, args, array)
+        array = linked.array
+        array_sensor.checked_info(device, array, info)
         temperature = _build.TEMPERATURE_ENABLED
         columns = [c for c in RECORD_COLUMNS if temperature or c != "temperature_C"]
         reader = ArrayReader(device, array)
@@ -117,6 +122,7 @@ def record(args: argparse.Namespace, array: ArrayCalibration) -> int:
                  "# taxel: the chip each row was read from; Bx_uT, By_uT, Bz_uT as that chip read it (the other "
                  "magnets' field included); F*_sensor_N that taxel's force after the compensation of array.json"]
         extra += [f"# taxel {k} calibration_sha256: {c.sha256}" for k, c in enumerate(array.calibrations)]
+        extra += [] if linked.sensor is None else [f"# sensor: {linked.sensor.id}"]
         with open(args.out, "w", encoding="utf-8", newline="") as f:
             record_header(f, device, info, columns, extra)
             with stop:
@@ -154,65 +160,99 @@ def _record_rows(cycle: Cycle, host: float, temperature: bool) -> List[str]:
     return rows
 
 
-def _checked_info(device: Device, array: ArrayCalibration, info=None):
-    """The board's info line (``info``, or asked now), refused when it reads another number of chips than the array
-    has; the calibration checked as a single taxel's (taxel 0's, the package's calibration.json)."""
-    info = device.info() if info is None else info
-    if info.taxels != array.taxels:
-        raise WrongFirmware("the board on {} reads {} chip{} but this readout package is for an array of {} taxels: "
-                            "flash this build's firmware, or install the readout package of the board's build".format(
-                                device.port, info.taxels, "" if info.taxels == 1 else "s", array.taxels))
-    for warning in device.check_info(info):
-        print("magfab-readout: warning: " + warning, file=sys.stderr)
-    return info
+def _sensor_note(linked: array_sensor.ArrayLink) -> str:
+    if linked.sensor is None or linked.calibrations is None:
+        return ""
+    return f", sensor {linked.sensor.id}'s taxel calibrations {linked.calibrations.sha256[:16]}"
 
 
 def info(args: argparse.Namespace, array: ArrayCalibration, out) -> int:
     with _device(args, array, None) as device:
         line = device.info()
+        linked = array_sensor.link(device, line, args, array)
         out.write(f"device:  {line.line}\n")
         out.write("  spec {}, calibration {}, gain_sel {}, resolution {}, osr {}, dig_filt {}, {} taxel(s)\n".format(
             json.dumps(line.spec_name), line.calibration_hash, *line.settings, line.taxels))
         out.write(f"package: magfab-readout {_build.VERSION}, spec {json.dumps(_build.SPEC_NAME)}, "
                   f"calibration {device.calibration.short_hash}\n")
+        out.write(board_sensor.sensor_line(linked.identity, line.calibration_hash))
+        array = linked.array
         out.write(f"array:   {_title(array)}\n")
-        for t, cal in zip(array.layout, array.calibrations):
+        events = linked.calibrations.events if linked.calibrations is not None else (None,) * array.taxels
+        for t, cal, event in zip(array.layout, array.calibrations, events):
             straps = t.get("address_straps") or ["?", "?"]
+            source = t["calibration"] if event is None else f"calibration of {event.get('date', '?')}"
             out.write("  taxel {:2d}  at x {:+6.1f} y {:+6.1f} mm  address 0x{:02X}  option code {}  A1 {} A0 {}  "
                       "magnet north {}  {} {}\n".format(
                           t["index"], t.get("x_mm", math.nan), t.get("y_mm", math.nan), t["i2c_address"],
                           t.get("option_code", "?"), straps[0], straps[1], "up" if t["polarity"] == 1 else "down",
-                          t["calibration"], cal.short_hash))
-        _checked_info(device, array, line)
-        out.write("calibration: match\n")
+                          source, cal.short_hash))
+        array_sensor.checked_info(device, array, line)
+        if linked.sensor is not None and linked.calibrations is not None:
+            out.write(f"calibration: match (sensor {linked.sensor.id}'s current taxel calibrations, the newest of "
+                      f"{linked.calibrations.date}, from its record in {linked.sensor.root})\n")
+        else:
+            out.write("calibration: match\n")
     return 0
 
 
 def upload(args: argparse.Namespace, array: ArrayCalibration, out) -> int:
     """Write the array's record (docs/bundle.md section 4, version 3: the settings and every chip's address, no
-    calibration) into the board's EEPROM, read it back, and check the board's info line."""
+    calibration) into the board's EEPROM, read it back, and check the board's info line. With ``--sensor ID`` the
+    record carries the set hash of the sensor's current taxel calibrations, the identity block names the sensor,
+    and the record gets an ``upload`` event (:mod:`.array_sensor`); without it a board that names a sensor is
+    refused unless ``--force``."""
     if args.calibration:
-        raise DeviceError("an array's board holds no calibration (the host computes every force): a new taxel "
-                          "calibration reaches the readout by reinstalling this build's readout package")
+        raise UsageError("an array's board holds no calibration (the host computes every force): a new taxel "
+                         "calibration reaches the readout by reinstalling this build's readout package, or by "
+                         "magfab calibrate --sensor ID --taxel K and upload --sensor ID")
+    sensor, current, ident = None, None, None
+    if args.sensor:
+        sensor = board_sensor.open_record(args, args.sensor)
+        current = array_sensor.sensor_set(sensor, array.taxels)
+        ident = current.identity(sensor.id)
+        try:
+            identity.pack(ident)  # checks the block's fields before anything is written
+        except identity.IdentityError as exc:
+            raise UsageError(f"sensor {sensor.id}: {exc}") from None
+        array = array.with_calibrations(current.data, current.sha256[:16])  # each one checked before the board
     settings = _build.IMAGE_SETTINGS
-    record = eeprom.pack_array(settings["taxel_addresses"], array.calibrations[0].short_hash, settings)
+    record = eeprom.pack_array(settings["taxel_addresses"], array.board_hash, settings)
 
     def write(device: Device):
+        if sensor is None:
+            found = board_sensor.refuse_named_board(device, args.force)
+        else:
+            found = device.read_identity()
+            if not args.force:
+                board_sensor.refuse_other_sensor(device, found, sensor.id, f"connect sensor {sensor.id}'s board, or "
+                                                 "pass --force to make this board carry it")
         last = device.eeprom_write(0, record)
         if device.eeprom_read(0, len(record)) != record:
             raise UploadFailed("the EEPROM read back differs from the array record written")
         if last.record != 0:
             raise UploadFailed("the board does not accept the array record (a firmware older than record version "
                                f"{eeprom.VERSION_ARRAY}?)")
-        return _checked_info(device, array)
-    info = at_fallback_baud(args, out, lambda a: _device(a, array, None), write)
+        if ident is not None:
+            device.write_identity(ident)
+        return array_sensor.checked_info(device, array), found
+    info, found = at_fallback_baud(args, out, lambda a: _device(a, array, None), write)
     out.write(f"uploaded {len(record)} bytes, read back equal; the board reads {info.taxels} chips "
-              f"(spec {json.dumps(info.spec_name)}, calibration {info.calibration_hash})\n")
+              f"(spec {json.dumps(info.spec_name)}, calibration {info.calibration_hash})")
+    if sensor is None or current is None:
+        out.write("\n")
+        return 0
+    note: dict = {"calibration_sha256": current.sha256, "taxel": None, "taxel_calibrations": list(current.shas)}
+    if found is not None and found.sensor_id != sensor.id:
+        note["replaced_sensor"] = found.sensor_id
+    sensor.append("upload", note)
+    out.write(f" and carries sensor {sensor.id}'s ID, taxel calibrations {current.sha256[:16]} (the newest of "
+              f"{current.date}); noted in {sensor.path}\n")
     return 0
 
 
 def run(args: argparse.Namespace, array: ArrayCalibration, out) -> int:
-    """``stream``, ``record``, ``info``, ``upload`` or ``check`` (refused) of an array build (``args`` as the command
+    """``stream``, ``record``, ``info``, ``upload`` or ``check`` of an array build (``args`` as the command
     line parsed them)."""
     if args.command == "stream":
         return stream(args, array, out)
@@ -221,6 +261,5 @@ def run(args: argparse.Namespace, array: ArrayCalibration, out) -> int:
     if args.command == "upload":
         return upload(args, array, out)
     if args.command == "check":
-        raise DeviceError("check, the acceptance test, reads a single taxel: an array's taxels are not checked by it "
-                          "yet (stream --zero 200 shows each taxel at rest and pressed)")
+        return array_check.run(args, array, out, lambda a, text, pattern: _device(a, array, text, pattern))
     return info(args, array, out)

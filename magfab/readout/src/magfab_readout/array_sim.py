@@ -28,10 +28,10 @@ from .frames import (
     encode_info_line,
     temperature_C,
 )
-from .simulate import GOLDEN_ANGLE, SIMULATED_FAULT, SimulatedDevice, _temperature_raw
+from .simulate import GOLDEN_ANGLE, SIMULATED_FAULT, RestTip, SimulatedDevice, _temperature_raw
 from .taxels import ArrayCalibration
 
-__all__ = ["ArrayPressPattern", "SimulatedArray", "cycle_rate_Hz"]
+__all__ = ["ArrayPressPattern", "ArrayRestTip", "SimulatedArray", "cycle_rate_Hz"]
 
 Vector = Tuple[float, float, float]
 
@@ -118,6 +118,59 @@ class ArrayPressPattern:
         return self.readings({k: motion} if any(motion) else {})
 
 
+class ArrayRestTip:
+    """Every taxel at rest as array.json has it, and a known weight on one taxel (:meth:`place_weight`), for the
+    acceptance test: the weighted taxel's magnet travels towards its chip by what raises its own Bz by the nominal
+    rise under that weight (acceptance.json ``weight.table``, times ``softness[k]``: a softer or stiffer skin than the
+    recipe's), and each other magnet i by ``coupling[i][k]`` of that travel (crosstalk.json: a continuous skin; zero
+    for separate tips). Every chip's reading then follows from array.json's tables as :class:`ArrayPressPattern`'s."""
+
+    def __init__(self, calibration: ArrayCalibration, force_N: Sequence[float], delta_Bz_uT: Sequence[float],
+                 coupling: Optional[Sequence[Sequence[float]]] = None,
+                 softness: Optional[Sequence[float]] = None) -> None:
+        n = calibration.taxels
+        self.calibration = calibration
+        self.readings = ArrayPressPattern(calibration).readings
+        self.tip = RestTip(0.0, force_N, delta_Bz_uT)
+        self.coupling = [[float(c) for c in row] for row in coupling] if coupling is not None else [[0.0] * n] * n
+        self.softness = [float(x) for x in softness] if softness is not None else [1.0] * n
+        self.load: Tuple[int, float] = (0, 0.0)
+
+    @classmethod
+    def from_acceptance(cls, calibration: ArrayCalibration, acceptance: dict, crosstalk: Optional[dict] = None,
+                        softness: Optional[Sequence[float]] = None) -> ArrayRestTip:
+        table = acceptance["weight"]["table"]
+        coupling = None if crosstalk is None else crosstalk.get("coupling")
+        return cls(calibration, table["force_N"], table["delta_Bz_nominal_uT"], coupling, softness)
+
+    def place_weight(self, grams: float, taxel: int = 0) -> None:
+        """A weight of ``grams`` on ``taxel`` (0 g: nothing on any)."""
+        if not (math.isfinite(grams) and grams >= 0) or not 0 <= taxel < self.calibration.taxels:
+            raise ValueError(f"a weight needs grams >= 0 and a taxel of the array; instead received {grams!r}, "
+                             f"{taxel!r}")
+        self.load = (int(taxel), float(grams))
+
+    def travel_mm(self, rise_uT: float) -> float:
+        """The travel towards the chip that raises the own Bz (polarity +1) by ``rise_uT`` (array.json's table)."""
+        comp = self.calibration.compensator
+        own, travel = comp.own, comp.travel
+        target = own[0] + rise_uT
+        if target >= own[-1]:
+            return travel[-1]
+        hi = next(i for i in range(1, len(own)) if own[i] >= target)
+        return travel[hi - 1] + (target - own[hi - 1]) / (own[hi] - own[hi - 1]) * (travel[hi] - travel[hi - 1])
+
+    def fields(self, t_s: float) -> List[Vector]:
+        k, grams = self.load
+        if grams <= 0:
+            return [(r[0], r[1], r[2]) for r in self.calibration.rest_readings]
+        travel = self.travel_mm(self.tip.rise_uT(grams) * self.softness[k])
+        motions = {i: (0.0, 0.0, -self.coupling[i][k] * travel) for i in range(self.calibration.taxels)
+                   if i != k and self.coupling[i][k]}
+        motions[k] = (0.0, 0.0, -travel)
+        return self.readings(motions)
+
+
 def _clamp16(x: float) -> int:
     return max(-32768, min(32767, round(x)))
 
@@ -173,6 +226,13 @@ class SimulatedArray(SimulatedDevice):
         self.info_line = encode_info_line(self.spec_name, sha16, _build.GAIN_SEL, _build.RESOLUTION, _build.OSR,
                                           _build.DIG_FILT, self.n)
         return valid
+
+    def place_weight(self, grams: float, taxel: int = 0) -> None:
+        """Put a weight on one taxel of the simulated array (an :class:`ArrayRestTip` pattern only)."""
+        place = getattr(self.pattern, "place_weight", None)
+        if place is None:
+            raise ValueError("this simulated array runs a press pattern; a weight needs pattern=ArrayRestTip(...)")
+        place(grams, taxel)
 
     def _sample_bytes(self, c: int) -> bytes:
         """Cycle ``c``'s frames, every chip in taxel order (the single taxel's one frame per sample)."""

@@ -26,8 +26,8 @@ from .device import CalibrationMismatch, Device
 from .frames import DeviceInfo
 from .identity import Identity
 
-__all__ = ["Link", "add_options", "current_calibration", "link", "open_record", "refuse_other_design",
-           "refuse_other_sensor"]
+__all__ = ["Link", "add_options", "current_calibration", "link", "open_record", "refuse_named_board",
+           "refuse_other_design", "refuse_other_sensor", "sensor_line"]
 
 
 def add_options(parser: argparse.ArgumentParser, what: str) -> None:
@@ -78,6 +78,26 @@ def refuse_other_sensor(device: Device, found: Optional[Identity], sensor_id: st
     """:class:`UsageError` when the board's identity names another sensor than ``sensor_id``."""
     if found is not None and found.sensor_id != sensor_id:
         raise UsageError(f"the board on {device.port} reports sensor {found.sensor_id}, not {sensor_id}: {hint}")
+
+
+def refuse_named_board(device: Device, force: bool) -> Optional[Identity]:
+    """The board's identity; :class:`UsageError` when it names a sensor and ``force`` is not given: a plain
+    ``upload`` would put the package's provisional calibration over that sensor's measured one."""
+    found = device.read_identity()
+    if found is not None and not force:
+        raise UsageError(f"this board is sensor {found.sensor_id}: upload --sensor {found.sensor_id}, or --force")
+    return found
+
+
+def sensor_line(found: Optional[Identity], running: str) -> str:
+    """``info``'s line naming the sensor the board's EEPROM names, and its calibration's date."""
+    if found is None:
+        return "sensor:  no sensor ID on this board (upload --sensor ID)\n"
+    line = f"sensor:  {found.sensor_id}, calibration of {found.calibration_date} ({found.calibration_sha16})"
+    if found.calibration_sha16 != running.lower():
+        line += (f"; the board runs calibration {running} since, not that one (magfab-readout upload --sensor "
+                 f"{found.sensor_id} writes the sensor's current one)")
+    return line + "\n"
 
 
 @dataclasses.dataclass(frozen=True)

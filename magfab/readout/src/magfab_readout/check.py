@@ -166,7 +166,7 @@ def _mean_field(device: Device, count: int) -> Tuple[Tuple[float, float, float],
     return reading.B, reading.full
 
 
-def _settle(device: Device, seconds: float) -> None:
+def settle(device: Device, seconds: float) -> None:
     """Drop what the board sent before, then wait ``seconds`` of device time."""
     device.drain()
     start = None
@@ -177,18 +177,19 @@ def _settle(device: Device, seconds: float) -> None:
             break
 
 
-def _ask(prompt: str, yes: bool) -> None:
+def ask(prompt: str, yes: bool) -> None:
     sys.stderr.write(prompt + (" (--yes: not waiting)\n" if yes else ", then press Enter: "))
     sys.stderr.flush()
     if not yes and not sys.stdin.readline():
         raise DeviceError("no answer on stdin (end of input): run the check at a terminal, or pass --yes")
 
 
-class _Steps:
+class Steps:
     """The acceptance test's steps as they are reported: numbered PASS/FAIL lines, and the verdict."""
 
-    def __init__(self, out) -> None:
+    def __init__(self, out, prefix: str = "") -> None:
         self.out = out
+        self.prefix = prefix  # before each line: an array's taxel
         self.results: List[Tuple[str, bool]] = []  # (name, passed)
         self.texts: List[str] = []
         #: What was measured, by name with its unit (the sensor record's check event keeps them).
@@ -200,7 +201,8 @@ class _Steps:
     def report(self, name: str, passed: bool, text: str) -> None:
         self.results.append((name, passed))
         self.texts.append(text)
-        self.out.write("step {}  {:<26} {}  {}\n".format(len(self.results), name, "PASS" if passed else "FAIL", text))
+        self.out.write("{}step {}  {:<26} {}  {}\n".format(self.prefix, len(self.results), name,
+                                                          "PASS" if passed else "FAIL", text))
         self.out.flush()
 
     def verdict(self) -> int:
@@ -275,15 +277,15 @@ def run(args: argparse.Namespace, out, open_device) -> int:
     weight, rise, pattern = _check_options(args, bands, data)
     n = args.samples
     allow = bands.sigmas * bands.noise_z / math.sqrt(n) + _build.LSB_Z_UT / 2.0
-    steps = _Steps(out)
+    steps = Steps(out)
     with open_device(args, text=None, pattern=pattern) as device:
         linked = _link(args, device)
         _check_header(out, device, bands, weight, rise, n)
         (bx, by, bz), full = _mean_field(device, n)
         steps.figure(Bx_rest_uT=bx, By_rest_uT=by, Bz_rest_uT=bz, Bxy_rest_uT=math.hypot(bx, by), samples=n)
-        _check_polarity(steps, bz, allow + bands.earth)
-        _check_rest(steps, out, bands, bz, full, allow)
-        _check_lateral(steps, bands, bx, by, bands.sigmas * bands.noise_xy / math.sqrt(n) + _build.LSB_XY_UT / 2.0)
+        check_polarity(steps, bz, allow + bands.earth)
+        check_rest(steps, out, bands, bz, full, allow)
+        check_lateral(steps, bands, bx, by, bands.sigmas * bands.noise_xy / math.sqrt(n) + _build.LSB_XY_UT / 2.0)
         if not args.no_weight:
             _check_weight(steps, out, args, device, bands, weight, rise, bz)
         if args.rotation:
@@ -323,7 +325,7 @@ def _check_header(out, device, bands: Bands, weight: float, rise, n: int) -> Non
     out.flush()
 
 
-def _check_polarity(steps: _Steps, bz: float, floor: float) -> None:
+def check_polarity(steps: Steps, bz: float, floor: float) -> None:
     """Step 1, the sign: an upside-down magnet reads the same field negated."""
     if bz > floor:
         steps.report("polarity (sign of Bz)", True,
@@ -337,7 +339,7 @@ def _check_polarity(steps: _Steps, bz: float, floor: float) -> None:
                      "in the fingertip, and is the fingertip on the chip?")
 
 
-def _check_rest(steps: _Steps, out, bands: Bands, bz: float, full: int, allow: float) -> None:
+def check_rest(steps: Steps, out, bands: Bands, bz: float, full: int, allow: float) -> None:
     """Step 2, the field at rest against the predicted band, and the remanence it implies."""
     lo, nom, hi = bands.rest
     text = f"measured {bz:+.0f} uT, predicted {lo:.0f} .. {hi:.0f} uT (nominal {nom:.0f})"
@@ -365,7 +367,7 @@ def _check_rest(steps: _Steps, out, bands: Bands, bz: float, full: int, allow: f
         out.write(note + "\n")
 
 
-def _check_lateral(steps: _Steps, bands: Bands, bx: float, by: float, allow_xy: float) -> None:
+def check_lateral(steps: Steps, bands: Bands, bx: float, by: float, allow_xy: float) -> None:
     """Step 3, the lateral field at rest: the magnet on the chip's axis and level."""
     bxy = math.hypot(bx, by)
     text = f"measured {bxy:.0f} uT, predicted at most {bands.bxy_max:.0f} uT"
@@ -376,17 +378,27 @@ def _check_lateral(steps: _Steps, bands: Bands, bx: float, by: float, allow_xy: 
                      "its pins and the fingertip in the lip), or a magnetic object is near")
 
 
-def _check_weight(steps: _Steps, out, args: argparse.Namespace, device, bands: Bands, weight: float, rise,
+def _check_weight(steps: Steps, out, args: argparse.Namespace, device, bands: Bands, weight: float, rise,
                   bz: float) -> None:
     """Step 4, the known weight: the rise of Bz against the band the material and magnet predict."""
     n = args.samples
-    _ask(f"place the {weight:g} g weight on the tip, centred, with nothing else touching", args.yes)
+    ask(f"place the {weight:g} g weight on the tip, centred, with nothing else touching", args.yes)
     if args.simulate:
         device.transport.place_weight(weight)
-    _settle(device, args.settle)
+    settle(device, args.settle)
     out.write(f"# reading {n} samples with {weight:g} g on the tip\n")
     (_, _, bz_w), full_w = _mean_field(device, n)
-    delta = bz_w - bz
+    judge_rise(steps, bands, weight, rise, bz_w - bz, full_w, bz, n)
+    if not args.yes:
+        sys.stderr.write("take the weight off the tip\n")
+    if args.simulate:
+        device.transport.place_weight(0.0)
+
+
+def judge_rise(steps: Steps, bands: Bands, weight: float, rise, delta: float, full_w: int, bz: float,
+               n: int) -> None:
+    """The known weight's step: the rise of Bz ``delta`` (uT, means of ``n`` samples; ``bz`` the field at rest)
+    against the band the material and magnet predict, ``rise`` (min, nominal, max)."""
     steps.figure(weight_g=weight, Bz_rise_uT=delta)
     allow_d = bands.sigmas * bands.noise_z * math.sqrt(2.0 / n) + _build.LSB_Z_UT
     name = f"rise of Bz under {weight:g} g"
@@ -405,25 +417,21 @@ def _check_weight(steps: _Steps, out, args: argparse.Namespace, device, bands: B
     else:
         steps.report(name, False, text + ": a larger rise than predicted - a softer silicone (under-cured or "
                      "off-ratio) or the magnet closer to the chip")
-    if not args.yes:
-        sys.stderr.write("take the weight off the tip\n")
-    if args.simulate:
-        device.transport.place_weight(0.0)
 
 
-def _check_rotation(steps: _Steps, out, args: argparse.Namespace, device, bands: Bands) -> None:
+def _check_rotation(steps: Steps, out, args: argparse.Namespace, device, bands: Bands) -> None:
     """The turn-over step: the field change against the Earth's field turned over and the fingertip's own weight
     reversed (acceptance.json ``rotation``), and the force it is worth against the drift budget's."""
     rot, n = bands.rotation, args.samples
     assert rot is not None, "_drift_options refuses --rotation without acceptance.json's rotation section"
-    _ask("turning over: the sensor upright as before, nothing touching the tip", args.yes)
-    _settle(device, args.settle)
+    ask("turning over: the sensor upright as before, nothing touching the tip", args.yes)
+    settle(device, args.settle)
     upright = _mean_reading(device, n)
-    _ask("turn the whole sensor (board and fingertip) upside down, 180 deg about a horizontal axis, with nothing "
+    ask("turn the whole sensor (board and fingertip) upside down, 180 deg about a horizontal axis, with nothing "
          "touching the tip", args.yes)
     if args.simulate:
         device.transport.turn(True)
-    _settle(device, args.settle)
+    settle(device, args.settle)
     out.write(f"# reading {n} samples turned upside down\n")
     turned = _mean_reading(device, n)
     if args.simulate:
@@ -483,16 +491,16 @@ def _thermal_case(device) -> Tuple[str, str]:
     return "with", "the recipe's thermal coefficients"
 
 
-def _check_warmup(steps: _Steps, out, args: argparse.Namespace, device, bands: Bands) -> None:
+def _check_warmup(steps: Steps, out, args: argparse.Namespace, device, bands: Bands) -> None:
     """The warm-up step: the rest force's change against the drift budget's compensated figure per degree times
     the warming (acceptance.json ``warmup``)."""
     w, n = bands.warmup, args.samples
     assert w is not None, "_drift_options refuses --warmup without acceptance.json's warmup section"
     least = float(w["min_change_C"])
-    _ask("warm-up: nothing touching the tip, the sensor where it will stay", args.yes)
-    _settle(device, args.settle)
+    ask("warm-up: nothing touching the tip, the sensor where it will stay", args.yes)
+    settle(device, args.settle)
     cold = _mean_reading(device, n)
-    _ask(f"warm the sensor by at least {least:g} C with nothing touching the tip: hold the board (not the fingertip) "
+    ask(f"warm the sensor by at least {least:g} C with nothing touching the tip: hold the board (not the fingertip) "
          "in your hand, or power it up from cold; warm it evenly, so the magnet keeps up with the chip",
          args.yes)
     if args.simulate:

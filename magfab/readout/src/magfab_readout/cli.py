@@ -113,7 +113,8 @@ def _parser() -> argparse.ArgumentParser:
     board_sensor.add_options(upload, "write this sensor's current calibration from its record (not the package's) "
                              "and its ID (docs/bundle.md section 4), and note the upload in its record")
     upload.add_argument("--force", action="store_true",
-                        help="with --sensor: write it even when the board names another sensor")
+                        help="write even when the board names another sensor (with --sensor), or names a sensor at "
+                        "all (without: the package's calibration over that sensor's)")
 
     board_sensor.add_options(check.add_parser(commands, common), _SENSOR_HELP + "; the check's result is appended "
                              "to its record")
@@ -271,7 +272,7 @@ def _info(args: argparse.Namespace, out) -> int:
         out.write(f"package: magfab-readout {_build.VERSION}, spec {json.dumps(_build.SPEC_NAME)}, "
                   f"calibration {device.calibration.short_hash}\n")
         linked = board_sensor.link(device, info, args)
-        out.write(_sensor_line(linked.identity, info.calibration_hash))
+        out.write(board_sensor.sensor_line(linked.identity, info.calibration_hash))
         warnings = device.check_info(info)
         for warning in warnings:
             out.write(f"warning: {warning}\n")
@@ -283,22 +284,9 @@ def _info(args: argparse.Namespace, out) -> int:
     return 0
 
 
-def _sensor_line(found: Optional[Identity], running: str) -> str:
-    """``info``'s line naming the sensor the board's EEPROM names, and its calibration's date."""
-    if found is None:
-        return "sensor:  no sensor ID on this board (upload --sensor ID)\n"
-    line = f"sensor:  {found.sensor_id}, calibration of {found.calibration_date} ({found.calibration_sha16})"
-    if found.calibration_sha16 != running.lower():
-        line += (f"; the board runs calibration {running} since, not that one (magfab-readout upload --sensor "
-                 f"{found.sensor_id} writes the sensor's current one)")
-    return line + "\n"
-
-
 def _upload(args: argparse.Namespace, out) -> int:
     if args.sensor:
         return _upload_sensor(args, out)
-    if args.force:
-        raise UsageError("--force goes with --sensor ID (a board that names another sensor)")
     if args.calibration:
         try:
             with open(args.calibration, encoding="utf-8") as handle:
@@ -308,7 +296,11 @@ def _upload(args: argparse.Namespace, out) -> int:
     else:
         data = json.loads(pkgutil.get_data("magfab_readout", "calibration.json").decode("utf-8"))  # type: ignore[union-attr]
     record = calibration_record(data)
-    info = at_fallback_baud(args, out, lambda a: _device(a, text=None), lambda device: device.upload(data))
+
+    def write(device: Device):
+        board_sensor.refuse_named_board(device, args.force)
+        return device.upload(data)
+    info = at_fallback_baud(args, out, lambda a: _device(a, text=None), write)
     out.write(f"uploaded {len(record)} bytes, read back equal; the board runs calibration {info.calibration_hash} "
               f"(spec {json.dumps(info.spec_name)})\n")
     return 0
@@ -357,9 +349,6 @@ def main(argv: Optional[List[str]] = None) -> int:
             if args.simulate_warm is not None or args.simulate_no_thermal:
                 raise UsageError("--simulate-warm and --simulate-no-thermal simulate a single taxel's board; this "
                                  "package reads an array")
-            if getattr(args, "sensor", None):
-                raise UsageError("--sensor: an array board's sensor record (one calibration per taxel) is not read by "
-                                 "magfab-readout yet; leave --sensor out")
             return array_cli.run(args, array, sys.stdout)
         if args.command == "stream":
             return _stream(args, sys.stdout)

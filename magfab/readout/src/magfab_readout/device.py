@@ -470,10 +470,11 @@ class Device:
             raise UploadFailed(f"the sensor identity read back from EEPROM address {identity.ADDRESS} differs from "
                                "what was written")
 
-    def check_info(self, info: DeviceInfo) -> List[str]:
-        """Raise :class:`CalibrationMismatch` unless the device runs this package's calibration; return warnings
-        for a different spec name or chip settings."""
-        mine = self.calibration.short_hash
+    def check_info(self, info: DeviceInfo, expected: Optional[str] = None) -> List[str]:
+        """Raise :class:`CalibrationMismatch` unless the device runs this package's calibration (or carries the hash
+        ``expected``, 16 hex digits: an array's record); return warnings for a different spec name or chip
+        settings."""
+        mine = expected or self.calibration.short_hash
         if info.calibration_hash.lower() != mine:
             raise CalibrationMismatch(
                 f"calibration mismatch: the device on {self.port} runs calibration {info.calibration_hash} "
@@ -485,8 +486,8 @@ class Device:
                             f"{_build.SPEC_NAME!r}")
         if info.taxels != TAXELS:
             warnings.append(f"the device reads {info.taxels} taxel(s), this package was built for {TAXELS}")
-        expected = (_build.GAIN_SEL, _build.RESOLUTION, _build.OSR, _build.DIG_FILT)
-        if info.settings != expected:
+        settings = (_build.GAIN_SEL, _build.RESOLUTION, _build.OSR, _build.DIG_FILT)
+        if info.settings != settings:
             warnings.append(f"the device reports gain_sel/resolution/osr/dig_filt {info.settings} but this package "
-                            f"expects {expected}: the field in microtesla will be wrong")
+                            f"expects {settings}: the field in microtesla will be wrong")
         return warnings

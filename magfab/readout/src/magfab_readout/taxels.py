@@ -26,6 +26,7 @@ is imported when an :class:`ArrayCalibration` is made.
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import json
 import math
@@ -77,6 +78,10 @@ class ArrayCalibration:
         if len(cals) != n:
             raise ValueError(f"{len(cals)} calibrations for the {n} taxels of array.json")
         self.calibrations = cals
+        #: The hash the board's array record carries when it is read with these calibrations (16 hex digits): the
+        #: package's taxel 0 calibration's; a sensor's set of taxel calibrations has its own
+        #: (:meth:`with_calibrations`).
+        self.board_hash = cals[0].short_hash if cals else ""
         self.dynamic = bool(array["dynamic"])
         self.sha256 = hashlib.sha256(
             json.dumps(array, sort_keys=True, separators=(",", ":")).encode("utf-8")).hexdigest()
@@ -116,6 +121,16 @@ class ArrayCalibration:
                 raise OSError(f"the package's {name} cannot be read: reinstall it")
             return data
         return cls.from_files(read)
+
+    def with_calibrations(self, calibrations: Sequence, board_hash: str) -> ArrayCalibration:
+        """The same array read with other taxel calibrations (a sensor's, from its record), in taxel order; the
+        board running them carries ``board_hash`` (16 hex digits) in its record."""
+        cals = tuple(c if isinstance(c, Calibration) else Calibration(c) for c in calibrations)
+        if len(cals) != self.taxels:
+            raise ValueError(f"{len(cals)} calibrations for the {self.taxels} taxels of array.json")
+        other = copy.copy(self)
+        other.calibrations, other.board_hash = cals, board_hash.lower()
+        return other
 
     @property
     def taxels(self) -> int:
