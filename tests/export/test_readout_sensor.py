@@ -176,11 +176,30 @@ def test_check_of_another_sensors_board_or_calibration_writes_nothing(bench):
     assert _snapshot(bench["root"]) == record and _board(bench) == board
 
 
-def test_upload_takes_a_file_or_a_sensor_and_force_only_with_a_sensor(bench, tmp_path):
+def test_upload_takes_a_file_or_a_sensor(bench, tmp_path):
     path = tmp_path / "cal.json"
     path.write_text(json.dumps(bench["cal"]))
     proc = readout(bench, "upload", path, "--sensor", "finger-01", "--sensors", bench["root"])
     assert proc.returncode == 2 and "not both" in proc.stderr
-    proc = readout(bench, "upload", "--force")
-    assert proc.returncode == 2 and "--force goes with --sensor" in proc.stderr
     assert _board(bench) == b""
+
+
+def test_a_plain_upload_onto_a_sensors_board_is_refused_without_force(bench, tmp_path):
+    """The board names finger-01: the package's provisional calibration (or any file) would replace the sensor's;
+    refused (exit 2, one line, nothing written) until --force, which writes it and leaves the identity, so info
+    says the board runs another calibration than the sensor's."""
+    assert readout(bench, "upload", "--sensor", "finger-01", "--sensors", bench["root"]).returncode == 0
+    path = tmp_path / "cal.json"
+    path.write_text(json.dumps(_calibration(bench["build"])))
+    for args in ((), (path,)):
+        board, record = _board(bench), _snapshot(bench["root"])
+        proc = readout(bench, "upload", *args)
+        assert proc.returncode == 2, proc.stdout + proc.stderr
+        assert proc.stderr == ("magfab-readout: error: this board is sensor finger-01: upload --sensor finger-01, or "
+                               "--force\n")
+        assert _board(bench) == board and _snapshot(bench["root"]) == record
+    proc = readout(bench, "upload", "--force")
+    assert proc.returncode == 0, proc.stderr
+    package = calibration_sha256(_calibration(bench["build"]))[:16]
+    assert f"the board runs calibration {package}" in proc.stdout
+    assert "the board runs calibration" in readout(bench, "info").stdout.split("sensor:  finger-01")[1]
