@@ -150,13 +150,14 @@ def add_from_build(root: Path, sensor_id: str, folder: Path, date: str | None = 
         manifest = json.loads(_read(folder / "manifest.json"))
         spec_raw, design_raw = _read(folder / "spec.json"), _read(folder / "design.json")
         spec = json.loads(spec_raw)
-        taxels = (spec.get("array") or {}).get("taxels")
+        design = derive(spec_from_json(spec, str(folder / "spec.json")))
+        taxels = None if design.spec.array is None else design.spec.array.taxels  # spec.json states rows and cols
         files = {"spec.json": spec_raw, "design.json": design_raw}
         for role, rel in (("acceptance.json", "calibration/acceptance.json"), ("array.json", "calibration/array.json")):
             if (folder / rel).is_file():
                 files[role] = (folder / rel).read_bytes()
         spec_sha = str(manifest.get("spec_sha256") or rec.sha256_hex(spec_raw))
-        adopted = measured_calibrations(folder, taxels, derive(spec_from_json(spec, str(folder / "spec.json"))))
+        adopted = measured_calibrations(folder, taxels, design)
         info = {"spec_name": spec.get("name"), "spec_sha256": spec_sha, "design_sha256": rec.sha256_hex(design_raw),
                 "magfab_version": manifest.get("magfab_version", __version__), "taxels": taxels, "build": str(folder)}
         when = rec.parse_date(date) if date else rec.now_utc()

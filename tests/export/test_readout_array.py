@@ -214,10 +214,10 @@ def test_a_single_taxels_firmware_is_refused(pkg, array):
     with pkg.Device(transport=single) as device, \
             pytest.raises(pkg.WrongFirmware, match="sends a single taxel's force frames"):
         pkg.ArrayReader(device, array).read(1)
-    array_cli = importlib.import_module("magfab_readout.array_cli")
+    array_sensor = importlib.import_module("magfab_readout.array_sensor")
     with pkg.Device(transport=pkg.SimulatedDevice(array.calibrations[0], realtime=False)) as device, \
             pytest.raises(pkg.WrongFirmware, match="reads 1 chip but this readout package is for an array of 5"):
-        array_cli._checked_info(device, array)
+        array_sensor.checked_info(device, array)
 
 
 def _rows(stdout):
@@ -275,8 +275,8 @@ def test_info_lists_the_array(pkg, capsys):
     assert "I,magfab,strip," in out and out.rstrip().endswith("calibration: match") and "5 taxel(s)" in out
     lines = [line for line in out.splitlines() if line.startswith("  taxel ")]
     assert len(lines) == 5 and "address 0x10  option code 012" in lines[4] and "magnet north down" in lines[1]
-    assert cli.main(["check", "--simulate", "--yes"]) == 1  # rendered here without the build's crosstalk budget
-    assert "carries no crosstalk.json" in capsys.readouterr().err
+    assert cli.main(["check", "--simulate", "--yes"]) == 1  # rendered here without the build's bands and budget
+    assert "carries no acceptance.json" in capsys.readouterr().err
 
 
 def test_upload_writes_the_array_record(pkg, array, capsys, tmp_path):
