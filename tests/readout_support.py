@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import importlib
 import math
+import os
 import random
 import struct
 import subprocess
@@ -209,3 +210,27 @@ def install(rendered: dict, root: Path) -> SimpleNamespace:
     serial = subprocess.run([str(python), "-c", "import serial"], capture_output=True).returncode == 0
     return SimpleNamespace(python=python, script=venv / "bin" / "magfab-readout", serial=serial, root=root,
                            bundle=bundle, before=before, after=listing(bundle))
+
+
+# --- the command on a package of a build, against the simulated board whose EEPROM a file keeps ------------------
+
+def readout_command(bench: dict, *args, timeout: float = 180) -> subprocess.CompletedProcess:
+    """``python -m magfab_readout ARGS --simulate --simulate-eeprom FILE`` on the package of ``bench["build"]``, in
+    ``bench["cwd"]``, with no sensor root in the environment (the sensor tests' benches)."""
+    from magfab.formats.sensor_records import ROOT_ENV
+
+    env = {k: v for k, v in os.environ.items() if k != ROOT_ENV}
+    env["PYTHONPATH"] = str(bench["build"].out_dir / "readout" / "src")
+    return subprocess.run([sys.executable, "-m", "magfab_readout", *map(str, args), "--simulate", "--simulate-eeprom",
+                           str(bench["eeprom"])], capture_output=True, text=True, timeout=timeout, env=env,
+                          cwd=bench["cwd"])
+
+
+def snapshot(root: Path) -> dict:
+    """Every file under ``root`` and its bytes."""
+    return {str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}
+
+
+def board_bytes(bench: dict) -> bytes:
+    """The simulated board's EEPROM as its file keeps it (empty before the first write)."""
+    return bench["eeprom"].read_bytes() if bench["eeprom"].exists() else b""

@@ -107,3 +107,24 @@ def test_a_taxel_named_wrongly_or_not_at_all_writes_nothing(bench):
         assert result.exit_code == 2 and words in result.output, result.output
         assert len(result.output.strip().splitlines()) == 1
     assert sensor.events() == events
+
+
+def test_sensor_add_adopts_a_taxel_calibration_measured_into_the_array_build(array_builds, tmp_path, monkeypatch):
+    """A taxel calibrated into the build folder before the sensor had a record (``magfab calibrate --taxel 3``
+    without --sensor): ``sensor add`` keeps it as taxel 3's calibration, with its scan, and no other taxel's."""
+    import json
+
+    out = tmp_path / "build" / "strip_1x5"
+    shutil.copytree(array_builds["strip_1x5"].out_dir, out)
+    cal = json.loads((out / "calibration" / "taxel_03.json").read_text())
+    cal["scan"]["source"] = "rec.csv + ref.csv"  # as a measured calibration names its recording and reference log
+    (out / "calibration" / "taxel_03.json").write_text(json.dumps(cal, indent=1))
+    shutil.copy(out / "calibration" / "scan_simulated_taxel_03.csv", out / "calibration" / "scan_taxel_03.csv")
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.delenv(records.ROOT_ENV, raising=False)
+    result = CliRunner().invoke(main, ["sensor", "add", "strip-02", "--build", str(out), "--sensors", "sensors"])
+    assert result.exit_code == 0, result.output
+    sensor = records.open_sensor(tmp_path / "sensors", "strip-02")
+    adopted = [e for e in sensor.events() if e["kind"] == "calibration"]
+    assert [e["taxel"] for e in adopted] == [3] and adopted[0]["calibration_sha256"] == calibration_sha256(cal)
+    assert sensor.info["taxels"] == 5 and "scan_merged.csv" in adopted[0]["files"]

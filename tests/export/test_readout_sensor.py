@@ -7,12 +7,11 @@ default build's package against the simulated board, whose EEPROM a file keeps b
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
-from pathlib import Path
 
 import pytest
+from readout_support import board_bytes as _board
+from readout_support import readout_command as readout
+from readout_support import snapshot as _snapshot
 
 from magfab.formats import sensor_records as rec
 from magfab.formats.calibration_json import calibration_sha256
@@ -44,22 +43,6 @@ def bench(default_build, tmp_path):
     bench.mkdir()
     return {"build": default_build, "root": root, "sensor": sensor, "cal": cal, "spec": spec,
             "eeprom": tmp_path / "board.eeprom", "cwd": bench}
-
-
-def readout(bench, *args, timeout=120):
-    env = {k: v for k, v in os.environ.items() if k != rec.ROOT_ENV}
-    env["PYTHONPATH"] = str(bench["build"].out_dir / "readout" / "src")
-    return subprocess.run([sys.executable, "-m", "magfab_readout", *map(str, args), "--simulate", "--simulate-eeprom",
-                           str(bench["eeprom"])], capture_output=True, text=True, timeout=timeout, env=env,
-                          cwd=bench["cwd"])
-
-
-def _snapshot(root: Path) -> dict:
-    return {str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}
-
-
-def _board(bench) -> bytes:
-    return bench["eeprom"].read_bytes() if bench["eeprom"].exists() else b""
 
 
 def test_upload_info_check_round_trip(bench):

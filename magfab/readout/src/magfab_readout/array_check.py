@@ -225,10 +225,10 @@ def _crosstalk(steps: Steps, array: ArrayCalibration, bands: Bands, budget: Budg
         allowed, predicted = budget.allowed_mN(i, k, weight)
         rows.append((read, allowed + noise, predicted, i))
         figures[f"crosstalk_taxel_{i:02d}_mN"] = read
-    worst = max(rows, key=lambda r: r[0] / r[1])
-    steps.figure(crosstalk_worst_mN=worst[0], **figures)
-    text = ("worst on taxel {}: {:.2f} mN, allowed {:.2f} mN (budget {:.2f} mN, predicted {:.2f} mN with the host's "
-            "compensation); the others: {}").format(
+    worst = max(rows, key=lambda r: r[0] / r[1])  # the nearest its limit
+    steps.figure(crosstalk_max_mN=max(r[0] for r in rows), **figures)
+    text = ("nearest its limit taxel {}: {:.2f} mN, allowed {:.2f} mN (budget {:.2f} mN, predicted {:.2f} mN with the "
+            "host's compensation); the others: {}").format(
         worst[3], worst[0], worst[1], budget.tolerance_mN, worst[2],
         ", ".join(f"{i} {r:.2f}" for r, _, _, i in rows if i != worst[3]) or "none")
     name = "crosstalk on the others"

@@ -20,7 +20,7 @@ import sys
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 from . import records
-from .board_sensor import _root, current_calibration, open_record, refuse_other_design, refuse_other_sensor
+from .board_sensor import current_calibration, named_sensor, refuse_other_design
 from .calibration_json import calibration_sha256
 from .cli_shared import UsageError
 from .device import CalibrationMismatch, Device
@@ -93,19 +93,10 @@ def link(device: Device, info: DeviceInfo, args: argparse.Namespace, array: Arra
     calibration was fitted to another design; :class:`~.device.CalibrationMismatch` when the sensor has a calibration
     of every taxel and the board carries another set. Without it, a sensor without a record here, or without every
     taxel calibrated, leaves the package's calibrations in place."""
-    found = device.read_identity()
+    found, sensor = named_sensor(device, args)
     wanted = getattr(args, "sensor", None)
-    if wanted:
-        sensor: Optional[records.Sensor] = open_record(args, wanted)
-        refuse_other_sensor(device, found, wanted, "connect that sensor's board, or name this one's")
-    elif found is not None:
-        try:
-            sensor = records.open_sensor(_root(args), found.sensor_id)
-        except records.RecordError:
-            return ArrayLink(found, None, None, array)
-    else:
-        return ArrayLink(None, None, None, array)
-    assert sensor is not None
+    if sensor is None:
+        return ArrayLink(found, None, None, array)
     try:
         current = _collect(sensor, array.taxels, strict=False)
         for event in current.events:

@@ -26,7 +26,7 @@ from .device import CalibrationMismatch, Device
 from .frames import DeviceInfo
 from .identity import Identity
 
-__all__ = ["Link", "add_options", "current_calibration", "link", "open_record", "refuse_named_board",
+__all__ = ["Link", "add_options", "current_calibration", "link", "named_sensor", "open_record", "refuse_named_board",
            "refuse_other_design", "refuse_other_sensor", "sensor_line"]
 
 
@@ -110,6 +110,24 @@ class Link:
     event: Optional[Dict[str, Any]]
 
 
+def named_sensor(device: Device, args: argparse.Namespace) -> Tuple[Optional[Identity], Optional[records.Sensor]]:
+    """(the board's identity, the record that applies): ``--sensor ID``'s (:class:`UsageError` when it has none or
+    the board names another sensor), else the record of the sensor the board names when it is found here, else
+    None."""
+    found = device.read_identity()
+    wanted = getattr(args, "sensor", None)
+    if wanted:
+        sensor = open_record(args, wanted)
+        refuse_other_sensor(device, found, wanted, "connect that sensor's board, or name this one's")
+        return found, sensor
+    if found is None:
+        return None, None
+    try:
+        return found, records.open_sensor(_root(args), found.sensor_id)
+    except records.RecordError:  # no root here, or none holding that sensor's record
+        return found, None
+
+
 def link(device: Device, info: DeviceInfo, args: argparse.Namespace) -> Link:
     """Read the board's identity and, when the board runs the current calibration of the sensor it names (or of
     ``args.sensor``), make that calibration ``device.calibration`` (what ``check_info`` and the host's forces use).
@@ -118,19 +136,10 @@ def link(device: Device, info: DeviceInfo, args: argparse.Namespace) -> Link:
     the calibration was fitted to another design; :class:`~.device.CalibrationMismatch` when the sensor has a
     calibration and the board runs another. Without it, a board's sensor without a record here leaves the package's
     calibration in place."""
-    found = device.read_identity()
+    found, sensor = named_sensor(device, args)
     wanted = getattr(args, "sensor", None)
-    if wanted:
-        sensor: Optional[records.Sensor] = open_record(args, wanted)
-        refuse_other_sensor(device, found, wanted, "connect that sensor's board, or name this one's")
-    elif found is not None:
-        try:
-            sensor = records.open_sensor(_root(args), found.sensor_id)
-        except records.RecordError:  # no root here, or none holding that sensor's record
-            return Link(found, None, None)
-    else:
-        return Link(None, None, None)
-    assert sensor is not None
+    if sensor is None:
+        return Link(found, None, None)
     try:
         event, data = sensor.current_calibration()
     except records.RecordError as exc:
