@@ -59,7 +59,7 @@ class Budget:
             self.tolerance_mN = float(data["tolerance_mN"])
             self.residual_mN = [[float(x) for x in row] for row in data["residual_mN"]]
             self.coupling = [[float(x) for x in row] for row in data["coupling"]]
-            tables = (self.residual_mN, self.coupling, *self.residual_mN, *self.coupling)
+            tables: List[list] = [self.residual_mN, self.coupling, *self.residual_mN, *self.coupling]
             ok = math.isfinite(self.tolerance_mN) and self.tolerance_mN > 0 and all(len(t) == taxels for t in tables)
         except (KeyError, TypeError, ValueError):
             ok = False
