@@ -234,3 +234,14 @@ def snapshot(root: Path) -> dict:
 def board_bytes(bench: dict) -> bytes:
     """The simulated board's EEPROM as its file keeps it (empty before the first write)."""
     return bench["eeprom"].read_bytes() if bench["eeprom"].exists() else b""
+
+
+def assert_refused(bench: dict, message: str, *args) -> None:
+    """``magfab-readout ARGS`` exits 2 with one line on stderr holding ``message``, and writes nothing to the board
+    or the sensor records of ``bench["root"]``."""
+    board, record = board_bytes(bench), snapshot(bench["root"])
+    proc = readout_command(bench, *args)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    assert len(proc.stderr.splitlines()) == 1 and proc.stderr.startswith("magfab-readout: error: "), proc.stderr
+    assert message in proc.stderr
+    assert board_bytes(bench) == board and snapshot(bench["root"]) == record

@@ -16,8 +16,8 @@ import json
 from pathlib import Path
 
 import pytest
+from readout_support import assert_refused, imported
 from readout_support import board_bytes as _board
-from readout_support import imported
 from readout_support import readout_command as readout
 from readout_support import snapshot as _snapshot
 
@@ -140,16 +140,9 @@ GUARDS = {
 @pytest.mark.parametrize("case", list(GUARDS))
 def test_upload_guards_exit_2_with_one_line_and_write_nothing(bench, case):
     sid, message = GUARDS[case](bench)
-    board, record = _board(bench), _snapshot(bench["root"])
-    proc = readout(bench, "upload", "--sensor", sid, "--sensors", bench["root"])
-    assert proc.returncode == 2, proc.stdout + proc.stderr
-    assert len(proc.stderr.splitlines()) == 1 and proc.stderr.startswith("magfab-readout: error: ")
-    assert message in proc.stderr
-    assert _board(bench) == board and _snapshot(bench["root"]) == record
+    assert_refused(bench, message, "upload", "--sensor", sid, "--sensors", bench["root"])
     if case == "the board names another sensor":  # check too: refused before a reading, nothing appended
-        proc = readout(bench, "check", "--sensor", sid, "--sensors", bench["root"], *FAST)
-        assert proc.returncode == 2 and len(proc.stderr.splitlines()) == 1 and message in proc.stderr
-        assert _board(bench) == board and _snapshot(bench["root"]) == record
+        assert_refused(bench, message, "check", "--sensor", sid, "--sensors", bench["root"], *FAST)
         proc = readout(bench, "upload", "--sensor", sid, "--sensors", bench["root"], "--force")
         assert proc.returncode == 0 and bench["sensor"].events()[-1]["replaced_sensor"] == "arr-02", proc.stderr
 

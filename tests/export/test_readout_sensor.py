@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 
 import pytest
+from readout_support import assert_refused
 from readout_support import board_bytes as _board
 from readout_support import readout_command as readout
 from readout_support import snapshot as _snapshot
@@ -127,12 +128,7 @@ def test_upload_guards_exit_2_with_one_line_and_write_nothing(bench, case):
     prepare, sid, message = GUARDS[case]
     if prepare is not None:
         prepare(bench)
-    board, record = _board(bench), _snapshot(bench["root"])
-    proc = readout(bench, "upload", "--sensor", sid, "--sensors", bench["root"])
-    assert proc.returncode == 2, proc.stdout + proc.stderr
-    assert len(proc.stderr.splitlines()) == 1 and proc.stderr.startswith("magfab-readout: error: ")
-    assert message in proc.stderr
-    assert _board(bench) == board and _snapshot(bench["root"]) == record
+    assert_refused(bench, message, "upload", "--sensor", sid, "--sensors", bench["root"])
 
 
 def test_force_writes_over_another_sensors_board_and_says_so(bench):
