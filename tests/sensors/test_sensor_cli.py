@@ -109,7 +109,8 @@ def test_add_adopts_a_calibration_measured_into_the_build(here, default_build):
     s = rec.open_sensor(here / "sensors", "finger-02")
     (cal,) = s.calibrations()
     built = (folder / "calibration" / "calibration.json").read_bytes()
-    assert cal["calibration_sha256"] == calibration_sha256(json.loads(built)) and not cal["provisional"] and cal["taxel"] is None
+    assert cal["calibration_sha256"] == calibration_sha256(json.loads(built))
+    assert not cal["provisional"] and cal["taxel"] is None
     assert s.file(cal["files"]["calibration.json"]) == built
     for role, name in (("scan.csv", "rec.csv"), ("reference.csv", "ref.csv"),
                        ("scan_merged.csv", "calibration/scan_merged.csv")):
