@@ -124,13 +124,26 @@ def _top_flat_area(mesh) -> float:
     return float(mesh.area_faces[up].sum())
 
 
+def _solids_of(spec):
+    """The parts as plan() makes them: its CAD branch (pipeline._solids: every solid, its STL and the mesh checks),
+    without the physics branch, which these tests do not read."""
+    from types import SimpleNamespace
+
+    from magfab.check import preflight
+    from magfab.pipeline import _solids
+
+    design = derive(spec)
+    preflight(design)
+    return SimpleNamespace(spec=spec, design=design, artifacts=_solids(design, lambda _stage: None, {}).artifacts)
+
+
 def test_variants_make_closed_solids_of_their_own_shape(default_build):
     """plan() only promises no error-level finding; here the variants' meshes are closed, match their CAD
     solids, and carry the variant: a flat tip is flat on top (the default dome is not), two cavities make a
     cup with two cavities' volume taken out, a wider pad is as wide as asked."""
-    flat = plan(parse_spec('[elastomer]\ntip = "flat"'))
-    wide = plan(parse_spec("[mould]\ncavities = 2\nprinter = \"fdm\"\n[pad]\ndiameter_mm = 22.0\n"
-                           "alignment_hole_diameter_mm = 2.0\nalignment_hole_spacing_mm = 17.0"))
+    flat = _solids_of(parse_spec('[elastomer]\ntip = "flat"'))
+    wide = _solids_of(parse_spec("[mould]\ncavities = 2\nprinter = \"fdm\"\n[pad]\ndiameter_mm = 22.0\n"
+                                 "alignment_hole_diameter_mm = 2.0\nalignment_hole_spacing_mm = 17.0"))
     solids = {"elastomer": elastomer_solid, "mould_cup": cup_solid, "mould_lid": lid_solid, "pad": pad_solid}
     for result in (flat, wide):
         tol = result.spec.mould.tessellation_tolerance_mm
