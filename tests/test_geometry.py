@@ -11,7 +11,7 @@ import pytest
 cq = pytest.importorskip("cadquery")
 trimesh = pytest.importorskip("trimesh")
 
-from magfab import derive, load_spec, parse_spec, plan  # noqa: E402
+from magfab import derive, load_spec, parse_spec  # noqa: E402
 from magfab.elastomer import elastomer_solid, envelope_solid  # noqa: E402
 from magfab.mould import cup_solid, lid_solid  # noqa: E402
 from magfab.pad import pad_solid  # noqa: E402
@@ -104,17 +104,6 @@ def test_assembled_mould_does_not_collide_and_leaves_the_cavity():
     part = elastomer_solid(d).rotate((0, 0, 0), (1, 0, 0), 180).translate((0, 0, h))
     assert _intersection_volume(cup_solid(d), part) == pytest.approx(0.0, abs=1e-6)
     assert _intersection_volume(lid_assembled, part) == pytest.approx(0.0, abs=1e-6)
-
-
-def test_same_spec_same_bytes_in_one_process_or_two(default_build):
-    """The session build ran its physics branch in a forked worker where it could; this plan runs everything
-    in one process. Same spec, same bytes, whichever way the work was split."""
-    from magfab.fork import parallel_available
-
-    again = plan(load_spec(None), parallel=False)
-    assert [(x.path, x.data) for x in again.artifacts] == [(x.path, x.data) for x in default_build.artifacts]
-    assert "wait-physics" not in again.timings_s
-    assert ("wait-physics" in default_build.timings_s) == parallel_available()
 
 
 def _top_flat_area(mesh) -> float:
