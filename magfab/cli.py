@@ -414,8 +414,8 @@ def check(spec: Path | None, as_json: bool) -> None:
         from .spec import load_spec
 
         loaded = load_spec(spec)
-        design = derive(loaded)
-        preflight(design)  # the reference chip's site and the build's cost, refused as the build refuses them
+        # the reference chip's site, the build's cost and the board's size, refused (or the board sized) as the build
+        design = preflight(derive(loaded))
         findings = design_findings(design)
         findings += predict_with_findings(design)[1]
         if as_json:
