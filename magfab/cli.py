@@ -276,6 +276,7 @@ def _calibrate_sensor(scan_path: Path, reference: Path | None, spec_path: Path |
     """``magfab calibrate SCAN --sensor ID``: every guard, then the fit appended to the sensor's record; the build
     folder is left as it is (its calibration stays the provisional one, fitted to the simulated scan)."""
     with _handled():
+        from .check import preflight
         from .design import derive
         from .formats import sensor_records as records
         from .models.scan_guards import MERGED, merged_csv
@@ -299,6 +300,8 @@ def _calibrate_sensor(scan_path: Path, reference: Path | None, spec_path: Path |
         else:
             loaded, _ = _calibration_target(spec_path, out_dir, scan_path)
         folder = found if found is not None and is_build(found) else None
+        design = preflight(derive(loaded))  # the spec as built: a board it does not size is sized as the build sizes it
+        loaded = design.spec
         check_spec(sensor, loaded)
         scans = _read_scan(scan_path, reference, folder, loaded, taxel)
         scan = scans[taxel] if isinstance(scans, dict) else scans
@@ -310,7 +313,6 @@ def _calibrate_sensor(scan_path: Path, reference: Path | None, spec_path: Path |
             files["scan_merged.csv"] = merged_csv(scan)
         check_owner(sensor, files)
         _reject_own_forces(sensor, scan, loaded, taxel)
-        design = derive(loaded)
         for line in _depth_warnings(scan, loaded, folder, design, taxel):
             click.echo(f"warning: {line} [calibration.scan_z_mm]", err=True)
         done = calibrate_record(sensor, loaded, design, scan, rest, files, taxel, when)

@@ -121,9 +121,9 @@ def _solids_of(spec):
     from magfab.check import preflight
     from magfab.pipeline import _solids
 
-    design = derive(spec)
-    preflight(design)
-    return SimpleNamespace(spec=spec, design=design, artifacts=_solids(design, lambda _stage: None, {}).artifacts)
+    design = preflight(derive(spec))
+    solids = _solids(design, lambda _stage: None, {})
+    return SimpleNamespace(spec=design.spec, design=design, artifacts=solids.artifacts)
 
 
 def test_variants_make_closed_solids_of_their_own_shape(default_build):
