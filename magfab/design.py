@@ -542,7 +542,7 @@ def _array(spec: Spec, arr: Array, chip, printer, minimum: float) -> ArrayLayout
                         f"puts two taxels {_fmt(pitch)} mm apart: at least {_fmt(minimum)} mm for "
                         + ("separate fingertips with their centring lips" if arr.skin is Skin.SEPARATE else
                            "one skin (pockets apart by the minimum skin, chip recesses by the printer's minimum wall)"))
-    addresses = _address_plan(spec, chip, len(centres))
+    addresses = address_plan(spec, chip, len(centres))
     taxels = tuple(Taxel(i, x + 0.0, y + 0.0, s, a, code, straps)
                    for i, ((x, y), s, (a, code, straps)) in enumerate(zip(centres, signs, addresses)))
     hull = outline.hull(centres)
@@ -564,7 +564,7 @@ def _min_pitch(spec: Spec, skin: Skin, printer, part: Part, stack: Stack, pad: P
     return max(2.0 * part["pocket_radius_mm"] + spec.elastomer.min_skin_mm, recesses)
 
 
-def _address_plan(spec: Spec, chip, n: int) -> list[tuple[int, str, tuple[int, int]]]:
+def address_plan(spec: Spec, chip, n: int) -> list[tuple[int, str, tuple[int, int]]]:
     """(address, option code, (A1, A0)) per taxel: the four A1/A0 straps of the sensor's option code from its
     address on, then the next option codes' (the order number's -0xx sets the base: one code per four chips, as the
     ReSkin/AnySkin boards mix two). Ordering the right chips needs no programming step; the chip's user-writable
