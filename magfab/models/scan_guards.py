@@ -335,17 +335,21 @@ def _grid(values: np.ndarray) -> tuple[float, float] | None:
     q = float(steps.min())
     if q <= FORCE_FLOOR_N:
         return None
-    k = (u - u[0]) / q
-    if np.max(np.abs(k - np.round(k))) * q > 2e-6:
+    q = float(np.median(steps[steps < 1.5 * q]))  # the step as the file's decimals (1e-6 N) let it be read
+    k = np.round((u - u[0]) / q)
+    if k[-1] > 0:
+        q = float(np.dot(k, u - u[0]) / np.dot(k, k))  # the step fitted over the whole span
+    if np.max(np.abs(u - u[0] - k * q)) > 2e-6:
         return None
     return q, float(u[0])
 
 
-def _cubic(x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """The least-squares cubic of y in x (scaled), evaluated at x."""
+def _cubic(x: np.ndarray, y: np.ndarray, weight: np.ndarray | None = None) -> np.ndarray:
+    """The least-squares cubic of y in x (scaled), evaluated at x; rows weighted by ``weight``."""
     s = (x - x.mean()) / (x.std() or 1.0)
     A = np.column_stack([np.ones_like(s), s, s * s, s * s * s])
-    coef, *_ = np.linalg.lstsq(A, y, rcond=None)
+    w = np.ones_like(s) if weight is None else np.sqrt(weight)
+    coef, *_ = np.linalg.lstsq(A * w[:, None], y * w, rcond=None)
     return A @ coef
 
 
@@ -356,8 +360,15 @@ def _axis_residual(ref: np.ndarray, own: np.ndarray, grid: tuple[float, float] |
     r = float(np.sqrt(np.mean((ref - fit) ** 2)))
     if grid is not None:
         q, origin = grid
-        rounded = origin + q * np.round((fit - origin) / q)
-        r = min(r, float(np.sqrt(np.mean((ref - rounded) ** 2))))
+        # each rounded level weighs the same: the rows resting on one level share one rounding error, which
+        # would pull the map's gain and offset off by a fraction of a step
+        _, level, count = np.unique(np.round((ref - origin) / q), return_inverse=True, return_counts=True)
+        fit = _cubic(own, ref, 1.0 / count[level])
+        # the least-squares offset is off by up to half a step where the force rests on one step (the rounding's
+        # error there is a constant): the map's offset is searched over a step
+        for shift in q * np.linspace(-0.5, 0.5, 21):
+            rounded = origin + q * np.round((fit + shift - origin) / q)
+            r = min(r, float(np.sqrt(np.mean((ref - rounded) ** 2))))
     return r
 
 
