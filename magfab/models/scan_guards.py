@@ -39,6 +39,7 @@ from ..formats.scan_csv import (
     read_reference,
     scan_csv,
 )
+from ..spec import Calibration as CalibrationSpec
 from .calibration import Calibration
 
 if TYPE_CHECKING:
@@ -499,8 +500,6 @@ def merge_reference(recording: Recording | str | os.PathLike[str] | bytes,
     inside = _overlap(h, rec, ref)
     _check_gaps(h, ref, _period(rec))
     if reference_resolution_mN is None:  # the spec's default
-        from ..spec import Calibration as CalibrationSpec
-
         reference_resolution_mN = float(CalibrationSpec.model_fields["reference_resolution_mN"].default)
     reject_dead_reference(rec, ref, inside, reference_resolution_mN)
     reject_copied_reference(rec, ref, reference_resolution_mN)
