@@ -381,7 +381,7 @@ def _read_scan(scan_path: Path, reference: Path | None, build_dir: Path | None, 
 
         check_taxel(spec, taxel)
     if reference is not None:
-        scan = merge_reference(read_recording(scan_path, taxel), reference)
+        scan = merge_reference(read_recording(scan_path, taxel), reference, spec.calibration.reference_resolution_mN)
     else:
         scan = read_scan_csv(scan_path, taxel=taxel)
     folder = None if build_dir is None else Path(build_dir)
