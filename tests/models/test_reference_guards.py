@@ -103,13 +103,18 @@ def test_a_dead_channel_is_refused():
 
 # ---- generators ---------------------------------------------------------------------------------------------------
 
-@settings(max_examples=25, deadline=None, phases=NO_SHRINK, suppress_health_check=[HealthCheck.too_slow])
-@given(rate=st.floats(200.0, 2000.0), lag=st.floats(-0.5, 0.5), gain=st.floats(0.9, 1.1),
-       tare=st.tuples(*[st.floats(-0.5, 0.5)] * 3), step_mN=st.one_of(st.just(0.0), st.floats(0.1, 2.0)),
-       noise_mN=st.floats(0.0, 0.05), seed=st.integers(0, 2**16))
-def test_disguised_copies_of_the_sensors_forces_are_refused(rate, lag, gain, tare, step_mN, noise_mN, seed):
-    """The sensor's forces resampled at another rate and lag, through a gain and a tare, with a little noise (well
-    under the sensor's own), rounded to 0.1-2 mN or not (coarser: docs/bundle.md, what the guard cannot tell)."""
+#: How many cases a generator draws: a sample in the default run (each merge takes about half a second), many more
+#: with -m slow.
+EXAMPLES = [pytest.param(6, id="sampled"), pytest.param(60, id="exhaustive", marks=pytest.mark.slow)]
+
+
+def _drawn(examples: int, **strategies):
+    """``@given(**strategies)`` with ``examples`` cases, unshrunk (a failing case is reported as drawn)."""
+    return lambda test: settings(max_examples=examples, deadline=None, phases=NO_SHRINK,
+                                 suppress_health_check=[HealthCheck.too_slow])(given(**strategies)(test))
+
+
+def _disguised_copy(rate, lag, gain, tare, step_mN, noise_mN, seed):
     rng = np.random.default_rng(seed)
     times = log_times(rate)
     F = gain * at(times, REC.scan.F_N, lag) + np.array(tare) + rng.normal(0.0, noise_mN / 1000.0, (len(times), 3))
@@ -118,13 +123,16 @@ def test_disguised_copies_of_the_sensors_forces_are_refused(rate, lag, gain, tar
     refused(reference(times, F), "copy of rec.csv's own forces")
 
 
-@settings(max_examples=25, deadline=None, phases=NO_SHRINK, suppress_health_check=[HealthCheck.too_slow])
-@given(rate=st.floats(200.0, 2000.0), offset=st.floats(-0.2, 0.2), tare=st.tuples(*[st.floats(-0.5, 0.5)] * 3),
-       resolution_mN=st.floats(1.0, 10.0), seed=st.integers(0, 2**16))
-def test_independent_references_are_accepted(rate, offset, tare, resolution_mN, seed):
-    """The true force as a reference of the stated resolution logs it (its noise, resolution / sqrt 12, and its
-    quantisation), its clock off by up to 0.2 s, tared anywhere: the accurate sensor's forces agree with it to its
-    noise and the reference's resolution, never closer."""
+@pytest.mark.parametrize("examples", EXAMPLES)
+def test_disguised_copies_of_the_sensors_forces_are_refused(examples):
+    """The sensor's forces resampled at another rate and lag, through a gain and a tare, with a little noise (well
+    under the sensor's own), rounded to 0.1-2 mN or not (coarser: docs/bundle.md, what the guard cannot tell)."""
+    _drawn(examples, rate=st.floats(200.0, 2000.0), lag=st.floats(-0.5, 0.5), gain=st.floats(0.9, 1.1),
+           tare=st.tuples(*[st.floats(-0.5, 0.5)] * 3), step_mN=st.one_of(st.just(0.0), st.floats(0.1, 2.0)),
+           noise_mN=st.floats(0.0, 0.05), seed=st.integers(0, 2**16))(_disguised_copy)()
+
+
+def _independent(rate, offset, tare, resolution_mN, seed):
     rng = np.random.default_rng(seed)
     times = log_times(rate)
     q = resolution_mN / 1000.0
@@ -132,6 +140,16 @@ def test_independent_references_are_accepted(rate, offset, tare, resolution_mN, 
     F = rounded(F + rng.normal(0.0, q / math.sqrt(12.0), F.shape), q)
     merged = G.merge_reference(REC, reference(times, F), resolution_mN)
     assert merged.rows > 0.5 * REC.scan.rows
+
+
+@pytest.mark.parametrize("examples", EXAMPLES)
+def test_independent_references_are_accepted(examples):
+    """The true force as a reference of the stated resolution logs it (its noise, resolution / sqrt 12, and its
+    quantisation), its clock off by up to 0.2 s, tared anywhere: the accurate sensor's forces agree with it to its
+    noise and the reference's resolution, never closer."""
+    _drawn(examples, rate=st.floats(200.0, 2000.0), offset=st.floats(-0.2, 0.2),
+           tare=st.tuples(*[st.floats(-0.5, 0.5)] * 3), resolution_mN=st.floats(1.0, 10.0),
+           seed=st.integers(0, 2**16))(_independent)()
 
 
 @settings(max_examples=25, deadline=None, phases=NO_SHRINK)
