@@ -46,7 +46,7 @@ MESHES_MM = FE_MESHES_MM[:2]  # the meshes auto may pick on these designs
 
 def _ours(body: mech.Body, depths: np.ndarray, mesh_mm: float) -> tuple[np.ndarray, float, str]:
     """magfab's force (mu mm^2, NaN past a failure) at ``depths``, the cold time (s), and what stopped it ('')."""
-    mech._clear_caches()
+    mech.clear_caches()
     t0 = time.perf_counter()
     curve = mech.fe(body, 1.0, np.concatenate([[0.0], depths]), mesh_mm=mesh_mm, on_failure="truncate")
     seconds = time.perf_counter() - t0
@@ -58,7 +58,7 @@ def _ours(body: mech.Body, depths: np.ndarray, mesh_mm: float) -> tuple[np.ndarr
 
 def _theirs(body: mech.Body, depths: np.ndarray, mesh_mm: float) -> tuple[np.ndarray, float, str]:
     """FElupe's force (mu mm^2, NaN past a failure), the cold time (s, mesh included), and what stopped it ('')."""
-    mech._clear_caches()
+    mech.clear_caches()
     t0 = time.perf_counter()
     force, why = np.full(depths.size, np.nan), ""
     for k in range(depths.size, 0, -1):  # a failure: keep the depths before it

@@ -66,7 +66,7 @@ def magone_at_3mm(body: mech.Body, band: tuple[float, float, float]) -> dict[str
           "(one solve, scaled by mu)")
     result: dict[str, object] = {}
     for name in ("column", "hertz_column"):
-        mech._clear_caches()
+        mech.clear_caches()
         t0 = time.perf_counter()
         curves = mech.band_curves(body, band, name, d)
         dt = time.perf_counter() - t0
@@ -74,7 +74,7 @@ def magone_at_3mm(body: mech.Body, band: tuple[float, float, float]) -> dict[str
         result[name] = {"force_N": forces, "time_s": dt}
         print(f"  {name:<13} " + " / ".join(f"{f:.3f}" for f in forces) + f" N   ({dt:.3f} s)")
     build_mesh = body.radius_mm * mech.BUILD_MESH_FRACTION
-    mech._clear_caches()
+    mech.clear_caches()
     t0 = time.perf_counter()
     curves = mech.band_curves(body, band, "fe", d, mesh_mm=build_mesh, on_failure="truncate")
     dt = time.perf_counter() - t0
@@ -92,7 +92,7 @@ def magone_at_3mm(body: mech.Body, band: tuple[float, float, float]) -> dict[str
     print("  how far each FE mesh gets (nominal mu, 0.1 mm steps):")
     reach = []
     for h in MESHES_MM:
-        mech._clear_caches()
+        mech.clear_caches()
         c = mech.fe(body, nominal, np.linspace(0.0, DELTA_MAX_MM, 31), mesh_mm=h, on_failure="truncate")
         reach.append({"mesh_mm": h, "reached_mm": float(c.indentation_mm[-1]), "force_N": float(c.force_N[-1]),
                       "failure": c.info.get("failure")})
@@ -122,7 +122,7 @@ def shear(body: mech.Body, mu_kPa: float) -> dict[str, object]:
     for label, b in (("MagOne", body), ("plate column R 6, h 4.3", plate)):
         for ends in ("free", "guided"):
             kt = mech.shear_stiffness(b, mu_kPa, "timoshenko", ends)
-            mech._clear_caches()
+            mech.clear_caches()
             t0 = time.perf_counter()
             kf = mech.shear_stiffness(b, mu_kPa, "fe", ends, mesh_mm=0.25)
             dt = time.perf_counter() - t0

@@ -276,6 +276,7 @@ def _calibrate_sensor(scan_path: Path, reference: Path | None, spec_path: Path |
     """``magfab calibrate SCAN --sensor ID``: every guard, then the fit appended to the sensor's record; the build
     folder is left as it is (its calibration stays the provisional one, fitted to the simulated scan)."""
     with _handled():
+        from .check import preflight
         from .design import derive
         from .formats import sensor_records as records
         from .models.scan_guards import MERGED, merged_csv
@@ -299,6 +300,8 @@ def _calibrate_sensor(scan_path: Path, reference: Path | None, spec_path: Path |
         else:
             loaded, _ = _calibration_target(spec_path, out_dir, scan_path)
         folder = found if found is not None and is_build(found) else None
+        design = preflight(derive(loaded))  # the spec as built: a board it does not size is sized as the build sizes it
+        loaded = design.spec
         check_spec(sensor, loaded)
         scans = _read_scan(scan_path, reference, folder, loaded, taxel)
         scan = scans[taxel] if isinstance(scans, dict) else scans
@@ -310,7 +313,6 @@ def _calibrate_sensor(scan_path: Path, reference: Path | None, spec_path: Path |
             files["scan_merged.csv"] = merged_csv(scan)
         check_owner(sensor, files)
         _reject_own_forces(sensor, scan, loaded, taxel)
-        design = derive(loaded)
         for line in _depth_warnings(scan, loaded, folder, design, taxel):
             click.echo(f"warning: {line} [calibration.scan_z_mm]", err=True)
         done = calibrate_record(sensor, loaded, design, scan, rest, files, taxel, when)
@@ -379,7 +381,7 @@ def _read_scan(scan_path: Path, reference: Path | None, build_dir: Path | None, 
 
         check_taxel(spec, taxel)
     if reference is not None:
-        scan = merge_reference(read_recording(scan_path, taxel), reference)
+        scan = merge_reference(read_recording(scan_path, taxel), reference, spec.calibration.reference_resolution_mN)
     else:
         scan = read_scan_csv(scan_path, taxel=taxel)
     folder = None if build_dir is None else Path(build_dir)
@@ -414,8 +416,8 @@ def check(spec: Path | None, as_json: bool) -> None:
         from .spec import load_spec
 
         loaded = load_spec(spec)
-        design = derive(loaded)
-        preflight(design)  # the reference chip's site and the build's cost, refused as the build refuses them
+        # the reference chip's site, the build's cost and the board's size, refused (or the board sized) as the build
+        design = preflight(derive(loaded))
         findings = design_findings(design)
         findings += predict_with_findings(design)[1]
         if as_json:

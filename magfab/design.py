@@ -159,6 +159,9 @@ class Design:
     vent_offset_mm: float
     vent_angles_deg: tuple[float, ...]
     array: ArrayLayout | None = None  # None: one taxel at the origin
+    # the [pcb] sides the spec left unstated and the board's fit chose, because the default did not hold the parts
+    # (magfab.board.fit; the chosen values are in spec.pcb); () where the stated or default size holds them
+    pcb_sized: tuple[str, ...] = ()
 
     @property
     def taxels(self) -> tuple[Taxel, ...]:
@@ -259,7 +262,8 @@ class Design:
         """Every derived number (for design.json), rounded to 1 nm so the text is stable."""
         out: dict[str, object] = {}
         for name in self.__dataclass_fields__:
-            if name in {"spec", "printer", "chip", "magnet_grade", "material", "adhesive", "release_agent", "array"}:
+            if name in {"spec", "printer", "chip", "magnet_grade", "material", "adhesive", "release_agent", "array",
+                        "pcb_sized"}:
                 continue
             out[name] = _rounded(getattr(self, name))
         out["tip"] = self.tip.value
@@ -267,6 +271,8 @@ class Design:
         out["chip"] = self.chip.key
         if self.array is not None:  # a single taxel's design.json is what it was before arrays
             out["array"] = self.array.as_dict()
+        if self.pcb_sized:  # a board of the stated or default size leaves design.json as it was
+            out["pcb_sized"] = {k: _rounded(getattr(self.spec.pcb, k)) for k in self.pcb_sized}
         for name in ("envelope_volume_mm3", "core_volume_mm3", "elastomer_volume_mm3", "magnet_volume_mm3"):
             out[name] = _rounded(getattr(self, name))
         return out
@@ -319,8 +325,9 @@ def derive(spec: Spec) -> Design:
 
     In the order a person would design it: the magnet and its pocket in the elastomer, the stack from the
     chip's sensing point up, where the pocket sits so that the rest distance is d_max, the pad, the chip's
-    address, the mould round the part. Geometry only: the reference chip's site and what the build would cost
-    (:func:`magfab.check.preflight`) are checked by the stage above, ``magfab check`` and the pipeline's plan."""
+    address, the mould round the part. Geometry only: the reference chip's site, what the build would cost and the
+    board's size (:func:`magfab.check.preflight`) are checked by the stage above, ``magfab check`` and the pipeline's
+    plan, which go on with the design it returns."""
     chip = resolve.chip(spec.sensor.chip)
     printer = resolve.printer(spec.mould.printer.value)
     part = _elastomer(spec)
@@ -535,7 +542,7 @@ def _array(spec: Spec, arr: Array, chip, printer, minimum: float) -> ArrayLayout
                         f"puts two taxels {_fmt(pitch)} mm apart: at least {_fmt(minimum)} mm for "
                         + ("separate fingertips with their centring lips" if arr.skin is Skin.SEPARATE else
                            "one skin (pockets apart by the minimum skin, chip recesses by the printer's minimum wall)"))
-    addresses = _address_plan(spec, chip, len(centres))
+    addresses = address_plan(spec, chip, len(centres))
     taxels = tuple(Taxel(i, x + 0.0, y + 0.0, s, a, code, straps)
                    for i, ((x, y), s, (a, code, straps)) in enumerate(zip(centres, signs, addresses)))
     hull = outline.hull(centres)
@@ -557,7 +564,7 @@ def _min_pitch(spec: Spec, skin: Skin, printer, part: Part, stack: Stack, pad: P
     return max(2.0 * part["pocket_radius_mm"] + spec.elastomer.min_skin_mm, recesses)
 
 
-def _address_plan(spec: Spec, chip, n: int) -> list[tuple[int, str, tuple[int, int]]]:
+def address_plan(spec: Spec, chip, n: int) -> list[tuple[int, str, tuple[int, int]]]:
     """(address, option code, (A1, A0)) per taxel: the four A1/A0 straps of the sensor's option code from its
     address on, then the next option codes' (the order number's -0xx sets the base: one code per four chips, as the
     ReSkin/AnySkin boards mix two). Ordering the right chips needs no programming step; the chip's user-writable

@@ -74,7 +74,7 @@ class _Shown:
             text = repr(raw)
         else:
             text = str(raw)
-        self.text = _shorten(text)
+        self.text = shorten(text)
 
     def __str__(self) -> str:
         return self.text
@@ -87,7 +87,7 @@ class _Shown:
     __hash__ = None  # type: ignore[assignment]  # unhashable, the documented way; typeshed types __hash__ as a method
 
 
-def _shorten(text: str, limit: int = SHOWN_MAX_CHARS) -> str:
+def shorten(text: str, limit: int = SHOWN_MAX_CHARS) -> str:
     if len(text) <= limit:
         return text
     keep = (limit - 5) // 2

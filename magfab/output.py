@@ -13,11 +13,18 @@ into place. The rules, in the order a user meets them:
   the build before anything changes: move it away. (A manifest without an ``artifacts`` list, which no
   magfab ever wrote, marks every file as magfab's.)
 * **The swap is recoverable.** The new build is written into ``.NAME.tmp-*`` beside the target; a journal
-  ``.NAME.swap`` naming where the previous build goes is written; then the previous build is renamed to
-  ``.NAME.old-*`` and the new one into place; the journal is removed only once the new one is there. A run
-  killed between any two of these steps leaves either a complete build at the path or a journal from which
-  the next :func:`write` or :func:`check_target` puts the previous build back (:func:`_recover`); an error or
-  interrupt runs the same recovery at once. Temporaries of killed runs are removed by the next run.
+  ``.NAME.swap`` naming where the previous build goes is written; then the two folders are exchanged in one
+  step (Linux ``renameat2`` with ``RENAME_EXCHANGE``), so the path holds the previous build until it holds the
+  new one, never neither; the journal is removed only once the new one is there. Where the platform, its C
+  library (glibc before 2.28) or the file system refuses the exchange (``EINVAL``, ``ENOSYS``, ``ENOTSUP``), the
+  previous build is renamed to ``.NAME.old-*`` and the new one into place: between those two renames (a few
+  microseconds) no folder is at the path, and a run killed there leaves the journal, from which the next
+  :func:`write` or :func:`check_target` puts the previous build back (:func:`_recover`). A run killed between
+  any other two steps leaves a complete build at the path; an error or interrupt runs the same recovery at once.
+* **Only what magfab made is ever removed.** Every temporary is written into the lock file's log (``+NAME``)
+  before it is made, and ``-NAME`` once it is gone; the next run removes what a killed run left listed there or
+  in its journal, and nothing else: a folder beside the build whose name only looks like a temporary
+  (``.NAME.old-20241128``, a copy the user made) is never touched, nor is one left by a magfab before this rule.
 * **One writer at a time.** Writers of one folder take an ``flock`` on ``.NAME.lock`` beside it for the
   swap (a few seconds at most); a second writer waits for it, and gives up with :class:`OutputError` naming
   the other build's process after ``lock_timeout_s``.
@@ -36,11 +43,13 @@ from __future__ import annotations
 
 import errno
 import fcntl
+import functools
 import json
 import os
 import re
 import secrets
 import shutil
+import sys
 import time
 from collections.abc import Callable
 from contextlib import suppress
@@ -159,25 +168,74 @@ def _link(src: Path, dst: Path) -> None:
             shutil.copy2(src, dst)
 
 
-# ---- the folder beside the target: temporaries, journal, lock ----
+# ---- the folders beside the target: temporaries, journal, lock ----
 
 def _sibling(out: Path, kind: str) -> Path:
     return out.parent / f".{out.name}.{kind}"
 
 
-def _new_sibling(out: Path, kind: str) -> Path:
-    return _sibling(out, f"{kind}-{secrets.token_hex(8)}")
+def _own_name(out: Path, name: object) -> bool:
+    """Whether ``name`` is one this magfab gives a temporary of ``out`` (``.NAME.tmp-`` or ``.NAME.old-`` and 16
+    hex digits): a record naming anything else (another path, a folder of the user's) is ignored."""
+    pattern = rf"\.{re.escape(out.name)}\.(tmp|old)-[0-9a-f]{{16}}"
+    return isinstance(name, str) and re.fullmatch(pattern, name) is not None
 
 
-def _temporaries(out: Path) -> list[Path]:
-    """Leftovers of earlier runs beside ``out``: ``.NAME.tmp-*`` and ``.NAME.old-*`` (also the 8-character
-    names of magfab versions before the journal)."""
-    pattern = re.compile(rf"\.{re.escape(out.name)}\.(tmp|old)-([0-9a-f]{{16}}|[a-z0-9_]{{8}})")
+class _Lock:
+    """The flock on ``.NAME.lock`` and the log in that file: the holder's process id, then ``+NAME`` written
+    before each temporary beside the target is made and ``-NAME`` once it is gone, a line per write, so a kill
+    leaves whole lines. The next holder inherits what a killed one left listed; only those are ever removed."""
+
+    def __init__(self, out: Path, fd: int, log: bytes) -> None:
+        self.out, self.fd = out, fd
+        self.owned: list[str] = []
+        for line in log.decode("utf-8", "replace").splitlines():
+            name = line[1:]
+            if line[:1] == "+" and _own_name(out, name) and name not in self.owned:
+                self.owned.append(name)
+            elif line[:1] == "-" and name in self.owned:
+                self.owned.remove(name)
+        self._log(str(os.getpid()))
+
+    def _log(self, line: str) -> None:
+        os.write(self.fd, f"{line}\n".encode())
+
+    def adopt(self, name: object) -> None:
+        """Record a temporary a journal names (a killed run's, recorded there too)."""
+        if _own_name(self.out, name) and name not in self.owned:
+            self._log(f"+{name}")
+            self.owned.append(str(name))
+
+    def make(self, kind: str) -> Path:
+        """A new temporary's path, recorded (not yet made: the caller makes it, failing if it exists)."""
+        path = self.out.parent / f".{self.out.name}.{kind}-{secrets.token_hex(8)}"
+        while os.path.lexists(path):  # pragma: no cover - 2**-64
+            path = self.out.parent / f".{self.out.name}.{kind}-{secrets.token_hex(8)}"
+        self.adopt(path.name)
+        return path
+
+    def forget(self, name: str) -> None:
+        self._log(f"-{name}")
+        self.owned.remove(name)
+
+    def remove_owned(self) -> None:
+        """Remove every temporary on record (idempotent; one that cannot be removed stays on record)."""
+        for name in list(self.owned):
+            _remove(self.out.parent / name)
+            if not os.path.lexists(self.out.parent / name):
+                _step(f"removed {name}")
+                self.forget(name)
+
+
+def _made(lock: _Lock, kind: str) -> Path:
+    """A new empty temporary folder, recorded before it is made; one that exists already is not ours."""
+    path = lock.make(kind)
     try:
-        names = os.listdir(out.parent)
-    except OSError:  # no such folder (nothing to clean), or one we cannot list (the checks say why)
-        return []
-    return sorted(out.parent / n for n in names if pattern.fullmatch(n))
+        os.mkdir(path)
+    except FileExistsError:  # pragma: no cover - made by someone else between the check and the mkdir
+        lock.forget(path.name)
+        raise
+    return path
 
 
 def _remove(path: Path) -> None:
@@ -188,18 +246,29 @@ def _remove(path: Path) -> None:
         shutil.rmtree(path, ignore_errors=True)
 
 
-def _journal_old(out: Path) -> Path | None:
-    """Where the journal says the previous build was moved (None: no journal, or one cut short)."""
+def _inode(path: Path) -> list[int] | None:
     try:
-        name = json.loads(_sibling(out, "swap").read_text(encoding="utf-8"))["old"]
-    except (OSError, ValueError, KeyError, TypeError):
+        st = os.lstat(path)
+    except OSError:
         return None
-    old = out.parent / str(name)
-    return old if old in _temporaries(out) else None
+    return [st.st_dev, st.st_ino]
 
 
-def _acquire(out: Path, timeout_s: float) -> int | None:
-    """An fd holding the flock on ``.NAME.lock``, or None if another process still holds it after the wait."""
+def _journal(out: Path) -> tuple[Path, list[int] | None] | None:
+    """Where the journal says the previous build goes and the new build's inode (None in a journal of a magfab
+    before the exchange); None: no journal, one cut short, or one naming no temporary of ours."""
+    try:
+        plan = json.loads(_sibling(out, "swap").read_text(encoding="utf-8"))
+        name, inode = plan["old"], plan.get("new_inode")
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return None
+    if not _own_name(out, name):
+        return None
+    return out.parent / name, inode if isinstance(inode, list) else None
+
+
+def _acquire(out: Path, timeout_s: float) -> _Lock | None:
+    """The flock on ``.NAME.lock`` with its log, or None if another process still holds it after the wait."""
     path = _sibling(out, "lock")
     deadline = time.monotonic() + timeout_s
     while True:
@@ -219,65 +288,74 @@ def _acquire(out: Path, timeout_s: float) -> int | None:
         if same:  # else its holder removed it as we opened it: lock the new one
             break
         os.close(fd)
-    with suppress(OSError):
-        os.ftruncate(fd, 0)
-        os.write(fd, f"{os.getpid()}\n".encode())
-    return fd
+    try:
+        chunks = []
+        while chunk := os.read(fd, 1 << 16):
+            chunks.append(chunk)
+        return _Lock(out, fd, b"".join(chunks))  # appends after what a killed holder left
+    except BaseException:
+        os.close(fd)
+        raise
 
 
-def _release(out: Path, fd: int) -> None:
-    with suppress(FileNotFoundError):
-        os.unlink(_sibling(out, "lock"))  # while still holding it, so no waiter locks a removed file
-    os.close(fd)
+def _release(out: Path, lock: _Lock) -> None:
+    if not lock.owned:  # else the log stays, for the next run to remove what it lists
+        with suppress(FileNotFoundError):
+            os.unlink(_sibling(out, "lock"))  # while still holding it, so no waiter locks a removed file
+    os.close(lock.fd)
 
 
 def _busy(out: Path) -> OutputError:
     try:
-        pid = _sibling(out, "lock").read_text().strip()
+        lines = _sibling(out, "lock").read_text(errors="replace").split()
     except OSError:
-        pid = ""
-    who = f"another magfab build (process {pid})" if pid.isdigit() else "another magfab build"
+        lines = []
+    pid = next((line for line in reversed(lines) if line.isdigit()), "")
+    who = f"another magfab build (process {pid})" if pid else "another magfab build"
     return OutputError(f"{who} is writing {out}; try again when it has finished")
 
 
 # ---- recovery and the swap ----
 
-def _recover(out: Path) -> None:
+def _recover(out: Path, lock: _Lock) -> None:
     """Finish or undo what a killed or failed run left beside ``out``: with the lock held, and idempotent.
 
-    Killed between the two renames: the previous build goes back. After them: the user's files that
-    appeared in the previous build meanwhile are carried over. Then the journal and all temporaries go."""
-    _roll_back_in_place(out)
-    old = _journal_old(out)
-    if old is not None and old.is_dir():
-        if not os.path.lexists(out):
-            os.rename(old, out)
-            _step("restored")
-        else:
-            _carry(old, out, _user_files(old))
-    if not os.path.lexists(out):
-        _restore_legacy(out)
+    Killed between the two renames of the fallback: the previous build goes back. After the exchange (or the
+    renames): the user's files that appeared in the previous build meanwhile are carried over. Then the journal
+    and every temporary on record go."""
+    _roll_back_in_place(out, lock)
+    journal = _journal(out)
+    if journal is not None:
+        old, new_inode = journal
+        lock.adopt(old.name)
+        new_in_place = _inode(out) == new_inode if new_inode is not None else os.path.lexists(out)
+        if old.is_dir() and (new_inode is None or _inode(old) != new_inode):  # else the new build, not swapped
+            if not os.path.lexists(out):
+                os.rename(old, out)
+                _step("restored")
+            elif new_in_place:
+                _carry(old, out, _user_files(old))
     with suppress(FileNotFoundError):
         os.unlink(_sibling(out, "swap"))
         _step("journal removed")
-    for stale in _temporaries(out):
-        _remove(stale)
-        _step(f"removed {stale.name}")
+    lock.remove_owned()
 
 
-def _roll_back_in_place(out: Path) -> None:
+def _roll_back_in_place(out: Path, lock: _Lock) -> None:
     """An in-place update cut short (its journal ``.NAME.inplace`` is there): every replaced or removed file
     back from the hard links in ``.NAME.old-*`` (which stay until the journal goes), every added file and the
     folders made for them removed. Idempotent: a rollback cut short is finished by the next."""
     journal = _sibling(out, "inplace")
     try:
         plan = json.loads(journal.read_text(encoding="utf-8"))
-        old, kept, added = out.parent / str(plan["old"]), list(plan["kept"]), list(plan["added"])
+        name, kept, added = plan["old"], list(plan["kept"]), list(plan["added"])
         made = list(plan["made"])
     except FileNotFoundError:
         return
     except (OSError, ValueError, KeyError, TypeError):  # cut short while written: nothing was renamed yet
-        old, kept, added, made = None, [], [], []
+        name, kept, added, made = None, [], [], []
+    lock.adopt(name)
+    old = out.parent / name if _own_name(out, name) else None
     for rel in kept:  # link back, the hard link in old/ kept: a second rollback finds it again
         if old is None or not os.path.lexists(old / rel):
             continue
@@ -298,25 +376,64 @@ def _roll_back_in_place(out: Path) -> None:
     _step("in-place update rolled back")
 
 
-def _restore_legacy(out: Path) -> None:
-    """magfab before the journal moved the previous build to ``.NAME.old-XXXXXXXX/previous``: put it back."""
-    held = [h / "previous" for h in _temporaries(out) if (h / "previous" / "manifest.json").is_file()]
-    if held:
-        os.rename(max(held, key=lambda p: p.stat().st_mtime), out)
+_NO_EXCHANGE = {errno.EINVAL, errno.ENOSYS, errno.ENOTSUP, errno.EOPNOTSUPP}  # the file system or kernel lacks it
 
 
-def _swap(out: Path, tmp: Path) -> None:
-    if os.path.lexists(out):
-        old = _new_sibling(out, "old")
-        _sibling(out, "swap").write_text(json.dumps({"old": old.name, "new": tmp.name}), encoding="utf-8")
-        _step("journal written")
-        os.rename(out, old)
-        _step("previous moved aside")
+@functools.cache
+def _renameat2() -> Callable[..., int] | None:
+    """libc's ``renameat2`` (glibc 2.28+, Linux 3.15+); None elsewhere."""
+    if not sys.platform.startswith("linux"):
+        return None
+    import ctypes  # only the swap needs it; `import magfab` stays fast
+
+    try:
+        call = ctypes.CDLL(None, use_errno=True).renameat2
+    except (OSError, AttributeError):
+        return None
+    call.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p, ctypes.c_uint]
+    call.restype = ctypes.c_int
+    return call
+
+
+def _exchange(a: Path, b: Path) -> bool:
+    """Swap the folders at ``a`` and ``b`` in one step (``RENAME_EXCHANGE``); False where the platform, the C
+    library or the file system cannot, so the caller renames twice. Any other failure is the OSError."""
+    call = _renameat2()
+    if call is None:
+        return False
+    import ctypes
+
+    at_fdcwd, rename_exchange = -100, 2  # <fcntl.h>, <linux/fs.h>
+    if call(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), rename_exchange) == 0:
+        return True
+    err = ctypes.get_errno()
+    if err in _NO_EXCHANGE:
+        return False
+    raise OSError(err, os.strerror(err), str(a))
+
+
+def _swap(out: Path, tmp: Path, lock: _Lock) -> None:
+    """The new build ``tmp`` to ``out``; the previous build (if any) ends at the journal's ``old``."""
+    if not os.path.lexists(out):
+        os.rename(tmp, out)
+        _step("new in place")
+        return
+    journal, new_inode = _sibling(out, "swap"), _inode(tmp)
+    journal.write_text(json.dumps({"old": tmp.name, "new": tmp.name, "new_inode": new_inode}), encoding="utf-8")
+    _step("journal written")
+    if _exchange(out, tmp):  # the previous build now at tmp's name
+        _step("new in place")
+        return
+    old = lock.make("old")
+    journal.write_text(json.dumps({"old": old.name, "new": tmp.name, "new_inode": new_inode}), encoding="utf-8")
+    _step("journal rewritten for two renames")
+    os.rename(out, old)
+    _step("previous moved aside")
     os.rename(tmp, out)
     _step("new in place")
 
 
-def _update_in_place(out: Path, tmp: Path, paths: list[str]) -> None:
+def _update_in_place(out: Path, tmp: Path, paths: list[str], lock: _Lock) -> None:
     """Rename the files of ``tmp`` that differ from ``out``'s into it, remove the previous build's files the
     new one does not have; journalled so that a kill can be rolled back (see the module's rules)."""
     previous = (_listed(out) or set()) - {"manifest.json"}
@@ -326,13 +443,14 @@ def _update_in_place(out: Path, tmp: Path, paths: list[str]) -> None:
     made = sorted({str(q) for p in added for q in PurePosixPath(p).parents
                    if str(q) != "." and not os.path.lexists(out / str(q))})
     kept = [p for p in changed + removed if p not in set(added)]
-    old = _new_sibling(out, "old")
+    old = _made(lock, "old")
     for rel in kept:
         (old / rel).parent.mkdir(parents=True, exist_ok=True)
         _link(out / rel, old / rel)
     journal = _sibling(out, "inplace")
-    draft = _new_sibling(out, "tmp")
-    draft.write_text(json.dumps({"old": old.name, "kept": kept, "added": added, "made": made}), encoding="utf-8")
+    draft = lock.make("tmp")
+    with open(draft, "x", encoding="utf-8") as f:  # "x": never over a file of the same name
+        f.write(json.dumps({"old": old.name, "kept": kept, "added": added, "made": made}))
     os.replace(draft, journal)
     _step("journal written")
     for rel in changed:
@@ -427,13 +545,13 @@ def check_target(out_dir: Path) -> Path:
     before any work, and again just before the swap."""
     out = _absolute(out_dir)
     try:
-        if _temporaries(out) or any(os.path.lexists(_sibling(out, k)) for k in ("swap", "inplace", "lock")):
-            fd = _acquire(out, 0.0)
-            if fd is not None:  # else the build holding it recovers
+        if any(os.path.lexists(_sibling(out, k)) for k in ("swap", "inplace", "lock")):
+            lock = _acquire(out, 0.0)
+            if lock is not None:  # else the build holding it recovers
                 try:
-                    _recover(out)
+                    _recover(out, lock)
                 finally:
-                    _release(out, fd)
+                    _release(out, lock)
         _check_replaceable(out)
     except OSError as exc:
         raise _os_error(exc, out) from exc
@@ -452,39 +570,38 @@ def write(out_dir: Path, artifacts: list[Artifact], *, lock_timeout_s: float = L
     paths = [str(_safe_relative(a.path)) for a in artifacts]
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
-        fd = _acquire(out, lock_timeout_s)
+        lock = _acquire(out, lock_timeout_s)
     except OSError as exc:
         raise _os_error(exc, out) from exc
-    if fd is None:
+    if lock is None:
         raise _busy(out)
     try:
         _step("locked")
-        _recover(out)
+        _recover(out, lock)
         _check_replaceable(out)
         users = _user_files(out)
         _check_collisions(out, users, paths)
-        tmp = _new_sibling(out, "tmp")
-        os.mkdir(tmp)
+        tmp = _made(lock, "tmp")
         _step("temporary made")
         _write_tree(tmp, artifacts)
         if in_place is None:
             in_place = _working_folder_inside(out)
         if in_place and out.is_dir():
-            _update_in_place(out, tmp, paths)
+            _update_in_place(out, tmp, paths, lock)
         else:
             _carry(out, tmp, users)
             if out.is_dir():
                 shutil.copymode(out, tmp)  # a user's chmod 700 on the folder stays
-            _swap(out, tmp)
-        _recover(out)  # commits: the journal goes, then the previous build
+            _swap(out, tmp, lock)
+        _recover(out, lock)  # commits: the journal goes, then the previous build
     except BaseException as exc:
         with suppress(OSError):
-            _recover(out)
+            _recover(out, lock)
         if isinstance(exc, OSError):
             raise _os_error(exc, out) from exc
         raise
     finally:
-        _release(out, fd)
+        _release(out, lock)
     return out
 
 

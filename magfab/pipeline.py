@@ -366,8 +366,8 @@ def plan(spec: Spec, progress: Progress | None = None, scan=None, parallel: bool
     for measured in (scan.values() if isinstance(scan, dict) else [] if scan is None else [scan]):
         check_scan(spec, measured)
     say("deriving the design")
-    design = derive(spec)
-    preflight(design)  # the reference chip's site and the build's cost: refused before any work
+    design = preflight(derive(spec))  # the reference chip's site, the build's cost, the board: before any work
+    spec = design.spec  # with the board's size where the spec left it unstated: spec.json and its hash say so
     findings = design_findings(design)
     timings["derive"] = time.perf_counter() - t0
     _stop(findings, spec)

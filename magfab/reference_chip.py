@@ -10,7 +10,7 @@ on the bus), its designator the next U.
 
 from __future__ import annotations
 
-from .design import Design, _address_plan
+from .design import Design, address_plan
 from .errors import SpecError
 from .models.reference import ReferenceChip, Travel, site
 from .spec import Environment
@@ -33,7 +33,7 @@ def reference_chip(design: Design) -> ReferenceChip | None:
     if design.array is not None:
         raise SpecError("reference", "present", "is for a single taxel: an array's firmware sends every chip's field "
                         "and its host compensation reads no reference chip yet", "omit [reference] or [array]")
-    address, code, straps = _address_plan(spec, design.chip, n + 1)[n]
+    address, code, straps = address_plan(spec, design.chip, n + 1)[n]
     where = site(design, Travel.bound(design), temperature_span_C(design), spec.reference.distance_mm)
     top = max(t.y_mm for t in design.taxels)
     return ReferenceChip(n, where.xy_mm[0], where.xy_mm[1], where.xy_mm[1] - top, where.separation_mm, address, code,

@@ -1,5 +1,5 @@
 """``magfab calibrate``'s guards and its ``--sensor`` path: a measured calibration appended to a sensor's record
-(:mod:`magfab.formats.sensor_records`, docs/bundle.md section 6), the build folder left as it is.
+(:mod:`magfab.formats.sensor_records`, docs/sensors.md section 3), the build folder left as it is.
 
 The fit for a record needs neither the CAD nor the prediction: the calibration (:func:`magfab.models.calibration.
 fit`, for an array's taxel on the field with its neighbours' removed) is a function of the scan and the design
@@ -190,7 +190,7 @@ class SensorCalibration:
 
 def calibrate_record(sensor: records.Sensor, spec: Spec, design: Design, scan: Scan, rest: RestField,
                      files: Mapping[str, bytes], taxel: int | None, date: str | None = None) -> SensorCalibration:
-    """Fit ``scan`` and append the calibration event to ``sensor``'s record (docs/bundle.md section 6), keeping
+    """Fit ``scan`` and append the calibration event to ``sensor``'s record (docs/sensors.md section 3), keeping
     ``files`` (``scan.csv``, and ``reference.csv`` and ``scan_merged.csv`` for a merged scan) and the fitted
     calibration.json. Raises before appending when the fit fails."""
 

@@ -18,6 +18,7 @@ from typing import Any
 from . import __version__
 from .design import Design, derive
 from .errors import InputError
+from .export.sensor_history import check_error_mN, check_rest_uT
 from .formats import sensor_records as rec
 from .formats.calibration_json import calibration_sha256
 from .formats.scan_csv import ScanError, read_scan_csv
@@ -200,8 +201,12 @@ def _figures(event: Mapping[str, Any]) -> str:
         return text + (" (provisional)" if event.get("provisional") else "")
     if kind in ("check", "drift"):
         figures = event.get("figures") or {}
-        shown = ", ".join(f"{k} {_g(v)}" for k, v in sorted(figures.items()))
-        return f"{str(event.get('verdict', '?')).upper()}" + (f": {shown}" if shown else "")
+        shown = [f"Bz rest {_g(check_rest_uT(event), ' uT', 6)}"] if check_rest_uT(event) is not None else []
+        if isinstance(figures.get("Bz_rise_uT"), (int, float)):
+            shown.append(f"rise {_g(figures['Bz_rise_uT'], ' uT')} under {_g(figures.get('weight_g'), ' g')}")
+        if check_error_mN(event) is not None:
+            shown.append(f"error {_g(check_error_mN(event), ' mN', 3)} turned over or warmed")
+        return f"{str(event.get('verdict', '?')).upper()}" + (f": {', '.join(shown)}" if shown else "")
     if kind == "upload":
         return f"calibration {str(event.get('calibration_sha256', ''))[:12]} to the board"
     return str(event.get("note") or event.get("text") or "")

@@ -21,7 +21,7 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator, model_validator
 
-from .errors import SpecError, _shorten, shown
+from .errors import SpecError, shorten, shown
 from .recipes import catalogue
 from .spec_errors import did_you_mean, translate_error
 
@@ -531,7 +531,7 @@ def parse_spec(text: str, default_name: str = "magone") -> Spec:
     except tomllib.TOMLDecodeError as exc:
         raise SpecError("spec", "<TOML>", f"not valid TOML: {exc}") from None
     except ValueError as exc:  # e.g. an integer of more than 4300 digits (Python's int-from-string limit)
-        raise SpecError("spec", "<TOML>", f"not valid TOML: {_shorten(str(exc), 200)}") from None
+        raise SpecError("spec", "<TOML>", f"not valid TOML: {shorten(str(exc), 200)}") from None
     if "name" not in raw:
         raw["name"] = default_name
         if not is_valid_name(default_name):
@@ -551,7 +551,7 @@ def load_build_spec(folder: str | Path) -> Spec:
     except FileNotFoundError:
         raise SpecError("spec", str(path), "file not found: not a magfab build folder") from None
     except (OSError, UnicodeDecodeError, ValueError) as exc:
-        raise SpecError("spec", str(path), f"cannot read it as JSON: {_shorten(str(exc), 200)}") from None
+        raise SpecError("spec", str(path), f"cannot read it as JSON: {shorten(str(exc), 200)}") from None
     return spec_from_json(raw, str(path))
 
 

@@ -11,7 +11,7 @@ from typing import Any, get_args
 
 from pydantic import BaseModel, ValidationError
 
-from .errors import SHOWN_MAX_CHARS, SpecError, _shorten, shown
+from .errors import SHOWN_MAX_CHARS, SpecError, shorten, shown
 
 __all__ = ["translate_error", "did_you_mean"]
 
@@ -53,7 +53,7 @@ def _key_part(part: object) -> str:
         return f"[{part}]"
     text = str(part)
     return (text if re.fullmatch(r"[A-Za-z0-9_-]+", text) and len(text) <= SHOWN_MAX_CHARS
-            else _shorten(json.dumps(text)))
+            else shorten(json.dumps(text)))
 
 
 def _key(loc: tuple[Any, ...]) -> str:

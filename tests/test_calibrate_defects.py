@@ -1,5 +1,5 @@
-"""The measured defects of issue 28, each a test that failed on the main before the fix (run this file with
-PYTHONPATH at that main to see them fail): another sensor's scan calibrated a build; calibrating from the build's
+"""The measured defects of the sensor-records work, each a test that failed on the main before the fix (run this file
+with PYTHONPATH at that main to see them fail): another sensor's scan calibrated a build; calibrating from the build's
 own simulated scan removed it; a rebuild silently replaced a measured calibration."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""``magfab calibrate --sensor ID`` (issue 28): the record gets the calibration event, the build folder is left
+"""``magfab calibrate --sensor ID``: the record gets the calibration event, the build folder is left
 byte for byte; a scan belongs to one sensor; a record made from another spec is refused; a wrong scan writes no
 record. And the rest-band guard over a space of wrong and right scans (Hypothesis, the grades, the distance)."""
 

@@ -14,21 +14,24 @@ import pytest
 from click.testing import CliRunner
 
 from magfab.cli import main
+from magfab.fork import parallel_available
 
 
-def run(*args: str, cwd=None):
-    """The console script as a user runs it: a fresh process."""
+def run(*args: str, cwd=None, env=None):
+    """The console script as a user runs it: a fresh process (``env``: added to the environment)."""
     return subprocess.run([sys.executable, "-m", "magfab.cli", *args], capture_output=True, text=True, cwd=cwd,
-                          timeout=300)
+                          timeout=300, env=None if env is None else {**os.environ, **env})
 
 
 def _snapshot(path):
     return {p.relative_to(path): p.read_bytes() for p in sorted(path.rglob("*")) if p.is_file()}
 
 
-def test_build_default_writes_parts_a_true_manifest_and_a_json_summary(tmp_path):
-    """One fresh process, as a user runs it: the default output folder, every hash true, --json quiet."""
-    proc = run("build", "--json", cwd=tmp_path)
+def test_build_default_writes_parts_a_true_manifest_and_a_json_summary(tmp_path, default_build):
+    """One fresh process, as a user runs it: the default output folder, every hash true, --json quiet. It runs in
+    one process (MAGFAB_JOBS=1) while the session's build ran its physics branch in a forked worker where it could:
+    same spec, same bytes, whichever way the work was split and whichever process did it."""
+    proc = run("build", "--json", cwd=tmp_path, env={"MAGFAB_JOBS": "1"})
     assert proc.returncode == 0, proc.stderr
     assert proc.stderr == ""  # quiet: no progress when not a terminal
     out = tmp_path / "build" / "magone"
@@ -44,6 +47,10 @@ def test_build_default_writes_parts_a_true_manifest_and_a_json_summary(tmp_path)
     assert summary["figures"]["d_rest_mm"] == pytest.approx(6.0)
     assert set(summary["artifacts"]) == listed | {"manifest.json"}  # the manifest lists all but itself
     assert isinstance(summary["findings"], list)
+    assert "wait-physics" not in summary["timings_s"]
+    assert ("wait-physics" in default_build.timings_s) == parallel_available()
+    written = {p: (out / p).read_bytes() for p in listed | {"manifest.json"}}
+    assert {a.path: a.data for a in default_build.artifacts} == written
 
 
 def _previous_build(default_build, tmp_path):
@@ -134,7 +141,9 @@ def test_refuses_to_replace_a_directory_that_is_not_a_build(tmp_path):
     assert (precious / "chapter1.tex").read_text() == "do not delete"
 
 
-def test_init_then_check_then_build(tmp_path, monkeypatch):
+def test_init_then_check(tmp_path, monkeypatch):
+    """init writes once, check writes nothing; the build of the same spec that follows them in the README is run,
+    as pasted, by the README's walk (tests/docs/test_pages.py)."""
     runner = CliRunner()
     monkeypatch.chdir(tmp_path)
     assert runner.invoke(main, ["init", "finger.toml"]).exit_code == 0
@@ -143,9 +152,6 @@ def test_init_then_check_then_build(tmp_path, monkeypatch):
     checked = runner.invoke(main, ["check", "finger.toml"])
     assert checked.exit_code == 0 and "finger: ok" in checked.output
     assert sorted(os.listdir(".")) == ["finger.toml"]  # check writes nothing
-    built = runner.invoke(main, ["build", "finger.toml"])
-    assert built.exit_code == 0, built.output
-    assert (tmp_path / "build" / "finger" / "mould_cup.stl").is_file()
 
 
 def test_internal_error_is_one_line_exit_1(tmp_path, monkeypatch):

@@ -11,7 +11,7 @@ import pytest
 cq = pytest.importorskip("cadquery")
 trimesh = pytest.importorskip("trimesh")
 
-from magfab import derive, load_spec, parse_spec, plan  # noqa: E402
+from magfab import derive, load_spec, parse_spec  # noqa: E402
 from magfab.elastomer import elastomer_solid, envelope_solid  # noqa: E402
 from magfab.mould import cup_solid, lid_solid  # noqa: E402
 from magfab.pad import pad_solid  # noqa: E402
@@ -106,17 +106,6 @@ def test_assembled_mould_does_not_collide_and_leaves_the_cavity():
     assert _intersection_volume(lid_assembled, part) == pytest.approx(0.0, abs=1e-6)
 
 
-def test_same_spec_same_bytes_in_one_process_or_two(default_build):
-    """The session build ran its physics branch in a forked worker where it could; this plan runs everything
-    in one process. Same spec, same bytes, whichever way the work was split."""
-    from magfab.fork import parallel_available
-
-    again = plan(load_spec(None), parallel=False)
-    assert [(x.path, x.data) for x in again.artifacts] == [(x.path, x.data) for x in default_build.artifacts]
-    assert "wait-physics" not in again.timings_s
-    assert ("wait-physics" in default_build.timings_s) == parallel_available()
-
-
 def _top_flat_area(mesh) -> float:
     """Area of the upward facets at the mesh's highest point, mm^2: the tip's flat top (0 for a dome)."""
     top = mesh.bounds[1][2]
@@ -124,13 +113,26 @@ def _top_flat_area(mesh) -> float:
     return float(mesh.area_faces[up].sum())
 
 
+def _solids_of(spec):
+    """The parts as plan() makes them: its CAD branch (pipeline._solids: every solid, its STL and the mesh checks),
+    without the physics branch, which these tests do not read."""
+    from types import SimpleNamespace
+
+    from magfab.check import preflight
+    from magfab.pipeline import _solids
+
+    design = preflight(derive(spec))
+    solids = _solids(design, lambda _stage: None, {})
+    return SimpleNamespace(spec=design.spec, design=design, artifacts=solids.artifacts)
+
+
 def test_variants_make_closed_solids_of_their_own_shape(default_build):
     """plan() only promises no error-level finding; here the variants' meshes are closed, match their CAD
     solids, and carry the variant: a flat tip is flat on top (the default dome is not), two cavities make a
     cup with two cavities' volume taken out, a wider pad is as wide as asked."""
-    flat = plan(parse_spec('[elastomer]\ntip = "flat"'))
-    wide = plan(parse_spec("[mould]\ncavities = 2\nprinter = \"fdm\"\n[pad]\ndiameter_mm = 22.0\n"
-                           "alignment_hole_diameter_mm = 2.0\nalignment_hole_spacing_mm = 17.0"))
+    flat = _solids_of(parse_spec('[elastomer]\ntip = "flat"'))
+    wide = _solids_of(parse_spec("[mould]\ncavities = 2\nprinter = \"fdm\"\n[pad]\ndiameter_mm = 22.0\n"
+                                 "alignment_hole_diameter_mm = 2.0\nalignment_hole_spacing_mm = 17.0"))
     solids = {"elastomer": elastomer_solid, "mould_cup": cup_solid, "mould_lid": lid_solid, "pad": pad_solid}
     for result in (flat, wide):
         tol = result.spec.mould.tessellation_tolerance_mm

@@ -101,8 +101,8 @@ LAYERS = (
     ("magfab.elastomer", "magfab.mould", "magfab.pad", "magfab.fit"),  # the CAD solids and the mould's fit
     ("magfab.models", "magfab.reference_chip"),  # the reference chip is placed by the physics, read by the board
     ("magfab.limits",),
+    ("magfab.board", "magfab.pcb"),  # below the checks: preflight holds the board's size to what placement can make
     ("magfab.check",),
-    ("magfab.board", "magfab.pcb"),
     ("magfab.export", "magfab.output", "magfab.array_bench", "magfab.sensor_calibration"),
     ("magfab.pipeline", "magfab.stages", "magfab.sensors"),
     ("magfab.inverse",),
@@ -249,3 +249,44 @@ def test_the_checks_see_a_planted_cycle_an_upward_import_and_an_unexplained_lazy
     assert "no reason given" in bad[-1] and "import it at the top" in bad[0]
     acyclic = [i for i in imports if i.module != "magfab.pipeline" and i.module != "magfab.models.b"]
     assert _cycle(acyclic) == []
+
+
+def _private_across_packages(name: str, source: str, is_package: bool) -> list[str]:
+    """Private names (``_x``) one module imports from a module of another package, or between the top-level
+    modules (each its own unit): a subpackage's own helpers are shared among its modules, never with the rest of
+    the code (tests may reach them)."""
+    package = name if is_package else name.rsplit(".", 1)[0]
+    bad = []
+    for node in ast.walk(ast.parse(source)):
+        if not isinstance(node, ast.ImportFrom):
+            continue
+        base = package.split(".")[: len(package.split(".")) - node.level + 1] if node.level else []
+        source_module = ".".join(base + ([node.module] if node.module else []))
+        # where the name lives: ``from . import _m`` names a module of that package, ``from .m import _x`` a name of m
+        home = source_module if node.module is None else source_module.rsplit(".", 1)[0]
+        for alias in node.names:
+            private = alias.name.startswith("_") and not alias.name.startswith("__")
+            reexport = is_package and node.module is not None  # an __init__ re-exporting a private name
+            if private and (home != package or reexport or (package == "magfab" and node.module is not None)):
+                bad.append(f"{name}:{node.lineno} imports {source_module}.{alias.name}")
+    return bad
+
+
+def test_private_names_stay_in_their_package():
+    paths = {_name(p): p for p in PACKAGE.rglob("*.py") if "__pycache__" not in p.parts}
+    bad = [b for name, p in sorted(paths.items())
+           for b in _private_across_packages(name, p.read_text(), p.name == "__init__.py")]
+    assert bad == [], "make the name public where it is defined, or keep its use inside the package"
+
+
+def test_the_private_name_check_sees_a_name_taken_across_packages():
+    assert _private_across_packages("magfab.reference_chip", "from .design import _plan\n", False) == [
+        "magfab.reference_chip:1 imports magfab.design._plan"]
+    assert _private_across_packages("magfab.export.a", "from .figures import _render\n", False) == []
+    assert _private_across_packages("magfab.export.x", "from ..design import _plan\n", False) == [
+        "magfab.export.x:1 imports magfab.design._plan"]
+    assert _private_across_packages("magfab.models.m", "from .mesh import _body as _body\n", True) == [
+        "magfab.models.m:1 imports magfab.models.m.mesh._body"]
+    assert _private_across_packages("magfab.readout", "from . import _build\n", True) == []
+    assert _private_across_packages("magfab.models.a", "from .b import _c\nfrom typing import _T\n", False) == [
+        "magfab.models.a:2 imports typing._T"]

@@ -1,5 +1,7 @@
-"""The output folder (magfab/output.py): user files are never lost, the swap survives a kill at every step,
-errors and interrupts at every step, concurrent writers, a full disk and a read-only folder.
+"""The output folder (magfab/output.py): user files are never lost, nor folders beside the build that only look
+like magfab's temporaries; the swap leaves a build at the path at every step (an exchange; the two renames where
+the file system refuses it) and survives a kill at every step, errors and interrupts at every step, concurrent
+writers, a full disk and a read-only folder.
 
 Fake artifacts stand in for a build (the writer does not care what is in them, only that a manifest lists
 them); one test goes through ``magfab calibrate`` on the session's real default build."""
@@ -19,6 +21,8 @@ import time
 import traceback
 
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from magfab import output
 from magfab.errors import OutputError
@@ -234,14 +238,26 @@ def _killed_at(k: int, call) -> int:
     return os.waitpid(pid, 0)[1]
 
 
-def test_a_kill_at_every_step_leaves_the_old_or_the_new_build(built):
+@pytest.fixture(params=["exchange", "two renames"])
+def swap(request, monkeypatch):
+    """How the folders are swapped: in one step, or (where the file system refuses the exchange) by two renames."""
+    if request.param == "two renames":
+        monkeypatch.setattr(output, "_exchange", lambda a, b: False)
+    return request.param
+
+
+def test_a_kill_at_every_step_leaves_the_old_or_the_new_build(built, swap):
+    """At the path, before any recovery: the old build or the new one at every step (the two renames' only
+    window, the documented one, is after the first), and after the next run's recovery with nothing beside it."""
     out, user = built
     old, new = _tree(out), _expected("new", user)
     steps = _steps(out)
-    assert len(steps) >= 10 and "previous moved aside" in steps
+    assert len(steps) >= 10 and (swap == "exchange" or "previous moved aside" in steps)
     for k, step in enumerate(steps):
         status = _killed_at(k, lambda: write(out, _fake("new")))
         assert os.WIFSIGNALED(status) and os.WTERMSIG(status) == signal.SIGKILL, step
+        if swap == "exchange" or step != "previous moved aside":
+            assert _tree(out) in (old, new), f"killed after {step!r}: no complete build at the path"
         check_target(out)  # the recovery call
         assert _tree(out) in (old, new), f"killed after {step!r}"
         assert _beside(out) == ["out"], f"killed after {step!r}"
@@ -294,8 +310,38 @@ def test_a_kill_at_every_step_of_the_write_then_of_its_recovery(built):
                 break
 
 
-def test_a_kill_between_the_two_renames_is_undone_by_the_next_run(built):
-    """Killed after the previous build was moved aside, before the new one landed."""
+def test_a_build_is_at_the_path_at_every_instant_of_a_rebuild(built):
+    """A second process stats the build's manifest as fast as it can while builds replace it: never missing."""
+    out, _user = built
+    ready, stop = os.pipe(), os.pipe()
+    pid = os.fork()
+    if pid == 0:  # pragma: no cover - the child: the watcher
+        looks = misses = 0
+        os.write(ready[1], b"1")
+        os.set_blocking(stop[0], False)
+        while True:
+            try:
+                if os.read(stop[0], 1):
+                    break
+            except BlockingIOError:
+                pass
+            looks += 1
+            misses += not os.path.isfile(out / "manifest.json")
+        os.write(ready[1], f"{looks} {misses}".encode())
+        os._exit(0)
+    os.read(ready[0], 1)
+    for k in range(30):
+        write(out, _fake(f"w{k % 2}"))
+    os.write(stop[1], b"x")
+    os.waitpid(pid, 0)
+    looks, misses = map(int, os.read(ready[0], 100).split())
+    assert looks > 30 and misses == 0
+
+
+def test_a_kill_between_the_two_renames_is_undone_by_the_next_run(built, monkeypatch):
+    """Killed after the previous build was moved aside, before the new one landed (the two renames, where the
+    file system refuses the exchange: the documented window)."""
+    monkeypatch.setattr(output, "_exchange", lambda a, b: False)
     out, _user = built
     old = _tree(out)
     pid = os.fork()
@@ -370,31 +416,99 @@ def test_an_error_at_every_step_leaves_a_complete_build_and_no_temporaries(built
         write(out, _fake("old"), in_place=in_place)
 
 
-def test_stale_temporaries_are_removed_and_others_kept(built, tmp_path):
+def test_stale_temporaries_on_record_are_removed_and_others_kept(built, tmp_path):
+    """What a killed run's lock log lists goes; a name that merely looks like a temporary stays."""
     out, _user = built
     old = _tree(out)
-    for name in (".out.tmp-0123456789abcdef", ".out.old-fedcba9876543210", ".out.tmp-abcd_123"):
+    stale = (".out.tmp-0123456789abcdef", ".out.old-fedcba9876543210", ".out.tmp-00000000000000aa")
+    for name in (*stale, ".out.tmp-abcd_123", ".out.old-1111111111111111"):
         (tmp_path / name / "parts").mkdir(parents=True)
         (tmp_path / name / "parts" / "x.stl").write_text("partial")
     (tmp_path / ".out.swap").write_text('{"old": ".out.old-')  # cut short by a kill
-    (tmp_path / ".out.lock").write_text("99999999\n")  # its holder was killed
-    keep = [".out.tmp-mine", ".outer.tmp-0123456789abcdef", ".out.tmp-0123456789abcdef.bak"]
-    for name in keep:
+    # its holder was killed: it had made three (one was gone), and named one outside the pattern
+    (tmp_path / ".out.lock").write_text("99999999\n+" + "\n+".join(stale) + "\n+.out.old-1111\n+../x\n-.out.tmp-"
+                                        "00000000000000aa\n+.out.tmp-00000000000000aa\n+.out.tmp-")
+    keep = [".out.tmp-mine", ".outer.tmp-0123456789abcdef", ".out.tmp-0123456789abcdef.bak", ".out.tmp-abcd_123",
+            ".out.old-1111111111111111"]
+    for name in keep[:3]:
         (tmp_path / name).write_text("not magfab's")
     check_target(out)
     assert _beside(out) == sorted(["out", *keep]) and _tree(out) == old
 
 
-def test_a_previous_build_stranded_by_an_older_magfab_is_put_back(tmp_path):
-    """magfab before the journal, killed between its renames, left the build in .out.old-XXXXXXXX/previous."""
+def test_a_folder_like_a_temporary_of_an_older_magfab_is_left_alone(tmp_path):
+    """No record names them, so nothing removes or moves them: not even a stranded-looking previous build."""
     out = tmp_path / "out"
     write(out, _fake("old"))
-    user = _add_user_files(out)
     (tmp_path / ".out.old-k2j_9x0a").mkdir()
     os.rename(out, tmp_path / ".out.old-k2j_9x0a" / "previous")
     (tmp_path / ".out.tmp-q8w7e6r5").mkdir()
     assert check_target(out) == out
-    assert _tree(out) == _expected("old", user) and _beside(out) == ["out"]
+    write(out, _fake("new"))
+    assert _beside(out) == [".out.old-k2j_9x0a", ".out.tmp-q8w7e6r5", "out"]
+    assert _tree(tmp_path / ".out.old-k2j_9x0a") == {f"previous/{k}": v for k, v in _expected("old", {}).items()}
+
+
+def test_a_users_folder_named_like_a_temporary_survives_a_build(tmp_path):
+    """The reported case: ``build/.magone.old-20241128`` beside ``build/magone``, through a build, a rebuild, a
+    kill's recovery and a journal that names it."""
+    out = tmp_path / "magone"
+    mine = tmp_path / ".magone.old-20241128"
+    (mine / "parts").mkdir(parents=True)
+    (mine / "parts" / "tip.stl").write_bytes(b"my backup")
+    write(out, _fake("old"))
+    write(out, _fake("new"))
+    _killed_at(4, lambda: write(out, _fake("newer")))
+    (tmp_path / ".magone.swap").write_text('{"old": ".magone.old-20241128"}')
+    check_target(out)
+    write(out, _fake("old"))
+    assert _tree(mine) == {"parts/tip.stl": b"my backup"}
+    assert _beside(out) == [".magone.old-20241128", "magone"] and _tree(out) == _expected("old", {})
+
+
+_HEX, _WORD = "0123456789abcdef", "abcdefghijklmnopqrstuvwxyz0123456789_"
+_SUFFIXES = st.one_of(st.text(_HEX, min_size=16, max_size=16), st.text(_WORD, min_size=8, max_size=8),
+                      st.dates().map(lambda d: d.strftime("%Y%m%d")), st.dates().map(str),
+                      st.text(_WORD + "-.", max_size=24))
+_LOOK_ALIKES = st.lists(st.tuples(st.sampled_from(["tmp", "old"]), _SUFFIXES,
+                                  st.sampled_from(["folder", "empty folder", "file", "link"])),
+                        min_size=1, max_size=6, unique_by=lambda t: t[:2])
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(name=st.sampled_from(["magone", "out", "my.finger-2"]), look_alikes=_LOOK_ALIKES, killed=st.booleans())
+def test_no_folder_named_like_a_temporary_is_removed(tmp_path_factory, name, look_alikes, killed):
+    """Generated: names built from magfab's temporary patterns with random suffixes and dates, as folders (full
+    and empty), files and links beside the build; a build, a rebuild (after a run killed mid-build when
+    ``killed``, whose own temporary must go) and the recovery leave every one byte for byte."""
+    root = tmp_path_factory.mktemp("beside")
+    out = root / name
+    write(out, _fake("old"))
+    made = {}
+    for kind, suffix, shape in look_alikes:
+        path = root / f".{name}.{kind}-{suffix}"
+        if shape == "folder":
+            (path / "sub").mkdir(parents=True)
+            (path / "sub" / "data.bin").write_bytes(suffix.encode())
+        elif shape == "empty folder":
+            path.mkdir()
+        elif shape == "file":
+            path.write_bytes(suffix.encode())
+        else:
+            os.symlink(name, path)
+        made[path.name] = _tree(path) if path.is_dir() and not path.is_symlink() else os.readlink(path) \
+            if path.is_symlink() else path.read_bytes()
+    if killed:
+        status = _killed_at(3, lambda: write(out, _fake("half")))  # after the temporary was made
+        assert os.WIFSIGNALED(status)
+    check_target(out)
+    write(out, _fake("new"))
+    for n, content in made.items():
+        path = root / n
+        assert (_tree(path) if path.is_dir() and not path.is_symlink() else os.readlink(path)
+                if path.is_symlink() else path.read_bytes()) == content, n
+    assert _beside(out) == sorted([name, *made]) and _tree(out) == _expected("new", {})
+    shutil.rmtree(root)
 
 
 # ---- concurrent writers ----
@@ -475,11 +589,20 @@ def test_a_full_disk_is_one_line_naming_the_file_and_nothing_is_lost(built, monk
     assert _tree(out) == before and _beside(out) == ["out"]
 
 
-@pytest.mark.parametrize("fail", ["lock", "mkdir", "rename"])
+@pytest.mark.parametrize("fail", ["lock", "mkdir", "rename", "exchange"])
 def test_a_read_only_folder_is_one_line_naming_it_and_nothing_is_lost(built, monkeypatch, fail):
-    """Simulated (root ignores permissions): the first call that needs the parent writable fails with EACCES."""
+    """Simulated (root ignores permissions): the first call that needs the parent writable fails with EACCES
+    (the rename: on the two renames' path, where the file system refuses the exchange)."""
     out, _user = built
     before = _tree(out)
+    if fail == "exchange":
+        def refused(a, b):
+            raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(a))
+
+        monkeypatch.setattr(output, "_exchange", refused)
+        fail = "rename"
+    elif fail == "rename":
+        monkeypatch.setattr(output, "_exchange", lambda a, b: False)
     real = {"lock": os.open, "mkdir": os.mkdir, "rename": os.rename}[fail]
 
     def denied(path, *args, **kwargs):

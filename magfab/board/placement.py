@@ -35,7 +35,13 @@ from .layout import (
 from .plan import ORDER_CODE
 from .route import distance
 
-__all__ = ["place", "label", "wrap", "pad_hull", "board_size_mm"]
+__all__ = ["place", "label", "wrap", "pad_hull", "pad_room_mm", "resized", "board_size_mm", "SIZE_STEP_MM",
+           "SIZE_REACH_MM"]
+
+#: A board size that magfab searches for (the least that holds the parts) goes up in these steps, mm ...
+SIZE_STEP_MM = 0.5
+#: ... up to this much beyond where the search starts, mm.
+SIZE_REACH_MM = 40.0
 
 
 def _chip_nets(design: Design, fp: Footprint, straps: tuple[int, int] | None = None, ref: str = "U1") -> dict[str, str]:
@@ -59,21 +65,16 @@ def _land_gap(part: Placed) -> float:
     return math.floor(gap * 1000 + 1e-6) / 1000
 
 
-def place(design: Design) -> tuple[list[Placed], Box, tuple[float, float, float]]:
+def place(design: Design, hint: bool = True) -> tuple[list[Placed], Box, tuple[float, float, float]]:
     """Every part on the board: (parts with U1 first, board outline, the pad's disc x, y, r), mm.
 
-    Raises :class:`SpecError` when the board cannot hold the pad, the connector or the clearance asked."""
+    Raises :class:`SpecError` when the board cannot hold the pad, the connector or the clearance asked; with ``hint``
+    the connector's names the size that would hold it (a search: :mod:`magfab.board.fit` asks only whether it fits)."""
     pcb = design.spec.pcb
     ox, oy = ORIGIN
     hw, hh = pcb.width_mm / 2, pcb.height_mm / 2
     outline = (ox - hw, oy - hh - _reference_room(design), ox + hw, oy + hh)
-    if design.array is not None:
-        _array_fits(design.array.pad_extent_mm, hw, hh)
-    for key, half in (("pcb.width_mm", hw), ("pcb.height_mm", hh)):
-        if half < design.pad_radius_mm + PAD_KEEPOUT_MARGIN_MM:
-            raise SpecError(key, 2 * half,
-                            f"must be at least {2 * (design.pad_radius_mm + PAD_KEEPOUT_MARGIN_MM):g} mm "
-                            f"so the {2 * design.pad_radius_mm:g} mm mounting pad fits on the board")
+    _pad_fits(design, hw, hh)
     qfn = qfn_footprint(design.chip, pcb.density, clearance=pcb.clearance_mm)
     placed = _chips(design, qfn) + _reference(design, qfn)
     gap = _land_gap(placed[0])
@@ -83,7 +84,7 @@ def place(design: Design) -> tuple[list[Placed], Box, tuple[float, float, float]
                         f"{gap:g} mm apart, so no board could meet a larger clearance")
     chips = len(placed)
     placed += _holes(design, outline)
-    j1 = _connector(design, outline, placed, chips)
+    j1 = _connector(design, outline, placed, chips, hint)
     placed.append(j1)
     placed += _passives(design, qfn, j1, placed[:chips])
     return placed, outline, (ox, oy, design.pad_radius_mm)
@@ -97,15 +98,27 @@ def pad_hull(design: Design) -> tuple[tuple[float, float], ...]:
     return tuple((round(ox + x, 6), round(oy - y, 6)) for x, y in hull)
 
 
-def _array_fits(pad_extent_mm: tuple[float, float, float, float], hw: float, hh: float) -> None:
-    """An array's pad (the hull grown by its radius, ``pad_extent_mm``) and the margin fit on the board, or one
-    SpecError."""
-    x0, y0, x1, y1 = pad_extent_mm
+def pad_room_mm(design: Design) -> tuple[float, float]:
+    """The least board width and height (mm) that hold the mounting pad and its keep-out margin, centred on the
+    board: the single pad's disc, or an array's pad (the taxels' hull grown by the pad radius, ``pad_extent_mm``)."""
     m = PAD_KEEPOUT_MARGIN_MM
-    for key, half, need in (("pcb.width_mm", hw, max(-x0, x1) + m), ("pcb.height_mm", hh, max(-y0, y1) + m)):
-        if half < need:
-            raise SpecError(key, 2 * half, f"must be at least {2 * need:g} mm so the array's {x1 - x0:g} x {y1 - y0:g} "
-                            "mm mounting pad fits on the board, centred on it")
+    if design.array is None:
+        return 2 * (design.pad_radius_mm + m), 2 * (design.pad_radius_mm + m)
+    x0, y0, x1, y1 = design.array.pad_extent_mm
+    return 2 * (max(-x0, x1) + m), 2 * (max(-y0, y1) + m)
+
+
+def _pad_fits(design: Design, hw: float, hh: float) -> None:
+    """The pad and its margin fit on a board of half width ``hw`` and half height ``hh`` (:func:`pad_room_mm`), or
+    one SpecError naming the least side that holds it."""
+    if design.array is None:
+        what = f"the {2 * design.pad_radius_mm:g} mm mounting pad fits on the board"
+    else:
+        x0, y0, x1, y1 = design.array.pad_extent_mm
+        what = f"the array's {x1 - x0:g} x {y1 - y0:g} mm mounting pad fits on the board, centred on it"
+    for key, half, need in zip(("pcb.width_mm", "pcb.height_mm"), (hw, hh), pad_room_mm(design)):
+        if half < need / 2:
+            raise SpecError(key, 2 * half, f"must be at least {need:g} mm so {what}")
 
 
 def _chips(design: Design, qfn: Footprint) -> list[Placed]:
@@ -170,7 +183,7 @@ def _holes(design: Design, outline: Box) -> list[Placed]:
     return out
 
 
-def _connector(design: Design, outline: Box, placed: list[Placed], chips: int = 1) -> Placed:
+def _connector(design: Design, outline: Box, placed: list[Placed], chips: int = 1, hint: bool = True) -> Placed:
     """The Qwiic connector on the bottom edge, mating face flush with it, as near the centre line as the
     pad's keep-out and the holes allow."""
     found = _find_connector(design, outline, placed, chips)
@@ -180,19 +193,18 @@ def _connector(design: Design, outline: Box, placed: list[Placed], chips: int = 
     keep_r = design.pad_radius_mm + PAD_KEEPOUT_MARGIN_MM
     raise SpecError("pcb.width_mm", pcb.width_mm,
                     f"leaves no room for the Qwiic connector on the bottom edge outside the mounting pad's "
-                    f"{2 * keep_r:g} mm keep-out and clear of the screw holes", _larger_board(design))
+                    f"{2 * keep_r:g} mm keep-out and clear of the screw holes", _larger_board(design) if hint else "")
 
 
 def _larger_board(design: Design) -> str:
-    """What to change when the connector finds no room: for an array, the least board height (in 0.5 mm steps, at
-    the spec's width) that holds it; for a single taxel, the default pad's sizes."""
+    """What to change when the connector finds no room: for an array, the least board height (in SIZE_STEP_MM steps,
+    at the spec's width) that holds it; for a single taxel, the default pad's sizes."""
     pcb = design.spec.pcb
     if design.array is None:
         return "make the board larger (usually pcb.height_mm: 30 x 28 fits the default pad, 28 x 28 does not)"
-    for k in range(1, 81):  # up to 40 mm taller
-        height = pcb.height_mm + 0.5 * k
-        trial = replace(design,
-                        spec=design.spec.model_copy(update={"pcb": pcb.model_copy(update={"height_mm": height})}))
+    for k in range(1, round(SIZE_REACH_MM / SIZE_STEP_MM) + 1):
+        height = pcb.height_mm + SIZE_STEP_MM * k
+        trial = resized(design, {"height_mm": height})
         ox, oy = ORIGIN
         outline = (ox - pcb.width_mm / 2, oy - height / 2 - _reference_room(trial), ox + pcb.width_mm / 2,
                    oy + height / 2)
@@ -200,7 +212,12 @@ def _larger_board(design: Design) -> str:
         if _find_connector(trial, outline, placed + _holes(trial, outline), len(placed)) is not None:
             return (f"make the board taller: {pcb.width_mm:g} x {height:g} mm (pcb.height_mm = {height:g}) holds this "
                     "array's pad and the connector below it")
-    return "make the board larger: no height up to 40 mm more holds the connector at this width"
+    return f"make the board larger: no height up to {SIZE_REACH_MM:g} mm more holds the connector at this width"
+
+
+def resized(design: Design, sizes: dict[str, float]) -> Design:
+    """``design`` on a board of other ``sizes`` (``{"width_mm": ..., "height_mm": ...}``, either or both), mm."""
+    return replace(design, spec=design.spec.model_copy(update={"pcb": design.spec.pcb.model_copy(update=sizes)}))
 
 
 def _find_connector(design: Design, outline: Box, placed: list[Placed], chips: int) -> Placed | None:
@@ -213,6 +230,7 @@ def _find_connector(design: Design, outline: Box, placed: list[Placed], chips: i
     reach = max(jst.body[3], max(p.y + p.h / 2 for p in jst.pads) + pcb.edge_clearance_mm)
     jy = round(oy + hh - reach, 6)
     e = pcb.edge_clearance_mm
+    hull = pad_hull(design)
     for k in range(int(hw / 0.25) * 2 + 1):
         dx = (k + 1) // 2 * 0.25 * (1 if k % 2 else -1)
         cand = Placed("J1", "Qwiic JST-SH 4", jst, round(ox + dx, 6), jy,
@@ -221,9 +239,9 @@ def _find_connector(design: Design, outline: Box, placed: list[Placed], chips: i
         body = cand.box(jst.body)
         if body[0] < outline[0] or body[2] > outline[2]:
             continue
-        if any(c.bbox()[0] < outline[0] + e or c.bbox()[2] > outline[2] - e for c in cand.copper()):
+        if not outline_clear(cy, hull, keep_r):  # first: it refuses most places, and costs less than the copper
             continue
-        if not outline_clear(cy, pad_hull(design), keep_r):
+        if any(c.bbox()[0] < outline[0] + e or c.bbox()[2] > outline[2] - e for c in cand.copper()):
             continue
         if any(overlap(cy, h.box(h.footprint.courtyard)) for h in placed[chips:]):
             continue

@@ -21,7 +21,7 @@ from .route import (
     via_clearance,
 )
 
-__all__ = ["findings", "distance_margin"]
+__all__ = ["findings", "placement_findings", "distance_margin"]
 
 Report = Callable[[str, str], None]  # (code, message) -> records an error-level finding
 
@@ -30,7 +30,7 @@ def findings(b: Board) -> list[Finding]:
     """Measure the board: every rule the build promises, as findings (errors stop the build); a clean
     board gets one ``pcb-ok`` note with its track count and smallest clearance margin."""
     out: list[Finding] = []
-    err = lambda code, msg: out.append(Finding(Severity.ERROR, code, msg, "pcb"))
+    err = _reporter(out)
     for msg in b.unrouted:
         err("pcb-unrouted", msg)
     items = b.copper()
@@ -50,6 +50,23 @@ def findings(b: Board) -> list[Finding]:
                            f"smallest clearance margin {margin:.3f} mm above the rules ({b.rules['clearance']:g} mm "
                            f"between copper, {b.rules['hole_clearance']:g} mm from a drill)", "pcb"))
     return out
+
+
+def placement_findings(b: Board) -> list[Finding]:
+    """The rules placement alone decides, on a board before routing (no tracks): the parts' copper and bodies
+    against the edge and the outline, courtyards and the pad's keep-out, the silk label. The routed board has the same
+    parts and label, so :func:`findings` reports each of these errors there too."""
+    out: list[Finding] = []
+    err = _reporter(out)
+    _edge_rules(b, [c for p in b.parts for c in p.copper()], err)
+    _part_rules(b, err)
+    _silk_rules(b, err)
+    return out
+
+
+def _reporter(out: list[Finding]) -> Report:
+    """A Report that records each broken rule in ``out`` as an error-level finding on the board."""
+    return lambda code, msg: out.append(Finding(Severity.ERROR, code, msg, "pcb"))
 
 
 def _copper_rules(b: Board, items: list[Copper], err: Report) -> None:

@@ -8,8 +8,9 @@ One module per thing checked:
 * :mod:`.predict`: the prediction (docs/models.md: M9 as errors, the M18 guidelines as warnings), with the drift
   budget's (:mod:`.drift`) and the reference chip's (:mod:`.reference`) findings: :func:`predict_with_findings`.
 * :mod:`.crosstalk`: an array's crosstalk budget. :mod:`.fabrication`: the silicone against its pot life.
-* :mod:`.preflight`: what refuses a spec before any work (the reference chip's site, the build's cost limits),
-  as one :class:`~magfab.errors.SpecError`.
+* :mod:`.preflight`: what refuses a spec before any work (the reference chip's site, the build's cost limits, a
+  board too small for its parts), as one line; it returns the design to go on with, its board sized where the spec
+  leaves the size out (:mod:`magfab.board.fit`).
 
 The routed board's rule checks are the board's own (:func:`magfab.pcb.findings`).
 """

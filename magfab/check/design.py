@@ -6,8 +6,10 @@ from __future__ import annotations
 import math
 
 from .. import outline
+from ..board.placement import SIZE_STEP_MM
 from ..design import Design
 from ..errors import Finding, Severity
+from ..spec import Pcb
 
 __all__ = ["design_findings"]
 
@@ -74,7 +76,19 @@ def design_findings(design: Design) -> list[Finding]:
                            f"{_f(arr.pitch_mm - design.recess_side_mm)} mm of pad between chip recesses" +
                            (f", {_f(arr.pitch_mm - 2 * design.pocket_radius_mm)} mm of silicone between pockets"
                             if design.continuous else "")))
+    if design.pcb_sized:
+        out.append(_board_sized(design))
     return out
+
+
+def _board_sized(design: Design) -> Finding:
+    """The board's size, where the spec left a side unstated and the default did not hold the parts."""
+    pcb = design.spec.pcb
+    keys = " and ".join(f"pcb.{k}" for k in design.pcb_sized)
+    default = " x ".join(f"{Pcb.model_fields[k].default:g}" for k in design.pcb_sized)
+    return Finding(INFO, "pcb-sized", f"board sized to fit, {pcb.width_mm:g} x {pcb.height_mm:g} mm: {keys} not "
+                   f"stated, and the default {default} mm does not hold the parts; the least that does, in "
+                   f"{SIZE_STEP_MM:g} mm steps (state the size to choose another)", "pcb")
 
 
 def _array_pad_walls(design: Design) -> tuple[float, float]:

@@ -1,18 +1,23 @@
 """What :func:`magfab.design.derive` leaves to the stage above it: the checks that refuse a spec before any of the
-build's work, each with one :class:`~magfab.errors.SpecError` naming the key. ``magfab check``, the pipeline's plan
-and the design search call it right after deriving."""
+build's work, each with one line naming the key, and the board's size. ``magfab check``, the pipeline's plan and the
+design search call it right after deriving, and go on with the design it returns."""
 
 from __future__ import annotations
 
+from ..board.fit import fit
 from ..design import Design
-from ..limits import Cost, check_limits
+from ..limits import check_limits
 from ..reference_chip import reference_chip
 
 __all__ = ["preflight"]
 
 
-def preflight(design: Design) -> Cost:
-    """Refuse ``design`` as ``magfab check`` and ``magfab build`` do: the reference chip's address and site (refused
-    for an array), then what the build would cost against its limits (:mod:`magfab.limits`). Returns the cost."""
+def preflight(design: Design) -> Design:
+    """Refuse ``design`` as ``magfab check`` and ``magfab build`` do, and return the design they go on with: the
+    reference chip's address and site (refused for an array), what the build would cost against its limits
+    (:mod:`magfab.limits`), then the board (:func:`magfab.board.fit.fit`: a size the spec states that does not hold
+    the parts is refused as the build's board would refuse it; an unstated one too small for them is sized to fit, in
+    the design returned)."""
     reference_chip(design)
-    return check_limits(design)
+    check_limits(design)
+    return fit(design)

@@ -14,7 +14,7 @@ from .figures import RC, _legend_below, _render
 # Imported lazily, inside the functions that use it, for speed: matplotlib takes a
 # noticeable time to import, and importing this module should not.
 
-__all__ = ["CAPTION", "chart"]
+__all__ = ["CAPTION", "chart", "check_error_mN", "check_rest_uT"]
 
 CAPTION = ("against the date: the normal and shear sensitivities at rest; the field Bz at rest, the design's band "
            "shaded; each calibration's held-out RMS error and each check's error; each check's verdict; a new skin "
@@ -22,6 +22,21 @@ CAPTION = ("against the date: the normal and shear sensitivities at rest; the fi
 
 #: The lines' colours (green and red kept for the verdicts).
 _COLOURS = ("#1f77b4", "#ff7f0e", "#9467bd", "#8c564b", "#17becf", "#e377c2", "#7f7f7f", "#bcbd22")
+
+
+def check_rest_uT(event: Mapping[str, Any]) -> float | None:
+    """A check's field Bz at rest, uT (``magfab-readout check``'s figure ``Bz_rest_uT``)."""
+    value = (event.get("figures") or {}).get("Bz_rest_uT")
+    return float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else None
+
+
+def check_error_mN(event: Mapping[str, Any]) -> float | None:
+    """A check's force error, mN: the largest force change it read where none was applied, turned over
+    (``turned_dFz_mN``) or warmed (``warmup_dFz_mN``); None when the check ran neither step."""
+    figures = event.get("figures") or {}
+    found = [abs(float(v)) for k, v in figures.items() if k in ("turned_dFz_mN", "warmup_dFz_mN")
+             and isinstance(v, (int, float)) and not isinstance(v, bool)]
+    return max(found) if found else None
 
 
 def _when(text: str) -> dt.datetime:
@@ -105,11 +120,11 @@ def chart(sensor_id: str, events: Sequence[Mapping[str, Any]], bands: Mapping[st
         if {"min", "max"} <= set(bz):
             rest.axhspan(bz["min"], bz["max"], color="#1f77b4", alpha=0.12, lw=0, label="design band")
         _lines(rest, events, [("calibration", "calibration", _rest, "o"),
-                              ("check", "check", lambda e: (e.get("figures") or {}).get("rest_Bz_uT"), "D")], "uT")
+                              ("check", "check", check_rest_uT, "D")], "uT")
         rest.set_title("field Bz at rest", fontsize=9, loc="left")
         _lines(err, events, [("calibration, Fz held out", "calibration", lambda e: e.get("rms_holdout_Fz_mN"), "o"),
                              ("calibration, Fr held out", "calibration", lambda e: e.get("rms_holdout_Fr_mN"), "s"),
-                             ("check", "check", lambda e: (e.get("figures") or {}).get("error_mN"), "D")], "mN")
+                             ("check, turned over or warmed", "check", check_error_mN, "D")], "mN")
         err.set_title("force error: each calibration's held-out RMS, each check's", fontsize=9, loc="left")
         err.set_ylim(bottom=0)
         _checks(checks, events)

@@ -4,24 +4,33 @@ so magfab and the host refuse exactly the same files."""
 
 from ..readout.src.magfab_readout.calibration_json import (
     AXES,
+    FORCE_MAX_N,
     FORCES,
     FORMAT,
+    INPUT_MAX,
     INPUTS,
     MAX_ORDER,
     MLS_MAX_ORDER,
+    MLS_MIN_BANDWIDTH,
     THERMAL_MAX_PER_C,
+    THERMAL_MIN_DENOMINATOR,
+    THERMAL_REFERENCE_C,
     CalibrationError,
     Checked,
     MLSPoints,
     Thermal,
     calibration_sha256,
     canonical_json,
+    check_formula,
     cross,
     loads,
     monomials,
+    region_box,
     validate,
 )
 
-__all__ = ["FORMAT", "FORCES", "INPUTS", "MAX_ORDER", "MLS_MAX_ORDER", "AXES", "THERMAL_MAX_PER_C", "CalibrationError",
-           "Checked", "MLSPoints", "Thermal",
-           "calibration_sha256", "canonical_json", "cross", "loads", "monomials", "validate"]
+__all__ = ["FORMAT", "FORCES", "INPUTS", "MAX_ORDER", "MLS_MAX_ORDER", "AXES", "THERMAL_MAX_PER_C",
+           "THERMAL_REFERENCE_C", "THERMAL_MIN_DENOMINATOR", "INPUT_MAX", "FORCE_MAX_N", "MLS_MIN_BANDWIDTH",
+           "CalibrationError", "Checked", "MLSPoints", "Thermal",
+           "calibration_sha256", "canonical_json", "check_formula", "cross", "loads", "monomials", "region_box",
+           "validate"]

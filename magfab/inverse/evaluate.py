@@ -118,8 +118,7 @@ def _run(point: dict[str, Any], base: Spec, targets: Targets, fidelity: str, nam
     spec = candidate_spec(point, base, targets, name)
     if fidelity == SURROGATE:  # the exact field: no per-aspect surrogate table to build for each new magnet (0.3 s)
         spec = spec.model_copy(update={"predict": spec.predict.model_copy(update={"field_model": FieldModel.EXACT})})
-    design = derive(spec)
-    preflight(design)  # a candidate the build would refuse (its cost past a limit) fails as the build would
+    design = preflight(derive(spec))  # a candidate the build would refuse (its cost past a limit) fails as it would
     model, label = (None, FE)
     if fidelity == SURROGATE:
         model, label = _elastomer_model(design)

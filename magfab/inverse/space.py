@@ -123,8 +123,8 @@ def base_point(base: Spec, variables: Variables) -> dict[str, Any] | None:
     keys = [k for k in variables.magnet_keys() if stock_disc(k)[:2] == (m.diameter_mm, m.height_mm)]
     if not keys or f"{keys[0]}:{m.grade}" not in magnets(variables):
         return None
-    design = derive(base)
-    preflight(design)  # a base the build would refuse (its cost, its reference chip) stops the study before it starts
+    # a base the build would refuse (its cost, its reference chip, its board) stops the study before it starts
+    design = preflight(derive(base))
     point = {"magnet": keys[0], "grade": m.grade, "material": base.elastomer.material, "tip": base.elastomer.tip.value,
              "d_max_mm": base.sensor.d_max_mm, "d_min_mm": base.sensor.d_min_mm,
              "elastomer_diameter_mm": base.elastomer.diameter_mm, "cover_mm": round(design.cover_mm, 9)}

@@ -28,7 +28,9 @@ import numpy as np
 
 from ..errors import ScanError
 from ..formats.scan_csv import (
+    FORCE_COLUMNS,
     MIN_ROWS,
+    SENSOR_FORCE_COLUMNS,
     Recording,
     Reference,
     Scan,
@@ -37,6 +39,7 @@ from ..formats.scan_csv import (
     read_reference,
     scan_csv,
 )
+from ..spec import Calibration as CalibrationSpec
 from .calibration import Calibration
 
 if TYPE_CHECKING:
@@ -46,7 +49,8 @@ if TYPE_CHECKING:
     from .predict import Prediction
 
 __all__ = ["MERGED", "SELF_FRACTION", "SELF_FLOOR_N", "GAP_PERIODS", "MIN_OVERLAP", "self_calibration_rms_N",
-           "reject_self_calibrated", "scan_depth_warnings", "host_clock", "merge_reference", "merged_csv"]
+           "reject_self_calibrated", "scan_depth_warnings", "host_clock", "merge_reference", "merged_csv",
+           "sensor_noise_N", "agreement_floor_N", "copy_residual_N", "reject_copied_reference", "reject_dead_reference"]
 
 #: Guard B refuses force columns within this fraction of the reference's resolution (RMS) of the calibration's
 #: output: a genuine reference differs from any smooth fit by at least its quantisation, resolution / sqrt(12)
@@ -275,8 +279,212 @@ def _check_gaps(h: np.ndarray, ref: Reference, period_s: float) -> None:
                             "each sample")
 
 
+# ---------------------------------------------------------------------------------------------------
+# Guards on the merged reference: a copy of the recording's own forces, a dead reference
+
+
+#: A reference is refused as a copy of the sensor's own forces when, at the lag and cubic map (per axis) that
+#: bring them closest, they differ by less than this fraction of what two independent sensors differ by at
+#: least (:func:`agreement_floor_N`).
+COPY_FRACTION = 0.5
+#: The share of a reference's quantisation variance (resolution^2 / 12) that stays between it and the sensor's
+#: forces rounded as it is (:func:`agreement_floor_N`).
+QUANTISATION_SHARE = 0.25
+#: A reference whose force spans at most this many of its resolutions on every axis over the scan is dead.
+DEAD_RESOLUTIONS = 4.0
+#: An axis the sensor's own forces move on by this many reference resolutions (and at least
+#: :data:`LIVE_FLOOR_N`) must move in the reference too.
+LIVE_RESOLUTIONS = 20.0
+LIVE_FLOOR_N = 0.05
+#: The file's last decimal (1e-6 N) and the floor of every force threshold, N.
+FORCE_FLOOR_N = 1e-5
+#: The lag is refined around the cross-correlation's in this many passes of this many steps, each a tenth as
+#: wide as the last (from +-2 sample periods to 2e-4 of one: a copy matches only at its own lag, to its noise).
+_ZOOMS, _FINE_STEPS = 4, 21
+
+
+def sensor_noise_N(own_N: np.ndarray) -> np.ndarray:
+    """The sensor's own force noise per axis, N (3,): from the second differences of its forces, which a smooth
+    press leaves near zero while white noise gives them 6 sigma^2 (the chip's noise through the calibration)."""
+    if len(own_N) < 3:
+        return np.zeros(own_N.shape[1])
+    d2 = np.diff(own_N, 2, axis=0)
+    return np.sqrt(np.mean(d2 * d2, axis=0) / 6.0)
+
+
+def agreement_floor_N(noise_N: np.ndarray, reference_resolution_mN: float) -> float:
+    """The least RMS difference (N, over the axes of ``noise_N``) that a reference which measured the force
+    itself keeps from the sensor's forces interpolated at its times, even after the best lag and cubic map and
+    after rounding them as the reference is rounded: the two sensors' errors are independent, so their
+    variances add. The sensor's white noise (``noise_N`` per axis), linearly interpolated between its samples,
+    keeps 2/3 of its variance, and neither a calibration error of the sensor nor a perfect reference takes the
+    difference below it. A reference of the stated resolution q adds its quantisation: q^2 / 12 while the force
+    moves, and compared with the sensor's force rounded to the same steps, a step wherever the two sensors'
+    difference crosses one; :data:`QUANTISATION_SHARE` of q^2 / 12 is what that leaves in the simulated bench
+    with the sensor's noise well under q (a MagOne: 0.2-0.6 mN against 6.25 mN: 0.6-1.1 mN RMS)."""
+    q = reference_resolution_mN / 1000.0
+    return float(np.sqrt((2.0 / 3.0) * np.mean(noise_N ** 2) + QUANTISATION_SHARE * q * q / 12.0))
+
+
+def _grid(values: np.ndarray) -> tuple[float, float] | None:
+    """(step, origin), N, when every value lies on a grid origin + k step of a step above FORCE_FLOOR_N (a
+    rounded log), else None."""
+    u = np.unique(np.round(values, 7))
+    steps = np.diff(u)
+    if not len(steps):
+        return None
+    q = float(steps.min())
+    if q <= FORCE_FLOOR_N:
+        return None
+    q = float(np.median(steps[steps < 1.5 * q]))  # the step as the file's decimals (1e-6 N) let it be read
+    k = np.round((u - u[0]) / q)
+    if k[-1] > 0:
+        q = float(np.dot(k, u - u[0]) / np.dot(k, k))  # the step fitted over the whole span
+    if np.max(np.abs(u - u[0] - k * q)) > 2e-6:
+        return None
+    return q, float(u[0])
+
+
+def _cubic(x: np.ndarray, y: np.ndarray, weight: np.ndarray | None = None) -> np.ndarray:
+    """The least-squares cubic of y in x (scaled), evaluated at x; rows weighted by ``weight``."""
+    s = (x - x.mean()) / (x.std() or 1.0)
+    A = np.column_stack([np.ones_like(s), s, s * s, s * s * s])
+    w = np.ones_like(s) if weight is None else np.sqrt(weight)
+    coef, *_ = np.linalg.lstsq(A * w[:, None], y * w, rcond=None)
+    return A @ coef
+
+
+def _axis_residual(ref: np.ndarray, own: np.ndarray, grid: tuple[float, float] | None) -> float:
+    """RMS of the reference less the best cubic map of the sensor's force, N; for a rounded reference the lesser
+    of that and the same with the map rounded as the reference is."""
+    fit = _cubic(own, ref)
+    r = float(np.sqrt(np.mean((ref - fit) ** 2)))
+    if grid is not None:
+        q, origin = grid
+        # each rounded level weighs the same: the rows resting on one level share one rounding error, which
+        # would pull the map's gain and offset off by a fraction of a step
+        _, level, count = np.unique(np.round((ref - origin) / q), return_inverse=True, return_counts=True)
+        fit = _cubic(own, ref, 1.0 / count[level])
+        # the least-squares offset is off by up to half a step where the force rests on one step (the rounding's
+        # error there is a constant): the map's offset is searched over a step
+        for shift in q * np.linspace(-0.5, 0.5, 21):
+            rounded = origin + q * np.round((fit + shift - origin) / q)
+            r = min(r, float(np.sqrt(np.mean((ref - rounded) ** 2))))
+    return r
+
+
+def _best_lag(t: np.ndarray, ref: np.ndarray, h: np.ndarray, own: np.ndarray, period_s: float) -> float:
+    """The time shift, s, that best lines the sensor's force up with the reference's: the least mean square
+    difference of the two (each scaled to unit variance) on a grid of the recording's period, over every shift
+    that leaves half of them overlapping (the correlation by FFT, the overlaps' sums of squares by cumulative sums)."""
+    grid = np.arange(max(t[0], h[0]), min(t[-1], h[-1]), period_s)
+    n = len(grid)
+    if n < 8:
+        return 0.0
+    a, b = np.interp(grid, t, ref), np.interp(grid, h, own)
+    a, b = (a - a.mean()) / (a.std() or 1.0), (b - b.mean()) / (b.std() or 1.0)
+    size = 1 << int(2 * n - 1).bit_length()
+    c = np.fft.irfft(np.fft.rfft(a, size) * np.conj(np.fft.rfft(b, size)), size)  # c[k] = sum_i a[i + k] b[i]
+    ca, cb = np.concatenate([[0.0], np.cumsum(a * a)]), np.concatenate([[0.0], np.cumsum(b * b)])
+    lags = np.arange(-(n // 2), n // 2 + 1)
+    m = n - np.abs(lags)
+    sa = np.where(lags >= 0, ca[n] - ca[np.maximum(lags, 0)], ca[m])
+    sb = np.where(lags >= 0, cb[m], cb[n] - cb[np.maximum(-lags, 0)])
+    msd = (sa + sb - 2.0 * c[lags % size]) / m
+    return float(lags[int(np.argmin(msd))] * period_s)
+
+
+def copy_residual_N(h: np.ndarray, own: np.ndarray, ref_t: np.ndarray, ref_F: np.ndarray, axes: list[int],
+                    period_s: float) -> tuple[np.ndarray, float]:
+    """(RMS difference per axis of ``axes``, N; the lag, s) between the reference's force at its own times and
+    the sensor's forces interpolated there linearly (as the merge interpolates), shifted by the lag and mapped
+    by a cubic per axis (a gain, a tare, a mild bend), at the lag that brings them closest."""
+    inside = (ref_t >= h[0]) & (ref_t <= h[-1])
+    t, F = ref_t[inside], ref_F[inside]
+    total = np.sum([own[:, k] / (own[:, k].std() or 1.0) for k in axes], axis=0)
+    rtotal = np.sum([F[:, k] / (F[:, k].std() or 1.0) for k in axes], axis=0)
+    coarse = _best_lag(t, rtotal, h, total, period_s)
+    grids = [_grid(F[:, k]) for k in axes]
+    best: tuple[np.ndarray, float] = (np.full(len(axes), math.inf), coarse)
+    width = 2.0 * period_s
+    for _ in range(_ZOOMS):  # each pass around the best so far, a tenth as wide
+        for lag in best[1] + width * np.linspace(-1.0, 1.0, _FINE_STEPS):
+            ok = (t - lag >= h[0]) & (t - lag <= h[-1])
+            if ok.sum() < MIN_ROWS:
+                continue
+            r = np.array([_axis_residual(F[ok, k], np.interp(t[ok] - lag, h, own[:, k]), g)
+                          for k, g in zip(axes, grids)])
+            if np.sum(r * r) < np.sum(best[0] ** 2):
+                best = (r, float(lag))
+        width /= 10.0
+    return best
+
+
+def reject_copied_reference(recording: Recording, reference: Reference, reference_resolution_mN: float) -> None:
+    """ScanError (one line) when the reference's force is the recording's own (``Fx_sensor_N``...) resampled,
+    shifted in time, scaled, tared, bent or rounded: closer to it, at the best lag and cubic map per axis
+    (:func:`copy_residual_N`), than :data:`COPY_FRACTION` of :func:`agreement_floor_N` (RMS over the axes the
+    sensor's force moves on; the sensor's noise measured from its own forces, :func:`sensor_noise_N`). Skipped
+    without the sensor's forces or when they do not move."""
+    own = recording.scan.F_N
+    if own is None or not np.isfinite(own).all():
+        return
+    h = host_clock(recording)
+    noise = sensor_noise_N(own)
+    q = reference_resolution_mN / 1000.0
+    axes = [k for k in range(3) if np.ptp(own[:, k]) > max(DEAD_RESOLUTIONS * q, 20.0 * noise[k], FORCE_FLOOR_N)]
+    if not axes:
+        return
+    r, lag = copy_residual_N(h, own, reference.time_s, reference.F_N, axes, _period(recording))
+    floor = agreement_floor_N(noise[axes], reference_resolution_mN)
+    rms, limit = float(np.sqrt(np.mean(r * r))), max(COPY_FRACTION * floor, FORCE_FLOOR_N)
+    if rms < limit:
+        names = ", ".join(FORCE_COLUMNS[k] for k in axes)
+        raise ScanError(
+            f"{reference.source} is a copy of {recording.scan.source}'s own forces, not a reference sensor's: its "
+            f"{names} follow the recording's {', '.join(SENSOR_FORCE_COLUMNS[k] for k in axes)} (shifted "
+            f"{1000.0 * lag:.3g} ms, through a gain, a tare and a rounding) to {1000.0 * rms:.2g} mN RMS, under the "
+            f"{1000.0 * limit:.2g} mN that two independent sensors differ by at least (this sensor's noise and "
+            f"the reference's resolution, {reference_resolution_mN:g} mN, calibration.reference_resolution_mN); "
+            "log a reference force sensor during the scan (docs/bundle.md section 1)")
+
+
+def reject_dead_reference(recording: Recording, reference: Reference, inside: np.ndarray,
+                          reference_resolution_mN: float) -> None:
+    """ScanError (one line) for a reference whose force over the scan never moves by more than
+    :data:`DEAD_RESOLUTIONS` of its resolution on any axis (a dead, unplugged or constant log), or that stays
+    that still on an axis where the sensor's own force moves by :data:`LIVE_RESOLUTIONS` of them."""
+    h = host_clock(recording)
+    span = (float(h[inside][0]), float(h[inside][-1]))
+    during = (reference.time_s >= span[0]) & (reference.time_s <= span[1])
+    F = reference.F_N[during] if during.sum() >= 2 else reference.F_N
+    q = reference_resolution_mN / 1000.0
+    still = max(DEAD_RESOLUTIONS * q, FORCE_FLOOR_N)
+    ptp = np.ptp(F, axis=0)
+    where = f"{reference.source}: its force "
+    if np.all(ptp <= still):
+        levels = ", ".join(f"{c} {float(np.median(F[:, k])):.4g} N" for k, c in enumerate(FORCE_COLUMNS))
+        raise ScanError(
+            f"{where}never moves during the scan: it stays within {1000.0 * float(ptp.max()):.3g} mN of "
+            f"({levels}), under {DEAD_RESOLUTIONS:g} x its resolution ({reference_resolution_mN:g} mN, "
+            "calibration.reference_resolution_mN); a dead, unplugged or constant reference calibrates nothing: "
+            "check its cable and that it logs the force (docs/bundle.md section 1)")
+    own = recording.scan.F_N
+    if own is None or not np.isfinite(own).all():
+        return
+    moving = np.ptp(own[inside], axis=0)
+    for k in range(3):
+        if ptp[k] <= still and moving[k] > max(LIVE_RESOLUTIONS * q, LIVE_FLOOR_N):
+            raise ScanError(
+                f"{where}{FORCE_COLUMNS[k]} never moves during the scan (within {1000.0 * float(ptp[k]):.3g} mN "
+                f"of {float(np.median(F[:, k])):.4g} N) while the sensor's own {SENSOR_FORCE_COLUMNS[k]} moves by "
+                f"{1000.0 * float(moving[k]):.3g} mN: that channel of the reference is dead or unplugged "
+                "(docs/bundle.md section 1)")
+
+
 def merge_reference(recording: Recording | str | os.PathLike[str] | bytes,
-                    reference: Reference | str | os.PathLike[str] | bytes) -> Scan:
+                    reference: Reference | str | os.PathLike[str] | bytes,
+                    reference_resolution_mN: float | None = None) -> Scan:
     """A calibration scan (force columns ``Fx_N``...) from a ``magfab-readout record`` recording and a reference
     force sensor's log (each a parsed value or a path, CSV text or bytes; docs/bundle.md section 1): the
     reference's force interpolated linearly at each recorded sample's host-clock time (:func:`host_clock`),
@@ -291,6 +499,10 @@ def merge_reference(recording: Recording | str | os.PathLike[str] | bytes,
     h = host_clock(rec)
     inside = _overlap(h, rec, ref)
     _check_gaps(h, ref, _period(rec))
+    if reference_resolution_mN is None:  # the spec's default
+        reference_resolution_mN = float(CalibrationSpec.model_fields["reference_resolution_mN"].default)
+    reject_dead_reference(rec, ref, inside, reference_resolution_mN)
+    reject_copied_reference(rec, ref, reference_resolution_mN)
     force = np.column_stack([np.interp(h[inside], ref.time_s, ref.F_N[:, k]) for k in range(3)])
     s = rec.scan
     temperature = None if s.temperature_C is None else s.temperature_C[inside]

@@ -86,7 +86,7 @@ def test_the_readme_walk_reaches_a_passing_acceptance_test(walked):
     print("\n".join(line for line in check.stdout.splitlines() if line.startswith("step ")))  # with -s
     cal = json.loads((build / "calibration" / "calibration.json").read_text())
     assert cal["scan"]["source"] == "scan.csv + reference.csv" and \
-        (build / "calibration" / "scan_simulated.csv").exists()  # kept: it may be a calibration's input (issue 28)
+        (build / "calibration" / "scan_simulated.csv").exists()  # kept: it may be a calibration's input
     fitted = _ran(walked, "magfab calibrate").stdout
     print(next(line for line in fitted.splitlines() if "calibration (" in line))  # the bench scan's fit, with -s
     merged = (build / "calibration" / "scan_merged.csv").read_bytes()  # what was fitted, by its hash

@@ -157,7 +157,7 @@ def test_calibrate_command_refits_from_a_scan(bundle, tmp_path):
     new = json.loads((target / "calibration" / "calibration.json").read_text())
     assert new["scan"]["source"] == "bench_scan.csv"
     assert new["coefficients"] == cal["coefficients"]  # same data, same fit
-    # the simulated scan stays (deterministic, and it may be the scan a calibration was given: issue 28)
+    # the simulated scan stays (deterministic, and it may be the scan a calibration was given)
     assert (target / "calibration" / "scan_simulated.csv").read_bytes() == (out / "calibration" /
                                                                            "scan_simulated.csv").read_bytes()
     firmware_files = "".join(p.read_text() for p in (target / "firmware" / "magfab_readout" / "src").glob("*.h"))

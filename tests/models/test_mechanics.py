@@ -15,6 +15,9 @@ from magfab.design import derive
 from magfab.errors import ModelLimitError
 from magfab.models import mechanics as mech
 from magfab.models.mechanics import Body, MechanicsError
+from magfab.models.mechanics.closed_forms import _hertz_axis_displacement  # a module's own helper, tested as such
+from magfab.models.mechanics.mesh import _body_mesh
+from magfab.models.mechanics.shear import _mode1_matrix
 
 
 @pytest.fixture(scope="module")
@@ -90,9 +93,9 @@ def test_hertz_column_without_a_base_is_hertz():
 def test_hertz_axis_displacement_at_the_surface_is_the_approach():
     F, a, mu = 0.3, 1.2, 20.0  # N, mm, kPa
     p0 = 3 * F / (2 * math.pi * a * a)
-    u0 = mech._hertz_axis_displacement(F, a, np.array([0.0]), mu)[0]
+    u0 = _hertz_axis_displacement(F, a, np.array([0.0]), mu)[0]
     assert u0 == pytest.approx(math.pi * p0 * a / (8 * mu * 1e-3), rel=1e-6)
-    deeper = mech._hertz_axis_displacement(F, a, np.array([0.5, 1.0, 3.0]), mu)
+    deeper = _hertz_axis_displacement(F, a, np.array([0.5, 1.0, 3.0]), mu)
     assert np.all(np.diff(deeper) < 0) and deeper[0] < u0
 
 
@@ -236,7 +239,7 @@ def test_scaling_all_lengths(magone):
 def test_fe_is_deterministic(magone):
     d = [0.0, 0.4, 0.8]
     a = mech.fe(magone, 23.0, d, mesh_mm=1.0)
-    mech._clear_caches()
+    mech.clear_caches()
     b = mech.fe(magone, 23.0, d, mesh_mm=1.0)
     for name in ("force_N", "magnet_displacement_mm", "stiffness_N_per_mm", "max_stretch", "max_stress_kPa"):
         np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
@@ -367,7 +370,7 @@ def test_shear_is_linear_in_mu_and_compliance_is_its_inverse(magone):
 
 def test_mode1_rigid_motions_cost_no_energy(magone):
     """Lateral translation (U_r = U_t = 1) and tilt about y (U_r = U_t = z, U_z = -r) strain nothing."""
-    K, N, M, _, (r, z) = mech._mode1_matrix(mech._body_mesh(magone, 1.0))
+    K, N, M, _, (r, z) = _mode1_matrix(_body_mesh(magone, 1.0))
     for ur, uz in ((np.ones(N), np.zeros(N)), (z, -r)):
         x = np.concatenate([ur, ur, uz, np.zeros(M)])
         assert np.max(np.abs(K @ x)) < 1e-10 * np.max(np.abs(K.diagonal()))

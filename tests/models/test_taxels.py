@@ -109,7 +109,7 @@ def test_one_taxel_is_calibrated_from_its_rows_of_a_recording(strip, tmp_path):
 
     arrayed = pipeline._taxel_calibrations(design, pred, taxel_scans(None, design.spec, 2, scan), False)
     files = {a.path: a for a in arrayed.artifacts}
-    # the simulated scan stays beside the measured one (it may be what was calibrated on: issue 28)
+    # the simulated scan stays beside the measured one (it may be what was calibrated on)
     assert "calibration/scan_taxel_02.csv" in files and "calibration/scan_simulated_taxel_02.csv" in files
     assert "calibration/scan_simulated_taxel_01.csv" in files
     kept = tmp_path / "calibration"

@@ -24,7 +24,8 @@ def calibration(taxel: int | None = None, *, bz: float = 18700.0, normal: float 
 def check(verdict: str, taxel: int | None = None, *, bz: float = 18700.0, error: float = 4.0) -> dict[str, Any]:
     """A check event's data as ``magfab-readout check --sensor`` writes it."""
     return {"taxel": taxel, "verdict": verdict, "calibration_sha256": "1" * 64,
-            "figures": {"rest_Bz_uT": bz, "error_mN": error}, "steps": ["rest", "weight"]}
+            "figures": {"Bz_rest_uT": bz, "Bz_rise_uT": 2875.0, "weight_g": 50.0, "turned_dFz_mN": error},
+            "steps": ["rest", "weight", "turned"]}
 
 
 #: Three calibrations and five checks over seven weeks, a new skin in week four (the issue's closing example).

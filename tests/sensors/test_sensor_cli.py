@@ -109,7 +109,8 @@ def test_add_adopts_a_calibration_measured_into_the_build(here, default_build):
     s = rec.open_sensor(here / "sensors", "finger-02")
     (cal,) = s.calibrations()
     built = (folder / "calibration" / "calibration.json").read_bytes()
-    assert cal["calibration_sha256"] == calibration_sha256(json.loads(built)) and not cal["provisional"] and cal["taxel"] is None
+    assert cal["calibration_sha256"] == calibration_sha256(json.loads(built))
+    assert not cal["provisional"] and cal["taxel"] is None
     assert s.file(cal["files"]["calibration.json"]) == built
     for role, name in (("scan.csv", "rec.csv"), ("reference.csv", "ref.csv"),
                        ("scan_merged.csv", "calibration/scan_merged.csv")):
@@ -142,7 +143,8 @@ def test_show_lists_every_event_with_its_skin(history):
     rows = lines[2:2 + 1 + len(HISTORY)]
     assert [r.split()[3] for r in rows] == ["added"] + [h[1] for h in HISTORY]
     assert [int(r.split()[4]) for r in rows] == [0] * 7 + [1] * 4  # the reskin event opens skin 1
-    assert "FAIL: error_mN 14.5" in rows[6] and "Bz rest 19420 uT" in rows[8]
+    assert "FAIL: Bz rest 18380 uT, rise 2875 uT under 50 g, error 14.5 mN turned over or warmed" in rows[6]
+    assert "Bz rest 19420 uT" in rows[8]
     listed = _run("list")
     assert listed.output.splitlines()[1].split() == ["finger-01", "magone", "1", "3", "5", "2026-10-28", "09:00",
                                                     "(2.9", "mN)", "pass"]

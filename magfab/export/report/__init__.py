@@ -178,11 +178,11 @@ def render_report(spec: Spec, design: Design, findings: Sequence[Finding], artif
     ``elastomer`` and ``pad`` (the stack-up is drawn from their sections); ``board`` the routed board
     the build wrote (``magfab.pcb.board(design)``), drawn as it is, never routed again here; ``pictures``
     what :func:`draw_pictures` drew from them already (drawn here when not given)."""
+    extra = [(str(p), str(d)) for p, d in extra_files]
+    files = tables.file_groups(artifacts, extra)  # refuses a bad file list before any drawing
+    listed = {a.path for a in artifacts} | {p for p, _ in extra}
     if pictures is None:
         pictures = draw_pictures(design, meshes, artifacts, board)
-    extra = [(str(p), str(d)) for p, d in extra_files]
-    files = tables.file_groups(artifacts, extra)
-    listed = {a.path for a in artifacts} | {p for p, _ in extra}
     html = render(
         "report/report.html.j2",
         spec=spec, version=__version__, sha256=spec.sha256(), design=design,

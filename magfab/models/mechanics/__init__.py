@@ -31,20 +31,16 @@ package is cheap.
 from __future__ import annotations
 
 from .body import Body, Convergence, Curve, MechanicsError, band, check_option
-from .closed_forms import _hertz_axis_displacement as _hertz_axis_displacement  # tests reach it here
 from .closed_forms import column, hertz_column
 from .energy import STRETCH_AVERAGING_FRACTION
 from .fe import STRETCH_LIMIT, fe
 from .indentation import MagnetInterface
 from .mesh import BUILD_MESH_FRACTION, channel_wall
-from .mesh import _body_mesh as _body_mesh  # tests reach it here
 from .options import MaterialLaw, MechanicsModel, OnFailure, ShearEnds, ShearModel
 from .registry import MODELS, band_curves
 from .shear import SHEAR_MODELS, shear_compliance, shear_stiffness
-from .shear import _mode1_matrix as _mode1_matrix  # tests reach it here
 from .shear_surface import REST_PATCH_INDENTATION_MM, ShearLoad, ShearProbe, ShearResponse, shear_response
-from .study import _clear_caches as _clear_caches  # cold timings in bench/ and tests
-from .study import convergence, measure
+from .study import clear_caches, convergence, measure
 
 #: What the FE models, for the report (shown beside the stack-up drawing, which shows the pocket).
 #:
@@ -77,6 +73,7 @@ __all__ = [
     "column",
     "hertz_column",
     "fe",
+    "clear_caches",
     "convergence",
     "shear_stiffness",
     "shear_compliance",

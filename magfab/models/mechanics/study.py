@@ -24,7 +24,7 @@ from .shear_surface import _operator
 __all__ = ["convergence", "measure"]
 
 
-def _clear_caches() -> None:
+def clear_caches() -> None:
     """Forget meshes and discretisations (for cold timings)."""
     for f in (_body_mesh, _unit_mesh, _axisym, _mode1_matrix, _operator):
         f.cache_clear()
@@ -45,7 +45,7 @@ def convergence(body: Body, mu_kPa: float, indentation_mm: Sequence[float] | np.
     forces, times = [], []
     sizes_mm: list[float] = []
     for k in range(int(levels) + 1):
-        _clear_caches()
+        clear_caches()
         t0 = time.perf_counter()
         c = fe(body, mu_kPa, indentation_mm, mesh_mm=h0, refine=k, **options)
         times.append(time.perf_counter() - t0)
@@ -75,7 +75,7 @@ def measure(body: Body, mu_kPa: float, delta_max_mm: float, mesh_sizes_mm: Seque
     d = np.linspace(0.0, float(delta_max_mm), int(points))
 
     def timed(fn: Callable[[np.ndarray], Curve], dd: np.ndarray) -> tuple[Curve | None, float, str | None]:
-        _clear_caches()
+        clear_caches()
         t0 = time.perf_counter()
         try:
             c = fn(dd)

@@ -34,6 +34,7 @@ import pkgutil
 from .calibration_json import (
     FORCES,
     FORMAT,
+    THERMAL_MIN_DENOMINATOR,
     CalibrationError,
     calibration_sha256,
     canonical_json,
@@ -238,13 +239,18 @@ class Calibration:
 
     def corrected(self, Bx_uT: float, By_uT: float, Bz_uT: float, temperature_C=None) -> tuple:
         """The field as at the calibration's temperature: each axis / (1 + a (T - T0)); unchanged without a
-        temperature (None or NaN) or without ``thermal``."""
+        temperature (None or NaN), without ``thermal``, or where a denominator falls below
+        ``THERMAL_MIN_DENOMINATOR`` (a temperature outside the chip's range: the validator holds it there inside;
+        the firmware leaves it uncorrected too, and flags the sample)."""
         B = (float(Bx_uT), float(By_uT), float(Bz_uT))
         t = self._thermal
         if t is None or temperature_C is None or temperature_C != temperature_C:
             return B
         dt = float(temperature_C) - t.reference_C
-        return tuple(b / (1.0 + a * dt) for b, a in zip(B, t.coefficient_per_C))
+        d = [1.0 + a * dt for a in t.coefficient_per_C]
+        if not min(d) >= THERMAL_MIN_DENOMINATOR:
+            return B
+        return tuple(b / dk for b, dk in zip(B, d))
 
     def evaluate(self, Bx_uT: float, By_uT: float, Bz_uT: float, method=None, temperature_C=None) -> tuple:
         """(Fx_N, Fy_N, Fz_N) for a field in microtesla (chip axes) read at the chip's ``temperature_C`` (degC;

@@ -13,6 +13,14 @@ point and collinear points allowed); ``mls`` (when present, and required by meth
 equally long point columns; ``errors``, ``scan`` and ``chip`` objects when present; ``thermal`` (optional: a file
 without it has no temperature correction) with ``reference_C`` from -40 to 125 and one ``coefficient_per_C`` per
 field axis within +/-:data:`THERMAL_MAX_PER_C`; no NaN or infinity anywhere.
+
+And what the formula computes from those numbers together (:func:`check_formula`), so that a file each of whose
+numbers is in bounds cannot divide by zero or overflow on the host or on the device (which evaluates in float32):
+the thermal denominator 1 + a (T - T0) stays at least :data:`THERMAL_MIN_DENOMINATOR` over the chip's rated
+temperature range; the scaled inputs u, v stay within +/-:data:`INPUT_MAX` over the valid region's bounding box
+(and at the MLS points); every partial sum of the polynomial stays within :data:`FORCE_MAX_N` there, as do the MLS
+points' forces; the MLS bandwidth is at least :data:`MLS_MIN_BANDWIDTH`. The firmware's record check
+(mf_calib.c) refuses the same records.
 """
 
 from __future__ import annotations
@@ -25,9 +33,11 @@ from typing import Any, Mapping, Tuple
 
 from .json_checks import FormatError, finite, is_number
 
-__all__ = ["FORMAT", "FORCES", "INPUTS", "MAX_ORDER", "MLS_MAX_ORDER", "AXES", "THERMAL_MAX_PER_C", "CalibrationError",
-           "Checked", "MLSPoints", "Thermal",
-           "calibration_sha256", "canonical_json", "cross", "loads", "monomials", "validate"]
+__all__ = ["FORMAT", "FORCES", "INPUTS", "MAX_ORDER", "MLS_MAX_ORDER", "AXES", "THERMAL_MAX_PER_C",
+           "THERMAL_REFERENCE_C", "THERMAL_MIN_DENOMINATOR", "INPUT_MAX", "FORCE_MAX_N", "MLS_MIN_BANDWIDTH",
+           "CalibrationError", "Checked", "MLSPoints", "Thermal",
+           "calibration_sha256", "canonical_json", "check_formula", "cross", "loads", "monomials", "region_box",
+           "validate"]
 
 FORMAT = "magfab-calibration/1"
 FORCES = ("Fz_N", "Fr_N")
@@ -42,6 +52,25 @@ THERMAL_MAX_PER_C = 0.01
 #: The chip's rated operating range, degC (MLX90393 datasheet: -40 to 125): a calibration's temperature outside it
 #: is a mistake.
 THERMAL_REFERENCE_C = (-40.0, 125.0)
+#: Least value of the thermal denominator 1 + a (T - T0) over :data:`THERMAL_REFERENCE_C`, the range the chip
+#: reports: the correction may at most double the field. NdFeB's -0.12 %/C over the whole 165 C changes it by 20 %,
+#: so a halving is no drift of magnet or chip but a wrong T0 or a; and 1/d then stays within 2, far from the zero
+#: a file with T0 125 C and a +0.01 reaches at 25 C. The firmware skips the correction and flags the sample
+#: (MF_FLAG_OUTSIDE) where a temperature outside that range would take it below this (mf_calib.c).
+THERMAL_MIN_DENOMINATOR = 0.5
+#: Largest |u| and |v| (the scaled inputs (B - center) / scale) over the valid region's bounding box and at the
+#: MLS points. The scaling maps the scanned region to about [-1, 1] (the fit's centre and half range), so a
+#: thousand times that is a scaling made for another region or a unit slip (1e-300, 1e308), and it keeps u^8,
+#: the firmware's highest power, at 1e24, far inside float32.
+INPUT_MAX = 1e3
+#: Largest sum of |c_m| max(1, |u|)^i max(1, |v|)^j over the valid region's bounding box, per force (N): it
+#: bounds the polynomial's value and every partial sum of its Horner form, so the firmware's float32 evaluation
+#: (up to 3.4e38) keeps a factor 3e8 for the tare and Fr Bx / Br; a force model that large is no force model. The
+#: MLS points' forces are held to the same bound.
+FORCE_MAX_N = 1e30
+#: Least MLS bandwidth in (u, v) units: the fit chooses multiples of the scan's nearest-neighbour spacing (a few
+#: hundredths); this keeps the local monomials ((u - uq) / h)^(2 order) of the farthest query below 1e76.
+MLS_MIN_BANDWIDTH = 1e-6
 
 Point = Tuple[float, float]  # evaluated at import: the readout's Python 3.8 has no tuple[...]
 
@@ -236,8 +265,8 @@ def _order(data: dict) -> int:
     return order
 
 
-def validate(data: object) -> Checked:
-    """The values of a parsed calibration.json; :class:`CalibrationError` naming the first bad key."""
+def _values(data: object) -> Checked:
+    """The values of a parsed calibration.json, each number checked on its own (not yet :func:`check_formula`)."""
     if not isinstance(data, dict):
         raise CalibrationError("", type(data).__name__, "must be a JSON object")
     if data.get("format") != FORMAT:
@@ -272,6 +301,94 @@ def validate(data: object) -> Checked:
                    coefficients, int(sign), direction_min, tare, box, hull, span, mls,  # type: ignore[arg-type]
                    dict(data.get("errors", {})), dict(data.get("scan", {})), dict(data.get("chip", {})),
                    canonical, hashlib.sha256(canonical.encode("ascii")).hexdigest(), thermal)
+
+
+def validate(data: object) -> Checked:
+    """The values of a parsed calibration.json; :class:`CalibrationError` naming the first bad key, its own or
+    what it makes the formula compute (:func:`check_formula`)."""
+    return check_formula(_values(data))
+
+
+def region_box(checked: Checked) -> tuple[Point, Point]:
+    """((Bz lo, hi), (Br lo, hi)) uT bounding the valid region (inside the box and the hull): the box clipped to
+    the hull's bounding box (the hull's alone when they do not overlap: then no reading is valid, but the
+    firmware evaluates every reading, flagged)."""
+    out = []
+    for k in range(2):
+        lo, hi = checked.box[k]
+        hlo, hhi = min(p[k] for p in checked.hull), max(p[k] for p in checked.hull)
+        lo, hi = max(lo, hlo), min(hi, hhi)
+        out.append((lo, hi) if lo <= hi else (hlo, hhi))
+    return out[0], out[1]
+
+
+def _thermal_denominators(t: Thermal) -> None:
+    lo, hi = THERMAL_REFERENCE_C
+    for axis, a in zip(AXES, t.coefficient_per_C):
+        d, at = min((1.0 + a * (temp - t.reference_C), temp) for temp in (lo, hi))  # linear in T: least at an end
+        if not d >= THERMAL_MIN_DENOMINATOR:
+            raise CalibrationError("thermal.coefficient_per_C." + axis, a,
+                                   f"with reference_C {t.reference_C:g}, 1 + a (T - T0) falls to {d:.3g} at "
+                                   f"{at:g} degC: must stay at least {THERMAL_MIN_DENOMINATOR:g} over the chip's "
+                                   f"rated {lo:g} to {hi:g} degC")
+
+
+def _reach(checked: Checked) -> tuple[float, float]:
+    """The largest |u| and |v| over :func:`region_box`, each refused beyond :data:`INPUT_MAX`."""
+    reach = []
+    for k, (name, (lo, hi)) in enumerate(zip(INPUTS, region_box(checked))):
+        c, s = checked.center[k], checked.scale[k]
+        r = max(abs(lo - c), abs(hi - c)) / s
+        if not r <= INPUT_MAX:
+            raise CalibrationError("scaling." + name, {"center": c, "scale": s},
+                                   f"must map the valid region's {name} {lo:g} to {hi:g} into +/-{INPUT_MAX:g} "
+                                   f"(it reaches {r:.3g})")
+        reach.append(r)
+    return reach[0], reach[1]
+
+
+def _force_bound(checked: Checked, reach: Point) -> None:
+    """Sum |c_m| max(1, |u|)^i max(1, |v|)^j per force within :data:`FORCE_MAX_N` (:data:`FORCE_MAX_N`'s note)."""
+    pu, pv = max(1.0, reach[0]), max(1.0, reach[1])
+    for force in FORCES:
+        terms = [abs(c) * pu ** i * pv ** j for c, (i, j) in zip(checked.coefficients[force], checked.monomials)]
+        total = sum(terms)
+        if not total <= FORCE_MAX_N:
+            m = max(range(len(terms)), key=lambda n: terms[n])
+            raise CalibrationError(f"coefficients.{force}[{m}]", checked.coefficients[force][m],
+                                   f"with |u|, |v| up to {reach[0]:.3g}, {reach[1]:.3g} over the valid region the "
+                                   f"polynomial's terms reach {total:.3g} N: must stay within {FORCE_MAX_N:g} N "
+                                   "(the firmware evaluates it in float32)")
+
+
+def _mls_bounds(checked: Checked) -> None:
+    m = checked.mls
+    if m is None:
+        return
+    if not m.bandwidth >= MLS_MIN_BANDWIDTH:
+        raise CalibrationError("mls.bandwidth", m.bandwidth, f"must be at least {MLS_MIN_BANDWIDTH:g} (scaled units)")
+    columns = (("Bz_uT", m.bz_uT), ("Br_uT", m.br_uT))
+    for k, (name, column) in enumerate(columns):
+        c, s = checked.center[k], checked.scale[k]
+        for n, x in enumerate(column):
+            if not abs(x - c) / s <= INPUT_MAX:
+                raise CalibrationError(f"mls.points.{name}[{n}]", x,
+                                       f"must lie within +/-{INPUT_MAX:g} scales of scaling.{name}.center")
+    for name, column in (("Fz_N", m.fz_N), ("Fr_N", m.fr_N)):
+        for n, x in enumerate(column):
+            if not abs(x) <= FORCE_MAX_N:
+                raise CalibrationError(f"mls.points.{name}[{n}]", x, f"must be within +/-{FORCE_MAX_N:g} N")
+
+
+def check_formula(checked: Checked) -> Checked:
+    """``checked`` when what its formula computes stays bounded (module doc): the thermal denominators, the scaled
+    inputs over the valid region, the polynomial's terms there and the MLS model's inputs; else
+    :class:`CalibrationError` naming the key that takes it out of bounds and what is allowed."""
+    if checked.thermal is not None:
+        _thermal_denominators(checked.thermal)
+    _force_bound(checked, _reach(checked))
+    _mls_bounds(checked)
+    return checked
 
 
 def loads(text: str) -> Checked:

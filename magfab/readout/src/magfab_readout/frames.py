@@ -46,7 +46,7 @@ import math
 import re
 import struct
 from dataclasses import dataclass, field
-from typing import Dict, List, Optional, Tuple, Union
+from typing import Callable, Dict, List, Optional, Tuple, Union
 
 from . import _build
 
@@ -85,6 +85,11 @@ _LINE_STARTS = (b"F,", b"I,", b"W,", b"R,", b"B,")
 #: What the firmware prints for a float (mf_format_float): [-]digits.digits, d.dddde+XX beyond 1e9, nan, inf.
 _FLOAT = re.compile(r"-?[0-9]{1,10}(?:\.[0-9]{1,6})?(?:e\+[0-9]{2})?|nan|-?inf")
 _CHECKED = re.compile(rb"(.*)\*([0-9A-F]{4})")
+#: Where a frame or a line may start: the sync bytes or a line's first two characters (the leftmost match).
+_START = re.compile(re.escape(SYNC) + rb"|[" + b"".join(p[:1] for p in _LINE_STARTS) + rb"],")
+_UNPRINTABLE = re.compile(rb"[^\x20-\x7e\r]")
+#: Tests set it to count the bytes each search for a start examines (the decoder's work, without a clock).
+_scan_hook: Optional[Callable[[int], None]] = None
 
 _BODY = struct.Struct("<BBBI3hH3f")  # bytes 2..28: type, seq, status, time, counts, temperature, forces
 _FIELD_BODY = struct.Struct("<BBBIB3hH")  # bytes 2..17: type, seq, status, time, taxel, counts, temperature
@@ -321,7 +326,8 @@ def encode_info_line(spec_name: str, calibration_hash: str, gain_sel: int, resol
 
 
 def _printable(chunk: bytes) -> bool:
-    return all(32 <= b < 127 or b == 13 for b in chunk)
+    """Every byte printable ASCII (32..126) or a carriage return."""
+    return _UNPRINTABLE.search(chunk) is None
 
 
 class Decoder:
@@ -374,8 +380,14 @@ class Decoder:
 
     @staticmethod
     def _next_candidate(buf: bytes, start: int) -> int:
-        found = [k for k in (buf.find(SYNC, start), *(buf.find(p, start) for p in _LINE_STARTS)) if k >= 0]
-        return min(found) if found else -1
+        """The first start of a frame or line at or after ``start``, -1 if none. One search for the leftmost of
+        all the starts, so it reads only up to the one it returns: the candidates of one buffer are searched in
+        one pass whatever they turn out to be (a search per kind of start reads to the buffer's end for every
+        kind that is absent, at every candidate, which is quadratic)."""
+        m = _START.search(buf, start)
+        if _scan_hook is not None:
+            _scan_hook((m.end() if m else len(buf)) - start)
+        return m.start() if m else -1
 
     def _frame(self, frame: bytes, out: list) -> int:
         """Bytes consumed by the frame ``frame`` (as long as :func:`frame_length` of its type)."""

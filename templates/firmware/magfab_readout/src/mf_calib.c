@@ -4,6 +4,7 @@
  * EEPROM as the region test needs them (a few entries per reading, and only near the region's edge). */
 #include "mf_calib.h"
 
+#include <float.h>
 #include <math.h>
 
 #include "mf_config.h"
@@ -36,6 +37,15 @@ static struct {
     float f[N_FLOATS];
     float coef[(MF_CAL_MAX_ORDER + 1) * (MF_CAL_MAX_ORDER + 2)]; /* the Horner rows, as in the record */
 } cal = {MF_E_CALIB, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0.0f, {0}, {0}, {0}};
+
+/* What the formula computes, bounded as calibration_json.check_formula bounds it (magfab docs/bundle.md section 2):
+ * the least thermal denominator 1 + a (T - T0) over the chip's rated range, the scaled inputs' reach over the valid
+ * region's bounding box, and the sum of |c| max(1, |u|)^i max(1, |v|)^j (every Horner partial sum's bound). */
+#define MF_THERMAL_MIN_DEN 0.5f
+#define MF_T_MIN_C (-40.0f)
+#define MF_T_MAX_C 125.0f
+#define MF_INPUT_MAX 1000.0f
+#define MF_FORCE_MAX_N 1e30f
 
 static uint16_t record_crc(uint16_t len)
 {
@@ -136,6 +146,87 @@ static int load_array(uint16_t len, uint8_t name_len)
     return MF_OK;
 }
 
+#define FAN_Z(k) mf_nv_float((uint16_t)(cal.fan_at + 8U * (k)))
+#define FAN_R(k) mf_nv_float((uint16_t)(cal.fan_at + 8U * (k) + 4U))
+
+static uint8_t finite_f(float x)
+{
+    return (uint8_t)(x >= -FLT_MAX && x <= FLT_MAX); /* 0 for NaN and infinities */
+}
+
+/* The largest |(x - centre) inv_scale| over [lo, hi], at least 1 (MF_INPUT_MAX + 1 when it exceeds MF_INPUT_MAX,
+ * or for a centre or reciprocal scale that is not finite and positive). */
+static float reach(float lo, float hi, float centre, float inv_scale)
+{
+    float a = fabsf(lo - centre) * inv_scale;
+    float b = fabsf(hi - centre) * inv_scale;
+    float r = a > b ? a : b;
+    if (!finite_f(centre) || !(inv_scale > 0.0f) || !finite_f(inv_scale) || !(r <= MF_INPUT_MAX)) {
+        return MF_INPUT_MAX + 1.0f;
+    }
+    return r > 1.0f ? r : 1.0f;
+}
+
+/* MF_OK when the loaded record's formula stays bounded (above), MF_E_CALIB when not: a record no calibration.json
+ * that magfab accepts packs to. */
+static int record_bounded(void)
+{
+    float lo[2], hi[2], pu[MF_CAL_MAX_ORDER + 1], pv[MF_CAL_MAX_ORDER + 1], sz = 0.0f, sr = 0.0f;
+    const float *c = cal.coef;
+    uint16_t k;
+    uint8_t m, j;
+    if (cal.thermal) {
+        for (k = 0; k < 3U; ++k) {
+            float a = cal.a_per_C[k];
+            if (!(1.0f + a * (MF_T_MIN_C - cal.t0_C) >= MF_THERMAL_MIN_DEN)
+                || !(1.0f + a * (MF_T_MAX_C - cal.t0_C) >= MF_THERMAL_MIN_DEN)) {
+                return MF_E_CALIB;
+            }
+        }
+    }
+    /* the valid region's bounding box: the box clipped to the hull's (the hull's alone when they do not overlap) */
+    lo[0] = hi[0] = cal.f[P0_BZ];
+    lo[1] = hi[1] = cal.f[P0_BR];
+    for (k = 1; k < cal.hull_n; ++k) {
+        float z = cal.f[P0_BZ] + FAN_Z(k);
+        float r = cal.f[P0_BR] + FAN_R(k);
+        lo[0] = z < lo[0] ? z : lo[0];
+        hi[0] = z > hi[0] ? z : hi[0];
+        lo[1] = r < lo[1] ? r : lo[1];
+        hi[1] = r > hi[1] ? r : hi[1];
+    }
+    for (k = 0; k < 2U; ++k) {
+        float blo = cal.f[k ? BR_LO : BZ_LO], bhi = cal.f[k ? BR_HI : BZ_HI];
+        float l = blo > lo[k] ? blo : lo[k], h = bhi < hi[k] ? bhi : hi[k];
+        if (l <= h) {
+            lo[k] = l;
+            hi[k] = h;
+        }
+    }
+    pu[0] = reach(lo[0], hi[0], cal.f[BZ_CENTER], cal.f[BZ_INV_SCALE]);
+    pv[0] = reach(lo[1], hi[1], cal.f[BR_CENTER], cal.f[BR_INV_SCALE]);
+    if (pu[0] > MF_INPUT_MAX || pv[0] > MF_INPUT_MAX) {
+        return MF_E_CALIB;
+    }
+    pu[1] = pu[0];
+    pv[1] = pv[0];
+    pu[0] = pv[0] = 1.0f;
+    for (m = 2; m <= cal.order; ++m) {
+        pu[m] = pu[m - 1] * pu[1];
+        pv[m] = pv[m - 1] * pv[1];
+    }
+    /* the Horner rows: row m holds u^i v^j for i = order + 1 - m, j = m - 1 down to 0; Fz's m, then Fr's m */
+    for (m = 1; m <= (uint8_t)(cal.order + 1); ++m) {
+        for (j = 0; j < m; ++j) {
+            float p = pu[cal.order + 1 - m] * pv[m - 1 - j];
+            sz += fabsf(c[j]) * p;
+            sr += fabsf(c[m + j]) * p;
+        }
+        c += 2U * m;
+    }
+    return (sz <= MF_FORCE_MAX_N && sr <= MF_FORCE_MAX_N) ? MF_OK : MF_E_CALIB;
+}
+
 int mf_calib_load(void)
 {
     uint8_t version = mf_nv_byte(2);
@@ -199,6 +290,9 @@ int mf_calib_load(void)
     cal.edge_at = (uint16_t)(fan_at + 8U * n);
     cal.name_at = (uint16_t)(cal.edge_at + 12U * n);
     cal.name_len = name_len;
+    if (record_bounded() != MF_OK) {
+        return MF_E_CALIB;
+    }
     cal.status = MF_OK;
     return MF_OK;
 }
@@ -248,8 +342,6 @@ char mf_calib_name(uint8_t k)
     return (char)mf_nv_byte((uint16_t)(cal.name_at + k));
 }
 
-#define FAN_Z(k) mf_nv_float((uint16_t)(cal.fan_at + 8U * (k)))
-#define FAN_R(k) mf_nv_float((uint16_t)(cal.fan_at + 8U * (k) + 4U))
 
 /* Left of p_0 -> p_k (q relative to p_0), > 0; on it, 0. */
 static float fan_side(uint16_t k, float qz, float qr)
@@ -318,9 +410,16 @@ void mf_calib_forces(mf_sample_t *s)
     float br;
     if (cal.thermal && s->t_C == s->t_C) { /* the field as at the calibration's temperature: B / (1 + a (T - T0)) */
         float dt = s->t_C - cal.t0_C;
-        bx /= 1.0f + cal.a_per_C[0] * dt;
-        by /= 1.0f + cal.a_per_C[1] * dt;
-        bz /= 1.0f + cal.a_per_C[2] * dt;
+        float dx = 1.0f + cal.a_per_C[0] * dt;
+        float dy = 1.0f + cal.a_per_C[1] * dt;
+        float dz = 1.0f + cal.a_per_C[2] * dt;
+        if (dx >= MF_THERMAL_MIN_DEN && dy >= MF_THERMAL_MIN_DEN && dz >= MF_THERMAL_MIN_DEN) {
+            bx /= dx;
+            by /= dy;
+            bz /= dz;
+        } else { /* a temperature outside the chip's range (the record's check holds it there): uncorrected, flagged */
+            s->flags |= MF_FLAG_OUTSIDE;
+        }
     }
     br = sqrtf(bx * bx + by * by);
     float fz, fr;

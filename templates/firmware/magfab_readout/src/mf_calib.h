@@ -56,8 +56,9 @@ uint8_t mf_calib_setting(uint8_t k);
 uint8_t mf_calib_name_len(void);
 char mf_calib_name(uint8_t k);
 /* Forces of a converted sample (b_uT set, left as read); adds MF_FLAG_OUTSIDE outside the calibrated region. A
- * version-4 record's thermal correction applies when the sample carries a temperature (t_C not NaN). Only with a
- * valid record (mf_calib_status() == MF_OK). */
+ * version-4 record's thermal correction applies when the sample carries a temperature (t_C not NaN) at which every
+ * denominator 1 + a (T - T0) is at least 0.5 (a record is refused unless it is so from -40 to 125 degC); at another
+ * the field is left uncorrected and MF_FLAG_OUTSIDE set. Only with a valid record (mf_calib_status() == MF_OK). */
 void mf_calib_forces(mf_sample_t *s);
 /* 1 when (Bz, Br) in microtesla lies in the calibrated region: inside the box and the hull, edges included. */
 uint8_t mf_calib_inside(float bz, float br);
