@@ -22,6 +22,7 @@ from typing import Any
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator, model_validator
 
 from .errors import SpecError, _shorten, shown
+from .readout.src.magfab_readout import bounded
 from .recipes import catalogue
 from .spec_errors import did_you_mean, translate_error
 
@@ -515,19 +516,41 @@ def load_spec(path: str | Path | None = None) -> Spec:
     if path is None:
         return parse_spec(default_spec_text(), default_name="magone")
     path = Path(path)
+    text = read_toml(path, "spec")
+    return parse_spec(text, default_name=path.stem, where=str(path))
+
+
+def read_toml(path: Path, what: str) -> str:
+    """The text of the TOML file ``path``: a regular file within ``what``'s size limit (:mod:`bounded`), UTF-8;
+    :class:`SpecError` naming ``what`` when it cannot be read."""
     try:
-        text = path.read_text(encoding="utf-8")
+        return bounded.read_text(path, what)
     except FileNotFoundError:
-        raise SpecError("spec", str(path), "file not found") from None
+        raise SpecError(what, str(path), "file not found") from None
     except (OSError, UnicodeDecodeError) as exc:
-        raise SpecError("spec", str(path), f"cannot read it as UTF-8 text: {exc}") from None
-    return parse_spec(text, default_name=path.stem)
+        raise SpecError(what, str(path), f"cannot read it as UTF-8 text: {exc}") from None
 
 
-def parse_spec(text: str, default_name: str = "magone") -> Spec:
-    """Validate TOML text. A missing ``name`` is taken from ``default_name`` (the file's stem)."""
+def loads_toml(text: str, what: str, where: str) -> dict[str, Any]:
+    """``tomllib.loads(text)`` with the bounds of :mod:`bounded` around it: the nesting scanned before the recursive
+    parser runs, the parsed document's depth and keys per table checked before any validation; tomllib's errors
+    (TOMLDecodeError, ValueError) pass through."""
+    bounded.check_toml(text, what, where)
     try:
         raw = tomllib.loads(text)
+    except RecursionError:  # unreachable after check_toml; kept so the parser never ends in a traceback
+        raise bounded.InputFileError(what, where, f"nests more than {bounded.MAX_DEPTH} deep") from None
+    bounded.check_tree(raw, what, where)
+    return raw
+
+
+def parse_spec(text: str, default_name: str = "magone", where: str = "<TOML>") -> Spec:
+    """Validate TOML text (``where`` names it: its path). A missing ``name`` is taken from ``default_name`` (the
+    file's stem)."""
+    try:
+        raw = loads_toml(text, "spec", where)
+    except bounded.InputFileError:
+        raise
     except tomllib.TOMLDecodeError as exc:
         raise SpecError("spec", "<TOML>", f"not valid TOML: {exc}") from None
     except ValueError as exc:  # e.g. an integer of more than 4300 digits (Python's int-from-string limit)
@@ -547,7 +570,9 @@ def load_build_spec(folder: str | Path) -> Spec:
     spec. :class:`SpecError` when the folder has none or it does not validate."""
     path = Path(folder) / "spec.json"
     try:
-        raw = json.loads(path.read_text(encoding="utf-8"))
+        raw = bounded.loads_json(bounded.read_bytes(path, "spec.json"), "spec.json", path)
+    except bounded.InputFileError:
+        raise
     except FileNotFoundError:
         raise SpecError("spec", str(path), "file not found: not a magfab build folder") from None
     except (OSError, UnicodeDecodeError, ValueError) as exc:
