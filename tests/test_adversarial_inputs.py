@@ -63,7 +63,7 @@ def inserted(document: str, line: str, rng: random.Random) -> str:
     """``line`` put at a random line boundary of ``document`` (inside a table, or at the top)."""
     lines = document.splitlines()
     at = rng.randint(0, len(lines))
-    return "\n".join(lines[:at] + [line] + lines[at:]) + "\n"
+    return "\n".join([*lines[:at], line, *lines[at:]]) + "\n"
 
 
 @st.composite
