@@ -25,6 +25,7 @@ from .errors import SpecError, _shorten, shown
 from .readout.src.magfab_readout import bounded
 from .recipes import catalogue
 from .spec_errors import did_you_mean, translate_error
+from .toml_input import loads_toml, read_toml
 
 __all__ = ["Spec", "Tip", "Density", "Printer", "Array", "Environment", "Skin", "Polarity", "MAX_TAXELS", "load_spec",
            "spec_from_json", "parse_spec", "spec_from_dict", "default_spec_text", "translate_error",
@@ -518,30 +519,6 @@ def load_spec(path: str | Path | None = None) -> Spec:
     path = Path(path)
     text = read_toml(path, "spec")
     return parse_spec(text, default_name=path.stem, where=str(path))
-
-
-def read_toml(path: Path, what: str) -> str:
-    """The text of the TOML file ``path``: a regular file within ``what``'s size limit (:mod:`bounded`), UTF-8;
-    :class:`SpecError` naming ``what`` when it cannot be read."""
-    try:
-        return bounded.read_text(path, what)
-    except FileNotFoundError:
-        raise SpecError(what, str(path), "file not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise SpecError(what, str(path), f"cannot read it as UTF-8 text: {exc}") from None
-
-
-def loads_toml(text: str, what: str, where: str) -> dict[str, Any]:
-    """``tomllib.loads(text)`` with the bounds of :mod:`bounded` around it: the nesting scanned before the recursive
-    parser runs, the parsed document's depth and keys per table checked before any validation; tomllib's errors
-    (TOMLDecodeError, ValueError) pass through."""
-    bounded.check_toml(text, what, where)
-    try:
-        raw = tomllib.loads(text)
-    except RecursionError:  # unreachable after check_toml; kept so the parser never ends in a traceback
-        raise bounded.InputFileError(what, where, f"nests more than {bounded.MAX_DEPTH} deep") from None
-    bounded.check_tree(raw, what, where)
-    return raw
 
 
 def parse_spec(text: str, default_name: str = "magone", where: str = "<TOML>") -> Spec:

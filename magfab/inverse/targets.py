@@ -46,7 +46,8 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_serial
 
 from ..errors import InputError, SpecError, shown
 from ..recipes import catalogue
-from ..spec import NAME_PATTERN, Sensor, Spec, Tip, is_valid_name, load_spec, loads_toml, read_toml, translate_error
+from ..spec import NAME_PATTERN, Sensor, Spec, Tip, is_valid_name, load_spec, translate_error
+from ..toml_input import loads_toml, read_toml
 
 __all__ = ["Objective", "OBJECTIVES", "Targets", "load_targets", "parse_targets"]
 
