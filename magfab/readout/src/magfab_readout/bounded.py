@@ -41,7 +41,7 @@ LIMITS = {
     "array.json": 16 * MB,        # the neighbours' field tables of up to 16 taxels: tens of kB
     "JSON": 16 * MB,              # any other JSON a build or a record holds (predictions, manifest, events)
 }
-#: Deepest nesting of arrays, tables and objects inside each other; magfab's deepest format nests 5.
+#: Deepest nesting of arrays, tables and objects inside each other (the document itself is 1); magfab's deepest nests 4.
 MAX_DEPTH = 32
 #: Most keys of one table or object (TOML: also most items of one array); the largest of any format holds under 50.
 MAX_KEYS = 1000
