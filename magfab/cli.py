@@ -278,6 +278,7 @@ def _calibrate_sensor(scan_path: Path, reference: Path | None, spec_path: Path |
     with _handled():
         from .check import preflight
         from .design import derive
+        from .formats import bounded
         from .formats import sensor_records as records
         from .models.scan_guards import MERGED, merged_csv
         from .output import is_build
@@ -306,9 +307,9 @@ def _calibrate_sensor(scan_path: Path, reference: Path | None, spec_path: Path |
         scans = _read_scan(scan_path, reference, folder, loaded, taxel)
         scan = scans[taxel] if isinstance(scans, dict) else scans
         rest = _check_rest(scan, loaded, folder, taxel, sensor)
-        files = {"scan.csv": scan_path.read_bytes()}
+        files = {"scan.csv": bounded.read_bytes(scan_path, "scan CSV")}
         if reference is not None:
-            files["reference.csv"] = reference.read_bytes()
+            files["reference.csv"] = bounded.read_bytes(reference, "reference log")
         if MERGED in scan.source:
             files["scan_merged.csv"] = merged_csv(scan)
         check_owner(sensor, files)
@@ -356,6 +357,7 @@ def _reject_own_forces(sensor, scan, spec, taxel: int | None) -> None:
 def _depth_warnings(scan, spec, folder: Path | None, design, taxel: int | None) -> list[str]:
     """Guard C's lines, against the build folder's predictions.json when it is a build of this spec (none without:
     the prediction would cost more than the fit)."""
+    from .formats import bounded
     from .models.scan_guards import scan_depth_warnings
     from .sensor_calibration import build_of
 
@@ -365,7 +367,8 @@ def _depth_warnings(scan, spec, folder: Path | None, design, taxel: int | None) 
         from .models.taxels import array_field, compensated
 
         scan = compensated(scan, array_field(design), taxel)
-    return scan_depth_warnings(scan, json.loads((folder / "predictions.json").read_text(encoding="utf-8")))
+    predictions = folder / "predictions.json"
+    return scan_depth_warnings(scan, bounded.loads_json(bounded.read_bytes(predictions, "JSON"), "JSON", predictions))
 
 
 def _read_scan(scan_path: Path, reference: Path | None, build_dir: Path | None, spec, taxel: int | None = None):
