@@ -32,6 +32,7 @@ try:  # Ctrl-C while these load is Python's KeyboardInterrupt, ended here as exi
 
     from . import __version__
     from .errors import BuildError, InputError, SpecError, shown
+    from .out_path import check_out
 except KeyboardInterrupt:
     sys.stderr.write("magfab: error: interrupted; nothing was written\n")
     raise SystemExit(130) from None
@@ -75,45 +76,6 @@ def _handled() -> Iterator[None]:
         if os.environ.get("MAGFAB_DEBUG"):
             raise
         _fail(f"internal error: {type(exc).__name__}: {exc} (set MAGFAB_DEBUG=1 for a traceback)", EXIT_INTERNAL)
-
-
-#: What magfab adds to the output folder's name for the files beside it (``.NAME.tmp-`` and 16 hex digits, the longest
-#: of output.py's temporaries, journal and lock).
-OUT_BESIDE_BYTES = 22
-#: Room kept within the file system's longest path for what magfab writes inside the folder (its deepest file with a
-#: temporary name: under 120 bytes).
-OUT_INSIDE_BYTES = 256
-
-
-def _check_out(out_dir: Path | None) -> None:
-    """Refuse an ``--out`` the file system cannot hold with what magfab writes in it and beside it, before any work:
-    one line naming the name or the path that is too long and the most allowed (no ENAMETOOLONG halfway)."""
-    if out_dir is None:
-        return
-    full = os.path.abspath(out_dir)
-    here = full
-    while not os.path.isdir(here) and os.path.dirname(here) != here:
-        here = os.path.dirname(here)
-    name_max, path_max = (_pathconf(here, key, default) for key, default in (("PC_NAME_MAX", 255),
-                                                                             ("PC_PATH_MAX", 4096)))
-    parts = Path(full).parts
-    for i, part in enumerate(parts[1:], 1):
-        most = name_max - (OUT_BESIDE_BYTES if i == len(parts) - 1 else 0)
-        if len(os.fsencode(part)) > most:
-            why = f", less {OUT_BESIDE_BYTES} for magfab's files beside the folder" if most < name_max else ""
-            raise InputError(f"--out {shown(str(out_dir))}: a name of {len(os.fsencode(part))} bytes in it; at most "
-                             f"{most} (the file system's {name_max}{why})")
-    if len(os.fsencode(full)) > path_max - OUT_INSIDE_BYTES:
-        raise InputError(f"--out {shown(str(out_dir))}: a path of {len(os.fsencode(full))} bytes; at most "
-                         f"{path_max - OUT_INSIDE_BYTES} (the file system's {path_max}, less {OUT_INSIDE_BYTES} for "
-                         "the files in it)")
-
-
-def _pathconf(path: str, key: str, default: int) -> int:
-    try:
-        return int(os.pathconf(path, key))
-    except (OSError, ValueError):
-        return default
 
 
 @contextmanager
@@ -168,7 +130,7 @@ def _one_line_warning(message, category, filename, lineno, file=None, line=None)
 def build(spec: Path | None, out_dir: Path | None, as_json: bool, discard_calibration: bool) -> None:
     """Build SPEC (default: the embedded MagOne reference design)."""
     with _handled():
-        _check_out(out_dir)
+        check_out(out_dir)
     _run_build(spec, out_dir, as_json, None, discard=discard_calibration)
 
 
@@ -552,7 +514,7 @@ def design(targets: Path, out_dir: Path | None, scheduler: str | None, workers: 
     """Search for designs that meet TARGETS (a TOML file: requirements, variables, objectives) and write the Pareto
     front, its page and plot, and each front design as a spec `magfab build` accepts."""
     with _handled(), _bar(sys.stderr.isatty()) as bar:
-        _check_out(out_dir)
+        check_out(out_dir)
         from .inverse.run import design as run_design
 
         try:
@@ -585,7 +547,7 @@ def sweep(targets: Path, levels: int | None, samples: int | None, fidelity: str,
           scheduler: str | None, workers: int | None) -> None:
     """Evaluate every design of a grid or Latin hypercube of TARGETS' variables; write sweep.csv (and .parquet)."""
     with _handled(), _bar(sys.stderr.isatty()) as bar:
-        _check_out(out_dir)
+        check_out(out_dir)
         from .inverse.run import sweep as run_sweep
 
         if (levels is None) == (samples is None):

@@ -81,7 +81,7 @@ def check_workers(workers: int | None, scheduler: str | None) -> int:
 
 def check_scheduler(address: str) -> None:
     """A ``--scheduler`` address Dask can dial (``[PROTOCOL://]HOST:PORT``, the port 1-65535), else one line."""
-    from distributed.comm.addressing import parse_address, parse_host_port
+    from distributed.comm.addressing import parse_address, parse_host_port  # lazy: Dask is slow to import
 
     try:
         _, port = parse_host_port(parse_address(address)[1])
