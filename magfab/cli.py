@@ -32,6 +32,7 @@ try:  # Ctrl-C while these load is Python's KeyboardInterrupt, ended here as exi
 
     from . import __version__
     from .errors import BuildError, InputError, SpecError, shown
+    from .out_path import check_out
 except KeyboardInterrupt:
     sys.stderr.write("magfab: error: interrupted; nothing was written\n")
     raise SystemExit(130) from None
@@ -128,6 +129,8 @@ def _one_line_warning(message, category, filename, lineno, file=None, line=None)
                    "default the build refuses: keep it first with `magfab sensor add ID --build DIR`).")
 def build(spec: Path | None, out_dir: Path | None, as_json: bool, discard_calibration: bool) -> None:
     """Build SPEC (default: the embedded MagOne reference design)."""
+    with _handled():
+        check_out(out_dir)
     _run_build(spec, out_dir, as_json, None, discard=discard_calibration)
 
 
@@ -514,6 +517,7 @@ def design(targets: Path, out_dir: Path | None, scheduler: str | None, workers: 
     """Search for designs that meet TARGETS (a TOML file: requirements, variables, objectives) and write the Pareto
     front, its page and plot, and each front design as a spec `magfab build` accepts."""
     with _handled(), _bar(sys.stderr.isatty()) as bar:
+        check_out(out_dir)
         from .inverse.run import design as run_design
 
         try:
@@ -546,6 +550,7 @@ def sweep(targets: Path, levels: int | None, samples: int | None, fidelity: str,
           scheduler: str | None, workers: int | None) -> None:
     """Evaluate every design of a grid or Latin hypercube of TARGETS' variables; write sweep.csv (and .parquet)."""
     with _handled(), _bar(sys.stderr.isatty()) as bar:
+        check_out(out_dir)
         from .inverse.run import sweep as run_sweep
 
         if (levels is None) == (samples is None):
