@@ -147,7 +147,8 @@ def test_a_measured_scan_too_large_for_mls_is_refused_before_any_work(tmp_path):
 
     n = limits.MAX_MLS_ROWS + 1000
     t = np.arange(n) * 1e-3
-    scan = Scan(t, np.tile([1.0, 2.0, 300.0], (n, 1)) + t[:, None], np.tile([0.0, 0.0, 0.1], (n, 1)))
+    # at rest in the design's band (18.8 mT: a scan of this design), so only its size is wrong
+    scan = Scan(t, np.tile([1.0, 2.0, 18763.0], (n, 1)) + t[:, None], np.tile([0.0, 0.0, 0.1], (n, 1)))
     (tmp_path / "scan.csv").write_text(scan_csv(scan))
     (tmp_path / "mls.toml").write_text('name = "mls"\n[calibration]\nmethod = "mls"\n')
     result = CliRunner().invoke(main, ["calibrate", str(tmp_path / "scan.csv"), "--spec", str(tmp_path / "mls.toml"),
