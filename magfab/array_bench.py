@@ -5,12 +5,12 @@ scan, made again by the build)."""
 
 from __future__ import annotations
 
-import json
 from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from .errors import SpecError, shown
+from .formats import bounded
 from .formats.scan_csv import read_scan_csv
 from .models.scan_guards import reject_self_calibrated_file
 
@@ -53,7 +53,8 @@ def taxel_scans(folder: Path | None, spec: Spec, taxel: int, scan: Scan) -> dict
         present = folder / "calibration" / f"taxel_{taxel:02d}.json"
         layout = folder / "calibration" / "array.json"
         if present.is_file() and layout.is_file():
-            offset = json.loads(layout.read_text(encoding="utf-8"))["offset_uT"][taxel]
+            array = bounded.loads_json(bounded.read_bytes(layout, "array.json"), "array.json", layout)
+            offset = array["offset_uT"][taxel]
             reject_self_calibrated_file(replace(scan, B_uT=scan.B_uT - offset), present,
                                         spec.calibration.reference_resolution_mN)
     scans[taxel] = scan

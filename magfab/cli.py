@@ -32,6 +32,7 @@ try:  # Ctrl-C while these load is Python's KeyboardInterrupt, ended here as exi
 
     from . import __version__
     from .errors import BuildError, InputError, SpecError, shown
+    from .out_path import check_out
 except KeyboardInterrupt:
     sys.stderr.write("magfab: error: interrupted; nothing was written\n")
     raise SystemExit(130) from None
@@ -128,6 +129,8 @@ def _one_line_warning(message, category, filename, lineno, file=None, line=None)
                    "default the build refuses: keep it first with `magfab sensor add ID --build DIR`).")
 def build(spec: Path | None, out_dir: Path | None, as_json: bool, discard_calibration: bool) -> None:
     """Build SPEC (default: the embedded MagOne reference design)."""
+    with _handled():
+        check_out(out_dir)
     _run_build(spec, out_dir, as_json, None, discard=discard_calibration)
 
 
@@ -278,6 +281,7 @@ def _calibrate_sensor(scan_path: Path, reference: Path | None, spec_path: Path |
     with _handled():
         from .check import preflight
         from .design import derive
+        from .formats import bounded
         from .formats import sensor_records as records
         from .models.scan_guards import MERGED, merged_csv
         from .output import is_build
@@ -306,9 +310,9 @@ def _calibrate_sensor(scan_path: Path, reference: Path | None, spec_path: Path |
         scans = _read_scan(scan_path, reference, folder, loaded, taxel)
         scan = scans[taxel] if isinstance(scans, dict) else scans
         rest = _check_rest(scan, loaded, folder, taxel, sensor)
-        files = {"scan.csv": scan_path.read_bytes()}
+        files = {"scan.csv": bounded.read_bytes(scan_path, "scan CSV")}
         if reference is not None:
-            files["reference.csv"] = reference.read_bytes()
+            files["reference.csv"] = bounded.read_bytes(reference, "reference log")
         if MERGED in scan.source:
             files["scan_merged.csv"] = merged_csv(scan)
         check_owner(sensor, files)
@@ -356,6 +360,7 @@ def _reject_own_forces(sensor, scan, spec, taxel: int | None) -> None:
 def _depth_warnings(scan, spec, folder: Path | None, design, taxel: int | None) -> list[str]:
     """Guard C's lines, against the build folder's predictions.json when it is a build of this spec (none without:
     the prediction would cost more than the fit)."""
+    from .formats import bounded
     from .models.scan_guards import scan_depth_warnings
     from .sensor_calibration import build_of
 
@@ -365,7 +370,8 @@ def _depth_warnings(scan, spec, folder: Path | None, design, taxel: int | None) 
         from .models.taxels import array_field, compensated
 
         scan = compensated(scan, array_field(design), taxel)
-    return scan_depth_warnings(scan, json.loads((folder / "predictions.json").read_text(encoding="utf-8")))
+    predictions = folder / "predictions.json"
+    return scan_depth_warnings(scan, bounded.loads_json(bounded.read_bytes(predictions, "JSON"), "JSON", predictions))
 
 
 def _read_scan(scan_path: Path, reference: Path | None, build_dir: Path | None, spec, taxel: int | None = None):
@@ -511,6 +517,7 @@ def design(targets: Path, out_dir: Path | None, scheduler: str | None, workers: 
     """Search for designs that meet TARGETS (a TOML file: requirements, variables, objectives) and write the Pareto
     front, its page and plot, and each front design as a spec `magfab build` accepts."""
     with _handled(), _bar(sys.stderr.isatty()) as bar:
+        check_out(out_dir)
         from .inverse.run import design as run_design
 
         try:
@@ -543,6 +550,7 @@ def sweep(targets: Path, levels: int | None, samples: int | None, fidelity: str,
           scheduler: str | None, workers: int | None) -> None:
     """Evaluate every design of a grid or Latin hypercube of TARGETS' variables; write sweep.csv (and .parquet)."""
     with _handled(), _bar(sys.stderr.isatty()) as bar:
+        check_out(out_dir)
         from .inverse.run import sweep as run_sweep
 
         if (levels is None) == (samples is None):

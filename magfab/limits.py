@@ -14,6 +14,7 @@ FE work (elements x steps) predict.tolerance_pct (the meshes the auto choice   p
                            runs), elastomer size, predict.mechanics_model      over the meshes tried
 scan rows                  calibration.scan_step_mm, scan_y_mm, scan_z_mm      (y / step) (z / step)
 MLS work                   scan rows, calibration.method ('mls' or 'auto')     rows^2
+board routing              array.rows x cols or positions_mm (the chips)       1.45 s x chips^1.7 (fitted, below)
 =========================  ==================================================  ===================================
 
 The constants were measured on the MagOne design and variants of it, on a shared two-core machine that was
@@ -38,7 +39,8 @@ if TYPE_CHECKING:
     from .spec import Spec
 
 __all__ = ["BUDGET_S", "BUDGET_MB", "Cost", "estimate", "check_limits", "scan_rows", "triangles",
-           "MAX_TRIANGLES", "MAX_FE_WORK", "MAX_SCAN_ROWS", "MAX_MLS_ROWS"]
+           "MAX_TRIANGLES", "MAX_FE_WORK", "MAX_SCAN_ROWS", "MAX_MLS_ROWS", "MAX_BOARD_S", "routing_s",
+           "most_chips"]
 
 #: What any valid spec may take to build, on two cores.
 BUDGET_S = 60.0
@@ -87,16 +89,30 @@ SECONDS_PER_FE_WORK = 0.1e-3
 MAX_FE_WORK = 90_000
 MB_PER_FE_TRIANGLE = 0.1  # 1,299 triangles: 221 MB peak, with ~100 MB of Python and numpy
 
-# ---- an array's board -----------------------------------------------------------------------------------
-#: Routing the breakout board grows with about the square of its chips (every connection of the bus searches a board
-#: that grows with them). Measured in one run on the two-core machine, shared with other work: 0.3 s for one chip,
-#: 4.8 s for five (the strip), 16 s for eight (2x4), 41 s for sixteen (4x4 at 14 mm on 76 x 80 mm; 17 s at 25 mm
-#: on 120 x 120, 35 s at 14 mm on 100 x 100): 0.16-0.25 s x N^2. 0.2 s x N^2 is the estimate.
-SECONDS_PER_CHIP2 = 0.2
-#: The board's share of the budget. The sixteen-chip build above took 48 s in all (the CAD and physics branches beside
-#: the board; MagOne's 9.7 s in the same run): the spec's largest array (16 chips on one bus) stays within the
-#: minute, and a larger one would need this raised on measurement.
-MAX_BOARD_S = 55.0
+# ---- an array's board ----------------------------------------------------------------------------------
+#: Routing the breakout board grows faster than its chips: every connection of the bus searches a board that grows
+#: with them, and a dense grid rips up and re-routes. Measured (CPU s of pcb.board, preflight's board, 14 mm pitch,
+#: the two-core machine under a load of 8-15): 1 chip 0.48 s, 2 (1x2) 2.79, 4 (2x2) 15.1, 5 (1x5) 7.24, 8 (2x4) 27.9,
+#: 9 (3x3) 18.9; 16 (4x4) over 300 s of wall time (73 s in the issue's run, 41 s on a quieter machine). A least-squares
+#: fit of log t on log N gives t = 0.675 N^1.71 (measured/fitted 0.66-2.09, the compact 2x2 the worst: its rip-ups);
+#: adding the board's area gave t ~ N^0.43 (N/A)^3.1 over six noisy points, an over-fit we do not use. The estimate is
+#: the fit's power with its constant raised to bound every measurement: 1.45 N^1.7 (measured/estimated 0.31-0.98).
+SECONDS_PER_CHIP_POWER = 1.45
+CHIP_EXPONENT = 1.7
+#: The board's share of the budget: all of it but the fixed part; the whole-budget check (routing counted beside
+#: the other parts) refuses most arrays past six to eight chips first.
+MAX_BOARD_S = 50.0
+
+
+def routing_s(chips: int) -> float:
+    """Estimated seconds to route an array's board of ``chips`` MLX90393s (0 for a single taxel: in FIXED_S)."""
+    return SECONDS_PER_CHIP_POWER * chips**CHIP_EXPONENT if chips > 1 else 0.0
+
+
+def most_chips(seconds: float) -> int:
+    """The most chips whose board routes within ``seconds``."""
+    return max(1, int((max(seconds, 0.0) / SECONDS_PER_CHIP_POWER) ** (1.0 / CHIP_EXPONENT)))
+
 
 # ---- calibration ----------------------------------------------------------------------------------------
 #: Rows of the simulated scan (field, force, the polynomial fits, the CSV in the build): linear and cheap, but
@@ -123,6 +139,7 @@ class Cost:
     fe_peak_triangles: int  # the finest mesh's
     scan_rows: int
     mls: bool
+    chips: int = 0  # an array's chips on its board (0: a single taxel)
 
     @property
     def fe_work(self) -> int:
@@ -133,7 +150,7 @@ class Cost:
         """Estimated seconds per cost driver (the fixed part excluded)."""
         mls = SECONDS_PER_MLS_ROW2 * self.scan_rows**2 if self.mls else 0.0
         return {"tessellation": SECONDS_PER_TRIANGLE * self.triangles, "fe": SECONDS_PER_FE_WORK * self.fe_work,
-                "calibration": SECONDS_PER_SCAN_ROW * self.scan_rows + mls}
+                "calibration": SECONDS_PER_SCAN_ROW * self.scan_rows + mls, "routing": routing_s(self.chips)}
 
     @property
     def seconds(self) -> float:
@@ -148,13 +165,20 @@ class Cost:
 # ---- the estimates --------------------------------------------------------------------------------------
 
 
+#: More facets round a circle than any limit lets through (what a tolerance too fine to compute is counted as).
+MAX_FACETS = 1e12
+
+
 def facets(radius_mm: float, tolerance_mm: float, angle_deg: float) -> float:
     """Facets round a full circle of ``radius_mm`` meshed within ``tolerance_mm`` of it and ``angle_deg``
     between neighbouring facets' normals: the kernel honours both, so the finer of the two."""
     by_angle = 360.0 / angle_deg
     if tolerance_mm >= radius_mm:
         return max(by_angle, 3.0)
-    return max(by_angle, math.pi / math.acos(1.0 - tolerance_mm / radius_mm), 3.0)
+    # acos(1 - x) as 2 asin(sqrt(x / 2)): exact where 1 - x rounds to 1 (x below 1e-16 gave acos(1) = 0 and a division
+    # by zero); capped where even that underflows, far past any limit.
+    half_angle = 2.0 * math.asin(math.sqrt(tolerance_mm / radius_mm / 2.0))
+    return max(by_angle, math.pi / half_angle if half_angle > 0.0 else MAX_FACETS, 3.0)
 
 
 def triangles(design: Design) -> int:
@@ -200,6 +224,7 @@ def estimate(design: Design) -> Cost:
         fe_peak_triangles=fe_triangles(design, min(meshes)) if meshes else 0,
         scan_rows=scan_rows(design),
         mls=design.spec.calibration.method.value in ("mls", "auto"),
+        chips=(len(design.taxels) + (design.spec.reference is not None)) if design.spec.array is not None else 0,
     )
 
 
@@ -232,13 +257,8 @@ def check_limits(design: Design) -> Cost:
             if need is not None:
                 raise SpecError(key, getattr(m, name), what, f"raise {key} to at least {_fmt(_round_up(need))}")
         raise SpecError("mould.cavities", design.cavities, what, "use fewer cavities per mould")
-    chips = len(design.taxels) + (spec.reference is not None)  # the reference chip is one more on the board
-    if spec.array is not None and SECONDS_PER_CHIP2 * chips**2 > MAX_BOARD_S:
-        most = int(math.sqrt(MAX_BOARD_S / SECONDS_PER_CHIP2))
-        key = "array.rows" if spec.array.positions_mm is None else "array.positions_mm"
-        raise SpecError(key, getattr(spec.array, key.split(".")[1]),
-                        f"makes {chips} taxels, whose board would take about {SECONDS_PER_CHIP2 * chips**2:.0f} s to "
-                        f"route (limit {MAX_BOARD_S:g} s)", f"use at most {most} taxels per array")
+    if routing_s(cost.chips) > MAX_BOARD_S:
+        _too_many_chips(design, cost, MAX_BOARD_S, f"limit {MAX_BOARD_S:g} s")
     if cost.fe_work > MAX_FE_WORK:
         p = spec.predict
         finest_ok = [h for h in cost.fe_meshes_mm if sum(fe_triangles(design, g) for g in cost.fe_meshes_mm
@@ -282,9 +302,23 @@ _KNOBS = {
 }
 
 
+def _too_many_chips(design: Design, cost: Cost, seconds: float, limit: str) -> None:
+    """Refuse an array whose board's routing is estimated past ``seconds``, naming the key that sets its taxels."""
+    array = design.spec.array
+    assert array is not None
+    key = "array.rows" if array.positions_mm is None else "array.positions_mm"
+    raise SpecError(key, getattr(array, key.split(".")[1]),
+                    f"makes {cost.chips} chips, whose board would take about {routing_s(cost.chips):.0f} s to route "
+                    f"({limit})", f"use at most {most_chips(seconds)} taxels per array")
+
+
 def _over_budget(design: Design, cost: Cost) -> None:
     """Each part is within its own limit but together they are not: blame the costliest part's key."""
     part = max(cost.parts_s, key=lambda k: cost.parts_s[k])
+    if part == "routing":
+        rest = cost.seconds - cost.parts_s["routing"]
+        _too_many_chips(design, cost, BUDGET_S - rest,
+                        f"{cost.seconds:.0f} s for the whole build, budget {BUDGET_S:g} s")
     section, name, lo, hi = _KNOBS[part]
     current = getattr(getattr(design.spec, section), name)
 

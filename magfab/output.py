@@ -43,13 +43,11 @@ from __future__ import annotations
 
 import errno
 import fcntl
-import functools
 import json
 import os
 import re
 import secrets
 import shutil
-import sys
 import time
 from collections.abc import Callable
 from contextlib import suppress
@@ -57,6 +55,7 @@ from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 
 from .errors import OutputError
+from .exchange import exchange
 
 __all__ = ["Artifact", "check_target", "write", "is_build", "OutputError"]
 
@@ -376,42 +375,6 @@ def _roll_back_in_place(out: Path, lock: _Lock) -> None:
     _step("in-place update rolled back")
 
 
-_NO_EXCHANGE = {errno.EINVAL, errno.ENOSYS, errno.ENOTSUP, errno.EOPNOTSUPP}  # the file system or kernel lacks it
-
-
-@functools.cache
-def _renameat2() -> Callable[..., int] | None:
-    """libc's ``renameat2`` (glibc 2.28+, Linux 3.15+); None elsewhere."""
-    if not sys.platform.startswith("linux"):
-        return None
-    import ctypes  # only the swap needs it; `import magfab` stays fast
-
-    try:
-        call = ctypes.CDLL(None, use_errno=True).renameat2
-    except (OSError, AttributeError):
-        return None
-    call.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p, ctypes.c_uint]
-    call.restype = ctypes.c_int
-    return call
-
-
-def _exchange(a: Path, b: Path) -> bool:
-    """Swap the folders at ``a`` and ``b`` in one step (``RENAME_EXCHANGE``); False where the platform, the C
-    library or the file system cannot, so the caller renames twice. Any other failure is the OSError."""
-    call = _renameat2()
-    if call is None:
-        return False
-    import ctypes
-
-    at_fdcwd, rename_exchange = -100, 2  # <fcntl.h>, <linux/fs.h>
-    if call(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), rename_exchange) == 0:
-        return True
-    err = ctypes.get_errno()
-    if err in _NO_EXCHANGE:
-        return False
-    raise OSError(err, os.strerror(err), str(a))
-
-
 def _swap(out: Path, tmp: Path, lock: _Lock) -> None:
     """The new build ``tmp`` to ``out``; the previous build (if any) ends at the journal's ``old``."""
     if not os.path.lexists(out):
@@ -421,7 +384,7 @@ def _swap(out: Path, tmp: Path, lock: _Lock) -> None:
     journal, new_inode = _sibling(out, "swap"), _inode(tmp)
     journal.write_text(json.dumps({"old": tmp.name, "new": tmp.name, "new_inode": new_inode}), encoding="utf-8")
     _step("journal written")
-    if _exchange(out, tmp):  # the previous build now at tmp's name
+    if exchange(out, tmp):  # the previous build now at tmp's name
         _step("new in place")
         return
     old = lock.make("old")

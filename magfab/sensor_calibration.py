@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from .errors import InputError, ModelLimitError, OutputError
+from .formats import bounded
 from .formats import sensor_records as records
 from .formats.calibration_json import calibration_sha256
 from .models.acceptance import acceptance
@@ -74,7 +75,8 @@ def build_of(folder: Path | None, spec: Spec) -> bool:
     if folder is None:
         return False
     try:
-        manifest = json.loads((Path(folder) / "manifest.json").read_text(encoding="utf-8"))
+        path = Path(folder) / "manifest.json"
+        manifest = bounded.loads_json(bounded.read_bytes(path, "JSON"), "JSON", path)
     except (OSError, ValueError):
         return False
     return isinstance(manifest, dict) and manifest.get("spec_sha256") == spec.sha256()
@@ -89,10 +91,11 @@ def acceptance_bands(spec: Spec, design: Design, folder: Path | None,
         sha = _added(sensor).get("files", {}).get("acceptance.json")
         if sha:
             with record_errors():
-                return json.loads(sensor.file(sha).decode("utf-8")), f"the record of {sensor.id}, acceptance.json"
+                where = f"the record of {sensor.id}, acceptance.json"
+                return bounded.loads_json(sensor.file(sha), "acceptance.json", where), where
     path = None if folder is None else Path(folder) / "calibration" / "acceptance.json"
     if path is not None and build_of(folder, spec) and path.is_file():
-        return json.loads(path.read_text(encoding="utf-8")), str(path)
+        return bounded.loads_json(bounded.read_bytes(path, "acceptance.json"), "acceptance.json", path), str(path)
 
     try:
         return acceptance(design, predict(design)), "the design's acceptance bands"
@@ -130,7 +133,7 @@ def spec_of_record(sensor: records.Sensor) -> Spec | None:
     if not sha:
         return None
     with record_errors():
-        raw = json.loads(sensor.file(sha).decode("utf-8"))
+        raw = bounded.loads_json(sensor.file(sha), "spec.json", f"{sensor.path}/files/{sha}.json")
     return spec_from_json(raw, f"{sensor.path}/files/{sha}.json")
 
 
@@ -243,9 +246,9 @@ def _measured(folder: Path) -> list[tuple[str, bytes]]:
     for path in sorted(calibration.glob("*.json")) if calibration.is_dir() else []:
         if path.name != "calibration.json" and not path.name.startswith("taxel_"):
             continue
-        data = path.read_bytes()
+        data = bounded.read_bytes(path, "calibration.json")
         try:
-            source = json.loads(data)["scan"]["source"]
+            source = bounded.loads_json(data, "calibration.json", path)["scan"]["source"]
         except (ValueError, KeyError, TypeError):
             continue  # a file gone bad: nothing worth keeping
         if not str(source).startswith("simulated"):
@@ -280,8 +283,8 @@ def unkept_calibrations(folder: Path, starts: list[Path]) -> list[str]:
         if (root / records.MARKER).is_file() and root not in roots:
             roots.append(root)
     kept = _kept(roots)
-    return [rel for rel, data in measured
-            if hashlib.sha256(data).hexdigest() not in kept and calibration_sha256(json.loads(data)) not in kept]
+    return [rel for rel, data in measured if hashlib.sha256(data).hexdigest() not in kept
+            and calibration_sha256(bounded.loads_json(data, "calibration.json", folder / rel)) not in kept]
 
 
 def refuse_discarding(folder: Path, starts: list[Path]) -> None:

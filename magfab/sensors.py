@@ -7,7 +7,6 @@ Pure functions over records and build folders; the CLI (:mod:`magfab.sensor_cli`
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
@@ -19,6 +18,7 @@ from . import __version__
 from .design import Design, derive
 from .errors import InputError
 from .export.sensor_history import check_error_mN, check_rest_uT
+from .formats import bounded
 from .formats import sensor_records as rec
 from .formats.calibration_json import calibration_sha256
 from .formats.scan_csv import ScanError, read_scan_csv
@@ -55,9 +55,10 @@ def is_measured(source: str) -> bool:
     return not source.startswith("simulated") and not Path(source.split(MERGED)[0]).name.startswith("scan_simulated")
 
 
-def _read(path: Path) -> bytes:
+def _read(path: Path, what: str = "JSON") -> bytes:
+    """A build folder's file (within ``what``'s limit, :mod:`.formats.bounded`)."""
     try:
-        return path.read_bytes()
+        return bounded.read_bytes(path, what)
     except OSError as exc:
         raise SensorError(f"{path}: {exc.strerror}: the build folder is incomplete; rebuild it") from None
 
@@ -75,12 +76,12 @@ def _scan_files(folder: Path, source: str, sha256: str, kept: str | None) -> dic
     (``kept``), the recording and the reference log named in ``source``, a plain scan by its name."""
     files: dict[str, bytes] = {}
     if kept is not None and (folder / kept).is_file():
-        files["scan_merged.csv" if MERGED in source else "scan.csv"] = (folder / kept).read_bytes()
+        files["scan_merged.csv" if MERGED in source else "scan.csv"] = _read(folder / kept, "scan CSV")
     names = source.split(MERGED)
     for role, name in zip(("scan.csv", "reference.csv"), names):
         for where in (folder / name, folder / "calibration" / name):
             if role not in files and where.is_file():
-                files[role] = where.read_bytes()
+                files[role] = _read(where, "scan CSV" if role == "scan.csv" else "reference log")
     if MERGED not in source and "scan.csv" in files and rec.sha256_hex(files["scan.csv"]) != sha256:
         del files["scan.csv"]  # a file of the same name, not the one fitted
     return files
@@ -90,8 +91,8 @@ def _adopt(folder: Path, rel: str, taxel: int | None, design: Design, kept: str 
     path = folder / rel
     if not path.is_file():
         return None
-    raw = path.read_bytes()
-    cal = json.loads(raw.decode("utf-8"))
+    raw = _read(path, "calibration.json")
+    cal = bounded.loads_json(raw, "calibration.json", path)
     scan = cal.get("scan", {})
     source = str(scan.get("source", "simulated"))
     if not is_measured(source):
@@ -148,15 +149,15 @@ def add_from_build(root: Path, sensor_id: str, folder: Path, date: str | None = 
         rec.check_id(sensor_id)
         if (Path(root) / sensor_id / "sensor.json").exists():
             raise SensorError(f"sensor = {sensor_id}: already has a record in {root}: pick another ID, or use that one")
-        manifest = json.loads(_read(folder / "manifest.json"))
-        spec_raw, design_raw = _read(folder / "spec.json"), _read(folder / "design.json")
-        spec = json.loads(spec_raw)
+        manifest = bounded.loads_json(_read(folder / "manifest.json"), "JSON", folder / "manifest.json")
+        spec_raw, design_raw = _read(folder / "spec.json", "spec.json"), _read(folder / "design.json")
+        spec = bounded.loads_json(spec_raw, "spec.json", folder / "spec.json")
         design = derive(spec_from_json(spec, str(folder / "spec.json")))
         taxels = None if design.spec.array is None else design.spec.array.taxels  # spec.json states rows and cols
         files = {"spec.json": spec_raw, "design.json": design_raw}
         for role, rel in (("acceptance.json", "calibration/acceptance.json"), ("array.json", "calibration/array.json")):
             if (folder / rel).is_file():
-                files[role] = (folder / rel).read_bytes()
+                files[role] = _read(folder / rel, role)
         spec_sha = str(manifest.get("spec_sha256") or rec.sha256_hex(spec_raw))
         adopted = measured_calibrations(folder, taxels, design)
         info = {"spec_name": spec.get("name"), "spec_sha256": spec_sha, "design_sha256": rec.sha256_hex(design_raw),
@@ -278,7 +279,7 @@ def bands(sensor: rec.Sensor) -> dict[str, Any]:
     if not sha:
         return {}
     with records_checked():
-        return dict(json.loads(sensor.file(sha).decode("utf-8")))
+        return dict(bounded.loads_json(sensor.file(sha), "acceptance.json", f"the record of {sensor.id}"))
 
 
 def _limits(bands: Mapping[str, Any]) -> dict[str, tuple[float, tuple[float, float] | None]]:

@@ -22,8 +22,10 @@ from typing import Any
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator, model_validator
 
 from .errors import SpecError, shorten, shown
+from .readout.src.magfab_readout import bounded
 from .recipes import catalogue
 from .spec_errors import did_you_mean, translate_error
+from .toml_input import loads_toml, read_toml
 
 __all__ = ["Spec", "Tip", "Density", "Printer", "Array", "Environment", "Skin", "Polarity", "MAX_TAXELS", "load_spec",
            "spec_from_json", "parse_spec", "spec_from_dict", "default_spec_text", "translate_error",
@@ -515,19 +517,17 @@ def load_spec(path: str | Path | None = None) -> Spec:
     if path is None:
         return parse_spec(default_spec_text(), default_name="magone")
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise SpecError("spec", str(path), "file not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise SpecError("spec", str(path), f"cannot read it as UTF-8 text: {exc}") from None
-    return parse_spec(text, default_name=path.stem)
+    text = read_toml(path, "spec")
+    return parse_spec(text, default_name=path.stem, where=str(path))
 
 
-def parse_spec(text: str, default_name: str = "magone") -> Spec:
-    """Validate TOML text. A missing ``name`` is taken from ``default_name`` (the file's stem)."""
+def parse_spec(text: str, default_name: str = "magone", where: str = "<TOML>") -> Spec:
+    """Validate TOML text (``where`` names it: its path). A missing ``name`` is taken from ``default_name`` (the
+    file's stem)."""
     try:
-        raw = tomllib.loads(text)
+        raw = loads_toml(text, "spec", where)
+    except bounded.InputFileError:
+        raise
     except tomllib.TOMLDecodeError as exc:
         raise SpecError("spec", "<TOML>", f"not valid TOML: {exc}") from None
     except ValueError as exc:  # e.g. an integer of more than 4300 digits (Python's int-from-string limit)
@@ -547,7 +547,9 @@ def load_build_spec(folder: str | Path) -> Spec:
     spec. :class:`SpecError` when the folder has none or it does not validate."""
     path = Path(folder) / "spec.json"
     try:
-        raw = json.loads(path.read_text(encoding="utf-8"))
+        raw = bounded.loads_json(bounded.read_bytes(path, "spec.json"), "spec.json", path)
+    except bounded.InputFileError:
+        raise
     except FileNotFoundError:
         raise SpecError("spec", str(path), "file not found: not a magfab build folder") from None
     except (OSError, UnicodeDecodeError, ValueError) as exc:

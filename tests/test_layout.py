@@ -103,7 +103,7 @@ LAYERS = (
     ("magfab.limits",),
     ("magfab.board", "magfab.pcb"),  # below the checks: preflight holds the board's size to what placement can make
     ("magfab.check",),
-    ("magfab.export", "magfab.output", "magfab.array_bench", "magfab.sensor_calibration"),
+    ("magfab.export", "magfab.output", "magfab.exchange", "magfab.array_bench", "magfab.sensor_calibration"),
     ("magfab.pipeline", "magfab.stages", "magfab.sensors"),
     ("magfab.inverse",),
     ("magfab.sensor_cli",),

@@ -242,7 +242,7 @@ def _killed_at(k: int, call) -> int:
 def swap(request, monkeypatch):
     """How the folders are swapped: in one step, or (where the file system refuses the exchange) by two renames."""
     if request.param == "two renames":
-        monkeypatch.setattr(output, "_exchange", lambda a, b: False)
+        monkeypatch.setattr(output, "exchange", lambda a, b: False)
     return request.param
 
 
@@ -341,7 +341,7 @@ def test_a_build_is_at_the_path_at_every_instant_of_a_rebuild(built):
 def test_a_kill_between_the_two_renames_is_undone_by_the_next_run(built, monkeypatch):
     """Killed after the previous build was moved aside, before the new one landed (the two renames, where the
     file system refuses the exchange: the documented window)."""
-    monkeypatch.setattr(output, "_exchange", lambda a, b: False)
+    monkeypatch.setattr(output, "exchange", lambda a, b: False)
     out, _user = built
     old = _tree(out)
     pid = os.fork()
@@ -599,10 +599,10 @@ def test_a_read_only_folder_is_one_line_naming_it_and_nothing_is_lost(built, mon
         def refused(a, b):
             raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), str(a))
 
-        monkeypatch.setattr(output, "_exchange", refused)
+        monkeypatch.setattr(output, "exchange", refused)
         fail = "rename"
     elif fail == "rename":
-        monkeypatch.setattr(output, "_exchange", lambda a, b: False)
+        monkeypatch.setattr(output, "exchange", lambda a, b: False)
     real = {"lock": os.open, "mkdir": os.mkdir, "rename": os.rename}[fail]
 
     def denied(path, *args, **kwargs):

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ScanError, shown
+from . import bounded
 
 __all__ = ["SCAN_COLUMNS", "FORCE_COLUMNS", "SENSOR_FORCE_COLUMNS", "HOST_TIME_COLUMN", "TAXEL_COLUMN",
            "REFERENCE_COLUMNS", "TEMPERATURE_COLUMN", "MIN_ROWS", "BANDS", "HOST_TIME_BAND", "MIN_SPAN_UT",
@@ -133,16 +134,16 @@ def scan_csv(scan: Scan, comments: Sequence[str] = ()) -> str:
     return out.getvalue()
 
 
-def _load(source: str | os.PathLike[str] | bytes) -> tuple[bytes, str]:
-    """(bytes, name) of a scan: a path, CSV text (a str holding a newline, or a comma and naming no file) or
-    CSV bytes."""
+def _load(source: str | os.PathLike[str] | bytes, what: str = "scan CSV") -> tuple[bytes, str]:
+    """(bytes, name) of a scan: a path (a regular file within ``what``'s limit, :mod:`.bounded`), CSV text (a str
+    holding a newline, or a comma and naming no file) or CSV bytes."""
     if isinstance(source, bytes):
         return source, "scan"
     if isinstance(source, str) and ("\n" in source or ("," in source and not os.path.exists(source))):
         return source.encode("utf-8"), "scan"
     path = Path(source)
     try:
-        return path.read_bytes(), path.name
+        return bounded.read_bytes(path, what), path.name
     except OSError as exc:
         raise ScanError(f"{path}: cannot read the scan file ({exc.strerror or exc})") from None
 
@@ -163,9 +164,9 @@ def _number(text: str, name: str, line: int, column: str, row: int, band: tuple[
     return x
 
 
-def _lines(source: str | os.PathLike[str] | bytes) -> tuple[list[tuple[int, str]], str, bytes]:
+def _lines(source: str | os.PathLike[str] | bytes, what: str = "scan CSV") -> tuple[list[tuple[int, str]], str, bytes]:
     """(numbered lines that are neither blank nor comments, the file's name, its bytes)."""
-    raw, name = _load(source)
+    raw, name = _load(source, what)
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
@@ -342,7 +343,7 @@ def read_recording(source: str | os.PathLike[str] | bytes, taxel: int | None = N
 def read_reference(source: str | os.PathLike[str] | bytes) -> Reference:
     """A reference force sensor's log (:class:`Reference`): columns ``time_s`` (host clock, Unix time, s) and
     ``Fx_N, Fy_N, Fz_N`` (others ignored); ScanError (one line) as :func:`read_scan_csv`."""
-    lines, name, raw = _lines(source)
+    lines, name, raw = _lines(source, "reference log")
     hline, names = _header(lines, name)
     _require(names, REFERENCE_COLUMNS, name, hline, "any order, others ignored; time_s is the host's clock, "
              "Unix time in s, the clock of the recording's host_time_s")

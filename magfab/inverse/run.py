@@ -17,18 +17,21 @@ full chain (FE), the front of the verified designs, and the files::
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import contextlib
+import shutil
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import InputError
+from .budget import check_plan, check_scheduler, check_trials, check_workers
 from .evaluate import FE, SURROGATE
 from .page import write_outputs
 from .pareto import front_mask, pick_for_verification, values_of
 from .result import DesignResult
 from .space import grid, latin_hypercube
-from .study import KEPT, Record, client, evaluate_all, records, run_study
+from .study import KEPT, Record, client, evaluate_all, open_study, records, run_study
 from .tables import rows, write_table
 from .targets import Models, Targets, load_targets
 
@@ -54,16 +57,41 @@ def _check_folder(folder: Path) -> None:
                          "give an empty or new folder")
 
 
+def _cluster(scheduler: str | None, workers: int | None) -> int | None:
+    """The local cluster's workers (None with ``scheduler``), refused before any work past what the machine holds
+    (:mod:`.budget`), as a malformed ``scheduler`` is."""
+    if scheduler:
+        check_scheduler(scheduler)
+    return check_workers(workers, scheduler) or None
+
+
+@contextlib.contextmanager
+def _made(folder: Path) -> Iterator[None]:
+    """Make ``folder`` (and its missing parents); if the block is refused (an InputError), remove what was made:
+    a refusal leaves nothing behind."""
+    new = next((p for p in reversed((folder, *folder.parents)) if not p.exists()), None)
+    folder.mkdir(parents=True, exist_ok=True)
+    try:
+        yield
+    except InputError:
+        if new is not None:
+            shutil.rmtree(new, ignore_errors=True)
+        raise
+
+
 def design(targets_path: Path, out: Path | None = None, scheduler: str | None = None, workers: int | None = None,
            progress: Progress | None = None) -> DesignResult:
     """Run ``magfab design`` (module doc)."""
     targets, base = load_targets(targets_path)
+    workers = _cluster(scheduler, workers)
+    check_trials(targets, workers or 0)
     folder = out or default_folder(targets)
     _check_folder(folder)
     say = progress or (lambda *_: None)
     with client(scheduler, workers) as c:
-        folder.mkdir(parents=True, exist_ok=True)  # once the cluster is there: a bad --scheduler writes nothing
-        study = run_study(targets, base, _storage(targets, folder), c, lambda n, t: say("search", n, t))
+        with _made(folder):  # once the cluster is there (a bad --scheduler writes nothing); a refused storage: none
+            opened = open_study(targets, _storage(targets, folder))
+        study = run_study(targets, base, _storage(targets, folder), c, lambda n, t: say("search", n, t), opened)
         trials = records(study)
         picks = _near_front(trials, targets)
         screened = [trials[i] for i in picks]
@@ -144,11 +172,10 @@ def sweep(targets_path: Path, out: Path | None = None, scheduler: str | None = N
     targets, base = load_targets(targets_path)
     if fidelity not in {m.value for m in Models}:
         raise InputError(f"--models {fidelity}: must be one of " + ", ".join(m.value for m in Models))
+    workers = _cluster(scheduler, workers)
+    check_plan(targets, levels, samples, workers or 0)  # counted before any is listed
     points = list(grid(targets.variables, levels)) if levels else latin_hypercube(targets.variables, samples or 100,
                                                                                     targets.study.seed)
-    if len(points) > targets.study.trials and levels:
-        raise InputError(f"--grid {levels}: {len(points)} designs, more than study.trials = {targets.study.trials} "
-                         "(raise study.trials or lower --grid)")
     folder = out or default_folder(targets)
     _check_folder(folder)
     say = progress or (lambda *_: None)

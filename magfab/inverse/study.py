@@ -13,8 +13,10 @@ models are NumPy-bound); an address connects to an existing Dask scheduler uncha
 from __future__ import annotations
 
 import contextlib
+import itertools
 import math
 import os
+import signal
 import socket
 import warnings
 from collections.abc import Callable, Iterable, Iterator, Mapping
@@ -75,7 +77,9 @@ def tally(records: Iterable[Record]) -> dict[str, int]:
 
 @contextlib.contextmanager
 def client(scheduler: str | None, workers: int | None) -> Iterator[Any]:
-    """A Dask client: on a new local cluster (``workers`` processes, default the cores) or on ``scheduler``."""
+    """A Dask client: on a new local cluster (``workers`` processes, default the cores) or on ``scheduler``. The local
+    workers start with SIGINT blocked and set it to its default (:mod:`magfab.inverse.worker`): a Ctrl-C ends them
+    quietly while magfab's own handler ends the run."""
     import dask
     from distributed import Client, LocalCluster
 
@@ -83,16 +87,29 @@ def client(scheduler: str | None, workers: int | None) -> Iterator[Any]:
         if scheduler:
             try:
                 c = Client(scheduler, timeout="3s")
-            except OSError as exc:
+            except (OSError, ValueError, TypeError, OverflowError) as exc:
                 raise StudyError(f"--scheduler {scheduler}: cannot connect to a Dask scheduler there ({exc})") from None
             with c:
                 yield c
             return
         # The scheduler's HTTP endpoint moves to a free port when 8787 is taken (another cluster): nothing to report.
         warnings.filterwarnings("ignore", message="Port 8787 is already in use", category=UserWarning)
-        with LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
-                          dashboard_address=None, silence_logs=50) as cluster, Client(cluster) as c:
+        with dask.config.set({"distributed.worker.preload": ["magfab.inverse.worker"]}), _sigint_blocked():
+            cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
+                                   dashboard_address=None, silence_logs=50)
+        with cluster, Client(cluster) as c:
             yield c
+
+
+@contextlib.contextmanager
+def _sigint_blocked() -> Iterator[None]:
+    """SIGINT blocked in this thread while the cluster starts: the event loop's thread and every worker process it
+    starts (then or later) inherit the mask; a Ctrl-C meanwhile is delivered here when it ends."""
+    try:
+        signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
 
 def _sampler(targets: Targets):
@@ -198,13 +215,13 @@ def tell(study, trial, result: dict[str, Any], targets: Targets) -> None:
 
 
 def run_study(targets: Targets, base: Spec, storage: str | Path, dask_client,
-              progress: Callable[[int, int], None] | None = None,
-              ) -> Any:
-    """Run the study to ``targets.study.trials`` evaluated designs (counting those a previous run stored)."""
+              progress: Callable[[int, int], None] | None = None, study: Any = None) -> Any:
+    """Run the study to ``targets.study.trials`` evaluated designs (counting those a previous run stored); ``study``:
+    the one :func:`open_study` opened at ``storage`` already."""
     from distributed import as_completed
     from optuna.trial import TrialState
 
-    study = open_study(targets, storage)
+    study = study if study is not None else open_study(targets, storage)
     _recover(study)
     finished = (TrialState.COMPLETE, TrialState.FAIL)
     done = len(study.get_trials(deepcopy=False, states=finished))
@@ -264,12 +281,23 @@ def evaluate_all(points: Iterable[dict[str, Any]], targets: Targets, base: Spec,
 
     points = list(points)
     args = (base.model_dump_json(), targets.model_dump_json())
-    futures = {dask_client.submit(evaluate, p, *args, fidelity, f"{targets.name}-{prefix}{i}", pure=False): i
-               for i, p in enumerate(points)}
+    workers = max(1, len(dask_client.scheduler_info().get("workers", {})) or 1)
+    todo = iter(enumerate(points))
+    futures: dict[Any, int] = {}
+    queue = as_completed()
+
+    def submit() -> None:  # a bounded number in flight, as the search keeps: the cluster holds no whole plan
+        for i, p in itertools.islice(todo, 1):
+            fut = dask_client.submit(evaluate, p, *args, fidelity, f"{targets.name}-{prefix}{i}", pure=False)
+            futures[fut] = i
+            queue.add(fut)
+
+    for _ in range(IN_FLIGHT_PER_WORKER * workers):
+        submit()
     results: dict[int, dict[str, Any]] = {}
-    for n, fut in enumerate(as_completed(futures), 1):
-        results[futures[fut]] = fut.result()
+    for n, fut in enumerate(queue, 1):
+        results[futures.pop(fut)] = fut.result()
+        submit()
         if progress:
             progress(n, len(points))
     return [Record.of(i, points[i], r) for i, r in sorted(results.items())]
-

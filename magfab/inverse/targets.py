@@ -44,9 +44,10 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_serializer, field_validator
 
-from ..errors import SpecError, shown
+from ..errors import InputError, SpecError, shown
 from ..recipes import catalogue
 from ..spec import NAME_PATTERN, Sensor, Spec, Tip, is_valid_name, load_spec, translate_error
+from ..toml_input import loads_toml, read_toml
 
 __all__ = ["Objective", "OBJECTIVES", "Targets", "load_targets", "parse_targets"]
 
@@ -272,10 +273,13 @@ def _lowest(c: Choice) -> float:
     return float(min(c))
 
 
-def parse_targets(text: str, default_name: str = "design") -> Targets:
-    """Validate TARGETS TOML text; errors are :class:`SpecError` lines naming the key."""
+def parse_targets(text: str, default_name: str = "design", where: str = "<TOML>") -> Targets:
+    """Validate TARGETS TOML text (``where`` names it: its path); errors are :class:`SpecError` lines naming the
+    key."""
     try:
-        raw = tomllib.loads(text)
+        raw = loads_toml(text, "targets", where)
+    except InputError:  # a bound of the file (magfab.formats.bounded), already one line
+        raise
     except (tomllib.TOMLDecodeError, ValueError) as exc:
         raise SpecError("targets", "<TOML>", f"not valid TOML: {exc}") from None
     raw.setdefault("name", default_name)
@@ -295,12 +299,7 @@ def parse_targets(text: str, default_name: str = "design") -> Targets:
 def load_targets(path: str | Path) -> tuple[Targets, Spec]:
     """The targets and the base spec they start from (its own file, or MagOne)."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise SpecError("targets", str(path), "file not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise SpecError("targets", str(path), f"cannot read it as UTF-8 text: {exc}") from None
-    targets = parse_targets(text, default_name=path.stem if is_valid_name(path.stem) else "design")
+    text = read_toml(path, "targets")
+    targets = parse_targets(text, default_name=path.stem if is_valid_name(path.stem) else "design", where=str(path))
     base = load_spec(path.parent / targets.base) if targets.base else load_spec()
     return targets, base

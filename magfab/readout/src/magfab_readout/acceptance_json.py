@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import math
 
+from . import bounded
 from .json_checks import FormatError, is_number
 
 __all__ = ["FORMAT", "KEYS", "SECTIONS", "AcceptanceError", "drift_flags", "loads", "validate"]
@@ -103,9 +104,11 @@ def validate(data: object) -> dict:
 
 
 def loads(raw: bytes) -> dict:
-    """Parse (UTF-8) and :func:`validate` acceptance.json bytes."""
+    """Parse (UTF-8; nesting and keys bounded, :mod:`.bounded`) and :func:`validate` acceptance.json bytes."""
     try:
-        data = json.loads(raw.decode("utf-8"))
+        data = bounded.loads_json(raw, "acceptance.json")
+    except bounded.InputFileError:
+        raise
     except ValueError as exc:  # UnicodeDecodeError is a ValueError too
         raise AcceptanceError("", "(contents)", f"is not valid JSON ({exc})") from None
     return validate(data)

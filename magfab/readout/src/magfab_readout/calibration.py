@@ -31,6 +31,7 @@ import json
 import math
 import pkgutil
 
+from . import bounded
 from .calibration_json import (
     FORCES,
     FORMAT,
@@ -110,18 +111,19 @@ class Calibration:
 
     @classmethod
     def from_json(cls, text: str) -> Calibration:
-        """Parse calibration.json text."""
+        """Parse calibration.json text (its nesting and keys bounded, :mod:`.bounded`)."""
         try:
-            data = json.loads(text)
+            data = bounded.loads_json(text, "calibration.json")
+        except bounded.InputFileError:
+            raise
         except ValueError as exc:
             raise CalibrationError("", text[:40], f"is not valid JSON ({exc})") from None
         return cls(data)
 
     @classmethod
     def load(cls, path: str) -> Calibration:
-        """Read a calibration.json file."""
-        with open(path, encoding="utf-8") as f:
-            return cls.from_json(f.read())
+        """Read a calibration.json file: a regular file within its limit (:mod:`.bounded`)."""
+        return cls.from_json(bounded.read_text(path, "calibration.json"))
 
     @classmethod
     def embedded(cls) -> Calibration:

@@ -31,6 +31,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, Mapping, Tuple
 
+from . import bounded
 from .json_checks import FormatError, finite, is_number
 
 __all__ = ["FORMAT", "FORCES", "INPUTS", "MAX_ORDER", "MLS_MAX_ORDER", "AXES", "THERMAL_MAX_PER_C",
@@ -392,9 +393,11 @@ def check_formula(checked: Checked) -> Checked:
 
 
 def loads(text: str) -> Checked:
-    """Parse and :func:`validate` calibration.json text."""
+    """Parse (nesting and keys bounded, :mod:`.bounded`) and :func:`validate` calibration.json text."""
     try:
-        data = json.loads(text)
+        data = bounded.loads_json(text, "calibration.json")
+    except bounded.InputFileError:
+        raise
     except ValueError as exc:
         raise CalibrationError("", text[:40], f"is not valid JSON ({exc})") from None
     return validate(data)

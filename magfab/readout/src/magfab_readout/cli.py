@@ -17,7 +17,7 @@ import sys
 import time
 from typing import List, Optional
 
-from . import _build, array_cli, board_sensor, check, identity, records
+from . import _build, array_cli, board_sensor, bounded, check, identity, records
 from .calibration import Calibration, CalibrationError, calibration_sha256
 from .cli_shared import CSV_COLUMNS, Interrupt, UsageError, at_fallback_baud, format_csv, format_number, record_header
 from .device import Device, DeviceError, calibration_record, cross_check
@@ -289,8 +289,10 @@ def _upload(args: argparse.Namespace, out) -> int:
         return _upload_sensor(args, out)
     if args.calibration:
         try:
-            with open(args.calibration, encoding="utf-8") as handle:
-                data = json.load(handle)
+            data = bounded.loads_json(bounded.read_bytes(args.calibration, "calibration.json"), "calibration.json",
+                                      args.calibration)
+        except bounded.InputFileError:
+            raise
         except ValueError as exc:
             raise CalibrationError("", args.calibration, f"is not valid JSON ({exc})") from None
     else:
@@ -363,7 +365,7 @@ def main(argv: Optional[List[str]] = None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())  # stdout's reader went away (| head): stop quietly
         return 0
-    except UsageError as exc:
+    except (UsageError, bounded.InputFileError) as exc:  # the input file refused before it is parsed
         print(f"magfab-readout: error: {exc}", file=sys.stderr)
         return 2
     except (DeviceError, CalibrationError, EepromError, records.RecordError, OSError) as exc:

@@ -35,6 +35,8 @@ import secrets
 from pathlib import Path
 from typing import Any, Dict, Iterator, List, Mapping, Optional, Sequence, Tuple
 
+from . import bounded
+
 __all__ = ["EVENT_KINDS", "FORMAT", "ID_PATTERN", "MARKER", "ROOT_ENV", "RecordError", "Sensor", "check_id", "create",
            "find_root", "init_root", "list_sensors", "now_utc", "open_sensor", "owner_of", "parse_date",
            "sha256_hex"]
@@ -152,7 +154,9 @@ def _json_bytes(data: Mapping[str, Any]) -> bytes:
 
 def _read_json(path: Path, what: str) -> Dict[str, Any]:
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
+        data = bounded.loads_json(bounded.read_bytes(path, "JSON"), what, path)
+    except bounded.InputFileError:
+        raise
     except FileNotFoundError:
         raise RecordError(what, str(path), "is missing: the sensor record is incomplete") from None
     except (OSError, ValueError, UnicodeDecodeError) as exc:
@@ -343,7 +347,7 @@ class Sensor:
         matches = sorted((self.path / "files").glob(sha256 + ".*"))
         if not matches:
             raise RecordError("file", sha256, f"is not kept in the record of {self.id}")
-        data = matches[0].read_bytes()
+        data = bounded.read_bytes(matches[0], "a record's file", FILE_MAX_BYTES)
         if sha256_hex(data) != sha256:
             raise RecordError("file", str(matches[0]), "does not hold the bytes its name promises: the record "
                               "was edited by hand; restore it from a backup")
@@ -373,4 +377,5 @@ class Sensor:
                               "SCAN --reference REF --sensor {}`".format(
                                   what, "since its new skin " if epoch else "", self.id))
         event = found[-1]
-        return event, json.loads(self.file(event["files"]["calibration.json"]).decode("utf-8"))
+        return event, bounded.loads_json(self.file(event["files"]["calibration.json"]), "calibration.json",
+                                         f"the record of {self.id}")

@@ -36,7 +36,7 @@ import time
 from dataclasses import dataclass
 from typing import Iterator, List, Optional, Sequence, Tuple
 
-from . import array_json  # an array build's compensation (docs/bundle.md section 5)
+from . import array_json, bounded  # array_json: an array build's compensation (docs/bundle.md section 5)
 from .calibration import Calibration
 from .device import DeviceError
 from .frames import STATUS_CHIP_ERROR, STATUS_OUTSIDE_REGION, Sample, fault_name, flag_letters
@@ -93,7 +93,7 @@ class ArrayCalibration:
     @classmethod
     def from_files(cls, read) -> ArrayCalibration:
         """From ``read(name) -> bytes`` (array.json, then the taxel files it names)."""
-        array = json.loads(read("array.json").decode("utf-8"))
+        array = bounded.loads_json(read("array.json"), "array.json")
         names = [t.get("calibration") if isinstance(t, dict) else None for t in array.get("taxels") or []]
         return cls(array, [Calibration.from_json(read(name).decode("utf-8")) if isinstance(name, str) else {}
                            for name in names])
@@ -102,8 +102,8 @@ class ArrayCalibration:
     def load(cls, folder: str) -> ArrayCalibration:
         """From a folder holding array.json and the taxel files (a build's ``calibration/``)."""
         def read(name: str) -> bytes:
-            with open(os.path.join(folder, os.path.basename(name)), "rb") as f:
-                return f.read()
+            return bounded.read_bytes(os.path.join(folder, os.path.basename(name)),
+                                      "array.json" if name == "array.json" else "calibration.json")
         return cls.from_files(read)
 
     @classmethod

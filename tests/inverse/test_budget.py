@@ -1,0 +1,99 @@
+"""A study's limits (magfab.inverse.budget), each at its edge: just under passes, just over is refused in one line
+naming the option or key, its value and what is allowed; generated plans near and past the edges."""
+
+from __future__ import annotations
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from magfab.inverse import budget
+from magfab.inverse.space import grid
+from magfab.inverse.study import StudyError
+from magfab.inverse.targets import parse_targets
+
+SMALL = """
+[variables]
+magnets = ["d5_h2"]
+grades = ["N52"]
+materials = ["ecoflex-00-30"]
+tips = ["hemisphere"]
+d_max_mm = [5.0, 7.0]
+d_min_mm = [2.5, 3.0]
+elastomer_diameter_mm = {values = [12.0]}
+cover_mm = [1.5, 2.0]
+[study]
+trials = %d
+"""
+
+
+def test_the_grid_at_the_trial_limit_passes_and_one_over_is_refused():
+    targets = parse_targets(SMALL % 8)  # 2 x 2 x 2 numeric levels of one magnet, material and tip
+    assert budget.check_plan(targets, 2, None, 2) == 8 == len(list(grid(targets.variables, 2)))
+    with pytest.raises(StudyError, match=r"--grid 3: 27 designs, more than study.trials = 8"):
+        budget.check_plan(parse_targets(SMALL % 8), 3, None, 2)
+    assert budget.check_plan(parse_targets(SMALL % 27), 3, None, 2) == 27
+
+
+def test_the_samples_at_the_trial_limit_pass_and_one_over_is_refused():
+    targets = parse_targets(SMALL % 40)
+    assert budget.check_plan(targets, None, 40, 2) == 40
+    with pytest.raises(StudyError, match=r"^--lhs 41: designs, more than study.trials = 40 "):
+        budget.check_plan(targets, None, 41, 2)
+
+
+def test_the_designs_at_the_memory_limit_pass_and_one_over_is_refused():
+    most = budget.most_designs(2)
+    assert most * budget.MB_PER_DESIGN + 2 * budget.MB_PER_WORKER + budget.STUDY_FIXED_MB <= budget.memory_mb()
+    targets = parse_targets(SMALL % 1_000_000)
+    assert budget.check_plan(targets, None, most, 2) == most
+    with pytest.raises(StudyError, match=rf"^--lhs {most + 1}: designs, more than memory holds: at most {most:,}"):
+        budget.check_plan(targets, None, most + 1, 2)
+    budget.check_trials(parse_targets(SMALL % most), 2)
+    with pytest.raises(StudyError, match=rf"^study.trials = {most + 1:,}: more than memory holds"):
+        budget.check_trials(parse_targets(SMALL % (most + 1)), 2)
+
+
+@pytest.mark.parametrize("cores", [1, 2, 64])
+def test_the_workers_at_the_limit_pass_and_one_over_is_refused(monkeypatch, cores):
+    monkeypatch.setattr(budget.os, "cpu_count", lambda: cores)
+    most = budget.most_workers()
+    assert most == min(cores, int((budget.memory_mb() - budget.STUDY_FIXED_MB) // budget.MB_PER_WORKER))
+    assert budget.check_workers(most, None) == most == budget.check_workers(None, None)
+    with pytest.raises(StudyError, match=rf"^--workers {most + 1}: more than this machine can run: at most {most} "):
+        budget.check_workers(most + 1, None)
+    assert budget.check_workers(most + 1, "tcp://127.0.0.1:8786") == 0  # an existing cluster: no local workers
+
+
+@settings(max_examples=60, deadline=None)
+@given(levels=st.integers(2, 60), samples=st.integers(1, 2_000_000), workers=st.integers(1, 300),
+       trials=st.integers(1, 1_000_000), cores=st.integers(1, 128))
+def test_generated_plans_are_refused_exactly_past_a_limit(levels, samples, workers, trials, cores):
+    """Near and past every edge: a plan is accepted iff it is within the trials and memory, workers iff within the
+    cores and memory; a refusal is one line naming the option."""
+    targets = parse_targets(SMALL % trials)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(budget.os, "cpu_count", lambda: cores)
+        _accepted_iff(workers <= budget.most_workers(), f"--workers {workers}:", budget.check_workers, workers, None)
+    for lv, n, count in ((levels, None, budget.grid_size(targets.variables, levels)), (None, samples, samples)):
+        _accepted_iff(count <= trials and count <= budget.most_designs(1), "--grid" if lv else "--lhs",
+                      budget.check_plan, targets, lv, n, 1)
+
+
+def _accepted_iff(within: bool, start: str, check, *args) -> None:
+    if within:
+        check(*args)
+        return
+    with pytest.raises(StudyError) as info:
+        check(*args)
+    assert str(info.value).startswith(start) and "\n" not in str(info.value)
+
+
+@settings(max_examples=20, deadline=None)
+@given(levels=st.integers(2, 4))
+def test_the_grid_is_counted_as_it_is_listed(levels):
+    variables = parse_targets(SMALL % 10).variables
+    assert budget.grid_size(variables, levels) == len(list(grid(variables, levels))) == levels**3
+    assert budget.grid_size(parse_targets("").variables, 50) > 10**9  # the default variables at --grid 50
+
+
