@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import csv
 import hashlib
+import importlib
 import io
 import itertools
 import json
@@ -559,12 +560,26 @@ def test_installed_cli_info_and_errors(installed):
     assert proc.returncode == 0, proc.stderr
     assert "I,magfab,magone," in proc.stdout and "calibration: match" in proc.stdout
     proc = cli(installed, "stream", "--simulate", "--simulate-corrupt", "0.5", "--count", "500")
-    assert proc.returncode == 1 and "failed their CRC" in proc.stderr
+    assert proc.returncode == 2 and "failed their CRC" in proc.stderr
     proc = cli(installed, "stream", "--port", "/dev/does-not-exist", "--count", "1")
-    assert proc.returncode == 1
+    assert proc.returncode == 2
     assert ("not found" if installed.serial else "pyserial is not installed") in proc.stderr
     proc = cli(installed, "stream", "--simulate", "--text", "--raw")
-    assert proc.returncode == 1 and "--raw needs binary frames" in proc.stderr
+    assert proc.returncode == 2 and "--raw needs binary frames" in proc.stderr
+
+
+def test_a_bug_of_ours_is_one_line_and_exit_1(pkg, monkeypatch, capsys):
+    """Exit 1 is kept for magfab-readout's own bugs (2 for what was given or the bench, 3 for a failed check): an
+    exception nobody expected is one line naming it, not a traceback."""
+    cli_module = importlib.import_module(pkg.__name__ + ".cli")
+
+    def broken(*_args, **_kwargs):
+        raise ZeroDivisionError("boom")
+
+    monkeypatch.setattr(cli_module, "_info", broken)
+    assert cli_module.main(["info", "--simulate"]) == 1
+    err = capsys.readouterr().err
+    assert err == "magfab-readout: internal error: ZeroDivisionError: boom (a bug: please report it)\n"
 
 
 def test_installed_cli_uploads_a_calibration(installed, calibration, tmp_path):
@@ -582,7 +597,7 @@ def test_installed_cli_uploads_a_calibration(installed, calibration, tmp_path):
     assert proc.returncode == 0 and calibration_sha256(other)[:16] in proc.stdout, proc.stderr
     path.write_text(json.dumps({"format": "magfab-calibration/1"}))
     proc = cli(installed, "upload", str(path), "--simulate")
-    assert proc.returncode == 1 and "calibration.json" in proc.stderr
+    assert proc.returncode == 2 and "calibration.json" in proc.stderr
 
 
 @contextmanager
@@ -622,14 +637,14 @@ def test_installed_cli_over_a_real_serial_port(installed, pkg):
     if not installed.serial:
         pytest.skip("pyserial could not be installed into the test venv (no package index)")
     proc = cli(installed, "info", port_variable="/dev/magfab-no-such-port")
-    assert proc.returncode == 1 and "'/dev/magfab-no-such-port' not found" in proc.stderr
+    assert proc.returncode == 2 and "'/dev/magfab-no-such-port' not found" in proc.stderr
     assert "the port named by MAGFAB_READOUT_PORT" in proc.stderr
     proc = cli(installed, "info", "--port", "/dev/does-not-exist", port_variable="/dev/magfab-no-such-port")
-    assert proc.returncode == 1 and "'/dev/does-not-exist' not found" in proc.stderr  # --port comes first
+    assert proc.returncode == 2 and "'/dev/does-not-exist' not found" in proc.stderr  # --port comes first
     assert "MAGFAB_READOUT_PORT" not in proc.stderr
     with pseudo_terminal(pkg, feed=False) as port:
         proc = cli(installed, "stream", "--port", port, "--timeout", "0.5", "--count", "1")
-        assert proc.returncode == 1 and f"no frames from {port} within 0.5 s; nothing arrived" in proc.stderr
+        assert proc.returncode == 2 and f"no frames from {port} within 0.5 s; nothing arrived" in proc.stderr
     with pseudo_terminal(pkg, feed=True) as port:
         proc = cli(installed, "info", "--port", port)
         assert proc.returncode == 0 and "calibration: match" in proc.stdout, proc.stderr

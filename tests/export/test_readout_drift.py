@@ -42,7 +42,7 @@ def test_a_loose_magnet_fails_turning_over(default_build, acc):
     """A magnet sliding 0.1 mm in its pocket moves Bz by 0.1 mm x dBz/dz at rest (726 uT for MagOne), far over the
     band (the Earth turned over, 130 uT, and the tip's own weight reversed, 150 uT)."""
     proc = readout(default_build, "check", "--simulate", *FAST, "--no-weight", "--rotation", "--simulate-loose", "0.1")
-    assert proc.returncode == 1, proc.stdout + proc.stderr
+    assert proc.returncode == 3, proc.stdout + proc.stderr
     line = steps(proc.stdout)[4]
     assert " FAIL " in line and "loose in its pocket" in line and "steel or magnetised parts" in line
     change = float(line.split("|dB| ")[1].split(" uT")[0])
@@ -52,13 +52,13 @@ def test_a_loose_magnet_fails_turning_over(default_build, acc):
 
 def test_a_missing_thermal_correction_fails_warming(default_build):
     proc = readout(default_build, "check", "--simulate", *FAST, "--no-weight", "--warmup", "--simulate-no-thermal")
-    assert proc.returncode == 1, proc.stdout + proc.stderr
+    assert proc.returncode == 3, proc.stdout + proc.stderr
     line = steps(proc.stdout)[4]
     assert " FAIL " in line and "without its thermal block" in line
     # a warm-up that does not reach the step's least warming fails and says so
     proc = readout(default_build, "check", "--simulate", *FAST, "--no-weight", "--warmup", "--simulate-warm", "0.5",
                    "--warmup-seconds", "0.3")
-    assert proc.returncode == 1 and "warmed by only 0.5 C" in steps(proc.stdout)[4], proc.stdout
+    assert proc.returncode == 3 and "warmed by only 0.5 C" in steps(proc.stdout)[4], proc.stdout
 
 
 @pytest.mark.parametrize("args, message", [

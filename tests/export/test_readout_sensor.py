@@ -87,7 +87,7 @@ def test_without_the_record_the_board_of_a_sensor_is_a_mismatch(bench):
     folder) the host has only the package's calibration, and ``info`` keeps refusing the mismatch."""
     assert readout(bench, "upload", "--sensor", "finger-01", "--sensors", bench["root"]).returncode == 0
     proc = readout(bench, "info")
-    assert proc.returncode == 1 and "calibration mismatch" in proc.stderr
+    assert proc.returncode == 2 and "calibration mismatch" in proc.stderr
     assert "sensor:  finger-01" in proc.stdout
     (bench["cwd"] / "sensors").symlink_to(bench["root"])  # found from the working folder
     assert "calibration: match (sensor finger-01's" in readout(bench, "info").stdout
@@ -145,7 +145,7 @@ def test_check_of_another_sensors_board_or_calibration_writes_nothing(bench):
     calibration while the sensor has its own: the mismatch (exit 1) naming the upload; the record unchanged."""
     record = _snapshot(bench["root"])
     proc = readout(bench, "check", "--sensor", "finger-01", "--sensors", bench["root"], *FAST)
-    assert proc.returncode == 1 and "upload --sensor finger-01" in proc.stderr, proc.stderr
+    assert proc.returncode == 2 and "upload --sensor finger-01" in proc.stderr, proc.stderr
     assert _snapshot(bench["root"]) == record
     _another_sensor_on_the_board(bench)
     record, board = _snapshot(bench["root"]), _board(bench)

@@ -347,12 +347,12 @@ def test_installed_check_passes_on_the_simulated_sensor(installed, acc):
     proc = check(installed, stdin="\n")
     assert proc.returncode == 0 and "press Enter" in proc.stderr, proc.stdout + proc.stderr
     proc = check(installed)  # no terminal, no --yes: says what to do
-    assert proc.returncode == 1 and "no answer on stdin" in proc.stderr and "--yes" in proc.stderr
+    assert proc.returncode == 2 and "no answer on stdin" in proc.stderr and "--yes" in proc.stderr
 
 
 def test_installed_check_fails_on_an_upside_down_magnet(installed):
     proc = check(installed, "--yes", "--simulate-flipped")
-    assert proc.returncode == 1
+    assert proc.returncode == 3  # the sensor failed: the check's verdict, not an error
     lines = steps(proc.stdout)
     assert " FAIL " in lines[1] and "the magnet is upside down" in lines[1] and "measured -" in lines[1]
     assert " FAIL " in lines[2] and "upside down" in lines[2]
@@ -363,7 +363,7 @@ def test_installed_check_fails_on_an_upside_down_magnet(installed):
 def test_installed_check_on_other_magnets(installed, acc):
     # N52 instead of N35 fails the rest band (see test_which_magnet_grades_the_rest_band_tells_apart) ...
     proc = check(installed, "--yes", "--no-weight", "--simulate-grade", "N52")
-    assert proc.returncode == 1, proc.stdout
+    assert proc.returncode == 3, proc.stdout
     assert "stronger than predicted" in steps(proc.stdout)[2]
     # ... N42 passes: the band cannot tell N35 and N42 apart, and the check says so
     proc = check(installed, "--yes", "--no-weight", "--simulate-grade", "N42")
@@ -371,12 +371,12 @@ def test_installed_check_on_other_magnets(installed, acc):
     assert "means a remanence of 1.30 T" in proc.stdout and "cannot tell those apart" in proc.stdout
     # a ferrite-strength magnet (0.4 T) and an impossible 1.8 T one fail the rest band, each with its cause
     proc = check(installed, "--yes", "--simulate-grade", "0.4")
-    assert proc.returncode == 1
+    assert proc.returncode == 3
     lines = steps(proc.stdout)
     assert " PASS " in lines[1] and " FAIL " in lines[2] and "weaker than predicted" in lines[2]
     assert " FAIL " in lines[4] and "smaller rise than predicted" in lines[4]
     proc = check(installed, "--yes", "--no-weight", "--simulate-grade", "1.8")
-    assert proc.returncode == 1 and "stronger than predicted - a stronger grade than N35" in steps(proc.stdout)[2]
+    assert proc.returncode == 3 and "stronger than predicted - a stronger grade than N35" in steps(proc.stdout)[2]
     assert len(steps(proc.stdout)) == 3 and "verdict: FAIL (step 2 of 3)" in proc.stdout
 
 
@@ -409,4 +409,4 @@ def test_check_without_acceptance_data_says_so(design, tmp_path):
     root = write_tree(render(design, make_calibration()), tmp_path)
     proc = subprocess.run([sys.executable, "-m", "magfab_readout", "check", "--simulate", "--yes"],
                           capture_output=True, text=True, timeout=60, cwd=root / "readout" / "src")
-    assert proc.returncode == 1 and "carries no acceptance.json" in proc.stderr
+    assert proc.returncode == 2 and "carries no acceptance.json" in proc.stderr

@@ -31,7 +31,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 from . import _build, array_sensor
 from .array_sim import ArrayRestTip
 from .check import G0, Bands, Steps, ask, check_lateral, check_polarity, check_rest, judge_rise, load_acceptance, settle
-from .cli_shared import UsageError
+from .cli_shared import FAILED, UsageError
 from .device import DeviceError
 from .frames import STATUS_FULL_SCALE
 from .rest import slope_mN_per_uT
@@ -248,6 +248,6 @@ def _verdict(out, steps: Sequence[Steps]) -> int:
     if failed:
         out.write("verdict: FAIL ({})\n".format("; ".join(
             "taxel {}: step{} {}".format(k, "s" if len(f) > 1 else "", ", ".join(map(str, f))) for k, f in failed)))
-        return 1
+        return FAILED
     out.write(f"verdict: PASS (all {len(steps)} taxels, {sum(len(s.results) for s in steps)} steps)\n")
     return 0

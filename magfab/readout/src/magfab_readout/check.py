@@ -12,7 +12,7 @@ import sys
 from typing import Any, Dict, List, Optional, Tuple
 
 from . import _build, acceptance_json, board_sensor
-from .cli_shared import UsageError
+from .cli_shared import FAILED, UsageError
 from .device import Device, DeviceError
 from .rest import slope_mN_per_uT
 from .simulate import RestTip
@@ -29,7 +29,7 @@ def add_parser(commands, common: argparse.ArgumentParser) -> argparse.ArgumentPa
         "tolerances (its sign tells an upside-down magnet); then it asks for a known weight on the tip and compares "
         "the rise of Bz with the predicted band. --rotation adds turning the sensor over, --warmup warming it. "
         "Prints PASS or FAIL per step with the measured and predicted values; exit status 0 when every step passes, "
-        "1 otherwise.")
+        f"{FAILED} when one fails.")
     check.add_argument("--weight-g", type=float, metavar="W",
                        help="the known weight in grams (default: the one the build chose, in acceptance.json)")
     check.add_argument("--samples", type=int, default=500, metavar="N",
@@ -210,7 +210,7 @@ class Steps:
         if failed:
             self.out.write("verdict: FAIL (step{} {} of {})\n".format("s" if len(failed) > 1 else "",
                                                                       ", ".join(map(str, failed)), len(self.results)))
-            return 1
+            return FAILED
         self.out.write(f"verdict: PASS (all {len(self.results)} steps)\n")
         return 0
 

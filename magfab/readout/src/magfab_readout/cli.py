@@ -2,8 +2,9 @@
 calibration into its EEPROM (``upload``), and run the acceptance test (``check``) against the bands magfab
 predicted for this build (acceptance.json).
 
-Exit status: 0 done (``check``: passed), 1 a device or calibration problem (one line on stderr) or a failed
-check, 2 a usage error, 130 Ctrl-C.
+Exit status: 0 done (``check``: passed); 2 a problem with what was given or with the bench (a usage error, a file
+refused, a calibration the record cannot hold, an unknown sensor, no board or no data on the port: one line on
+stderr); 3 ``check`` ran and the sensor failed a step; 1 only for a bug of ours (one line naming it); 130 Ctrl-C.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from .cli_shared import CSV_COLUMNS, Interrupt, UsageError, at_fallback_baud, fo
 from .device import Device, DeviceError, calibration_record, cross_check
 from .eeprom import EepromError
 from .identity import Identity
+from .json_checks import FormatError
 from .rest import RestTracker
 from .simulate import WARM_RATE_C_PER_S, SimulatedDevice, TemperatureRamp
 from .taxels import ArrayCalibration
@@ -365,11 +367,12 @@ def main(argv: Optional[List[str]] = None) -> int:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())  # stdout's reader went away (| head): stop quietly
         return 0
-    except (UsageError, bounded.InputFileError) as exc:  # the input file refused before it is parsed
+    except (UsageError, bounded.InputFileError, DeviceError, CalibrationError, FormatError, EepromError,
+            identity.IdentityError, records.RecordError, OSError) as exc:  # what was given, or the bench: exit 2
         print(f"magfab-readout: error: {exc}", file=sys.stderr)
         return 2
-    except (DeviceError, CalibrationError, EepromError, records.RecordError, OSError) as exc:
-        print(f"magfab-readout: error: {exc}", file=sys.stderr)
-        return 1
     except KeyboardInterrupt:
         return 130
+    except Exception as exc:  # anything else is a bug of ours: one line naming it, exit 1, no traceback
+        print(f"magfab-readout: internal error: {type(exc).__name__}: {exc} (a bug: please report it)", file=sys.stderr)
+        return 1

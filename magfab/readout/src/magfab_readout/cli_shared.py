@@ -12,12 +12,16 @@ from typing import Any, List, Optional, Sequence
 from . import _build, eeprom
 from .device import NoData
 
-__all__ = ["CSV_COLUMNS", "Interrupt", "UsageError", "at_fallback_baud", "format_csv", "format_number",
+__all__ = ["FAILED", "CSV_COLUMNS", "Interrupt", "UsageError", "at_fallback_baud", "format_csv", "format_number",
            "record_header"]
 
 #: ``record``'s columns (docs/bundle.md section 1): host_time_s ties the recording to a reference sensor's log.
 CSV_COLUMNS = ("time_s", "host_time_s", "Bx_uT", "By_uT", "Bz_uT", "temperature_C", "Fx_sensor_N", "Fy_sensor_N",
                "Fz_sensor_N", "status", "seq")
+
+
+#: ``check``'s exit status when the sensor failed a step (its verdict, not an error: 1 is kept for a bug of ours).
+FAILED = 3
 
 
 class UsageError(ValueError):
