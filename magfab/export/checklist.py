@@ -29,7 +29,8 @@ from ..models.silicone import (
 from ..recipes import Recipe, catalogue
 from . import firmware
 from .bom import bom_rows, indenter_disc_mm
-from .checklist_array import ADDRESS_HEADER, acceptance_steps, address_rows, calibrate_step, chips_text, magnets_text
+from .checklist_array import ADDRESS_HEADER, acceptance_steps, address_rows, calibrate_text, chips_text, magnets_text
+from .checklist_array import CALIBRATE_COMMANDS as ARRAY_CALIBRATE_COMMANDS
 from .templating import render
 
 if TYPE_CHECKING:
@@ -37,7 +38,7 @@ if TYPE_CHECKING:
     from ..models.scan import ScanPlan
 
 __all__ = ["Step", "Table", "Section", "sections", "checklist_md", "checklist_html", "FLASH_COMMANDS",
-           "CALIBRATE_COMMANDS"]
+           "sensor_id", "sensor_commands", "calibrate_commands", "acceptance_commands"]
 
 # ---------------------------------------------------------------------------------------------------
 # Rendering: sections of imperative steps; a step may end in a ```sh block of commands (run from the build
@@ -52,12 +53,33 @@ FLASH_COMMANDS = (
     "magfab-readout info",
     "magfab-readout stream --zero 200            # Ctrl-C ends it",
 )
-CALIBRATE_COMMANDS = (
-    "magfab-readout record scan.csv              # during the scan; Ctrl-C ends it",
-    "magfab calibrate scan.csv --reference reference.csv",
-    "pip install ./readout",
-    "magfab-readout upload",
-)
+
+
+def sensor_id(design: Design) -> str:
+    """The sensor ID the bench commands carry, the first sensor of the design's: its name and ``-01`` (an ID has at
+    most 32 characters, docs/sensors.md section 1)."""
+    return f"{design.spec.name[:29]}-01"
+
+
+def sensor_commands(design: Design) -> tuple[str, ...]:
+    """The sensor's record started beside the spec, from the build folder: up to the folder ``magfab build`` made it
+    in (``build/<name>``, the pipeline's default output folder) and back, as the README runs it."""
+    out = f"build/{design.spec.name}"
+    return ("cd ../..", f"magfab sensor add {sensor_id(design)} --build {out}", f"cd {out}")
+
+
+def calibrate_commands(sensor: str) -> tuple[str, ...]:
+    """A single taxel's calibration: the recording, the fit into the sensor's record, and onto its board."""
+    return ("magfab-readout record scan.csv              # during the scan; Ctrl-C ends it",
+            f"magfab calibrate scan.csv --reference reference.csv --sensor {sensor}",
+            f"magfab-readout upload --sensor {sensor}",
+            "magfab-readout info")
+
+
+def acceptance_commands(sensor: str, weight_g: float, flags: str) -> tuple[str, ...]:
+    """The acceptance test, kept in the sensor's record, and the record's history."""
+    return (f"magfab-readout check --weight-g {weight_g:g}{flags} --sensor {sensor}",
+            f"magfab sensor show {sensor} --plot {sensor}.png")
 
 
 @dataclass(frozen=True)
@@ -320,15 +342,27 @@ def _wiring_section(design: Design) -> Section:
 
 
 def _flash_section(design: Design) -> Section:
-    return _section("Flash and read", [Step(
+    flash = Step(
         "Plug the Arduino into this computer and run these from the build folder (the folder holding this "
         f"checklist). They flash firmware/{firmware.HEX_NAME} with avrdude (a Uno as shown; a Nano: nano, or nano-old "
         "for the old bootloader; the last argument is the Arduino's serial port, a COM port on Windows with "
-        "firmware\\flash.bat), install the reader with this build's calibration, write that calibration into the "
-        "board's EEPROM (the bootloader leaves the EEPROM empty, and until then the board sends only text error "
-        "lines naming the missing calibration), check that the board reports the same calibration hash, and stream "
+        "firmware\\flash.bat), install the reader with this build's calibration (provisional: fitted to the scan "
+        "magfab simulated for the design), write that calibration into the board's EEPROM (the bootloader leaves the "
+        "EEPROM empty, and until then the board sends only text error lines naming the missing calibration), check "
+        "that the board reports the same calibration hash, and stream "
         f"calibrated forces at {design.spec.firmware.baud} baud, zeroed on the first 200 samples: keep the tip "
-        f"untouched while it starts.", FLASH_COMMANDS)])
+        f"untouched while it starts.", FLASH_COMMANDS)
+    if design.array is not None:
+        return _section("Flash and read", [flash])
+    sensor = sensor_id(design)
+    return _section("Flash and read", [Step(
+        f"Give the sensor an ID and write it on the board's label: {sensor} here, {sensor[:-2]}02 for the next sensor "
+        f"of this design, and so on (yours in place of {sensor} in the commands below). Start its record in sensors/ "
+        "beside the spec, outside every build folder: it keeps what the sensor was made from and every measurement "
+        "made on it, and a rebuild, which replaces the build folder, never touches it. The lines below go to the "
+        "folder you built in (two up from this one, for a build in its default place), add the record, and come "
+        "back; the later commands find sensors/ from here.",
+        sensor_commands(design)), flash])
 
 
 def _calibrate_section(design: Design, plan: ScanPlan | None) -> Section:
@@ -339,14 +373,18 @@ def _calibrate_section(design: Design, plan: ScanPlan | None) -> Section:
 
         plan = scan_plan(design)
     disc = indenter_disc_mm(design, plan.y_half_mm)
-    run = Step("From the build folder: start the reference log and the recording (the first line below), run the scan, "
-               "and end both when it is done. The recording's host_time_s column is this computer's clock too, which "
-               "is how calibrate pairs each sample with the reference's force. Then fit the calibration to the "
-               f"reference (order {cal.order}, {cal.method.value}, {cal.folds}-fold held-out error, tolerance "
-               f"{cal.tolerance_mN:g} mN), which updates this build folder, reinstall the reader with the new "
-               "calibration, and upload it into the board's EEPROM (no compiler, no reflash).", CALIBRATE_COMMANDS)
+    scan = ("From the build folder: start the reference log and the recording (the first line below), run the scan, "
+            "and end both when it is done. The recording's host_time_s column is this computer's clock too, which "
+            "is how calibrate pairs each sample with the reference's force. Then fit the calibration to the "
+            f"reference (order {cal.order}, {cal.method.value}, {cal.folds}-fold held-out error, tolerance "
+            f"{cal.tolerance_mN:g} mN)")
     if design.array is not None:
-        run = calibrate_step(design, run)
+        run = Step(calibrate_text(design, scan), ARRAY_CALIBRATE_COMMANDS)
+    else:
+        run = Step(scan + ", which goes into the sensor's record with the scan and the reference log (the build folder "
+                   "keeps its provisional calibration), and upload it with the sensor's ID into the board's EEPROM (no "
+                   "compiler, no reflash): the board then names the sensor and the calibration's date.",
+                   calibrate_commands(sensor_id(design)))
     return _section("Calibrate", [
         f"Build the rig: the {ref.name} (resolution {cal.reference_resolution_mN:g} mN, the figure the simulated scan "
         f"assumed) on a {_lc(stage.name)} graduated in "
@@ -362,10 +400,10 @@ def _calibrate_section(design: Design, plan: ScanPlan | None) -> Section:
     ])
 
 
-def _acceptance_section(acceptance: Mapping[str, Any] | None, design: Design | None = None) -> Section:
+def _acceptance_section(acceptance: Mapping[str, Any] | None, design: Design) -> Section:
     doc = acceptance or {}
     rest, weight, delta = doc.get("rest_Bz_uT"), doc.get("weight_g"), doc.get("delta_Bz_uT")
-    if design is not None and design.array is not None:
+    if design.array is not None:
         return _section("Acceptance test", acceptance_steps(design, float(weight or 50)))
     if not (rest and weight and delta):
         return _section("Acceptance test", [
@@ -376,8 +414,9 @@ def _acceptance_section(acceptance: Mapping[str, Any] | None, design: Design | N
     then = " then to turn the sensor over and to warm it (below)," if flags else ""
     return _section("Acceptance test", [
         Step(f"From the build folder, with nothing touching the tip, run the check: it reads the field at rest, then "
-             f"asks you to put the {w:g} g weight on the tip,{then} waiting for Enter at each step.",
-             (f"magfab-readout check --weight-g {w:g}{flags}",)),
+             f"asks you to put the {w:g} g weight on the tip,{then} waiting for Enter at each step. Its result goes "
+             "into the sensor's record; the record's history follows, as a table and as a chart.",
+             acceptance_commands(sensor_id(design), w, flags)),
         f"Pass: Bz at rest within {rest[0]:.0f} to {rest[1]:.0f} uT (positive: magnet the right way up), and a {w:g} g "
         f"weight raises Bz by {delta[0]:.0f} to {delta[1]:.0f} uT.",
         "A fail names the step and the measured and predicted values: a weak or strong field points at the magnet "

@@ -3,8 +3,7 @@ single taxel's steps that change when one board carries several chips and magnet
 
 from __future__ import annotations
 
-from dataclasses import replace
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from ..units import G0
 
@@ -12,7 +11,7 @@ if TYPE_CHECKING:
     from ..design import Design
 
 __all__ = ["address_rows", "ADDRESS_HEADER", "north", "chips_text", "magnets_text", "CALIBRATE_COMMANDS",
-           "calibrate_step", "acceptance_steps"]
+           "calibrate_text", "acceptance_steps"]
 
 #: An array's calibration commands: one taxel's scan per recording, --taxel naming it (the readout README's bench
 #: block has the same lines). One command per line.
@@ -57,14 +56,16 @@ def magnets_text(design: Design) -> str:
             "wrong one reads a negative field at rest for a north-up taxel (the acceptance test names it).")
 
 
-def calibrate_step(design: Design, step: Any) -> Any:
-    """The single taxel's calibration step (a checklist Step) for an array: one taxel scanned per recording."""
+def calibrate_text(design: Design, scan: str) -> str:
+    """The calibration step's words for an array (its commands: :data:`CALIBRATE_COMMANDS`), after the words ``scan``
+    it shares with a single taxel's: one taxel scanned per recording, its calibration fitted into this build folder."""
     n = len(design.taxels)
-    text = step.text.replace("upload it into the board's EEPROM", "upload the array's record again, which names it")
-    return replace(step, commands=CALIBRATE_COMMANDS, text=text + (
-        f" Scan one taxel at a time, taxel 0 first, its tip under the disc: the recording holds every chip's field and "
-        f"--taxel names the taxel scanned (the others keep their calibrations). Then the same for taxels 1 to {n - 1}, "
-        "one recording each, with --taxel the taxel scanned."))
+    return scan + (
+        ", which updates this build folder, reinstall the reader with the new calibration, and upload the array's "
+        "record again, which names it (no compiler, no reflash). Scan one taxel at a time, taxel 0 first, its tip "
+        "under the disc: the recording holds every chip's field and --taxel names the taxel scanned (the others keep "
+        f"their calibrations). Then the same for taxels 1 to {n - 1}, one recording each, with --taxel the taxel "
+        "scanned.")
 
 
 def acceptance_steps(design: Design, weight_g: float) -> list[str]:

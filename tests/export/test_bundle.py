@@ -213,10 +213,10 @@ magfab-readout upload
 magfab-readout info
 magfab-readout stream --zero 200            # Ctrl-C ends it
 magfab-readout record scan.csv              # during the scan; Ctrl-C ends it
-magfab calibrate scan.csv --reference reference.csv
-pip install ./readout
-magfab-readout upload
-magfab-readout check --weight-g 50 --rotation --warmup
+magfab calibrate scan.csv --reference reference.csv --sensor magone-01
+magfab-readout upload --sensor magone-01
+magfab-readout info
+magfab-readout check --weight-g 50 --rotation --warmup --sensor magone-01
 """
 
 

@@ -314,15 +314,22 @@ def test_bench_commands_are_sh_blocks_with_the_acceptance_weight(design):
 
     text = C.checklist_md(design, ACCEPTANCE)
     blocks = _blocks(text)
-    assert blocks == [list(C.FLASH_COMMANDS), list(C.CALIBRATE_COMMANDS), ["magfab-readout check --weight-g 73"]]
+    sensor = C.sensor_id(design)
+    expected = [C.sensor_commands(design), C.FLASH_COMMANDS, C.calibrate_commands(sensor),
+                C.acceptance_commands(sensor, 73, "")]
+    assert blocks == [list(b) for b in expected]
+    assert blocks[0][1] == f"magfab sensor add {sensor} --build build/{design.spec.name}"
+    assert blocks[-1] == [f"magfab-readout check --weight-g 73 --sensor {sensor}",
+                          f"magfab sensor show {sensor} --plot {sensor}.png"]
     html = C.checklist_html(design, ACCEPTANCE)
-    for line in C.FLASH_COMMANDS + C.CALIBRATE_COMMANDS + ("magfab-readout check --weight-g 73",):
+    for line in (line for b in expected for line in b):
         assert line in html
-    assert html.count('<pre class="sh">') == 3
+    assert html.count('<pre class="sh">') == 4
     for step in _steps(C.sections(design, ACCEPTANCE)):  # prose never holds a command to type
-        assert not re.search(r"magfab-readout \w|pip install|(?<![\w-])sh firmware/|magfab calibrate", step), step
+        assert not re.search(r"magfab-readout \w|pip install|(?<![\w-])sh firmware/|magfab (calibrate|sensor)",
+                             step), step
     without = C.checklist_md(design, None)
-    assert len(_blocks(without)) == 2 and "--weight-g" not in without
+    assert len(_blocks(without)) == 3 and "--weight-g" not in without
 
 
 def test_the_built_checklist_commands_match_the_readme(default_build):
@@ -333,9 +340,12 @@ def test_the_built_checklist_commands_match_the_readme(default_build):
     out = default_build.out_dir
     weight = json.loads((out / "calibration" / "acceptance.json").read_text())["weight_g"]
     blocks = _blocks((out / "checklist.md").read_text())
-    assert blocks[-1] == [f"magfab-readout check --weight-g {weight:g} --rotation --warmup"]
+    assert blocks[-1][0] == f"magfab-readout check --weight-g {weight:g} --rotation --warmup --sensor magone-01"
     readme = (Path(__file__).parents[2] / "README.md").read_text()
-    missing = [c.split("#")[0].strip() for b in blocks for c in b if c.split("#")[0].strip() not in readme]
+    # The README builds the spec "finger" in build/finger and names its sensor finger-01; the checklist's cd lines
+    # go to the folder the build was made in and back (the README's commands start there).
+    commands = [c.split("#")[0].strip().replace("magone", "finger") for b in blocks for c in b]
+    missing = [c for c in commands if not c.startswith("cd ") and c not in readme]
     assert not missing, f"README lacks {missing}"
 
 
@@ -372,4 +382,5 @@ def test_the_acceptance_section_describes_the_drift_steps_with_their_bands(defau
     assert f"at most {rot['band_uT']:.0f} uT" in turned and f"{rot['earth_change_uT']:.0f} uT" in turned
     warmed = next(s for s in text.splitlines() if "Warm-up:" in s)
     assert f"at least {warm['min_change_C']:g} C" in warmed and f"{warm['per_C_mN']['with']:.1f} mN per C" in warmed
-    assert _blocks(text)[-1] == [f"magfab-readout check --weight-g {acc['weight_g']:g} --rotation --warmup"]
+    check = f"magfab-readout check --weight-g {acc['weight_g']:g} --rotation --warmup --sensor magone-01"
+    assert _blocks(text)[-1][0] == check
