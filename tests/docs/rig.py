@@ -168,8 +168,38 @@ class Rig:
             return self.bus.time_us / 1e6 if self.bus is not None else 0.0
 
     def eeprom(self, size: int) -> bytes:
+        """The EEPROM's first ``size`` bytes: the running board's, or what it kept when it was reset or unplugged."""
         with self._lock:
-            return self.bus.eeprom(0, size) if self.bus is not None else b""
+            if self.bus is not None:
+                return self.bus.eeprom(0, size)
+            return self._eeprom[:size] if self._eeprom is not None else b""
+
+    def power_off(self) -> None:
+        """Unplugged: the board stops (its simulator freed, nothing runs on the port); the image it was flashed with
+        and its EEPROM are kept, as a real board's flash and EEPROM keep them."""
+        self._stop.set()
+        self._thread.join(10)
+        if self._thread.is_alive():
+            raise RuntimeError("the simulated board's thread did not stop")
+        with self._lock:
+            if self.bus is not None:
+                self._eeprom = self.bus.eeprom(0, EEPROM_BYTES)
+                self.bus.close()
+                self.bus = None
+
+    def power_on(self) -> None:
+        """Plugged in again (a no-op while it runs): a flashed board boots the image it holds, its EEPROM as it was
+        left; a board never flashed waits in its bootloader for avrdude."""
+        if self._thread.is_alive():
+            return
+        if self._error is not None:
+            raise RuntimeError("the simulated board failed") from self._error
+        self._pending = b""
+        if self.loader.done:  # the image avrdude wrote last (a reset starts a new loader, which avrdude then fills)
+            self._boot()
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name="rig", daemon=True)
+        self._thread.start()
 
     def _send(self, data: bytes) -> None:
         """To the host; dropped when nobody reads the port and its buffer is full, as a USB serial line drops."""

@@ -44,7 +44,7 @@ def walked(tmp_path_factory):
                 _missing(str(exc))
             return stack.enter_context(Rig(build_dir, lib, tmp_path_factory.mktemp("board")))
 
-        bench = Bench(cwd=lab, venv=venv, plug_in=plug_in)
+        bench = Bench(cwd=lab, venv=venv, plug_in=plug_in, home=lab)
         skip = install_command(README)
         for block in blocks(README, "README.md"):
             for line in block.commands:
@@ -71,25 +71,33 @@ def _ran(bench, start: str):
 
 
 def test_the_readme_walk_reaches_a_passing_acceptance_test(walked):
-    """Flash (avrdude over the bootloader), install, upload, stream, record during the scan, calibrate in place
-    against the reference log, reinstall, upload, and the acceptance test passes on the board."""
+    """Add the sensor's record, flash (avrdude over the bootloader), install, upload the provisional calibration,
+    stream, record during the scan, calibrate into the sensor's record against the reference log, upload it with the
+    sensor's ID, and the acceptance test passes on the board and is kept in the record."""
     build = walked.cwd
     assert build.name == "finger" and (build / "manifest.json").is_file() and not (build / "build").exists()
     flashed = _data(walked.rig.flashed.read_text())  # what avrdude wrote, in whole pages
     image = _data((build / "firmware" / "magfab-atmega328p.hex").read_text())
     assert flashed[:len(image)] == image and set(flashed[len(image):]) <= {0xFF}
-    assert "calibration: match" in _ran(walked, "magfab-readout info").stdout
+    infos = [r.stdout for r in walked.ran if r.line.startswith("magfab-readout info")]
+    assert len(infos) == 2 and all("calibration: match" in i for i in infos), infos
+    assert "no sensor ID on this board" in infos[0] and "sensor:  finger-01, calibration of " in infos[1], infos
     check = _ran(walked, "magfab-readout check")
     assert "FAIL" not in check.stdout and check.stdout.count("PASS") >= 6, check.stdout
     passed = [line.split()[2] for line in check.stdout.splitlines() if line.startswith("step ") and "PASS" in line]
     assert {"turned", "warm-up"} <= set(passed), check.stdout  # the board turned over and warmed at the prompts
     print("\n".join(line for line in check.stdout.splitlines() if line.startswith("step ")))  # with -s
-    cal = json.loads((build / "calibration" / "calibration.json").read_text())
-    assert cal["scan"]["source"] == "scan.csv + reference.csv" and \
-        (build / "calibration" / "scan_simulated.csv").exists()  # kept: it may be a calibration's input
+    built = json.loads((build / "calibration" / "calibration.json").read_text())
+    assert built["scan"]["source"] == "simulated"  # the build keeps its provisional calibration
+    sensor = _record(walked, "finger-01")
+    kinds = [e["kind"] for e in sensor.events()]
+    assert kinds == ["added", "calibration", "upload", "check", "reskin"], kinds
+    event = next(e for e in sensor.events() if e["kind"] == "calibration")
+    cal = json.loads(sensor.file(event["files"]["calibration.json"]))
+    assert cal["scan"]["source"] == event["source"] == "scan.csv + reference.csv" and not event["provisional"]
     fitted = _ran(walked, "magfab calibrate").stdout
-    print(next(line for line in fitted.splitlines() if "calibration (" in line))  # the bench scan's fit, with -s
-    merged = (build / "calibration" / "scan_merged.csv").read_bytes()  # what was fitted, by its hash
+    print(next(line for line in fitted.splitlines() if line.startswith("calibrated sensor")))  # the fit, with -s
+    merged = sensor.file(event["files"]["scan_merged.csv"])  # what was fitted, by its hash
     from magfab.formats.scan_csv import read_scan_csv
 
     assert read_scan_csv(merged).rows == cal["scan"]["rows"]
@@ -97,10 +105,29 @@ def test_the_readme_walk_reaches_a_passing_acceptance_test(walked):
     assert hashlib.sha256(data).hexdigest() == cal["scan"]["sha256"]  # the file without its comment
     assert _ran(walked, "magfab-readout record").returncode == 0  # Ctrl-C ends a recording as a success
     uploads = [r for r in walked.ran if r.line.startswith("magfab-readout upload")]
-    assert len(uploads) == 2 and cal["scan"]["sha256"] and uploads[-1].stdout != uploads[0].stdout
+    assert len(uploads) == 2 and "--sensor finger-01" in uploads[1].line and uploads[1].stdout != uploads[0].stdout
+    assert _board_says(walked.rig) == ("finger-01", event["calibration_sha256"][:16])  # its EEPROM's ID and record
     with open(build / "scan.csv", newline="") as f:
         header = next(csv.reader(line for line in f if not line.startswith("#")))
     assert "Fz_sensor_N" in header and "Fz_N" not in header  # the recording keeps the sensor's own forces apart
+    assert (walked.cwd / "finger-01.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"  # sensor show's chart
+
+
+def _record(bench, sensor_id: str):
+    """The record of ``sensor_id`` in the walk's sensors/ (beside the spec, where the README adds it)."""
+    from magfab.formats import sensor_records
+
+    return sensor_records.open_sensor(bench.home / "sensors", sensor_id)
+
+
+def _board_says(rig) -> tuple:
+    """(the sensor ID in the board's identity block, the calibration hash its EEPROM record carries), as written."""
+    from magfab.export.firmware import _eeprom_module
+    from magfab.readout.src.magfab_readout import identity
+
+    data = rig.eeprom(1024)
+    found = identity.unpack(data[identity.ADDRESS:])
+    return (found and found.sensor_id), _eeprom_module().unpack_header(data)["sha16"]
 
 
 def test_the_rest_of_the_pages_run_as_written(walked):
@@ -173,6 +200,128 @@ def test_a_recording_is_not_calibrated_against_itself(walked):
     assert ran.returncode == 2 and "Traceback" not in ran.stderr
     assert ran.stderr.count("\n") == 1 and "Fz_sensor_N" in ran.stderr and "--reference" in ran.stderr
     assert (build / "manifest.json").read_bytes() == before
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Two sensors of one design. The README's walk made and calibrated finger-01 on the first board and gave it a new
+# skin; the same README lines then run for finger-02 on a second board (the ID is the only text changed), the design
+# is rebuilt, finger-02 is calibrated again, and finger-01's board comes back for its new skin's calibration.
+
+def _readme_lines(first: str, last: str) -> list[str]:
+    """The README's commands from the block holding a line that starts with ``first`` to the one with ``last``."""
+    found = [b for b in blocks(README, "README.md") if b.lang == "sh"]
+    start = next(i for i, b in enumerate(found) if any(c.startswith(first) for c in b.commands))
+    end = next(i for i, b in enumerate(found) if any(c.startswith(last) for c in b.commands))
+    return [c for b in found[start:end + 1] for c in b.commands]
+
+
+def _paste(bench, lines, swap: tuple[str, str] = ("finger-01", "finger-01")) -> None:
+    for line in lines:
+        ran = bench.paste(line.replace(*swap))
+        _assert_ok(ran, "README.md")
+
+
+def _tree(folder: Path) -> dict:
+    """{relative path: sha256} of every file under ``folder``."""
+    return {p.relative_to(folder).as_posix(): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+@pytest.fixture(scope="module")
+def two_sensors(walked, tmp_path_factory):
+    """The bench after the two-sensor lifecycle (the ran lines before it: the README walk's), with the records'
+    folder and the build's readout just before and just after the rebuild, and both boards."""
+    bench, home, build = walked, walked.home, walked.cwd
+    first = len(bench.ran)
+    for_one = _readme_lines("magfab sensor add finger-01", "magfab sensor show")  # one sensor's bench lines
+    scan_again = _readme_lines("magfab-readout record", "magfab-readout record")[:4]  # record, calibrate, upload, info
+    listing = _readme_lines("magfab sensor reskin", "magfab sensor reskin")[1]
+    rebuild = next(c for c in _readme_lines("magfab init finger.toml", "magfab init finger.toml")
+                   if c.startswith("magfab build finger.toml"))
+    plug_in = bench.plug_in
+    with contextlib.ExitStack() as stack:
+        board_1 = bench.swap(None)  # finger-01's board off the bench
+        bench.plug_in = lambda d: stack.enter_context(Rig(d, board_1.lib, tmp_path_factory.mktemp("board-2")))
+        bench.cwd = home
+        _paste(bench, for_one, ("finger-01", "finger-02"))  # the same lines with finger-02's ID, on the new board
+        board_2 = bench.rig
+        bench.cwd = home
+        before = _tree(home / "sensors"), _tree(build / "readout")
+        _assert_ok(bench.paste(rebuild), "README.md")
+        after = _tree(home / "sensors"), _tree(build / "readout")
+        bench.cwd = build
+        _paste(bench, scan_again, ("finger-01", "finger-02"))  # finger-02 calibrated again, same skin
+        bench.swap(board_1)  # finger-01's board back, a new skin on it since the README's walk
+        _paste(bench, [*scan_again, for_one[-1], listing])  # and its history compares the two skins
+        for ran in bench.ran[first:]:  # with -s: what the two-sensor lifecycle adds to the walk
+            print(f"{ran.seconds:6.1f} s  {ran.line}")
+        print(f"{sum(r.seconds for r in bench.ran[first:]):6.1f} s  in all")
+        yield {"boards": {"finger-01": board_1, "finger-02": board_2}, "before": before, "after": after,
+               "first": first}
+    bench.plug_in = plug_in
+
+
+def test_two_sensors_of_one_design_keep_every_measurement(walked, two_sensors):
+    """Through two sensors' calibrations, uploads and checks, a rebuild of the design, a second calibration and a
+    new skin's: every recording, reference log, calibration and check the walk made is in its sensor's record, each
+    kept file is the bytes its name promises, and each history holds its events in order."""
+    from magfab.formats import sensor_records
+    from magfab.readout.src.magfab_readout.calibration_json import calibration_sha256
+
+    for index, path, sha in walked.produced:  # each recording and its reference log, as the walk made them
+        calibrate = next(r for r in walked.ran[index:] if r.line.startswith("magfab calibrate"))
+        sensor = _record(walked, calibrate.line.split("--sensor ")[1].split()[0])
+        kept = [e["files"] for e in sensor.events() if e["kind"] == "calibration"]
+        assert any(sha == files.get(path.name) for files in kept), (path.name, calibrate.line, kept)
+    histories = {}
+    for sensor in sensor_records.list_sensors(walked.home / "sensors"):
+        events = sensor.events()
+        histories[sensor.id] = [e["kind"] for e in events]
+        assert [e["number"] for e in events] == list(range(1, len(events) + 1))
+        assert [e["date"] for e in events] == sorted(e["date"] for e in events)
+        for event in events:  # every kept file holds the bytes its name promises
+            for role, sha in event["files"].items():
+                assert hashlib.sha256(sensor.file(sha)).hexdigest() == sha, (sensor.id, role)
+        calibrations = [e for e in events if e["kind"] == "calibration"]
+        ran = [r for r in walked.ran if r.line.startswith("magfab calibrate") and f"--sensor {sensor.id}" in r.line]
+        assert len(calibrations) == len(ran) == 2  # one per calibrate line the walk ran
+        for event, line in zip(calibrations, ran):
+            cal = json.loads(sensor.file(event["files"]["calibration.json"]))
+            assert event["number"] == int(line.stdout.split("events/")[1][:6]) and not event["provisional"]
+            assert calibration_sha256(cal) == event["calibration_sha256"]
+        checks = [r for r in walked.ran if r.line.startswith("magfab-readout check") and sensor.id in r.line]
+        kept = [e for e in events if e["kind"] == "check"]
+        assert len(kept) == len(checks) == 1 and kept[0]["verdict"] == "pass"
+        assert f"record: check {kept[0]['number']} of sensor {sensor.id}" in checks[0].stdout
+    assert histories == {
+        "finger-01": ["added", "calibration", "upload", "check", "reskin", "calibration", "upload"],
+        "finger-02": ["added", "calibration", "upload", "check", "calibration", "upload"]}, histories
+
+
+def test_each_board_reports_its_own_sensor(walked, two_sensors):
+    """Each board's EEPROM names its own sensor and that sensor's newest calibration, and `info` says so; the ID
+    is the only thing the pages changed between the two boards."""
+    for sensor_id, rig in two_sensors["boards"].items():
+        current, _ = _record(walked, sensor_id).current_calibration()
+        assert _board_says(rig) == (sensor_id, current["calibration_sha256"][:16])
+    infos = [r.stdout for r in walked.ran[two_sensors["first"]:] if r.line.startswith("magfab-readout info")]
+    said = [next(line for line in i.splitlines() if line.startswith("sensor:")) for i in infos]
+    assert [s.split()[1].rstrip(",") for s in said] == ["no", "finger-02", "finger-02", "finger-01"], said
+    assert all("calibration: match" in i for i in infos)
+
+
+def test_a_rebuild_leaves_the_records_and_a_new_skin_is_compared(walked, two_sensors):
+    """`magfab build finger.toml` over a build whose sensors were calibrated into their records: it succeeds, every
+    record is as it was, and the build's readout (the installed reader's) is the same; `sensor show` compares the
+    new skin's calibration with the old one's; `sensor list` names both sensors."""
+    rebuilt = [r for r in walked.ran if r.line.startswith("magfab build finger.toml")][-1]
+    assert rebuilt.returncode == 0 and "discard" not in rebuilt.stderr
+    assert two_sensors["after"] == two_sensors["before"]
+    show = [r for r in walked.ran if r.line.startswith("magfab sensor show finger-01")][-1].stdout
+    assert "new skin against the previous one" in show and "rest Bz" in show, show
+    listed = [r for r in walked.ran if r.line.startswith("magfab sensor list")][-1].stdout
+    rows = {line.split()[0]: line.split() for line in listed.splitlines()[1:]}
+    assert set(rows) == {"finger-01", "finger-02"} and rows["finger-01"][2:4] == ["1", "2"], listed
 
 
 # ---------------------------------------------------------------------------------------------------------------

@@ -19,6 +19,7 @@ pseudo-terminal, which ``MAGFAB_READOUT_PORT`` also names for the commands that 
 from __future__ import annotations
 
 import csv
+import hashlib
 import itertools
 import json
 import os
@@ -32,6 +33,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import magfab
 from magfab.units import G0 as G
 
 #: The Earth's vertical field where the walk's bench stands, uT (0.45 G: mid-latitudes), and the magnet's
@@ -58,7 +60,7 @@ class Scan:
     other chips keep their readings at rest (array.json's own field plus the other magnets'): calibrating taxel K
     reads only taxel K's rows."""
 
-    def __init__(self, build_dir: Path, every: int = 5, dwell_s: float = 0.03) -> None:
+    def __init__(self, build_dir: Path, every: int = 5, dwell_s: float = 0.03, rest_s: float = 1.0) -> None:
         self.spec = json.loads((build_dir / "spec.json").read_text())
         layout = build_dir / "calibration" / "array.json"
         if layout.is_file():  # an array: every chip's reading at rest, one track per taxel
@@ -69,7 +71,7 @@ class Scan:
         else:
             self.readings, names = None, ["scan_simulated.csv"]
         self.tracks = [self._track(build_dir / "calibration" / name, every) for name in names]
-        self.dwell_s = dwell_s
+        self.dwell_s, self.rest_s = dwell_s, rest_s
         self.axis = self.tracks[0][1]
         self.rest = self.field_at(0.0)
 
@@ -112,21 +114,25 @@ class Scan:
 
     def play(self, rig, reference: Path, taxel: int = 0) -> None:
         """Move the tip (an array's: taxel ``taxel``'s) along the track, the reference logging at 1 kHz on its own
-        ticks (a row for every millisecond that passed, however late this thread wakes: a logger's buffer); back
-        to rest at the end."""
-        points = self.tracks[taxel][0]
+        ticks (a row for every millisecond that passed, however late this thread wakes: a logger's buffer). As on a
+        bench, the log starts and ends with the tip at rest (:attr:`rest_s` each: the rows a calibration reads the
+        field at rest from), and the stage moves from rest to the track's first point and back."""
+        rest = ((self.rest if self.readings is None else self.readings[taxel]), [0.0, 0.0, 0.0])
+        points = [rest, *self.tracks[taxel][0], rest]
+        moves = [(rest, rest, self.rest_s), *((p0, p1, self.dwell_s) for p0, p1 in itertools.pairwise(points)),
+                 (rest, rest, self.rest_s)]
         wall0, mono0 = time.time(), time.monotonic()
         tick = mono0
         with open(reference, "w", newline="") as f:
             out = csv.writer(f)
             out.writerow(["time_s", "Fx_N", "Fy_N", "Fz_N"])
-            for (b0, f0), (b1, f1) in itertools.pairwise(points):
+            for (b0, f0), (b1, f1), seconds in moves:
                 start = time.monotonic()
-                while (now := time.monotonic()) < start + self.dwell_s:
-                    w = (now - start) / self.dwell_s
+                while (now := time.monotonic()) < start + seconds:
+                    w = (now - start) / seconds
                     self._set(rig, taxel, [a + w * (b - a) for a, b in zip(b0, b1)])
                     while tick <= now:  # the ticks since the last row, where the stage was then
-                        wt = min(max((tick - start) / self.dwell_s, 0.0), 1.0)
+                        wt = min(max((tick - start) / seconds, 0.0), 1.0)
                         forces = (f"{a + wt * (b - a):.6f}" for a, b in zip(f0, f1))
                         out.writerow([f"{wall0 + tick - mono0:.6f}", *forces])
                         tick += 0.001
@@ -150,11 +156,29 @@ class Bench:
     wait_s: float = 120.0  # how long the walk waits for a stream's output (its zeroing, each of those phases)
     rig: object = None
     scan: Scan | None = None
+    home: Path | None = None  # the folder the walk started in (the spec's: the README's sensors/ is made there)
     ran: list[Ran] = field(default_factory=list)
+    #: What the bench's measurements wrote, as each was made: (its line's index in :attr:`ran`, the file, its sha256)
+    #: for every ``record``'s recording and its scan's reference log (the next recording in the folder replaces both).
+    produced: list[tuple[int, Path, str]] = field(default_factory=list)
 
     @property
     def env(self) -> dict:
         return bench_env(self.venv, self.rig.port if self.rig is not None else None)
+
+    def swap(self, rig=None):
+        """Unplug the board on the bench (powered off: its image and EEPROM kept) and plug in ``rig``, a board used
+        before, as it was left; or, with None, leave the bench empty for a new board, which the next line that needs
+        one plugs in (:attr:`plug_in`). Returns the board unplugged. The commands then reach the board plugged in:
+        the pages' port is its port."""
+        old = self.rig
+        if old is not None:
+            old.power_off()
+        self.rig = rig
+        if rig is not None:
+            rig.power_on()
+            self.scan.at_rest(rig)
+        return old
 
     def _board(self, line: str) -> None:
         if self.rig is None and (PAGE_PORT in line or "magfab-readout" in line or "flash.sh" in line):
@@ -173,10 +197,21 @@ class Bench:
         if "magfab-readout check" in line and not {"--yes", "-y", "--no-weight"} & set(line.split()):
             return self._log(self._interactive(line, timeout_s))
         if "Ctrl-C ends it" in line:
-            return self._log(self._until_interrupted(line, timeout_s))
+            ran = self._log(self._until_interrupted(line, timeout_s))
+            if " record " in f" {line} ":
+                self._produced(line)
+            return ran
         proc = subprocess.run(["bash", "-c", line], cwd=self.cwd, env=self.env, capture_output=True, text=True,
                               timeout=timeout_s)
         return self._log(Ran(line, self.cwd, proc.returncode, proc.stdout, proc.stderr))
+
+    def _produced(self, line: str) -> None:
+        """Note what a ``record`` line and its scan's reference log wrote (:attr:`produced`)."""
+        words = line.split("#")[0].split()
+        for name in (words[words.index("record") + 1], "reference.csv"):
+            path = self.cwd / name
+            if path.is_file():
+                self.produced.append((len(self.ran) - 1, path, hashlib.sha256(path.read_bytes()).hexdigest()))
 
     def python(self, source: str, timeout_s: float = 120) -> Ran:
         self._started = time.monotonic()
@@ -317,10 +352,13 @@ def _text(file) -> str:
 
 def bench_env(venv: Path, port: str | None = None) -> dict:
     """The shell's environment: the bench venv first on PATH (its pip, python, magfab-readout), then the
-    magfab under test (this interpreter's folder), then the system's."""
+    magfab under test (this interpreter's folder), then the system's. PYTHONPATH is the folder holding the magfab
+    package this process imports, so the shell's ``magfab`` runs the code under test even when it is not the
+    checkout the interpreter's ``magfab`` script was installed from (a second work tree, with PYTHONPATH set)."""
     path = [str(venv / "bin"), str(Path(sys.executable).parent), os.environ.get("PATH", "")]
     env = {k: v for k, v in os.environ.items() if k not in {"PYTHONPATH", "VIRTUAL_ENV", "PYTHONHOME"}}
-    env.update(PATH=os.pathsep.join(path), VIRTUAL_ENV=str(venv), PIP_DISABLE_PIP_VERSION_CHECK="1")
+    env.update(PATH=os.pathsep.join(path), VIRTUAL_ENV=str(venv), PIP_DISABLE_PIP_VERSION_CHECK="1",
+               PYTHONPATH=str(Path(magfab.__file__).resolve().parents[1]))
     if port:
         env["MAGFAB_READOUT_PORT"] = port
     return env
