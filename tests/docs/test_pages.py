@@ -105,8 +105,12 @@ def test_the_readme_walk_reaches_a_passing_acceptance_test(walked):
     assert hashlib.sha256(data).hexdigest() == cal["scan"]["sha256"]  # the file without its comment
     assert _ran(walked, "magfab-readout record").returncode == 0  # Ctrl-C ends a recording as a success
     uploads = [r for r in walked.ran if r.line.startswith("magfab-readout upload")]
-    assert len(uploads) == 2 and "--sensor finger-01" in uploads[1].line and uploads[1].stdout != uploads[0].stdout
-    assert _board_says(walked.rig) == ("finger-01", event["calibration_sha256"][:16])  # its EEPROM's ID and record
+    assert [u.line.split("#")[0].split()[2:] for u in uploads] == [[], ["--sensor", "finger-01"], []]
+    assert uploads[1].stdout != uploads[0].stdout
+    from magfab.readout.src.magfab_readout.calibration_json import calibration_sha256
+
+    # The board names finger-01 and its calibration; after the new skin it runs the build's provisional one again.
+    assert _board_says(walked.rig) == ("finger-01", event["calibration_sha256"][:16], calibration_sha256(built)[:16])
     with open(build / "scan.csv", newline="") as f:
         header = next(csv.reader(line for line in f if not line.startswith("#")))
     assert "Fz_sensor_N" in header and "Fz_N" not in header  # the recording keeps the sensor's own forces apart
@@ -121,13 +125,15 @@ def _record(bench, sensor_id: str):
 
 
 def _board_says(rig) -> tuple:
-    """(the sensor ID in the board's identity block, the calibration hash its EEPROM record carries), as written."""
+    """What the board's EEPROM holds: (the sensor ID its identity block names, the calibration hash that block names,
+    the hash of the calibration record the image runs), each None when it holds none."""
     from magfab.export.firmware import _eeprom_module
     from magfab.readout.src.magfab_readout import identity
 
     data = rig.eeprom(1024)
     found = identity.unpack(data[identity.ADDRESS:])
-    return (found and found.sensor_id), _eeprom_module().unpack_header(data)["sha16"]
+    running = _eeprom_module().unpack_header(data)["sha16"]
+    return (None, None, running) if found is None else (found.sensor_id, found.calibration_sha16, running)
 
 
 def test_the_rest_of_the_pages_run_as_written(walked):
@@ -242,23 +248,25 @@ def two_sensors(walked, tmp_path_factory):
     with contextlib.ExitStack() as stack:
         board_1 = bench.swap(None)  # finger-01's board off the bench
         bench.plug_in = lambda d: stack.enter_context(Rig(d, board_1.lib, tmp_path_factory.mktemp("board-2")))
-        bench.cwd = home
-        _paste(bench, for_one, ("finger-01", "finger-02"))  # the same lines with finger-02's ID, on the new board
-        board_2 = bench.rig
-        bench.cwd = home
-        before = _tree(home / "sensors"), _tree(build / "readout")
-        _assert_ok(bench.paste(rebuild), "README.md")
-        after = _tree(home / "sensors"), _tree(build / "readout")
-        bench.cwd = build
-        _paste(bench, scan_again, ("finger-01", "finger-02"))  # finger-02 calibrated again, same skin
-        bench.swap(board_1)  # finger-01's board back, a new skin on it since the README's walk
-        _paste(bench, [*scan_again, for_one[-1], listing])  # and its history compares the two skins
-        for ran in bench.ran[first:]:  # with -s: what the two-sensor lifecycle adds to the walk
-            print(f"{ran.seconds:6.1f} s  {ran.line}")
-        print(f"{sum(r.seconds for r in bench.ran[first:]):6.1f} s  in all")
+        try:
+            bench.cwd = home
+            _paste(bench, for_one, ("finger-01", "finger-02"))  # the same lines with finger-02's ID, on the new board
+            board_2 = bench.rig
+            bench.cwd = home
+            before = _tree(home / "sensors"), _tree(build / "readout")
+            _assert_ok(bench.paste(rebuild), "README.md")
+            after = _tree(home / "sensors"), _tree(build / "readout")
+            bench.cwd = build
+            _paste(bench, scan_again, ("finger-01", "finger-02"))  # finger-02 calibrated again, same skin
+            bench.swap(board_1)  # finger-01's board back, a new skin on it since the README's walk
+            _paste(bench, [*scan_again, for_one[-1], listing])  # and its history compares the two skins
+        finally:
+            bench.plug_in = plug_in
+            for ran in bench.ran[first:]:  # with -s: what the two-sensor lifecycle adds to the walk
+                print(f"{ran.seconds:6.1f} s  {ran.line}")
+            print(f"{sum(r.seconds for r in bench.ran[first:]):6.1f} s  in all")
         yield {"boards": {"finger-01": board_1, "finger-02": board_2}, "before": before, "after": after,
                "first": first}
-    bench.plug_in = plug_in
 
 
 def test_two_sensors_of_one_design_keep_every_measurement(walked, two_sensors):
@@ -303,7 +311,7 @@ def test_each_board_reports_its_own_sensor(walked, two_sensors):
     is the only thing the pages changed between the two boards."""
     for sensor_id, rig in two_sensors["boards"].items():
         current, _ = _record(walked, sensor_id).current_calibration()
-        assert _board_says(rig) == (sensor_id, current["calibration_sha256"][:16])
+        assert _board_says(rig) == (sensor_id, *[current["calibration_sha256"][:16]] * 2)
     infos = [r.stdout for r in walked.ran[two_sensors["first"]:] if r.line.startswith("magfab-readout info")]
     said = [next(line for line in i.splitlines() if line.startswith("sensor:")) for i in infos]
     assert [s.split()[1].rstrip(",") for s in said] == ["no", "finger-02", "finger-02", "finger-01"], said
