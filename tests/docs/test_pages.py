@@ -222,7 +222,12 @@ def _readme_lines(first: str, last: str) -> list[str]:
 
 
 def _paste(bench, lines, swap: tuple[str, str] = ("finger-01", "finger-01")) -> None:
+    """Paste ``lines`` with the sensor ID ``swap[0]`` changed to ``swap[1]``. ``pip install ./readout`` is not run
+    again: the reader it installs, this build's, is installed already (the same text in the same folder, as
+    _paste_pages leaves out)."""
     for line in lines:
+        if line.startswith("pip install ./readout"):
+            continue
         ran = bench.paste(line.replace(*swap))
         _assert_ok(ran, "README.md")
 
@@ -241,7 +246,8 @@ def two_sensors(walked, tmp_path_factory):
     first = len(bench.ran)
     for_one = _readme_lines("magfab sensor add finger-01", "magfab sensor show")  # one sensor's bench lines
     scan_again = _readme_lines("magfab-readout record", "magfab-readout record")[:4]  # record, calibrate, upload, info
-    listing = _readme_lines("magfab sensor reskin", "magfab sensor reskin")[1]
+    listing = next(c for c in _readme_lines("magfab sensor list", "magfab sensor list")
+                   if c.startswith("magfab sensor list"))
     rebuild = next(c for c in _readme_lines("magfab init finger.toml", "magfab init finger.toml")
                    if c.startswith("magfab build finger.toml"))
     plug_in = bench.plug_in
