@@ -1,5 +1,5 @@
 """Hypothesis strategies for calibration.json documents whose numbers are each within the format's bounds but
-combine badly (issue 33, "values the validator accepts that the device cannot survive"): a thermal reference and
+combine badly ("values the validator accepts that the device cannot survive"): a thermal reference and
 coefficients whose denominator 1 + a (T - T0) crosses zero inside the chip's range, tiny scales, huge centres,
 coefficients that overflow float32 over the region, a tiny MLS bandwidth or far MLS points. Each strategy mixes
 harmless draws with harmful ones, so the tests see both verdicts; and the sample of points (uT) at which an

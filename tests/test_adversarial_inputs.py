@@ -1,5 +1,5 @@
-"""Inputs without a size or shape bound (issue 33, class 1): every reader of a user's file in magfab and
-magfab-readout refuses, in one line and exit 2 and before anything is written, a file that is not a regular file
+"""Inputs without a size or shape bound (the adversarial pass's first class): every reader of a user's file in magfab
+and magfab-readout refuses, in one line and exit 2 and before anything is written, a file that is not a regular file
 (a FIFO, /dev/zero, a symlink to it, a directory), one over its kind's limit, TOML or JSON nested deeper than
 ``MAX_DEPTH`` anywhere (arrays, inline tables, objects, dotted keys, table headers), and a table or object of more
 than ``MAX_KEYS`` keys. Generated cases, not only the issue's examples.

@@ -159,7 +159,7 @@ def test_a_measured_scan_too_large_for_mls_is_refused_before_any_work(tmp_path):
 
 
 def test_an_array_is_refused_by_its_board_routing_in_the_whole_budget():
-    """The 4 x 4 array that passed every limit and took 73 s (issue 33): its board's routing is in the estimate and
+    """The 4 x 4 array that passed every limit and took 73 s: its board's routing is in the estimate and
     the whole budget, so it is refused in one line naming array.rows, the routing estimate and how many taxels fit."""
     text = ("[array]\nrows = 4\ncols = 4\npitch_mm = 14\n[mould]\nangular_tolerance_deg = 15\n"
             "[pcb]\nwidth_mm = 76\nheight_mm = 80\n")

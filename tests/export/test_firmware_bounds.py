@@ -1,4 +1,4 @@
-"""The firmware's record check refuses the records whose formula the validator refuses (issue 33): mf_calib.c,
+"""The firmware's record check refuses the records whose formula the validator refuses: mf_calib.c,
 compiled for the host with gcc against an EEPROM held in a buffer, loads the records eeprom.py packs from
 generated calibration documents (tests/calibration_strategies.py: each number in bounds, combined badly or not)
 and agrees with calibration_json.validate on every one; an accepted one gives finite forces wherever the

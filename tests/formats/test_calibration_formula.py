@@ -1,4 +1,4 @@
-"""calibration.json: the validator bounds what the formula computes, not only each number (issue 33): the thermal
+"""calibration.json: the validator bounds what the formula computes, not only each number: the thermal
 denominator over the chip's rated range, the scaled inputs and the polynomial over the valid region, the MLS
 model's inputs. The examples of the issue, then generated documents: every refused one in one line naming the
 key path, every accepted one finite (and within float32) wherever it is sampled in its region and over the

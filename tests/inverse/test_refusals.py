@@ -1,4 +1,4 @@
-"""The second adversarial pass's refusals for a study and the CLI (issue 33): a sweep or search that asks more than
+"""The second adversarial pass's refusals for a study and the CLI: a sweep or search that asks more than
 the machine holds is refused before any work (no grid listed, no cluster started, no folder made); a malformed
 --scheduler, an --out too long for the file system and a refused storage URL are each one line, exit 2, with nothing
 left behind; Dask workers take Ctrl-C by default. Each test failed on the code before (a grid listed, a traceback,

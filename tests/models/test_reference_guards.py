@@ -76,7 +76,7 @@ def refused(ref: Reference, *words: str) -> str:
     return message
 
 
-# ---- the examples of issue 33 -------------------------------------------------------------------------------------
+# ---- the adversarial pass's examples ------------------------------------------------------------------------------
 
 @pytest.mark.parametrize("case", ["resampled", "tared", "scaled by 1.01", "rounded to 1 mN"])
 def test_the_recordings_own_forces_as_the_reference_are_refused(case):
