@@ -178,7 +178,8 @@ def facets(radius_mm: float, tolerance_mm: float, angle_deg: float) -> float:
     # acos(1 - x) as 2 asin(sqrt(x / 2)): exact where 1 - x rounds to 1 (x below 1e-16 gave acos(1) = 0 and a division
     # by zero); capped where even that underflows, far past any limit.
     half_angle = 2.0 * math.asin(math.sqrt(tolerance_mm / radius_mm / 2.0))
-    return max(by_angle, math.pi / half_angle if half_angle > 0.0 else MAX_FACETS, 3.0)
+    # capped: a subnormal tolerance's pi / half_angle squared would overflow the triangle count
+    return min(max(by_angle, math.pi / half_angle if half_angle > 0.0 else MAX_FACETS, 3.0), MAX_FACETS)
 
 
 def triangles(design: Design) -> int:
