@@ -171,7 +171,9 @@ def test_chip_absent_300_ms(sim):
         decoder = sim.frames.Decoder()
         bus.absent(False)
         after = sim.samples(decoder, bus.run_us(LOST_RETRY_US + 30_000))
-        assert during and all(s.chip_error for s in during[1:]), flags(during)
+        # frames of reads made before the chip left may still arrive: the one on the wire and the one read just
+        # before (whether that read falls before or after depends on the boot's phase), then only error frames
+        assert during and all(s.chip_error for s in during[2:]), flags(during)
         errors = [s.fault_name for s in during if s.chip_error]
         assert errors[0] == "nack at read" and set(errors[1:]) == {"nack at start"}, errors
         assert sim.wrong(before + during + after) == []
