@@ -81,6 +81,7 @@ def test_show_and_list_agree_with_the_events(steps: list) -> None:
         # the re-skin comparison: each taxel calibrated on both the skin in use and the one before it, every quantity
         both = {c[1] for c in calibrations if epochs[c[0] + 1] == epochs[-1]} & {
             c[1] for c in calibrations if epochs[c[0] + 1] == epochs[-1] - 1}
-        assert sorted(c["taxel"] for c in shown["reskin"]) == sorted(
-            [t for t in both for _ in range(6)], key=lambda t: -1 if t is None else t)
+        order = lambda t: -1 if t is None else t  # a single taxel's (None) sorts first
+        assert sorted((c["taxel"] for c in shown["reskin"]), key=order) == sorted(
+            [t for t in both for _ in range(6)], key=order)
         assert not any(c["flagged"] for c in shown["reskin"])  # the same sensor, within its bands
