@@ -10,6 +10,7 @@ import json
 import shutil
 from pathlib import Path
 
+import pytest
 from click.testing import CliRunner
 
 from magfab import derive
@@ -53,3 +54,18 @@ def n52_scan(magone_design, magone_prediction):
     spec = magone_design.spec
     other = derive(spec.model_copy(update={"magnet": spec.magnet.model_copy(update={"grade": "N52"})}))
     return simulate_scan(other, magone_prediction)
+
+
+# Fixtures of the calibrate tests (tests/conftest.py registers this module as a plugin).
+
+
+@pytest.fixture
+def bench(default_build, tmp_path, monkeypatch):
+    """A project folder with a copy of the session's MagOne build (:func:`make_bench`)."""
+    return make_bench(default_build, tmp_path, monkeypatch)
+
+
+@pytest.fixture(scope="module")
+def n52(magone_design, magone_prediction):
+    """MagOne's simulated scan with an N52 magnet (:func:`n52_scan`)."""
+    return n52_scan(magone_design, magone_prediction)

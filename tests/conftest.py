@@ -28,6 +28,9 @@ if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
     signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
+#: The calibrate tests' fixtures (bench, n52), shared by test_calibrate_defects.py and test_calibrate_sensor.py.
+pytest_plugins = ("calibrate_support",)
+
 def _missing(reason: str):
     if os.environ.get("MAGFAB_REQUIRE_TOOLS") == "1":
         pytest.fail(f"MAGFAB_REQUIRE_TOOLS=1 but {reason}")

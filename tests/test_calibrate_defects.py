@@ -8,22 +8,10 @@ import json
 from dataclasses import replace
 from pathlib import Path
 
-import pytest
-from calibrate_support import add, make_bench, n52_scan, tree
+from calibrate_support import add, tree
 
 from magfab.formats.scan_csv import read_scan_csv, scan_csv
 from magfab.pipeline import _scan
-
-
-@pytest.fixture
-def bench(default_build, tmp_path, monkeypatch):
-    return make_bench(default_build, tmp_path, monkeypatch)
-
-
-@pytest.fixture(scope="module")
-def n52(magone_design, magone_prediction):
-    return n52_scan(magone_design, magone_prediction)
-
 
 # ---- B1: a scan whose rest field is outside the design's band ------------------------------------------------------
 

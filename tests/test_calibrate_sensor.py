@@ -10,7 +10,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from calibrate_support import add, make_bench, n52_scan, tree
+from calibrate_support import add, tree
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -19,17 +19,6 @@ from magfab.errors import ScanError
 from magfab.formats.scan_csv import read_scan_csv, scan_csv
 from magfab.models import rest_guard as R
 from magfab.models.scan import simulate_scan
-
-
-@pytest.fixture
-def bench(default_build, tmp_path, monkeypatch):
-    return make_bench(default_build, tmp_path, monkeypatch)
-
-
-@pytest.fixture(scope="module")
-def n52(magone_design, magone_prediction):
-    return n52_scan(magone_design, magone_prediction)
-
 
 # ---- A, B2, B3: --sensor ------------------------------------------------------------------------------------------
 
