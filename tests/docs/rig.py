@@ -19,6 +19,7 @@ the MLX90393 breakout on its I2C bus and a tip the test can press.
 
 from __future__ import annotations
 
+import collections
 import json
 import os
 import select
@@ -29,6 +30,9 @@ import tty
 from contextlib import suppress
 from pathlib import Path
 from typing import ClassVar
+
+import numpy as np
+from scipy.optimize import linprog
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "export"))
 from simbus import Bus, build_library
@@ -41,6 +45,8 @@ _SIGNATURE_M328P = bytes([0x1E, 0x95, 0x0F])
 _INSYNC, _OK, _EOP = 0x14, 0x10, 0x20
 _CHUNK = 16  # host bytes handed to the AVR's UART per step
 EEPROM_BYTES = 1024  # ATmega328P
+#: A slice of simulated time while a stage moves (Rig.follow), us: the field is held for a slice.
+TRACK_SLICE_US = 2_000
 
 
 class Stk500:
@@ -118,9 +124,12 @@ class Rig:
         self._pending = b""
         self._last_rx = 0.0
         self.resets = 0
+        #: (board clock s, host clock s) when the board's bytes went out: what ties the two clocks (host_line).
+        self.sent: collections.deque = collections.deque(maxlen=200_000)
         self.flashed: Path | None = None
         self.addresses = addresses(self.build_dir)
         self._fields = [(0.0, 0.0, 0.0, 25.0)] * len(self.addresses)
+        self._track = None  # a stage moving on the board's clock (follow)
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._error: BaseException | None = None
@@ -154,6 +163,34 @@ class Rig:
             raise ValueError(f"one (Bx, By, Bz) per chip: {len(self.addresses)} chip(s), got {fields!r}")
         with self._lock:
             self._fields = [(*f, t_C) for f in fields]
+
+    def follow(self, track) -> None:
+        """From now on every chip's field is ``track(board_s)`` (one (Bx, By, Bz) per taxel, uT) at the start of each
+        simulated slice of at most :data:`TRACK_SLICE_US`: a stage moving on the board's own clock, so a recording's
+        samples see the stage where it was at their device time however loaded the machine is (a stage moving on
+        the wall clock meets a board that falls behind it, then catches up, at varying delays). None: the fields
+        keep their last values."""
+        with self._lock:
+            self._track = track
+
+    def host_line(self, board_from: float, board_to: float) -> tuple[float, float]:
+        """(a, s): the host clock (Unix time, s) at which the board sent what it made at board time b is at least
+        a + s (b - board_from), the line under every send from ``board_from`` to ``board_to`` closest to them (least
+        total gap; scipy's linear program). On a bench the board's clock runs in step with the host's; in
+        simulation the board falls behind the wall clock on a loaded machine (by a varying lag, at a varying rate),
+        and a reference logger's clock must be the one the host's reads are late against, as by a serial link: this
+        line, which a recording's reads lie on or above."""
+        with self._lock:
+            pairs = np.array([p for p in self.sent if board_from <= p[0] <= board_to])
+        if len(pairs) < 2:
+            raise AssertionError(f"the board sent nothing between {board_from:.3f} and {board_to:.3f} s of its clock")
+        pairs = pairs[:: max(1, len(pairs) // 4000)]
+        x, y = pairs[:, 0] - board_from, pairs[:, 1] - pairs[0, 1]
+        fit = linprog(c=[-len(x), -float(x.sum())], A_ub=np.column_stack([np.ones_like(x), x]), b_ub=y,
+                      bounds=[(None, None), (0.1, 10.0)], method="highs")
+        if not fit.success:
+            raise AssertionError(f"the board's clock against the host's: {fit.message}")
+        return float(pairs[0, 1] + fit.x[0]), float(fit.x[1])
 
     @property
     def error(self) -> BaseException | None:
@@ -251,6 +288,7 @@ class Rig:
             if self._eeprom is not None:
                 self.bus.eeprom_set(0, self._eeprom)
         self._t0 = time.monotonic()
+        self.sent.clear()  # the new boot's clock starts at 0
         self._byte_us = 10e6 / _baud(self.build_dir)  # 10 bits a byte
 
     def _step(self, data: bytes) -> None:
@@ -260,11 +298,16 @@ class Rig:
         chunk, self._pending = self._pending[:_CHUNK], self._pending[_CHUNK:]
         with self._lock:
             self.bus.send(chunk)
+            dt = min((time.monotonic() - self._t0) * 1e6 - self.bus.time_us, 20_000)
+            if self._track is not None:
+                dt = min(dt, TRACK_SLICE_US)
+                self._fields = [(*(float(b) for b in f), 25.0) for f in self._track(self.bus.time_us / 1e6)]
             for k, f in enumerate(self._fields):
                 self.bus.target(k).set_field(*f)
-            dt = min((time.monotonic() - self._t0) * 1e6 - self.bus.time_us, 20_000)
             dt = max(dt, len(chunk) * self._byte_us)
             out = self.bus.run_us(dt) if dt > 0 else b""
+            if out:
+                self.sent.append((self.bus.time_us / 1e6, time.time()))
         if out:
             self._send(out)
 

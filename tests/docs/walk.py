@@ -6,10 +6,11 @@ installs into) and whose ``magfab`` is the one under test. Where a person would 
 
 * a line whose comment says ``Ctrl-C ends it`` runs until the bench has seen enough, then gets SIGINT;
 * ``magfab-readout record`` runs while :class:`Scan` moves the simulated tip along the build's scan track and
-  logs the reference sensor's forces to ``reference.csv`` (time.time(), Fx_N, Fy_N, Fz_N at 1 kHz); on an array,
-  the tip of the taxel the line's comment names (``during taxel 0's scan``);
+  logs the reference sensor's forces to ``reference.csv`` (host-clock time, Fx_N, Fy_N, Fz_N at 1 kHz), both on
+  the board's clock (:meth:`Scan.play`); on an array, the tip of the taxel the line's comment names (``during taxel
+  0's scan``);
 * ``magfab-readout stream --zero N`` (Ctrl-C'd), when the test gave :attr:`Bench.press`, zeroes at rest, then the
-  press comes on and goes;
+  press comes on and goes, and the stream runs until it has printed the rest after it (:attr:`Bench.after_press`);
 * ``magfab-readout check`` waits for each prompt, then the known weight goes on the tip, the board is turned over or
   warmed as the prompt asks (:meth:`Bench._do`), and Enter is pressed.
 
@@ -18,6 +19,7 @@ pseudo-terminal, which ``MAGFAB_READOUT_PORT`` also names for the commands that 
 
 from __future__ import annotations
 
+import bisect
 import csv
 import hashlib
 import itertools
@@ -106,38 +108,49 @@ class Scan:
         else:
             rig.set_fields(self.readings)
 
-    def _set(self, rig, taxel: int, b: list[float]) -> None:
+    def _fields(self, taxel: int, b: list[float]) -> list:
+        """Every chip's field with taxel ``taxel``'s reading ``b`` (a single taxel's: ``b`` alone)."""
         if self.readings is None:
-            rig.set_field(*b)
-        else:
-            rig.set_fields([b if k == taxel else r for k, r in enumerate(self.readings)])
+            return [b]
+        return [b if k == taxel else r for k, r in enumerate(self.readings)]
 
-    def play(self, rig, reference: Path, taxel: int = 0) -> None:
-        """Move the tip (an array's: taxel ``taxel``'s) along the track, the reference logging at 1 kHz on its own
-        ticks (a row for every millisecond that passed, however late this thread wakes: a logger's buffer). As on a
-        bench, the log starts and ends with the tip at rest (:attr:`rest_s` each: the rows a calibration reads the
-        field at rest from), and the stage moves from rest to the track's first point and back."""
+    def play(self, rig, reference: Path, taxel: int = 0, wait_s: float = 600.0) -> None:
+        """Move the tip (an array's: taxel ``taxel``'s) along the track on the board's own clock (:meth:`Rig.follow`),
+        and log the reference at 1 kHz of it, a row for every millisecond of the stage's motion, on the host clock
+        the board's sends keep to (:meth:`Rig.host_line`). As on a bench, the log starts and ends with the tip at rest
+        (:attr:`rest_s` each: the rows a calibration reads the field at rest from), and the stage moves from rest to
+        the track's first point and back."""
         rest = ((self.rest if self.readings is None else self.readings[taxel]), [0.0, 0.0, 0.0])
         points = [rest, *self.tracks[taxel][0], rest]
         moves = [(rest, rest, self.rest_s), *((p0, p1, self.dwell_s) for p0, p1 in itertools.pairwise(points)),
                  (rest, rest, self.rest_s)]
-        wall0, mono0 = time.time(), time.monotonic()
-        tick = mono0
+        ends = list(itertools.accumulate(seconds for _, _, seconds in moves))
+        start = rig.board_s
+
+        def stage(board_s: float) -> tuple[list[float], list[float]]:
+            """(field, force) with the stage where it is at ``board_s``: linear between two points."""
+            t = min(max(board_s - start, 0.0), ends[-1])
+            k = min(bisect.bisect_right(ends, t), len(moves) - 1)
+            (b0, f0), (b1, f1), seconds = moves[k]
+            w = min(max((t - (ends[k] - seconds)) / seconds, 0.0), 1.0)
+            return ([a + w * (b - a) for a, b in zip(b0, b1)], [a + w * (b - a) for a, b in zip(f0, f1)])
+
+        rig.follow(lambda board_s: self._fields(taxel, stage(board_s)[0]))
+        deadline = time.monotonic() + wait_s
+        try:
+            while rig.board_s < start + ends[-1]:
+                if rig.error is not None or time.monotonic() > deadline:
+                    raise AssertionError(f"the scan's stage: the simulated board stopped or stalled ({rig.error!r})")
+                time.sleep(0.01)
+        finally:
+            rig.follow(None)
+            self.at_rest(rig)
+        a, rate = rig.host_line(start, start + ends[-1])
         with open(reference, "w", newline="") as f:
             out = csv.writer(f)
             out.writerow(["time_s", "Fx_N", "Fy_N", "Fz_N"])
-            for (b0, f0), (b1, f1), seconds in moves:
-                start = time.monotonic()
-                while (now := time.monotonic()) < start + seconds:
-                    w = (now - start) / seconds
-                    self._set(rig, taxel, [a + w * (b - a) for a, b in zip(b0, b1)])
-                    while tick <= now:  # the ticks since the last row, where the stage was then
-                        wt = min(max((tick - start) / seconds, 0.0), 1.0)
-                        forces = (f"{a + wt * (b - a):.6f}" for a, b in zip(f0, f1))
-                        out.writerow([f"{wall0 + tick - mono0:.6f}", *forces])
-                        tick += 0.001
-                    time.sleep(0.001)
-        self.at_rest(rig)
+            for tick in range(int(ends[-1] * 1000) + 1):
+                out.writerow([f"{a + rate * tick / 1000:.6f}", *(f"{x:.6f}" for x in stage(start + tick / 1000)[1])])
 
 
 @dataclass
@@ -153,6 +166,9 @@ class Bench:
     # How long that press is held, in the board's (simulated) time: ~160 of a 5-chip board's cycles, of which the
     # readout prints fewer when it falls behind and leaves cycles out (11 of 0.6 s's ~65 under a load of 7 on 2 cores).
     press_s: float = 1.5
+    #: Given the stream's output so far: True once it shows enough of the rest after the press (a stream that falls
+    #: behind the board prints the last cycles late, and Ctrl-C would cut them off). None: 0.5 s after, as a person.
+    after_press: object = None
     wait_s: float = 120.0  # how long the walk waits for a stream's output (its zeroing, each of those phases)
     rig: object = None
     scan: Scan | None = None
@@ -264,6 +280,8 @@ class Bench:
             until = self.rig.board_s + seconds
             self._await(line, proc, out, err, f"the board to run {seconds:g} s more",
                         lambda _, until=until: self.rig.board_s >= until)
+        if self.after_press is not None:
+            self._await(line, proc, out, err, "the stream to print the rest after the press", self.after_press)
 
     def _await(self, line: str, proc: subprocess.Popen, out, err, what: str, seen) -> None:
         """Until ``seen(its output so far)``; fails at once if the command ends first or the board stops, and after
