@@ -185,7 +185,7 @@ def _enums(v: Any, kind: type[Enum]) -> list:
     out = []
     for x in v:
         if x not in names:
-            raise ValueError(f"{x!r} is not one of " + ", ".join(names))
+            raise ValueError(f"{shown(x)} is not one of " + ", ".join(names))  # shown: a long name is cut
         out.append(kind(x))
     return out
 
@@ -195,7 +195,7 @@ def _known(values: list[str], known: list[str], where: str) -> list[str]:
         raise ValueError(f"must name at least one of {where}")
     for v in values:
         if v not in known:
-            raise ValueError(f"{v!r} is not a key of {where} (" + ", ".join(known) + ")")
+            raise ValueError(f"{shown(v)} is not a key of {where} (" + ", ".join(known) + ")")  # shown: cut if long
     return sorted(set(values))
 
 
