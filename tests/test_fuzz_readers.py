@@ -1146,3 +1146,13 @@ def test_a_long_unknown_name_in_the_targets_is_shown_cut():
         with pytest.raises(SpecError) as info:
             parse_targets(text.replace(old, new, 1))
         assert len(one_line(info.value)) < 400, str(info.value)[:200]
+
+
+def test_an_integer_too_large_for_a_float_in_the_targets_is_out_of_bounds():
+    from magfab.errors import SpecError
+    from magfab.inverse.targets import parse_targets
+
+    text = (EXAMPLES / "targets.toml").read_text()
+    assert "elastomer_diameter_mm = [8.0, 14.0]" in text
+    with pytest.raises(SpecError, match=r"variables\.elastomer_diameter_mm .*must lie within"):
+        parse_targets(text.replace("elastomer_diameter_mm = [8.0, 14.0]", f"elastomer_diameter_mm = [8.0, {BIG}]"))

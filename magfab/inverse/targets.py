@@ -110,7 +110,10 @@ def _range(v: Any, lo: float, hi: float, what: str) -> Any:
         raise ValueError("must be [low, high] or {values = [v1, v2, ...]}")
     if not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in values):
         raise ValueError("must hold numbers")
-    values = [float(x) for x in values]
+    try:
+        values = [float(x) for x in values]
+    except OverflowError:  # an integer past a float's range: pydantic reports ValueError, and it is out of bounds
+        raise ValueError(f"must lie within {lo:g} to {hi:g} {what}") from None
     if not all(lo <= x <= hi for x in values):
         raise ValueError(f"must lie within {lo:g} to {hi:g} {what}")
     if isinstance(v, dict):
