@@ -11,6 +11,8 @@ from typing import TYPE_CHECKING
 
 from .errors import SpecError, shown
 from .formats import bounded
+from .formats.array_json import ArrayError
+from .formats.array_json import validate as validate_array
 from .formats.scan_csv import read_scan_csv
 from .models.scan_guards import reject_self_calibrated_file
 
@@ -39,6 +41,19 @@ def check_taxel(spec: Spec, taxel: int | None) -> None:
         raise SpecError("--taxel", shown(taxel), f"must be 0 to {n - 1} for the {n} taxels of {spec.name!r}")
 
 
+def _offsets(layout: Path) -> list:
+    """Each chip's neighbours' field at rest (``offset_uT``) of the build's array.json, validated as the host
+    validates it (:mod:`magfab.formats.array_json`): :class:`ArrayError` (exit 2, one line) for a file that is not
+    the format's."""
+    try:
+        array = bounded.loads_json(bounded.read_bytes(layout, "array.json"), "array.json", layout)
+    except bounded.InputFileError:
+        raise
+    except ValueError as exc:  # json's error, or UnicodeDecodeError
+        raise ArrayError("", str(layout), f"is not valid JSON ({exc})") from None
+    return validate_array(array).offset
+
+
 def taxel_scans(folder: Path | None, spec: Spec, taxel: int, scan: Scan) -> dict[int, Scan]:
     """{k: scan} for the build: ``scan`` for ``taxel`` (refused by guard B when its forces are the sensor's own,
     compared with the taxel's present calibration on the field with the neighbours' removed), and the measured
@@ -53,8 +68,11 @@ def taxel_scans(folder: Path | None, spec: Spec, taxel: int, scan: Scan) -> dict
         present = folder / "calibration" / f"taxel_{taxel:02d}.json"
         layout = folder / "calibration" / "array.json"
         if present.is_file() and layout.is_file():
-            array = bounded.loads_json(bounded.read_bytes(layout, "array.json"), "array.json", layout)
-            offset = array["offset_uT"][taxel]
+            offset = _offsets(layout)
+            if taxel >= len(offset):
+                raise ArrayError("offset_uT", f"{len(offset)} taxels", f"must hold taxel {taxel} of the spec's array "
+                                 f"({layout}); rebuild the folder")
+            offset = offset[taxel]
             reject_self_calibrated_file(replace(scan, B_uT=scan.B_uT - offset), present,
                                         spec.calibration.reference_resolution_mN)
     scans[taxel] = scan

@@ -92,7 +92,7 @@ def acceptance_bands(spec: Spec, design: Design, folder: Path | None,
         if sha:
             with record_errors():
                 where = f"the record of {sensor.id}, acceptance.json"
-                return bounded.loads_json(sensor.file(sha), "acceptance.json", where), where
+                return sensor.json_file(sha, "acceptance.json"), where
     path = None if folder is None else Path(folder) / "calibration" / "acceptance.json"
     if path is not None and build_of(folder, spec) and path.is_file():
         return bounded.loads_json(bounded.read_bytes(path, "acceptance.json"), "acceptance.json", path), str(path)
@@ -133,7 +133,7 @@ def spec_of_record(sensor: records.Sensor) -> Spec | None:
     if not sha:
         return None
     with record_errors():
-        raw = bounded.loads_json(sensor.file(sha), "spec.json", f"{sensor.path}/files/{sha}.json")
+        raw = sensor.json_file(sha, "spec.json")
     return spec_from_json(raw, f"{sensor.path}/files/{sha}.json")
 
 

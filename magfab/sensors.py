@@ -279,7 +279,10 @@ def bands(sensor: rec.Sensor) -> dict[str, Any]:
     if not sha:
         return {}
     with records_checked():
-        return dict(bounded.loads_json(sensor.file(sha), "acceptance.json", f"the record of {sensor.id}"))
+        data = sensor.json_file(sha, "acceptance.json")
+    if not isinstance(data, dict):
+        raise SensorError(f"acceptance.json of {sensor.id} = {sha}: is kept in the record but is not a JSON object")
+    return data
 
 
 def _limits(bands: Mapping[str, Any]) -> dict[str, tuple[float, tuple[float, float] | None]]:

@@ -110,7 +110,10 @@ def _range(v: Any, lo: float, hi: float, what: str) -> Any:
         raise ValueError("must be [low, high] or {values = [v1, v2, ...]}")
     if not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in values):
         raise ValueError("must hold numbers")
-    values = [float(x) for x in values]
+    try:
+        values = [float(x) for x in values]
+    except OverflowError:  # an integer past a float's range: pydantic reports ValueError, and it is out of bounds
+        raise ValueError(f"must lie within {lo:g} to {hi:g} {what}") from None
     if not all(lo <= x <= hi for x in values):
         raise ValueError(f"must lie within {lo:g} to {hi:g} {what}")
     if isinstance(v, dict):
@@ -185,7 +188,7 @@ def _enums(v: Any, kind: type[Enum]) -> list:
     out = []
     for x in v:
         if x not in names:
-            raise ValueError(f"{x!r} is not one of " + ", ".join(names))
+            raise ValueError(f"{shown(x)} is not one of " + ", ".join(names))  # shown: a long name is cut
         out.append(kind(x))
     return out
 
@@ -195,7 +198,7 @@ def _known(values: list[str], known: list[str], where: str) -> list[str]:
         raise ValueError(f"must name at least one of {where}")
     for v in values:
         if v not in known:
-            raise ValueError(f"{v!r} is not a key of {where} (" + ", ".join(known) + ")")
+            raise ValueError(f"{shown(v)} is not a key of {where} (" + ", ".join(known) + ")")  # shown: cut if long
     return sorted(set(values))
 
 

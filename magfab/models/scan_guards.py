@@ -17,16 +17,15 @@ Units: force N, field uT, time s.
 from __future__ import annotations
 
 import hashlib
-import json
 import math
 from collections.abc import Mapping
 from dataclasses import replace
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..errors import ScanError
+from ..formats import bounded
 from ..formats.scan_csv import (
     FORCE_COLUMNS,
     MIN_ROWS,
@@ -524,8 +523,9 @@ def reject_self_calibrated_file(scan: Scan, path: str | os.PathLike[str], refere
     """Guard B against the calibration.json at ``path`` (a build's present one); skipped when that file has gone
     bad: the rebuild replaces it, and there is nothing to compare with."""
 
-    try:
-        calibration = Calibration.from_json(json.loads(Path(path).read_text(encoding="utf-8")))
+    try:  # bounded: a file nested past json's recursion limit has gone bad too (InputFileError is a ValueError)
+        calibration = Calibration.from_json(bounded.loads_json(bounded.read_bytes(path, "calibration.json"),
+                                                               "calibration.json", path))
     except ValueError:
         return
     reject_self_calibrated(scan, calibration, reference_resolution_mN)

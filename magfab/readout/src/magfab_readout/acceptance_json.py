@@ -9,10 +9,9 @@ library only: a module of the readout package (shipped verbatim in every build),
 from __future__ import annotations
 
 import json
-import math
 
 from . import bounded
-from .json_checks import FormatError, is_number
+from .json_checks import FormatError, is_finite
 
 __all__ = ["FORMAT", "KEYS", "SECTIONS", "AcceptanceError", "drift_flags", "loads", "validate"]
 
@@ -58,7 +57,7 @@ class AcceptanceError(FormatError):
 
 
 def _finite_number(x: object) -> bool:
-    return is_number(x) and math.isfinite(x)
+    return is_finite(x)
 
 
 def _kind_ok(node: object, kind: str) -> bool:

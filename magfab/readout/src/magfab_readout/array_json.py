@@ -32,7 +32,7 @@ from bisect import bisect_left
 from collections.abc import Sequence
 from typing import Tuple
 
-from .json_checks import FormatError, finite, is_number, lookup
+from .json_checks import FormatError, finite, is_finite, lookup
 
 __all__ = ["FORMAT", "ArrayError", "Compensator", "validate"]
 
@@ -52,18 +52,20 @@ class ArrayError(FormatError):
     file = "array.json"
 
 
-def _vectors(data: dict, key: str, n: int) -> list[Vector]:
+def _vectors(data: dict, key: str, n: int, name: str = "") -> list[Vector]:
+    """The ``n`` [x, y, z] triples at ``key``; ``name`` is the key path the error names (``key`` by default)."""
     rows = lookup(data, key, ArrayError)
     if not isinstance(rows, list) or len(rows) != n or not all(
-            isinstance(r, list) and len(r) == 3 and all(is_number(x) and math.isfinite(x) for x in r) for r in rows):
-        raise ArrayError(key, rows, f"must be {n} [x, y, z] triples of finite numbers, one per taxel")
+            isinstance(r, list) and len(r) == 3 and all(is_finite(x) for x in r) for r in rows):
+        raise ArrayError(name or key, rows, f"must be {n} [x, y, z] triples of finite numbers, one per "
+                         + ("point of travel_mm" if name else "taxel"))
     return [(float(r[0]), float(r[1]), float(r[2])) for r in rows]
 
 
 def _table(data: dict, key: str, length: int = 0) -> list[float]:
     values = lookup(data, key, ArrayError)
     if not isinstance(values, list) or len(values) < 2 or (length and len(values) != length) or not all(
-            is_number(x) and math.isfinite(x) for x in values):
+            is_finite(x) for x in values):
         raise ArrayError(key, values, "must be a list of finite numbers" + (f", {length} long" if length else
                                                                            ", at least 2"))
     return [float(x) for x in values]
@@ -96,7 +98,7 @@ def validate(data: object) -> Compensator:
     table = lookup(data, "own_lateral_uT", ArrayError)
     if not isinstance(table, list) or len(table) != len(travel) or not all(
             isinstance(row, list) and len(row) == len(lateral) and all(
-                isinstance(v, list) and len(v) == 2 and all(is_number(x) and math.isfinite(x) for x in v) for v in row)
+                isinstance(v, list) and len(v) == 2 and all(is_finite(x) for x in v) for v in row)
             for row in table):
         raise ArrayError("own_lateral_uT", table, f"must be {len(travel)} x {len(lateral)} [Bx, Bz] pairs")
     size = _table(data, "magnet_mm", 2)
@@ -107,7 +109,10 @@ def validate(data: object) -> Compensator:
     rows = lookup(data, "neighbour_uT", ArrayError)
     if not isinstance(rows, list) or len(rows) != n or not all(isinstance(r, list) and len(r) == n for r in rows):
         raise ArrayError("neighbour_uT", rows, f"must be {n} x {n} tables (chip k, magnet j)")
-    neighbour = [[_vectors({"t": rows[k][j]}, "t", len(travel)) for j in range(n)] for k in range(n)]
+    neighbour = [[_vectors({"t": rows[k][j]}, "t", len(travel), f"neighbour_uT[{k}][{j}]") for j in range(n)]
+                 for k in range(n)]
+    if data.get("rest_uT") is not None:  # optional (the host then takes the own field at rest from own_Bz_uT)
+        _vectors(data, "rest_uT", n)
     return Compensator([t["polarity"] for t in taxels], _vectors(data, "chips_mm", n), _vectors(data, "centres_mm", n),
                        _vectors(data, "offset_uT", n), travel, own, (lateral, table, size), neighbour,
                        finite(data, "moment_uT_mm3", ArrayError, positive=True), data["dynamic"])

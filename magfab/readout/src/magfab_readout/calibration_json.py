@@ -27,12 +27,11 @@ from __future__ import annotations
 
 import hashlib
 import json
-import math
 from dataclasses import dataclass
 from typing import Any, Mapping, Tuple
 
 from . import bounded
-from .json_checks import FormatError, finite, is_number
+from .json_checks import FormatError, finite, is_finite, is_number
 
 __all__ = ["FORMAT", "FORCES", "INPUTS", "MAX_ORDER", "MLS_MAX_ORDER", "AXES", "THERMAL_MAX_PER_C",
            "THERMAL_REFERENCE_C", "THERMAL_MIN_DENOMINATOR", "INPUT_MAX", "FORCE_MAX_N", "MLS_MIN_BANDWIDTH",
@@ -150,7 +149,7 @@ class Checked:
 def _interval(data: dict, name: str) -> Point:
     path = "valid_region." + name
     pair = data["valid_region"].get(name)
-    if (not isinstance(pair, list) or len(pair) != 2 or not all(is_number(x) and math.isfinite(x) for x in pair)
+    if (not isinstance(pair, list) or len(pair) != 2 or not all(is_finite(x) for x in pair)
             or not pair[0] <= pair[1]):
         raise CalibrationError(path, pair, "must be [lo, hi] with finite lo <= hi")
     return float(pair[0]), float(pair[1])
@@ -168,7 +167,7 @@ def _hull(data: dict) -> tuple[tuple[Point, ...], float]:
         raise CalibrationError(path, raw, "must be a list of [Bz_uT, Br_uT] points")
     points = []
     for n, p in enumerate(raw):
-        if not isinstance(p, list) or len(p) != 2 or not all(is_number(x) and math.isfinite(x) for x in p):
+        if not isinstance(p, list) or len(p) != 2 or not all(is_finite(x) for x in p):
             raise CalibrationError(f"{path}[{n}]", p, "must be [Bz_uT, Br_uT], two finite numbers")
         points.append((float(p[0]), float(p[1])))
     if len(points) > 1 and points[0] == points[-1]:
@@ -188,7 +187,7 @@ def _hull(data: dict) -> tuple[tuple[Point, ...], float]:
 
 def _column(points: dict, name: str) -> tuple[float, ...]:
     node = points.get(name)
-    if not isinstance(node, list) or not all(is_number(x) and math.isfinite(x) for x in node):
+    if not isinstance(node, list) or not all(is_finite(x) for x in node):
         raise CalibrationError("mls.points." + name, node, "must be a list of finite numbers")
     return tuple(float(x) for x in node)
 
@@ -249,7 +248,7 @@ def _coefficients(data: dict, terms: int) -> dict[str, tuple[float, ...]]:
         if not isinstance(c, list) or len(c) != terms:
             raise CalibrationError(path, c, f"must be a list of {terms} numbers, one per monomial")
         for m, x in enumerate(c):
-            if not is_number(x) or not math.isfinite(x):
+            if not is_finite(x):
                 raise CalibrationError(f"{path}[{m}]", x, "must be a finite number")
         out[force] = tuple(float(x) for x in c)
     return out

@@ -19,7 +19,7 @@ if __name__.startswith("magfab."):  # magfab's import of this file (magfab.forma
 else:  # the readout package on the user's Python, where magfab is not needed
     _Base = ValueError  # type: ignore[misc, assignment]
 
-__all__ = ["FormatError", "is_number", "lookup", "finite"]
+__all__ = ["FormatError", "is_number", "is_finite", "lookup", "finite"]
 
 
 class FormatError(_Base):
@@ -43,6 +43,17 @@ def is_number(x: object) -> TypeGuard[int | float]:
     return isinstance(x, (int, float)) and not isinstance(x, bool)
 
 
+def is_finite(x: object) -> TypeGuard[int | float]:
+    """A JSON number a float holds finitely: not NaN or infinity, and not an integer too large for a float (JSON
+    allows 10**400 written out in digits, where ``math.isfinite`` raises OverflowError)."""
+    if not is_number(x):
+        return False
+    try:
+        return math.isfinite(x)
+    except OverflowError:
+        return False
+
+
 def lookup(data: dict, path: str, error: type) -> object:
     """The value at the dotted ``path``; ``error(path, None, "is missing")`` where a step is absent."""
     node: object = data
@@ -56,7 +67,7 @@ def lookup(data: dict, path: str, error: type) -> object:
 def finite(data: dict, path: str, error: type, *, positive: bool = False, nonnegative: bool = False) -> float:
     """The finite number at the dotted ``path`` (optionally > 0 or >= 0), else ``error`` naming the path."""
     node = lookup(data, path, error)
-    if not is_number(node) or not math.isfinite(node):
+    if not is_finite(node):
         raise error(path, node, "must be a finite number")
     if positive and not node > 0:
         raise error(path, node, "must be greater than 0")

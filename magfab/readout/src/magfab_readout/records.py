@@ -29,6 +29,7 @@ from __future__ import annotations
 import datetime as _dt
 import hashlib
 import json
+import math
 import os
 import re
 import secrets
@@ -63,6 +64,76 @@ class RecordError(ValueError):
     def __init__(self, what: str, value: object, allowed: str) -> None:
         super().__init__(f"{what} = {value}: {allowed}")
         self.what, self.value, self.allowed = what, value, allowed
+
+
+def _shown(value: object) -> str:
+    """``value`` for a :class:`RecordError` line: JSON, at most 60 characters (a hand-edited record may hold
+    anything, of any length)."""
+    try:
+        text = json.dumps(value, sort_keys=True)
+    except (TypeError, ValueError):  # not JSON, or an integer past Python's digit limit
+        text = type(value).__name__
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+#: The numbers a calibration event carries (docs/sensors.md section 3), each a finite number or null.
+_EVENT_NUMBERS = ("rms_holdout_Fz_mN", "rms_holdout_Fr_mN", "sensitivity_normal_uT_per_N",
+                  "sensitivity_shear_uT_per_N", "range_normal_N", "range_shear_N")
+
+
+def _finite(x: object) -> bool:
+    """A JSON number a float holds finitely (bool is not one; nor is an integer too large for a float)."""
+    if isinstance(x, bool) or not isinstance(x, (int, float)):
+        return False
+    try:
+        return math.isfinite(x)
+    except OverflowError:
+        return False
+
+
+def _is_date(x: object) -> bool:
+    """A date as the records write it (ISO 8601, a trailing Z for UTC), which every reader of a history parses."""
+    if not isinstance(x, str):
+        return False
+    try:
+        _dt.datetime.fromisoformat(x[:-1] + "+00:00" if x.endswith("Z") else x)
+    except ValueError:
+        return False
+    return True
+
+
+def _check_event(event: Dict[str, Any], what: str) -> None:
+    """:class:`RecordError` naming the event file ``what`` and the key unless ``event`` holds what every event
+    must (``date``, ``sensor``, ``files`` as docs/sensors.md section 3 has them) and each documented field present
+    has its documented type. The readers of a history compute with these fields (a date parsed, a figure
+    formatted, a file looked up by its hash), so a record edited by hand is refused here in one line, not deep
+    inside one of them."""
+    def refuse(key: str, allowed: str) -> RecordError:
+        return RecordError(f"{what}: {key}", _shown(event.get(key)), allowed)
+
+    if not _is_date(event.get("date")):
+        raise refuse("date", "must be an ISO 8601 date and time, e.g. 2026-11-28T14:05:00Z")
+    if not isinstance(event.get("sensor"), str):
+        raise refuse("sensor", "must be the sensor's ID (a string)")
+    files = event.get("files")
+    if not isinstance(files, dict) or not all(isinstance(v, str) and _SHA.fullmatch(v) for v in files.values()):
+        raise refuse("files", "must map each kept file's role to its SHA-256 in hex")
+    taxel = event.get("taxel")
+    if taxel is not None and (isinstance(taxel, bool) or not isinstance(taxel, int) or taxel < 0):
+        raise refuse("taxel", "must be null (a single taxel) or an array's taxel index, an integer from 0")
+    for key in _EVENT_NUMBERS:
+        if event.get(key) is not None and not _finite(event[key]):
+            raise refuse(key, "must be a finite number or null")
+    rest = event.get("rest_field_uT")
+    if rest is not None and not (isinstance(rest, list) and len(rest) == 3 and all(_finite(x) for x in rest)):
+        raise refuse("rest_field_uT", "must be [Bx, By, Bz], three finite numbers, or null")
+    figures = event.get("figures")
+    if figures is not None and not (isinstance(figures, dict)
+                                    and all(v is None or _finite(v) for v in figures.values())):
+        raise refuse("figures", "must map each figure's name to a finite number or null")
+    for key in ("calibration_sha256", "verdict"):
+        if event.get(key) is not None and not isinstance(event[key], str):
+            raise refuse(key, "must be a string")
 
 
 def _iso(when: _dt.datetime) -> str:
@@ -296,6 +367,7 @@ class Sensor:
             if match is None:
                 continue  # a temporary file a kill left behind, or a file a person put there
             event = _read_json(path, "events/" + path.name)
+            _check_event(event, "events/" + path.name)
             event["number"], event["kind"] = int(match.group(1)), match.group(2)
             out.append(event)
         return out
@@ -342,8 +414,8 @@ class Sensor:
 
     def file(self, sha256: str) -> bytes:
         """The bytes an event keeps under ``sha256`` (checked against it)."""
-        if not _SHA.match(sha256):
-            raise RecordError("file", sha256, "must be a SHA-256 in hex")
+        if not isinstance(sha256, str) or not _SHA.fullmatch(sha256):
+            raise RecordError("file", _shown(sha256), "must be a SHA-256 in hex")
         matches = sorted((self.path / "files").glob(sha256 + ".*"))
         if not matches:
             raise RecordError("file", sha256, f"is not kept in the record of {self.id}")
@@ -377,5 +449,19 @@ class Sensor:
                               "SCAN --reference REF --sensor {}`".format(
                                   what, "since its new skin " if epoch else "", self.id))
         event = found[-1]
-        return event, bounded.loads_json(self.file(event["files"]["calibration.json"]), "calibration.json",
-                                         f"the record of {self.id}")
+        sha = event["files"].get("calibration.json")
+        if sha is None:
+            raise RecordError("events/{:06d}-calibration.json: files".format(event["number"]), _shown(event["files"]),
+                              "must keep the calibration.json of the calibration")
+        return event, self.json_file(sha, "calibration.json")
+
+    def json_file(self, sha256: str, what: str) -> Any:
+        """The JSON file an event keeps under ``sha256`` (``what`` names it), parsed within bounds; :class:`RecordError`
+        when it does not parse (a file stored by hand under its hash: magfab keeps only JSON it wrote)."""
+        try:
+            return bounded.loads_json(self.file(sha256), what, f"the record of {self.id}")
+        except bounded.InputFileError:
+            raise
+        except ValueError as exc:  # json's error, or UnicodeDecodeError
+            raise RecordError(f"{what} of {self.id}", sha256, f"is kept in the record but is not valid JSON ({exc})"
+                              ) from None

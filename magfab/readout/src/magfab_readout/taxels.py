@@ -37,7 +37,7 @@ from dataclasses import dataclass
 from typing import Iterator, List, Optional, Sequence, Tuple
 
 from . import array_json, bounded  # array_json: an array build's compensation (docs/bundle.md section 5)
-from .calibration import Calibration
+from .calibration import Calibration, CalibrationError
 from .device import DeviceError
 from .frames import STATUS_CHIP_ERROR, STATUS_OUTSIDE_REGION, Sample, fault_name, flag_letters
 
@@ -57,6 +57,14 @@ _NAN3 = (math.nan, math.nan, math.nan)
 
 class WrongFirmware(DeviceError):
     """The board sends a single taxel's force frames to an array's package (or the other way round)."""
+
+
+def _text(raw: bytes, name: str) -> str:
+    """A taxel's calibration file as text: :class:`~magfab_readout.calibration.CalibrationError` unless UTF-8."""
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise CalibrationError("", name, f"is not UTF-8 text ({exc})") from None
 
 
 def _finite(v: Sequence[float]) -> bool:
@@ -93,10 +101,15 @@ class ArrayCalibration:
     @classmethod
     def from_files(cls, read) -> ArrayCalibration:
         """From ``read(name) -> bytes`` (array.json, then the taxel files it names)."""
-        array = bounded.loads_json(read("array.json"), "array.json")
-        names = [t.get("calibration") if isinstance(t, dict) else None for t in array.get("taxels") or []]
-        return cls(array, [Calibration.from_json(read(name).decode("utf-8")) if isinstance(name, str) else {}
-                           for name in names])
+        try:
+            array = bounded.loads_json(read("array.json"), "array.json")
+        except bounded.InputFileError:
+            raise
+        except ValueError as exc:  # json's error, or UnicodeDecodeError: the file's, in the format's one line
+            raise array_json.ArrayError("", "(contents)", f"is not valid JSON ({exc})") from None
+        array_json.validate(array)  # the taxels and their calibration file names, before any of them is read
+        return cls(array, [Calibration.from_json(_text(read(t["calibration"]), t["calibration"]))
+                           for t in array["taxels"]])
 
     @classmethod
     def load(cls, folder: str) -> ArrayCalibration:
