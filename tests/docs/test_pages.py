@@ -333,11 +333,15 @@ def test_each_board_reports_its_own_sensor(walked, two_sensors):
 
 def test_a_rebuild_leaves_the_records_and_a_new_skin_is_compared(walked, two_sensors):
     """`magfab build finger.toml` over a build whose sensors were calibrated into their records: it succeeds, every
-    record is as it was, and the build's readout (the installed reader's) is the same; `sensor show` compares the
+    record is as it was, and the build's readout (the installed reader's) is the same; `record` reads the re-skinned
+    board, which still runs the old skin's calibration, and says so; `sensor show` compares the
     new skin's calibration with the old one's; `sensor list` names both sensors."""
     rebuilt = [r for r in walked.ran if r.line.startswith("magfab build finger.toml")][-1]
     assert rebuilt.returncode == 0 and "discard" not in rebuilt.stderr
     assert two_sensors["after"] == two_sensors["before"]
+    recorded = [r for r in walked.ran[two_sensors["first"]:]
+                if r.line.startswith("magfab-readout record") and r.cwd.name == "finger"][-1]  # finger-01's new skin
+    assert "calibration of" in recorded.stderr and "(skin 0), not one of the skin in use (skin 1)" in recorded.stderr
     show = [r for r in walked.ran if r.line.startswith("magfab sensor show finger-01")][-1].stdout
     assert "new skin against the previous one" in show and "rest Bz" in show, show
     listed = [r for r in walked.ran if r.line.startswith("magfab sensor list")][-1].stdout

@@ -97,6 +97,23 @@ def test_without_the_record_the_board_of_a_sensor_is_a_mismatch(bench):
     assert "# sensor: finger-01" in header and calibration_sha256(bench["cal"]) in header
 
 
+def test_a_new_skin_s_board_reads_with_the_old_calibration_named_as_superseded(bench):
+    """After a re-skin the board still runs the old skin's calibration, which is no longer the sensor's current one:
+    ``info`` and ``record`` read it with that calibration and name it superseded (its skin and date); ``check``, an
+    acceptance test that would judge the old skin's fit on the new skin, refuses in one line and keeps nothing."""
+    root, sensor = bench["root"], bench["sensor"]
+    assert readout(bench, "upload", "--sensor", "finger-01", "--sensors", root).returncode == 0
+    sensor.append("reskin", {"note": "torn tip"}, {}, date="2026-11-29T09:00:00Z")
+    note = f"sensor finger-01's calibration of {DATE} (skin 0), not one of the skin in use (skin 1)"
+    proc = readout(bench, "info", "--sensors", root)
+    assert proc.returncode == 0, proc.stderr
+    assert "calibration: match, superseded (the board runs " + note in proc.stdout
+    proc = readout(bench, "record", bench["cwd"] / "scan.csv", "--seconds", "0.1", "--sensors", root)
+    assert proc.returncode == 0 and note in proc.stderr, proc.stderr
+    assert calibration_sha256(bench["cal"]) in (bench["cwd"] / "scan.csv").read_text()
+    assert_refused(bench, note, "check", "--sensors", root, *FAST)
+
+
 def _other_design(bench):
     sensor = rec.open_sensor(bench["root"], "finger-01")
     sensor.append("calibration", {"taxel": None, "spec_sha256": "ab" * 32},

@@ -103,11 +103,48 @@ def sensor_line(found: Optional[Identity], running: str) -> str:
 @dataclasses.dataclass(frozen=True)
 class Link:
     """What :func:`link` found: the board's ``identity`` (None without one), the ``sensor`` whose record applies
-    (None: the package's calibration), and its current calibration ``event`` when the board runs it."""
+    (None: the package's calibration), and the calibration ``event`` of that record the board runs: its current one,
+    or (``superseded``) an earlier one the record keeps, e.g. the old skin's after a re-skin."""
 
     identity: Optional[Identity]
     sensor: Optional[records.Sensor]
     event: Optional[Dict[str, Any]]
+    superseded: bool = False
+
+    def superseded_note(self) -> str:
+        """One line on a superseded calibration the board runs ("" when it runs the current one, or none)."""
+        if not self.superseded or self.sensor is None or self.event is None:
+            return ""
+        return (f"the board runs sensor {self.sensor.id}'s calibration of {self.event.get('date', '?')} (skin "
+                f"{self.event.get('epoch', '?')}), not one of the skin in use (skin {self.sensor.epoch()}): its forces "
+                f"are that calibration's; calibrate this skin and write it with magfab-readout upload --sensor "
+                f"{self.sensor.id}")
+
+
+def _kept(sensor: records.Sensor, running: str) -> Optional[Tuple[Dict[str, Any], dict]]:
+    """(event, calibration.json) of the newest calibration in ``sensor``'s record whose hash is ``running`` (the
+    board's), of any skin; None when the record keeps none."""
+    for event in reversed(list(sensor.calibrations())):
+        sha = event["files"].get("calibration.json")
+        if sha is None:
+            continue
+        try:
+            data = sensor.json_file(sha, "calibration.json")
+        except records.RecordError:
+            continue
+        if calibration_sha256(data)[:16] == running.lower():
+            return event, data
+    return None
+
+
+def _superseded(device: Device, info: DeviceInfo, found: Optional[Identity], sensor: records.Sensor) -> Link:
+    """The board runs a calibration its sensor's record keeps but no longer current (the old skin's): that one, as
+    the device's, flagged; else the package's calibration (:class:`Link` with no sensor)."""
+    kept = _kept(sensor, info.calibration_hash)
+    if kept is None:
+        return Link(found, None, None)
+    device.calibration = Calibration(kept[1])
+    return Link(found, sensor, kept[0], superseded=True)
 
 
 def named_sensor(device: Device, args: argparse.Namespace) -> Tuple[Optional[Identity], Optional[records.Sensor]]:
@@ -135,7 +172,8 @@ def link(device: Device, info: DeviceInfo, args: argparse.Namespace) -> Link:
     With ``--sensor ID``: :class:`UsageError` when the record is missing, or the board names another sensor, or
     the calibration was fitted to another design; :class:`~.device.CalibrationMismatch` when the sensor has a
     calibration and the board runs another. Without it, a board's sensor without a record here leaves the package's
-    calibration in place."""
+    calibration in place, and a board running an earlier calibration its record keeps (the old skin's, after a
+    re-skin) is read with that one, flagged ``superseded``."""
     found, sensor = named_sensor(device, args)
     wanted = getattr(args, "sensor", None)
     if sensor is None:
@@ -145,7 +183,9 @@ def link(device: Device, info: DeviceInfo, args: argparse.Namespace) -> Link:
     except records.RecordError as exc:
         if wanted and exc.what != "sensor":  # a record that cannot be read, not one without a calibration yet
             raise UsageError(str(exc)) from None
-        return Link(found, sensor if wanted else None, None)  # the board runs the package's calibration
+        if wanted:
+            return Link(found, sensor, None)  # the board runs the package's calibration
+        return _superseded(device, info, found, sensor)  # a new skin's board may still run the old skin's
     try:
         refuse_other_design(sensor, event)
     except UsageError:
@@ -161,4 +201,4 @@ def link(device: Device, info: DeviceInfo, args: argparse.Namespace) -> Link:
             f"the board on {device.port} runs calibration {info.calibration_hash}, not sensor {sensor.id}'s current "
             f"calibration {sha[:16]} (of {event.get('date', '?')}): write it with magfab-readout upload --sensor "
             f"{sensor.id}")
-    return Link(found, None, None)
+    return _superseded(device, info, found, sensor)

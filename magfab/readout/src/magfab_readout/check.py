@@ -305,6 +305,8 @@ def _link(args: argparse.Namespace, device) -> board_sensor.Link:
     device's; with ``--sensor`` the board must run that calibration (or, not calibrated yet, the package's)."""
     info = device.info()
     linked = board_sensor.link(device, info, args)
+    if linked.superseded:  # an acceptance test of an old skin's calibration on the new skin would judge nothing
+        raise UsageError(linked.superseded_note())
     if args.sensor:
         for warning in device.check_info(info):
             sys.stderr.write(f"magfab-readout: warning: {warning}\n")

@@ -229,7 +229,7 @@ def _record(args: argparse.Namespace) -> int:
     with _device(args, text=bool(args.text)) as device:
         info = device.info()
         linked = board_sensor.link(device, info, args)
-        for warning in device.check_info(info):
+        for warning in device.check_info(info) + [linked.superseded_note()] * linked.superseded:
             print("magfab-readout: warning: " + warning, file=sys.stderr)
         sensor = [] if linked.sensor is None else [f"# sensor: {linked.sensor.id}"]
         temperature = _build.TEMPERATURE_ENABLED
@@ -278,7 +278,9 @@ def _info(args: argparse.Namespace, out) -> int:
         warnings = device.check_info(info)
         for warning in warnings:
             out.write(f"warning: {warning}\n")
-        if linked.event is not None and linked.sensor is not None:
+        if linked.superseded:
+            out.write(f"calibration: match, superseded ({linked.superseded_note()})\n")
+        elif linked.event is not None and linked.sensor is not None:
             out.write(f"calibration: match (sensor {linked.sensor.id}'s current calibration of "
                       f"{linked.event.get('date', '?')}, from its record in {linked.sensor.root})\n")
         else:
