@@ -1156,3 +1156,16 @@ def test_an_integer_too_large_for_a_float_in_the_targets_is_out_of_bounds():
     assert "elastomer_diameter_mm = [8.0, 14.0]" in text
     with pytest.raises(SpecError, match=r"variables\.elastomer_diameter_mm .*must lie within"):
         parse_targets(text.replace("elastomer_diameter_mm = [8.0, 14.0]", f"elastomer_diameter_mm = [8.0, {BIG}]"))
+
+
+@pytest.mark.parametrize("key", ["index", "polarity", "i2c_address"])
+@pytest.mark.parametrize("value", [True, False])
+def test_a_taxels_bool_is_not_an_integer(array_doc, key, value):
+    """JSON's true equals 1 and false 0 in Python, and both are ints there: array.json's taxel index, polarity and
+    address refuse them as what they are, a bool."""
+    from magfab.formats.array_json import ArrayError, validate
+
+    doc = json.loads(json.dumps(array_doc))
+    doc["taxels"][int(value)][key] = value
+    with pytest.raises(ArrayError, match=r"taxels\[[01]\]"):
+        validate(doc)

@@ -81,7 +81,10 @@ def validate(data: object) -> Compensator:
     if not isinstance(taxels, list) or not 2 <= len(taxels) <= MAX_TAXELS:
         raise ArrayError("taxels", taxels, f"must be a list of 2 to {MAX_TAXELS} taxels")
     for i, t in enumerate(taxels):
-        if not isinstance(t, dict) or t.get("index") != i or t.get("polarity") not in (1, -1) \
+        # JSON's true and false are Python's bools, which equal 1 and 0 and are ints: none is an index, a polarity
+        # or an address.
+        if not isinstance(t, dict) or any(isinstance(t.get(k), bool) for k in ("index", "polarity", "i2c_address")) \
+                or t.get("index") != i or t.get("polarity") not in (1, -1) \
                 or not isinstance(t.get("calibration"), str) or not isinstance(t.get("i2c_address"), int):
             raise ArrayError(f"taxels[{i}]", t, f"must hold index {i}, polarity 1 or -1, an integer i2c_address and "
                              "a calibration file name")
