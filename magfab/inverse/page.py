@@ -306,8 +306,8 @@ def _parts(result: DesignResult) -> list[tuple[str, Any]]:
     else:
         c = result.verified[result.chosen]
         parts += [("p", f"Chosen: {result.names[result.chosen]}, the best on {objs[0]} (its spec is also "
-                        "chosen.toml). " + "; ".join("met with margin: " + _margin_text(m)
-                                                     for m in margins(t, c)) + ". Build it from this folder:"),
+                        "chosen.toml). It meets every requirement with margin: "
+                        + "; ".join(_margin_text(m) for m in margins(t, c)) + ". Build it from this folder:"),
                   ("code", f"magfab build designs/{result.names[result.chosen]}.toml")]
     head = ["design", *objs, "magnet", "grade", "material", "tip", "d_max_mm", "d_min_mm",
             "elastomer_diameter_mm", "cover_mm"]

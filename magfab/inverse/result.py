@@ -52,7 +52,7 @@ def closest(targets: Targets, recs: list[Record], names: list[str] | None = None
     if not scored:
         return "no design could be evaluated (trials.csv gives each reason)"
     _, _, i = min(scored)
-    r, name = recs[i], (names[i] if names else f"trial {recs[i].number}")
+    r, name = recs[i], (names[i] if names else f"trial-{recs[i].number}")
     ms = margins(targets, r)
     short = [m for m in ms if not m.met]
     if short:
