@@ -211,10 +211,12 @@ def plot_front(result: DesignResult, ext: str) -> bytes:
             if label not in labels:
                 handles.append(h)
                 labels.append(label)
-    fig.legend(handles, labels, loc="lower center", ncol=2 if len(pairs) == 1 else 4, fontsize=8, frameon=False)
+    ncol = 2 if len(pairs) == 1 else 4
+    fig.legend(handles, labels, loc="lower center", ncol=ncol, fontsize=8, frameon=False)
+    rows = -(-len(labels) // ncol)  # the legend's rows: room kept below the axes for them
     fig.suptitle(f"{result.targets.name}: {len(result.trials)} designs searched, {len(result.verified)} verified",
                  fontsize=10)
-    fig.tight_layout(rect=(0, 0.16 if len(pairs) == 1 else 0.1, 1, 0.95))
+    fig.tight_layout(rect=(0, (0.045 if len(pairs) == 1 else 0.05) * rows + 0.02, 1, 0.95))
     buf = io.BytesIO()
     meta = {"svg": {"Date": None}, "png": {"Software": None}}[ext]
     fig.savefig(buf, format=ext, dpi=130, metadata=meta)
@@ -227,27 +229,30 @@ def _requirement_of(objective: str) -> str | None:
 
 
 def _requirement(ax, result: DesignResult, objective: str, vertical: bool) -> None:
-    """The requirement on ``objective``'s axis as a line, and the margin band inside it (the largest margin among the
-    verified designs, or the targets' percentage), both labelled: a design in the band meets the requirement but not
-    by the model chain's own error."""
+    """The requirement on ``objective``'s axis as a dashed line, and inside it the margin bands: the search's (the
+    largest margin among its designs: the cheap models' error) and the full chain's (the largest among the verified
+    designs), both labelled. A design in a band meets the requirement, but not by the model chain's own error."""
     name = _requirement_of(objective)
     t = result.targets
     if name is None or getattr(t.require, name) is None:
         return
     need = float(getattr(t.require, name))
-    recs = [r for r in result.verified if r.metrics] or [r for r in result.trials if r.metrics]
-    margin = max((m.margin for r in recs for m in margins(t, r) if m.name == name), default=0.0)
-    inner = need * (1.0 - margin) if REQUIREMENTS[name][1] == "at_most" else need * (1.0 + margin)
+    at_most = REQUIREMENTS[name][1] == "at_most"
+    what = "model error" if t.require.margin == "model" else "targets' margin"
     line, span = (ax.axvline, ax.axvspan) if vertical else (ax.axhline, ax.axhspan)
+    bands = []
+    for recs, who, alpha in ((result.trials, "search", 0.08), (result.verified, "full chain", 0.18)):
+        margin = max((m.margin for r in recs if r.metrics for m in margins(t, r) if m.name == name), default=0.0)
+        if margin > 0:
+            bands.append((need * (1.0 - margin) if at_most else need * (1.0 + margin), who, alpha, margin))
     lim = ax.get_xlim() if vertical else ax.get_ylim()
-    lo, hi = min(lim[0], need, inner), max(lim[1], need, inner)
+    lo, hi = min([lim[0], need, *(b[0] for b in bands)]), max([lim[1], need, *(b[0] for b in bands)])
     pad = 0.03 * (hi - lo) if (lo, hi) != tuple(lim) else 0.0
     (ax.set_xlim if vertical else ax.set_ylim)(lo - pad, hi + pad)  # the requirement stays in view
     line(need, color="#d62728", lw=1.0, ls="--", label="requirement")
-    if margin > 0:
-        what = "model error" if t.require.margin == "model" else "targets' margin"
-        span(min(need, inner), max(need, inner), color="#d62728", alpha=0.12, lw=0,
-             label=f"margin band ({what}, up to {100 * margin:.1f} %)")
+    for inner, who, alpha, margin in bands:
+        span(min(need, inner), max(need, inner), color="#d62728", alpha=alpha, lw=0,
+             label=f"margin band, {who} ({what}, up to {100 * margin:.1f} %)")
 
 
 def _zoom(ax, v: np.ndarray, a: int, b: int) -> None:
