@@ -518,7 +518,8 @@ def _study_options(f):
 @_study_options
 def design(targets: Path, out_dir: Path | None, scheduler: str | None, workers: int | None) -> None:
     """Search for designs that meet TARGETS (a TOML file: requirements, variables, objectives) and write the Pareto
-    front, its page and plot, and each front design as a spec `magfab build` accepts."""
+    front, its page and plot, and each verified design as a spec `magfab build` accepts. Every requirement is met by
+    a margin (the models' own error, or [require] margin); exits 3 when no design meets them so."""
     with _handled(), _bar(sys.stderr.isatty()) as bar:
         check_out(out_dir)
         from .inverse.run import design as run_design

@@ -14,7 +14,7 @@ import numpy as np
 from .evaluate import REQUIREMENTS, bench_point, constraint_names
 from .files import spec_toml, write_bytes
 from .pareto import front_mask
-from .result import margins
+from .result import margins, nearest
 from .space import CATEGORICAL, NUMERIC, candidate_spec
 from .study import Record, tally
 from .tables import FIGURES, csv_bytes, parquet_bytes, rows, write_table
@@ -84,8 +84,7 @@ def pareto_rows(result: DesignResult, base) -> list[dict[str, Any]]:
         labels = list(result.names)
         verified = True
     else:
-        ranked = sorted((r for r in result.trials if r.metrics),
-                        key=lambda r: max([m.short for m in margins(t, r)] or [0.0]))
+        ranked = [result.trials[i] for i in nearest(t, result.trials)]
         recs, screened, labels, verified = ranked[:t.study.verify], [], [f"trial-{r.number}" for r in ranked], False
     for i, r in enumerate(recs):
         point = bench_point(r.point, base, t) if verified and r.metrics else r.point

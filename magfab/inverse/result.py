@@ -13,7 +13,7 @@ from .pareto import values_of
 from .study import Record
 from .targets import Targets
 
-__all__ = ["DesignResult", "Margin", "margins", "closest"]
+__all__ = ["DesignResult", "Margin", "margins", "nearest", "closest"]
 
 
 @dataclass(frozen=True)
@@ -44,14 +44,25 @@ def margins(targets: Targets, r: Record) -> list[Margin]:
                    slack_of(targets, n, m), margin_of(targets, n, m)) for n in requirement_names(targets)]
 
 
+def nearest(targets: Targets, recs: list[Record]) -> list[int]:
+    """Indices of the records with figures, nearest to meeting the targets first: those with every figure a
+    requirement needs, then those without error findings, then by the largest shortfall of a requirement from its
+    margin."""
+    def key(i: int) -> tuple[bool, bool, float, int]:
+        worst = max([m.short for m in margins(targets, recs[i])] or [-math.inf])
+        return (not worst < math.inf, bool(recs[i].errors), worst, i)
+
+    return sorted((i for i, r in enumerate(recs) if r.metrics), key=key)
+
+
 def closest(targets: Targets, recs: list[Record], names: list[str] | None = None) -> str:
-    """One line: the design among ``recs`` nearest to meeting the targets, and its requirement furthest from its
-    margin (or, when it meets every requirement, the error findings it has)."""
-    scored = [(max([m.short for m in margins(targets, r)] or [-math.inf]), len(r.errors), i)
-              for i, r in enumerate(recs) if r.metrics]
-    if not scored:
+    """One line: the design among ``recs`` nearest to meeting the targets (one without error findings if there is
+    one: the smallest largest shortfall of a requirement from its margin), and that requirement (or, when it meets
+    every requirement, the error findings it has)."""
+    order = nearest(targets, recs)
+    if not order:
         return "no design could be evaluated (trials.csv gives each reason)"
-    _, _, i = min(scored)
+    i = order[0]
     r, name = recs[i], (names[i] if names else f"trial-{recs[i].number}")
     ms = margins(targets, r)
     short = [m for m in ms if not m.met]
