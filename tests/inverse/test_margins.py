@@ -17,7 +17,7 @@ from magfab.errors import SpecError
 from magfab.inverse import evaluate as ev
 from magfab.inverse.files import spec_toml
 from magfab.inverse.page import pareto_rows, write_outputs
-from magfab.inverse.result import DesignResult, closest, margins
+from magfab.inverse.result import DesignResult, closest, margins, nearest
 from magfab.inverse.space import candidate_spec
 from magfab.inverse.study import Record
 from magfab.inverse.targets import parse_targets
@@ -222,3 +222,26 @@ def test_nothing_meets_the_targets_exits_3_with_the_closest_requirement(tmp_path
     errors = [line for line in out.output.splitlines() if line.startswith("magfab: error:")]
     assert len(errors) == 1 and "closest: t-0 (fe), normal_range_N 1.014 against >= 1 (margin 4.4 %): short by 3.0 %" \
         in errors[0], out.output
+
+
+def test_the_full_chain_verifies_the_design_as_printed():
+    """The full chain evaluates the point on the printer's step: its figures are the written spec's."""
+    t = targets("normal_range_N = 0.5")
+    off = {**POINT, "elastomer_diameter_mm": 10.97, "d_max_mm": 4.56}
+    out = ev.evaluate(off, BASE.model_dump_json(), t.model_dump_json(), ev.FE)
+    assert out["model"] == ev.FE and out["metrics"], out["reason"]
+    assert out["metrics"]["diameter_mm"] == pytest.approx(10.95)
+    spec = candidate_spec(ev.bench_point(off, BASE, t), BASE, t, "x")
+    assert out["metrics"]["height_mm"] == pytest.approx(spec.elastomer.height_mm)
+
+
+def test_the_nearest_design_has_its_figures_and_no_error_findings_first():
+    t = targets("normal_range_N = 1.0")
+    base = {"normal_range_N": 0.9, "field_error": 0.0, "mechanics_error": 0.02}
+    recs = [Record(0, POINT, "infeasible", "", "surrogate", {**base, "normal_range_N": 1.2}, [], ["chip-saturates"]),
+            Record(1, POINT, "infeasible", "", "surrogate", {**base, "normal_range_N": math.nan}, [], []),
+            Record(2, POINT, "infeasible", "", "surrogate", base, [], []),
+            Record(3, POINT, "infeasible", "", "surrogate", {**base, "normal_range_N": 0.95}, [], [])]
+    assert nearest(t, recs) == [3, 2, 0, 1]
+    assert closest(t, recs).startswith("closest: trial-3 (surrogate), normal_range_N 0.95 against >= 1 (margin 2.0 "
+                                       "%): short by 7.0 %")
