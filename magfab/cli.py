@@ -26,7 +26,7 @@ try:  # Ctrl-C while these load is Python's KeyboardInterrupt, ended here as exi
     from collections.abc import Callable, Iterator, Mapping
     from contextlib import contextmanager
     from pathlib import Path
-    from typing import TYPE_CHECKING, Any
+    from typing import TYPE_CHECKING, Any, NoReturn
 
     import click
 
@@ -48,9 +48,12 @@ if TYPE_CHECKING:
 EXIT_BAD_INPUT = 2
 EXIT_INTERNAL = 1
 EXIT_INTERRUPTED = 130
+#: The command ran and wrote its results, and they fail what was asked: `magfab design` when no design meets the
+#: targets with margin (as magfab-readout exits when the sensor fails a check step).
+EXIT_UNMET = 3
 
 
-def _fail(message: str, code: int) -> None:
+def _fail(message: str, code: int) -> NoReturn:
     click.echo(f"magfab: error: {message}", err=True)
     sys.exit(code)
 
@@ -515,7 +518,8 @@ def _study_options(f):
 @_study_options
 def design(targets: Path, out_dir: Path | None, scheduler: str | None, workers: int | None) -> None:
     """Search for designs that meet TARGETS (a TOML file: requirements, variables, objectives) and write the Pareto
-    front, its page and plot, and each front design as a spec `magfab build` accepts."""
+    front, its page and plot, and each verified design as a spec `magfab build` accepts. Every requirement is met by
+    a margin (the models' own error, or [require] margin); exits 3 when no design meets them so."""
     with _handled(), _bar(sys.stderr.isatty()) as bar:
         check_out(out_dir)
         from .inverse.run import design as run_design
@@ -532,9 +536,13 @@ def design(targets: Path, out_dir: Path | None, scheduler: str | None, workers: 
                    f"{states['failed']} failed); verified {len(r.verified)} by the full chain; front of "
                    f"{len(r.front)} in {r.folder}")
         if r.chosen is None:  # a result, not an input error: the study and its tables are written and resumable
-            click.echo("magfab: warning: no verified design meets every requirement: see README.md there; relax a "
-                       "requirement, widen the variables or raise study.trials and run again", err=True)
-            return
+            _fail(f"no design meets the targets with margin; {r.closest()}; see README.md there: relax a "
+                  "requirement, widen the variables or raise study.trials and run again", EXIT_UNMET)
+        from .inverse.result import margins
+
+        chosen = r.verified[r.chosen]
+        for m in margins(r.targets, chosen):
+            click.echo(f"  {m.name}: {m.value:.4g} met with margin {100 * m.margin:.1f} % (by {100 * m.slack:+.1f} %)")
         click.echo(f"chosen: {r.names[r.chosen]}; build it: magfab build "
                    f"{r.folder / 'designs' / r.names[r.chosen]}.toml")
 

@@ -5,10 +5,12 @@ full chain (FE), the front of the verified designs, and the files::
 
     DIR/study.log                 the Optuna storage (its journal file; resumed by running the command again)
     DIR/trials.csv, .parquet      every design the search evaluated, with its state and reason
-    DIR/pareto.csv, .parquet      the verified designs (full-chain figures, and the cheap models' beside them)
+    DIR/pareto.csv, .parquet      the verified designs: full-chain figures, each requirement's distance against its
+                                  margin, the spec's path, the cheap models' figures beside them (none verified: the
+                                  search's nearest designs, marked verified false)
     DIR/pareto.svg, .png          the front
     DIR/index.html, README.md     the page: targets, front, the chosen design and how to build it
-    DIR/designs/NAME.toml         each verified front design as a spec `magfab build` accepts
+    DIR/designs/NAME.toml         each verified design as a spec `magfab build` accepts (on the printer's step)
     DIR/designs/NAME.json         its full-chain figures
     DIR/chosen.toml               the chosen design's spec (the best verified one on the first objective)
 

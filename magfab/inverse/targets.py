@@ -9,7 +9,10 @@
     normal_resolution_mN = 2.0           # at most: worst case over the material and grade bands
     normal_range_N = 3.0                 # at least: the softest material's range
     max_diameter_mm = 14.0
+    max_drift_mN_per_C = 1.0             # at most: normal force drift at rest per degree C
+    max_earth_field_mN = 5.0             # at most: normal force error when turned over in the Earth's field
     noise_G = 0.1                        # the environment's RMS field noise, gauss
+    margin = "model"                     # each met by at least the models' own error (or a percentage, e.g. 5)
 
     [variables]                          # what the search may change: a [low, high] range or a list of values
     magnets = "stock"                    # the stock discs (recipes/magnet_stock.toml) or a list of their keys
@@ -30,7 +33,9 @@
     seed = 0
 
 Objectives and requirements are the build's own figures (predictions.json): resolution is the worst case over the
-bands, range the softest material's, size the elastomer's diameter and height.
+bands, range the softest material's, size the elastomer's diameter and height, drift and the Earth field's error
+the drift budget's (predictions.json's ``drift``). Every requirement the models predict is met by a margin: the
+model chain's own error estimate (``margin = "model"``), or the percentage given.
 """
 
 from __future__ import annotations
@@ -61,6 +66,8 @@ class Objective(str, Enum):
     SHEAR_RANGE = "shear_range_N"
     DIAMETER = "diameter_mm"
     HEIGHT = "height_mm"
+    DRIFT = "drift_mN_per_C"
+    EARTH_FIELD = "earth_field_mN"
 
 
 Direction = Literal["minimize", "maximize"]
@@ -68,7 +75,8 @@ Direction = Literal["minimize", "maximize"]
 OBJECTIVES: dict[Objective, Direction] = {
     Objective.NORMAL_RESOLUTION: "minimize", Objective.SHEAR_RESOLUTION: "minimize",
     Objective.NORMAL_RANGE: "maximize", Objective.SHEAR_RANGE: "maximize",
-    Objective.DIAMETER: "minimize", Objective.HEIGHT: "minimize"}
+    Objective.DIAMETER: "minimize", Objective.HEIGHT: "minimize",
+    Objective.DRIFT: "minimize", Objective.EARTH_FIELD: "minimize"}
 
 
 class _Table(BaseModel):
@@ -77,6 +85,10 @@ class _Table(BaseModel):
 
 Range = tuple[float, float]
 Choice = Range | list[float]  # a [low, high] range or (in a table {values = [...]}) listed values
+
+
+#: The largest margin a requirement may ask, percent.
+MAX_MARGIN_PCT = 50.0
 
 
 class Require(_Table):
@@ -90,7 +102,28 @@ class Require(_Table):
     shear_range_N: float | None = Field(None, gt=0.0, le=1e3, description="Shear force range, at least, N.")
     max_diameter_mm: float | None = Field(None, gt=0.0, le=100.0, description="Largest elastomer diameter, mm.")
     max_height_mm: float | None = Field(None, gt=0.0, le=100.0, description="Largest elastomer height, mm.")
+    max_drift_mN_per_C: float | None = Field(None, gt=0.0, le=1e4,
+                                             description="Normal force drift at rest per degree C, at most, mN/C "
+                                                         "(with the chip-temperature compensation when the firmware "
+                                                         "applies it).")
+    max_earth_field_mN: float | None = Field(None, gt=0.0, le=1e5,
+                                             description="Normal force error when the sensor is turned over in the "
+                                                         "strongest Earth field (0.65 G), at most, mN.")
     noise_G: float = Field(0.1, ge=0.0, le=100.0, description="RMS field noise of the environment, gauss.")
+    margin: Literal["model"] | float = Field("model", description="How far every design meets each requirement the "
+                                             "models predict: \"model\" (the model chain's own error estimate) or "
+                                             "a percentage.")
+
+    @field_validator("margin", mode="before")
+    @classmethod
+    def _margin(cls, v: Any) -> Any:
+        if v == "model":
+            return v
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise ValueError(f"must be \"model\" (the models' own error) or a percentage from 0 to {MAX_MARGIN_PCT:g}")
+        if not 0.0 <= float(v) <= MAX_MARGIN_PCT:
+            raise ValueError(f"must be a percentage from 0 to {MAX_MARGIN_PCT:g} (or \"model\")")
+        return float(v)
 
 
 def _range(v: Any, lo: float, hi: float, what: str) -> Any:

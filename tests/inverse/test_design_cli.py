@@ -83,11 +83,16 @@ def test_the_files_a_user_gets(study):
     page = (folder / "README.md").read_text()
     chosen = run.stdout.split("chosen: ")[1].split(";")[0]
     assert f"magfab build designs/{chosen}.toml" in page
-    for spec_file in (folder / "designs").glob("*.toml"):
+    listed = {r["spec"]: r for r in _pareto(folder)}
+    for spec_file in (folder / "designs").glob("*.toml"):  # every verified design's; the front's meet the targets
         spec = load_spec(spec_file)
         figures = json.loads(spec_file.with_suffix(".json").read_text())
         assert figures["model"] == "fe" and spec.name == spec_file.stem
-        assert figures["error_findings"] == [] and all(v <= 0 for v in figures["requirements"].values())
+        assert listed[f"designs/{spec_file.name}"]["meets_targets"] == str(figures["meets_targets"])
+        if figures["on_front"]:
+            assert figures["meets_targets"] and figures["error_findings"] == []
+            assert all(v <= 0 for v in figures["requirements"].values())
+            assert all(m["met"] and m["met_by"] >= m["margin"] for m in figures["margins"].values())
 
 
 def test_running_again_resumes(study):
@@ -124,7 +129,8 @@ def test_an_existing_cluster_by_its_address(tmp_path):
     (tmp_path / "t.toml").write_text(small)
     with LocalCluster(n_workers=2, threads_per_worker=1, dashboard_address=None) as cluster:
         run = magfab("design", "t.toml", "--scheduler", cluster.scheduler_address, cwd=tmp_path)
-        assert run.returncode == 0 and "Traceback" not in run.stderr, run.stderr
+        # 8 designs may find none that meets the targets with margin: exit 3 and one line, the study written
+        assert run.returncode in (0, 3) and "Traceback" not in run.stderr, run.stderr
         counts = cluster.scheduler.task_prefixes["evaluate"].state_counts  # what went through this scheduler
     assert "searched 8 designs" in run.stdout and counts["memory"] >= 8  # every searched design went through it
 
