@@ -20,8 +20,9 @@ ends too. Its error is measured on held-out runs of another hypercube (``held_ou
 
 A flat tip is a second family with its own table (``fe_surrogate_flat.json``, :data:`FLAT_BOX`): the same four
 ratios (``c`` the silicone above the magnet to the flat top; the body's height is z + h + c), the same grid, fit and
-scaling. Its box is the example targets' whole box of flat-tip designs with a margin, and its held-out runs are the
-ratios of designs drawn over that box (bench/fe_surrogate.py), not table-like points.
+scaling, from 100 FE runs (fewer than the hemispherical tip's 281: a flat-tip run costs 8-26 s; the held-out errors
+of both are in their files and bench/fe_surrogate.py's doc). Its box is the example targets' whole box of flat-tip
+designs with a margin, and its held-out runs are the ratios of designs drawn over that box, not table-like points.
 
 Used only inside its family's box (:data:`BOXES`) and for bodies :class:`~.body.Body` accepts: anything else is
 :class:`OutsideRegion`, and the search evaluates it with the FE.
