@@ -9,10 +9,11 @@ blocked (:func:`magfab.inverse.study.client`), so one pressed before this runs w
 And glibc's allocator thresholds (:func:`malloc_thresholds`). Dask's nanny starts every worker with
 ``MALLOC_TRIM_THRESHOLD_=65536`` (its ``distributed.nanny.pre-spawn-environ``), to hand freed memory back to the
 system quickly. Setting it also switches off glibc's dynamic mmap threshold, so every array over 128 KiB the FE
-allocates is a fresh mmap, page-faulted in and unmapped again: on 20 FE designs 39.8 s of system time against
-2.1 s without the variable (measured; bench/design.py measures the ratio on each run). The process has read the
-variable by the time this runs, so the thresholds are set again with ``mallopt``: mmap from 32 MiB and trim past
-64 MiB, glibc's own dynamic ceilings on 64-bit, which the FE's arrays stay under.
+allocates is a fresh mmap, page-faulted in and unmapped again: on 6 FE designs of the example targets on 2 workers
+the workers spent 19.2 s of system time with Dask's setting against 1.5 s with these thresholds, and 78 s of user
+time against 68 s (one cluster, the settings in turn; bench/design.py measures the ratio on each run). The process
+has read the variable by the time this runs, so the thresholds are set again with ``mallopt``: mmap from 32 MiB and
+trim past 64 MiB, glibc's own dynamic ceilings on 64-bit (an array over 32 MiB is still mapped afresh each time).
 """
 
 from __future__ import annotations
