@@ -118,7 +118,7 @@ def before_after(points, fe_points, targets, base, workers: int = 2) -> dict[str
             c.run(_flat_family, flat)
             u0, s0 = _cpu_of(c)
             t0 = time.perf_counter()
-            recs = evaluate_all(fe_points, targets, base, c, "fe")
+            fe_recs = evaluate_all(fe_points, targets, base, c, "fe")
             fe_rate = len(fe_points) / (time.perf_counter() - t0)
             u1, s1 = _cpu_of(c)
             t0 = time.perf_counter()
@@ -132,6 +132,10 @@ def before_after(points, fe_points, targets, base, workers: int = 2) -> dict[str
                          "designs_per_s": rate, "worker_cpu_s_per_design": cpu,
                          "designs_per_s_cores_to_itself": workers / cpu,
                          "fe_fallback_share": _fallbacks(recs, modelled)}
+            if name == "after":  # the cheap models' error in each figure against the full chain, on the FE designs
+                index = {json.dumps(p, sort_keys=True): i for i, p in enumerate(points)}
+                cheap = [recs[index[json.dumps(p, sort_keys=True)]] for p in fe_points]
+                out["error_vs_full_chain"] = _errors(cheap, fe_recs)
             print(f"{name:6s}: {rate:7.2f} designs/s on {workers} workers over {len(points)} designs of the whole box, "
                   f"({workers / cpu:.1f} from the workers' CPU time), "
                   f"FE fallbacks {100 * out[name]['fe_fallback_share']:.0f} % of the designs modelled; "
@@ -165,7 +169,7 @@ def _rate(points, targets, base, workers: int, fidelity: str) -> tuple[float, li
 
 
 def _modelled(points, targets, base) -> list:
-    """The points the spec accepts (the ones the models run on), in order, alternating tips where both come."""
+    """The points the spec accepts (the ones the models run on), in order."""
     from magfab.design import derive
     from magfab.inverse.space import candidate_spec
 
@@ -223,7 +227,8 @@ def main(argv: list[str] | None = None) -> int:
 
     targets, base = whole_box()
     points = latin_hypercube(targets.variables, a.surrogate_designs, seed=7)
-    fe_points = _modelled(points, targets, base)[:a.fe_designs]
+    by_tip = [[p for p in _modelled(points, targets, base) if p["tip"] == t] for t in ("flat", "hemisphere")]
+    fe_points = [p for pair in zip(*by_tip) for p in pair][:a.fe_designs]  # the two tips in turn
     result: dict[str, object] = {"cores": os.cpu_count(), "surrogate_designs": len(points),
                                  "fe_designs": len(fe_points)}
     result["before_after_2_workers"] = before_after(points, fe_points, targets, base)
