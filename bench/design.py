@@ -5,9 +5,15 @@ Run from anywhere::
 
     python bench/design.py [--surrogate-designs N] [--fe-designs M] [--out DIR]
 
-What it measures, each on the same Latin hypercube of the example targets' variables (magfab/examples/targets.toml)
-and on local Dask clusters started here (wall clock, :func:`time.perf_counter`):
+What it measures, each on the same Latin hypercube over the example targets' whole box (magfab/examples/targets.toml's
+ranges and magnets, with both tips and every silicone of the catalogue: :func:`whole_box`, the real studies' mix) and
+on local Dask clusters started here (wall clock, :func:`time.perf_counter`):
 
+0. **Before / after, on one 2-worker cluster**: the cheap models' designs per second and share of FE fallbacks with
+   the surrogate as it was (hemispherical tips only: the flat family taken out of the workers' ``BOXES``) and glibc's
+   allocator thresholds as Dask's nanny leaves them (``MALLOC_TRIM_THRESHOLD_=65536``, mmap threshold fixed at
+   128 KiB), against both families and :func:`magfab.inverse.worker.malloc_thresholds`; and the workers' system CPU
+   time (``os.times``) on the same FE designs under each allocator setting: their ratio.
 1. **Throughput**: designs per second through :func:`magfab.inverse.study.evaluate_all` (the code the search and
    ``magfab sweep`` run: one Dask task per design) with the cheap models (elastomer surrogate) and with the full
    chain (FE), on 1 and on 2 worker processes; the scaling efficiency rate(2) / (2 rate(1)).
@@ -45,6 +51,106 @@ def _targets():
     return parse_targets(text), load_spec(None)
 
 
+def whole_box():
+    """(targets, base spec) of the example targets over their whole box: their ranges and magnets, every tip and every
+    silicone of the catalogue (the real studies' mix: the example's own list has the hemispherical tip only)."""
+    from magfab.spec import Tip
+
+    targets, base = _targets()
+    variables = targets.variables.model_copy(update={"tips": [Tip.HEMISPHERE, Tip.FLAT], "materials": None})
+    return targets.model_copy(update={"variables": variables}), base
+
+
+def _cpu() -> tuple[float, float]:
+    """(user, system) CPU seconds of this process so far."""
+    t = os.times()
+    return t.user, t.system
+
+
+def _cpu_of(c) -> tuple[float, float]:
+    """(user, system) CPU seconds of every worker of ``c``, summed."""
+    times = c.run(_cpu).values()
+    return sum(t[0] for t in times), sum(t[1] for t in times)
+
+
+def _dask_malloc() -> bool:
+    """glibc's thresholds as Dask's nanny leaves them (MALLOC_TRIM_THRESHOLD_=65536; the mmap threshold glibc's
+    128 KiB default, no longer dynamic)."""
+    from magfab.inverse.worker import malloc_thresholds
+
+    return malloc_thresholds(128 * 1024, 65536)
+
+
+def _ours_malloc() -> bool:
+    from magfab.inverse.worker import malloc_thresholds
+
+    return malloc_thresholds()
+
+
+def _flat_family(on: bool) -> None:
+    """The surrogate's flat-tip family in this worker (off: the surrogate as it was, hemispherical tips only)."""
+    from magfab.models.mechanics import fe_surrogate as S
+    from magfab.spec import Tip
+
+    if on:
+        S.BOXES[Tip.FLAT] = S.FLAT_BOX
+    else:
+        S.BOXES.pop(Tip.FLAT, None)
+
+
+def _fallbacks(recs, modelled: int) -> float:
+    """Share of the ``modelled`` designs (the points the spec accepts: the rest fail in milliseconds before any
+    model) that fell back to the FE."""
+    return sum(r.model.startswith("fe") for r in recs) / max(modelled, 1)
+
+
+def before_after(points, fe_points, targets, base, workers: int = 2) -> dict[str, object]:
+    """Item 0 of the module doc, on one cluster of ``workers``: rates, fallback shares and system-time ratio."""
+    from magfab.inverse.study import client, evaluate_all
+
+    modelled = len(_modelled(points, targets, base))
+    out: dict[str, object] = {"points": len(points), "modelled": modelled}
+    with client(None, workers) as c:
+        evaluate_all(points[-2 * workers:], targets, base, c, "surrogate")  # warm-up: imports, tables, caches
+        evaluate_all(fe_points[-workers:], targets, base, c, "fe")
+        for name, malloc, flat in (("before", _dask_malloc, False), ("after", _ours_malloc, True)):
+            assert all(c.run(malloc).values()), "glibc's mallopt refused"
+            c.run(_flat_family, flat)
+            u0, s0 = _cpu_of(c)
+            t0 = time.perf_counter()
+            fe_recs = evaluate_all(fe_points, targets, base, c, "fe")
+            fe_rate = len(fe_points) / (time.perf_counter() - t0)
+            u1, s1 = _cpu_of(c)
+            t0 = time.perf_counter()
+            recs = evaluate_all(points, targets, base, c, "surrogate")
+            rate = len(points) / (time.perf_counter() - t0)
+            u2, s2 = _cpu_of(c)
+            # CPU seconds the workers spent per design: on a machine shared with other work the wall clock's rate
+            # falls, this does not; workers / cpu is the rate the cluster reaches with its cores to itself.
+            cpu = (u2 + s2 - u1 - s1) / len(points)
+            out[name] = {"fe_designs_per_s": fe_rate, "fe_user_s": u1 - u0, "fe_system_s": s1 - s0,
+                         "designs_per_s": rate, "worker_cpu_s_per_design": cpu,
+                         "designs_per_s_cores_to_itself": workers / cpu,
+                         "fe_fallback_share": _fallbacks(recs, modelled)}
+            if name == "after":  # the cheap models' error in each figure against the full chain, on the FE designs
+                index = {json.dumps(p, sort_keys=True): i for i, p in enumerate(points)}
+                cheap = [recs[index[json.dumps(p, sort_keys=True)]] for p in fe_points]
+                out["error_vs_full_chain"] = _errors(cheap, fe_recs)
+            print(f"{name:6s}: {rate:7.2f} designs/s on {workers} workers over {len(points)} designs of the whole box, "
+                  f"({workers / cpu:.1f} from the workers' CPU time), "
+                  f"FE fallbacks {100 * out[name]['fe_fallback_share']:.0f} % of the designs modelled; "
+                  f"{len(fe_points)} FE designs: system {s1 - s0:.2f} s, user {u1 - u0:.2f} s", flush=True)
+        c.run(_flat_family, True)
+    b, a = out["before"], out["after"]
+    out["ratios"] = {"designs_per_s_after_over_before": a["designs_per_s"] / b["designs_per_s"],
+                     "worker_cpu_per_design_before_over_after": b["worker_cpu_s_per_design"]
+                     / a["worker_cpu_s_per_design"],
+                     "fe_system_s_before_over_after": b["fe_system_s"] / max(a["fe_system_s"], 1e-9),
+                     "fe_designs_per_s_after_over_before": a["fe_designs_per_s"] / b["fe_designs_per_s"]}
+    print("ratios: " + ", ".join(f"{k} {v:.2f}" for k, v in out["ratios"].items()), flush=True)
+    return out
+
+
 def _rate(points, targets, base, workers: int, fidelity: str) -> tuple[float, list]:
     """Designs per second over ``points`` on a fresh local cluster of ``workers`` (after one warm-up design per
     worker, so imports and first-call caches are not counted)."""
@@ -60,6 +166,21 @@ def _rate(points, targets, base, workers: int, fidelity: str) -> tuple[float, li
         c.gather(c.map(lambda i: i, range(n_noop), pure=False))
         overhead = (time.perf_counter() - t1) / n_noop
     return len(points) / dt, recs, overhead
+
+
+def _modelled(points, targets, base) -> list:
+    """The points the spec accepts (the ones the models run on), in order."""
+    from magfab.design import derive
+    from magfab.inverse.space import candidate_spec
+
+    ok = []
+    for p in points:
+        try:
+            derive(candidate_spec(p, base, targets, "bench"))
+        except Exception:
+            continue
+        ok.append(p)
+    return ok
 
 
 def _study_overhead(targets, n: int, where) -> dict[str, float]:
@@ -100,14 +221,22 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--fe-designs", type=int, default=16)
     ap.add_argument("--overhead-trials", type=int, default=800)
     ap.add_argument("--out", type=Path, default=Path(tempfile.gettempdir()) / "magfab-bench")
+    ap.add_argument("--only-before-after", action="store_true", help="item 0 only")
     a = ap.parse_args(argv)
     from magfab.inverse.space import latin_hypercube
 
-    targets, base = _targets()
+    targets, base = whole_box()
     points = latin_hypercube(targets.variables, a.surrogate_designs, seed=7)
-    fe_points = points[:a.fe_designs]
+    by_tip = [[p for p in _modelled(points, targets, base) if p["tip"] == t] for t in ("flat", "hemisphere")]
+    fe_points = [p for pair in zip(*by_tip) for p in pair][:a.fe_designs]  # the two tips in turn
     result: dict[str, object] = {"cores": os.cpu_count(), "surrogate_designs": len(points),
                                  "fe_designs": len(fe_points)}
+    result["before_after_2_workers"] = before_after(points, fe_points, targets, base)
+    a.out.mkdir(parents=True, exist_ok=True)
+    (a.out / "design_bench.json").write_text(json.dumps(result, indent=1, sort_keys=True) + "\n")
+    if a.only_before_after:
+        print(f"wrote {a.out / 'design_bench.json'}")
+        return 0
     rates: dict[str, dict[int, float]] = {"surrogate": {}, "fe": {}}
     recs: dict[str, list] = {}
     overheads = []
@@ -118,7 +247,8 @@ def main(argv: list[str] | None = None) -> int:
             overheads.append(overhead)
             recs[fidelity] = r
             print(f"{fidelity:9s} {workers} worker(s): {rate:9.2f} designs/s over {len(pts)} designs", flush=True)
-    cheap_on_fe = recs["surrogate"][:len(fe_points)]
+    index = {json.dumps(p, sort_keys=True): i for i, p in enumerate(points)}
+    cheap_on_fe = [recs["surrogate"][index[json.dumps(p, sort_keys=True)]] for p in fe_points]
     per_task = statistics.median(overheads)
     speed_ratio = rates["surrogate"][1] / rates["fe"][1]
     result.update(

@@ -186,8 +186,8 @@ def surrogate_curve(design: Design, body: mech.Body, mu: float,
     curve, response = fe_surrogate.normal_and_shear(body, mu, indentation, depth,
                                                     shear_probe_depths(design, indentation),
                                                     design.spec.calibration.scan_step_mm)
-    return curve, ModelUse("mechanics", "surrogate", fe_surrogate.held_out_error()["force_rms"],
-                           fe_surrogate.description(), "search"), response
+    return curve, ModelUse("mechanics", "surrogate", fe_surrogate.held_out_error(body.tip)["force_rms"],
+                           fe_surrogate.description(body.tip), "search"), response
 
 
 # ---------------------------------------------------------------------------------------------------

@@ -1,5 +1,6 @@
 """The elastomer FE's surrogate: the scaling it rests on, its shipped table reproducible by the FE, its error on
-MagOne against the build's own FE, and its refusal outside the region it was validated on."""
+MagOne against the build's own FE, its region covering the example targets' whole box (both tips, every silicone),
+its error at random points of that box against the FE, and its refusal outside the region it was validated on."""
 
 from __future__ import annotations
 
@@ -9,6 +10,83 @@ import pytest
 from magfab.models import mechanics as mech
 from magfab.models.mechanics import fe_surrogate as S
 from magfab.models.predict import indentation_grid, shear_probe_depths
+from magfab.spec import Tip
+
+
+def _whole_box_bodies(n: int, seed: int) -> list[mech.Body]:
+    """The bodies of the designs the spec accepts among ``n`` hypercube points over the example targets' whole box:
+    their ranges and magnets, both tips, every silicone of the catalogue (bench/design.py's ``whole_box``)."""
+    from importlib import resources
+
+    from magfab.design import derive
+    from magfab.errors import InputError, ModelLimitError
+    from magfab.inverse.space import candidate_spec, latin_hypercube
+    from magfab.inverse.targets import parse_targets
+    from magfab.spec import load_spec
+
+    targets = parse_targets(resources.files("magfab.examples").joinpath("targets.toml").read_text(encoding="utf-8"))
+    variables = targets.variables.model_copy(update={"tips": [Tip.HEMISPHERE, Tip.FLAT], "materials": None})
+    targets = targets.model_copy(update={"variables": variables})
+    base = load_spec(None)
+    out = []
+    for p in latin_hypercube(variables, n, seed=seed):
+        try:
+            out.append(mech.Body.from_design(derive(candidate_spec(p, base, targets, "box"))))
+        except (InputError, ModelLimitError):
+            continue
+    return out
+
+
+def test_the_region_covers_the_example_targets_whole_box():
+    """Every design the spec accepts over the example targets' whole box, of either tip, is in the surrogate's region
+    (none falls back to the FE for its geometry)."""
+    bodies = _whole_box_bodies(300, seed=123)
+    assert {b.tip for b in bodies} == {Tip.HEMISPHERE, Tip.FLAT}
+    assert len(bodies) > 100
+    outside = [(b, S._refusal(b)) for b in bodies if not S.in_region(b)]
+    assert not outside, outside[:3]
+
+
+def _force_errors(x: dict[str, float], tip: Tip, up_to: float) -> np.ndarray:
+    """Relative errors of the surrogate's force against the FE's normal curve (the table's mesh, no shear probe) at
+    the table's grid points up to ``up_to`` R that both reach, for the body of ratios ``x`` at the table's radius."""
+    body = S.body_of(x, tip=tip)
+    d = S.GRID[1:][S.GRID[1:] <= up_to] * S.R_TABLE
+    truth = mech.fe(body, 1.0, d, mesh_mm=S.MESH_TABLE, on_failure="truncate")
+    n = len(truth.force_N)
+    guess = S.curve(body, 1.0, d)
+    n = min(n, len(guess.force_N))
+    assert n >= 3
+    return np.abs(guess.force_N[:n] - truth.force_N[:n]) / truth.force_N[:n]
+
+
+def _random_points(tip: Tip, n: int, seed: int) -> list[dict[str, float]]:
+    """Ratios of random designs of the whole box with tip ``tip`` (not the table's nodes: another sampler, seed)."""
+    rng = np.random.default_rng(seed)
+    bodies = [b for b in _whole_box_bodies(40 * n, seed=seed) if b.tip == tip]
+    return [S.ratios(b) for b in rng.choice(np.array(bodies, dtype=object), size=n, replace=False)]
+
+
+@pytest.mark.parametrize("tip", [Tip.HEMISPHERE, Tip.FLAT])
+def test_error_at_a_random_design_of_the_box_is_within_the_stated_one(tip):
+    """At a random design of the whole box (its ratios at the table's radius), the surrogate's force over the first
+    third of R of indentation is within the held-out maximum its data file states."""
+    x = _random_points(tip, 1, seed=2024)[0]
+    err = _force_errors(x, tip, 0.35)
+    assert err.max() <= S.held_out_error(tip)["force_max"], (x, err)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("tip", [Tip.HEMISPHERE, Tip.FLAT])
+def test_error_at_random_designs_of_the_box_is_within_the_stated_one(tip):
+    """Eight random designs of the whole box per tip, over every depth both reach: the median and 90th percentile of
+    the force error within twice the stated ones, the largest within 1.25 times the stated maximum (a tail statistic:
+    the hemispherical tip's eight reached 18.7 % against the 18.6 % of its 67 held-out runs, at the deepest point)."""
+    errs = np.concatenate([_force_errors(x, tip, S.GRID[-1]) for x in _random_points(tip, 8, seed=7)])
+    e = S.held_out_error(tip)
+    assert np.median(errs) <= 2.0 * e["force_median"] + 1e-3
+    assert np.percentile(errs, 90) <= 2.0 * e["force_p90"]
+    assert errs.max() <= 1.25 * e["force_max"]
 
 
 def test_the_fe_scales_as_the_surrogate_assumes():
@@ -23,15 +101,16 @@ def test_the_fe_scales_as_the_surrogate_assumes():
     assert large.max_stretch == pytest.approx(small.max_stretch, rel=2e-3)
 
 
-def test_the_shipped_table_is_what_the_fe_gives():
+@pytest.mark.parametrize("tip", [Tip.HEMISPHERE, pytest.param(Tip.FLAT, marks=pytest.mark.slow)])
+def test_the_shipped_table_is_what_the_fe_gives(tip):
     """A held-out body of the shipped file, rerun with the FE now: the same numbers (the file is reproducible), and
     the surrogate's error on it within the file's stated maximum."""
-    data = S._shipped()[1]
+    data = S._shipped(tip)[1]
     kept = data["held_out"][0]
-    again = S.run(kept["x"])
+    again = S.run(kept["x"], tip)
     for key in ("force", "travel", "disp"):
         np.testing.assert_allclose(again[key], kept[key], rtol=1e-6, equal_nan=True)
-    err = S._errors(S._shipped()[0], [kept])
+    err = S._errors(S._shipped(tip)[0], [kept])
     assert err["force_max"] <= data["held_out_error"]["force_max"] + 1e-12
 
 
@@ -60,7 +139,8 @@ def test_magone_against_the_builds_fe(magone_design, magone_prediction):
 
 
 @pytest.mark.parametrize("change, words", [
-    ({"tip": "flat", "base_height_mm": 7.9}, "hemispherical tips only"),
+    ({"tip": "flat", "base_height_mm": 7.9, "magnet_z_mm": 0.3}, "ratio z"),
+    ({"magnet_radius_mm": 0.0, "magnet_height_mm": 0.0, "magnet_edge_radius_mm": 0.0}, "with a magnet only"),
     ({"magnet_height_mm": 0.3, "magnet_edge_radius_mm": 0.05}, "ratio h"),
 ])
 def test_outside_the_region_it_refuses(magone_design, change, words):

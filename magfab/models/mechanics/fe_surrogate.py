@@ -18,7 +18,13 @@ each run reached (the FE stops where an element inverts or a stretch passes its 
 ends too. Its error is measured on held-out runs of another hypercube (``held_out`` in the data file) and by
 ``bench/design.py`` on whole designs against the full chain.
 
-Used only inside :data:`BOX` and for bodies :class:`~.body.Body` accepts with a hemispherical tip: anything else is
+A flat tip is a second family with its own table (``fe_surrogate_flat.json``, :data:`FLAT_BOX`): the same four
+ratios (``c`` the silicone above the magnet to the flat top; the body's height is z + h + c), the same grid, fit and
+scaling, from 100 FE runs (fewer than the hemispherical tip's 281: a flat-tip run costs 8-26 s; the held-out errors
+of both are in their files and bench/fe_surrogate.py's doc). Its box is the example targets' whole box of flat-tip
+designs with a margin, and its held-out runs are the ratios of designs drawn over that box, not table-like points.
+
+Used only inside its family's box (:data:`BOXES`) and for bodies :class:`~.body.Body` accepts: anything else is
 :class:`OutsideRegion`, and the search evaluates it with the FE.
 
 Not scale-free, so approximated: the magnet's edge radius (the recipe's 0.2 mm at R = 6 mm) and the rest patch of
@@ -46,11 +52,17 @@ from .shear_surface import ShearProbe, ShearResponse
 # Imported lazily, inside the functions that use it, for speed: scipy takes a
 # noticeable time to import, and importing this module should not.
 
-__all__ = ["OutsideRegion", "BOX", "GRID", "in_region", "curve", "normal_and_shear", "held_out_error", "description",
-           "ratios", "body_of", "run", "fit_data"]
+__all__ = ["OutsideRegion", "BOX", "FLAT_BOX", "BOXES", "GRID", "in_region", "curve", "normal_and_shear",
+           "held_out_error", "description", "ratios", "body_of", "run", "fit_data"]
 
 #: The box of ratios the table covers (a, h, z, c), and so the surrogate's validated region.
 BOX = {"a": (0.10, 0.80), "h": (0.08, 0.80), "z": (0.15, 2.20), "c": (0.05, 0.80)}
+#: The flat tip's box: the ratios of the example targets' whole box of flat-tip designs (every stock disc, elastomer
+#: 8-14 mm, cover 0.5-3 mm, d_max 3-10 mm; 813 of 2000 hypercube points: a 0.227-0.914, h 0.143-0.792, z 0.219-2.008,
+#: c 0.077-0.706) with a margin. A flat tip's body needs no height of R, so the magnet may fill nearly the radius.
+FLAT_BOX = {"a": (0.20, 0.93), "h": (0.12, 0.80), "z": (0.20, 2.05), "c": (0.07, 0.75)}
+#: Each tip's box.
+BOXES = {Tip.HEMISPHERE: BOX, Tip.FLAT: FLAT_BOX}
 #: Least silicone between the magnet's top corner and the cap, over R, the surrogate answers for (the hypercube has
 #: few bodies nearer the cap: they are rejected when the magnet pierces it).
 CAP_CLEARANCE = 0.05
@@ -67,6 +79,8 @@ SHEAR_DEPTH_MAX = float(GRID[PROBED[8]])
 R_TABLE, MESH_TABLE, EDGE_TABLE, REST_TABLE = 6.0, 0.75, 0.2, 0.05
 MU_TABLE = 1.0  # kPa: the table is per unit modulus
 DATA = "fe_surrogate.json"
+#: Each tip's data file.
+DATAS = {Tip.HEMISPHERE: DATA, Tip.FLAT: "fe_surrogate_flat.json"}
 CURVE_KEYS = ("force", "travel", "stretch", "stiffness", "stress")
 SHEAR_KEYS = ("preload", "drop", "disp", "tilt", "kind", "patch")
 #: Outputs fitted in log space (positive, spanning decades): the rest as they are.
@@ -86,11 +100,12 @@ def ratios(body: Body) -> dict[str, float]:
             "c": (body.height_mm - body.magnet_top_mm) / R}
 
 
-def body_of(x: dict[str, float], R: float = R_TABLE) -> Body:
-    """The hemispherical-tip body of ratios ``x`` at radius ``R`` (:class:`MechanicsError` if it cannot exist)."""
+def body_of(x: dict[str, float], R: float = R_TABLE, tip: Tip = Tip.HEMISPHERE) -> Body:
+    """The body of ratios ``x`` at radius ``R`` with tip ``tip`` (:class:`MechanicsError` if it cannot exist)."""
     H = (x["z"] + x["h"] + x["c"]) * R
     rm, hm = x["a"] * R, x["h"] * R
-    return Body(radius_mm=R, height_mm=H, base_height_mm=H - R, tip=Tip.HEMISPHERE, magnet_radius_mm=rm,
+    return Body(radius_mm=R, height_mm=H, base_height_mm=H - R if tip == Tip.HEMISPHERE else H, tip=tip,
+                magnet_radius_mm=rm,
                 magnet_height_mm=hm, magnet_z_mm=x["z"] * R,
                 magnet_edge_radius_mm=min(EDGE_TABLE * R / R_TABLE, 0.25 * min(2.0 * rm, hm)))
 
@@ -100,15 +115,16 @@ def in_region(body: Body) -> bool:
 
 
 def _refusal(body: Body) -> str:
-    if body.tip != Tip.HEMISPHERE:
-        return "the surrogate covers hemispherical tips only"
+    if body.tip not in BOXES:
+        return f"the surrogate covers {' and '.join(t.value for t in BOXES)} tips only"
     if not body.has_magnet:
         return "the surrogate covers bodies with a magnet only"
     R, corner_z = body.radius_mm, body.magnet_top_mm - body.base_height_mm
-    if corner_z > 0 and R - math.hypot(body.magnet_radius_mm, corner_z) < CAP_CLEARANCE * R:
+    if body.tip == Tip.HEMISPHERE and corner_z > 0 and R - math.hypot(body.magnet_radius_mm, corner_z) \
+            < CAP_CLEARANCE * R:
         return f"the magnet's corner is within {CAP_CLEARANCE:g} R of the cap, where the table has few runs"
     for k, v in ratios(body).items():
-        lo, hi = BOX[k]
+        lo, hi = BOXES[body.tip][k]
         if not lo - 1e-9 <= v <= hi + 1e-9:
             return f"ratio {k} = {v:.3g} is outside the surrogate's validated {lo:g}-{hi:g}"
     return ""
@@ -118,10 +134,10 @@ def _refusal(body: Body) -> str:
 # The table: FE runs (what bench/fe_surrogate.py makes and ships)
 
 
-def run(x: dict[str, float]) -> dict[str, object]:
-    """One FE run of the table: the body of ratios ``x`` at R_TABLE, its curve on GRID and its shear response on
-    PROBED, per unit modulus, as plain lists (NaN where the FE stopped), with the seconds it took."""
-    body = body_of(x)
+def run(x: dict[str, float], tip: Tip = Tip.HEMISPHERE) -> dict[str, object]:
+    """One FE run of the table: the body of ratios ``x`` at R_TABLE with tip ``tip``, its curve on GRID and its shear
+    response on PROBED, per unit modulus, as plain lists (NaN where the FE stopped), with the seconds it took."""
+    body = body_of(x, tip=tip)
     d = GRID * R_TABLE
     probe = ShearProbe(depths_mm=d[PROBED], rest_indentation_mm=REST_TABLE)
     t0 = time.perf_counter()
@@ -145,12 +161,13 @@ def run(x: dict[str, float]) -> dict[str, object]:
     return out
 
 
-def fit_data(runs: Sequence[dict], held_out: Sequence[dict]) -> dict[str, object]:
-    """The shipped data: the table's runs, the held-out runs and their errors against the surrogate fitted on the
-    table (:func:`_errors`). No timings: the same FE runs give the same bytes (bench/fe_surrogate.py prints the
-    speed)."""
-    model = _Model(list(runs))
-    return {"box": BOX, "grid": [float(g) for g in GRID], "probed": [int(i) for i in PROBED], "r_table_mm": R_TABLE,
+def fit_data(runs: Sequence[dict], held_out: Sequence[dict], tip: Tip = Tip.HEMISPHERE) -> dict[str, object]:
+    """The shipped data of tip ``tip``: the table's runs, the held-out runs and their errors against the surrogate
+    fitted on the table (:func:`_errors`). No timings: the same FE runs give the same bytes (bench/fe_surrogate.py
+    prints the speed)."""
+    box = BOXES[tip]
+    model = _Model(list(runs), box)
+    return {"box": box, "grid": [float(g) for g in GRID], "probed": [int(i) for i in PROBED], "r_table_mm": R_TABLE,
             "mesh_table_mm": MESH_TABLE, "runs": list(runs), "held_out": list(held_out),
             "held_out_error": _errors(model, held_out)}
 
@@ -159,9 +176,9 @@ def fit_data(runs: Sequence[dict], held_out: Sequence[dict]) -> dict[str, object
 # The model
 
 
-def _scaled(x: np.ndarray) -> np.ndarray:
-    lo = np.array([BOX[k][0] for k in "ahzc"])
-    hi = np.array([BOX[k][1] for k in "ahzc"])
+def _scaled(x: np.ndarray, box: dict[str, tuple[float, float]]) -> np.ndarray:
+    lo = np.array([box[k][0] for k in "ahzc"])
+    hi = np.array([box[k][1] for k in "ahzc"])
     return (np.atleast_2d(x) - lo) / (hi - lo)
 
 
@@ -175,10 +192,11 @@ class _Column:
 
 
 class _Model:
-    def __init__(self, runs: list[dict]):
+    def __init__(self, runs: list[dict], box: dict[str, tuple[float, float]]):
         from scipy.interpolate import RBFInterpolator
 
-        X = _scaled(np.array([[r["x"][k] for k in "ahzc"] for r in runs]))
+        self.box = box
+        X = _scaled(np.array([[r["x"][k] for k in "ahzc"] for r in runs]), box)
         self.reach = RBFInterpolator(X, np.array([r["reach"] for r in runs]), kernel="thin_plate_spline", degree=1)
         self.columns: list[_Column] = []
         for k in range(GRID.size):
@@ -191,7 +209,7 @@ class _Model:
 
     def predict(self, x: np.ndarray) -> tuple[float, dict[str, np.ndarray]]:
         """(reach, outputs on GRID / PROBED) at one point of ratios (a, h, z, c), per unit modulus, at R_TABLE."""
-        xs = _scaled(x)
+        xs = _scaled(x, self.box)
         reach = float(self.reach(xs)[0])
         out = {k: np.full(GRID.size, math.nan) for k in CURVE_KEYS}
         out.update({k: np.full(PROBED.size, math.nan) for k in SHEAR_KEYS})
@@ -220,16 +238,16 @@ def _inverse(key: str, v: float) -> float:
     return math.exp(v) if key in LOG_KEYS else v
 
 
-@lru_cache(maxsize=1)
-def _shipped() -> tuple[_Model, dict]:
-    data = json.loads(resources.files("magfab.models.mechanics").joinpath(DATA).read_text(encoding="utf-8"))
-    return _Model(data["runs"]), data
+@lru_cache(maxsize=2)
+def _shipped(tip: Tip = Tip.HEMISPHERE) -> tuple[_Model, dict]:
+    data = json.loads(resources.files("magfab.models.mechanics").joinpath(DATAS[tip]).read_text(encoding="utf-8"))
+    return _Model(data["runs"], BOXES[tip]), data
 
 
-def held_out_error() -> dict[str, float]:
-    """The shipped table's held-out errors (relative: RMS, 90th percentile and max per output, at the table's grid
-    points)."""
-    return dict(_shipped()[1]["held_out_error"])
+def held_out_error(tip: Tip = Tip.HEMISPHERE) -> dict[str, float]:
+    """The shipped table's held-out errors for tip ``tip`` (relative: median, RMS, 90th percentile and max per
+    output, at the table's grid points)."""
+    return dict(_shipped(Tip(tip))[1]["held_out_error"])
 
 
 def _errors(model: _Model, held_out: Sequence[dict]) -> dict[str, float]:
@@ -253,16 +271,18 @@ def _errors(model: _Model, held_out: Sequence[dict]) -> dict[str, float]:
     for key, values in errs.items():
         e = np.array(values, dtype=float)
         summary[f"{key}_max"] = float(e.max()) if e.size else math.nan
+        summary[f"{key}_median"] = float(np.median(e)) if e.size else math.nan
         summary[f"{key}_rms"] = float(np.sqrt(np.mean(e**2))) if e.size else math.nan
         summary[f"{key}_p90"] = float(np.percentile(e, 90)) if e.size else math.nan
     return summary
 
 
-def description() -> str:
-    """One line for the report and the ModelUse: what the surrogate is and its held-out error."""
-    e = held_out_error()
-    return ("Surrogate of the elastomer FE over dimensionless geometry (RBF over 4 ratios, "
-            f"{len(_shipped()[1]['runs'])} FE runs); held-out error: force RMS {100 * e['force_rms']:.1f} % (90th "
+def description(tip: Tip = Tip.HEMISPHERE) -> str:
+    """One line for the report and the ModelUse: what the surrogate of tip ``tip`` is and its held-out error."""
+    tip = Tip(tip)
+    e = held_out_error(tip)
+    return (f"Surrogate of the elastomer FE over dimensionless geometry, {tip.value} tip (RBF over 4 ratios, "
+            f"{len(_shipped(tip)[1]['runs'])} FE runs); held-out error: force RMS {100 * e['force_rms']:.1f} % (90th "
             f"percentile {100 * e['force_p90']:.1f} %), magnet travel RMS {100 * e['travel_rms']:.1f} %")
 
 
@@ -295,7 +315,7 @@ def normal_and_shear(body: Body, mu_kPa: float, indentation_mm: np.ndarray, dept
     why = _refusal(body)
     if why:
         raise OutsideRegion(why)
-    model = _shipped()[0]
+    model = _shipped(body.tip)[0]
     R, mu = body.radius_mm, float(mu_kPa)
     reach, t = model.predict(np.array([ratios(body)[k] for k in "ahzc"]))
     grid = GRID * R

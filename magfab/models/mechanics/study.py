@@ -96,7 +96,7 @@ def measure(body: Body, mu_kPa: float, delta_max_mm: float, mesh_sizes_mm: Seque
         ("hertz_column", None, lambda dd: hertz_column(body, mu_kPa, dd)),
     ]
     if fe_surrogate.in_region(body):  # the design search's stand-in for the FE (its table loaded before the clock)
-        fe_surrogate.held_out_error()
+        fe_surrogate.held_out_error(body.tip)
         runs.append(("surrogate", None, lambda dd: fe_surrogate.curve(body, mu_kPa, dd)))
     for mesh in sorted((float(v) for v in mesh_sizes_mm), reverse=True):
         runs.append(("fe", mesh, partial(fe, body, mu_kPa, mesh_mm=mesh)))
