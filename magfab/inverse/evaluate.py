@@ -98,7 +98,7 @@ def _mechanics_errors(pred, design) -> dict[str, float]:
     (the surrogate's held-out travel error's 90th percentile added; the FE's estimate covers its own travel)."""
     use = pred.model("mechanics")
     if use.name == SURROGATE:
-        held = fe_surrogate.held_out_error()
+        held = fe_surrogate.held_out_error(design.tip)  # each tip's table has its own held-out errors
         force = float(held["force_p90"])
         return {"mechanics_error": force, "range_error": force + float(held["travel_p90"])}
     err = max(_model_error(pred, "mechanics", design), 0.0)
