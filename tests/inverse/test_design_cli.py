@@ -88,6 +88,7 @@ def test_the_files_a_user_gets(study):
         figures = json.loads(spec_file.with_suffix(".json").read_text())
         assert figures["model"] == "fe" and spec.name == spec_file.stem
         assert figures["error_findings"] == [] and all(v <= 0 for v in figures["requirements"].values())
+        assert (folder / "builds" / spec_file.stem / "manifest.json").is_file()  # verified by building it
 
 
 def test_running_again_resumes(study):
