@@ -523,11 +523,14 @@ def design(targets: Path, out_dir: Path | None, scheduler: str | None, workers: 
             _fail("interrupted; the designs evaluated so far are kept in the study folder's study.log: run the same "
                   "command again to resume", EXIT_INTERRUPTED)
         from .inverse.study import tally
+        from .inverse.verify import PREFIX
 
         states = tally(r.trials)
+        refused = sum(v.reason.startswith(PREFIX) for v in r.verified)
         click.echo(f"searched {len(r.trials)} designs ({states['ok']} feasible, {states['infeasible']} infeasible, "
-                   f"{states['failed']} failed); verified {len(r.verified)} by the full chain; front of "
-                   f"{len(r.front)} in {r.folder}")
+                   f"{states['failed']} failed); verified {len(r.verified)} by the full chain"
+                   + (f" ({refused} refused by the build: pareto.csv says why)" if refused else "")
+                   + f"; front of {len(r.front)} in {r.folder}")
         if r.chosen is None:  # a result, not an input error: the study and its tables are written and resumable
             click.echo("magfab: warning: no verified design meets every requirement: see README.md there; relax a "
                        "requirement, widen the variables or raise study.trials and run again", err=True)
