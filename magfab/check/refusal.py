@@ -6,16 +6,18 @@ one line: the design's checks; the CAD branch (the board routed and its rules, t
 mould; errors and notes only); the prediction; the bundle (the acceptance test and the calibration; warnings only);
 the bench papers (:func:`~magfab.check.fabrication_findings`; warnings only).
 
-:func:`verdict` runs the same stages but the CAD branch, which the board's fit before any work
-(:mod:`magfab.board.fit`) stands for, and, unless ``build.strict`` makes their warnings stop a build, the bundle and
-the papers; it refuses where the build refuses, with the build's line (``tests/test_check_build_agree.py`` holds
-them to each other over the design space).
+:func:`verdict` runs the same stages but the solids of the CAD branch (of which it routes and checks the board,
+beside its prediction, a few seconds: only routing finds that a connection has no path with the board's rules) and,
+unless ``build.strict`` makes their warnings stop a build, the bundle and the papers; it refuses where the build
+refuses, with the build's line (``tests/test_check_build_agree.py`` holds them to each other over the design space,
+the solids included).
 """
 
 from __future__ import annotations
 
 from ..design import Design, derive
 from ..errors import BuildError, Finding
+from ..fork import side_branch
 from ..spec import Spec
 from .design import design_findings
 from .fabrication import fabrication_findings
@@ -33,7 +35,17 @@ def verdict(spec: Spec) -> tuple[Design, list[Finding], BuildError | None]:
     strict = spec.build.strict
     findings = design_findings(design)
     stop = errors_in(findings, strict)  # the build stops here, before its CAD branch
-    pred, found = predict_with_findings(design)
+    # the board routed and checked, beside the prediction (forked where the build forks): only routing finds that a
+    # connection has no path with the board's rules
+    routed: list[Finding] = []
+    if stop:
+        pred, found = predict_with_findings(design)
+    else:
+        with side_branch(board_findings, design) as board:
+            pred, found = predict_with_findings(design)
+            routed = board.result()
+    findings += routed
+    stop = stop or errors_in(findings, strict)
     findings += found
     stop = stop or errors_in(findings, strict)
     if strict and not stop and pred is not None:  # the bundle's and the papers' warnings stop a strict build
@@ -45,3 +57,10 @@ def verdict(spec: Spec) -> tuple[Design, list[Finding], BuildError | None]:
         findings += fabrication_findings(design)
         stop = stop or errors_in(findings, strict)
     return design, findings, BuildError(stop) if stop else None
+
+
+def board_findings(design: Design) -> list[Finding]:
+    """The routed board's findings, as the build's board stage makes them (:func:`magfab.pcb.findings`)."""
+    from .. import pcb  # lazily: the router is only needed here
+
+    return pcb.findings(pcb.board(design))
