@@ -178,6 +178,12 @@ UNROUTABLE = ({"magnet": "d5_h2", "grade": "N52", "material": "ecoflex-00-30", "
                "via_diameter_mm": 0.84, "edge_clearance_mm": 0.52, "density": "least", "pullups": True,
                "mounting_hole_diameter_mm": 0.0, "mounting_hole_inset_mm": 2.0})
 
+#: A design a small study verified and built (MagOne's disc, a 11.6 mm elastomer): both commands accept it.
+BUILDS = ({"magnet": "d5_h2", "grade": "N52", "material": "ecoflex-00-30", "tip": "hemisphere",
+           "d_max_mm": 5.6345799453449334, "d_min_mm": 2.7567890606328733,
+           "elastomer_diameter_mm": 11.592219932823458, "cover_mm": 1.8926675739083367},
+          dict(BASE.toml_dict()["pcb"]))
+
 #: The users' case: a 20 mm elastomer on the base's stated 30 x 30 mm board. Both refuse, with one line.
 WIDE = ({"magnet": "d5_h2", "grade": "N52", "material": "ecoflex-00-30", "tip": "flat", "d_max_mm": 6.0,
          "d_min_mm": 2.5, "elastomer_diameter_mm": 20.0, "cover_mm": 1.9}, dict(BASE.toml_dict()["pcb"]))
@@ -279,6 +285,8 @@ def test_the_commands_agree_on_the_users_wide_elastomer(tmp_path):
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much,
                                  HealthCheck.function_scoped_fixture])
 @given(points(), boards(), st.booleans())
+@example(*BUILDS, False)
+@example(*WIDE_SIZED, True)
 def test_the_commands_agree(tmp_path_factory, point, board, strict):
     _same_verdict(spec_of(point, board, strict), tmp_path_factory.mktemp("agree"))
 
