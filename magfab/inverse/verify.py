@@ -18,7 +18,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from ..errors import InputError, ModelLimitError
+from ..errors import InputError, MagfabError
 from ..spec import Spec
 from .space import candidate_spec
 from .study import Record
@@ -36,13 +36,15 @@ Progress = Callable[[int, int], None]
 
 def build_refusal(spec: Spec, out: Path) -> str | None:
     """Build ``spec`` into ``out`` as ``magfab build`` does; None when it was built, else the build's one-line
-    refusal (what ``magfab build`` prints before exiting 2)."""
+    refusal (what ``magfab build`` prints before exiting). An interrupt is not caught."""
     from ..pipeline import build  # lazily: the pipeline imports the whole build
 
     try:
         build(spec, out)
-    except (InputError, ModelLimitError) as exc:
+    except MagfabError as exc:  # the user's input (exit 2), or a tool failing on it (exit 1)
         return str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+    except Exception as exc:  # as the search records a design's bug: failed, and the reason says so
+        return f"bug: {type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"
     return None
 
 
