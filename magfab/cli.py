@@ -31,7 +31,7 @@ try:  # Ctrl-C while these load is Python's KeyboardInterrupt, ended here as exi
     import click
 
     from . import __version__
-    from .errors import BuildError, InputError, SpecError, shown
+    from .errors import InputError, SpecError, shown
     from .out_path import check_out
 except KeyboardInterrupt:
     sys.stderr.write("magfab: error: interrupted; nothing was written\n")
@@ -420,24 +420,21 @@ def _print_findings(findings: list) -> None:
 def check(spec: Path | None, as_json: bool) -> None:
     """Validate SPEC and run the design checks, predictions included; writes nothing."""
     with _handled():
-        from .check import design_findings, errors_in, predict_with_findings, preflight
-        from .design import derive
+        from .check import verdict
         from .spec import load_spec
 
         loaded = load_spec(spec)
-        # the reference chip's site, the build's cost and the board's size, refused (or the board sized) as the build
-        design = preflight(derive(loaded))
-        findings = design_findings(design)
-        findings += predict_with_findings(design)[1]
+        # the reference chip's site, the build's cost and the board's size refused (or the board sized) as the build
+        # does, then its stages' findings, and the refusal the build would stop with
+        _design, findings, stop = verdict(loaded)
         if as_json:
             click.echo(json.dumps([f.as_dict() for f in findings], indent=2))
         else:
             for f in findings:
                 where = f" [{f.key}]" if f.key else ""
                 click.echo(f"{f.severity.value}: {f.message}{where}")
-        stop = errors_in(findings, loaded.build.strict)
         if stop:
-            raise BuildError(stop)
+            raise stop
         if not as_json:
             click.echo(f"{loaded.name}: ok")
 
@@ -530,11 +527,14 @@ def design(targets: Path, out_dir: Path | None, scheduler: str | None, workers: 
             _fail("interrupted; the designs evaluated so far are kept in the study folder's study.log: run the same "
                   "command again to resume", EXIT_INTERRUPTED)
         from .inverse.study import tally
+        from .inverse.verify import PREFIX
 
         states = tally(r.trials)
+        refused = sum(v.reason.startswith(PREFIX) for v in r.verified)
         click.echo(f"searched {len(r.trials)} designs ({states['ok']} feasible, {states['infeasible']} infeasible, "
-                   f"{states['failed']} failed); verified {len(r.verified)} by the full chain; front of "
-                   f"{len(r.front)} in {r.folder}")
+                   f"{states['failed']} failed); verified {len(r.verified)} by the full chain"
+                   + (f" ({refused} refused by the build: pareto.csv says why)" if refused else "")
+                   + f"; front of {len(r.front)} in {r.folder}")
         if r.chosen is None:  # a result, not an input error: the study and its tables are written and resumable
             _fail(f"no design meets the targets with margin; {r.closest()}; see README.md there: relax a "
                   "requirement, widen the variables or raise study.trials and run again", EXIT_UNMET)

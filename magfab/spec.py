@@ -495,8 +495,18 @@ class Spec(_Section):
     def toml_dict(self) -> dict[str, Any]:
         """Every key as a TOML spec file holds it (an omitted optional key stays omitted): what
         :func:`spec_from_dict` reads back to this spec."""
-        return _without_nulls(self.dump())
+        raw = _without_nulls(self.dump())
+        for section, keys in _STATED_ONLY.items():  # their absence means something: kept out unless stated
+            stated = getattr(self, section).model_fields_set
+            for key in keys:
+                if key not in stated:
+                    raw[section].pop(key, None)
+        return raw
 
+
+#: Keys whose absence from a spec means something other than their default (the board sized to fit, an array's
+#: cavities one per taxel): :meth:`Spec.toml_dict` holds them only where the spec states them.
+_STATED_ONLY = {"pcb": ("width_mm", "height_mm"), "mould": ("cavities",)}
 
 _CATALOGUE_KEYS = {
     ("magnet", "grade"): "magnets",

@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 
 from .layout import GROUND, Placed
-from .route import HOLE_TO_HOLE_MM, LAYERS, Copper, Point, RouteError, Router, distance, touching
+from .route import HOLE_TO_HOLE_MM, LAYERS, Copper, Point, RouteError, Router, distance, is_via, touching, via_clearance
 
 __all__ = ["NETS_ROUTED", "ROUTE_GRID_MM", "RIP_UP_LIMIT", "FANOUT_MM", "route_all"]
 
@@ -115,12 +115,17 @@ def _chip_order(owner: str) -> tuple:
     return (int(ref[1:]) if ref[:1] == "U" and ref[1:].isdigit() else 0, owner)
 
 
-def _clash(a: Copper, b: Copper, clearance: float, via_drill: float) -> bool:
-    """Would two pieces of routed copper of different nets break a rule (clearance, hole spacing)?"""
+def _clash(a: Copper, b: Copper, router: Router) -> bool:
+    """Would two pieces of routed copper of different nets break a rule (clearance, hole spacing)? A via is held to
+    the clearance its drill needs (:func:`via_clearance`), as the board's check holds it."""
     if (a.kind == "point" and b.kind == "point" and len(a.layers) == 2 == len(b.layers)
-            and math.dist(a.a, b.a) - via_drill < HOLE_TO_HOLE_MM - 1e-6):
+            and math.dist(a.a, b.a) - router.via_drill < HOLE_TO_HOLE_MM - 1e-6):
         return True
-    return bool(a.layers & b.layers) and distance(a, b) < clearance - 1e-6
+    need = router.clearance
+    for v in (a, b):
+        if is_via(v):
+            need = max(need, via_clearance(router.clearance, router.hole_clearance, v.r, router.via_drill))
+    return bool(a.layers & b.layers) and distance(a, b) < need - 1e-6
 
 
 def _connections(parts: list[Placed], terminals: list[Copper], order: tuple[str, ...]):
@@ -173,7 +178,7 @@ def route_all(router: Router, parts: list[Placed], order: tuple[str, ...] = NETS
             failed[k] = reason  # blocked by pads, holes or the edge: no rip-up can help
             continue
         victims = sorted(j for j, other in routes.items() if connections[j][0] != net
-                         and any(_clash(a, b, router.clearance, router.via_drill) for a in path for b in other))
+                         and any(_clash(a, b, router) for a in path for b in other))
         if any(ripped[j] >= RIP_UP_LIMIT for j in victims):
             failed[k] = reason
             continue

@@ -11,6 +11,7 @@ One module per thing checked:
 * :mod:`.preflight`: what refuses a spec before any work (the reference chip's site, the build's cost limits, a
   board too small for its parts), as one line; it returns the design to go on with, its board sized where the spec
   leaves the size out (:mod:`magfab.board.fit`).
+* :mod:`.refusal`: ``magfab check``'s findings and the refusal the build would stop with, stage by stage as it does.
 
 The routed board's rule checks are the board's own (:func:`magfab.pcb.findings`).
 """
@@ -25,8 +26,9 @@ from .mesh import mesh_findings, mould_fit_findings
 from .predict import predict_with_findings, prediction_findings
 from .preflight import preflight
 from .reference import reference_findings
+from .refusal import verdict
 from .stop import errors_in
 
 __all__ = ["design_findings", "mesh_findings", "mould_fit_findings", "prediction_findings", "predict_with_findings",
            "drift_findings", "reference_findings", "crosstalk_findings", "fabrication_findings", "preflight",
-           "errors_in"]
+           "errors_in", "verdict"]

@@ -1,7 +1,8 @@
 """``magfab design`` and ``magfab sweep``: from TARGETS.toml to a study folder.
 
 ``design``: the search (:mod:`.study`) with the cheap models, then the designs near the front re-verified by the
-full chain (FE), the front of the verified designs, and the files::
+full chain (FE), each of them that meets the requirements built as ``magfab build`` builds it (:mod:`.verify`: a
+refused build fails the verification), the front of the verified designs, and the files::
 
     DIR/study.log                 the Optuna storage (its journal file; resumed by running the command again)
     DIR/trials.csv, .parquet      every design the search evaluated, with its state and reason
@@ -13,6 +14,7 @@ full chain (FE), the front of the verified designs, and the files::
     DIR/designs/NAME.toml         each verified design as a spec `magfab build` accepts (on the printer's step)
     DIR/designs/NAME.json         its full-chain figures
     DIR/chosen.toml               the chosen design's spec (the best verified one on the first objective)
+    DIR/builds/NAME/              each verified design's build (what `magfab build` writes)
 
 ``sweep``: every design of a grid or a Latin hypercube of the same variables, in ``DIR/sweep.csv`` (.parquet).
 """
@@ -36,6 +38,7 @@ from .space import grid, latin_hypercube
 from .study import KEPT, Record, client, evaluate_all, open_study, records, run_study
 from .tables import rows, write_table
 from .targets import Models, Targets, load_targets
+from .verify import built
 
 __all__ = ["design", "sweep", "default_folder"]
 
@@ -102,6 +105,8 @@ def design(targets_path: Path, out: Path | None = None, scheduler: str | None = 
         else:
             verified = _verified(study, screened, targets, base, c, lambda n, t: say("verify (full chain)", n, t))
     names = [f"{targets.name}-{r.number}" for r in screened]
+    # each design that meets the requirements is built (CAD, board, bundle): a refused build is a failed verification
+    verified = built(study, verified, names, targets, base, folder, lambda n, t: say("verify (build)", n, t))
     result = DesignResult(targets, folder, trials, verified, screened, [], None, names)
     _front(result)
     result.files = write_outputs(result, base)

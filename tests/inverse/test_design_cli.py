@@ -93,6 +93,8 @@ def test_the_files_a_user_gets(study):
             assert figures["meets_targets"] and figures["error_findings"] == []
             assert all(v <= 0 for v in figures["requirements"].values())
             assert all(m["met"] and m["met_by"] >= m["margin"] for m in figures["margins"].values())
+        if figures["meets_targets"]:
+            assert (folder / "builds" / spec_file.stem / "manifest.json").is_file()  # verified by building it
 
 
 def test_running_again_resumes(study):
