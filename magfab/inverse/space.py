@@ -31,7 +31,7 @@ from .targets import Targets, Variables
 # noticeable time to import, and importing this module should not.
 
 __all__ = ["NUMERIC", "CATEGORICAL", "stock_disc", "candidate_spec", "suggest", "grid", "latin_hypercube",
-           "base_point", "Space", "FRACTIONS"]
+           "base_point", "Space", "FRACTIONS", "POINT"]
 
 #: The numeric variables (mm), in the order tables show them.
 NUMERIC = ("d_max_mm", "d_min_mm", "elastomer_diameter_mm", "cover_mm")
@@ -188,9 +188,14 @@ def _pad_for(base: Spec, d_e: float) -> dict[str, float]:
 
 # --- The search's own coordinates: buildable by construction ------------------------------------------------------
 
+#: The user attribute a trial keeps its mm point in.
+POINT = "point"
 #: A trial's numeric params: fractions in [0, 1] of the interval the other choices leave each mm variable, in the
 #: order they are resolved (the elastomer's diameter first, then the rest distance, the cover, the closest distance).
+#: A variable given as listed values is a categorical param of its own name instead, moved to the nearest allowed.
 FRACTIONS = ("f_elastomer_diameter", "f_d_max", "f_cover", "f_d_min")
+_FRACTION_OF = {"elastomer_diameter_mm": FRACTIONS[0], "d_max_mm": FRACTIONS[1], "cover_mm": FRACTIONS[2],
+                "d_min_mm": FRACTIONS[3]}
 #: The smallest gap kept between d_min and what bounds it (d_max above, the elastomer's base below), mm.
 _GAP_MM = 0.01
 #: Steps the elastomer's diameter range is scanned in for the sub-range every other choice can follow.
@@ -228,7 +233,8 @@ class Space:
         if not buildable:
             raise SpecError("variables.magnets", ", ".join(self.all_choices["magnet"]),
                             "no magnet listed fits a buildable elastomer within the ranges and requirements")
-        self.choices = {**self.all_choices, "magnet": buildable}
+        tips = [t for t in self.all_choices["tip"] if any(self.diameter_range(m, t) is not None for m in buildable)]
+        self.choices = {**self.all_choices, "magnet": buildable, "tip": tips}
 
     # the bounds each choice leaves -------------------------------------------------------------------------------
 
@@ -297,15 +303,23 @@ class Space:
     # fractions <-> mm ----------------------------------------------------------------------------------------------
 
     def point(self, params: dict[str, Any]) -> dict[str, Any]:
-        """The mm point of a trial's params (categories and fractions)."""
+        """The mm point of a trial's params (categories and fractions; a listed-values variable's own value, moved to
+        the nearest allowed one)."""
         magnet, tip = str(params["magnet"]), str(params["tip"])
         v = self.variables
-        f = [min(max(float(params[k]), 0.0), 1.0) for k in FRACTIONS]
-        span = self.diameter_range(magnet, tip) or _span(v.elastomer_diameter_mm)
-        d_e = _pick(v.elastomer_diameter_mm, *span, f[0])
-        d_max = _pick(v.d_max_mm, *self.d_max_bounds(magnet, tip, d_e), f[1])
-        cover = _pick(v.cover_mm, *self.cover_bounds(magnet, tip, d_e, d_max), f[2])
-        d_min = _pick(v.d_min_mm, *self.d_min_bounds(d_max), f[3])
+
+        def value(name: str, lo: float, hi: float) -> float:
+            c = getattr(v, name)
+            if isinstance(c, list):
+                values, _, _ = _allowed(c, lo, hi)
+                x = float(params[name])
+                return float(min(values, key=lambda y: (abs(y - x), y)))
+            return _pick(c, lo, hi, min(max(float(params[_FRACTION_OF[name]]), 0.0), 1.0))
+
+        d_e = value("elastomer_diameter_mm", *(self.diameter_range(magnet, tip) or _span(v.elastomer_diameter_mm)))
+        d_max = value("d_max_mm", *self.d_max_bounds(magnet, tip, d_e))
+        cover = value("cover_mm", *self.cover_bounds(magnet, tip, d_e, d_max))
+        d_min = value("d_min_mm", *self.d_min_bounds(d_max))
         return point_of({"magnet": magnet, "material": params["material"], "tip": tip, "d_max_mm": d_max,
                          "d_min_mm": d_min, "elastomer_diameter_mm": d_e, "cover_mm": cover})
 
@@ -314,20 +328,28 @@ class Space:
         magnet, tip = f"{point['magnet']}:{point['grade']}", str(point["tip"])
         v = self.variables
         d_e, d_max = float(point["elastomer_diameter_mm"]), float(point["d_max_mm"])
-        span = self.diameter_range(magnet, tip) or _span(v.elastomer_diameter_mm)
-        return {"magnet": magnet, "material": point["material"], "tip": tip,
-                FRACTIONS[0]: _fraction(v.elastomer_diameter_mm, *span, d_e),
-                FRACTIONS[1]: _fraction(v.d_max_mm, *self.d_max_bounds(magnet, tip, d_e), d_max),
-                FRACTIONS[2]: _fraction(v.cover_mm, *self.cover_bounds(magnet, tip, d_e, d_max),
-                                        float(point["cover_mm"])),
-                FRACTIONS[3]: _fraction(v.d_min_mm, *self.d_min_bounds(d_max), float(point["d_min_mm"]))}
+        bounds = {"elastomer_diameter_mm": self.diameter_range(magnet, tip) or _span(v.elastomer_diameter_mm),
+                  "d_max_mm": self.d_max_bounds(magnet, tip, d_e),
+                  "cover_mm": self.cover_bounds(magnet, tip, d_e, d_max), "d_min_mm": self.d_min_bounds(d_max)}
+        out: dict[str, Any] = {"magnet": magnet, "material": point["material"], "tip": tip}
+        for name, (lo, hi) in bounds.items():
+            c = getattr(v, name)
+            out.update({name: float(point[name])} if isinstance(c, list)
+                       else {_FRACTION_OF[name]: _fraction(c, lo, hi, float(point[name]))})
+        return out
 
     def suggest(self, trial) -> dict[str, Any]:
-        """The mm point an Optuna trial draws (ask-and-tell): the categories, then the four fractions."""
+        """The mm point an Optuna trial draws (ask-and-tell): the categories, then each numeric variable's fraction
+        (or, for listed values, the value). The trial keeps the point as its user attribute :data:`POINT` (what tables
+        and the front read)."""
         params: dict[str, Any] = {k: trial.suggest_categorical(k, v) for k, v in self.choices.items()}
-        for name in FRACTIONS:
-            params[name] = trial.suggest_float(name, 0.0, 1.0)
-        return self.point(params)
+        for name in NUMERIC:
+            c = getattr(self.variables, name)
+            params.update({name: float(trial.suggest_categorical(name, list(c)))} if isinstance(c, list)
+                          else {_FRACTION_OF[name]: trial.suggest_float(_FRACTION_OF[name], 0.0, 1.0)})
+        point = self.point(params)
+        trial.set_user_attr(POINT, point)
+        return point
 
     def latin_hypercube(self, n: int, seed: int) -> list[dict[str, Any]]:
         """``n`` trials' params of a Latin hypercube in the search's coordinates: the (material, tip) pairs and the
@@ -338,14 +360,17 @@ class Space:
         combos = self.buildable()
         pairs = sorted({(mat, t) for _, mat, t in combos}, key=lambda p: (self.choices["material"].index(p[0]),
                                                                            self.choices["tip"].index(p[1])))
-        u = qmc.LatinHypercube(d=2 + len(FRACTIONS), seed=seed).random(n)
+        u = qmc.LatinHypercube(d=2 + len(NUMERIC), seed=seed).random(n)
         out = []
         for row in u:
             mat, tip = pairs[min(int(row[0] * len(pairs)), len(pairs) - 1)]
             mags = [m for m, a, b in combos if (a, b) == (mat, tip)]
             params: dict[str, Any] = {"magnet": mags[min(int(row[1] * len(mags)), len(mags) - 1)], "material": mat,
                                       "tip": tip}
-            params.update({k: float(x) for k, x in zip(FRACTIONS, row[2:])})
+            for name, x in zip(NUMERIC, row[2:]):
+                c = getattr(self.variables, name)
+                params.update({name: float(c[min(int(x * len(c)), len(c) - 1)])} if isinstance(c, list)
+                              else {_FRACTION_OF[name]: float(x)})
             out.append(params)
         return out
 

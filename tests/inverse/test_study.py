@@ -72,7 +72,7 @@ def test_front_against_brute_force(cluster, tmp_path):
 def test_an_interrupted_study_resumes(cluster, tmp_path):
     """A trial left running (the process was killed while a design was out) is failed as "interrupted" and its
     point asked again; the study then runs to its new total, counting what the first run stored."""
-    from magfab.inverse.space import suggest
+    from magfab.inverse.space import Space
     from magfab.inverse.study import StudyError
 
     storage = tmp_path / "study.log"
@@ -80,7 +80,7 @@ def test_an_interrupted_study_resumes(cluster, tmp_path):
     run_study(first, BASE, storage, cluster)
     study = open_study(first, storage)
     orphan = study.ask()  # asked, never told: what a kill leaves behind
-    point = suggest(orphan, first.variables)
+    point = Space(first, BASE).suggest(orphan)
     study = run_study(parse_targets(SMALL % 10), BASE, storage, cluster)  # more trials: the same study, extended
     recs = records(study)
     assert len(recs) == 10
@@ -92,11 +92,32 @@ def test_an_interrupted_study_resumes(cluster, tmp_path):
         open_study(other, storage)
 
 
-def test_failed_designs_are_recorded_and_the_study_goes_on(cluster, tmp_path):
-    text = (SMALL % 8).replace("d_min_mm = {values = [3.0]}", "d_min_mm = {values = [3.0, 8.0]}")
-    study = run_study(parse_targets(text), BASE, tmp_path / "study.log", cluster)
+def _refusing(point, *args, **kwargs):
+    """The evaluation, refusing designs at d_max = 7.5 mm as the geometry refuses a design it cannot build (the
+    search's coordinates no longer propose those, so the test makes its own)."""
+    from magfab.inverse.evaluate import evaluate
+
+    if point["d_max_mm"] == 7.5:
+        return {"state": "failed", "reason": "sensor.d_max_mm = 7.5: refused by the test", "model": "surrogate",
+                "metrics": {}, "constraints": [], "errors": []}
+    return evaluate(point, *args, **kwargs)
+
+
+def test_failed_designs_are_recorded_and_the_study_goes_on(cluster, tmp_path, monkeypatch):
+    import sys
+
+    import cloudpickle
+
+    from magfab.inverse import study as st
+
+    cloudpickle.register_pickle_by_value(sys.modules[__name__])  # the workers run this module's function
+    monkeypatch.setattr(st, "evaluate", _refusing)
+    try:
+        study = run_study(parse_targets(SMALL % 12), BASE, tmp_path / "study.log", cluster)
+    finally:
+        cloudpickle.unregister_pickle_by_value(sys.modules[__name__])
     recs = records(study)
-    assert len(recs) == 8
-    failed = [r for r in recs if r.point["d_min_mm"] == 8.0]
-    assert failed and all(r.state == "failed" and r.reason.startswith("sensor.d_min_mm") for r in failed)
+    assert len(recs) == 12
+    failed = [r for r in recs if r.point["d_max_mm"] == 7.5]
+    assert failed and all(r.state == "failed" and r.reason.startswith("sensor.d_max_mm") for r in failed)
     assert any(r.state != "failed" for r in recs)
