@@ -121,3 +121,22 @@ def test_failed_designs_are_recorded_and_the_study_goes_on(cluster, tmp_path, mo
     failed = [r for r in recs if r.point["d_max_mm"] == 7.5]
     assert failed and all(r.state == "failed" and r.reason.startswith("sensor.d_max_mm") for r in failed)
     assert any(r.state != "failed" for r in recs)
+
+
+def test_the_same_seed_gives_the_same_study(cluster, tmp_path):
+    """Twice with one seed on two workers (who finish in whatever order): the same trials in the same order, the same
+    figures and the same best design; another seed, another study."""
+    text = SMALL.replace("d_max_mm = {values = [4.5, 6.0, 7.5]}", "d_max_mm = [4.0, 8.0]").replace(
+        "elastomer_diameter_mm = {values = [10.0, 12.0]}", "elastomer_diameter_mm = [9.0, 13.0]") % 24
+    targets = parse_targets(text)
+
+    def run(where: str, t=targets):
+        recs = records(run_study(t, BASE, tmp_path / where, cluster))
+        ok = [r for r in recs if r.state == "ok"]
+        best = min(ok, key=lambda r: r.metrics["normal_resolution_mN"]) if ok else None
+        return [(r.number, r.point, r.state) for r in recs], best and (best.number, best.point)
+
+    first, again = run("a.log"), run("b.log")
+    assert len(first[0]) == 24 and first == again
+    other = run("c.log", parse_targets(text.replace("seed = 3", "seed = 4")))
+    assert other[0] != first[0]
