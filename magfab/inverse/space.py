@@ -226,6 +226,7 @@ class Space:
         r = targets.require
         self.max_height = r.max_height_mm if r.max_height_mm is not None else math.inf
         self.max_diameter = r.max_diameter_mm if r.max_diameter_mm is not None else math.inf
+        self.max_diameter = min(self.max_diameter, _board_limit(base, float(max(v.elastomer_diameter_mm))))
         self.all_choices = choices(v)
         self._d_range: dict[tuple[str, str], tuple[float, float] | None] = {}
         buildable = [m for m in self.all_choices["magnet"]
@@ -373,6 +374,33 @@ class Space:
                               else {_FRACTION_OF[name]: float(x)})
             out.append(params)
         return out
+
+
+@lru_cache(maxsize=8)
+def _board_limit(base: Spec, top: float) -> float:
+    """The largest elastomer diameter (up to ``top``) whose grown pad the base's board still holds (its connector
+    outside the pad's keep-out): bisected on the base design with a flat tip, 0.01 mm; ``top`` when it fits."""
+
+    def fits(d_e: float) -> bool:
+        raw = base.toml_dict()
+        raw["elastomer"].update(diameter_mm=d_e, tip="flat")
+        raw["elastomer"].pop("cover_mm", None)
+        raw["pad"].update(_pad_for(base, d_e))
+        try:
+            preflight(derive(spec_from_dict(raw)))
+        except SpecError as exc:
+            return not str(exc.key).startswith("pcb.")
+        return True
+
+    if fits(top):
+        return top
+    lo, hi = base.elastomer.diameter_mm, top
+    if not fits(lo):
+        return lo
+    while hi - lo > 0.01:
+        mid = (lo + hi) / 2.0
+        lo, hi = (mid, hi) if fits(mid) else (lo, mid)
+    return lo
 
 
 def _span(c: Any) -> tuple[float, float]:
