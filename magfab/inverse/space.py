@@ -312,7 +312,7 @@ class Space:
         def value(name: str, lo: float, hi: float) -> float:
             c = getattr(v, name)
             if isinstance(c, list):
-                values, _, _ = _allowed(c, lo, hi)
+                values = _allowed(c, lo, hi)[0] or c
                 x = float(params[name])
                 return float(min(values, key=lambda y: (abs(y - x), y)))
             return _pick(c, lo, hi, min(max(float(params[_FRACTION_OF[name]]), 0.0), 1.0))
