@@ -188,16 +188,18 @@ def _study_overhead(targets, n: int, where) -> dict[str, float]:
     ``where`` with the targets' sampler, evaluating nothing: the mean up to N trials, since a sampler's ask grows with
     history."""
     from magfab.inverse import study as st
-    from magfab.inverse.space import suggest
+    from magfab.inverse.space import Space
+    from magfab.spec import load_spec
 
     t = targets.model_copy(update={"name": "overhead"})
     study = st.open_study(t, where)
     fake = {"state": "ok", "reason": "", "model": "none", "errors": [],
             "constraints": [0.0] * len(st.constraint_names(t))}
+    space = Space(t, load_spec(None))
     out, t0, rng = {}, time.perf_counter(), np.random.default_rng(0)
     for i in range(1, n + 1):
         trial = study.ask()
-        suggest(trial, t.variables)
+        space.suggest(trial)
         metrics = {o.value: float(rng.random()) for o in t.objectives}
         st.tell(study, trial, {**fake, "metrics": metrics}, t)
         if i in (50, 100, 200, 400, 800, 1600) or i == n:

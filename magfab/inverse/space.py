@@ -31,7 +31,7 @@ from .targets import Targets, Variables
 # noticeable time to import, and importing this module should not.
 
 __all__ = ["NUMERIC", "CATEGORICAL", "stock_disc", "candidate_spec", "suggest", "grid", "latin_hypercube",
-           "base_point"]
+           "base_point", "Space", "FRACTIONS", "POINT"]
 
 #: The numeric variables (mm), in the order tables show them.
 NUMERIC = ("d_max_mm", "d_min_mm", "elastomer_diameter_mm", "cover_mm")
@@ -184,3 +184,265 @@ def _pad_for(base: Spec, d_e: float) -> dict[str, float]:
     radius = max(pad.diameter_mm / 2.0, half + d2 / 2.0 + _RIM_MARGIN_MM)
     return {"alignment_hole_spacing_mm": round(2.0 * half, 6),
             "diameter_mm": round(2.0 * math.ceil(radius * 10) / 10, 6)}
+
+
+# --- The search's own coordinates: buildable by construction ------------------------------------------------------
+
+#: The user attribute a trial keeps its mm point in.
+POINT = "point"
+#: A trial's numeric params: fractions in [0, 1] of the interval the other choices leave each mm variable, in the
+#: order they are resolved (the elastomer's diameter first, then the rest distance, the cover, the closest distance).
+#: A variable given as listed values is a categorical param of its own name instead, moved to the nearest allowed.
+FRACTIONS = ("f_elastomer_diameter", "f_d_max", "f_cover", "f_d_min")
+_FRACTION_OF = {"elastomer_diameter_mm": FRACTIONS[0], "d_max_mm": FRACTIONS[1], "cover_mm": FRACTIONS[2],
+                "d_min_mm": FRACTIONS[3]}
+#: The smallest gap kept between d_min and what bounds it (d_max above, the elastomer's base below), mm.
+_GAP_MM = 0.01
+#: Steps the elastomer's diameter range is scanned in for the sub-range every other choice can follow.
+_SCAN = 401
+
+
+class Space:
+    """The variables as the search sees them: the categorical choices and four fractions, each mapped onto the part
+    of its mm range that the choices before it leave buildable (the geometry :func:`magfab.design.derive` checks:
+    the pocket's skin in the elastomer, the magnet's roof between the minimum skin and the cover, a hemisphere tip
+    no taller than the elastomer, d_min between the elastomer's base and d_max, the mould's fill and vent holes), and
+    within the required maximum diameter and height. Any point of the unit cube is then a design the geometry
+    accepts, save a listed-values choice with no value inside its interval (rare; the design then fails as before).
+
+    The base spec fixes the stack (pad + glue above the sensing point), the pocket's clearance, the minimum skin and
+    the insertion channel; the targets the ranges and the required maxima."""
+
+    def __init__(self, targets: Targets, base: Spec):
+        from ..recipes.resolve import printer as printer_recipe
+
+        self.variables = v = targets.variables
+        el = base.elastomer
+        self.stack = _stack_offset(base)
+        self.clearance, self.skin = el.pocket_clearance_mm, el.min_skin_mm
+        self.channel = el.insert_channel_diameter_mm / 2.0
+        vent = max(1.0, printer_recipe(base.mould.printer.value)["min_hole_mm"].nominal)
+        self.annulus = max(1.0, vent + 0.6) + 1e-6  # the mould's fill and vent holes round the channel (derive)
+        r = targets.require
+        self.max_height = r.max_height_mm if r.max_height_mm is not None else math.inf
+        self.max_diameter = r.max_diameter_mm if r.max_diameter_mm is not None else math.inf
+        self.max_diameter = min(self.max_diameter, _board_limit(base, float(max(v.elastomer_diameter_mm))))
+        self.all_choices = choices(v)
+        self._d_range: dict[tuple[str, str], tuple[float, float] | None] = {}
+        buildable = [m for m in self.all_choices["magnet"]
+                     if any(self.diameter_range(m, t) is not None for t in self.all_choices["tip"])]
+        if not buildable:
+            raise SpecError("variables.magnets", ", ".join(self.all_choices["magnet"]),
+                            "no magnet listed fits a buildable elastomer within the ranges and requirements")
+        tips = [t for t in self.all_choices["tip"] if any(self.diameter_range(m, t) is not None for m in buildable)]
+        self.choices = {**self.all_choices, "magnet": buildable, "tip": tips}
+
+    # the bounds each choice leaves -------------------------------------------------------------------------------
+
+    def _magnet(self, magnet: str) -> tuple[float, float]:
+        d, h, _ = stock_disc(magnet.split(":")[0])
+        return d / 2.0, h
+
+    def _cover_floor(self, r_e: float, r_p: float, tip: str) -> float:
+        """The least cover the skin allows (over a hemisphere tip, the dome's skin above the pocket's rim)."""
+        floor = self.skin
+        if tip == "hemisphere":
+            floor = max(floor, r_e - math.sqrt(max((r_e - self.skin) ** 2 - r_p**2, 0.0)))
+        return floor
+
+    def d_max_bounds(self, magnet: str, tip: str, d_e: float) -> tuple[float, float]:
+        r_m, h_m = self._magnet(magnet)
+        r_p, r_e, s = r_m + self.clearance, d_e / 2.0, self.stack
+        cover_lo = _lowest_at_least(self.variables.cover_mm, self._cover_floor(r_e, r_p, tip))
+        lo = max(s + self.skin + self.clearance, _lowest_at_least(self.variables.d_min_mm, s + _GAP_MM) + _GAP_MM)
+        if tip == "hemisphere":  # the elastomer at least as tall as the dome's radius, with the most cover allowed
+            lo = max(lo, r_e - float(max(self.variables.cover_mm)) + s - h_m)
+        return lo, self.max_height + s - h_m - cover_lo
+
+    def cover_bounds(self, magnet: str, tip: str, d_e: float, d_max: float) -> tuple[float, float]:
+        r_m, h_m = self._magnet(magnet)
+        r_e, roof = d_e / 2.0, d_max + h_m - self.stack
+        lo = self._cover_floor(r_e, r_m + self.clearance, tip)
+        if tip == "hemisphere":
+            lo = max(lo, r_e - roof)
+        return lo, self.max_height - roof
+
+    def d_min_bounds(self, d_max: float) -> tuple[float, float]:
+        return self.stack + _GAP_MM, d_max - _GAP_MM
+
+    def _d_ok(self, magnet: str, tip: str, d_e: float) -> bool:
+        lo, hi = self.d_max_bounds(magnet, tip, d_e)
+        return _has(self.variables.d_max_mm, lo, hi)
+
+    def diameter_range(self, magnet: str, tip: str) -> tuple[float, float] | None:
+        """The elastomer diameters (lowest, highest) a (magnet, tip) can be built with inside the ranges; None:
+        none."""
+        key = (magnet, tip)
+        if key not in self._d_range:
+            self._d_range[key] = self._scan(magnet, tip)
+        return self._d_range[key]
+
+    def _scan(self, magnet: str, tip: str) -> tuple[float, float] | None:
+        r_m, _ = self._magnet(magnet)
+        r_p = r_m + self.clearance
+        if self.channel > r_p:
+            return None
+        lo = 2.0 * max(r_p + self.skin, self.channel + self.annulus)
+        hi = min(self.max_diameter, 2.0 * self.max_height if tip == "hemisphere" else math.inf)
+        c = self.variables.elastomer_diameter_mm
+        values = ([x for x in c if lo <= x <= hi] if isinstance(c, list)
+                  else [float(x) for x in np.linspace(max(c[0], lo), min(c[1], hi), _SCAN)] if max(c[0], lo) <= min(
+                      c[1], hi) else [])
+        ok = [x for x in values if self._d_ok(magnet, tip, x)]
+        return (ok[0], ok[-1]) if ok else None
+
+    def buildable(self) -> list[tuple[str, str, str]]:
+        """Every (magnet, material, tip) combination with a buildable design, in a fixed order."""
+        return [(m, mat, t) for mat in self.choices["material"] for t in self.choices["tip"]
+                for m in self.choices["magnet"] if self.diameter_range(m, t) is not None]
+
+    # fractions <-> mm ----------------------------------------------------------------------------------------------
+
+    def point(self, params: dict[str, Any]) -> dict[str, Any]:
+        """The mm point of a trial's params (categories and fractions; a listed-values variable's own value, moved to
+        the nearest allowed one)."""
+        magnet, tip = str(params["magnet"]), str(params["tip"])
+        v = self.variables
+
+        def value(name: str, lo: float, hi: float) -> float:
+            c = getattr(v, name)
+            if isinstance(c, list):
+                values = _allowed(c, lo, hi)[0] or c
+                x = float(params[name])
+                return float(min(values, key=lambda y: (abs(y - x), y)))
+            return _pick(c, lo, hi, min(max(float(params[_FRACTION_OF[name]]), 0.0), 1.0))
+
+        d_e = value("elastomer_diameter_mm", *(self.diameter_range(magnet, tip) or _span(v.elastomer_diameter_mm)))
+        d_max = value("d_max_mm", *self.d_max_bounds(magnet, tip, d_e))
+        cover = value("cover_mm", *self.cover_bounds(magnet, tip, d_e, d_max))
+        d_min = value("d_min_mm", *self.d_min_bounds(d_max))
+        return point_of({"magnet": magnet, "material": params["material"], "tip": tip, "d_max_mm": d_max,
+                         "d_min_mm": d_min, "elastomer_diameter_mm": d_e, "cover_mm": cover})
+
+    def params(self, point: dict[str, Any]) -> dict[str, Any]:
+        """A trial's params for a mm point (the inverse of :meth:`point` for a point inside the bounds)."""
+        magnet, tip = f"{point['magnet']}:{point['grade']}", str(point["tip"])
+        v = self.variables
+        d_e, d_max = float(point["elastomer_diameter_mm"]), float(point["d_max_mm"])
+        bounds = {"elastomer_diameter_mm": self.diameter_range(magnet, tip) or _span(v.elastomer_diameter_mm),
+                  "d_max_mm": self.d_max_bounds(magnet, tip, d_e),
+                  "cover_mm": self.cover_bounds(magnet, tip, d_e, d_max), "d_min_mm": self.d_min_bounds(d_max)}
+        out: dict[str, Any] = {"magnet": magnet, "material": point["material"], "tip": tip}
+        for name, (lo, hi) in bounds.items():
+            c = getattr(v, name)
+            out.update({name: float(point[name])} if isinstance(c, list)
+                       else {_FRACTION_OF[name]: _fraction(c, lo, hi, float(point[name]))})
+        return out
+
+    def suggest(self, trial) -> dict[str, Any]:
+        """The mm point an Optuna trial draws (ask-and-tell): the categories, then each numeric variable's fraction
+        (or, for listed values, the value). The trial keeps the point as its user attribute :data:`POINT` (what tables
+        and the front read)."""
+        params: dict[str, Any] = {k: trial.suggest_categorical(k, v) for k, v in self.choices.items()}
+        for name in NUMERIC:
+            c = getattr(self.variables, name)
+            params.update({name: float(trial.suggest_categorical(name, list(c)))} if isinstance(c, list)
+                          else {_FRACTION_OF[name]: trial.suggest_float(_FRACTION_OF[name], 0.0, 1.0)})
+        point = self.point(params)
+        trial.set_user_attr(POINT, point)
+        return point
+
+    def latin_hypercube(self, n: int, seed: int) -> list[dict[str, Any]]:
+        """``n`` trials' params of a Latin hypercube in the search's coordinates: the (material, tip) pairs and the
+        magnets each in equal strata (every pair at least once when ``n`` is at least their number), the fractions
+        in ``n`` strata each. Only combinations with a buildable design."""
+        from scipy.stats import qmc
+
+        combos = self.buildable()
+        pairs = sorted({(mat, t) for _, mat, t in combos}, key=lambda p: (self.choices["material"].index(p[0]),
+                                                                           self.choices["tip"].index(p[1])))
+        u = qmc.LatinHypercube(d=2 + len(NUMERIC), seed=seed).random(n)
+        out = []
+        for row in u:
+            mat, tip = pairs[min(int(row[0] * len(pairs)), len(pairs) - 1)]
+            mags = [m for m, a, b in combos if (a, b) == (mat, tip)]
+            params: dict[str, Any] = {"magnet": mags[min(int(row[1] * len(mags)), len(mags) - 1)], "material": mat,
+                                      "tip": tip}
+            for name, x in zip(NUMERIC, row[2:]):
+                c = getattr(self.variables, name)
+                params.update({name: float(c[min(int(x * len(c)), len(c) - 1)])} if isinstance(c, list)
+                              else {_FRACTION_OF[name]: float(x)})
+            out.append(params)
+        return out
+
+
+@lru_cache(maxsize=8)
+def _board_limit(base: Spec, top: float) -> float:
+    """The largest elastomer diameter (up to ``top``) whose grown pad the base's board still holds (its connector
+    outside the pad's keep-out): bisected on the base design with a flat tip, 0.01 mm; ``top`` when it fits."""
+
+    def fits(d_e: float) -> bool:
+        raw = base.toml_dict()
+        raw["elastomer"].update(diameter_mm=d_e, tip="flat")
+        raw["elastomer"].pop("cover_mm", None)
+        raw["pad"].update(_pad_for(base, d_e))
+        try:
+            preflight(derive(spec_from_dict(raw)))
+        except SpecError as exc:
+            return not str(exc.key).startswith("pcb.")
+        return True
+
+    if fits(top):
+        return top
+    lo, hi = base.elastomer.diameter_mm, top
+    if not fits(lo):
+        return lo
+    while hi - lo > 0.01:
+        mid = (lo + hi) / 2.0
+        lo, hi = (mid, hi) if fits(mid) else (lo, mid)
+    return lo
+
+
+def _span(c: Any) -> tuple[float, float]:
+    return float(min(c)), float(max(c))
+
+
+def _lowest_at_least(c: Any, floor: float) -> float:
+    """The lowest value of a choice at or above ``floor`` (a range's: the larger of its low end and the floor); inf
+    when none is."""
+    if isinstance(c, list):
+        return min((x for x in c if x >= floor - 1e-9), default=math.inf)
+    return max(c[0], floor) if floor <= c[1] + 1e-12 else math.inf
+
+
+def _has(c: Any, lo: float, hi: float) -> bool:
+    if isinstance(c, list):
+        return any(lo - 1e-9 <= x <= hi + 1e-9 for x in c)
+    return max(c[0], lo) <= min(c[1], hi) + 1e-12
+
+
+def _allowed(c: Any, lo: float, hi: float) -> tuple[list[float] | None, float, float]:
+    """(the listed values within [lo, hi] or, when none is, the one nearest it; or None for a range, and the range
+    within [lo, hi]: a range with none gives the bound nearest the user's range)."""
+    if isinstance(c, list):
+        inside = [x for x in c if lo - 1e-9 <= x <= hi + 1e-9]
+        return inside or [min(c, key=lambda x: max(lo - x, x - hi))], lo, hi
+    a, b = max(c[0], lo), min(c[1], hi)
+    if a > b:  # nothing of the range is buildable: the nearest end (the design then fails with its reason)
+        a = b = min(max(c[0], min(lo, hi)), c[1])
+    return None, a, b
+
+
+def _pick(c: Any, lo: float, hi: float, f: float) -> float:
+    values, a, b = _allowed(c, lo, hi)
+    if values is not None:
+        return float(values[min(int(f * len(values)), len(values) - 1)])
+    return float(a + f * (b - a))
+
+
+def _fraction(c: Any, lo: float, hi: float, x: float) -> float:
+    values, a, b = _allowed(c, lo, hi)
+    if values is not None:
+        i = min(range(len(values)), key=lambda j: abs(values[j] - x))
+        return (i + 0.5) / len(values)
+    return 0.5 if b <= a else min(max((x - a) / (b - a), 0.0), 1.0)

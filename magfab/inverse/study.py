@@ -27,7 +27,7 @@ from typing import Any
 from ..errors import InputError
 from ..spec import Spec
 from .evaluate import constraint_names, evaluate
-from .space import base_point, params_of, point_of, suggest
+from .space import POINT, Space, base_point, point_of
 from .targets import Sampler, Targets
 
 # Imported lazily, inside the functions that use them, for speed: Dask, Optuna and SQLAlchemy take a
@@ -112,15 +112,30 @@ def _sigint_blocked() -> Iterator[None]:
         signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
 
+#: Of the trials after the first phase, one in this many has its (material, tip) fixed to the pair the study has
+#: tried least (the sampler draws the rest of it): the categories stay explored however the sampler's model narrows.
+EXPLORE_EVERY = 4
+
+
+def first_phase(targets: Targets) -> int:
+    """Trials of the space-filling first phase (:meth:`Space.latin_hypercube`): a fifth of the study, 10 to 100, and
+    at least two per (material, tip) pair; never more than the study."""
+    pairs = len(targets.variables.material_keys()) * len(targets.variables.tips)
+    return min(targets.study.trials, max(10, 2 * pairs, min(targets.study.trials // 5, 100)))
+
+
 def _sampler(targets: Targets):
+    """The study's sampler, seeded with study.seed. Its startup is the enqueued first phase (and the base point),
+    so it models from the start; constraints (trial.set_constraint) are read from each trial by both samplers, an
+    infeasible design ranked by how far it misses."""
     import optuna
 
     s = targets.study
     if s.sampler is Sampler.NSGA2:
         population = max(8, min(50, s.trials // 10))
         return optuna.samplers.NSGAIISampler(population_size=population, seed=s.seed)
-    return optuna.samplers.TPESampler(seed=s.seed, multivariate=True,
-                                      n_startup_trials=min(max(10, s.trials // 10), 100))
+    return optuna.samplers.TPESampler(seed=s.seed, multivariate=True, constant_liar=True,
+                                      n_startup_trials=first_phase(targets) + 1)
 
 
 def storage_of(where: str | Path):
@@ -159,6 +174,8 @@ def open_study(targets: Targets, where: str | Path):
     return study
 
 
+#: The study's user attribute saying its first phase is enqueued (once, by the run that starts it).
+PLANNED = "first_phase_enqueued"
 #: The user attribute naming the run (host:pid) that asked a trial.
 RUNNER = "runner"
 
@@ -217,48 +234,80 @@ def tell(study, trial, result: dict[str, Any], targets: Targets) -> None:
 def run_study(targets: Targets, base: Spec, storage: str | Path, dask_client,
               progress: Callable[[int, int], None] | None = None, study: Any = None) -> Any:
     """Run the study to ``targets.study.trials`` evaluated designs (counting those a previous run stored); ``study``:
-    the one :func:`open_study` opened at ``storage`` already."""
+    the one :func:`open_study` opened at ``storage`` already.
+
+    A new study starts from the base spec (when it is a point of the space) and a space-filling first phase
+    (:func:`first_phase` trials of :meth:`Space.latin_hypercube`, every (material, tip) pair in it), all enqueued;
+    then the sampler, with one trial in :data:`EXPLORE_EVERY` held to the least-tried (material, tip) pair.
+
+    Repeatable: results are told to Optuna in the order their trials were asked, whatever order the workers finish
+    in, and the next trial is asked right after each is told; with a seeded sampler, the same targets, seed and
+    number of workers give the same trials in the same order."""
     from distributed import as_completed
     from optuna.trial import TrialState
 
     study = study if study is not None else open_study(targets, storage)
+    space = Space(targets, base)
     _recover(study)
     finished = (TrialState.COMPLETE, TrialState.FAIL)
     done = len(study.get_trials(deepcopy=False, states=finished))
-    if done == 0:
+    if done == 0 and not study.user_attrs.get(PLANNED):
         start = base_point(base, targets.variables)
         if start is not None:
-            study.enqueue_trial(params_of(start))
+            study.enqueue_trial(space.params(start))
+        for params in space.latin_hypercube(first_phase(targets), targets.study.seed):
+            study.enqueue_trial(params)
+        study.set_user_attr(PLANNED, True)
     total = targets.study.trials
     args = (base.model_dump_json(), targets.model_dump_json())
     workers = max(1, len(dask_client.scheduler_info().get("workers", {})) or 1)
-    pending: dict[Any, Any] = {}
+    order: list[tuple[Any, Any]] = []  # (trial, future) in the order asked
+    results: dict[Any, dict[str, Any]] = {}
     queue = as_completed()
-
     runner = _runner()
+    n_first = first_phase(targets) + 1
 
     def submit() -> None:
+        _explore(study, space, n_first)
         trial = study.ask()
         trial.set_user_attr(RUNNER, runner)
-        point = suggest(trial, targets.variables)
+        point = space.suggest(trial)
         fut = dask_client.submit(evaluate, point, *args, targets.study.models.value, f"{targets.name}-{trial.number}",
                                  pure=False)
-        pending[fut] = trial
+        order.append((trial, fut))
         queue.add(fut)
 
-    while done + len(pending) < total and len(pending) < IN_FLIGHT_PER_WORKER * workers:
+    while done + len(order) < total and len(order) < IN_FLIGHT_PER_WORKER * workers:
         submit()
     if progress:
         progress(done, total)
     for fut in queue:
-        trial = pending.pop(fut)
-        tell(study, trial, fut.result(), targets)
-        done += 1
-        if progress:
-            progress(done, total)
-        if done + len(pending) < total:
-            submit()
+        results[fut] = fut.result()
+        while order and order[0][1] in results:  # told in ask order; each told trial's slot asked again at once
+            trial, first = order.pop(0)
+            tell(study, trial, results.pop(first), targets)
+            done += 1
+            if progress:
+                progress(done, total)
+            if done + len(order) < total:
+                submit()
     return study
+
+
+def _explore(study, space: Space, n_first: int) -> None:
+    """Before an ask: past the first phase, one trial in :data:`EXPLORE_EVERY` is enqueued with the (material, tip)
+    pair the study has tried least (ties: the choices' order), its magnet and fractions left to the sampler."""
+    from optuna.trial import TrialState
+
+    trials = study.get_trials(deepcopy=False)
+    number = len(trials)
+    if number < n_first or (number - n_first) % EXPLORE_EVERY != EXPLORE_EVERY - 1 or \
+            any(t.state is TrialState.WAITING for t in trials):
+        return
+    pairs = [(m, t) for m in space.choices["material"] for t in space.choices["tip"]]
+    tried = [(t.params.get("material"), t.params.get("tip")) for t in trials]
+    material, tip = min(pairs, key=lambda p: tried.count(p))
+    study.enqueue_trial({"material": material, "tip": tip})
 
 
 def records(study) -> list[Record]:
@@ -269,7 +318,8 @@ def records(study) -> list[Record]:
     for t in study.get_trials(deepcopy=False, states=(TrialState.COMPLETE, TrialState.FAIL)):
         if "magnet" not in t.params:  # asked, never given a point (cut short before it was drawn)
             continue
-        out.append(Record.of(t.number, point_of(t.params),
+        point = t.user_attrs.get(POINT) or point_of(t.params)  # a study stored before the fractions: mm params
+        out.append(Record.of(t.number, point,
                              t.user_attrs.get(RESULT) or {"state": "failed", "reason": "no result stored"}))
     return out
 

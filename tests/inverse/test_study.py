@@ -72,7 +72,7 @@ def test_front_against_brute_force(cluster, tmp_path):
 def test_an_interrupted_study_resumes(cluster, tmp_path):
     """A trial left running (the process was killed while a design was out) is failed as "interrupted" and its
     point asked again; the study then runs to its new total, counting what the first run stored."""
-    from magfab.inverse.space import suggest
+    from magfab.inverse.space import Space
     from magfab.inverse.study import StudyError
 
     storage = tmp_path / "study.log"
@@ -80,7 +80,7 @@ def test_an_interrupted_study_resumes(cluster, tmp_path):
     run_study(first, BASE, storage, cluster)
     study = open_study(first, storage)
     orphan = study.ask()  # asked, never told: what a kill leaves behind
-    point = suggest(orphan, first.variables)
+    point = Space(first, BASE).suggest(orphan)
     study = run_study(parse_targets(SMALL % 10), BASE, storage, cluster)  # more trials: the same study, extended
     recs = records(study)
     assert len(recs) == 10
@@ -92,11 +92,51 @@ def test_an_interrupted_study_resumes(cluster, tmp_path):
         open_study(other, storage)
 
 
-def test_failed_designs_are_recorded_and_the_study_goes_on(cluster, tmp_path):
-    text = (SMALL % 8).replace("d_min_mm = {values = [3.0]}", "d_min_mm = {values = [3.0, 8.0]}")
-    study = run_study(parse_targets(text), BASE, tmp_path / "study.log", cluster)
+def _refusing(point, *args, **kwargs):
+    """The evaluation, refusing designs at d_max = 7.5 mm as the geometry refuses a design it cannot build (the
+    search's coordinates no longer propose those, so the test makes its own)."""
+    from magfab.inverse.evaluate import evaluate
+
+    if point["d_max_mm"] == 7.5:
+        return {"state": "failed", "reason": "sensor.d_max_mm = 7.5: refused by the test", "model": "surrogate",
+                "metrics": {}, "constraints": [], "errors": []}
+    return evaluate(point, *args, **kwargs)
+
+
+def test_failed_designs_are_recorded_and_the_study_goes_on(cluster, tmp_path, monkeypatch):
+    import sys
+
+    import cloudpickle
+
+    from magfab.inverse import study as st
+
+    cloudpickle.register_pickle_by_value(sys.modules[__name__])  # the workers run this module's function
+    monkeypatch.setattr(st, "evaluate", _refusing)
+    try:
+        study = run_study(parse_targets(SMALL % 12), BASE, tmp_path / "study.log", cluster)
+    finally:
+        cloudpickle.unregister_pickle_by_value(sys.modules[__name__])
     recs = records(study)
-    assert len(recs) == 8
-    failed = [r for r in recs if r.point["d_min_mm"] == 8.0]
-    assert failed and all(r.state == "failed" and r.reason.startswith("sensor.d_min_mm") for r in failed)
+    assert len(recs) == 12
+    failed = [r for r in recs if r.point["d_max_mm"] == 7.5]
+    assert failed and all(r.state == "failed" and r.reason.startswith("sensor.d_max_mm") for r in failed)
     assert any(r.state != "failed" for r in recs)
+
+
+def test_the_same_seed_gives_the_same_study(cluster, tmp_path):
+    """Twice with one seed on two workers (who finish in whatever order): the same trials in the same order, the same
+    figures and the same best design; another seed, another study."""
+    text = SMALL.replace("d_max_mm = {values = [4.5, 6.0, 7.5]}", "d_max_mm = [4.0, 8.0]").replace(
+        "elastomer_diameter_mm = {values = [10.0, 12.0]}", "elastomer_diameter_mm = [9.0, 13.0]") % 24
+    targets = parse_targets(text)
+
+    def run(where: str, t=targets):
+        recs = records(run_study(t, BASE, tmp_path / where, cluster))
+        ok = [r for r in recs if r.state == "ok"]
+        best = min(ok, key=lambda r: r.metrics["normal_resolution_mN"]) if ok else None
+        return [(r.number, r.point, r.state) for r in recs], best and (best.number, best.point)
+
+    first, again = run("a.log"), run("b.log")
+    assert len(first[0]) == 24 and first == again
+    other = run("c.log", parse_targets(text.replace("seed = 3", "seed = 4")))
+    assert other[0] != first[0]
