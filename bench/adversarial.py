@@ -376,6 +376,7 @@ class Case:
     then: list[tuple[str, list[str]]] = field(default_factory=list)
     signal_at: tuple[float, int] | None = None
     code: str = ""  # the program of prog "python"
+    cwd: str = ""  # where it runs, relative to the case's folder (default: the folder)
     detail: str = ""  # the generator's parameters, for the report
     timeout_s: float = TIMEOUT_S
 
@@ -505,11 +506,11 @@ class Runner:
         before = tree(folder)
         subst = [a.replace("{here}", str(folder)) for a in case.args]
         argv, env = self.argv(case.prog, subst, case.code)
-        results = [run_child(argv, folder, env, case.timeout_s, case.signal_at)]
+        results = [run_child(argv, folder / case.cwd, env, case.timeout_s, case.signal_at)]
         label, why, usage = judge(case, results[0], before, tree(folder))
         for prog, args in case.then if label in ("stopped", "ok") else []:
             argv, env = self.argv(prog, [a.replace("{here}", str(folder)) for a in args], "")
-            results.append(run_child(argv, folder, env))
+            results.append(run_child(argv, folder / case.cwd, env))
             nxt = Case(case.cls, case.name, prog, args, expect="ok")
             label2, why2, _ = judge(nxt, results[-1], {}, {})
             if label2 != "ok":
@@ -575,6 +576,7 @@ class Env:
     replay: Path  # its BuildResult, pickled
     golden_tree: dict
     steps: list[str]  # the output steps of a rebuild over it
+    in_place: list[str]  # the output steps of `magfab calibrate SCAN` run inside it (an update in place)
     magfab_env: dict[str, str]
     readout_env: dict[str, str]
     decode_env: dict[str, str]
@@ -617,16 +619,23 @@ def prepare(work: Path, quick: bool, seed: int) -> Env:
     readout = work / "reference" / "readout-src"
     shutil.rmtree(readout, ignore_errors=True)
     shutil.copytree(golden / "readout" / "src", readout)
-    env = Env(work, quick, seed, golden, replay, tree(golden), [], magfab_env, _environment([readout]),
+    env = Env(work, quick, seed, golden, replay, tree(golden), [], [], magfab_env, _environment([readout]),
               _environment([ROOT, readout]), None)
-    counting = work / "reference" / "count"
-    env.copy_build(counting / "magone")
-    res = run_child([PY, "-c", WRAPPED.format(tests=str(TESTS)), "count", str(counting / "steps.txt"), str(replay),
-                     "build", str(EXAMPLES / "magone.toml"), "--out", str(counting / "magone")], counting, magfab_env)
-    env.steps = (counting / "steps.txt").read_text().splitlines() if res.code == 0 else []
-    if not env.steps:
-        raise SystemExit(f"counting the swap's steps failed (exit {res.code}): {res.stderr[-2000:]}")
-    shutil.rmtree(counting)
+    for inside in (False, True):
+        counting = work / "reference" / "count"
+        out = env.copy_build(counting / "magone")
+        shutil.copy(golden / "calibration" / "scan_simulated.csv", out / SCAN)
+        args = ["calibrate", SCAN] if inside else ["build", str(EXAMPLES / "magone.toml"), "--out", str(out)]
+        res = run_child([PY, "-c", WRAPPED.format(tests=str(TESTS)), "count", str(counting / "steps.txt"),
+                         str(replay), *args], out if inside else counting, magfab_env)
+        steps = (counting / "steps.txt").read_text().splitlines() if res.code == 0 else []
+        if not steps:
+            raise SystemExit(f"counting the output's steps failed (exit {res.code}): {res.stderr[-2000:]}")
+        if inside:
+            env.in_place = steps
+        else:
+            env.steps = steps
+        shutil.rmtree(counting)
     shutil.rmtree(work / "reference" / "harness", ignore_errors=True)
     shutil.rmtree(work / "cases", ignore_errors=True)
     env.harness = _firmware_harness(work / "reference" / "harness")
@@ -1297,6 +1306,8 @@ def _own_scan(env: Env, form: str, seed: int) -> Callable[[Path], None]:
 
 USER_FILES = {"scan.csv": b"time_s,Bx_uT\n0,1\n", "notes/day1/log.txt": b"\x00\xffmy notes",
               "calibration/mine.txt": b"inside a magfab folder"}
+#: The scan a user recorded into the build folder and calibrates on from inside it (the simulated scan's bytes).
+SCAN = "bench_scan.csv"
 
 
 def class6(env: Env, rng: random.Random) -> list[Case]:
@@ -1309,17 +1320,18 @@ def class6(env: Env, rng: random.Random) -> list[Case]:
     names = ["magone", "out", "my.finger-2"]
 
     def case(name: str, mode: str, arg: str, replay: bool, expect: str, then: bool = False,
-             signal_at: tuple[float, int] | None = None) -> None:
+             signal_at: tuple[float, int] | None = None, inside: bool = False) -> None:
         folder_name = rng.choice(names)
         look = alikes.pop() if alikes else []
-        args = [mode, arg, str(env.replay) if replay else "-", "build", spec, "--out", f"build/{folder_name}"]
-        nxt = [("wrapped", ["none", "-", str(env.replay) if replay else "-", "build", spec, "--out",
-                            f"build/{folder_name}"])] if then else []
+        command = ["calibrate", SCAN] if inside else ["build", spec, "--out", f"build/{folder_name}"]
+        args = [mode, arg, str(env.replay) if replay else "-", *command]
+        nxt = [("wrapped", ["none", "-", str(env.replay) if replay else "-", *command])] if then else []
         look_names = [f".{folder_name}.{k}-{s}" for k, s, _ in look]
         cases.append(Case(6, name, "wrapped", args, _previous_build(env, folder_name, look), expect=expect,
                           keep=tuple(f"build/{n}" for n in look_names) + tuple(f"build/{folder_name}/{u}"
-                                                                             for u in USER_FILES),
+                                                                             for u in [*USER_FILES, SCAN]),
                           check=_swap_check(env, folder_name, look_names, replay), then=nxt, signal_at=signal_at,
+                          cwd=f"build/{folder_name}" if inside else "",
                           detail=f"folder {folder_name!r}, beside it {look_names}"))
 
     for _ in range(env.n(1, 2)):
@@ -1332,6 +1344,13 @@ def class6(env: Env, rng: random.Random) -> list[Case]:
         case(f"SIGKILL at swap step {k} of {n_steps} ({env.steps[k - 1]}), then a rebuild [plan replayed]",
              "SIGKILL", str(k), True, "stop", then=True)
     case("Ctrl-C during the work of a rebuild", "ctrl-c-in-plan", "0", True, "stop")
+    n_in = len(env.in_place)  # `magfab calibrate SCAN` inside the build folder: updated file by file, journalled
+    for k in rng.sample(range(1, n_in + 1), env.n(1, min(3, n_in))):
+        case(f"Ctrl-C at in-place step {k} of {n_in} ({env.in_place[k - 1]}) of calibrate run inside the build "
+             "[plan replayed]", "SIGINT", str(k), True, "stop", inside=True)
+    for k in rng.sample(range(1, n_in + 1), env.n(0, min(2, n_in))):
+        case(f"SIGKILL at in-place step {k} of {n_in} ({env.in_place[k - 1]}) of calibrate run inside the build, "
+             "then calibrate again [plan replayed]", "SIGKILL", str(k), True, "stop", then=True, inside=True)
     if not env.quick:
         case("a real rebuild with look-alike names beside it and the user's files in it", "none", "0", False, "ok")
         case(f"Ctrl-C {8:.0f} s into a real rebuild", "none", "0", False, "stop", signal_at=(8.0, signal.SIGINT))
@@ -1371,6 +1390,7 @@ def _previous_build(env: Env, name: str, look: list) -> Callable[[Path], None]:
         (out / "manifest.json").write_text(json.dumps(manifest, indent=2, sort_keys=True) + "\n")
         for rel, data in USER_FILES.items():
             _write(out / rel, data)
+        shutil.copy(env.golden / "calibration" / "scan_simulated.csv", out / SCAN)
         os.symlink("scan.csv", out / "latest.csv")
         for kind, suffix, shape in look:
             make_look_alike(folder / "build", name, kind, suffix, shape)
@@ -1385,7 +1405,7 @@ def _swap_check(env: Env, name: str, look_names: list[str], replay: bool) -> Che
         out = folder / "build" / name
         old = {k: tuple(v) for k, v in json.loads((folder / "old.json").read_text()).items()}
         now = tree(out)
-        user = {k: v for k, v in old.items() if k.split("/")[0] in ("scan.csv", "notes", "latest.csv")
+        user = {k: v for k, v in old.items() if k.split("/")[0] in ("scan.csv", "notes", "latest.csv", SCAN)
                 or k == "calibration/mine.txt"}
         if now != old:
             if replay:

@@ -20,7 +20,7 @@ import adversarial as adv  # (bench/, put on sys.path above)
 def runner(tmp_path):
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
     e = adv.Env(work=tmp_path, quick=True, seed=0, golden=tmp_path, replay=tmp_path, golden_tree={}, steps=[],
-                magfab_env=env, readout_env=env, decode_env=env, harness=None)
+                in_place=[], magfab_env=env, readout_env=env, decode_env=env, harness=None)
     return adv.Runner(e, keep_failures=None)
 
 
