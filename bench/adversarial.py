@@ -34,7 +34,8 @@ The classes (the project's adversarial pass):
 
 Each case runs in a fresh folder, in a child process with its address space limited (``RLIMIT_AS``, 4.5 GB) and
 killed after 90 s; its wall time, CPU time and peak memory (the larger of its ``wait4`` ``ru_maxrss`` and the
-resident memory of its whole process group sampled from /proc every 0.1 s) are measured. Outcomes:
+resident memory of its whole session sampled from /proc every 0.1 s; the CPU time likewise, the larger of the two)
+are measured. Outcomes:
 
 * **refused**: exit 2, exactly one non-empty line on stderr, no traceback, the folder byte for byte as before (the
   argument parsers' own usage block, click's three lines and argparse's two, is counted here and reported apart);
@@ -234,8 +235,12 @@ def _limit_child() -> None:
 _PAGE_MB = os.sysconf("SC_PAGE_SIZE") / 2**20
 
 
-def session_rss_mb(session: int) -> float:
-    """Resident memory, MB, of every process of ``session`` (the child and what it started), from /proc."""
+_TICK_S = 1.0 / os.sysconf("SC_CLK_TCK")
+
+
+def session_usage(session: int, cpu: dict[int, float] | None = None) -> float:
+    """Resident memory, MB, of every process of ``session`` (the child and what it started), from /proc; ``cpu``
+    gets each one's CPU seconds so far by pid (what wait4 cannot count: a killed child's own children)."""
     total = 0
     for entry in os.scandir("/proc"):
         if not entry.name.isdigit():
@@ -245,9 +250,11 @@ def session_rss_mb(session: int) -> float:
                 data = f.read()
         except OSError:
             continue
-        fields = data[data.rfind(b")") + 2:].split()  # from field 3 (state) on: session is field 6, rss 24
+        fields = data[data.rfind(b")") + 2:].split()  # from field 3 (state) on: session 6, utime 14, stime 15, rss 24
         if len(fields) > 21 and int(fields[3]) == session:
             total += int(fields[21])
+            if cpu is not None:
+                cpu[int(entry.name)] = (int(fields[11]) + int(fields[12])) * _TICK_S
     return total * _PAGE_MB
 
 
@@ -268,12 +275,13 @@ def run_child(argv: Sequence[str], cwd: Path, env: dict[str, str], timeout_s: fl
         proc = subprocess.Popen(list(argv), cwd=cwd, env=env, stdin=subprocess.DEVNULL, stdout=out, stderr=err,
                                 preexec_fn=_limit_child, start_new_session=True)
         state: dict[str, Any] = {"peak": 0.0, "timed_out": False, "sent": None}
+        cpu: dict[int, float] = {}
         done = threading.Event()
 
         def watch() -> None:
             while not done.wait(0.1):
                 elapsed = time.perf_counter() - start
-                state["peak"] = max(state["peak"], session_rss_mb(proc.pid))
+                state["peak"] = max(state["peak"], session_usage(proc.pid, cpu))
                 if signal_at is not None and state["sent"] is None and elapsed >= signal_at[0]:
                     state["sent"] = signal_at[1]
                     _killpg(proc.pid, signal_at[1])
@@ -293,7 +301,7 @@ def run_child(argv: Sequence[str], cwd: Path, env: dict[str, str], timeout_s: fl
         out.seek(0)
         err.seek(0)
         return Result(code, out.read().decode("utf-8", "replace"), err.read().decode("utf-8", "replace"), wall,
-                      usage.ru_utime + usage.ru_stime,
+                      max(usage.ru_utime + usage.ru_stime, sum(cpu.values())),
                       max(usage.ru_maxrss / 1024.0 if usage.ru_maxrss > floor_kb else 0.0, state["peak"]),
                       state["timed_out"], state["sent"])
 
@@ -1619,6 +1627,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.work is None:
             shutil.rmtree(work, ignore_errors=True)
     rows = summary(runner.outcomes)
+    if max(load[0], os.getloadavg()[0]) > 1.5 * (os.cpu_count() or 1):
+        print(f"\nwarning: the machine was loaded (load average {load[0]:.1f} at the start, {os.getloadavg()[0]:.1f} "
+              "at the end): wall times are stretched by other processes; a case killed at the timeout with little "
+              "CPU time waited for the processor, not for its input's work", flush=True)
     elapsed = time.perf_counter() - started
     print()
     print(table(rows))
