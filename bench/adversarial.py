@@ -292,7 +292,12 @@ def run_child(argv: Sequence[str], cwd: Path, env: dict[str, str], timeout_s: fl
 
         watcher = threading.Thread(target=watch, daemon=True)
         watcher.start()
-        _, status, usage = os.wait4(proc.pid, 0)
+        try:
+            _, status, usage = os.wait4(proc.pid, 0)
+        except BaseException:  # the runner interrupted: its child's session goes with it
+            _killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+            raise
         wall = time.perf_counter() - start
         done.set()
         watcher.join()
@@ -802,6 +807,29 @@ def class1(env: Env, rng: random.Random) -> list[Case]:
         words = () if kind == "directory" and prog == "magfab" else ("regular file",)  # click's own refusal
         cases.append(Case(1, f"{reader}: {kind}{f' of {size:,} bytes' if kind == 'oversize' else ''}", prog,
                           [a.replace("{}", path_of) for a in args], setup, words=words))
+    # the same files of the build folder as a FIFO, /dev/zero or a file far over its kind's limit (sparse): refused, or
+    # skipped (the rebuild replaces them), never read until the memory or the time runs out
+    kinds = {"calibration/calibration.json": "calibration.json", "calibration/acceptance.json": "acceptance.json",
+             "spec.json": "spec.json", "manifest.json": "JSON"}
+    for name, shape in rng.sample([(n, k) for n in kinds for k in ("fifo", "symlink", "oversize")], env.n(2, 6)):
+        size = rng.choice([LIMITS[kinds[name]] + 1, rng.randrange(1 << 30, 3 << 30)])
+
+        def replace(folder: Path, name: str = name, shape: str = shape, size: int = size) -> None:
+            env.copy_build(folder / "build")
+            path = folder / "build" / name
+            path.unlink()
+            if shape == "fifo":
+                os.mkfifo(path)
+            elif shape == "symlink":
+                path.symlink_to("/dev/zero")
+            else:
+                with open(path, "wb") as f:
+                    f.truncate(size)
+
+        what = {"fifo": "a FIFO", "symlink": "a link to /dev/zero", "oversize": f"{size:,} bytes (sparse)"}[shape]
+        cases.append(Case(1, f"{name} in the build folder as {what} through calibrate", "wrapped",
+                          ["none", "-", str(env.replay), "calibrate", "build/calibration/scan_simulated.csv", "--out",
+                           "build"], replace, expect="either", check=_refused_or_built(env), detail=what))
     if not env.quick:  # a scan CSV of valid rows just under its kind's limit: read and fitted in the budget, or refused
         cases.append(Case(1, "a scan CSV of valid rows just under the 256 MiB limit through calibrate", "magfab",
                           ["calibrate", "big.csv", "--out", "build"],
@@ -1604,6 +1632,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help="work in this folder and keep it (its reference build is reused by the next run given it; "
                              "default: a temporary folder, removed)")
     args = parser.parse_args(argv)
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))  # the work folder and the running child cleaned up
     _tests_path()
     started = time.perf_counter()
     load = os.getloadavg()
