@@ -13,7 +13,6 @@ from __future__ import annotations
 import importlib
 import json
 import os
-import random
 import resource
 import subprocess
 import sys
@@ -21,6 +20,7 @@ import tempfile
 from pathlib import Path
 
 import pytest
+from adversarial_support import KEYS, KINDS, deep_json_document, deep_toml_document, special
 from click.testing import CliRunner
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -31,73 +31,11 @@ from magfab.errors import InputError
 
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLES = REPO / "magfab" / "examples"
-DEPTH = 32  # magfab_readout.bounded.MAX_DEPTH, written out so this file runs against a tree without the module
-KEYS = 1000  # bounded.MAX_KEYS
 #: Memory a child process may use: far above what refusing a file needs, far below what reading /dev/zero takes.
 CHILD_AS_BYTES = 2 * 1024**3
 CHILD_TIMEOUT_S = 60
 SETTINGS = settings(max_examples=15, deadline=None, derandomize=True,
                     suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
-
-
-# --- generators ------------------------------------------------------------------------------------------------
-
-@st.composite
-def deep_toml_value(draw) -> str:
-    """A TOML line nesting more than DEPTH levels: arrays and inline tables mixed at random (under a plain or a
-    dotted key), a dotted key or a table header of that many parts; 33 to 5,000 levels."""
-    depth = draw(st.integers(DEPTH + 1, 5000))
-    rng = random.Random(draw(st.integers(0, 2**32)))
-    form = draw(st.sampled_from(["value", "dotted value", "dotted key", "header", "array of tables"]))
-    if form in ("dotted key", "header", "array of tables"):
-        path = ".".join(rng.choice(["a", "b_1", '"q.k"', "'l'"]) for _ in range(depth))
-        return {"dotted key": f"{path} = 1", "header": f"[{path}]\nx = 1", "array of tables": f"[[{path}]]"}[form]
-    kinds = [rng.choice("[{") for _ in range(depth)]
-    opens = "".join("[" if k == "[" else "{k = " for k in kinds)
-    closes = "".join("]" if k == "[" else "}" for k in reversed(kinds))
-    key = "x.y.z" if form == "dotted value" else "deep_key"
-    return f"{key} = {opens}1{closes}"
-
-
-def inserted(document: str, line: str, rng: random.Random) -> str:
-    """``line`` put at a random line boundary of ``document`` (inside a table, or at the top)."""
-    lines = document.splitlines()
-    at = rng.randint(0, len(lines))
-    return "\n".join([*lines[:at], line, *lines[at:]]) + "\n"
-
-
-@st.composite
-def deep_toml_document(draw, base: str) -> str:
-    return inserted(base, draw(deep_toml_value()), random.Random(draw(st.integers(0, 2**32))))
-
-
-@st.composite
-def deep_json_document(draw, base: dict) -> str:
-    """``base`` with one value, at a random place (a key of any of its objects), replaced by arrays and objects
-    nested 33 to 5,000 deep in random order."""
-    depth = draw(st.integers(DEPTH + 1, 5000))
-    rng = random.Random(draw(st.integers(0, 2**32)))
-    objects = [base]
-    todo = [base]
-    while todo:
-        node = todo.pop()
-        for v in node.values():
-            if isinstance(v, dict):
-                objects.append(v)
-                todo.append(v)
-    target = rng.choice(objects)
-    key = rng.choice([*target, "extra"])
-    saved = target.get(key, None)
-    target[key] = "@@DEEP@@"
-    text = json.dumps(base)
-    if saved is None:
-        del target[key]
-    else:
-        target[key] = saved
-    kinds = [rng.choice("[{") for _ in range(depth)]
-    deep = "".join("[" if k == "[" else '{"k": ' for k in kinds) + "1" + "".join(
-        "]" if k == "[" else "}" for k in reversed(kinds))
-    return text.replace('"@@DEEP@@"', deep, 1)
 
 
 # --- the readers through their CLIs ---------------------------------------------------------------------------
@@ -248,24 +186,6 @@ def child(cwd: Path, env: dict, *argv: str) -> subprocess.CompletedProcess:
         pytest.fail(f"{argv[3:]}: still reading after {CHILD_TIMEOUT_S} s")
 
 
-def special(kind: str, folder: Path, size: int) -> Path:
-    """A file of ``kind``: a FIFO, /dev/zero, a symlink to it, a directory, or a sparse file of ``size`` bytes."""
-    path = folder / f"input-{kind}"
-    if kind == "fifo":
-        os.mkfifo(path)
-    elif kind == "dev-zero":
-        return Path("/dev/zero")
-    elif kind == "symlink":
-        path.symlink_to("/dev/zero")
-    elif kind == "directory":
-        path.mkdir()
-    else:
-        with open(path, "wb") as f:
-            f.truncate(size)  # sparse: no disk, no time
-    return path
-
-
-KINDS = ["fifo", "dev-zero", "symlink", "directory", "oversize"]
 MAGFAB = (sys.executable, "-c", "import sys; from magfab.cli import main; sys.argv[0] = 'magfab'; main()")
 #: (reader, limit in bytes, its command with {} for the file)
 READERS = {

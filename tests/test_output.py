@@ -21,6 +21,7 @@ import time
 import traceback
 
 import pytest
+from adversarial_support import LOOK_ALIKES, make_look_alike
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -466,17 +467,8 @@ def test_a_users_folder_named_like_a_temporary_survives_a_build(tmp_path):
     assert _beside(out) == [".magone.old-20241128", "magone"] and _tree(out) == _expected("old", {})
 
 
-_HEX, _WORD = "0123456789abcdef", "abcdefghijklmnopqrstuvwxyz0123456789_"
-_SUFFIXES = st.one_of(st.text(_HEX, min_size=16, max_size=16), st.text(_WORD, min_size=8, max_size=8),
-                      st.dates().map(lambda d: d.strftime("%Y%m%d")), st.dates().map(str),
-                      st.text(_WORD + "-.", max_size=24))
-_LOOK_ALIKES = st.lists(st.tuples(st.sampled_from(["tmp", "old"]), _SUFFIXES,
-                                  st.sampled_from(["folder", "empty folder", "file", "link"])),
-                        min_size=1, max_size=6, unique_by=lambda t: t[:2])
-
-
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(name=st.sampled_from(["magone", "out", "my.finger-2"]), look_alikes=_LOOK_ALIKES, killed=st.booleans())
+@given(name=st.sampled_from(["magone", "out", "my.finger-2"]), look_alikes=LOOK_ALIKES, killed=st.booleans())
 def test_no_folder_named_like_a_temporary_is_removed(tmp_path_factory, name, look_alikes, killed):
     """Generated: names built from magfab's temporary patterns with random suffixes and dates, as folders (full
     and empty), files and links beside the build; a build, a rebuild (after a run killed mid-build when
@@ -486,16 +478,7 @@ def test_no_folder_named_like_a_temporary_is_removed(tmp_path_factory, name, loo
     write(out, _fake("old"))
     made = {}
     for kind, suffix, shape in look_alikes:
-        path = root / f".{name}.{kind}-{suffix}"
-        if shape == "folder":
-            (path / "sub").mkdir(parents=True)
-            (path / "sub" / "data.bin").write_bytes(suffix.encode())
-        elif shape == "empty folder":
-            path.mkdir()
-        elif shape == "file":
-            path.write_bytes(suffix.encode())
-        else:
-            os.symlink(name, path)
+        path = make_look_alike(root, name, kind, suffix, shape)
         made[path.name] = _tree(path) if path.is_dir() and not path.is_symlink() else os.readlink(path) \
             if path.is_symlink() else path.read_bytes()
     if killed:
