@@ -166,6 +166,8 @@ def calibrate(scan: Path, reference: Path | None, spec: Path | None, out_dir: Pa
     that build from its own spec.json, file by file (your shell stays where it is). An array is calibrated one
     taxel at a time (`--taxel K`); the other taxels keep the scans they were fitted to. A scan whose field at rest
     is outside the design's acceptance band is refused (the wrong sensor or build, or a misassembled sensor)."""
+    with _handled():
+        check_out(out_dir)
     if sensor_id is None:
         if date is not None:
             _fail("--date dates a sensor's calibration: give it with --sensor ID", EXIT_BAD_INPUT)
@@ -420,8 +422,8 @@ def _print_findings(findings: list) -> None:
 def check(spec: Path | None, as_json: bool) -> None:
     """Validate SPEC and run the design checks, predictions included; writes nothing."""
     with _handled():
-        from .check import verdict
         from .spec import load_spec
+        from .verdict import verdict
 
         loaded = load_spec(spec)
         # the reference chip's site, the build's cost and the board's size refused (or the board sized) as the build

@@ -56,6 +56,7 @@ from pathlib import Path, PurePosixPath
 
 from .errors import OutputError
 from .exchange import exchange
+from .formats.bounded import InputFileError, loads_json, read_bytes
 
 __all__ = ["Artifact", "check_target", "write", "is_build", "OutputError"]
 
@@ -93,8 +94,8 @@ def _absolute(out_dir: Path) -> Path:
 def _listed(out: Path) -> set[str] | None:
     """The paths the previous build's manifest says magfab wrote (with the manifest); None if it lists none."""
     try:
-        manifest = json.loads((out / "manifest.json").read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+        manifest = loads_json(read_bytes(out / "manifest.json", "JSON"), "manifest.json", out)
+    except (OSError, ValueError, InputFileError):
         return {"manifest.json"}  # an empty folder (or a manifest gone bad meanwhile): all else is the user's
     items = manifest.get("artifacts") if isinstance(manifest, dict) else None
     if not isinstance(items, list):
@@ -494,9 +495,10 @@ def _check_replaceable(out: Path) -> None:
 
 def is_build(path: Path) -> bool:
     """Whether ``path`` holds an earlier magfab build (a manifest.json magfab wrote)."""
-    try:
-        return "magfab_version" in json.loads((path / "manifest.json").read_text(encoding="utf-8"))
-    except (OSError, ValueError, TypeError):
+    try:  # read within bounds: a manifest.json that is a FIFO, /dev/zero or nested past the stack is not magfab's
+        manifest = loads_json(read_bytes(path / "manifest.json", "JSON"), "manifest.json", path)
+        return isinstance(manifest, dict) and "magfab_version" in manifest
+    except (OSError, ValueError, TypeError, InputFileError):
         return False
 
 

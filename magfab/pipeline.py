@@ -87,7 +87,7 @@ if TYPE_CHECKING:
 
 
 __all__ = ["Artifact", "BuildResult", "OutputError", "plan", "write", "build", "check_target", "PARTS", "Part",
-           "Stage", "default_out_dir"]
+           "Stage", "default_out_dir", "acceptance_stage", "bundle_stage"]
 
 
 @dataclass(frozen=True)
@@ -181,7 +181,7 @@ def _drift_charts(pred: Prediction) -> list[Artifact]:
     return _charts(drift_figures.FOLDER, drift_figures.figures(pred.drift), drift_figures.CAPTIONS)
 
 
-def _acceptance(design: Design, prediction: Prediction) -> AcceptanceStage:
+def acceptance_stage(design: Design, prediction: Prediction) -> AcceptanceStage:
     """The acceptance test's bands (magfab.models.acceptance), for the readout package and the checklist."""
     try:
         return AcceptanceStage(bands=acceptance(design, prediction))
@@ -220,7 +220,7 @@ def _scan(design: Design, prediction: Prediction | None, scan: Scan | None, say:
     return ScanStage(artifacts=out, findings=found, scan=scan)
 
 
-def _bundle(design: Design, prediction: Prediction | None, scan: Scan | dict[int, Scan] | None,
+def bundle_stage(design: Design, prediction: Prediction | None, scan: Scan | dict[int, Scan] | None,
             acceptance: dict[str, Any] | None, say: Progress, timings: dict[str, float]) -> BundleStage:
     """The firmware-plus-calibration bundle: calibration.json (from ``scan``, or a simulated scan when there
     is none yet), its chart, the firmware sources, the generic AVR image with the .eep of its settings and
@@ -517,8 +517,8 @@ def _physics(design: Design, scan: Scan | dict[int, Scan] | None, parallel: bool
     with side_branch(figures.figures, design, prediction, model_bench(), beside, parallel=parallel) as worker:
         drawn = figures.figures(design, prediction, (), mine)
         timings["plots"] = time.perf_counter() - t  # the worker's plots too where they were drawn in-process
-        accepted = _acceptance(design, prediction)
-        bundle = _bundle(design, prediction, scan, accepted.bands, say, timings)
+        accepted = acceptance_stage(design, prediction)
+        bundle = bundle_stage(design, prediction, scan, accepted.bands, say, timings)
         papers = _fabrication(design, prediction, accepted.bands, say, timings)
         t = time.perf_counter()
         drawn |= worker.result()

@@ -28,15 +28,14 @@ from .spec_errors import did_you_mean, translate_error
 from .toml_input import loads_toml, read_toml
 
 __all__ = ["Spec", "Tip", "Density", "Printer", "Array", "Environment", "Skin", "Polarity", "MAX_TAXELS", "load_spec",
-           "spec_from_json", "parse_spec", "spec_from_dict", "default_spec_text", "translate_error",
-           "spec_schema", "NAME_PATTERN", "is_valid_name"]
+           "spec_from_json", "parse_spec", "spec_from_dict", "default_spec_text", "translate_error", "spec_schema",
+           "NAME_PATTERN", "is_valid_name"]
 
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
 
 
 def is_valid_name(name: str) -> bool:
-    """Whether ``name`` is a design name: the whole string matches :data:`NAME_PATTERN` (Python's ``$`` alone
-    would also accept a trailing newline, which then breaks the TOML that ``init`` writes)."""
+    """Whether ``name`` matches all of :data:`NAME_PATTERN` (``$`` alone takes a trailing newline: bad TOML)."""
     return re.fullmatch(NAME_PATTERN, name) is not None
 
 
@@ -493,20 +492,17 @@ class Spec(_Section):
         return hashlib.sha256(self.canonical_json().encode()).hexdigest()
 
     def toml_dict(self) -> dict[str, Any]:
-        """Every key as a TOML spec file holds it (an omitted optional key stays omitted): what
-        :func:`spec_from_dict` reads back to this spec."""
+        """Every key as a TOML spec file holds it (an omitted optional key stays omitted), as spec_from_dict reads."""
         raw = _without_nulls(self.dump())
-        for section, keys in _STATED_ONLY.items():  # their absence means something: kept out unless stated
-            stated = getattr(self, section).model_fields_set
-            for key in keys:
-                if key not in stated:
-                    raw[section].pop(key, None)
+        for section, key in _STATED_ONLY:  # their absence means something: kept out unless stated
+            if key not in getattr(self, section).model_fields_set:
+                raw[section].pop(key, None)
         return raw
 
 
 #: Keys whose absence from a spec means something other than their default (the board sized to fit, an array's
 #: cavities one per taxel): :meth:`Spec.toml_dict` holds them only where the spec states them.
-_STATED_ONLY = {"pcb": ("width_mm", "height_mm"), "mould": ("cavities",)}
+_STATED_ONLY = (("pcb", "width_mm"), ("pcb", "height_mm"), ("mould", "cavities"))
 
 _CATALOGUE_KEYS = {
     ("magnet", "grade"): "magnets",
@@ -545,10 +541,8 @@ def parse_spec(text: str, default_name: str = "magone", where: str = "<TOML>") -
     if "name" not in raw:
         raw["name"] = default_name
         if not is_valid_name(default_name):
-            raise SpecError(
-                "name", shown(default_name), "taken from the file name, must match " + NAME_PATTERN,
-                hint="add name = \"...\" to the spec",
-            )
+            raise SpecError("name", shown(default_name), "taken from the file name, must match " + NAME_PATTERN,
+                            hint="add name = \"...\" to the spec")
     return _validated(raw)
 
 
@@ -576,8 +570,7 @@ def spec_from_json(raw: object, where: str = "spec.json") -> Spec:
 
 
 def spec_from_dict(raw: dict[str, Any]) -> Spec:
-    """Validate a spec given as a dict (parsed TOML, or :meth:`Spec.toml_dict` changed): :class:`SpecError` as for a
-    file."""
+    """Validate a spec given as a dict (parsed TOML, or :meth:`Spec.toml_dict` changed); SpecError as for a file."""
     return _validated(raw)
 
 
@@ -603,6 +596,5 @@ def _validated(raw: dict[str, Any]) -> Spec:
 def spec_schema() -> dict[str, Any]:
     """JSON Schema of the spec, generated from the models (what ``spec.schema.json`` holds)."""
     schema = Spec.model_json_schema()
-    schema["$schema"] = "https://json-schema.org/draft/2020-12/schema"
-    schema["title"] = "magfab design spec"
+    schema.update({"$schema": "https://json-schema.org/draft/2020-12/schema", "title": "magfab design spec"})
     return schema

@@ -35,10 +35,9 @@ from hypothesis import HealthCheck, assume, event, example, given, settings
 from hypothesis import strategies as st
 
 from magfab import pcb, pipeline
+from magfab import verdict as verdict_module
 from magfab.board.connect import _clash
 from magfab.board.route import LAYERS, Copper, Router
-from magfab.check import refusal as verdict_module
-from magfab.check.refusal import verdict
 from magfab.cli import main
 from magfab.errors import BuildError, Finding, InputError, MagfabError, Severity
 from magfab.inverse.files import spec_toml
@@ -46,6 +45,7 @@ from magfab.inverse.space import candidate_spec, choices
 from magfab.inverse.targets import parse_targets
 from magfab.recipes import catalogue
 from magfab.spec import Spec, load_spec, spec_from_dict
+from magfab.verdict import verdict
 
 pytestmark = pytest.mark.filterwarnings("ignore")
 

@@ -104,7 +104,7 @@ LAYERS = (
     ("magfab.board", "magfab.pcb"),  # below the checks: preflight holds the board's size to what placement can make
     ("magfab.check",),
     ("magfab.export", "magfab.output", "magfab.exchange", "magfab.array_bench", "magfab.sensor_calibration"),
-    ("magfab.pipeline", "magfab.stages", "magfab.sensors"),
+    ("magfab.pipeline", "magfab.stages", "magfab.sensors", "magfab.verdict"),
     ("magfab.inverse",),
     ("magfab.sensor_cli",),
     ("magfab.cli",),

@@ -626,3 +626,19 @@ def test_a_really_read_only_folder(built, which):
     finally:
         folder.chmod(0o755)
     assert _tree(out) == before and _beside(out) == ["out"]
+
+
+@pytest.mark.parametrize("kind", ["fifo", "deep", "dev zero"])
+def test_a_manifest_that_is_no_file_of_magfabs_is_not_a_build(tmp_path, kind):
+    """manifest.json as a FIFO (a plain read waits forever), a link to /dev/zero (it reads until memory runs out) or
+    nested past Python's recursion limit: read within bounds, the folder is not a magfab build, at once."""
+    from magfab.output import is_build
+
+    manifest = tmp_path / "manifest.json"
+    if kind == "fifo":
+        os.mkfifo(manifest)
+    elif kind == "deep":
+        manifest.write_text('{"magfab_version": ' + "[" * 5000 + "]" * 5000 + "}")
+    else:
+        manifest.symlink_to("/dev/zero")
+    assert is_build(tmp_path) is False

@@ -26,9 +26,8 @@ from .mesh import mesh_findings, mould_fit_findings
 from .predict import predict_with_findings, prediction_findings
 from .preflight import preflight
 from .reference import reference_findings
-from .refusal import verdict
 from .stop import errors_in
 
 __all__ = ["design_findings", "mesh_findings", "mould_fit_findings", "prediction_findings", "predict_with_findings",
            "drift_findings", "reference_findings", "crosstalk_findings", "fabrication_findings", "preflight",
-           "errors_in", "verdict"]
+           "errors_in"]

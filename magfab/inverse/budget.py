@@ -89,7 +89,8 @@ def check_scheduler(address: str) -> None:
         port, why = None, str(exc)
     if port is None or not 0 < int(port) < 65536:
         why = why if port is None else f"port {port} is not 1-65535"
-        raise _error(f"--scheduler {address}: not a Dask scheduler's address ({why}); give PROTOCOL://HOST:PORT, "
+        shown = address if address.isprintable() else repr(address)  # a newline in it must not split the line
+        raise _error(f"--scheduler {shown}: not a Dask scheduler's address ({why!r}); give PROTOCOL://HOST:PORT, "
                      "e.g. tcp://127.0.0.1:8786")
 
 

@@ -24,6 +24,7 @@ from ..check import preflight
 from ..design import SECOND_HOLE_EXTRA_MM, derive
 from ..errors import SpecError
 from ..recipes import catalogue
+from ..recipes.resolve import printer as printer_recipe
 from ..spec import Spec, spec_from_dict
 from .targets import Targets, Variables
 
@@ -214,8 +215,6 @@ class Space:
     the insertion channel; the targets the ranges and the required maxima."""
 
     def __init__(self, targets: Targets, base: Spec):
-        from ..recipes.resolve import printer as printer_recipe
-
         self.variables = v = targets.variables
         el = base.elastomer
         self.stack = _stack_offset(base)

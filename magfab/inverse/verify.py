@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import InputError, MagfabError
+from ..pipeline import build
 from ..spec import Spec
 from .space import candidate_spec
 from .study import Record
@@ -37,8 +38,6 @@ Progress = Callable[[int, int], None]
 def build_refusal(spec: Spec, out: Path) -> str | None:
     """Build ``spec`` into ``out`` as ``magfab build`` does; None when it was built, else the build's one-line
     refusal (what ``magfab build`` prints before exiting). An interrupt is not caught."""
-    from ..pipeline import build  # lazily: the pipeline imports the whole build
-
     try:
         build(spec, out)
     except MagfabError as exc:  # the user's input (exit 2), or a tool failing on it (exit 1)

@@ -63,10 +63,10 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..errors import InputError, ScanError
-from ..formats import calibration_json, json_checks
+from ..formats import calibration_json
 from ..formats.scan_csv import FORCE_COLUMNS, MIN_ROWS, SCAN_COLUMNS, Scan, check_calibration_scan
 from ..units import UT_PER_GAUSS
-from .calibration_thermal import ThermalFit, correct, fit_thermal
+from .calibration_thermal import ThermalFit, correct, fit_thermal, thermal_from_json
 from .chip import chip_setting, noise
 from .region import HULL_MAX_VERTICES, Scaling, ValidRegion, guard_ops
 
@@ -325,35 +325,7 @@ class Calibration:
         return cls(c.method, c.order, Scaling(c.center[0], c.scale[0], c.center[1], c.scale[1]),
                    np.column_stack([c.coefficients[f] for f in FORCES]), c.shear_sign, c.direction_min_uT,
                    ValidRegion(c.box[0], c.box[1], c.hull), c.errors, c.scan, c.chip, c.tare_N, mls,
-                   _thermal_of(doc, c.thermal))
-
-
-def _thermal_of(doc: Mapping[str, object], t: calibration_json.Thermal | None) -> ThermalFit | None:
-    """The ``thermal`` object back as a :class:`ThermalFit` (its informative keys when present). The format leaves
-    those keys to the writer, so a hand-edited file may hold anything there: each that is present must be what
-    :meth:`ThermalFit.as_json` writes, else :class:`~magfab.formats.calibration_json.CalibrationError` names it."""
-    if t is None:
-        return None
-    node = doc["thermal"]
-    assert isinstance(node, Mapping)
-
-    def number(key: str, value: object) -> float:
-        if not json_checks.is_finite(value):
-            raise calibration_json.CalibrationError(f"thermal.{key}", value, "must be a finite number")
-        return float(value)
-
-    unc = node.get("uncertainty_per_C")
-    if unc is not None and not isinstance(unc, Mapping):
-        raise calibration_json.CalibrationError("thermal.uncertainty_per_C", unc, "must map {} to numbers".format(
-            ", ".join(calibration_json.AXES)))
-    note = node.get("note", "")
-    if not isinstance(note, str):
-        raise calibration_json.CalibrationError("thermal.note", note, "must be a string")
-    return ThermalFit(t.reference_C, t.coefficient_per_C, t.source,
-                      None if unc is None else tuple(number(f"uncertainty_per_C.{a}", unc.get(a))
-                                                     for a in calibration_json.AXES),  # type: ignore[arg-type]
-                      number("span_C", node.get("span_C", 0.0)),
-                      number("recipe_per_C", node.get("recipe_per_C", t.coefficient_per_C[2])), note)
+                   thermal_from_json(doc, c.thermal))
 
 
 def _readings(B_uT: ArrayLike) -> np.ndarray:

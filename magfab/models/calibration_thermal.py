@@ -28,17 +28,19 @@ temperature, or :data:`DEFAULT_REFERENCE_C` (the simulated scan's and the chip's
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
 
+from ..formats import calibration_json, json_checks
 from ..formats.calibration_json import AXES
 
 # Imported lazily, inside the functions that use it, for speed: scipy takes a
 # noticeable time to import, and importing this module should not.
 
 __all__ = ["MIN_SPAN_C", "MIN_INDEPENDENT_C", "DEFAULT_REFERENCE_C", "ThermalFit", "recipe_coefficient_per_C",
-           "fit_thermal", "correct"]
+           "fit_thermal", "correct", "thermal_from_json"]
 
 #: Least temperature span, degC, a scan needs before its coefficients are fitted: a few degrees, twice the
 #: chip's temperature noise band; below it the force residual cannot see a 0.1 %/C drift.
@@ -178,3 +180,31 @@ def _solve(b: np.ndarray, dt: np.ndarray, y: np.ndarray, order: int, scale: tupl
     except np.linalg.LinAlgError:
         sigma = np.array([math.inf, math.inf])
     return (float(sol.x[0]) / 100.0, float(sol.x[1]) / 100.0), (float(sigma[0]), float(sigma[1]))
+
+
+def thermal_from_json(doc: Mapping[str, object], t: calibration_json.Thermal | None) -> ThermalFit | None:
+    """The ``thermal`` object back as a :class:`ThermalFit` (its informative keys when present). The format leaves
+    those keys to the writer, so a hand-edited file may hold anything there: each that is present must be what
+    :meth:`ThermalFit.as_json` writes, else :class:`~magfab.formats.calibration_json.CalibrationError` names it."""
+    if t is None:
+        return None
+    node = doc["thermal"]
+    assert isinstance(node, Mapping)
+
+    def number(key: str, value: object) -> float:
+        if not json_checks.is_finite(value):
+            raise calibration_json.CalibrationError(f"thermal.{key}", value, "must be a finite number")
+        return float(value)
+
+    unc = node.get("uncertainty_per_C")
+    if unc is not None and not isinstance(unc, Mapping):
+        raise calibration_json.CalibrationError("thermal.uncertainty_per_C", unc, "must map {} to numbers".format(
+            ", ".join(calibration_json.AXES)))
+    note = node.get("note", "")
+    if not isinstance(note, str):
+        raise calibration_json.CalibrationError("thermal.note", note, "must be a string")
+    return ThermalFit(t.reference_C, t.coefficient_per_C, t.source,
+                      None if unc is None else tuple(number(f"uncertainty_per_C.{a}", unc.get(a))
+                                                     for a in calibration_json.AXES),  # type: ignore[arg-type]
+                      number("span_C", node.get("span_C", 0.0)),
+                      number("recipe_per_C", node.get("recipe_per_C", t.coefficient_per_C[2])), note)

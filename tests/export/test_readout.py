@@ -566,6 +566,10 @@ def test_installed_cli_info_and_errors(installed):
     assert ("not found" if installed.serial else "pyserial is not installed") in proc.stderr
     proc = cli(installed, "stream", "--simulate", "--text", "--raw")
     assert proc.returncode == 2 and "--raw needs binary frames" in proc.stderr
+    for option, value in (("--timeout", "nan"), ("--timeout", "-1"), ("--timeout", "inf"), ("--simulate-corrupt", "2"),
+                          ("--simulate-corrupt", "-0.1"), ("--simulate-corrupt", "nan")):
+        proc = cli(installed, "stream", "--simulate", "--count", "5", option, value)
+        assert proc.returncode == 2 and len(proc.stderr.splitlines()) == 1 and option in proc.stderr, proc.stderr
 
 
 def test_a_bug_of_ours_is_one_line_and_exit_1(pkg, monkeypatch, capsys):

@@ -69,7 +69,8 @@ def _magfab(*args: str, cwd: Path) -> subprocess.CompletedProcess:
                           timeout=300)
 
 
-@pytest.mark.parametrize("address", ["garbage", "tcp://localhost:notaport", "tcp://localhost:99999", "tcp://:"])
+@pytest.mark.parametrize("address", ["garbage", "tcp://localhost:notaport", "tcp://localhost:99999", "tcp://:",
+                                     "tcp://127.0.0.1:8786\nsecond line", "tcp://127.0.0.1:87\r86"])
 def test_a_malformed_scheduler_address_is_one_line(tmp_path, address):
     (tmp_path / "t.toml").write_text("[study]\ntrials = 2")
     run_ = _magfab("design", "t.toml", "--scheduler", address, cwd=tmp_path)
@@ -77,7 +78,7 @@ def test_a_malformed_scheduler_address_is_one_line(tmp_path, address):
     assert len(run_.stderr.strip().splitlines()) == 1 and sorted(p.name for p in tmp_path.iterdir()) == ["t.toml"]
 
 
-@pytest.mark.parametrize("command", ["build", "design", "sweep"])
+@pytest.mark.parametrize("command", ["build", "design", "sweep", "calibrate"])
 @pytest.mark.parametrize("where", ["name", "beside", "path"])
 def test_an_out_path_too_long_for_the_file_system_is_one_line(tmp_path, monkeypatch, command, where):
     """A name over the file system's 255 bytes, one that leaves no room for magfab's temporaries beside it, or a

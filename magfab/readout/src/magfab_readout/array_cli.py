@@ -21,7 +21,16 @@ from typing import List
 
 from . import _build, array_check, array_sensor, board_sensor, eeprom, identity
 from .array_sim import SimulatedArray
-from .cli_shared import CSV_COLUMNS, Interrupt, UsageError, at_fallback_baud, format_csv, format_number, record_header
+from .cli_shared import (
+    CSV_COLUMNS,
+    Interrupt,
+    UsageError,
+    at_fallback_baud,
+    check_link,
+    format_csv,
+    format_number,
+    record_header,
+)
 from .device import Device, DeviceError, UploadFailed
 from .taxels import ArrayCalibration, ArrayReader, Cycle
 
@@ -34,6 +43,7 @@ RECORD_LAG_WARNING_S = 2.0
 
 
 def _device(args: argparse.Namespace, array: ArrayCalibration, text, pattern=None) -> Device:
+    check_link(args)
     transport = None
     if args.simulate:
         transport = SimulatedArray(array, seed=args.simulate_seed, corrupt_fraction=args.simulate_corrupt,

@@ -20,7 +20,16 @@ from typing import List, Optional
 
 from . import _build, array_cli, board_sensor, bounded, check, identity, records
 from .calibration import Calibration, CalibrationError, calibration_sha256
-from .cli_shared import CSV_COLUMNS, Interrupt, UsageError, at_fallback_baud, format_csv, format_number, record_header
+from .cli_shared import (
+    CSV_COLUMNS,
+    Interrupt,
+    UsageError,
+    at_fallback_baud,
+    check_link,
+    format_csv,
+    format_number,
+    record_header,
+)
 from .device import Device, DeviceError, calibration_record, cross_check
 from .eeprom import EepromError
 from .identity import Identity
@@ -152,6 +161,7 @@ def _simulated(args: argparse.Namespace, calibration: Calibration, pattern) -> S
 
 def _device(args: argparse.Namespace, text: Optional[bool], pattern=None) -> Device:
     calibration = Calibration.embedded()
+    check_link(args)
     transport = None
     if args.simulate:
         transport = _simulated(args, calibration, pattern)

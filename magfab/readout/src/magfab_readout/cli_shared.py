@@ -28,6 +28,17 @@ class UsageError(ValueError):
     """A bad option value, or a command that would write the wrong thing (exit status 2, nothing written)."""
 
 
+def check_link(args: argparse.Namespace) -> None:
+    """:class:`UsageError` (one line) for a ``--timeout`` that is not a positive number of seconds or a
+    ``--simulate-corrupt`` that is not a fraction from 0 to 1 (argparse takes any float, nan and inf included)."""
+    timeout = getattr(args, "timeout", None)
+    if timeout is not None and not (math.isfinite(timeout) and timeout > 0):
+        raise UsageError(f"--timeout {timeout}: must be a positive number of seconds")
+    corrupt = getattr(args, "simulate_corrupt", None)
+    if corrupt is not None and not 0.0 <= corrupt <= 1.0:
+        raise UsageError(f"--simulate-corrupt {corrupt}: must be a fraction from 0 to 1")
+
+
 def format_number(x: Optional[float], width: int, decimals: int, sign: bool = True) -> str:
     if x is None or math.isnan(x):
         return "nan".rjust(width)

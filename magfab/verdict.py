@@ -15,15 +15,13 @@ the solids included).
 
 from __future__ import annotations
 
-from ..design import Design, derive
-from ..errors import BuildError, Finding
-from ..fork import side_branch
-from ..spec import Spec
-from .design import design_findings
-from .fabrication import fabrication_findings
-from .predict import predict_with_findings
-from .preflight import preflight
-from .stop import errors_in
+from . import pcb
+from .check import design_findings, errors_in, fabrication_findings, predict_with_findings, preflight
+from .design import Design, derive
+from .errors import BuildError, Finding
+from .fork import side_branch
+from .pipeline import acceptance_stage, bundle_stage
+from .spec import Spec
 
 __all__ = ["verdict"]
 
@@ -49,10 +47,8 @@ def verdict(spec: Spec) -> tuple[Design, list[Finding], BuildError | None]:
     findings += found
     stop = stop or errors_in(findings, strict)
     if strict and not stop and pred is not None:  # the bundle's and the papers' warnings stop a strict build
-        from ..pipeline import _acceptance, _bundle  # lazily: the pipeline imports this package
-
-        accepted = _acceptance(design, pred)
-        findings += accepted.findings + _bundle(design, pred, None, accepted.bands, lambda _: None, {}).findings
+        accepted = acceptance_stage(design, pred)
+        findings += accepted.findings + bundle_stage(design, pred, None, accepted.bands, lambda _: None, {}).findings
         stop = errors_in(findings, strict)
         findings += fabrication_findings(design)
         stop = stop or errors_in(findings, strict)
@@ -61,6 +57,4 @@ def verdict(spec: Spec) -> tuple[Design, list[Finding], BuildError | None]:
 
 def board_findings(design: Design) -> list[Finding]:
     """The routed board's findings, as the build's board stage makes them (:func:`magfab.pcb.findings`)."""
-    from .. import pcb  # lazily: the router is only needed here
-
     return pcb.findings(pcb.board(design))
