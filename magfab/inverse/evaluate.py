@@ -32,7 +32,7 @@ from ..errors import InputError, ModelLimitError, Severity
 from ..models import mechanics as mech
 from ..models.mechanics import fe_surrogate
 from ..models.predict import surrogate_curve
-from ..recipes import catalogue
+from ..recipes.resolve import printer as printer_recipe
 from ..spec import FieldModel, Spec
 from .space import candidate_spec
 from .targets import Models, Objective, Targets
@@ -174,7 +174,7 @@ def _constraints(targets: Targets, m: dict[str, float], errors: list[str]) -> li
 def bench_step_mm(base: Spec) -> float:
     """The step the written dimensions are rounded to: the printer's layer height (recipes/printers.toml, the base
     spec's ``mould.printer``: 0.05 mm for resin, Formlabs' default layer height)."""
-    return float(catalogue("printers")[base.mould.printer.value]["layer_height_mm"].nominal)
+    return float(printer_recipe(base.mould.printer.value)["layer_height_mm"].nominal)
 
 
 def _on_step(x: float, step: float, bounds: tuple[float, float] | None) -> float:
