@@ -375,8 +375,9 @@ def _cycles(stream_out: str) -> list[dict[int, list[float]]]:
 
 def _rest_after_press(stream_out: str) -> bool:
     """The stream has printed the press and then AT_REST whole cycles with the pressed taxel back at rest."""
-    on = [k for k, c in enumerate(_cycles(stream_out)) if c.get(PRESSED, [0.0] * 3)[2] > PRESS_N / 2]
-    return bool(on) and sum(len(c) == 5 for c in _cycles(stream_out)[on[-1] + 2:]) >= AT_REST
+    cycles = _cycles(stream_out)  # parsed once: the walk asks this of the whole output every 0.1 s
+    on = [k for k, c in enumerate(cycles) if c.get(PRESSED, [0.0] * 3)[2] > PRESS_N / 2]
+    return bool(on) and sum(len(c) == 5 for c in cycles[on[-1] + 2:]) >= AT_REST
 
 
 def _press_fields(build: Path, taxel: int, force_N: float) -> list:
