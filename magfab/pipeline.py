@@ -221,7 +221,7 @@ def _scan(design: Design, prediction: Prediction | None, scan: Scan | None, say:
 
 
 def bundle_stage(design: Design, prediction: Prediction | None, scan: Scan | dict[int, Scan] | None,
-            acceptance: dict[str, Any] | None, say: Progress, timings: dict[str, float]) -> BundleStage:
+                 acceptance: dict[str, Any] | None, say: Progress, timings: dict[str, float]) -> BundleStage:
     """The firmware-plus-calibration bundle: calibration.json (from ``scan``, or a simulated scan when there
     is none yet), its chart, the firmware sources, the generic AVR image with the .eep of its settings and
     calibration, the flash scripts and the readout package."""

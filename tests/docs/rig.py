@@ -293,23 +293,29 @@ class Rig:
 
     def _step(self, data: bytes) -> None:
         """Host bytes in at the line's rate (the AVR's receive buffer is small), simulated time up to the wall
-        clock (in slices of 20 ms at most), board bytes out."""
+        clock (at most 20 ms a step; while a stage moves, in slices of TRACK_SLICE_US, each with the field of its
+        middle), board bytes out."""
         self._pending += data
         chunk, self._pending = self._pending[:_CHUNK], self._pending[_CHUNK:]
+        out: list[tuple[float, bytes]] = []  # (board time, bytes) of each slice that made any
         with self._lock:
             self.bus.send(chunk)
             dt = min((time.monotonic() - self._t0) * 1e6 - self.bus.time_us, 20_000)
-            if self._track is not None:
-                dt = min(dt, TRACK_SLICE_US)
-                self._fields = [(*(float(b) for b in f), 25.0) for f in self._track(self.bus.time_us / 1e6)]
-            for k, f in enumerate(self._fields):
-                self.bus.target(k).set_field(*f)
             dt = max(dt, len(chunk) * self._byte_us)
-            out = self.bus.run_us(dt) if dt > 0 else b""
-            if out:
-                self.sent.append((self.bus.time_us / 1e6, time.time()))
-        if out:
-            self._send(out)
+            while dt > 0:  # a moving stage's field is set again every slice: the whole step, in slices
+                run = dt if self._track is None else min(dt, TRACK_SLICE_US)
+                if self._track is not None:
+                    at = (self.bus.time_us + run / 2) / 1e6  # the slice's middle: off by half a slice's motion at most
+                    self._fields = [(*(float(b) for b in f), 25.0) for f in self._track(at)]
+                for k, f in enumerate(self._fields):
+                    self.bus.target(k).set_field(*f)
+                made = self.bus.run_us(run)
+                if made:
+                    out.append((self.bus.time_us / 1e6, made))
+                dt -= run
+        for board_s, made in out:  # each send stamped as it leaves: the host reads it no earlier
+            self._send(made)
+            self.sent.append((board_s, time.time()))
 
 
 def _spec(build_dir: Path) -> dict:

@@ -96,7 +96,12 @@ def test_the_readme_walk_reaches_a_passing_acceptance_test(walked):
     cal = json.loads(sensor.file(event["files"]["calibration.json"]))
     assert cal["scan"]["source"] == event["source"] == "scan.csv + reference.csv" and not event["provisional"]
     fitted = _ran(walked, "magfab calibrate").stdout
-    print(next(line for line in fitted.splitlines() if line.startswith("calibrated sensor")))  # the fit, with -s
+    fit = next(line for line in fitted.splitlines() if line.startswith("calibrated sensor"))
+    print(fit)  # with -s
+    # The bench's scan is coarse (every 5th point, 30 ms apart, the stage's field held for 2 ms slices), so the fit
+    # misses the build's simulated one (about 5 mN) by a few mN; a recording misaligned with its reference (a board
+    # clock the log was not stamped on) gives hundreds.
+    assert float(fit.split("held-out RMS Fz ")[1].split()[0]) < 50, fit
     merged = sensor.file(event["files"]["scan_merged.csv"])  # what was fitted, by its hash
     from magfab.formats.scan_csv import read_scan_csv
 
@@ -105,12 +110,10 @@ def test_the_readme_walk_reaches_a_passing_acceptance_test(walked):
     assert hashlib.sha256(data).hexdigest() == cal["scan"]["sha256"]  # the file without its comment
     assert _ran(walked, "magfab-readout record").returncode == 0  # Ctrl-C ends a recording as a success
     uploads = [r for r in walked.ran if r.line.startswith("magfab-readout upload")]
-    assert [u.line.split("#")[0].split()[2:] for u in uploads] == [[], ["--sensor", "finger-01"], ["--force"]]
+    assert [u.line.split("#")[0].split()[2:] for u in uploads] == [[], ["--sensor", "finger-01"]]
     assert uploads[1].stdout != uploads[0].stdout
-    from magfab.readout.src.magfab_readout.calibration_json import calibration_sha256
-
-    # The board names finger-01 and its calibration; after the new skin it runs the build's provisional one again.
-    assert _board_says(walked.rig) == ("finger-01", event["calibration_sha256"][:16], calibration_sha256(built)[:16])
+    # The board names finger-01 and runs its calibration; the new skin changes the record, not the board.
+    assert _board_says(walked.rig) == ("finger-01", event["calibration_sha256"][:16], event["calibration_sha256"][:16])
     with open(build / "scan.csv", newline="") as f:
         header = next(csv.reader(line for line in f if not line.startswith("#")))
     assert "Fz_sensor_N" in header and "Fz_N" not in header  # the recording keeps the sensor's own forces apart
@@ -272,6 +275,7 @@ def two_sensors(walked, tmp_path_factory):
             bench.cwd = build
             _paste(bench, scan_again, ("finger-01", "finger-02"))  # finger-02 calibrated again, same skin
             bench.swap(board_1)  # finger-01's board back, a new skin on it since the README's walk
+            back = _board_says(board_1)  # what it runs: the old skin's, or the file the readout README forced on it
             _paste(bench, [*scan_again, for_one[-1], listing])  # and its history compares the two skins
         finally:
             bench.plug_in = plug_in
@@ -279,7 +283,7 @@ def two_sensors(walked, tmp_path_factory):
                 print(f"{ran.seconds:6.1f} s  {ran.line}")
             print(f"{sum(r.seconds for r in bench.ran[first:]):6.1f} s  in all")
         yield {"boards": {"finger-01": board_1, "finger-02": board_2}, "before": before, "after": after,
-               "first": first}
+               "first": first, "back": back}
 
 
 def test_two_sensors_of_one_design_keep_every_measurement(walked, two_sensors):
@@ -334,14 +338,19 @@ def test_each_board_reports_its_own_sensor(walked, two_sensors):
 def test_a_rebuild_leaves_the_records_and_a_new_skin_is_compared(walked, two_sensors):
     """`magfab build finger.toml` over a build whose sensors were calibrated into their records: it succeeds, every
     record is as it was, and the build's readout (the installed reader's) is the same; `record` reads the re-skinned
-    board, which still runs the old skin's calibration, and says so; `sensor show` compares the
+    board, which runs the old skin's calibration or (after the readout README's forced upload) the package's, and
+    says which; `sensor show` compares the
     new skin's calibration with the old one's; `sensor list` names both sensors."""
     rebuilt = [r for r in walked.ran if r.line.startswith("magfab build finger.toml")][-1]
     assert rebuilt.returncode == 0 and "discard" not in rebuilt.stderr
     assert two_sensors["after"] == two_sensors["before"]
     recorded = [r for r in walked.ran[two_sensors["first"]:]
                 if r.line.startswith("magfab-readout record") and r.cwd.name == "finger"][-1]  # finger-01's new skin
-    assert "calibration of" in recorded.stderr and "(skin 0), not one of the skin in use (skin 1)" in recorded.stderr
+    named, running = two_sensors["back"][1:]
+    if named == running:  # the README's walk left it so: the old skin's calibration, which the record keeps
+        assert "(skin 0), not one of the skin in use (skin 1)" in recorded.stderr, recorded.stderr
+    else:  # the readout README's `upload calibration/calibration.json --force` ran on it since (its page's test)
+        assert f"but runs calibration {running}" in recorded.stderr.lower(), recorded.stderr
     show = [r for r in walked.ran if r.line.startswith("magfab sensor show finger-01")][-1].stdout
     assert "new skin against the previous one" in show and "rest Bz" in show, show
     listed = [r for r in walked.ran if r.line.startswith("magfab sensor list")][-1].stdout

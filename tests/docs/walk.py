@@ -114,12 +114,16 @@ class Scan:
             return [b]
         return [b if k == taxel else r for k, r in enumerate(self.readings)]
 
-    def play(self, rig, reference: Path, taxel: int = 0, wait_s: float = 600.0) -> None:
-        """Move the tip (an array's: taxel ``taxel``'s) along the track on the board's own clock (:meth:`Rig.follow`),
-        and log the reference at 1 kHz of it, a row for every millisecond of the stage's motion, on the host clock
-        the board's sends keep to (:meth:`Rig.host_line`). As on a bench, the log starts and ends with the tip at rest
-        (:attr:`rest_s` each: the rows a calibration reads the field at rest from), and the stage moves from rest to
-        the track's first point and back."""
+    def play(self, rig, taxel: int = 0, wait_s: float = 600.0):
+        """Move the tip (an array's: taxel ``taxel``'s) along the track on the board's own clock (:meth:`Rig.follow`).
+        As on a bench, the motion starts and ends with the tip at rest (:attr:`rest_s` each: the rows a calibration
+        reads the field at rest from), and the stage moves from rest to the track's first point and back. Returns
+        ``log(reference, board_from, board_to)``, which writes the reference's log of that motion at 1 kHz of it (a
+        row for every millisecond), stamped on the host clock the board's sends from ``board_from`` to ``board_to``
+        (the recording's span, on the board's clock) keep to (:meth:`Rig.host_line`): a simulated board runs its
+        clock unevenly against the wall clock (it falls behind a little while the stage is followed, more on a loaded
+        machine), and the recording's clock merge fits one line over the whole recording, as for a real board's
+        steady clock; the log is stamped on the line over the same span."""
         rest = ((self.rest if self.readings is None else self.readings[taxel]), [0.0, 0.0, 0.0])
         points = [rest, *self.tracks[taxel][0], rest]
         moves = [(rest, rest, self.rest_s), *((p0, p1, self.dwell_s) for p0, p1 in itertools.pairwise(points)),
@@ -145,12 +149,18 @@ class Scan:
         finally:
             rig.follow(None)
             self.at_rest(rig)
-        a, rate = rig.host_line(start, start + ends[-1])
-        with open(reference, "w", newline="") as f:
-            out = csv.writer(f)
-            out.writerow(["time_s", "Fx_N", "Fy_N", "Fz_N"])
-            for tick in range(int(ends[-1] * 1000) + 1):
-                out.writerow([f"{a + rate * tick / 1000:.6f}", *(f"{x:.6f}" for x in stage(start + tick / 1000)[1])])
+
+        def log(reference: Path, board_from: float, board_to: float) -> None:
+            a, rate = rig.host_line(board_from, board_to)
+            with open(reference, "w", newline="") as f:
+                out = csv.writer(f)
+                out.writerow(["time_s", "Fx_N", "Fy_N", "Fz_N"])
+                for tick in range(int(ends[-1] * 1000) + 1):
+                    board_s = start + tick / 1000
+                    out.writerow([f"{a + rate * (board_s - board_from):.6f}",
+                                  *(f"{x:.6f}" for x in stage(board_s)[1])])
+
+        return log
 
 
 @dataclass
@@ -249,11 +259,12 @@ class Bench:
         goes to files, as to a terminal that never stops reading (a pipe nobody reads would stall it)."""
         with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
             proc = self._start(line, stdout=out, stderr=err)
+            log, board_from = None, self.rig.board_s if self.rig is not None else 0.0
             try:
                 time.sleep(1.5)  # it opens the port and finds the frames
                 if " record " in f" {line} ":
                     taxel = re.search(r"taxel (\d+)", line.partition("#")[2])  # an array's: the taxel the page scans
-                    self.scan.play(self.rig, self.cwd / "reference.csv", int(taxel[1]) if taxel else 0)
+                    log = self.scan.play(self.rig, int(taxel[1]) if taxel else 0)
                 elif " stream " in f" {line} " and "--zero" in line and self.press is not None:
                     self._press_while_streaming(line, proc, out, err)
                 time.sleep(0.5)
@@ -261,6 +272,8 @@ class Bench:
                 proc.wait(timeout_s)
             finally:
                 proc.kill()  # a no-op once it has ended; else (a failure above) it must not outlive the walk
+            if log is not None:  # the reference's log, once the recording's span is known
+                log(self.cwd / "reference.csv", board_from, self.rig.board_s)
             out.seek(0)
             err.seek(0)
             return Ran(line, self.cwd, proc.returncode, out.read(), err.read())

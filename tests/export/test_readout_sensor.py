@@ -114,6 +114,24 @@ def test_a_new_skin_s_board_reads_with_the_old_calibration_named_as_superseded(b
     assert_refused(bench, note, "check", "--sensors", root, *FAST)
 
 
+def test_a_calibration_file_forced_onto_a_named_board_is_named_when_recording(bench):
+    """``upload FILE --force`` onto finger-01's board keeps its ID but runs the file's calibration (here the
+    package's), which no record keeps: ``record`` reads with it and says the board runs another calibration than the
+    one it names, and how to write the sensor's own; ``info`` says the same on its sensor line."""
+    root = bench["root"]
+    assert readout(bench, "upload", "--sensor", "finger-01", "--sensors", root).returncode == 0
+    package = _build_data(bench["build"])["calibration_sha256"][:16]
+    cal = bench["build"].out_dir / "readout" / "src" / "magfab_readout" / "calibration.json"
+    assert readout(bench, "upload", cal, "--force", "--sensors", root).returncode == 0
+    proc = readout(bench, "record", bench["cwd"] / "scan.csv", "--seconds", "0.1", "--sensors", root)
+    named = calibration_sha256(bench["cal"])[:16]
+    said = f"the board names sensor finger-01 and its calibration of {DATE} ({named}) but runs calibration "
+    assert proc.returncode == 0 and said in proc.stderr, proc.stderr
+    assert proc.stderr.split(said)[1][:16].lower() == package
+    assert "upload --sensor finger-01" in proc.stderr and "superseded" not in proc.stderr
+    assert f"the board runs calibration {package} since" in readout(bench, "info", "--sensors", root).stdout.lower()
+
+
 def _other_design(bench):
     sensor = rec.open_sensor(bench["root"], "finger-01")
     sensor.append("calibration", {"taxel": None, "spec_sha256": "ab" * 32},

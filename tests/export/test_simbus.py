@@ -429,12 +429,12 @@ def test_a_build_without_avr_gcc_writes_an_image_that_runs(sim, default_build, t
     from magfab import derive, load_spec
     from magfab.export import firmware, toolchain
     from magfab.formats.scan_csv import read_scan_csv
-    from magfab.pipeline import _bundle
+    from magfab.pipeline import bundle_stage
 
     scan = read_scan_csv(default_build.out_dir / "calibration" / "scan_simulated.csv")
     monkeypatch.setenv("PATH", str(tmp_path))  # nothing on it: no avr-gcc, no avr-objcopy
     assert toolchain.build_hex(firmware.generic_sources()) is None and toolchain.versions() is None
-    bundle = _bundle(derive(load_spec(None)), None, scan, None, lambda *a, **k: None, {})
+    bundle = bundle_stage(derive(load_spec(None)), None, scan, None, lambda *a, **k: None, {})
     written = {a.path: a.data for a in bundle.artifacts}
     for name in (firmware.HEX_NAME, firmware.EEP_NAME):
         (tmp_path / name).write_bytes(written[f"firmware/{name}"])

@@ -111,6 +111,19 @@ class Link:
     event: Optional[Dict[str, Any]]
     superseded: bool = False
 
+    def running_note(self, running: str) -> str:
+        """One line on a calibration the board runs that is not the one it names: the old skin's
+        (:meth:`superseded_note`), or one no record here keeps (e.g. a calibration file written with ``upload
+        --force`` over a board that names a sensor); "" when the board runs what it names, or names nothing."""
+        if self.superseded:
+            return self.superseded_note()
+        found = self.identity
+        if found is None or self.event is not None or found.calibration_sha16 == running.lower():
+            return ""
+        return (f"the board names sensor {found.sensor_id} and its calibration of {found.calibration_date} "
+                f"({found.calibration_sha16}) but runs calibration {running}: its forces are that calibration's; "
+                f"magfab-readout upload --sensor {found.sensor_id} writes the sensor's current one")
+
     def superseded_note(self) -> str:
         """One line on a superseded calibration the board runs ("" when it runs the current one, or none)."""
         if not self.superseded or self.sensor is None or self.event is None:

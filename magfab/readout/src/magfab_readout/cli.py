@@ -239,8 +239,9 @@ def _record(args: argparse.Namespace) -> int:
     with _device(args, text=bool(args.text)) as device:
         info = device.info()
         linked = board_sensor.link(device, info, args)
-        for warning in device.check_info(info) + [linked.superseded_note()] * linked.superseded:
-            print("magfab-readout: warning: " + warning, file=sys.stderr)
+        for warning in [*device.check_info(info), linked.running_note(info.calibration_hash)]:
+            if warning:
+                print("magfab-readout: warning: " + warning, file=sys.stderr)
         sensor = [] if linked.sensor is None else [f"# sensor: {linked.sensor.id}"]
         temperature = _build.TEMPERATURE_ENABLED
         columns = [c for c in CSV_COLUMNS if temperature or c != "temperature_C"]
