@@ -830,11 +830,16 @@ def class1(env: Env, rng: random.Random) -> list[Case]:
         cases.append(Case(1, f"{name} in the build folder as {what} through calibrate", "wrapped",
                           ["none", "-", str(env.replay), "calibrate", "build/calibration/scan_simulated.csv", "--out",
                            "build"], replace, expect="either", check=_refused_or_built(env), detail=what))
-    if not env.quick:  # a scan CSV of valid rows just under its kind's limit: read and fitted in the budget, or refused
-        cases.append(Case(1, "a scan CSV of valid rows just under the 256 MiB limit through calibrate", "magfab",
-                          ["calibrate", "big.csv", "--out", "build"],
-                          _big_scan(env, LIMITS["scan CSV"] - 4096), expect="either",
-                          detail=f"{LIMITS['scan CSV'] - 4096:,} bytes"))
+    from magfab.formats.scan_csv import MAX_ROWS
+
+    if not env.quick:  # scans of valid rows at the readers' row limit and past it: in the budget, or refused
+        for rows in (MAX_ROWS, MAX_ROWS + 1):
+            cases.append(Case(1, f"a scan CSV of {rows:,} valid rows (the row limit is {MAX_ROWS:,}) through "
+                              "calibrate", "magfab", ["calibrate", "big.csv", "--out", "build"],
+                              _big_scan(env, rows), expect="either", detail=f"{rows:,} rows"))
+        cases.append(Case(1, "a scan CSV of valid rows just under the 256 MiB file limit through calibrate", "magfab",
+                          ["calibrate", "big.csv", "--out", "build"], _big_scan(env, None, LIMITS["scan CSV"] - 4096),
+                          expect="either", detail=f"{LIMITS['scan CSV'] - 4096:,} bytes"))
     return cases
 
 
@@ -896,22 +901,25 @@ def _recording_csv(seed: int = 0) -> str:
     return "\n".join(rows) + "\n"
 
 
-def _big_scan(env: Env, size: int) -> Callable[[Path], None]:
+def _big_scan(env: Env, rows: int | None, size: int | None = None) -> Callable[[Path], None]:
+    """The build's simulated scan repeated (its time running on) to ``rows`` data rows, or to ``size`` bytes."""
     def setup(folder: Path) -> None:
         env.copy_build(folder / "build")
         lines = (env.golden / "calibration" / "scan_simulated.csv").read_text().splitlines()
-        head, rows = lines[0], [r.split(",", 1) for r in lines[1:]]
+        lines = [line for line in lines if not line.startswith("#")]
+        head, body = lines[0], [r.split(",", 1) for r in lines[1:]]
         period = 0.00184
         with open(folder / "big.csv", "w") as f:
             f.write(head + "\n")
             written, k = len(head) + 1, 0
-            while True:
-                block = "".join(f"{(k + i) * period!r},{rest}\n" for i, (_t, rest) in enumerate(rows))
-                if written + len(block) > size:
+            while rows is None or k < rows:
+                take = body if rows is None else body[:rows - k]
+                block = "".join(f"{(k + i) * period!r},{rest}\n" for i, (_t, rest) in enumerate(take))
+                if size is not None and written + len(block) > size:
                     break
                 f.write(block)
                 written += len(block)
-                k += len(rows)
+                k += len(take)
     return setup
 
 

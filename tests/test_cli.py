@@ -216,3 +216,44 @@ def test_init_copies_an_array_example(tmp_path, monkeypatch):
     assert spec.name == "row" and spec.array.taxels == 5 and spec.array.pitch_mm == 14.0
     bad = CliRunner().invoke(main, ["init", "--example", "nope", "x.toml"])
     assert bad.exit_code == 2 and "fingertip_2x2" in bad.output
+
+
+def _commands(group, path=()):
+    """(words, command) of every magfab command, the sensor group's too."""
+    import click
+
+    for name, command in sorted(group.commands.items()):
+        if isinstance(command, click.Group):
+            yield from _commands(command, (*path, name))
+        else:
+            yield (*path, name), command
+
+
+def _usage_mistakes():
+    """For every command: an unknown option, and each required argument left out, and each typed option given a word
+    its type refuses (an int, a float, a choice, an int range)."""
+    import click
+
+    for words, command in _commands(main):
+        yield words, ["--no-such-option"], "No such option"
+        required = [p for p in command.params if isinstance(p, click.Argument) and p.required]
+        if required:
+            yield words, [], "Missing argument"
+        for p in command.params:
+            if isinstance(p, click.Option) and not p.is_flag and isinstance(
+                    p.type, (click.types.IntParamType, click.types.FloatParamType, click.Choice)):
+                yield words, ["x.toml"] * len(required) + [p.opts[0], "not-a-value"], "Invalid value"
+
+
+@pytest.mark.parametrize(("words", "args", "said"), list(_usage_mistakes()),
+                         ids=lambda v: "-".join(v) if isinstance(v, tuple) else None)
+def test_a_usage_mistake_is_one_line_and_exit_2(words, args, said, tmp_path):
+    """click's own refusals (its three-line usage block before) are one line naming the mistake and the command's
+    --help, exit 2, nothing on stdout, nothing written: generated for every command and every typed option."""
+    before = sorted(tmp_path.rglob("*"))
+    result = CliRunner().invoke(main, [*words, *args], prog_name="magfab", catch_exceptions=False)
+    assert result.exit_code == 2, result.output
+    err = result.stderr
+    assert err.count("\n") == 1 and err.startswith("magfab: error: ") and said in err, err
+    assert f"`magfab {' '.join(words)} --help` lists what is allowed" in err and result.stdout == ""
+    assert sorted(tmp_path.rglob("*")) == before

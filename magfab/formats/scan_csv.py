@@ -65,6 +65,14 @@ BANDS = {
     "Fx_N": (-1e3, 1e3, "N"), "Fy_N": (-1e3, 1e3, "N"), "Fz_N": (-1e3, 1e3, "N"),
     "Fx_sensor_N": (-1e3, 1e3, "N"), "Fy_sensor_N": (-1e3, 1e3, "N"), "Fz_sensor_N": (-1e3, 1e3, "N"),
 }
+#: Most data rows a scan, recording or reference log may hold, checked before a value is parsed (parsing is about
+#: 15 us a row, so the largest file is read in seconds): a recording at the chip's fastest 543 Hz for 15 minutes, a
+#: 1 kHz reference log for 8; a calibration then fits at most magfab.limits.MAX_SCAN_ROWS of them. Lines of any
+#: kind (blank and comment lines too) at most twice as many, counted before the text is split.
+MAX_ROWS = 500_000
+#: What str.splitlines splits at, in UTF-8 (each counted before the text is split into that many lines).
+_BREAKS = (b"\n", b"\r", b"\x0b", b"\x0c", b"\x1c", b"\x1d", b"\x1e", "\x85".encode(), "\u2028".encode(),
+           "\u2029".encode())
 #: The host clock's band (Unix time in s, 1970 to about the year 5000): a recording's ``host_time_s`` and a
 #: reference log's ``time_s``.
 HOST_TIME_BAND = (0.0, 1e11, "s")
@@ -167,11 +175,16 @@ def _number(text: str, name: str, line: int, column: str, row: int, band: tuple[
 def _lines(source: str | os.PathLike[str] | bytes, what: str = "scan CSV") -> tuple[list[tuple[int, str]], str, bytes]:
     """(numbered lines that are neither blank nor comments, the file's name, its bytes)."""
     raw, name = _load(source, what)
+    limit = f"a {what} may hold at most {MAX_ROWS:,} data rows (15 minutes at 543 Hz): split it or record less"
+    if sum(raw.count(b) for b in _BREAKS) > 4 * MAX_ROWS:  # CRLF counts twice
+        raise ScanError(f"{name}: over {4 * MAX_ROWS:,} line breaks; {limit}")
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         raise ScanError(f"{name}: byte {exc.start} is not UTF-8; the scan must be UTF-8 text") from None
     lines = [(i, s) for i, s in enumerate(text.splitlines(), 1) if s.strip() and not s.lstrip().startswith("#")]
+    if len(lines) - 1 > MAX_ROWS:
+        raise ScanError(f"{name}: {len(lines) - 1:,} data rows; {limit}")
     return lines, name, raw
 
 

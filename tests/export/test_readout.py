@@ -658,3 +658,36 @@ def test_installed_cli_over_a_real_serial_port(installed, pkg):
         assert proc.returncode == 0, proc.stderr
         rows = _rows(proc.stdout)
         assert len(rows) == 30 and max(float(r[11]) for r in rows) < 1e-3  # text rounds the field to 0.01 uT
+
+
+def _readout_mistakes(cli_module):
+    """For every magfab-readout command: an unknown option, its required positionals left out, and each int or
+    float option given a word (generated from the parser itself, so a new command or option is covered)."""
+    import argparse
+
+    parser = cli_module._parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    yield [], "the following arguments are required"
+    for name, command in sorted(sub.choices.items()):
+        positionals = [a for a in command._actions if not a.option_strings and a.required and a.nargs != "?"]
+        yield [name, *["x"] * len(positionals), "--no-such-option"], "unrecognized arguments"
+        if positionals:
+            yield [name], "the following arguments are required"
+        for action in command._actions:
+            if action.option_strings and action.type in (int, float):
+                yield [name, *["x"] * len(positionals), action.option_strings[0], "not-a-number"], "invalid"
+
+
+def test_a_usage_mistake_is_one_line_and_exit_2(pkg, capsys):
+    """argparse's own refusals (a usage line and the error before) are one line naming the mistake and the command's
+    --help, exit 2, nothing on stdout: generated for every command and every typed option."""
+    cli_module = importlib.import_module(pkg.__name__ + ".cli")
+    cases = list(_readout_mistakes(cli_module))
+    assert len(cases) > 20
+    for args, said in cases:
+        with pytest.raises(SystemExit) as exit_:
+            cli_module.main(args)
+        out, err = capsys.readouterr()
+        assert exit_.value.code == 2 and out == "", (args, out)
+        assert err.count("\n") == 1 and err.startswith("magfab-readout: error: ") and said in err, (args, err)
+        assert "--help` lists what is allowed" in err, err

@@ -155,3 +155,28 @@ def test_recording_and_reference_readers():
         read_reference(_recording_text().encode())
     with pytest.raises(ScanError, match=r"line 3.*'time_s'.*non-decreasing"):
         read_reference(b"time_s,Fx_N,Fy_N,Fz_N\n2,0,0,0\n1,0,0,0\n")
+
+
+@pytest.mark.parametrize("reader", ["scan", "recording", "reference"])
+def test_a_file_over_the_row_limit_is_refused_before_its_values_are_read(reader, monkeypatch):
+    """Every reader counts rows before parsing a value (a 256 MiB scan once took over a minute to be refused):
+    MAX_ROWS data rows are read, one more is refused in one line naming the file and the limit, and so is a text
+    of more line breaks (of any kind str.splitlines splits at) than four times the limit, before it is split."""
+    from magfab.formats import scan_csv
+    from magfab.formats.scan_csv import read_recording, read_reference
+
+    monkeypatch.setattr(scan_csv, "MAX_ROWS", 60)
+    log = "time_s,Fx_N,Fy_N,Fz_N\n" + "".join(f"{1.7e9 + k},0,0,{0.01 * k}\n" for k in range(60))
+    text = {"scan": "\n".join(_good(60)) + "\n", "recording": _recording_text(), "reference": log}[reader]
+    read = {"scan": lambda t: read_scan_csv(t, require_force=False), "recording": read_recording,
+            "reference": read_reference}[reader]
+    assert read(text.encode()) is not None  # at the limit
+    header, first, rest = text.split("\n", 2)
+    over = f"{header}\n{first}\n{first}\n{rest}"  # one row more (a repeated time is non-decreasing)
+    with pytest.raises(ScanError, match=r"61 data rows; a .* may hold at most 60 data rows") as info:
+        read(over.encode())
+    assert "\n" not in str(info.value)
+    for brk in ("\n", "\r\n", "\x0c", "\u2028"):
+        with pytest.raises(ScanError, match="over 240 line breaks") as info:
+            read((text + "#" + brk * 241).encode())
+        assert "\n" not in str(info.value)

@@ -16,7 +16,7 @@ import os
 import pkgutil
 import sys
 import time
-from typing import List, Optional
+from typing import List, NoReturn, Optional
 
 from . import _build, array_cli, board_sensor, bounded, check, identity, records
 from .calibration import Calibration, CalibrationError, calibration_sha256
@@ -67,9 +67,18 @@ def _common() -> argparse.ArgumentParser:
     return common
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse's own errors (an unknown option, a missing argument: its usage line and the error) as one line, as
+    every other refusal; its subcommands' parsers are of this class too."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"magfab-readout: error: {' '.join(message.split())} (`{self.prog} --help` lists what is "
+                     "allowed)\n")
+
+
 def _parser() -> argparse.ArgumentParser:
     common = _common()
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="magfab-readout",
         description=f"Host readout for the magfab tactile sensor built from spec {json.dumps(_build.SPEC_NAME)}.",
     )
