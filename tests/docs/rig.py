@@ -19,7 +19,6 @@ the MLX90393 breakout on its I2C bus and a tip the test can press.
 
 from __future__ import annotations
 
-import collections
 import json
 import os
 import select
@@ -30,9 +29,6 @@ import tty
 from contextlib import suppress
 from pathlib import Path
 from typing import ClassVar
-
-import numpy as np
-from scipy.optimize import linprog
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "export"))
 from simbus import Bus, build_library
@@ -124,8 +120,6 @@ class Rig:
         self._pending = b""
         self._last_rx = 0.0
         self.resets = 0
-        #: (board clock s, host clock s) when the board's bytes went out: what ties the two clocks (host_line).
-        self.sent: collections.deque = collections.deque(maxlen=200_000)
         self.flashed: Path | None = None
         self.addresses = addresses(self.build_dir)
         self._fields = [(0.0, 0.0, 0.0, 25.0)] * len(self.addresses)
@@ -165,32 +159,13 @@ class Rig:
             self._fields = [(*f, t_C) for f in fields]
 
     def follow(self, track) -> None:
-        """From now on every chip's field is ``track(board_s)`` (one (Bx, By, Bz) per taxel, uT) at the start of each
+        """From now on every chip's field is ``track(board_s)`` (one (Bx, By, Bz) per taxel, uT) at the middle of each
         simulated slice of at most :data:`TRACK_SLICE_US`: a stage moving on the board's own clock, so a recording's
         samples see the stage where it was at their device time however loaded the machine is (a stage moving on
         the wall clock meets a board that falls behind it, then catches up, at varying delays). None: the fields
         keep their last values."""
         with self._lock:
             self._track = track
-
-    def host_line(self, board_from: float, board_to: float) -> tuple[float, float]:
-        """(a, s): the host clock (Unix time, s) at which the board sent what it made at board time b is at least
-        a + s (b - board_from), the line under every send from ``board_from`` to ``board_to`` closest to them (least
-        total gap; scipy's linear program). On a bench the board's clock runs in step with the host's; in
-        simulation the board falls behind the wall clock on a loaded machine (by a varying lag, at a varying rate),
-        and a reference logger's clock must be the one the host's reads are late against, as by a serial link: this
-        line, which a recording's reads lie on or above."""
-        with self._lock:
-            pairs = np.array([p for p in self.sent if board_from <= p[0] <= board_to])
-        if len(pairs) < 2:
-            raise AssertionError(f"the board sent nothing between {board_from:.3f} and {board_to:.3f} s of its clock")
-        pairs = pairs[:: max(1, len(pairs) // 4000)]
-        x, y = pairs[:, 0] - board_from, pairs[:, 1] - pairs[0, 1]
-        fit = linprog(c=[-len(x), -float(x.sum())], A_ub=np.column_stack([np.ones_like(x), x]), b_ub=y,
-                      bounds=[(None, None), (0.1, 10.0)], method="highs")
-        if not fit.success:
-            raise AssertionError(f"the board's clock against the host's: {fit.message}")
-        return float(pairs[0, 1] + fit.x[0]), float(fit.x[1])
 
     @property
     def error(self) -> BaseException | None:
@@ -288,7 +263,6 @@ class Rig:
             if self._eeprom is not None:
                 self.bus.eeprom_set(0, self._eeprom)
         self._t0 = time.monotonic()
-        self.sent.clear()  # the new boot's clock starts at 0
         self._byte_us = 10e6 / _baud(self.build_dir)  # 10 bits a byte
 
     def _step(self, data: bytes) -> None:
@@ -297,7 +271,7 @@ class Rig:
         middle), board bytes out."""
         self._pending += data
         chunk, self._pending = self._pending[:_CHUNK], self._pending[_CHUNK:]
-        out: list[tuple[float, bytes]] = []  # (board time, bytes) of each slice that made any
+        out: list[bytes] = []  # what each slice made
         with self._lock:
             self.bus.send(chunk)
             dt = min((time.monotonic() - self._t0) * 1e6 - self.bus.time_us, 20_000)
@@ -311,11 +285,10 @@ class Rig:
                     self.bus.target(k).set_field(*f)
                 made = self.bus.run_us(run)
                 if made:
-                    out.append((self.bus.time_us / 1e6, made))
+                    out.append(made)
                 dt -= run
-        for board_s, made in out:  # each send stamped as it leaves: the host reads it no earlier
+        for made in out:
             self._send(made)
-            self.sent.append((board_s, time.time()))
 
 
 def _spec(build_dir: Path) -> dict:

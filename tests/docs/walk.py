@@ -20,6 +20,7 @@ pseudo-terminal, which ``MAGFAB_READOUT_PORT`` also names for the commands that 
 from __future__ import annotations
 
 import bisect
+import contextlib
 import csv
 import hashlib
 import itertools
@@ -118,12 +119,7 @@ class Scan:
         """Move the tip (an array's: taxel ``taxel``'s) along the track on the board's own clock (:meth:`Rig.follow`).
         As on a bench, the motion starts and ends with the tip at rest (:attr:`rest_s` each: the rows a calibration
         reads the field at rest from), and the stage moves from rest to the track's first point and back. Returns
-        ``log(reference, board_from, board_to)``, which writes the reference's log of that motion at 1 kHz of it (a
-        row for every millisecond), stamped on the host clock the board's sends from ``board_from`` to ``board_to``
-        (the recording's span, on the board's clock) keep to (:meth:`Rig.host_line`): a simulated board runs its
-        clock unevenly against the wall clock (it falls behind a little while the stage is followed, more on a loaded
-        machine), and the recording's clock merge fits one line over the whole recording, as for a real board's
-        steady clock; the log is stamped on the line over the same span."""
+        ``log(reference, recording)``, which writes the reference sensor's log of that motion (:func:`_log`)."""
         rest = ((self.rest if self.readings is None else self.readings[taxel]), [0.0, 0.0, 0.0])
         points = [rest, *self.tracks[taxel][0], rest]
         moves = [(rest, rest, self.rest_s), *((p0, p1, self.dwell_s) for p0, p1 in itertools.pairwise(points)),
@@ -149,18 +145,65 @@ class Scan:
         finally:
             rig.follow(None)
             self.at_rest(rig)
+        array = self.readings is not None
+        return lambda reference, recording: _log(reference, recording, taxel if array else None, stage, start,
+                                                 ends[-1])
 
-        def log(reference: Path, board_from: float, board_to: float) -> None:
-            a, rate = rig.host_line(board_from, board_to)
-            with open(reference, "w", newline="") as f:
-                out = csv.writer(f)
-                out.writerow(["time_s", "Fx_N", "Fy_N", "Fz_N"])
-                for tick in range(int(ends[-1] * 1000) + 1):
-                    board_s = start + tick / 1000
-                    out.writerow([f"{a + rate * (board_s - board_from):.6f}",
-                                  *(f"{x:.6f}" for x in stage(board_s)[1])])
 
-        return log
+def _recorded_s(path: Path) -> float:
+    """The device time of the last whole row a recording being written holds (its first column), -1 before any."""
+    try:
+        with open(path, "rb") as f:
+            f.seek(max(0, f.seek(0, os.SEEK_END) - 4096))
+            lines = f.read().split(b"\n")[:-1]  # the last piece may be a row half written
+    except OSError:
+        return -1.0
+    for raw in reversed(lines):
+        with contextlib.suppress(ValueError):
+            return float(raw.split(b",")[0])
+    return -1.0
+
+
+def _log(reference: Path, recording: Path, taxel: int | None, stage, start: float, seconds: float) -> None:
+    """The reference sensor's log of the stage's motion (``stage(board_s) -> (field, force)`` from board time
+    ``start`` for ``seconds``): a row every millisecond of it, stamped on the host clock as the recording's clock
+    merge will read it. A simulated board's clock runs unevenly against the wall clock (it falls behind while the
+    stage is followed, with five chips, and more on a loaded machine), while the merge fits one line to the
+    recording's (time_s, host_time_s), as for a real board's steady clock. So the log is stamped on that line, found
+    here independently (the least-gap line under the pairs, scipy's linear program), at each row's device time: its
+    board time less the recording's offset, which the recorded field itself gives (where it best matches the
+    stage's, as a lab aligns a log by a tap)."""
+    import numpy as np
+    from scipy.optimize import linprog
+
+    with open(recording, newline="") as f:
+        rows = [r for r in csv.DictReader(line for line in f if not line.startswith("#"))
+                if taxel is None or int(r["taxel"]) == taxel]
+    t, h, bz = (np.array([float(r[k]) for r in rows]) for k in ("time_s", "host_time_s", "Bz_uT"))
+    grid = np.arange(start - 1.0, start + seconds + 1.0, 0.001)  # the stage's field, at rest on both sides
+    field = np.array([stage(b)[0][2] for b in grid])
+
+    def misfit(offset: float) -> float:
+        return float(np.mean((bz - np.interp(t + offset, grid, field)) ** 2))
+
+    candidates = np.arange(start + seconds - t[-1], start - t[0] + 0.0025, 0.0025)  # the motion within the recording
+    if candidates.size == 0:
+        raise AssertionError(f"{recording}: the recording ({t[-1]:.1f} s) is shorter than the scan ({seconds:.1f} s)")
+    best = min(candidates, key=misfit)
+    offset = min(np.arange(best - 0.005, best + 0.005, 0.0001), key=misfit)
+    x, y = t - t[0], h - h[0]
+    fit = linprog(c=[-len(x), -float(x.sum())], A_ub=np.column_stack([np.ones_like(x), x]), b_ub=y,
+                  bounds=[(None, None), (0.1, 10.0)], method="highs")
+    if not fit.success:
+        raise AssertionError(f"{recording}: no line under its (time_s, host_time_s): {fit.message}")
+    a, rate = fit.x
+    with open(reference, "w", newline="") as f:
+        out = csv.writer(f)
+        out.writerow(["time_s", "Fx_N", "Fy_N", "Fz_N"])
+        for tick in range(int(seconds * 1000) + 1):
+            board_s = start + tick / 1000
+            out.writerow([f"{h[0] + a + rate * (board_s - offset - t[0]):.6f}",
+                          *(f"{v:.6f}" for v in stage(board_s)[1])])
 
 
 @dataclass
@@ -258,13 +301,21 @@ class Bench:
         """Run it; meanwhile play the scan (``record``) or let it run 2 s; then Ctrl-C (SIGINT to it). Its output
         goes to files, as to a terminal that never stops reading (a pipe nobody reads would stall it)."""
         with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
+            board_from = self.rig.board_s if self.rig is not None else 0.0
             proc = self._start(line, stdout=out, stderr=err)
-            log, board_from = None, self.rig.board_s if self.rig is not None else 0.0
+            log = None
+            words = line.split("#")[0].split()
             try:
                 time.sleep(1.5)  # it opens the port and finds the frames
                 if " record " in f" {line} ":
                     taxel = re.search(r"taxel (\d+)", line.partition("#")[2])  # an array's: the taxel the page scans
                     log = self.scan.play(self.rig, int(taxel[1]) if taxel else 0)
+                    # A person ends it once the tip is back at rest; a reader that has fallen behind the board (five
+                    # chips, a loaded machine) must first have written the samples of the motion's end. Its device
+                    # time counts from its first sample, made after board_from: past this, they are in the file.
+                    until, path = self.rig.board_s - board_from + 0.3, self.cwd / words[words.index("record") + 1]
+                    self._await(line, proc, out, err, "the recording to reach the scan's end",
+                                lambda _: _recorded_s(path) >= until)
                 elif " stream " in f" {line} " and "--zero" in line and self.press is not None:
                     self._press_while_streaming(line, proc, out, err)
                 time.sleep(0.5)
@@ -272,8 +323,8 @@ class Bench:
                 proc.wait(timeout_s)
             finally:
                 proc.kill()  # a no-op once it has ended; else (a failure above) it must not outlive the walk
-            if log is not None:  # the reference's log, once the recording's span is known
-                log(self.cwd / "reference.csv", board_from, self.rig.board_s)
+            if log is not None:  # the reference's log, stamped on the recording's clock (its file, now written)
+                log(self.cwd / "reference.csv", path)
             out.seek(0)
             err.seek(0)
             return Ran(line, self.cwd, proc.returncode, out.read(), err.read())
