@@ -23,14 +23,16 @@ try:  # Ctrl-C while these load is Python's KeyboardInterrupt, ended here as exi
     import json
     import os
     import warnings
-    from collections.abc import Callable, Iterator, Mapping, Sequence
+    from collections.abc import Callable, Iterator, Mapping
     from contextlib import contextmanager
     from pathlib import Path
-    from typing import TYPE_CHECKING, Any, NoReturn
+    from typing import TYPE_CHECKING, Any
 
     import click
 
     from . import __version__
+    from .cli_usage import EXIT_INTERRUPTED, OneLineErrors
+    from .cli_usage import fail as _fail
     from .errors import InputError, SpecError, shown
     from .out_path import check_out
 except KeyboardInterrupt:
@@ -47,15 +49,11 @@ if TYPE_CHECKING:
 
 EXIT_BAD_INPUT = 2
 EXIT_INTERNAL = 1
-EXIT_INTERRUPTED = 130
 #: The command ran and wrote its results, and they fail what was asked: `magfab design` when no design meets the
 #: targets with margin (as magfab-readout exits when the sensor fails a check step).
 EXIT_UNMET = 3
 
 
-def _fail(message: str, code: int) -> NoReturn:
-    click.echo(f"magfab: error: {message}", err=True)
-    sys.exit(code)
 
 
 @contextmanager
@@ -107,36 +105,7 @@ def _catch_interrupts(ctx: click.Context) -> None:
     ctx.call_on_close(lambda: signal.signal(signal.SIGINT, previous))
 
 
-class _OneLineErrors(click.Group):
-    """click's own errors (an unknown option, a missing argument, a bad choice: its three-line usage block) as one
-    line and their exit code, as every other refusal: ``magfab: error: <what> (`<command> --help` lists what is
-    allowed)``, exit 2."""
-
-    def main(self, args: Sequence[str] | None = None, prog_name: str | None = None,
-             complete_var: str | None = None, standalone_mode: bool = True, **extra: Any) -> Any:
-        # (click types main() as two overloads on standalone_mode; this one takes both)
-        if not standalone_mode:
-            return super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
-        try:
-            code = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
-        except click.exceptions.NoArgsIsHelpError as exc:  # `magfab` or `magfab sensor` alone: the help, as click
-            exc.show()
-            sys.exit(exc.exit_code)
-        except click.UsageError as exc:
-            where = exc.ctx.command_path if exc.ctx is not None else "magfab"
-            _fail(f"{_one_line(exc.format_message())} (`{where} --help` lists what is allowed)", exc.exit_code)
-        except click.ClickException as exc:
-            _fail(_one_line(exc.format_message()), exc.exit_code)
-        except click.Abort:
-            _fail("interrupted; nothing was written and any previous output is untouched", EXIT_INTERRUPTED)
-        sys.exit(code if isinstance(code, int) else 0)
-
-
-def _one_line(text: str) -> str:
-    return "; ".join(part.strip() for part in text.splitlines() if part.strip())
-
-
-@click.group(cls=_OneLineErrors, context_settings={"help_option_names": ["-h", "--help"]})
+@click.group(cls=OneLineErrors, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="magfab")
 @click.pass_context
 def main(ctx: click.Context) -> None:

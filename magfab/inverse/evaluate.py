@@ -232,6 +232,7 @@ def evaluate(point: dict[str, Any], base_json: str, targets_json: str, fidelity:
              name: str = "candidate") -> dict[str, Any]:
     """Evaluate one point (module doc). Returns ``{"state": "ok" | "infeasible" | "failed", "reason", "model",
     "metrics", "constraints", "errors", "seconds"}``; never raises (a bug is a failed design whose reason says so)."""
+    jobs = os.environ.get("MAGFAB_JOBS")
     os.environ["MAGFAB_JOBS"] = "1"  # the study runs designs side by side: no forked side branch inside one
     t0 = time.perf_counter()
     out: dict[str, Any] = {"state": "failed", "reason": "", "model": fidelity, "metrics": {}, "constraints": [],
@@ -244,6 +245,11 @@ def evaluate(point: dict[str, Any], base_json: str, targets_json: str, fidelity:
     except Exception as exc:  # one design's bug never stops a study; it is recorded and counted
         where = traceback.extract_tb(exc.__traceback__)[-1]
         out["reason"] = f"bug: {type(exc).__name__}: {exc} (at {where.name}, line {where.lineno})"
+    finally:  # as it was: a design evaluated in the caller's own process leaves its later builds as they were
+        if jobs is None:
+            del os.environ["MAGFAB_JOBS"]
+        else:
+            os.environ["MAGFAB_JOBS"] = jobs
     out["seconds"] = time.perf_counter() - t0
     return out
 

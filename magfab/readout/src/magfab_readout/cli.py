@@ -39,9 +39,18 @@ from .simulate import WARM_RATE_C_PER_S, SimulatedDevice, TemperatureRamp
 from .taxels import ArrayCalibration
 
 
-def _common() -> argparse.ArgumentParser:
+class _Parser(argparse.ArgumentParser):
+    """argparse's own errors (an unknown option, a missing argument: its usage line and the error) as one line, as
+    every other refusal; its subcommands' parsers are of this class too."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"magfab-readout: error: {' '.join(message.split())} (`{self.prog} --help` lists what is "
+                     "allowed)\n")
+
+
+def _common() -> _Parser:
     """The options every command that talks to a board takes: the serial link and the simulated board."""
-    common = argparse.ArgumentParser(add_help=False)
+    common = _Parser(add_help=False)
     link = common.add_argument_group("connection")
     link.add_argument("--port", help="serial port (default: $MAGFAB_READOUT_PORT when set, else the one USB serial "
                       "port present)")
@@ -65,15 +74,6 @@ def _common() -> argparse.ArgumentParser:
                      help="keep the simulated board's EEPROM in FILE between commands (upload, then info or check, as "
                      "on a board; created when missing)")
     return common
-
-
-class _Parser(argparse.ArgumentParser):
-    """argparse's own errors (an unknown option, a missing argument: its usage line and the error) as one line, as
-    every other refusal; its subcommands' parsers are of this class too."""
-
-    def error(self, message: str) -> NoReturn:
-        self.exit(2, f"magfab-readout: error: {' '.join(message.split())} (`{self.prog} --help` lists what is "
-                     "allowed)\n")
 
 
 def _parser() -> argparse.ArgumentParser:
