@@ -372,6 +372,30 @@ def _axis_residual(ref: np.ndarray, own: np.ndarray, grid: tuple[float, float] |
     return r
 
 
+def _interval_residual(ref: np.ndarray, own: np.ndarray, grid: tuple[float, float]) -> float:
+    """RMS of a rounded reference less the sensor's force through the cubic map that puts the most of it inside
+    the reference's rounding intervals (ref +- step / 2; the least total distance outside them, a linear
+    programme), rounded as the reference is. A rounded copy of the sensor's force has a map with none outside
+    (the rounding itself), which a least-squares fit to the rounded levels misses by a fraction of a step: the
+    rows on one level pull it as much as the rows that cross to the next."""
+    from scipy import sparse
+    from scipy.optimize import linprog
+
+    q, origin = grid
+    s = (own - own.mean()) / (own.std() or 1.0)
+    A = sparse.csr_matrix(np.column_stack([np.ones_like(s), s, s * s, s * s * s]))
+    n = len(s)
+    out = -sparse.identity(n, format="csr")  # the distance outside the interval, one per row
+    result = linprog(np.concatenate([np.zeros(4), np.ones(n)]),
+                     A_ub=sparse.vstack([sparse.hstack([A, out]), sparse.hstack([-A, out])]),
+                     b_ub=np.concatenate([ref + q / 2.0, q / 2.0 - ref]),
+                     bounds=[(None, None)] * 4 + [(0.0, None)] * n, method="highs")
+    if result.status != 0:
+        return math.inf
+    rounded = origin + q * np.round((A @ result.x[:4] - origin) / q)
+    return float(np.sqrt(np.mean((ref - rounded) ** 2)))
+
+
 def _best_lag(t: np.ndarray, ref: np.ndarray, h: np.ndarray, own: np.ndarray, period_s: float) -> float:
     """The time shift, s, that best lines the sensor's force up with the reference's: the least mean square
     difference of the two (each scaled to unit variance) on a grid of the recording's period, over every shift
@@ -416,7 +440,12 @@ def copy_residual_N(h: np.ndarray, own: np.ndarray, ref_t: np.ndarray, ref_F: np
             if np.sum(r * r) < np.sum(best[0] ** 2):
                 best = (r, float(lag))
         width /= 10.0
-    return best
+    r, lag = best
+    ok = (t - lag >= h[0]) & (t - lag <= h[-1])
+    if ok.sum() >= MIN_ROWS:  # at the best lag, a rounded reference's map as its rounding intervals give it
+        r = np.array([min(rk, _interval_residual(F[ok, k], np.interp(t[ok] - lag, h, own[:, k]), g))
+                      if g is not None else rk for rk, k, g in zip(r, axes, grids)])
+    return r, lag
 
 
 def reject_copied_reference(recording: Recording, reference: Reference, reference_resolution_mN: float) -> None:

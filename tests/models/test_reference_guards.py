@@ -126,9 +126,10 @@ def _disguised_copy(rate, lag, gain, tare, step_mN, noise_mN, seed):
 @pytest.mark.parametrize("examples", EXAMPLES)
 def test_disguised_copies_of_the_sensors_forces_are_refused(examples):
     """The sensor's forces resampled at another rate and lag, through a gain and a tare, with a little noise (well
-    under the sensor's own), rounded to 0.1-2 mN or not (coarser: docs/bundle.md, what the guard cannot tell)."""
+    under the sensor's own), rounded to 0.1 mN up to the stated resolution (6.25 mN) or not."""
     _drawn(examples, rate=st.floats(200.0, 2000.0), lag=st.floats(-0.5, 0.5), gain=st.floats(0.9, 1.1),
-           tare=st.tuples(*[st.floats(-0.5, 0.5)] * 3), step_mN=st.one_of(st.just(0.0), st.floats(0.1, 2.0)),
+           tare=st.tuples(*[st.floats(-0.5, 0.5)] * 3),
+           step_mN=st.one_of(st.just(0.0), st.floats(0.1, RESOLUTION_MN), st.just(RESOLUTION_MN)),
            noise_mN=st.floats(0.0, 0.05), seed=st.integers(0, 2**16))(_disguised_copy)()
 
 
