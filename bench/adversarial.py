@@ -392,6 +392,7 @@ class Case:
     cwd: str = ""  # where it runs, relative to the case's folder (default: the folder)
     detail: str = ""  # the generator's parameters, for the report
     timeout_s: float = TIMEOUT_S
+    allowed_s: float = BUDGET_S  # past this wall time a finished case is listed as SLOW (a study: its estimate)
 
     def command(self, prog: str | None = None, args: Sequence[str] | None = None) -> str:
         prog = prog or self.prog
@@ -424,10 +425,11 @@ class Outcome:
     cpu_s: float
     peak_mb: float
     usage_block: bool = False
-    slow: bool = False  # finished, but past the budget's minute of wall time (under the kill at TIMEOUT_S)
+    slow: bool = False  # finished, but past its allowance (the budget's minute; a study's own estimate)
     detail: str = ""
     stderr_tail: str = ""
     folder: str = ""
+    allowed_s: float = BUDGET_S
 
 
 def _lines(text: str) -> list[str]:
@@ -450,7 +452,7 @@ def judge(case: Case, res: Result, before: dict, after: dict) -> tuple[str, str,
     lines = _lines(res.stderr)
     last = lines[-1][:300] if lines else ""
     if res.timed_out:
-        return "over budget", f"killed after {TIMEOUT_S:.0f} s of wall time, {res.cpu_s:.0f} s of CPU", False
+        return "over budget", f"killed after {case.timeout_s:.0f} s of wall time, {res.cpu_s:.0f} s of CPU", False
     if any(w in text for w in MEMORY_WORDS) or res.peak_mb > BUDGET_MB:
         return "over budget", f"out of memory or over {BUDGET_MB:.0f} MB ({res.peak_mb:.0f} MB): {last}", False
     if "Traceback (most recent call last)" in text:
@@ -542,8 +544,8 @@ class Runner:
         worst = max(results, key=lambda r: r.wall_s)
         out = Outcome(case.cls, case.name, case.command(), label, lost, why, results[0].code, worst.wall_s,
                       max(r.cpu_s for r in results), max(r.peak_mb for r in results), usage,
-                      worst.wall_s > BUDGET_S and label != "over budget", case.detail,
-                      "\n".join(_lines(results[0].stderr)[-3:])[-600:])
+                      worst.wall_s > case.allowed_s and label != "over budget", case.detail,
+                      "\n".join(_lines(results[0].stderr)[-3:])[-600:], allowed_s=case.allowed_s)
         bad = label in FAILURES or lost
         if bad and self.keep_failures is not None:
             kept = self.keep_failures / f"{number:03d}"
@@ -1009,26 +1011,26 @@ def class2(env: Env, rng: random.Random) -> list[Case]:
                           ["design", "t.toml", "--out", "d", "--workers", str(cores + 1)], _targets(),
                           words=("--workers",)))
     small = rng.randint(1, 3)
-    cases.append(Case(2, f"a small sweep: --lhs {small} --workers 1", "magfab",
-                      ["sweep", "t.toml", "--lhs", str(small), "--workers", "1", "--out", "s"], _targets(),
-                      expect="ok", check=_sweep_written))
+    cases.append(_study(2, f"a small sweep: --lhs {small} --workers 1",
+                        ["sweep", "--lhs", str(small), "--workers", "1", "--out", "s"], _targets_text(),
+                        expect="ok", check=_sweep_written))
+    w = str(min(2, cores))
     if not env.quick:  # what the limits let through: as many designs as study.trials allows
         n = int(_log_uniform(rng, 30, 300))
-        cases.append(Case(2, f"a sweep the limits allow: --lhs {n} of study.trials = 300, --workers {min(2, cores)}",
-                          "magfab", ["sweep", "t.toml", "--lhs", str(n), "--workers", str(min(2, cores)), "--out", "s"],
-                          _targets(300), expect="either", check=_sweep_written))
+        cases.append(_study(2, f"a sweep the limits allow: --lhs {n} of study.trials = 300, --workers {w}",
+                            ["sweep", "--lhs", str(n), "--workers", w, "--out", "s"], _targets_text(300),
+                            expect="either", check=_sweep_written))
         n = int(_log_uniform(rng, 30, 300))  # the default variables (no [variables]): the FE where the surrogate ends
-        cases.append(Case(2, f"a sweep of the default variables: --lhs {n}, --workers {min(2, cores)}", "magfab",
-                          ["sweep", "t.toml", "--lhs", str(n), "--workers", str(min(2, cores)), "--out", "s"],
-                          writes({"t.toml": "[study]\ntrials = 300\n"}), expect="either", check=_sweep_written))
+        cases.append(_study(2, f"a sweep of the default variables: --lhs {n}, --workers {w}",
+                            ["sweep", "--lhs", str(n), "--workers", w, "--out", "s"], "[study]\ntrials = 300\n",
+                            expect="either", check=_sweep_written))
         n = rng.randint(5, 40)  # the full chain (FE) per design
-        cases.append(Case(2, f"sweep --models fe --lhs {n} --workers {min(2, cores)}", "magfab",
-                          ["sweep", "t.toml", "--models", "fe", "--lhs", str(n), "--workers", str(min(2, cores)),
-                           "--out", "s"], _targets(300), expect="either", check=_sweep_written))
+        cases.append(_study(2, f"sweep --models fe --lhs {n} --workers {w}",
+                            ["sweep", "--models", "fe", "--lhs", str(n), "--workers", w, "--out", "s"],
+                            _targets_text(300), expect="either", check=_sweep_written))
         t = rng.randint(4, 12)
-        cases.append(Case(2, f"a search of study.trials = {t}, verify 1, --workers {min(2, cores)}", "magfab",
-                          ["design", "t.toml", "--out", "d", "--workers", str(min(2, cores))],
-                          _targets(t, verify=1), expect="either"))
+        cases.append(_study(2, f"a search of study.trials = {t}, verify 1, --workers {w}",
+                            ["design", "--out", "d", "--workers", w], _targets_text(t, verify=1), expect="either"))
     # a measured scan too large for MLS
     cases.append(Case(2, "a measured scan over the MLS row limit through calibrate", "magfab",
                       ["calibrate", "scan.csv", "--spec", "mls.toml", "--out", "out"], _mls_scan(rng),
@@ -1036,13 +1038,29 @@ def class2(env: Env, rng: random.Random) -> list[Case]:
     return cases
 
 
-def _targets(trials: int | None = None, verify: int | None = None) -> Callable[[Path], None]:
+def _targets_text(trials: int | None = None, verify: int | None = None) -> str:
     text = (EXAMPLES / "targets.toml").read_text()
     if trials is not None:
         text = text.replace("trials = 250", f"trials = {trials}")
     if verify is not None:
         text = text.replace("verify = 6", f"verify = {verify}")
-    return writes({"t.toml": text})
+    return text
+
+
+def _targets(trials: int | None = None, verify: int | None = None) -> Callable[[Path], None]:
+    return writes({"t.toml": _targets_text(trials, verify)})
+
+
+def _study(cls: int, name: str, args: list[str], text: str, **kw: Any) -> Case:
+    """A study that runs: held to the estimate it prints before the work (bench/study_time.py computes it as the
+    command does), killed at 1.5 times that or TIMEOUT_S, whichever is later."""
+    from study_time import estimated_s
+
+    with tempfile.TemporaryDirectory() as tmp:
+        (Path(tmp) / "t.toml").write_text(text)
+        estimate = estimated_s(Path(tmp) / "t.toml", args)
+    return Case(cls, f"{name} (estimated {estimate:.0f} s)", "magfab", [*args[:1], "t.toml", *args[1:]],
+                writes({"t.toml": text}), timeout_s=max(TIMEOUT_S, 1.5 * estimate), allowed_s=estimate, **kw)
 
 
 def _sweep_written(folder: Path, results: list[Result]) -> tuple[str, str] | None:
@@ -1685,8 +1703,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     for o in runner.outcomes:
         if o.slow:
             print(f"\nSLOW class {o.cls} [{o.label}] {o.name}: {o.wall_s:.0f} s wall, {o.cpu_s:.0f} s CPU, "
-                  f"{o.peak_mb:.0f} MB (finished before the kill at {TIMEOUT_S:.0f} s, past the budget's "
-                  f"{BUDGET_S:.0f} s)\n  {o.command}" + (f"\n  input: {o.detail}" if o.detail else ""))
+                  f"{o.peak_mb:.0f} MB (finished before the kill, past its allowance of {o.allowed_s:.0f} s)"
+                  f"\n  {o.command}" + (f"\n  input: {o.detail}" if o.detail else ""))
     failing = [o for o in runner.outcomes if o.label in FAILURES or o.lost]
     for o in failing:
         print(f"\nFAIL class {o.cls} [{o.label}{', lost' if o.lost else ''}] {o.name}\n  {o.command}\n  {o.why[:600]}"

@@ -504,6 +504,11 @@ _STUDY_OPTIONS = [
 ]
 
 
+def _say_estimate(cost) -> None:
+    """A study's estimated time, before its work (magfab.inverse.budget.study_cost)."""
+    click.echo(cost.line())
+
+
 def _study_options(f):
     for option in reversed(_STUDY_OPTIONS):
         f = option(f)
@@ -522,7 +527,7 @@ def design(targets: Path, out_dir: Path | None, scheduler: str | None, workers: 
         from .inverse.run import design as run_design
 
         try:
-            r = run_design(targets, out_dir, scheduler, workers, bar)
+            r = run_design(targets, out_dir, scheduler, workers, bar, _say_estimate)
         except KeyboardInterrupt:
             _fail("interrupted; the designs evaluated so far are kept in the study folder's study.log: run the same "
                   "command again to resume", EXIT_INTERRUPTED)
@@ -563,7 +568,7 @@ def sweep(targets: Path, levels: int | None, samples: int | None, fidelity: str,
 
         if (levels is None) == (samples is None):
             _fail("give one of --grid LEVELS or --lhs SAMPLES", EXIT_BAD_INPUT)
-        folder, recs = run_sweep(targets, out_dir, scheduler, workers, levels, samples, fidelity, bar)
+        folder, recs = run_sweep(targets, out_dir, scheduler, workers, levels, samples, fidelity, bar, _say_estimate)
         from .inverse.study import tally
 
         states = tally(recs)

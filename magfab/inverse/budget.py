@@ -12,6 +12,12 @@ limit                  allowed                                         why
 ``[study] trials``     at most what memory holds (MB_PER_DESIGN each)  record, the search each trial, in memory
 =====================  ==============================================  ==============================================
 
+A study's time is the user's to choose (its designs, its workers), so it is estimated, not limited: before any
+work, :func:`study_cost` prices a sample of its designs as they will be evaluated (the surrogate chain at
+SURROGATE_S each; a design outside the surrogate's region, or any with ``--models fe``, at the FE estimate of
+:mod:`magfab.limits` plus FE_CHAIN_S; a search's verified designs also at their build's estimate), and the CLI
+prints the total over the workers before it starts.
+
 :func:`memory_mb` is the project's budget (:data:`magfab.limits.BUDGET_MB`), or less on a machine with less memory.
 A refusal is one :class:`~magfab.inverse.study.StudyError` naming the option or key, its value and what is allowed.
 """
@@ -20,14 +26,24 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
 
-from ..limits import BUDGET_MB
-from .space import NUMERIC, choices
+from ..check import preflight
+from ..design import derive
+from ..errors import InputError
+from ..limits import BUDGET_MB, estimate
+from ..models import mechanics as mech
+from ..models.mechanics import fe_surrogate
+from .evaluate import FE, bench_point
+from .space import NUMERIC, candidate_spec, choices
 from .study import StudyError
 from .targets import Targets, Variables
 
 __all__ = ["MB_PER_WORKER", "MB_PER_DESIGN", "STUDY_FIXED_MB", "memory_mb", "cores", "most_workers", "most_designs",
-           "grid_size", "check_scheduler", "check_workers", "check_plan", "check_trials"]
+           "grid_size", "check_scheduler", "check_workers", "check_plan", "check_trials", "PRICED", "StudyCost",
+           "study_cost"]
 
 #: A local cluster's worker process (one thread) at its peak: measured 137 MB idle and 224 MB after evaluating
 #: designs with the surrogate (the models and the surrogate's table loaded); the full chain's FE adds up to ~200 MB
@@ -124,6 +140,96 @@ def check_trials(targets: Targets, workers: int) -> None:
     if targets.study.trials > most:
         raise _error(f"study.trials = {targets.study.trials:,}: more than memory holds: at most {most:,} beside "
                      f"{workers} workers ({MB_PER_DESIGN * 1000:g} KB each within {memory_mb():.0f} MB)")
+
+
+# ---- a study's time -----------------------------------------------------------------------------------------
+
+#: One design by the surrogate chain on one worker (the exact field, the elastomer surrogate, the design checks):
+#: bench/study_time.py's sweeps of 120 designs on 2 workers took 10.4 s (the example targets' variables) and 14 s (the
+#: default ones, 4 of them by the FE), about 0.1 s a design after the cluster's start; 1.5x that.
+SURROGATE_S = 0.15
+#: One design by the full chain beyond its FE estimate (:mod:`magfab.limits`: the field model, its table for a new
+#: magnet, the design checks), on one worker: 7 designs evaluated one by one took 2.7-11.4 s against FE estimates of
+#: 5.5-6.0 s (in all 1.05x); with this added, 1.5x the estimate's FE part.
+FE_CHAIN_S = 3.0
+#: A local cluster's start and the tables written at the end (a sweep of 30 designs by the surrogate: 8.6 s in all).
+STUDY_START_S = 8.0
+#: The designs priced one by one; a larger study is priced by this many spread over its list.
+PRICED = 64
+
+
+@dataclass(frozen=True)
+class StudyCost:
+    """A study's estimated time: its designs and how many of them the FE evaluates (estimated from a sample), the
+    seconds of one worker they take, and a search's verified designs: their full chain on the workers, then their
+    builds one after another in the calling process."""
+
+    designs: int
+    by_fe: int
+    design_s: float  # all the designs, one worker's seconds
+    verify_s: float  # the verified designs' full chain, one worker's seconds
+    build_s: float  # their builds, in the calling process
+    workers: int  # 0: an existing cluster (its workers unknown)
+    full_chain: bool = False  # every design by the full chain (``--models fe``)
+
+    longest_s: float = 0.0  # the costliest design priced (one worker's seconds)
+
+    @property
+    def seconds(self) -> float:
+        """The start, the designs shared by the workers as they come free (at most their sum over the workers plus
+        (1 - 1 / workers) of the longest one, Graham's bound for a list schedule), and the builds."""
+        w = max(self.workers, 1)
+        return STUDY_START_S + (self.design_s + self.verify_s) / w + (1.0 - 1.0 / w) * self.longest_s + self.build_s
+
+    def line(self) -> str:
+        """One line for the user before the work starts."""
+        where = f"on {self.workers} worker{'s' * (self.workers != 1)}" if self.workers else \
+            "with one worker (the cluster's workers divide the designs' share)"
+        refused = self.designs - self.by_fe
+        fe = (", by the full chain (FE)" + (f", about {refused:,} of them refused at once" if refused else "")) \
+            if self.full_chain else \
+            f", about {self.by_fe:,} of them by the FE (outside the surrogate's region)" if self.by_fe else ""
+        then = ", then the verified designs' full chain and builds" if self.build_s else ""
+        return f"estimated {_duration(self.seconds)} {where}: {self.designs:,} designs{fe}{then}"
+
+
+def _duration(seconds: float) -> str:
+    return f"{seconds:.0f} s" if seconds < 120 else f"{seconds / 60:.0f} min" if seconds < 7200 else \
+        f"{seconds / 3600:.1f} h"
+
+
+def _priced(point: dict[str, Any], base: Any, targets: Targets, fidelity: str) -> tuple[float, bool, float, float]:
+    """One design as the study evaluates it: (one worker's seconds, whether by the FE, its full chain's seconds, its
+    build's estimated seconds); a point the spec refuses at once costs SURROGATE_S and no FE or build."""
+    try:
+        if fidelity == FE:
+            point = bench_point(point, base, targets)
+        design = preflight(derive(candidate_spec(point, base, targets, "candidate")))
+    except InputError:
+        return SURROGATE_S, False, 0.0, 0.0
+    cost = estimate(design)
+    full = FE_CHAIN_S + cost.parts_s["fe"]
+    fe = fidelity == FE or not fe_surrogate.in_region(mech.Body.from_design(design))
+    return (full if fe else SURROGATE_S), fe, full, cost.seconds
+
+
+def study_cost(points: Sequence[dict[str, Any]], count: int, base: Any, targets: Targets, fidelity: str,
+               workers: int, verify: int = 0, verify_chain: bool = True) -> StudyCost:
+    """The time of a study of ``count`` designs like ``points`` (its list, or a sample of its space; up to
+    :data:`PRICED` of them spread over it are priced) on ``workers`` workers (0: an existing cluster), with
+    ``verify`` designs then built, after the full chain has verified them (``verify_chain``: a search by the
+    surrogate; one by the FE has verified them already)."""
+    step = max(1, len(points) // PRICED)
+    priced = [_priced(p, base, targets, fidelity) for p in points[::step][:PRICED]]
+    if not priced:
+        return StudyCost(count, 0, 0.0, 0.0, 0.0, workers)
+    n = len(priced)
+    buildable = [p for p in priced if p[3] > 0.0]
+    full = sum(p[2] for p in buildable) / len(buildable) if buildable else 0.0
+    build = sum(p[3] for p in buildable) / len(buildable) if buildable else 0.0
+    return StudyCost(count, round(count * sum(p[1] for p in priced) / n), count * sum(p[0] for p in priced) / n,
+                     verify * full * verify_chain, verify * build, workers, fidelity == FE,
+                     max([p[0] for p in priced] + [full * verify_chain * (verify > 0)]))
 
 
 def _error(message: str) -> StudyError:

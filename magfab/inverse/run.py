@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from .budget import check_plan, check_scheduler, check_trials, check_workers
+from .budget import PRICED, StudyCost, check_plan, check_scheduler, check_trials, check_workers, study_cost
 from .evaluate import FE, SURROGATE
 from .page import write_outputs
 from .pareto import front_mask, pick_for_verification, values_of
@@ -43,6 +43,7 @@ from .verify import built
 __all__ = ["design", "sweep", "default_folder"]
 
 Progress = Callable[[str, int, int], None]
+Estimate = Callable[[StudyCost], None]
 
 
 def default_folder(targets: Targets) -> Path:
@@ -85,13 +86,18 @@ def _made(folder: Path) -> Iterator[None]:
 
 
 def design(targets_path: Path, out: Path | None = None, scheduler: str | None = None, workers: int | None = None,
-           progress: Progress | None = None) -> DesignResult:
-    """Run ``magfab design`` (module doc)."""
+           progress: Progress | None = None, estimate: Estimate | None = None) -> DesignResult:
+    """Run ``magfab design`` (module doc); ``estimate`` is given the study's estimated time before the work."""
     targets, base = load_targets(targets_path)
     workers = _cluster(scheduler, workers)
     check_trials(targets, workers or 0)
     folder = out or default_folder(targets)
     _check_folder(folder)
+    if estimate:  # the search's points are its own: priced on a sample of the space it searches
+        fidelity = targets.study.models.value
+        sample = latin_hypercube(targets.variables, PRICED, targets.study.seed)
+        estimate(study_cost(sample, targets.study.trials, base, targets, fidelity, workers or 0,
+                            targets.study.verify, fidelity != FE))
     say = progress or (lambda *_: None)
     with client(scheduler, workers) as c:
         with _made(folder):  # once the cluster is there (a bad --scheduler writes nothing); a refused storage: none
@@ -174,8 +180,9 @@ def _front(result: DesignResult) -> None:
 
 def sweep(targets_path: Path, out: Path | None = None, scheduler: str | None = None, workers: int | None = None,
           levels: int | None = None, samples: int | None = None, fidelity: str = SURROGATE,
-          progress: Progress | None = None) -> tuple[Path, list[Record]]:
-    """Evaluate every design of a grid (``levels`` per numeric range) or a Latin hypercube (``samples``)."""
+          progress: Progress | None = None, estimate: Estimate | None = None) -> tuple[Path, list[Record]]:
+    """Evaluate every design of a grid (``levels`` per numeric range) or a Latin hypercube (``samples``);
+    ``estimate`` is given the sweep's estimated time before the work."""
     targets, base = load_targets(targets_path)
     if fidelity not in {m.value for m in Models}:
         raise InputError(f"--models {fidelity}: must be one of " + ", ".join(m.value for m in Models))
@@ -185,6 +192,8 @@ def sweep(targets_path: Path, out: Path | None = None, scheduler: str | None = N
                                                                                     targets.study.seed)
     folder = out or default_folder(targets)
     _check_folder(folder)
+    if estimate:
+        estimate(study_cost(points, len(points), base, targets, fidelity, workers or 0))
     say = progress or (lambda *_: None)
     with client(scheduler, workers) as c:
         recs = evaluate_all(points, targets, base, c, fidelity, lambda n, t: say("sweep", n, t), prefix="s")

@@ -378,8 +378,8 @@ def _interval_residual(ref: np.ndarray, own: np.ndarray, grid: tuple[float, floa
     programme), rounded as the reference is. A rounded copy of the sensor's force has a map with none outside
     (the rounding itself), which a least-squares fit to the rounded levels misses by a fraction of a step: the
     rows on one level pull it as much as the rows that cross to the next."""
-    from scipy import sparse
-    from scipy.optimize import linprog
+    from scipy import sparse  # lazy: scipy is slow to import and only the merge's guard needs it
+    from scipy.optimize import linprog  # lazy: as above
 
     q, origin = grid
     s = (own - own.mean()) / (own.std() or 1.0)

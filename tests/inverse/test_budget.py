@@ -97,3 +97,72 @@ def test_the_grid_is_counted_as_it_is_listed(levels):
     assert budget.grid_size(parse_targets("").variables, 50) > 10**9  # the default variables at --grid 50
 
 
+
+
+# ---- a study's time -----------------------------------------------------------------------------------------------
+
+def _sample(text: str, n: int, seed: int):
+    from magfab.inverse.space import latin_hypercube
+    from magfab.spec import load_spec
+
+    targets = parse_targets(text)
+    return targets, load_spec(None), latin_hypercube(targets.variables, n, seed)
+
+
+def _models(points, base, targets, fidelity: str = "surrogate") -> list[str | None]:
+    """Each point's model as the study's evaluate chooses it: "fe" outside the surrogate's region (or every point
+    with the full chain, on the printer's step), "surrogate" inside, None for a point the spec refuses at once."""
+    from magfab.check import preflight
+    from magfab.design import derive
+    from magfab.errors import InputError
+    from magfab.inverse.evaluate import _elastomer_model, bench_point
+    from magfab.inverse.space import candidate_spec
+
+    out: list[str | None] = []
+    for p in points:
+        try:
+            if fidelity == "fe":
+                p = bench_point(p, base, targets)
+            design = preflight(derive(candidate_spec(p, base, targets, "candidate")))
+        except InputError:
+            out.append(None)
+            continue
+        out.append("fe" if fidelity == "fe" or _elastomer_model(design)[0] is None else "surrogate")
+    return out
+
+
+@settings(max_examples=6, deadline=None)
+@given(n=st.integers(1, 40), seed=st.integers(0, 2**16), workers=st.integers(1, 4))
+def test_a_studys_estimate_grows_with_its_designs_and_shrinks_with_its_workers(n, seed, workers):
+    """Priced design by design: the same designs twice cost twice, more workers divide them, the full chain (FE)
+    takes every design the spec accepts and costs more than the surrogate, and a search's verified designs' chain
+    and builds add to it."""
+    targets, base, points = _sample("[study]\ntrials = 300\n", n, seed)
+    models = _models(points, base, targets)
+    one = budget.study_cost(points, n, base, targets, "surrogate", 1)
+    assert one.designs == n and one.by_fe == models.count("fe") and one.verify_s == one.build_s == 0.0
+    twice = budget.study_cost(points, 2 * n, base, targets, "surrogate", 1)
+    assert twice.design_s == pytest.approx(2 * one.design_s) and twice.by_fe == 2 * one.by_fe
+    spread = budget.study_cost(points, n, base, targets, "surrogate", workers)
+    shared = budget.STUDY_START_S + one.design_s / workers
+    assert shared - 1e-9 <= spread.seconds <= min(one.seconds, shared + one.longest_s) + 1e-9
+    fe = budget.study_cost(points, n, base, targets, "fe", workers)
+    assert fe.by_fe == _models(points, base, targets, "fe").count("fe")
+    assert fe.design_s > one.design_s or fe.by_fe == one.by_fe
+    search = budget.study_cost(points, n, base, targets, "surrogate", workers, verify=4)
+    if models.count(None) < n:
+        assert search.verify_s > 0 and search.build_s > 0
+    assert search.seconds >= spread.seconds
+    line = search.line()
+    assert line.startswith("estimated ") and f"on {workers} worker" in line and f"{n:,} designs" in line
+    assert "\n" not in line
+
+
+def test_the_estimate_counts_the_designs_outside_the_surrogates_region():
+    """The default variables reach bodies the surrogate does not cover: those are priced at the FE's estimate, as
+    the study evaluates them."""
+    targets, base, points = _sample("[study]\ntrials = 300\n", budget.PRICED, 3)
+    fe = _models(points, base, targets).count("fe")
+    cost = budget.study_cost(points, len(points), base, targets, "surrogate", 2)
+    assert cost.by_fe == fe > 0
+    assert cost.design_s > len(points) * budget.SURROGATE_S
