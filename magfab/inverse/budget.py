@@ -37,13 +37,13 @@ from ..limits import BUDGET_MB, estimate
 from ..models import mechanics as mech
 from ..models.mechanics import fe_surrogate
 from .evaluate import FE, bench_point
-from .space import NUMERIC, candidate_spec, choices
+from .space import NUMERIC, Space, candidate_spec, choices
 from .study import StudyError
 from .targets import Targets, Variables
 
 __all__ = ["MB_PER_WORKER", "MB_PER_DESIGN", "STUDY_FIXED_MB", "memory_mb", "cores", "most_workers", "most_designs",
            "grid_size", "check_scheduler", "check_workers", "check_plan", "check_trials", "PRICED", "StudyCost",
-           "study_cost"]
+           "search_sample", "study_cost"]
 
 #: A local cluster's worker process (one thread) at its peak: measured 137 MB idle and 224 MB after evaluating
 #: designs with the surrogate (the models and the surrogate's table loaded); the full chain's FE adds up to ~200 MB
@@ -211,6 +211,13 @@ def _priced(point: dict[str, Any], base: Any, targets: Targets, fidelity: str) -
     full = FE_CHAIN_S + cost.parts_s["fe"]
     fe = fidelity == FE or not fe_surrogate.in_region(mech.Body.from_design(design))
     return (full if fe else SURROGATE_S), fe, full, cost.seconds
+
+
+def search_sample(targets: Targets, base: Any) -> list[dict[str, Any]]:
+    """The points a search's cost is priced on: :data:`PRICED` of a Latin hypercube in the search's own coordinates
+    (every one buildable, as the search's are)."""
+    space = Space(targets, base)
+    return [space.point(p) for p in space.latin_hypercube(PRICED, targets.study.seed)]
 
 
 def study_cost(points: Sequence[dict[str, Any]], count: int, base: Any, targets: Targets, fidelity: str,

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from .budget import PRICED, StudyCost, check_plan, check_scheduler, check_trials, check_workers, study_cost
+from .budget import StudyCost, check_plan, check_scheduler, check_trials, check_workers, search_sample, study_cost
 from .evaluate import FE, SURROGATE
 from .page import write_outputs
 from .pareto import front_mask, pick_for_verification, values_of
@@ -95,8 +95,7 @@ def design(targets_path: Path, out: Path | None = None, scheduler: str | None = 
     _check_folder(folder)
     if estimate:  # the search's points are its own: priced on a sample of the space it searches
         fidelity = targets.study.models.value
-        sample = latin_hypercube(targets.variables, PRICED, targets.study.seed)
-        estimate(study_cost(sample, targets.study.trials, base, targets, fidelity, workers or 0,
+        estimate(study_cost(search_sample(targets, base), targets.study.trials, base, targets, fidelity, workers or 0,
                             targets.study.verify, fidelity != FE))
     say = progress or (lambda *_: None)
     with client(scheduler, workers) as c:
