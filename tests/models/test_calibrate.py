@@ -9,6 +9,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from magfab import derive, parse_spec
 from magfab.export.calibration_chart import chart
@@ -334,6 +336,70 @@ def test_rotating_the_scan_rotates_the_forces(poly4, design, scan, angle, flip):
     f, _ = cal.evaluate(turned.B_uT)
     expected = _rotated(C.Scan(scan.time_s, scan.B_uT, poly4.calibration.evaluate(scan.B_uT)[0]), angle).F_N
     assert np.allclose(f, expected, atol=1e-7)
+
+
+# ---- moving least squares -------------------------------------------------------------------------
+
+
+def _mls_reference(u, v, y, uq, vq, order, h):
+    """MLS the plain way, one query at a time: the weighted design matrix, its normal equations with the ridge
+    1e-12 trace, solved. Also each query's condition number and nearest squared distance (in h units)."""
+    mono = C.monomials(order)
+    out, cond, nearest = np.empty((len(uq), y.shape[1])), np.empty(len(uq)), np.empty(len(uq))
+    for q in range(len(uq)):
+        du, dv = (u - uq[q]) / h, (v - vq[q]) / h
+        d2 = du**2 + dv**2
+        w = np.exp(-0.5 * (d2 - d2.min()))
+        a = np.column_stack([du**i * dv**j for i, j in mono])
+        normal = a.T @ (w[:, None] * a)
+        normal += 1e-12 * np.trace(normal) * np.eye(len(mono))
+        out[q] = np.linalg.solve(normal, a.T @ (w[:, None] * y))[0]
+        cond[q], nearest[q] = np.linalg.cond(normal), d2.min()
+    return out, cond, nearest
+
+
+@settings(max_examples=150, deadline=None, derandomize=True)
+@given(order=st.integers(0, 3), n=st.integers(12, 150), log_h=st.floats(-3.5, 3.0), raster=st.booleans(),
+       seed=st.integers(0, 2**32 - 1))
+def test_mls_matches_the_plain_per_query_fit(order, n, log_h, raster, seed):
+    """_mls (moments, blocks of queries) against :func:`_mls_reference`, bandwidths from far below the points'
+    spacing to far above their spread, queries inside the data and up to 1000 spreads outside; on a raster
+    (repeated coordinates, as a scan's) too. Agreement to 1e-8 of the larger of |y| and the value, except where
+    the problem itself amplifies rounding: any reordering of the sums moves the answer by up to ~eps times the
+    condition number (the ridge caps it at 1e12) times 1 + the nearest squared distance (the weights' exponent),
+    so the tolerance is the larger of the two, with a margin (64) over the worst seen (2.6)."""
+    rng = np.random.default_rng(seed)
+    if raster:
+        u, v = rng.integers(0, 6, n) / 5.0, rng.integers(0, 4, n) / 3.0
+    else:
+        u, v = rng.random(n), rng.random(n)
+    y = np.column_stack([np.sin(3 * u) + v**2, u * v - 0.5]) + 0.01 * rng.standard_normal((n, 2))
+    far = 10 ** rng.uniform(0, 3, 4) * rng.choice([-1.0, 1.0], 4)
+    uq = np.concatenate([rng.random(8), far])
+    vq = np.concatenate([rng.random(8), rng.uniform(-2.0, 3.0, 4)])
+    h = 10.0**log_h
+    ref, cond, nearest = _mls_reference(u, v, y, uq, vq, order, h)
+    got = C._mls(u, v, y, uq, vq, order, h)
+    scale = np.maximum(np.abs(y).max(), np.abs(ref).max(axis=1))
+    tolerance = scale * np.maximum(1e-8, 64 * np.finfo(float).eps * cond * (1 + nearest))
+    assert got.shape == ref.shape
+    assert np.all(np.abs(got - ref).max(axis=1) <= tolerance), (np.abs(got - ref).max(axis=1) / scale, cond)
+
+
+def test_mls_edge_cases():
+    """No queries: an empty answer; a NaN coordinate: NaN rows, as the weights' exp would give, not a singular
+    system; a quadratic is reproduced by order 2 (at bandwidths where the ridge does not bias its curvature)."""
+    rng = np.random.default_rng(1)
+    u, v = rng.random(40), rng.random(40)
+    y = np.column_stack([1 + 2 * u - v + 0.5 * u * u - u * v, 3 * v * v])
+    assert C._mls(u, v, y, np.empty(0), np.empty(0), 2, 0.1).shape == (0, 2)
+    uq, vq = np.array([0.3, np.nan, 0.7]), np.array([0.4, 0.5, 0.2])
+    got = C._mls(u, v, y, uq, vq, 2, 0.2)
+    assert np.isnan(got[1]).all() and np.isfinite(got[[0, 2]]).all()
+    for h in (0.2, 0.5):
+        got = C._mls(u, v, y, uq[[0, 2]], vq[[0, 2]], 2, h)
+        want = np.column_stack([1 + 2 * uq - vq + 0.5 * uq * uq - uq * vq, 3 * vq * vq])[[0, 2]]
+        assert np.allclose(got, want, rtol=1e-8, atol=1e-8), (h, got - want)
 
 
 # ---- the chart -------------------------------------------------------------------------------------
