@@ -120,10 +120,12 @@ def most_chips(seconds: float) -> int:
 #: steps).
 MAX_SCAN_ROWS = 40_000
 SECONDS_PER_SCAN_ROW = 2.5e-4
-#: MLS cross-validation grows with rows^2 (11 bandwidths x the folds): 2.7k rows 8.7 s, 10.6k rows 109 s
-#: measured on an earlier machine (1.0-1.2 us per row^2; 3.7 us here under heavy contention). The row count is an upper
-#: bound (MagOne: 4,941 by its steps, 2,673 in fact), which is the margin; 5,000 rows stay near 30 s.
-SECONDS_PER_MLS_ROW2 = 1.2e-6
+#: MLS cross-validation grows with rows^2 (11 bandwidths x the folds). The MLS candidate of the 4,941-row scan of
+#: MagOne with mechanics_model = "hertz_column" (whose scan fills its bound) took 46.6 s before MLS was computed from
+#: weighted moments and 7.2 s after (2,500 rows: 13.0 and 2.1 s), both in one run on the two-core machine under load:
+#: 0.29-0.33 us per row^2, where the estimate had 1.2 and that build took 61-72 s against 46 estimated. 0.5 us keeps a
+#: 1.5x margin; the row count is an upper bound (MagOne: 4,941 by its steps, 2,673 in fact), which is more margin.
+SECONDS_PER_MLS_ROW2 = 0.5e-6
 MAX_MLS_ROWS = 5_000
 MB_PER_SCAN_ROW = 0.01
 

@@ -123,6 +123,7 @@ def metrics_of(pred, design) -> dict[str, float]:
         **_mechanics_errors(pred, design),
         "normal_sensitivity_at_rest_G_per_N": float(n.sensitivity_at_rest_G_per_N["nominal"]),
         "Bz_rest_G": float(pred.field.Bz_rest_G),
+        "saturation": float(pred.field.Bz_d_min_strongest_G / pred.chip.full_scale_z_G),
         "range_limit": n.range_limit,
     }
 
@@ -161,14 +162,31 @@ def slack_of(targets: Targets, name: str, m: dict[str, float]) -> float:
     return (need - value) / need if sense == "at_most" else (value - need) / need
 
 
+def findings_violation(targets: Targets, m: dict[str, float], errors: list[str]) -> float:
+    """The error findings as one violation (0: none), graded where the finding has a measure, so that the sampler
+    learns which way is closer: the chip's saturation by how far the strongest magnet's field at d_min exceeds full
+    scale (its ratio less one), the resolution the targets ask for not at all (its requirement is a constraint of
+    its own, graded), and one for each other error."""
+    total = 0.0
+    for code in (e.split(":")[0] for e in errors):
+        if code == "chip-saturates" and math.isfinite(m.get("saturation", math.nan)):
+            total += max(m["saturation"] - 1.0, 1e-6)
+        elif code == "resolution-short" and targets.require.normal_resolution_mN is not None:
+            continue
+        else:
+            total += 1.0
+    return total
+
+
 def _constraints(targets: Targets, m: dict[str, float], errors: list[str]) -> list[float]:
     """Violations (<= 0 feasible), in :func:`constraint_names`' order: for each requirement its margin less how far
-    the design meets it (so a design must meet each by its margin: :func:`margin_of`), then the error findings."""
+    the design meets it (so a design must meet each by its margin: :func:`margin_of`), then the error findings
+    (:func:`findings_violation`)."""
     out = []
     for name in requirement_names(targets):
         c = margin_of(targets, name, m) - slack_of(targets, name, m)
         out.append(c if math.isfinite(c) else 1e9)  # Optuna takes finite constraints only
-    return [*out, float(len(errors))]
+    return [*out, findings_violation(targets, m, errors)]
 
 
 def bench_step_mm(base: Spec) -> float:

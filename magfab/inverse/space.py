@@ -32,7 +32,7 @@ from .targets import Targets, Variables
 # noticeable time to import, and importing this module should not.
 
 __all__ = ["NUMERIC", "CATEGORICAL", "stock_disc", "candidate_spec", "suggest", "grid", "latin_hypercube",
-           "base_point", "Space", "FRACTIONS", "POINT"]
+           "base_point", "Space", "FRACTIONS", "MAGNET_FRACTION", "POINT"]
 
 #: The numeric variables (mm), in the order tables show them.
 NUMERIC = ("d_max_mm", "d_min_mm", "elastomer_diameter_mm", "cover_mm")
@@ -197,6 +197,10 @@ POINT = "point"
 FRACTIONS = ("f_elastomer_diameter", "f_d_max", "f_cover", "f_d_min")
 _FRACTION_OF = {"elastomer_diameter_mm": FRACTIONS[0], "d_max_mm": FRACTIONS[1], "cover_mm": FRACTIONS[2],
                 "d_min_mm": FRACTIONS[3]}
+#: The magnet as the search sees it: a fraction over the magnets a tip can be built with, in order of their moment
+#: (volume x nominal remanence), so that neighbouring values are neighbouring fields and the sampler's model of the
+#: fraction carries over between magnets (as a categorical param it learns each of a dozen or more on its own).
+MAGNET_FRACTION = "f_magnet"
 #: The smallest gap kept between d_min and what bounds it (d_max above, the elastomer's base below), mm.
 _GAP_MM = 0.01
 #: Steps the elastomer's diameter range is scanned in for the sub-range every other choice can follow.
@@ -235,6 +239,19 @@ class Space:
                             "no magnet listed fits a buildable elastomer within the ranges and requirements")
         tips = [t for t in self.all_choices["tip"] if any(self.diameter_range(m, t) is not None for m in buildable)]
         self.choices = {**self.all_choices, "magnet": buildable, "tip": tips}
+        #: each tip's buildable magnets, weakest moment first (ties: the catalogue's order)
+        self.magnet_order = {t: sorted((m for m in buildable if self.diameter_range(m, t) is not None),
+                                       key=lambda m: (_moment(m), buildable.index(m))) for t in tips}
+
+    def magnet_at(self, tip: str, fraction: float) -> str:
+        """The magnet at ``fraction`` of the tip's buildable magnets in order of moment (equal strata)."""
+        order = self.magnet_order[tip]
+        return order[min(int(min(max(fraction, 0.0), 1.0) * len(order)), len(order) - 1)]
+
+    def magnet_fraction(self, tip: str, magnet: str) -> float:
+        """The middle of ``magnet``'s stratum among the tip's buildable magnets (the inverse of :meth:`magnet_at`)."""
+        order = self.magnet_order[tip]
+        return (order.index(magnet) + 0.5) / len(order)
 
     # the bounds each choice leaves -------------------------------------------------------------------------------
 
@@ -305,7 +322,9 @@ class Space:
     def point(self, params: dict[str, Any]) -> dict[str, Any]:
         """The mm point of a trial's params (categories and fractions; a listed-values variable's own value, moved to
         the nearest allowed one)."""
-        magnet, tip = str(params["magnet"]), str(params["tip"])
+        tip = str(params["tip"])
+        # a study stored before the magnet's fraction names the magnet itself
+        magnet = str(params["magnet"]) if "magnet" in params else self.magnet_at(tip, float(params[MAGNET_FRACTION]))
         v = self.variables
 
         def value(name: str, lo: float, hi: float) -> float:
@@ -331,7 +350,8 @@ class Space:
         bounds = {"elastomer_diameter_mm": self.diameter_range(magnet, tip) or _span(v.elastomer_diameter_mm),
                   "d_max_mm": self.d_max_bounds(magnet, tip, d_e),
                   "cover_mm": self.cover_bounds(magnet, tip, d_e, d_max), "d_min_mm": self.d_min_bounds(d_max)}
-        out: dict[str, Any] = {"magnet": magnet, "material": point["material"], "tip": tip}
+        out: dict[str, Any] = {"material": point["material"], "tip": tip,
+                               MAGNET_FRACTION: self.magnet_fraction(tip, magnet)}
         for name, (lo, hi) in bounds.items():
             c = getattr(v, name)
             out.update({name: float(point[name])} if isinstance(c, list)
@@ -339,10 +359,11 @@ class Space:
         return out
 
     def suggest(self, trial) -> dict[str, Any]:
-        """The mm point an Optuna trial draws (ask-and-tell): the categories, then each numeric variable's fraction
-        (or, for listed values, the value). The trial keeps the point as its user attribute :data:`POINT` (what tables
-        and the front read)."""
-        params: dict[str, Any] = {k: trial.suggest_categorical(k, v) for k, v in self.choices.items()}
+        """The mm point an Optuna trial draws (ask-and-tell): the material and the tip, the magnet's fraction
+        (:data:`MAGNET_FRACTION`), then each numeric variable's fraction (or, for listed values, the value). The trial
+        keeps the point as its user attribute :data:`POINT` (what tables and the front read)."""
+        params: dict[str, Any] = {k: trial.suggest_categorical(k, self.choices[k]) for k in ("material", "tip")}
+        params[MAGNET_FRACTION] = trial.suggest_float(MAGNET_FRACTION, 0.0, 1.0)
         for name in NUMERIC:
             c = getattr(self.variables, name)
             params.update({name: float(trial.suggest_categorical(name, list(c)))} if isinstance(c, list)
@@ -352,9 +373,9 @@ class Space:
         return point
 
     def latin_hypercube(self, n: int, seed: int) -> list[dict[str, Any]]:
-        """``n`` trials' params of a Latin hypercube in the search's coordinates: the (material, tip) pairs and the
-        magnets each in equal strata (every pair at least once when ``n`` is at least their number), the fractions
-        in ``n`` strata each. Only combinations with a buildable design."""
+        """``n`` trials' params of a Latin hypercube in the search's coordinates: the (material, tip) pairs in equal
+        strata (every pair at least once when ``n`` is at least their number), the magnet's and the numeric
+        variables' fractions in ``n`` strata each. Only combinations with a buildable design."""
         from scipy.stats import qmc
 
         combos = self.buildable()
@@ -364,15 +385,20 @@ class Space:
         out = []
         for row in u:
             mat, tip = pairs[min(int(row[0] * len(pairs)), len(pairs) - 1)]
-            mags = [m for m, a, b in combos if (a, b) == (mat, tip)]
-            params: dict[str, Any] = {"magnet": mags[min(int(row[1] * len(mags)), len(mags) - 1)], "material": mat,
-                                      "tip": tip}
+            params: dict[str, Any] = {"material": mat, "tip": tip, MAGNET_FRACTION: float(row[1])}
             for name, x in zip(NUMERIC, row[2:]):
                 c = getattr(self.variables, name)
                 params.update({name: float(c[min(int(x * len(c)), len(c) - 1)])} if isinstance(c, list)
                               else {_FRACTION_OF[name]: float(x)})
             out.append(params)
         return out
+
+
+def _moment(magnet: str) -> float:
+    """A "DISC:GRADE" magnet's moment up to a constant: its volume times its grade's nominal remanence."""
+    disc, grade = magnet.split(":")
+    d, h, _ = stock_disc(disc)
+    return d * d * h * catalogue("magnets")[grade]["remanence_T"].nominal
 
 
 @lru_cache(maxsize=8)

@@ -316,7 +316,7 @@ def records(study) -> list[Record]:
 
     out = []
     for t in study.get_trials(deepcopy=False, states=(TrialState.COMPLETE, TrialState.FAIL)):
-        if "magnet" not in t.params:  # asked, never given a point (cut short before it was drawn)
+        if POINT not in t.user_attrs and "magnet" not in t.params:  # asked, never given a point (cut short)
             continue
         point = t.user_attrs.get(POINT) or point_of(t.params)  # a study stored before the fractions: mm params
         out.append(Record.of(t.number, point,

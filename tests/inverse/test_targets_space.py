@@ -117,3 +117,48 @@ def test_verification_takes_near_feasible_designs_too():
               rec(5, "infeasible", 1.5, 0.99, ["chip-saturates: ..."])]  # a design-constraint error: never
     picks = _near_front(trials, t)
     assert sorted(picks) == [0, 1, 3]
+
+
+def test_the_findings_constraint_is_graded_where_a_finding_has_a_measure():
+    """The sampler reads how far a design is from feasible: a saturating chip by how far the field at d_min exceeds
+    full scale (more saturation, a larger violation), the resolution asked for by its own requirement only (not
+    counted twice), every other error as one; a design evaluated by the real chain agrees with its own figures."""
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    from magfab.inverse.evaluate import findings_violation
+
+    asks = parse_targets("[require]\nnormal_resolution_mN = 4.0")
+    free = parse_targets("")
+    sat, short, other = "chip-saturates: ...", "resolution-short: ...", "pocket-thin: ..."
+
+    @settings(max_examples=50, deadline=None)
+    @given(a=st.floats(1.0, 50.0, exclude_min=True), b=st.floats(1.0, 50.0, exclude_min=True))
+    def graded(a, b):
+        va, vb = (findings_violation(asks, {"saturation": x}, [sat]) for x in (a, b))
+        assert va > 0 and vb > 0 and (va < vb) == (a < b)
+        assert findings_violation(asks, {"saturation": a}, [sat, short]) == va  # the requirement grades it
+        assert findings_violation(free, {"saturation": a}, [sat, short]) == va + 1.0  # none asked: it counts
+        assert findings_violation(asks, {"saturation": a}, [sat, other]) == va + 1.0
+
+    graded()
+    assert findings_violation(asks, {}, []) == 0.0
+
+
+def test_a_saturating_design_is_infeasible_by_how_far_it_saturates():
+    """The real chain: the same design with d_min closer saturates more, and its findings violation grows."""
+    import json
+
+    from magfab.inverse.evaluate import evaluate
+
+    targets = parse_targets("")
+    point = base_point(STOCK, targets.variables)
+    assert point is not None
+    out = []
+    for d_min in (2.4, 1.9):
+        p = {**point, "d_min_mm": d_min}
+        r = evaluate(p, STOCK.model_dump_json(), targets.model_dump_json())
+        assert r["state"] == "infeasible" and any(e.startswith("chip-saturates") for e in r["errors"]), r
+        out.append((r["metrics"]["saturation"], r["constraints"][-1]))
+    assert 1.0 < out[0][0] < out[1][0] and 0.0 < out[0][1] < out[1][1], out
+    assert json.dumps(out)  # plain numbers
