@@ -24,6 +24,7 @@ from ..check import preflight
 from ..design import SECOND_HOLE_EXTRA_MM, derive
 from ..errors import SpecError
 from ..recipes import catalogue
+from ..recipes.resolve import magnet_grade
 from ..recipes.resolve import printer as printer_recipe
 from ..spec import Spec, spec_from_dict
 from .targets import Targets, Variables
@@ -398,7 +399,7 @@ def _moment(magnet: str) -> float:
     """A "DISC:GRADE" magnet's moment up to a constant: its volume times its grade's nominal remanence."""
     disc, grade = magnet.split(":")
     d, h, _ = stock_disc(disc)
-    return d * d * h * catalogue("magnets")[grade]["remanence_T"].nominal
+    return d * d * h * magnet_grade(grade).remanence_T.nominal
 
 
 @lru_cache(maxsize=8)
