@@ -33,7 +33,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from magfab.inverse.budget import search_sample, study_cost  # noqa: E402  (the project on the path first)
+from magfab.inverse.budget import search_cost, study_cost  # noqa: E402  (the project on the path first)
 from magfab.inverse.space import latin_hypercube  # noqa: E402
 from magfab.inverse.targets import load_targets  # noqa: E402
 
@@ -61,9 +61,7 @@ def estimated_s(path: Path, args: list[str]) -> float:
     targets, base = load_targets(path)
     workers = int(args[args.index("--workers") + 1])
     if args[0] == "design":
-        fidelity = targets.study.models.value
-        return study_cost(search_sample(targets, base), targets.study.trials, base, targets, fidelity, workers,
-                          targets.study.verify, fidelity != "fe").seconds
+        return search_cost(targets, base, workers).seconds
     n = int(args[args.index("--lhs") + 1])
     fidelity = args[args.index("--models") + 1] if "--models" in args else "surrogate"
     points = latin_hypercube(targets.variables, n, targets.study.seed)

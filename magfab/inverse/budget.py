@@ -34,16 +34,14 @@ from ..check import preflight
 from ..design import derive
 from ..errors import InputError
 from ..limits import BUDGET_MB, estimate
-from ..models import mechanics as mech
-from ..models.mechanics import fe_surrogate
-from .evaluate import FE, bench_point
+from .evaluate import FE, _elastomer_model, bench_point
 from .space import NUMERIC, Space, candidate_spec, choices
 from .study import StudyError
 from .targets import Targets, Variables
 
 __all__ = ["MB_PER_WORKER", "MB_PER_DESIGN", "STUDY_FIXED_MB", "memory_mb", "cores", "most_workers", "most_designs",
            "grid_size", "check_scheduler", "check_workers", "check_plan", "check_trials", "PRICED", "StudyCost",
-           "search_sample", "study_cost"]
+           "search_cost", "search_sample", "study_cost"]
 
 #: A local cluster's worker process (one thread) at its peak: measured 137 MB idle and 224 MB after evaluating
 #: designs with the surrogate (the models and the surrogate's table loaded); the full chain's FE adds up to ~200 MB
@@ -172,7 +170,6 @@ class StudyCost:
     build_s: float  # their builds, in the calling process
     workers: int  # 0: an existing cluster (its workers unknown)
     full_chain: bool = False  # every design by the full chain (``--models fe``)
-
     longest_s: float = 0.0  # the costliest design priced (one worker's seconds)
 
     @property
@@ -210,7 +207,7 @@ def _priced(point: dict[str, Any], base: Any, targets: Targets, fidelity: str) -
         return SURROGATE_S, False, 0.0, 0.0
     cost = estimate(design)
     full = FE_CHAIN_S + cost.parts_s["fe"]
-    fe = fidelity == FE or not fe_surrogate.in_region(mech.Body.from_design(design))
+    fe = fidelity == FE or _elastomer_model(design)[0] is None  # evaluate's own choice of model
     return (full if fe else SURROGATE_S), fe, full, cost.seconds
 
 
@@ -219,6 +216,14 @@ def search_sample(targets: Targets, base: Any) -> list[dict[str, Any]]:
     (every one buildable, as the search's are)."""
     space = Space(targets, base)
     return [space.point(p) for p in space.latin_hypercube(PRICED, targets.study.seed)]
+
+
+def search_cost(targets: Targets, base: Any, workers: int) -> StudyCost:
+    """The time of ``magfab design`` on ``targets``: its trials priced on :func:`search_sample`, then its verified
+    designs (the full chain, unless the search ran it already, and their builds)."""
+    fidelity = targets.study.models.value
+    return study_cost(search_sample(targets, base), targets.study.trials, base, targets, fidelity, workers,
+                      targets.study.verify, fidelity != FE)
 
 
 def study_cost(points: Sequence[dict[str, Any]], count: int, base: Any, targets: Targets, fidelity: str,

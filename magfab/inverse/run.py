@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from .budget import StudyCost, check_plan, check_scheduler, check_trials, check_workers, search_sample, study_cost
+from .budget import StudyCost, check_plan, check_scheduler, check_trials, check_workers, search_cost, study_cost
 from .evaluate import FE, SURROGATE
 from .page import write_outputs
 from .pareto import front_mask, pick_for_verification, values_of
@@ -94,9 +94,7 @@ def design(targets_path: Path, out: Path | None = None, scheduler: str | None = 
     folder = out or default_folder(targets)
     _check_folder(folder)
     if estimate:  # the search's points are its own: priced on a sample of the space it searches
-        fidelity = targets.study.models.value
-        estimate(study_cost(search_sample(targets, base), targets.study.trials, base, targets, fidelity, workers or 0,
-                            targets.study.verify, fidelity != FE))
+        estimate(search_cost(targets, base, workers or 0))
     say = progress or (lambda *_: None)
     with client(scheduler, workers) as c:
         with _made(folder):  # once the cluster is there (a bad --scheduler writes nothing); a refused storage: none
