@@ -286,6 +286,11 @@ def _check_gaps(h: np.ndarray, ref: Reference, period_s: float) -> None:
 #: bring them closest, they differ by less than this fraction of what two independent sensors differ by at
 #: least (:func:`agreement_floor_N`).
 COPY_FRACTION = 0.5
+#: A rounded reference is refused as a copy, too, when the sensor's force through the map that puts the most of it
+#: inside the reference's rounding intervals lies outside them by less than this fraction (RMS) of what the
+#: sensor's own noise alone would carry outside them (:func:`copy_residual_N`): a copy lies outside by its added
+#: noise only, 0.001-0.08 of it with noise up to 0.05 mN; an independent reference of 1-10 mN, 1.1-14 times it.
+INTERVAL_FRACTION = 0.3
 #: The share of a reference's quantisation variance (resolution^2 / 12) that stays between it and the sensor's
 #: forces rounded as it is (:func:`agreement_floor_N`).
 QUANTISATION_SHARE = 0.25
@@ -372,12 +377,30 @@ def _axis_residual(ref: np.ndarray, own: np.ndarray, grid: tuple[float, float] |
     return r
 
 
-def _interval_residual(ref: np.ndarray, own: np.ndarray, grid: tuple[float, float]) -> float:
-    """RMS of a rounded reference less the sensor's force through the cubic map that puts the most of it inside
-    the reference's rounding intervals (ref +- step / 2; the least total distance outside them, a linear
-    programme), rounded as the reference is. A rounded copy of the sensor's force has a map with none outside
-    (the rounding itself), which a least-squares fit to the rounded levels misses by a fraction of a step: the
-    rows on one level pull it as much as the rows that cross to the next."""
+def _outside_expected(ref: np.ndarray, mapped: np.ndarray, q: float, sigma: float) -> np.ndarray:
+    """Per row, the mean square distance (N^2) by which white noise of ``sigma`` would carry a force from inside
+    its rounding interval (ref +- q / 2, at the point of it nearest ``mapped``) outside it: sigma^2 (g(a) + g(b)),
+    a and b the distances to its two ends in sigma, g(a) = E[(Z - a)+^2] = (1 + a^2) Phi(-a) - a phi(a)."""
+    from scipy.special import ndtr  # lazy: as in _interval_residual
+    if sigma <= 0.0:
+        return np.zeros_like(ref)
+    c = np.clip(mapped, ref - q / 2.0, ref + q / 2.0)
+    total = np.zeros_like(ref)
+    for a in ((ref + q / 2.0 - c) / sigma, (c - ref + q / 2.0) / sigma):
+        total += (1.0 + a * a) * ndtr(-a) - a * np.exp(-0.5 * a * a) / math.sqrt(2.0 * math.pi)
+    return sigma * sigma * total
+
+
+def _interval_residual(ref: np.ndarray, own: np.ndarray, grid: tuple[float, float],
+                       sigma: float) -> tuple[float, float, float]:
+    """For a rounded reference, the sensor's force through the cubic map that puts the most of it inside the
+    reference's rounding intervals (ref +- step / 2; the least total distance outside them, a linear programme):
+    (RMS of the reference less that map rounded as the reference is, N; the mean square distance outside the
+    intervals and what the sensor's interpolated noise ``sigma`` alone would leave, :func:`_outside_expected`,
+    N^2). A rounded copy has a map with nothing outside but its added noise, which a least-squares fit to the
+    levels misses by a fraction of a step (the rows on one level pull it as much as those that cross to the next);
+    where the force rests at a step's edge, noise added before the rounding flips whole steps: only the distance
+    outside stays small."""
     from scipy import sparse  # lazy: scipy is slow to import and only the merge's guard needs it
     from scipy.optimize import linprog  # lazy: as above
 
@@ -391,9 +414,11 @@ def _interval_residual(ref: np.ndarray, own: np.ndarray, grid: tuple[float, floa
                      b_ub=np.concatenate([ref + q / 2.0, q / 2.0 - ref]),
                      bounds=[(None, None)] * 4 + [(0.0, None)] * n, method="highs")
     if result.status != 0:
-        return math.inf
-    rounded = origin + q * np.round((A @ result.x[:4] - origin) / q)
-    return float(np.sqrt(np.mean((ref - rounded) ** 2)))
+        return math.inf, math.inf, 0.0
+    mapped, outside = A @ result.x[:4], result.x[4:]
+    rounded = origin + q * np.round((mapped - origin) / q)
+    return (float(np.sqrt(np.mean((ref - rounded) ** 2))), float(np.mean(outside * outside)),
+            float(np.mean(_outside_expected(ref, mapped, q, sigma))))
 
 
 def _best_lag(t: np.ndarray, ref: np.ndarray, h: np.ndarray, own: np.ndarray, period_s: float) -> float:
@@ -418,10 +443,13 @@ def _best_lag(t: np.ndarray, ref: np.ndarray, h: np.ndarray, own: np.ndarray, pe
 
 
 def copy_residual_N(h: np.ndarray, own: np.ndarray, ref_t: np.ndarray, ref_F: np.ndarray, axes: list[int],
-                    period_s: float) -> tuple[np.ndarray, float]:
-    """(RMS difference per axis of ``axes``, N; the lag, s) between the reference's force at its own times and
-    the sensor's forces interpolated there linearly (as the merge interpolates), shifted by the lag and mapped
-    by a cubic per axis (a gain, a tare, a mild bend), at the lag that brings them closest."""
+                    period_s: float, noise_N: np.ndarray) -> tuple[np.ndarray, float, tuple[float, float]]:
+    """(RMS difference per axis of ``axes``, N; the lag, s; over the axes the reference rounds, the RMS distance
+    outside its rounding intervals and what the sensor's noise alone would leave, N) between the reference's
+    force at its own times and the sensor's forces interpolated there linearly (as the merge interpolates),
+    shifted by the lag and mapped by a cubic per axis (a gain, a tare, a mild bend), at the lag that brings them
+    closest. ``noise_N`` is the sensor's noise per axis (:func:`sensor_noise_N`), which interpolation leaves 2/3
+    of in variance (:func:`agreement_floor_N`)."""
     inside = (ref_t >= h[0]) & (ref_t <= h[-1])
     t, F = ref_t[inside], ref_F[inside]
     total = np.sum([own[:, k] / (own[:, k].std() or 1.0) for k in axes], axis=0)
@@ -442,17 +470,23 @@ def copy_residual_N(h: np.ndarray, own: np.ndarray, ref_t: np.ndarray, ref_F: np
         width /= 10.0
     r, lag = best
     ok = (t - lag >= h[0]) & (t - lag <= h[-1])
+    outside, expected = 0.0, 0.0
     if ok.sum() >= MIN_ROWS:  # at the best lag, a rounded reference's map as its rounding intervals give it
-        r = np.array([min(rk, _interval_residual(F[ok, k], np.interp(t[ok] - lag, h, own[:, k]), g))
-                      if g is not None else rk for rk, k, g in zip(r, axes, grids)])
-    return r, lag
+        r = r.copy()
+        for i, (k, g) in enumerate(zip(axes, grids)):
+            if g is not None:
+                ri, out, exp = _interval_residual(F[ok, k], np.interp(t[ok] - lag, h, own[:, k]), g,
+                                                  math.sqrt(2.0 / 3.0) * float(noise_N[k]))
+                r[i], outside, expected = min(r[i], ri), outside + out, expected + exp
+    return r, lag, (math.sqrt(outside), math.sqrt(expected))
 
 
 def reject_copied_reference(recording: Recording, reference: Reference, reference_resolution_mN: float) -> None:
     """ScanError (one line) when the reference's force is the recording's own (``Fx_sensor_N``...) resampled,
     shifted in time, scaled, tared, bent or rounded: closer to it, at the best lag and cubic map per axis
     (:func:`copy_residual_N`), than :data:`COPY_FRACTION` of :func:`agreement_floor_N` (RMS over the axes the
-    sensor's force moves on; the sensor's noise measured from its own forces, :func:`sensor_noise_N`). Skipped
+    sensor's force moves on; the sensor's noise measured from its own forces, :func:`sensor_noise_N`), or, for a
+    rounded reference, inside its rounding steps but for :data:`INTERVAL_FRACTION` of the sensor's noise. Skipped
     without the sensor's forces or when they do not move."""
     own = recording.scan.F_N
     if own is None or not np.isfinite(own).all():
@@ -463,18 +497,24 @@ def reject_copied_reference(recording: Recording, reference: Reference, referenc
     axes = [k for k in range(3) if np.ptp(own[:, k]) > max(DEAD_RESOLUTIONS * q, 20.0 * noise[k], FORCE_FLOOR_N)]
     if not axes:
         return
-    r, lag = copy_residual_N(h, own, reference.time_s, reference.F_N, axes, _period(recording))
+    r, lag, (outside, expected) = copy_residual_N(h, own, reference.time_s, reference.F_N, axes,
+                                                  _period(recording), noise)
     floor = agreement_floor_N(noise[axes], reference_resolution_mN)
     rms, limit = float(np.sqrt(np.mean(r * r))), max(COPY_FRACTION * floor, FORCE_FLOOR_N)
-    if rms < limit:
-        names = ", ".join(FORCE_COLUMNS[k] for k in axes)
-        raise ScanError(
-            f"{reference.source} is a copy of {recording.scan.source}'s own forces, not a reference sensor's: its "
+    names = ", ".join(FORCE_COLUMNS[k] for k in axes)
+    head = (f"{reference.source} is a copy of {recording.scan.source}'s own forces, not a reference sensor's: its "
             f"{names} follow the recording's {', '.join(SENSOR_FORCE_COLUMNS[k] for k in axes)} (shifted "
-            f"{1000.0 * lag:.3g} ms, through a gain, a tare and a rounding) to {1000.0 * rms:.2g} mN RMS, under the "
-            f"{1000.0 * limit:.2g} mN that two independent sensors differ by at least (this sensor's noise and "
-            f"the reference's resolution, {reference_resolution_mN:g} mN, calibration.reference_resolution_mN); "
-            "log a reference force sensor during the scan (docs/bundle.md section 1)")
+            f"{1000.0 * lag:.3g} ms, through a gain, a tare and a rounding)")
+    resolution = f"{reference_resolution_mN:g} mN, calibration.reference_resolution_mN"
+    tail = "; log a reference force sensor during the scan (docs/bundle.md section 1)"
+    if rms < limit:
+        raise ScanError(f"{head} to {1000.0 * rms:.2g} mN RMS, under the {1000.0 * limit:.2g} mN that two "
+                        "independent sensors differ by at least (this sensor's noise and the reference's resolution, "
+                        f"{resolution}){tail}")
+    if expected > 0.0 and outside < INTERVAL_FRACTION * expected:
+        raise ScanError(f"{head}: it lies outside the reference's rounding steps ({resolution}) by "
+                        f"{1000.0 * outside:.2g} mN RMS, under {INTERVAL_FRACTION:g} x the {1000.0 * expected:.2g} mN "
+                        f"that this sensor's own noise alone puts outside them{tail}")
 
 
 def reject_dead_reference(recording: Recording, reference: Reference, inside: np.ndarray,

@@ -133,6 +133,16 @@ def test_disguised_copies_of_the_sensors_forces_are_refused(examples):
            noise_mN=st.floats(0.0, 0.05), seed=st.integers(0, 2**16))(_disguised_copy)()
 
 
+@pytest.mark.parametrize("step_mN", [1.0, 3.0, RESOLUTION_MN])
+def test_a_noisy_copy_resting_at_a_steps_edge_is_refused(step_mN):
+    """The copy's rest level a hair from a rounding step's edge: its added noise (0.05 mN) flips whole steps there,
+    about a mN RMS, which the rounding residual alone let through (CI, seed 1803); it still lies inside the steps
+    but for its noise."""
+    q = step_mN / 1000.0
+    tare = (np.array([40.0, -17.0, 65.0]) + 0.5) * q + np.array([0.06e-3, -0.04e-3, 0.02e-3])
+    _disguised_copy(799.0, 0.0039, 0.99999, tuple(tare), step_mN, 0.05, 1803)
+
+
 def _independent(rate, offset, tare, resolution_mN, seed):
     rng = np.random.default_rng(seed)
     times = log_times(rate)
