@@ -11,7 +11,6 @@ from ..errors import Finding, Severity
 from ..models import field as fieldmod
 from ..models import mechanics as mech
 from ..models.predict import ElastomerModel, Prediction, predict
-from ..spec import FieldModel
 from .drift import drift_findings
 from .reference import reference_findings
 
@@ -36,7 +35,7 @@ def prediction_findings(design: Design, pred: Prediction) -> list[Finding]:
     b_dmin = pred.field.Bz_d_min_strongest_G
     if b_dmin > chip.full_scale_z_G:
         strongest = fieldmod.Magnet.from_design(design, "high")
-        d_sat = _saturation_gap(strongest, chip.full_scale_z_G, sen.d_min_mm, design.d_rest_mm)
+        d_sat = fieldmod.saturation_gap(strongest, chip.full_scale_z_G, sen.d_min_mm, design.d_rest_mm)
         out.append(Finding(E, "chip-saturates",
                            f"Bz at d_min = {sen.d_min_mm:g} mm is {b_dmin:.0f} G with the grade's strongest magnet, "
                            f"above the chip's {chip.full_scale_z_G:.0f} G full scale at GAIN_SEL {chip.gain_sel} / RES "
@@ -101,17 +100,6 @@ def prediction_findings(design: Design, pred: Prediction) -> list[Finding]:
                        f"{shear.resolution_mN:.1f} mN, range {shear.range_N:.2f} N (worst case over the material "
                        f"and magnet bands; noise {pred.noise.total_z_G:.3f} G)"))
     return out
-
-
-def _saturation_gap(magnet, full_scale_G: float, lo: float, hi: float) -> float:
-    """The gap d (mm) at which Bz on the axis equals ``full_scale_G`` (bisection; Bz falls with d)."""
-    for _ in range(60):
-        mid = 0.5 * (lo + hi)
-        if fieldmod.bz_br(magnet, mid, 0.0, model=FieldModel.EXACT)[0] > full_scale_G:
-            lo = mid
-        else:
-            hi = mid
-    return hi
 
 
 def predict_with_findings(design: Design,

@@ -23,6 +23,8 @@ import numpy as np
 from ..check import preflight
 from ..design import SECOND_HOLE_EXTRA_MM, derive
 from ..errors import SpecError
+from ..models.chip import chip_setting
+from ..models.field import Magnet, saturation_gap
 from ..recipes import catalogue
 from ..recipes.resolve import magnet_grade
 from ..recipes.resolve import printer as printer_recipe
@@ -212,9 +214,11 @@ class Space:
     """The variables as the search sees them: the categorical choices and four fractions, each mapped onto the part
     of its mm range that the choices before it leave buildable (the geometry :func:`magfab.design.derive` checks:
     the pocket's skin in the elastomer, the magnet's roof between the minimum skin and the cover, a hemisphere tip
-    no taller than the elastomer, d_min between the elastomer's base and d_max, the mould's fill and vent holes), and
-    within the required maximum diameter and height. Any point of the unit cube is then a design the geometry
-    accepts, save a listed-values choice with no value inside its interval (rare; the design then fails as before).
+    no taller than the elastomer, d_min between the elastomer's base and d_max, the mould's fill and vent holes round
+    the channel and its funnel), within the required maximum diameter and height, and with d_min no nearer than where
+    the grade's strongest magnet saturates the chip (:meth:`saturation_floor`: the check refuses every design
+    nearer). Any point of the unit cube is then a design the geometry accepts, save a listed-values choice with no
+    value inside its interval (rare; the design then fails as before).
 
     The base spec fixes the stack (pad + glue above the sensing point), the pocket's clearance, the minimum skin and
     the insertion channel; the targets the ranges and the required maxima."""
@@ -231,6 +235,8 @@ class Space:
         self.max_height = r.max_height_mm if r.max_height_mm is not None else math.inf
         self.max_diameter = r.max_diameter_mm if r.max_diameter_mm is not None else math.inf
         self.max_diameter = min(self.max_diameter, _board_limit(base, float(max(v.elastomer_diameter_mm))))
+        self.full_scale_G = _full_scale_z_G(base, targets)
+        self._saturation: dict[str, float] = {}
         self.all_choices = choices(v)
         self._d_range: dict[tuple[str, str], tuple[float, float] | None] = {}
         buildable = [m for m in self.all_choices["magnet"]
@@ -260,6 +266,17 @@ class Space:
         d, h, _ = stock_disc(magnet.split(":")[0])
         return d / 2.0, h
 
+    def saturation_floor(self, magnet: str) -> float:
+        """The least d_min (mm) at which the chip, at the targets' gain and resolution, does not saturate with the
+        grade's strongest magnet of this disc (the check's M9, chip-saturates: the exact Bz on the axis against the
+        chip's full scale); nearer, every design is refused, so the space starts d_min there."""
+        if magnet not in self._saturation:
+            disc, grade = magnet.split(":")
+            d, h, _ = stock_disc(disc)
+            strongest = Magnet(d / 2.0, h, magnet_grade(grade).remanence_T.high)
+            self._saturation[magnet] = saturation_gap(strongest, self.full_scale_G)
+        return self._saturation[magnet]
+
     def _cover_floor(self, r_e: float, r_p: float, tip: str) -> float:
         """The least cover the skin allows (over a hemisphere tip, the dome's skin above the pocket's rim)."""
         floor = self.skin
@@ -271,7 +288,11 @@ class Space:
         r_m, h_m = self._magnet(magnet)
         r_p, r_e, s = r_m + self.clearance, d_e / 2.0, self.stack
         cover_lo = _lowest_at_least(self.variables.cover_mm, self._cover_floor(r_e, r_p, tip))
-        lo = max(s + self.skin + self.clearance, _lowest_at_least(self.variables.d_min_mm, s + _GAP_MM) + _GAP_MM)
+        d_min_floor = max(s + _GAP_MM, self.saturation_floor(magnet))
+        lo = max(s + self.skin + self.clearance, _lowest_at_least(self.variables.d_min_mm, d_min_floor) + _GAP_MM)
+        # the pocket's floor high enough that the channel's funnel, clipped at the base, leaves the mould's fill and
+        # vent holes their annulus (design: the core's base radius is R_p less the floor's height when it is low)
+        lo = max(lo, s + self.clearance + r_p + self.annulus - r_e)
         if tip == "hemisphere":  # the elastomer at least as tall as the dome's radius, with the most cover allowed
             lo = max(lo, r_e - float(max(self.variables.cover_mm)) + s - h_m)
         return lo, self.max_height + s - h_m - cover_lo
@@ -284,8 +305,8 @@ class Space:
             lo = max(lo, r_e - roof)
         return lo, self.max_height - roof
 
-    def d_min_bounds(self, d_max: float) -> tuple[float, float]:
-        return self.stack + _GAP_MM, d_max - _GAP_MM
+    def d_min_bounds(self, magnet: str, d_max: float) -> tuple[float, float]:
+        return max(self.stack + _GAP_MM, self.saturation_floor(magnet)), d_max - _GAP_MM
 
     def _d_ok(self, magnet: str, tip: str, d_e: float) -> bool:
         lo, hi = self.d_max_bounds(magnet, tip, d_e)
@@ -339,7 +360,7 @@ class Space:
         d_e = value("elastomer_diameter_mm", *(self.diameter_range(magnet, tip) or _span(v.elastomer_diameter_mm)))
         d_max = value("d_max_mm", *self.d_max_bounds(magnet, tip, d_e))
         cover = value("cover_mm", *self.cover_bounds(magnet, tip, d_e, d_max))
-        d_min = value("d_min_mm", *self.d_min_bounds(d_max))
+        d_min = value("d_min_mm", *self.d_min_bounds(magnet, d_max))
         return point_of({"magnet": magnet, "material": params["material"], "tip": tip, "d_max_mm": d_max,
                          "d_min_mm": d_min, "elastomer_diameter_mm": d_e, "cover_mm": cover})
 
@@ -350,7 +371,8 @@ class Space:
         d_e, d_max = float(point["elastomer_diameter_mm"]), float(point["d_max_mm"])
         bounds = {"elastomer_diameter_mm": self.diameter_range(magnet, tip) or _span(v.elastomer_diameter_mm),
                   "d_max_mm": self.d_max_bounds(magnet, tip, d_e),
-                  "cover_mm": self.cover_bounds(magnet, tip, d_e, d_max), "d_min_mm": self.d_min_bounds(d_max)}
+                  "cover_mm": self.cover_bounds(magnet, tip, d_e, d_max),
+                  "d_min_mm": self.d_min_bounds(magnet, d_max)}
         out: dict[str, Any] = {"material": point["material"], "tip": tip,
                                MAGNET_FRACTION: self.magnet_fraction(tip, magnet)}
         for name, (lo, hi) in bounds.items():
@@ -427,6 +449,13 @@ def _board_limit(base: Spec, top: float) -> float:
         mid = (lo + hi) / 2.0
         lo, hi = (mid, hi) if fits(mid) else (lo, mid)
     return lo
+
+
+def _full_scale_z_G(base: Spec, targets: Targets) -> float:
+    """The chip's Bz full scale (G) at the targets' register fields ([chip]), on the base design."""
+    raw = base.toml_dict()
+    raw["sensor"].update(**targets.chip.model_dump())
+    return chip_setting(derive(spec_from_dict(raw))).full_scale_z_G
 
 
 def _span(c: Any) -> tuple[float, float]:

@@ -24,10 +24,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from ..errors import InputError
 from ..spec import Spec
 from .evaluate import constraint_names, evaluate
-from .space import POINT, Space, base_point, point_of
+from .pareto import front_mask
+from .space import FRACTIONS, MAGNET_FRACTION, POINT, Space, base_point, point_of
 from .targets import Sampler, Targets
 
 # Imported lazily, inside the functions that use them, for speed: Dask, Optuna and SQLAlchemy take a
@@ -115,6 +118,13 @@ def _sigint_blocked() -> Iterator[None]:
 #: Of the trials after the first phase, one in this many has its (material, tip) fixed to the pair the study has
 #: tried least (the sampler draws the rest of it): the categories stay explored however the sampler's model narrows.
 EXPLORE_EVERY = 4
+#: Of the trials after the first phase that :data:`EXPLORE_EVERY` leaves to the sampler, one in this many is instead a
+#: step from one of the study's best designs (:func:`_refine`): the sampler's model is broad where few designs are
+#: feasible, and the steps walk along and into the feasible front it has found.
+REFINE_EVERY = 2
+#: The step's spread over the unit fractions (the magnet's and each numeric variable's): this much right after the
+#: first phase, narrowing to a fifth of it by the study's last trial.
+REFINE_SIGMA = 0.1
 
 
 def first_phase(targets: Targets) -> int:
@@ -269,6 +279,7 @@ def run_study(targets: Targets, base: Spec, storage: str | Path, dask_client,
 
     def submit() -> None:
         _explore(study, space, n_first)
+        _refine(study, targets, n_first)
         trial = study.ask()
         trial.set_user_attr(RUNNER, runner)
         point = space.suggest(trial)
@@ -308,6 +319,44 @@ def _explore(study, space: Space, n_first: int) -> None:
     tried = [(t.params.get("material"), t.params.get("tip")) for t in trials]
     material, tip = min(pairs, key=lambda p: tried.count(p))
     study.enqueue_trial({"material": material, "tip": tip})
+
+
+def _elite(trials: list, targets: Targets) -> list:
+    """The study's best designs so far: its feasible front (no feasible design better on every objective), or, while
+    none is feasible, the three that miss their constraints by least (the sum of their violations)."""
+    def violation(t) -> float:
+        return sum(max(float(v), 0.0) for v in (t.constraints or {}).values())
+
+    feasible = [t for t in trials if violation(t) <= 0.0]
+    if feasible:
+        return [t for t, keep in zip(feasible, front_mask(np.array([t.values for t in feasible]),
+                                                          targets.directions())) if keep]
+    return sorted(trials, key=lambda t: (violation(t), t.number))[:3]
+
+
+def _refine(study, targets: Targets, n_first: int) -> None:
+    """Before an ask: past the first phase, one of every :data:`REFINE_EVERY` trials that :func:`_explore` leaves is
+    enqueued as a step from one of the study's best designs (:func:`_elite`, drawn with the study's seed and the
+    trial's number): its categories kept, its magnet's and numeric fractions moved by a normal step of
+    :data:`REFINE_SIGMA` (narrowing as the study goes on), clipped to the unit interval: the step is buildable too."""
+    from optuna.trial import TrialState
+
+    trials = study.get_trials(deepcopy=False)
+    number, past = len(trials), len(trials) - n_first
+    if past < 0 or past % EXPLORE_EVERY == EXPLORE_EVERY - 1 or past % REFINE_EVERY != 0 or \
+            any(t.state is TrialState.WAITING for t in trials):
+        return
+    elite = _elite([t for t in trials if t.state is TrialState.COMPLETE], targets)
+    if not elite:
+        return
+    rng = np.random.default_rng([targets.study.seed, number])
+    parent = elite[int(rng.integers(len(elite)))]
+    sigma = REFINE_SIGMA * (1.0 - 0.8 * min(1.0, past / max(1, targets.study.trials - n_first)))
+    params = dict(parent.params)
+    for name in (MAGNET_FRACTION, *FRACTIONS):
+        if name in params:
+            params[name] = float(np.clip(float(params[name]) + sigma * rng.standard_normal(), 0.0, 1.0))
+    study.enqueue_trial(params)
 
 
 def records(study) -> list[Record]:

@@ -42,12 +42,45 @@ def test_every_point_of_the_search_is_buildable():
         assert _close(space.point(space.params(p)), p)
 
 
+@pytest.mark.parametrize("name", ["fingertip", "taxel", "stiff_pad"])
+def test_no_point_of_the_search_saturates_the_chip_and_the_floor_is_tight(name):
+    """Every point of the search on each bench set builds (the build's preflight), and d_min starts where the
+    grade's strongest magnet saturates the chip: magpylib's cylinder (not the models' field) puts Bz at each point's
+    d_min within the chip's full scale, and 0.05 mm nearer than the floor above it."""
+    import magpylib
+
+    from magfab.inverse.targets import load_targets
+    from magfab.models.chip import chip_setting
+    from magfab.models.field import Magnet
+
+    targets, base = load_targets(BENCH / "targets" / f"{name}.toml")
+    space = Space(targets, base)
+
+    def bz_G(m: Magnet, d_mm: float) -> float:  # below the lower face on the axis; lengths in mm, B in T
+        cyl = magpylib.magnet.Cylinder(polarization=(0, 0, m.remanence_T), dimension=(2 * m.radius_mm, m.height_mm))
+        return 1e4 * float(cyl.getB((0.0, 0.0, -m.height_mm / 2.0 - d_mm))[2])
+
+    at_floor = 0
+    for p in (space.point(q) for q in space.latin_hypercube(120, 4)):
+        design = derive(candidate_spec(p, base, targets, "probe"))
+        preflight(design)  # every point builds: the build's own refusals
+        strongest, full = Magnet.from_design(design, "high"), chip_setting(design).full_scale_z_G
+        d_min, floor = float(p["d_min_mm"]), space.saturation_floor(f"{p['magnet']}:{p['grade']}")
+        assert bz_G(strongest, d_min) <= full * (1 + 1e-6), p
+        if floor > space.stack:  # the floor is the chip's, not the stack's
+            assert bz_G(strongest, floor - 0.05) > full, p
+            at_floor += d_min < floor + 0.1
+    assert at_floor > 0  # the sampler reaches the closest, best-resolving distances
+
+
 def _close(a, b) -> bool:
     return all(a[k] == b[k] if isinstance(b[k], str) else abs(a[k] - b[k]) < 1e-9 for k in b)
 
 
 def test_the_base_point_round_trips():
-    stock = BASE.model_copy(update={"magnet": BASE.magnet.model_copy(update={"grade": "N52"})})
+    # MagOne's disc in N52, 3 mm at the closest (its 2.5 mm would saturate the chip with the grade's strongest)
+    stock = BASE.model_copy(update={"magnet": BASE.magnet.model_copy(update={"grade": "N52"}),
+                                    "sensor": BASE.sensor.model_copy(update={"d_min_mm": 3.0})})
     targets = parse_targets("")
     point = base_point(stock, targets.variables)
     space = Space(targets, BASE)

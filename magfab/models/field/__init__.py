@@ -63,7 +63,7 @@ from .closed_forms import (
 )
 from .exact import exact, exact_rounding_estimate, magpylib_cylinder
 from .magnet import DEFAULT_RTOL, EXACT_RTOL, MU0, SURFACE_GAP, FieldModelError, Magnet
-from .sensor import FD_STEP, bz_br, dbz_dz
+from .sensor import FD_STEP, bz_br, dbz_dz, saturation_gap
 from .surrogate import SURROGATE_BUILD_RTOL, SurrogateDomain, SurrogateTable, surrogate, surrogate_table
 from .tilt import lateral_field, lateral_rates, tilted_field
 from .timing import Measurement, measure
@@ -75,6 +75,6 @@ __all__ = [
     "dipole", "dipole_error_estimate", "axial_multipoles",
     "SURROGATE_BUILD_RTOL", "SurrogateDomain", "SurrogateTable", "surrogate_table", "surrogate",
     "working_volume", "ModelAccuracy", "model_error",
-    "FieldModel", "Model", "MODELS", "model_name", "Choice", "choose", "bz_br", "dbz_dz", "FD_STEP",
+    "FieldModel", "Model", "MODELS", "model_name", "Choice", "choose", "bz_br", "dbz_dz", "saturation_gap", "FD_STEP",
     "Measurement", "measure", "lateral_field", "lateral_rates", "tilted_field",
 ]

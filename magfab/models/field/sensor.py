@@ -12,7 +12,7 @@ from .closed_forms import axis_dbz_dz
 from .exact import exact
 from .magnet import DEFAULT_RTOL, Magnet
 
-__all__ = ["bz_br", "dbz_dz", "FD_STEP"]
+__all__ = ["bz_br", "dbz_dz", "saturation_gap", "FD_STEP"]
 
 #: Central-difference step for :func:`dbz_dz`, in magnet radii. Exact and dipole are smooth: a small
 #: step (truncation ~1e-7, rounding ~1e-12). The surrogate is piecewise bilinear: the step must span
@@ -62,3 +62,20 @@ def dbz_dz(magnet: Magnet, d_mm: ArrayLike, r_mm: ArrayLike = 0.0, model: FieldM
     dz = np.array([0.0, 0.0, FD_STEP[name] * magnet.radius_mm])
     up, down = _call(name, magnet, pts + dz, rtol), _call(name, magnet, pts - dz, rtol)
     return ((up[:, 2] - down[:, 2]) / (2.0 * dz[2])).reshape(shape)[()]
+
+
+def saturation_gap(magnet: Magnet, full_scale_G: float, lo: float = 1e-3, hi: float = 1.0) -> float:
+    """The axial distance d (mm) at which the exact Bz on the axis falls to ``full_scale_G``: nearer, a chip of that
+    full scale saturates. Bisection (Bz falls with d) between ``lo`` and ``hi``, ``hi`` first doubled until the field
+    there is under full scale; ``lo`` when the field is under it there already."""
+    def over(d: float) -> bool:
+        return float(bz_br(magnet, d, 0.0, model=FieldModel.EXACT)[0]) > full_scale_G
+
+    if not over(lo):
+        return lo
+    while over(hi) and hi < 1e4:
+        lo, hi = hi, 2.0 * hi
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if over(mid) else (lo, mid)
+    return hi
