@@ -278,8 +278,9 @@ def run_study(targets: Targets, base: Spec, storage: str | Path, dask_client,
     n_first = first_phase(targets) + 1
 
     def submit() -> None:
-        _explore(study, space, n_first)
-        _refine(study, targets, n_first)
+        trials = study.get_trials(deepcopy=False)  # once per ask: both read the same list
+        if not _explore(study, space, n_first, trials):
+            _refine(study, targets, n_first, trials)
         trial = study.ask()
         trial.set_user_attr(RUNNER, runner)
         point = space.suggest(trial)
@@ -305,20 +306,21 @@ def run_study(targets: Targets, base: Spec, storage: str | Path, dask_client,
     return study
 
 
-def _explore(study, space: Space, n_first: int) -> None:
+def _explore(study, space: Space, n_first: int, trials: list) -> bool:
     """Before an ask: past the first phase, one trial in :data:`EXPLORE_EVERY` is enqueued with the (material, tip)
-    pair the study has tried least (ties: the choices' order), its magnet and fractions left to the sampler."""
+    pair the study has tried least (ties: the choices' order), its magnet and fractions left to the sampler; True when
+    it enqueued one. ``trials``: the study's trials, as asked."""
     from optuna.trial import TrialState
 
-    trials = study.get_trials(deepcopy=False)
     number = len(trials)
     if number < n_first or (number - n_first) % EXPLORE_EVERY != EXPLORE_EVERY - 1 or \
             any(t.state is TrialState.WAITING for t in trials):
-        return
+        return False
     pairs = [(m, t) for m in space.choices["material"] for t in space.choices["tip"]]
     tried = [(t.params.get("material"), t.params.get("tip")) for t in trials]
     material, tip = min(pairs, key=lambda p: tried.count(p))
     study.enqueue_trial({"material": material, "tip": tip})
+    return True
 
 
 def _elite(trials: list, targets: Targets) -> list:
@@ -334,14 +336,13 @@ def _elite(trials: list, targets: Targets) -> list:
     return sorted(trials, key=lambda t: (violation(t), t.number))[:3]
 
 
-def _refine(study, targets: Targets, n_first: int) -> None:
+def _refine(study, targets: Targets, n_first: int, trials: list) -> None:
     """Before an ask: past the first phase, one of every :data:`REFINE_EVERY` trials that :func:`_explore` leaves is
     enqueued as a step from one of the study's best designs (:func:`_elite`, drawn with the study's seed and the
     trial's number): its categories kept, its magnet's and numeric fractions moved by a normal step of
     :data:`REFINE_SIGMA` (narrowing as the study goes on), clipped to the unit interval: the step is buildable too."""
     from optuna.trial import TrialState
 
-    trials = study.get_trials(deepcopy=False)
     number, past = len(trials), len(trials) - n_first
     if past < 0 or past % EXPLORE_EVERY == EXPLORE_EVERY - 1 or past % REFINE_EVERY != 0 or \
             any(t.state is TrialState.WAITING for t in trials):

@@ -294,6 +294,8 @@ INTERVAL_FRACTION = 0.3
 #: The share of a reference's quantisation variance (resolution^2 / 12) that stays between it and the sensor's
 #: forces rounded as it is (:func:`agreement_floor_N`).
 QUANTISATION_SHARE = 0.25
+#: The share of white noise's variance that linear interpolation between its samples keeps.
+INTERPOLATED_SHARE = 2.0 / 3.0
 #: A reference whose force spans at most this many of its resolutions on every axis over the scan is dead.
 DEAD_RESOLUTIONS = 4.0
 #: An axis the sensor's own forces move on by this many reference resolutions (and at least
@@ -327,7 +329,7 @@ def agreement_floor_N(noise_N: np.ndarray, reference_resolution_mN: float) -> fl
     difference crosses one; :data:`QUANTISATION_SHARE` of q^2 / 12 is what that leaves in the simulated bench
     with the sensor's noise well under q (a MagOne: 0.2-0.6 mN against 6.25 mN: 0.6-1.1 mN RMS)."""
     q = reference_resolution_mN / 1000.0
-    return float(np.sqrt((2.0 / 3.0) * np.mean(noise_N ** 2) + QUANTISATION_SHARE * q * q / 12.0))
+    return float(np.sqrt(INTERPOLATED_SHARE * np.mean(noise_N ** 2) + QUANTISATION_SHARE * q * q / 12.0))
 
 
 def _grid(values: np.ndarray) -> tuple[float, float] | None:
@@ -476,7 +478,7 @@ def copy_residual_N(h: np.ndarray, own: np.ndarray, ref_t: np.ndarray, ref_F: np
         for i, (k, g) in enumerate(zip(axes, grids)):
             if g is not None:
                 ri, out, exp = _interval_residual(F[ok, k], np.interp(t[ok] - lag, h, own[:, k]), g,
-                                                  math.sqrt(2.0 / 3.0) * float(noise_N[k]))
+                                                  math.sqrt(INTERPOLATED_SHARE) * float(noise_N[k]))
                 r[i], outside, expected = min(r[i], ri), outside + out, expected + exp
     return r, lag, (math.sqrt(outside), math.sqrt(expected))
 
