@@ -281,7 +281,6 @@ def _check_gaps(h: np.ndarray, ref: Reference, period_s: float) -> None:
 # ---------------------------------------------------------------------------------------------------
 # Guards on the merged reference: a copy of the recording's own forces, a dead reference
 
-
 #: A reference is refused as a copy of the sensor's own forces when, at the lag and cubic map (per axis) that
 #: bring them closest, they differ by less than this fraction of what two independent sensors differ by at
 #: least (:func:`agreement_floor_N`).
@@ -300,8 +299,7 @@ INTERPOLATED_SHARE = 2.0 / 3.0
 DEAD_RESOLUTIONS = 4.0
 #: An axis the sensor's own forces move on by this many reference resolutions (and at least
 #: :data:`LIVE_FLOOR_N`) must move in the reference too.
-LIVE_RESOLUTIONS = 20.0
-LIVE_FLOOR_N = 0.05
+LIVE_RESOLUTIONS, LIVE_FLOOR_N = 20.0, 0.05
 #: The file's last decimal (1e-6 N) and the floor of every force threshold, N.
 FORCE_FLOOR_N = 1e-5
 #: The lag is refined around the cross-correlation's in this many passes of this many steps, each a tenth as
