@@ -159,9 +159,10 @@ def test_a_studys_estimate_grows_with_its_designs_and_shrinks_with_its_workers(n
 
 
 def test_the_estimate_counts_the_designs_outside_the_surrogates_region():
-    """The default variables reach bodies the surrogate does not cover: those are priced at the FE's estimate, as
-    the study evaluates them."""
-    targets, base, points = _sample("[study]\ntrials = 300\n", budget.PRICED, 3)
+    """Variables that reach bodies the surrogate does not cover (a small elastomer under a thick cover: c past the
+    box's 1.05 R): those are priced at the FE's estimate, as the study evaluates them."""
+    targets, base, points = _sample("[study]\ntrials = 300\n[variables]\nelastomer_diameter_mm = [6.0, 8.0]\n"
+                                    "cover_mm = [2.0, 4.0]\n", budget.PRICED, 3)
     fe = _models(points, base, targets).count("fe")
     cost = budget.study_cost(points, len(points), base, targets, "surrogate", 2)
     assert cost.by_fe == fe > 0

@@ -47,6 +47,26 @@ def test_the_region_covers_the_example_targets_whole_box():
     assert not outside, outside[:3]
 
 
+@pytest.mark.parametrize("name", ["fingertip", "taxel", "stiff_pad"])
+def test_the_region_covers_each_bench_target_sets_search(name):
+    """Every design of a hypercube of the search's coordinates on each bench target set (bench/targets/: a small
+    taxel's magnet nearly as wide as its body, a stiff pad's thick cover), of either tip, is in the surrogate's
+    region: the search evaluates none of them with the FE for its geometry."""
+    from pathlib import Path
+
+    from magfab.design import derive
+    from magfab.inverse.space import Space, candidate_spec
+    from magfab.inverse.targets import load_targets
+
+    targets, base = load_targets(Path(__file__).resolve().parents[2] / "bench" / "targets" / f"{name}.toml")
+    space = Space(targets, base)
+    bodies = [mech.Body.from_design(derive(candidate_spec(space.point(q), base, targets, "box")))
+              for q in space.latin_hypercube(300, 5)]
+    assert {b.tip for b in bodies} == {Tip.HEMISPHERE, Tip.FLAT}
+    outside = [(S.ratios(b), S._refusal(b)) for b in bodies if not S.in_region(b)]
+    assert not outside, outside[:3]
+
+
 def _force_errors(x: dict[str, float], tip: Tip, up_to: float) -> np.ndarray:
     """Relative errors of the surrogate's force against the FE's normal curve (the table's mesh, no shear probe) at
     the table's grid points up to ``up_to`` R that both reach, for the body of ratios ``x`` at the table's radius."""
