@@ -34,7 +34,7 @@ from ..models.mechanics import fe_surrogate
 from ..models.predict import surrogate_curve
 from ..recipes.resolve import printer as printer_recipe
 from ..spec import FieldModel, Spec
-from .space import candidate_spec
+from .space import candidate_spec, saturation_floor
 from .targets import Models, Objective, Targets
 
 __all__ = ["SURROGATE", "FE", "REQUIREMENTS", "evaluate", "metrics_of", "constraint_names", "requirement_names",
@@ -213,14 +213,18 @@ def bench_point(point: dict[str, Any], base: Spec, targets: Targets) -> dict[str
     """``point`` with its dimensions on what the printer makes (:func:`bench_step_mm`): d_max, d_min and the elastomer
     diameter on the step, and the cover adjusted so the elastomer's height is on it too. What the full chain verifies
     and the specs are written from, so the figures reported are the design's as built. Listed values stay as
-    listed."""
+    listed. d_min stays at or past the chip's saturation (the search's floor, :func:`saturation_floor`); a rounding
+    the geometry refuses (a d_max past its stack's bound by less than a step) leaves the point as searched."""
     step = bench_step_mm(base)
     out = dict(point)
     v = targets.variables
     for key in ("d_max_mm", "d_min_mm", "elastomer_diameter_mm"):
         c = getattr(v, key)
         if not isinstance(c, list):
-            out[key] = _on_step(float(point[key]), step, c)
+            lo, hi = c
+            if key == "d_min_mm":
+                lo = max(lo, saturation_floor(point, base, targets))
+            out[key] = _on_step(float(point[key]), step, (lo, hi))
     if out["d_min_mm"] >= out["d_max_mm"]:  # rounding must not turn a design into one the spec refuses
         out["d_min_mm"], out["d_max_mm"] = point["d_min_mm"], point["d_max_mm"]
     if not isinstance(v.cover_mm, list):
@@ -229,7 +233,15 @@ def bench_point(point: dict[str, Any], base: Spec, targets: Targets) -> dict[str
         lo, hi = v.cover_mm
         if lo - 1e-9 <= cover <= hi + 1e-9:
             out["cover_mm"] = round(cover, 9)
-    return out
+    return out if _derives(out, base, targets) or not _derives(point, base, targets) else dict(point)
+
+
+def _derives(point: dict[str, Any], base: Spec, targets: Targets) -> bool:
+    try:
+        derive(candidate_spec(point, base, targets, "bench"))
+    except InputError:
+        return False
+    return True
 
 
 def _elastomer_model(design) -> tuple[Any, str]:

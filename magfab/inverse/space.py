@@ -34,8 +34,8 @@ from .targets import Targets, Variables
 # Imported lazily, inside the functions that use it, for speed: scipy takes a
 # noticeable time to import, and importing this module should not.
 
-__all__ = ["NUMERIC", "CATEGORICAL", "stock_disc", "candidate_spec", "suggest", "grid", "latin_hypercube",
-           "base_point", "Space", "FRACTIONS", "MAGNET_FRACTION", "POINT"]
+__all__ = ["NUMERIC", "CATEGORICAL", "stock_disc", "saturation_floor", "candidate_spec", "suggest", "grid",
+           "latin_hypercube", "base_point", "Space", "FRACTIONS", "MAGNET_FRACTION", "POINT"]
 
 #: The numeric variables (mm), in the order tables show them.
 NUMERIC = ("d_max_mm", "d_min_mm", "elastomer_diameter_mm", "cover_mm")
@@ -272,9 +272,7 @@ class Space:
         chip's full scale); nearer, every design is refused, so the space starts d_min there."""
         if magnet not in self._saturation:
             disc, grade = magnet.split(":")
-            d, h, _ = stock_disc(disc)
-            strongest = Magnet(d / 2.0, h, magnet_grade(grade).remanence_T.high)
-            self._saturation[magnet] = saturation_gap(strongest, self.full_scale_G)
+            self._saturation[magnet] = _saturation_floor(disc, grade, self.full_scale_G)
         return self._saturation[magnet]
 
     def _cover_floor(self, r_e: float, r_p: float, tip: str) -> float:
@@ -449,6 +447,17 @@ def _board_limit(base: Spec, top: float) -> float:
         mid = (lo + hi) / 2.0
         lo, hi = (mid, hi) if fits(mid) else (lo, mid)
     return lo
+
+
+def _saturation_floor(disc: str, grade: str, full_scale_G: float) -> float:
+    d, h, _ = stock_disc(disc)
+    strongest = Magnet(d / 2.0, h, magnet_grade(grade).remanence_T.high)
+    return saturation_gap(strongest, full_scale_G)
+
+
+def saturation_floor(point: dict[str, Any], base: Spec, targets: Targets) -> float:
+    """:meth:`Space.saturation_floor` of a point's magnet (``magnet`` a stock disc, ``grade``), without the space."""
+    return _saturation_floor(str(point["magnet"]), str(point["grade"]), _full_scale_z_G(base, targets))
 
 
 def _full_scale_z_G(base: Spec, targets: Targets) -> float:
