@@ -10,6 +10,7 @@ import contextlib
 import csv
 import hashlib
 import json
+import math
 import subprocess
 import sys
 from pathlib import Path
@@ -366,19 +367,23 @@ PRESSED, PRESS_N = 2, 0.5  # a press of 0.5 N straight down on the middle taxel 
 AT_REST = 20  # cycles at rest the stream must print after the press
 
 
-def _cycles(stream_out: str) -> list[dict[int, list[float]]]:
+def _cycles(stream_out: str, unread: list | None = None) -> list[dict[int, list[float]]]:
     """`stream`'s cycles in the order printed, each {taxel: [Fx, Fy, Fz]}: a cycle's lines are consecutive and share
-    its sequence number (the second column; one byte, it wraps every 256 cycles, so it only tells cycles apart)."""
+    its sequence number (the second column; one byte, it wraps every 256 cycles, so it only tells cycles apart).
+    ``unread`` collects (cycle index, flags) of each line whose taxel was not read: its frame missing ('M', dropped
+    on the line) or its chip's error ('E')."""
     cycles: list[dict[int, list[float]]] = []
     seq = None
     for line in stream_out.splitlines():
         r = line.split()
-        if len(r) < 6 or line.startswith("#") or not r[1].isdigit():
+        if len(r) < 11 or line.startswith("#") or not r[1].isdigit():
             continue
         if r[1] != seq:
             cycles.append({})
             seq = r[1]
         cycles[-1][int(r[2])] = [float(x) for x in r[3:6]]
+        if unread is not None and ("M" in r[10] or "E" in r[10] or any(math.isnan(f) for f in cycles[-1][int(r[2])])):
+            unread.append((len(cycles) - 1, r[10]))
     return cycles
 
 
@@ -468,9 +473,14 @@ def test_a_press_on_one_taxel_streams_on_that_taxel_only(strip_walked):
     predicted resolution (the host removes the magnet's field from theirs)."""
     bench, build = strip_walked, strip_walked.cwd
     ran = _ran(bench, "magfab-readout stream --zero 200")
-    cycles = _cycles(ran.stdout)
-    whole = [c for c in cycles if len(c) == 5]
-    assert len(whole) >= 100 and len(whole) >= len(cycles) - 2, ran.stderr  # a cycle cut by Ctrl-C at most
+    unread: list[tuple[int, str]] = []
+    cycles = _cycles(ran.stdout, unread)
+    # A frame the port dropped (nobody read it in time on a loaded machine, as a USB serial line drops) reads NaN,
+    # flagged 'M'; such cycles are left out, and must be rare.
+    dropped = {i for i, _ in unread}
+    assert all(f[4] == "M" for _, f in unread) and len(dropped) <= len(cycles) // 20, (unread, ran.stderr)
+    whole = [c for i, c in enumerate(cycles) if len(c) == 5 and i not in dropped]
+    assert len(whole) >= 100 and len(whole) >= len(cycles) - 2 - len(dropped), ran.stderr  # a cycle cut by Ctrl-C
     pred = json.loads((build / "predictions.json").read_text())
     resolution = [pred["shear"]["resolution_mN"] / 1e3] * 2 + [pred["normal"]["resolution_mN"] / 1e3]
     cal = json.loads((build / "calibration" / f"taxel_{PRESSED:02d}.json").read_text())
