@@ -124,14 +124,17 @@ EXPLORE_EVERY = 4
 REFINE_EVERY = 2
 #: The step's spread over the unit fractions (the magnet's and each numeric variable's): this much right after the
 #: first phase, narrowing to a fifth of it by the study's last trial.
-REFINE_SIGMA = 0.1
+REFINE_SIGMA = 0.2
+#: Steps drawn for one refinement before it gives up on finding a design the study has not evaluated (a space of
+#: listed values or few magnets has few neighbours); the sampler then draws that trial.
+REFINE_DRAWS = 8
 
 
 def first_phase(targets: Targets) -> int:
-    """Trials of the space-filling first phase (:meth:`Space.latin_hypercube`): a fifth of the study, 10 to 100, and
+    """Trials of the space-filling first phase (:meth:`Space.latin_hypercube`): a third of the study, 10 to 100, and
     at least two per (material, tip) pair; never more than the study."""
     pairs = len(targets.variables.material_keys()) * len(targets.variables.tips)
-    return min(targets.study.trials, max(10, 2 * pairs, min(targets.study.trials // 5, 100)))
+    return min(targets.study.trials, max(10, 2 * pairs, min(targets.study.trials // 3, 100)))
 
 
 def _sampler(targets: Targets):
@@ -280,7 +283,7 @@ def run_study(targets: Targets, base: Spec, storage: str | Path, dask_client,
     def submit() -> None:
         trials = study.get_trials(deepcopy=False)  # once per ask: both read the same list
         if not _explore(study, space, n_first, trials):
-            _refine(study, targets, n_first, trials)
+            _refine(study, space, targets, n_first, trials)
         trial = study.ask()
         trial.set_user_attr(RUNNER, runner)
         point = space.suggest(trial)
@@ -336,11 +339,12 @@ def _elite(trials: list, targets: Targets) -> list:
     return sorted(trials, key=lambda t: (violation(t), t.number))[:3]
 
 
-def _refine(study, targets: Targets, n_first: int, trials: list) -> None:
+def _refine(study, space: Space, targets: Targets, n_first: int, trials: list) -> None:
     """Before an ask: past the first phase, one of every :data:`REFINE_EVERY` trials that :func:`_explore` leaves is
     enqueued as a step from one of the study's best designs (:func:`_elite`, drawn with the study's seed and the
     trial's number): its categories kept, its magnet's and numeric fractions moved by a normal step of
-    :data:`REFINE_SIGMA` (narrowing as the study goes on), clipped to the unit interval: the step is buildable too."""
+    :data:`REFINE_SIGMA` (narrowing as the study goes on), clipped to the unit interval: the step is buildable too.
+    A step onto a design the study has evaluated is drawn again, up to :data:`REFINE_DRAWS` times."""
     from optuna.trial import TrialState
 
     number, past = len(trials), len(trials) - n_first
@@ -350,14 +354,22 @@ def _refine(study, targets: Targets, n_first: int, trials: list) -> None:
     elite = _elite([t for t in trials if t.state is TrialState.COMPLETE], targets)
     if not elite:
         return
+    seen = {_key(t.user_attrs[POINT]) for t in trials if POINT in t.user_attrs}
     rng = np.random.default_rng([targets.study.seed, number])
-    parent = elite[int(rng.integers(len(elite)))]
     sigma = REFINE_SIGMA * (1.0 - 0.8 * min(1.0, past / max(1, targets.study.trials - n_first)))
-    params = dict(parent.params)
-    for name in (MAGNET_FRACTION, *FRACTIONS):
-        if name in params:
-            params[name] = float(np.clip(float(params[name]) + sigma * rng.standard_normal(), 0.0, 1.0))
-    study.enqueue_trial(params)
+    for _ in range(REFINE_DRAWS):
+        params = dict(elite[int(rng.integers(len(elite)))].params)
+        for name in (MAGNET_FRACTION, *FRACTIONS):
+            if name in params:
+                params[name] = float(np.clip(float(params[name]) + sigma * rng.standard_normal(), 0.0, 1.0))
+        if _key(space.point(params)) not in seen:
+            study.enqueue_trial(params)
+            return
+
+
+def _key(point: Mapping[str, Any]) -> tuple:
+    """A design's identity: its point's items, in name order."""
+    return tuple(sorted(point.items()))
 
 
 def records(study) -> list[Record]:
