@@ -305,6 +305,15 @@ def _interpolate(x: np.ndarray, y: np.ndarray, at: np.ndarray, log: bool) -> np.
     return out
 
 
+def _interpolate_linear(x: np.ndarray, ys: list[np.ndarray], at: np.ndarray) -> list[np.ndarray]:
+    """:func:`_interpolate` (not in log-log) of several quantities on the same ``x`` at once: one PCHIP over their
+    columns, the same numbers as one each (PCHIP's slopes are per column), at a fraction of the set-up cost (a design of
+    the search built eleven interpolants, a quarter of its time)."""
+    from scipy.interpolate import PchipInterpolator
+
+    return list(PchipInterpolator(x, np.column_stack(ys), axis=0)(at).T.copy())
+
+
 def curve(body: Body, mu_kPa: float, indentation_mm: np.ndarray) -> Curve:
     """The normal curve alone, over ``indentation_mm`` (what the speed-accuracy chart compares with the FE)."""
     d = np.asarray(indentation_mm, dtype=float)
@@ -335,11 +344,12 @@ def normal_and_shear(body: Body, mu_kPa: float, indentation_mm: np.ndarray, dept
     kept = d[:inside] if inside == d.size or d[inside - 1] >= last - 1e-9 else np.append(d[:inside], last)
 
     def along(key: str, scale: float) -> np.ndarray:
-        return _interpolate(grid[fin], t[key][fin] * scale, kept, log=key in ("force", "travel"))
+        return _interpolate(grid[fin], t[key][fin] * scale, kept, log=True)
 
+    stiffness, stretch, stress = _interpolate_linear(grid[fin], [t["stiffness"][fin] * (mu * k), t["stretch"][fin],
+                                                                 t["stress"][fin] * mu], kept)
     curve = Curve("surrogate", mu, kept, force_N=along("force", mu * k * k), magnet_displacement_mm=along("travel", k),
-                  stiffness_N_per_mm=along("stiffness", mu * k), max_stretch=along("stretch", 1.0),
-                  max_stress_kPa=along("stress", mu), mesh_mm=None)
+                  stiffness_N_per_mm=stiffness, max_stretch=stretch, max_stress_kPa=stress, mesh_mm=None)
     if inside < d.size:
         info = {"failure": (f"the surrogate's curve is solved to {last:g} mm of indentation ("
                             + ("the depth the design is used over, calibration.scan_z_mm)" if ends_at == "scan depth"
@@ -352,10 +362,11 @@ def normal_and_shear(body: Body, mu_kPa: float, indentation_mm: np.ndarray, dept
     pfin = np.isfinite(t["disp"]) & (pg <= end + 1e-9)
 
     def probed(key: str, scale: float) -> np.ndarray:
-        return _interpolate(pg[pfin], t[key][pfin] * scale, probe, log=key in ("preload", "drop"))
+        return _interpolate(pg[pfin], t[key][pfin] * scale, probe, log=True)
 
-    response = ShearResponse("surface", mu, probe, probed("preload", mu * k * k), probed("drop", k),
-                             probed("disp", 1.0 / (mu * k)), probed("tilt", 1.0 / (mu * k * k)),
-                             probed("kind", mu * k), probed("patch", k), MESH_TABLE * R / R_TABLE,
-                             {"model": "surrogate"})
+    disp, tilt, kind, patch = _interpolate_linear(pg[pfin], [t["disp"][pfin] * (1.0 / (mu * k)),
+                                                             t["tilt"][pfin] * (1.0 / (mu * k * k)),
+                                                             t["kind"][pfin] * (mu * k), t["patch"][pfin] * k], probe)
+    response = ShearResponse("surface", mu, probe, probed("preload", mu * k * k), probed("drop", k), disp, tilt, kind,
+                             patch, MESH_TABLE * R / R_TABLE, {"model": "surrogate"})
     return curve, response
