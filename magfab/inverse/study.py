@@ -28,7 +28,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..spec import Spec
-from .evaluate import constraint_names, evaluate
+from .evaluate import SURROGATE, constraint_names, evaluate
 from .pareto import front_mask
 from .space import FRACTIONS, MAGNET_FRACTION, POINT, Space, base_point, point_of
 from .targets import Sampler, Targets
@@ -386,30 +386,48 @@ def records(study) -> list[Record]:
     return out
 
 
+#: Most cheap designs one task of :func:`evaluate_all` evaluates: a cheap design takes a few tens of milliseconds, about
+#: what the scheduler and this process spend on a task on a small machine, so one design per task left the workers
+#: waiting for a third of the time (bench/design.py).
+CHUNK = 8
+
+
+def _evaluate_chunk(points: list[dict[str, Any]], base_json: str, targets_json: str, fidelity: str,
+                    names: list[str]) -> list[dict[str, Any]]:
+    """:func:`evaluate` of each point in turn: one task's work."""
+    return [evaluate(p, base_json, targets_json, fidelity, n) for p, n in zip(points, names)]
+
+
 def evaluate_all(points: Iterable[dict[str, Any]], targets: Targets, base: Spec, dask_client, fidelity: str,
                  progress: Callable[[int, int], None] | None = None, prefix: str = "") -> list[Record]:
-    """Evaluate ``points`` on the cluster (a sweep, or the re-verification of the front), in their order."""
+    """Evaluate ``points`` on the cluster (a sweep, or the re-verification of the front), in their order: the cheap
+    models' designs up to :data:`CHUNK` to a task while that leaves every worker eight tasks or more, the full
+    chain's (a second or more each) one to a task."""
     from distributed import as_completed
 
     points = list(points)
     args = (base.model_dump_json(), targets.model_dump_json())
     workers = max(1, len(dask_client.scheduler_info().get("workers", {})) or 1)
-    todo = iter(enumerate(points))
+    size = max(1, min(CHUNK, len(points) // (8 * workers))) if fidelity == SURROGATE else 1
+    chunks = iter(range(0, len(points), size))
     futures: dict[Any, int] = {}
     queue = as_completed()
 
     def submit() -> None:  # a bounded number in flight, as the search keeps: the cluster holds no whole plan
-        for i, p in itertools.islice(todo, 1):
-            fut = dask_client.submit(evaluate, p, *args, fidelity, f"{targets.name}-{prefix}{i}", pure=False)
+        for i in itertools.islice(chunks, 1):
+            part = points[i:i + size]
+            names = [f"{targets.name}-{prefix}{k}" for k in range(i, i + len(part))]
+            fut = dask_client.submit(_evaluate_chunk, part, *args, fidelity, names, pure=False)
             futures[fut] = i
             queue.add(fut)
 
     for _ in range(IN_FLIGHT_PER_WORKER * workers):
         submit()
     results: dict[int, dict[str, Any]] = {}
-    for n, fut in enumerate(queue, 1):
-        results[futures.pop(fut)] = fut.result()
+    for fut in queue:
+        i = futures.pop(fut)
+        results.update(zip(itertools.count(i), fut.result()))
         submit()
         if progress:
-            progress(n, len(points))
+            progress(len(results), len(points))
     return [Record.of(i, points[i], r) for i, r in sorted(results.items())]
