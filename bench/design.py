@@ -14,8 +14,9 @@ on local Dask clusters started here (wall clock, :func:`time.perf_counter`):
    allocator thresholds as Dask's nanny leaves them (``MALLOC_TRIM_THRESHOLD_=65536``, mmap threshold fixed at
    128 KiB), against both families and :func:`magfab.inverse.worker.malloc_thresholds`; and the workers' system CPU
    time (``os.times``) on the same FE designs under each allocator setting: their ratio.
-1. **Throughput**: designs per second through :func:`magfab.inverse.study.evaluate_all` (the code the search and
-   ``magfab sweep`` run: one Dask task per design) with the cheap models (elastomer surrogate) and with the full
+1. **Throughput**: designs per second through :func:`magfab.inverse.study.evaluate_all` (the code ``magfab sweep``
+   and the search's verification run: up to :data:`~magfab.inverse.study.CHUNK` cheap designs a Dask task; the
+   search's own loop sends one design a task) with the cheap models (elastomer surrogate) and with the full
    chain (FE), on 1 and on 2 worker processes; the scaling efficiency rate(2) / (2 rate(1)).
 2. **Overhead**: no-op tasks through the same cluster: the scheduler's cost per task, which bounds how finely a study
    can be cut.
