@@ -31,7 +31,7 @@ from ..design import derive
 from ..errors import InputError, ModelLimitError, Severity
 from ..models import mechanics as mech
 from ..models.mechanics import fe_surrogate
-from ..models.predict import surrogate_curve
+from ..models.predict import normal_curve, surrogate_curve
 from ..recipes.resolve import printer as printer_recipe
 from ..spec import FieldModel, Spec
 from .space import candidate_spec, saturation_floor
@@ -244,12 +244,26 @@ def _derives(point: dict[str, Any], base: Spec, targets: Targets) -> bool:
     return True
 
 
+#: The model label of a cheap design the FE evaluated: its body outside the surrogate's validated region.
+OUTSIDE = "fe (outside surrogate region)"
+
+
 def _elastomer_model(design) -> tuple[Any, str]:
     """The surrogate's elastomer model for ``design``, or (None, why not) outside its validated region."""
     body = mech.Body.from_design(design)
     if not fe_surrogate.in_region(body):
-        return None, "fe (outside surrogate region)"
-    return surrogate_curve, SURROGATE
+        return None, OUTSIDE
+    return _surrogate_or_fe, SURROGATE
+
+
+def _surrogate_or_fe(design, body, mu, indentation):
+    """The surrogate's curve and shear response, or the FE's where the surrogate refuses the body once it has seen
+    its curve (a curve that ends before two of its shear probes: a body in the region by its ratios whose travel is
+    a few hundredths of a millimetre)."""
+    try:
+        return surrogate_curve(design, body, mu, indentation)
+    except fe_surrogate.OutsideRegion:
+        return normal_curve(design, body, mu, indentation)
 
 
 @lru_cache(maxsize=4)
@@ -296,6 +310,8 @@ def _run(point: dict[str, Any], base: Spec, targets: Targets, fidelity: str, nam
         model, label = _elastomer_model(design)
     out["model"] = label
     pred, findings = predict_with_findings(design, model)
+    if pred is not None and label == SURROGATE and pred.model("mechanics").name != SURROGATE:
+        out["model"] = OUTSIDE  # the surrogate refused the body inside predict (_surrogate_or_fe)
     findings = design_findings(design) + findings
     if pred is None:
         out["reason"] = next(f.message for f in findings if f.severity is Severity.ERROR)

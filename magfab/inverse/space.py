@@ -206,6 +206,9 @@ _FRACTION_OF = {"elastomer_diameter_mm": FRACTIONS[0], "d_max_mm": FRACTIONS[1],
 MAGNET_FRACTION = "f_magnet"
 #: The smallest gap kept between d_min and what bounds it (d_max above, the elastomer's base below), mm.
 _GAP_MM = 0.01
+#: How far a hemisphere's height is kept above its radius at the space's edge, mm: more than the spec's rounding of
+#: the height (9 decimals), so that a point at the edge is not refused for a height a rounding below the radius.
+_EDGE_MM = 1e-6
 #: Steps the elastomer's diameter range is scanned in for the sub-range every other choice can follow.
 _SCAN = 401
 
@@ -292,7 +295,7 @@ class Space:
         # vent holes their annulus (design: the core's base radius is R_p less the floor's height when it is low)
         lo = max(lo, s + self.clearance + r_p + self.annulus - r_e)
         if tip == "hemisphere":  # the elastomer at least as tall as the dome's radius, with the most cover allowed
-            lo = max(lo, r_e - float(max(self.variables.cover_mm)) + s - h_m)
+            lo = max(lo, r_e - float(max(self.variables.cover_mm)) + s - h_m + 2 * _EDGE_MM)
         return lo, self.max_height + s - h_m - cover_lo
 
     def cover_bounds(self, magnet: str, tip: str, d_e: float, d_max: float) -> tuple[float, float]:
@@ -300,7 +303,7 @@ class Space:
         r_e, roof = d_e / 2.0, d_max + h_m - self.stack
         lo = self._cover_floor(r_e, r_m + self.clearance, tip)
         if tip == "hemisphere":
-            lo = max(lo, r_e - roof)
+            lo = max(lo, r_e - roof + _EDGE_MM)
         return lo, self.max_height - roof
 
     def d_min_bounds(self, magnet: str, d_max: float) -> tuple[float, float]:

@@ -77,6 +77,27 @@ def test_no_point_of_the_search_saturates_the_chip_and_the_floor_is_tight(name):
     assert at_floor > 0  # the sampler reaches the closest, best-resolving distances
 
 
+@pytest.mark.parametrize("name", ["fingertip", "taxel", "stiff_pad"])
+def test_the_edges_of_the_search_evaluate(name):
+    """Points on the search cube's edges, where the geometry's bounds are met exactly: every fraction at 0 or 1 (a
+    corner), and d_max at its lowest under the largest d_min (the thinnest travel). Each builds and the cheap chain
+    gives it figures, the FE where the surrogate cannot (a hemisphere's height once fell a rounding short of its
+    radius there, and the surrogate's log-log curves, negative at the first indentations, extrapolated to 1e58 mm)."""
+    from magfab.inverse.evaluate import evaluate
+    from magfab.inverse.space import FRACTIONS, MAGNET_FRACTION
+    from magfab.inverse.targets import load_targets
+
+    targets, base = load_targets(BENCH / "targets" / f"{name}.toml")
+    space = Space(targets, base)
+    args = (base.model_dump_json(), targets.model_dump_json())
+    edges = [{**q, **{k: float(round(q[k])) for k in (*FRACTIONS, MAGNET_FRACTION)}}
+             for q in space.latin_hypercube(24, 21)]
+    edges += [{**q, "f_d_max": 0.0, "f_d_min": 1.0} for q in space.latin_hypercube(24, 8)]
+    for q in edges:
+        result = evaluate(space.point(q), *args, "surrogate", "edge")
+        assert result["state"] != "failed", (space.point(q), result["reason"])
+
+
 def _close(a, b) -> bool:
     return all(a[k] == b[k] if isinstance(b[k], str) else abs(a[k] - b[k]) < 1e-9 for k in b)
 

@@ -336,6 +336,9 @@ def normal_and_shear(body: Body, mu_kPa: float, indentation_mm: np.ndarray, dept
     fin = np.isfinite(t["force"]) & (grid <= max(reach, 0.0) * R + 1e-9)
     if fin.sum() < 3:
         raise OutsideRegion(f"the surrogate's curve ends at once for this body (reach {reach * R:.3g} mm)")
+    if any((t[key][fin & (grid > 0)] <= 0).any() for key in ("force", "travel")):
+        raise OutsideRegion("the surrogate's force or travel is not positive at a small indentation of this body "
+                            "(interpolated in log-log, it cannot be extrapolated)")
     end = min(max(reach, 0.0) * R, float(grid[fin][-1]))
     d = np.asarray(indentation_mm, dtype=float)
     ends_at = "model" if end < depth_mm else "scan depth"
@@ -360,6 +363,10 @@ def normal_and_shear(body: Body, mu_kPa: float, indentation_mm: np.ndarray, dept
     probe = probe[probe <= min(last, SHEAR_DEPTH_MAX * R) + 1e-9]
     pg = grid[PROBED]
     pfin = np.isfinite(t["disp"]) & (pg <= end + 1e-9)
+    probed_at = pfin & (pg > 0)
+    if np.count_nonzero(probed_at) < 2 or any((t[key][probed_at] <= 0).any() for key in ("preload", "drop")):
+        raise OutsideRegion(f"the surrogate's shear probes end at once for this body (its curve ends at {end:.3g} mm) "
+                            "or are not positive")
 
     def probed(key: str, scale: float) -> np.ndarray:
         return _interpolate(pg[pfin], t[key][pfin] * scale, probe, log=True)
