@@ -258,8 +258,8 @@ def _elastomer_model(design) -> tuple[Any, str]:
 
 def _surrogate_or_fe(design, body, mu, indentation):
     """The surrogate's curve and shear response, or the FE's where the surrogate refuses the body once it has seen
-    its curve (a curve that ends before two of its shear probes: a body in the region by its ratios whose travel is
-    a few hundredths of a millimetre)."""
+    its table (:func:`~magfab.models.mechanics.fe_surrogate.normal_and_shear`: a curve that ends before two shear
+    probes, or a force, travel or probe not positive at a small indentation, which log-log cannot extrapolate)."""
     try:
         return surrogate_curve(design, body, mu, indentation)
     except fe_surrogate.OutsideRegion:

@@ -13,6 +13,7 @@ elastomer so its centring lip and alignment holes still fit. Everything else is 
 from __future__ import annotations
 
 import itertools
+import json
 import math
 from collections.abc import Iterator
 from functools import lru_cache
@@ -452,6 +453,7 @@ def _board_limit(base: Spec, top: float) -> float:
     return lo
 
 
+@lru_cache(maxsize=256)
 def _saturation_floor(disc: str, grade: str, full_scale_G: float) -> float:
     d, h, _ = stock_disc(disc)
     strongest = Magnet(d / 2.0, h, magnet_grade(grade).remanence_T.high)
@@ -464,9 +466,15 @@ def saturation_floor(point: dict[str, Any], base: Spec, targets: Targets) -> flo
 
 
 def _full_scale_z_G(base: Spec, targets: Targets) -> float:
-    """The chip's Bz full scale (G) at the targets' register fields ([chip]), on the base design."""
-    raw = base.toml_dict()
-    raw["sensor"].update(**targets.chip.model_dump())
+    """The chip's Bz full scale (G) at the targets' register fields ([chip]), on the base design: derived once per
+    base and chip (:func:`saturation_floor` asks for it on every verified design)."""
+    return _full_scale_of(base.model_dump_json(), targets.chip.model_dump_json())
+
+
+@lru_cache(maxsize=8)
+def _full_scale_of(base_json: str, chip_json: str) -> float:
+    raw = Spec.model_validate_json(base_json).toml_dict()
+    raw["sensor"].update(**json.loads(chip_json))
     return chip_setting(derive(spec_from_dict(raw))).full_scale_z_G
 
 
