@@ -30,6 +30,7 @@ from ..errors import InputError
 from ..spec import Spec
 from .evaluate import SURROGATE, constraint_names, evaluate
 from .pareto import front_mask
+from .propose import propose
 from .space import FRACTIONS, MAGNET_FRACTION, POINT, Space, base_point, point_of
 from .targets import Sampler, Targets
 
@@ -116,14 +117,11 @@ def _sigint_blocked() -> Iterator[None]:
 
 
 #: Of the trials after the first phase, one in this many has its (material, tip) fixed to the pair the study has
-#: tried least (the sampler draws the rest of it): the categories stay explored however the sampler's model narrows.
+#: tried least (the sampler draws the rest of it): the categories stay explored however the models narrow.
 EXPLORE_EVERY = 4
-#: Of the trials after the first phase that :data:`EXPLORE_EVERY` leaves to the sampler, one in this many is instead a
-#: step from one of the study's best designs (:func:`_refine`): the sampler's model is broad where few designs are
-#: feasible, and the steps walk along and into the feasible front it has found.
-REFINE_EVERY = 2
-#: The step's spread over the unit fractions (the magnet's and each numeric variable's): this much right after the
-#: first phase, narrowing to a fifth of it by the study's last trial.
+#: A refinement's step over the unit fractions (the magnet's and each numeric variable's), when the model step
+#: (:mod:`magfab.inverse.propose`) has no proposal: this much right after the first phase, narrowing to a fifth of it
+#: by the study's last trial.
 REFINE_SIGMA = 0.2
 #: Steps drawn for one refinement before it gives up on finding a design the study has not evaluated (a space of
 #: listed values or few magnets has few neighbours); the sampler then draws that trial.
@@ -251,7 +249,9 @@ def run_study(targets: Targets, base: Spec, storage: str | Path, dask_client,
 
     A new study starts from the base spec (when it is a point of the space) and a space-filling first phase
     (:func:`first_phase` trials of :meth:`Space.latin_hypercube`, every (material, tip) pair in it), all enqueued;
-    then the sampler, with one trial in :data:`EXPLORE_EVERY` held to the least-tried (material, tip) pair.
+    then one trial in :data:`EXPLORE_EVERY` held to the least-tried (material, tip) pair (the sampler draws the
+    rest of it) and every other one the model's proposal (:func:`_model_step`), or, where it has none, a step from
+    the study's best designs (:func:`_refine`).
 
     Repeatable: results are told to Optuna in the order their trials were asked, whatever order the workers finish
     in, and the next trial is asked right after each is told; with a seeded sampler, the same targets, seed and
@@ -282,8 +282,8 @@ def run_study(targets: Targets, base: Spec, storage: str | Path, dask_client,
 
     def submit() -> None:
         trials = study.get_trials(deepcopy=False)  # once per ask: both read the same list
-        if not _explore(study, space, n_first, trials):
-            _refine(study, space, targets, n_first, trials)
+        steps = (_explore, _model_step, _refine)  # the first that enqueues a trial
+        any(step(study, space, targets, n_first, trials) for step in steps)
         trial = study.ask()
         trial.set_user_attr(RUNNER, runner)
         point = space.suggest(trial)
@@ -309,10 +309,11 @@ def run_study(targets: Targets, base: Spec, storage: str | Path, dask_client,
     return study
 
 
-def _explore(study, space: Space, n_first: int, trials: list) -> bool:
+def _explore(study, space: Space, targets: Targets, n_first: int, trials: list) -> bool:
     """Before an ask: past the first phase, one trial in :data:`EXPLORE_EVERY` is enqueued with the (material, tip)
     pair the study has tried least (ties: the choices' order), its magnet and fractions left to the sampler; True when
-    it enqueued one. ``trials``: the study's trials, as asked."""
+    it enqueued one. ``trials``: the study's trials, as asked. (The model's proposal restricted to that pair, tried
+    instead, found the fingertip set's feasible designs in a less-tried pair less often: bench/design_search.py.)"""
     from optuna.trial import TrialState
 
     number = len(trials)
@@ -339,22 +340,47 @@ def _elite(trials: list, targets: Targets) -> list:
     return sorted(trials, key=lambda t: (violation(t), t.number))[:3]
 
 
-def _refine(study, space: Space, targets: Targets, n_first: int, trials: list) -> None:
-    """Before an ask: past the first phase, one of every :data:`REFINE_EVERY` trials that :func:`_explore` leaves is
-    enqueued as a step from one of the study's best designs (:func:`_elite`, drawn with the study's seed and the
-    trial's number): its categories kept, its magnet's and numeric fractions moved by a normal step of
-    :data:`REFINE_SIGMA` (narrowing as the study goes on), clipped to the unit interval: the step is buildable too.
-    A step onto a design the study has evaluated is drawn again, up to :data:`REFINE_DRAWS` times."""
+def _seen(trials: list) -> set:
+    """The designs the study has asked (evaluated or in flight), as :func:`_key` s."""
+    return {_key(t.user_attrs[POINT]) for t in trials if POINT in t.user_attrs}
+
+
+def _model_step(study, space: Space, targets: Targets, n_first: int, trials: list) -> bool:
+    """Before an ask: past the first phase, each trial that :func:`_explore` leaves is enqueued as the model's proposal
+    (:func:`magfab.inverse.propose.propose`: from every design the study has evaluated, its local steps from the
+    study's best designs, seeded with the study's seed and the trial's number); True when it enqueued one."""
+    from optuna.trial import TrialState
+
+    if len(trials) < n_first or any(t.state is TrialState.WAITING for t in trials):
+        return False
+    done = [t for t in trials if t.state is TrialState.COMPLETE]
+    names = constraint_names(targets)
+    seen = _seen(trials)
+    params = propose(space, targets.directions(), [t.params for t in done], [t.values for t in done],
+                     [[float(t.constraints.get(n, 0.0)) for n in names] for t in done],
+                     [t.params for t in _elite(done, targets)], lambda p: _key(space.point(p)) not in seen,
+                     (targets.study.seed, len(trials)))
+    if params is None:
+        return False
+    study.enqueue_trial(params)
+    return True
+
+
+def _refine(study, space: Space, targets: Targets, n_first: int, trials: list) -> bool:
+    """Before an ask the model step left: past the first phase, a step from one of the study's best designs
+    (:func:`_elite`, drawn with the study's seed and the trial's number) is enqueued: its categories kept, its
+    magnet's and numeric fractions moved by a normal step of :data:`REFINE_SIGMA` (narrowing as the study goes on),
+    clipped to the unit interval: the step is buildable too. A step onto a design the study has asked is drawn again,
+    up to :data:`REFINE_DRAWS` times; then the sampler draws the trial. True when it enqueued one."""
     from optuna.trial import TrialState
 
     number, past = len(trials), len(trials) - n_first
-    if past < 0 or past % EXPLORE_EVERY == EXPLORE_EVERY - 1 or past % REFINE_EVERY != 0 or \
-            any(t.state is TrialState.WAITING for t in trials):
-        return
+    if past < 0 or any(t.state is TrialState.WAITING for t in trials):
+        return False
     elite = _elite([t for t in trials if t.state is TrialState.COMPLETE], targets)
     if not elite:
-        return
-    seen = {_key(t.user_attrs[POINT]) for t in trials if POINT in t.user_attrs}
+        return False
+    seen = _seen(trials)
     rng = np.random.default_rng([targets.study.seed, number])
     sigma = REFINE_SIGMA * (1.0 - 0.8 * min(1.0, past / max(1, targets.study.trials - n_first)))
     for _ in range(REFINE_DRAWS):
@@ -364,7 +390,8 @@ def _refine(study, space: Space, targets: Targets, n_first: int, trials: list) -
                 params[name] = float(np.clip(float(params[name]) + sigma * rng.standard_normal(), 0.0, 1.0))
         if _key(space.point(params)) not in seen:
             study.enqueue_trial(params)
-            return
+            return True
+    return False
 
 
 def _key(point: Mapping[str, Any]) -> tuple:

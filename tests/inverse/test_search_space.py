@@ -113,10 +113,6 @@ def test_the_base_point_round_trips():
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="the search falls short of this bar since the space starts d_min at the chip's "
-                   "saturation: the sweep in those coordinates holds 52 feasible designs in 600 and the 60-trial study "
-                   "reaches 0.27 of its hypervolume (seed 0, 2 workers; 0.45 before the first phase grew to a third "
-                   "of the trials, which leaves this 60-trial study 40); remove this marker when it passes")
 def test_the_study_finds_the_sweeps_front_on_the_fingertip_set():
     """bench/design_search.py on the fingertip set, small: 60 trials against a 600-design sweep, one seed."""
     sys.path.insert(0, str(BENCH))
