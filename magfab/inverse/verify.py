@@ -21,6 +21,7 @@ from typing import Any
 from ..errors import InputError, MagfabError
 from ..pipeline import build
 from ..spec import Spec
+from .evaluate import bench_point
 from .space import candidate_spec
 from .study import Record
 from .targets import Targets
@@ -61,7 +62,8 @@ def built(study: Any, verified: list[Record], names: list[str], targets: Targets
             progress(n, len(todo))
         if key not in kept:
             try:
-                spec = candidate_spec(r.point, base, targets, names[i])
+                # the design as written (designs/NAME.toml, dimensions on the printer's step) and verified
+                spec = candidate_spec(bench_point(r.point, base, targets), base, targets, names[i])
             except InputError as exc:  # the search evaluated this spec: not expected, but never offered unbuilt
                 kept[key] = str(exc)
             else:

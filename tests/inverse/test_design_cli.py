@@ -93,8 +93,11 @@ def test_the_files_a_user_gets(study):
             assert figures["meets_targets"] and figures["error_findings"] == []
             assert all(v <= 0 for v in figures["requirements"].values())
             assert all(m["met"] and m["met_by"] >= m["margin"] for m in figures["margins"].values())
-        if figures["meets_targets"]:
-            assert (folder / "builds" / spec_file.stem / "manifest.json").is_file()  # verified by building it
+        if figures["meets_targets"]:  # verified by building it: the design as written, not the search's point
+            built = folder / "builds" / spec_file.stem
+            assert (built / "manifest.json").is_file()
+            used = json.loads((built / "spec.json").read_text())  # the board's size filled in where unstated
+            assert all(used[k] == spec.dump()[k] for k in ("magnet", "elastomer", "sensor", "pad")), spec_file.stem
 
 
 def test_running_again_resumes(study):
