@@ -27,7 +27,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from ..check import preflight
@@ -151,6 +151,10 @@ SURROGATE_S = 0.15
 #: 5.5-6.0 s (in all 1.05x); with this added, about 1.4x their time. (3.0 s left bench/adversarial.py's sweep of 17
 #: designs by the full chain at 1.05x its estimate on the machine under a load of 2-3.)
 FE_CHAIN_S = 4.0
+#: The search's own loop per trial in the calling process: Optuna's ask and tell, the journal's writes and the model
+#: step (magfab.inverse.propose). Three bench sets x 2 seeds of 300 trials on 2 workers took 76.8 s, 43 ms a trial,
+#: bound by the loop (the designs' share there is about 15 ms a trial); 1.4x that.
+LOOP_S = 0.06
 #: A local cluster's start and the tables written at the end (a sweep of 30 designs by the surrogate: 8.6 s in all).
 STUDY_START_S = 8.0
 #: The designs priced one by one; a larger study is priced by this many spread over its list.
@@ -171,13 +175,16 @@ class StudyCost:
     workers: int  # 0: an existing cluster (its workers unknown)
     full_chain: bool = False  # every design by the full chain (``--models fe``)
     longest_s: float = 0.0  # the costliest design priced (one worker's seconds)
+    loop_s: float = 0.0  # a search's own loop in the calling process (asks, tells, the model step): LOOP_S a trial
 
     @property
     def seconds(self) -> float:
         """The start, the designs shared by the workers as they come free (at most their sum over the workers plus
-        (1 - 1 / workers) of the longest one, Graham's bound for a list schedule), and the builds."""
+        (1 - 1 / workers) of the longest one, Graham's bound for a list schedule) or, when it is longer, the search's
+        own loop, which asks each design after the one before it is told, and the builds."""
         w = max(self.workers, 1)
-        return STUDY_START_S + (self.design_s + self.verify_s) / w + (1.0 - 1.0 / w) * self.longest_s + self.build_s
+        shared = (self.design_s + self.verify_s) / w + (1.0 - 1.0 / w) * self.longest_s
+        return STUDY_START_S + max(shared, self.loop_s) + self.build_s
 
     def line(self) -> str:
         """One line for the user before the work starts."""
@@ -222,8 +229,9 @@ def search_cost(targets: Targets, base: Any, workers: int) -> StudyCost:
     """The time of ``magfab design`` on ``targets``: its trials priced on :func:`search_sample`, then its verified
     designs (the full chain, unless the search ran it already, and their builds)."""
     fidelity = targets.study.models.value
-    return study_cost(search_sample(targets, base), targets.study.trials, base, targets, fidelity, workers,
+    cost = study_cost(search_sample(targets, base), targets.study.trials, base, targets, fidelity, workers,
                       targets.study.verify, fidelity != FE)
+    return replace(cost, loop_s=targets.study.trials * LOOP_S)
 
 
 def study_cost(points: Sequence[dict[str, Any]], count: int, base: Any, targets: Targets, fidelity: str,

@@ -167,3 +167,19 @@ def test_the_estimate_counts_the_designs_outside_the_surrogates_region():
     cost = budget.study_cost(points, len(points), base, targets, "surrogate", 2)
     assert cost.by_fe == fe > 0
     assert cost.design_s > len(points) * budget.SURROGATE_S
+
+
+@settings(max_examples=4, deadline=None)
+@given(trials=st.integers(20, 2000), workers=st.sampled_from([1, 2, 16, 256]))
+def test_a_searchs_estimate_is_never_shorter_than_its_own_loop(trials, workers):
+    """The search asks each design after the one before it is told, in the calling process: however many workers
+    share the designs, its estimate is at least its trials at LOOP_S each; a sweep (no loop) is not bounded so."""
+    from magfab.spec import load_spec
+
+    targets = parse_targets(f"[study]\ntrials = {trials}\n")
+    search = budget.search_cost(targets, load_spec(None), workers)
+    assert search.loop_s == pytest.approx(trials * budget.LOOP_S)
+    assert search.seconds >= budget.STUDY_START_S + trials * budget.LOOP_S + search.build_s - 1e-9
+    sweep = budget.study_cost(budget.search_sample(targets, load_spec(None)), trials, load_spec(None), targets,
+                              "surrogate", workers)
+    assert sweep.loop_s == 0.0
