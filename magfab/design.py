@@ -26,6 +26,7 @@ from . import outline
 from .design_fields import Address, Mould, Pad, Part, Pocket, Stack
 from .errors import SpecError, shown
 from .errors import number_text as _fmt
+from .plausible import plausible
 from .recipes import Recipe, resolve
 from .spec import Array, Polarity, Skin, Spec, Tip
 
@@ -328,6 +329,7 @@ def derive(spec: Spec) -> Design:
     address, the mould round the part. Geometry only: the reference chip's site, what the build would cost and the
     board's size (:func:`magfab.check.preflight`) are checked by the stage above, ``magfab check`` and the pipeline's
     plan, which go on with the design it returns."""
+    plausible(spec)  # a unit's mistake is named at the key typed, before a derived key breaks on it
     chip = resolve.chip(spec.sensor.chip)
     printer = resolve.printer(spec.mould.printer.value)
     part = _elastomer(spec)

@@ -97,7 +97,7 @@ LAYERS = (
     ("magfab.spec_errors",),
     ("magfab.spec",),
     ("magfab.formats",),  # file formats: standard library (and magfab.errors), shipped in the readout package too
-    ("magfab.design",),
+    ("magfab.design", "magfab.plausible"),  # the design, and the unit-mistake guard it runs first
     ("magfab.elastomer", "magfab.mould", "magfab.pad", "magfab.fit"),  # the CAD solids and the mould's fit
     ("magfab.models", "magfab.reference_chip"),  # the reference chip is placed by the physics, read by the board
     ("magfab.limits",),

@@ -1,0 +1,71 @@
+"""Inputs no physical sensor has: a size or a modulus a unit's factor away from every sourced part is refused, naming
+the key the user typed, before a derived key can break on it.
+
+Each guarded key is compared with the span the recipes source for it: the stock magnets' diameters and heights
+(recipes/magnet_stock.toml) and the silicones' shear modulus bands (recipes/materials.toml, for a spec's own
+``elastomer.shear_modulus_kPa``). A value more than the key's factor outside that span is refused (:data:`FACTOR`
+for a magnet's size; :data:`MODULUS_FACTOR` for a modulus, whose sourced span is already 140 times wide, so that any
+band inside it typed :data:`UNIT` times off lands outside); when a factor of :data:`UNIT` (a unit prefix: metres typed
+as millimetres, MPa or Pa as kPa) brings it inside the span, the refusal says so. Within the factor, a value is the
+designer's (a custom magnet, an unusual batch) and the design's own checks judge it.
+
+Without this, ``magnet.diameter_mm = 0.005`` (metres typed as millimetres) was refused as
+``elastomer.insert_channel_diameter_mm = 2.0: must be at most the pocket diameter 0.105 mm``, a key the user did not
+touch, and ``shear_modulus_kPa = [15000, 23000, 39000]`` (MPa read as kPa) was accepted and printed a range of 1,026 N.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from functools import cache
+
+from .errors import SpecError
+from .errors import number_text as _fmt
+from .recipes import catalogue
+from .spec import Spec
+
+__all__ = ["FACTOR", "MODULUS_FACTOR", "UNIT", "plausible", "spans"]
+
+#: How far outside the stock magnets' span a size may lie before it is refused (either way).
+FACTOR = 10.0
+#: The same for a shear modulus: 2.3-2,970 kPa passes, against 7-990 kPa sourced.
+MODULUS_FACTOR = 3.0
+#: The unit mistake a refusal suggests undoing: a factor of a thousand.
+UNIT = 1000.0
+
+
+@cache
+def spans() -> dict[str, tuple[float, float, float, str, str]]:
+    """Each guarded key's sourced span: (lowest, highest, the factor allowed past them, unit, what the span is)."""
+    stock = catalogue("magnet_stock").values()
+    moduli = [r["shear_modulus_kPa"] for r in catalogue("materials").values()]
+    diameters = [r["diameter_mm"].nominal for r in stock]
+    heights = [r["height_mm"].nominal for r in stock]
+    return {
+        "magnet.diameter_mm": (min(diameters), max(diameters), FACTOR, "mm", "the stock magnets' diameters"),
+        "magnet.height_mm": (min(heights), max(heights), FACTOR, "mm", "the stock magnets' heights"),
+        "elastomer.shear_modulus_kPa": (min(q.low for q in moduli), max(q.high for q in moduli), MODULUS_FACTOR,
+                                        "kPa", "the sourced silicones' shear moduli"),
+    }
+
+
+def plausible(spec: Spec) -> None:
+    """Refuse (:class:`SpecError`, naming the key) a guarded value more than its key's factor outside its sourced
+    span (module doc)."""
+    values: dict[str, Sequence[float]] = {"magnet.diameter_mm": (spec.magnet.diameter_mm,),
+                                          "magnet.height_mm": (spec.magnet.height_mm,)}
+    if spec.elastomer.shear_modulus_kPa is not None:
+        values["elastomer.shear_modulus_kPa"] = spec.elastomer.shear_modulus_kPa
+    for key, xs in values.items():
+        lo, hi, factor, unit, what = spans()[key]
+        if all(lo / factor <= x <= hi * factor for x in xs):
+            continue
+        shown = xs[0] if len(xs) == 1 else list(xs)
+        hint = ""
+        for f in (1.0 / UNIT, UNIT):
+            if all(lo <= x * f <= hi for x in xs):
+                meant = ", ".join(_fmt(x * f) for x in xs)
+                hint = f"did you mean {meant if len(xs) == 1 else '[' + meant + ']'} {unit}? a factor of " \
+                       f"{_fmt(UNIT)} off"
+        raise SpecError(key, shown, f"more than {_fmt(factor)} times outside {what} ({_fmt(lo)}-{_fmt(hi)} {unit})",
+                        hint)
