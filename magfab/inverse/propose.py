@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from .space import FRACTIONS, MAGNET_FRACTION, NUMERIC, Space
+from .space import FRACTION_OF, MAGNET_FRACTION, NUMERIC, Space
 
 __all__ = ["propose", "CANDIDATES", "LOCAL_SIGMA", "CATEGORY_SCALE", "MIN_DESIGNS"]
 
@@ -61,17 +61,16 @@ MAX_FIT = 400
 def _numeric_axes(space: Space) -> dict[str, tuple[str, list[float] | None]]:
     """Each numeric variable's param: its fraction (None) or, given as listed values, its own name and the values."""
     out: dict[str, tuple[str, list[float] | None]] = {}
-    fraction = dict(zip(("elastomer_diameter_mm", "d_max_mm", "cover_mm", "d_min_mm"), FRACTIONS))
     for name in NUMERIC:
         c = getattr(space.variables, name)
-        out[name] = (name, sorted(float(x) for x in c)) if isinstance(c, list) else (fraction[name], None)
+        out[name] = (name, sorted(float(x) for x in c)) if isinstance(c, list) else (FRACTION_OF[name], None)
     return out
 
 
 def _columns(space: Space, axes, rows: Sequence[Mapping[str, Any]]) -> tuple[np.ndarray, np.ndarray]:
     """Trials' params as (unit coordinates: the magnet's fraction, then each numeric variable's fraction or listed
-    value scaled over its list; each one's pair index into :func:`_pairs`)."""
-    pairs = _pairs(space)
+    value scaled over its list; each one's pair index into :meth:`Space.pairs`)."""
+    pairs = space.pairs()
     u = np.empty((len(rows), 1 + len(axes)))
     for i, p in enumerate(rows):
         u[i, 0] = float(p[MAGNET_FRACTION])
@@ -87,10 +86,6 @@ def _scaled(values: list[float], v: float) -> float:
 def _nearest(values: list[float], x: float) -> float:
     """The listed value whose scaled coordinate is nearest ``x`` (ties: the smaller)."""
     return min(values, key=lambda v: (abs(_scaled(values, v) - x), v))
-
-
-def _pairs(space: Space) -> list[tuple[str, str]]:
-    return [(m, t) for m in space.choices["material"] for t in space.choices["tip"]]
 
 
 def _features(space: Space, u: np.ndarray, pair: np.ndarray) -> np.ndarray:
@@ -115,7 +110,7 @@ def _snap(axes, u: np.ndarray) -> np.ndarray:
 
 def _params(space: Space, axes, u: np.ndarray, pair: int) -> dict[str, Any]:
     """A candidate's params from its unit coordinates and pair index."""
-    material, tip = _pairs(space)[pair]
+    material, tip = space.pairs()[pair]
     p: dict[str, Any] = {"material": material, "tip": tip, MAGNET_FRACTION: float(u[0])}
     for j, (param, values) in enumerate(axes.values(), start=1):
         p[param] = float(u[j]) if values is None else _nearest(values, float(u[j]))
@@ -152,7 +147,7 @@ def propose(space: Space, directions: Sequence[str], params: Sequence[Mapping[st
     except (np.linalg.LinAlgError, ValueError):
         return None
     rng = np.random.default_rng(list(seed))
-    n_pairs = len(_pairs(space))
+    n_pairs = len(space.pairs())
     cu, cp = rng.random((CANDIDATES, u.shape[1])), rng.integers(n_pairs, size=CANDIDATES)
     if parents:
         pu, pp = _columns(space, axes, parents)

@@ -13,7 +13,6 @@ elastomer so its centring lip and alignment holes still fit. Everything else is 
 from __future__ import annotations
 
 import itertools
-import json
 import math
 from collections.abc import Iterator
 from functools import lru_cache
@@ -30,13 +29,13 @@ from ..recipes import catalogue
 from ..recipes.resolve import magnet_grade
 from ..recipes.resolve import printer as printer_recipe
 from ..spec import Spec, spec_from_dict
-from .targets import Targets, Variables
+from .targets import Chip, Targets, Variables
 
 # Imported lazily, inside the functions that use it, for speed: scipy takes a
 # noticeable time to import, and importing this module should not.
 
 __all__ = ["NUMERIC", "CATEGORICAL", "stock_disc", "saturation_floor", "candidate_spec", "suggest", "grid",
-           "latin_hypercube", "base_point", "Space", "FRACTIONS", "MAGNET_FRACTION", "POINT"]
+           "latin_hypercube", "base_point", "Space", "FRACTIONS", "FRACTION_OF", "MAGNET_FRACTION", "POINT"]
 
 #: The numeric variables (mm), in the order tables show them.
 NUMERIC = ("d_max_mm", "d_min_mm", "elastomer_diameter_mm", "cover_mm")
@@ -199,7 +198,7 @@ POINT = "point"
 #: order they are resolved (the elastomer's diameter first, then the rest distance, the cover, the closest distance).
 #: A variable given as listed values is a categorical param of its own name instead, moved to the nearest allowed.
 FRACTIONS = ("f_elastomer_diameter", "f_d_max", "f_cover", "f_d_min")
-_FRACTION_OF = {"elastomer_diameter_mm": FRACTIONS[0], "d_max_mm": FRACTIONS[1], "cover_mm": FRACTIONS[2],
+FRACTION_OF = {"elastomer_diameter_mm": FRACTIONS[0], "d_max_mm": FRACTIONS[1], "cover_mm": FRACTIONS[2],
                 "d_min_mm": FRACTIONS[3]}
 #: The magnet as the search sees it: a fraction over the magnets a tip can be built with, in order of their moment
 #: (volume x nominal remanence), so that neighbouring values are neighbouring fields and the sampler's model of the
@@ -336,6 +335,10 @@ class Space:
         ok = [x for x in values if self._d_ok(magnet, tip, x)]
         return (ok[0], ok[-1]) if ok else None
 
+    def pairs(self) -> list[tuple[str, str]]:
+        """Every (material, tip) pair of the choices, materials first, in the choices' order."""
+        return [(m, t) for m in self.choices["material"] for t in self.choices["tip"]]
+
     def buildable(self) -> list[tuple[str, str, str]]:
         """Every (magnet, material, tip) combination with a buildable design, in a fixed order."""
         return [(m, mat, t) for mat in self.choices["material"] for t in self.choices["tip"]
@@ -357,7 +360,7 @@ class Space:
                 values = _allowed(c, lo, hi)[0] or c
                 x = float(params[name])
                 return float(min(values, key=lambda y: (abs(y - x), y)))
-            return _pick(c, lo, hi, min(max(float(params[_FRACTION_OF[name]]), 0.0), 1.0))
+            return _pick(c, lo, hi, min(max(float(params[FRACTION_OF[name]]), 0.0), 1.0))
 
         d_e = value("elastomer_diameter_mm", *(self.diameter_range(magnet, tip) or _span(v.elastomer_diameter_mm)))
         d_max = value("d_max_mm", *self.d_max_bounds(magnet, tip, d_e))
@@ -380,7 +383,7 @@ class Space:
         for name, (lo, hi) in bounds.items():
             c = getattr(v, name)
             out.update({name: float(point[name])} if isinstance(c, list)
-                       else {_FRACTION_OF[name]: _fraction(c, lo, hi, float(point[name]))})
+                       else {FRACTION_OF[name]: _fraction(c, lo, hi, float(point[name]))})
         return out
 
     def suggest(self, trial) -> dict[str, Any]:
@@ -392,7 +395,7 @@ class Space:
         for name in NUMERIC:
             c = getattr(self.variables, name)
             params.update({name: float(trial.suggest_categorical(name, list(c)))} if isinstance(c, list)
-                          else {_FRACTION_OF[name]: trial.suggest_float(_FRACTION_OF[name], 0.0, 1.0)})
+                          else {FRACTION_OF[name]: trial.suggest_float(FRACTION_OF[name], 0.0, 1.0)})
         point = self.point(params)
         trial.set_user_attr(POINT, point)
         return point
@@ -414,7 +417,7 @@ class Space:
             for name, x in zip(NUMERIC, row[2:]):
                 c = getattr(self.variables, name)
                 params.update({name: float(c[min(int(x * len(c)), len(c) - 1)])} if isinstance(c, list)
-                              else {_FRACTION_OF[name]: float(x)})
+                              else {FRACTION_OF[name]: float(x)})
             out.append(params)
         return out
 
@@ -466,15 +469,16 @@ def saturation_floor(point: dict[str, Any], base: Spec, targets: Targets) -> flo
 
 
 def _full_scale_z_G(base: Spec, targets: Targets) -> float:
-    """The chip's Bz full scale (G) at the targets' register fields ([chip]), on the base design: derived once per
-    base and chip (:func:`saturation_floor` asks for it on every verified design)."""
-    return _full_scale_of(base.model_dump_json(), targets.chip.model_dump_json())
+    """The chip's Bz full scale (G) at the targets' register fields ([chip]), on the base design."""
+    return _full_scale_of(base, targets.chip)
 
 
 @lru_cache(maxsize=8)
-def _full_scale_of(base_json: str, chip_json: str) -> float:
-    raw = Spec.model_validate_json(base_json).toml_dict()
-    raw["sensor"].update(**json.loads(chip_json))
+def _full_scale_of(base: Spec, chip: Chip) -> float:
+    """:func:`_full_scale_z_G`, derived once per base and chip (both frozen, hashable): :func:`saturation_floor`
+    asks for it on every verified design."""
+    raw = base.toml_dict()
+    raw["sensor"].update(**chip.model_dump())
     return chip_setting(derive(spec_from_dict(raw))).full_scale_z_G
 
 

@@ -282,8 +282,9 @@ def run_study(targets: Targets, base: Spec, storage: str | Path, dask_client,
 
     def submit() -> None:
         trials = study.get_trials(deepcopy=False)  # once per ask: both read the same list
-        steps = (_explore, _model_step, _refine)  # the first that enqueues a trial
-        any(step(study, space, targets, n_first, trials) for step in steps)
+        if len(trials) >= n_first and not any(t.state is TrialState.WAITING for t in trials):  # first phase done
+            steps = (_explore, _model_step, _refine)  # the first that enqueues a trial
+            any(step(study, space, targets, n_first, trials) for step in steps)
         trial = study.ask()
         trial.set_user_attr(RUNNER, runner)
         point = space.suggest(trial)
@@ -310,19 +311,15 @@ def run_study(targets: Targets, base: Spec, storage: str | Path, dask_client,
 
 
 def _explore(study, space: Space, targets: Targets, n_first: int, trials: list) -> bool:
-    """Before an ask: past the first phase, one trial in :data:`EXPLORE_EVERY` is enqueued with the (material, tip)
-    pair the study has tried least (ties: the choices' order), its magnet and fractions left to the sampler; True when
-    it enqueued one. ``trials``: the study's trials, as asked. (The model's proposal restricted to that pair, tried
-    instead, found the fingertip set's feasible designs in a less-tried pair less often: bench/design_search.py.)"""
-    from optuna.trial import TrialState
-
-    number = len(trials)
-    if number < n_first or (number - n_first) % EXPLORE_EVERY != EXPLORE_EVERY - 1 or \
-            any(t.state is TrialState.WAITING for t in trials):
+    """Before an ask past the first phase (none waiting): one trial in :data:`EXPLORE_EVERY` is enqueued with the
+    (material, tip) pair the study has tried least (ties: the choices' order), its magnet and fractions left to the
+    sampler; True when it enqueued one. ``trials``: the study's trials, as asked. (The model's proposal restricted to
+    that pair, tried instead, found the fingertip set's feasible designs in a less-tried pair less often:
+    bench/design_search.py.)"""
+    if (len(trials) - n_first) % EXPLORE_EVERY != EXPLORE_EVERY - 1:
         return False
-    pairs = [(m, t) for m in space.choices["material"] for t in space.choices["tip"]]
     tried = [(t.params.get("material"), t.params.get("tip")) for t in trials]
-    material, tip = min(pairs, key=lambda p: tried.count(p))
+    material, tip = min(space.pairs(), key=lambda p: tried.count(p))
     study.enqueue_trial({"material": material, "tip": tip})
     return True
 
@@ -346,13 +343,12 @@ def _seen(trials: list) -> set:
 
 
 def _model_step(study, space: Space, targets: Targets, n_first: int, trials: list) -> bool:
-    """Before an ask: past the first phase, each trial that :func:`_explore` leaves is enqueued as the model's proposal
-    (:func:`magfab.inverse.propose.propose`: from every design the study has evaluated, its local steps from the
-    study's best designs, seeded with the study's seed and the trial's number); True when it enqueued one."""
+    """Before an ask past the first phase (none waiting): each trial that :func:`_explore` leaves is enqueued as the
+    model's proposal (:func:`magfab.inverse.propose.propose`: from every design the study has evaluated, its local
+    steps from the study's best designs, seeded with the study's seed and the trial's number); True when it enqueued
+    one."""
     from optuna.trial import TrialState
 
-    if len(trials) < n_first or any(t.state is TrialState.WAITING for t in trials):
-        return False
     done = [t for t in trials if t.state is TrialState.COMPLETE]
     names = constraint_names(targets)
     seen = _seen(trials)
@@ -367,16 +363,14 @@ def _model_step(study, space: Space, targets: Targets, n_first: int, trials: lis
 
 
 def _refine(study, space: Space, targets: Targets, n_first: int, trials: list) -> bool:
-    """Before an ask the model step left: past the first phase, a step from one of the study's best designs
-    (:func:`_elite`, drawn with the study's seed and the trial's number) is enqueued: its categories kept, its
+    """Before an ask the model step left (past the first phase, none waiting): a step from one of the study's best
+    designs (:func:`_elite`, drawn with the study's seed and the trial's number) is enqueued: its categories kept, its
     magnet's and numeric fractions moved by a normal step of :data:`REFINE_SIGMA` (narrowing as the study goes on),
     clipped to the unit interval: the step is buildable too. A step onto a design the study has asked is drawn again,
     up to :data:`REFINE_DRAWS` times; then the sampler draws the trial. True when it enqueued one."""
     from optuna.trial import TrialState
 
     number, past = len(trials), len(trials) - n_first
-    if past < 0 or any(t.state is TrialState.WAITING for t in trials):
-        return False
     elite = _elite([t for t in trials if t.state is TrialState.COMPLETE], targets)
     if not elite:
         return False

@@ -61,7 +61,7 @@ def _best(params, values, constraints) -> list:
     return [params[i] for i, k in zip(feasible, keep) if k]
 
 
-def _non_dominated(value, params, values, constraints) -> bool:
+def _non_dominated(value, values, constraints) -> bool:
     feasible = [values[i] for i, c in enumerate(constraints) if max(c) <= 0]
     return not any(all(a <= b for a, b in zip(f, value)) and f != tuple(value) for f in map(tuple, feasible))
 
@@ -81,11 +81,11 @@ def test_proposals_are_feasible_and_extend_the_front():
             assert p is not None
             value, constraint = truth(p)
             feasible += max(constraint) <= 0
-            on_front += max(constraint) <= 0 and _non_dominated(value, params, values, constraints)
+            on_front += max(constraint) <= 0 and _non_dominated(value, values, constraints)
             q = _uniform(rng)
             value, constraint = truth(q)
             uniform_feasible += max(constraint) <= 0
-            uniform_front += max(constraint) <= 0 and _non_dominated(value, params, values, constraints)
+            uniform_front += max(constraint) <= 0 and _non_dominated(value, values, constraints)
     assert feasible >= 0.8 * 160 and feasible >= 2.5 * uniform_feasible, (feasible, uniform_feasible)
     assert on_front >= 0.5 * 160 and on_front >= 3 * uniform_front, (on_front, uniform_front)
 
