@@ -247,7 +247,7 @@ def _run_build(spec: Path | None, out_dir: Path | None, as_json: bool, scan_path
             click.echo(f"  field at rest {pred['Bz_rest_G']} G, gradient {pred['dBz_dz_rest_G_per_mm']} G/mm; "
                        f"noise {pred['noise_G']} G RMS")
             click.echo(f"  normal: {n0:g}-{n1:g} G/N, resolution {pred['normal_resolution_mN']:g} mN, range "
-                       f"{pred['normal_range_N']:g} N (ends at: {pred['normal_range_limit']})")
+                       f"{pred['normal_range_text']}")
             click.echo(f"  shear:  {s0:g}-{s1:g} G/N, resolution {pred['shear_resolution_mN']:g} mN, range "
                        f"{pred['shear_range_N']:g} N  (worst case over material and magnet bands; models: "
                        + ", ".join(f"{k} {v}" for k, v in sorted(pred["models"].items())) + ")")

@@ -1,13 +1,16 @@
-"""Inputs no physical sensor has: a size or a modulus a unit's factor away from every sourced part is refused, naming
-the key the user typed, before a derived key can break on it.
+"""Inputs no physical sensor has: a size, a distance or a modulus a unit's factor away from every sourced part is
+refused, naming the key the user typed, before a derived key can break on it; and a material law the recipes hold
+no data for.
 
 Each guarded key is compared with the span the recipes source for it: the stock magnets' diameters and heights
-(recipes/magnet_stock.toml) and the silicones' shear modulus bands (recipes/materials.toml, for a spec's own
+(recipes/magnet_stock.toml), the magnet's distances from the sensing point (``sensor.d_max_mm``, ``d_min_mm``: from
+the chips' least sensing depth, recipes/chips.toml, to twice the largest stock diameter, the far end of docs/models.md
+M18's 1-2 diameters) and the silicones' shear modulus bands (recipes/materials.toml, for a spec's own
 ``elastomer.shear_modulus_kPa``). A value more than the key's factor outside that span is refused (:data:`FACTOR`
-for a magnet's size; :data:`MODULUS_FACTOR` for a modulus, whose sourced span is already 140 times wide, so that any
-band inside it typed :data:`UNIT` times off lands outside); when a factor of :data:`UNIT` (a unit prefix: metres typed
-as millimetres, MPa or Pa as kPa) brings it inside the span, the refusal says so. Within the factor, a value is the
-designer's (a custom magnet, an unusual batch) and the design's own checks judge it.
+for a magnet's size or distance; :data:`MODULUS_FACTOR` for a modulus, whose sourced span is already 140 times wide,
+so that any band inside it typed :data:`UNIT` times off lands outside); when a factor of :data:`UNIT` (a unit
+prefix: metres typed as millimetres, MPa or Pa as kPa) brings it inside the span, the refusal says so. Within the
+factor, a value is the designer's (a custom magnet, an unusual batch) and the design's own checks judge it.
 
 Without this, ``magnet.diameter_mm = 0.005`` (metres typed as millimetres) was refused as
 ``elastomer.insert_channel_diameter_mm = 2.0: must be at most the pocket diameter 0.105 mm``, a key the user did not
@@ -41,7 +44,12 @@ def spans() -> dict[str, tuple[float, float, float, str, str]]:
     moduli = [r["shear_modulus_kPa"] for r in catalogue("materials").values()]
     diameters = [r["diameter_mm"].nominal for r in stock]
     heights = [r["height_mm"].nominal for r in stock]
+    # The magnet's distances: from the chip's sensing depth below its package top (no magnet comes nearer) to twice
+    # the largest stock diameter (docs/models.md M18: d_max at 1-2 magnet diameters).
+    depth = min(r["sensing_depth_mm"].low for r in catalogue("chips").values() if "sensing_depth_mm" in r.quantities)
+    reach = (depth, 2.0 * max(diameters), FACTOR, "mm", "the distances a magnet can sit from the sensing point")
     return {
+        "sensor.d_max_mm": reach, "sensor.d_min_mm": reach,
         "magnet.diameter_mm": (min(diameters), max(diameters), FACTOR, "mm", "the stock magnets' diameters"),
         "magnet.height_mm": (min(heights), max(heights), FACTOR, "mm", "the stock magnets' heights"),
         "elastomer.shear_modulus_kPa": (min(q.low for q in moduli), max(q.high for q in moduli), MODULUS_FACTOR,
@@ -53,7 +61,9 @@ def plausible(spec: Spec) -> None:
     """Refuse (:class:`SpecError`, naming the key) a guarded value more than its key's factor outside its sourced
     span (module doc)."""
     values: dict[str, Sequence[float]] = {"magnet.diameter_mm": (spec.magnet.diameter_mm,),
-                                          "magnet.height_mm": (spec.magnet.height_mm,)}
+                                          "magnet.height_mm": (spec.magnet.height_mm,),
+                                          "sensor.d_max_mm": (spec.sensor.d_max_mm,),
+                                          "sensor.d_min_mm": (spec.sensor.d_min_mm,)}
     if spec.elastomer.shear_modulus_kPa is not None:
         values["elastomer.shear_modulus_kPa"] = spec.elastomer.shear_modulus_kPa
     for key, xs in values.items():
@@ -69,3 +79,18 @@ def plausible(spec: Spec) -> None:
                        f"{_fmt(UNIT)} off"
         raise SpecError(key, shown, f"more than {_fmt(factor)} times outside {what} ({_fmt(lo)}-{_fmt(hi)} {unit})",
                         hint)
+    _law_has_data(spec)
+
+
+def _law_has_data(spec: Spec) -> None:
+    """Refuse the Yeoh law for a silicone the recipes hold no Yeoh fit for (there is nothing to fit it from), or with
+    a closed-form mechanics model (they are neo-Hookean)."""
+    if spec.predict.material_law.value != "yeoh":
+        return
+    if spec.predict.mechanics_model.value in ("column", "hertz_column"):
+        raise SpecError("predict.material_law", "yeoh", f"needs the FE: predict.mechanics_model = "
+                        f"'{spec.predict.mechanics_model.value}' is a neo-Hookean closed form; use 'auto' or 'fe'")
+    fitted = sorted(k for k, r in catalogue("materials").items() if "yeoh_mu_kPa" in r.quantities)
+    if spec.elastomer.material not in fitted:
+        raise SpecError("predict.material_law", "yeoh", f"recipes/materials.toml holds no Yeoh fit for "
+                        f"{spec.elastomer.material} (fitted: {', '.join(fitted)}); use 'neo-hookean'")

@@ -25,11 +25,13 @@ from .errors import SpecError, shorten, shown
 from .readout.src.magfab_readout import bounded
 from .recipes import catalogue
 from .spec_errors import did_you_mean, translate_error
+from .spec_options import CalibrationMethod, FieldModel, MaterialLaw, MechanicsModel
 from .toml_input import loads_toml, read_toml
 
 __all__ = ["Spec", "Tip", "Density", "Printer", "Array", "Environment", "Skin", "Polarity", "MAX_TAXELS", "load_spec",
            "spec_from_json", "parse_spec", "spec_from_dict", "default_spec_text", "translate_error", "spec_schema",
-           "NAME_PATTERN", "is_valid_name"]
+           "NAME_PATTERN", "is_valid_name", "FieldModel", "MechanicsModel", "MaterialLaw",
+           "CalibrationMethod"]
 
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
 
@@ -221,26 +223,6 @@ class Mould(_Section):
     )
 
 
-class FieldModel(str, Enum):
-    """Magnet-field model: 'auto' picks the cheapest whose error fits predict.tolerance_pct."""
-
-    AUTO = "auto"
-    EXACT = "exact"
-    SURROGATE = "surrogate"
-    DIPOLE = "dipole"
-    ON_AXIS = "on_axis"
-
-
-class MechanicsModel(str, Enum):
-    """Elastomer model: 'auto' uses the finite-element model on the coarsest mesh whose estimated
-    discretisation error fits predict.tolerance_pct."""
-
-    AUTO = "auto"
-    FE = "fe"
-    HERTZ_COLUMN = "hertz_column"
-    COLUMN = "column"
-
-
 class Predict(_Section):
     """Predicted sensitivity, resolution and range, and the models behind them."""
 
@@ -255,21 +237,18 @@ class Predict(_Section):
     required_resolution_mN: float | None = Field(
         None, gt=0.0, le=1.0e4,
         description="Worst-case normal force resolution the application needs, mN (omit: no requirement).")
-    # The allowed stretch 2.0 is where the material model's sources end (recipes/materials.toml): every neo-Hookean
-    # band is fitted to tensile data up to 100 % strain, so past it the force curve extrapolates. It is not a fatigue
-    # limit (none was found for casting silicones); 100 % strain is a ninth of Ecoflex 00-30's 900 %
-    # elongation at break. It is compared with the FE's kernel-averaged stretch (models/mechanics/energy.py).
-    max_stretch: float = Field(
-        2.0, gt=1.0, le=10.0,
-        description="Largest principal stretch allowed anywhere in the elastomer under load (limits the force range).")
-
-
-class CalibrationMethod(str, Enum):
-    """Calibration fit: 'poly' (global least squares), 'mls' (moving least squares, host only) or 'auto'."""
-
-    AUTO = "auto"
-    POLY = "poly"
-    MLS = "mls"
+    material_law: MaterialLaw = Field(
+        MaterialLaw.NEO_HOOKEAN, strict=False,
+        description="Hyperelastic law of the elastomer FE: 'neo-hookean' (fitted to 100 % strain, so its data end at "
+                    "a stretch of 2) or 'yeoh' (the silicone's large-strain law, fitted to a stretch of 4; "
+                    "recipes/materials.toml).")
+    # Not a limit of the model: the model's own reach is the material law's data end (predict's "material data"
+    # limit). No fatigue or working-strain rule for casting silicones was found (recipes/materials.toml), so this is
+    # the user's, and the range ends there as "stretch".
+    max_stretch: float | None = Field(
+        None, gt=1.0, le=10.0,
+        description="Your own limit on the largest principal stretch in the elastomer under load, which then ends "
+                    "the force range (omit: none; the range still ends where the material law's data do).")
 
 
 class Calibration(_Section):

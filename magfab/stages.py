@@ -135,13 +135,20 @@ class BuildResult:
         return {
             "Bz_rest_G": round(p.field.Bz_rest_G, 1),
             "dBz_dz_rest_G_per_mm": round(p.field.dBz_dz_rest_G_per_mm, 1),
-            "normal_sensitivity_G_per_N": [round(x, 1) for x in n.sensitivity_G_per_N],
-            "normal_resolution_mN": round(n.resolution_mN, 2),
+            # significant digits, not decimals: a soft or a stiff design's figures never print as 0
+            "normal_sensitivity_G_per_N": [_sig(x) for x in n.sensitivity_G_per_N],
+            "normal_resolution_mN": _sig(n.resolution_mN),
             "normal_range_N": round(n.range_N, 3),
             "normal_range_limit": n.range_limit,
-            "shear_sensitivity_G_per_N": [round(x, 1) for x in s.sensitivity_G_per_N],
-            "shear_resolution_mN": round(s.resolution_mN, 2),
+            "normal_range_text": n.range_text(),
+            "shear_sensitivity_G_per_N": [_sig(x) for x in s.sensitivity_G_per_N],
+            "shear_resolution_mN": _sig(s.resolution_mN),
             "shear_range_N": round(s.range_N, 3),
             "noise_G": round(p.noise.total_z_G, 3),
             "models": {m.family: m.name for m in p.models},
         }
+
+
+def _sig(x: float, digits: int = 4) -> float:
+    """``x`` to ``digits`` significant digits (the summary's figures: 0.000123 stays 0.000123, 1234.5 is 1235)."""
+    return float(f"{x:.{digits}g}")

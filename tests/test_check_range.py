@@ -11,6 +11,7 @@ from magfab.check import prediction_findings
 
 
 @pytest.mark.parametrize("label, key", [("stretch", "predict.max_stretch"), ("scan depth", "calibration.scan_z_mm"),
+                                        ("material data", "predict.material_law"),
                                         ("model", ""), ("chip full scale", "")])
 def test_the_range_limit_note_names_its_key(magone_design, magone_prediction, label, key):
     pred = magone_prediction

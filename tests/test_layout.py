@@ -94,7 +94,7 @@ def test_imports_point_down_the_pipeline(path):
 #: belongs to the layer of its longest matching prefix.
 LAYERS = (
     ("magfab", "magfab.units", "magfab.errors", "magfab.recipes", "magfab.outline", "magfab.fork"),
-    ("magfab.spec_errors",),
+    ("magfab.spec_errors", "magfab.spec_options"),
     ("magfab.spec",),
     ("magfab.formats",),  # file formats: standard library (and magfab.errors), shipped in the readout package too
     ("magfab.design", "magfab.plausible"),  # the design, and the unit-mistake guard it runs first

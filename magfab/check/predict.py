@@ -10,7 +10,7 @@ from ..design import Design
 from ..errors import Finding, Severity
 from ..models import field as fieldmod
 from ..models import mechanics as mech
-from ..models.predict import ElastomerModel, Prediction, predict
+from ..models.predict import ElastomerModel, NormalFigures, Prediction, predict
 from .drift import drift_findings
 from .reference import reference_findings
 
@@ -21,7 +21,8 @@ E, W, INFO = Severity.ERROR, Severity.WARNING, Severity.INFO
 
 #: The spec key that moves each normal range limit (predict.py's labels); d_min and the chip's full scale have theirs
 #: in their own findings, and "model" (the FE stopped before the scan depth) none a user sets.
-_RANGE_LIMIT_KEYS = {"stretch": "predict.max_stretch", "scan depth": "calibration.scan_z_mm"}
+_RANGE_LIMIT_KEYS = {"stretch": "predict.max_stretch", "scan depth": "calibration.scan_z_mm",
+                     "material data": "predict.material_law"}
 
 
 def prediction_findings(design: Design, pred: Prediction) -> list[Finding]:
@@ -51,12 +52,7 @@ def prediction_findings(design: Design, pred: Prediction) -> list[Finding]:
                            f"{pred.field.dBz_dz_rest_G_per_mm:.0f} G/mm is too shallow; reduce sensor.d_max_mm, use a "
                            "softer elastomer.material or a stronger magnet", "predict.required_resolution_mN"))
     if normal.range_limit != "d_min":
-        travel = normal.range_limits_travel_mm
-        out.append(Finding(INFO, "range-limit",
-                           f"the normal range ends at {normal.travel_mm:.2f} mm of magnet travel "
-                           f"({normal.range_limit}), before the magnet reaches d_min ({travel['d_min']:.2f} mm of "
-                           "travel)",
-                           _RANGE_LIMIT_KEYS.get(normal.range_limit, "")))
+        out.append(_range_limit(normal, p.material_law.value))
     # Guidelines (docs/models.md, M18).
     ratio = spec.magnet.height_mm / spec.magnet.diameter_mm
     if not 0.2 <= ratio <= 0.5:
@@ -93,13 +89,29 @@ def prediction_findings(design: Design, pred: Prediction) -> list[Finding]:
                                f"the {family} model '{m.name}' has an estimated error of {100 * err:.2g} %, more than "
                                f"predict.tolerance_pct = {p.tolerance_pct:g} %", f"predict.{family}_model"
                                if family in ("field", "mechanics") else "predict.tolerance_pct"))
+    # significant digits, never decimals: a very soft or very stiff design's figures must not print as 0
     out.append(Finding(INFO, "prediction",
-                       f"normal: {normal.sensitivity_G_per_N[0]:.0f}-{normal.sensitivity_G_per_N[1]:.0f} G/N, "
-                       f"resolution {normal.resolution_mN:.1f} mN, range {normal.range_N:.2f} N; shear: "
-                       f"{shear.sensitivity_G_per_N[0]:.0f}-{shear.sensitivity_G_per_N[1]:.0f} G/N, resolution "
-                       f"{shear.resolution_mN:.1f} mN, range {shear.range_N:.2f} N (worst case over the material "
+                       f"normal: {normal.sensitivity_G_per_N[0]:.3g}-{normal.sensitivity_G_per_N[1]:.3g} G/N, "
+                       f"resolution {normal.resolution_mN:.3g} mN, range "
+                       f"{'at least ' * normal.range_is_model_reach}{normal.range_N:.3g} N; shear: "
+                       f"{shear.sensitivity_G_per_N[0]:.3g}-{shear.sensitivity_G_per_N[1]:.3g} G/N, resolution "
+                       f"{shear.resolution_mN:.3g} mN, range {shear.range_N:.3g} N (worst case over the material "
                        f"and magnet bands; noise {pred.noise.total_z_G:.3f} G)"))
     return out
+
+
+def _range_limit(normal: NormalFigures, law: str) -> Finding:
+    """The note on what ends the normal range before d_min, and whether it is the sensor or a model's reach."""
+    travel = normal.range_limits_travel_mm
+    model_reach = ""
+    if normal.range_is_model_reach:
+        model_reach = ": a model's reach, not the sensor's, so the sensor reaches at least this far"
+        if normal.range_limit == "material data" and law != "yeoh":
+            model_reach += " (predict.material_law = 'yeoh' is fitted to a stretch of 4)"
+    return Finding(INFO, "range-limit",
+                   f"the normal range ends at {normal.travel_mm:.2f} mm of magnet travel ({normal.range_limit}), "
+                   f"before the magnet reaches d_min ({travel['d_min']:.2f} mm of travel){model_reach}",
+                   _RANGE_LIMIT_KEYS.get(normal.range_limit, ""))
 
 
 def predict_with_findings(design: Design,

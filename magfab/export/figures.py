@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..models import field as fieldmod
+from ..models.predict import MODEL_REACH
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -27,6 +28,8 @@ if TYPE_CHECKING:
 # noticeable time to import, and importing this module should not.
 
 BAND_COLOURS = {"soft": "#1f77b4", "nominal": "#2ca02c", "stiff": "#d62728"}
+#: The range limits that do not end the range, marked on the force plot (the one that ends it is black).
+LIMIT_COLOURS = ("#9467bd", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22")
 
 #: What each plot shows, by file stem: the report's captions and the file table's descriptions. Each says what
 #: is drawn, no more (tests/export/test_figures.py checks the figures against these claims).
@@ -35,7 +38,8 @@ CAPTIONS = {
     "field_contours": "|Bz| and |Br| in the z-r plane, filled log contours each with its colour bar, where Bz "
                       "changes sign dotted and the magnet's travel envelope dashed",
     "force": "force and stiffness against indentation, soft / nominal / stiff material, where the normal range "
-             "ends marked",
+             "ends and why marked, and where each other limit (d_min, the chip's full scale, the material law's data "
+             "end) would bind",
     "sensitivity": "sensitivity and resolution against the magnet's axial travel, normal (at the Z noise) and shear "
                    "(at the XY noise), soft / nominal / stiff material, where the normal range ends marked",
     "speed_accuracy": "each model's error against its time (bench/models.py figures), one panel per model family and "
@@ -181,10 +185,8 @@ def _force(plt, design: Design, pred: Prediction):
     for k, c in pred.curves.items():
         axes[0].plot(c.indentation_mm, c.force_N, color=BAND_COLOURS[k])
         axes[1].plot(c.indentation_mm, c.stiffness_N_per_mm, color=BAND_COLOURS[k])
-    u_max = pred.normal.travel_mm
-    idx = np.interp(u_max, pred.arrays["u"], pred.arrays["indentation"])
+    u, indentation = pred.arrays["u"], pred.arrays["indentation"]
     for ax in axes:
-        ax.axvline(idx, color="k", lw=0.8, ls="--")
         ax.set_xlabel("indentation, mm")
     axes[0].set_ylabel("normal force, N")
     axes[1].set_ylabel("dF/d(indentation), N/mm")
@@ -192,9 +194,21 @@ def _force(plt, design: Design, pred: Prediction):
     fig.suptitle(textwrap.fill(f"Elastomer ({design.spec.elastomer.material}): {m.name}, {m.detail}", 150), fontsize=7)
     handles = [Line2D([], [], color=BAND_COLOURS[k], label=f"{k} (mu {c.mu_kPa:g} kPa)")
                for k, c in pred.curves.items()]
-    handles.append(Line2D([], [], color="k", lw=0.8, ls="--", label=f"normal range ends ({pred.normal.range_limit}, "
-                                                                     f"{idx:.2f} mm)"))
-    _legend_below(fig, handles, ncol=4)
+    # Every limit of the range, each where it would bind (the first ends the range; a model's reach is marked so)
+    n = pred.normal
+    for i, (label, travel) in enumerate(sorted(n.range_limits_travel_mm.items(), key=lambda kv: kv[1])):
+        binding = label == n.range_limit
+        colour, lw, ls = ("k", 1.0, "--") if binding else (LIMIT_COLOURS[i % len(LIMIT_COLOURS)], 0.8, ":")
+        what = f"{label}{' (model reach)' if label in MODEL_REACH else ''}"
+        if travel <= float(u[-1]) + 1e-9:
+            at = float(np.interp(travel, u, indentation))
+            for ax in axes:
+                ax.axvline(at, color=colour, lw=lw, ls=ls)
+            text = f"{'range ends: ' if binding else ''}{what}, {at:.2f} mm"
+        else:
+            text = f"{what}: past the curve ({travel:.2f} mm of magnet travel)"
+        handles.append(Line2D([], [], color=colour, lw=lw, ls=ls, label=text))
+    _legend_below(fig, handles, ncol=3)
     return fig
 
 
@@ -223,7 +237,7 @@ def _sensitivity(plt, design: Design, pred: Prediction):
     handles += [Line2D([], [], color="0.3", label=f"normal: dBz/dFz, Z noise {noise.total_z_G:.3g} G"),
                 Line2D([], [], color="0.3", ls="--", marker=".", label="shear under that normal preload: dBr/dFx, "
                        f"XY noise {noise.total_xy_G:.3g} G"),
-                Line2D([], [], color="k", lw=0.8, ls=":", label=f"normal range ends ({pred.normal.range_limit})")]
+                Line2D([], [], color="k", lw=0.8, ls=":", label=f"normal range ends ({pred.normal.range_parts()[1]})")]
     _legend_below(fig, handles, ncol=3)
     return fig
 

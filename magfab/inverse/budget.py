@@ -193,7 +193,7 @@ class StudyCost:
         refused = self.designs - self.by_fe
         fe = (", by the full chain (FE)" + (f", about {refused:,} of them refused at once" if refused else "")) \
             if self.full_chain else \
-            f", about {self.by_fe:,} of them by the FE (outside the surrogate's region)" if self.by_fe else ""
+            f", about {self.by_fe:,} of them by the FE (outside the surrogate's region or law)" if self.by_fe else ""
         then = ", then the verified designs' full chain and builds" if self.build_s else ""
         return f"estimated {_duration(self.seconds)} {where}: {self.designs:,} designs{fe}{then}"
 

@@ -249,10 +249,10 @@ OUTSIDE = "fe (outside surrogate region)"
 
 
 def _elastomer_model(design) -> tuple[Any, str]:
-    """The surrogate's elastomer model for ``design``, or (None, why not) outside its validated region."""
+    """The surrogate's elastomer model for ``design``, or (None, why not) outside its validated region or law."""
     body = mech.Body.from_design(design)
-    if not fe_surrogate.in_region(body):
-        return None, OUTSIDE
+    if not fe_surrogate.in_region(body) or design.spec.predict.material_law.value != "neo-hookean":
+        return None, OUTSIDE  # the surrogate's table is of neo-Hookean runs: a Yeoh design is evaluated by the FE
     return _surrogate_or_fe, SURROGATE
 
 

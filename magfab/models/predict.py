@@ -16,11 +16,15 @@ band (the grade's min / nominal / max); every figure is given over the band, and
 combination that makes it worst (resolution: stiff material, weakest magnet, at rest). Noise N_B is the
 environment's (``predict.noise_G``) and the chip's own (at its OSR/DIG_FILT) and quantisation, in quadrature.
 
-The force range ends at the first of: the magnet reaching d_min, the chip's output reaching full scale at its
-configured gain and resolution, the silicone reaching ``predict.max_stretch`` (the FE's principal stretch averaged
-with a smooth kernel of radius R/30 about each point, :mod:`.mechanics.energy`: it converges under refinement where
-a pointwise stretch at a corner does not), and the depth the FE is solved to (the scan depth, ``scan depth``) or
-where it stopped (``model``).
+The force range ends at the first of the sensor's limits: the magnet reaching d_min, the chip's output reaching full
+scale at its configured gain and resolution, the field-to-force map ceasing to be one-to-one (``invertibility``: the
+force or the field stops rising with the magnet's travel), the depth the spec calibrates over (the scan depth, where
+the FE is solved to), and the user's own ``predict.max_stretch`` if given (``stretch``). Or it ends at a model's
+reach, and is then "at least" its figure (:data:`MODEL_REACH`): the silicone reaching the stretch where the material
+law's data end (``material data``: 2 for the neo-Hookean bands, the Yeoh fit's for ``predict.material_law =
+"yeoh"``), or the FE stopping (``model``). Stretches are the FE's principal stretch averaged with a smooth kernel of
+radius R/30 about each point (:mod:`.mechanics.energy`: it converges under refinement where a pointwise stretch at a
+corner does not).
 
 Models: ``predict.field_model`` and ``predict.mechanics_model``; ``auto`` takes the cheapest field model whose
 error over the working volume fits ``predict.tolerance_pct`` (measured against the exact field, per build), and
@@ -35,7 +39,7 @@ import math
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -107,19 +111,31 @@ def choose_field(design: Design, magnet: fieldmod.Magnet) -> ModelUse:
 
 #: What ends a normal curve solved to the scan depth, and one the FE could not take further (range limit labels).
 SCAN_DEPTH, MODEL = "scan depth", "model"
+#: The range limit where the material law's data end, and the user's own stretch limit (predict.max_stretch).
+MATERIAL_DATA, STRETCH = "material data", "stretch"
+#: The range limit where the field-to-force map stops being one-to-one, and the slope (of its largest) below which the
+#: force or the field has stopped rising.
+INVERTIBILITY, FLAT = "invertibility", 1e-6
+#: Limits of the models, not of the sensor: a range they end is "at least" its figure (NormalFigures.range_text).
+MODEL_REACH = frozenset({MODEL, MATERIAL_DATA})
+#: The stretch where the neo-Hookean bands' data end: they are fitted to engineering strains up to 100 %
+#: (recipes/materials.toml).
+NEO_HOOKEAN_DATA_END = 2.0
 
 
 def _fe_curve(body: mech.Body, mu: float, indentation: np.ndarray, mesh: float, depth_mm: float,
-              probe: mech.ShearProbe | None = None) -> mech.Curve:
+              probe: mech.ShearProbe | None = None, law: Mapping[str, Any] | None = None) -> mech.Curve:
     """The FE curve up to ``depth_mm``, the deepest indentation the design is used over (see :func:`normal_curve`):
     the FE is solved there and no deeper, and the curve says so in ``info["failure"]``, so the range ends there if
     nothing ends it earlier. A failure before that depth (element inversion, non-convergence) truncates the curve
-    where the model stopped. ``probe``: solved at each converged indentation (the shear response along the scan)."""
+    where the model stopped. ``probe``: solved at each converged indentation (the shear response along the scan).
+    ``law``: :func:`material_law`'s arguments."""
     d = np.asarray(indentation, dtype=float)
+    law = dict(law or {})
     if d[-1] <= depth_mm:
-        return mech.fe(body, mu, d, mesh_mm=mesh, on_failure=mech.OnFailure.TRUNCATE, probe=probe)
+        return mech.fe(body, mu, d, mesh_mm=mesh, on_failure=mech.OnFailure.TRUNCATE, probe=probe, **law)
     kept = np.append(d[d < depth_mm - 1e-9], depth_mm)
-    curve = mech.fe(body, mu, kept, mesh_mm=mesh, on_failure=mech.OnFailure.TRUNCATE, probe=probe)
+    curve = mech.fe(body, mu, kept, mesh_mm=mesh, on_failure=mech.OnFailure.TRUNCATE, probe=probe, **law)
     if "failure" not in curve.info:
         curve.info["failure"] = (f"the FE is solved to {depth_mm:g} mm of indentation, the depth the design is used "
                                  "over (calibration.scan_z_mm)")
@@ -155,11 +171,12 @@ def normal_curve(design: Design, body: mech.Body, mu: float,
     meshes = fe_meshes(design)  # coarse to fine; past the last, the model-error warning says so
     # The first mesh is only the reference of the second's error estimate (never chosen, so not probed): it is solved
     # in a forked worker beside the second where two cores allow (magfab.fork; the same numbers either way).
-    with side_branch(_fe_curve, body, mu, indentation, meshes[0], depth) as first:
+    law = material_law(design)
+    with side_branch(_fe_curve, body, mu, indentation, meshes[0], depth, None, law) as first:
         previous = None
         for mesh in meshes[1:]:
             probe = mech.ShearProbe(depths_mm=depths, rest_indentation_mm=rest)
-            curve = _fe_curve(body, mu, indentation, mesh, depth, probe)
+            curve = _fe_curve(body, mu, indentation, mesh, depth, probe, law)
             previous = first.result() if previous is None else previous
             n = min(len(curve.force_N), len(previous.force_N))
             if n < 2:
@@ -175,8 +192,12 @@ def normal_curve(design: Design, body: mech.Body, mu: float,
     assert chosen is not None
     curve, err, coarse, probe = chosen
     how = "auto" if name == "auto" else "spec"
+    described = mech.MODEL_DESCRIPTION
+    if law:
+        k2, k3 = law["yeoh_ratios"]
+        described = described.replace("neo-Hookean", f"Yeoh (k2 = {k2:.3g}, k3 = {k3:.3g}, recipes/materials.toml)")
     return curve, ModelUse("mechanics", "fe", err,
-                           f"{mech.MODEL_DESCRIPTION} Mesh {curve.mesh_mm:g} mm; error estimated against mesh "
+                           f"{described} Mesh {curve.mesh_mm:g} mm; error estimated against mesh "
                            f"{coarse:g} mm (Richardson, order {FE_ORDER:g})", how), probe.response(mu)
 
 
@@ -237,12 +258,31 @@ class NormalFigures:
     resolution_at_rest_mN: Mapping[str, float]  # per material, weakest magnet
     range_N: float  # the softest material's
     range_by_material_N: Mapping[str, float]
-    range_limit: str  # what ends the range: d_min, chip full scale, stretch, scan depth or model
+    range_limit: str  # what ends it: d_min, chip full scale, invertibility, stretch, scan depth, material data, model
     range_limits_travel_mm: Mapping[str, float]  # magnet travel at which each limit would bind
     travel_mm: float
     stiffness_at_rest_N_per_mm: Mapping[str, float]
     sensitivity_at_rest_G_per_N: Mapping[str, float]  # per material, nominal magnet grade
     model_limit: str = ""  # why the mechanics model's curve ends before the indentation grid does, if it does
+
+    @property
+    def range_is_model_reach(self) -> bool:
+        """Whether a model's reach, not the sensor, ends the range (:data:`MODEL_REACH`): the sensor reaches at
+        least this far."""
+        return self.range_limit in MODEL_REACH
+
+    def range_parts(self, digits: int = 3) -> tuple[str, str]:
+        """The range and what ends it, as a person reads them: ("1.573 N", "ends at: d_min"), or for a model's reach
+        ("at least 1.573 N", "the model's reach: material data")."""
+        value = f"{self.range_N:.{digits}f} N"
+        if self.range_is_model_reach:
+            return f"at least {value}", f"the model's reach: {self.range_limit}"
+        return value, f"ends at: {self.range_limit}"
+
+    def range_text(self, digits: int = 3) -> str:
+        """:meth:`range_parts` as one phrase: "at least 1.573 N (the model's reach: material data)"."""
+        value, why = self.range_parts(digits)
+        return f"{value} ({why})"
 
 
 @dataclass(frozen=True)
@@ -284,6 +324,7 @@ class Prediction:
             "range_N": n.range_N,
             "range_by_material_N": dict(n.range_by_material_N),
             "range_limit": n.range_limit,
+            "range_is_model_reach": n.range_is_model_reach,
             "range_limits_travel_mm": dict(n.range_limits_travel_mm),
             "travel_mm": n.travel_mm,
             "stiffness_at_rest_N_per_mm": dict(n.stiffness_at_rest_N_per_mm),
@@ -313,7 +354,24 @@ def _derivative(x: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 def _band(design: Design) -> dict[str, float]:
     spec = design.spec
-    return dict(zip(MATERIALS, spec.elastomer.shear_modulus_kPa or mech.band(design.material)))
+    law = spec.predict.material_law.value
+    return dict(zip(MATERIALS, spec.elastomer.shear_modulus_kPa or mech.band(design.material, law)))
+
+
+def material_law(design: Design) -> dict[str, Any]:
+    """The FE's material arguments for the spec's ``predict.material_law``: none for neo-Hookean (the FE's default),
+    or the silicone's Yeoh ratios (recipes/materials.toml)."""
+    if design.spec.predict.material_law.value != "yeoh" or design.material.yeoh is None:
+        return {}
+    y = design.material.yeoh
+    return {"material": "yeoh", "yeoh_ratios": (y.k2, y.k3)}
+
+
+def data_end_stretch(design: Design) -> float:
+    """The stretch where the material law's data end (predict's "material data" limit): 2 for the neo-Hookean bands
+    (fitted to 100 % strain), the Yeoh fit's stretch for "yeoh" (recipes/materials.toml)."""
+    y = design.material.yeoh
+    return y.stretch_max if material_law(design) and y is not None else NEO_HOOKEAN_DATA_END
 
 
 #: What replaces :func:`normal_curve` in :func:`predict`: (design, body, mu_kPa, indentation) -> (nominal curve, its
@@ -391,7 +449,8 @@ def normal_on_mesh(design: Design, mesh_mm: float, field_model: str = "exact") -
     body = mech.Body.from_design(design)
     mus = _band(design)
     indentation = indentation_grid(design)
-    nominal = _fe_curve(body, mus["nominal"], indentation, mesh_mm, float(design.spec.calibration.scan_z_mm))
+    nominal = _fe_curve(body, mus["nominal"], indentation, mesh_mm, float(design.spec.calibration.scan_z_mm), None,
+                        material_law(design))
     curves = {k: nominal.scaled(mu) if k != "nominal" else nominal for k, mu in mus.items()}
     chip = chip_setting(design)
     magnets = {band: fieldmod.Magnet.from_design(design, band) for band in GRADE_BAND}
@@ -414,14 +473,30 @@ def _normal(design: Design, chip: ChipSetting, nz: Mapping[str, float], magnets:
           for b, m in magnets.items()}
     s_b = {b: _derivative(u, v) for b, v in bz.items()}  # G per mm of magnet travel
     k_e = {k: _derivative(u, c.force_N) for k, c in curves.items()}  # N per mm of magnet travel
-    # Range limits, as magnet travel u: d_min, full scale (strongest magnet), stretch.
+    # Range limits, as magnet travel u: d_min, full scale (strongest magnet), the material law's data end, and the
+    # user's own stretch limit if given.
     limits = {"d_min": travel}
     over = np.nonzero(bz["high"] > chip.full_scale_z_G)[0]
     if over.size:
         limits["chip full scale"] = _crossing(u, bz["high"], chip.full_scale_z_G, over[0])
-    stretched = np.nonzero(nominal.max_stretch > p.max_stretch)[0]
-    if stretched.size:
-        limits["stretch"] = _crossing(u, nominal.max_stretch, p.max_stretch, stretched[0])
+    stretches = {MATERIAL_DATA: data_end_stretch(design)}
+    if p.max_stretch is not None:
+        stretches[STRETCH] = p.max_stretch
+    for label, most in stretches.items():
+        stretched = np.nonzero(nominal.max_stretch > most)[0]
+        if stretched.size:
+            limits[label] = _crossing(u, nominal.max_stretch, most, stretched[0])
+    # The field-to-force map stops being one-to-one where the force stops rising with the magnet's travel (the
+    # silicone buckles or snaps through) or the field stops rising with it: past there two forces give one field.
+    # "Stops" is a slope below FLAT of its largest, so a plateau the derivative leaves at +1e-17 counts; only once it
+    # has risen (a rounded tip's stiffness starts at 0: Hertz).
+    for slope in (k_e["nominal"], s_b["nominal"]):
+        level = FLAT * float(np.max(np.abs(slope)))
+        rising = np.nonzero(slope > level)[0]
+        flat = np.nonzero(slope[rising[0]:] <= level)[0] if rising.size else rising
+        if flat.size:
+            k = int(rising[0] + flat[0])
+            limits[INVERTIBILITY] = min(limits.get(INVERTIBILITY, math.inf), _crossing(u, slope, level, k))
     end_label, limit_note = end
     if end_label:
         limits[end_label] = float(u[-1])

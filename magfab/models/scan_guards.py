@@ -68,11 +68,11 @@ MIN_OVERLAP = 0.5
 _BEYOND = {
     "d_min": "bring the magnet closer to the chip than sensor.d_min_mm",
     "chip full scale": "drive the chip's output past its full scale, where readings clip",
-    "stretch": "stretch the silicone past predict.max_stretch, where it may tear or creep",
+    "stretch": "stretch the silicone past predict.max_stretch, your own limit for it",
+    "material data": "stretch the silicone past the material law's data, where the model extrapolates",
     "scan depth": "lie deeper than the mechanics model was solved (calibration.scan_z_mm)",
-    "model": "lie where the mechanics model stopped",
-    "lateral travel = magnet radius": "move the magnet sideways by more than its radius",
-}
+    "model": "lie where the mechanics model stopped", "invertibility": "lie where two forces give one field",
+    "lateral travel = magnet radius": "move the magnet sideways by more than its radius"}
 
 
 # ---------------------------------------------------------------------------------------------------

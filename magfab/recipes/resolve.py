@@ -16,7 +16,7 @@ from functools import cache
 
 from . import Quantity, Recipe, RecipeError, catalogue
 
-__all__ = ["MagnetGrade", "Material", "magnet_grade", "material", "chip", "printer", "adhesive"]
+__all__ = ["MagnetGrade", "Material", "YeohLaw", "magnet_grade", "material", "chip", "printer", "adhesive"]
 
 
 @dataclass(frozen=True)
@@ -36,6 +36,18 @@ class MagnetGrade:
 
 
 @dataclass(frozen=True)
+class YeohLaw:
+    """A silicone's Yeoh law (recipes/materials.toml's yeoh_* rows): mu = 2 C10 in kPa, k2 = C20/C10, k3 = C30/C10,
+    fitted over stretches 1 to ``stretch_max`` with RMS relative error ``rms_pct``."""
+
+    mu_kPa: float
+    k2: float
+    k3: float
+    stretch_max: float
+    rms_pct: float
+
+
+@dataclass(frozen=True)
 class Material:
     """A casting silicone (recipes/materials.toml): the numbers the models and the silicone quantities read, and the
     whole entry (``recipe``) for the checklist's prose (degassing, inhibition, cure schedule and their sources)."""
@@ -49,6 +61,8 @@ class Material:
     cure_temperature_C: Quantity
     mix_ratio_by_weight: str  # "1A:1B", "10A:1B"
     recipe: Recipe
+    yeoh: YeohLaw | None = None  # the large-strain law; None where the recipes hold no fit (predict.material_law)
+    modulus_100_kPa: Quantity | None = None  # the datasheet's stress at 100 % strain, where it reports one
 
 
 def _q(recipe: Recipe, kind: str, name: str) -> Quantity:
@@ -91,8 +105,23 @@ def material(key: str) -> Material:
         key=r.key, name=r.name, shear_modulus_kPa=_q(r, "materials", "shear_modulus_kPa"),
         density_g_cm3=_q(r, "materials", "density_g_cm3"), pot_life_min=_q(r, "materials", "pot_life_min"),
         cure_time_h=_q(r, "materials", "cure_time_h"), cure_temperature_C=_q(r, "materials", "cure_temperature_C"),
-        mix_ratio_by_weight=r.texts["mix_ratio_by_weight"], recipe=r,
+        mix_ratio_by_weight=r.texts["mix_ratio_by_weight"], recipe=r, yeoh=_yeoh(r),
+        modulus_100_kPa=r.quantities.get("modulus_100_kPa"),
     )
+
+
+_YEOH = ("yeoh_mu_kPa", "yeoh_k2", "yeoh_k3", "yeoh_stretch_max", "yeoh_fit_rms_pct")
+
+
+def _yeoh(r: Recipe) -> YeohLaw | None:
+    """The entry's Yeoh law: all of its rows, or none of them."""
+    present = [k for k in _YEOH if k in r.quantities]
+    if not present:
+        return None
+    if len(present) != len(_YEOH):
+        raise RecipeError(f"recipes/materials.toml [{r.key}] has {', '.join(present)} but needs all of "
+                          f"{', '.join(_YEOH)}")
+    return YeohLaw(*(r[k].nominal for k in _YEOH))
 
 
 @cache

@@ -151,6 +151,28 @@ def test_sensitivity_draws_normal_and_shear_in_both_panels_with_plain_ticks(draw
         assert labels and not any("times" in t or "^" in t or "$" in t for t in labels), labels
 
 
+def test_force_marks_every_range_limit_where_it_binds(drawn, magone_prediction):
+    """One vertical line per limit the curve reaches, at the indentation where the magnet's travel reaches it, in
+    both panels; the one that ends the range black and dashed, named "range ends" with "(model reach)" when it is a
+    model's; a limit past the curve named in the legend only."""
+    fig, n, a = drawn["force"], magone_prediction.normal, magone_prediction.arrays
+    texts = [t.get_text() for t in fig.legends[0].get_texts()]
+    u, ind = a["u"], a["indentation"]
+    for label, travel in n.range_limits_travel_mm.items():
+        (text,) = [t for t in texts if label in t]
+        if travel <= u[-1] + 1e-9:
+            at = float(np.interp(travel, u, ind))
+            assert f"{at:.2f} mm" in text
+            for ax in fig.axes:
+                xs = [line.get_xdata()[0] for line in ax.lines if len(set(line.get_xdata())) == 1]
+                assert any(abs(x - at) < 1e-9 for x in xs), (label, xs)
+        else:
+            assert "past the curve" in text
+    (ends,) = [t for t in texts if t.startswith("range ends")]
+    assert n.range_limit in ends and ("(model reach)" in ends) == n.range_is_model_reach
+    assert n.range_limit == "material data" and "d_min: past the curve" in " ".join(texts)  # MagOne, neo-Hookean
+
+
 def test_calibration_chart_draws_what_its_caption_says(magone_design, magone_prediction):
     from magfab.models import calibration as C
     from magfab.models.scan import simulate_scan

@@ -9,6 +9,8 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from magfab import SpecError, derive, parse_spec
 from magfab.check import predict_with_findings, prediction_findings
@@ -118,21 +120,23 @@ def test_noise_combines_environment_chip_and_quantisation(design):
 def test_range_limits_are_reported_and_consistent(pred, design):
     n = pred.as_json()["normal"]
     limits = n["range_limits_travel_mm"]
-    assert set(limits) <= {"d_min", "chip full scale", "stretch", "scan depth", "model"}
+    assert set(limits) <= {"d_min", "chip full scale", "stretch", "material data", "scan depth", "model"}
     assert limits["d_min"] == pytest.approx(design.d_rest_mm - design.spec.sensor.d_min_mm)
     assert n["travel_mm"] == pytest.approx(min(limits.values()))
     assert n["range_limit"] == min(limits, key=limits.get)
     u, f = pred.arrays["u"], pred.curves["soft"].force_N
     assert n["range_N"] == pytest.approx(float(np.interp(n["travel_mm"], u, f)))
     # MagOne's FE reaches the 3 mm scan depth: the curve ends there, named so, not as a model failure;
-    # the kernel-averaged stretch 2.0 ends the range first (tests/models/test_range_convergence.py)
+    # the kernel-averaged stretch 2.0, where the neo-Hookean bands' data end, ends the range first
+    # (tests/models/test_range_convergence.py): a model's reach, so the range reads "at least"
     nominal = pred.curves["nominal"]
     assert nominal.indentation_mm[-1] == pytest.approx(design.spec.calibration.scan_z_mm)
     assert "model" not in limits and limits["scan depth"] == pytest.approx(nominal.magnet_displacement_mm[-1])
     assert "calibration.scan_z_mm" in n["model_limit"]
-    assert n["range_limit"] == "stretch"
+    assert n["range_limit"] == "material data" and n["range_is_model_reach"]
+    assert pred.normal.range_text().startswith(f"at least {n['range_N']:.3f} N")
     stretch = np.interp(n["travel_mm"], u, nominal.max_stretch)
-    assert stretch == pytest.approx(design.spec.predict.max_stretch, rel=1e-9)
+    assert stretch == pytest.approx(2.0, rel=1e-9)
 
 
 def test_a_curve_is_named_by_what_ends_it():
@@ -291,3 +295,32 @@ def test_the_predicted_rate_is_the_firmwares_pace(default_build):
     build = json.loads((default_build.out_dir / "readout/src/magfab_readout/build.json").read_text())
     assert pred["chip"]["conversion_ms"] == pytest.approx(1.84)  # OSR 0, DIG_FILT 2, with T (MagOne)
     assert build["sample_rate_Hz"] == pytest.approx(pred["chip"]["rate_Hz"], rel=1e-6)
+
+
+@settings(max_examples=12, deadline=None)
+@given(peak=st.floats(0.15, 0.85), drop=st.floats(0.0, 0.3))
+def test_the_range_ends_where_two_forces_give_one_field(magone_design, magone_prediction, peak, drop):
+    """A curve whose force stops rising with the magnet's travel at a drawn point (the silicone buckling: it then
+    stays level or falls by a drawn fraction) is not one-to-one past it, so the range ends there as "invertibility",
+    a limit of the sensor (not "at least"), even before the material law's data end. Drawn to the model's reach or
+    past it, it is still found, and the earlier limit ends the range."""
+    from magfab.models.predict import FLAT, INVERTIBILITY, _derivative, _normal
+    from magfab.models.shear_figures import _crossing
+
+    real = magone_prediction.curves["nominal"]
+    u = real.magnet_displacement_mm
+    u_peak = peak * float(u[-1])
+    force = np.where(u <= u_peak, real.force_N, np.interp(u_peak, u, real.force_N) * (1.0 - drop * (u - u_peak)))
+    curves = {k: replace(real, force_N=force).scaled(mu) for k, mu in magone_prediction.material_mu_kPa.items()}
+    chip, nz = chip_setting(magone_design), noise(magone_design, chip_setting(magone_design))
+    magnets = {b: F.Magnet.from_design(magone_design, b) for b in ("low", "nominal", "high")}
+    n, _ = _normal(magone_design, chip, nz, magnets, "exact", curves, ("", ""))
+    k_e = _derivative(u, force)
+    level = FLAT * np.max(np.abs(k_e))
+    flat = int(np.nonzero(k_e[1:] <= level)[0][0]) + 1
+    expected = _crossing(u, k_e, level, flat)
+    assert n.range_limits_travel_mm[INVERTIBILITY] == pytest.approx(expected)
+    if expected < n.range_limits_travel_mm.get("material data", math.inf):
+        assert n.range_limit == INVERTIBILITY and not n.range_is_model_reach
+        # within the curve's grid step of the peak: the slope is a three-point derivative on the FE's own grid
+        assert u_peak - 1e-9 <= n.travel_mm <= u[min(np.searchsorted(u, u_peak) + 1, u.size - 1)] + 1e-9

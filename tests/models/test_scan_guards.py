@@ -165,7 +165,7 @@ def test_guard_c_flags_a_scan_past_the_predicted_ranges(simulated, build_dir, pr
     deep = simulated.F_N[:, 2] > 0.8 * simulated.F_N[:, 2].max()
     B[deep, 2] *= 1.3
     (fz,) = G.scan_depth_warnings(replace(simulated, B_uT=B), doc)
-    assert "past the predicted normal range (ends at: stretch)" in fz and "\n" not in fz
+    assert "past the predicted normal range (ends at: material data)" in fz and "\n" not in fz
     assert f"of {simulated.rows} rows" in fz and "keep the scan within the range" in fz
     # lateral force past the stiffest silicone's shear range
     stiff = max(shear["range_by_material_N"].values())

@@ -246,14 +246,27 @@ def _newton_per_mu_mm2(mu_kPa: float) -> float:
 # ---- material band -----------------------------------------------------------------------------------------
 
 
-def band(material: Material | str) -> tuple[float, float, float]:
-    """(soft, nominal, stiff) neo-Hookean shear modulus in kPa of a material (a design's ``design.material``, or for
-    scripts its key in recipes/materials.toml)."""
+def band(material: Material | str, law: str = "neo-hookean") -> tuple[float, float, float]:
+    """(soft, nominal, stiff) shear modulus mu in kPa of a material (a design's ``design.material``, or for scripts
+    its key in recipes/materials.toml) under ``law``: the recipe's neo-Hookean band, or for "yeoh" the band of its
+    Yeoh law: soft, the fitted mu less the fit's RMS error; stiff, the larger of the fitted mu plus that error and
+    the mu at which the law meets the datasheet's 100 % modulus, P(2) = 1.75 mu (1 + 4 k2 + 12 k3); nominal, their
+    geometric mean (as the neo-Hookean bands' nominal). The recipe's fit is to one lab's test and the datasheet's
+    stiffer figure to another's, so the band spans both, as the neo-Hookean one does."""
     if isinstance(material, str):
         try:
             material = resolve_material(material)
         except KeyError as exc:
             raise MechanicsError(f"Input material {exc.args[0]}") from None
-    q = material.shear_modulus_kPa
-    return (q.low, q.nominal, q.high)
+    if law != "yeoh":
+        q = material.shear_modulus_kPa
+        return (q.low, q.nominal, q.high)
+    y = material.yeoh
+    if y is None:
+        raise MechanicsError(f"Input material {material.key!r} has no Yeoh law in recipes/materials.toml")
+    spread = y.rms_pct / 100.0
+    soft, stiff = y.mu_kPa * (1.0 - spread), y.mu_kPa * (1.0 + spread)
+    if material.modulus_100_kPa is not None:
+        stiff = max(stiff, material.modulus_100_kPa.nominal / (1.75 * (1.0 + 4.0 * y.k2 + 12.0 * y.k3)))
+    return (soft, math.sqrt(soft * stiff), stiff)
 

@@ -2,14 +2,15 @@
 
 Each is a ``str`` Enum, so a caller passing the old string (``on_failure="truncate"``) still works: the models
 convert with ``Enum(value)`` through :func:`~magfab.models.mechanics.body.check_option`. The normal-force model
-names are :class:`magfab.spec.MechanicsModel`'s (its ``auto`` is the spec's choice among them, not a model).
+names are :class:`magfab.spec.MechanicsModel`'s (its ``auto`` is the spec's choice among them, not a model), and the
+hyperelastic law is :class:`magfab.spec.MaterialLaw` (``predict.material_law``).
 """
 
 from __future__ import annotations
 
 from enum import Enum
 
-from ...spec import MechanicsModel
+from ...spec import MaterialLaw, MechanicsModel
 
 __all__ = ["MechanicsModel", "OnFailure", "ShearModel", "ShearEnds", "MaterialLaw"]
 
@@ -33,10 +34,3 @@ class ShearEnds(str, Enum):
 
     FREE = "free"
     GUIDED = "guided"
-
-
-class MaterialLaw(str, Enum):
-    """Incompressible hyperelastic law of the FE: neo-Hookean, or Yeoh (which needs its coefficient ratios)."""
-
-    NEO_HOOKEAN = "neo-hookean"
-    YEOH = "yeoh"

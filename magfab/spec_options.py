@@ -1,0 +1,44 @@
+"""The spec's choices of model (``predict.field_model``, ``predict.mechanics_model``, ``predict.material_law``,
+``calibration.method``): plain enums, imported by :mod:`magfab.spec` (which re-exports them) and by the models that
+take the same choices."""
+
+from __future__ import annotations
+
+from enum import Enum
+
+__all__ = ["FieldModel", "MechanicsModel", "MaterialLaw", "CalibrationMethod"]
+
+
+class FieldModel(str, Enum):
+    """Magnet-field model: 'auto' picks the cheapest whose error fits predict.tolerance_pct."""
+
+    AUTO = "auto"
+    EXACT = "exact"
+    SURROGATE = "surrogate"
+    DIPOLE = "dipole"
+    ON_AXIS = "on_axis"
+
+
+class MechanicsModel(str, Enum):
+    """Elastomer model: 'auto' uses the finite-element model on the coarsest mesh whose estimated
+    discretisation error fits predict.tolerance_pct."""
+
+    AUTO = "auto"
+    FE = "fe"
+    HERTZ_COLUMN = "hertz_column"
+    COLUMN = "column"
+
+
+class MaterialLaw(str, Enum):
+    """Hyperelastic law of the elastomer FE: 'neo-hookean' or 'yeoh' (the silicone's fit in recipes/materials.toml)."""
+
+    NEO_HOOKEAN = "neo-hookean"
+    YEOH = "yeoh"
+
+
+class CalibrationMethod(str, Enum):
+    """Calibration fit: 'poly' (global least squares), 'mls' (moving least squares, host only) or 'auto'."""
+
+    AUTO = "auto"
+    POLY = "poly"
+    MLS = "mls"

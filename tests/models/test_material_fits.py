@@ -1,0 +1,124 @@
+"""The silicones' Yeoh laws (recipes/materials.toml's yeoh_* rows): refitted from the tensile tests they came from,
+recovered from drawn laws the fit did not make, and used by the build's FE so that the range ends where the sensor
+does, not where a material model's data end."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from magfab.models.mechanics import band
+from magfab.models.mechanics.material_fit import ERROR_FROM, fit_yeoh, read_tensile_csv, uniaxial_stress_kPa
+from magfab.recipes import catalogue
+from magfab.recipes.resolve import material
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "bench"))
+from material_fits import DATA, FILES  # noqa: E402
+
+
+@pytest.mark.parametrize("key", sorted(FILES))
+def test_the_recipe_carries_the_fit_of_its_tensile_test(key):
+    lam, p = read_tensile_csv(DATA / FILES[key])
+    fit = fit_yeoh(lam, p)
+    law = material(key).yeoh
+    assert law is not None
+    assert law.mu_kPa == pytest.approx(fit.mu_kPa, rel=1e-3)
+    assert law.k2 == pytest.approx(fit.k2, rel=1e-3, abs=1e-6)
+    assert law.k3 == pytest.approx(fit.k3, rel=1e-3, abs=1e-6)
+    assert law.stretch_max == fit.stretch_max
+    assert law.rms_pct == pytest.approx(fit.rms_pct, rel=0.05)
+    # stable at every strain (the FE needs it), and the data run past the fitted stretch
+    assert fit.k2 >= 0.0 and fit.k3 >= 0.0 and lam.max() > fit.stretch_max
+    # the fit against its data over the stated stretches, point by point
+    used = (lam >= ERROR_FROM) & (lam <= fit.stretch_max)
+    rel = np.abs(fit.stress_kPa(lam[used]) - p[used]) / p[used]
+    assert np.sqrt(np.mean(rel**2)) <= 0.08 and rel.max() <= 0.25
+
+
+def test_every_silicone_with_a_yeoh_row_has_all_of_them_and_a_band_in_order():
+    fitted = [k for k, r in catalogue("materials").items() if "yeoh_mu_kPa" in r.quantities]
+    assert sorted(fitted) == sorted(FILES)
+    for key in fitted:
+        soft, nominal, stiff = band(key, "yeoh")
+        assert soft < nominal < stiff
+        assert soft < material(key).yeoh.mu_kPa < stiff
+
+
+@settings(max_examples=40, deadline=None)
+@given(mu=st.floats(5.0, 300.0), k2=st.floats(0.0, 0.2), k3=st.floats(0.0, 0.002),
+       noise=st.floats(0.0, 0.02), seed=st.integers(0, 2**16))
+def test_the_fit_recovers_a_drawn_law_from_noisy_data(mu, k2, k3, noise, seed):
+    """Truth the fit did not make: a drawn Yeoh law, sampled as a tensile test is (to break) with relative noise."""
+    lam = np.linspace(1.02, 8.0, 300)
+    p = uniaxial_stress_kPa(lam, mu, k2, k3) * (1.0 + noise * np.random.default_rng(seed).standard_normal(lam.size))
+    fit = fit_yeoh(lam, p)
+    x = np.linspace(ERROR_FROM, fit.stretch_max, 50)
+    truth = uniaxial_stress_kPa(x, mu, k2, k3)
+    assert np.max(np.abs(fit.stress_kPa(x) - truth) / truth) <= 0.01 + 2.0 * noise
+    assert fit.mu_kPa == pytest.approx(mu, rel=0.02 + 3.0 * noise)
+
+
+def test_the_fit_refuses_too_few_points():
+    with pytest.raises(ValueError, match="at least 4 points"):
+        fit_yeoh(np.array([1.0, 1.5, 5.0]), np.array([0.0, 10.0, 90.0]))
+
+
+def _check(tmp_path: Path, law: str, material_key: str = "ecoflex-00-30", model: str = "auto"):
+    """``magfab check`` on MagOne with the law, silicone and mechanics model given."""
+    text = (ROOT / "magfab/examples/magone.toml").read_text()
+    for old, new in (('material_law = "neo-hookean"', f'material_law = "{law}"'),
+                     ('material = "ecoflex-00-30"', f'material = "{material_key}"'),
+                     ('mechanics_model = "auto"', f'mechanics_model = "{model}"')):
+        assert old in text
+        text = text.replace(old, new)
+    (tmp_path / "spec.toml").write_text(text)
+    return subprocess.run([sys.executable, "-m", "magfab.cli", "check", "spec.toml"], capture_output=True, text=True,
+                          cwd=tmp_path, timeout=300)
+
+
+def test_magone_with_the_yeoh_law_ends_at_a_physical_limit_and_neo_hookean_at_its_data(tmp_path):
+    """The neo-Hookean law's range is a model's reach (its data end at a stretch of 2): "at least". The Yeoh law
+    reaches past it, to a limit of the sensor: here the scan depth the spec calibrates over."""
+    nh = _check(tmp_path, "neo-hookean")
+    assert nh.returncode == 0, nh.stderr
+    assert "range at least" in nh.stdout and "(material data)" in nh.stdout
+    yeoh = _check(tmp_path, "yeoh")
+    assert yeoh.returncode == 0, yeoh.stderr
+    line = next(x for x in yeoh.stdout.splitlines() if x.startswith("info: normal:"))
+    assert "at least" not in line
+    rng = float(line.split("range ")[1].split(" N")[0])
+    assert rng > 2.0 * float(nh.stdout.split("range at least ")[1].split(" N")[0])
+    assert "(scan depth)" in yeoh.stdout
+
+
+@pytest.mark.parametrize("key, model, why", [
+    ("sylgard-184", "auto", "no Yeoh fit for sylgard-184"),
+    ("ecoflex-00-30", "column", "needs the FE"),
+    ("ecoflex-00-30", "hertz_column", "needs the FE"),
+])
+def test_the_yeoh_law_is_refused_where_it_cannot_run(tmp_path, key, model, why):
+    r = _check(tmp_path, "yeoh", key, model)
+    assert r.returncode == 2
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and why in lines[0], r.stderr
+    assert lines[0].startswith("magfab: error: predict.material_law = ")
+    assert "Traceback" not in r.stderr and sorted(p.name for p in tmp_path.iterdir()) == ["spec.toml"]
+
+
+def test_the_search_evaluates_a_yeoh_design_with_the_fe():
+    """The FE surrogate's table is of neo-Hookean runs: a design search over a Yeoh base evaluates every design with
+    the FE (the law it asks for). magfab.inverse.budget reads the same choice to price a design."""
+    from magfab.design import derive
+    from magfab.inverse.evaluate import OUTSIDE, _elastomer_model
+    from magfab.spec import parse_spec
+
+    nh, yeoh = (derive(parse_spec(f'[predict]\nmaterial_law = "{law}"\n')) for law in ("neo-hookean", "yeoh"))
+    assert _elastomer_model(nh)[0] is not None
+    assert _elastomer_model(yeoh) == (None, OUTSIDE)
