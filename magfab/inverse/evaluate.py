@@ -249,10 +249,12 @@ OUTSIDE = "fe (outside surrogate region)"
 
 
 def _elastomer_model(design) -> tuple[Any, str]:
-    """The surrogate's elastomer model for ``design``, or (None, why not) outside its validated region or law."""
+    """The surrogate's elastomer model for ``design``, or (None, why not) outside its validated region or laws."""
     body = mech.Body.from_design(design)
-    if not fe_surrogate.in_region(body) or design.spec.predict.material_law.value != "neo-hookean":
-        return None, OUTSIDE  # the surrogate's table is of neo-Hookean runs: a Yeoh design is evaluated by the FE
+    yeoh = design.material.yeoh if design.spec.predict.material_law.value == "yeoh" else None
+    if not fe_surrogate.in_region(body) or (yeoh is not None and yeoh.k3 > 0.0) or \
+            (yeoh is not None and yeoh.k2 > fe_surrogate.YEOH_K2):
+        return None, OUTSIDE  # the Yeoh tables are for C30 = 0 and C20/C10 up to YEOH_K2: any other law by the FE
     return _surrogate_or_fe, SURROGATE
 
 

@@ -207,11 +207,13 @@ def surrogate_curve(design: Design, body: mech.Body, mu: float,
     search: the curve to the scan depth and the shear response at the preloads the FE probe would solve. Raises
     :class:`~.mechanics.fe_surrogate.OutsideRegion` for a body outside its validated region."""
     depth = float(design.spec.calibration.scan_z_mm)
+    law = material_law(design)
+    k2 = float(law["yeoh_ratios"][0]) if law else 0.0
     curve, response = fe_surrogate.normal_and_shear(body, mu, indentation, depth,
                                                     shear_probe_depths(design, indentation),
-                                                    design.spec.calibration.scan_step_mm)
-    return curve, ModelUse("mechanics", "surrogate", fe_surrogate.held_out_error(body.tip)["force_rms"],
-                           fe_surrogate.description(body.tip), "search"), response
+                                                    design.spec.calibration.scan_step_mm, k2)
+    return curve, ModelUse("mechanics", "surrogate", fe_surrogate.held_out_error(body.tip, bool(law))["force_rms"],
+                           fe_surrogate.description(body.tip, bool(law)), "search"), response
 
 
 # ---------------------------------------------------------------------------------------------------

@@ -170,3 +170,40 @@ def test_outside_the_region_it_refuses(magone_design, change, words):
     assert not S.in_region(body)
     with pytest.raises(S.OutsideRegion, match=words):
         S.normal_and_shear(body, 20.0, np.array([0.0, 1.0]), 3.0, np.array([0.0]), 0.05)
+
+
+@pytest.mark.parametrize("key", ["ecoflex-00-10", "ecoflex-00-30", "ecoflex-00-50", "dragon-skin-10",
+                                 "dragon-skin-20", "dragon-skin-30"])
+def test_the_yeoh_blend_against_the_fe_at_each_silicones_law(magone_design, key):
+    """MagOne's body with each recipe's Yeoh law (k2 0.013-0.057, none of them the tables' 0 or 0.06): the FE run
+    now against the surrogate's blend of the two tables, on the grid points before the surrogate's reach (2.7-2.9 mm
+    here: the last point, at its interpolated end, is 5-8 % off, as the neo-Hookean table's is), within the blend's
+    stated held-out error (its 90th percentile, doubled for a single design; at least 2 %; travel from the fourth
+    point, as for the neo-Hookean table). Measured: force within 1.8 %, travel within 1.4 % from there."""
+    from magfab.recipes.resolve import material
+
+    law = material(key).yeoh
+    body = mech.Body.from_design(magone_design)
+    ind = np.linspace(0.0, 3.0, 13)
+    fe = mech.fe(body, law.mu_kPa, ind, mesh_mm=S.MESH_TABLE, on_failure="truncate", material="yeoh",
+                 yeoh_ratios=(law.k2, law.k3))
+    curve, _ = S.normal_and_shear(body, law.mu_kPa, ind, 3.0, ind[:3], 0.05, law.k2)
+    assert len(fe.force_N) == ind.size and curve.indentation_mm[-1] >= 2.5  # the FE to 3 mm, the blend past 2.5
+    n = int(np.count_nonzero(ind < curve.indentation_mm[-1] - 1e-9))  # the grid points before the blend's end
+    e = S.held_out_error(Tip.HEMISPHERE, yeoh=True)
+    np.testing.assert_allclose(curve.force_N[1:n], fe.force_N[1:n], rtol=max(2.0 * e["force_p90"], 0.02))
+    np.testing.assert_allclose(curve.magnet_displacement_mm[3:n], fe.magnet_displacement_mm[3:n],
+                               rtol=max(2.0 * e["travel_p90"], 0.02))
+    neo, _ = S.normal_and_shear(body, law.mu_kPa, ind, 3.0, ind[:3], 0.05)
+    assert curve.force_N[-1] > neo.force_N[-1]  # the blend stiffens as the law does
+
+
+def test_the_shipped_yeoh_table_is_what_the_fe_gives():
+    """A held-out body of the Yeoh file, rerun with the FE at its k2 now: the same numbers."""
+    data = S._shipped(Tip.HEMISPHERE, True)[1]
+    assert data["k2"] == S.YEOH_K2 and data["held_out_k2"] == S.YEOH_HELD_OUT_K2
+    kept = data["held_out"][0]
+    again = S.run(kept["x"], Tip.HEMISPHERE, S.YEOH_HELD_OUT_K2)
+    for key in ("force", "travel", "disp"):
+        np.testing.assert_allclose(again[key], kept[key], rtol=1e-6, equal_nan=True)
+    assert data["held_out_error"]["force_rms"] <= 0.05

@@ -112,13 +112,48 @@ def test_the_yeoh_law_is_refused_where_it_cannot_run(tmp_path, key, model, why):
     assert "Traceback" not in r.stderr and sorted(p.name for p in tmp_path.iterdir()) == ["spec.toml"]
 
 
-def test_the_search_evaluates_a_yeoh_design_with_the_fe():
-    """The FE surrogate's table is of neo-Hookean runs: a design search over a Yeoh base evaluates every design with
-    the FE (the law it asks for). magfab.inverse.budget reads the same choice to price a design."""
+@pytest.mark.parametrize("key", ["ecoflex-00-30", "dragon-skin-10"])
+def test_the_search_evaluates_a_yeoh_design_with_the_blend_and_agrees_with_the_build(key):
+    """A design search over a Yeoh base evaluates a design with the surrogate's Yeoh blend (not the neo-Hookean
+    table, not the FE), and its range and resolution agree with the build's FE chain: MagOne's geometry with the
+    least- and the most-stiffening silicone."""
     from magfab.design import derive
-    from magfab.inverse.evaluate import OUTSIDE, _elastomer_model
+    from magfab.inverse.evaluate import SURROGATE, _elastomer_model
+    from magfab.models.mechanics import fe_surrogate as S
+    from magfab.models.predict import predict
     from magfab.spec import parse_spec
 
-    nh, yeoh = (derive(parse_spec(f'[predict]\nmaterial_law = "{law}"\n')) for law in ("neo-hookean", "yeoh"))
-    assert _elastomer_model(nh)[0] is not None
-    assert _elastomer_model(yeoh) == (None, OUTSIDE)
+    design = derive(parse_spec(f'[elastomer]\nmaterial = "{key}"\n[predict]\nmaterial_law = "yeoh"\n'))
+    model, label = _elastomer_model(design)
+    assert label == SURROGATE and model is not None
+    cheap, full = predict(design, model), predict(design)
+    assert "Yeoh law" in cheap.model("mechanics").detail and "Yeoh (k2" in full.model("mechanics").detail
+    assert full.normal.range_limit == "scan depth"
+    # The blend's curve ends where the table's runs stop (its reach, interpolated: 2.7-2.9 mm on MagOne, where the
+    # FE reaches the 3 mm scan depth), so the cheap chain's range may be a model's reach: then at least its figure,
+    # and never more than the full chain's.
+    if cheap.normal.range_limit == "model":
+        assert 0.7 * full.normal.range_N <= cheap.normal.range_N <= 1.03 * full.normal.range_N
+        assert cheap.normal.range_text().startswith("at least")
+    else:
+        assert cheap.normal.range_limit == "scan depth"
+        assert cheap.normal.range_N == pytest.approx(full.normal.range_N, rel=0.03)
+    # resolution: within the blend's stated error (its force p90, doubled for one design: 6 %); measured 5 % and 6 %
+    # finer than the build's (the neo-Hookean table: 2 %)
+    band = 2.0 * S.held_out_error(design.spec.elastomer.tip, yeoh=True)["force_p90"]
+    assert cheap.normal.resolution_mN == pytest.approx(full.normal.resolution_mN, rel=band)
+
+
+def test_the_bench_command_prints_the_recipes_rows_and_draws_the_fits(tmp_path):
+    """`python bench/material_fits.py --plot FILE`, as the README lists it: one row per silicone with the recipe's
+    mu, k2 and k3, and the figure written."""
+    png = tmp_path / "fits.png"
+    r = subprocess.run([sys.executable, "bench/material_fits.py", "--plot", str(png)], capture_output=True, text=True,
+                       cwd=ROOT, timeout=300)
+    assert r.returncode == 0, r.stderr
+    rows = {line.split()[0]: line.split() for line in r.stdout.splitlines()[1:] if line.split()[0] in FILES}
+    assert sorted(rows) == sorted(FILES)
+    for key, row in rows.items():
+        law = material(key).yeoh
+        assert float(row[1]) == pytest.approx(law.mu_kPa, rel=5e-3) and float(row[2]) == pytest.approx(law.k2, rel=5e-3)
+    assert png.stat().st_size > 10_000

@@ -25,6 +25,15 @@ bench/fe_surrogate.py's doc). Its box is the example targets' and the bench targ
 margin, and its held-out runs are the ratios of designs drawn over the example targets' box and a hypercube over
 what the bench sets added.
 
+The Yeoh law (``predict.material_law = "yeoh"``) is scale-free too (its ratios k2 = C20/C10 and k3 = C30/C10 are
+dimensionless), but each silicone has its own k2. Every recipe's fit has k3 = 0 and k2 from 0.013 to 0.057, and the
+FE's response is close to linear in k2 over that span (MagOne's force at 3 mm: 3.001, 3.163, 3.480 at k2 = 0, 0.02,
+0.057; linear from the ends gives 3.169 at 0.02). So each tip has a second table (``fe_surrogate_yeoh.json``,
+``fe_surrogate_flat_yeoh.json``): the same bodies run at k2 = :data:`YEOH_K2`, and a silicone's outputs are the two
+tables' blended linearly in its k2. The blend's error is measured on the held-out bodies run at
+:data:`YEOH_HELD_OUT_K2` (in the file; as small as the neo-Hookean table's own). A Yeoh law past YEOH_K2 or with
+k3 > 0 is the FE's.
+
 Used only inside its family's box (:data:`BOXES`) and for bodies :class:`~.body.Body` accepts: anything else is
 :class:`OutsideRegion`, and the search evaluates it with the FE.
 
@@ -54,7 +63,7 @@ from .shear_surface import ShearProbe, ShearResponse
 # noticeable time to import, and importing this module should not.
 
 __all__ = ["OutsideRegion", "BOX", "FLAT_BOX", "BOXES", "GRID", "in_region", "curve", "normal_and_shear",
-           "held_out_error", "description", "ratios", "body_of", "run", "fit_data"]
+           "held_out_error", "description", "ratios", "body_of", "run", "fit_data", "fit_yeoh_data", "YEOH_K2"]
 
 #: The box of ratios the table covers (a, h, z, c), and so the surrogate's validated region: the example targets'
 #: whole box and the bench target sets' (bench/targets/; 1,500-point hypercubes of each set's search coordinates:
@@ -85,6 +94,12 @@ MU_TABLE = 1.0  # kPa: the table is per unit modulus
 DATA = "fe_surrogate.json"
 #: Each tip's data file.
 DATAS = {Tip.HEMISPHERE: DATA, Tip.FLAT: "fe_surrogate_flat.json"}
+#: The Yeoh law's tables: the same bodies run with C20/C10 = YEOH_K2 (and C30 = 0, as every recipe's fit), one file
+#: per tip; a silicone's k2 between 0 and YEOH_K2 is a linear blend of the two tables (:func:`_predict`), whose
+#: error is measured on held-out bodies run at YEOH_HELD_OUT_K2. YEOH_K2 is just above the stiffest-stiffening fit
+#: (Dragon Skin 10, 0.057).
+YEOH_K2, YEOH_HELD_OUT_K2 = 0.06, 0.03
+YEOH_DATAS = {Tip.HEMISPHERE: "fe_surrogate_yeoh.json", Tip.FLAT: "fe_surrogate_flat_yeoh.json"}
 CURVE_KEYS = ("force", "travel", "stretch", "stiffness", "stress")
 SHEAR_KEYS = ("preload", "drop", "disp", "tilt", "kind", "patch")
 #: Outputs fitted in log space (positive, spanning decades): the rest as they are.
@@ -138,14 +153,16 @@ def _refusal(body: Body) -> str:
 # The table: FE runs (what bench/fe_surrogate.py makes and ships)
 
 
-def run(x: dict[str, float], tip: Tip = Tip.HEMISPHERE) -> dict[str, object]:
+def run(x: dict[str, float], tip: Tip = Tip.HEMISPHERE, k2: float = 0.0) -> dict[str, object]:
     """One FE run of the table: the body of ratios ``x`` at R_TABLE with tip ``tip``, its curve on GRID and its shear
-    response on PROBED, per unit modulus, as plain lists (NaN where the FE stopped), with the seconds it took."""
+    response on PROBED, per unit modulus, as plain lists (NaN where the FE stopped), with the seconds it took.
+    ``k2`` > 0: the Yeoh law with that C20/C10 (and C30 = 0, as every recipe's fit) instead of the neo-Hookean."""
     body = body_of(x, tip=tip)
     d = GRID * R_TABLE
     probe = ShearProbe(depths_mm=d[PROBED], rest_indentation_mm=REST_TABLE)
     t0 = time.perf_counter()
-    curve = fe(body, MU_TABLE, d, mesh_mm=MESH_TABLE, on_failure=OnFailure.TRUNCATE, probe=probe)
+    curve = fe(body, MU_TABLE, d, mesh_mm=MESH_TABLE, on_failure=OnFailure.TRUNCATE, probe=probe,
+               material="yeoh" if k2 > 0.0 else "neo-hookean", yeoh_ratios=(k2, 0.0) if k2 > 0.0 else None)
     seconds = time.perf_counter() - t0
     resp = probe.response(MU_TABLE)
     n = len(curve.force_N)
@@ -242,19 +259,46 @@ def _inverse(key: str, v: float) -> float:
     return math.exp(v) if key in LOG_KEYS else v
 
 
-@lru_cache(maxsize=2)
-def _shipped(tip: Tip = Tip.HEMISPHERE) -> tuple[_Model, dict]:
-    data = json.loads(resources.files("magfab.models.mechanics").joinpath(DATAS[tip]).read_text(encoding="utf-8"))
+@lru_cache(maxsize=4)
+def _shipped(tip: Tip = Tip.HEMISPHERE, yeoh: bool = False) -> tuple[_Model, dict]:
+    name = (YEOH_DATAS if yeoh else DATAS)[tip]
+    data = json.loads(resources.files("magfab.models.mechanics").joinpath(name).read_text(encoding="utf-8"))
     return _Model(data["runs"], BOXES[tip]), data
 
 
-def held_out_error(tip: Tip = Tip.HEMISPHERE) -> dict[str, float]:
+class _Blend:
+    """The neo-Hookean table's model and the Yeoh one's, blended linearly in k2 (module doc; :data:`YEOH_K2`)."""
+
+    def __init__(self, neo: _Model, yeoh: _Model, k2: float):
+        self.neo, self.yeoh, self.w = neo, yeoh, k2 / YEOH_K2
+
+    def predict(self, x: np.ndarray) -> tuple[float, dict[str, np.ndarray]]:
+        (r0, t0), (r1, t1) = self.neo.predict(x), self.yeoh.predict(x)
+        return r0 + self.w * (r1 - r0), {key: t0[key] + self.w * (t1[key] - t0[key]) for key in t0}
+
+
+def _model(tip: Tip, k2: float) -> _Model | _Blend:
+    """The model for a silicone with Yeoh ratio ``k2`` (0: neo-Hookean, the first table alone)."""
+    neo = _shipped(tip)[0]
+    return _Blend(neo, _shipped(tip, True)[0], k2) if k2 > 0.0 else neo
+
+
+def held_out_error(tip: Tip = Tip.HEMISPHERE, yeoh: bool = False) -> dict[str, float]:
     """The shipped table's held-out errors for tip ``tip`` (relative: median, RMS, 90th percentile and max per
-    output, at the table's grid points)."""
-    return dict(_shipped(Tip(tip))[1]["held_out_error"])
+    output, at the table's grid points); ``yeoh``: the blend's, at :data:`YEOH_HELD_OUT_K2`."""
+    return dict(_shipped(Tip(tip), yeoh)[1]["held_out_error"])
 
 
-def _errors(model: _Model, held_out: Sequence[dict]) -> dict[str, float]:
+def fit_yeoh_data(runs: Sequence[dict], held_out: Sequence[dict], tip: Tip = Tip.HEMISPHERE) -> dict[str, object]:
+    """The shipped Yeoh data of tip ``tip``: the table's bodies run at :data:`YEOH_K2`, held-out bodies run at
+    :data:`YEOH_HELD_OUT_K2`, and the errors of the blend (the shipped neo-Hookean table and this one) on them."""
+    blend = _Blend(_shipped(tip)[0], _Model(list(runs), BOXES[tip]), YEOH_HELD_OUT_K2)
+    return {"box": BOXES[tip], "grid": [float(g) for g in GRID], "probed": [int(i) for i in PROBED],
+            "r_table_mm": R_TABLE, "mesh_table_mm": MESH_TABLE, "k2": YEOH_K2, "held_out_k2": YEOH_HELD_OUT_K2,
+            "runs": list(runs), "held_out": list(held_out), "held_out_error": _errors(blend, held_out)}
+
+
+def _errors(model: _Model | _Blend, held_out: Sequence[dict]) -> dict[str, float]:
     """Relative errors of the surrogate on held-out runs, over the grid points both reached (force from the second
     grid point on: the first is zero)."""
     errs: dict[str, list[float]] = {"force": [], "travel": [], "stretch": [], "disp": [], "reach": []}
@@ -281,13 +325,16 @@ def _errors(model: _Model, held_out: Sequence[dict]) -> dict[str, float]:
     return summary
 
 
-def description(tip: Tip = Tip.HEMISPHERE) -> str:
-    """One line for the report and the ModelUse: what the surrogate of tip ``tip`` is and its held-out error."""
+def description(tip: Tip = Tip.HEMISPHERE, yeoh: bool = False) -> str:
+    """One line for the report and the ModelUse: what the surrogate of tip ``tip`` is and its held-out error
+    (``yeoh``: the blend of the neo-Hookean and the Yeoh tables)."""
     tip = Tip(tip)
-    e = held_out_error(tip)
-    return (f"Surrogate of the elastomer FE over dimensionless geometry, {tip.value} tip (RBF over 4 ratios, "
-            f"{len(_shipped(tip)[1]['runs'])} FE runs); held-out error: force RMS {100 * e['force_rms']:.1f} % (90th "
-            f"percentile {100 * e['force_p90']:.1f} %), magnet travel RMS {100 * e['travel_rms']:.1f} %")
+    e = held_out_error(tip, yeoh)
+    law = (f"Yeoh law: the neo-Hookean and the k2 = {YEOH_K2:g} tables blended linearly in k2, held out at "
+           f"k2 = {YEOH_HELD_OUT_K2:g}" if yeoh else "neo-Hookean")
+    return (f"Surrogate of the elastomer FE over dimensionless geometry, {tip.value} tip, {law} (RBF over 4 ratios, "
+            f"{len(_shipped(tip, yeoh)[1]['runs'])} FE runs); held-out error: force RMS {100 * e['force_rms']:.1f} % "
+            f"(90th percentile {100 * e['force_p90']:.1f} %), magnet travel RMS {100 * e['travel_rms']:.1f} %")
 
 
 def _interpolate(x: np.ndarray, y: np.ndarray, at: np.ndarray, log: bool) -> np.ndarray:
@@ -321,14 +368,16 @@ def curve(body: Body, mu_kPa: float, indentation_mm: np.ndarray) -> Curve:
 
 
 def normal_and_shear(body: Body, mu_kPa: float, indentation_mm: np.ndarray, depth_mm: float,
-                     probe_depths_mm: np.ndarray, rest_indentation_mm: float) -> tuple[Curve, ShearResponse]:
+                     probe_depths_mm: np.ndarray, rest_indentation_mm: float,
+                     k2: float = 0.0) -> tuple[Curve, ShearResponse]:
     """What ``predict`` takes from the FE (the nominal curve to ``depth_mm`` and the shear response at
     ``probe_depths_mm``), from the surrogate: the table scaled to this body's radius and modulus, interpolated in
-    indentation (PCHIP) onto the indentations asked for. :class:`OutsideRegion` outside the validated region."""
-    why = _refusal(body)
+    indentation (PCHIP) onto the indentations asked for; ``k2`` > 0, the Yeoh law's blend (:data:`YEOH_K2`).
+    :class:`OutsideRegion` outside the validated region."""
+    why = _refusal(body) or (f"k2 = {k2:g} is past the Yeoh table's {YEOH_K2:g}" if k2 > YEOH_K2 + 1e-12 else "")
     if why:
         raise OutsideRegion(why)
-    model = _shipped(body.tip)[0]
+    model = _model(body.tip, k2)
     R, mu = body.radius_mm, float(mu_kPa)
     reach, t = model.predict(np.array([ratios(body)[k] for k in "ahzc"]))
     grid = GRID * R
