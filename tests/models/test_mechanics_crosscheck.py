@@ -5,7 +5,8 @@ vertices and triangles, its boundary tags), and a small Newton / active-set loop
 and one common axial displacement on every node of its surface, midpoints included; flat frictionless indenter:
 prescribed axial displacement on the surface nodes it touches). Not shared: the quadratic nodes (FElupe's
 ``add_midpoints_edges``), FElupe's quadratic triangle element, its quadrature (7 points), axisymmetric kinematics,
-its neo-Hookean law (``NeoHookeCompressible``, lambda = 0) and its (u, p, J) three-field nearly-incompressible
+its neo-Hookean law (``NeoHookeCompressible``, lambda = 0; for the recipes' Yeoh laws, tensortrax's derivatives of
+FElupe's isochoric Yeoh energy) and its (u, p, J) three-field nearly-incompressible
 formulation (continuous P1 pressure and volume ratio, bulk modulus 5000 mu; magfab: two-field Taylor-Hood P2/P1,
 exact incompressibility, its own assembly and kinematics), and the linear solver (SuperLU; magfab: QDLDL).
 
