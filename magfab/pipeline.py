@@ -187,7 +187,7 @@ def acceptance_stage(design: Design, prediction: Prediction) -> AcceptanceStage:
         return AcceptanceStage(bands=acceptance(design, prediction))
     except ModelLimitError as exc:  # e.g. no weight fits the predicted range: the bundle ships without the check
         return AcceptanceStage(bands=None, findings=[Finding(Severity.WARNING, "acceptance", "the readout package "
-                               f"has no acceptance test for this design: {exc}", "predict.max_stretch")])
+                               f"has no acceptance test for this design: {exc}", "predict.material_law")])
 
 
 def _calibration_finding(result: FitResult, prefix: str, source: str = "") -> Finding:

@@ -25,7 +25,7 @@ from functools import cache
 from .errors import SpecError
 from .errors import number_text as _fmt
 from .recipes import catalogue
-from .spec import Spec
+from .spec import MaterialLaw, MechanicsModel, Spec
 
 __all__ = ["FACTOR", "MODULUS_FACTOR", "UNIT", "plausible", "spans"]
 
@@ -85,11 +85,12 @@ def plausible(spec: Spec) -> None:
 def _law_has_data(spec: Spec) -> None:
     """Refuse the Yeoh law for a silicone the recipes hold no Yeoh fit for (there is nothing to fit it from), or with
     a closed-form mechanics model (they are neo-Hookean)."""
-    if spec.predict.material_law.value != "yeoh":
+    if spec.predict.material_law != MaterialLaw.YEOH:
         return
-    if spec.predict.mechanics_model.value in ("column", "hertz_column"):
+    model = MechanicsModel(spec.predict.mechanics_model)
+    if model in (MechanicsModel.COLUMN, MechanicsModel.HERTZ_COLUMN):
         raise SpecError("predict.material_law", "yeoh", f"needs the FE: predict.mechanics_model = "
-                        f"'{spec.predict.mechanics_model.value}' is a neo-Hookean closed form; use 'auto' or 'fe'")
+                        f"'{model.value}' is a neo-Hookean closed form; use 'auto' or 'fe'")
     fitted = sorted(k for k, r in catalogue("materials").items() if "yeoh_mu_kPa" in r.quantities)
     if spec.elastomer.material not in fitted:
         raise SpecError("predict.material_law", "yeoh", f"recipes/materials.toml holds no Yeoh fit for "

@@ -11,6 +11,7 @@ from ..errors import Finding, Severity
 from ..models import field as fieldmod
 from ..models import mechanics as mech
 from ..models.predict import ElastomerModel, NormalFigures, Prediction, predict
+from ..spec import MaterialLaw
 from .drift import drift_findings
 from .reference import reference_findings
 
@@ -20,7 +21,8 @@ E, W, INFO = Severity.ERROR, Severity.WARNING, Severity.INFO
 
 
 #: The spec key that moves each normal range limit (predict.py's labels); d_min and the chip's full scale have theirs
-#: in their own findings, and "model" (the FE stopped before the scan depth) none a user sets.
+#: in their own findings, and "model" (the FE stopped before the scan depth) and "invertibility" (the force or field
+#: stops rising) none a user sets; "material data" (the law's data end) the law, where a further one is fitted.
 _RANGE_LIMIT_KEYS = {"stretch": "predict.max_stretch", "scan depth": "calibration.scan_z_mm",
                      "material data": "predict.material_law"}
 
@@ -52,7 +54,7 @@ def prediction_findings(design: Design, pred: Prediction) -> list[Finding]:
                            f"{pred.field.dBz_dz_rest_G_per_mm:.0f} G/mm is too shallow; reduce sensor.d_max_mm, use a "
                            "softer elastomer.material or a stronger magnet", "predict.required_resolution_mN"))
     if normal.range_limit != "d_min":
-        out.append(_range_limit(normal, p.material_law.value))
+        out.append(_range_limit(normal, design.material.yeoh is not None and p.material_law != MaterialLaw.YEOH))
     # Guidelines (docs/models.md, M18).
     ratio = spec.magnet.height_mm / spec.magnet.diameter_mm
     if not 0.2 <= ratio <= 0.5:
@@ -100,18 +102,21 @@ def prediction_findings(design: Design, pred: Prediction) -> list[Finding]:
     return out
 
 
-def _range_limit(normal: NormalFigures, law: str) -> Finding:
-    """The note on what ends the normal range before d_min, and whether it is the sensor or a model's reach."""
+def _range_limit(normal: NormalFigures, yeoh_reaches: bool) -> Finding:
+    """The note on what ends the normal range before d_min, and whether it is the sensor or a model's reach;
+    ``yeoh_reaches``: the silicone has a Yeoh law the spec does not use, which would take the range further."""
     travel = normal.range_limits_travel_mm
-    model_reach = ""
+    model_reach, key = "", _RANGE_LIMIT_KEYS.get(normal.range_limit, "")
     if normal.range_is_model_reach:
         model_reach = ": a model's reach, not the sensor's, so the sensor reaches at least this far"
-        if normal.range_limit == "material data" and law != "yeoh":
-            model_reach += " (predict.material_law = 'yeoh' is fitted to a stretch of 4)"
+        if normal.range_limit == "material data":
+            if yeoh_reaches:
+                model_reach += " (predict.material_law = 'yeoh' is fitted to a stretch of 4)"
+            else:
+                key = ""  # no law in the recipes reaches further for this silicone
     return Finding(INFO, "range-limit",
                    f"the normal range ends at {normal.travel_mm:.2f} mm of magnet travel ({normal.range_limit}), "
-                   f"before the magnet reaches d_min ({travel['d_min']:.2f} mm of travel){model_reach}",
-                   _RANGE_LIMIT_KEYS.get(normal.range_limit, ""))
+                   f"before the magnet reaches d_min ({travel['d_min']:.2f} mm of travel){model_reach}", key)
 
 
 def predict_with_findings(design: Design,

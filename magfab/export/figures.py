@@ -38,8 +38,8 @@ CAPTIONS = {
     "field_contours": "|Bz| and |Br| in the z-r plane, filled log contours each with its colour bar, where Bz "
                       "changes sign dotted and the magnet's travel envelope dashed",
     "force": "force and stiffness against indentation, soft / nominal / stiff material, where the normal range "
-             "ends and why marked, and where each other limit (d_min, the chip's full scale, the material law's data "
-             "end) would bind",
+             "ends and why marked, and where each other limit (d_min, the chip's full scale, invertibility, the scan "
+             "depth, a stretch, the material law's data end, the FE stopping) would bind",
     "sensitivity": "sensitivity and resolution against the magnet's axial travel, normal (at the Z noise) and shear "
                    "(at the XY noise), soft / nominal / stiff material, where the normal range ends marked",
     "speed_accuracy": "each model's error against its time (bench/models.py figures), one panel per model family and "

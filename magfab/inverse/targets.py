@@ -51,7 +51,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_serial
 
 from ..errors import InputError, SpecError, shown
 from ..recipes import catalogue
-from ..spec import NAME_PATTERN, Sensor, Spec, Tip, is_valid_name, load_spec, translate_error
+from ..spec import NAME_PATTERN, MaterialLaw, Sensor, Spec, Tip, is_valid_name, load_spec, translate_error
 from ..toml_input import loads_toml, read_toml
 
 __all__ = ["Objective", "OBJECTIVES", "Targets", "load_targets", "parse_targets"]
@@ -338,4 +338,19 @@ def load_targets(path: str | Path) -> tuple[Targets, Spec]:
     text = read_toml(path, "targets")
     targets = parse_targets(text, default_name=path.stem if is_valid_name(path.stem) else "design", where=str(path))
     base = load_spec(path.parent / targets.base) if targets.base else load_spec()
-    return targets, base
+    return _with_the_laws_silicones(targets, base), base
+
+
+def _with_the_laws_silicones(targets: Targets, base: Spec) -> Targets:
+    """With a Yeoh base (predict.material_law), the silicones the recipes fit a Yeoh law for: by default those
+    alone, and a listed one without a fit refused up front rather than as a failed trial each time it is drawn."""
+    if base.predict.material_law != MaterialLaw.YEOH:
+        return targets
+    fitted = sorted(k for k, r in catalogue("materials").items() if "yeoh_mu_kPa" in r.quantities)
+    if targets.variables.materials is None:
+        return targets.model_copy(update={"variables": targets.variables.model_copy(update={"materials": fitted})})
+    missing = [m for m in targets.variables.materials if m not in fitted]
+    if missing:
+        raise SpecError("variables.materials", missing, f"the base spec's predict.material_law = 'yeoh' has no fit "
+                        f"for these (fitted: {', '.join(fitted)}); leave them out or use 'neo-hookean'")
+    return targets

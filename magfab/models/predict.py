@@ -45,7 +45,7 @@ import numpy as np
 
 from ..fork import side_branch
 from ..reference_chip import reference_chip
-from ..spec import FieldModel
+from ..spec import FieldModel, MaterialLaw
 from ..units import MN_PER_N
 from . import drift
 from . import field as fieldmod
@@ -356,14 +356,14 @@ def _derivative(x: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 def _band(design: Design) -> dict[str, float]:
     spec = design.spec
-    law = spec.predict.material_law.value
+    law = MaterialLaw(spec.predict.material_law).value
     return dict(zip(MATERIALS, spec.elastomer.shear_modulus_kPa or mech.band(design.material, law)))
 
 
 def material_law(design: Design) -> dict[str, Any]:
     """The FE's material arguments for the spec's ``predict.material_law``: none for neo-Hookean (the FE's default),
     or the silicone's Yeoh ratios (recipes/materials.toml)."""
-    if design.spec.predict.material_law.value != "yeoh" or design.material.yeoh is None:
+    if design.spec.predict.material_law != MaterialLaw.YEOH or design.material.yeoh is None:
         return {}
     y = design.material.yeoh
     return {"material": "yeoh", "yeoh_ratios": (y.k2, y.k3)}

@@ -126,7 +126,7 @@ def test_report_shows_the_key_figures_models_findings_and_spec(inputs, report):
     sens = "{0:.1f} – {1:.1f} G/N".format
     expected = [f"{design.d_rest_mm:.2f} mm", f"cover {design.cover_mm:.2f} mm", f"skin {design.skin_mm:.2f} mm",
                 f"{data['field']['Bz_rest_G']:.1f} G", sens(*n["sensitivity_G_per_N"]), f"{n['resolution_mN']:.2f} mN",
-                f"{n['range_N']:.3f} N", inputs["prediction"].normal.range_parts()[1], sens(*s["sensitivity_G_per_N"]),
+                *inputs["prediction"].normal.range_parts(), sens(*s["sensitivity_G_per_N"]),
                 f"{s['resolution_mN']:.2f} mN", f"{s['range_N']:.3f} N", f"{data['noise_G']['total_z_G']:.3f} G",
                 cal["method"]]
     expected += [f"{1000 * cal['errors'][k]['rms_holdout']:.2f}" for k in ("Fz_N", "Fr_N")]

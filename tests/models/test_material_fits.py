@@ -157,3 +157,22 @@ def test_the_bench_command_prints_the_recipes_rows_and_draws_the_fits(tmp_path):
         law = material(key).yeoh
         assert float(row[1]) == pytest.approx(law.mu_kPa, rel=5e-3) and float(row[2]) == pytest.approx(law.k2, rel=5e-3)
     assert png.stat().st_size > 10_000
+
+
+def test_a_search_over_a_yeoh_base_takes_the_fitted_silicones(tmp_path):
+    """With predict.material_law = "yeoh" in the base spec, the search's silicones default to those with a fit, and
+    a listed one without (sylgard-184) is refused up front in one line, nothing written."""
+    from magfab.inverse.targets import load_targets
+
+    base = (ROOT / "magfab/examples/magone.toml").read_text().replace('material_law = "neo-hookean"',
+                                                                       'material_law = "yeoh"')
+    (tmp_path / "base.toml").write_text(base)
+    head = 'name = "t"\nbase = "base.toml"\nobjectives = ["normal_range_N"]\n[require]\nnormal_range_N = 1.0\n'
+    (tmp_path / "all.toml").write_text(head)
+    targets, _ = load_targets(tmp_path / "all.toml")
+    assert targets.variables.materials == sorted(FILES)
+    (tmp_path / "syl.toml").write_text(head + '[variables]\nmaterials = ["sylgard-184", "ecoflex-00-30"]\n')
+    r = subprocess.run([sys.executable, "-m", "magfab.cli", "design", "syl.toml", "--out", "out"], capture_output=True,
+                       text=True, cwd=tmp_path, timeout=300)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "variables.materials" in r.stderr, r.stderr
+    assert not (tmp_path / "out").exists()

@@ -120,7 +120,8 @@ def test_noise_combines_environment_chip_and_quantisation(design):
 def test_range_limits_are_reported_and_consistent(pred, design):
     n = pred.as_json()["normal"]
     limits = n["range_limits_travel_mm"]
-    assert set(limits) <= {"d_min", "chip full scale", "stretch", "material data", "scan depth", "model"}
+    assert set(limits) <= {"d_min", "chip full scale", "invertibility", "stretch", "material data", "scan depth",
+                           "model"}
     assert limits["d_min"] == pytest.approx(design.d_rest_mm - design.spec.sensor.d_min_mm)
     assert n["travel_mm"] == pytest.approx(min(limits.values()))
     assert n["range_limit"] == min(limits, key=limits.get)

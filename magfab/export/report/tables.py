@@ -102,7 +102,7 @@ def prediction_tables(pred: Prediction) -> dict[str, list[tuple[str, str]]]:
             ("resolution, worst case", f"{n.resolution_mN:.2f} mN"),
             ("resolution at rest (weakest magnet)", band(n.resolution_at_rest_mN, ".2f") + " mN"),
             ("range, worst case", n.range_text()),
-            ("range by material", band(n.range_by_material_N, ".3f") + " N"),
+            ("range by material", "at least " * n.range_is_model_reach + band(n.range_by_material_N, ".3f") + " N"),
             ("magnet travel over the range", f"{n.travel_mm:.3f} mm"),
             ("sensitivity at rest (nominal magnet)", band(n.sensitivity_at_rest_G_per_N, ".1f") + " G/N"),
             ("stiffness at rest", band(n.stiffness_at_rest_N_per_mm, ".3f") + " N/mm"),

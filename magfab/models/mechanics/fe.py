@@ -51,8 +51,8 @@ def fe(body: Body, mu_kPa: float, indentation_mm: Sequence[float] | np.ndarray, 
 
     ``mesh_mm``: element size in mm (default ``radius / 12``, 0.5 mm for MagOne); ``refine``: extra refinement
     rounds (uniform, or near the apex within ``refine_near_apex_mm``). ``material``: "neo-hookean", or "yeoh" with
-    ``yeoh_ratios = (C20/C10, C30/C10)`` (C10 = mu/2). No Yeoh coefficients are in the recipes (the sourced data
-    are neo-Hookean fits), so Yeoh needs the ratios given explicitly. ``base_bonded = False`` lets the base slide
+    ``yeoh_ratios = (C20/C10, C30/C10)`` (C10 = mu/2): the recipes' fits (recipes/materials.toml yeoh_k2, yeoh_k3;
+    the build passes them for predict.material_law = "yeoh"). ``base_bonded = False`` lets the base slide
     (frictionless), for checks against the homogeneous uniaxial solution.
 
     The magnet's interface (``interface``): "bonded" (the build's model, :data:`MODEL_DESCRIPTION`) or "sliding"

@@ -87,7 +87,7 @@ def _material(material: MaterialLaw | str, yeoh_ratios: tuple[float, float] | No
             raise MechanicsError("Input yeoh_ratios must be omitted for material 'neo-hookean'")
         return _Material()
     if yeoh_ratios is None:
-        raise MechanicsError("Input yeoh_ratios = (C20/C10, C30/C10) must be given for material 'yeoh': the "
-                             "recipes hold only neo-Hookean moduli, so there are no sourced Yeoh coefficients")
+        raise MechanicsError("Input yeoh_ratios = (C20/C10, C30/C10) must be given for material 'yeoh' (a silicone's "
+                             "are its recipe's yeoh_k2 and yeoh_k3, recipes/materials.toml)")
     k2, k3 = (float(v) for v in yeoh_ratios)
     return _Material(k2, k3)
