@@ -547,7 +547,7 @@ def design(targets: Path, out_dir: Path | None, scheduler: str | None, workers: 
 
         chosen = r.verified[r.chosen]
         for m in margins(r.targets, chosen):
-            click.echo(f"  {m.name}: {m.value:.4g} met with margin {100 * m.margin:.1f} % (by {100 * m.slack:+.1f} %)")
+            click.echo(f"  {m.name}: {m.shown} met with margin {100 * m.margin:.1f} % (by {100 * m.slack:+.1f} %)")
         click.echo(f"chosen: {r.names[r.chosen]}; build it: magfab build "
                    f"{r.folder / 'designs' / r.names[r.chosen]}.toml")
 

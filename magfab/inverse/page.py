@@ -122,7 +122,7 @@ def _header(result: DesignResult, i: int) -> str:
 def _margin_text(m) -> str:
     sense = "<=" if REQUIREMENTS[m.name][1] == "at_most" else ">="
     by = f"{100 * m.slack:+.1f} %" if math.isfinite(m.slack) else "no figure"
-    return f"{m.name} {m.value:.4g} {sense} {m.need:g}: by {by} (margin {100 * m.margin:.1f} %)"
+    return f"{m.name} {m.shown} {sense} {m.need:g}: by {by} (margin {100 * m.margin:.1f} %)"
 
 
 def write_specs(result: DesignResult, base) -> list[Path]:

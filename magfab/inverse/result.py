@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..models.predict import MODEL_REACH
 from .evaluate import REQUIREMENTS, margin_of, requirement_names, shortfall, slack_of
 from .pareto import values_of
 from .study import Record
@@ -26,6 +27,12 @@ class Margin:
     need: float  # the requirement
     slack: float
     margin: float
+    at_least: bool = False  # the figure is a model's reach (a range the material data or the FE ended): a lower bound
+
+    @property
+    def shown(self) -> str:
+        """The figure as a person reads it: "1.021", or "at least 1.021" for a model's reach."""
+        return f"{'at least ' * self.at_least}{self.value:.4g}"
 
     @property
     def met(self) -> bool:
@@ -40,8 +47,10 @@ class Margin:
 def margins(targets: Targets, r: Record) -> list[Margin]:
     """Each requirement of ``targets`` for the design ``r`` (a record with figures)."""
     m = r.metrics
+    reach = m.get("range_limit") in MODEL_REACH
     return [Margin(n, float(m.get(REQUIREMENTS[n][0], math.nan)), float(getattr(targets.require, n)),
-                   slack_of(targets, n, m), margin_of(targets, n, m)) for n in requirement_names(targets)]
+                   slack_of(targets, n, m), margin_of(targets, n, m), reach and n == "normal_range_N")
+            for n in requirement_names(targets)]
 
 
 def nearest(targets: Targets, recs: list[Record]) -> list[int]:

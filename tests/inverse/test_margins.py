@@ -247,3 +247,18 @@ def test_the_nearest_design_has_its_figures_and_no_error_findings_first():
     assert nearest(t, recs) == [3, 2, 0, 1]
     assert closest(t, recs).startswith("closest: trial-3 (surrogate), normal_range_N 0.95 against >= 1 (margin 2.0 "
                                        "%): short by 7.0 %")
+
+
+@pytest.mark.parametrize("limit, at_least", [("material data", True), ("model", True), ("d_min", False),
+                                             ("scan depth", False), ("invertibility", False), ("stretch", False)])
+def test_a_range_a_model_ended_reads_at_least(tmp_path, limit, at_least):
+    """A verified design whose range a model's reach ended (the material law's data, the FE stopping) shows its
+    range requirement's figure as "at least" it (Margin.shown: what the design's header, the page and magfab
+    design's summary print); a range the sensor ends (d_min, the scan depth, ...) without it."""
+    result = _result(tmp_path, ["ok"], chosen=0)
+    rec = result.verified[0]
+    rec = Record(rec.number, rec.point, rec.state, rec.reason, rec.model, {**rec.metrics, "range_limit": limit},
+                 rec.constraints, rec.errors)
+    (m,) = [m for m in margins(result.targets, rec) if m.name == "normal_range_N"]
+    assert m.at_least == at_least and m.shown.startswith("at least ") == at_least
+    assert not any(x.at_least for x in margins(result.targets, rec) if x.name != "normal_range_N")
