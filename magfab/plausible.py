@@ -25,6 +25,7 @@ from functools import cache
 from .errors import SpecError
 from .errors import number_text as _fmt
 from .recipes import catalogue
+from .recipes.resolve import yeoh_fitted
 from .spec import MaterialLaw, MechanicsModel, Spec
 
 __all__ = ["FACTOR", "MODULUS_FACTOR", "UNIT", "plausible", "spans"]
@@ -91,7 +92,7 @@ def _law_has_data(spec: Spec) -> None:
     if model in (MechanicsModel.COLUMN, MechanicsModel.HERTZ_COLUMN):
         raise SpecError("predict.material_law", "yeoh", f"needs the FE: predict.mechanics_model = "
                         f"'{model.value}' is a neo-Hookean closed form; use 'auto' or 'fe'")
-    fitted = sorted(k for k, r in catalogue("materials").items() if "yeoh_mu_kPa" in r.quantities)
+    fitted = yeoh_fitted()
     if spec.elastomer.material not in fitted:
         raise SpecError("predict.material_law", "yeoh", f"recipes/materials.toml holds no Yeoh fit for "
                         f"{spec.elastomer.material} (fitted: {', '.join(fitted)}); use 'neo-hookean'")

@@ -31,9 +31,9 @@ from ..design import derive
 from ..errors import InputError, ModelLimitError, Severity
 from ..models import mechanics as mech
 from ..models.mechanics import fe_surrogate
-from ..models.predict import normal_curve, surrogate_curve
+from ..models.predict import normal_curve, surrogate_curve, yeoh_ratios
 from ..recipes.resolve import printer as printer_recipe
-from ..spec import FieldModel, MaterialLaw, Spec
+from ..spec import FieldModel, Spec
 from .space import candidate_spec, saturation_floor
 from .targets import Models, Objective, Targets
 
@@ -250,11 +250,8 @@ OUTSIDE = "fe (outside surrogate region)"
 
 def _elastomer_model(design) -> tuple[Any, str]:
     """The surrogate's elastomer model for ``design``, or (None, why not) outside its validated region or laws."""
-    body = mech.Body.from_design(design)
-    yeoh = design.material.yeoh if design.spec.predict.material_law == MaterialLaw.YEOH else None
-    if not fe_surrogate.in_region(body) or (yeoh is not None and yeoh.k3 > 0.0) or \
-            (yeoh is not None and yeoh.k2 > fe_surrogate.YEOH_K2):
-        return None, OUTSIDE  # the Yeoh tables are for C30 = 0 and C20/C10 up to YEOH_K2: any other law by the FE
+    if not fe_surrogate.in_region(mech.Body.from_design(design), *yeoh_ratios(design)):
+        return None, OUTSIDE
     return _surrogate_or_fe, SURROGATE
 
 

@@ -51,6 +51,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_serial
 
 from ..errors import InputError, SpecError, shown
 from ..recipes import catalogue
+from ..recipes.resolve import yeoh_fitted
 from ..spec import NAME_PATTERN, MaterialLaw, Sensor, Spec, Tip, is_valid_name, load_spec, translate_error
 from ..toml_input import loads_toml, read_toml
 
@@ -346,9 +347,10 @@ def _with_the_laws_silicones(targets: Targets, base: Spec) -> Targets:
     alone, and a listed one without a fit refused up front rather than as a failed trial each time it is drawn."""
     if base.predict.material_law != MaterialLaw.YEOH:
         return targets
-    fitted = sorted(k for k, r in catalogue("materials").items() if "yeoh_mu_kPa" in r.quantities)
+    fitted = yeoh_fitted()
     if targets.variables.materials is None:
-        return targets.model_copy(update={"variables": targets.variables.model_copy(update={"materials": fitted})})
+        variables = targets.variables.model_copy(update={"materials": list(fitted)})
+        return targets.model_copy(update={"variables": variables})
     missing = [m for m in targets.variables.materials if m not in fitted]
     if missing:
         raise SpecError("variables.materials", missing, f"the base spec's predict.material_law = 'yeoh' has no fit "

@@ -207,13 +207,13 @@ def surrogate_curve(design: Design, body: mech.Body, mu: float,
     search: the curve to the scan depth and the shear response at the preloads the FE probe would solve. Raises
     :class:`~.mechanics.fe_surrogate.OutsideRegion` for a body outside its validated region."""
     depth = float(design.spec.calibration.scan_z_mm)
-    law = material_law(design)
-    k2 = float(law["yeoh_ratios"][0]) if law else 0.0
+    ratios = yeoh_ratios(design)
+    yeoh = ratios != (0.0, 0.0)
     curve, response = fe_surrogate.normal_and_shear(body, mu, indentation, depth,
                                                     shear_probe_depths(design, indentation),
-                                                    design.spec.calibration.scan_step_mm, k2)
-    return curve, ModelUse("mechanics", "surrogate", fe_surrogate.held_out_error(body.tip, bool(law))["force_rms"],
-                           fe_surrogate.description(body.tip, bool(law)), "search"), response
+                                                    design.spec.calibration.scan_step_mm, *ratios)
+    return curve, ModelUse("mechanics", "surrogate", fe_surrogate.held_out_error(body.tip, yeoh)["force_rms"],
+                           fe_surrogate.description(body.tip, yeoh), "search"), response
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -367,6 +367,11 @@ def material_law(design: Design) -> dict[str, Any]:
         return {}
     y = design.material.yeoh
     return {"material": "yeoh", "yeoh_ratios": (y.k2, y.k3)}
+
+
+def yeoh_ratios(design: Design) -> tuple[float, float]:
+    """(k2, k3) of the spec's law: the silicone's Yeoh ratios, or (0, 0) for neo-Hookean."""
+    return material_law(design).get("yeoh_ratios", (0.0, 0.0))
 
 
 def data_end_stretch(design: Design) -> float:

@@ -16,7 +16,8 @@ from functools import cache
 
 from . import Quantity, Recipe, RecipeError, catalogue
 
-__all__ = ["MagnetGrade", "Material", "YeohLaw", "magnet_grade", "material", "chip", "printer", "adhesive"]
+__all__ = ["MagnetGrade", "Material", "YeohLaw", "yeoh_fitted", "magnet_grade", "material", "chip", "printer",
+           "adhesive"]
 
 
 @dataclass(frozen=True)
@@ -108,6 +109,12 @@ def material(key: str) -> Material:
         mix_ratio_by_weight=r.texts["mix_ratio_by_weight"], recipe=r, yeoh=_yeoh(r),
         modulus_100_kPa=r.quantities.get("modulus_100_kPa"),
     )
+
+
+@cache
+def yeoh_fitted() -> tuple[str, ...]:
+    """The silicones the recipes fit a Yeoh law for (predict.material_law = "yeoh"), sorted."""
+    return tuple(sorted(k for k, r in catalogue("materials").items() if "yeoh_mu_kPa" in r.quantities))
 
 
 _YEOH = ("yeoh_mu_kPa", "yeoh_k2", "yeoh_k3", "yeoh_stretch_max", "yeoh_fit_rms_pct")

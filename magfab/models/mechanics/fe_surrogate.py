@@ -129,11 +129,14 @@ def body_of(x: dict[str, float], R: float = R_TABLE, tip: Tip = Tip.HEMISPHERE) 
                 magnet_edge_radius_mm=min(EDGE_TABLE * R / R_TABLE, 0.25 * min(2.0 * rm, hm)))
 
 
-def in_region(body: Body) -> bool:
-    return _refusal(body) == ""
+def in_region(body: Body, k2: float = 0.0, k3: float = 0.0) -> bool:
+    """Whether the surrogate answers for ``body`` under the law with Yeoh ratios (k2, k3) (0, 0: neo-Hookean)."""
+    return _refusal(body, k2, k3) == ""
 
 
-def _refusal(body: Body) -> str:
+def _refusal(body: Body, k2: float = 0.0, k3: float = 0.0) -> str:
+    if k3 > 0.0 or k2 > YEOH_K2 + 1e-12:
+        return f"the Yeoh tables are for C30 = 0 and C20/C10 up to {YEOH_K2:g}, not ({k2:g}, {k3:g})"
     if body.tip not in BOXES:
         return f"the surrogate covers {' and '.join(t.value for t in BOXES)} tips only"
     if not body.has_magnet:
@@ -186,11 +189,14 @@ def fit_data(runs: Sequence[dict], held_out: Sequence[dict], tip: Tip = Tip.HEMI
     """The shipped data of tip ``tip``: the table's runs, the held-out runs and their errors against the surrogate
     fitted on the table (:func:`_errors`). No timings: the same FE runs give the same bytes (bench/fe_surrogate.py
     prints the speed)."""
-    box = BOXES[tip]
-    model = _Model(list(runs), box)
-    return {"box": box, "grid": [float(g) for g in GRID], "probed": [int(i) for i in PROBED], "r_table_mm": R_TABLE,
-            "mesh_table_mm": MESH_TABLE, "runs": list(runs), "held_out": list(held_out),
-            "held_out_error": _errors(model, held_out)}
+    return {**_header(tip), "runs": list(runs), "held_out": list(held_out),
+            "held_out_error": _errors(_Model(list(runs), BOXES[tip]), held_out)}
+
+
+def _header(tip: Tip) -> dict[str, object]:
+    """What a data file says of its table: the box, the grids, the table's radius and mesh."""
+    return {"box": BOXES[tip], "grid": [float(g) for g in GRID], "probed": [int(i) for i in PROBED],
+            "r_table_mm": R_TABLE, "mesh_table_mm": MESH_TABLE}
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -293,9 +299,8 @@ def fit_yeoh_data(runs: Sequence[dict], held_out: Sequence[dict], tip: Tip = Tip
     """The shipped Yeoh data of tip ``tip``: the table's bodies run at :data:`YEOH_K2`, held-out bodies run at
     :data:`YEOH_HELD_OUT_K2`, and the errors of the blend (the shipped neo-Hookean table and this one) on them."""
     blend = _Blend(_shipped(tip)[0], _Model(list(runs), BOXES[tip]), YEOH_HELD_OUT_K2)
-    return {"box": BOXES[tip], "grid": [float(g) for g in GRID], "probed": [int(i) for i in PROBED],
-            "r_table_mm": R_TABLE, "mesh_table_mm": MESH_TABLE, "k2": YEOH_K2, "held_out_k2": YEOH_HELD_OUT_K2,
-            "runs": list(runs), "held_out": list(held_out), "held_out_error": _errors(blend, held_out)}
+    return {**_header(tip), "k2": YEOH_K2, "held_out_k2": YEOH_HELD_OUT_K2, "runs": list(runs),
+            "held_out": list(held_out), "held_out_error": _errors(blend, held_out)}
 
 
 def _errors(model: _Model | _Blend, held_out: Sequence[dict]) -> dict[str, float]:
@@ -369,12 +374,12 @@ def curve(body: Body, mu_kPa: float, indentation_mm: np.ndarray) -> Curve:
 
 def normal_and_shear(body: Body, mu_kPa: float, indentation_mm: np.ndarray, depth_mm: float,
                      probe_depths_mm: np.ndarray, rest_indentation_mm: float,
-                     k2: float = 0.0) -> tuple[Curve, ShearResponse]:
+                     k2: float = 0.0, k3: float = 0.0) -> tuple[Curve, ShearResponse]:
     """What ``predict`` takes from the FE (the nominal curve to ``depth_mm`` and the shear response at
     ``probe_depths_mm``), from the surrogate: the table scaled to this body's radius and modulus, interpolated in
     indentation (PCHIP) onto the indentations asked for; ``k2`` > 0, the Yeoh law's blend (:data:`YEOH_K2`).
-    :class:`OutsideRegion` outside the validated region."""
-    why = _refusal(body) or (f"k2 = {k2:g} is past the Yeoh table's {YEOH_K2:g}" if k2 > YEOH_K2 + 1e-12 else "")
+    :class:`OutsideRegion` outside the validated region or laws."""
+    why = _refusal(body, k2, k3)
     if why:
         raise OutsideRegion(why)
     model = _model(body.tip, k2)
