@@ -26,7 +26,7 @@ from .errors import SpecError
 from .errors import number_text as _fmt
 from .recipes import catalogue
 from .recipes.resolve import yeoh_fitted
-from .spec import MaterialLaw, MechanicsModel, Spec
+from .spec import MaterialLawChoice, MechanicsModel, Spec
 
 __all__ = ["FACTOR", "MODULUS_FACTOR", "UNIT", "plausible", "spans"]
 
@@ -86,7 +86,7 @@ def plausible(spec: Spec) -> None:
 def _law_has_data(spec: Spec) -> None:
     """Refuse the Yeoh law for a silicone the recipes hold no Yeoh fit for (there is nothing to fit it from), or with
     a closed-form mechanics model (they are neo-Hookean)."""
-    if spec.predict.material_law != MaterialLaw.YEOH:
+    if spec.predict.material_law != MaterialLawChoice.YEOH:
         return
     model = MechanicsModel(spec.predict.mechanics_model)
     if model in (MechanicsModel.COLUMN, MechanicsModel.HERTZ_COLUMN):

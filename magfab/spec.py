@@ -25,12 +25,12 @@ from .errors import SpecError, shorten, shown
 from .readout.src.magfab_readout import bounded
 from .recipes import catalogue
 from .spec_errors import did_you_mean, translate_error
-from .spec_options import CalibrationMethod, FieldModel, MaterialLaw, MechanicsModel
+from .spec_options import CalibrationMethod, FieldModel, MaterialLaw, MaterialLawChoice, MechanicsModel
 from .toml_input import loads_toml, read_toml
 
 __all__ = ["Spec", "Tip", "Density", "Printer", "Array", "Environment", "Skin", "Polarity", "MAX_TAXELS", "load_spec",
            "spec_from_json", "parse_spec", "spec_from_dict", "default_spec_text", "translate_error", "spec_schema",
-           "NAME_PATTERN", "is_valid_name", "FieldModel", "MechanicsModel", "MaterialLaw",
+           "NAME_PATTERN", "is_valid_name", "FieldModel", "MechanicsModel", "MaterialLaw", "MaterialLawChoice",
            "CalibrationMethod"]
 
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
@@ -237,11 +237,12 @@ class Predict(_Section):
     required_resolution_mN: float | None = Field(
         None, gt=0.0, le=1.0e4,
         description="Worst-case normal force resolution the application needs, mN (omit: no requirement).")
-    material_law: MaterialLaw = Field(
-        MaterialLaw.NEO_HOOKEAN, strict=False,
-        description="Hyperelastic law of the elastomer FE: 'neo-hookean' (fitted to 100 % strain, so its data end at "
-                    "a stretch of 2) or 'yeoh' (the silicone's large-strain law, fitted to a stretch of 4; "
-                    "recipes/materials.toml).")
+    material_law: MaterialLawChoice = Field(
+        MaterialLawChoice.AUTO, strict=False,
+        description="Hyperelastic law of the elastomer FE: 'auto' (the silicone's Yeoh law where "
+                    "recipes/materials.toml fits one, neo-Hookean otherwise or with a closed-form mechanics model), "
+                    "'yeoh' (the silicone's large-strain law, fitted to a stretch of 4) or 'neo-hookean' (fitted to "
+                    "100 % strain, so its data end at a stretch of 2).")
     # Not a limit of the model: the model's own reach is the material law's data end (predict's "material data"
     # limit). No fatigue or working-strain rule for casting silicones was found (recipes/materials.toml), so this is
     # the user's, and the range ends there as "stretch".

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from enum import Enum
 
-__all__ = ["FieldModel", "MechanicsModel", "MaterialLaw", "CalibrationMethod"]
+__all__ = ["FieldModel", "MechanicsModel", "MaterialLaw", "MaterialLawChoice", "CalibrationMethod"]
 
 
 class FieldModel(str, Enum):
@@ -32,6 +32,16 @@ class MechanicsModel(str, Enum):
 class MaterialLaw(str, Enum):
     """Hyperelastic law of the elastomer FE: 'neo-hookean' or 'yeoh' (the silicone's fit in recipes/materials.toml)."""
 
+    NEO_HOOKEAN = "neo-hookean"
+    YEOH = "yeoh"
+
+
+class MaterialLawChoice(str, Enum):
+    """The spec's ``predict.material_law``: a :class:`MaterialLaw`, or 'auto': the silicone's Yeoh law where the
+    recipes fit one and the FE (or its surrogate) models the elastomer, neo-Hookean otherwise (a silicone without a
+    fit, a closed-form mechanics model)."""
+
+    AUTO = "auto"
     NEO_HOOKEAN = "neo-hookean"
     YEOH = "yeoh"
 

@@ -52,7 +52,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_serial
 from ..errors import InputError, SpecError, shown
 from ..recipes import catalogue
 from ..recipes.resolve import yeoh_fitted
-from ..spec import NAME_PATTERN, MaterialLaw, Sensor, Spec, Tip, is_valid_name, load_spec, translate_error
+from ..spec import NAME_PATTERN, MaterialLawChoice, Sensor, Spec, Tip, is_valid_name, load_spec, translate_error
 from ..toml_input import loads_toml, read_toml
 
 __all__ = ["Objective", "OBJECTIVES", "Targets", "load_targets", "parse_targets"]
@@ -345,7 +345,7 @@ def load_targets(path: str | Path) -> tuple[Targets, Spec]:
 def _with_the_laws_silicones(targets: Targets, base: Spec) -> Targets:
     """With a Yeoh base (predict.material_law), the silicones the recipes fit a Yeoh law for: by default those
     alone, and a listed one without a fit refused up front rather than as a failed trial each time it is drawn."""
-    if base.predict.material_law != MaterialLaw.YEOH:
+    if base.predict.material_law != MaterialLawChoice.YEOH:
         return targets
     fitted = yeoh_fitted()
     if targets.variables.materials is None:

@@ -45,7 +45,7 @@ import numpy as np
 
 from ..fork import side_branch
 from ..reference_chip import reference_chip
-from ..spec import FieldModel, MaterialLaw
+from ..spec import FieldModel, MaterialLaw, MaterialLawChoice, MechanicsModel
 from ..units import MN_PER_N
 from . import drift
 from . import field as fieldmod
@@ -355,15 +355,32 @@ def _derivative(x: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 
 def _band(design: Design) -> dict[str, float]:
-    spec = design.spec
-    law = MaterialLaw(spec.predict.material_law).value
-    return dict(zip(MATERIALS, spec.elastomer.shear_modulus_kPa or mech.band(design.material, law)))
+    given = design.spec.elastomer.shear_modulus_kPa
+    return dict(zip(MATERIALS, given or mech.band(design.material, law_in_force(design).value)))
+
+
+#: The mechanics models that are closed forms: neo-Hookean by construction, so ``predict.material_law = "auto"``
+#: gives them that law.
+CLOSED_FORMS = (MechanicsModel.COLUMN, MechanicsModel.HERTZ_COLUMN)
+
+
+def law_in_force(design: Design) -> MaterialLaw:
+    """The hyperelastic law the elastomer's models use for the spec's ``predict.material_law``: Yeoh when asked, or
+    for "auto" where the silicone has a Yeoh fit (recipes/materials.toml) and the mechanics model is the FE (or its
+    surrogate); neo-Hookean otherwise. (An explicit "yeoh" the recipes cannot serve is refused in
+    :mod:`magfab.plausible` before this runs.)"""
+    choice = MaterialLawChoice(design.spec.predict.material_law)
+    if choice is MaterialLawChoice.NEO_HOOKEAN or design.material.yeoh is None:
+        return MaterialLaw.NEO_HOOKEAN
+    if choice is MaterialLawChoice.AUTO and MechanicsModel(design.spec.predict.mechanics_model) in CLOSED_FORMS:
+        return MaterialLaw.NEO_HOOKEAN
+    return MaterialLaw.YEOH
 
 
 def material_law(design: Design) -> dict[str, Any]:
-    """The FE's material arguments for the spec's ``predict.material_law``: none for neo-Hookean (the FE's default),
-    or the silicone's Yeoh ratios (recipes/materials.toml)."""
-    if design.spec.predict.material_law != MaterialLaw.YEOH or design.material.yeoh is None:
+    """The FE's material arguments for the law in force (:func:`law_in_force`): none for neo-Hookean (the FE's
+    default), or the silicone's Yeoh ratios (recipes/materials.toml)."""
+    if law_in_force(design) is not MaterialLaw.YEOH or design.material.yeoh is None:
         return {}
     y = design.material.yeoh
     return {"material": "yeoh", "yeoh_ratios": (y.k2, y.k3)}

@@ -48,7 +48,7 @@ def test_the_scan_depth_and_points_are_the_scan_plans(default_build):
     out = default_build.out_dir
     plan = scan_plan(default_build.design, default_build.prediction)
     checklist = _text(out / "checklist.md")
-    depths = {f"{plan.depth_mm:.1f} mm", f"{plan.depth_mm:.2f} mm"}
+    depths = {f"{plan.depth_mm:.3g} mm of indentation"}
     assert any(d in checklist for d in depths) and f"{plan.points} points" in checklist
     rows = [line for line in (out / "calibration" / "scan_simulated.csv").read_text().splitlines()
             if line and not line.startswith(("#", "time_s"))]

@@ -170,7 +170,7 @@ def test_force_marks_every_range_limit_where_it_binds(drawn, magone_prediction):
             assert "past the curve" in text
     (ends,) = [t for t in texts if t.startswith("range ends")]
     assert n.range_limit in ends and ("(model reach)" in ends) == n.range_is_model_reach
-    assert n.range_limit == "material data" and "d_min: past the curve" in " ".join(texts)  # MagOne, neo-Hookean
+    assert n.range_limit == "scan depth" and "d_min: past the curve" in " ".join(texts)  # MagOne, Yeoh (the default)
 
 
 def test_calibration_chart_draws_what_its_caption_says(magone_design, magone_prediction):

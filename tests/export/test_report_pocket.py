@@ -19,5 +19,7 @@ def test_stackup_caption_says_what_the_fe_models(default_build):
     assert note, "the stack-up caption has no note on the force model"
     text = " ".join(note.group(1).split())
     assert "<code>fe</code>" in text  # the build's model (auto picks the FE for MagOne)
-    assert " ".join(str(escape(mech.MODEL_DESCRIPTION)).split()) in text
+    y = default_build.design.material.yeoh  # the default law for Ecoflex 00-30 (predict.material_law = "auto")
+    law = f"Yeoh (k2 = {y.k2:.3g}, k3 = {y.k3:.3g}, recipes/materials.toml)"
+    assert " ".join(str(escape(mech.MODEL_DESCRIPTION.replace("neo-Hookean", law))).split()) in text
     assert "'" not in text and "&#39;" in text  # escaped, not raw (the description has an apostrophe)

@@ -4,6 +4,7 @@ direction split (a law: rotating the scan rotates the forces)."""
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 
@@ -22,6 +23,24 @@ from magfab.models.chip import chip_setting, noise
 from magfab.models.region import _cross
 from magfab.models.scan import scan_track, simulate_scan
 from magfab.units import UT_PER_GAUSS
+
+#: The neo-Hookean law, which this module's MagOne uses (:func:`design`).
+NH = '[predict]\nmaterial_law = "neo-hookean"\n'
+
+
+@pytest.fixture(scope="module")
+def design():
+    """MagOne with the neo-Hookean law: its range, and so its scan, ends at 1.6 N, where an order-4 polynomial sits on
+    the noise floor; the default (Yeoh) scan reaches 4.9 N, past what order 4 fits to the noise
+    (:func:`test_the_default_scan_is_fitted_within_its_tolerance`)."""
+    return derive(parse_spec(NH))
+
+
+@pytest.fixture(scope="module")
+def pred(design):
+    from magfab.models.predict import predict
+
+    return predict(design)
 
 
 @pytest.fixture(scope="module")
@@ -43,7 +62,7 @@ def result(design, scan):
 @pytest.fixture(scope="module")
 def poly4(pred, scan):
     """The order-4 polynomial the paper used (method 'poly')."""
-    return C.fit(scan, derive(parse_spec('[calibration]\nmethod = "poly"\norder = 4\n')), mls=False)
+    return C.fit(scan, derive(parse_spec(NH + '[calibration]\nmethod = "poly"\norder = 4\n')), mls=False)
 
 
 # ---- the scan CSV ---------------------------------------------------------------------------------
@@ -127,7 +146,7 @@ def test_simulated_noise_matches_the_prediction_and_is_deterministic(design, pre
     assert np.sqrt(np.mean((scan.F_N[:, 2] - ideal.F_N[:, 2]) ** 2)) == pytest.approx(q / math.sqrt(12), rel=0.1)
     again = simulate_scan(design, pred)
     assert again.sha256 == scan.sha256 and np.array_equal(again.B_uT, scan.B_uT)
-    other = simulate_scan(derive(parse_spec("[calibration]\nseed = 1\n")), pred)
+    other = simulate_scan(derive(parse_spec(NH + "[calibration]\nseed = 1\n")), pred)
     assert other.sha256 != scan.sha256 and np.array_equal(other.F_N, scan.F_N)
 
 
@@ -187,6 +206,16 @@ def test_held_out_error_falls_with_order_then_levels_off(result):
             assert c.rms_fit_N[f] <= c.rms_holdout_N[f] * 1.001 and c.max_holdout_N[f] >= c.rms_holdout_N[f]
 
 
+def test_the_default_scan_is_fitted_within_its_tolerance(magone_design, magone_prediction):
+    """The default's scan runs to the 3 mm scan depth (4.9 N nominal): the error falls with the order, and the paper's
+    order 4 meets calibration.tolerance_mN there, though its own error now shows above the noise (orders 5-6 lower)."""
+    got = C.fit(simulate_scan(magone_design, magone_prediction), magone_design, mls=False)
+    rms = {c.order: c.rms_holdout_N["Fz_N"] for c in got.candidates if c.method == "poly"}
+    e = [rms[n] for n in C.ORDERS]
+    assert all(a > b for a, b in itertools.pairwise(e))
+    assert got.chosen == "poly 4" and 1000.0 * rms[4] <= magone_design.spec.calibration.tolerance_mN
+
+
 def test_scaling_keeps_the_least_squares_well_conditioned(result):
     polys = [c for c in result.candidates if c.method == "poly"]
     for c in polys:
@@ -221,7 +250,7 @@ def test_auto_takes_the_cheapest_within_tolerance(design, result):
 
 
 def test_no_fit_within_tolerance_is_a_flag_not_an_error(design, scan):
-    r = C.fit(scan, derive(parse_spec("[calibration]\ntolerance_mN = 0.5\n")), mls=False)
+    r = C.fit(scan, derive(parse_spec(NH + "[calibration]\ntolerance_mN = 0.5\n")), mls=False)
     assert not r.meets_tolerance and "0.5 mN" in r.message and "\n" not in r.message
     assert r.chosen == min((c for c in r.candidates if c.order <= 4), key=lambda c: c.worst_rms_N).label
 
@@ -330,7 +359,7 @@ def test_rotating_the_scan_rotates_the_forces(poly4, design, scan, angle, flip):
     """Bz, Br and Fr do not change when the scan is turned about z, so the fitted polynomial is the same and
     M14 turns the lateral force with the field; a chip mounted the other way round gives shear_sign -1."""
     turned = _rotated(scan, angle, flip)
-    cal = C.fit(turned, derive(parse_spec('[calibration]\nmethod = "poly"\n')), mls=False).calibration
+    cal = C.fit(turned, derive(parse_spec(NH + '[calibration]\nmethod = "poly"\n')), mls=False).calibration
     assert cal.shear_sign == (-1 if flip else 1)
     assert np.allclose(cal.coefficients, poly4.calibration.coefficients, rtol=1e-6, atol=1e-9)
     f, _ = cal.evaluate(turned.B_uT)
@@ -475,7 +504,7 @@ def warm_fit(pred):
     """A scan run twice while the tip warms from 20 to 35 C (each point read at two temperatures 7.5 C apart), on
     a 0.2 mm grid (378 rows: the default 0.05 mm's 5346 give sigmas four times smaller, at a hundred times the
     fit's time)."""
-    coarse = derive(parse_spec("[calibration]\nscan_step_mm = 0.2\n"))
+    coarse = derive(parse_spec(NH + "[calibration]\nscan_step_mm = 0.2\n"))
     scan = simulate_scan(coarse, pred, temperature_C=(20.0, 35.0), passes=2, thermal_per_C=TRUE_PER_C)
     return scan, C.fit(scan, coarse, mls=False)
 
@@ -512,7 +541,7 @@ def test_without_a_temperature_span_calibrate_uses_the_recipe(design, pred, scan
     t = result.calibration.thermal
     assert t.source == "recipe" and t.coefficient_per_C == (-0.0012,) * 3 and t.reference_C == 25.0
     assert "no temperature column" in result.thermal_note
-    coarse = derive(parse_spec("[calibration]\nscan_step_mm = 0.2\n"))
+    coarse = derive(parse_spec(NH + "[calibration]\nscan_step_mm = 0.2\n"))
     held = C.fit(simulate_scan(coarse, pred, temperature_C=30.0), coarse, mls=False).calibration.thermal
     assert held.source == "recipe" and held.reference_C == pytest.approx(30.0, abs=0.02) and held.span_C < 0.05
     once = C.fit(simulate_scan(coarse, pred, temperature_C=(20.0, 35.0)), coarse, mls=False).calibration.thermal

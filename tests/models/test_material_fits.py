@@ -73,7 +73,7 @@ def test_the_fit_refuses_too_few_points():
 def _check(tmp_path: Path, law: str, material_key: str = "ecoflex-00-30", model: str = "auto"):
     """``magfab check`` on MagOne with the law, silicone and mechanics model given."""
     text = (ROOT / "magfab/examples/magone.toml").read_text()
-    for old, new in (('material_law = "neo-hookean"', f'material_law = "{law}"'),
+    for old, new in (('material_law = "auto"', f'material_law = "{law}"'),
                      ('material = "ecoflex-00-30"', f'material = "{material_key}"'),
                      ('mechanics_model = "auto"', f'mechanics_model = "{model}"')):
         assert old in text
@@ -110,6 +110,22 @@ def test_the_yeoh_law_is_refused_where_it_cannot_run(tmp_path, key, model, why):
     assert len(lines) == 1 and why in lines[0], r.stderr
     assert lines[0].startswith("magfab: error: predict.material_law = ")
     assert "Traceback" not in r.stderr and sorted(p.name for p in tmp_path.iterdir()) == ["spec.toml"]
+
+
+@pytest.mark.parametrize("key, model, want", [
+    ("ecoflex-00-30", "auto", "yeoh"), ("dragon-skin-30", "fe", "yeoh"), ("ecoflex-00-10", "auto", "yeoh"),
+    ("sylgard-184", "auto", "neo-hookean"), ("ecoflex-00-30", "column", "neo-hookean"),
+    ("dragon-skin-10", "hertz_column", "neo-hookean"),
+])
+def test_the_default_law_is_yeoh_where_it_can_run(key, model, want):
+    """predict.material_law = "auto", the default: the silicone's Yeoh law where the recipes fit one and the FE (or
+    its surrogate) runs; neo-Hookean for a silicone without a fit or a closed-form model, where "yeoh" is refused."""
+    from magfab.design import derive
+    from magfab.models.predict import law_in_force
+    from magfab.spec import parse_spec
+
+    d = derive(parse_spec(f'[elastomer]\nmaterial = "{key}"\n[predict]\nmechanics_model = "{model}"\n'))
+    assert d.spec.predict.material_law == "auto" and law_in_force(d).value == want
 
 
 @pytest.mark.parametrize("key", ["ecoflex-00-30", "dragon-skin-10"])
@@ -164,8 +180,7 @@ def test_a_search_over_a_yeoh_base_takes_the_fitted_silicones(tmp_path):
     a listed one without (sylgard-184) is refused up front in one line, nothing written."""
     from magfab.inverse.targets import load_targets
 
-    base = (ROOT / "magfab/examples/magone.toml").read_text().replace('material_law = "neo-hookean"',
-                                                                       'material_law = "yeoh"')
+    base = (ROOT / "magfab/examples/magone.toml").read_text().replace('material_law = "auto"', 'material_law = "yeoh"')
     (tmp_path / "base.toml").write_text(base)
     head = 'name = "t"\nbase = "base.toml"\nobjectives = ["normal_range_N"]\n[require]\nnormal_range_N = 1.0\n'
     (tmp_path / "all.toml").write_text(head)

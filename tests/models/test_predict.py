@@ -89,8 +89,11 @@ def test_band_orders_as_physics_says(pred):
     mus = pred.as_json()["material_mu_kPa"]
     k = n["stiffness_at_rest_N_per_mm"]
     assert k["stiff"] / k["soft"] == pytest.approx(mus["stiff"] / mus["soft"], rel=1e-9)
-    # the worst case is the stiff material with the weakest magnet, at rest (docs/models.md, M10)
-    assert n["resolution_mN"] == pytest.approx(at_rest["stiff"], rel=1e-9)
+    # the worst case is the stiff material with the weakest magnet, over the range (docs/models.md, M10): at rest
+    # under the neo-Hookean law; the Yeoh law's stiffening makes it coarser deeper in
+    a = pred.arrays
+    assert n["resolution_mN"] == pytest.approx(float(np.max(a["res_stiff_low"][a["in_range"]])), rel=1e-9)
+    assert n["resolution_mN"] >= at_rest["stiff"]
 
 
 def test_sensitivity_is_field_gradient_over_stiffness(pred, design):
@@ -127,17 +130,18 @@ def test_range_limits_are_reported_and_consistent(pred, design):
     assert n["range_limit"] == min(limits, key=limits.get)
     u, f = pred.arrays["u"], pred.curves["soft"].force_N
     assert n["range_N"] == pytest.approx(float(np.interp(n["travel_mm"], u, f)))
-    # MagOne's FE reaches the 3 mm scan depth: the curve ends there, named so, not as a model failure;
-    # the kernel-averaged stretch 2.0, where the neo-Hookean bands' data end, ends the range first
-    # (tests/models/test_range_convergence.py): a model's reach, so the range reads "at least"
+    # MagOne's FE reaches the 3 mm scan depth: the curve ends there, named so, not as a model failure; with the
+    # default law (Ecoflex 00-30's Yeoh fit) the stretch stays within its data (4), so the scan depth ends the range:
+    # the sensor's range, not a model's reach (the neo-Hookean law's is, tests/test_check_range.py)
     nominal = pred.curves["nominal"]
     assert nominal.indentation_mm[-1] == pytest.approx(design.spec.calibration.scan_z_mm)
     assert "model" not in limits and limits["scan depth"] == pytest.approx(nominal.magnet_displacement_mm[-1])
     assert "calibration.scan_z_mm" in n["model_limit"]
-    assert n["range_limit"] == "material data" and n["range_is_model_reach"]
-    assert pred.normal.range_text().startswith(f"at least {n['range_N']:.3f} N")
+    assert n["range_limit"] == "scan depth" and not n["range_is_model_reach"]
+    text = pred.normal.range_text()
+    assert text == f"{n['range_N']:.3f} N (ends at: scan depth)"
     stretch = np.interp(n["travel_mm"], u, nominal.max_stretch)
-    assert stretch == pytest.approx(2.0, rel=1e-9)
+    assert 2.0 < stretch < design.material.yeoh.stretch_max  # past the neo-Hookean data, within the Yeoh fit's
 
 
 def test_a_curve_is_named_by_what_ends_it():
@@ -212,9 +216,12 @@ def test_required_resolution_is_checked():
 
 
 def test_default_design_passes_its_checks(design, pred):
+    """No error; one warning: with the range to the 3 mm scan depth, the strongest grade's field at its end just
+    reaches the chip's 50 mT saturation onset (MLX90393 datasheet, BSAT), which the calibration scan covers."""
     found = prediction_findings(design, pred)
     assert not _codes(found), found
-    assert not _codes(found, Severity.WARNING), found
+    assert _codes(found, Severity.WARNING) == {"imc-saturation"}, found
+    assert 500.0 < pred.field.Bz_range_end_strongest_G < 505.0
     assert any(f.code == "prediction" for f in found)
 
 
