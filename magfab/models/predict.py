@@ -464,7 +464,13 @@ def indentation_grid(design: Design) -> np.ndarray:
     surface, and the curve must reach d_min), in :data:`N_INDENT` steps graded finer near zero, where a rounded
     tip's force rises as indentation^1.5. The FE solves them up to the scan depth (:func:`_fe_curve`)."""
     travel = design.d_rest_mm - design.spec.sensor.d_min_mm
-    return 1.25 * travel * np.linspace(0.0, 1.0, N_INDENT) ** 1.5
+    return GRID_REACH * travel * np.linspace(0.0, 1.0, N_INDENT) ** 1.5
+
+
+#: How far past the travel to d_min the indentation grid reaches (:func:`indentation_grid`): a magnet that lags the
+#: surface by more (deep in a stiff silicone under a small tip) ends its curve short of d_min, and the range then
+#: ends there as the model's reach ("model"), not at d_min.
+GRID_REACH = 1.25
 
 
 def normal_on_mesh(design: Design, mesh_mm: float, field_model: str = "exact") -> NormalFigures:
@@ -524,6 +530,11 @@ def _normal(design: Design, chip: ChipSetting, nz: Mapping[str, float], magnets:
     end_label, limit_note = end
     if end_label:
         limits[end_label] = float(u[-1])
+    elif u[-1] < travel - 1e-9:  # every indentation asked was solved, and the magnet lags it more than the grid allows
+        limits[MODEL] = float(u[-1])
+        limit_note = (f"the curve was asked to {indentation_grid(design)[-1]:.3g} mm of indentation "
+                      f"({GRID_REACH:g} x the travel to d_min), where the magnet had moved {u[-1]:.3g} mm of its "
+                      f"{travel:.3g} mm")
     binding = min(limits, key=lambda k: limits[k])
     u_max = limits[binding]
     in_range = (u <= u_max + 1e-9) & keep
