@@ -244,43 +244,39 @@ def tell(study, trial, result: dict[str, Any], targets: Targets) -> None:
 
 def run_study(targets: Targets, base: Spec, storage: str | Path, dask_client,
               progress: Callable[[int, int], None] | None = None, study: Any = None) -> Any:
-    """Run the study to ``targets.study.trials`` evaluated designs (counting those a previous run stored); ``study``:
-    the one :func:`open_study` opened at ``storage`` already.
+    """Run the study to ``targets.study.trials`` evaluated designs (counting those a previous run stored, not repeats:
+    :data:`REPEAT`); ``study``: the one :func:`open_study` opened at ``storage`` already.
 
     A new study starts from the base spec (when it is a point of the space) and a space-filling first phase
-    (:func:`first_phase` trials of :meth:`Space.latin_hypercube`, every (material, tip) pair in it), all enqueued;
-    then one trial in :data:`EXPLORE_EVERY` held to the least-tried (material, tip) pair (the sampler draws the
-    rest of it) and every other one the model's proposal (:func:`_model_step`), or, where it has none, a step from
-    the study's best designs (:func:`_refine`).
+    (:func:`first_phase` trials of :meth:`Space.latin_hypercube`, every (material, tip) pair in it), all enqueued
+    (:func:`_plan`); then one trial in :data:`EXPLORE_EVERY` held to the least-tried (material, tip) pair (the sampler
+    draws the rest of it) and every other one the model's proposal (:func:`_model_step`), or, where it has none, a
+    step from the study's best designs (:func:`_refine`).
 
-    Repeatable: results are told to Optuna in the order their trials were asked, whatever order the workers finish
-    in, and the next trial is asked right after each is told; with a seeded sampler, the same targets, seed and
-    number of workers give the same trials in the same order."""
+    Repeatable: results are told in the order their trials were asked, whatever order the workers finish in, and
+    the next trial is asked right after each is told: the same targets, seed and workers give the same trials."""
     from distributed import as_completed
     from optuna.trial import TrialState
 
     study = study if study is not None else open_study(targets, storage)
     space = Space(targets, base)
     _recover(study)
-    finished = (TrialState.COMPLETE, TrialState.FAIL)
-    done = len(study.get_trials(deepcopy=False, states=finished))
+    done = _counted(study)
     if done == 0 and not study.user_attrs.get(PLANNED):
-        start = base_point(base, targets.variables)
-        if start is not None:
-            study.enqueue_trial(space.params(start))
-        for params in space.latin_hypercube(first_phase(targets), targets.study.seed):
-            study.enqueue_trial(params)
-        study.set_user_attr(PLANNED, True)
+        _plan(study, space, targets, base)
     total = targets.study.trials
     args = (base.model_dump_json(), targets.model_dump_json())
     workers = max(1, len(dask_client.scheduler_info().get("workers", {})) or 1)
-    order: list[tuple[Any, Any]] = []  # (trial, future) in the order asked
-    results: dict[Any, dict[str, Any]] = {}
+    order: list[_Asked] = []  # in the order asked
+    results: dict[Any, dict[str, Any]] = {}  # by future (or a repeat's told design's key)
+    known = _told(study)  # each design told so far, by its key: what a repeat of it is told
     queue = as_completed()
     runner = _runner()
     n_first = first_phase(targets) + 1
+    repeats = 0
 
     def submit() -> None:
+        nonlocal repeats
         trials = study.get_trials(deepcopy=False)  # once per ask: both read the same list
         if len(trials) >= n_first and not any(t.state is TrialState.WAITING for t in trials):  # first phase done
             steps = (_explore, _model_step, _refine)  # the first that enqueues a trial
@@ -288,26 +284,99 @@ def run_study(targets: Targets, base: Spec, storage: str | Path, dask_client,
         trial = study.ask()
         trial.set_user_attr(RUNNER, runner)
         point = space.suggest(trial)
+        key = _key(point)
+        earlier = next((a.source for a in order if a.key == key), key if key in known else None)
+        if earlier is not None and repeats < REPEATS_PER_TRIAL * total:  # a design asked before: its result
+            repeats += 1
+            trial.set_user_attr(REPEAT, True)
+            order.append(_Asked(trial, earlier, key, counts=False))
+            _draw_next(study, space, targets, trial.number)
+            return
         fut = dask_client.submit(evaluate, point, *args, targets.study.models.value, f"{targets.name}-{trial.number}",
                                  pure=False)
-        order.append((trial, fut))
+        order.append(_Asked(trial, fut, key, counts=True))
         queue.add(fut)
 
-    while done + len(order) < total and len(order) < IN_FLIGHT_PER_WORKER * workers:
+    def flush() -> None:  # tell in ask order every trial whose result is in; ask again for each evaluation told
+        nonlocal done
+        while order and (order[0].source in results or order[0].source in known):
+            asked = order.pop(0)
+            result = results.get(asked.source) or known[asked.source]
+            tell(study, asked.trial, result, targets)
+            known[asked.key] = result
+            if asked.counts:
+                done += 1
+                if progress:
+                    progress(done, total)
+            if not any(a.source == asked.source for a in order):
+                results.pop(asked.source, None)
+            while done + sum(a.counts for a in order) < total and len(order) < IN_FLIGHT_PER_WORKER * workers:
+                submit()
+
+    while done + sum(a.counts for a in order) < total and len(order) < IN_FLIGHT_PER_WORKER * workers:
         submit()
     if progress:
         progress(done, total)
+    flush()
     for fut in queue:
         results[fut] = fut.result()
-        while order and order[0][1] in results:  # told in ask order; each told trial's slot asked again at once
-            trial, first = order.pop(0)
-            tell(study, trial, results.pop(first), targets)
-            done += 1
-            if progress:
-                progress(done, total)
-            if done + len(order) < total:
-                submit()
+        flush()
     return study
+
+
+def _counted(study) -> int:
+    """The study's told trials that count against study.trials: all but the repeats (:data:`REPEAT`)."""
+    from optuna.trial import TrialState
+
+    told = study.get_trials(deepcopy=False, states=(TrialState.COMPLETE, TrialState.FAIL))
+    return sum(not t.user_attrs.get(REPEAT) for t in told)
+
+
+def _plan(study, space: Space, targets: Targets, base: Spec) -> None:
+    """A new study's first trials, enqueued: the base spec's design (when it is a point of the space), then the first
+    phase's Latin hypercube."""
+    start = base_point(base, targets.variables)
+    if start is not None:
+        study.enqueue_trial(space.params(start))
+    for params in space.latin_hypercube(first_phase(targets), targets.study.seed):
+        study.enqueue_trial(params)
+    study.set_user_attr(PLANNED, True)
+
+
+def _draw_next(study, space: Space, targets: Targets, number: int) -> None:
+    """After trial ``number`` asked a repeat, the next ask a uniform draw, seeded with the study's seed and that
+    number (the sampler, converged on a small space, would ask the same design again)."""
+    draw = int(np.random.default_rng([targets.study.seed, number]).integers(2**31))
+    study.enqueue_trial(space.latin_hypercube(1, draw)[0])
+
+
+#: The user attribute marking a trial that asked a design the study had already asked: told that design's result,
+#: and neither counted against study.trials nor listed by :func:`records` (TPE's draws can repeat a design, most of
+#: all over listed values); the next trial is then a uniform draw.
+REPEAT = "repeat"
+#: Repeats a study may ask per trial of study.trials before a repeat counts as a trial: a bound on the asks (a few tens
+#: of milliseconds each) when the space holds fewer designs than the trials asked.
+REPEATS_PER_TRIAL = 4
+
+
+@dataclass
+class _Asked:
+    """A trial asked and not yet told: ``source`` is its evaluation's future, or for a repeat the future or design key
+    its result comes from; ``counts``: against study.trials."""
+
+    trial: Any
+    source: Any
+    key: tuple
+    counts: bool
+
+
+def _told(study) -> dict[tuple, dict[str, Any]]:
+    """The result each design the study has told carries (a resumed study's too), by the design's key."""
+    from optuna.trial import TrialState
+
+    return {_key(t.user_attrs[POINT]): t.user_attrs[RESULT] for t in study.get_trials(
+        deepcopy=False, states=(TrialState.COMPLETE, TrialState.FAIL))
+        if POINT in t.user_attrs and RESULT in t.user_attrs and t.user_attrs[RESULT].get("reason") != "interrupted"}
 
 
 def _explore(study, space: Space, targets: Targets, n_first: int, trials: list) -> bool:
@@ -399,8 +468,8 @@ def records(study) -> list[Record]:
 
     out = []
     for t in study.get_trials(deepcopy=False, states=(TrialState.COMPLETE, TrialState.FAIL)):
-        if POINT not in t.user_attrs and "magnet" not in t.params:  # asked, never given a point (cut short)
-            continue
+        if (POINT not in t.user_attrs and "magnet" not in t.params) or t.user_attrs.get(REPEAT):
+            continue  # asked, never given a point (cut short), or a repeat of a design listed already
         point = t.user_attrs.get(POINT) or point_of(t.params)  # a study stored before the fractions: mm params
         out.append(Record.of(t.number, point,
                              t.user_attrs.get(RESULT) or {"state": "failed", "reason": "no result stored"}))
