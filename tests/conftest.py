@@ -82,6 +82,17 @@ def magone_prediction(magone_design):
 
 
 @pytest.fixture(scope="session")
+def magone_neo_hookean():
+    """MagOne with the neo-Hookean law (the default is the silicone's Yeoh law): (design, prediction), once per
+    session, for the tests of that law's own path (its stretch limit, its surrogate table, its calibration scan)."""
+    from magfab import derive, parse_spec
+    from magfab.models.predict import predict
+
+    design = derive(parse_spec('[predict]\nmaterial_law = "neo-hookean"\n'))
+    return design, predict(design)
+
+
+@pytest.fixture(scope="session")
 def design(magone_design):
     """Short name for the MagOne design (a test module may define its own ``design``, which then wins)."""
     return magone_design

@@ -29,21 +29,13 @@ def test_no_note_when_d_min_ends_the_range(magone_design, magone_prediction):
     assert not [f for f in prediction_findings(magone_design, replace(pred, normal=normal)) if f.code == "range-limit"]
 
 
-@pytest.fixture(scope="module")
-def neo_hookean_normal():
-    from magfab import derive, parse_spec
-    from magfab.models.predict import predict
-
-    return predict(derive(parse_spec('[predict]\nmaterial_law = "neo-hookean"\n'))).normal
-
-
 @pytest.mark.parametrize("fitted", [True, False])
-def test_a_model_reach_says_at_least_and_points_to_a_law_only_where_one_reaches(neo_hookean_normal, fitted):
+def test_a_model_reach_says_at_least_and_points_to_a_law_only_where_one_reaches(magone_neo_hookean, fitted):
     """MagOne's neo-Hookean range ends at the material data: the note calls it a model's reach, and names
     predict.material_law only where the silicone has a Yeoh law (sylgard-184 has none)."""
     from magfab.check.predict import _range_limit
 
-    normal = neo_hookean_normal
+    normal = magone_neo_hookean[1].normal
     assert normal.range_limit == "material data"
     note = _range_limit(normal, fitted)
     assert "a model's reach" in note.message and "at least" in note.message

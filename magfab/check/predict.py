@@ -10,8 +10,8 @@ from ..design import Design
 from ..errors import Finding, Severity
 from ..models import field as fieldmod
 from ..models import mechanics as mech
-from ..models.predict import CLOSED_FORMS, ElastomerModel, NormalFigures, Prediction, law_in_force, predict
-from ..spec import MaterialLaw, MechanicsModel
+from ..models.predict import ElastomerModel, NormalFigures, Prediction, law_in_force, predict, yeoh_can_run
+from ..spec import MaterialLaw
 from .drift import drift_findings
 from .reference import reference_findings
 
@@ -54,9 +54,7 @@ def prediction_findings(design: Design, pred: Prediction) -> list[Finding]:
                            f"{pred.field.dBz_dz_rest_G_per_mm:.0f} G/mm is too shallow; reduce sensor.d_max_mm, use a "
                            "softer elastomer.material or a stronger magnet", "predict.required_resolution_mN"))
     if normal.range_limit != "d_min":
-        yeoh_unused = (design.material.yeoh is not None and law_in_force(design) is not MaterialLaw.YEOH
-                       and MechanicsModel(p.mechanics_model) not in CLOSED_FORMS)
-        out.append(_range_limit(normal, yeoh_unused))
+        out.append(_range_limit(normal, yeoh_can_run(design) and law_in_force(design) is not MaterialLaw.YEOH))
     # Guidelines (docs/models.md, M18).
     ratio = spec.magnet.height_mm / spec.magnet.diameter_mm
     if not 0.2 <= ratio <= 0.5:

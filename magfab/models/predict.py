@@ -144,12 +144,17 @@ def _fe_curve(body: mech.Body, mu: float, indentation: np.ndarray, mesh: float, 
     return curve
 
 
-def _curve_end(curve: mech.Curve, indentation: np.ndarray) -> tuple[str, str]:
+def _curve_end(curve: mech.Curve, indentation: np.ndarray, travel_mm: float = 0.0) -> tuple[str, str]:
     """(label, note) for a curve shorter than ``indentation``: :data:`SCAN_DEPTH` or :data:`MODEL`, and why it ends;
-    ("", "") for a curve that runs the whole grid."""
-    if len(curve.force_N) >= len(indentation):
-        return "", ""
-    return str(curve.info.get("ends_at", MODEL)), str(curve.info.get("failure", ""))
+    :data:`MODEL` too for one that runs the whole grid with the magnet short of ``travel_mm`` (d_min's: it lags the
+    surface more than :data:`GRID_REACH` allows); ("", "") for a curve that reaches it."""
+    if len(curve.force_N) < len(indentation):
+        return str(curve.info.get("ends_at", MODEL)), str(curve.info.get("failure", ""))
+    moved = float(curve.magnet_displacement_mm[-1])
+    if moved < travel_mm - 1e-9:
+        return MODEL, (f"the curve was asked to {indentation[-1]:.3g} mm of indentation ({GRID_REACH:g} x the travel "
+                       f"to d_min), where the magnet had moved {moved:.3g} mm of its {travel_mm:.3g} mm")
+    return "", ""
 
 
 def normal_curve(design: Design, body: mech.Body, mu: float,
@@ -208,7 +213,7 @@ def surrogate_curve(design: Design, body: mech.Body, mu: float,
     :class:`~.mechanics.fe_surrogate.OutsideRegion` for a body outside its validated region."""
     depth = float(design.spec.calibration.scan_z_mm)
     ratios = yeoh_ratios(design)
-    yeoh = ratios != (0.0, 0.0)
+    yeoh = law_in_force(design) is MaterialLaw.YEOH
     curve, response = fe_surrogate.normal_and_shear(body, mu, indentation, depth,
                                                     shear_probe_depths(design, indentation),
                                                     design.spec.calibration.scan_step_mm, *ratios)
@@ -364,15 +369,20 @@ def _band(design: Design) -> dict[str, float]:
 CLOSED_FORMS = (MechanicsModel.COLUMN, MechanicsModel.HERTZ_COLUMN)
 
 
+def yeoh_can_run(design: Design) -> bool:
+    """Whether the Yeoh law can model this design: the silicone has a fit (recipes/materials.toml) and the mechanics
+    model is the FE (or its surrogate), not a closed form."""
+    return design.material.yeoh is not None and MechanicsModel(design.spec.predict.mechanics_model) not in CLOSED_FORMS
+
+
 def law_in_force(design: Design) -> MaterialLaw:
     """The hyperelastic law the elastomer's models use for the spec's ``predict.material_law``: Yeoh when asked, or
-    for "auto" where the silicone has a Yeoh fit (recipes/materials.toml) and the mechanics model is the FE (or its
-    surrogate); neo-Hookean otherwise. (An explicit "yeoh" the recipes cannot serve is refused in
-    :mod:`magfab.plausible` before this runs.)"""
+    for "auto" where it can run (:func:`yeoh_can_run`); neo-Hookean otherwise. (An explicit "yeoh" that cannot run
+    is refused in :mod:`magfab.plausible` before this runs.)"""
     choice = MaterialLawChoice(design.spec.predict.material_law)
     if choice is MaterialLawChoice.NEO_HOOKEAN or design.material.yeoh is None:
         return MaterialLaw.NEO_HOOKEAN
-    if choice is MaterialLawChoice.AUTO and MechanicsModel(design.spec.predict.mechanics_model) in CLOSED_FORMS:
+    if choice is MaterialLawChoice.AUTO and not yeoh_can_run(design):
         return MaterialLaw.NEO_HOOKEAN
     return MaterialLaw.YEOH
 
@@ -380,9 +390,9 @@ def law_in_force(design: Design) -> MaterialLaw:
 def material_law(design: Design) -> dict[str, Any]:
     """The FE's material arguments for the law in force (:func:`law_in_force`): none for neo-Hookean (the FE's
     default), or the silicone's Yeoh ratios (recipes/materials.toml)."""
-    if law_in_force(design) is not MaterialLaw.YEOH or design.material.yeoh is None:
-        return {}
     y = design.material.yeoh
+    if y is None or law_in_force(design) is not MaterialLaw.YEOH:
+        return {}
     return {"material": "yeoh", "yeoh_ratios": (y.k2, y.k3)}
 
 
@@ -395,7 +405,7 @@ def data_end_stretch(design: Design) -> float:
     """The stretch where the material law's data end (predict's "material data" limit): 2 for the neo-Hookean bands
     (fitted to 100 % strain), the Yeoh fit's stretch for "yeoh" (recipes/materials.toml)."""
     y = design.material.yeoh
-    return y.stretch_max if material_law(design) and y is not None else NEO_HOOKEAN_DATA_END
+    return y.stretch_max if y is not None and law_in_force(design) is MaterialLaw.YEOH else NEO_HOOKEAN_DATA_END
 
 
 #: What replaces :func:`normal_curve` in :func:`predict`: (design, body, mu_kPa, indentation) -> (nominal curve, its
@@ -423,7 +433,8 @@ def predict(design: Design, elastomer: ElastomerModel | None = None) -> Predicti
     curves = {k: nominal.scaled(mu) if k != "nominal" else nominal for k, mu in mus.items()}
     t_mech = time.perf_counter()
 
-    normal, normal_arrays = _normal(design, chip, nz, magnets, fuse.name, curves, _curve_end(nominal, indentation))
+    end = _curve_end(nominal, indentation, design.d_rest_mm - design.spec.sensor.d_min_mm)
+    normal, normal_arrays = _normal(design, chip, nz, magnets, fuse.name, curves, end)
     if response is None:
         response = rest_response(design, body, mus["nominal"])
     depth_end = float(np.interp(normal.travel_mm, nominal.magnet_displacement_mm, nominal.indentation_mm))
@@ -484,7 +495,8 @@ def normal_on_mesh(design: Design, mesh_mm: float, field_model: str = "exact") -
     curves = {k: nominal.scaled(mu) if k != "nominal" else nominal for k, mu in mus.items()}
     chip = chip_setting(design)
     magnets = {band: fieldmod.Magnet.from_design(design, band) for band in GRADE_BAND}
-    return _normal(design, chip, noise(design, chip), magnets, field_model, curves, _curve_end(nominal, indentation))[0]
+    end = _curve_end(nominal, indentation, design.d_rest_mm - design.spec.sensor.d_min_mm)
+    return _normal(design, chip, noise(design, chip), magnets, field_model, curves, end)[0]
 
 
 def _normal(design: Design, chip: ChipSetting, nz: Mapping[str, float], magnets: Mapping[str, fieldmod.Magnet],
@@ -530,11 +542,6 @@ def _normal(design: Design, chip: ChipSetting, nz: Mapping[str, float], magnets:
     end_label, limit_note = end
     if end_label:
         limits[end_label] = float(u[-1])
-    elif u[-1] < travel - 1e-9:  # every indentation asked was solved, and the magnet lags it more than the grid allows
-        limits[MODEL] = float(u[-1])
-        limit_note = (f"the curve was asked to {indentation_grid(design)[-1]:.3g} mm of indentation "
-                      f"({GRID_REACH:g} x the travel to d_min), where the magnet had moved {u[-1]:.3g} mm of its "
-                      f"{travel:.3g} mm")
     binding = min(limits, key=lambda k: limits[k])
     u_max = limits[binding]
     in_range = (u <= u_max + 1e-9) & keep

@@ -29,18 +29,16 @@ NH = '[predict]\nmaterial_law = "neo-hookean"\n'
 
 
 @pytest.fixture(scope="module")
-def design():
+def design(magone_neo_hookean):
     """MagOne with the neo-Hookean law: its range, and so its scan, ends at 1.6 N, where an order-4 polynomial sits on
     the noise floor; the default (Yeoh) scan reaches 4.9 N, past what order 4 fits to the noise
     (:func:`test_the_default_scan_is_fitted_within_its_tolerance`)."""
-    return derive(parse_spec(NH))
+    return magone_neo_hookean[0]
 
 
 @pytest.fixture(scope="module")
-def pred(design):
-    from magfab.models.predict import predict
-
-    return predict(design)
+def pred(magone_neo_hookean):
+    return magone_neo_hookean[1]
 
 
 @pytest.fixture(scope="module")

@@ -134,22 +134,11 @@ def test_the_shipped_table_is_what_the_fe_gives(tip):
     assert err["force_max"] <= data["held_out_error"]["force_max"] + 1e-12
 
 
-@pytest.fixture(scope="module")
-def neo_hookean_magone():
-    """MagOne with the neo-Hookean law, whose table this is (the Yeoh blend's test is in test_material_fits.py), and
-    the build's prediction of it."""
-    from magfab import derive, parse_spec
-    from magfab.models.predict import predict
-
-    design = derive(parse_spec('[predict]\nmaterial_law = "neo-hookean"\n'))
-    return design, predict(design)
-
-
-def test_magone_against_the_builds_fe(neo_hookean_magone):
+def test_magone_against_the_builds_fe(magone_neo_hookean):
     """The surrogate's MagOne curve over the working range (the deepest preloads, past the range, are off by up to
     11 %) and rest shear response against the build's FE (the prediction's), within the held-out error the file
     states (its 90th percentile, doubled for a single design)."""
-    magone_design, magone_prediction = neo_hookean_magone
+    magone_design, magone_prediction = magone_neo_hookean  # the neo-Hookean law, whose table this is
     body = mech.Body.from_design(magone_design)
     assert S.in_region(body)
     fe = magone_prediction.curves["nominal"]

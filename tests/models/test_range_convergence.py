@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from magfab import derive, load_spec, parse_spec
+from magfab import derive, load_spec
 from magfab.models import mechanics as M
 from magfab.models.predict import MATERIALS, normal_on_mesh
 
@@ -34,11 +34,13 @@ def _assert_converged(design, figures):
     assert max(travel) / min(travel) - 1.0 <= tol, travel
 
 
-def test_magone_range_converges_over_three_meshes():
-    """MagOne with the neo-Hookean law, meshes 1, 0.75 (the build's) and 0.5 mm: the soft, nominal and stiff range
-    within predict.tolerance_pct (measured 0.24 % apart), ended by the stretch where its data end each time."""
-    design = derive(parse_spec('[predict]\nmaterial_law = "neo-hookean"\n'))
-    figures = [normal_on_mesh(design, h) for h in (1.0, 0.75, 0.5)]
+def test_magone_range_converges_over_three_meshes(magone_neo_hookean):
+    """MagOne with the neo-Hookean law, meshes 1, 0.75 (the build's, from the session's prediction) and 0.5 mm: the
+    soft, nominal and stiff range within predict.tolerance_pct (measured 0.24 % apart), ended by the stretch where
+    its data end each time."""
+    design, pred = magone_neo_hookean
+    assert pred.curves["nominal"].mesh_mm == pytest.approx(0.75)
+    figures = [normal_on_mesh(design, 1.0), pred.normal, normal_on_mesh(design, 0.5)]
     _assert_converged(design, figures)
     assert figures[0].range_limit == "material data"
     assert figures[1].range_N == pytest.approx(1.025, abs=0.002)  # the soft range; 1.364 N with the ball average
