@@ -156,6 +156,11 @@ def test_a_curve_is_named_by_what_ends_it():
     assert _curve_end(stopped, d) == (MODEL, "element inversion at indentation 2 mm")
     solved = replace(curve, info={**curve.info, "failure": "solved to 1 mm", "ends_at": SCAN_DEPTH})
     assert _curve_end(solved, d) == (SCAN_DEPTH, "solved to 1 mm")
+    # the whole grid solved, the magnet short of the travel to d_min (it lags the surface): the model's reach
+    moved = float(curve.magnet_displacement_mm[-1])
+    assert _curve_end(curve, d[:2], travel_mm=moved) == ("", "")
+    label, note = _curve_end(curve, d[:2], travel_mm=moved + 0.5)
+    assert label == MODEL and f"{moved:.3g} mm of its {moved + 0.5:.3g} mm" in note
 
 
 def test_sensitivity_at_rest_is_m10_per_material_with_the_nominal_magnet(pred, design):
