@@ -208,3 +208,17 @@ def test_the_shipped_yeoh_table_is_what_the_fe_gives():
     for key in ("force", "travel", "disp"):
         np.testing.assert_allclose(again[key], kept[key], rtol=1e-6, equal_nan=True)
     assert data["held_out_error"]["force_rms"] <= 0.05
+
+
+def test_each_shipped_table_is_built_once_however_it_is_asked_for():
+    """A two-tip Yeoh search asks for every table, by enum and by name, with the law given or left out: each of the
+    four tables is built once and then served from memory (a cache keyed on the spelling rebuilt one on most
+    designs, 0.2 s each, ten times the design itself)."""
+    S._loaded.cache_clear()
+    for _ in range(3):
+        for tip in (Tip.HEMISPHERE, Tip.FLAT):
+            for ask in ((tip,), (tip, False), (tip.value, False), (tip, True), (tip.value, True)):
+                S._shipped(*ask)
+            S.held_out_error(tip, yeoh=True)
+    assert S._loaded.cache_info().misses == 4
+    assert S._shipped(Tip.FLAT) is S._shipped("flat", False)

@@ -48,7 +48,7 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
-from functools import lru_cache
+from functools import cache
 from importlib import resources
 
 import numpy as np
@@ -265,8 +265,15 @@ def _inverse(key: str, v: float) -> float:
     return math.exp(v) if key in LOG_KEYS else v
 
 
-@lru_cache(maxsize=4)
 def _shipped(tip: Tip = Tip.HEMISPHERE, yeoh: bool = False) -> tuple[_Model, dict]:
+    """Tip ``tip``'s shipped table (the Yeoh one with ``yeoh``) and its model, built once per process."""
+    return _loaded(Tip(tip), bool(yeoh))
+
+
+@cache  # one entry per (tip, law): four in all
+def _loaded(tip: Tip, yeoh: bool) -> tuple[_Model, dict]:
+    # One key per table, however a caller spells its arguments: a bounded cache keyed on the spelling held the
+    # tables of a two-tip Yeoh search in six entries and rebuilt one on most designs (0.2 s each, 10x the design).
     name = (YEOH_DATAS if yeoh else DATAS)[tip]
     data = json.loads(resources.files("magfab.models.mechanics").joinpath(name).read_text(encoding="utf-8"))
     return _Model(data["runs"], BOXES[tip]), data
