@@ -299,7 +299,9 @@ def test_decoder_resynchronises_rejects_bad_crcs_and_counts_them(pkg):
             assert all(math.isnan(x) for x in s.force_N + s.B_uT) and s.temperature_C is None
             assert s.fault == (f["t_raw"] or None)  # bytes 15..16 of an error frame: the fault word
         else:
-            assert s.force_N == tuple(f32(x) for x in f["forces"])
+            # an axis at full scale: the field stands, the force is none (a clipped field is no force)
+            expected = (math.nan,) * 3 if f["status"] & 0x04 else tuple(f32(x) for x in f["forces"])
+            assert all(a == b or (math.isnan(a) and math.isnan(b)) for a, b in zip(s.force_N, expected))
             assert s.B_uT == (f["counts"][0] * 3.004, f["counts"][1] * 3.004, f["counts"][2] * 4.84)
             assert s.temperature_C == pytest.approx(25 + (f["t_raw"] - 46244) / 45.2)
     assert sum(s.chip_error for s in samples) == 4  # statuses 2, 7, 10, 11 (3 and 6 are the broken frames)
@@ -691,3 +693,34 @@ def test_a_usage_mistake_is_one_line_and_exit_2(pkg, capsys):
         assert exit_.value.code == 2 and out == "", (args, out)
         assert err.count("\n") == 1 and err.startswith("magfab-readout: error: ") and said in err, (args, err)
         assert "--help` lists what is allowed" in err, err
+
+
+class _Past:
+    """A field pattern: at rest, then Bz pushed past the chip's full scale for ``hold_s`` every ``period_s``."""
+
+    def __init__(self, rest, full_uT: float, period_s: float = 0.05, hold_s: float = 0.02) -> None:
+        self.rest, self.full, self.period, self.hold = rest, full_uT, period_s, hold_s
+
+    def field(self, t_s: float):
+        bx, by, bz = self.rest
+        return (bx, by, 1.5 * self.full if (t_s % self.period) < self.hold else bz)
+
+
+@pytest.mark.parametrize("text", [False, True])
+def test_a_field_past_full_scale_gives_no_force_and_names_the_axis(pkg, calibration, text):
+    """The simulated board pressed past the chip's full scale: every such sample reaches the Python API with NaN
+    forces (after a tare too), its field kept and its fault named; the others carry their forces; zero skips the
+    saturated ones."""
+    full_z = pkg._build.FULL_SCALE_COUNTS * pkg._build.LSB_Z_UT
+    rest = pkg.PressPattern(pkg.Calibration.embedded()).field(0.0)
+    sim = pkg.SimulatedDevice(realtime=False, text=text, pattern=_Past(rest, full_z))
+    with pkg.Device(transport=sim) as device:
+        device.zero(20)
+        samples = device.read(400)
+    past = [s for s in samples if s.full_scale]
+    assert 0.2 * len(samples) < len(past) < 0.6 * len(samples)
+    for s in past:
+        assert all(math.isnan(f) for f in s.force_N + s.device_force_N) and not s.chip_error
+        assert s.B_uT[2] >= 0.99 * full_z and s.fault_name == ("full scale" if text else "full scale on Bz")
+        assert math.isnan(pkg.cross_check(s, pkg.Calibration.embedded()))
+    assert all(all(math.isfinite(f) for f in s.force_N) and s.fault_name is None for s in samples if not s.full_scale)

@@ -6,6 +6,7 @@ command line's stream, record (the taxel column, read back by magfab's own recor
 from __future__ import annotations
 
 import csv
+import dataclasses
 import importlib
 import io
 import math
@@ -329,3 +330,30 @@ def test_a_warming_array_is_corrected_taxel_by_taxel(pkg, array, strip):
     worst = max(abs(c[k].force_N[2]) for c in hot for k in range(5))
     print(f"after +10 C: corrected |Fz| <= {1e3 * worst:.2f} mN, "
           f"uncorrected Fz {[round(1e3 * fz, 1) for fz in drift]} mN")
+
+
+def test_a_taxel_at_full_scale_reads_no_force_and_is_held_in_the_compensation(pkg, array, strip):
+    """Taxel 3 pressed and slid, its chip at full scale for two cycles (its field clipped there): it reads NaN force
+    with its field kept and the fault named, and taxel 2 beside it still reads nothing of the press (taxel 3's slot
+    holds its last good reading, not the clipped one)."""
+    design, pred, _, _ = strip
+    resolution = (pred.shear.resolution_mN / 1e3,) * 2 + (pred.normal.resolution_mN / 1e3,)
+    motion, _ = _press_points(design, pred)[2]
+    exact = Exact(design, taxel=3, motion=motion, t_press=0.0)
+    rest = pkg.ArrayEvaluator(array).cycle(_samples(pkg, [(0, Exact(design).rest.tolist())]))[2].force_N
+    full_z = pkg._build.FULL_SCALE_COUNTS * pkg._build.LSB_Z_UT
+    samples = _samples(pkg, [(s, exact.fields(0.0)) for s in range(4)])
+    for i, s in enumerate(samples):
+        if s.taxel == 3 and s.seq in (2, 3):
+            samples[i] = dataclasses.replace(s, status=0x04, B_uT=(*s.B_uT[:2], full_z))
+    assembler = pkg.CycleAssembler(5)
+    groups = [g for s in samples for g in assembler.feed(s)] + assembler.flush()
+    evaluator = pkg.ArrayEvaluator(array)
+    cycles = [evaluator.cycle(g) for g in groups]
+    assert [c.held for c in cycles] == [(), (), (3,), (3,)]
+    for c in cycles[2:]:
+        t = c[3]
+        assert all(math.isnan(x) for x in t.force_N) and not t.ok and t.flags == "--S--"
+        assert t.B_uT[2] == full_z and t.fault_name == "full scale"
+    for c in cycles:
+        assert all(abs(a - b) < r for a, b, r in zip(c[2].force_N, rest, resolution)), (c.seq, c[2].force_N, rest)

@@ -152,3 +152,40 @@ def test_a_frame_with_a_force_out_of_band_is_refused(pkg, forces):  # noqa: F811
     decoder = pkg.Decoder()
     assert decoder.feed(frame(0x00, forces) + frame(0x04, (0.0, 0.0, 1000.0))) != []
     assert decoder.stats.refused == 1 and decoder.stats.frames == 1 and decoder.stats.crc_errors == 0
+
+
+def _saturated_counts(readout, axes: str) -> tuple[int, ...]:
+    """Counts with each axis of ``axes`` at the chip's full scale (the rest well inside it)."""
+    full = readout._build.FULL_SCALE_COUNTS
+    return tuple(full if a in axes else 100 * (i + 1) for i, a in enumerate(("Bx", "By", "Bz")))
+
+
+@pytest.mark.parametrize("status", [0x04, 0x05, 0x0C])
+@pytest.mark.parametrize("axes", ["Bz", "Bx", "ByBz"])
+@pytest.mark.parametrize("forces", [(0.0, 0.0, 578.0), (0.1, -0.2, 3.0), (0.0, 0.0, 5000.0), (0.0, 0.0, math.inf)])
+def test_a_full_scale_frame_never_yields_a_force(pkg, status, axes, forces):  # noqa: F811 - pkg: the fixture imported from test_readout.py
+    """A frame with an axis at the chip's full scale once passed its force (Fz = 578 N, flagged o and S) to stream
+    as a number. Whatever force it carries, even one out of band, the host gives NaN forces, keeps the field and the
+    counts, counts the frame, and names the fault with the axes at full scale."""
+    counts = _saturated_counts(pkg, axes)
+    body = FRAME.pack(1, 5, status, 1000, *counts, 46244, *forces)
+    decoder = pkg.Decoder(lsb_xy_uT=3.004, lsb_z_uT=4.84)
+    (s,) = decoder.feed(b"\xa5\x5a" + body + struct.pack("<H", ref_crc16(body)))
+    assert s.full_scale and not s.chip_error and decoder.stats.frames == 1 and decoder.stats.refused == 0
+    assert all(math.isnan(f) for f in s.force_N + s.device_force_N)
+    assert s.counts == counts and s.B_uT == (counts[0] * 3.004, counts[1] * 3.004, counts[2] * 4.84)
+    named = [a for a in ("Bx", "By", "Bz") if a in axes]
+    assert s.fault_name == "full scale on " + "+".join(named) and "S" in s.flags
+
+
+def test_a_full_scale_text_line_never_yields_a_force(pkg):  # noqa: F811 - pkg: the fixture imported from test_readout.py
+    """The same in text mode: the line's field stands, its force is NaN, the fault says full scale; a force far out
+    of band on a full-scale line is not refused (the field is the reading), on any other line it is."""
+    for status, force in ((4, b"0.0000,0.0000,578.0000"), (5, b"0.0000,0.0000,5000.0000"), (4, b"nan,nan,nan")):
+        decoder = pkg.Decoder()
+        (s,) = decoder.feed(checked(b"F,9,5000,%d,%s,60.08,-3.00,106480.00,25.02" % (status, force)))
+        assert s.full_scale and all(math.isnan(f) for f in s.force_N) and s.B_uT == (60.08, -3.0, 106480.0)
+        assert s.fault_name == "full scale" and decoder.stats.refused == 0
+    decoder = pkg.Decoder()
+    assert decoder.feed(checked(b"F,9,5000,0,0.0000,0.0000,5000.0000,60.08,-3.00,106480.00,25.02")) == []
+    assert decoder.stats.refused == 1

@@ -150,7 +150,7 @@ def record(args: argparse.Namespace, array: ArrayCalibration) -> int:
                               file=sys.stderr)
                     if stop.requested:
                         break
-        print("magfab-readout: wrote {} rows to {}{} ({} chip-error or missing readings left out)".format(
+        print("magfab-readout: wrote {} rows to {}{} ({} chip-error, missing or full-scale readings left out)".format(
             written, args.out, " (Ctrl-C)" if stop.requested else "", skipped), file=sys.stderr)
         _summary(reader, reader.computed)
     return 0

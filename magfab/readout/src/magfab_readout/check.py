@@ -523,7 +523,9 @@ def _check_warmup(steps: Steps, out, args: argparse.Namespace, device, bands: Ba
             "uncompensated {:.2f} mN/C; the drift budget's figures x {:.2f}, this calibration's force per field at "
             "rest over the budget's)").format(dF, dT, dF / dT if dT else math.nan, band, per_C, what,
                                               float(w["per_C_mN"]["without"]) * k, k)
-    if not warmed:
+    if cold.full or warm.full:
+        steps.report(name, False, text + ": samples had an axis at the chip's full scale")
+    elif not warmed:
         steps.report(name, False, text + f": the chip warmed by only {dT:.1f} C in {waited:.0f} s - warm it by at "
                      f"least {least:g} C (or give --warmup-seconds more) and repeat")
     elif abs(dF) <= band:

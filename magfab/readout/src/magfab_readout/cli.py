@@ -107,9 +107,9 @@ def _parser() -> argparse.ArgumentParser:
                                  description="Write the device's and the host's time, the field, the temperature and "
                                  "this sensor's own calibrated force (Fx_sensor_N, Fy_sensor_N, Fz_sensor_N) as CSV "
                                  "with a # comment header (docs/bundle.md section 1), until Ctrl-C or --seconds. "
-                                 "Samples with a chip error are left out. To calibrate, log a reference force "
-                                 "sensor on this computer's clock during the scan and pass its log to magfab "
-                                 "calibrate --reference.")
+                                 "Samples with a chip error or an axis at the chip's full scale are left out. To "
+                                 "calibrate, log a reference force sensor on this computer's clock during the scan "
+                                 "and pass its log to magfab calibrate --reference.")
     record.add_argument("out", metavar="OUT.csv", help="file to write")
     record.add_argument("--seconds", type=float, metavar="S",
                         help="stop after S seconds of device time (default: record until Ctrl-C)")
@@ -254,7 +254,7 @@ def _record(args: argparse.Namespace) -> int:
         sensor = [] if linked.sensor is None else [f"# sensor: {linked.sensor.id}"]
         temperature = _build.TEMPERATURE_ENABLED
         columns = [c for c in CSV_COLUMNS if temperature or c != "temperature_C"]
-        written = skipped = 0
+        written = skipped = full = 0
         stop = Interrupt()
         rest = _rest_tracker(device)
         with open(args.out, "w", encoding="utf-8", newline="") as f:
@@ -265,7 +265,9 @@ def _record(args: argparse.Namespace) -> int:
                     rest.add(sample)
                     host = time.time()
                     values = list(sample.B_uT) + list(sample.force_N)
-                    if sample.chip_error or not all(math.isfinite(v) for v in values) or (
+                    if sample.full_scale and not sample.chip_error:
+                        full += 1  # a clipped field: no force to record
+                    elif sample.chip_error or not all(math.isfinite(v) for v in values) or (
                             temperature and sample.temperature_C is None):
                         skipped += 1
                     else:
@@ -279,9 +281,10 @@ def _record(args: argparse.Namespace) -> int:
                     stop.writing = False
                     if stop.requested:
                         break
-        print("magfab-readout: wrote {} rows to {}{} ({} chip-error samples left out)".format(
-            written, args.out, " (Ctrl-C)" if stop.requested else "", skipped), file=sys.stderr)
-        _summary(device, written + skipped, None, rest)
+        print("magfab-readout: wrote {} rows to {}{} ({} chip-error samples and {} with an axis at the chip's full "
+              "scale left out)".format(written, args.out, " (Ctrl-C)" if stop.requested else "", skipped, full),
+              file=sys.stderr)
+        _summary(device, written + skipped + full, None, rest)
     return 0
 
 

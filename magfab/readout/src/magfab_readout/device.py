@@ -168,8 +168,9 @@ class SerialTransport:
 def cross_check(sample: Sample, calibration: Calibration) -> float:
     """Largest |F_host - F_device| in newton, the host recomputing the force from the sample's field with
     ``calibration``'s global polynomial at the sample's temperature (what the firmware evaluates); NaN for a
-    chip-error sample. Binary frames carry exact counts, text lines a rounded field."""
-    if sample.chip_error:
+    chip-error sample and one at the chip's full scale (no force). Binary frames carry exact counts, text lines a
+    rounded field."""
+    if sample.chip_error or sample.full_scale:
         return math.nan
     host = calibration.evaluate(*sample.B_uT, method="poly", temperature_C=sample.temperature_C)
     assert sample.device_force_N is not None, "Sample.__post_init__ sets it"
@@ -343,8 +344,8 @@ class Device:
         return dropped
 
     def zero(self, count: int) -> Tuple[float, float, float]:
-        """Average ``count`` samples at rest (chip-error samples are skipped) and subtract that force from every
-        later sample (tare). Returns the offset (Fx, Fy, Fz) in newton."""
+        """Average ``count`` samples at rest (chip-error and full-scale samples are skipped) and subtract that force
+        from every later sample (tare). Returns the offset (Fx, Fy, Fz) in newton."""
         if count < 1:
             raise ValueError(f"zero needs at least one sample; instead received {count!r}")
         self.offset_N = (0.0, 0.0, 0.0)
@@ -357,7 +358,8 @@ class Device:
                 skipped += 1
                 if skipped > 10 * count + 100:
                     raise DeviceError(f"cannot zero: {skipped} of the last samples from {self.port} were chip errors "
-                                      "(check the sensor board's wiring and supply)")
+                                      "or at the chip's full scale (check the sensor board's wiring and supply, and "
+                                      "that nothing presses the tip)")
                 continue
             total = [t + f for t, f in zip(total, device_force)]
             used += 1

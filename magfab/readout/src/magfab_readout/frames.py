@@ -54,7 +54,8 @@ __all__ = [
     "SYNC", "FRAME_LENGTH", "FRAME_FORCE", "STATUS_OUTSIDE_REGION", "STATUS_CHIP_ERROR", "STATUS_FULL_SCALE",
     "STATUS_RECOVERED", "FORCE_LIMIT_N", "FIELD_LIMIT_UT", "Sample", "DeviceInfo", "DecoderStats", "Decoder",
     "crc16_ccitt_false", "line_checksum", "encode_frame", "encode_text_line", "encode_info_line", "decode_frames",
-    "temperature_C", "FAULTS", "FAULT_STAGES", "fault_name", "FRAME_FIELD", "FIELD_FRAME_LENGTH", "encode_field_frame",
+    "temperature_C", "FAULTS", "FAULT_STAGES", "fault_name", "full_scale_name", "FRAME_FIELD", "FIELD_FRAME_LENGTH",
+    "encode_field_frame",
     "encode_field_line", "frame_length",
 ]
 
@@ -131,6 +132,15 @@ def fault_name(word: Optional[int]) -> Optional[str]:
                              FAULT_STAGES.get(stage, f"stage {stage}"))
 
 
+def full_scale_name(counts: Optional[Tuple[int, int, int]]) -> str:
+    """A full-scale sample's fault, naming the axes at the chip's full scale where the raw counts are known (binary
+    frames): e.g. ``'full scale on Bx+Bz'``; ``'full scale'`` from a text line."""
+    if counts is None:
+        return "full scale"
+    axes = [name for name, c in zip(("Bx", "By", "Bz"), counts) if abs(c) >= _build.FULL_SCALE_COUNTS]
+    return "full scale on " + "+".join(axes) if axes else "full scale"
+
+
 def flag_letters(status: int) -> str:
     """Status flags as four letters, '-' where clear: o outside region, E chip error, S full scale, R recovered."""
     return "".join(letter if status & bit else "-" for bit, letter in _FLAG_LETTERS)
@@ -142,7 +152,9 @@ class Sample:
 
     ``B_uT`` is (Bx, By, Bz) in microtesla; ``force_N`` is (Fx, Fy, Fz) in newton as the firmware computed it,
     minus the host's zero offset when one is set (``device_force_N`` keeps the firmware's value); both are NaN
-    when the chip-error bit is set (the sample is kept for its sequence number, time and flags);
+    when the chip-error bit is set (the sample is kept for its sequence number, time and flags) and when an axis is
+    at the chip's full scale (a clipped field is no force; ``B_uT`` and ``counts`` keep the reading, and
+    :attr:`fault_name` names the axes);
     ``counts`` and ``temperature_raw`` are the raw chip readings (binary frames only); ``time_s`` is the
     device time since the first sample of a :class:`~magfab_readout.Device` stream (None from the decoder);
     ``fault`` is the fault word of a chip-error sample (:func:`fault_name`, :attr:`fault_name`), else None;
@@ -190,7 +202,10 @@ class Sample:
 
     @property
     def fault_name(self) -> Optional[str]:
-        """What failed and where, e.g. ``'chip reset at read'``; None for a good sample."""
+        """What failed and where, e.g. ``'chip reset at read'``, or for a sample at the chip's full scale which axes
+        (``'full scale on Bz'``); None for a good sample."""
+        if self.full_scale and not self.chip_error:
+            return full_scale_name(self.counts)
         return fault_name(self.fault)
 
     @property
@@ -404,15 +419,16 @@ class Decoder:
             self.stats.unknown_frames += 1
             return FRAME_LENGTH
         self._sequence(seq)
-        if status & STATUS_CHIP_ERROR or _plausible((fx, fy, fz)):
+        if status & (STATUS_CHIP_ERROR | STATUS_FULL_SCALE) or _plausible((fx, fy, fz)):
             self.stats.frames += 1
         if status & STATUS_CHIP_ERROR:
             out.append(Sample(seq, t_us, status, _NAN3, _NAN3, None, "binary", (bx, by, bz), t_raw,
                               fault=t_raw or None))
-        elif _plausible((fx, fy, fz)):
+        elif status & STATUS_FULL_SCALE or _plausible((fx, fy, fz)):
             B = (bx * self.lsb_xy_uT, by * self.lsb_xy_uT, bz * self.lsb_z_uT)
             temp = temperature_C(t_raw) if self.temperature else None
-            out.append(Sample(seq, t_us, status, B, (fx, fy, fz), temp, "binary", (bx, by, bz), t_raw))
+            force = _NAN3 if status & STATUS_FULL_SCALE else (fx, fy, fz)  # a clipped field gives no force
+            out.append(Sample(seq, t_us, status, B, force, temp, "binary", (bx, by, bz), t_raw))
         else:
             self.stats.refused += 1
         return FRAME_LENGTH
@@ -476,10 +492,13 @@ class Decoder:
             self.stats.lines += 1
             return Sample(seq, t_us, status, _NAN3, _NAN3, None, "text", fault=int(fault) if fault else None)
         force, B, temp = (values[0], values[1], values[2]), (values[3], values[4], values[5]), values[6]
-        if not _plausible(force) or not all(abs(b) <= FIELD_LIMIT_UT for b in B):
+        full = bool(status & STATUS_FULL_SCALE)
+        if not (full or _plausible(force)) or not all(abs(b) <= FIELD_LIMIT_UT for b in B):
             self.stats.refused += 1
             return _REFUSED
         self.stats.lines += 1
+        if full:  # a clipped field gives no force, whatever the line carries
+            force = _NAN3
         return Sample(seq, t_us, status, B, force, temp if not math.isnan(temp) else None, "text")
 
     def _info(self, text: str) -> Optional[DeviceInfo]:

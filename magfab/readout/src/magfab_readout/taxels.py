@@ -39,7 +39,15 @@ from typing import Iterator, List, Optional, Sequence, Tuple
 from . import array_json, bounded  # array_json: an array build's compensation (docs/bundle.md section 5)
 from .calibration import Calibration, CalibrationError
 from .device import DeviceError
-from .frames import STATUS_CHIP_ERROR, STATUS_OUTSIDE_REGION, Sample, fault_name, flag_letters
+from .frames import (
+    STATUS_CHIP_ERROR,
+    STATUS_FULL_SCALE,
+    STATUS_OUTSIDE_REGION,
+    Sample,
+    fault_name,
+    flag_letters,
+    full_scale_name,
+)
 
 __all__ = ["HOLD_S", "ArrayCalibration", "TaxelReading", "Cycle", "CycleAssembler", "ArrayEvaluator", "ArrayReader",
            "WrongFirmware"]
@@ -172,7 +180,8 @@ class ArrayCalibration:
 class TaxelReading:
     """One taxel in one cycle: the field its chip read (``B_uT``), its own field after the compensation
     (``own_uT``), its force (``force_N``, minus the taxel's zero) and the frame's status with the host's
-    'outside the calibrated region' bit. A taxel with a chip error or a missing frame reads NaN."""
+    'outside the calibrated region' bit. A taxel with a chip error, a missing frame or an axis at the chip's full
+    scale reads NaN force (the last keeps its field: ``B_uT``, ``counts``)."""
 
     taxel: int
     seq: int
@@ -196,13 +205,19 @@ class TaxelReading:
         return bool(self.status & STATUS_OUTSIDE_REGION)
 
     @property
+    def full_scale(self) -> bool:
+        return bool(self.status & STATUS_FULL_SCALE)
+
+    @property
     def ok(self) -> bool:
-        """A force was computed (the frame came, without a chip error)."""
-        return not self.missing and not self.chip_error
+        """A force was computed (the frame came, without a chip error, with no axis at full scale)."""
+        return not self.missing and not self.chip_error and not self.full_scale
 
     @property
     def fault_name(self) -> Optional[str]:
-        return "missing frame" if self.missing else fault_name(self.fault)
+        if self.missing:
+            return "missing frame"
+        return full_scale_name(self.counts) if self.full_scale and not self.chip_error else fault_name(self.fault)
 
     @property
     def flags(self) -> str:
@@ -291,12 +306,12 @@ class ArrayEvaluator:
     def remember(self, slots: Sequence[Optional[Sample]]) -> None:
         """Keep the good readings of a cycle that is not evaluated (for the compensation's held slots)."""
         for k, s in enumerate(slots):
-            if s is not None and not s.chip_error and _finite(s.B_uT):
+            if s is not None and _usable(s):
                 self._last[k] = (_time(s), s.B_uT)
 
     def cycle(self, slots: Sequence[Optional[Sample]]) -> Cycle:
         cal = self.calibration
-        good = [s is not None and not s.chip_error and _finite(s.B_uT) for s in slots]
+        good = [_usable(s) for s in slots]
         present = [s for s in slots if s is not None]
         now = min(_time(s) for s in present) if present else None
         readings, held = [], []
@@ -328,6 +343,12 @@ class ArrayEvaluator:
                                                 self.offset_N[k]))
         return TaxelReading(k, s.seq, s.time_s, status, s.B_uT, own, force, s.temperature_C,
                             s.fault, counts=s.counts, temperature_raw=s.temperature_raw)
+
+
+def _usable(s: Optional[Sample]) -> bool:
+    """A taxel's sample whose field is a reading: it came, without a chip error, finite and with no axis at full
+    scale (a clipped field would mis-compensate the neighbours too; the taxel's last good field stands in)."""
+    return s is not None and not s.chip_error and not s.full_scale and _finite(s.B_uT)
 
 
 class ArrayReader:
