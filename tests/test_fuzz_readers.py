@@ -734,13 +734,14 @@ def check_decoded(readout, stream: bytes, items: list) -> None:
     binary, lines = _sources(frames, stream)
     for item in items:
         if isinstance(item, frames.Sample) and item.source == "binary":
-            if item.taxel or (math.isnan(item.force_N[0]) and not item.chip_error):  # an array's field frame
-                fields = (frames.FRAME_FIELD, item.seq, item.status, item.t_us, item.taxel, *item.counts,
-                          item.temperature_raw)
-                assert fields in binary, item
-            else:
-                assert any(f[:8] == (frames.FRAME_FORCE, item.seq, item.status, item.t_us, *item.counts,
-                                     item.temperature_raw) for f in binary), item
+            field = (frames.FRAME_FIELD, item.seq, item.status, item.t_us, item.taxel, *item.counts,
+                     item.temperature_raw) in binary
+            force = not item.taxel and any(f[:8] == (frames.FRAME_FORCE, item.seq, item.status, item.t_us,
+                                                     *item.counts, item.temperature_raw) for f in binary)
+            if item.taxel or (math.isnan(item.force_N[0]) and not item.chip_error and not item.full_scale):
+                assert field, item  # an array's field frame
+            else:  # a force frame; one at full scale has no force, as a field frame of taxel 0 at full scale
+                assert force or (item.full_scale and field), item
         elif isinstance(item, frames.Sample):
             head = (b"B,%d,%d,%d,%d," % (item.taxel, item.seq, item.t_us, item.status) if item.taxel else
                     b"F,%d,%d,%d," % (item.seq, item.t_us, item.status))
