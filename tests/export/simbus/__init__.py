@@ -81,7 +81,8 @@ def _declare(lib: ctypes.CDLL) -> ctypes.CDLL:
         "bus_close": (None, [p]), "bus_eeprom_set": (ctypes.c_int, [p, u16, ctypes.c_char_p, u32]),
         "bus_eeprom_get": (ctypes.c_int, [p, u16, ctypes.c_char_p, u32]),
         "bus_add_chip": (ctypes.c_int, [p, u8]), "bus_target": (None, [p, u8]),
-        "bus_ramp": (None, [p, d, d, d, d, d, d, d]),
+        "bus_ramp": (None, [p, d, d, d, d, d, d, d]), "bus_real_timing": (None, [p, ctypes.c_int]),
+        "bus_timed_steps": (u32, [p]), "bus_timed_step_us": (d, [p]), "bus_byte_us": (d, [p]),
     }
     for name, (restype, argtypes) in signatures.items():
         fn = getattr(lib, name)
@@ -191,6 +192,10 @@ class Bus:
         """The chip's conversions take ``scale`` times the datasheet table's time from now on (a slow oscillator)."""
         self._lib.bus_clock_scale(self._h, scale)
 
+    def real_timing(self, on: bool = True) -> None:
+        """I2C timed as on a real bus at the SCL clock the image sets, from now on (mlxbus.c), or as simavr times it."""
+        self._lib.bus_real_timing(self._h, int(on))
+
     def register(self, reg: int) -> int:
         """The chip model's register ``reg`` now."""
         return self._lib.bus_chip_register(self._h, reg)
@@ -199,6 +204,11 @@ class Bus:
     phases = property(lambda self: self._lib.bus_phases(self._h), doc="address phases on the bus so far")
     status_fixes = property(lambda self: self._lib.bus_status_fixes(self._h))
     held = property(lambda self: self._lib.bus_held(self._h), doc="TWI steps held by hang_us")
+    timed_steps = property(lambda self: self._lib.bus_timed_steps(self._h), doc="TWI steps given real timing")
+    timed_step_us = property(lambda self: self._lib.bus_timed_step_us(self._h),
+                             doc="their mean time from the firmware's start of the step to TWINT, us")
+    byte_us = property(lambda self: self._lib.bus_byte_us(self._h),
+                       doc="the same for the address and data bytes alone, us")
     uart_cycles_per_byte = property(lambda self: self._lib.bus_uart_cycles_per_byte(self._h))
     chip_mode = property(lambda self: self._lib.bus_chip_mode(self._h), doc="0 idle, 1 burst, 2 single")
     conversion_us = property(lambda self: self._lib.bus_conversion_us(self._h),

@@ -12,7 +12,10 @@
  *    before the firmware sees TWINT (counted: status_fixes; on a fixed simavr it never triggers).
  *  - UART: the byte time is set only when UBRRnL is written (reading U2X as it is then) and always counts a
  *    parity bit; it is recomputed the hardware's way on every write of UCSR0A, UCSR0C and UBRR0L.
- * simavr times I2C at about 9 us per byte (400 kHz takes 22.5 us) and has no clock stretching.
+ * simavr times I2C at about 9 us per byte (400 kHz takes 22.5 us) and has no clock stretching. bus_real_timing
+ * corrects that here, never in the firmware: each TWI step's TWINT is held until the time the step takes on a real
+ * bus at the SCL clock the image configures (TWBR, TWPS): 9 SCL periods for an address or data byte with its ACK
+ * bit, one for a START, two for a repeated START, and after a STOP the bus-free time before the next START.
  *
  * An array: up to MAX_CHIPS models on the one bus, each at its own address with its own field (bus_add_chip); the
  * per-chip calls (field, faults inside the chip, address NACKs, absent, reset_in, clock, registers) act on the
@@ -32,7 +35,9 @@
 
 #include "sim_mlx90393.h"
 
-#define TWSR_ADDR 0xB9 /* ATmega328P data-space addresses */
+#define TWBR_ADDR 0xB8 /* ATmega328P data-space addresses */
+#define TWSR_ADDR 0xB9
+#define TWCR_ADDR 0xBC
 #define UCSR0A_ADDR 0xC0
 #define UCSR0C_ADDR 0xC2
 #define UBRR0L_ADDR 0xC4
@@ -73,6 +78,15 @@ typedef struct bus {
     uint32_t status_fixes;
     uint32_t phases;        /* address phases seen */
     uint32_t held;          /* TWI steps held */
+    /* real bus timing (bus_real_timing) */
+    uint8_t real_timing;
+    uint64_t step_cycle;    /* the AVR cycle at which the firmware started the TWI step in flight (TWINT written) */
+    uint64_t stop_cycle;    /* the cycle of the last STOP; the next START waits for the bus to be free */
+    uint64_t due_cycle;     /* the cycle at which the step held now ends */
+    uint32_t timed;         /* TWI steps given real timing */
+    uint64_t timed_cycles;  /* their total time, start to TWINT, in AVR cycles */
+    uint32_t byte_steps;    /* of them, address or data bytes */
+    uint64_t byte_cycles;
     uint8_t *uart;
     uint32_t uart_len;
     /* a temperature ramp per chip (bus_ramp): the field served is base x (1 + alpha (T - t_ref)) at T(now) */
@@ -196,11 +210,69 @@ static avr_cycle_count_t take_twint_back(struct avr_t *avr, avr_cycle_count_t wh
     return 0;
 }
 
+/* A step held for real timing: TWINT back, with its interrupt, at the cycle the step ends on a real bus. */
+static avr_cycle_count_t give_twint(struct avr_t *avr, avr_cycle_count_t when, void *param)
+{
+    bus_t *b = (bus_t *)param;
+    (void)when;
+    avr_raise_interrupt(avr, &b->twi0->twi);
+    return 0;
+}
+
+/* The firmware writes TWCR: a step starts when it writes TWINT with TWEN (a STOP is over once it is written). */
+static void twcr_hook(struct avr_t *avr, avr_io_addr_t addr, uint8_t v, void *param)
+{
+    bus_t *b = (bus_t *)param;
+    (void)addr;
+    if ((v & 0x84) == 0x84) {
+        b->step_cycle = avr->cycle;
+    }
+    if ((v & 0x94) == 0x94) {
+        b->stop_cycle = avr->cycle;
+    }
+}
+
+/* SCL periods, in AVR cycles, at the clock the image set: F_CPU / (16 + 2 TWBR 4^TWPS). */
+static uint64_t scl_cycles(bus_t *b)
+{
+    uint32_t twps = b->avr->data[TWSR_ADDR] & 0x03;
+    return 16u + 2u * (uint64_t)b->avr->data[TWBR_ADDR] * (1u << (2 * twps));
+}
+
+/* Holds TWINT (just raised with status value) until the step's real end; the step's time is counted. */
+static void real_time_step(bus_t *b, uint32_t value)
+{
+    uint64_t scl = scl_cycles(b), start = b->step_cycle, span;
+    if (value == 0x08) {
+        uint64_t free_at = b->stop_cycle + 2 * scl; /* the STOP (one SCL period) and t_BUF after it */
+        start = start > free_at ? start : free_at;
+        span = scl;
+    } else if (value == 0x10) {
+        span = 2 * scl;
+    } else {
+        span = 9 * scl;
+        ++b->byte_steps;
+    }
+    b->due_cycle = start + span;
+    ++b->timed;
+    b->timed_cycles += b->due_cycle - b->step_cycle;
+    if (value != 0x08 && value != 0x10) {
+        b->byte_cycles += b->due_cycle - b->step_cycle;
+    }
+    if (b->avr->cycle < b->due_cycle) {
+        avr_cycle_timer_register(b->avr, 0, take_twint_back, b);
+        avr_cycle_timer_register(b->avr, b->due_cycle - b->avr->cycle, give_twint, b);
+    }
+}
+
 static void twi_status_hook(struct avr_irq_t *irq, uint32_t value, void *param)
 {
     bus_t *b = (bus_t *)param;
     (void)irq;
     sync_time(b);
+    if (value != TW_NO_INFO && b->real_timing && b->twi0 && !b->hang_for_us && b->now_us >= b->hang_until_us) {
+        real_time_step(b, value);
+    }
     if (value != TW_NO_INFO && b->hang_for_us) {
         b->hang_until_us = b->now_us + b->hang_for_us;
         b->hang_for_us = 0;
@@ -263,6 +335,7 @@ static void hook_up(bus_t *b)
     avr_irq_register_notify(avr_io_getirq(b->avr, AVR_IOCTL_TWI_GETIRQ(0), TWI_IRQ_STATUS), twi_status_hook, b);
     b->twi0 = (avr_twi_t *)find_io(b->avr, "twi");
     b->uart0 = (avr_uart_t *)find_io(b->avr, "uart"); /* the first UART on the list is USART0 */
+    avr_register_io_write(b->avr, TWCR_ADDR, twcr_hook, b);
     avr_register_io_write(b->avr, UCSR0A_ADDR, uart_baud_hook, b);
     avr_register_io_write(b->avr, UCSR0C_ADDR, uart_baud_hook, b);
     avr_register_io_write(b->avr, UBRR0L_ADDR, uart_baud_hook, b);
@@ -404,6 +477,12 @@ void bus_clock_scale(bus_t *b, double scale) { CHIP->clock_scale = scale; }
 uint32_t bus_status_fixes(bus_t *b) { return b->status_fixes; }
 uint32_t bus_phases(bus_t *b) { return b->phases; }
 uint32_t bus_held(bus_t *b) { return b->held; }
+/* Real I2C timing from now on (on != 0), or simavr's own. */
+void bus_real_timing(bus_t *b, int on) { b->real_timing = (uint8_t)(on != 0); }
+/* Steps given real timing, and their mean time from start to TWINT, us: all of them, and the bytes alone. */
+uint32_t bus_timed_steps(bus_t *b) { return b->timed; }
+double bus_timed_step_us(bus_t *b) { return b->timed ? (double)b->timed_cycles * 1e6 / b->avr->frequency / b->timed : 0.0; }
+double bus_byte_us(bus_t *b) { return b->byte_steps ? (double)b->byte_cycles * 1e6 / b->avr->frequency / b->byte_steps : 0.0; }
 uint32_t bus_uart_cycles_per_byte(bus_t *b) { return b->uart0 ? (uint32_t)b->uart0->cycles_per_byte : 0; }
 uint16_t bus_chip_register(bus_t *b, uint8_t reg) { return CHIP->reg[reg & 31]; }
 int bus_chip_mode(bus_t *b) { return CHIP->mode; }

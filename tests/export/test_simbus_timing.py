@@ -1,0 +1,75 @@
+"""The simulated bus timed like a real one (mlxbus.c's bus_real_timing): each TWI step takes what it takes at the
+SCL clock the image configures (a byte and its ACK 9 SCL periods: 22.5 us at 400 kHz), not simavr's 9 us; and the
+shipped image's rate over MagOne's calibrated region on that bus, against the chip's conversion rate.
+
+The rate at the test field reproduces an independent measurement of the same image (an MLX90393 model on simavr's
+TWI bus timed at a real 400 kHz: 496 Hz at (1200, -800, 20000) uT, 535 Hz on the axis): here 496 Hz and 542 Hz."""
+
+from __future__ import annotations
+
+import importlib
+import math
+
+import pytest
+from simbus import Bus
+from test_simbus import FIELD_UT, SETTLE_US, sim  # noqa: F401  (the harness and the build, made once)
+
+F_SCL_HZ = 400_000  # the image's TWI clock (mf_i2c: TWBR for 400 kHz at 16 MHz)
+RUN_S = 0.5  # simulated seconds per field: one lost conversion in 270 is under 0.4 %
+
+
+def _rate(sim, field, real: bool = True) -> dict:  # noqa: F811 - sim: the fixture imported from test_simbus.py
+    """Steady streaming at ``field`` (uT, 25 C): frames per second against the chip's conversions."""
+    with Bus(sim.lib, sim.hex_path, sim.addr7, sim.hex_path.with_suffix(".eep")) as bus:
+        bus.set_field(*field)
+        bus.real_timing(real)
+        decoder = sim.frames.Decoder()
+        sim.samples(decoder, bus.run_us(SETTLE_US))
+        t0, c0 = bus.time_us, bus.conversions
+        samples = sim.samples(decoder, bus.run_us(RUN_S * 1e6))
+        elapsed, conversions = (bus.time_us - t0) * 1e-6, bus.conversions - c0
+        assert decoder.stats.lost == 0 and decoder.stats.crc_errors == 0
+        return {"rate_Hz": len(samples) / elapsed, "chip_Hz": 1e6 / bus.conversion_us,
+                "delivered": len(samples) / conversions, "byte_us": bus.byte_us, "steps": bus.timed_steps,
+                "samples": samples}
+
+
+def test_a_byte_takes_nine_scl_periods_and_the_forces_stay_right(sim):  # noqa: F811
+    """Real timing on: every address and data byte takes 9 SCL periods at 400 kHz (22.5 us; simavr alone: about
+    9 us), no frame is lost or wrong, and on the axis (the cheapest field to compute) the image still delivers
+    what it does on simavr's faster bus within 1.5 %: the bus's share of the cycle is small there."""
+    fast, real = _rate(sim, (0.0, 0.0, 20000.0), real=False), _rate(sim, (0.0, 0.0, 20000.0))
+    assert fast["steps"] == 0 and real["steps"] > 1000
+    assert real["byte_us"] == pytest.approx(9e6 / F_SCL_HZ, abs=0.01)
+    assert sim.wrong(real["samples"], (0.0, 0.0, 20000.0)) == [] and not any(s.chip_error for s in real["samples"])
+    assert real["delivered"] >= fast["delivered"] - 0.015
+
+
+def _region_fields(sim) -> list:  # noqa: F811
+    """Fields across the calibrated region: each vertex of its convex hull in (Bz, Br), pulled 3 % towards the
+    centroid, the centroid, and the midpoints between it and each vertex; Br put at 0, 45 and 135 degrees in turn."""
+    cal = importlib.import_module("magfab_readout.calibration").Calibration(sim.cal)
+    hull = cal.hull
+    cz, cr = (sum(p[0] for p in hull) / len(hull), sum(p[1] for p in hull) / len(hull))
+    points = [(cz, cr)] + [(cz + f * (z - cz), cr + f * (r - cr)) for z, r in hull for f in (0.97, 0.5)]
+    out = []
+    for k, (bz, br) in enumerate(points):
+        angle = math.radians((0.0, 45.0, 135.0)[k % 3])
+        field = (br * math.cos(angle), br * math.sin(angle), bz)
+        assert cal.in_region_B(*field)
+        out.append(field)
+    return out
+
+
+@pytest.mark.xfail(strict=True, reason="the image's per-sample float arithmetic takes longer than the chip's "
+                   "conversion at most fields of the region on a real-timed bus (91 % of the conversions at the "
+                   "test field): the cycle is not yet bounded")
+def test_every_conversion_arrives_at_every_field_of_the_region(sim):  # noqa: F811
+    """The rate claim over the whole calibrated region, on the real-timed bus: at least 99 % of the chip's
+    conversions arrive as frames at every field sampled (the hull's vertices, the centroid and between)."""
+    rows = [(field, _rate(sim, field)) for field in [FIELD_UT, *_region_fields(sim)]]
+    for field, r in rows:
+        print(f"({field[0]:8.1f}, {field[1]:8.1f}, {field[2]:8.1f}) uT: {r['rate_Hz']:6.1f} Hz, "
+              f"{100 * r['delivered']:5.1f} % of {r['chip_Hz']:.1f} Hz")
+    assert all(sim.wrong(r["samples"], field) == [] for field, r in rows)
+    assert min(r["delivered"] for _, r in rows) >= 0.99
