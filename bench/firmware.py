@@ -23,9 +23,13 @@ What it measures:
    and RAM of both, the measurement behind shipping the generic one.
 5. **The shipped build, measured**: the cycles per sample with the build's own calibration.json, and the output
    rate of its .hex on the simulated I2C bus (tests/export/simbus: libsimavr with the build's MLX90393 model,
-   which converts at the datasheet table's time): frames per simulated second against the chip's conversions
-   over the same time. ``--build`` names an existing build folder; without it the spec is built into a
-   temporary one (a minute). ``--no-rate`` skips this part.
+   which converts at the datasheet table's time; the bus timed like a real one at the image's SCL clock):
+   frames per simulated second against the chip's conversions over the same time, at the tests' field and at
+   fields across the calibrated region (``region_fields``: the worst, median and best are printed); at the worst,
+   where the cycle goes, from a profile of the running image (its program counter every 37 cycles, grouped by
+   function: waiting on the bus, float arithmetic, the calibration's own code, the frame, the interrupts).
+   ``--build`` names an existing build folder; without it the spec is built into a temporary one (a minute).
+   ``--no-rate`` skips this part.
 
 A synthetic calibration per order (random coefficients, an elliptical hull of N points) stands in unless
 ``--calibration`` gives a real one. Prints a table and writes ``<out>/firmware_bench.json``. Nothing here
@@ -103,9 +107,10 @@ def measure(design, calibration: dict, generic: bool = True) -> dict:
 
 def shipped(spec_path: Path | None, build_dir: Path | None) -> dict:
     """The shipped build measured: cycles per sample with its calibration.json, and its .hex's output rate on the
-    simulated bus against the chip's conversions (simulated time)."""
+    simulated bus timed like a real one, at fields across the calibrated region, against the chip's conversions
+    (simulated time); at the slowest field, where the cycle goes (a profile of the image, by function group)."""
     sys.path.insert(0, str(BENCH_DIR.parent / "tests" / "export"))
-    from simbus import Bus, build_library  # the test harness: libsimavr + the build's chip model
+    from simbus import Bus, build_library, functions, grouped, region_fields  # the harness: libsimavr + chip model
 
     with tempfile.TemporaryDirectory(prefix="magfab-fw-rate-") as tmp:
         out = build_dir
@@ -121,16 +126,33 @@ def shipped(spec_path: Path | None, build_dir: Path | None) -> dict:
         design = derive(load_spec(spec_path))
         cycles = measure(design, cal)["cycles"]
         lib = build_library(out, Path(tmp))
-        with Bus(lib, hex_path, design.i2c_address, hex_path.with_suffix(".eep")) as bus:
-            bus.set_field(1200.0, -800.0, 20000.0)  # inside MagOne's calibrated region
-            bus.run_us(SETTLE_US)
-            t0, c0 = bus.time_us, bus.conversions
-            data = bus.run_us(RATE_SECONDS * 1e6)
-            seconds, conversions = (bus.time_us - t0) * 1e-6, bus.conversions - c0
-            frames = data.count(b"\xa5\x5a\x01")  # sync and frame type; the tests decode them fully
-            chip_hz = 1e6 / bus.conversion_us
-    return {"sample_cycles": max(cycles["sample_binary"].values()), "rate_Hz": frames / seconds,
-            "chip_Hz": chip_hz, "delivered": frames / conversions, "seconds": seconds}
+
+        def run(field, profile: bool = False) -> dict:
+            with Bus(lib, hex_path, design.i2c_address, hex_path.with_suffix(".eep")) as bus:
+                bus.set_field(*field)
+                bus.real_timing()
+                bus.run_us(SETTLE_US)
+                if profile:
+                    bus.profile_start()
+                t0, c0 = bus.time_us, bus.conversions
+                data = bus.run_us(RATE_SECONDS * 1e6)
+                seconds, conversions = (bus.time_us - t0) * 1e-6, bus.conversions - c0
+                frames = data.count(b"\xa5\x5a\x01")  # sync and frame type; the tests decode them fully
+                return {"field_uT": list(field), "rate_Hz": frames / seconds, "chip_Hz": 1e6 / bus.conversion_us,
+                        "delivered": frames / conversions, "frames": frames, "profile": bus.profile}
+
+        rows = [run(f) for f in [(1200.0, -800.0, 20000.0), *region_fields(cal)]]  # the tests' field, the region
+        rows.sort(key=lambda r: r["delivered"])
+        worst = run(rows[0]["field_uT"], profile=True)
+        elf, _ = toolchain.build_avr_elf(firmware.generic_sources(), Path(tmp) / "elf", "main")
+        counts, bus_samples = worst.pop("profile")
+        per_frame_us = RATE_SECONDS * 1e6 / worst["frames"]
+        budget = {k: v * per_frame_us for k, v in grouped(counts, bus_samples, functions(elf)).items()}
+    for r in rows:
+        r.pop("profile")
+    return {"sample_cycles": max(cycles["sample_binary"].values()), "fields": rows,
+            "worst": rows[0], "median": rows[len(rows) // 2], "best": rows[-1], "seconds": RATE_SECONDS,
+            "cycle_at_worst_us": per_frame_us, "budget_at_worst_us": budget}
 
 
 def generic_vs_own(design, calibration: dict, f_mhz: float) -> dict:
@@ -212,8 +234,16 @@ def main(argv: list[str] | None = None) -> int:
         m = shipped(args.spec, args.build)
         result["shipped"] = m
         print(f"shipped build: {m['sample_cycles']} cycles per sample ({m['sample_cycles'] / f_mhz:.0f} us); on the "
-              f"simulated bus {m['rate_Hz']:.1f} frames/s against the chip's {m['chip_Hz']:.1f} conversions/s "
-              f"({m['delivered']:.1%} delivered, {m['seconds']:g} simulated s; simavr times I2C at ~9 us/byte)")
+              f"simulated bus timed at the image's I2C clock, over {len(m['fields'])} fields of the calibrated "
+              f"region ({m['seconds']:g} simulated s each), frames against the chip's conversions:")
+        for which in ("worst", "median", "best"):
+            r = m[which]
+            print("  {:6s} ({:8.1f}, {:8.1f}, {:8.1f}) uT: {:6.1f} Hz of {:.1f} Hz ({:.1%})".format(
+                which, *r["field_uT"], r["rate_Hz"], r["chip_Hz"], r["delivered"]))
+        print(f"  where a cycle goes at the worst field ({m['cycle_at_worst_us']:.0f} us a frame; a profile of the "
+              "image, every 37 cycles):")
+        for group, us in sorted(m["budget_at_worst_us"].items(), key=lambda kv: -kv[1]):
+            print(f"    {group:46s} {us:7.1f} us")
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / JSON_NAME).write_text(json.dumps(result, indent=2, sort_keys=True) + "\n")
     print(f"wrote {args.out / JSON_NAME}")

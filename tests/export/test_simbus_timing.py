@@ -8,10 +8,11 @@ TWI bus timed at a real 400 kHz: 496 Hz at (1200, -800, 20000) uT, 535 Hz on the
 from __future__ import annotations
 
 import importlib
-import math
+import subprocess
 
 import pytest
-from simbus import Bus
+from conftest import require_tool
+from simbus import Bus, functions, grouped, region_fields
 from test_simbus import FIELD_UT, SETTLE_US, sim  # noqa: F401  (the harness and the build, made once)
 
 F_SCL_HZ = 400_000  # the image's TWI clock (mf_i2c: TWBR for 400 kHz at 16 MHz)
@@ -46,19 +47,11 @@ def test_a_byte_takes_nine_scl_periods_and_the_forces_stay_right(sim):  # noqa: 
 
 
 def _region_fields(sim) -> list:  # noqa: F811
-    """Fields across the calibrated region: each vertex of its convex hull in (Bz, Br), pulled 3 % towards the
-    centroid, the centroid, and the midpoints between it and each vertex; Br put at 0, 45 and 135 degrees in turn."""
+    """:func:`simbus.region_fields` of the build's calibration, each inside its region by the readout package."""
     cal = importlib.import_module("magfab_readout.calibration").Calibration(sim.cal)
-    hull = cal.hull
-    cz, cr = (sum(p[0] for p in hull) / len(hull), sum(p[1] for p in hull) / len(hull))
-    points = [(cz, cr)] + [(cz + f * (z - cz), cr + f * (r - cr)) for z, r in hull for f in (0.97, 0.5)]
-    out = []
-    for k, (bz, br) in enumerate(points):
-        angle = math.radians((0.0, 45.0, 135.0)[k % 3])
-        field = (br * math.cos(angle), br * math.sin(angle), bz)
-        assert cal.in_region_B(*field)
-        out.append(field)
-    return out
+    fields = region_fields(sim.cal)
+    assert all(cal.in_region_B(*f) for f in fields) and len(fields) == 1 + 2 * len(cal.hull)
+    return fields
 
 
 @pytest.mark.xfail(strict=True, reason="the image's per-sample float arithmetic takes longer than the chip's "
@@ -73,3 +66,29 @@ def test_every_conversion_arrives_at_every_field_of_the_region(sim):  # noqa: F8
               f"{100 * r['delivered']:5.1f} % of {r['chip_Hz']:.1f} Hz")
     assert all(sim.wrong(r["samples"], field) == [] for field, r in rows)
     assert min(r["delivered"] for _, r in rows) >= 0.99
+
+
+def test_a_profile_of_the_image_accounts_for_its_cycle(sim, tmp_path):  # noqa: F811
+    """The profiler (the image's program counter every 37 cycles, on the real-timed bus): the time it finds the
+    firmware waiting on TWI steps is the RM transfer's bit count at 400 kHz (START, address, command, repeated
+    START, address, status and the 2 bytes of T, X, Y, Z, STOP: 111 SCL periods, 277.5 us) per frame within 2 %, and
+    the named groups of the image's functions (built here from the same sources: the same bytes as the shipped
+    .hex) hold at least 95 % of the rest."""
+    require_tool("avr-gcc")
+    from magfab.export import firmware, toolchain
+
+    elf, _ = toolchain.build_avr_elf(firmware.generic_sources(), tmp_path, "main")
+    hex_path = tmp_path / "main.hex"
+    subprocess.run(["avr-objcopy", "-O", "ihex", "-R", ".eeprom", str(elf), str(hex_path)], check=True)
+    assert hex_path.read_bytes() == sim.hex_path.read_bytes()
+    with Bus(sim.lib, sim.hex_path, sim.addr7, sim.hex_path.with_suffix(".eep")) as bus:
+        bus.set_field(*FIELD_UT)
+        bus.real_timing()
+        bus.run_us(SETTLE_US)
+        bus.profile_start()
+        samples = sim.samples(sim.frames.Decoder(), bus.run_us(RUN_S * 1e6))
+        counts, bus_samples = bus.profile
+    per_frame_us = RUN_S * 1e6 / len(samples)
+    shares = grouped(counts, bus_samples, functions(elf))
+    assert shares["waiting on the I2C bus"] * per_frame_us == pytest.approx(111 * 1e6 / F_SCL_HZ, rel=0.02)
+    assert shares["other"] <= 0.05 * (1.0 - shares["waiting on the I2C bus"]), shares

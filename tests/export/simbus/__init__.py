@@ -13,11 +13,18 @@ calls act on (``bus.target(2).set_field(...)``).
 
 Faults: :meth:`Bus.chip_fault` (inside the chip model: ``error``, ``short``, ``reset``, ``stuck``),
 :meth:`Bus.nack`, :meth:`Bus.all_ff`, :meth:`Bus.hang_us`, :meth:`Bus.absent`, :meth:`Bus.reset_in` (on the bus).
+
+Timing: :meth:`Bus.real_timing` times I2C as a real bus at the image's SCL clock (simavr alone: about 9 us a byte).
+A profile of the image: :meth:`Bus.profile_start`, then :attr:`Bus.profile` (program-counter samples, and those
+taken while a TWI step was in flight) grouped by :func:`grouped` over the ELF's :func:`functions`.
+:func:`region_fields` samples a calibration's region.
 """
 
 from __future__ import annotations
 
 import ctypes
+import math
+import re
 import shutil
 import subprocess
 from pathlib import Path
@@ -82,6 +89,7 @@ def _declare(lib: ctypes.CDLL) -> ctypes.CDLL:
         "bus_eeprom_get": (ctypes.c_int, [p, u16, ctypes.c_char_p, u32]),
         "bus_add_chip": (ctypes.c_int, [p, u8]), "bus_target": (None, [p, u8]),
         "bus_ramp": (None, [p, d, d, d, d, d, d, d]), "bus_real_timing": (None, [p, ctypes.c_int]),
+        "bus_profile": (None, [p, ctypes.c_void_p, u32]), "bus_profile_bus_samples": (u32, [p]),
         "bus_timed_steps": (u32, [p]), "bus_timed_step_us": (d, [p]), "bus_byte_us": (d, [p]),
     }
     for name, (restype, argtypes) in signatures.items():
@@ -99,6 +107,7 @@ class Bus:
         if not self._h:
             raise OSError(f"simavr cannot load {hex_path}")
         self._buf = ctypes.create_string_buffer(1 << 20)
+        self._hist: ctypes.Array | None = None  # the profiler's counters (profile_start)
         if eep is not None:
             for address, data in read_intel_hex(Path(eep).read_text()):
                 if self._lib.bus_eeprom_set(self._h, address, data, len(data)) != 0:
@@ -196,6 +205,18 @@ class Bus:
         """I2C timed as on a real bus at the SCL clock the image sets, from now on (mlxbus.c), or as simavr times it."""
         self._lib.bus_real_timing(self._h, int(on))
 
+    def profile_start(self, period_cycles: int = 37) -> None:
+        """Sample where the CPU is every ``period_cycles`` from now on (a prime: no loop's period aliases it)."""
+        self._hist = (ctypes.c_uint32 * PROFILE_WORDS)()
+        self._lib.bus_profile(self._h, ctypes.cast(self._hist, ctypes.c_void_p), period_cycles)
+
+    @property
+    def profile(self) -> tuple[dict[int, int], int]:
+        """(samples by byte address of the program counter, samples taken while a TWI step was in flight) since
+        :meth:`profile_start`."""
+        counts = {2 * w: n for w, n in enumerate(self._hist or ()) if n}
+        return counts, self._lib.bus_profile_bus_samples(self._h)
+
     def register(self, reg: int) -> int:
         """The chip model's register ``reg`` now."""
         return self._lib.bus_chip_register(self._h, reg)
@@ -215,3 +236,56 @@ class Bus:
                              doc="the chip's conversion time at its current registers, us")
     conversions = property(lambda self: self._lib.bus_conversions(self._h),
                            doc="conversions completed since the chip's burst started")
+
+
+#: Flash words the profile counts (the ATmega328P's 32 KB).
+PROFILE_WORDS = 16384
+#: The groups a profile reports, each by the symbols it holds (the first pattern a function matches).
+PROFILE_GROUPS = (
+    ("float arithmetic (avr-libc)", re.compile(r"__(add|sub|mul|div)sf3.*|__fp_.*|__float.*|__fix.*|sqrt.*")),
+    ("calibration (Horner, direction, region test)", re.compile(r"mf_calib_.*|fan_side|eeprom_.*|mf_nv_.*")),
+    ("sample conversion", re.compile(r"mf_sample_.*|mf_app_process|mf_ref_.*")),
+    ("frame, CRC and queueing", re.compile(r"mf_frame_.*|mf_crc16_.*|avr_serial_write|mf_app_emit.*")),
+    ("UART interrupts", re.compile(r"__vector_(18|19|20)")),
+    ("I2C driver", re.compile(r"twi_.*|avr_i2c_.*|mlx_.*|mf_app_read_measurement")),
+    ("clock reads and waits", re.compile(r"avr_micros|avr_delay_us|__vector_13|mf_app_wait_until|mf_app_now")),
+)
+
+
+def functions(elf: Path) -> list[tuple[int, int, str]]:
+    """(start, size, name) of each function of ``elf`` (avr-nm), by address."""
+    text = subprocess.run(["avr-nm", "-n", "-S", "--defined-only", str(elf)], capture_output=True, text=True,
+                          check=True).stdout
+    out = []
+    for line in text.splitlines():
+        parts = line.split()
+        if len(parts) == 4 and parts[2] in "tTwW":
+            out.append((int(parts[0], 16), int(parts[1], 16), parts[3]))
+    return out
+
+
+def grouped(counts: dict[int, int], bus_samples: int, symbols: list[tuple[int, int, str]]) -> dict[str, float]:
+    """A profile's shares: waiting on the I2C bus, each of :data:`PROFILE_GROUPS`, and "other"."""
+    total = sum(counts.values()) + bus_samples
+    out = {"waiting on the I2C bus": bus_samples / total}
+    out.update({name: 0.0 for name, _ in PROFILE_GROUPS})
+    out["other"] = 0.0
+    for address, n in counts.items():
+        name = next((nm for start, size, nm in symbols if start <= address < start + size), "")
+        group = next((g for g, pattern in PROFILE_GROUPS if pattern.fullmatch(name)), "other")
+        out[group] += n / total
+    return out
+
+
+def region_fields(calibration: dict, pull: float = 0.97) -> list[tuple[float, float, float]]:
+    """Fields across a calibration.json's valid region: each vertex of its convex hull in (Bz, Br) moved ``pull``
+    of the way from the hull's centroid, the centroid, and the midpoints between it and each vertex; the lateral
+    field at 0, 45 and 135 degrees in turn (uT)."""
+    hull = calibration["valid_region"]["hull"]
+    cz, cr = sum(p[0] for p in hull) / len(hull), sum(p[1] for p in hull) / len(hull)
+    points = [(cz, cr)] + [(cz + f * (z - cz), cr + f * (r - cr)) for z, r in hull for f in (pull, 0.5)]
+    out = []
+    for k, (bz, br) in enumerate(points):
+        angle = math.radians((0.0, 45.0, 135.0)[k % 3])
+        out.append((br * math.cos(angle), br * math.sin(angle), bz))
+    return out

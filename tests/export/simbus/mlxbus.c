@@ -78,6 +78,10 @@ typedef struct bus {
     uint32_t status_fixes;
     uint32_t phases;        /* address phases seen */
     uint32_t held;          /* TWI steps held */
+    uint32_t *pc_hist;      /* profiler: samples per word address */
+    uint32_t pc_period;
+    uint8_t in_step;        /* a TWI step in flight: the firmware waits on the bus */
+    uint32_t bus_samples;   /* profiler samples taken while one was */
     /* real bus timing (bus_real_timing) */
     uint8_t real_timing;
     uint64_t step_cycle;    /* the AVR cycle at which the firmware started the TWI step in flight (TWINT written) */
@@ -215,6 +219,7 @@ static avr_cycle_count_t give_twint(struct avr_t *avr, avr_cycle_count_t when, v
 {
     bus_t *b = (bus_t *)param;
     (void)when;
+    b->in_step = 0;
     avr_raise_interrupt(avr, &b->twi0->twi);
     return 0;
 }
@@ -226,6 +231,7 @@ static void twcr_hook(struct avr_t *avr, avr_io_addr_t addr, uint8_t v, void *pa
     (void)addr;
     if ((v & 0x84) == 0x84) {
         b->step_cycle = avr->cycle;
+        b->in_step = !(v & 0x10);
     }
     if ((v & 0x94) == 0x94) {
         b->stop_cycle = avr->cycle;
@@ -260,6 +266,7 @@ static void real_time_step(bus_t *b, uint32_t value)
         b->byte_cycles += b->due_cycle - b->step_cycle;
     }
     if (b->avr->cycle < b->due_cycle) {
+        b->in_step = 2; /* held: give_twint ends it */
         avr_cycle_timer_register(b->avr, 0, take_twint_back, b);
         avr_cycle_timer_register(b->avr, b->due_cycle - b->avr->cycle, give_twint, b);
     }
@@ -270,6 +277,9 @@ static void twi_status_hook(struct avr_irq_t *irq, uint32_t value, void *param)
     bus_t *b = (bus_t *)param;
     (void)irq;
     sync_time(b);
+    if (value != TW_NO_INFO && b->in_step == 1) {
+        b->in_step = 0;
+    }
     if (value != TW_NO_INFO && b->real_timing && b->twi0 && !b->hang_for_us && b->now_us >= b->hang_until_us) {
         real_time_step(b, value);
     }
@@ -477,6 +487,27 @@ void bus_clock_scale(bus_t *b, double scale) { CHIP->clock_scale = scale; }
 uint32_t bus_status_fixes(bus_t *b) { return b->status_fixes; }
 uint32_t bus_phases(bus_t *b) { return b->phases; }
 uint32_t bus_held(bus_t *b) { return b->held; }
+/* The profiler: every pc_period cycles, a sample of where the CPU is: waiting on a TWI step in flight (counted
+ * apart), else its program counter (a histogram by word address, which Python maps to the ELF's functions). */
+static avr_cycle_count_t pc_sample(struct avr_t *avr, avr_cycle_count_t when, void *param)
+{
+    bus_t *b = (bus_t *)param;
+    if (b->in_step) {
+        ++b->bus_samples;
+    } else if (b->pc_hist && avr->pc / 2 < 16384) {
+        ++b->pc_hist[avr->pc / 2];
+    }
+    return when + b->pc_period;
+}
+uint32_t bus_profile_bus_samples(bus_t *b) { return b->bus_samples; }
+/* Start the profiler: hist (16384 counters, one per flash word) from now on, a sample every period cycles. */
+void bus_profile(bus_t *b, uint32_t *hist, uint32_t period)
+{
+    b->bus_samples = 0;
+    b->pc_hist = hist;
+    b->pc_period = period;
+    avr_cycle_timer_register(b->avr, period, pc_sample, b);
+}
 /* Real I2C timing from now on (on != 0), or simavr's own. */
 void bus_real_timing(bus_t *b, int on) { b->real_timing = (uint8_t)(on != 0); }
 /* Steps given real timing, and their mean time from start to TWINT, us: all of them, and the bytes alone. */
