@@ -14,6 +14,7 @@ import json
 import math
 import os
 import random
+import re
 import select
 import subprocess
 import sys
@@ -513,6 +514,12 @@ def test_installed_cli_streams_zeroes_and_checks(installed):
     assert max(abs(float(x)) for r in rows for x in r[2:5]) < 0.05  # tared at rest
     assert max(float(r[15]) for r in rows) < 1e-5  # host and "firmware" agree (float32)
     assert "# zero: offset" in proc.stdout and "0 CRC errors" in proc.stderr
+    # the rate the stream had, from the frames' device time, against the chip's (the simulated board keeps it)
+    rate = re.search(r"60 samples; ([0-9.]+) frames/s over ([0-9.]+) s of device time, against the chip's "
+                     r"([0-9.]+) conversions/s \(([0-9.]+)%\)", proc.stderr)
+    assert rate, proc.stderr
+    chip = float(rate[3])
+    assert float(rate[1]) == pytest.approx(chip, rel=0.01) and float(rate[2]) == pytest.approx(59 / chip, rel=0.02)
 
 
 def test_pip_install_leaves_the_folder_as_it_was(installed):
