@@ -27,6 +27,7 @@ from .errors import number_text as _fmt
 from .recipes import catalogue
 from .recipes.resolve import yeoh_fitted
 from .spec import MaterialLawChoice, MechanicsModel, Spec
+from .spec_options import CLOSED_FORMS
 
 __all__ = ["FACTOR", "MODULUS_FACTOR", "UNIT", "plausible", "spans"]
 
@@ -89,7 +90,7 @@ def _law_has_data(spec: Spec) -> None:
     if spec.predict.material_law != MaterialLawChoice.YEOH:
         return
     model = MechanicsModel(spec.predict.mechanics_model)
-    if model in (MechanicsModel.COLUMN, MechanicsModel.HERTZ_COLUMN):
+    if model in CLOSED_FORMS:
         raise SpecError("predict.material_law", "yeoh", f"needs the FE: predict.mechanics_model = "
                         f"'{model.value}' is a neo-Hookean closed form; use 'auto' or 'fe'")
     fitted = yeoh_fitted()

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from enum import Enum
 
-__all__ = ["FieldModel", "MechanicsModel", "MaterialLaw", "MaterialLawChoice", "CalibrationMethod"]
+__all__ = ["FieldModel", "MechanicsModel", "CLOSED_FORMS", "MaterialLaw", "MaterialLawChoice", "CalibrationMethod"]
 
 
 class FieldModel(str, Enum):
@@ -34,6 +34,11 @@ class MaterialLaw(str, Enum):
 
     NEO_HOOKEAN = "neo-hookean"
     YEOH = "yeoh"
+
+
+#: The mechanics models that are closed forms: neo-Hookean by construction, so ``predict.material_law = "auto"``
+#: gives them that law and "yeoh" is refused with them.
+CLOSED_FORMS = (MechanicsModel.COLUMN, MechanicsModel.HERTZ_COLUMN)
 
 
 class MaterialLawChoice(str, Enum):

@@ -247,13 +247,10 @@ def run_study(targets: Targets, base: Spec, storage: str | Path, dask_client,
     """Run the study to ``targets.study.trials`` evaluated designs (counting those a previous run stored, not repeats:
     :data:`REPEAT`); ``study``: the one :func:`open_study` opened at ``storage`` already.
 
-    A new study starts from the base spec (when it is a point of the space) and a space-filling first phase
-    (:func:`first_phase` trials of :meth:`Space.latin_hypercube`, every (material, tip) pair in it), all enqueued
-    (:func:`_plan`); then one trial in :data:`EXPLORE_EVERY` held to the least-tried (material, tip) pair (the sampler
-    draws the rest of it) and every other one the model's proposal (:func:`_model_step`), or, where it has none, a
-    step from the study's best designs (:func:`_refine`).
-
-    Repeatable: results are told in the order their trials were asked, whatever order the workers finish in, and
+    A new study starts with :func:`_plan`'s trials (the base design, a space-filling first phase over every pair);
+    then one trial in :data:`EXPLORE_EVERY` held to the least-tried (material, tip) pair (the sampler draws the rest)
+    and every other one the model's proposal (:func:`_model_step`), or where it has none a step from the study's best
+    designs (:func:`_refine`). Repeatable: results are told in ask order, whatever order the workers finish in, and
     the next trial is asked right after each is told: the same targets, seed and workers give the same trials."""
     from distributed import as_completed
     from optuna.trial import TrialState
@@ -310,11 +307,13 @@ def run_study(targets: Targets, base: Spec, storage: str | Path, dask_client,
                     progress(done, total)
             if not any(a.source == asked.source for a in order):
                 results.pop(asked.source, None)
-            while done + sum(a.counts for a in order) < total and len(order) < IN_FLIGHT_PER_WORKER * workers:
-                submit()
+            fill()
 
-    while done + sum(a.counts for a in order) < total and len(order) < IN_FLIGHT_PER_WORKER * workers:
-        submit()
+    def fill() -> None:  # ask while trials are left to count and a worker's slot is free
+        while done + sum(a.counts for a in order) < total and len(order) < IN_FLIGHT_PER_WORKER * workers:
+            submit()
+
+    fill()
     if progress:
         progress(done, total)
     flush()

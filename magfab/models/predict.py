@@ -46,6 +46,7 @@ import numpy as np
 from ..fork import side_branch
 from ..reference_chip import reference_chip
 from ..spec import FieldModel, MaterialLaw, MaterialLawChoice, MechanicsModel
+from ..spec_options import CLOSED_FORMS
 from ..units import MN_PER_N
 from . import drift
 from . import field as fieldmod
@@ -364,11 +365,6 @@ def _band(design: Design) -> dict[str, float]:
     return dict(zip(MATERIALS, given or mech.band(design.material, law_in_force(design).value)))
 
 
-#: The mechanics models that are closed forms: neo-Hookean by construction, so ``predict.material_law = "auto"``
-#: gives them that law.
-CLOSED_FORMS = (MechanicsModel.COLUMN, MechanicsModel.HERTZ_COLUMN)
-
-
 def yeoh_can_run(design: Design) -> bool:
     """Whether the Yeoh law can model this design: the silicone has a fit (recipes/materials.toml) and the mechanics
     model is the FE (or its surrogate), not a closed form."""
@@ -380,11 +376,10 @@ def law_in_force(design: Design) -> MaterialLaw:
     for "auto" where it can run (:func:`yeoh_can_run`); neo-Hookean otherwise. (An explicit "yeoh" that cannot run
     is refused in :mod:`magfab.plausible` before this runs.)"""
     choice = MaterialLawChoice(design.spec.predict.material_law)
-    if choice is MaterialLawChoice.NEO_HOOKEAN or design.material.yeoh is None:
-        return MaterialLaw.NEO_HOOKEAN
-    if choice is MaterialLawChoice.AUTO and not yeoh_can_run(design):
-        return MaterialLaw.NEO_HOOKEAN
-    return MaterialLaw.YEOH
+    if design.material.yeoh is not None and (choice is MaterialLawChoice.YEOH
+                                             or (choice is MaterialLawChoice.AUTO and yeoh_can_run(design))):
+        return MaterialLaw.YEOH
+    return MaterialLaw.NEO_HOOKEAN
 
 
 def material_law(design: Design) -> dict[str, Any]:
@@ -433,7 +428,7 @@ def predict(design: Design, elastomer: ElastomerModel | None = None) -> Predicti
     curves = {k: nominal.scaled(mu) if k != "nominal" else nominal for k, mu in mus.items()}
     t_mech = time.perf_counter()
 
-    end = _curve_end(nominal, indentation, design.d_rest_mm - design.spec.sensor.d_min_mm)
+    end = _curve_end(nominal, indentation, travel_to_d_min(design))
     normal, normal_arrays = _normal(design, chip, nz, magnets, fuse.name, curves, end)
     if response is None:
         response = rest_response(design, body, mus["nominal"])
@@ -474,8 +469,12 @@ def indentation_grid(design: Design) -> np.ndarray:
     """The indentations (mm) the normal curve is asked for: a little past the travel to d_min (the magnet lags the
     surface, and the curve must reach d_min), in :data:`N_INDENT` steps graded finer near zero, where a rounded
     tip's force rises as indentation^1.5. The FE solves them up to the scan depth (:func:`_fe_curve`)."""
-    travel = design.d_rest_mm - design.spec.sensor.d_min_mm
-    return GRID_REACH * travel * np.linspace(0.0, 1.0, N_INDENT) ** 1.5
+    return GRID_REACH * travel_to_d_min(design) * np.linspace(0.0, 1.0, N_INDENT) ** 1.5
+
+
+def travel_to_d_min(design: Design) -> float:
+    """How far the magnet travels from rest to d_min, mm."""
+    return design.d_rest_mm - design.spec.sensor.d_min_mm
 
 
 #: How far past the travel to d_min the indentation grid reaches (:func:`indentation_grid`): a magnet that lags the
@@ -495,7 +494,7 @@ def normal_on_mesh(design: Design, mesh_mm: float, field_model: str = "exact") -
     curves = {k: nominal.scaled(mu) if k != "nominal" else nominal for k, mu in mus.items()}
     chip = chip_setting(design)
     magnets = {band: fieldmod.Magnet.from_design(design, band) for band in GRADE_BAND}
-    end = _curve_end(nominal, indentation, design.d_rest_mm - design.spec.sensor.d_min_mm)
+    end = _curve_end(nominal, indentation, travel_to_d_min(design))
     return _normal(design, chip, noise(design, chip), magnets, field_model, curves, end)[0]
 
 
@@ -507,7 +506,7 @@ def _normal(design: Design, chip: ChipSetting, nz: Mapping[str, float], magnets:
     curve)."""
     sen, p = design.spec.sensor, design.spec.predict
     nominal = curves["nominal"]
-    travel = design.d_rest_mm - sen.d_min_mm
+    travel = travel_to_d_min(design)
     u = nominal.magnet_displacement_mm  # axial magnet travel, + towards the chip; independent of mu
     gap = design.d_rest_mm - u
     keep = gap >= sen.d_min_mm - 1e-9

@@ -90,7 +90,7 @@ def _declare(lib: ctypes.CDLL) -> ctypes.CDLL:
         "bus_add_chip": (ctypes.c_int, [p, u8]), "bus_target": (None, [p, u8]),
         "bus_ramp": (None, [p, d, d, d, d, d, d, d]), "bus_real_timing": (None, [p, ctypes.c_int]),
         "bus_profile": (None, [p, ctypes.c_void_p, u32]), "bus_profile_bus_samples": (u32, [p]),
-        "bus_timed_steps": (u32, [p]), "bus_timed_step_us": (d, [p]), "bus_byte_us": (d, [p]),
+        "bus_timed_steps": (u32, [p]), "bus_byte_us": (d, [p]),
     }
     for name, (restype, argtypes) in signatures.items():
         fn = getattr(lib, name)
@@ -226,10 +226,8 @@ class Bus:
     status_fixes = property(lambda self: self._lib.bus_status_fixes(self._h))
     held = property(lambda self: self._lib.bus_held(self._h), doc="TWI steps held by hang_us")
     timed_steps = property(lambda self: self._lib.bus_timed_steps(self._h), doc="TWI steps given real timing")
-    timed_step_us = property(lambda self: self._lib.bus_timed_step_us(self._h),
-                             doc="their mean time from the firmware's start of the step to TWINT, us")
     byte_us = property(lambda self: self._lib.bus_byte_us(self._h),
-                       doc="the same for the address and data bytes alone, us")
+                       doc="the address and data bytes' mean time from the firmware's start of the step to TWINT, us")
     uart_cycles_per_byte = property(lambda self: self._lib.bus_uart_cycles_per_byte(self._h))
     chip_mode = property(lambda self: self._lib.bus_chip_mode(self._h), doc="0 idle, 1 burst, 2 single")
     conversion_us = property(lambda self: self._lib.bus_conversion_us(self._h),
@@ -238,7 +236,7 @@ class Bus:
                            doc="conversions completed since the chip's burst started")
 
 
-#: Flash words the profile counts (the ATmega328P's 32 KB).
+#: Flash words the profile counts (the ATmega328P's 32 KB; mlxbus.c's PROFILE_WORDS).
 PROFILE_WORDS = 16384
 #: The groups a profile reports, each by the symbols it holds (the first pattern a function matches).
 PROFILE_GROUPS = (

@@ -46,6 +46,7 @@
 #define UART_CAP (1u << 20)
 #define REPLY_MAX 16
 #define MAX_CHIPS 16
+#define PROFILE_WORDS 16384 /* the ATmega328P's flash, 16-bit words: the profiler's histogram */
 
 typedef struct bus {
     avr_t *avr;
@@ -86,10 +87,8 @@ typedef struct bus {
     uint8_t real_timing;
     uint64_t step_cycle;    /* the AVR cycle at which the firmware started the TWI step in flight (TWINT written) */
     uint64_t stop_cycle;    /* the cycle of the last STOP; the next START waits for the bus to be free */
-    uint64_t due_cycle;     /* the cycle at which the step held now ends */
     uint32_t timed;         /* TWI steps given real timing */
-    uint64_t timed_cycles;  /* their total time, start to TWINT, in AVR cycles */
-    uint32_t byte_steps;    /* of them, address or data bytes */
+    uint32_t byte_steps;    /* of them, address or data bytes, and their total time, start to TWINT, AVR cycles */
     uint64_t byte_cycles;
     uint8_t *uart;
     uint32_t uart_len;
@@ -248,27 +247,22 @@ static uint64_t scl_cycles(bus_t *b)
 /* Holds TWINT (just raised with status value) until the step's real end; the step's time is counted. */
 static void real_time_step(bus_t *b, uint32_t value)
 {
-    uint64_t scl = scl_cycles(b), start = b->step_cycle, span;
+    uint64_t scl = scl_cycles(b), start = b->step_cycle, due;
     if (value == 0x08) {
         uint64_t free_at = b->stop_cycle + 2 * scl; /* the STOP (one SCL period) and t_BUF after it */
-        start = start > free_at ? start : free_at;
-        span = scl;
+        due = (start > free_at ? start : free_at) + scl;
     } else if (value == 0x10) {
-        span = 2 * scl;
+        due = start + 2 * scl;
     } else {
-        span = 9 * scl;
+        due = start + 9 * scl;
         ++b->byte_steps;
+        b->byte_cycles += due - start;
     }
-    b->due_cycle = start + span;
     ++b->timed;
-    b->timed_cycles += b->due_cycle - b->step_cycle;
-    if (value != 0x08 && value != 0x10) {
-        b->byte_cycles += b->due_cycle - b->step_cycle;
-    }
-    if (b->avr->cycle < b->due_cycle) {
+    if (b->avr->cycle < due) {
         b->in_step = 2; /* held: give_twint ends it */
         avr_cycle_timer_register(b->avr, 0, take_twint_back, b);
-        avr_cycle_timer_register(b->avr, b->due_cycle - b->avr->cycle, give_twint, b);
+        avr_cycle_timer_register(b->avr, due - b->avr->cycle, give_twint, b);
     }
 }
 
@@ -494,13 +488,13 @@ static avr_cycle_count_t pc_sample(struct avr_t *avr, avr_cycle_count_t when, vo
     bus_t *b = (bus_t *)param;
     if (b->in_step) {
         ++b->bus_samples;
-    } else if (b->pc_hist && avr->pc / 2 < 16384) {
+    } else if (b->pc_hist && avr->pc / 2 < PROFILE_WORDS) {
         ++b->pc_hist[avr->pc / 2];
     }
     return when + b->pc_period;
 }
 uint32_t bus_profile_bus_samples(bus_t *b) { return b->bus_samples; }
-/* Start the profiler: hist (16384 counters, one per flash word) from now on, a sample every period cycles. */
+/* Start the profiler: hist (PROFILE_WORDS counters, one per flash word) from now on, a sample every period cycles. */
 void bus_profile(bus_t *b, uint32_t *hist, uint32_t period)
 {
     b->bus_samples = 0;
@@ -510,9 +504,8 @@ void bus_profile(bus_t *b, uint32_t *hist, uint32_t period)
 }
 /* Real I2C timing from now on (on != 0), or simavr's own. */
 void bus_real_timing(bus_t *b, int on) { b->real_timing = (uint8_t)(on != 0); }
-/* Steps given real timing, and their mean time from start to TWINT, us: all of them, and the bytes alone. */
+/* Steps given real timing, and the bytes' mean time from start to TWINT, us. */
 uint32_t bus_timed_steps(bus_t *b) { return b->timed; }
-double bus_timed_step_us(bus_t *b) { return b->timed ? (double)b->timed_cycles * 1e6 / b->avr->frequency / b->timed : 0.0; }
 double bus_byte_us(bus_t *b) { return b->byte_steps ? (double)b->byte_cycles * 1e6 / b->avr->frequency / b->byte_steps : 0.0; }
 uint32_t bus_uart_cycles_per_byte(bus_t *b) { return b->uart0 ? (uint32_t)b->uart0->cycles_per_byte : 0; }
 uint16_t bus_chip_register(bus_t *b, uint8_t reg) { return CHIP->reg[reg & 31]; }

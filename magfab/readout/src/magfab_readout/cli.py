@@ -202,7 +202,6 @@ def _stream(args: argparse.Namespace, out) -> int:
             columns.append("dF_N")
         out.write("# " + " ".join(columns) + "\n")
         worst = 0.0
-        n = 0
         rest = _rest_tracker(device)
         span = _Span()
         for sample in device.samples(count=args.count, seconds=args.seconds):
@@ -221,8 +220,7 @@ def _stream(args: argparse.Namespace, out) -> int:
                 worst = max(worst, diff) if not math.isnan(diff) else worst
                 row.append(f"{diff:.2e}" if not math.isnan(diff) else "nan")
             out.write("  ".join(row) + "\n")
-            n += 1
-        _summary(device, n, worst if args.check else None, rest, span)
+        _summary(device, span, worst if args.check else None, rest)
     return 0
 
 
@@ -257,10 +255,9 @@ class _Span:
                 f"conversions/s ({rate / chip:.1%})")
 
 
-def _summary(device: Device, n: int, worst: Optional[float], rest: Optional[RestTracker] = None,
-             span: Optional[_Span] = None) -> None:
+def _summary(device: Device, span: _Span, worst: Optional[float], rest: Optional[RestTracker] = None) -> None:
     s = device.stats
-    text = (f"{n} samples{span.rate() if span else ''}; {s.lost} lost (sequence gaps), {s.crc_errors} CRC errors, "
+    text = (f"{span.n} samples{span.rate()}; {s.lost} lost (sequence gaps), {s.crc_errors} CRC errors, "
             f"{s.bad_lines} bad lines, {s.refused} refused values, {s.skipped_bytes} bytes skipped")
     if worst is not None:
         text += f"; host vs firmware force: max |dF| = {worst:.3g} N"
@@ -313,7 +310,7 @@ def _record(args: argparse.Namespace) -> int:
         print("magfab-readout: wrote {} rows to {}{} ({} chip-error samples and {} with an axis at the chip's full "
               "scale left out)".format(written, args.out, " (Ctrl-C)" if stop.requested else "", skipped, full),
               file=sys.stderr)
-        _summary(device, written + skipped + full, None, rest, span)
+        _summary(device, span, None, rest)
     return 0
 
 

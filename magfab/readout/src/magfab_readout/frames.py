@@ -54,8 +54,8 @@ __all__ = [
     "SYNC", "FRAME_LENGTH", "FRAME_FORCE", "STATUS_OUTSIDE_REGION", "STATUS_CHIP_ERROR", "STATUS_FULL_SCALE",
     "STATUS_RECOVERED", "FORCE_LIMIT_N", "FIELD_LIMIT_UT", "Sample", "DeviceInfo", "DecoderStats", "Decoder",
     "crc16_ccitt_false", "line_checksum", "encode_frame", "encode_text_line", "encode_info_line", "decode_frames",
-    "temperature_C", "FAULTS", "FAULT_STAGES", "fault_name", "full_scale_name", "FRAME_FIELD", "FIELD_FRAME_LENGTH",
-    "encode_field_frame",
+    "temperature_C", "FAULTS", "FAULT_STAGES", "fault_name", "full_scale_name", "reading_fault", "FRAME_FIELD",
+    "FIELD_FRAME_LENGTH", "encode_field_frame",
     "encode_field_line", "frame_length",
 ]
 
@@ -132,6 +132,14 @@ def fault_name(word: Optional[int]) -> Optional[str]:
                              FAULT_STAGES.get(stage, f"stage {stage}"))
 
 
+def reading_fault(status: int, fault: Optional[int], counts: Optional[Tuple[int, int, int]]) -> Optional[str]:
+    """The fault a reading carries, as words: for an axis at the chip's full scale (without a chip error) which
+    axes (:func:`full_scale_name`), else the firmware's fault word (:func:`fault_name`)."""
+    if status & STATUS_FULL_SCALE and not status & STATUS_CHIP_ERROR:
+        return full_scale_name(counts)
+    return fault_name(fault)
+
+
 def full_scale_name(counts: Optional[Tuple[int, int, int]]) -> str:
     """A full-scale sample's fault, naming the axes at the chip's full scale where the raw counts are known (binary
     frames): e.g. ``'full scale on Bx+Bz'``; ``'full scale'`` from a text line."""
@@ -204,9 +212,7 @@ class Sample:
     def fault_name(self) -> Optional[str]:
         """What failed and where, e.g. ``'chip reset at read'``, or for a sample at the chip's full scale which axes
         (``'full scale on Bz'``); None for a good sample."""
-        if self.full_scale and not self.chip_error:
-            return full_scale_name(self.counts)
-        return fault_name(self.fault)
+        return reading_fault(self.status, self.fault, self.counts)
 
     @property
     def flags(self) -> str:

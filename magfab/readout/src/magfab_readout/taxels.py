@@ -44,9 +44,8 @@ from .frames import (
     STATUS_FULL_SCALE,
     STATUS_OUTSIDE_REGION,
     Sample,
-    fault_name,
     flag_letters,
-    full_scale_name,
+    reading_fault,
 )
 
 __all__ = ["HOLD_S", "ArrayCalibration", "TaxelReading", "Cycle", "CycleAssembler", "ArrayEvaluator", "ArrayReader",
@@ -215,9 +214,7 @@ class TaxelReading:
 
     @property
     def fault_name(self) -> Optional[str]:
-        if self.missing:
-            return "missing frame"
-        return full_scale_name(self.counts) if self.full_scale and not self.chip_error else fault_name(self.fault)
+        return "missing frame" if self.missing else reading_fault(self.status, self.fault, self.counts)
 
     @property
     def flags(self) -> str:
