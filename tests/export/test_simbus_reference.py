@@ -142,7 +142,7 @@ def test_a_missing_reference_chip_costs_no_force_frame(sim, setup):  # noqa: F81
         bus.target(0).set_field(*np.add(FIELD, (0.0, 0.0, 500.0)))
         bus.target(k).set_field(*np.add(REF_FIELD, (0.0, 0.0, 500.0)))
         moved = sim.samples(decoder, bus.run_us(200_000))
-    assert len(gone) > 90 and not any(s.chip_error or s.recovered for s in gone + back + moved)
+    assert len(gone) >= 90 and not any(s.chip_error or s.recovered for s in gone + back + moved)
     assert len({round(s.force_N[2], 6) for s in gone + back}) == 1  # the same field, the same force throughout
     change = 1000 * abs(moved[-1].force_N[2] - back[-1].force_N[2])
     assert change < 2.0, change  # 500 uT uniform: about 88 mN uncompensated, a count's rounding with it

@@ -243,11 +243,15 @@ PROFILE_GROUPS = (
     ("float arithmetic (avr-libc)", re.compile(r"__(add|sub|mul|div)sf3.*|__fp_.*|__float.*|__fix.*|sqrt.*")),
     ("calibration (Horner, direction, region test)", re.compile(r"mf_calib_.*|fan_side|eeprom_.*|mf_nv_.*")),
     ("sample conversion", re.compile(r"mf_sample_.*|mf_app_process|mf_ref_.*")),
-    ("frame, CRC and queueing", re.compile(r"mf_frame_.*|mf_crc16_.*|avr_serial_write|mf_app_emit.*")),
+    ("frame, CRC and queueing", re.compile(r"mf_frame_.*|mf_crc16_.*|avr_serial_write|mf_app_emit.*|mf_app_flush")),
     ("UART interrupts", re.compile(r"__vector_(18|19|20)")),
-    ("I2C driver", re.compile(r"twi_.*|avr_i2c_.*|mlx_.*|mf_app_read_measurement")),
-    ("clock reads and waits", re.compile(r"avr_micros|avr_delay_us|__vector_13|mf_app_wait_until|mf_app_now")),
+    ("I2C driver and its interrupt",
+     re.compile(r"twi_.*|avr_i2c_.*|mlx_.*|measurement_reply|read_first|mf_app_read_measurement|__vector_24")),
+    ("idle until the next conversion, clock reads",
+     re.compile(r"avr_micros|avr_delay_us|__vector_13|mf_app_wait_until|mf_app_now")),
 )
+#: The group of :data:`PROFILE_GROUPS` that is the cycle's spare time (with the few clock reads of the work).
+IDLE = PROFILE_GROUPS[-1][0]
 
 
 def functions(elf: Path) -> list[tuple[int, int, str]]:
@@ -262,10 +266,16 @@ def functions(elf: Path) -> list[tuple[int, int, str]]:
     return out
 
 
+#: The share :func:`grouped` gives the bus's busy time: it overlaps the CPU's (the CPU waits on the bus, or does
+#: other work while the transfer runs from its interrupt), so it is not one of the shares that add up to 1.
+BUS_BUSY = "I2C bus busy (overlaps the rest)"
+
+
 def grouped(counts: dict[int, int], bus_samples: int, symbols: list[tuple[int, int, str]]) -> dict[str, float]:
-    """A profile's shares: waiting on the I2C bus, each of :data:`PROFILE_GROUPS`, and "other"."""
-    total = sum(counts.values()) + bus_samples
-    out = {"waiting on the I2C bus": bus_samples / total}
+    """A profile's shares of the CPU's time: each of :data:`PROFILE_GROUPS`, and "other" (together 1); and
+    :data:`BUS_BUSY`, the share of the time a TWI step was in flight."""
+    total = sum(counts.values())
+    out = {BUS_BUSY: bus_samples / total}
     out.update({name: 0.0 for name, _ in PROFILE_GROUPS})
     out["other"] = 0.0
     for address, n in counts.items():

@@ -83,6 +83,7 @@ typedef struct bus {
     uint32_t pc_period;
     uint8_t in_step;        /* a TWI step in flight: the firmware waits on the bus */
     uint32_t bus_samples;   /* profiler samples taken while one was */
+    uint32_t twint_fixes;   /* TWINT writes simavr left reading set (twcr_hook) */
     /* real bus timing (bus_real_timing) */
     uint8_t real_timing;
     uint64_t step_cycle;    /* the AVR cycle at which the firmware started the TWI step in flight (TWINT written) */
@@ -223,11 +224,17 @@ static avr_cycle_count_t give_twint(struct avr_t *avr, avr_cycle_count_t when, v
     return 0;
 }
 
-/* The firmware writes TWCR: a step starts when it writes TWINT with TWEN (a STOP is over once it is written). */
+/* The firmware writes TWCR: a step starts when it writes TWINT with TWEN (a STOP is over once it is written). Writing
+ * TWINT clears the flag on the hardware; simavr 1.6 stores the 1 written when the flag was clear (a START after a
+ * STOP), so the flag reads set, with the old status, until the START's own event: it is cleared here (counted). */
 static void twcr_hook(struct avr_t *avr, avr_io_addr_t addr, uint8_t v, void *param)
 {
     bus_t *b = (bus_t *)param;
     (void)addr;
+    if ((v & 0x84) == 0x84 && b->twi0 && avr_regbit_get(avr, b->twi0->twi.raised)) {
+        avr_regbit_clear(avr, b->twi0->twi.raised);
+        ++b->twint_fixes;
+    }
     if ((v & 0x84) == 0x84) {
         b->step_cycle = avr->cycle;
         b->in_step = !(v & 0x10);
@@ -481,14 +488,16 @@ void bus_clock_scale(bus_t *b, double scale) { CHIP->clock_scale = scale; }
 uint32_t bus_status_fixes(bus_t *b) { return b->status_fixes; }
 uint32_t bus_phases(bus_t *b) { return b->phases; }
 uint32_t bus_held(bus_t *b) { return b->held; }
-/* The profiler: every pc_period cycles, a sample of where the CPU is: waiting on a TWI step in flight (counted
- * apart), else its program counter (a histogram by word address, which Python maps to the ELF's functions). */
+/* The profiler: every pc_period cycles, a sample of where the CPU is, its program counter (a histogram by word
+ * address, which Python maps to the ELF's functions), and apart whether a TWI step is in flight then (the bus's busy
+ * time, which the CPU spends waiting on it or, when the transfer runs from its interrupt, on other work). */
 static avr_cycle_count_t pc_sample(struct avr_t *avr, avr_cycle_count_t when, void *param)
 {
     bus_t *b = (bus_t *)param;
     if (b->in_step) {
         ++b->bus_samples;
-    } else if (b->pc_hist && avr->pc / 2 < PROFILE_WORDS) {
+    }
+    if (b->pc_hist && avr->pc / 2 < PROFILE_WORDS) {
         ++b->pc_hist[avr->pc / 2];
     }
     return when + b->pc_period;

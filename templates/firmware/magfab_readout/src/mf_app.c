@@ -83,6 +83,7 @@ static void eeprom_write_command(mf_app_t *a)
     } else if ((uint32_t)addr + len > MF_NV_SIZE) {
         rc = 2;
     } else {
+        mf_app_flush(a); /* the held sample's forces from the record it was read under */
         mf_nv_write(addr, &a->cmd[4], len);
         if (mf_calib_load() == MF_OK) {
             a->lost = 1; /* (re)start the chip now, with the settings of the record just completed */
@@ -221,16 +222,31 @@ int mf_app_start_at(mf_app_t *a, uint8_t addr7)
     return rc;
 }
 
+/* The first RM of a read: with a sample held, on the bus's own time while the held one is processed and sent
+ * (*overlapped = 1). */
+static int read_first(mf_app_t *a, mlx_raw_t *raw, uint8_t *overlapped)
+{
+    *overlapped = (uint8_t)(a->held && mlx_measurement_begin(&a->chip, MF_ZYXT) == MF_OK);
+    mf_app_flush(a);
+    return *overlapped ? mlx_measurement_end(&a->chip, MF_ZYXT, raw) : mlx_read_measurement(&a->chip, MF_ZYXT, raw);
+}
+
 int mf_app_read_measurement(mf_app_t *a, mlx_raw_t *raw, uint8_t mode_bit, uint32_t *t_us, uint8_t *retried)
 {
     int rc;
+    uint8_t overlapped;
     *t_us = mf_app_now(a);
     *retried = 0;
-    rc = mlx_read_measurement(&a->chip, MF_ZYXT, raw);
+    rc = read_first(a, raw, &overlapped);
     if (rc == MF_E_CHIP && (a->chip.status & mode_bit)) {
         *retried = 1;
-        a->hal->delay_us(a->hal->ctx, MF_RETRY_US);
-        *t_us = mf_app_now(a);
+        if (overlapped) { /* due MF_RETRY_US after the first started: the held sample's frame took longer than that */
+            *t_us += MF_RETRY_US;
+            mf_app_wait_until(a, *t_us);
+        } else {
+            a->hal->delay_us(a->hal->ctx, MF_RETRY_US);
+            *t_us = mf_app_now(a);
+        }
         rc = mlx_read_measurement(&a->chip, MF_ZYXT, raw);
     }
     return rc;
@@ -288,8 +304,21 @@ static void send_frame(const mf_app_t *a, int16_t taxel, const mf_sample_t *s, u
 
 void mf_app_emit(mf_app_t *a, const mf_sample_t *s, uint32_t t_us)
 {
+    mf_app_flush(a);
     send_frame(a, -1, s, t_us);
     a->seq = (uint8_t)(a->seq + 1);
+}
+
+void mf_app_flush(mf_app_t *a)
+{
+    mf_sample_t s;
+    if (!a->held) {
+        return;
+    }
+    a->held = 0;
+    mf_app_process(&a->held_raw, &s);
+    s.flags |= a->held_flags;
+    mf_app_emit(a, &s, a->held_t);
 }
 
 void mf_app_emit_field(const mf_app_t *a, uint8_t taxel, const mf_sample_t *s, uint32_t t_us)
@@ -314,6 +343,7 @@ void mf_app_init(mf_app_t *a, const mf_hal_t *hal)
     a->errors = 0;
     a->recoveries = 0;
     a->cmd_len = 0;
+    a->held = 0;
     a->t0 = mf_app_now(a);
     a->t_next = a->t0;
     if (mf_calib_status() != MF_OK) {
@@ -374,6 +404,16 @@ void mf_app_poll(mf_app_t *a)
         ++a->recoveries;
     }
     rc = acquire(a, &raw, &t);
+    if (rc == MF_OK && a->hal->i2c_begin != 0) { /* held: sent while the next sample is on the bus */
+        mf_ref_update(a);
+        a->held_raw = raw;
+        a->held_t = t;
+        a->held_flags = (uint8_t)(a->recovered_pending ? MF_FLAG_RECOVERED : 0U);
+        a->held = 1;
+        a->recovered_pending = 0;
+        a->poll_error = MF_OK;
+        return;
+    }
     if (rc == MF_OK) {
         mf_ref_update(a);
         mf_app_process(&raw, &s);

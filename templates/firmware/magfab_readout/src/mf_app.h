@@ -1,6 +1,8 @@
 /* The readout loop: chip start-up and recovery, paced acquisition, calibration, frames, host commands.
  * One call of mf_app_poll() emits exactly one frame (binary or text); with an array's record one field frame per
- * chip (mf_array.h). */
+ * chip (mf_array.h). With a HAL that reads on the bus's own time (mf_hal_t.i2c_begin) a good sample is held instead
+ * and goes out while the next one is on the bus (mf_app_flush): the cycle is then the longer of the read and the
+ * arithmetic, not their sum, and each good frame leaves one poll later. */
 #ifndef MF_APP_H
 #define MF_APP_H
 
@@ -32,6 +34,10 @@ typedef struct mf_app {
     uint8_t cmd_len;
     uint32_t cmd_t;            /* micros() at its first byte: a command not complete in MF_CMD_TIMEOUT_US is dropped */
     uint32_t recoveries;       /* successful recoveries after a failed sample */
+    uint8_t held;              /* a good sample read and not yet sent (a HAL with i2c_begin): its words, read time, flags */
+    uint8_t held_flags;
+    uint32_t held_t;
+    mlx_raw_t held_raw;
 } mf_app_t;
 
 void mf_app_init(mf_app_t *a, const mf_hal_t *hal);
@@ -42,10 +48,11 @@ void mf_app_poll(mf_app_t *a);
 int mf_app_start_chip(mf_app_t *a);
 /* The same for the chip at addr7 (an array's chips, one after another). */
 int mf_app_start_at(mf_app_t *a, uint8_t addr7);
-/* RM of the chip at a->chip.addr, once more after MF_RETRY_US if the chip rejects it while still in the measuring
+/* RM of the chip at a->chip.addr, once more MF_RETRY_US later if the chip rejects it while still in the measuring
  * mode (mode_bit: MLX_ST_BURST or MLX_ST_SM): the conversion ran late (the chip's oscillator is slower than the
- * table). A second rejection is an error. *t_us is when the last attempt started; *retried says whether there
- * was a second. */
+ * table). A second rejection is an error. *t_us is when the last attempt started (a first attempt on the bus's own
+ * time, a held sample sent meanwhile: the second is due MF_RETRY_US after the first started, and *t_us says so);
+ * *retried says whether there was a second. */
 int mf_app_read_measurement(mf_app_t *a, mlx_raw_t *raw, uint8_t mode_bit, uint32_t *t_us, uint8_t *retried);
 /* Act on every byte the host has sent: 'b' binary, 't' text, 'i' the info line, and the EEPROM commands of
  * docs/bundle.md section 4: 'w' <addr:u16> <n:u8, 1..16> <n bytes> <crc:u16> writes (answered by a W line, the
@@ -56,8 +63,11 @@ uint32_t mf_app_now(const mf_app_t *a);
 void mf_app_wait_until(const mf_app_t *a, uint32_t t);
 /* Sample processing without the bus: counts -> microtesla -> forces, flags. */
 void mf_app_process(const mlx_raw_t *raw, mf_sample_t *s);
-/* Encode and send one frame in the current mode. */
+/* Encode and send one frame in the current mode, after the held sample's (mf_app_flush). */
 void mf_app_emit(mf_app_t *a, const mf_sample_t *s, uint32_t t_us);
+/* The held sample, if any, processed and sent: before any other frame, and before an EEPROM write can change the
+ * record its forces come from (in the mode the host last asked for). */
+void mf_app_flush(mf_app_t *a);
 /* An array's field frame of taxel in the current mode, with the cycle's sequence number (not advanced). */
 void mf_app_emit_field(const mf_app_t *a, uint8_t taxel, const mf_sample_t *s, uint32_t t_us);
 

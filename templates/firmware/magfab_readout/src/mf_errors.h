@@ -15,5 +15,6 @@
 #define MF_E_VERIFY (-8)  /* a register read back differs from what was written */
 #define MF_E_ARG (-9)     /* a transfer the driver cannot make (too long for the bus driver's buffer) */
 #define MF_E_CALIB (-10)  /* no valid calibration record in EEPROM (missing, bad CRC, other chip settings) */
+#define MF_BUSY 1         /* a transfer still on the bus (mf_hal_t.i2c_done): never a sample's result */
 
 #endif

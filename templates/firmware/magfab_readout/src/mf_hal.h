@@ -22,6 +22,12 @@ typedef struct mf_hal {
     void (*delay_us)(void *ctx, uint32_t us);    /* busy wait at least us microseconds */
     int (*serial_read)(void *ctx);               /* next byte from the host, or -1 when none is waiting */
     void (*serial_write)(void *ctx, const uint8_t *data, uint8_t len); /* blocks until buffered */
+    /* Optional (0: every transfer waits): write ntx bytes, repeated START, read nrx bytes (ACK all but the last),
+     * STOP, on the bus's own time, returning at once (MF_OK, or MF_E_ARG for a transfer it cannot make); i2c_done
+     * then gives MF_BUSY while it runs, else its result as i2c_write and i2c_read give theirs, its own timeout
+     * included. tx and rx stay the caller's, untouched, until i2c_done no longer gives MF_BUSY. */
+    int (*i2c_begin)(void *ctx, uint8_t addr7, const uint8_t *tx, uint8_t ntx, uint8_t *rx, uint8_t nrx);
+    int (*i2c_done)(void *ctx);
 } mf_hal_t;
 
 #ifdef __cplusplus

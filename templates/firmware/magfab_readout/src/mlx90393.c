@@ -3,8 +3,6 @@
 
 #include "mf_errors.h"
 
-#define MLX_REPLY_MAX 9 /* status + T, X, Y, Z */
-
 void mlx_init(mlx_t *m, const mf_hal_t *hal, uint8_t addr7)
 {
     m->hal = hal;
@@ -127,27 +125,18 @@ int mlx_update_register(mlx_t *m, uint8_t reg, uint16_t mask, uint16_t value)
     return back == want ? MF_OK : MF_E_VERIFY;
 }
 
-int mlx_read_measurement(mlx_t *m, uint8_t zyxt, mlx_raw_t *raw)
+/* An RM's reply (status, then the zyxt channels' words), checked: RS, ERROR, D. */
+static int measurement_reply(const uint8_t *rx, uint8_t zyxt, mlx_raw_t *raw)
 {
-    uint8_t rx[MLX_REPLY_MAX];
     uint16_t words[4] = {0, 0, 0, 0};
-    uint8_t cmd = (uint8_t)(MLX_CMD_RM | (zyxt & 0x0F));
-    uint8_t n = mlx_words(zyxt);
     uint8_t bit;
     uint8_t k = 0;
     uint8_t i = 1;
-    int rc;
-    if (n == 0) {
-        return MF_E_ARG;
-    }
-    rc = transfer(m, &cmd, 1, rx, (uint8_t)(1 + 2 * n));
-    if (rc == MF_OK) {
-        rc = status_rc(rx[0]);
-    }
+    int rc = status_rc(rx[0]);
     if (rc != MF_OK) {
         return rc;
     }
-    if (check_count(rx[0], n) != MF_OK) {
+    if (check_count(rx[0], mlx_words(zyxt)) != MF_OK) {
         return MF_E_COUNT;
     }
     for (bit = MLX_T; bit <= MLX_Z; bit = (uint8_t)(bit << 1), ++k) {
@@ -161,4 +150,39 @@ int mlx_read_measurement(mlx_t *m, uint8_t zyxt, mlx_raw_t *raw)
     raw->y = words[2];
     raw->z = words[3];
     return MF_OK;
+}
+
+int mlx_read_measurement(mlx_t *m, uint8_t zyxt, mlx_raw_t *raw)
+{
+    uint8_t rx[MLX_REPLY_MAX];
+    uint8_t cmd = (uint8_t)(MLX_CMD_RM | (zyxt & 0x0F));
+    uint8_t n = mlx_words(zyxt);
+    int rc;
+    if (n == 0) {
+        return MF_E_ARG;
+    }
+    rc = transfer(m, &cmd, 1, rx, (uint8_t)(1 + 2 * n));
+    return rc == MF_OK ? measurement_reply(rx, zyxt, raw) : rc;
+}
+
+int mlx_measurement_begin(mlx_t *m, uint8_t zyxt)
+{
+    uint8_t n = mlx_words(zyxt);
+    if (n == 0 || m->hal->i2c_begin == 0 || m->hal->i2c_done == 0) {
+        return MF_E_ARG;
+    }
+    m->tx = (uint8_t)(MLX_CMD_RM | (zyxt & 0x0F));
+    return m->hal->i2c_begin(m->hal->ctx, m->addr, &m->tx, 1, m->rx, (uint8_t)(1 + 2 * n));
+}
+
+int mlx_measurement_end(mlx_t *m, uint8_t zyxt, mlx_raw_t *raw)
+{
+    int rc;
+    while ((rc = m->hal->i2c_done(m->hal->ctx)) == MF_BUSY) {
+    }
+    if (rc != MF_OK) {
+        return rc;
+    }
+    m->status = m->rx[0];
+    return measurement_reply(m->rx, zyxt, raw);
 }

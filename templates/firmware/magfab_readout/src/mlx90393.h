@@ -40,10 +40,14 @@ extern "C" {
 #define MLX_ST_RS 0x04
 #define MLX_ST_D 0x03
 
+#define MLX_REPLY_MAX 9 /* status + T, X, Y, Z */
+
 typedef struct mlx {
     const mf_hal_t *hal;
     uint8_t addr;   /* 7-bit I2C address */
     uint8_t status; /* status byte of the last reply */
+    uint8_t tx;     /* an RM on the bus (mlx_measurement_begin): its command and its reply */
+    uint8_t rx[MLX_REPLY_MAX];
 } mlx_t;
 
 typedef struct mlx_raw {
@@ -65,6 +69,10 @@ int mlx_write_register(mlx_t *m, uint8_t reg, uint16_t value);
 int mlx_update_register(mlx_t *m, uint8_t reg, uint16_t mask, uint16_t value);
 /* RM of the zyxt channels, checked in this order: RS (MF_E_RESET), ERROR (MF_E_CHIP), D (MF_E_COUNT). */
 int mlx_read_measurement(mlx_t *m, uint8_t zyxt, mlx_raw_t *raw);
+/* The same RM on the bus's own time (the HAL's i2c_begin): MF_OK once it is under way, MF_E_ARG without channels or
+ * an asynchronous HAL; mlx_measurement_end waits for it and checks it as mlx_read_measurement does. */
+int mlx_measurement_begin(mlx_t *m, uint8_t zyxt);
+int mlx_measurement_end(mlx_t *m, uint8_t zyxt, mlx_raw_t *raw);
 
 #ifdef __cplusplus
 }
