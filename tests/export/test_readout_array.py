@@ -11,6 +11,7 @@ import importlib
 import io
 import math
 import os
+import re
 import subprocess
 import sys
 
@@ -236,7 +237,15 @@ def test_stream_prints_every_taxel_of_every_cycle(pkg, capsys):
     assert len(rows) == 60 and [int(r[2]) for r in rows] == list(range(5)) * 12
     assert all(len({r[1] for r in rows[5 * c:5 * c + 5]}) == 1 for c in range(12))  # one sequence per cycle
     assert max(abs(float(x)) for r in rows for x in r[3:6]) < 0.02 and {r[10] for r in rows} == {"-----"}
-    assert "12 cycles of 5 taxels; 0 incomplete" in err
+    # the rate the cycles came at, from their device time, against the chips' (the simulated board's: the serial link
+    # carries 250 cycles of 5 field frames a second at 250000 baud)
+    rate = re.search(r"12 cycles of 5 taxels; ([0-9.]+) cycles/s over ([0-9.]+) s of device time, against the chip's "
+                     r"([0-9.]+) conversions/s \(([0-9.]+)%\); 0 incomplete", err)
+    assert rate, err
+    expected = importlib.import_module("magfab_readout.array_sim").cycle_rate_Hz(5)
+    assert float(rate[1]) == pytest.approx(expected, rel=0.01)
+    assert float(rate[2]) == pytest.approx(11 / expected, abs=0.005)  # printed to 10 ms
+    assert float(rate[4]) == pytest.approx(100 * expected / float(rate[3]), abs=0.1)
     assert cli.main(["stream", "--simulate", "--count", "1", "--check"]) == 2
     assert "an array's firmware sends only fields" in capsys.readouterr().err
 

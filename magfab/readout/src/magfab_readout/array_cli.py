@@ -24,6 +24,7 @@ from .array_sim import SimulatedArray
 from .cli_shared import (
     CSV_COLUMNS,
     Interrupt,
+    Span,
     UsageError,
     at_fallback_baud,
     check_link,
@@ -93,18 +94,20 @@ def stream(args: argparse.Namespace, array: ArrayCalibration, out) -> int:
         if args.raw:
             columns += ["Bx_lsb", "By_lsb", "Bz_lsb", "T_raw"]
         out.write("# " + " ".join(columns) + "\n")
-        n = 0
+        span = Span()
         for cycle in reader.cycles(count=args.count, seconds=args.seconds, keep_up=True):
             out.write("".join(_row(cycle, t, args.raw) + "\n" for t in cycle))
-            n += 1
-        _summary(reader, n)
+            span.add(cycle.time_s)
+        _summary(reader, span)
     return 0
 
 
-def _summary(reader: ArrayReader, n: int) -> None:
+def _summary(reader: ArrayReader, span: Span) -> None:
+    """The stream's or recording's end: its cycles, the rate they came at (each taxel's: a frame a cycle) against
+    the chips' conversions, what was missing or lost."""
     s = reader.device.stats
-    text = (f"{n} cycles of {reader.calibration.taxels} taxels; {reader.incomplete} incomplete "
-            f"({reader.missing} frames missing)")
+    text = (f"{span.n} cycles of {reader.calibration.taxels} taxels{span.rate('cycles')}; {reader.incomplete} "
+            f"incomplete ({reader.missing} frames missing)")
     if reader.skipped:
         text += f", {reader.skipped} left out to keep up"
     if reader.cost is not None:
@@ -127,6 +130,7 @@ def record(args: argparse.Namespace, array: ArrayCalibration) -> int:
         reader = ArrayReader(device, array)
         written = skipped = 0
         stop = Interrupt()
+        span = Span()
         warned = False
         extra = [f"# array: {_title(array)}",
                  "# taxel: the chip each row was read from; Bx_uT, By_uT, Bz_uT as that chip read it (the other "
@@ -138,6 +142,7 @@ def record(args: argparse.Namespace, array: ArrayCalibration) -> int:
             with stop:
                 for cycle in reader.cycles(seconds=args.seconds):
                     stop.writing = True
+                    span.add(cycle.time_s)
                     rows = _record_rows(cycle, time.time(), temperature)
                     f.write("".join(r + "\n" for r in rows))
                     written += len(rows)
@@ -152,7 +157,7 @@ def record(args: argparse.Namespace, array: ArrayCalibration) -> int:
                         break
         print("magfab-readout: wrote {} rows to {}{} ({} chip-error, missing or full-scale readings left out)".format(
             written, args.out, " (Ctrl-C)" if stop.requested else "", skipped), file=sys.stderr)
-        _summary(reader, reader.computed)
+        _summary(reader, span)
     return 0
 
 

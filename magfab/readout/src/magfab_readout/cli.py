@@ -23,6 +23,7 @@ from .calibration import Calibration, CalibrationError, calibration_sha256
 from .cli_shared import (
     CSV_COLUMNS,
     Interrupt,
+    Span,
     UsageError,
     at_fallback_baud,
     check_link,
@@ -203,10 +204,10 @@ def _stream(args: argparse.Namespace, out) -> int:
         out.write("# " + " ".join(columns) + "\n")
         worst = 0.0
         rest = _rest_tracker(device)
-        span = _Span()
+        span = Span()
         for sample in device.samples(count=args.count, seconds=args.seconds):
             rest.add(sample)
-            span.add(sample)
+            span.add(sample.time_s)
             row = [format_number(sample.time_s, 10, 4, False), f"{sample.seq:3d}"]
             row += [format_number(f, 8, 4) for f in sample.force_N]
             row += [format_number(b, 9, 2) for b in sample.B_uT]
@@ -231,31 +232,7 @@ def _rest_tracker(device: Device) -> RestTracker:
     return RestTracker(device.calibration, noise)
 
 
-class _Span:
-    """The device time the samples of a stream or recording span, and how many there were."""
-
-    def __init__(self) -> None:
-        self.first: Optional[float] = None
-        self.last: Optional[float] = None
-        self.n = 0
-
-    def add(self, sample) -> None:
-        self.first = sample.time_s if self.first is None else self.first
-        self.last = sample.time_s
-        self.n += 1
-
-    def rate(self) -> str:
-        """'; R frames/s over S s of device time, against the chip's C conversions/s (P)', or '' with too few."""
-        if self.n < 2 or self.first is None or self.last is None or not self.last > self.first:
-            return ""
-        seconds = self.last - self.first
-        rate = (self.n - 1) / seconds
-        chip = _build.SAMPLE_RATE_HZ
-        return (f"; {rate:.1f} frames/s over {seconds:.2f} s of device time, against the chip's {chip:.1f} "
-                f"conversions/s ({rate / chip:.1%})")
-
-
-def _summary(device: Device, span: _Span, worst: Optional[float], rest: Optional[RestTracker] = None) -> None:
+def _summary(device: Device, span: Span, worst: Optional[float], rest: Optional[RestTracker] = None) -> None:
     s = device.stats
     text = (f"{span.n} samples{span.rate()}; {s.lost} lost (sequence gaps), {s.crc_errors} CRC errors, "
             f"{s.bad_lines} bad lines, {s.refused} refused values, {s.skipped_bytes} bytes skipped")
@@ -281,14 +258,14 @@ def _record(args: argparse.Namespace) -> int:
         written = skipped = full = 0
         stop = Interrupt()
         rest = _rest_tracker(device)
-        span = _Span()
+        span = Span()
         with open(args.out, "w", encoding="utf-8", newline="") as f:
             record_header(f, device, info, columns, sensor)
             with stop:
                 for sample in device.samples(seconds=args.seconds):
                     stop.writing = True
                     rest.add(sample)
-                    span.add(sample)
+                    span.add(sample.time_s)
                     host = time.time()
                     values = list(sample.B_uT) + list(sample.force_N)
                     if sample.full_scale and not sample.chip_error:

@@ -12,8 +12,8 @@ from typing import Any, List, Optional, Sequence
 from . import _build, eeprom
 from .device import NoData
 
-__all__ = ["FAILED", "CSV_COLUMNS", "Interrupt", "UsageError", "at_fallback_baud", "format_csv", "format_number",
-           "record_header"]
+__all__ = ["FAILED", "CSV_COLUMNS", "Interrupt", "Span", "UsageError", "at_fallback_baud", "format_csv",
+           "format_number", "record_header"]
 
 #: ``record``'s columns (docs/bundle.md section 1): host_time_s ties the recording to a reference sensor's log.
 CSV_COLUMNS = ("time_s", "host_time_s", "Bx_uT", "By_uT", "Bz_uT", "temperature_C", "Fx_sensor_N", "Fy_sensor_N",
@@ -71,6 +71,34 @@ class Interrupt:
         if self._previous is not None:
             signal.signal(signal.SIGINT, self._previous)
         return kind is KeyboardInterrupt
+
+
+class Span:
+    """The device time the frames of a stream or recording span, and how many there were (``add`` each one's time:
+    a sample's, or an array cycle's)."""
+
+    def __init__(self) -> None:
+        self.first: Optional[float] = None
+        self.last: Optional[float] = None
+        self.n = 0
+        self.timed = 0
+
+    def add(self, time_s: Optional[float]) -> None:
+        self.n += 1
+        if time_s is not None:
+            self.first = time_s if self.first is None else self.first
+            self.last = time_s
+            self.timed += 1
+
+    def rate(self, what: str = "frames") -> str:
+        """'; R <what>/s over S s of device time, against the chip's C conversions/s (P)', or '' with too few."""
+        if self.timed < 2 or self.first is None or self.last is None or not self.last > self.first:
+            return ""
+        seconds = self.last - self.first
+        rate = (self.timed - 1) / seconds
+        chip = _build.SAMPLE_RATE_HZ
+        return (f"; {rate:.1f} {what}/s over {seconds:.2f} s of device time, against the chip's {chip:.1f} "
+                f"conversions/s ({rate / chip:.1%})")
 
 
 def record_header(f, device, info, columns: List[str], extra: Sequence[str] = ()) -> None:
