@@ -113,7 +113,7 @@ def shipped(spec_path: Path | None, build_dir: Path | None) -> dict:
     simulated bus timed like a real one, at fields across the calibrated region, against the chip's conversions
     (simulated time); at the slowest field, where the cycle goes (a profile of the image, by function group)."""
     sys.path.insert(0, str(BENCH_DIR.parent / "tests" / "export"))
-    from simbus import IDLE, Bus, build_library, functions, grouped, region_fields  # the harness: libsimavr, chip
+    from simbus import IDLE, Bus, build_library, functions, grouped, region_fields, steady  # the harness
 
     with tempfile.TemporaryDirectory(prefix="magfab-fw-rate-") as tmp:
         out = build_dir
@@ -136,16 +136,12 @@ def shipped(spec_path: Path | None, build_dir: Path | None) -> dict:
             with Bus(lib, hex_path, design.i2c_address, hex_path.with_suffix(".eep")) as bus:
                 bus.set_field(*field)
                 bus.real_timing()
-                bus.run_us(SETTLE_US)
-                bus.profile_start()
-                t0, c0 = bus.time_us, bus.conversions
-                data = bus.run_us(RATE_SECONDS * 1e6)
-                seconds, conversions = (bus.time_us - t0) * 1e-6, bus.conversions - c0
-                frames = data.count(b"\xa5\x5a\x01")  # sync and frame type; the tests decode them fully
-                per_frame_us = RATE_SECONDS * 1e6 / frames
-                budget = {k: v * per_frame_us for k, v in grouped(*bus.profile, symbols).items()}
-                return {"field_uT": list(field), "rate_Hz": frames / seconds, "chip_Hz": 1e6 / bus.conversion_us,
-                        "delivered": frames / conversions, "frames": frames, "cycle_us": per_frame_us,
+                r = steady(bus, RATE_SECONDS, SETTLE_US, profile=True)
+                frames = r.out.count(b"\xa5\x5a\x01")  # sync and frame type; the tests decode them fully
+                per_frame_us = r.seconds * 1e6 / frames
+                budget = {k: v * per_frame_us for k, v in grouped(*r.profile, symbols).items()}
+                return {"field_uT": list(field), "rate_Hz": frames / r.seconds, "chip_Hz": r.chip_Hz,
+                        "delivered": frames / r.conversions, "frames": frames, "cycle_us": per_frame_us,
                         "busy_us": per_frame_us - budget[IDLE], "budget_us": budget}
 
         rows = [run(f) for f in [(1200.0, -800.0, 20000.0), *region_fields(cal)]]  # the tests' field, the region

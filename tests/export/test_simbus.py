@@ -17,11 +17,12 @@ import math
 import struct
 import sys
 from dataclasses import dataclass
+from functools import partial
 
 import pytest
 from conftest import _missing, require_tool
 from readout_support import ref_forces
-from simbus import Bus, HarnessUnavailable, build_library, read_intel_hex
+from simbus import Bus, HarnessUnavailable, build_library, read_intel_hex, steady
 
 from magfab.export.firmware import LOST_RETRY_US
 
@@ -245,16 +246,10 @@ def measure_rate(sim: Sim, eep, seconds: float, bus_setup=None) -> tuple:
     with Bus(sim.lib, sim.hex_path, sim.addr7, eep) as bus:
         bus.set_field(*FIELD_UT)
         decoder = sim.frames.Decoder()
-        sim.samples(decoder, bus.run_us(SETTLE_US))
-        if bus_setup:
-            bus_setup(bus)
-            sim.samples(decoder, bus.run_us(SETTLE_US))
-        t0, c0 = bus.time_us, bus.conversions
-        samples = sim.samples(decoder, bus.run_us(seconds * 1e6))
-        elapsed, conversions = (bus.time_us - t0) * 1e-6, bus.conversions - c0
+        r = steady(bus, seconds, SETTLE_US, partial(sim.samples, decoder), bus_setup)
         assert decoder.stats.lost == 0 and decoder.stats.crc_errors == 0
-        assert len(samples) <= conversions + 1  # every frame a distinct conversion
-        return len(samples) / elapsed, 1e6 / bus.conversion_us, len(samples) / conversions, samples
+        assert len(r.out) <= r.conversions + 1  # every frame a distinct conversion
+        return len(r.out) / r.seconds, r.chip_Hz, len(r.out) / r.conversions, r.out
 
 
 @pytest.mark.parametrize("osr, dig_filt", list(RATE_SETTINGS))

@@ -10,10 +10,11 @@ from __future__ import annotations
 
 import importlib
 import subprocess
+from functools import partial
 
 import pytest
 from conftest import require_tool
-from simbus import BUS_BUSY, Bus, functions, grouped, region_fields
+from simbus import BUS_BUSY, Bus, functions, grouped, region_fields, steady
 from test_simbus import FIELD_UT, SETTLE_US, sim  # noqa: F401  (the harness and the build, made once)
 from test_simbus_reference import REF_ADDR, REF_FIELD, setup  # noqa: F401  (the records with a reference chip)
 
@@ -30,14 +31,10 @@ def _rate(sim, field, real: bool = True, eep=None) -> dict:  # noqa: F811 - sim:
         bus.target(0).set_field(*field)
         bus.real_timing(real)
         decoder = sim.frames.Decoder()
-        sim.samples(decoder, bus.run_us(SETTLE_US))
-        t0, c0 = bus.time_us, bus.target(0).conversions
-        samples = sim.samples(decoder, bus.run_us(RUN_S * 1e6))
-        elapsed, conversions = (bus.time_us - t0) * 1e-6, bus.target(0).conversions - c0
+        r = steady(bus, RUN_S, SETTLE_US, partial(sim.samples, decoder))
         assert decoder.stats.lost == 0 and decoder.stats.crc_errors == 0
-        return {"rate_Hz": len(samples) / elapsed, "chip_Hz": 1e6 / bus.conversion_us,
-                "delivered": len(samples) / conversions, "byte_us": bus.byte_us, "steps": bus.timed_steps,
-                "samples": samples}
+        return {"rate_Hz": len(r.out) / r.seconds, "chip_Hz": r.chip_Hz, "delivered": len(r.out) / r.conversions,
+                "byte_us": bus.byte_us, "steps": bus.timed_steps, "samples": r.out}
 
 
 def test_a_byte_takes_nine_scl_periods_and_the_forces_stay_right(sim):  # noqa: F811
@@ -97,11 +94,8 @@ def test_a_profile_of_the_image_accounts_for_its_cycle(sim, tmp_path):  # noqa: 
     with Bus(sim.lib, sim.hex_path, sim.addr7, sim.hex_path.with_suffix(".eep")) as bus:
         bus.set_field(*FIELD_UT)
         bus.real_timing()
-        bus.run_us(SETTLE_US)
-        bus.profile_start()
-        samples = sim.samples(sim.frames.Decoder(), bus.run_us(RUN_S * 1e6))
-        counts, bus_samples = bus.profile
-    per_frame_us = RUN_S * 1e6 / len(samples)
-    shares = grouped(counts, bus_samples, functions(elf))
+        r = steady(bus, RUN_S, SETTLE_US, partial(sim.samples, sim.frames.Decoder()), profile=True)
+    per_frame_us = r.seconds * 1e6 / len(r.out)
+    shares = grouped(*r.profile, functions(elf))
     assert shares[BUS_BUSY] * per_frame_us == pytest.approx(111 * 1e6 / F_SCL_HZ, rel=0.02)
     assert shares["other"] <= 0.05, shares

@@ -27,7 +27,10 @@ import math
 import re
 import shutil
 import subprocess
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 HERE = Path(__file__).resolve().parent
 F_CPU_HZ = 16_000_000
@@ -283,6 +286,35 @@ def grouped(counts: dict[int, int], bus_samples: int, symbols: list[tuple[int, i
         group = next((g for g, pattern in PROFILE_GROUPS if pattern.fullmatch(name)), "other")
         out[group] += n / total
     return out
+
+
+@dataclass
+class Steady:
+    """A span of steady streaming (:func:`steady`): what ``feed`` made of its output, its simulated seconds, the
+    first chip's conversions over it and its conversion rate, and the profile (:attr:`Bus.profile`) when asked."""
+
+    out: Any
+    seconds: float
+    conversions: int
+    chip_Hz: float
+    profile: tuple[dict[int, int], int] | None
+
+
+def steady(bus: Bus, seconds: float, settle_us: float, feed: Callable[[bytes], Any] = bytes,
+           setup: Callable[[Bus], None] | None = None, profile: bool = False) -> Steady:
+    """``settle_us`` of streaming (and, with ``setup``, that called and as long again), then ``seconds`` measured:
+    ``feed`` sees every output in turn (a decoder's, so that no frame is cut at the span's edge); the conversions
+    are the first chip's (``bus.target(0)``), the sensing chip's of a single taxel."""
+    feed(bus.run_us(settle_us))
+    if setup is not None:
+        setup(bus)
+        feed(bus.run_us(settle_us))
+    if profile:
+        bus.profile_start()
+    t0, c0 = bus.time_us, bus.target(0).conversions
+    out = feed(bus.run_us(seconds * 1e6))
+    return Steady(out, (bus.time_us - t0) * 1e-6, bus.target(0).conversions - c0, 1e6 / bus.conversion_us,
+                  bus.profile if profile else None)
 
 
 def region_fields(calibration: dict, pull: float = 0.97) -> list[tuple[float, float, float]]:
