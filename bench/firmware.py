@@ -32,7 +32,9 @@ What it measures:
    spare time until the next conversion; the bus's busy time apart, as it overlaps them). The worst field is the
    one with the fewest conversions delivered, then the least spare time.
    ``--build`` names an existing build folder; without it the spec is built into a temporary one (a minute).
-   ``--no-rate`` skips this part.
+   ``--no-rate`` skips this part; ``--record-rate`` writes it (worst, median, best) beside the generic image,
+   ``magfab/export/generic_image/rate.json``, where every build's firmware README, report and predictions.json
+   quote it (``firmware.measured_rate``), and tests/export/test_simbus_timing.py holds it to a new measurement.
 
 A synthetic calibration per order (random coefficients, an elliptical hull of N points) stands in unless
 ``--calibration`` gives a real one. Prints a table and writes ``<out>/firmware_bench.json``. Nothing here
@@ -42,6 +44,7 @@ asserts on a time: the figures are for reading.
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import math
 import re
@@ -146,9 +149,31 @@ def shipped(spec_path: Path | None, build_dir: Path | None) -> dict:
 
         rows = [run(f) for f in [(1200.0, -800.0, 20000.0), *region_fields(cal)]]  # the tests' field, the region
     rows.sort(key=lambda r: (r["delivered"], -r["busy_us"]))  # the fewest conversions delivered, the busiest CPU
-    return {"sample_cycles": max(cycles["sample_binary"].values()), "fields": rows,
+    return {"sample_cycles": max(cycles["sample_binary"].values()), "fields": rows, "hex_path": str(hex_path),
+            "calibration": {"spec": design.spec.name, "order": cal["order"],
+                            "hull_points": len(cal["valid_region"]["hull"])},
             "worst": rows[0], "median": rows[len(rows) // 2], "best": rows[-1], "seconds": RATE_SECONDS,
             "cycle_at_worst_us": rows[0]["cycle_us"], "budget_at_worst_us": rows[0]["budget_us"]}
+
+
+def record_rate(m: dict, i2c_hz: float) -> Path:
+    """``rate.json`` beside the generic image (:func:`magfab.export.firmware.measured_rate`) from :func:`shipped`'s
+    measurement: only of the shipped image itself."""
+    image, _ = firmware.shipped_image()
+    if Path(m["hex_path"]).read_bytes() != image:
+        raise SystemExit("the build's image is not the shipped one (rebuilt since?): rebuild the build first")
+
+    def row(r: dict) -> dict:
+        return {"field_uT": [round(b, 1) for b in r["field_uT"]], "rate_Hz": round(r["rate_Hz"], 1),
+                "delivered": round(r["delivered"], 4), "busy_us": round(r["busy_us"], 1),
+                "cycle_us": round(r["cycle_us"], 1)}
+
+    record = {"image_sha256": hashlib.sha256(image).hexdigest(), "calibration": m["calibration"],
+              "fields": len(m["fields"]), "seconds": m["seconds"], "i2c_Hz": i2c_hz,
+              "chip_Hz": round(m["worst"]["chip_Hz"], 3), **{k: row(m[k]) for k in ("worst", "median", "best")}}
+    path = BENCH_DIR.parent / "magfab" / "export" / firmware.GENERIC_DIR / firmware.GENERIC_RATE
+    path.write_text(json.dumps(record, indent=2, sort_keys=True) + "\n")
+    return path
 
 
 def generic_vs_own(design, calibration: dict, f_mhz: float) -> dict:
@@ -178,6 +203,10 @@ def main(argv: list[str] | None = None) -> int:
                              "with the settings)")
     parser.add_argument("--build", type=Path, help="an existing build folder to measure (default: build the spec)")
     parser.add_argument("--no-rate", action="store_true", help="skip the shipped build's rate on the simulated bus")
+    parser.add_argument("--record-rate", action="store_true",
+                        help="write the shipped build's measured rate beside the generic image in the source tree "
+                             "(magfab/export/generic_image/rate.json), which builds quote; the build must run the "
+                             "shipped image")
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT)
     args = parser.parse_args(argv)
 
@@ -241,6 +270,8 @@ def main(argv: list[str] | None = None) -> int:
               "image, every 37 cycles; the bus's busy time overlaps the CPU's):")
         for group, us in sorted(m["budget_at_worst_us"].items(), key=lambda kv: -kv[1]):
             print(f"    {group:46s} {us:7.1f} us")
+        if args.record_rate:
+            print(f"wrote {record_rate(m, i2c_hz)}")
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / JSON_NAME).write_text(json.dumps(result, indent=2, sort_keys=True) + "\n")
     print(f"wrote {args.out / JSON_NAME}")

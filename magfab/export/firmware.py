@@ -22,6 +22,7 @@ the named constants below, each with its source or marked as an assumption. The 
 from __future__ import annotations
 
 import binascii
+import hashlib
 import json
 import math
 from collections.abc import Mapping
@@ -83,6 +84,9 @@ NO_RECORD_US = 20_000
 #: and avr-libc versions that made it (``python -m magfab.export.toolchain`` rebuilds both).
 GENERIC_DIR = "generic_image"
 GENERIC_TOOLCHAIN = "toolchain.json"
+#: Beside them, what the image delivered on the project's simulated bus timed like a real one, across MagOne's
+#: calibrated region (:func:`measured_rate`; ``python bench/firmware.py --record-rate`` measures and writes it).
+GENERIC_RATE = "rate.json"
 CORE_SOURCES = ("mlx90393.c", "mf_sample.c", "mf_nv.c", "mf_calib.c", "mf_frame.c", "mf_app.c", "mf_array.c",
                 "mf_reference.c")
 CORE_DIR = "magfab_readout/src"
@@ -379,6 +383,7 @@ def _context(design: Design, calibration: Mapping[str, Any], generic: bool) -> d
         "t_c_per_lsb": 1.0 / TEMPERATURE_LSB_PER_C,
         "tconv_us": chip.tconv_us, "read_margin_us": chip.read_margin_us, "margin_pct": round(READ_MARGIN * 100),
         "tconv_ms": f"{chip.tconv_us / 1000:.3f}",
+        "measured_rate": "" if design.array is not None else _measured_line(int(calibration.get("order", 0))),
         "retry_us": settings["retry_us"], "exit_wait_us": settings["exit_wait_us"],
         "board_pullups": bool(spec.pcb.pullups),
         "hex_name": HEX_NAME, "eep_name": EEP_NAME,
@@ -450,3 +455,42 @@ def shipped_image() -> tuple[bytes, dict[str, Any]]:
     build and machine, with or without avr-gcc: the settings and calibration come from the build's .eep."""
     folder = files("magfab.export").joinpath(GENERIC_DIR)
     return folder.joinpath(HEX_NAME).read_bytes(), json.loads(folder.joinpath(GENERIC_TOOLCHAIN).read_text())
+
+
+def measured_rate() -> dict[str, Any] | None:
+    """What the shipped image delivered on the simulated bus timed like a real one (:data:`GENERIC_RATE`): the
+    chip's conversion rate, and at the worst, median and best of the fields measured across the calibrated region of
+    the build it names, the frames a second, the share of the chip's conversions and the processor's busy time a
+    frame. None when the package holds no record, or one of another image (the image was rebuilt since)."""
+    folder = files("magfab.export").joinpath(GENERIC_DIR)
+    record = folder.joinpath(GENERIC_RATE)
+    if not record.is_file():
+        return None
+    data = json.loads(record.read_text())
+    image, _ = shipped_image()
+    return data if data.get("image_sha256") == hashlib.sha256(image).hexdigest() else None
+
+
+def _measured_line(order: int) -> str:
+    """The firmware README's sentence on the measured rate (:func:`measured_rate`), "" without a record; a build
+    whose calibration is of higher order than the measured one is told it costs more a sample."""
+    measured = measured_rate()
+    if measured is None:
+        return ""
+    above = order > measured["calibration"]["order"]
+    line = measured_rate_line(measured)
+    return (line[:1].upper() + line[1:] + (
+        f"; this build's calibration is of order {order}, which costs more a sample than order "
+        f"{measured['calibration']['order']}: docs/bundle.md section 2 says how much" if above else "") + ".")
+
+
+def measured_rate_line(measured: dict[str, Any] | None) -> str:
+    """The measured rate in one line for a page a person reads, or "" without a record."""
+    if measured is None:
+        return ""
+    w, cal = measured["worst"], measured["calibration"]
+    return (f"measured: {w['rate_Hz']:.0f} frames/s, {w['delivered']:.1%} of the chip's {measured['chip_Hz']:.1f} "
+            f"conversions/s at the busiest of {measured['fields']} fields across {cal['spec']}'s calibrated region "
+            f"(the processor busy {w['busy_us']:.0f} of {w['cycle_us']:.0f} us a frame), the shipped image with that "
+            f"calibration (order {cal['order']}, {cal['hull_points']}-point region) on a simulated bus timed like a "
+            f"real {measured['i2c_Hz'] / 1000:.0f} kHz one")

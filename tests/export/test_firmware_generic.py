@@ -56,6 +56,18 @@ def test_the_wheel_takes_the_shipped_image():
     data = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["package-data"]["magfab.export"]
     folder = ROOT / "magfab" / "export" / firmware.GENERIC_DIR
     shipped = sorted(p.relative_to(folder.parent).as_posix() for p in folder.iterdir() if p.is_file())
-    assert shipped == [f"{firmware.GENERIC_DIR}/{firmware.HEX_NAME}",
-                       f"{firmware.GENERIC_DIR}/{firmware.GENERIC_TOOLCHAIN}"]
+    assert shipped == sorted(f"{firmware.GENERIC_DIR}/{name}" for name in (
+        firmware.HEX_NAME, firmware.GENERIC_RATE, firmware.GENERIC_TOOLCHAIN))
     assert all(any(fnmatch.fnmatch(rel, pattern) for pattern in data) for rel in shipped)
+
+
+def test_every_build_quotes_the_measured_rate_and_its_calibration():
+    """The shipped image's recorded rate (generic_image/rate.json, held to a new measurement by
+    test_simbus_timing.py) is the one firmware.measured_rate gives: a build's firmware README says it with the
+    calibration it was measured with, and warns a build whose calibration is of higher order."""
+    measured = firmware.measured_rate()
+    assert measured is not None and measured["worst"]["delivered"] >= 0.99
+    order = measured["calibration"]["order"]
+    same, higher = firmware._measured_line(order), firmware._measured_line(order + 2)
+    assert same.startswith("Measured: ") and f"(order {order}," in same and "this build's" not in same
+    assert f"this build's calibration is of order {order + 2}" in higher

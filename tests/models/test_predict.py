@@ -15,6 +15,7 @@ from hypothesis import strategies as st
 from magfab import SpecError, derive, parse_spec
 from magfab.check import predict_with_findings, prediction_findings
 from magfab.errors import Severity
+from magfab.export import firmware
 from magfab.models import field as F
 from magfab.models import mechanics as M
 from magfab.models.chip import chip_setting, noise
@@ -277,6 +278,8 @@ def test_prediction_is_deterministic(design, pred, monkeypatch):
 def test_build_writes_predictions_plots_and_records_models(default_build, pred):
     out = default_build.out_dir
     data = json.loads((out / "predictions.json").read_text())
+    measured = data.pop("readout_measured")  # beside it, the readout's rate as the shipped image measured it
+    assert measured == firmware.measured_rate()
     assert data == json.loads(json.dumps(pred.as_json()))  # the build writes the prediction of its design, whole
     for stem in ("field_axis", "field_contours", "force", "sensitivity", "speed_accuracy"):
         svg = (out / "plots" / f"{stem}.svg").read_text()

@@ -12,6 +12,7 @@ from urllib.parse import quote
 
 from ...errors import Finding, Severity
 from ...spec import Spec
+from ..firmware import measured_rate
 
 if TYPE_CHECKING:
     from ...board.layout import Board
@@ -93,7 +94,21 @@ def heights(design: Design) -> list[tuple[str, str]]:
         ("elastomer top", d.z_elastomer_base_mm + d.elastomer_height_mm)], key=lambda r: r[1])]
 
 
-def prediction_tables(pred: Prediction) -> dict[str, list[tuple[str, str]]]:
+def _measured_rows() -> list[tuple[str, str]]:
+    """The readout's rate as the shipped image measured it (firmware.measured_rate), where the package records it."""
+    m = measured_rate()
+    if m is None:
+        return []
+    w, cal = m["worst"], m["calibration"]
+    return [("readout rate, measured", f"{w['rate_Hz']:.0f} frames/s, {w['delivered']:.1%} of the chip's conversions, "
+             f"at the busiest of {m['fields']} fields of {cal['spec']}'s region (order {cal['order']} calibration; "
+             f"processor busy {w['busy_us']:.0f} of {w['cycle_us']:.0f} µs a frame; simulated bus, real "
+             f"{m['i2c_Hz'] / 1000:.0f} kHz timing)")]
+
+
+def prediction_tables(pred: Prediction, measured: bool = True) -> dict[str, list[tuple[str, str]]]:
+    """The prediction's tables for the report; ``measured``: the chip's with the single taxel's measured readout rate
+    (an array's image reads every chip in turn: not the figure measured)."""
     n, s, f, c, nz = pred.normal, pred.shear, pred.field, pred.chip, pred.noise
     band = lambda m, fmt: ", ".join(f"{k} {format(v, fmt)}" for k, v in m.items())
     return {
@@ -130,6 +145,7 @@ def prediction_tables(pred: Prediction) -> dict[str, list[tuple[str, str]]]:
             ("full scale, xy / z", f"{c.full_scale_xy_G:.1f} / {c.full_scale_z_G:.1f} G"),
             ("saturation onset", f"{c.saturation_onset_G:.0f} G"),
             ("conversion (T+X+Y+Z)", f"{c.conversion_ms:.3f} ms ({c.rate_Hz:.0f} Hz)"),
+            *(_measured_rows() if measured else []),
         ],
         "noise": [
             ("environment", f"{nz.environment_G:.3f} G"),
