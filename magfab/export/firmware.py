@@ -383,6 +383,7 @@ def _context(design: Design, calibration: Mapping[str, Any], generic: bool) -> d
         "t_c_per_lsb": 1.0 / TEMPERATURE_LSB_PER_C,
         "tconv_us": chip.tconv_us, "read_margin_us": chip.read_margin_us, "margin_pct": round(READ_MARGIN * 100),
         "tconv_ms": f"{chip.tconv_us / 1000:.3f}",
+        "array": design.array is not None,  # an array's image reads its chips in turn, each read waited for
         "measured_rate": "" if design.array is not None else _measured_line(int(calibration.get("order", 0))),
         "retry_us": settings["retry_us"], "exit_wait_us": settings["exit_wait_us"],
         "board_pullups": bool(spec.pcb.pullups),

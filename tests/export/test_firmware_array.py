@@ -271,7 +271,7 @@ def test_per_taxel_and_total_rate_in_simulated_time(harness, designs, tmp_path, 
     """Every chip's frames at the rate the tightest of three bounds allows: the cycle's pace (one table conversion
     plus the 5 % read margin, so each read finds a conversion newer than the last), the UART (baud / 200 field
     frames a second, shared by the chips) and the loop (a chip's read and frame, times the chips: simavr's TWI
-    keeps its own byte time whatever TWBR says); at least 97 % of it, no error, every chip equally often."""
+    keeps its own byte time whatever TWBR says); at least 95 % of it, no error, every chip equally often."""
     from magfab.export import firmware
 
     ee = firmware._eeprom_module()
@@ -303,7 +303,9 @@ def test_per_taxel_and_total_rate_in_simulated_time(harness, designs, tmp_path, 
           f"({min(per_taxel) * elapsed / converted[0]:.0%} of conversions read)")
     assert not any(s.chip_error for s in got) and all(s.counts == sim.counts(s.taxel) for s in got)
     assert max(counts) - min(counts) <= 1  # one frame apart at most: the window's edge
-    assert 0.97 * bound <= min(per_taxel) <= 1.01 * bound
+    # the loop bound is read from the gaps within a cycle: the cycle's own work between its last chip and the next
+    # cycle's first (the grid check, the sequence number) is not in it, about 4 % of a 5-chip cycle at 1 Mbaud
+    assert 0.95 * bound <= min(per_taxel) <= 1.01 * bound
     assert all(p * elapsed <= c + 1 for p, c in zip(per_taxel, converted))  # never a conversion twice
 
 
