@@ -271,7 +271,8 @@ def test_per_taxel_and_total_rate_in_simulated_time(harness, designs, tmp_path, 
     """Every chip's frames at the rate the tightest of three bounds allows: the cycle's pace (one table conversion
     plus the 5 % read margin, so each read finds a conversion newer than the last), the UART (baud / 200 field
     frames a second, shared by the chips) and the loop (a chip's read and frame, times the chips: simavr's TWI
-    keeps its own byte time whatever TWBR says); at least 95 % of it, no error, every chip equally often."""
+    keeps its own byte time whatever TWBR says: the cycles' own period, so this bound says only that no cycle
+    stalls beyond its work); at least 97 % of it, no error, every chip equally often."""
     from magfab.export import firmware
 
     ee = firmware._eeprom_module()
@@ -294,18 +295,18 @@ def test_per_taxel_and_total_rate_in_simulated_time(harness, designs, tmp_path, 
     per_taxel = [c / elapsed for c in counts]
     cycle_hz = 1e6 / (settings["tconv_us"] + settings["read_margin_us"])
     uart_hz = baud / FIELD_FRAME_BITS / chips
-    gaps = sorted(b.t_us - a.t_us for c in cycles(got) for a, b in itertools.pairwise(c))
-    loop_hz = 1e6 / (gaps[len(gaps) // 2] * chips) if gaps else math.inf  # a read, its frame, the next chip's
+    # the loop: a cycle from its first chip's read to the next cycle's (the reads, the frames, the cycle's own work)
+    periods = sorted(b[0].t_us - a[0].t_us for a, b in itertools.pairwise(cycles(got)))
+    loop_hz = 1e6 / periods[len(periods) // 2] if periods else math.inf
     bound = min(cycle_hz, uart_hz, loop_hz)
     print(f"{chips} chips at {baud} baud: per taxel {min(per_taxel):.1f} Hz, total {len(got) / elapsed:.0f} frames/s; "
           f"bounds per taxel: cycle {cycle_hz:.1f} Hz, UART {uart_hz:.1f} Hz, loop {loop_hz:.1f} Hz "
-          f"({gaps[len(gaps) // 2] if gaps else 0} us a chip); chips convert at {converted[0] / elapsed:.1f} Hz "
+          f"({periods[len(periods) // 2] / chips if periods else 0:.0f} us a chip); "
+          f"chips convert at {converted[0] / elapsed:.1f} Hz "
           f"({min(per_taxel) * elapsed / converted[0]:.0%} of conversions read)")
     assert not any(s.chip_error for s in got) and all(s.counts == sim.counts(s.taxel) for s in got)
     assert max(counts) - min(counts) <= 1  # one frame apart at most: the window's edge
-    # the loop bound is read from the gaps within a cycle: the cycle's own work between its last chip and the next
-    # cycle's first (the grid check, the sequence number) is not in it, about 4 % of a 5-chip cycle at 1 Mbaud
-    assert 0.95 * bound <= min(per_taxel) <= 1.01 * bound
+    assert 0.97 * bound <= min(per_taxel) <= 1.01 * bound
     assert all(p * elapsed <= c + 1 for p, c in zip(per_taxel, converted))  # never a conversion twice
 
 

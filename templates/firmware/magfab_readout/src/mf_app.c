@@ -312,17 +312,25 @@ void mf_app_emit(mf_app_t *a, const mf_sample_t *s, uint32_t t_us)
 void mf_app_flush(mf_app_t *a)
 {
     mf_sample_t s;
-    if (!a->held) {
+    uint8_t held = a->held;
+    if (!held) {
         return;
     }
     a->held = 0;
+    if (held == MF_HELD_FIELD) {
+        mf_sample_convert(&a->held_raw, &s);
+        s.flags |= a->held_flags;
+        send_frame(a, a->held_taxel, &s, a->held_t);
+        return;
+    }
     mf_app_process(&a->held_raw, &s);
     s.flags |= a->held_flags;
     mf_app_emit(a, &s, a->held_t);
 }
 
-void mf_app_emit_field(const mf_app_t *a, uint8_t taxel, const mf_sample_t *s, uint32_t t_us)
+void mf_app_emit_field(mf_app_t *a, uint8_t taxel, const mf_sample_t *s, uint32_t t_us)
 {
+    mf_app_flush(a);
     send_frame(a, taxel, s, t_us);
 }
 
@@ -409,7 +417,7 @@ void mf_app_poll(mf_app_t *a)
         a->held_raw = raw;
         a->held_t = t;
         a->held_flags = (uint8_t)(a->recovered_pending ? MF_FLAG_RECOVERED : 0U);
-        a->held = 1;
+        a->held = MF_HELD_FORCE;
         a->recovered_pending = 0;
         a->poll_error = MF_OK;
         return;

@@ -2,7 +2,8 @@
  * One call of mf_app_poll() emits exactly one frame (binary or text); with an array's record one field frame per
  * chip (mf_array.h). With a HAL that reads on the bus's own time (mf_hal_t.i2c_begin) a good sample is held instead
  * and goes out while the next one is on the bus (mf_app_flush): the cycle is then the longer of the read and the
- * arithmetic, not their sum, and each good frame leaves one poll later. */
+ * arithmetic, not their sum, and each good frame leaves one poll later. An array's chip's good reading is held the
+ * same way, its field frame sent during the next chip's read (the cycle's last before the cycle ends). */
 #ifndef MF_APP_H
 #define MF_APP_H
 
@@ -16,6 +17,9 @@
 #ifdef __cplusplus
 extern "C" {
 #endif
+
+#define MF_HELD_FORCE 1U /* a single taxel's sample: a force frame */
+#define MF_HELD_FIELD 2U /* an array chip's: its field frame, in the cycle it was read in (mf_array.h) */
 
 typedef struct mf_app {
     const mf_hal_t *hal;
@@ -34,7 +38,8 @@ typedef struct mf_app {
     uint8_t cmd_len;
     uint32_t cmd_t;            /* micros() at its first byte: a command not complete in MF_CMD_TIMEOUT_US is dropped */
     uint32_t recoveries;       /* successful recoveries after a failed sample */
-    uint8_t held;              /* a good sample read and not yet sent (a HAL with i2c_begin): its words, read time, flags */
+    uint8_t held;              /* a good sample read and not yet sent (a HAL with i2c_begin): MF_HELD_*; its words, read */
+    uint8_t held_taxel;        /* time, flags, and an array's taxel */
     uint8_t held_flags;
     uint32_t held_t;
     mlx_raw_t held_raw;
@@ -69,7 +74,7 @@ void mf_app_emit(mf_app_t *a, const mf_sample_t *s, uint32_t t_us);
  * record its forces come from (in the mode the host last asked for). */
 void mf_app_flush(mf_app_t *a);
 /* An array's field frame of taxel in the current mode, with the cycle's sequence number (not advanced). */
-void mf_app_emit_field(const mf_app_t *a, uint8_t taxel, const mf_sample_t *s, uint32_t t_us);
+void mf_app_emit_field(mf_app_t *a, uint8_t taxel, const mf_sample_t *s, uint32_t t_us);
 
 #ifdef __cplusplus
 }

@@ -87,6 +87,15 @@ static void poll_taxel(mf_app_t *a, uint8_t k)
         return;
     }
     rc = read_taxel(a, k, &raw, &t);
+    if (rc == MF_OK && a->hal->i2c_begin != 0) { /* held: its frame sent while the next chip's read is on the bus */
+        a->held_raw = raw;
+        a->held_t = t;
+        a->held_taxel = k;
+        a->held_flags = (uint8_t)(x->recovered ? MF_FLAG_RECOVERED : 0U);
+        a->held = MF_HELD_FIELD;
+        x->recovered = 0;
+        return;
+    }
     if (rc == MF_OK) {
         mf_sample_convert(&raw, &s);
     } else {
@@ -130,5 +139,6 @@ void mf_array_poll(mf_app_t *a)
     for (k = 0; k < n; ++k) {
         poll_taxel(a, k);
     }
+    mf_app_flush(a); /* the cycle's last chip's frame, with the cycle's sequence number */
     a->seq = (uint8_t)(a->seq + 1);
 }
