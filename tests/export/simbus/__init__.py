@@ -245,7 +245,8 @@ PROFILE_WORDS = 16384
 PROFILE_GROUPS = (
     ("float arithmetic (avr-libc)", re.compile(r"__(add|sub|mul|div)sf3.*|__fp_.*|__float.*|__fix.*|sqrt.*")),
     ("calibration (Horner, direction, region test)", re.compile(r"mf_calib_.*|fan_side|eeprom_.*|mf_nv_.*")),
-    ("sample conversion", re.compile(r"mf_sample_.*|mf_app_process|mf_ref_.*")),
+    ("sample conversion", re.compile(r"mf_sample_.*|fill_counts|counts|clamp16|mf_app_process|mf_app_field_sample|"
+                                     r"mf_ref_.*")),
     ("frame, CRC and queueing", re.compile(r"mf_frame_.*|mf_crc16_.*|avr_serial_write|mf_app_emit.*|mf_app_flush")),
     ("UART interrupts", re.compile(r"__vector_(18|19|20)")),
     ("I2C driver and its interrupt",

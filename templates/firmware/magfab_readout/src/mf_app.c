@@ -309,6 +309,15 @@ void mf_app_emit(mf_app_t *a, const mf_sample_t *s, uint32_t t_us)
     a->seq = (uint8_t)(a->seq + 1);
 }
 
+void mf_app_field_sample(const mf_app_t *a, const mlx_raw_t *raw, mf_sample_t *s)
+{
+    if (a->text_mode) {
+        mf_sample_convert(raw, s); /* a text line gives microtesla */
+    } else {
+        mf_sample_counts(raw, s);
+    }
+}
+
 void mf_app_flush(mf_app_t *a)
 {
     mf_sample_t s;
@@ -318,7 +327,7 @@ void mf_app_flush(mf_app_t *a)
     }
     a->held = 0;
     if (held == MF_HELD_FIELD) {
-        mf_sample_convert(&a->held_raw, &s);
+        mf_app_field_sample(a, &a->held_raw, &s);
         s.flags |= a->held_flags;
         send_frame(a, a->held_taxel, &s, a->held_t);
         return;

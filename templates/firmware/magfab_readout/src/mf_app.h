@@ -73,6 +73,9 @@ void mf_app_emit(mf_app_t *a, const mf_sample_t *s, uint32_t t_us);
 /* The held sample, if any, processed and sent: before any other frame, and before an EEPROM write can change the
  * record its forces come from (in the mode the host last asked for). */
 void mf_app_flush(mf_app_t *a);
+/* An array chip's reading as its field frame in the current mode needs it: a binary frame the counts alone
+ * (mf_sample_counts), a text line the microtesla too. */
+void mf_app_field_sample(const mf_app_t *a, const mlx_raw_t *raw, mf_sample_t *s);
 /* An array's field frame of taxel in the current mode, with the cycle's sequence number (not advanced). */
 void mf_app_emit_field(mf_app_t *a, uint8_t taxel, const mf_sample_t *s, uint32_t t_us);
 

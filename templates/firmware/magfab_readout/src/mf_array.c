@@ -97,7 +97,7 @@ static void poll_taxel(mf_app_t *a, uint8_t k)
         return;
     }
     if (rc == MF_OK) {
-        mf_sample_convert(&raw, &s);
+        mf_app_field_sample(a, &raw, &s);
     } else {
         mf_sample_fail(&s, rc, MF_STAGE_READ);
         a->last_error = (int8_t)rc;

@@ -76,7 +76,7 @@ void mf_ref_update(mf_app_t *a)
         }
         return;
     }
-    mf_sample_convert(&raw, &r);
+    mf_sample_counts(&raw, &r); /* counts are all the average needs */
     for (i = 0; i < 3U; ++i) {
         int32_t c = (int32_t)r.b_counts[i] * (int32_t)256;
         if (!ref.on) {

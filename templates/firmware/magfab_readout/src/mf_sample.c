@@ -26,9 +26,9 @@ static int16_t clamp16(int32_t c)
     return (int16_t)c;
 }
 
-void mf_sample_convert(const mlx_raw_t *raw, mf_sample_t *s)
+/* The counts (c: before the clamp), the saturation flag, the temperature word, NaN forces. */
+static void fill_counts(const mlx_raw_t *raw, mf_sample_t *s, int32_t *c)
 {
-    int32_t c[3];
     uint8_t k;
     c[0] = counts(raw->x);
     c[1] = counts(raw->y);
@@ -41,17 +41,26 @@ void mf_sample_convert(const mlx_raw_t *raw, mf_sample_t *s)
         }
         s->b_counts[k] = clamp16(c[k]);
     }
+    s->t_raw = MF_TEMPERATURE ? raw->t : 0U;
+    s->f_N[0] = s->f_N[1] = s->f_N[2] = NAN;
+}
+
+void mf_sample_counts(const mlx_raw_t *raw, mf_sample_t *s)
+{
+    int32_t c[3];
+    fill_counts(raw, s, c);
+    s->b_uT[0] = s->b_uT[1] = s->b_uT[2] = NAN;
+    s->t_C = NAN;
+}
+
+void mf_sample_convert(const mlx_raw_t *raw, mf_sample_t *s)
+{
+    int32_t c[3];
+    fill_counts(raw, s, c);
     s->b_uT[0] = (float)c[0] * MF_LSB_XY_UT;
     s->b_uT[1] = (float)c[1] * MF_LSB_XY_UT;
     s->b_uT[2] = (float)c[2] * MF_LSB_Z_UT;
-    if (MF_TEMPERATURE) {
-        s->t_raw = raw->t;
-        s->t_C = 25.0f + (float)((int32_t)raw->t - MF_T_RAW_25C) * MF_T_C_PER_LSB;
-    } else {
-        s->t_raw = 0;
-        s->t_C = NAN;
-    }
-    s->f_N[0] = s->f_N[1] = s->f_N[2] = NAN;
+    s->t_C = MF_TEMPERATURE ? 25.0f + (float)((int32_t)raw->t - MF_T_RAW_25C) * MF_T_C_PER_LSB : NAN;
 }
 
 void mf_sample_fail(mf_sample_t *s, int rc, uint8_t stage)

@@ -33,6 +33,9 @@ typedef struct mf_sample {
 
 /* Counts and microtesla from the raw words; sets MF_FLAG_SATURATED, clears the other flags and the forces. */
 void mf_sample_convert(const mlx_raw_t *raw, mf_sample_t *s);
+/* The same without floating point: the counts, the flag and the temperature word, NaN microtesla and temperature
+ * (what an array's binary field frame and the reference chip's average use: about 60 us less on the AVR). */
+void mf_sample_counts(const mlx_raw_t *raw, mf_sample_t *s);
 /* A sample that failed with error rc (MF_E_*) at stage (MF_STAGE_*): chip-error flag, the fault word, zero
  * counts, NaN everywhere else. */
 void mf_sample_fail(mf_sample_t *s, int rc, uint8_t stage);
