@@ -116,7 +116,7 @@ def shipped(spec_path: Path | None, build_dir: Path | None) -> dict:
     simulated bus timed like a real one, at fields across the calibrated region, against the chip's conversions
     (simulated time); at the slowest field, where the cycle goes (a profile of the image, by function group)."""
     sys.path.insert(0, str(BENCH_DIR.parent / "tests" / "export"))
-    from simbus import IDLE, Bus, build_library, functions, grouped, region_fields, steady  # the harness
+    from simbus import IDLE, Bus, build_library, functions, region_fields, steady  # the harness
 
     with tempfile.TemporaryDirectory(prefix="magfab-fw-rate-") as tmp:
         out = build_dir
@@ -142,7 +142,7 @@ def shipped(spec_path: Path | None, build_dir: Path | None) -> dict:
                 r = steady(bus, RATE_SECONDS, SETTLE_US, profile=True)
                 frames = r.out.count(b"\xa5\x5a\x01")  # sync and frame type; the tests decode them fully
                 per_frame_us = r.seconds * 1e6 / frames
-                budget = {k: v * per_frame_us for k, v in grouped(*r.profile, symbols).items()}
+                budget = r.budget_us(frames, symbols)
                 return {"field_uT": list(field), "rate_Hz": frames / r.seconds, "chip_Hz": r.chip_Hz,
                         "delivered": frames / r.conversions, "frames": frames, "cycle_us": per_frame_us,
                         "busy_us": per_frame_us - budget[IDLE], "budget_us": budget}

@@ -27,6 +27,7 @@ import json
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
+from functools import cache
 from importlib.resources import files
 from typing import TYPE_CHECKING, Any
 
@@ -458,11 +459,13 @@ def shipped_image() -> tuple[bytes, dict[str, Any]]:
     return folder.joinpath(HEX_NAME).read_bytes(), json.loads(folder.joinpath(GENERIC_TOOLCHAIN).read_text())
 
 
+@cache
 def measured_rate() -> dict[str, Any] | None:
     """What the shipped image delivered on the simulated bus timed like a real one (:data:`GENERIC_RATE`): the
     chip's conversion rate, and at the worst, median and best of the fields measured across the calibrated region of
     the build it names, the frames a second, the share of the chip's conversions and the processor's busy time a
-    frame. None when the package holds no record, or one of another image (the image was rebuilt since)."""
+    frame. None when the package holds no record, or one of another image (the image was rebuilt since). Read once
+    a process (a build quotes it three times: the firmware README, the report, predictions.json)."""
     folder = files("magfab.export").joinpath(GENERIC_DIR)
     record = folder.joinpath(GENERIC_RATE)
     if not record.is_file():
@@ -478,20 +481,11 @@ def _measured_line(order: int) -> str:
     measured = measured_rate()
     if measured is None:
         return ""
-    above = order > measured["calibration"]["order"]
-    line = measured_rate_line(measured)
-    return (line[:1].upper() + line[1:] + (
-        f"; this build's calibration is of order {order}, which costs more a sample than order "
-        f"{measured['calibration']['order']}: docs/bundle.md section 2 says how much" if above else "") + ".")
-
-
-def measured_rate_line(measured: dict[str, Any] | None) -> str:
-    """The measured rate in one line for a page a person reads, or "" without a record."""
-    if measured is None:
-        return ""
     w, cal = measured["worst"], measured["calibration"]
-    return (f"measured: {w['rate_Hz']:.0f} frames/s, {w['delivered']:.1%} of the chip's {measured['chip_Hz']:.1f} "
+    above = (f"; this build's calibration is of order {order}, which costs more a sample than order {cal['order']}: "
+             "docs/bundle.md section 2 says how much") if order > cal["order"] else ""
+    return (f"Measured: {w['rate_Hz']:.0f} frames/s, {w['delivered']:.1%} of the chip's {measured['chip_Hz']:.1f} "
             f"conversions/s at the busiest of {measured['fields']} fields across {cal['spec']}'s calibrated region "
             f"(the processor busy {w['busy_us']:.0f} of {w['cycle_us']:.0f} us a frame), the shipped image with that "
             f"calibration (order {cal['order']}, {cal['hull_points']}-point region) on a simulated bus timed like a "
-            f"real {measured['i2c_Hz'] / 1000:.0f} kHz one")
+            f"real {measured['i2c_Hz'] / 1000:.0f} kHz one{above}.")

@@ -34,8 +34,7 @@ def _rate(sim, field, real: bool = True, eep=None, symbols=None) -> dict:  # noq
         decoder = sim.frames.Decoder()
         r = steady(bus, RUN_S, SETTLE_US, partial(sim.samples, decoder), profile=symbols is not None)
         assert decoder.stats.lost == 0 and decoder.stats.crc_errors == 0
-        per_frame_us = r.seconds * 1e6 / len(r.out)
-        busy = per_frame_us * (1.0 - grouped(*r.profile, symbols)[IDLE]) if r.profile else None
+        busy = r.seconds * 1e6 / len(r.out) - r.budget_us(len(r.out), symbols)[IDLE] if r.profile else None
         return {"rate_Hz": len(r.out) / r.seconds, "chip_Hz": r.chip_Hz, "delivered": len(r.out) / r.conversions,
                 "byte_us": bus.byte_us, "steps": bus.timed_steps, "samples": r.out, "busy_us": busy}
 

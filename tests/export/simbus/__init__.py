@@ -300,6 +300,11 @@ class Steady:
     chip_Hz: float
     profile: tuple[dict[int, int], int] | None
 
+    def budget_us(self, frames: int, symbols: list[tuple[int, int, str]]) -> dict[str, float]:
+        """The profile's :func:`grouped` shares as microseconds a frame, over ``frames`` frames."""
+        per_frame_us = self.seconds * 1e6 / frames
+        return {k: v * per_frame_us for k, v in grouped(*self.profile, symbols).items()} if self.profile else {}
+
 
 def steady(bus: Bus, seconds: float, settle_us: float, feed: Callable[[bytes], Any] = bytes,
            setup: Callable[[Bus], None] | None = None, profile: bool = False) -> Steady:
