@@ -152,9 +152,9 @@ SURROGATE_S = 0.15
 #: designs by the full chain at 1.05x its estimate on the machine under a load of 2-3.)
 FE_CHAIN_S = 4.0
 #: The search's own loop per trial in the calling process: Optuna's ask and tell, the journal's writes and the model
-#: step (magfab.inverse.propose). Three bench sets x 2 seeds of 300 trials on 2 workers took 76.8 s, 43 ms a trial,
-#: bound by the loop (the designs' share there is about 15 ms a trial); 1.4x that.
-LOOP_S = 0.06
+#: step (magfab.inverse.propose, its candidates mapped to mm). Three bench sets x 10 seeds of 300 trials on 2 workers
+#: took 551 s, 61 ms a trial, bound by the loop (the designs' share there is about 15 ms a trial); 1.4x that.
+LOOP_S = 0.085
 #: A local cluster's start and the tables written at the end (a sweep of 30 designs by the surrogate: 8.6 s in all).
 STUDY_START_S = 8.0
 #: The designs priced one by one; a larger study is priced by this many spread over its list.

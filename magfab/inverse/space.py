@@ -35,7 +35,8 @@ from .targets import Chip, Targets, Variables
 # noticeable time to import, and importing this module should not.
 
 __all__ = ["NUMERIC", "CATEGORICAL", "stock_disc", "saturation_floor", "candidate_spec", "suggest", "grid",
-           "latin_hypercube", "base_point", "Space", "FRACTIONS", "FRACTION_OF", "MAGNET_FRACTION", "POINT"]
+           "latin_hypercube", "base_point", "magnet_moment", "Space", "FRACTIONS", "FRACTION_OF", "MAGNET_FRACTION",
+           "POINT"]
 
 #: The numeric variables (mm), in the order tables show them.
 NUMERIC = ("d_max_mm", "d_min_mm", "elastomer_diameter_mm", "cover_mm")
@@ -251,7 +252,7 @@ class Space:
         self.choices = {**self.all_choices, "magnet": buildable, "tip": tips}
         #: each tip's buildable magnets, weakest moment first (ties: the catalogue's order)
         self.magnet_order = {t: sorted((m for m in buildable if self.diameter_range(m, t) is not None),
-                                       key=lambda m: (_moment(m), buildable.index(m))) for t in tips}
+                                       key=lambda m: (magnet_moment(m), buildable.index(m))) for t in tips}
 
     def magnet_at(self, tip: str, fraction: float) -> str:
         """The magnet at ``fraction`` of the tip's buildable magnets in order of moment (equal strata)."""
@@ -422,7 +423,7 @@ class Space:
         return out
 
 
-def _moment(magnet: str) -> float:
+def magnet_moment(magnet: str) -> float:
     """A "DISC:GRADE" magnet's moment up to a constant: its volume times its grade's nominal remanence."""
     disc, grade = magnet.split(":")
     d, h, _ = stock_disc(disc)
