@@ -186,7 +186,7 @@ def table(results: list[dict]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("--trials", type=int, default=150)
+    p.add_argument("--trials", type=int, default=300)
     p.add_argument("--seeds", type=int, default=5)
     p.add_argument("--sweep-factor", type=int, default=10)
     p.add_argument("--workers", type=int, default=2)

@@ -25,12 +25,13 @@ import contextlib
 import shutil
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from ..errors import InputError
 from .budget import StudyCost, check_plan, check_scheduler, check_trials, check_workers, search_cost, study_cost
-from .evaluate import FE, SURROGATE
+from .evaluate import FE, SURROGATE, bench_point
 from .page import write_outputs
 from .pareto import front_mask, pick_for_verification, values_of
 from .result import DesignResult
@@ -101,7 +102,7 @@ def design(targets_path: Path, out: Path | None = None, scheduler: str | None = 
             opened = open_study(targets, _storage(targets, folder))
         study = run_study(targets, base, _storage(targets, folder), c, lambda n, t: say("search", n, t), opened)
         trials = records(study)
-        picks = _near_front(trials, targets)
+        picks = _near_front(trials, targets, lambda r: tuple(sorted(bench_point(r.point, base, targets).items())))
         screened = [trials[i] for i in picks]
         if targets.study.models.value == FE:  # the search ran the full chain already
             verified = screened
@@ -134,16 +135,27 @@ NEAR_MARGIN = 0.06
 NEAR_SHARE = 1.0 / 3.0
 
 
-def _near_front(trials: list[Record], targets: Targets) -> list[int]:
+def _near_front(trials: list[Record], targets: Targets, design: Callable[[Record], Any] | None = None) -> list[int]:
     """Indices of up to ``study.verify`` trials for the full chain: the cheap chain's feasible front (spread along
     it, then the next ranks), and, with a third of the budget, the front of the near-feasible designs, those short of
     a requirement by at most :data:`NEAR_MARGIN` (the best designs often sit on a requirement's boundary, where the
-    cheap chain's error decides which side they fall)."""
+    cheap chain's error decides which side they fall). ``design``: a trial's design as it is written and verified
+    (default: the trial itself); two trials that write the same design (the search's points differ by less than the
+    printer's step) take one place."""
     ok = [i for i, r in enumerate(trials) if r.state == "ok"]
     near = [i for i, r in enumerate(trials) if _near_feasible(r)]
     k = targets.study.verify
     k_near = min(len(near), round(k * NEAR_SHARE)) if ok else min(len(near), k)
-    return _picks(trials, ok, targets, k - k_near) + _picks(trials, near, targets, k_near)
+    known: dict[int, Any] = {}
+
+    def written(i: int) -> Any:
+        if i not in known:
+            known[i] = design(trials[i]) if design else i
+        return known[i]
+
+    taken: set = set()
+    return (_picks(trials, ok, targets, k - k_near, written, taken)
+            + _picks(trials, near, targets, k_near, written, taken))
 
 
 def _near_feasible(r: Record) -> bool:
@@ -155,11 +167,25 @@ def _near_feasible(r: Record) -> bool:
     return not other_errors and all(c <= NEAR_MARGIN for c in r.constraints[:-1])
 
 
-def _picks(trials: list[Record], idx: list[int], targets: Targets, k: int) -> list[int]:
-    if not idx or k <= 0:
-        return []
-    values = values_of([trials[i] for i in idx], [o.value for o in targets.objectives])
-    return [idx[j] for j in pick_for_verification(values, targets.directions(), k)]
+def _picks(trials: list[Record], idx: list[int], targets: Targets, k: int, written: Callable[[int], Any],
+           taken: set) -> list[int]:
+    """Up to ``k`` of ``idx`` spread along their front (:func:`pick_for_verification`), each writing a design not in
+    ``taken`` (then added to it): a pick that writes a design already taken is dropped and the picks made again
+    without it."""
+    idx = list(idx)
+    while idx and k > 0:
+        values = values_of([trials[i] for i in idx], [o.value for o in targets.objectives])
+        picks = [idx[j] for j in pick_for_verification(values, targets.directions(), k)]
+        seen, dropped = set(taken), []
+        for i in picks:
+            if written(i) in seen:
+                dropped.append(i)
+            seen.add(written(i))
+        if not dropped:
+            taken |= seen
+            return picks
+        idx = [i for i in idx if i not in dropped]
+    return []
 
 
 def _front(result: DesignResult) -> None:

@@ -1,5 +1,5 @@
 """The search's coordinates: every point of the unit cube is a geometry the build accepts, the mapping round-trips,
-and (slow) the study's front against a ten times larger sweep on a bench target set."""
+and (slow) the study's front against a ten times larger sweep on each bench target set."""
 
 from __future__ import annotations
 
@@ -113,19 +113,24 @@ def test_the_base_point_round_trips():
 
 
 @pytest.mark.slow
-def test_the_study_finds_the_sweeps_front_on_the_fingertip_set():
-    """bench/design_search.py on the fingertip set, small: 60 trials against a 600-design sweep, one seed."""
+@pytest.mark.parametrize("name", ["fingertip", "taxel", "stiff_pad"])
+def test_the_study_finds_the_sweeps_front_at_every_seed(name):
+    """bench/design_search.py on each bench set at the study's default size: 300 trials against a 3,000-design sweep,
+    seeds 0-4; every seed's feasible front holds 0.95 of the sweep's hypervolume or more (about 2 minutes a set on
+    two cores)."""
     sys.path.insert(0, str(BENCH))
     import design_search as ds
 
     from magfab.inverse.study import client, evaluate_all, records, run_study
 
-    targets, base = ds._load("fingertip", 60, all_tips=False)
+    targets, base = ds._load(name, 300, all_tips=True)
     space = Space(targets, base)
     with client(None, 2) as c:
-        sweep = evaluate_all([space.point(p) for p in space.latin_hypercube(600, 12345)], targets, base, c,
+        sweep = evaluate_all([space.point(p) for p in space.latin_hypercube(3000, 12345)], targets, base, c,
                              "surrogate")
-        recs = records(run_study(targets, base, Path(ds.tempfile.mkdtemp()) / "study.log", c))
-    row = ds.compare(recs, sweep, targets)
-    assert row["hypervolume_ratio"] >= 0.9, row
-    assert row["sweep_dominating_chosen"] == 0, row
+        rows = []
+        for seed in range(5):
+            t = targets.model_copy(update={"study": targets.study.model_copy(update={"seed": seed})})
+            recs = records(run_study(t, base, Path(ds.tempfile.mkdtemp()) / "study.log", c))
+            rows.append(ds.compare(recs, sweep, t))
+    assert min(r["hypervolume_ratio"] for r in rows) >= 0.95, [r["hypervolume_ratio"] for r in rows]

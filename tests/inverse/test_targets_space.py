@@ -119,6 +119,32 @@ def test_verification_takes_near_feasible_designs_too():
     assert sorted(picks) == [0, 1, 3]
 
 
+def test_verification_never_spends_two_places_on_one_written_design():
+    """Trials whose points differ by less than the printer's step write one design (designs/NAME.toml, on the step):
+    drawn fronts with drawn groups of such trials, any budget; the picks write distinct designs, as many as the budget
+    or the distinct designs allow (a taxel study once verified 6 trials that wrote 3 designs)."""
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    from magfab.inverse.run import _near_front
+    from magfab.inverse.study import Record
+
+    @settings(max_examples=60, deadline=None)
+    @given(st.lists(st.tuples(st.floats(0.1, 10.0), st.floats(0.1, 10.0), st.integers(0, 5)), min_size=1,
+                    max_size=25), st.integers(1, 8))
+    def check(rows, verify):
+        t = parse_targets('objectives = ["normal_resolution_mN", "normal_range_N"]\n[study]\nverify = '
+                          f"{verify}")
+        trials = [Record(n, {}, "ok", "", "surrogate", {"normal_resolution_mN": res, "normal_range_N": rng}, [0.0],
+                         []) for n, (res, rng, _) in enumerate(rows)]
+        group = {n: g for n, (_, _, g) in enumerate(rows)}
+        picks = _near_front(trials, t, lambda r: group[r.number])
+        written = [group[i] for i in picks]
+        assert len(set(written)) == len(written) == min(verify, len(set(group.values()))), (picks, written)
+
+    check()
+
+
 def test_the_findings_constraint_is_graded_where_a_finding_has_a_measure():
     """The sampler reads how far a design is from feasible: a saturating chip by how far the field at d_min exceeds
     full scale (more saturation, a larger violation), the resolution asked for by its own requirement only (not
