@@ -37,6 +37,7 @@ from ..formats.calibration_json import calibration_sha256
 from ..models.chip import conversion_us  # the chip's pace, shared with the prediction
 from ..models.reference import REFERENCE_SHIFT
 from ..readout.src.magfab_readout import eeprom
+from ..readout.src.magfab_readout.float32_bound import direction_band, float32_error_N
 from ..recipes import resolve
 from ..reference_chip import reference_chip
 from .templating import render as render_template
@@ -386,6 +387,7 @@ def _context(design: Design, calibration: Mapping[str, Any], generic: bool) -> d
         "tconv_ms": f"{chip.tconv_us / 1000:.3f}",
         "array": design.array is not None,  # an array's image reads its chips in turn, each read waited for
         "measured_rate": "" if design.array is not None else _measured_line(int(calibration.get("order", 0))),
+        "float32_bound": "" if design.array is not None else _float32_line(calibration),
         "retry_us": settings["retry_us"], "exit_wait_us": settings["exit_wait_us"],
         "board_pullups": bool(spec.pcb.pullups),
         "hex_name": HEX_NAME, "eep_name": EEP_NAME,
@@ -473,6 +475,20 @@ def measured_rate() -> dict[str, Any] | None:
     data = json.loads(record.read_text())
     image, _ = shipped_image()
     return data if data.get("image_sha256") == hashlib.sha256(image).hexdigest() else None
+
+
+def _float32_line(calibration: Mapping[str, Any]) -> str:
+    """The firmware README's sentence on how far its float32 forces can be from float64 ones of the build's
+    calibration.json (:func:`float32_error_N`)."""
+    checked = calibration_json.validate(json.loads(json.dumps(calibration)))
+    fz, fxy = float32_error_N(checked)
+    lo, hi = direction_band(checked)
+    near = (f"; it does not hold for a Br from {lo:.6g} to {hi:.6g} uT, about direction_min_uT, where one evaluation "
+            "may give a lateral force and the other none") if checked.direction_min_uT > 0 else ""
+    return (f"The image's forces are within {fz:.2g} N (Fz) and {fxy:.2g} N (Fx, Fy) of a float64 evaluation of "
+            "calibration.json wherever the temperature-corrected field is inside the valid region's box, at any chip "
+            "temperature: a bound worked out from this calibration's own numbers, each float32 operation allowed one "
+            f"unit in the last place (the readout package's `float32_bound.py`, docs/bundle.md section 2){near}.")
 
 
 def _measured_line(order: int) -> str:

@@ -16,11 +16,12 @@ import pytest
 from calibration_strategies import calibration, region_points
 from conftest import require_tool
 from hypothesis import HealthCheck, assume, event, given, settings
+from readout_support import ref_forces
 from test_firmware import make_calibration
 
 from magfab import derive, load_spec
 from magfab.export import firmware, toolchain
-from magfab.readout.src.magfab_readout import calibration_json
+from magfab.readout.src.magfab_readout import calibration_json, float32_bound
 from magfab.readout.src.magfab_readout.calibration_json import AXES, THERMAL_REFERENCE_C, CalibrationError
 
 SETTINGS = {"deadline": None, "derandomize": True,
@@ -214,3 +215,44 @@ def test_firmware_and_validator_agree_on_generated_records(harness, image_settin
     for line, s in zip(lines[1:], samples):
         f = [float(v) for v in line.split()[1:4]]
         assert all(math.isfinite(v) for v in f), (s, line)
+
+
+def _float64_forces(doc: dict, bx: float, by: float, bz: float, t: float) -> tuple:
+    """docs/bundle.md section 2 in float64, the temperature correction first (tests/readout_support.ref_forces)."""
+    if not math.isnan(t) and "thermal" in doc:
+        th = doc["thermal"]
+        bx, by, bz = (b / (1.0 + th["coefficient_per_C"][axis] * (t - th["reference_C"]))
+                      for b, axis in zip((bx, by, bz), AXES))
+    return ref_forces(doc, bx, by, bz)
+
+
+@settings(max_examples=80, **SETTINGS)
+@given(doc=calibration(max_order=8, mls=False))
+def test_the_float32_forces_are_within_the_stated_bound_of_float64(harness, image_settings, doc):
+    """mf_calib.c's forces (float32, compiled for the host) against float64 ones of the same document, at the
+    region's vertices, corners and an interior grid and over the chip's temperature range, on generated records:
+    every difference within float32_bound.float32_error_N (what the firmware README states for a build), save
+    readings within direction_band of direction_min_uT."""
+    record = _record(doc, image_settings)
+    if record is None:
+        return
+    assume(not _near_edge(doc))
+    try:
+        checked = calibration_json.validate(copy.deepcopy(doc))
+    except CalibrationError:
+        return
+    bound_z, bound_xy = float32_bound.float32_error_N(checked)
+    band = float32_bound.direction_band(checked)
+    samples = [s for s in _samples(doc) if not band[0] <= math.hypot(s[0], s[1]) <= band[1]]
+    script = f"R {record.hex()}\n" + "".join("E {:.9g} {:.9g} {:.9g} {}\n".format(*s) for s in samples)
+    lines = _run(harness, script)
+    assert lines[0] == "L 0"
+    worst = 0.0
+    for line, s in zip(lines[1:], samples):
+        got = [float(v) for v in line.split()[1:4]]
+        truth = _float64_forces(doc, *(float(f"{x:.9g}") for x in s))
+        for axis, (g, w) in enumerate(zip(got, truth)):
+            bound = bound_z if axis == 2 else bound_xy
+            assert abs(g - w) <= bound, (axis, g, w, bound, s)
+            worst = max(worst, abs(g - w) / bound if bound > 0 else 0.0)
+    event(f"worst difference {worst:.0e} of the bound")

@@ -4,8 +4,8 @@ rate measured in simulated time.
 
 A wrong force is a frame without the chip-error flag whose counts differ from the field the model served (rounded
 at the build's configured gain and resolution) or whose forces differ from a float64 evaluation of the build's
-calibration.json at that field (readout_support.ref_forces, docs/bundle.md written out) by more than
-:data:`FORCE_TOL_N` plus :data:`FORCE_REL` of the force (the firmware evaluates in float32).
+calibration.json at that field (readout_support.ref_forces, docs/bundle.md written out) by more than the float32
+bound the firmware README states for that calibration (magfab_readout.float32_bound.float32_error_N).
 """
 
 from __future__ import annotations
@@ -25,10 +25,10 @@ from readout_support import ref_forces
 from simbus import Bus, HarnessUnavailable, build_library, read_intel_hex, steady
 
 from magfab.export.firmware import LOST_RETRY_US
+from magfab.readout.src.magfab_readout import calibration_json
+from magfab.readout.src.magfab_readout.float32_bound import float32_error_N
 
 FIELD_UT = (1200.0, -800.0, 20000.0)  # inside MagOne's calibrated region (test_streams_the_true_force checks)
-FORCE_TOL_N = 1e-5
-FORCE_REL = 1e-5
 SETTLE_US = 40_000  # boot to steady streaming, with margin (the first frame comes at about 15 ms)
 STARTUP_PHASES = 28  # EX, RT, NOP, three read-modify-verify register updates, SB, the first RM: 2 phases each
 
@@ -64,13 +64,14 @@ class Sim:
         counts = self.expected_counts(field)
         lsb = (self.build_info["lsb_xy_uT"], self.build_info["lsb_xy_uT"], self.build_info["lsb_z_uT"])
         truth = ref_forces(cal or self.cal, *(c * q for c, q in zip(counts, lsb)))
+        bound_z, bound_xy = float32_error_N(calibration_json.validate(cal or self.cal))
         bad = []
         for s in samples:
             if s.chip_error:
                 assert all(math.isnan(f) for f in s.force_N + s.B_uT), s
                 continue
-            off = max(abs(f - t) - FORCE_REL * abs(t) for f, t in zip(s.force_N, truth))
-            if s.counts != counts or not off <= FORCE_TOL_N:
+            off = [abs(f - t) for f, t in zip(s.force_N, truth)]
+            if s.counts != counts or not (off[0] <= bound_xy and off[1] <= bound_xy and off[2] <= bound_z):
                 bad.append(s)
         return bad
 
