@@ -48,9 +48,10 @@ __all__ = ["propose", "CANDIDATES", "LOCAL_SIGMA", "CATEGORY_SCALE", "MIN_DESIGN
 CANDIDATES = 1000
 #: The local steps' spread over the unit fractions.
 LOCAL_SIGMA = 0.1
-#: How far apart two silicones (or two tips) sit in the model's coordinates, against unit fractions: near enough
-#: that a pair's few designs borrow the others' trends, far enough that a pair's own designs decide its model (1.0
-#: did worse on the fingertip bench set's first three seeds: hypervolume ratios 0.84, 0.89, 0.95).
+#: How far apart two silicones (or two tips) sit in the model's coordinates, against physical coordinates scaled to
+#: their span: near enough that a pair's few designs borrow the others' trends, far enough that a pair's own designs
+#: decide its model (1.0 did worse on the fingertip bench set's first three seeds when the model was in the
+#: fractions: hypervolume ratios 0.84, 0.89, 0.95; not measured again in mm).
 CATEGORY_SCALE = 0.5
 #: The radial-basis fit's smoothing: the cheap models are deterministic, so almost an interpolation; a little keeps
 #: the fit well-posed where two designs nearly coincide.

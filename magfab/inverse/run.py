@@ -102,7 +102,7 @@ def design(targets_path: Path, out: Path | None = None, scheduler: str | None = 
             opened = open_study(targets, _storage(targets, folder))
         study = run_study(targets, base, _storage(targets, folder), c, lambda n, t: say("search", n, t), opened)
         trials = records(study)
-        picks = _near_front(trials, targets, lambda r: tuple(sorted(bench_point(r.point, base, targets).items())))
+        picks = _near_front(trials, targets, lambda r: _written(r, base, targets))
         screened = [trials[i] for i in picks]
         if targets.study.models.value == FE:  # the search ran the full chain already
             verified = screened
@@ -156,6 +156,15 @@ def _near_front(trials: list[Record], targets: Targets, design: Callable[[Record
     taken: set = set()
     return (_picks(trials, ok, targets, k - k_near, written, taken)
             + _picks(trials, near, targets, k_near, written, taken))
+
+
+def _written(r: Record, base, targets: Targets) -> tuple:
+    """The design a trial is written and verified as: its point on the printer's step (:func:`bench_point`), as
+    sorted items; the point as searched where the step cannot be taken (verify.built reports such a design)."""
+    try:
+        return tuple(sorted(bench_point(r.point, base, targets).items()))
+    except InputError:
+        return tuple(sorted(r.point.items()))
 
 
 def _near_feasible(r: Record) -> bool:
