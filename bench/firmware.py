@@ -116,7 +116,7 @@ def shipped(spec_path: Path | None, build_dir: Path | None) -> dict:
     simulated bus timed like a real one, at fields across the calibrated region, against the chip's conversions
     (simulated time); at the slowest field, where the cycle goes (a profile of the image, by function group)."""
     sys.path.insert(0, str(BENCH_DIR.parent / "tests" / "export"))
-    from simbus import IDLE, Bus, build_library, functions, region_fields, steady  # the harness
+    from simbus import Bus, build_library, functions, region_fields, steady  # the harness
 
     with tempfile.TemporaryDirectory(prefix="magfab-fw-rate-") as tmp:
         out = build_dir
@@ -145,7 +145,7 @@ def shipped(spec_path: Path | None, build_dir: Path | None) -> dict:
                 budget = r.budget_us(frames, symbols)
                 return {"field_uT": list(field), "rate_Hz": frames / r.seconds, "chip_Hz": r.chip_Hz,
                         "delivered": frames / r.conversions, "frames": frames, "cycle_us": per_frame_us,
-                        "busy_us": per_frame_us - budget[IDLE], "budget_us": budget}
+                        "busy_us": r.busy_us(frames, symbols), "budget_us": budget}
 
         rows = [run(f) for f in [(1200.0, -800.0, 20000.0), *region_fields(cal)]]  # the tests' field, the region
     rows.sort(key=lambda r: -r["busy_us"])  # the busiest processor first (the share delivered is printed beside it)

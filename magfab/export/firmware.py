@@ -245,10 +245,13 @@ def _eeprom_module():
 def _calibration_context(cal: Mapping[str, Any]) -> dict[str, Any]:
     """Validate a calibration.json dict (:func:`magfab.formats.calibration_json.validate`) and lay it out as the
     firmware evaluates it (the package's ``eeprom.layout``); what it cannot carry is a :class:`FirmwareError`."""
+    return _layout(calibration_json.validate(dict(cal) if isinstance(cal, Mapping) else cal))
+
+
+def _layout(checked: calibration_json.Checked) -> dict[str, Any]:
     ee = _eeprom_module()
-    c = calibration_json.validate(dict(cal) if isinstance(cal, Mapping) else cal)
     try:
-        return ee.layout(c)
+        return ee.layout(checked)
     except ee.EepromError as exc:
         raise FirmwareError(exc.key, exc.value, exc.allowed) from None
 
@@ -349,7 +352,8 @@ def _context(design: Design, calibration: Mapping[str, Any], generic: bool) -> d
     spec, recipe = design.spec, design.chip
     fw = spec.firmware
     chip = chip_config(design)
-    cal = _calibration_context(calibration)
+    checked = calibration_json.validate(dict(calibration))
+    cal = _layout(checked)
     ubrr, baud_error = _uart(fw.baud)
     settings = image_settings(design)
     twbr, twps, i2c_actual = twi_settings(fw.i2c_hz)
@@ -387,7 +391,7 @@ def _context(design: Design, calibration: Mapping[str, Any], generic: bool) -> d
         "tconv_ms": f"{chip.tconv_us / 1000:.3f}",
         "array": design.array is not None,  # an array's image reads its chips in turn, each read waited for
         "measured_rate": "" if design.array is not None else _measured_line(int(calibration.get("order", 0))),
-        "float32_bound": "" if design.array is not None else _float32_line(calibration),
+        "float32_bound": "" if design.array is not None else _float32_line(checked),
         "retry_us": settings["retry_us"], "exit_wait_us": settings["exit_wait_us"],
         "board_pullups": bool(spec.pcb.pullups),
         "hex_name": HEX_NAME, "eep_name": EEP_NAME,
@@ -477,10 +481,9 @@ def measured_rate() -> dict[str, Any] | None:
     return data if data.get("image_sha256") == hashlib.sha256(image).hexdigest() else None
 
 
-def _float32_line(calibration: Mapping[str, Any]) -> str:
+def _float32_line(checked: calibration_json.Checked) -> str:
     """The firmware README's sentence on how far its float32 forces can be from float64 ones of the build's
     calibration.json (:func:`float32_error_N`)."""
-    checked = calibration_json.validate(json.loads(json.dumps(calibration)))
     fz, fxy = float32_error_N(checked)
     lo, hi = direction_band(checked)
     near = (f"; it does not hold for a Br from {lo:.6g} to {hi:.6g} uT, about direction_min_uT, where one evaluation "

@@ -36,7 +36,7 @@ from .page import write_outputs
 from .pareto import front_mask, pick_for_verification, values_of
 from .result import DesignResult
 from .space import grid, latin_hypercube
-from .study import KEPT, Record, client, evaluate_all, open_study, records, run_study
+from .study import KEPT, Record, client, design_key, evaluate_all, open_study, records, run_study
 from .tables import rows, write_table
 from .targets import Models, Targets, load_targets
 from .verify import built
@@ -159,12 +159,13 @@ def _near_front(trials: list[Record], targets: Targets, design: Callable[[Record
 
 
 def _written(r: Record, base, targets: Targets) -> tuple:
-    """The design a trial is written and verified as: its point on the printer's step (:func:`bench_point`), as
-    sorted items; the point as searched where the step cannot be taken (verify.built reports such a design)."""
+    """The design a trial is written and verified as: the :func:`design_key` of its point on the printer's step
+    (:func:`bench_point`), or of the point as searched where the step cannot be taken (verify.built reports such a
+    design)."""
     try:
-        return tuple(sorted(bench_point(r.point, base, targets).items()))
+        return design_key(bench_point(r.point, base, targets))
     except InputError:
-        return tuple(sorted(r.point.items()))
+        return design_key(r.point)
 
 
 def _near_feasible(r: Record) -> bool:

@@ -281,7 +281,7 @@ def run_study(targets: Targets, base: Spec, storage: str | Path, dask_client,
         trial = study.ask()
         trial.set_user_attr(RUNNER, runner)
         point = space.suggest(trial)
-        key = _key(point)
+        key = design_key(point)
         earlier = next((a.source for a in order if a.key == key), key if key in known else None)
         if earlier is not None and repeats < REPEATS_PER_TRIAL * total:  # a design asked before: its result
             repeats += 1
@@ -373,7 +373,7 @@ def _told(study) -> dict[tuple, dict[str, Any]]:
     """The result each design the study has told carries (a resumed study's too), by the design's key."""
     from optuna.trial import TrialState
 
-    return {_key(t.user_attrs[POINT]): t.user_attrs[RESULT] for t in study.get_trials(
+    return {design_key(t.user_attrs[POINT]): t.user_attrs[RESULT] for t in study.get_trials(
         deepcopy=False, states=(TrialState.COMPLETE, TrialState.FAIL))
         if POINT in t.user_attrs and RESULT in t.user_attrs and t.user_attrs[RESULT].get("reason") != "interrupted"}
 
@@ -406,8 +406,8 @@ def _elite(trials: list, targets: Targets) -> list:
 
 
 def _seen(trials: list) -> set:
-    """The designs the study has asked (evaluated or in flight), as :func:`_key` s."""
-    return {_key(t.user_attrs[POINT]) for t in trials if POINT in t.user_attrs}
+    """The designs the study has asked (evaluated or in flight), as :func:`design_key` s."""
+    return {design_key(t.user_attrs[POINT]) for t in trials if POINT in t.user_attrs}
 
 
 def _model_step(study, space: Space, targets: Targets, n_first: int, trials: list) -> bool:
@@ -422,7 +422,7 @@ def _model_step(study, space: Space, targets: Targets, n_first: int, trials: lis
     seen = _seen(trials)
     params = propose(space, targets.directions(), [t.params for t in done], [t.values for t in done],
                      [[float(t.constraints.get(n, 0.0)) for n in names] for t in done],
-                     [t.params for t in _elite(done, targets)], lambda p: _key(space.point(p)) not in seen,
+                     [t.params for t in _elite(done, targets)], lambda p: design_key(space.point(p)) not in seen,
                      (targets.study.seed, len(trials)))
     if params is None:
         return False
@@ -450,13 +450,13 @@ def _refine(study, space: Space, targets: Targets, n_first: int, trials: list) -
         for name in (MAGNET_FRACTION, *FRACTIONS):
             if name in params:
                 params[name] = float(np.clip(float(params[name]) + sigma * rng.standard_normal(), 0.0, 1.0))
-        if _key(space.point(params)) not in seen:
+        if design_key(space.point(params)) not in seen:
             study.enqueue_trial(params)
             return True
     return False
 
 
-def _key(point: Mapping[str, Any]) -> tuple:
+def design_key(point: Mapping[str, Any]) -> tuple:
     """A design's identity: its point's items, in name order."""
     return tuple(sorted(point.items()))
 

@@ -14,7 +14,7 @@ from functools import partial
 
 import pytest
 from conftest import require_tool
-from simbus import BUS_BUSY, IDLE, Bus, functions, grouped, region_fields, steady
+from simbus import BUS_BUSY, Bus, functions, grouped, region_fields, steady
 from test_simbus import FIELD_UT, SETTLE_US, sim  # noqa: F401  (the harness and the build, made once)
 from test_simbus_reference import REF_ADDR, REF_FIELD, setup  # noqa: F401  (the records with a reference chip)
 
@@ -34,7 +34,7 @@ def _rate(sim, field, real: bool = True, eep=None, symbols=None) -> dict:  # noq
         decoder = sim.frames.Decoder()
         r = steady(bus, RUN_S, SETTLE_US, partial(sim.samples, decoder), profile=symbols is not None)
         assert decoder.stats.lost == 0 and decoder.stats.crc_errors == 0
-        busy = r.seconds * 1e6 / len(r.out) - r.budget_us(len(r.out), symbols)[IDLE] if r.profile else None
+        busy = r.busy_us(len(r.out), symbols) if r.profile else None
         return {"rate_Hz": len(r.out) / r.seconds, "chip_Hz": r.chip_Hz, "delivered": len(r.out) / r.conversions,
                 "byte_us": bus.byte_us, "steps": bus.timed_steps, "samples": r.out, "busy_us": busy}
 

@@ -305,6 +305,10 @@ class Steady:
         per_frame_us = self.seconds * 1e6 / frames
         return {k: v * per_frame_us for k, v in grouped(*self.profile, symbols).items()} if self.profile else {}
 
+    def busy_us(self, frames: int, symbols: list[tuple[int, int, str]]) -> float:
+        """The processor's busy time a frame (us): the frame's time less its :data:`IDLE` share of the profile."""
+        return self.seconds * 1e6 / frames - self.budget_us(frames, symbols)[IDLE]
+
 
 def steady(bus: Bus, seconds: float, settle_us: float, feed: Callable[[bytes], Any] = bytes,
            setup: Callable[[Bus], None] | None = None, profile: bool = False) -> Steady:

@@ -36,8 +36,8 @@ from .json_checks import FormatError, finite, is_finite, is_number
 __all__ = ["FORMAT", "FORCES", "INPUTS", "MAX_ORDER", "MLS_MAX_ORDER", "AXES", "THERMAL_MAX_PER_C",
            "THERMAL_REFERENCE_C", "THERMAL_MIN_DENOMINATOR", "INPUT_MAX", "FORCE_MAX_N", "MLS_MIN_BANDWIDTH",
            "CalibrationError", "Checked", "MLSPoints", "Thermal",
-           "calibration_sha256", "canonical_json", "check_formula", "cross", "loads", "monomials", "region_box",
-           "validate"]
+           "abs_terms", "calibration_sha256", "canonical_json", "check_formula", "cross", "loads", "monomials",
+           "region_box", "scaled_reach", "validate"]
 
 FORMAT = "magfab-calibration/1"
 FORCES = ("Fz_N", "Fr_N")
@@ -333,7 +333,7 @@ def _thermal_denominators(t: Thermal) -> None:
                                    f"rated {lo:g} to {hi:g} degC")
 
 
-def _reach(checked: Checked) -> tuple[float, float]:
+def scaled_reach(checked: Checked) -> tuple[float, float]:
     """The largest |u| and |v| over :func:`region_box`, each refused beyond :data:`INPUT_MAX`."""
     reach = []
     for k, (name, (lo, hi)) in enumerate(zip(INPUTS, region_box(checked))):
@@ -347,11 +347,17 @@ def _reach(checked: Checked) -> tuple[float, float]:
     return reach[0], reach[1]
 
 
+def abs_terms(checked: Checked, force: str, u: float, v: float) -> list:
+    """|c_m| u^i v^j for each monomial of ``force`` (u, v >= 0): their sum bounds the polynomial where |u| <= u and
+    |v| <= v."""
+    return [abs(c) * u ** i * v ** j for c, (i, j) in zip(checked.coefficients[force], checked.monomials)]
+
+
 def _force_bound(checked: Checked, reach: Point) -> None:
     """Sum |c_m| max(1, |u|)^i max(1, |v|)^j per force within :data:`FORCE_MAX_N` (:data:`FORCE_MAX_N`'s note)."""
     pu, pv = max(1.0, reach[0]), max(1.0, reach[1])
     for force in FORCES:
-        terms = [abs(c) * pu ** i * pv ** j for c, (i, j) in zip(checked.coefficients[force], checked.monomials)]
+        terms = abs_terms(checked, force, pu, pv)
         total = sum(terms)
         if not total <= FORCE_MAX_N:
             m = max(range(len(terms)), key=lambda n: terms[n])
@@ -386,7 +392,7 @@ def check_formula(checked: Checked) -> Checked:
     :class:`CalibrationError` naming the key that takes it out of bounds and what is allowed."""
     if checked.thermal is not None:
         _thermal_denominators(checked.thermal)
-    _force_bound(checked, _reach(checked))
+    _force_bound(checked, scaled_reach(checked))
     _mls_bounds(checked)
     return checked
 

@@ -30,10 +30,17 @@ near the valid region's edge different inside flags: there the bound does not ap
 
 from __future__ import annotations
 
-import math
-from typing import Sequence, Tuple
+from typing import Tuple
 
-from .calibration_json import FORCES, THERMAL_MIN_DENOMINATOR, THERMAL_REFERENCE_C, Checked, region_box
+from .calibration_json import (
+    FORCES,
+    THERMAL_MIN_DENOMINATOR,
+    THERMAL_REFERENCE_C,
+    Checked,
+    abs_terms,
+    region_box,
+    scaled_reach,
+)
 
 __all__ = ["UNIT", "float32_error_N", "direction_band", "gamma"]
 
@@ -61,10 +68,6 @@ def _field_error(checked: Checked) -> float:
     return (1.0 + e) * (1.0 + UNIT) / (1.0 - e_d) - 1.0
 
 
-def _sum_abs(coefficients: Sequence[float], monomials, u: float, v: float) -> float:
-    return math.fsum(abs(c) * u ** i * v ** j for c, (i, j) in zip(coefficients, monomials))
-
-
 def direction_band(checked: Checked) -> Tuple[float, float]:
     """The Br interval (uT) around ``direction_min_uT`` where float32 and float64 may disagree on whether a lateral
     force is given (Br's relative error either side)."""
@@ -79,26 +82,21 @@ def float32_error_N(checked: Checked) -> Tuple[float, float]:
     ``direction_min_uT`` (:func:`direction_band`) apart."""
     e_b = _field_error(checked)
     e_br = (1.0 + e_b) * (1.0 + UNIT) ** 2 - 1.0  # two squares, their sum, the root (which halves its input's)
-    (zlo, zhi), (rlo, rhi) = region_box(checked)
+    reach = scaled_reach(checked)
     errors = []
-    reach = []
-    for k, (lo, hi) in enumerate(((zlo, zhi), (rlo, rhi))):
-        c, s = checked.center[k], checked.scale[k]
-        r = max(abs(lo - c), abs(hi - c)) / s
-        b = max(abs(lo), abs(hi))
+    for k, (lo, hi) in enumerate(region_box(checked)):
+        c, s, b = checked.center[k], checked.scale[k], max(abs(lo), abs(hi))
         # (B - c) x (1 / s): B's error and c's rounding (absolute), then the subtraction, 1 / s and the product
-        errors.append(((b * (e_br if k else e_b) + abs(c) * UNIT) / s) * (1.0 + gamma(3)) + r * gamma(3))
-        reach.append(r)
+        errors.append(((b * (e_br if k else e_b) + abs(c) * UNIT) / s) * (1.0 + gamma(3)) + reach[k] * gamma(3))
     (ru, rv), (du, dv) = reach, errors
     n = checked.order
     out = {}
     for force in FORCES:
-        coefficients = checked.coefficients[force]
-        at = _sum_abs(coefficients, checked.monomials, ru, rv)
-        past = _sum_abs(coefficients, checked.monomials, ru + du, rv + dv)
+        at = sum(abs_terms(checked, force, ru, rv))
+        past = sum(abs_terms(checked, force, ru + du, rv + dv))
         tare = abs(checked.tare_N[FORCES.index(force)])
         # propagated input error + the Horner evaluation + the tare's float32 and its subtraction
         out[force] = (past - at) + gamma(2 * n + 3) * past + UNIT * tare + UNIT * (past + tare)
-    fr_max = _sum_abs(checked.coefficients["Fr_N"], checked.monomials, ru + du, rv + dv) + abs(checked.tare_N[1])
+    fr_max = sum(abs_terms(checked, "Fr_N", ru + du, rv + dv)) + abs(checked.tare_N[1])
     ratio = (1.0 + e_b) * (1.0 + UNIT) ** 2 / (1.0 - e_br) - 1.0  # Bx / Br: the division and the product
     return out["Fz_N"], out["Fr_N"] * (1.0 + ratio) + fr_max * ratio
