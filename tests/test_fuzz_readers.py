@@ -703,6 +703,8 @@ def valid_stream(frames, ident: bytes) -> bytes:
     out += frames.encode_text_line(6, 9000, 2, (math.nan,) * 3, (math.nan,) * 3, None, fault=0x0104)
     out += frames.encode_info_line("magone", "0123456789abcdef", 0, 2, 0, 2)
     out += frames.encode_field_frame(1, 7, 9100, 0, (1, 2, 3), 46000)
+    out += frames.encode_cycle_frame(8, 9200, [(0, 0, (1, 2, 3), 46000), (2, 350, (0, 0, 0), 0x0101),
+                                               (8, 700, (-4, 5, -6), 46100)])
     out += frames.encode_field_line(1, 7, 9100, 0, (1.5, 2.5, 3.5), 24.0)
     for body in (b"W,0,16,0,0", b"R,960," + ident[:32].hex().upper().encode()):
         out += body + frames.line_checksum(body) + b"\n"
@@ -718,6 +720,15 @@ def _sources(frames, stream: bytes) -> tuple[list[tuple], list[bytes]]:
             frame = stream[m.start():m.start() + length]
             if len(frame) == length and frames.crc16_ccitt_false(frame[2:-2]) == struct.unpack("<H", frame[-2:])[0]:
                 binary.append(struct.unpack(layout, frame[2:-2]))
+        head = stream[m.start():m.start() + 9]  # a cycle frame: each chip's reading as a field frame's fields
+        if len(head) == 9 and head[2] == frames.FRAME_CYCLE and 1 <= head[8] <= 16:
+            frame = stream[m.start():m.start() + 11 + 11 * head[8]]
+            if len(frame) == 11 + 11 * head[8] and frames.crc16_ccitt_false(frame[2:-2]) == struct.unpack(
+                    "<H", frame[-2:])[0]:
+                seq, t_us = head[3], struct.unpack_from("<I", head, 4)[0]
+                for k in range(head[8]):
+                    status, dt, bx, by, bz, t_raw = struct.unpack_from("<BH3hH", frame, 9 + 11 * k)
+                    binary.append((frames.FRAME_FIELD, seq, status, (t_us + dt) & 0xFFFFFFFF, k, bx, by, bz, t_raw))
     lines = []
     for line in stream.split(b"\n"):
         for start in (m.start() for m in re.finditer(rb"[FIBWR],", line)):
@@ -740,8 +751,8 @@ def check_decoded(readout, stream: bytes, items: list) -> None:
                                                      *item.counts, item.temperature_raw) for f in binary)
             if item.taxel or (math.isnan(item.force_N[0]) and not item.chip_error and not item.full_scale):
                 assert field, item  # an array's field frame
-            else:  # a force frame; one at full scale has no force, as a field frame of taxel 0 at full scale
-                assert force or (item.full_scale and field), item
+            else:  # a force frame; one at full scale or with a chip error has no force, as taxel 0's field reading
+                assert force or ((item.full_scale or item.chip_error) and field), item
         elif isinstance(item, frames.Sample):
             head = (b"B,%d,%d,%d,%d," % (item.taxel, item.seq, item.t_us, item.status) if item.taxel else
                     b"F,%d,%d,%d," % (item.seq, item.t_us, item.status))
@@ -795,6 +806,8 @@ def bad_crc_stream(draw, frames, valid: bytes) -> bytes:
                                 (draw(st.sampled_from([0.5, -0.0, 1e30, math.inf, math.nan, 999.0, 1001.0])), 0.0,
                                  1.0)),
             frames.encode_field_frame(draw(st.integers(0, 255)), 3, 100, draw(st.integers(0, 255)), (1, 2, 3), 4),
+            frames.encode_cycle_frame(3, 100, [(draw(st.integers(0, 255)), 40 * k, (1, k, 3), 4)
+                                               for k in range(draw(st.integers(0, 17)))]),
             frames.encode_text_line(3, 100, draw(st.integers(0, 255)), (0.1, 1e4, 0.2), (1e7, 0.0, 1.0), 25.0),
             frames.encode_info_line("magone", "0123456789abcdef", 0, 2, 0, 2, draw(st.integers(1, 16))),
             b"R,0,A55A01\n", valid[:draw(st.integers(0, len(valid)))]]))
@@ -827,7 +840,8 @@ def test_the_decoder_reads_every_cut_of_a_valid_stream(readout):
     for cut in range(len(valid) + 1):
         decode(readout, valid[:cut], [])
     items = readout.frames.Decoder().feed(valid)
-    assert len(items) == 18  # 5 force frames and a chip error, 7 lines, the info line, 2 field samples, 2 replies
+    # 5 force frames and a chip error, 7 lines, the info line, 2 field samples, a cycle frame's 3 samples, 2 replies
+    assert len(items) == 21
 
 
 class Exhausted(Exception):

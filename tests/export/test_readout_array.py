@@ -325,7 +325,7 @@ def test_a_warming_array_is_corrected_taxel_by_taxel(pkg, array, strip):
         with pkg.Device(transport=sim) as device:
             reader = pkg.ArrayReader(device, calibration)
             reader.zero(10)
-            return [c for c in reader.read(200) if c.time_s > 0.5]
+            return [c for c in reader.read(300) if c.time_s > 0.5]
 
     hot = warmed(array)
     assert len(hot) > 20 and all(c.complete for c in hot)

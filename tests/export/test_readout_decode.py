@@ -27,7 +27,8 @@ def readout(pkg):  # noqa: F811 - pkg: the fixture imported from test_readout.py
 
 def reference_decoder(readout):
     """The decoder before it was made linear (magfab 56aa429): the same frame and line parsers, its own feed loop,
-    candidate search and printable test, copied verbatim."""
+    candidate search and printable test, copied verbatim, save the cycle frame's length (read from its head, a head
+    of no or too many chips skipped as noise), which came later."""
     frames = readout.frames
 
     def printable(chunk: bytes) -> bool:
@@ -52,7 +53,14 @@ def reference_decoder(readout):
                 if buf.startswith(frames.SYNC, i):
                     if len(buf) - i < 3:
                         break
-                    length = frames.frame_length(buf[i + 2])
+                    cycle = buf[i + 2] == frames.FRAME_CYCLE
+                    if cycle and len(buf) - i < frames.CYCLE_HEAD_LENGTH:
+                        break
+                    if cycle and not 1 <= buf[i + 8] <= frames.MAX_CYCLE_CHIPS:
+                        stats.skipped_bytes += 1
+                        i += 1
+                        continue
+                    length = frames.frame_length(buf[i + 2], buf[i + 8] if cycle else 1)
                     if len(buf) - i < length:
                         break
                     step = self._frame(buf[i:i + length], out)
@@ -122,6 +130,7 @@ def _items(readout):
     return st.one_of(
         st.builds(f.encode_frame, _U8, _U32, _STATUS, counts, _U16, forces),
         st.builds(f.encode_field_frame, _U8, _U8, _U32, _STATUS, counts, _U16),
+        st.builds(f.encode_cycle_frame, _U8, _U32, st.lists(st.tuples(_STATUS, _U16, counts, _U16), max_size=17)),
         st.builds(f.encode_text_line, _U8, _U32, _STATUS, forces,
                   st.tuples(_FIELD, _FIELD, _FIELD), st.none() | st.floats(-40, 125), _U16),
         st.builds(f.encode_field_line, _U8, _U8, _U32, _STATUS, st.tuples(_FIELD, _FIELD, _FIELD),

@@ -1,5 +1,5 @@
-"""A simulated array: an array image's field frames (one per chip per cycle, docs/bundle.md section 3) from a press
-pattern, for trying an array's readout without hardware.
+"""A simulated array: an array image's cycle frames (every chip's reading of a cycle in one, docs/bundle.md section 3)
+from a press pattern, for trying an array's readout without hardware.
 
 The fields are not computed from the magnets here (the package carries no field solver): :class:`ArrayPressPattern`
 moves one magnet at a time and gives every chip's reading through array.json's own tables, the forward model its
@@ -9,7 +9,8 @@ it (``array_json.Compensator``: the exact axial tables and the spread moment). S
 almost nothing of a pressed taxel on its neighbours here; magfab's tests feed the readout fields from the exact model
 instead. Anything with ``fields(t_s) -> [(Bx, By, Bz) uT per taxel]`` can stand in for the pattern.
 
-The cycle rate is the chip's conversion rate or what the serial link carries of N field frames, whichever is lower.
+The cycle rate is the chip's conversion rate or what the serial link carries of cycle frames of N chips, whichever is
+lower.
 """
 
 from __future__ import annotations
@@ -19,11 +20,11 @@ from typing import List, Optional, Protocol, Sequence, Tuple
 
 from . import _build, eeprom
 from .frames import (
-    FIELD_FRAME_LENGTH,
     STATUS_CHIP_ERROR,
     STATUS_FULL_SCALE,
     STATUS_RECOVERED,
-    encode_field_frame,
+    cycle_frame_length,
+    encode_cycle_frame,
     encode_field_line,
     encode_info_line,
     temperature_C,
@@ -38,8 +39,8 @@ Vector = Tuple[float, float, float]
 
 def cycle_rate_Hz(taxels: int, baud: int = _build.BAUD) -> float:
     """Cycles a second: one conversion per cycle (every chip converts at once), unless the link (10 bits a byte)
-    carries fewer cycles of ``taxels`` binary field frames."""
-    return min(_build.SAMPLE_RATE_HZ, baud / 10.0 / (taxels * FIELD_FRAME_LENGTH))
+    carries fewer cycle frames of ``taxels`` chips."""
+    return min(_build.SAMPLE_RATE_HZ, baud / 10.0 / cycle_frame_length(taxels))
 
 
 def _interp(x: float, xs: Sequence[float], ys: Sequence[float]) -> Tuple[int, float]:
@@ -184,8 +185,8 @@ class _ArrayPattern(Protocol):
 class SimulatedArray(SimulatedDevice):
     """Stands in for a serial port with an array's image behind it, as :class:`~magfab_readout.SimulatedDevice` does
     for a single taxel (whose serial side it shares: ``read``, ``write``, ``close``, pacing, the commands), sending
-    one cycle of field frames where a single taxel sends one force frame; the info line ends with the number of
-    taxels. Faults for testing: ``corrupt_fraction`` of the frames get a bit flipped after the CRC; every
+    a cycle frame of every chip where a single taxel sends one force frame; the info line ends with the number of
+    taxels. Faults for testing: ``corrupt_fraction`` of the cycle frames get a bit flipped after the CRC; every
     ``chip_error_every``-th cycle the chip of taxel ``chip_error_taxel`` reports a chip error (then a recovered
     flag). ``chunk`` is in cycles; ``rate_Hz`` cycles a second (default :func:`cycle_rate_Hz`). ``temperature`` and
     ``thermal_per_C`` as the single taxel's: every chip reads that temperature and every magnet's field follows it."""
@@ -235,23 +236,36 @@ class SimulatedArray(SimulatedDevice):
         place(grams, taxel)
 
     def _sample_bytes(self, c: int) -> bytes:
-        """Cycle ``c``'s frames, every chip in taxel order (the single taxel's one frame per sample)."""
+        """Cycle ``c``'s bytes: its cycle frame (every chip in taxel order), or a field line per chip in text mode."""
         fields = self.pattern.fields(c / self.rate_Hz)
-        return b"".join(self._frame(c, k, fields[k]) for k in range(self.n))
-
-    def _frame(self, c: int, k: int, B: Sequence[float]) -> bytes:
-        t_us = (c * self.period_us + k * (self.period_us // (2 * self.n))) & 0xFFFFFFFF
         seq = c & 0xFF
+        readings = [self._reading(c, k, fields[k]) for k in range(self.n)]
+        lsb = (_build.LSB_XY_UT, _build.LSB_XY_UT, _build.LSB_Z_UT)
+        if self.text:
+            nan = (math.nan, math.nan, math.nan)
+            return b"".join(
+                encode_field_line(k, seq, t_us, status, nan, None, word) if status & STATUS_CHIP_ERROR else
+                encode_field_line(k, seq, t_us, status, (counts[0] * lsb[0], counts[1] * lsb[1], counts[2] * lsb[2]),
+                                  temperature_C(word) if _build.TEMPERATURE_ENABLED else None)
+                for k, (t_us, status, counts, word) in enumerate(readings))
+        t0 = readings[0][0]
+        frame = encode_cycle_frame(seq, t0, [(status, t_us - t0, counts, word)
+                                             for t_us, status, counts, word in readings])
+        if self.corrupt_fraction and self._faults.random() < self.corrupt_fraction:
+            at = self._faults.randrange(2, len(frame))
+            frame = frame[:at] + bytes([frame[at] ^ (1 << self._faults.randrange(8))]) + frame[at + 1:]
+        return frame
+
+    def _reading(self, c: int, k: int, B: Sequence[float]) -> Tuple[int, int, Tuple[int, int, int], int]:
+        """Chip ``k``'s reading in cycle ``c``: (its read time, status, counts, temperature word; on a chip error the
+        fault word and zero counts)."""
+        t_us = (c * self.period_us + k * (self.period_us // (2 * self.n))) & 0xFFFFFFFF
         status = STATUS_RECOVERED if self._recovered_taxel[k] else 0
         self._recovered_taxel[k] = False
-        nan = float("nan")
         if (self.chip_error_every and k == self.chip_error_taxel
                 and c % self.chip_error_every == self.chip_error_every - 1):
             self._recovered_taxel[k] = True
-            status |= STATUS_CHIP_ERROR
-            if self.text:
-                return encode_field_line(k, seq, t_us, status, (nan, nan, nan), None, SIMULATED_FAULT)
-            return encode_field_frame(k, seq, t_us, status, (0, 0, 0), SIMULATED_FAULT)
+            return t_us, status | STATUS_CHIP_ERROR, (0, 0, 0), SIMULATED_FAULT
         T = self.temperature(t_us / 1e6)  # every chip and magnet at the same temperature, the field following it
         B = self._at_temperature(B, T)
         lsb = (_build.LSB_XY_UT, _build.LSB_XY_UT, _build.LSB_Z_UT)
@@ -260,13 +274,4 @@ class SimulatedArray(SimulatedDevice):
                   _clamp16(B[2] / lsb[2] + self._noise.gauss(0.0, self.noise_lsb)))
         if max(abs(x) for x in counts) >= _build.FULL_SCALE_COUNTS:
             status |= STATUS_FULL_SCALE
-        t_raw = _temperature_raw(T)
-        if self.text:
-            temp = temperature_C(t_raw) if _build.TEMPERATURE_ENABLED else None
-            return encode_field_line(k, seq, t_us, status, (counts[0] * lsb[0], counts[1] * lsb[1], counts[2] * lsb[2]),
-                                     temp)
-        frame = encode_field_frame(k, seq, t_us, status, counts, t_raw)
-        if self.corrupt_fraction and self._faults.random() < self.corrupt_fraction:
-            at = self._faults.randrange(2, len(frame))
-            frame = frame[:at] + bytes([frame[at] ^ (1 << self._faults.randrange(8))]) + frame[at + 1:]
-        return frame
+        return t_us, status, counts, _temperature_raw(T)

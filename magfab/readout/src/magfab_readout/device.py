@@ -31,8 +31,8 @@ CRC_MIN_ATTEMPTS = 100  # below this a handful of errors (the boot, a glitch) wo
 #: The environment variable naming the serial port to use when none is given (``Device(port=None)``, ``--port``).
 PORT_VARIABLE = "MAGFAB_READOUT_PORT"
 #: An array build's chips, 7-bit I2C addresses in taxel order (build.json's image settings); () for a single taxel.
-#: Its firmware sends one field frame per chip per cycle (``Sample.taxel``, ``force_N`` NaN: the host computes the
-#: forces) and its info line ends with the number of chips.
+#: Its firmware sends one cycle frame of every chip's reading a cycle (a ``Sample`` each, ``Sample.taxel``, ``force_N``
+#: NaN: the host computes the forces) and its info line ends with the number of chips.
 TAXEL_ADDRESSES = tuple(int(a) for a in _build.IMAGE_SETTINGS.get("taxel_addresses", ()))
 #: Taxels the firmware reads: 1 for a single taxel.
 TAXELS = len(TAXEL_ADDRESSES) or 1

@@ -17,8 +17,9 @@ with ``,<fault>`` (the fault word in decimal) before the ``*``; info line:
 ``XXXX`` is the CRC-16/CCITT-FALSE of the bytes before the ``*`` in four upper-case hex digits (as NMEA's
 ``*hh``): a person still reads the line, a script checks it.
 
-An array's image sends a field frame (type 0x02, 20 bytes) per chip per cycle instead: the taxel's field, no
-force (the host computes each taxel's force from every taxel's field, docs/bundle.md section 5)::
+An earlier array image sent a field frame (type 0x02, 20 bytes) per chip per cycle instead of force frames: the
+taxel's field, no force (the host computes each taxel's force from every taxel's field, docs/bundle.md section
+5)::
 
     0  2  sync 0xA5 0x5A          10 6  Bx, By, Bz raw counts (int16, RES offsets removed)
     2  1  frame type 0x02         16 2  temperature raw (uint16), the fault word on a chip-error frame
@@ -27,7 +28,17 @@ force (the host computes each taxel's force from every taxel's field, docs/bundl
     5  4  time, us (uint32): when this chip was read
     9  1  taxel index
 
-Every frame of one cycle carries the same sequence number; text line
+Every frame of one cycle carries the same sequence number. The array image of this package sends one cycle frame
+(type 0x03) a cycle instead, every chip's reading behind one head and one CRC (11 bytes a chip against 20)::
+
+    0  2  sync 0xA5 0x5A          8  1  chips n (1..16)
+    2  1  frame type 0x03         9  11 per chip, in taxel order: status flags (1), its read time after the head's
+    3  1  sequence (per cycle)          (uint16 us), Bx, By, Bz raw counts (int16), temperature raw (uint16), the
+    4  4  time, us (uint32): when         fault word on a chip-error reading
+          the cycle's first chip   9+11n 2 CRC-16/CCITT-FALSE over bytes 2 .. 8+11n
+          was read
+
+It decodes to the same samples as n field frames. Text line
 ``B,<taxel>,<seq>,<t_us>,<status>,<Bx_uT>,<By_uT>,<Bz_uT>,<T_C>*XXXX`` (``,<fault>`` before the ``*`` on a chip
 error); an array's info line ends with ``,<taxels>``.
 
@@ -45,17 +56,33 @@ import binascii
 import math
 import re
 import struct
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Callable, Dict, List, Optional, Tuple, Union
 
 from . import _build
+from .readings import (
+    FAULT_STAGES,
+    FAULTS,
+    STATUS_CHIP_ERROR,
+    STATUS_FULL_SCALE,
+    STATUS_OUTSIDE_REGION,
+    STATUS_RECOVERED,
+    DeviceInfo,
+    EepromReply,
+    Sample,
+    fault_name,
+    full_scale_name,
+    reading_fault,
+    temperature_C,
+)
 
 __all__ = [
     "SYNC", "FRAME_LENGTH", "FRAME_FORCE", "STATUS_OUTSIDE_REGION", "STATUS_CHIP_ERROR", "STATUS_FULL_SCALE",
     "STATUS_RECOVERED", "FORCE_LIMIT_N", "FIELD_LIMIT_UT", "Sample", "DeviceInfo", "DecoderStats", "Decoder",
     "crc16_ccitt_false", "line_checksum", "encode_frame", "encode_text_line", "encode_info_line", "decode_frames",
     "temperature_C", "FAULTS", "FAULT_STAGES", "fault_name", "full_scale_name", "reading_fault", "FRAME_FIELD",
-    "FIELD_FRAME_LENGTH", "encode_field_frame",
+    "FIELD_FRAME_LENGTH", "encode_field_frame", "FRAME_CYCLE", "CYCLE_HEAD_LENGTH", "CYCLE_CHIP_LENGTH",
+    "MAX_CYCLE_CHIPS", "encode_cycle_frame", "cycle_frame_length",
     "encode_field_line", "frame_length",
 ]
 
@@ -64,22 +91,16 @@ FRAME_LENGTH = 31
 FRAME_FORCE = 0x01
 FRAME_FIELD = 0x02  # an array's: one chip's field, the taxel index, no force
 FIELD_FRAME_LENGTH = 20
-STATUS_OUTSIDE_REGION = 0x01  # the reading is outside the calibrated region: the force is extrapolated
-STATUS_CHIP_ERROR = 0x02  # NACK, ERROR bit, wrong byte count or timeout; the forces are NaN
-STATUS_FULL_SCALE = 0x04  # a field axis is at the chip's full scale
-STATUS_RECOVERED = 0x08  # the chip was reset since the last frame
+FRAME_CYCLE = 0x03  # an array's: every chip's field of one cycle, one head and one CRC
+CYCLE_HEAD_LENGTH = 9
+CYCLE_CHIP_LENGTH = 11
+MAX_CYCLE_CHIPS = 16  # the firmware's MF_MAX_TAXELS: a head claiming more is noise
 MAX_LINE = 200  # longest text or info line accepted, bytes
 #: Largest |force| a sample may carry, N: 1 kN (100 kgf) is far past what a tactile tip's elastomer survives,
 #: so a larger value is a fault, never a reading (the scan CSV's band, magfab/formats/scan_csv.py).
 FORCE_LIMIT_N = 1000.0
 #: Largest |field| a text line may carry, uT: 1 T is past any magnetometer chip's full scale.
 FIELD_LIMIT_UT = 1.0e6
-
-#: The low byte of a fault word: the firmware's error (mf_errors.h, MF_E_* negated).
-FAULTS = {1: "nack", 2: "bus error", 3: "bus timeout", 4: "chip ERROR bit", 5: "byte count", 6: "chip reset",
-          7: "chip mode", 8: "register verify", 9: "transfer too long", 10: "no valid calibration"}
-#: The high byte of a fault word: where it struck (mf_sample.h, MF_STAGE_*).
-FAULT_STAGES = {1: "read", 2: "start", 3: "eeprom"}
 
 _INT = re.compile(r"[0-9]{1,10}")
 _LINE_STARTS = (b"F,", b"I,", b"W,", b"R,", b"B,")
@@ -94,9 +115,10 @@ _scan_hook: Optional[Callable[[int], None]] = None
 
 _BODY = struct.Struct("<BBBI3hH3f")  # bytes 2..28: type, seq, status, time, counts, temperature, forces
 _FIELD_BODY = struct.Struct("<BBBIB3hH")  # bytes 2..17: type, seq, status, time, taxel, counts, temperature
+_CYCLE_HEAD = struct.Struct("<BBIB")  # bytes 2..8: type, seq, time, chips
+_CYCLE_CHIP = struct.Struct("<BH3hH")  # per chip: status, time after the head's, counts, temperature
 _CRC = struct.Struct("<H")
-_FLAG_LETTERS = ((STATUS_OUTSIDE_REGION, "o"), (STATUS_CHIP_ERROR, "E"), (STATUS_FULL_SCALE, "S"),
-                 (STATUS_RECOVERED, "R"))
+
 
 
 def crc16_ccitt_false(data: bytes) -> int:
@@ -116,141 +138,6 @@ def _checked_body(raw: bytes) -> Optional[bytes]:
     if m is None or line_checksum(m.group(1)) != b"*" + m.group(2):
         return None
     return m.group(1)
-
-
-def temperature_C(raw: int) -> float:
-    """Chip temperature in degC from the raw 16-bit reading."""
-    return 25.0 + (raw - _build.TEMPERATURE_RAW_25C) / _build.TEMPERATURE_LSB_PER_C
-
-
-def fault_name(word: Optional[int]) -> Optional[str]:
-    """A fault word as words, e.g. ``'nack at read'`` (unknown codes by number); None for None or 0."""
-    if not word:
-        return None
-    error, stage = word & 0xFF, word >> 8
-    return "{} at {}".format(FAULTS.get(error, f"error {error}"),
-                             FAULT_STAGES.get(stage, f"stage {stage}"))
-
-
-def reading_fault(status: int, fault: Optional[int], counts: Optional[Tuple[int, int, int]]) -> Optional[str]:
-    """The fault a reading carries, as words: for an axis at the chip's full scale (without a chip error) which
-    axes (:func:`full_scale_name`), else the firmware's fault word (:func:`fault_name`)."""
-    if status & STATUS_FULL_SCALE and not status & STATUS_CHIP_ERROR:
-        return full_scale_name(counts)
-    return fault_name(fault)
-
-
-def full_scale_name(counts: Optional[Tuple[int, int, int]]) -> str:
-    """A full-scale sample's fault, naming the axes at the chip's full scale where the raw counts are known (binary
-    frames): e.g. ``'full scale on Bx+Bz'``; ``'full scale'`` from a text line."""
-    if counts is None:
-        return "full scale"
-    axes = [name for name, c in zip(("Bx", "By", "Bz"), counts) if abs(c) >= _build.FULL_SCALE_COUNTS]
-    return "full scale on " + "+".join(axes) if axes else "full scale"
-
-
-def flag_letters(status: int) -> str:
-    """Status flags as four letters, '-' where clear: o outside region, E chip error, S full scale, R recovered."""
-    return "".join(letter if status & bit else "-" for bit, letter in _FLAG_LETTERS)
-
-
-@dataclass(frozen=True)
-class Sample:
-    """One sample from the device.
-
-    ``B_uT`` is (Bx, By, Bz) in microtesla; ``force_N`` is (Fx, Fy, Fz) in newton as the firmware computed it,
-    minus the host's zero offset when one is set (``device_force_N`` keeps the firmware's value); both are NaN
-    when the chip-error bit is set (the sample is kept for its sequence number, time and flags) and when an axis is
-    at the chip's full scale (a clipped field is no force; ``B_uT`` and ``counts`` keep the reading, and
-    :attr:`fault_name` names the axes);
-    ``counts`` and ``temperature_raw`` are the raw chip readings (binary frames only); ``time_s`` is the
-    device time since the first sample of a :class:`~magfab_readout.Device` stream (None from the decoder);
-    ``fault`` is the fault word of a chip-error sample (:func:`fault_name`, :attr:`fault_name`), else None;
-    ``taxel`` the index of the chip an array's field frame came from (0 for a single taxel's force frames, whose
-    ``force_N`` is NaN: the host computes an array's forces).
-    """
-
-    seq: int
-    t_us: int
-    status: int
-    B_uT: Tuple[float, float, float]
-    force_N: Tuple[float, float, float]
-    temperature_C: Optional[float]
-    source: str  # "binary" or "text"
-    counts: Optional[Tuple[int, int, int]] = None
-    temperature_raw: Optional[int] = None
-    time_s: Optional[float] = None
-    device_force_N: Optional[Tuple[float, float, float]] = field(default=None, compare=False)
-    fault: Optional[int] = None
-    taxel: int = 0
-
-    def __post_init__(self) -> None:
-        if self.device_force_N is None:
-            object.__setattr__(self, "device_force_N", self.force_N)
-
-    @property
-    def outside_region(self) -> bool:
-        """Status bit 0: the reading is outside the calibrated (Bz, Br) region."""
-        return bool(self.status & STATUS_OUTSIDE_REGION)
-
-    @property
-    def chip_error(self) -> bool:
-        """Status bit 1: the chip failed to give this sample; the forces are NaN."""
-        return bool(self.status & STATUS_CHIP_ERROR)
-
-    @property
-    def full_scale(self) -> bool:
-        """Status bit 2: a field axis is at the chip's full scale."""
-        return bool(self.status & STATUS_FULL_SCALE)
-
-    @property
-    def recovered(self) -> bool:
-        """Status bit 3: the chip was reset since the last frame."""
-        return bool(self.status & STATUS_RECOVERED)
-
-    @property
-    def fault_name(self) -> Optional[str]:
-        """What failed and where, e.g. ``'chip reset at read'``, or for a sample at the chip's full scale which axes
-        (``'full scale on Bz'``); None for a good sample."""
-        return reading_fault(self.status, self.fault, self.counts)
-
-    @property
-    def flags(self) -> str:
-        """The status as letters (see :func:`flag_letters`)."""
-        return flag_letters(self.status)
-
-
-@dataclass(frozen=True)
-class DeviceInfo:
-    """The firmware's answer to 'i': which spec and calibration it was built with, and the chip settings."""
-
-    spec_name: str
-    calibration_hash: str  # first 16 hex digits of the calibration's sha256
-    gain_sel: int
-    resolution: int
-    osr: int
-    dig_filt: int
-    line: str
-    taxels: int = 1  # an array's image: the number of chips it reads
-
-    @property
-    def settings(self) -> Tuple[int, int, int, int]:
-        """(gain_sel, resolution, osr, dig_filt)."""
-        return self.gain_sel, self.resolution, self.osr, self.dig_filt
-
-
-@dataclass(frozen=True)
-class EepromReply:
-    """The firmware's answer to an EEPROM command (docs/bundle.md section 4): ``kind`` 'W' (a write: ``status``
-    0 written, 1 bad CRC, 2 outside the EEPROM; ``record`` 0 when the calibration record is now valid, 10 when
-    not) or 'R' (a read: ``data``)."""
-
-    kind: str
-    address: int
-    length: int = 0
-    status: int = 0
-    record: int = 0
-    data: bytes = b""
 
 
 @dataclass
@@ -299,8 +186,25 @@ def encode_field_frame(taxel: int, seq: int, t_us: int, status: int, counts: Tup
     return SYNC + body + _CRC.pack(crc16_ccitt_false(body))
 
 
-def frame_length(kind: int) -> int:
-    """Bytes of a binary frame of type ``kind`` (an unknown type is checked as a force frame's length)."""
+def encode_cycle_frame(seq: int, t_us: int, chips: List[Tuple[int, int, Tuple[int, int, int], int]]) -> bytes:
+    """One cycle frame of an array's image: ``chips`` in taxel order, each (status, its read time after ``t_us``,
+    counts, temperature word; on a chip error the fault word), exactly as the firmware sends it."""
+    body = _CYCLE_HEAD.pack(FRAME_CYCLE, seq & 0xFF, t_us & 0xFFFFFFFF, len(chips)) + b"".join(
+        _CYCLE_CHIP.pack(status & 0xFF, min(max(int(dt), 0), 0xFFFF), int(c[0]), int(c[1]), int(c[2]),
+                         int(t_raw) & 0xFFFF) for status, dt, c, t_raw in chips)
+    return SYNC + body + _CRC.pack(crc16_ccitt_false(body))
+
+
+def cycle_frame_length(chips: int) -> int:
+    """Bytes of a cycle frame of ``chips`` chips."""
+    return CYCLE_HEAD_LENGTH + CYCLE_CHIP_LENGTH * chips + 2
+
+
+def frame_length(kind: int, chips: int = 1) -> int:
+    """Bytes of a binary frame of type ``kind`` (a cycle frame's: of ``chips`` chips, its byte 8; an unknown type is
+    checked as a force frame's length)."""
+    if kind == FRAME_CYCLE:
+        return cycle_frame_length(chips)
     return FIELD_FRAME_LENGTH if kind == FRAME_FIELD else FRAME_LENGTH
 
 
@@ -385,9 +289,13 @@ class Decoder:
             stats.skipped_bytes += j - i
             i = j
             if buf.startswith(SYNC, i):
-                if len(buf) - i < 3:
+                if len(buf) - i < (CYCLE_HEAD_LENGTH if buf[i + 2:i + 3] == bytes([FRAME_CYCLE]) else 3):
                     break
-                length = frame_length(buf[i + 2])
+                if buf[i + 2] == FRAME_CYCLE and not 1 <= buf[i + 8] <= MAX_CYCLE_CHIPS:
+                    stats.skipped_bytes += 1  # no cycle of that many chips: noise, resynchronise
+                    i += 1
+                    continue
+                length = frame_length(buf[i + 2], buf[i + 8] if buf[i + 2] == FRAME_CYCLE else 1)
                 if len(buf) - i < length:
                     break
                 step = self._frame(buf[i:i + length], out)
@@ -420,6 +328,8 @@ class Decoder:
             return 1  # resynchronise: the next sync may start inside this candidate
         if frame[2] == FRAME_FIELD:
             return self._field_frame(frame, out)
+        if frame[2] == FRAME_CYCLE:
+            return self._cycle_frame(frame, out)
         kind, seq, status, t_us, bx, by, bz, t_raw, fx, fy, fz = _BODY.unpack_from(frame, 2)
         if kind != FRAME_FORCE:
             self.stats.unknown_frames += 1
@@ -441,16 +351,29 @@ class Decoder:
 
     def _field_frame(self, frame: bytes, out: list) -> int:
         _kind, seq, status, t_us, taxel, bx, by, bz, t_raw = _FIELD_BODY.unpack_from(frame, 2)
+        self._field_sample(out, taxel, seq, t_us, status, (bx, by, bz), t_raw)
+        return FIELD_FRAME_LENGTH
+
+    def _cycle_frame(self, frame: bytes, out: list) -> int:
+        _kind, seq, t_us, chips = _CYCLE_HEAD.unpack_from(frame, 2)
+        for k in range(chips):
+            status, dt, bx, by, bz, t_raw = _CYCLE_CHIP.unpack_from(frame, CYCLE_HEAD_LENGTH + CYCLE_CHIP_LENGTH * k)
+            self._field_sample(out, k, seq, (t_us + dt) & 0xFFFFFFFF, status, (bx, by, bz), t_raw)
+        return len(frame)
+
+    def _field_sample(self, out: list, taxel: int, seq: int, t_us: int, status: int,
+                      counts: Tuple[int, int, int], t_raw: int) -> None:
+        """One array chip's reading (a field frame's, or one of a cycle frame's) as a sample, counted as a frame."""
         self._sequence(seq, taxel)
         self.stats.frames += 1
         if status & STATUS_CHIP_ERROR:
-            out.append(Sample(seq, t_us, status, _NAN3, _NAN3, None, "binary", (bx, by, bz), t_raw,
+            out.append(Sample(seq, t_us, status, _NAN3, _NAN3, None, "binary", counts, t_raw,
                               fault=t_raw or None, taxel=taxel))
         else:
+            bx, by, bz = counts
             B = (bx * self.lsb_xy_uT, by * self.lsb_xy_uT, bz * self.lsb_z_uT)
             temp = temperature_C(t_raw) if self.temperature else None
-            out.append(Sample(seq, t_us, status, B, _NAN3, temp, "binary", (bx, by, bz), t_raw, taxel=taxel))
-        return FIELD_FRAME_LENGTH
+            out.append(Sample(seq, t_us, status, B, _NAN3, temp, "binary", counts, t_raw, taxel=taxel))
 
     def _line(self, buf: bytes, i: int, out: list) -> int:
         """Bytes consumed by the line candidate at ``i``; 0 when it is not complete yet."""

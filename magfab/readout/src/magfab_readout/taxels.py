@@ -1,7 +1,7 @@
-"""An array on the host: every taxel's force from one cycle of field frames (docs/bundle.md section 5).
+"""An array on the host: every taxel's force from one cycle of its chips' readings (docs/bundle.md section 5).
 
-An array's image sends one field frame per chip per cycle, in taxel order, all frames of a cycle with the same
-sequence number, and no force (:mod:`.frames`). The host
+An array's image sends each cycle one cycle frame of every chip's reading in taxel order (an earlier image a field
+frame per chip), all of a cycle with the same sequence number, and no force (:mod:`.frames`). The host
 
 1. groups the samples into cycles (:class:`CycleAssembler`): a cycle ends with its last taxel's frame, or when a
    frame of another sequence number or of a taxel already seen arrives; a taxel whose frame never came (refused
@@ -39,7 +39,7 @@ from typing import Iterator, List, Optional, Sequence, Tuple
 from . import array_json, bounded  # array_json: an array build's compensation (docs/bundle.md section 5)
 from .calibration import Calibration, CalibrationError
 from .device import DeviceError
-from .frames import (
+from .readings import (
     STATUS_CHIP_ERROR,
     STATUS_FULL_SCALE,
     STATUS_OUTSIDE_REGION,

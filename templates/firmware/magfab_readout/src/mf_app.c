@@ -148,6 +148,9 @@ void mf_app_commands(mf_app_t *a)
         a->cmd_len = 0; /* the rest never came */
     }
     while ((c = a->hal->serial_read(a->hal->ctx)) >= 0) {
+        if (a->cycle_open) {
+            mf_app_flush(a); /* an array's cycle frame is finished (its last chip held) before any reply or switch */
+        }
         if (a->cmd_len > 0) {
             command_byte(a, (uint8_t)c);
         } else if (c == 'w' || c == 'r') {
@@ -222,13 +225,17 @@ int mf_app_start_at(mf_app_t *a, uint8_t addr7)
     return rc;
 }
 
+/* The channels an RM reads: an array's subset, or all the record's. */
+#define RM_ZYXT(a) ((a)->rm_zyxt != 0 ? (a)->rm_zyxt : (uint8_t)MF_ZYXT)
+
 /* The first RM of a read: with a sample held, on the bus's own time while the held one is processed and sent
  * (*overlapped = 1). */
 static int read_first(mf_app_t *a, mlx_raw_t *raw, uint8_t *overlapped)
 {
-    *overlapped = (uint8_t)(a->held && mlx_measurement_begin(&a->chip, MF_ZYXT) == MF_OK);
+    uint8_t zyxt = RM_ZYXT(a);
+    *overlapped = (uint8_t)(a->held && mlx_measurement_begin(&a->chip, zyxt) == MF_OK);
     mf_app_flush(a);
-    return *overlapped ? mlx_measurement_end(&a->chip, MF_ZYXT, raw) : mlx_read_measurement(&a->chip, MF_ZYXT, raw);
+    return *overlapped ? mlx_measurement_end(&a->chip, zyxt, raw) : mlx_read_measurement(&a->chip, zyxt, raw);
 }
 
 int mf_app_read_measurement(mf_app_t *a, mlx_raw_t *raw, uint8_t mode_bit, uint32_t *t_us, uint8_t *retried)
@@ -247,7 +254,7 @@ int mf_app_read_measurement(mf_app_t *a, mlx_raw_t *raw, uint8_t mode_bit, uint3
             a->hal->delay_us(a->hal->ctx, MF_RETRY_US);
             *t_us = mf_app_now(a);
         }
-        rc = mlx_read_measurement(&a->chip, MF_ZYXT, raw);
+        rc = mlx_read_measurement(&a->chip, RM_ZYXT(a), raw);
     }
     return rc;
 }
@@ -286,18 +293,43 @@ void mf_app_process(const mlx_raw_t *raw, mf_sample_t *s)
     mf_calib_forces(s);
 }
 
-/* A force frame (taxel < 0) or an array's field frame of taxel, in the current mode. */
-static void send_frame(const mf_app_t *a, int16_t taxel, const mf_sample_t *s, uint32_t t_us)
+/* An array chip's piece of the cycle frame: after the frame's head when it is the cycle's first chip, and before
+ * the frame's CRC when it is the last. */
+static void send_cycle_piece(mf_app_t *a, uint8_t taxel, uint8_t seq, const mf_sample_t *s, uint32_t t_us)
+{
+    uint8_t out[MF_CYCLE_HEAD_LEN + MF_CYCLE_CHIP_LEN + 2];
+    uint8_t n = 0;
+    uint8_t m;
+    if (!a->cycle_open) {
+        a->cycle_t = t_us;
+        n = mf_frame_cycle_head(out, seq, t_us - a->t0, mf_calib_taxels());
+        a->cycle_crc = mf_crc16(&out[2], (uint8_t)(n - 2U));
+        a->cycle_open = 1;
+    }
+    m = mf_frame_cycle_chip(&out[n], (int32_t)(t_us - a->cycle_t) > 0 ? t_us - a->cycle_t : 0UL, s);
+    a->cycle_crc = mf_crc16_update(a->cycle_crc, &out[n], m);
+    n = (uint8_t)(n + m);
+    if (taxel + 1U >= mf_calib_taxels()) {
+        n = (uint8_t)(n + mf_frame_cycle_end(&out[n], a->cycle_crc));
+        a->cycle_open = 0;
+    }
+    a->hal->serial_write(a->hal->ctx, out, n);
+}
+
+/* A force frame (taxel < 0) or an array chip's reading (its text line, or its piece of the cycle frame), in the
+ * current mode, with sequence number seq. */
+static void send_frame(mf_app_t *a, int16_t taxel, uint8_t seq, const mf_sample_t *s, uint32_t t_us)
 {
     if (a->text_mode) {
         char line[MF_TEXT_MAX];
-        uint8_t n = taxel < 0 ? mf_frame_text(line, a->seq, t_us - a->t0, s)
-                              : mf_frame_field_text(line, (uint8_t)taxel, a->seq, t_us - a->t0, s);
+        uint8_t n = taxel < 0 ? mf_frame_text(line, seq, t_us - a->t0, s)
+                              : mf_frame_field_text(line, (uint8_t)taxel, seq, t_us - a->t0, s);
         a->hal->serial_write(a->hal->ctx, (const uint8_t *)line, n);
+    } else if (taxel >= 0) {
+        send_cycle_piece(a, (uint8_t)taxel, seq, s, t_us);
     } else {
         uint8_t frame[MF_FRAME_LEN];
-        uint8_t n = taxel < 0 ? mf_frame_binary(frame, a->seq, t_us - a->t0, s)
-                              : mf_frame_field(frame, (uint8_t)taxel, a->seq, t_us - a->t0, s);
+        uint8_t n = mf_frame_binary(frame, seq, t_us - a->t0, s);
         a->hal->serial_write(a->hal->ctx, frame, n);
     }
 }
@@ -305,7 +337,7 @@ static void send_frame(const mf_app_t *a, int16_t taxel, const mf_sample_t *s, u
 void mf_app_emit(mf_app_t *a, const mf_sample_t *s, uint32_t t_us)
 {
     mf_app_flush(a);
-    send_frame(a, -1, s, t_us);
+    send_frame(a, -1, a->seq, s, t_us);
     a->seq = (uint8_t)(a->seq + 1);
 }
 
@@ -329,7 +361,7 @@ void mf_app_flush(mf_app_t *a)
     if (held == MF_HELD_FIELD) {
         mf_app_field_sample(a, &a->held_raw, &s);
         s.flags |= a->held_flags;
-        send_frame(a, a->held_taxel, &s, a->held_t);
+        send_frame(a, a->held_taxel, a->held_seq, &s, a->held_t);
         return;
     }
     mf_app_process(&a->held_raw, &s);
@@ -340,7 +372,7 @@ void mf_app_flush(mf_app_t *a)
 void mf_app_emit_field(mf_app_t *a, uint8_t taxel, const mf_sample_t *s, uint32_t t_us)
 {
     mf_app_flush(a);
-    send_frame(a, taxel, s, t_us);
+    send_frame(a, taxel, a->seq, s, t_us);
 }
 
 void mf_app_init(mf_app_t *a, const mf_hal_t *hal)
@@ -361,6 +393,8 @@ void mf_app_init(mf_app_t *a, const mf_hal_t *hal)
     a->recoveries = 0;
     a->cmd_len = 0;
     a->held = 0;
+    a->rm_zyxt = 0;
+    a->cycle_open = 0;
     a->t0 = mf_app_now(a);
     a->t_next = a->t0;
     if (mf_calib_status() != MF_OK) {

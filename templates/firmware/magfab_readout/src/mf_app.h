@@ -3,7 +3,8 @@
  * chip (mf_array.h). With a HAL that reads on the bus's own time (mf_hal_t.i2c_begin) a good sample is held instead
  * and goes out while the next one is on the bus (mf_app_flush): the cycle is then the longer of the read and the
  * arithmetic, not their sum, and each good frame leaves one poll later. An array's chip's good reading is held the
- * same way, its field frame sent during the next chip's read (the cycle's last before the cycle ends). */
+ * same way, its reading sent during the next chip's read (the cycle's last chip's during the next cycle's first read,
+ * or before a command's reply). */
 #ifndef MF_APP_H
 #define MF_APP_H
 
@@ -39,10 +40,15 @@ typedef struct mf_app {
     uint32_t cmd_t;            /* micros() at its first byte: a command not complete in MF_CMD_TIMEOUT_US is dropped */
     uint32_t recoveries;       /* successful recoveries after a failed sample */
     uint8_t held;              /* a good sample read and not yet sent (a HAL with i2c_begin): MF_HELD_*; its words, read */
-    uint8_t held_taxel;        /* time, flags, and an array's taxel */
+    uint8_t held_taxel;        /* time, flags, and an array's taxel and cycle */
+    uint8_t held_seq;
     uint8_t held_flags;
     uint32_t held_t;
     mlx_raw_t held_raw;
+    uint8_t rm_zyxt;           /* the channels the next RM reads (mf_app_read_measurement): an array's subset, 0 all */
+    uint8_t cycle_open;        /* an array's binary cycle frame: its head sent, its last chip's piece and CRC not yet */
+    uint16_t cycle_crc;        /* its CRC so far */
+    uint32_t cycle_t;          /* its head's time: the first chip's read */
 } mf_app_t;
 
 void mf_app_init(mf_app_t *a, const mf_hal_t *hal);
@@ -53,11 +59,11 @@ void mf_app_poll(mf_app_t *a);
 int mf_app_start_chip(mf_app_t *a);
 /* The same for the chip at addr7 (an array's chips, one after another). */
 int mf_app_start_at(mf_app_t *a, uint8_t addr7);
-/* RM of the chip at a->chip.addr, once more MF_RETRY_US later if the chip rejects it while still in the measuring
- * mode (mode_bit: MLX_ST_BURST or MLX_ST_SM): the conversion ran late (the chip's oscillator is slower than the
- * table). A second rejection is an error. *t_us is when the last attempt started (a first attempt on the bus's own
- * time, a held sample sent meanwhile: the second is due MF_RETRY_US after the first started, and *t_us says so);
- * *retried says whether there was a second. */
+/* RM (of the a->rm_zyxt channels) of the chip at a->chip.addr, once more MF_RETRY_US later if the chip rejects it
+ * while still in the measuring mode (mode_bit: MLX_ST_BURST or MLX_ST_SM): the conversion ran late (the chip's
+ * oscillator is slower than the table). A second rejection is an error. *t_us is when the last attempt started (a
+ * first attempt on the bus's own time, a held sample sent meanwhile: the second is due MF_RETRY_US after the first
+ * started, and *t_us says so); *retried says whether there was a second. */
 int mf_app_read_measurement(mf_app_t *a, mlx_raw_t *raw, uint8_t mode_bit, uint32_t *t_us, uint8_t *retried);
 /* Act on every byte the host has sent: 'b' binary, 't' text, 'i' the info line, and the EEPROM commands of
  * docs/bundle.md section 4: 'w' <addr:u16> <n:u8, 1..16> <n bytes> <crc:u16> writes (answered by a W line, the
@@ -76,7 +82,8 @@ void mf_app_flush(mf_app_t *a);
 /* An array chip's reading as its field frame in the current mode needs it: a binary frame the counts alone
  * (mf_sample_counts), a text line the microtesla too. */
 void mf_app_field_sample(const mf_app_t *a, const mlx_raw_t *raw, mf_sample_t *s);
-/* An array's field frame of taxel in the current mode, with the cycle's sequence number (not advanced). */
+/* An array chip's reading in the current mode, with the cycle's sequence number (not advanced): its piece of the
+ * cycle frame (the frame's head before the first chip's, its CRC after the last chip's), or its text line. */
 void mf_app_emit_field(mf_app_t *a, uint8_t taxel, const mf_sample_t *s, uint32_t t_us);
 
 #ifdef __cplusplus

@@ -11,6 +11,8 @@ typedef struct mf_taxel {
     int8_t sm_rc;      /* single mode: the error of this cycle's SM */
     uint32_t t_ready;  /* the earliest next read: a conversion and the margin after its start or its last read */
     uint32_t t_retry;  /* lost: the next start attempt */
+    uint16_t t_raw;    /* its latest temperature word (read one cycle in n, n the chips) */
+    uint8_t t_known;   /* t_raw read since its start */
 } mf_taxel_t;
 
 static mf_taxel_t taxel[MF_MAX_TAXELS];
@@ -25,6 +27,7 @@ static int start(mf_app_t *a, uint8_t k)
     if (rc == MF_OK) {
         x->lost = 0;
         x->recovered = 1;
+        x->t_known = 0;
         x->t_ready = mf_app_now(a) + (uint32_t)(MF_BURST ? MF_TCONV_US + MF_READ_MARGIN_US : 0UL);
     } else {
         x->lost = 1;
@@ -51,6 +54,7 @@ static int read_taxel(mf_app_t *a, uint8_t k, mlx_raw_t *raw, uint32_t *t_us)
 {
     uint8_t mode = MF_BURST ? MLX_ST_BURST : MLX_ST_SM;
     uint8_t retried;
+    uint8_t read_t;
     int rc;
     if (!MF_BURST && taxel[k].sm_rc != MF_OK) {
         *t_us = mf_app_now(a);
@@ -58,13 +62,35 @@ static int read_taxel(mf_app_t *a, uint8_t k, mlx_raw_t *raw, uint32_t *t_us)
     }
     mf_app_wait_until(a, taxel[k].t_ready); /* started or read late: a new conversion first */
     a->chip.addr = mf_calib_address(k);
+    /* the temperature word (two of the reply's nine bytes) of one chip a cycle, in turn, and of a chip just started:
+     * the others' field goes out with their latest (a chip's temperature moves over seconds, a cycle is
+     * milliseconds); mf_array.h */
+    read_t = (uint8_t)((MF_ZYXT & MLX_T) && (!taxel[k].t_known || a->seq % mf_calib_taxels() == k));
+    a->rm_zyxt = (uint8_t)(read_t ? MF_ZYXT : MF_ZYXT & (uint8_t)~MLX_T);
     rc = mf_app_read_measurement(a, raw, mode, t_us, &retried);
+    a->rm_zyxt = 0;
+    if (rc == MF_OK && read_t) {
+        taxel[k].t_raw = raw->t;
+        taxel[k].t_known = 1;
+    } else if (rc == MF_OK) {
+        raw->t = taxel[k].t_raw;
+    }
     if (rc == MF_OK && MF_BURST && !(a->chip.status & MLX_ST_BURST)) {
         rc = MF_E_MODE;
     }
-    if (rc == MF_OK && MF_BURST) { /* its next conversion, whatever the cycle: on the chip's own grid when on time */
-        uint32_t late = *t_us - taxel[k].t_ready;
-        taxel[k].t_ready = (late <= MF_READ_MARGIN_US ? taxel[k].t_ready : *t_us) + MF_TCONV_US + MF_READ_MARGIN_US;
+    if (rc == MF_OK && MF_BURST) {
+        /* its next conversion, whatever the cycle: on the chip's own grid, the scheduled read (or the retry that
+         * found a late conversion: the chip's phase) plus whole conversions until past this read. A read on time
+         * or late finds the conversion after the last one read, so every read finds a new one and none is skipped
+         * that a read could have taken; far behind (a stalled link), the grid starts again from this read. */
+        uint32_t next = (retried ? *t_us : taxel[k].t_ready) + MF_TCONV_US;
+        if ((int32_t)(*t_us - next) >= (int32_t)(8UL * MF_TCONV_US)) {
+            next = *t_us + MF_TCONV_US;
+        }
+        while ((int32_t)(*t_us - next) >= 0) {
+            next += MF_TCONV_US;
+        }
+        taxel[k].t_ready = next;
     }
     return rc;
 }
@@ -91,6 +117,7 @@ static void poll_taxel(mf_app_t *a, uint8_t k)
         a->held_raw = raw;
         a->held_t = t;
         a->held_taxel = k;
+        a->held_seq = a->seq;
         a->held_flags = (uint8_t)(x->recovered ? MF_FLAG_RECOVERED : 0U);
         a->held = MF_HELD_FIELD;
         x->recovered = 0;
@@ -125,7 +152,7 @@ void mf_array_poll(mf_app_t *a)
             a->t_next = mf_app_now(a); /* behind by more than a conversion (frames or bus slower): no burst of reads */
         }
         mf_app_wait_until(a, a->t_next);
-        a->t_next += MF_TCONV_US + MF_READ_MARGIN_US;
+        a->t_next += MF_TCONV_US;
     } else {
         for (k = 0; k < n; ++k) { /* the conversions run in parallel */
             if (!taxel[k].lost) {
@@ -139,6 +166,7 @@ void mf_array_poll(mf_app_t *a)
     for (k = 0; k < n; ++k) {
         poll_taxel(a, k);
     }
-    mf_app_flush(a); /* the cycle's last chip's frame, with the cycle's sequence number */
+    /* the cycle's last chip, when held, goes out during the next cycle's first read (or before a command's reply),
+     * in this cycle's frame: its head carries this cycle's sequence number */
     a->seq = (uint8_t)(a->seq + 1);
 }

@@ -230,15 +230,31 @@ uint8_t mf_frame_field_text(char *out, uint8_t taxel, uint8_t seq, uint32_t t_us
     return text_line(out, taxel, seq, t_us, s);
 }
 
-uint8_t mf_frame_field(uint8_t *out, uint8_t taxel, uint8_t seq, uint32_t t_us, const mf_sample_t *s)
+uint8_t mf_frame_cycle_head(uint8_t *out, uint8_t seq, uint32_t t_us, uint8_t chips)
+{
+    out[0] = MF_FRAME_SYNC0;
+    out[1] = MF_FRAME_SYNC1;
+    out[2] = MF_FRAME_CYCLE;
+    out[3] = seq;
+    put_u32(&out[4], t_us);
+    out[8] = chips;
+    return MF_CYCLE_HEAD_LEN;
+}
+
+uint8_t mf_frame_cycle_chip(uint8_t *out, uint32_t dt_us, const mf_sample_t *s)
 {
     uint8_t k;
-    put_head(out, MF_FRAME_FIELD, seq, t_us, s);
-    out[9] = taxel;
+    out[0] = s->flags;
+    put_u16(&out[1], dt_us > 0xFFFFUL ? 0xFFFFU : (uint16_t)dt_us);
     for (k = 0; k < 3; ++k) {
-        put_u16(&out[10 + 2 * k], (uint16_t)s->b_counts[k]);
+        put_u16(&out[3 + 2 * k], (uint16_t)s->b_counts[k]);
     }
-    put_u16(&out[16], (s->flags & MF_FLAG_CHIP_ERROR) ? s->fault : s->t_raw);
-    put_u16(&out[18], mf_crc16(&out[2], 16));
-    return MF_FIELD_FRAME_LEN;
+    put_u16(&out[9], (s->flags & MF_FLAG_CHIP_ERROR) ? s->fault : s->t_raw);
+    return MF_CYCLE_CHIP_LEN;
+}
+
+uint8_t mf_frame_cycle_end(uint8_t *out, uint16_t crc)
+{
+    put_u16(out, crc);
+    return 2;
 }

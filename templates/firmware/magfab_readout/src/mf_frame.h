@@ -14,8 +14,9 @@ extern "C" {
 #define MF_FRAME_SYNC0 0xA5
 #define MF_FRAME_SYNC1 0x5A
 #define MF_FRAME_FORCE 0x01
-#define MF_FRAME_FIELD 0x02 /* an array's: one chip's field and its taxel index, no force */
-#define MF_FIELD_FRAME_LEN 20
+#define MF_FRAME_CYCLE 0x03 /* an array's binary cycle: every chip's counts, one head and one CRC */
+#define MF_CYCLE_HEAD_LEN 9
+#define MF_CYCLE_CHIP_LEN 11
 #define MF_TEXT_MAX 176 /* longest text line, checksum and newline included (166: 7 floats of 19 characters) */
 
 /* CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF, no reflection, no final xor). */
@@ -30,10 +31,16 @@ uint8_t mf_frame_binary(uint8_t *out, uint8_t seq, uint32_t t_us, const mf_sampl
  * binary frame's bytes 15..16 on an error frame: MF_STAGE_* << 8 | -MF_E_*); XXXX is mf_crc16 of the bytes before the '*' in upper-case hex.
  * out holds MF_TEXT_MAX bytes; returns the length (no terminator). */
 uint8_t mf_frame_text(char *out, uint8_t seq, uint32_t t_us, const mf_sample_t *s);
-/* An array's field frame: sync, type 0x02, seq (the cycle's), flags, time (uint32), the taxel index, X, Y, Z counts
- * (int16), the temperature word (the fault word on a chip error), CRC-16 over bytes 2..17; returns
- * MF_FIELD_FRAME_LEN. */
-uint8_t mf_frame_field(uint8_t *out, uint8_t taxel, uint8_t seq, uint32_t t_us, const mf_sample_t *s);
+/* An array's cycle frame (binary mode), sent in pieces as the cycle's chips are read: its head (sync, type 0x03, the
+ * cycle's seq, the first chip's read time (uint32), the number of chips), then per chip in taxel order its flags, its
+ * read time after the head's (uint16 us, 65535 at most), X, Y, Z counts (int16) and the temperature word (the fault
+ * word on a chip error), then the CRC-16 of every byte from the type on (mf_crc16_update over the pieces). The head's
+ * bytes: returns MF_CYCLE_HEAD_LEN. */
+uint8_t mf_frame_cycle_head(uint8_t *out, uint8_t seq, uint32_t t_us, uint8_t chips);
+/* One chip's piece: returns MF_CYCLE_CHIP_LEN. */
+uint8_t mf_frame_cycle_chip(uint8_t *out, uint32_t dt_us, const mf_sample_t *s);
+/* The closing CRC (little-endian): returns 2. */
+uint8_t mf_frame_cycle_end(uint8_t *out, uint16_t crc);
 /* Its text line: B,<taxel>,<seq>,<t_us>,<status>,<Bx_uT>,<By_uT>,<Bz_uT>,<T_C>[,<fault>]*XXXX\n (as mf_frame_text
  * without the forces); out holds MF_TEXT_MAX bytes. */
 uint8_t mf_frame_field_text(char *out, uint8_t taxel, uint8_t seq, uint32_t t_us, const mf_sample_t *s);
