@@ -3,7 +3,7 @@
 The package is one source tree, ``magfab/readout/`` (its pyproject.toml, the README's template and
 ``src/magfab_readout/``, the format validators included), which every build copies verbatim into ``readout/``;
 only data is generated: ``build.json`` (spec name, baud rate, chip register fields, microtesla per count, the
-calibration's hash), calibration.json, acceptance.json, for an array array.json and each taxel's calibration, and
+calibration's hash, the shipped image's measured rate), calibration.json, acceptance.json, for an array array.json and each taxel's calibration, and
 README.md from the tree's README.md.j2. The package decodes the firmware's frames (docs/bundle.md), evaluates the
 calibration in Python, and has a ``magfab-readout`` command with a simulated device.
 
@@ -31,7 +31,7 @@ from ..formats import acceptance_json, calibration_json
 from ..formats.json_checks import FormatError
 
 # TEMPERATURE_*, re-exported: MLX90393 temperature (TCMP off), T = 25 C + (raw - T25) / TRES, from recipes/chips.toml.
-from .firmware import TEMPERATURE_LSB_PER_C, TEMPERATURE_RAW_25C, chip_config, image_settings
+from .firmware import TEMPERATURE_LSB_PER_C, TEMPERATURE_RAW_25C, chip_config, image_settings, measured_rate
 from .templating import environment
 
 __all__ = ["PACKAGE", "SOURCE", "TEMPLATE_SUFFIX", "TREE_FILES", "render", "source_files", "data_files",
@@ -123,6 +123,9 @@ def _build_data(design, checked: calibration_json.Checked) -> dict[str, object]:
         "temperature_lsb_per_C": TEMPERATURE_LSB_PER_C,
         "calibration_sha256": checked.sha256,
         "image_settings": image_settings(design),
+        # what the shipped image delivered on the simulated bus timed like a real one, as predictions.json says it
+        # (a single taxel's: an array's rate is docs/bundle.md section 3's table)
+        "readout_measured": measured_rate() if design.array is None else None,
     }
 
 

@@ -282,6 +282,8 @@ def test_the_firmware_readme_states_the_rate_every_page_states(bundle):
     rate = json.loads((out / "predictions.json").read_text())["chip"]["rate_Hz"]
     build = json.loads((out / "readout" / "src" / "magfab_readout" / "build.json").read_text())
     assert build["sample_rate_Hz"] == pytest.approx(rate, rel=1e-9)
+    measured = json.loads((out / "predictions.json").read_text())["readout_measured"]
+    assert build["readout_measured"] == measured and measured["worst"]["delivered"] >= 0.99  # the one record
     us, hz = round(1e6 / rate), f"{rate:.0f}"
     assert (us, hz) == (1840, "543")  # MagOne: OSR 0, DIG_FILT 2, T+X+Y+Z (the datasheet's table)
     assert f"one sample every {us} us, {hz} Hz" in (out / "firmware" / "README.md").read_text()

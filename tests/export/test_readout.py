@@ -41,6 +41,7 @@ from readout_support import (
 )
 
 from magfab import SpecError, derive, load_spec
+from magfab.export.firmware import measured_rate
 from magfab.export.readout import calibration_sha256, render
 
 # --- fixtures -------------------------------------------------------------------------------------------------
@@ -520,6 +521,9 @@ def test_installed_cli_streams_zeroes_and_checks(installed):
     assert rate, proc.stderr
     chip = float(rate[3])
     assert float(rate[1]) == pytest.approx(chip, rel=0.01) and float(rate[2]) == pytest.approx(59 / chip, rel=0.02)
+    # beside it, what the shipped image delivered at the busiest field on the real-timed simulated bus (build.json)
+    image = re.search(r"the image delivered ([0-9]+) frames/s at the busiest field of its calibrated", proc.stderr)
+    assert image and int(image[1]) == round(measured_rate()["worst"]["rate_Hz"]), proc.stderr
 
 
 def test_pip_install_leaves_the_folder_as_it_was(installed):

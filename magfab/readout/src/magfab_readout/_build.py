@@ -34,6 +34,11 @@ LSB_XY_UT = float(_DATA["lsb_xy_uT"])  # microtesla per count, X and Y
 LSB_Z_UT = float(_DATA["lsb_z_uT"])  # microtesla per count, Z
 FULL_SCALE_COUNTS = int(_DATA["full_scale_counts"])  # |count| at which an axis is at the chip's full scale
 SAMPLE_RATE_HZ = float(_DATA["sample_rate_Hz"])  # one frame per conversion (the datasheet table's time)
+# What the shipped image delivered on a simulated bus timed like a real one, at the busiest field of the calibrated
+# region it was measured on (frames a second; magfab's generic_image/rate.json), or None (an array's build, a
+# rebuilt image, a package from before the record).
+_MEASURED = _DATA.get("readout_measured") or {}
+MEASURED_RATE_HZ = float(_MEASURED["worst"]["rate_Hz"]) if _MEASURED.get("worst") else None
 
 # Temperature: T = 25 C + (raw - TEMPERATURE_RAW_25C) / TEMPERATURE_LSB_PER_C (MLX90393, TCMP off).
 TEMPERATURE_ENABLED = bool(_DATA["temperature"])

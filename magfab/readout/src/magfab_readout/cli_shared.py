@@ -97,8 +97,10 @@ class Span:
         seconds = self.last - self.first
         rate = (self.timed - 1) / seconds
         chip = _build.SAMPLE_RATE_HZ
+        measured = (f"; the image delivered {_build.MEASURED_RATE_HZ:.0f} frames/s at the busiest field of its "
+                    "calibrated region on a simulated bus" if _build.MEASURED_RATE_HZ and what == "frames" else "")
         return (f"; {rate:.1f} {what}/s over {seconds:.2f} s of device time, against the chip's {chip:.1f} "
-                f"conversions/s ({rate / chip:.1%})")
+                f"conversions/s ({rate / chip:.1%}){measured}")
 
 
 def record_header(f, device, info, columns: List[str], extra: Sequence[str] = ()) -> None:
