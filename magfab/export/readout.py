@@ -3,9 +3,9 @@
 The package is one source tree, ``magfab/readout/`` (its pyproject.toml, the README's template and
 ``src/magfab_readout/``, the format validators included), which every build copies verbatim into ``readout/``;
 only data is generated: ``build.json`` (spec name, baud rate, chip register fields, microtesla per count, the
-calibration's hash, the shipped image's measured rate), calibration.json, acceptance.json, for an array array.json and each taxel's calibration, and
-README.md from the tree's README.md.j2. The package decodes the firmware's frames (docs/bundle.md), evaluates the
-calibration in Python, and has a ``magfab-readout`` command with a simulated device.
+calibration's hash, the shipped image's measured rate), calibration.json, acceptance.json, for an array array.json
+and each taxel's calibration, and README.md from the tree's README.md.j2. The package decodes the firmware's frames
+(docs/bundle.md), evaluates the calibration in Python, and has a ``magfab-readout`` command with a simulated device.
 
 calibration.json and acceptance.json are checked by :mod:`magfab.formats.calibration_json` and
 :mod:`magfab.formats.acceptance_json`, the validators the package itself runs, so the build and the host refuse

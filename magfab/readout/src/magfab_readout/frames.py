@@ -120,7 +120,6 @@ _CYCLE_CHIP = struct.Struct("<BH3hH")  # per chip: status, time after the head's
 _CRC = struct.Struct("<H")
 
 
-
 def crc16_ccitt_false(data: bytes) -> int:
     """CRC-16/CCITT-FALSE: polynomial 0x1021, initial value 0xFFFF, no reflection, no final XOR (the standard
     library's CRC-CCITT, ``binascii.crc_hqx``, started at 0xFFFF)."""

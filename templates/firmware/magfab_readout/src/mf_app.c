@@ -434,7 +434,7 @@ void mf_app_poll(mf_app_t *a)
         return;
     }
     if (mf_calib_taxels() > 0) {
-        mf_array_poll(a); /* an array's record: one field frame per chip per cycle */
+        mf_array_poll(a); /* an array's record: every chip's reading each cycle, in one cycle frame */
         return;
     }
     if (a->lost) {

@@ -1,6 +1,6 @@
 /* The readout loop: chip start-up and recovery, paced acquisition, calibration, frames, host commands.
- * One call of mf_app_poll() emits exactly one frame (binary or text); with an array's record one field frame per
- * chip (mf_array.h). With a HAL that reads on the bus's own time (mf_hal_t.i2c_begin) a good sample is held instead
+ * One call of mf_app_poll() emits exactly one frame (binary or text); with an array's record every chip's reading
+ * of one cycle (mf_array.h). With a HAL that reads on the bus's own time (mf_hal_t.i2c_begin) a good sample is held instead
  * and goes out while the next one is on the bus (mf_app_flush): the cycle is then the longer of the read and the
  * arithmetic, not their sum, and each good frame leaves one poll later. An array's chip's good reading is held the
  * same way, its reading sent during the next chip's read (the cycle's last chip's during the next cycle's first read,
@@ -20,7 +20,7 @@ extern "C" {
 #endif
 
 #define MF_HELD_FORCE 1U /* a single taxel's sample: a force frame */
-#define MF_HELD_FIELD 2U /* an array chip's: its field frame, in the cycle it was read in (mf_array.h) */
+#define MF_HELD_FIELD 2U /* an array chip's: its reading, in the cycle it was read in (mf_array.h) */
 
 typedef struct mf_app {
     const mf_hal_t *hal;
@@ -79,8 +79,8 @@ void mf_app_emit(mf_app_t *a, const mf_sample_t *s, uint32_t t_us);
 /* The held sample, if any, processed and sent: before any other frame, and before an EEPROM write can change the
  * record its forces come from (in the mode the host last asked for). */
 void mf_app_flush(mf_app_t *a);
-/* An array chip's reading as its field frame in the current mode needs it: a binary frame the counts alone
- * (mf_sample_counts), a text line the microtesla too. */
+/* An array chip's reading as the current mode needs it: the cycle frame the counts alone (mf_sample_counts), a
+ * text line the microtesla too. */
 void mf_app_field_sample(const mf_app_t *a, const mlx_raw_t *raw, mf_sample_t *s);
 /* An array chip's reading in the current mode, with the cycle's sequence number (not advanced): its piece of the
  * cycle frame (the frame's head before the first chip's, its CRC after the last chip's), or its text line. */
