@@ -99,7 +99,7 @@ def _nearest(values: list[float], x: float) -> float:
     return min(values, key=lambda v: (abs(_scaled(values, v) - x), v))
 
 
-def _physical(space: Space, rows: Sequence[Mapping[str, Any]], pair: np.ndarray) -> np.ndarray:
+def _physical(space: Space, rows: Sequence[Mapping[str, Any]]) -> np.ndarray:
     """The model's coordinates of designs given by their params (module doc): each design's mm point
     (:meth:`Space.point`) as its magnet's log moment, disc diameter and height, and its numeric variables, each scaled
     over what the space spans (:func:`_spans`); then indicators of every silicone and tip but the first (a linear term
@@ -111,6 +111,8 @@ def _physical(space: Space, rows: Sequence[Mapping[str, Any]], pair: np.ndarray)
         d, h, _ = stock_disc(point["magnet"])
         x[i, :3] = math.log(magnet_moment(f"{point['magnet']}:{point['grade']}")), d, h
         x[i, 3:] = [point[name] for name in NUMERIC]
+    pairs = space.pairs()
+    pair = np.array([pairs.index((p["material"], p["tip"])) for p in rows], dtype=int)
     n_tips = len(space.choices["tip"])
     material, tip = pair // n_tips, pair % n_tips
     ind_m = (material[:, None] == np.arange(1, len(space.choices["material"]))[None, :])
@@ -184,7 +186,7 @@ def propose(space: Space, directions: Sequence[str], params: Sequence[Mapping[st
     objectives = (logged - lo) / np.where(hi > lo, hi - lo, 1.0)
     c = np.clip(np.asarray(constraints, dtype=float).reshape(len(params), -1)[keep], *CLIP)
     kept = [params[i] for i in keep]
-    x = _physical(space, kept, _columns(space, axes, kept)[1])
+    x = _physical(space, kept)
     columns = _independent(x)
     try:
         model = RBFInterpolator(x[:, columns], np.hstack([objectives, c]), kernel="thin_plate_spline",
@@ -201,7 +203,7 @@ def propose(space: Space, directions: Sequence[str], params: Sequence[Mapping[st
         cu, cp = np.vstack([cu, steps]), np.concatenate([cp, pp[pick]])
     cu = _snap(axes, cu)
     candidates = [_params(space, axes, cu[i], int(cp[i])) for i in range(len(cu))]
-    predicted = model(_physical(space, candidates, cp)[:, columns])
+    predicted = model(_physical(space, candidates)[:, columns])
     o, miss = predicted[:, :len(directions)], np.maximum(predicted[:, len(directions):], 0.0).sum(axis=1)
     weight = rng.dirichlet(np.ones(len(directions)))
     feasible = miss <= 0.0

@@ -35,6 +35,8 @@ from .taxels import ArrayCalibration
 __all__ = ["ArrayPressPattern", "ArrayRestTip", "SimulatedArray", "cycle_rate_Hz"]
 
 Vector = Tuple[float, float, float]
+#: Microtesla per count of X, Y, Z (the build's chip settings).
+_LSB = (_build.LSB_XY_UT, _build.LSB_XY_UT, _build.LSB_Z_UT)
 
 
 def cycle_rate_Hz(taxels: int, baud: int = _build.BAUD) -> float:
@@ -240,12 +242,11 @@ class SimulatedArray(SimulatedDevice):
         fields = self.pattern.fields(c / self.rate_Hz)
         seq = c & 0xFF
         readings = [self._reading(c, k, fields[k]) for k in range(self.n)]
-        lsb = (_build.LSB_XY_UT, _build.LSB_XY_UT, _build.LSB_Z_UT)
         if self.text:
             nan = (math.nan, math.nan, math.nan)
             return b"".join(
                 encode_field_line(k, seq, t_us, status, nan, None, word) if status & STATUS_CHIP_ERROR else
-                encode_field_line(k, seq, t_us, status, (counts[0] * lsb[0], counts[1] * lsb[1], counts[2] * lsb[2]),
+                encode_field_line(k, seq, t_us, status, (counts[0] * _LSB[0], counts[1] * _LSB[1], counts[2] * _LSB[2]),
                                   temperature_C(word) if _build.TEMPERATURE_ENABLED else None)
                 for k, (t_us, status, counts, word) in enumerate(readings))
         t0 = readings[0][0]
@@ -268,10 +269,9 @@ class SimulatedArray(SimulatedDevice):
             return t_us, status | STATUS_CHIP_ERROR, (0, 0, 0), SIMULATED_FAULT
         T = self.temperature(t_us / 1e6)  # every chip and magnet at the same temperature, the field following it
         B = self._at_temperature(B, T)
-        lsb = (_build.LSB_XY_UT, _build.LSB_XY_UT, _build.LSB_Z_UT)
-        counts = (_clamp16(B[0] / lsb[0] + self._noise.gauss(0.0, self.noise_lsb)),
-                  _clamp16(B[1] / lsb[1] + self._noise.gauss(0.0, self.noise_lsb)),
-                  _clamp16(B[2] / lsb[2] + self._noise.gauss(0.0, self.noise_lsb)))
+        counts = (_clamp16(B[0] / _LSB[0] + self._noise.gauss(0.0, self.noise_lsb)),
+                  _clamp16(B[1] / _LSB[1] + self._noise.gauss(0.0, self.noise_lsb)),
+                  _clamp16(B[2] / _LSB[2] + self._noise.gauss(0.0, self.noise_lsb)))
         if max(abs(x) for x in counts) >= _build.FULL_SCALE_COUNTS:
             status |= STATUS_FULL_SCALE
         return t_us, status, counts, _temperature_raw(T)

@@ -98,7 +98,7 @@ class Span:
         rate = (self.timed - 1) / seconds
         chip = _build.SAMPLE_RATE_HZ
         measured = (f"; the image delivered {_build.MEASURED_RATE_HZ:.0f} frames/s at the busiest field of its "
-                    "calibrated region on a simulated bus" if _build.MEASURED_RATE_HZ and what == "frames" else "")
+                    "calibrated region on a simulated bus" if _build.MEASURED_RATE_HZ else "")  # None for an array
         return (f"; {rate:.1f} {what}/s over {seconds:.2f} s of device time, against the chip's {chip:.1f} "
                 f"conversions/s ({rate / chip:.1%}){measured}")
 

@@ -207,6 +207,17 @@ def frame_length(kind: int, chips: int = 1) -> int:
     return FIELD_FRAME_LENGTH if kind == FRAME_FIELD else FRAME_LENGTH
 
 
+def _candidate_length(buf: bytes, i: int) -> Optional[int]:
+    """The length of the frame whose sync is at ``buf[i]``: None while its type (or a cycle frame's head) has not
+    arrived, 0 for a cycle frame's head claiming no chips or more than :data:`MAX_CYCLE_CHIPS` (noise)."""
+    cycle = buf[i + 2:i + 3] == bytes([FRAME_CYCLE])
+    if len(buf) - i < (CYCLE_HEAD_LENGTH if cycle else 3):
+        return None
+    if not cycle:
+        return frame_length(buf[i + 2])
+    return frame_length(FRAME_CYCLE, buf[i + 8]) if 1 <= buf[i + 8] <= MAX_CYCLE_CHIPS else 0
+
+
 def _number(x: float, decimals: int) -> str:
     if math.isnan(x):
         return "nan"
@@ -288,15 +299,13 @@ class Decoder:
             stats.skipped_bytes += j - i
             i = j
             if buf.startswith(SYNC, i):
-                if len(buf) - i < (CYCLE_HEAD_LENGTH if buf[i + 2:i + 3] == bytes([FRAME_CYCLE]) else 3):
+                length = _candidate_length(buf, i)
+                if length is None or len(buf) - i < length:
                     break
-                if buf[i + 2] == FRAME_CYCLE and not 1 <= buf[i + 8] <= MAX_CYCLE_CHIPS:
+                if length == 0:
                     stats.skipped_bytes += 1  # no cycle of that many chips: noise, resynchronise
                     i += 1
                     continue
-                length = frame_length(buf[i + 2], buf[i + 8] if buf[i + 2] == FRAME_CYCLE else 1)
-                if len(buf) - i < length:
-                    break
                 step = self._frame(buf[i:i + length], out)
             else:
                 step = self._line(buf, i, out)

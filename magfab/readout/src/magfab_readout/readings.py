@@ -14,8 +14,8 @@ from typing import Optional, Tuple
 from . import _build
 
 __all__ = ["STATUS_OUTSIDE_REGION", "STATUS_CHIP_ERROR", "STATUS_FULL_SCALE", "STATUS_RECOVERED", "FAULTS",
-           "FAULT_STAGES", "Sample", "DeviceInfo", "EepromReply", "temperature_C", "fault_name", "reading_fault",
-           "full_scale_name", "flag_letters"]
+           "FAULT_STAGES", "StatusBits", "Sample", "DeviceInfo", "EepromReply", "temperature_C", "fault_name",
+           "reading_fault", "full_scale_name", "flag_letters"]
 
 STATUS_OUTSIDE_REGION = 0x01  # the reading is outside the calibrated region: the force is extrapolated
 STATUS_CHIP_ERROR = 0x02  # NACK, ERROR bit, wrong byte count or timeout; the forces are NaN
@@ -67,8 +67,35 @@ def flag_letters(status: int) -> str:
     return "".join(letter if status & bit else "-" for bit, letter in _FLAG_LETTERS)
 
 
+class StatusBits:
+    """The status byte's bits as properties, for a reading that carries ``status`` (a :class:`Sample`, an array's
+    ``TaxelReading``)."""
+
+    status: int
+
+    @property
+    def outside_region(self) -> bool:
+        """Status bit 0: the reading is outside the calibrated (Bz, Br) region."""
+        return bool(self.status & STATUS_OUTSIDE_REGION)
+
+    @property
+    def chip_error(self) -> bool:
+        """Status bit 1: the chip failed to give this sample; the forces are NaN."""
+        return bool(self.status & STATUS_CHIP_ERROR)
+
+    @property
+    def full_scale(self) -> bool:
+        """Status bit 2: a field axis is at the chip's full scale."""
+        return bool(self.status & STATUS_FULL_SCALE)
+
+    @property
+    def recovered(self) -> bool:
+        """Status bit 3: the chip was reset since the last frame."""
+        return bool(self.status & STATUS_RECOVERED)
+
+
 @dataclass(frozen=True)
-class Sample:
+class Sample(StatusBits):
     """One sample from the device.
 
     ``B_uT`` is (Bx, By, Bz) in microtesla; ``force_N`` is (Fx, Fy, Fz) in newton as the firmware computed it,
@@ -100,26 +127,6 @@ class Sample:
     def __post_init__(self) -> None:
         if self.device_force_N is None:
             object.__setattr__(self, "device_force_N", self.force_N)
-
-    @property
-    def outside_region(self) -> bool:
-        """Status bit 0: the reading is outside the calibrated (Bz, Br) region."""
-        return bool(self.status & STATUS_OUTSIDE_REGION)
-
-    @property
-    def chip_error(self) -> bool:
-        """Status bit 1: the chip failed to give this sample; the forces are NaN."""
-        return bool(self.status & STATUS_CHIP_ERROR)
-
-    @property
-    def full_scale(self) -> bool:
-        """Status bit 2: a field axis is at the chip's full scale."""
-        return bool(self.status & STATUS_FULL_SCALE)
-
-    @property
-    def recovered(self) -> bool:
-        """Status bit 3: the chip was reset since the last frame."""
-        return bool(self.status & STATUS_RECOVERED)
 
     @property
     def fault_name(self) -> Optional[str]:

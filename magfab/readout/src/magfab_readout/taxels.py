@@ -40,10 +40,9 @@ from . import array_json, bounded  # array_json: an array build's compensation (
 from .calibration import Calibration, CalibrationError
 from .device import DeviceError
 from .readings import (
-    STATUS_CHIP_ERROR,
-    STATUS_FULL_SCALE,
     STATUS_OUTSIDE_REGION,
     Sample,
+    StatusBits,
     flag_letters,
     reading_fault,
 )
@@ -176,7 +175,7 @@ class ArrayCalibration:
 
 
 @dataclass(frozen=True)
-class TaxelReading:
+class TaxelReading(StatusBits):
     """One taxel in one cycle: the field its chip read (``B_uT``), its own field after the compensation
     (``own_uT``), its force (``force_N``, minus the taxel's zero) and the frame's status with the host's
     'outside the calibrated region' bit. A taxel with a chip error, a missing frame or an axis at the chip's full
@@ -194,18 +193,6 @@ class TaxelReading:
     missing: bool = False
     counts: Optional[Tuple[int, int, int]] = None
     temperature_raw: Optional[int] = None
-
-    @property
-    def chip_error(self) -> bool:
-        return bool(self.status & STATUS_CHIP_ERROR)
-
-    @property
-    def outside_region(self) -> bool:
-        return bool(self.status & STATUS_OUTSIDE_REGION)
-
-    @property
-    def full_scale(self) -> bool:
-        return bool(self.status & STATUS_FULL_SCALE)
 
     @property
     def ok(self) -> bool:
