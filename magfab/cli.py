@@ -26,11 +26,12 @@ try:  # Ctrl-C while these load is Python's KeyboardInterrupt, ended here as exi
     from collections.abc import Callable, Iterator, Mapping
     from contextlib import contextmanager
     from pathlib import Path
-    from typing import TYPE_CHECKING, Any
+    from typing import TYPE_CHECKING, Any, cast
 
     import click
 
     from . import __version__
+    from .calibration_input import kept_from_record, read_scan
     from .cli_usage import EXIT_INTERRUPTED, OneLineErrors
     from .cli_usage import fail as _fail
     from .errors import InputError, SpecError, shown
@@ -136,7 +137,11 @@ def build(spec: Path | None, out_dir: Path | None, as_json: bool, discard_calibr
 
 
 @main.command()
-@click.argument("scan", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("scan", required=False, type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--weights", type=click.Path(dir_okay=False, path_type=Path),
+              help="Instead of SCAN: the weighings, the chip's mean field under known weights (docs/bundle.md section "
+                   "1b); the sensor's model is fitted to them and the calibration built from the model (no force "
+                   "sensor needed).")
 @click.option("--reference", type=click.Path(dir_okay=False, path_type=Path),
               help="The reference force sensor's log (time_s on this computer's clock, Fx_N, Fy_N, Fz_N), merged "
                    "into SCAN (a magfab-readout recording) by time.")
@@ -154,8 +159,9 @@ def build(spec: Path | None, out_dir: Path | None, as_json: bool, discard_calibr
 @click.option("--date", help="With --sensor: when the scan was taken (ISO 8601, UTC unless it names a zone; default: "
                              "now).")
 @click.option("--json", "as_json", is_flag=True, help="Print a machine-readable summary on stdout.")
-def calibrate(scan: Path, reference: Path | None, spec: Path | None, out_dir: Path | None, taxel: int | None,
-              sensor_id: str | None, sensors_root: Path | None, date: str | None, as_json: bool) -> None:
+def calibrate(scan: Path | None, weights: Path | None, reference: Path | None, spec: Path | None, out_dir: Path | None,
+              taxel: int | None, sensor_id: str | None, sensors_root: Path | None, date: str | None,
+              as_json: bool) -> None:
     """Fit the force calibration to SCAN (a CSV, see docs/bundle.md). With --sensor ID, append it to that
     sensor's record, which no build touches; without, update the build with it: calibration.json, the firmware's
     EEPROM record and the readout package carry the new coefficients.
@@ -163,15 +169,24 @@ def calibrate(scan: Path, reference: Path | None, spec: Path | None, out_dir: Pa
     Inside a build folder no option is needed: `magfab calibrate scan.csv --reference reference.csv` updates
     that build from its own spec.json, file by file (your shell stays where it is). An array is calibrated one
     taxel at a time (`--taxel K`); the other taxels keep the scans they were fitted to. A scan whose field at rest
-    is outside the design's acceptance band is refused (the wrong sensor or build, or a misassembled sensor)."""
+    is outside the design's acceptance band is refused (the wrong sensor or build, or a misassembled sensor).
+
+    Without a force sensor: `magfab calibrate --weights weights.csv` fits the sensor's model to known weights on the
+    build's weight jig and builds the calibration from the model (docs/bundle.md section 1b); a sensor on a new skin
+    (`magfab sensor reskin`) keeps its magnet's and silicone's fitted parameters, so three weighings do."""
     with _handled():
         check_out(out_dir)
+    if (scan is None) == (weights is None) or (weights is not None and (reference or taxel is not None)):
+        _fail("give a SCAN, or --weights FILE without --reference and --taxel (a weight calibration is of a single "
+              "taxel's sensor, and its loads are the weights')", EXIT_BAD_INPUT)
+    path = cast(Path, scan or weights)
     if sensor_id is None:
         if date is not None:
             _fail("--date dates a sensor's calibration: give it with --sensor ID", EXIT_BAD_INPUT)
-        _run_build(spec, out_dir, as_json, scan, reference, taxel)
+        _run_build(spec, out_dir, as_json, path, reference, taxel, weights=weights is not None)
         return
-    _calibrate_sensor(scan, reference, spec, out_dir, taxel, sensor_id, sensors_root, date, as_json)
+    _calibrate_sensor(path, reference, spec, out_dir, taxel, sensor_id, sensors_root, date, as_json,
+                      weights is not None)
 
 
 def _build_folder(*candidates: Path | None) -> Path | None:
@@ -205,7 +220,8 @@ def _calibration_target(spec_path: Path | None, out_dir: Path | None, scan_path:
 
 
 def _run_build(spec: Path | None, out_dir: Path | None, as_json: bool, scan_path: Path | None = None,
-               reference: Path | None = None, taxel: int | None = None, discard: bool = False) -> None:
+               reference: Path | None = None, taxel: int | None = None, discard: bool = False,
+               weights: bool = False) -> None:
     with _handled():  # every import inside: Ctrl-C while a heavy library loads is still exit 130
         from .output import is_build
         from .pipeline import build as run_build
@@ -222,7 +238,7 @@ def _run_build(spec: Path | None, out_dir: Path | None, as_json: bool, scan_path
                 refuse_discarding(target, [Path.cwd(), Path(target)] + ([spec.parent] if spec is not None else []))
         else:
             loaded, out_dir = _calibration_target(spec, out_dir, scan_path)
-            scan = _read_scan(scan_path, reference, out_dir, loaded, taxel)
+            scan = read_scan(scan_path, reference, out_dir, loaded, taxel, weights)
             _check_rest(scan, loaded, out_dir if out_dir is not None and is_build(out_dir) else None, taxel)
         with _progress(sys.stderr.isatty() and not as_json) as progress:
             result = run_build(loaded, out_dir, progress, scan)
@@ -257,6 +273,9 @@ def _run_build(spec: Path | None, out_dir: Path | None, as_json: bool, scan_path
             click.echo(f"  calibration ({source}): {cal['method']} order {cal['order']}, held-out RMS "
                        f"Fz {cal['rms_holdout_Fz_mN']:g} mN, Fr {cal['rms_holdout_Fr_mN']:g} mN; firmware image: "
                        f"{cal['image'] or 'not built (no avr-gcc)'}")
+            if "predicted_error_Fz_mN" in cal:
+                click.echo(f"  weight calibration's predicted error over the region (9 in 10): Fz RMS "
+                           f"{cal['predicted_error_Fz_mN']:g} mN, shear RMS {cal['predicted_error_shear_mN']:g} mN")
         if scan_path is not None and result.out_dir is not None:  # a command line build is always written out
             readout = os.path.relpath(result.out_dir / "readout")
             click.echo(f"next: pip install {readout if readout.startswith('.') else './' + readout} && "
@@ -278,7 +297,8 @@ def _check_rest(scan, spec, folder: Path | None, taxel: int | None, sensor=None)
 
 
 def _calibrate_sensor(scan_path: Path, reference: Path | None, spec_path: Path | None, out_dir: Path | None,
-                      taxel: int | None, sensor_id: str, root: Path | None, date: str | None, as_json: bool) -> None:
+                      taxel: int | None, sensor_id: str, root: Path | None, date: str | None, as_json: bool,
+                      weights: bool = False) -> None:
     """``magfab calibrate SCAN --sensor ID``: every guard, then the fit appended to the sensor's record; the build
     folder is left as it is (its calibration stays the provisional one, fitted to the simulated scan)."""
     with _handled():
@@ -310,16 +330,19 @@ def _calibrate_sensor(scan_path: Path, reference: Path | None, spec_path: Path |
         design = preflight(derive(loaded))  # the spec as built: a board it does not size is sized as the build sizes it
         loaded = design.spec
         check_spec(sensor, loaded)
-        scans = _read_scan(scan_path, reference, folder, loaded, taxel)
+        scans = read_scan(scan_path, reference, folder, loaded, taxel, weights, kept_from_record(sensor) if weights
+                          else None)
         scan = scans[taxel] if isinstance(scans, dict) else scans
         rest = _check_rest(scan, loaded, folder, taxel, sensor)
-        files = {"scan.csv": bounded.read_bytes(scan_path, "scan CSV")}
+        files = {"weights.csv": bounded.read_bytes(scan_path, "weighings CSV")} if weights else {
+            "scan.csv": bounded.read_bytes(scan_path, "scan CSV")}
         if reference is not None:
             files["reference.csv"] = bounded.read_bytes(reference, "reference log")
         if MERGED in scan.source:
             files["scan_merged.csv"] = merged_csv(scan)
         check_owner(sensor, files)
-        _reject_own_forces(sensor, scan, loaded, taxel)
+        if not weights:  # a weight calibration's forces are the weights', never the sensor's own
+            _reject_own_forces(sensor, scan, loaded, taxel)
         for line in _depth_warnings(scan, loaded, folder, design, taxel):
             click.echo(f"warning: {line} [calibration.scan_z_mm]", err=True)
         done = calibrate_record(sensor, loaded, design, scan, rest, files, taxel, when)
@@ -333,6 +356,9 @@ def _calibrate_sensor(scan_path: Path, reference: Path | None, spec_path: Path |
         click.echo(f"calibrated sensor {sensor_id}{which} from {event['source']}: {event['method']} order "
                    f"{event['order']}, held-out RMS Fz {event['rms_holdout_Fz_mN']:g} mN, Fr "
                    f"{event['rms_holdout_Fr_mN']:g} mN")
+        if "predicted_error_Fz_mN" in event:
+            click.echo(f"  predicted error over the region (9 in 10): Fz RMS {event['predicted_error_Fz_mN']:g} mN, "
+                       f"shear RMS {event['predicted_error_shear_mN']:g} mN")
         click.echo(f"  at rest Bz {event['rest_field_uT'][2]:.0f} uT; sensitivity "
                    f"{event['sensitivity_normal_uT_per_N']} uT/N normal, "
                    f"{event['sensitivity_shear_uT_per_N']} uT/N shear; calibrated to "
@@ -375,36 +401,6 @@ def _depth_warnings(scan, spec, folder: Path | None, design, taxel: int | None) 
         scan = compensated(scan, array_field(design), taxel)
     predictions = folder / "predictions.json"
     return scan_depth_warnings(scan, bounded.loads_json(bounded.read_bytes(predictions, "JSON"), "JSON", predictions))
-
-
-def _read_scan(scan_path: Path, reference: Path | None, build_dir: Path | None, spec, taxel: int | None = None):
-    """The scan to fit: the file, or a recording merged with the reference sensor's log; refused when its
-    forces are the sensor's own (a recording calibrated against itself: by their names in the reader, by their
-    values against the build's present calibration here). For an array, {taxel: scan} with the scans the build
-    folder's other taxels were fitted to (:func:`magfab.array_bench.taxel_scans`)."""
-    from .formats.scan_csv import read_recording, read_scan_csv
-    from .models.scan_guards import merge_reference
-
-    if spec.array is not None or taxel is not None:
-        from .array_bench import check_taxel
-
-        check_taxel(spec, taxel)
-    if reference is not None:
-        scan = merge_reference(read_recording(scan_path, taxel), reference, spec.calibration.reference_resolution_mN)
-    else:
-        scan = read_scan_csv(scan_path, taxel=taxel)
-    folder = None if build_dir is None else Path(build_dir)
-    if spec.array is not None:
-        from .array_bench import taxel_scans
-
-        assert taxel is not None  # check_taxel refused an array's scan that names no taxel
-        return taxel_scans(folder, spec, taxel, scan)
-    present = None if folder is None else folder / "calibration" / "calibration.json"
-    if present is not None and present.is_file():
-        from .models.scan_guards import reject_self_calibrated_file
-
-        reject_self_calibrated_file(scan, present, spec.calibration.reference_resolution_mN)
-    return scan
 
 
 def _print_findings(findings: list) -> None:

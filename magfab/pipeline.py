@@ -56,6 +56,7 @@ from .models.acceptance import acceptance
 from .models.scan import scan_plan, simulate_scan
 from .models.scan_guards import MERGED, merged_csv, scan_depth_warnings
 from .models.taxels import array_field, calibrate_taxels, compensated, simulate_taxel_scan
+from .models.weighing import stated_error
 from .mould import cup_solid, lid_solid
 from .output import Artifact, check_target, write
 from .pad import pad_solid
@@ -421,7 +422,8 @@ def plan(spec: Spec, progress: Progress | None = None, scan=None, parallel: bool
     image = next((a.path for a in artifacts if a.path.endswith(".hex")), None)
     calibration = {"source": cal["scan"]["source"], "method": cal["method"], "order": cal["order"],
                    "rms_holdout_Fz_mN": round(1000 * cal["errors"]["Fz_N"]["rms_holdout"], 2),
-                   "rms_holdout_Fr_mN": round(1000 * cal["errors"]["Fr_N"]["rms_holdout"], 2), "image": image}
+                   "rms_holdout_Fr_mN": round(1000 * cal["errors"]["Fr_N"]["rms_holdout"], 2), "image": image,
+                   **stated_error(cal)}
     return BuildResult(spec, design, artifacts, findings, timings, prediction=prediction, calibration=calibration)
 
 

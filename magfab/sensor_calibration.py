@@ -30,6 +30,7 @@ from .models.chip import chip_setting
 from .models.predict import predict
 from .models.rest_guard import RestField, calibrated_range_N, check_rest_band, rest_field, sensitivity_uT_per_N
 from .models.taxels import array_field, compensated
+from .models.weighing import stated_error
 from .spec import spec_from_json
 
 if TYPE_CHECKING:
@@ -205,6 +206,7 @@ def calibrate_record(sensor: records.Sensor, spec: Spec, design: Design, scan: S
         "order": cal["order"], "rms_holdout_Fz_mN": round(1000 * err["Fz_N"]["rms_holdout"], 2),
         "rms_holdout_Fr_mN": round(1000 * err["Fr_N"]["rms_holdout"], 2), "calibration_sha256": calibration_sha256(cal),
         **calibration_figures(scan, result.calibration, design, taxel, rest), "provisional": False,
+        **stated_error(cal),
     }
     with record_errors():
         event = sensor.append("calibration", data, {**files, "calibration.json": _json_bytes(cal)}, date=date)

@@ -19,9 +19,10 @@ import io
 import math
 import os
 import re
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -96,6 +97,8 @@ class Scan:
     ``F_N`` (N, 3) reference force on the tip in the sensor frame (+z presses the tip towards the chip), N,
     or None for a recording without a reference; ``temperature_C`` (N,) degC or None; ``source`` the file
     name or "simulated"; ``sha256`` of the CSV bytes as read (simulated: of :func:`scan_csv` of the scan).
+    ``model``: for the scan of a sensor's fitted model (a weight calibration, :mod:`magfab.models.weighing`), what
+    it was fitted from and to (JSON values, kept in calibration.json's ``scan``); None for a measured scan.
     """
 
     time_s: np.ndarray
@@ -104,6 +107,7 @@ class Scan:
     temperature_C: np.ndarray | None = None
     source: str = "simulated"
     sha256: str = ""
+    model: Mapping[str, Any] | None = None
 
     @property
     def rows(self) -> int:
@@ -145,15 +149,17 @@ def scan_csv(scan: Scan, comments: Sequence[str] = ()) -> str:
 def _load(source: str | os.PathLike[str] | bytes, what: str = "scan CSV") -> tuple[bytes, str]:
     """(bytes, name) of a scan: a path (a regular file within ``what``'s limit, :mod:`.bounded`), CSV text (a str
     holding a newline, or a comma and naming no file) or CSV bytes."""
+    given = "weighings" if what == "weighings CSV" else "scan"  # the name of a file given as its text
     if isinstance(source, bytes):
-        return source, "scan"
+        return source, given
     if isinstance(source, str) and ("\n" in source or ("," in source and not os.path.exists(source))):
-        return source.encode("utf-8"), "scan"
+        return source.encode("utf-8"), given
     path = Path(source)
     try:
         return bounded.read_bytes(path, what), path.name
     except OSError as exc:
-        raise ScanError(f"{path}: cannot read the scan file ({exc.strerror or exc})") from None
+        kind = "the scan file" if what == "scan CSV" else f"the {what}"
+        raise ScanError(f"{path}: cannot read {kind} ({exc.strerror or exc})") from None
 
 
 def _number(text: str, name: str, line: int, column: str, row: int, band: tuple[float, float, str]) -> float:

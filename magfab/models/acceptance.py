@@ -93,7 +93,8 @@ if TYPE_CHECKING:
 # Imported lazily, inside the functions that use it, for speed: magpylib takes a
 # noticeable time to import, and importing this module should not.
 
-__all__ = ["FORMAT", "G0", "DEFAULT_WEIGHT_G", "Tolerances", "SOURCES", "acceptance", "default_weight_g"]
+__all__ = ["FORMAT", "G0", "DEFAULT_WEIGHT_G", "Tolerances", "SOURCES", "acceptance", "default_weight_g",
+           "tolerance_bands"]
 
 FORMAT = acceptance_json.FORMAT
 DEFAULT_WEIGHT_G = 50.0
@@ -482,6 +483,25 @@ def _weight_section(data: Mapping[str, Any], wt: _Weight) -> dict[str, Any]:
 
 
 # The steps below are the module doc's, in its order; this only wires them and lays out acceptance.json.
+def tolerance_bands(design: Design, prediction: Prediction | Mapping[str, Any],
+                    tolerances: Tolerances | None = None) -> dict[str, Any]:
+    """The tolerance bands the acceptance test builds from, as a model fitted to the sensor takes its priors
+    (:mod:`magfab.models.weighing`): ``remanence_T`` (low, high, nominal); ``rest_distance_mm`` (the stack-up's
+    mean change of d, its root-sum-square half-width: the stack-up's terms, the magnet's height and its seating);
+    ``offset_mm`` the summed lateral offsets and ``tilt_deg`` the magnetisation's tilt (as :func:`acceptance`'s
+    lateral bound)."""
+    tol = tolerances or Tolerances()
+    data = _data(prediction)
+    inp = _resolve(design, data, tol)
+    terms = [(lo, hi) for _, lo, hi in _stack(inp, tol)] + [(-inp.dH, inp.dH), (-inp.seat_max(inp.H), 0.0)]
+    mid = sum((lo + hi) / 2.0 for lo, hi in terms)
+    half = math.sqrt(sum(((hi - lo) / 2.0) ** 2 for lo, hi in terms))
+    nominal = (inp.R, inp.H, inp.br_nom, inp.d_rest)
+    _, offset, tilt, _ = _lateral(design, inp, tol, nominal)
+    return {"remanence_T": (inp.br_lo, inp.br_hi, inp.br_nom), "rest_distance_mm": (mid, half),
+            "offset_mm": offset, "tilt_deg": tilt}
+
+
 def acceptance(design: Design, prediction: Prediction | Mapping[str, Any], weight_g: float | None = None,
                tolerances: Tolerances | None = None) -> dict[str, Any]:
     """The acceptance bands for ``design`` (module doc): a JSON-ready dict, format ``magfab-acceptance/1``.

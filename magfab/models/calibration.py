@@ -527,7 +527,8 @@ def fit(scan: Scan, design: Design, *, mls: bool = True) -> FitResult:
     chosen = next(c for c in cands if c.label == label)
     firmware = min((c for c in cands if c.method == "poly" and c.order <= cal.order), key=lambda c: c.worst_rms_N)
     base = Calibration("poly", 0, scaling, np.zeros((1, 2)), _shear_sign(scan), DIRECTION_MIN_SIGMAS * noise_xy_uT,
-                       region, {"folds": cal.folds}, {"sha256": scan.sha256, "rows": scan.rows, "source": scan.source},
+                       region, {"folds": cal.folds}, {"sha256": scan.sha256, "rows": scan.rows, "source": scan.source,
+                                                   **({} if scan.model is None else {"model": dict(scan.model)})},
                        chip, thermal=thermal)
     calibration = _calibration_for(base, cands, label, firmware.order)
     message = "" if meets else (

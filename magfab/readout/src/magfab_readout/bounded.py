@@ -36,6 +36,7 @@ LIMITS = {
     "spec.json": 1 * MB,          # a build's or a record's spec, every default filled in: about 3 kB
     "scan CSV": 256 * 1024 * 1024,      # the sensor records' own limit: about an hour of `record` rows (~100 bytes)
     "reference log": 256 * 1024 * 1024,  # at the chip's fastest conversion (1.27 ms); a calibration scan takes minutes
+    "weighings CSV": 1 * MB,      # at most 500 weighings of about 100 bytes (magfab.formats.weights_csv)
     "calibration.json": 64 * MB,  # an MLS calibration keeps its scan points: over 500,000 of them
     "acceptance.json": 16 * MB,   # bands and one weight table: a few kB
     "array.json": 16 * MB,        # the neighbours' field tables of up to 16 taxels: tens of kB

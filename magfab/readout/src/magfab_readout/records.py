@@ -78,7 +78,8 @@ def _shown(value: object) -> str:
 
 #: The numbers a calibration event carries (docs/sensors.md section 3), each a finite number or null.
 _EVENT_NUMBERS = ("rms_holdout_Fz_mN", "rms_holdout_Fr_mN", "sensitivity_normal_uT_per_N",
-                  "sensitivity_shear_uT_per_N", "range_normal_N", "range_shear_N")
+                  "sensitivity_shear_uT_per_N", "range_normal_N", "range_shear_N", "predicted_error_Fz_mN",
+                  "predicted_error_shear_mN")
 
 
 def _finite(x: object) -> bool:

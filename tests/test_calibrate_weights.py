@@ -1,0 +1,102 @@
+"""``magfab calibrate --weights``: a sensor's record gets a model-based calibration with its fitted parameters and
+predicted error; a new skin keeps the magnet's and the silicone's parameters, so three weighings do; a build is handed
+the model's scan; and every wrong use is one line, exit 2, nothing written."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from calibrate_support import add, tree
+
+from magfab.formats.weights_csv import weights_csv
+from magfab.models.weighing import RESKIN_KEPT, SensorModel, noise_uT, reskin_plan, weight_plan
+from magfab.models.weighing_study import draw_sensor, truth_model, weighings
+
+
+@pytest.fixture(scope="module")
+def sensor_and_plan(magone_design, magone_prediction, magone_neo_hookean):
+    """A drawn MagOne sensor of the other law (tests/models/test_weighing.py) and the plan's weighings of it."""
+    model = SensorModel.of(magone_design, magone_prediction)
+    truth = truth_model(magone_design, magone_prediction, model, magone_neo_hookean[1])
+    rng = np.random.default_rng(7)
+    sensor = draw_sensor(model, truth, rng)
+    plan = weight_plan(magone_prediction, 5.0)
+    return sensor, plan, noise_uT(magone_design), rng
+
+
+def _write(path, sensor_and_plan, plan=None):
+    sensor, full, noise, rng = sensor_and_plan
+    path.write_text(weights_csv(weighings(sensor, plan or full, noise, rng), ["simulated"]))
+
+
+def test_a_sensor_is_calibrated_from_weights_and_a_new_skin_from_three(bench, sensor_and_plan):
+    project, out, calls, run = bench
+    sensor = add(project, out, "finger-01")
+    _write(project / "weights.csv", sensor_and_plan)
+    before = tree(out)
+    result = run("calibrate", "--weights", "weights.csv", "--sensor", "finger-01", "--out", str(out))
+    assert result.exit_code == 0, result.output
+    assert "predicted error over the region (9 in 10): Fz RMS" in result.output
+    assert calls == [] and tree(out) == before
+    event, cal = sensor.current_calibration()
+    model = cal["scan"]["model"]
+    assert model["weighings"] == 12 and model["kept"] == [] and set(model["theta"]) >= set(RESKIN_KEPT)
+    assert event["predicted_error_Fz_mN"] == model["predicted_error_mN"]["Fz_rms"]["p90"] > 0
+    assert sensor.file(event["files"]["weights.csv"]) == (project / "weights.csv").read_bytes()
+    first = model["theta"]
+    # a new skin: three weighings, the magnet's and the silicone's parameters kept from the first skin's fit
+    assert run("sensor", "reskin", "finger-01").exit_code == 0
+    _write(project / "skin2.csv", sensor_and_plan, reskin_plan(sensor_and_plan[1]))
+    result = run("calibrate", "--weights", "skin2.csv", "--sensor", "finger-01", "--out", str(out))
+    assert result.exit_code == 0, result.output
+    _, cal2 = sensor.current_calibration()
+    again = cal2["scan"]["model"]
+    assert again["weighings"] == 3 and again["kept"] == sorted(RESKIN_KEPT)
+    assert all(again["theta"][k] == pytest.approx(first[k], abs=1e-8) for k in RESKIN_KEPT)
+
+
+def test_a_build_is_handed_the_models_scan(bench, sensor_and_plan):
+    _, out, calls, run = bench
+    _write(out / "weights.csv", sensor_and_plan)
+    result = run("calibrate", "--weights", str(out / "weights.csv"), "--out", str(out))
+    assert result.exit_code == 0, result.output
+    (_, scan), = calls
+    assert scan.model["weighings"] == 12 and scan.source.startswith("weights.csv (weight calibration")
+    assert scan.rows > 1000 and scan.F_N is not None
+
+
+@pytest.mark.parametrize("args, says", [
+    (("scan.csv", "--weights", "weights.csv"), "give a SCAN, or --weights FILE"),
+    ((), "give a SCAN, or --weights FILE"),
+    (("--weights", "weights.csv", "--reference", "ref.csv"), "without --reference"),
+    (("--weights", "weights.csv", "--taxel", "0"), "without --reference and --taxel"),
+    (("--weights", "missing.csv"), "missing.csv: cannot read the weighings CSV"),
+    (("--weights", "bad.csv"), "bad.csv: line 3 (row 2), column 'angle_deg'"),
+])
+def test_a_wrong_use_is_one_line_and_writes_nothing(bench, sensor_and_plan, args, says):
+    project, out, calls, run = bench
+    _write(project / "weights.csv", sensor_and_plan)
+    lines = (project / "weights.csv").read_text().splitlines()[1:]  # the header on line 1
+    parts = lines[2].split(",")
+    parts[1] = "95"  # row 2's stand angle past 80 degrees
+    lines[2] = ",".join(parts)
+    (project / "bad.csv").write_text("\n".join(lines) + "\n")
+    before = tree(project)
+    result = run("calibrate", *args, "--out", str(out))
+    assert result.exit_code == 2, result.output
+    assert says in result.output and calls == [] and tree(project) == before
+    assert len(result.output.strip().splitlines()) == 1
+
+
+def test_an_arrays_weights_are_refused(tmp_path, monkeypatch, sensor_and_plan):
+    from click.testing import CliRunner
+    from conftest import EXAMPLES
+
+    from magfab.cli import main
+
+    _write(tmp_path / "weights.csv", sensor_and_plan)
+    monkeypatch.chdir(tmp_path)
+    result = CliRunner().invoke(main, ["calibrate", "--weights", "weights.csv", "--spec",
+                                       str(EXAMPLES / "strip_1x5.toml"), "--out", str(tmp_path / "new")])
+    assert result.exit_code == 2 and "a weight calibration is of a single taxel's sensor" in result.output
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["weights.csv"]
