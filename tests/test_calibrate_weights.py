@@ -4,6 +4,9 @@ the model's scan; and every wrong use is one line, exit 2, nothing written."""
 
 from __future__ import annotations
 
+import math
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from calibrate_support import add, tree
@@ -72,15 +75,24 @@ def test_a_build_is_handed_the_models_scan(bench, sensor_and_plan):
     (("--weights", "weights.csv", "--taxel", "0"), "without --reference and --taxel"),
     (("--weights", "missing.csv"), "missing.csv: cannot read the weighings CSV"),
     (("--weights", "bad.csv"), "bad.csv: line 3 (row 2), column 'angle_deg'"),
+    (("--weights", "heavy.csv"), "heavy.csv: weighing 4, 5005 g at 0 deg, pushes 49.1 N"),
+    (("--weights", "n52.csv"), "n52.csv (weight calibration, 12 weighings): its field at rest"),
 ])
 def test_a_wrong_use_is_one_line_and_writes_nothing(bench, sensor_and_plan, args, says):
     project, out, calls, run = bench
     _write(project / "weights.csv", sensor_and_plan)
     lines = (project / "weights.csv").read_text().splitlines()[1:]  # the header on line 1
+    heavy = lines[:]
+    heavy[4] = ",".join(["5005", *heavy[4].split(",")[1:]])  # weighing 4: 5 kg on the tip
+    (project / "heavy.csv").write_text("\n".join(heavy) + "\n")
     parts = lines[2].split(",")
     parts[1] = "95"  # row 2's stand angle past 80 degrees
     lines[2] = ",".join(parts)
     (project / "bad.csv").write_text("\n".join(lines) + "\n")
+    sensor, plan, noise, rng = sensor_and_plan
+    n52 = replace(sensor, theta=sensor.theta.copy())
+    n52.theta[1] = math.log(1.205)  # an N52 magnet (20.5 % more remanence) in the N35 design
+    (project / "n52.csv").write_text(weights_csv(weighings(n52, plan, noise, rng)))
     before = tree(project)
     result = run("calibrate", *args, "--out", str(out))
     assert result.exit_code == 2, result.output

@@ -48,6 +48,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ..errors import ScanError
 from ..formats.scan_csv import Scan, scan_csv
 from ..formats.weights_csv import Weighing
 from ..units import G0, UT_PER_GAUSS
@@ -92,6 +93,14 @@ REGION_SIDE = 40
 #: weighings. Chosen on the simulated study (bench/weights.py: MagOne, sensors 0-29 of seed 0), where 0.001 covered
 #: 75 % of the drawn sensors' actual Fz error and 0.003 covered 97 %; checked on other designs and seeds there.
 BOUND_MODEL_ERROR = 0.003
+#: The largest mean squared residual per reading (in the fit's own error scale) of weighings the model explains; past
+#: it the weighings are refused (the wrong sensor, grade, weights or angles): about 5 sigma RMS, against the 0.1-0.6
+#: of the simulated study's sensors.
+MAX_CHI2 = 25.0
+#: The farthest a fitted parameter may sit from its prior's mean, in prior sigmas (the band is 2): past it the
+#: sensor is outside its design's bands (a MagOne magnet seated 1 mm high is fitted 8.7 sigma out; an N52 magnet in
+#: its N35 design 3.8 sigma, which the acceptance test's rest band then refuses).
+MAX_PRIOR_SIGMAS = 4.0
 #: How many parameter sets :func:`predicted_error` draws from the posterior.
 DRAWS = 64
 #: The share of posterior draws whose region RMS the stated error bound covers.
@@ -437,7 +446,16 @@ def calibration_scan(design: Design, prediction: Prediction, weighings: Sequence
     calibration's predicted error over the region (:func:`predicted_error`, of the calibration the build fits to
     this scan); ``source`` and ``sha256`` name the weighings file."""
     model = SensorModel.of(design, prediction)
+    _check_loads(model, weighings, source)
     fit = fit_weights(model, weighings, fixed=fixed)
+    if not fit.chi2 <= MAX_CHI2:
+        worst = int(np.argmax(np.abs(fit.residual_uT).max(axis=1)))
+        raise ScanError(f"{source}: the weighings do not fit this design's model (mean squared residual "
+                        f"{fit.chi2:.3g} per reading, at most {MAX_CHI2:g}; worst: weighing {worst + 1}, "
+                        f"{weighings[worst].mass_g:g} g at {weighings[worst].angle_deg:g} deg, off by "
+                        f"{np.abs(fit.residual_uT[worst]).max():.0f} uT): the wrong sensor, magnet grade, masses or "
+                        "angles")
+    _check_bands(model, fit, source)
     scan = model_scan(model, fit, design, prediction)
     cal = calibration_fit(scan, design, mls=design.spec.calibration.method.value != "poly").calibration
     bound = predicted_error(model, fit, cal, design, prediction)
@@ -458,6 +476,29 @@ def calibration_scan(design: Design, prediction: Prediction, weighings: Sequence
     }
     scan = replace(scan, source=f"{source} (weight calibration, {len(weighings)} weighings)", model=info)
     return replace(scan, sha256=hashlib.sha256(scan_csv(scan).encode("utf-8")).hexdigest()), fit, bound
+
+
+def _check_loads(model: SensorModel, weighings: Sequence[Weighing], source: str) -> None:
+    """ScanError for a weighing whose normal load is past the end of the stiffest skin's normal curve (the material
+    band's stiff end): no skin of this design could have carried it."""
+    stiffest = model.force_N[-1] * math.exp(model.prior.mean[0] + 2.0 * model.prior.sigma[0])
+    for k, w in enumerate(weighings, 1):
+        fz = float(load_of(w.mass_g, w.angle_deg)[0, 2])
+        if fz > stiffest:
+            raise ScanError(f"{source}: weighing {k}, {w.mass_g:g} g at {w.angle_deg:g} deg, pushes {fz:.3g} N; this "
+                            f"design's stiffest skin carries at most {stiffest:.3g} N over its calibrated depth "
+                            "(docs/models.md, M25: the plan's weights)")
+
+
+def _check_bands(model: SensorModel, fit: WeightFit, source: str) -> None:
+    """ScanError when a fitted parameter is more than :data:`MAX_PRIOR_SIGMAS` of its prior from the band's centre."""
+    z = (fit.theta[:len(PARAMS)] - model.prior.mean) / model.prior.sigma
+    k = int(np.argmax(np.abs(z)))
+    if abs(z[k]) > MAX_PRIOR_SIGMAS:
+        lo, hi = model.prior.mean[k] - 2 * model.prior.sigma[k], model.prior.mean[k] + 2 * model.prior.sigma[k]
+        raise ScanError(f"{source}: the weighings fit {PARAMS[k]} = {fit.theta[k]:.3g}, {abs(z[k]):.1f} sigma from its "
+                        f"band {lo:.3g} to {hi:.3g} (at most {MAX_PRIOR_SIGMAS:g}): the wrong sensor or magnet grade, "
+                        "or a misassembled sensor")
 
 
 def stated_error(calibration_json: Mapping[str, Any]) -> dict[str, float]:

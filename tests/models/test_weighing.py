@@ -5,17 +5,20 @@ stated bound covers the actual error; the plan stays inside the ranges of every 
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from magfab.errors import ScanError
 from magfab.models import acceptance
 from magfab.models.weighing import (
     PARAMS,
     RESKIN_KEPT,
     SensorModel,
+    calibration_scan,
     first_weighings,
     fit_weights,
     load_of,
@@ -112,3 +115,23 @@ def test_the_priors_are_the_acceptance_tests_bands(magone_design, magone_predict
     assert math.isclose(4 * model.prior.sigma[PARAMS.index("log_br")], math.log(hi / lo))
     assert np.all(model.prior.sigma > 0)
     assert set(RESKIN_KEPT) < set(PARAMS) and {"log_mu", "d_mm"}.isdisjoint(RESKIN_KEPT)
+
+
+def test_weighings_no_skin_of_the_design_explains_are_refused(magone_design, magone_prediction, model):
+    """A magnet seated 1 mm high (fitted as a rest distance far outside its band), a mass no skin of the design
+    carries, and weighings of another sensor's field: each refused in one line before any calibration is fitted."""
+    rng = np.random.default_rng(3)
+    sensor = draw_sensor(model, model, rng, centred=True)
+    sensor.theta[2] = model.prior.mean[2] + 1.0
+    plan = weight_plan(magone_prediction, 5.0)
+    noise = noise_uT(magone_design)
+    with pytest.raises(ScanError, match=r"the weighings fit d_mm = .* sigma from its band"):
+        calibration_scan(magone_design, magone_prediction, weighings(sensor, plan, noise, rng))
+    heavy = weighings(draw_sensor(model, model, rng), plan, noise, rng)
+    heavy[3] = replace(heavy[3], mass_g=5005.0)
+    with pytest.raises(ScanError, match=r"weighing 4, 5005 g at 0 deg, pushes 49\.1 N"):
+        calibration_scan(magone_design, magone_prediction, heavy)
+    mixed = weighings(draw_sensor(model, model, rng), plan, noise, rng)
+    mixed[5] = replace(mixed[5], field_uT=(0.0, 0.0, 0.5 * mixed[5].field_uT[2]))
+    with pytest.raises(ScanError, match="do not fit this design's model"):
+        calibration_scan(magone_design, magone_prediction, mixed)
