@@ -112,3 +112,27 @@ def test_an_arrays_weights_are_refused(tmp_path, monkeypatch, sensor_and_plan):
                                        str(EXAMPLES / "strip_1x5.toml"), "--out", str(tmp_path / "new")])
     assert result.exit_code == 2 and "a weight calibration is of a single taxel's sensor" in result.output
     assert sorted(p.name for p in tmp_path.iterdir()) == ["weights.csv"]
+
+
+def test_the_report_lists_a_weight_calibrations_fit(magone_design, magone_prediction, sensor_and_plan):
+    """calibration.json's scan.model into the report's calibration section: every fitted parameter with its spread,
+    the kept ones marked, and the predicted error (the same figures the record's event carries)."""
+    from magfab.export.report.tables import calibration_summary
+    from magfab.models.calibration import fit
+    from magfab.models.weighing import calibration_scan, stated_error
+
+    sensor, plan, noise, rng = sensor_and_plan
+    kept = {"log_br": 0.0, "shape_1": 0.01}
+    scan, _, bound = calibration_scan(magone_design, magone_prediction, weighings(sensor, plan, noise, rng),
+                                      fixed=kept, source="w.csv")
+    doc = fit(scan, magone_design, mls=False).calibration.to_json()
+    summary = calibration_summary(doc, 5.0)
+    assert summary is not None and not summary["provisional"]
+    weights = summary["weights"]
+    assert weights["weighings"] == 12
+    how = {name: mark for name, _, _, mark in weights["parameters"]}
+    assert how["br_ratio"] == how["shape_1"] == "kept" and how["mu_ratio"] == how["d_mm"] == "fitted"
+    assert len(how) == 10
+    assert float(weights["fz"][1]) == stated_error(doc)["predicted_error_Fz_mN"] == round(1000 * bound.fz_rms_N[1], 2)
+    assert calibration_summary({**doc, "scan": {k: v for k, v in doc["scan"].items() if k != "model"}},
+                               5.0)["weights"] is None

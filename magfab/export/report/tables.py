@@ -202,7 +202,22 @@ def calibration_summary(calibration: Mapping[str, Any] | None, tolerance_mN: flo
     return {"method": str(calibration["method"]), "order": calibration["order"], "folds": err["folds"],
             "source": str(scan["source"]), "rows": scan["rows"], "sha": str(scan["sha256"]), "errors": rows,
             "tolerance_mN": f"{tolerance_mN:g}", "meets": worst <= tolerance_mN,
-            "provisional": scan["source"] == "simulated"}
+            "provisional": scan["source"] == "simulated", "weights": _weights_summary(scan.get("model"))}
+
+
+def _weights_summary(model: Mapping[str, Any] | None) -> dict[str, object] | None:
+    """A weight calibration's fit (calibration.json's ``scan.model``, docs/models.md M25) for the report: the fitted
+    parameters with their standard deviations, which were kept from an earlier skin, and the predicted error."""
+    if not isinstance(model, Mapping):
+        return None
+    err = model["predicted_error_mN"]
+    kept = {k.removeprefix("log_") for k in model.get("kept", [])}
+    params = [(name, f"{p['value']:.4g}", f"{p['sd']:.2g}",
+               "kept" if name.removesuffix("_ratio") in kept else "fitted")
+              for name, p in sorted(model["parameters"].items())]
+    return {"weighings": model["weighings"], "parameters": params,
+            "fz": (f"{err['Fz_rms']['median']:g}", f"{err['Fz_rms']['p90']:g}"),
+            "shear": (f"{err['shear_rms']['median']:g}", f"{err['shear_rms']['p90']:g}")}
 
 
 def findings_by_severity(findings: Sequence[Finding]) -> list[dict[str, object]]:
