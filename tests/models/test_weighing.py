@@ -135,3 +135,59 @@ def test_weighings_no_skin_of_the_design_explains_are_refused(magone_design, mag
     mixed[5] = replace(mixed[5], field_uT=(0.0, 0.0, 0.5 * mixed[5].field_uT[2]))
     with pytest.raises(ScanError, match="do not fit this design's model"):
         calibration_scan(magone_design, magone_prediction, mixed)
+
+
+def _designs(n: int, seed: int):
+    """``n`` designs of the inverse search's default box (every silicone, tip and stock magnet), as it samples them:
+    the buildable ones (a design the build's preflight refuses is no sensor to weigh)."""
+    from magfab.check import preflight
+    from magfab.design import derive
+    from magfab.errors import InputError
+    from magfab.inverse.space import Space, candidate_spec
+    from magfab.inverse.targets import parse_targets
+    from magfab.spec import load_spec
+
+    targets, base = parse_targets(""), load_spec(None)
+    out = []
+    for params in Space(targets, base).latin_hypercube(4 * n, seed):
+        try:
+            out.append(preflight(derive(candidate_spec(Space(targets, base).point(params), base, targets, "w"))))
+        except InputError:
+            continue
+        if len(out) == n:
+            break
+    return out
+
+
+def _weighed_across_the_box(n: int, seed: int) -> None:
+    """Each drawn design: its plan inside its ranges, its model's own sensors recovered (4 posterior sigma), and the
+    command's path (guards, model scan, calibration, bound) run to a finite predicted error."""
+    from magfab.models.predict import predict
+
+    for design in _designs(n, seed):
+        prediction = predict(design)
+        model = SensorModel.of(design, prediction)
+        rng = np.random.default_rng(seed)
+        sensor = draw_sensor(model, model, rng)
+        plan = weight_plan(prediction, 5.0)
+        loads = load_of([m for m, _ in plan], [a for _, a in plan])
+        assert np.all(loads[:, 2] <= 0.9 * prediction.normal.range_N + 1e-9), design.spec.name
+        assert np.all(loads[:, 1] <= 0.9 * prediction.shear.range_N + 1e-9), design.spec.name
+        data = weighings(sensor, plan, noise_uT(design), rng)
+        fit = fit_weights(model, data)
+        sd = np.sqrt(np.diag(fit.covariance))[:len(PARAMS)]
+        off = np.abs(fit.theta[:len(PARAMS)] - sensor.theta) / sd
+        assert np.all(off < 4.0), (design.spec.elastomer, dict(zip(PARAMS, off.round(2))))
+        scan, _, bound = calibration_scan(design, prediction, data)
+        assert scan.rows > 50 and 0 < bound.fz_rms_N[0] <= bound.fz_rms_N[1] < math.inf
+
+
+def test_the_weight_path_holds_across_the_design_box():
+    """Two designs drawn from the search's default box (other silicones, tips and magnets than the fixtures'); the
+    slow test draws sixteen."""
+    _weighed_across_the_box(2, 2026)
+
+
+@pytest.mark.slow
+def test_the_weight_path_holds_across_the_design_box_densely():
+    _weighed_across_the_box(16, 7)
