@@ -233,9 +233,11 @@ def _prior(design: Design, prediction: Prediction) -> Prior:
         "log_mu": f"the material band {soft:.4g}-{stiff:.4g} kPa (recipes/materials.toml) as +/- 2 sigma",
         "log_br": f"the grade's remanence {br_lo:.4g}-{br_hi:.4g} T (recipes/magnets.toml) as +/- 2 sigma",
         "d_mm": "the acceptance test's stack-up of the rest distance, root-sum-square, as 2 sigma",
-        "tilt_x_deg": "the acceptance test's magnetisation angle and pocket play, as 2 sigma",
-        "offset_x_mm": "the acceptance test's summed lateral offsets, as 2 sigma",
-        "shape_1": f"assumption: the normal curve's shape within {SHAPE_SIGMA:.0%} (SHAPE_SIGMA)",
+        **dict.fromkeys(("tilt_x_deg", "tilt_y_deg"),
+                        "the acceptance test's magnetisation angle and pocket play, as 2 sigma"),
+        **dict.fromkeys(("offset_x_mm", "offset_y_mm"), "the acceptance test's summed lateral offsets, as 2 sigma"),
+        **dict.fromkeys(("shape_1", "shape_2"),
+                        f"assumption: the normal curve's shape within {SHAPE_SIGMA:.0%} (SHAPE_SIGMA)"),
         "log_shear": f"assumption: the shear stiffness within {SHEAR_SIGMA:.0%} of the model's (SHEAR_SIGMA)",
     }
     return Prior(mean, sigma, sources)
@@ -403,9 +405,17 @@ def _sqrt_psd(cov: np.ndarray) -> np.ndarray:
 def weight_plan(prediction: Prediction, cap_g: float = 0.0, stiffness: float = 1.0) -> list[tuple[float, float]]:
     """The weighings to make, as (mass on the tip in g, stand angle): at each of :data:`ANGLES_DEG` the cap alone and
     the three largest standard weights whose load stays within :data:`PLAN_RANGE_FRACTION` of the predicted normal
-    range (its normal part) and of the predicted shear range (its shear part), each with the cap on. The ranges are
-    the softest material's, times ``stiffness``: the skin's shear modulus over the softest (:func:`first_weighings`
-    and :func:`stiffness_of` find it, so a stiff skin is weighed over its whole range, not a soft one's)."""
+    range (its normal part) and of the predicted shear range (its shear part), each with the cap on (fewer where fewer
+    fit). The ranges are the softest material's, times ``stiffness``: the skin's shear modulus over the softest
+    (:func:`first_weighings` and :func:`stiffness_of` find it, so a stiff skin is weighed over its whole range, not a
+    soft one's). ScanError for a design whose range the cap and the lightest weight already pass."""
+    flat_N = PLAN_RANGE_FRACTION * max(stiffness, 1.0) * prediction.normal.range_N
+    lightest = STANDARD_WEIGHTS_G[0] + cap_g
+    if lightest * G0 / 1000.0 > flat_N:
+        range_mN = 1000.0 * flat_N / PLAN_RANGE_FRACTION
+        raise ScanError(f"the cap with the lightest weight ({lightest:g} g, {lightest * G0:.3g} mN) is past "
+                        f"{PLAN_RANGE_FRACTION:.0%} of this design's normal range ({range_mN:.3g} mN): no weight plan "
+                        "fits it; calibrate it from a scan")
     out = []
     for angle in ANGLES_DEG:
         a = math.radians(angle)
@@ -466,6 +476,8 @@ def calibration_scan(design: Design, prediction: Prediction, weighings: Sequence
         "theta": {name: round(float(fit.theta[i]), 8) for i, name in enumerate(PARAMS)},
         "parameters": {k: {"value": round(v["value"], 6), "sd": round(v["sd"], 6)} for k, v in fit.named().items()},
         "kept": sorted(fixed or {}),
+        "priors": {name: {"mean": round(float(model.prior.mean[i]), 8), "sigma": round(float(model.prior.sigma[i]), 8),
+                          "source": model.prior.sources[name]} for i, name in enumerate(PARAMS)},
         "predicted_error_mN": {
             "Fz_rms": {"median": round(1000 * bound.fz_rms_N[0], 2), "p90": round(1000 * bound.fz_rms_N[1], 2)},
             "shear_rms": {"median": round(1000 * bound.shear_rms_N[0], 2),
