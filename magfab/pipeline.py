@@ -231,7 +231,7 @@ def bundle_stage(design: Design, prediction: Prediction | None, scan: Scan | dic
     out: list[Artifact] = []
     found: list[Finding] = []
     t = time.perf_counter()
-    mls = design.spec.calibration.method.value != "poly"  # moving least squares costs seconds: only when it may be used
+    mls = calibrate.fits_mls(design)
     array_doc = None
     if design.array is not None:
         say("fitting every taxel's calibration")

@@ -25,7 +25,7 @@ from .formats import bounded
 from .formats import sensor_records as records
 from .formats.calibration_json import calibration_sha256
 from .models.acceptance import acceptance
-from .models.calibration import fit
+from .models.calibration import fit, fits_mls
 from .models.chip import chip_setting
 from .models.predict import predict
 from .models.rest_guard import RestField, calibrated_range_N, check_rest_band, rest_field, sensitivity_uT_per_N
@@ -175,7 +175,7 @@ def fit_taxel(scan: Scan, design: Design, taxel: int | None) -> FitResult:
     """The calibration of a single taxel, or of taxel ``taxel`` of an array (on its field with the neighbours'
     field at rest removed), as the build fits it."""
 
-    mls = design.spec.calibration.method.value != "poly"
+    mls = fits_mls(design)
     if design.array is None:
         return fit(scan, design, mls=mls)
 

@@ -82,7 +82,7 @@ __all__ = [
     "FORMAT", "MIN_ROWS", "ORDERS", "MLS_ORDER", "SCAN_COLUMNS", "FORCE_COLUMNS", "HULL_MAX_VERTICES",
     "CalibrationError", "ScanError", "Scan",
     "monomials", "Scaling", "ValidRegion", "MLSModel", "Calibration", "Candidate", "FitResult",
-    "fit", "choose", "poly_ops", "mls_ops", "guard_ops", "evaluation_time_s",
+    "fit", "fits_mls", "choose", "poly_ops", "mls_ops", "guard_ops", "evaluation_time_s",
 ]
 
 FORMAT = calibration_json.FORMAT
@@ -495,6 +495,12 @@ def _chip_json(design: Design) -> tuple[dict[str, object], float]:
     doc: dict[str, object] = {"gain_sel": chip.gain_sel, "resolution": chip.resolution, "osr": chip.osr,
                               "dig_filt": chip.dig_filt, "lsb_xy_uT": chip.lsb_xy_uT, "lsb_z_uT": chip.lsb_z_uT}
     return doc, noise(design, chip)["total_xy_G"] * UT_PER_GAUSS
+
+
+def fits_mls(design: Design) -> bool:
+    """Whether a calibration of ``design`` fits moving least squares too: only when its ``calibration.method`` may
+    choose it (MLS costs seconds)."""
+    return design.spec.calibration.method.value != "poly"
 
 
 def fit(scan: Scan, design: Design, *, mls: bool = True) -> FitResult:

@@ -47,6 +47,7 @@ from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..errors import ScanError
 from ..formats.scan_csv import Scan, scan_csv
@@ -55,6 +56,7 @@ from ..units import G0, UT_PER_GAUSS
 from . import acceptance
 from . import field as fieldmod
 from .calibration import fit as calibration_fit
+from .calibration import fits_mls
 from .chip import chip_setting, noise
 from .scan import scan_plan, scan_track
 
@@ -64,7 +66,7 @@ if TYPE_CHECKING:
     from .predict import Prediction
 
 __all__ = ["Weighing", "SensorModel", "WeightFit", "PARAMS", "fit_weights", "model_scan", "predicted_error",
-           "weight_plan", "load_of", "region_points", "region_errors", "noise_uT",
+           "weight_plan", "load_of", "region_points", "region_errors", "force_errors", "noise_uT",
            "calibration_scan", "ErrorBound", "RESKIN_KEPT", "reskin_plan", "first_weighings", "stiffness_of",
            "stated_error"]
 
@@ -113,15 +115,13 @@ PLAN_RANGE_FRACTION = 0.9
 ANGLES_DEG = (0.0, 20.0, 40.0)
 
 
-def load_of(mass_g: ArrayLikeFloat, angle_deg: ArrayLikeFloat) -> np.ndarray:
+def load_of(mass_g: ArrayLike, angle_deg: ArrayLike) -> np.ndarray:
     """The force (Fx, Fy, Fz) in N, (N, 3), of masses in grams resting on the tip on the stand at angles in degrees."""
     m = np.atleast_1d(np.asarray(mass_g, float)) * G0 / 1000.0
     a = np.radians(np.atleast_1d(np.asarray(angle_deg, float)))
     m, a = np.broadcast_arrays(m, a)
     return np.column_stack([np.zeros_like(m), m * np.sin(a), m * np.cos(a)])
 
-
-ArrayLikeFloat = float | Sequence[float] | np.ndarray
 
 
 @dataclass(frozen=True)
@@ -253,7 +253,6 @@ class WeightFit:
     angles: tuple[float, ...]
     chi2: float
     residual_uT: np.ndarray
-    free: tuple[str, ...]
 
     def named(self) -> dict[str, dict[str, float]]:
         """Each model parameter's value and standard deviation, in its unit (the log ratios as ratios)."""
@@ -316,8 +315,7 @@ def fit_weights(model: SensorModel, weighings: Sequence[Weighing], *, fixed: Map
     theta = full(sol.x)
     b = model.predict(theta, mass, angle, angles)
     r = sol.fun[:measured.size]
-    return WeightFit(theta, cov, angles, float(np.mean(r ** 2)), b - measured,
-                     tuple(PARAMS[i] if i < len(PARAMS) else f"bg_{i - len(PARAMS)}" for i in free))
+    return WeightFit(theta, cov, angles, float(np.mean(r ** 2)), b - measured)
 
 
 def model_scan(model: SensorModel, fit: WeightFit, design: Design, prediction: Prediction) -> Scan:
@@ -325,16 +323,16 @@ def model_scan(model: SensorModel, fit: WeightFit, design: Design, prediction: P
     0-degree background added, as the sensor reads in use) and the model's forces."""
     theta = fit.theta
     y, delta = scan_track(design, prediction)
-    b = model.field_at(theta, delta, y) + _background(fit, 0.0)
+    b = model.field_at(theta, delta, y) + _background(theta, fit.angles, 0.0)
     f = np.column_stack([np.zeros_like(y), model.shear_stiffness(theta) * y, model.normal_force(theta, delta)])
     t = np.arange(len(y)) * chip_setting(design).conversion_ms / 1000.0
     return Scan(t, b, f, None, "weights model", "")
 
 
-def _background(fit: WeightFit, angle: float) -> np.ndarray:
-    bg = fit.theta[len(PARAMS):].reshape(len(fit.angles), 3)
-    k = int(np.argmin(np.abs(np.asarray(fit.angles) - angle)))
-    return bg[k]
+def _background(theta: np.ndarray, angles: Sequence[float], angle: float) -> np.ndarray:
+    """The background vector of ``theta`` at the stand angle of ``angles`` nearest ``angle``."""
+    bg = theta[len(PARAMS):].reshape(len(angles), 3)
+    return bg[int(np.argmin(np.abs(np.asarray(angles) - angle)))]
 
 
 def noise_uT(design: Design) -> np.ndarray:
@@ -362,20 +360,27 @@ def region_points(design: Design, prediction: Prediction, side: int = REGION_SID
     return dd.ravel(), yy.ravel()
 
 
+def force_errors(calibration: Calibration, b: np.ndarray, f: np.ndarray, rest: np.ndarray) -> dict[str, float]:
+    """Fz and shear RMS and worst error (N) of ``calibration`` on readings ``b`` (uT) of true forces ``f`` (N), tared
+    at the readings ``rest`` as the readout tares."""
+    got, _ = calibration.zeroed(rest).evaluate(b)
+    ez = got[:, 2] - f[:, 2]
+    es = np.hypot(got[:, 0] - f[:, 0], got[:, 1] - f[:, 1])
+    return {"fz_rms_N": float(np.sqrt(np.mean(ez ** 2))), "fz_worst_N": float(np.max(np.abs(ez))),
+            "shear_rms_N": float(np.sqrt(np.mean(es ** 2))), "shear_worst_N": float(np.max(es))}
+
+
 def region_errors(model: SensorModel, theta: np.ndarray, background_uT: np.ndarray, calibration: Calibration,
                   points: tuple[np.ndarray, np.ndarray], noise: np.ndarray | None, rng: np.random.Generator
-                  ) -> tuple[float, float]:
-    """(Fz RMS, shear RMS) N of ``calibration``, tared at rest as the readout tares, at ``points`` (indentation, y)
-    on the sensor ``theta`` (the chip's ``noise`` added when given)."""
+                  ) -> dict[str, float]:
+    """:func:`force_errors` of ``calibration`` at ``points`` (indentation, y) on the sensor ``theta`` (the chip's
+    ``noise`` added when given)."""
     delta, y = points
     b = model.field_at(theta, delta, y) + background_uT
     if noise is not None:
         b = b + rng.standard_normal(b.shape) * noise
-    cal = calibration.zeroed(model.field_at(theta, np.zeros(1), np.zeros(1)) + background_uT)
-    f, _ = cal.evaluate(b)
-    ez = f[:, 2] - model.normal_force(theta, delta)
-    es = np.hypot(f[:, 0], f[:, 1] - model.shear_stiffness(theta) * y)
-    return float(np.sqrt(np.mean(ez ** 2))), float(np.sqrt(np.mean(es ** 2)))
+    f = np.column_stack([np.zeros_like(y), model.shear_stiffness(theta) * y, model.normal_force(theta, delta)])
+    return force_errors(calibration, b, f, model.field_at(theta, np.zeros(1), np.zeros(1)) + background_uT)
 
 
 def predicted_error(model: SensorModel, fit: WeightFit, calibration: Calibration, design: Design,
@@ -388,10 +393,9 @@ def predicted_error(model: SensorModel, fit: WeightFit, calibration: Calibration
     ez, es = [], []
     for _ in range(draws):
         theta = fit.theta + chol @ rng.standard_normal(len(fit.theta))
-        z, s = region_errors(model, theta, _background(replace(fit, theta=theta), 0.0), calibration, points, noise,
-                             rng)
-        ez.append(z)
-        es.append(s)
+        err = region_errors(model, theta, _background(theta, fit.angles, 0.0), calibration, points, noise, rng)
+        ez.append(err["fz_rms_N"])
+        es.append(err["shear_rms_N"])
     q = BOUND_QUANTILE
     return ErrorBound((float(np.median(ez)), float(np.quantile(ez, q))),
                       (float(np.median(es)), float(np.quantile(es, q))), draws)
@@ -409,7 +413,8 @@ def weight_plan(prediction: Prediction, cap_g: float = 0.0, stiffness: float = 1
     fit). The ranges are the softest material's, times ``stiffness``: the skin's shear modulus over the softest
     (:func:`first_weighings` and :func:`stiffness_of` find it, so a stiff skin is weighed over its whole range, not a
     soft one's). ScanError for a design whose range the cap and the lightest weight already pass."""
-    flat_N = PLAN_RANGE_FRACTION * max(stiffness, 1.0) * prediction.normal.range_N
+    scale = PLAN_RANGE_FRACTION * max(stiffness, 1.0)
+    flat_N = scale * prediction.normal.range_N
     lightest = STANDARD_WEIGHTS_G[0] + cap_g
     if lightest * G0 / 1000.0 > flat_N:
         range_mN = 1000.0 * flat_N / PLAN_RANGE_FRACTION
@@ -419,8 +424,8 @@ def weight_plan(prediction: Prediction, cap_g: float = 0.0, stiffness: float = 1
     out = []
     for angle in ANGLES_DEG:
         a = math.radians(angle)
-        limit_N = PLAN_RANGE_FRACTION * max(stiffness, 1.0) * min(
-            prediction.normal.range_N / math.cos(a), prediction.shear.range_N / math.sin(a) if angle > 0 else math.inf)
+        limit_N = scale * min(prediction.normal.range_N / math.cos(a),
+                              prediction.shear.range_N / math.sin(a) if angle > 0 else math.inf)
         weights = [w for w in STANDARD_WEIGHTS_G if w <= limit_N * 1000.0 / G0 - cap_g][-3:]
         out += [(cap_g + w, angle) for w in (0.0, *weights)]
     return out
@@ -467,7 +472,7 @@ def calibration_scan(design: Design, prediction: Prediction, weighings: Sequence
                         "angles")
     _check_bands(model, fit, source)
     scan = model_scan(model, fit, design, prediction)
-    cal = calibration_fit(scan, design, mls=design.spec.calibration.method.value != "poly").calibration
+    cal = calibration_fit(scan, design, mls=fits_mls(design)).calibration  # as the build will fit it
     bound = predicted_error(model, fit, cal, design, prediction)
     info = {
         "basis": "weights: the sensor's model fitted to known weights (magfab.models.weighing), the calibration "
@@ -494,12 +499,13 @@ def _check_loads(model: SensorModel, weighings: Sequence[Weighing], source: str)
     """ScanError for a weighing whose normal load is past the end of the stiffest skin's normal curve (the material
     band's stiff end): no skin of this design could have carried it."""
     stiffest = model.force_N[-1] * math.exp(model.prior.mean[0] + 2.0 * model.prior.sigma[0])
-    for k, w in enumerate(weighings, 1):
-        fz = float(load_of(w.mass_g, w.angle_deg)[0, 2])
-        if fz > stiffest:
-            raise ScanError(f"{source}: weighing {k}, {w.mass_g:g} g at {w.angle_deg:g} deg, pushes {fz:.3g} N; this "
-                            f"design's stiffest skin carries at most {stiffest:.3g} N over its calibrated depth "
-                            "(docs/models.md, M25: the plan's weights)")
+    fz = load_of([w.mass_g for w in weighings], [w.angle_deg for w in weighings])[:, 2]
+    over = np.nonzero(fz > stiffest)[0]
+    if over.size:
+        k, w = int(over[0]), weighings[int(over[0])]
+        raise ScanError(f"{source}: weighing {k + 1}, {w.mass_g:g} g at {w.angle_deg:g} deg, pushes {fz[k]:.3g} N; "
+                        f"this design's stiffest skin carries at most {stiffest:.3g} N over its calibrated depth "
+                        "(docs/models.md, M25: the plan's weights)")
 
 
 def _check_bands(model: SensorModel, fit: WeightFit, source: str) -> None:

@@ -41,6 +41,7 @@ from .weighing import (
     WeightFit,
     first_weighings,
     fit_weights,
+    force_errors,
     load_of,
     model_scan,
     noise_uT,
@@ -161,17 +162,6 @@ def held_out(sensor: Truth, design: Design, prediction: Prediction, noise: np.nd
     return b, f, sensor.field(np.zeros(1), np.zeros(1))
 
 
-def errors(calibration: Calibration, b: np.ndarray, f: np.ndarray, rest: np.ndarray) -> dict[str, float]:
-    """Fz and shear RMS and worst error (N) of ``calibration`` on readings ``b`` of true forces ``f``, tared at
-    ``rest`` as the readout tares."""
-    cal = calibration.zeroed(rest)
-    got, _ = cal.evaluate(b)
-    ez = got[:, 2] - f[:, 2]
-    es = np.hypot(got[:, 0] - f[:, 0], got[:, 1] - f[:, 1])
-    return {"fz_rms_N": float(np.sqrt(np.mean(ez ** 2))), "fz_worst_N": float(np.max(np.abs(ez))),
-            "shear_rms_N": float(np.sqrt(np.mean(es ** 2))), "shear_worst_N": float(np.max(es))}
-
-
 @dataclass(frozen=True)
 class TrialResult:
     """One drawn sensor's errors: the weight calibration's, the full scan's, the re-skin's (and the re-skin's full
@@ -214,5 +204,6 @@ def trial(design: Design, prediction: Prediction, model: SensorModel, truth: Sen
     cal_r = _calibrate(model_scan(model, refit, design, prediction), design)
     cal_rf = _calibrate(full_scan(new, design, prediction, noise, rng), design)
     test_r = held_out(new, design, prediction, noise, rng)
-    return TrialResult(errors(cal_w, *test), errors(cal_f, *test), errors(cal_r, *test_r), errors(cal_rf, *test_r),
+    return TrialResult(force_errors(cal_w, *test), force_errors(cal_f, *test), force_errors(cal_r, *test_r),
+                       force_errors(cal_rf, *test_r),
                        bound.fz_rms_N[1], bound.shear_rms_N[1], fit, sensor)
