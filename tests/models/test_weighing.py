@@ -198,3 +198,25 @@ def test_the_weight_path_holds_across_the_design_box():
 @pytest.mark.slow
 def test_the_weight_path_holds_across_the_design_box_densely():
     _weighed_across_the_box(16, 7)
+
+
+@settings(max_examples=12, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), high=st.floats(0.7, 2.0), row=st.integers(0, 11), excess=st.floats(1.01, 20.0))
+def test_generated_mistakes_are_refused_by_their_guard(magone_design, magone_prediction, model, seed, high, row,
+                                                       excess):
+    """The guards against generated variants of their mistakes, on a sensor drawn across the bands: a magnet seated
+    0.7-2 mm high is fitted outside the rest distance's band; any weighing made 1-20x heavier than the stiffest skin
+    carries is refused by its number."""
+    rng = np.random.default_rng(seed)
+    sensor = draw_sensor(model, model, rng)
+    sensor.theta[2] += high
+    plan = weight_plan(magone_prediction, 5.0)
+    noise = noise_uT(magone_design)
+    with pytest.raises(ScanError, match=r"the weighings fit d_mm = .* sigma from its band"):
+        calibration_scan(magone_design, magone_prediction, weighings(sensor, plan, noise, rng))
+    data = weighings(draw_sensor(model, model, rng), plan, noise, rng)
+    stiffest = model.force_N[-1] * math.exp(model.prior.mean[0] + 2.0 * model.prior.sigma[0])
+    angle = data[row].angle_deg
+    data[row] = replace(data[row], mass_g=excess * stiffest * 1000.0 / G0 / math.cos(math.radians(angle)))
+    with pytest.raises(ScanError, match=rf"weighing {row + 1}, .* g at {angle:g} deg, pushes"):
+        calibration_scan(magone_design, magone_prediction, data)
