@@ -77,7 +77,7 @@ def kept_from_record(sensor: Any) -> dict[str, float] | None:
     new skin keeps (:data:`magfab.models.weighing.RESKIN_KEPT`) from its newest weight calibration of an earlier skin;
     None when the skin in use has a calibration already, or no earlier one was a weight calibration (a full fit)."""
     from .formats import sensor_records as records
-    from .models.weighing import RESKIN_KEPT
+    from .models.weighing import RESKIN_KEPT, weight_fit_of
 
     epoch = sensor.epoch()
     found = list(sensor.calibrations(None))
@@ -89,7 +89,7 @@ def kept_from_record(sensor: Any) -> dict[str, float] | None:
             doc = sensor.json_file(sha, "calibration.json") if sha else None
         except records.RecordError:
             continue
-        theta = ((doc or {}).get("scan") or {}).get("model", {}).get("theta") if isinstance(doc, dict) else None
+        theta = (weight_fit_of(doc) or {}).get("theta") if isinstance(doc, dict) else None
         if isinstance(theta, dict) and all(isinstance(theta.get(k), (int, float)) for k in RESKIN_KEPT):
             return {k: float(theta[k]) for k in RESKIN_KEPT}
     return None

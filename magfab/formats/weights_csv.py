@@ -89,5 +89,5 @@ def weights_csv(weighings: Sequence[Weighing], comments: Sequence[str] = ()) -> 
     lines = [f"# {c}" for c in comments] + [",".join(WEIGHT_COLUMNS)]
     for w in weighings:
         values = [w.mass_g, w.angle_deg, *w.field_uT, *w.sd_uT]
-        lines.append(",".join(f"{float(np.float64(x)):.8g}" for x in values) + f",{int(w.samples)}")
+        lines.append(",".join(f"{float(x):.8g}" for x in values) + f",{int(w.samples)}")
     return "\n".join(lines) + "\n"

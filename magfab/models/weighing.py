@@ -68,7 +68,7 @@ if TYPE_CHECKING:
 __all__ = ["Weighing", "SensorModel", "WeightFit", "PARAMS", "fit_weights", "model_scan", "predicted_error",
            "weight_plan", "load_of", "region_points", "region_errors", "force_errors", "noise_uT",
            "calibration_scan", "ErrorBound", "RESKIN_KEPT", "reskin_plan", "first_weighings", "stiffness_of",
-           "stated_error"]
+           "stated_error", "weight_fit_of"]
 
 #: The fitted parameters, in order (module doc); then one background vector per stand angle.
 PARAMS = ("log_mu", "log_br", "d_mm", "tilt_x_deg", "tilt_y_deg", "offset_x_mm", "offset_y_mm", "shape_1", "shape_2",
@@ -519,11 +519,18 @@ def _check_bands(model: SensorModel, fit: WeightFit, source: str) -> None:
                         "or a misassembled sensor")
 
 
+def weight_fit_of(calibration_json: Mapping[str, Any]) -> Mapping[str, Any] | None:
+    """A weight calibration's fit, as calibration.json keeps it (``scan.model``, :func:`calibration_scan`); None for a
+    calibration fitted to a scan (or a document that holds no such object)."""
+    scan = calibration_json.get("scan")
+    model = scan.get("model") if isinstance(scan, Mapping) else None
+    return model if isinstance(model, Mapping) else None
+
+
 def stated_error(calibration_json: Mapping[str, Any]) -> dict[str, float]:
     """A weight calibration's predicted error over the region (the p90 of :func:`calibration_scan`'s bound), mN, as
     ``predicted_error_Fz_mN`` and ``predicted_error_shear_mN``; nothing for a calibration fitted to a scan."""
-    model = (calibration_json.get("scan") or {}).get("model") or {}
-    err = model.get("predicted_error_mN") if isinstance(model, Mapping) else None
+    err = (weight_fit_of(calibration_json) or {}).get("predicted_error_mN")
     if not isinstance(err, Mapping):
         return {}
     return {"predicted_error_Fz_mN": float(err["Fz_rms"]["p90"]),

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Any, TypedDict
 from urllib.parse import quote
 
 from ...errors import Finding, Severity
+from ...models.weighing import weight_fit_of
 from ...spec import Spec
 from ..firmware import measured_rate
 
@@ -202,13 +203,13 @@ def calibration_summary(calibration: Mapping[str, Any] | None, tolerance_mN: flo
     return {"method": str(calibration["method"]), "order": calibration["order"], "folds": err["folds"],
             "source": str(scan["source"]), "rows": scan["rows"], "sha": str(scan["sha256"]), "errors": rows,
             "tolerance_mN": f"{tolerance_mN:g}", "meets": worst <= tolerance_mN,
-            "provisional": scan["source"] == "simulated", "weights": _weights_summary(scan.get("model"))}
+            "provisional": scan["source"] == "simulated", "weights": _weights_summary(weight_fit_of(calibration))}
 
 
 def _weights_summary(model: Mapping[str, Any] | None) -> dict[str, object] | None:
     """A weight calibration's fit (calibration.json's ``scan.model``, docs/models.md M25) for the report: the fitted
     parameters with their standard deviations, which were kept from an earlier skin, and the predicted error."""
-    if not isinstance(model, Mapping):
+    if model is None:
         return None
     err = model["predicted_error_mN"]
     kept = {k.removeprefix("log_") for k in model.get("kept", [])}
