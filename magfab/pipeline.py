@@ -14,7 +14,6 @@ import re
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
-from importlib.resources import files
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast
 
@@ -43,12 +42,15 @@ from .export import (
     firmware,
     kicad,
     readout,
+    weights_figures,
 )
 from .export import cad as cad_files
 from .export.report import draw_pictures, part_figure, render_report
+from .export.weigh_plan import weigh_plan
 from .fit import mould_fit
 from .fork import deferred_interrupt, parallel_available, side_branch
 from .formats.scan_csv import scan_csv
+from .jig import cap_solid, stand_solid
 from .limits import check_scan
 from .models import calibration as calibrate
 from .models import crosstalk
@@ -88,7 +90,7 @@ if TYPE_CHECKING:
 
 
 __all__ = ["Artifact", "BuildResult", "OutputError", "plan", "write", "build", "check_target", "PARTS", "Part",
-           "Stage", "default_out_dir", "acceptance_stage", "bundle_stage"]
+           "parts_of", "Stage", "default_out_dir", "acceptance_stage", "bundle_stage"]
 
 
 @dataclass(frozen=True)
@@ -100,6 +102,7 @@ class Part:
     make: Callable[[Design], cq.Workplane]
     printed: bool
     description: str
+    single: bool = False  # made for a single taxel only (the weight jig: an array is calibrated from a scan)
 
 
 PARTS = (
@@ -107,9 +110,18 @@ PARTS = (
     Part("mould_cup", cup_solid, True, "mould cup with the cavities, print pose"),
     Part("mould_lid", lid_solid, True, "mould lid with the pocket cores, fill and vent holes, print pose"),
     Part("pad", pad_solid, True, "mounting pad: chip recess below, centring lip above, print pose"),
+    Part("weigh_cap", cap_solid, True, "weight jig's cap: a flat face on the tip, coin pockets beside it, print pose",
+         single=True),
+    Part("weigh_stand", stand_solid, True, "weight jig's stand: the board's pocket at 0, 20 and 40 degrees, print pose",
+         single=True),
 )
 
 Progress = Callable[[str], None]
+
+
+def parts_of(design: Design) -> tuple[Part, ...]:
+    """The solids a build of ``design`` makes (the weight jig for a single taxel only)."""
+    return tuple(p for p in PARTS if not (p.single and design.array is not None))
 
 
 def _json_bytes(obj: object) -> bytes:
@@ -259,6 +271,12 @@ def bundle_stage(design: Design, prediction: Prediction | None, scan: Scan | dic
     if acceptance is not None:
         out.append(Artifact("calibration/acceptance.json", _json_bytes(acceptance),
                             "acceptance-test bands: field at rest and the rise under a known weight, with assumptions"))
+    plan = None if prediction is None else weigh_plan(design, prediction)
+    if plan is not None:
+        out.append(Artifact("calibration/weigh_plan.json", _json_bytes(plan), "the weighings of a calibration with "
+                            "known weights on the weight jig: stand angles and coins (magfab-readout weigh)"))
+        out += _charts(weights_figures.FOLDER, weights_figures.figures(weights_figures.bench_rows()),
+                       weights_figures.CAPTIONS)
     say("rendering the firmware and the readout package")
     t = time.perf_counter()
     fw = firmware.render(design, cal)
@@ -267,7 +285,8 @@ def bundle_stage(design: Design, prediction: Prediction | None, scan: Scan | dic
             for rel, data in sorted(fw.items())]
     rd = readout.render(design, cal, acceptance, array_doc,
                         () if array_doc is None else tuple(f.calibration.to_json() for f in arrayed.fits),
-                        None if array_doc is None else _artifact_json(arrayed.artifacts, "array/crosstalk.json"))
+                        None if array_doc is None else _artifact_json(arrayed.artifacts, "array/crosstalk.json"),
+                        weigh_plan=plan)
     out += [Artifact(rel, data, "readout package (pip install ./readout)") for rel, data in sorted(rd.items())]
     timings["render"] = time.perf_counter() - t
     # the generic image shipped in the package, on every machine (avr-gcc or not): its settings and calibration
@@ -335,12 +354,13 @@ def _fabrication(design: Design, prediction: Prediction, acceptance: dict[str, A
     say("writing the checklist and the bill of materials")
     t = time.perf_counter()
     plan = scan_plan(design, prediction)
+    weighing = weigh_plan(design, prediction)
     out = [
-        Artifact("checklist.md", checklist.checklist_md(design, acceptance, plan).encode(),
+        Artifact("checklist.md", checklist.checklist_md(design, acceptance, plan, weighing).encode(),
                  "fabrication checklist with the quantities filled in (Markdown)"),
-        Artifact("checklist.html", checklist.checklist_html(design, acceptance, plan).encode(),
+        Artifact("checklist.html", checklist.checklist_html(design, acceptance, plan, weighing).encode(),
                  "the same checklist with tick boxes, to print"),
-        Artifact("bom.csv", bom.bom_csv(design, acceptance).encode(),
+        Artifact("bom.csv", bom.bom_csv(design, acceptance, weighing).encode(),
                  f"bill of materials for {design.spec.fabrication.sensors} sensor(s)"),
     ]
     timings["checklist"] = time.perf_counter() - t
@@ -349,11 +369,7 @@ def _fabrication(design: Design, prediction: Prediction, acceptance: dict[str, A
 
 def model_bench() -> list[dict[str, object]]:
     """The speed-accuracy table bench/models.py last measured (shipped with the package), or []."""
-    try:
-        text = files("magfab").joinpath("model_bench.json").read_text()
-    except FileNotFoundError:
-        return []
-    return list(json.loads(text)["rows"])
+    return weights_figures.packaged_rows("model_bench.json")
 
 
 def plan(spec: Spec, progress: Progress | None = None, scan=None, parallel: bool | None = None) -> BuildResult:
@@ -470,7 +486,7 @@ def _solids(design: Design, say: Progress, timings: dict[str, float]) -> SolidsS
     findings: list[Finding] = []
     meshes: dict[str, trimesh.Trimesh] = {}
     tol, ang = spec.mould.tessellation_tolerance_mm, spec.mould.angular_tolerance_deg
-    for part in PARTS:
+    for part in parts_of(design):
         stem, description = part.stem, part.description
         say(f"modelling {stem}")
         t = time.perf_counter()

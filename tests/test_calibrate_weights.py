@@ -4,14 +4,18 @@ the model's scan; and every wrong use is one line, exit 2, nothing written."""
 
 from __future__ import annotations
 
+import json
 import math
+import os
+import subprocess
+import sys
 from dataclasses import replace
 
 import numpy as np
 import pytest
 from calibrate_support import add, tree
 
-from magfab.formats.weights_csv import weights_csv
+from magfab.formats.weights_csv import read_weights_csv, weights_csv
 from magfab.models.weighing import RESKIN_KEPT, SensorModel, noise_uT, reskin_plan, weight_plan
 from magfab.models.weighing_study import draw_sensor, truth_model, weighings
 
@@ -136,3 +140,53 @@ def test_the_report_lists_a_weight_calibrations_fit(magone_design, magone_predic
     assert float(weights["fz"][1]) == stated_error(doc)["predicted_error_Fz_mN"] == round(1000 * bound.fz_rms_N[1], 2)
     assert calibration_summary({**doc, "scan": {k: v for k, v in doc["scan"].items() if k != "model"}},
                                5.0)["weights"] is None
+
+
+def _weigh(cwd, out, *args):
+    """``magfab-readout weigh ARGS --simulate --yes`` from the package of the build in ``out``."""
+    env = {k: v for k, v in os.environ.items() if k != "MAGFAB_SENSORS"}
+    env["PYTHONPATH"] = str(out / "readout" / "src")
+    return subprocess.run([sys.executable, "-m", "magfab_readout", "weigh", *args, "--simulate", "--yes"],
+                          capture_output=True, text=True, timeout=300, env=env, cwd=cwd)
+
+
+def test_the_readouts_weighings_calibrate_the_sensor(bench):
+    """The bench's path end to end: ``magfab-readout weigh`` walks the build's plan on the simulated board (the nominal
+    sensor under the jig's loads, with the chip's noise), and ``magfab calibrate --weights`` fits its file; the
+    re-skin walks the plan's three steps; a wrong option is one line, exit 2, no file."""
+    project, out, calls, run = bench
+    plan = json.loads((out / "calibration" / "weigh_plan.json").read_text())
+    proc = _weigh(project, out, "w.csv", "--cap-g", "10.5", "--samples", "40")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    rows = read_weights_csv(project / "w.csv")
+    assert [(r.angle_deg, round(r.mass_g - 10.5, 6)) for r in rows] == [
+        (s["angle_deg"], s["coins"] * plan["coin"]["mass_g"]) for s in plan["steps"]]
+    result = run("calibrate", "--weights", "w.csv", "--out", str(out))
+    assert result.exit_code == 0, result.output
+    (_, scan), = calls
+    assert scan.model["weighings"] == len(plan["steps"]) and scan.model["chi2_per_reading"] < 5
+    proc = _weigh(project, out, "skin.csv", "--cap-g", "9.8", "--coin-g", "4.1", "--reskin", "--samples", "40")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    steps = [plan["steps"][k] for k in plan["reskin"]]
+    assert [(r.angle_deg, round(r.mass_g, 6)) for r in read_weights_csv(project / "skin.csv")] == [
+        (s["angle_deg"], round(9.8 + 4.1 * s["coins"], 6)) for s in steps]
+    for args, says in ((("bad.csv", "--cap-g", "0"), "--cap-g 0.0: must be a positive number of grams"),
+                       (("bad.csv", "--cap-g", "10", "--samples", "1"), "--samples must be at least 2")):
+        proc = _weigh(project, out, *args)
+        assert proc.returncode == 2 and proc.stderr.count("\n") == 1 and says in proc.stderr, proc.stderr
+        assert not (project / "bad.csv").exists()
+
+
+def test_the_report_charts_the_study(default_build):
+    """Every single-taxel build charts the study (magfab/weights_bench.json: fifty sensors a row, as bench/weights.py
+    saved them, its command without any machine's path) into its calibration section, the same bytes twice."""
+    from magfab.export import weights_figures
+
+    rows = weights_figures.bench_rows()
+    assert len(rows) == 6 and all(len(r["ratios"]) == len(r["reskin_ratios"]) == r["sensors"] == 50 for r in rows)
+    assert all(r["command"].startswith("python bench/weights.py") and "--out" not in r["command"] for r in rows)
+    assert weights_figures.figures(rows) == weights_figures.figures(rows)
+    paths = {a.path for a in default_build.artifacts}
+    assert {"calibration/weights_study.svg", "calibration/weights_study.png"} <= paths
+    report = (default_build.out_dir / "report.html").read_text()
+    assert "fig-calibration-weights_study" in report

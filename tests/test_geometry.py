@@ -13,10 +13,13 @@ trimesh = pytest.importorskip("trimesh")
 
 from magfab import derive, load_spec, parse_spec  # noqa: E402
 from magfab.elastomer import elastomer_solid, envelope_solid  # noqa: E402
+from magfab.jig import cap_solid, stand_solid  # noqa: E402
 from magfab.mould import cup_solid, lid_solid  # noqa: E402
 from magfab.pad import pad_solid  # noqa: E402
 
-PRINTED = ("mould_cup", "mould_lid", "pad")
+PRINTED = ("mould_cup", "mould_lid", "pad", "weigh_cap", "weigh_stand")
+SOLIDS = {"elastomer": elastomer_solid, "mould_cup": cup_solid, "mould_lid": lid_solid, "pad": pad_solid,
+          "weigh_cap": cap_solid, "weigh_stand": stand_solid}
 
 
 def _mesh(result, stem):
@@ -29,7 +32,7 @@ def test_every_stl_is_a_closed_oriented_solid(default_build, stem):
     mesh = _mesh(default_build, stem)
     assert mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0
     tol = default_build.spec.mould.tessellation_tolerance_mm
-    exact = {"elastomer": elastomer_solid, "mould_cup": cup_solid, "mould_lid": lid_solid, "pad": pad_solid}[stem]
+    exact = SOLIDS[stem]
     volume = exact(default_build.design).val().Volume()
     assert abs(mesh.volume - volume) <= mesh.area * tol
 
@@ -61,7 +64,7 @@ def test_step_files_reimport_with_the_same_volume(default_build, tmp_path):
         path = tmp_path / f"{stem}.step"
         path.write_bytes(next(a.data for a in default_build.artifacts if a.path == f"{stem}.step"))
         solid = cq.importers.importStep(str(path)).val()
-        exact = {"elastomer": elastomer_solid, "mould_cup": cup_solid, "mould_lid": lid_solid, "pad": pad_solid}[stem]
+        exact = SOLIDS[stem]
         assert solid.isValid()
         assert solid.Volume() == pytest.approx(exact(default_build.design).val().Volume(), rel=1e-9)
 

@@ -101,7 +101,8 @@ LAYERS = (
     ("magfab.elastomer", "magfab.mould", "magfab.pad", "magfab.fit"),  # the CAD solids and the mould's fit
     ("magfab.models", "magfab.reference_chip"),  # the reference chip is placed by the physics, read by the board
     ("magfab.limits",),
-    ("magfab.board", "magfab.pcb"),  # below the checks: preflight holds the board's size to what placement can make
+    ("magfab.board", "magfab.pcb", "magfab.jig"),  # below the checks: preflight holds the board's size to what
+    # placement can make; the weight jig stands on the board and carries the weight plan's loads
     ("magfab.check",),
     ("magfab.export", "magfab.output", "magfab.exchange", "magfab.array_bench", "magfab.sensor_calibration"),
     ("magfab.pipeline", "magfab.stages", "magfab.sensors", "magfab.verdict"),

@@ -1,4 +1,6 @@
-"""Every printable STL slices in the real PrusaSlicer command line, as the printer kind asks."""
+"""Every printable STL slices in the real PrusaSlicer command line, as the printer kind asks: the mould and the pad on
+the spec's printer; the weight jig on a filament printer, whatever the spec's (its cap is wider than a small resin
+printer's display, and it needs no resin's detail)."""
 
 from __future__ import annotations
 
@@ -10,6 +12,7 @@ from conftest import require_tool
 from magfab import build, parse_spec
 
 PRINTED = ("mould_cup", "mould_lid", "pad")
+JIG = ("weigh_cap", "weigh_stand")
 
 
 def _slice(slicer: str, stl, technology: str, tmp_path):
@@ -31,7 +34,14 @@ def test_default_sla_parts_slice(default_build, stem, tmp_path):
     _slice(slicer, default_build.out_dir / f"{stem}.stl", "sla", tmp_path)
 
 
-@pytest.mark.parametrize("stem", PRINTED)
+@pytest.mark.parametrize("stem", JIG)
+def test_the_default_builds_jig_slices_for_a_filament_printer(default_build, stem, tmp_path):
+    slicer = require_tool("prusa-slicer")
+    text = _slice(slicer, default_build.out_dir / f"{stem}.stl", "fdm", tmp_path).read_text(errors="replace")
+    assert "G1" in text and ";LAYER_CHANGE" in text
+
+
+@pytest.mark.parametrize("stem", PRINTED + JIG)
 def test_fdm_parts_slice_to_gcode(stem, tmp_path_factory, tmp_path):
     slicer = require_tool("prusa-slicer")
     out = tmp_path_factory.getbasetemp() / "fdm-build"

@@ -13,6 +13,7 @@ from ..board.placement import board_size_mm
 from ..models.silicone import quantities
 from ..recipes import catalogue
 from ..reference_chip import reference_chip
+from .checklist_weights import jig_rows
 
 if TYPE_CHECKING:
     from ..design import Design
@@ -163,16 +164,19 @@ def _bench_rows(design: Design, acceptance: Mapping[str, Any] | None) -> list[di
     return rows
 
 
-def bom_rows(design: Design, acceptance: Mapping[str, object] | None = None) -> list[dict[str, object]]:
+def bom_rows(design: Design, acceptance: Mapping[str, object] | None = None,
+             weighing: Mapping[str, Any] | None = None) -> list[dict[str, object]]:
     """The bill of materials: one row per item (:data:`FIELDS`), quantities for ``fabrication.sensors``;
-    ``acceptance`` (acceptance.json's content) adds the acceptance test's weight."""
-    return _sensor_rows(design) + _bench_rows(design, acceptance)
+    ``acceptance`` (acceptance.json's content) adds the acceptance test's weight, ``weighing`` (the weight plan,
+    calibration/weigh_plan.json) the weight jig, its coins and a balance."""
+    return _sensor_rows(design) + _bench_rows(design, acceptance) + jig_rows(design, weighing, _row)
 
 
-def bom_csv(design: Design, acceptance: Mapping[str, object] | None = None) -> str:
+def bom_csv(design: Design, acceptance: Mapping[str, object] | None = None,
+            weighing: Mapping[str, Any] | None = None) -> str:
     out = io.StringIO()
     w = csv.DictWriter(out, fieldnames=list(FIELDS), lineterminator="\n")
     w.writeheader()
-    for row in bom_rows(design, acceptance):
+    for row in bom_rows(design, acceptance, weighing):
         w.writerow(row)
     return out.getvalue()

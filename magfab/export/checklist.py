@@ -31,6 +31,7 @@ from . import firmware
 from .bom import bom_rows, indenter_disc_mm
 from .checklist_array import ADDRESS_HEADER, acceptance_steps, address_rows, calibrate_text, chips_text, magnets_text
 from .checklist_array import CALIBRATE_COMMANDS as ARRAY_CALIBRATE_COMMANDS
+from .checklist_weights import weights_steps
 from .templating import render
 
 if TYPE_CHECKING:
@@ -120,9 +121,10 @@ def _q(recipe: Recipe, key: str) -> float | None:
     return recipe[key].nominal if key in recipe.quantities else None
 
 
-def _parts_section(design: Design, acceptance: Mapping[str, Any] | None) -> Section:
+def _parts_section(design: Design, acceptance: Mapping[str, Any] | None,
+                   weighing: Mapping[str, Any] | None = None) -> Section:
     rows = tuple((str(r["item"]), str(r["part"]), f"{r['quantity']:g} {r['unit']}")
-                 for r in bom_rows(design, acceptance))
+                 for r in bom_rows(design, acceptance, weighing))
     return _section("Parts", ["Check you have every part in the table before you start (bom.csv lists the same "
                               "parts with a description and a source for each)."],
                     Table(("item", "part", "quantity"), rows))
@@ -453,24 +455,28 @@ def _drift_steps(acceptance: Mapping[str, Any]) -> list[str]:
 
 
 def sections(design: Design, acceptance: Mapping[str, Any] | None = None,
-             plan: ScanPlan | None = None) -> list[Section]:
+             plan: ScanPlan | None = None, weighing: Mapping[str, Any] | None = None) -> list[Section]:
     """The checklist as :class:`Section` s of :class:`Step` s: plain text with the spec's, the design's and the
     recipes' numbers filled in; the Markdown and HTML templates only lay it out (and escape it). ``plan``: the
-    calibration scan's extent (:func:`magfab.models.scan.scan_plan`; omitted, the spec's)."""
+    calibration scan's extent (:func:`magfab.models.scan.scan_plan`; omitted, the spec's); ``weighing``: the weight
+    plan (calibration/weigh_plan.json), whose section follows the scan's."""
     q = quantities(design)
-    return [_parts_section(design, acceptance), *_array_sections(design), _print_section(design),
+    weights = weights_steps(design, weighing, sensor_id(design))
+    return [_parts_section(design, acceptance, weighing), *_array_sections(design), _print_section(design),
             _prepare_section(design, q), _mix_section(design, q), _pour_section(design, q), _magnet_section(design),
             _solder_section(design), _assemble_section(design), _wiring_section(design), _flash_section(design),
-            _calibrate_section(design, plan), _acceptance_section(acceptance, design)]
+            _calibrate_section(design, plan),
+            *([_section("Calibrate with weights (no force sensor)", weights)] if weights else []),
+            _acceptance_section(acceptance, design)]
 
 
 def checklist_md(design: Design, acceptance: Mapping[str, Any] | None = None,
-                 plan: ScanPlan | None = None) -> str:
+                 plan: ScanPlan | None = None, weighing: Mapping[str, Any] | None = None) -> str:
     return render("checklist/checklist.md.j2", spec=design.spec, q=quantities(design),
-                  sections=sections(design, acceptance, plan))
+                  sections=sections(design, acceptance, plan, weighing))
 
 
 def checklist_html(design: Design, acceptance: Mapping[str, Any] | None = None,
-                   plan: ScanPlan | None = None) -> str:
+                   plan: ScanPlan | None = None, weighing: Mapping[str, Any] | None = None) -> str:
     return render("checklist/checklist.html.j2", spec=design.spec, q=quantities(design),
-                  sections=sections(design, acceptance, plan))
+                  sections=sections(design, acceptance, plan, weighing))

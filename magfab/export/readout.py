@@ -165,7 +165,8 @@ def _json_file(data: object) -> bytes:
 
 def render(design, calibration: Mapping[str, Any], acceptance: Mapping[str, Any] | None = None,
            array: Mapping[str, Any] | None = None, taxel_calibrations: tuple = (),
-           crosstalk: Mapping[str, Any] | None = None) -> dict[str, bytes]:
+           crosstalk: Mapping[str, Any] | None = None, *, weigh_plan: Mapping[str, Any] | None = None
+           ) -> dict[str, bytes]:
     """Every file of the readout package: ``{"readout/<relative path>": bytes}``, sorted, deterministic.
 
     ``design`` is a :class:`~magfab.design.Design` (from :func:`magfab.derive`); ``calibration`` is the parsed
@@ -186,10 +187,14 @@ def render(design, calibration: Mapping[str, Any], acceptance: Mapping[str, Any]
     build = _build_data(design, checked)
     files = {f"readout/{path}": data for path, data in source_files().items()}
     context = _context(build, accepted)
+    context["weigh_steps"] = len(weigh_plan["steps"]) if weigh_plan is not None else 0
+    context["weigh_reskin"] = len(weigh_plan["reskin"]) if weigh_plan is not None else 0
     for path in [p for p in files if p.endswith(TEMPLATE_SUFFIX)]:  # the build's README.md in its template's place
         text = environment().from_string(files.pop(path).decode("utf-8")).render(**context)
         files[path[:-len(TEMPLATE_SUFFIX)]] = text.encode("utf-8")
     files.update(data_files(build, checked, accepted, array, taxel_calibrations, crosstalk))
+    if weigh_plan is not None:  # magfab-readout weigh's steps (export/weigh_plan.py)
+        files[f"readout/src/{PACKAGE}/weigh_plan.json"] = _json_file(weigh_plan)
     return dict(sorted(files.items()))
 
 

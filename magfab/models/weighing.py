@@ -145,16 +145,21 @@ class SensorModel:
     magnet: fieldmod.Magnet
     d_rest_mm: float
     prior: Prior
+    #: The floor of a weighing's standard error per axis, uT: the chip's quantisation (one count over sqrt 12), which a
+    #: mean of readings does not average away when the noise is below a count (a quiet chip, a simulated one).
+    floor_uT: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     @classmethod
     def of(cls, design: Design, prediction: Prediction) -> SensorModel:
         """The model of ``design`` from its prediction, with the priors of its tolerance bands (module doc)."""
         curve = prediction.curves["nominal"]
         ok = np.isfinite(curve.force_N) & np.isfinite(curve.magnet_displacement_mm)
+        chip = chip_setting(design)
         return cls(np.asarray(curve.indentation_mm, float)[ok], np.asarray(curve.force_N, float)[ok],
                    np.asarray(curve.magnet_displacement_mm, float)[ok],
                    float(prediction.shear.stiffness_N_per_mm["nominal"]), fieldmod.Magnet.from_design(design),
-                   float(design.d_rest_mm), _prior(design, prediction))
+                   float(design.d_rest_mm), _prior(design, prediction),
+                   np.array([chip.lsb_xy_uT, chip.lsb_xy_uT, chip.lsb_z_uT]) / math.sqrt(12.0))
 
     def with_curve(self, indentation_mm: np.ndarray, force_N: np.ndarray, travel_mm: np.ndarray) -> SensorModel:
         """The same sensor with another normal curve (a truth of another law, in the simulated study)."""
@@ -278,7 +283,7 @@ def fit_weights(model: SensorModel, weighings: Sequence[Weighing], *, fixed: Map
     mass = np.array([w.mass_g for w in weighings], float)
     angle = np.array([w.angle_deg for w in weighings], float)
     measured = np.array([w.field_uT for w in weighings], float)
-    se = np.array([w.standard_error_uT for w in weighings], float)
+    se = np.hypot(np.array([w.standard_error_uT for w in weighings], float), model.floor_uT)
     n_all = len(PARAMS) + 3 * len(angles)
     mean = np.concatenate([model.prior.mean, np.zeros(3 * len(angles))])
     sigma = np.concatenate([model.prior.sigma, np.full(3 * len(angles), BACKGROUND_SIGMA_UT)])
@@ -406,19 +411,24 @@ def _sqrt_psd(cov: np.ndarray) -> np.ndarray:
     return v * np.sqrt(np.clip(w, 0.0, None))
 
 
-def weight_plan(prediction: Prediction, cap_g: float = 0.0, stiffness: float = 1.0) -> list[tuple[float, float]]:
+def weight_plan(prediction: Prediction, cap_g: float = 0.0, stiffness: float = 1.0, *,
+                loads_g: Sequence[float] = STANDARD_WEIGHTS_G, tilted_max_g: float = math.inf
+                ) -> list[tuple[float, float]]:
     """The weighings to make, as (mass on the tip in g, stand angle): at each of :data:`ANGLES_DEG` the cap alone and
-    the three largest standard weights whose load stays within :data:`PLAN_RANGE_FRACTION` of the predicted normal
-    range (its normal part) and of the predicted shear range (its shear part), each with the cap on (fewer where fewer
-    fit). The ranges are the softest material's, times ``stiffness``: the skin's shear modulus over the softest
-    (:func:`first_weighings` and :func:`stiffness_of` find it, so a stiff skin is weighed over its whole range, not a
-    soft one's). ScanError for a design whose range the cap and the lightest weight already pass."""
+    three of the loads ``loads_g`` put on it (the standard 1-2-5 weights, or the weight jig's coin pairs,
+    :func:`magfab.jig.Jig.loads_g`): the heaviest whose load stays within :data:`PLAN_RANGE_FRACTION` of the predicted
+    normal range (its normal part) and of the predicted shear range (its shear part), then the heaviest lighter
+    than it within half that, and within a quarter (fewer where fewer fit). A tilted stand carries at most
+    ``tilted_max_g`` (what stays in the jig's pockets). The ranges are the softest material's, times ``stiffness``:
+    the skin's shear modulus over the softest (:func:`first_weighings` and :func:`stiffness_of` find it, so a stiff
+    skin is weighed over its whole range, not a soft one's). ScanError for a design whose range the cap and the
+    lightest load already pass."""
     scale = PLAN_RANGE_FRACTION * max(stiffness, 1.0)
     flat_N = scale * prediction.normal.range_N
-    lightest = STANDARD_WEIGHTS_G[0] + cap_g
+    lightest = min(loads_g) + cap_g
     if lightest * G0 / 1000.0 > flat_N:
         range_mN = 1000.0 * flat_N / PLAN_RANGE_FRACTION
-        raise ScanError(f"the cap with the lightest weight ({lightest:g} g, {lightest * G0:.3g} mN) is past "
+        raise ScanError(f"the cap with the lightest load ({lightest:g} g, {lightest * G0:.3g} mN) is past "
                         f"{PLAN_RANGE_FRACTION:.0%} of this design's normal range ({range_mN:.3g} mN): no weight plan "
                         "fits it; calibrate it from a scan")
     out = []
@@ -426,16 +436,21 @@ def weight_plan(prediction: Prediction, cap_g: float = 0.0, stiffness: float = 1
         a = math.radians(angle)
         limit_N = scale * min(prediction.normal.range_N / math.cos(a),
                               prediction.shear.range_N / math.sin(a) if angle > 0 else math.inf)
-        weights = [w for w in STANDARD_WEIGHTS_G if w <= limit_N * 1000.0 / G0 - cap_g][-3:]
-        out += [(cap_g + w, angle) for w in (0.0, *weights)]
+        limit_g = min(limit_N * 1000.0 / G0 - cap_g, tilted_max_g if angle > 0 else math.inf)
+        picked: list[float] = []
+        for fraction in (1.0, 0.5, 0.25):
+            below = [w for w in loads_g if w <= limit_g * fraction and (not picked or w < picked[-1])]
+            if below:
+                picked.append(max(below))
+        out += [(cap_g + w, angle) for w in (0.0, *sorted(picked))]
     return out
 
 
-def first_weighings(prediction: Prediction, cap_g: float = 0.0) -> list[tuple[float, float]]:
-    """The two weighings that come first, flat: the cap alone and the heaviest weight of the plan for the softest skin
+def first_weighings(prediction: Prediction, cap_g: float = 0.0, **loads: Any) -> list[tuple[float, float]]:
+    """The two weighings that come first, flat: the cap alone and the heaviest load of the plan for the softest skin
     (safe for any skin); their fit gives the skin's stiffness (:func:`stiffness_of`) and with it the rest of the
-    plan."""
-    flat = [p for p in weight_plan(prediction, cap_g) if p[1] == 0.0]
+    plan. ``loads`` as :func:`weight_plan`'s."""
+    flat = [p for p in weight_plan(prediction, cap_g, **loads) if p[1] == 0.0]
     return [min(flat), max(flat)]
 
 

@@ -21,9 +21,9 @@ region (not the track's points), with the chip's noise: RMS and worst of Fz and 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -88,6 +88,21 @@ class Truth:
     def field(self, indentation_mm: np.ndarray, y_mm: np.ndarray, angle_deg: float = 0.0) -> np.ndarray:
         return self.model.field_at(self.theta, indentation_mm, y_mm) + self.background(angle_deg)
 
+    def reading(self, mass_g: float, angle_deg: float) -> np.ndarray:
+        """The field (uT, (3,), no noise) with ``mass_g`` resting on the tip and the board at ``angle_deg``."""
+        f = load_of(mass_g, angle_deg)
+        delta = self.model.indentation_of(self.theta, f[:, 2])
+        return self.field(delta, f[:, 1] / self.model.shear_stiffness(self.theta), angle_deg)[0]
+
+    def reskinned(self, rng: np.random.Generator) -> Truth:
+        """The same board and magnet under a new skin: a new silicone batch and rest distance drawn across their
+        bands, the magnet's parameters kept."""
+        new = replace(self, theta=self.theta.copy())
+        for name in ("log_mu", "d_mm"):
+            i = PARAMS.index(name)
+            new.theta[i] = self.model.prior.mean[i] + self.model.prior.sigma[i] * rng.uniform(-2.0, 2.0)
+        return new
+
 
 def truth_model(design: Design, prediction: Prediction, model: SensorModel,
                 other: Prediction | None = None) -> SensorModel:
@@ -127,12 +142,7 @@ def weighings(sensor: Truth, plan: Sequence[tuple[float, float]], noise: np.ndar
     """What the bench records for ``plan`` on ``sensor``: each weighing's mean over ``samples`` noisy readings."""
     out = []
     for mass, angle in plan:
-        f = load_of(mass, angle)
-        m = sensor.model
-        delta = m.indentation_of(sensor.theta, f[:, 2])
-        y = f[:, 1] / m.shear_stiffness(sensor.theta)
-        b = sensor.field(delta, y, angle)[0]
-        mean = b + rng.standard_normal(3) * noise / math.sqrt(samples)
+        mean = sensor.reading(mass, angle) + rng.standard_normal(3) * noise / math.sqrt(samples)
         out.append(Weighing(mass, angle, (float(mean[0]), float(mean[1]), float(mean[2])),
                             (float(noise[0]), float(noise[1]), float(noise[2])), samples))
     return out
@@ -182,23 +192,26 @@ def _calibrate(scan: Scan, design: Design) -> Calibration:
 
 
 def trial(design: Design, prediction: Prediction, model: SensorModel, truth: SensorModel, rng: np.random.Generator,
-          *, cap_g: float = CAP_G, centred: bool = False) -> TrialResult:
-    """One drawn sensor (:func:`draw_sensor`) through both calibrations and a re-skin (module doc)."""
+          *, cap_g: float = CAP_G, centred: bool = False, loads: Mapping[str, Any] | None = None,
+          adaptive: bool = True) -> TrialResult:
+    """One drawn sensor (:func:`draw_sensor`) through both calibrations and a re-skin (module doc); ``loads`` as
+    :func:`~magfab.models.weighing.weight_plan` takes them (the weight jig's coins: ``loads_g`` and
+    ``tilted_max_g``; default the standard 1-2-5 weights). ``adaptive``: the first two weighings' fit sets the
+    skin's stiffness and with it the plan; without, the plan is the softest skin's (as the build ships it)."""
     noise = noise_uT(design)
     sensor = draw_sensor(model, truth, rng, centred)
-    first = first_weighings(prediction, cap_g)  # the bench's first two: the skin's stiffness sets the rest
-    plan = weight_plan(prediction, cap_g, stiffness_of(fit_weights(model, weighings(sensor, first, noise, rng)), model,
-                                                       prediction))
+    loads = dict(loads or {})
+    stiffness = 1.0
+    if adaptive:  # the bench's first two: the skin's stiffness sets the rest
+        first = first_weighings(prediction, cap_g, **loads)
+        stiffness = stiffness_of(fit_weights(model, weighings(sensor, first, noise, rng)), model, prediction)
+    plan = weight_plan(prediction, cap_g, stiffness, **loads)
     fit = fit_weights(model, weighings(sensor, plan, noise, rng))
     cal_w = _calibrate(model_scan(model, fit, design, prediction), design)
     cal_f = _calibrate(full_scan(sensor, design, prediction, noise, rng), design)
     bound = predicted_error(model, fit, cal_w, design, prediction, seed=int(rng.integers(2**31)))
     test = held_out(sensor, design, prediction, noise, rng)
-    # a new skin on the same board and magnet: a new silicone batch and rest distance, the magnet's parameters kept
-    new = replace(sensor, theta=sensor.theta.copy())
-    for name in ("log_mu", "d_mm"):
-        i = PARAMS.index(name)
-        new.theta[i] = model.prior.mean[i] + model.prior.sigma[i] * rng.uniform(-2.0, 2.0)
+    new = sensor.reskinned(rng)  # a new skin on the same board and magnet
     kept = {name: float(fit.theta[PARAMS.index(name)]) for name in RESKIN_KEPT}
     refit = fit_weights(model, weighings(new, reskin_plan(plan), noise, rng), fixed=kept)
     cal_r = _calibrate(model_scan(model, refit, design, prediction), design)

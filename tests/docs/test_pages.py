@@ -15,6 +15,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 from conftest import _missing, require_tool
 
@@ -22,7 +23,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from pages import blocks, install_command
 from rig import Rig, build_library
 from simbus import HarnessUnavailable
-from walk import Bench
+from walk import Bench, Skin
+
+from magfab.units import G0
 
 ROOT = Path(__file__).resolve().parents[2]
 README = (ROOT / "README.md").read_text(encoding="utf-8")
@@ -48,6 +51,10 @@ def walked(tmp_path_factory):
         bench = Bench(cwd=lab, venv=venv, plug_in=plug_in, home=lab)
         skip = install_command(README)
         for block in blocks(README, "README.md"):
+            weights = any(c.startswith("magfab-readout weigh") for c in block.commands)
+            if weights:  # a new sensor on its own board, not the nominal one: finger-01's board off the bench
+                board, bench.skin = bench.swap(None), Skin(bench.cwd)
+                bench.weighed = {"skin": bench.skin, "first": len(bench.ran)}
             for line in block.commands:
                 if line == skip:
                     continue
@@ -55,6 +62,9 @@ def walked(tmp_path_factory):
                 _assert_ok(ran, block)
                 if block.lang == "python":
                     break
+            if weights:
+                bench.skin = None
+                bench.weighed["rig"] = bench.swap(board)
         for ran in bench.ran:  # with -s: where the README's walk spends its time
             print(f"{ran.seconds:6.1f} s  {ran.line}")
         yield bench
@@ -111,7 +121,8 @@ def test_the_readme_walk_reaches_a_passing_acceptance_test(walked):
     assert hashlib.sha256(data).hexdigest() == cal["scan"]["sha256"]  # the file without its comment
     assert _ran(walked, "magfab-readout record").returncode == 0  # Ctrl-C ends a recording as a success
     uploads = [r for r in walked.ran if r.line.startswith("magfab-readout upload")]
-    assert [u.line.split("#")[0].split()[2:] for u in uploads] == [[], ["--sensor", "finger-01"]]
+    assert [u.line.split("#")[0].split()[2:] for u in uploads] == [
+        [], ["--sensor", "finger-01"], [], ["--sensor", "finger-03"], ["--sensor", "finger-03"]]
     assert uploads[1].stdout != uploads[0].stdout
     # The board names finger-01 and runs its calibration; the new skin changes the record, not the board.
     assert _board_says(walked.rig) == ("finger-01", event["calibration_sha256"][:16], event["calibration_sha256"][:16])
@@ -119,6 +130,39 @@ def test_the_readme_walk_reaches_a_passing_acceptance_test(walked):
         header = next(csv.reader(line for line in f if not line.startswith("#")))
     assert "Fz_sensor_N" in header and "Fz_N" not in header  # the recording keeps the sensor's own forces apart
     assert (walked.cwd / "finger-01.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"  # sensor show's chart
+
+
+def test_a_sensor_calibrated_with_weights_passes_its_check(walked):
+    """The README's weights path on its own board, whose chip reads a sensor drawn across the bands (not the nominal
+    one: another hyperelastic law, its magnet tilted and offset, the Earth's field turning with the stand): the twelve
+    weighings, the model's calibration into the record, its upload, and the acceptance check passes. The calibration
+    reads the drawn sensor's flat loads within twice the error it states; the re-skin's three weighings keep the
+    magnet's parameters."""
+    from magfab.models.weighing import RESKIN_KEPT
+    from magfab.readout.src.magfab_readout.calibration import Calibration
+
+    weighed = walked.weighed
+    ran = walked.ran[weighed["first"]:]
+    weighs = [r for r in ran if r.line.startswith("magfab-readout weigh")]
+    assert [r.stdout.count("step ") for r in weighs] == [12, 3], [r.stdout for r in weighs]
+    check = next(r for r in ran if r.line.startswith("magfab-readout check"))
+    assert "FAIL" not in check.stdout and "verdict: PASS" in check.stdout, check.stdout
+    print("\n".join(line for line in check.stdout.splitlines() if line.startswith("step ")))  # with -s
+    sensor = _record(walked, "finger-03")
+    fits = [e for e in sensor.events() if e["kind"] == "calibration"]
+    first, skin = (json.loads(sensor.file(e["files"]["calibration.json"])) for e in fits)
+    model = first["scan"]["model"]
+    assert model["weighings"] == 12 and skin["scan"]["model"]["kept"] == sorted(RESKIN_KEPT)
+    # the first calibration against the drawn sensor it was made on (the skin before its re-skin): flat loads
+    truth = weighed["skin"].first
+    cal = Calibration(first)
+    grams = np.linspace(20.0, 250.0, 12)
+    fz = np.array([cal.evaluate(*truth.reading(m, 0.0))[2] for m in grams])
+    rms_mN = 1000 * float(np.sqrt(np.mean((fz - grams * 1e-3 * G0) ** 2)))
+    stated = model["predicted_error_mN"]["Fz_rms"]["p90"]
+    print(f"weights calibration on the drawn sensor: flat loads 20-250 g, Fz RMS {rms_mN:.1f} mN, stated {stated} mN")
+    assert rms_mN <= 2.0 * stated, (rms_mN, stated)
+    assert _board_says(weighed["rig"])[0] == "finger-03"
 
 
 def _record(bench, sensor_id: str):
@@ -321,7 +365,8 @@ def test_two_sensors_of_one_design_keep_every_measurement(walked, two_sensors):
         assert f"record: check {kept[0]['number']} of sensor {sensor.id}" in checks[0].stdout
     assert histories == {
         "finger-01": ["added", "calibration", "upload", "check", "reskin", "calibration", "upload"],
-        "finger-02": ["added", "calibration", "upload", "check", "calibration", "upload"]}, histories
+        "finger-02": ["added", "calibration", "upload", "check", "calibration", "upload"],
+        "finger-03": ["added", "calibration", "upload", "check", "reskin", "calibration", "upload"]}, histories
 
 
 def test_each_board_reports_its_own_sensor(walked, two_sensors):
@@ -356,7 +401,7 @@ def test_a_rebuild_leaves_the_records_and_a_new_skin_is_compared(walked, two_sen
     assert "new skin against the previous one" in show and "rest Bz" in show, show
     listed = [r for r in walked.ran if r.line.startswith("magfab sensor list")][-1].stdout
     rows = {line.split()[0]: line.split() for line in listed.splitlines()[1:]}
-    assert set(rows) == {"finger-01", "finger-02"} and rows["finger-01"][2:4] == ["1", "2"], listed
+    assert set(rows) == {"finger-01", "finger-02", "finger-03"} and rows["finger-01"][2:4] == ["1", "2"], listed
 
 
 # ---------------------------------------------------------------------------------------------------------------

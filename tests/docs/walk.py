@@ -12,7 +12,10 @@ installs into) and whose ``magfab`` is the one under test. Where a person would 
 * ``magfab-readout stream --zero N`` (Ctrl-C'd), when the test gave :attr:`Bench.press`, zeroes at rest, then the
   press comes on and goes, and the stream runs until it has printed the rest after it (:attr:`Bench.after_press`);
 * ``magfab-readout check`` waits for each prompt, then the known weight goes on the tip, the board is turned over or
-  warmed as the prompt asks (:meth:`Bench._do`), and Enter is pressed.
+  warmed as the prompt asks (:meth:`Bench._do`), and Enter is pressed;
+* ``magfab-readout weigh`` likewise: at each step the board goes onto the stand at the step's angle with the step's
+  mass on the tip. With :attr:`Bench.skin` set (a :class:`Skin`), the board's chip reads that sensor, which is not the
+  nominal one, at rest, under the weight jig and under the check's weight.
 
 The only text changed in a line is the port: ``/dev/ttyACM0`` (the pages' Linux Uno) becomes the rig's
 pseudo-terminal, which ``MAGFAB_READOUT_PORT`` also names for the commands that take the default port."""
@@ -35,6 +38,8 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+
+import numpy as np
 
 import magfab
 from magfab.units import G0 as G
@@ -206,6 +211,34 @@ def _log(reference: Path, recording: Path, taxel: int | None, stage, start: floa
                           *(f"{v:.6f}" for v in stage(board_s)[1])])
 
 
+class Skin:
+    """A sensor that is not the nominal one, for the walk's weight calibration: drawn across the material, magnet and
+    assembly bands (:func:`magfab.models.weighing_study.draw_sensor`, ``seed``), its response made by the other
+    hyperelastic law than the fit's, its magnet tilted and offset, the Earth's field turning with the stand.
+    :meth:`field` is what its chip reads with ``mass_g`` on the tip and the board at ``angle_deg`` (no noise: the
+    simulated chip adds its own)."""
+
+    def __init__(self, build_dir: Path, seed: int = 3) -> None:
+        from magfab.design import derive
+        from magfab.models.predict import predict
+        from magfab.models.weighing import SensorModel
+        from magfab.models.weighing_study import draw_sensor, truth_model
+        from magfab.spec import spec_from_json
+
+        design = derive(spec_from_json(json.loads((build_dir / "spec.json").read_text())))
+        prediction = predict(design)
+        model = SensorModel.of(design, prediction)
+        self.rng = np.random.default_rng(seed)
+        self.sensor = self.first = draw_sensor(model, truth_model(design, prediction, model), self.rng)
+
+    def field(self, mass_g: float, angle_deg: float) -> list[float]:
+        return [float(b) for b in self.sensor.reading(mass_g, angle_deg)]
+
+    def reskin(self) -> None:
+        """A new skin cast on the same board and magnet (:meth:`magfab.models.weighing_study.Truth.reskinned`)."""
+        self.sensor = self.sensor.reskinned(self.rng)
+
+
 @dataclass
 class Bench:
     """A shell at the bench. ``plug_in(build_dir)`` gives the rig (a context manager made from the build: its
@@ -226,6 +259,8 @@ class Bench:
     rig: object = None
     scan: Scan | None = None
     home: Path | None = None  # the folder the walk started in (the spec's: the README's sensors/ is made there)
+    skin: Skin | None = None  # the sensor on the board, when it is not the scan's nominal one (the weights walk)
+    weighed: dict | None = None  # the weights walk's: its skin, its first line's index in ran, its board
     ran: list[Ran] = field(default_factory=list)
     #: What the bench's measurements wrote, as each was made: (its line's index in :attr:`ran`, the file, its sha256)
     #: for every ``record``'s recording and its scan's reference log (the next recording in the folder replaces both).
@@ -253,7 +288,7 @@ class Bench:
         if self.rig is None and (PAGE_PORT in line or "magfab-readout" in line or "flash.sh" in line):
             self.scan = Scan(self.cwd)
             self.rig = self.plug_in(self.cwd)
-            self.scan.at_rest(self.rig)
+            self._at_rest()
 
     def paste(self, line: str, timeout_s: float = 600) -> Ran:
         self._started = time.monotonic()
@@ -263,7 +298,10 @@ class Bench:
         if line.startswith("cd "):
             self.cwd = (self.cwd / line[3:].split("#")[0].strip()).resolve()
             return self._log(Ran(line, self.cwd, 0, "", ""))
-        if "magfab-readout check" in line and not {"--yes", "-y", "--no-weight"} & set(line.split()):
+        if line.startswith("magfab sensor reskin") and self.skin is not None:
+            self.skin.reskin()  # the person casts the new skin the line notes
+        if (("magfab-readout check" in line or "magfab-readout weigh" in line)
+                and not {"--yes", "-y", "--no-weight"} & set(line.split())):
             return self._log(self._interactive(line, timeout_s))
         if "Ctrl-C ends it" in line:
             ran = self._log(self._until_interrupted(line, timeout_s))
@@ -361,9 +399,16 @@ class Bench:
                                      f"{self.rig.resets} time(s)):\n{_text(out)[-3000:]}\n{_text(err)[-3000:]}")
             time.sleep(0.1)
 
+    def _at_rest(self) -> None:
+        """Nothing on the tip: the skin's field where one is set, else the scan's rest."""
+        if self.skin is not None:
+            self.rig.set_field(*self.skin.field(0.0, 0.0))
+        else:
+            self.scan.at_rest(self.rig)
+
     def _interactive(self, line: str, timeout_s: float) -> Ran:
-        """``check``: at each of its prompts, what a person does (:meth:`_do`), then Enter."""
-        self.scan.at_rest(self.rig)
+        """``check`` and ``weigh``: at each of their prompts, what a person does (:meth:`_do`), then Enter."""
+        self._at_rest()
         proc = self._start(line, stdin=subprocess.PIPE)
         err: list[str] = []
         prompts: list[str] = []
@@ -397,15 +442,23 @@ class Bench:
         out = proc.stdout.read()
         proc.wait(timeout_s)
         reader.join(5)
-        self.scan.at_rest(self.rig)
+        self._at_rest()
         return Ran(line, self.cwd, proc.returncode, out, "".join(err))
 
     def _do(self, prompt: str, stop: threading.Event) -> None:
         """What a person does at a prompt of ``check``: the weight on the tip; the sensor turned upside down (the
         vertical component of a 0.45 G Earth field reversed; the tip's own weight is not modelled here); warming it
-        by 6 C over 2 s (the magnet's field falls 0.12 %/C, the chip's temperature rises); else at rest."""
-        if "weight on the tip" in prompt:
-            self.rig.set_field(*self.scan.field_at(self.weight_g * 1e-3 * G))
+        by 6 C over 2 s (the magnet's field falls 0.12 %/C, the chip's temperature rises); ``weigh``'s step: the board
+        on the stand at the step's angle, the step's mass on the tip (:attr:`skin`'s field); else at rest."""
+        # the prompt's own text: a piped stderr gets no newline from the Enter, so earlier prompts share its line
+        text = prompt.removesuffix("press Enter: ").rpartition("press Enter: ")[2]
+        step = re.search(r"stand's ([\d.]+) deg platform.*\(([\d.]+) g on the tip\)", text)
+        if step:
+            assert self.skin is not None, "the weights walk needs Bench.skin: the sensor the board reads"
+            self.rig.set_field(*self.skin.field(float(step[2]), float(step[1])))
+        elif "weight on the tip" in prompt:
+            self.rig.set_field(*(self.skin.field(self.weight_g, 0.0) if self.skin is not None
+                                 else self.scan.field_at(self.weight_g * 1e-3 * G)))
         elif "upside down" in prompt:
             bx, by, bz = self.scan.rest
             self.rig.set_field(bx, by, bz - 2 * EARTH_Z_UT)
@@ -413,7 +466,7 @@ class Bench:
             self._warming = threading.Thread(target=self._warm, args=(stop,), daemon=True)
             self._warming.start()
         else:
-            self.scan.at_rest(self.rig)
+            self._at_rest()
 
     def _warm(self, stop: threading.Event, rise_C: float = 6.0, seconds: float = 2.0) -> None:
         t0 = time.monotonic()

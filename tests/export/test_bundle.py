@@ -90,7 +90,8 @@ def test_the_readout_is_its_source_tree_plus_data_files(bundle):
     templates = {p for p in tree if p.endswith(readout.TEMPLATE_SUFFIX)}
     assert templates == {"README.md.j2"}
     assert {p: d for p, d in shipped.items() if p in tree} == {p: d for p, d in tree.items() if p not in templates}
-    data = {f"src/magfab_readout/{name}" for name in ("build.json", "calibration.json", "acceptance.json")}
+    data = {f"src/magfab_readout/{name}"
+            for name in ("build.json", "calibration.json", "acceptance.json", "weigh_plan.json")}
     assert set(shipped) - set(tree) == {"README.md"} | data
     package = out / "readout" / "src" / "magfab_readout"
     build = json.loads((package / "build.json").read_text())

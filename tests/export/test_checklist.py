@@ -85,7 +85,7 @@ def test_markdown_and_html_escape_what_they_carry(design, monkeypatch):
     assert "<" not in md(hostile) and "\\*bold\\*" in md(hostile) and "\\[link\\]" in md(hostile)
     table = C.Table(("h " + hostile,), ((hostile,),))
     monkeypatch.setattr(C, "sections",
-                        lambda d, a=None, p=None: [C.Section("Step " + hostile, (C.Step(hostile),), table)])
+                        lambda d, a=None, p=None, w=None: [C.Section("Step " + hostile, (C.Step(hostile),), table)])
     html = C.checklist_html(design)
     assert "<script>" not in html and html.count("&lt;script&gt;alert(1)&lt;/script&gt;") == 4
     text = C.checklist_md(design)
@@ -124,7 +124,27 @@ def test_the_build_quotes_its_own_acceptance_bands_and_bom(default_build):
     line = next(s for s in (out / "checklist.md").read_text().splitlines() if "Pass:" in s)
     assert f"within {lo:.0f} to {hi:.0f} uT" in line and \
         f"a {w:g} g weight raises Bz by {d_lo:.0f} to {d_hi:.0f} uT" in line
-    assert (out / "bom.csv").read_text() == bom.bom_csv(default_build.design, acc)
+    plan = json.loads((out / "calibration" / "weigh_plan.json").read_text())
+    assert (out / "bom.csv").read_text() == bom.bom_csv(default_build.design, acc, plan)
+
+
+def test_the_weights_section_follows_the_scan_and_names_the_plans_load(default_build):
+    """With the build's weight plan the checklist gains "Calibrate with weights" between the scan's calibration and
+    the acceptance test, naming the coins the plan needs and the cap's bound; the BOM lists the jig, the coins and a
+    balance; an array's build has neither."""
+    import json
+
+    out = default_build.out_dir
+    plan = json.loads((out / "calibration" / "weigh_plan.json").read_text())
+    titles = [s.title for s in C.sections(default_build.design, None, None, plan)]
+    at = titles.index("Calibrate with weights (no force sensor)")
+    assert titles[at - 1] == "Calibrate" and titles[at + 1] == "Acceptance test"
+    text = (out / "checklist.md").read_text()
+    most = max(step["coins"] for step in plan["steps"])
+    assert f"Have {most} coins ready" in text and f"at most {plan['cap_mass_bound_g']:.1f} g" in text
+    rows = {r["item"]: r for r in bom.bom_rows(default_build.design, None, plan)}
+    assert rows["Coins"]["quantity"] == most and "weigh_cap.stl" in rows["Printed weight jig"]["part"]
+    assert "Balance" in rows and "Coins" not in {r["item"] for r in bom.bom_rows(default_build.design)}
 
 
 def test_the_scan_step_the_simulated_scan_and_the_range_share_one_depth(default_build, magone_design,

@@ -9,10 +9,12 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from design_box import box_designs
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from magfab.errors import ScanError
+from magfab.jig import jig_of
 from magfab.models import acceptance
 from magfab.models.weighing import (
     PARAMS,
@@ -63,7 +65,7 @@ def test_the_weight_calibration_holds_against_a_full_scan_on_sensors_of_the_othe
     weight calibration's Fz RMS within twice the full scan's at the median, the re-skin's too, and the stated bound
     over the actual error in at least six of eight (bench/weights.py runs fifty)."""
     rng = np.random.default_rng(2026)
-    rows = [trial(magone_design, magone_prediction, model, truth, rng) for _ in range(8)]
+    rows = [trial(magone_design, magone_prediction, model, truth, rng, **_shipped(magone_design)) for _ in range(8)]
     ratio = [r.weights["fz_rms_N"] / r.full["fz_rms_N"] for r in rows]
     reskin = [r.reskin["fz_rms_N"] / r.reskin_full["fz_rms_N"] for r in rows]
     assert np.median(ratio) <= 2.0 and np.median(reskin) <= 2.0, (ratio, reskin)
@@ -71,12 +73,19 @@ def test_the_weight_calibration_holds_against_a_full_scan_on_sensors_of_the_othe
     assert sum(r.weights["shear_rms_N"] <= r.bound_shear_rms_N for r in rows) >= 6
 
 
+def _shipped(design) -> dict:
+    """The plan as the build ships it (:meth:`magfab.jig.Jig.plan`): the jig's coins on its heaviest cap, the softest
+    skin's plan for every sensor."""
+    jig = jig_of(design)
+    return {"cap_g": jig.cap_mass_bound_g(), "adaptive": False, "loads": jig.plan_loads()}
+
+
 @pytest.mark.slow
 def test_fifty_sensors_meet_the_goals_at_the_median_and_p90(magone_design, magone_prediction, model, truth):
     """The goals over fifty drawn sensors of MagOne: the ratio to the full scan's Fz RMS at most 2 at the median and
     the 90th percentile (the worst is bench/weights.py's to report), the re-skin's too, coverage at least 0.9."""
     rng = np.random.default_rng(50)
-    rows = [trial(magone_design, magone_prediction, model, truth, rng) for _ in range(50)]
+    rows = [trial(magone_design, magone_prediction, model, truth, rng, **_shipped(magone_design)) for _ in range(50)]
     for a, b in (("weights", "full"), ("reskin", "reskin_full")):
         ratio = [getattr(r, a)["fz_rms_N"] / getattr(r, b)["fz_rms_N"] for r in rows]
         assert np.quantile(ratio, 0.9) <= 2.0, (a, sorted(ratio))
@@ -137,44 +146,23 @@ def test_weighings_no_skin_of_the_design_explains_are_refused(magone_design, mag
         calibration_scan(magone_design, magone_prediction, mixed)
 
 
-def _designs(n: int, seed: int):
-    """``n`` designs of the inverse search's default box (every silicone, tip and stock magnet), as it samples them:
-    the buildable ones (a design the build's preflight refuses is no sensor to weigh)."""
-    from magfab.check import preflight
-    from magfab.design import derive
-    from magfab.errors import InputError
-    from magfab.inverse.space import Space, candidate_spec
-    from magfab.inverse.targets import parse_targets
-    from magfab.spec import load_spec
-
-    targets, base = parse_targets(""), load_spec(None)
-    out = []
-    for params in Space(targets, base).latin_hypercube(4 * n, seed):
-        try:
-            out.append(preflight(derive(candidate_spec(Space(targets, base).point(params), base, targets, "w"))))
-        except InputError:
-            continue
-        if len(out) == n:
-            break
-    return out
-
-
 def _weighed_across_the_box(n: int, seed: int) -> None:
     """Each drawn design: its plan inside its ranges, its model's own sensors recovered (4 posterior sigma), and the
     command's path (guards, model scan, calibration, bound) run to a finite predicted error."""
     from magfab.models.predict import predict
 
     weighed = 0
-    for design in _designs(n, seed):
+    for design in box_designs(n, seed):
         prediction = predict(design)
         model = SensorModel.of(design, prediction)
         rng = np.random.default_rng(seed)
         sensor = draw_sensor(model, model, rng)
-        if 900 * prediction.normal.range_N < 6.0 * G0:  # a range below the cap's and a gram's weight: told, no plan
+        jig = jig_of(design)  # the plan the build ships: the jig's coins on its heaviest cap
+        if 900 * prediction.normal.range_N < (jig.cap_mass_bound_g() + 2 * jig.coin_g) * G0:  # told, no plan
             with pytest.raises(ScanError, match="calibrate it from a scan"):
-                weight_plan(prediction, 5.0)
+                jig.plan(prediction)
             continue
-        plan = weight_plan(prediction, 5.0)
+        plan = [(m, a) for m, a, _ in jig.plan(prediction)]
         weighed += 1
         loads = load_of([m for m, _ in plan], [a for _, a in plan])
         assert np.all(loads[:, 2] <= 0.9 * prediction.normal.range_N + 1e-9), design.spec.name

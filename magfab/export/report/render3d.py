@@ -28,6 +28,8 @@ PART_VIEWS = {
     "mould_cup": ("Mould cup (print pose)", "#b8b8b8"),
     "mould_lid": ("Mould lid (print pose)", "#c9b48a"),
     "pad": ("Mounting pad (print pose, board frame)", "#9e9e9e"),
+    "weigh_cap": ("Weight jig's cap (print pose)", "#d8c38f"),
+    "weigh_stand": ("Weight jig's stand (print pose)", "#a9c4a0"),
 }
 CUT_COLOUR = "#d9534f"
 VIEW_ELEV_DEG, VIEW_AZIM_DEG = 28.0, -58.0  # one fixed view for every part: looking at the y = 0 cut

@@ -1,6 +1,7 @@
 """``magfab-readout``: stream calibrated forces, record scans, ask the board what it runs, write a new
-calibration into its EEPROM (``upload``), and run the acceptance test (``check``) against the bands magfab
-predicted for this build (acceptance.json).
+calibration into its EEPROM (``upload``), run the acceptance test (``check``) against the bands magfab
+predicted for this build (acceptance.json), and walk the weight plan of a calibration without a force sensor
+(``weigh``).
 
 Exit status: 0 done (``check``: passed); 2 a problem with what was given or with the bench (a usage error, a file
 refused, a calibration the record cannot hold, an unknown sensor, no board or no data on the port: one line on
@@ -18,7 +19,7 @@ import sys
 import time
 from typing import List, NoReturn, Optional
 
-from . import _build, array_cli, board_sensor, bounded, check, identity, records
+from . import _build, array_cli, board_sensor, bounded, check, identity, records, weigh
 from .calibration import Calibration, CalibrationError, calibration_sha256
 from .cli_shared import (
     CSV_COLUMNS,
@@ -139,6 +140,7 @@ def _parser() -> argparse.ArgumentParser:
 
     board_sensor.add_options(check.add_parser(commands, common), _SENSOR_HELP + "; the check's result is appended "
                              "to its record")
+    weigh.add_parser(commands, common)
     return parser
 
 
@@ -377,6 +379,8 @@ def main(argv: Optional[List[str]] = None) -> int:
     """Entry point of the ``magfab-readout`` command."""
     args = _parser().parse_args(argv)
     try:
+        if args.command == "weigh":  # an array's package has no weight plan, which weigh says
+            return weigh.run(args, sys.stdout, _device)
         if (array := ArrayCalibration.embedded()) is not None:  # an array build's package: every taxel
             if args.simulate_warm is not None or args.simulate_no_thermal:
                 raise UsageError("--simulate-warm and --simulate-no-thermal simulate a single taxel's board; this "

@@ -44,7 +44,7 @@ from .frames import (
     temperature_C,
 )
 
-__all__ = ["PressPattern", "RestTip", "SimulatedDevice", "TemperatureRamp"]
+__all__ = ["PressPattern", "RestTip", "SimulatedDevice", "TemperatureRamp", "WeighedTip"]
 
 #: The fault word of the simulated device's error samples: a NACK while reading (frames.FAULTS, FAULT_STAGES).
 SIMULATED_FAULT = 1 << 8 | 1
@@ -268,6 +268,36 @@ class RestTip:
         return ex, ey, sign * self.scale * bz + ez
 
 
+class WeighedTip:
+    """The tip under the weight jig, for ``magfab-readout weigh``: the nominal sensor's field under a mass on the tip
+    with the board on the stand at an angle, interpolated linearly in the mass from the weight plan's ``nominal``
+    tables (one per angle: ``angle_deg``, ``mass_g`` rising, ``field_uT`` (Bx, By, Bz) rows)."""
+
+    def __init__(self, nominal) -> None:
+        self.tables = {float(t["angle_deg"]): ([float(m) for m in t["mass_g"]],
+                                               [tuple(float(v) for v in row) for row in t["field_uT"]])
+                       for t in nominal}
+        if not self.tables or any(len(m) < 2 or len(m) != len(b) for m, b in self.tables.values()):
+            raise ValueError("each angle's table needs two or more masses, one field row each")
+        self.mass_g, self.angle_deg = 0.0, min(self.tables)
+
+    def place_load(self, mass_g: float, angle_deg: float) -> None:
+        """The board on the stand at ``angle_deg`` (one of the tables') with ``mass_g`` on the tip."""
+        if float(angle_deg) not in self.tables:
+            raise ValueError(f"no table for {angle_deg!r} deg; the plan's angles are {sorted(self.tables)}")
+        if not (math.isfinite(mass_g) and mass_g >= 0):
+            raise ValueError(f"mass_g must be a non-negative number; instead received {mass_g!r}")
+        self.mass_g, self.angle_deg = float(mass_g), float(angle_deg)
+
+    def field(self, t_s: float) -> Tuple[float, float, float]:
+        """(Bx, By, Bz) in microtesla, without noise: constant until the load changes (held at the table's ends)."""
+        masses, fields = self.tables[self.angle_deg]
+        m = min(max(self.mass_g, masses[0]), masses[-1])
+        k = next(i for i in range(1, len(masses)) if masses[i] >= m)
+        w = (m - masses[k - 1]) / (masses[k] - masses[k - 1])
+        return tuple(a + w * (b - a) for a, b in zip(fields[k - 1], fields[k]))  # type: ignore[return-value]
+
+
 class TemperatureRamp:
     """The chip's temperature: ``start_C`` until ``delay_s``, then rising linearly to ``end_C`` over
     ``duration_s``, then held (a warm-up)."""
@@ -470,6 +500,13 @@ class SimulatedDevice:
         start = self.temperature(now_s)
         self.temperature = TemperatureRamp(start, start + by_C, duration_s=max(abs(by_C), 1e-3) / rate_C_per_s,
                                            delay_s=now_s)
+
+    def place_load(self, mass_g: float, angle_deg: float) -> None:
+        """Put ``mass_g`` on the simulated tip with the board at ``angle_deg`` (a :class:`WeighedTip` pattern only)."""
+        place = getattr(self.pattern, "place_load", None)
+        if place is None:
+            raise ValueError("this simulated device has no weight jig; a load needs pattern=WeighedTip(...)")
+        place(mass_g, angle_deg)
 
     def place_weight(self, grams: float) -> None:
         """Put a weight on the simulated tip (a :class:`RestTip` pattern only): later samples carry its field."""

@@ -1,0 +1,253 @@
+"""The weight jig: the cap that carries coins on the tip and the stand that holds the board at the plan's angles.
+
+A weight calibration (``magfab calibrate --weights``, :mod:`magfab.models.weighing`) fits the sensor's model to the
+field under known masses resting on the tip, with the board flat or tilted. The jig makes those loads the model's:
+
+- **The cap** (:func:`cap_solid`) rests on the tip through a flat rigid plate, the contact of the FE's flat indenter
+  (recipes bench.toml ``[indenter]``), which covers the tip at any lateral travel. A skirt hangs from the plate round
+  the tip, clear of it, and carries a tray of coin pockets low beside the tip, so that the load's centre of mass sits
+  near the contact plane: a tilted load then presses on the tip's top with little turning moment
+  (:meth:`Jig.moment_arm_mm` states what remains for each load). Equal stacks in each opposite pair of pockets keep
+  the centre of mass on the tip's axis. The cap's tray stays clear of the pad's lip and the connector at the
+  deepest indentation the normal curve reaches.
+- **The stand** (:func:`stand_solid`) is one part with a platform per stand angle (:data:`ANGLES_DEG`) side by side
+  on a base plate. Each platform has a pocket that takes the board with its connector uphill (the pocket is open
+  there for the cable) and a relief under it for the bottom-side parts; the weight's downhill pull is then along the
+  sensor's +y, as the weighing model has it.
+
+Board frame throughout (z = 0 on the board's top face, the chip on the axis); the cap's print pose is its use pose
+moved down to the bed (the tray's underside), the stand's is as it stands.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+from .board.placement import ORIGIN, place
+from .design import Design
+from .models.weighing import weight_plan
+from .recipes import catalogue
+
+if TYPE_CHECKING:
+    import cadquery as cq
+
+    from .models.predict import Prediction
+
+# Imported lazily, inside the functions that use it, for speed: CadQuery takes a noticeable time to import, and
+# importing this module should not.
+
+__all__ = ["Jig", "jig_of", "cap_solid", "stand_solid", "ANGLES_DEG", "REACH", "coin_layout", "Platform", "platforms"]
+
+#: The stand's angles, degrees: the weight plan's (magfab.models.weighing.ANGLES_DEG, which a test holds equal).
+ANGLES_DEG = (0.0, 20.0, 40.0)
+#: How far past the travel to d_min the normal curve reaches (magfab.models.predict.GRID_REACH, which a test holds
+#: equal): the deepest the cap can sink within the model's range.
+REACH = 1.25
+#: How tall a pocket's stack may be on the flat stand, in rims (our choice: four rims, about 24 mm, a steady column).
+FLAT_STACK_RIMS = 4
+#: Gap between the stand's platforms, mm.
+PLATFORM_GAP_MM = 6.0
+
+
+@dataclass(frozen=True)
+class Jig:
+    """The jig's dimensions for one design (mm, g; board frame), from :func:`jig_of`."""
+
+    z_face_mm: float  # the contact plane: the tip's top
+    face_radius_mm: float  # the flat face's radius (the skirt's inner radius)
+    wall_mm: float
+    plate_mm: float
+    z_under_mm: float  # the tray's underside, unloaded
+    floor_mm: float
+    rim_mm: float  # a pocket's wall above its floor
+    pocket_radius_mm: float
+    pocket_ring_mm: float  # the radius the pockets' centres sit on
+    pockets: int
+    coin_g: float
+    coin_mm: float  # a coin's thickness
+    sink_mm: float  # the deepest the cap sinks within the model's range
+    density_g_cm3: float
+    board_mm: tuple[float, float, float, float]  # the board's outline in the sensor's frame: x0, y0, x1, y1
+    board_thickness_mm: float
+
+    @property
+    def z_floor_mm(self) -> float:
+        """The pockets' floor."""
+        return self.z_under_mm + self.floor_mm
+
+    @property
+    def outer_radius_mm(self) -> float:
+        return self.pocket_ring_mm + self.pocket_radius_mm + 2.0 * self.wall_mm  # past the rings: no tangent circles
+
+    @property
+    def tilted_coins_max(self) -> int:
+        """The most coins a tilted stand may carry: stacks no taller than the pockets' rim."""
+        return self.pockets * int(self.rim_mm // self.coin_mm)
+
+    def loads_g(self) -> tuple[float, ...]:
+        """The loads the cap takes, g: every even number of coins up to :data:`FLAT_STACK_RIMS` rims a pocket."""
+        most = self.pockets * int(FLAT_STACK_RIMS * self.rim_mm // self.coin_mm)
+        return tuple(round(n * self.coin_g, 6) for n in range(2, most + 1, 2))
+
+    def plan_loads(self) -> dict[str, Any]:
+        """What :func:`magfab.models.weighing.weight_plan` takes of this jig: its loads and a tilted stand's most."""
+        return {"loads_g": self.loads_g(), "tilted_max_g": self.tilted_coins_max * self.coin_g}
+
+    def plan(self, prediction: Prediction, cap_g: float | None = None, stiffness: float = 1.0
+             ) -> list[tuple[float, float, int]]:
+        """The weight plan (:func:`magfab.models.weighing.weight_plan`) in this jig's coins: (mass on the tip in g,
+        stand angle in degrees, coins), the cap's mass ``cap_g`` (default: :meth:`cap_mass_bound_g`, the heaviest a
+        printed cap may be)."""
+        cap = self.cap_mass_bound_g() if cap_g is None else cap_g
+        plan = weight_plan(prediction, cap, stiffness, **self.plan_loads())
+        return [(m, a, round((m - cap) / self.coin_g)) for m, a in plan]
+
+    @property
+    def skirt_span_mm(self) -> tuple[float, float]:
+        """The skirt's bottom and top (board frame): from the tray's underside to the plate's top, or from the face up
+        to the tray where the tray must sit above the tip's top (a short tip over a long travel)."""
+        return (min(self.z_face_mm, self.z_under_mm),
+                max(self.z_face_mm + self.plate_mm, self.z_under_mm + self.floor_mm))
+
+    def cap_volume_mm3(self) -> float:
+        """The cap's volume from its dimensions (a test holds it to the CAD solid's)."""
+        r_in, w = self.face_radius_mm, self.wall_mm
+        lo, hi = self.skirt_span_mm
+        skirt = math.pi * ((r_in + w) ** 2 - r_in**2) * (hi - lo)
+        plate = math.pi * r_in**2 * self.plate_mm
+        floor = math.pi * (self.outer_radius_mm**2 - (r_in + w) ** 2) * self.floor_mm
+        ring = math.pi * ((self.pocket_radius_mm + w) ** 2 - self.pocket_radius_mm**2) * self.rim_mm
+        return skirt + plate + floor + self.pockets * ring  # the rings stand clear of the skirt and each other
+
+    def cap_mass_bound_g(self) -> float:
+        """The cap's mass at the densest printed material (the plan's range check; the bench weighs the cap)."""
+        return self.cap_volume_mm3() / 1000.0 * self.density_g_cm3
+
+    def moment_arm_mm(self, coins: int) -> float:
+        """How far the load's centre of mass (the coins') sits above the contact plane, mm: a tilted stand turns the
+        load about the tip's top by this arm times the load's downhill part."""
+        per_pocket = math.ceil(coins / self.pockets)
+        return self.z_floor_mm + per_pocket * self.coin_mm / 2.0 - self.z_face_mm
+
+
+def jig_of(design: Design) -> Jig:
+    """The jig for a single-taxel ``design`` (ValueError for an array, which is not weighed)."""
+    if design.array is not None:
+        raise ValueError("the weight jig is for a single taxel: an array is calibrated from a scan")
+    jig, coin = catalogue("bench")["weigh-jig"], catalogue("bench")["weigh-coin"]
+    w, bulge, clear = jig["wall_mm"].nominal, jig["bulge_mm"].nominal, jig["clearance_mm"].nominal
+    r_e = design.elastomer_radius_mm
+    z_face = design.z_elastomer_base_mm + design.elastomer_height_mm
+    face = 1.5 * r_e + bulge  # the tip, half its radius of lateral travel, and the bulge
+    sink = REACH * (design.d_rest_mm - design.spec.sensor.d_min_mm)
+    connector = catalogue("parts")["jst-sh-4"]["height_mm"].nominal
+    tallest = max(design.z_pad_top_mm + design.lip_height_mm, connector)
+    r_pocket = coin["diameter_mm"].nominal / 2.0 + jig["pocket_clearance_mm"].nominal / 2.0
+    pockets = int(jig["pockets"].nominal)
+    # the pockets' rings stand clear of the skirt and of each other (so their volumes add)
+    ring = max(face + w + r_pocket + w + 0.1, (r_pocket + w + 0.1) / math.sin(math.pi / pockets))
+    _, outline, _ = place(design)
+    ox, oy = ORIGIN
+    x0, y0, x1, y1 = outline
+    return Jig(z_face_mm=z_face, face_radius_mm=face, wall_mm=w, plate_mm=jig["plate_mm"].nominal,
+               z_under_mm=tallest + sink + clear, floor_mm=w, rim_mm=jig["rim_mm"].nominal,
+               pocket_radius_mm=r_pocket, pocket_ring_mm=ring, pockets=pockets, coin_g=coin["mass_g"].nominal,
+               coin_mm=coin["thickness_mm"].nominal, sink_mm=sink, density_g_cm3=jig["density_g_cm3"].nominal,
+               board_mm=(x0 - ox, oy - y1, x1 - ox, oy - y0), board_thickness_mm=design.spec.pcb.thickness_mm)
+
+
+def coin_layout(coins: int, pockets: int) -> list[int]:
+    """How many coins go in each pocket (in order round the cap) for an even number of ``coins``: pairs dealt to the
+    opposite pockets in turn, so each opposite pair holds equal stacks."""
+    if coins % 2:
+        raise ValueError(f"coins go in opposite pairs: {coins} is odd")
+    half = pockets // 2
+    out = [0] * pockets
+    for k in range(coins // 2):
+        out[k % half] += 1
+        out[k % half + half] += 1
+    return out
+
+
+def cap_solid(design: Design) -> cq.Workplane:
+    """The cap in its print pose: its use pose (:class:`Jig`) moved down onto the bed (the tray's underside, or the
+    face where the tray sits above it)."""
+    import cadquery as cq
+
+    j = jig_of(design)
+    r_in, w = j.face_radius_mm, j.wall_mm
+    lo, hi = j.skirt_span_mm
+    cap = cq.Workplane("XY", origin=(0, 0, lo)).circle(r_in + w).circle(r_in).extrude(hi - lo)
+    cap = cap.union(cq.Workplane("XY", origin=(0, 0, j.z_face_mm)).circle(r_in + w).extrude(j.plate_mm))
+    tray = cq.Workplane("XY", origin=(0, 0, j.z_under_mm))
+    cap = cap.union(tray.circle(j.outer_radius_mm).circle(r_in + w).extrude(j.floor_mm))
+    centres = [(j.pocket_ring_mm * math.cos(2 * math.pi * k / j.pockets),
+                j.pocket_ring_mm * math.sin(2 * math.pi * k / j.pockets)) for k in range(j.pockets)]
+    rings = (cq.Workplane("XY", origin=(0, 0, j.z_under_mm)).pushPoints(centres)
+             .circle(j.pocket_radius_mm + w).circle(j.pocket_radius_mm).extrude(j.floor_mm + j.rim_mm))
+    return cap.union(rings).clean().translate((0, 0, -lo))
+
+
+@dataclass(frozen=True)
+class Platform:
+    """One of the stand's platforms (mm): its angle, where it stands along x, its top face's centre height and half
+    its run along y (the top face spans ``length`` along its slope), and the board's pocket depth."""
+
+    angle_deg: float
+    x_mm: float
+    centre_z_mm: float
+    half_run_mm: float
+    low_mm: float  # the top face's height at its downhill edge
+    width_mm: float
+    length_mm: float
+    depth_mm: float
+
+
+def platforms(design: Design) -> tuple[list[Platform], tuple[float, float]]:
+    """The stand's platforms and its base plate's size (x, y), mm."""
+    j = jig_of(design)
+    jig = catalogue("bench")["weigh-jig"]
+    base, apron = jig["stand_base_mm"].nominal, jig["stand_apron_mm"].nominal
+    clear, relief = jig["stand_clearance_mm"].nominal, jig["stand_relief_mm"].nominal
+    x0, y0, x1, y1 = j.board_mm
+    wall = 2.0 * j.wall_mm
+    width, length = x1 - x0 + 2 * (clear + wall), y1 - y0 + 2 * (clear + wall)
+    depth = j.board_thickness_mm / 2.0  # the board stands half out of its pocket, to be lifted out
+    low = base + depth + relief + wall  # the platform's top at its lowest edge
+    out = []
+    for k, angle in enumerate(ANGLES_DEG):
+        a = math.radians(angle)
+        half = length / 2.0 * math.cos(a)
+        out.append(Platform(angle, (k - (len(ANGLES_DEG) - 1) / 2.0) * (width + PLATFORM_GAP_MM),
+                            low + half * math.tan(a), half, low, width, length, depth))
+    size_x = len(ANGLES_DEG) * width + (len(ANGLES_DEG) - 1) * PLATFORM_GAP_MM + 2 * wall
+    return out, (size_x, 2 * (max(p.half_run_mm for p in out) + apron))
+
+
+def stand_solid(design: Design) -> cq.Workplane:
+    """The stand as it prints and stands: a platform per angle of :data:`ANGLES_DEG` along x on one base plate."""
+    import cadquery as cq
+
+    j = jig_of(design)
+    jig = catalogue("bench")["weigh-jig"]
+    clear, relief = jig["stand_clearance_mm"].nominal, jig["stand_relief_mm"].nominal
+    x0, y0, x1, y1 = j.board_mm
+    wall = 2.0 * j.wall_mm
+    found, (size_x, size_y) = platforms(design)
+    stand = cq.Workplane("XY").rect(size_x, size_y).extrude(jig["stand_base_mm"].nominal)
+    for p in found:
+        slope = math.tan(math.radians(p.angle_deg))
+        wedge = (cq.Workplane("YZ", origin=(p.x_mm - p.width_mm / 2.0, 0, 0))
+                 .polyline([(-p.half_run_mm, 0.0), (p.half_run_mm, 0.0), (p.half_run_mm, p.low_mm),
+                            (-p.half_run_mm, p.centre_z_mm + p.half_run_mm * slope)]).close()
+                 .extrude(p.width_mm))
+        # the pocket in the platform's own frame (top face z = 0, the board centred), open uphill (-y)
+        pocket = (cq.Workplane("XY", origin=(0, 0, -p.depth_mm)).center(0.0, -p.length_mm / 2.0)
+                  .rect(x1 - x0 + 2 * clear, y1 - y0 + 2 * clear + p.length_mm).extrude(p.depth_mm + 1.0))
+        under = (cq.Workplane("XY", origin=(0, 0, -p.depth_mm - relief))
+                 .rect(x1 - x0 - 2 * wall, y1 - y0 - 2 * wall).extrude(relief + 0.5))
+        tool = pocket.union(under).rotate((0, 0, 0), (1, 0, 0), -p.angle_deg).translate((p.x_mm, 0, p.centre_z_mm))
+        stand = stand.union(wedge.cut(tool))
+    return stand.clean()

@@ -1,0 +1,166 @@
+"""``magfab-readout weigh``: the bench side of a calibration with known weights (docs/bundle.md section 1b).
+
+It walks the build's weight plan (``weigh_plan.json``, which magfab made for this design and the weight jig it
+printed): for each step it asks for the board on the stand's platform at the step's angle and for the coins in the
+cap's pockets, waits until the reading is steady (two windows of ``--samples`` readings whose means agree within
+their noise), and writes the mean field and its spread as one row of the weighings CSV, which ``magfab calibrate
+--weights`` fits. The mass on the tip is the cap's (``--cap-g``: weigh it once) plus the coins'. Each row is written
+and flushed as it is measured, so an interrupted session keeps the weighings made.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import pkgutil
+import sys
+from typing import Any, Dict, List, Optional, Tuple
+
+from . import _build
+from .check import ask
+from .cli_shared import UsageError
+from .device import DeviceError
+from .simulate import WeighedTip
+
+__all__ = ["add_parser", "run", "load_plan", "WEIGHT_COLUMNS", "steady_mean"]
+
+#: The weighings CSV's columns (docs/bundle.md section 1b; magfab.formats.weights_csv reads them).
+WEIGHT_COLUMNS = ("mass_g", "angle_deg", "Bx_uT", "By_uT", "Bz_uT", "Bx_sd_uT", "By_sd_uT", "Bz_sd_uT", "samples")
+#: Two windows are steady when their means agree within this many standard errors of their difference (per axis).
+STEADY_SIGMAS = 4.0
+
+
+def add_parser(commands, common: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """The ``weigh`` command and its options, on the command line's subcommands."""
+    weigh = commands.add_parser(
+        "weigh", parents=[common], help="walk the weight plan: the field under known weights on the weight jig",
+        description="Calibration without a force sensor (docs/bundle.md section 1b). For each step of this build's "
+        "weight plan, put the board on the stand's platform at the step's angle (connector uphill), the cap on the "
+        "tip and the step's coins in the cap's pockets as listed, and press Enter; the command waits until the "
+        "reading is steady and writes its mean field and spread to OUT.csv. Then: magfab calibrate --weights OUT.csv.")
+    weigh.add_argument("out", metavar="OUT.csv", help="the weighings file to write")
+    weigh.add_argument("--cap-g", type=float, metavar="G",
+                       help="the printed cap's mass in grams, weighed on a balance (needed)")
+    weigh.add_argument("--coin-g", type=float, metavar="G",
+                       help="one coin's mass in grams (default: the plan's coin, the US 5-cent piece, 5.000 g)")
+    weigh.add_argument("--reskin", action="store_true",
+                       help="only the three steps a new skin on a calibrated board needs (magfab calibrate --weights "
+                       "with --sensor keeps the rest)")
+    weigh.add_argument("--samples", type=int, default=200, metavar="N",
+                       help="readings per window; the mean of the last steady window is recorded (default: "
+                       "%(default)s)")
+    weigh.add_argument("--settle-s", type=float, default=60.0, metavar="S",
+                       help="longest wait for a steady reading, seconds of device time (default: %(default)s)")
+    weigh.add_argument("--yes", "-y", action="store_true",
+                       help="do not wait for Enter (non-interactive): each load is on the tip when the step asks")
+    return weigh
+
+
+def load_plan() -> Optional[Dict[str, Any]]:
+    """The package's weight plan, or None when the build made none (an array; a design too soft for the jig)."""
+    try:
+        raw = pkgutil.get_data("magfab_readout", "weigh_plan.json")
+    except OSError:
+        return None
+    if raw is None:
+        return None
+    plan = json.loads(raw.decode("utf-8"))
+    if plan.get("format") != "magfab-weigh-plan/1":
+        raise DeviceError("the package's weigh_plan.json is not magfab-weigh-plan/1: reinstall the readout package "
+                          "from the same magfab build")
+    return plan
+
+
+def _positive(value: Optional[float], name: str, unit: str) -> None:
+    if value is not None and not (math.isfinite(value) and value > 0):
+        raise UsageError(f"{name} {value}: must be a positive number of {unit}")
+
+
+def steady_mean(device, samples: int, settle_s: float) -> Tuple[List[float], List[float], int]:
+    """The field's mean and standard deviation (uT, per axis) over the first window of ``samples`` readings whose
+    mean agrees with the window before it within :data:`STEADY_SIGMAS` standard errors (or a count) on every axis;
+    DeviceError when none does within ``settle_s`` seconds of device time, or when an axis is at the chip's full
+    scale (a load the chip cannot read)."""
+    device.drain()
+    previous: Optional[Tuple[List[float], List[float]]] = None
+    window: List[Tuple[float, float, float]] = []
+    start: Optional[float] = None
+    lsb = (_build.LSB_XY_UT, _build.LSB_XY_UT, _build.LSB_Z_UT)
+    for sample in device.samples():
+        start = sample.time_s if start is None else start
+        if sample.time_s - start > settle_s:
+            raise DeviceError(f"the reading did not settle within {settle_s:g} s (--settle-s): something touches the "
+                              "cap or the stand, or the tip is still creeping; take the load off and try again")
+        if sample.full_scale:
+            raise DeviceError("an axis is at the chip's full scale: the load is past what this chip setting reads "
+                              "(the wrong plan, or the wrong coins)")
+        if sample.chip_error:
+            continue
+        window.append(tuple(sample.B_uT))
+        if len(window) < samples:
+            continue
+        mean = [sum(b[k] for b in window) / samples for k in range(3)]
+        sd = [math.sqrt(sum((b[k] - mean[k]) ** 2 for b in window) / max(samples - 1, 1)) for k in range(3)]
+        if previous is not None and all(
+                abs(mean[k] - previous[0][k]) <= max(STEADY_SIGMAS * math.hypot(sd[k], previous[1][k])
+                                                     / math.sqrt(samples), lsb[k]) for k in range(3)):
+            return mean, sd, samples
+        previous, window = (mean, sd), []
+    raise DeviceError("the board stopped sending samples")
+
+
+def _steps(plan: Dict[str, Any], reskin: bool) -> List[Dict[str, Any]]:
+    steps = plan["steps"]
+    return [steps[k] for k in plan["reskin"]] if reskin else list(steps)
+
+
+def _load_text(step: Dict[str, Any]) -> str:
+    coins = int(step["coins"])
+    if not coins:
+        return "the cap alone, no coins"
+    stacks = ", ".join(f"{n} in pocket {k + 1}" for k, n in enumerate(step["layout"]) if n)
+    return f"{coins} coins: {stacks}"
+
+
+def run(args: argparse.Namespace, out, open_device) -> int:
+    """The weighings as the command line asks them; ``open_device(args, text, pattern)`` opens the board (or the
+    simulated one, which then serves the nominal sensor's field under each load)."""
+    plan = load_plan()
+    if plan is None:
+        raise UsageError("this build has no weight plan (an array, or a design whose range the weight jig's cap and "
+                         "two coins already pass): calibrate it from a scan")
+    if args.cap_g is None:
+        raise UsageError("--cap-g G is needed: the printed cap's mass in grams (weigh it once on a balance)")
+    _positive(args.cap_g, "--cap-g", "grams")
+    _positive(args.coin_g, "--coin-g", "grams")
+    _positive(args.settle_s, "--settle-s", "seconds")
+    if args.samples < 2:
+        raise UsageError("--samples must be at least 2 (a window's spread needs two readings)")
+    coin_g = float(plan["coin"]["mass_g"]) if args.coin_g is None else float(args.coin_g)
+    steps = _steps(plan, args.reskin)
+    pattern = None
+    if args.simulate:
+        pattern = WeighedTip(plan["nominal"])
+    with open_device(args, text=None, pattern=pattern) as device, \
+            open(args.out, "w", encoding="utf-8", newline="") as f:
+        f.write(f"# magfab-readout {_build.VERSION} weigh: spec {json.dumps(_build.SPEC_NAME)}, cap {args.cap_g:g} g, "
+                f"coin {coin_g:g} g, {'re-skin ' if args.reskin else ''}plan of {len(steps)} steps\n")
+        f.write(",".join(WEIGHT_COLUMNS) + "\n")
+        f.flush()
+        for k, step in enumerate(steps):
+            angle, mass = float(step["angle_deg"]), args.cap_g + int(step["coins"]) * coin_g
+            ask(f"step {k + 1} of {len(steps)}: the board on the stand's {angle:g} deg platform, connector uphill, "
+                f"the cap on the tip; {_load_text(step)} ({mass:.2f} g on the tip)", args.yes)
+            if args.simulate:
+                device.transport.place_load(mass, angle)
+            mean, sd, n = steady_mean(device, args.samples, args.settle_s)
+            f.write(",".join([f"{mass:.4f}", f"{angle:g}", *(f"{b:.3f}" for b in mean), *(f"{s:.3f}" for s in sd),
+                              str(n)]) + "\n")
+            f.flush()
+            out.write("step {} of {}: {:.2f} g at {:g} deg: B = ({:.1f}, {:.1f}, {:.1f}) uT, sd ({:.1f}, {:.1f}, "
+                      "{:.1f})\n".format(k + 1, len(steps), mass, angle, *mean, *sd))
+            out.flush()
+    sys.stderr.write(f"magfab-readout: wrote {len(steps)} weighings to {args.out}; next: magfab calibrate --weights "
+                     f"{args.out}\n")
+    return 0
