@@ -9,14 +9,15 @@ field under known masses resting on the tip, with the board flat or tilted. The 
   near the contact plane: a tilted load then presses on the tip's top with little turning moment
   (:meth:`Jig.moment_arm_mm` states what remains for each load). Equal stacks in each opposite pair of pockets keep
   the centre of mass on the tip's axis. The cap's tray stays clear of the pad's lip and the connector at the
-  deepest indentation the normal curve reaches.
-- **The stand** (:func:`stand_solid`) is one part with a platform per stand angle (:data:`ANGLES_DEG`) side by side
-  on a base plate. Each platform has a pocket that takes the board with its connector uphill (the pocket is open
-  there for the cable) and a relief under it for the bottom-side parts; the weight's downhill pull is then along the
-  sensor's +y, as the weighing model has it.
+  deepest indentation the normal curve reaches; on a rounded tip its stacks stay low enough for the cap to sit steady.
+- **The stand** (:func:`stand_solid`) is one part per stand angle (:data:`ANGLES_DEG`): a platform on a base plate,
+  raised so that the loaded cap's tray clears the base on the downhill side. Each platform has a pocket that takes
+  the board with its connector uphill (the pocket is open there for the cable) and a relief under it for the
+  bottom-side parts; the weight's downhill pull is then along the sensor's +y, as the weighing model has it.
 
 Board frame throughout (z = 0 on the board's top face, the chip on the axis); the cap's print pose is its use pose
-moved down to the bed (the tray's underside), the stand's is as it stands.
+moved down to the bed (the tray's underside), its face a bridge over the skirt (the checklist asks for supports under
+it); each stand's is as it stands.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from .board.placement import ORIGIN, place
 from .design import Design
 from .models.weighing import weight_plan
 from .recipes import catalogue
+from .spec import Tip
 
 if TYPE_CHECKING:
     import cadquery as cq
@@ -38,7 +40,7 @@ if TYPE_CHECKING:
 # Imported lazily, inside the functions that use it, for speed: CadQuery takes a noticeable time to import, and
 # importing this module should not.
 
-__all__ = ["Jig", "jig_of", "cap_solid", "stand_solid", "ANGLES_DEG", "REACH", "coin_layout", "Platform", "platforms"]
+__all__ = ["Jig", "jig_of", "cap_solid", "stand_solid", "ANGLES_DEG", "REACH", "coin_layout", "Platform", "platform"]
 
 #: The stand's angles, degrees: the weight plan's (magfab.models.weighing.ANGLES_DEG, which a test holds equal).
 ANGLES_DEG = (0.0, 20.0, 40.0)
@@ -47,8 +49,13 @@ ANGLES_DEG = (0.0, 20.0, 40.0)
 REACH = 1.25
 #: How tall a pocket's stack may be on the flat stand, in rims (our choice: four rims, about 24 mm, a steady column).
 FLAT_STACK_RIMS = 4
-#: Gap between the stand's platforms, mm.
-PLATFORM_GAP_MM = 6.0
+#: A flat plate resting on a rounded tip is steady while its load's centre of mass sits below the tip's centre of
+#: curvature (a rigid body rolling on a sphere: the restoring moment W (R - h) per radian); the silicone's contact
+#: patch adds a restoring moment of its own, not counted. The coins' centre is kept within this share of the tip's
+#: radius above the face; a flat tip carries the plate flat on flat.
+STEADY_FRACTION = 1.0
+#: How far the loaded cap's lowest point stays above the stand's base plate, mm (our choice: room for a finger).
+BASE_CLEARANCE_MM = 5.0
 
 
 @dataclass(frozen=True)
@@ -71,6 +78,7 @@ class Jig:
     density_g_cm3: float
     board_mm: tuple[float, float, float, float]  # the board's outline in the sensor's frame: x0, y0, x1, y1
     board_thickness_mm: float
+    steady_arm_mm: float  # the highest the coins' centre may sit above the face and the cap stay steady on the tip
 
     @property
     def z_floor_mm(self) -> float:
@@ -81,14 +89,20 @@ class Jig:
     def outer_radius_mm(self) -> float:
         return self.pocket_ring_mm + self.pocket_radius_mm + 2.0 * self.wall_mm  # past the rings: no tangent circles
 
+    def _stack_max(self, height_mm: float) -> int:
+        """The most coins a pocket may hold: no taller than ``height_mm`` and the cap steady (:attr:`steady_arm_mm`)."""
+        steady = (self.steady_arm_mm + self.z_face_mm - self.z_floor_mm) * 2.0 / self.coin_mm
+        return max(0, int(min(height_mm / self.coin_mm, steady)))
+
     @property
     def tilted_coins_max(self) -> int:
-        """The most coins a tilted stand may carry: stacks no taller than the pockets' rim."""
-        return self.pockets * int(self.rim_mm // self.coin_mm)
+        """The most coins a tilted stand may carry: stacks no taller than the pockets' rim, the cap steady."""
+        return self.pockets * self._stack_max(self.rim_mm)
 
     def loads_g(self) -> tuple[float, ...]:
-        """The loads the cap takes, g: every even number of coins up to :data:`FLAT_STACK_RIMS` rims a pocket."""
-        most = self.pockets * int(FLAT_STACK_RIMS * self.rim_mm // self.coin_mm)
+        """The loads the cap takes, g: every even number of coins up to :data:`FLAT_STACK_RIMS` rims a pocket, the
+        cap steady."""
+        most = self.pockets * self._stack_max(FLAT_STACK_RIMS * self.rim_mm)
         return tuple(round(n * self.coin_g, 6) for n in range(2, most + 1, 2))
 
     def plan_loads(self) -> dict[str, Any]:
@@ -141,7 +155,8 @@ def jig_of(design: Design) -> Jig:
     r_e = design.elastomer_radius_mm
     z_face = design.z_elastomer_base_mm + design.elastomer_height_mm
     face = 1.5 * r_e + bulge  # the tip, half its radius of lateral travel, and the bulge
-    sink = REACH * (design.d_rest_mm - design.spec.sensor.d_min_mm)
+    # the normal curve's end: the indentation grid's reach, or the scan depth the FE stops at (predict._fe_curve)
+    sink = min(REACH * (design.d_rest_mm - design.spec.sensor.d_min_mm), float(design.spec.calibration.scan_z_mm))
     connector = catalogue("parts")["jst-sh-4"]["height_mm"].nominal
     tallest = max(design.z_pad_top_mm + design.lip_height_mm, connector)
     r_pocket = coin["diameter_mm"].nominal / 2.0 + jig["pocket_clearance_mm"].nominal / 2.0
@@ -155,7 +170,8 @@ def jig_of(design: Design) -> Jig:
                z_under_mm=tallest + sink + clear, floor_mm=w, rim_mm=jig["rim_mm"].nominal,
                pocket_radius_mm=r_pocket, pocket_ring_mm=ring, pockets=pockets, coin_g=coin["mass_g"].nominal,
                coin_mm=coin["thickness_mm"].nominal, sink_mm=sink, density_g_cm3=jig["density_g_cm3"].nominal,
-               board_mm=(x0 - ox, oy - y1, x1 - ox, oy - y0), board_thickness_mm=design.spec.pcb.thickness_mm)
+               board_mm=(x0 - ox, oy - y1, x1 - ox, oy - y0), board_thickness_mm=design.spec.pcb.thickness_mm,
+               steady_arm_mm=STEADY_FRACTION * r_e if design.tip is Tip.HEMISPHERE else math.inf)
 
 
 def coin_layout(coins: int, pockets: int) -> list[int]:
@@ -192,21 +208,25 @@ def cap_solid(design: Design) -> cq.Workplane:
 
 @dataclass(frozen=True)
 class Platform:
-    """One of the stand's platforms (mm): its angle, where it stands along x, its top face's centre height and half
-    its run along y (the top face spans ``length`` along its slope), and the board's pocket depth."""
+    """The stand for one angle (mm): its top face's centre height and half its run along y (the face spans
+    ``length_mm`` along its slope), the face's height at its downhill edge, the board's pocket depth, the base plate
+    (x, y), and how high the loaded cap's lowest point (its tray's downhill edge, sunk to the normal curve's end) sits
+    above the base plate."""
 
     angle_deg: float
-    x_mm: float
     centre_z_mm: float
     half_run_mm: float
-    low_mm: float  # the top face's height at its downhill edge
+    low_mm: float
     width_mm: float
     length_mm: float
     depth_mm: float
+    base_mm: tuple[float, float]
+    cap_clearance_mm: float
 
 
-def platforms(design: Design) -> tuple[list[Platform], tuple[float, float]]:
-    """The stand's platforms and its base plate's size (x, y), mm."""
+def platform(design: Design, angle_deg: float) -> Platform:
+    """The stand for ``angle_deg``: tall enough that the loaded cap's tray clears its base plate by
+    :data:`BASE_CLEARANCE_MM`, its base reaching past the platform by the apron uphill and downhill."""
     j = jig_of(design)
     jig = catalogue("bench")["weigh-jig"]
     base, apron = jig["stand_base_mm"].nominal, jig["stand_apron_mm"].nominal
@@ -215,39 +235,36 @@ def platforms(design: Design) -> tuple[list[Platform], tuple[float, float]]:
     wall = 2.0 * j.wall_mm
     width, length = x1 - x0 + 2 * (clear + wall), y1 - y0 + 2 * (clear + wall)
     depth = j.board_thickness_mm / 2.0  # the board stands half out of its pocket, to be lifted out
-    low = base + depth + relief + wall  # the platform's top at its lowest edge
-    out = []
-    for k, angle in enumerate(ANGLES_DEG):
-        a = math.radians(angle)
-        half = length / 2.0 * math.cos(a)
-        out.append(Platform(angle, (k - (len(ANGLES_DEG) - 1) / 2.0) * (width + PLATFORM_GAP_MM),
-                            low + half * math.tan(a), half, low, width, length, depth))
-    size_x = len(ANGLES_DEG) * width + (len(ANGLES_DEG) - 1) * PLATFORM_GAP_MM + 2 * wall
-    return out, (size_x, 2 * (max(p.half_run_mm for p in out) + apron))
+    a = math.radians(angle_deg)
+    half = length / 2.0 * math.cos(a)
+    # the tray's underside above the platform's face, the cap sunk: the board's top, then the tray over it
+    tray = j.board_thickness_mm - depth + j.z_under_mm - j.sink_mm
+    lowest = -j.outer_radius_mm * math.sin(a) + tray * math.cos(a)  # the tray's downhill edge, from the face's centre
+    centre = max(base + depth + relief + wall + half * math.tan(a), base + BASE_CLEARANCE_MM - lowest)
+    return Platform(angle_deg, centre, half, centre - half * math.tan(a), width, length, depth,
+                    (width + 2 * wall, 2 * (half + apron)), centre + lowest - base)
 
 
-def stand_solid(design: Design) -> cq.Workplane:
-    """The stand as it prints and stands: a platform per angle of :data:`ANGLES_DEG` along x on one base plate."""
+def stand_solid(design: Design, angle_deg: float) -> cq.Workplane:
+    """The stand for ``angle_deg`` as it prints and stands: the pocketed platform on its base plate."""
     import cadquery as cq
 
     j = jig_of(design)
     jig = catalogue("bench")["weigh-jig"]
-    clear, relief = jig["stand_clearance_mm"].nominal, jig["stand_relief_mm"].nominal
+    relief, clear = jig["stand_relief_mm"].nominal, jig["stand_clearance_mm"].nominal
     x0, y0, x1, y1 = j.board_mm
     wall = 2.0 * j.wall_mm
-    found, (size_x, size_y) = platforms(design)
-    stand = cq.Workplane("XY").rect(size_x, size_y).extrude(jig["stand_base_mm"].nominal)
-    for p in found:
-        slope = math.tan(math.radians(p.angle_deg))
-        wedge = (cq.Workplane("YZ", origin=(p.x_mm - p.width_mm / 2.0, 0, 0))
-                 .polyline([(-p.half_run_mm, 0.0), (p.half_run_mm, 0.0), (p.half_run_mm, p.low_mm),
-                            (-p.half_run_mm, p.centre_z_mm + p.half_run_mm * slope)]).close()
-                 .extrude(p.width_mm))
-        # the pocket in the platform's own frame (top face z = 0, the board centred), open uphill (-y)
-        pocket = (cq.Workplane("XY", origin=(0, 0, -p.depth_mm)).center(0.0, -p.length_mm / 2.0)
-                  .rect(x1 - x0 + 2 * clear, y1 - y0 + 2 * clear + p.length_mm).extrude(p.depth_mm + 1.0))
-        under = (cq.Workplane("XY", origin=(0, 0, -p.depth_mm - relief))
-                 .rect(x1 - x0 - 2 * wall, y1 - y0 - 2 * wall).extrude(relief + 0.5))
-        tool = pocket.union(under).rotate((0, 0, 0), (1, 0, 0), -p.angle_deg).translate((p.x_mm, 0, p.centre_z_mm))
-        stand = stand.union(wedge.cut(tool))
-    return stand.clean()
+    p = platform(design, angle_deg)
+    stand = cq.Workplane("XY").rect(*p.base_mm).extrude(jig["stand_base_mm"].nominal)
+    slope = math.tan(math.radians(angle_deg))
+    wedge = (cq.Workplane("YZ", origin=(-p.width_mm / 2.0, 0, 0))
+             .polyline([(-p.half_run_mm, 0.0), (p.half_run_mm, 0.0), (p.half_run_mm, p.low_mm),
+                        (-p.half_run_mm, p.centre_z_mm + p.half_run_mm * slope)]).close()
+             .extrude(p.width_mm))
+    # the pocket in the platform's own frame (top face z = 0, the board centred), open uphill (-y)
+    pocket = (cq.Workplane("XY", origin=(0, 0, -p.depth_mm)).center(0.0, -p.length_mm / 2.0)
+              .rect(x1 - x0 + 2 * clear, y1 - y0 + 2 * clear + p.length_mm).extrude(p.depth_mm + 1.0))
+    under = (cq.Workplane("XY", origin=(0, 0, -p.depth_mm - relief))
+             .rect(x1 - x0 - 2 * wall, y1 - y0 - 2 * wall).extrude(relief + 0.5))
+    tool = pocket.union(under).rotate((0, 0, 0), (1, 0, 0), -angle_deg).translate((0, 0, p.centre_z_mm))
+    return stand.union(wedge.cut(tool)).clean()

@@ -14,6 +14,7 @@ import re
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast
 
@@ -50,6 +51,7 @@ from .export.weigh_plan import weigh_plan
 from .fit import mould_fit
 from .fork import deferred_interrupt, parallel_available, side_branch
 from .formats.scan_csv import scan_csv
+from .jig import ANGLES_DEG as JIG_ANGLES_DEG
 from .jig import cap_solid, stand_solid
 from .limits import check_scan
 from .models import calibration as calibrate
@@ -112,8 +114,10 @@ PARTS = (
     Part("pad", pad_solid, True, "mounting pad: chip recess below, centring lip above, print pose"),
     Part("weigh_cap", cap_solid, True, "weight jig's cap: a flat face on the tip, coin pockets beside it, print pose",
          single=True),
-    Part("weigh_stand", stand_solid, True, "weight jig's stand: the board's pocket at 0, 20 and 40 degrees, print pose",
-         single=True),
+    *(Part(f"weigh_stand_{a:g}", partial(stand_solid, angle_deg=a), True,
+           f"weight jig's stand at {a:g} degrees: the board's pocket, open uphill for its cable, print pose",
+           single=True)
+      for a in JIG_ANGLES_DEG),
 )
 
 Progress = Callable[[str], None]

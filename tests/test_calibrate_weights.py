@@ -81,6 +81,7 @@ def test_a_build_is_handed_the_models_scan(bench, sensor_and_plan):
     (("--weights", "bad.csv"), "bad.csv: line 3 (row 2), column 'angle_deg'"),
     (("--weights", "heavy.csv"), "heavy.csv: weighing 4, 5005 g at 0 deg, pushes 49.1 N"),
     (("--weights", "n52.csv"), "n52.csv (weight calibration, 12 weighings): its field at rest"),
+    (("--weights", "flat.csv"), "flat.csv: 4 weighings, 0 of them tilted: a first weight calibration needs at least 6"),
 ])
 def test_a_wrong_use_is_one_line_and_writes_nothing(bench, sensor_and_plan, args, says):
     project, out, calls, run = bench
@@ -97,6 +98,7 @@ def test_a_wrong_use_is_one_line_and_writes_nothing(bench, sensor_and_plan, args
     n52 = replace(sensor, theta=sensor.theta.copy())
     n52.theta[1] = math.log(1.205)  # an N52 magnet (20.5 % more remanence) in the N35 design
     (project / "n52.csv").write_text(weights_csv(weighings(n52, plan, noise, rng)))
+    (project / "flat.csv").write_text(weights_csv(weighings(sensor, [p for p in plan if p[1] == 0.0], noise, rng)))
     before = tree(project)
     result = run("calibrate", *args, "--out", str(out))
     assert result.exit_code == 2, result.output
@@ -156,7 +158,7 @@ def test_the_readouts_weighings_calibrate_the_sensor(bench):
     re-skin walks the plan's three steps; a wrong option is one line, exit 2, no file."""
     project, out, calls, run = bench
     plan = json.loads((out / "calibration" / "weigh_plan.json").read_text())
-    proc = _weigh(project, out, "w.csv", "--cap-g", "10.5", "--samples", "40")
+    proc = _weigh(project, out, "w.csv", "--cap-g", "10.5", "--samples", "40", "--dwell-s", "0.1")
     assert proc.returncode == 0, proc.stderr[-2000:]
     rows = read_weights_csv(project / "w.csv")
     assert [(r.angle_deg, round(r.mass_g - 10.5, 6)) for r in rows] == [
@@ -165,16 +167,29 @@ def test_the_readouts_weighings_calibrate_the_sensor(bench):
     assert result.exit_code == 0, result.output
     (_, scan), = calls
     assert scan.model["weighings"] == len(plan["steps"]) and scan.model["chi2_per_reading"] < 5
-    proc = _weigh(project, out, "skin.csv", "--cap-g", "9.8", "--coin-g", "4.1", "--reskin", "--samples", "40")
+    proc = _weigh(project, out, "skin.csv", "--cap-g", "9.8", "--coin-g", "4.1", "--reskin", "--samples", "40",
+                  "--dwell-s", "0.1")
     assert proc.returncode == 0, proc.stderr[-2000:]
     steps = [plan["steps"][k] for k in plan["reskin"]]
     assert [(r.angle_deg, round(r.mass_g, 6)) for r in read_weights_csv(project / "skin.csv")] == [
         (s["angle_deg"], round(9.8 + 4.1 * s["coins"], 6)) for s in steps]
+    before = (project / "w.csv").read_bytes()
     for args, says in ((("bad.csv", "--cap-g", "0"), "--cap-g 0.0: must be a positive number of grams"),
-                       (("bad.csv", "--cap-g", "10", "--samples", "1"), "--samples must be at least 2")):
+                       (("bad.csv", "--cap-g", "10", "--samples", "1"), "--samples must be at least 2"),
+                       (("bad.csv", "--cap-g", "1e9"), "this build's cap weighs at most about"),
+                       (("bad.csv", "--cap-g", "10", "--coin-g", "7.8"), "at most the plan's coin, 5 g"),
+                       (("bad.csv", "--cap-g", "10", "--samples", "5000", "--settle-s", "5"), "two windows of 5000"),
+                       (("w.csv", "--cap-g", "10"), "w.csv exists: weighings are not overwritten")):
         proc = _weigh(project, out, *args)
         assert proc.returncode == 2 and proc.stderr.count("\n") == 1 and says in proc.stderr, proc.stderr
-        assert not (project / "bad.csv").exists()
+        assert not (project / "bad.csv").exists() and (project / "w.csv").read_bytes() == before
+    # no answer at the first prompt (end of input): one line, and no file that looks like a session
+    env = {k: v for k, v in os.environ.items() if k != "MAGFAB_SENSORS"}
+    env["PYTHONPATH"] = str(out / "readout" / "src")
+    proc = subprocess.run([sys.executable, "-m", "magfab_readout", "weigh", "eof.csv", "--cap-g", "10", "--simulate"],
+                          capture_output=True, text=True, timeout=300, env=env, cwd=project, stdin=subprocess.DEVNULL)
+    assert proc.returncode == 2 and proc.stderr.splitlines()[-1].startswith("magfab-readout: error: no answer")
+    assert not (project / "eof.csv").exists()
 
 
 def test_the_report_charts_the_study(default_build):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import io
 import math
+from functools import partial
 
 import numpy as np
 import pytest
@@ -13,13 +14,14 @@ trimesh = pytest.importorskip("trimesh")
 
 from magfab import derive, load_spec, parse_spec  # noqa: E402
 from magfab.elastomer import elastomer_solid, envelope_solid  # noqa: E402
-from magfab.jig import cap_solid, stand_solid  # noqa: E402
+from magfab.jig import ANGLES_DEG, cap_solid, stand_solid  # noqa: E402
 from magfab.mould import cup_solid, lid_solid  # noqa: E402
 from magfab.pad import pad_solid  # noqa: E402
 
-PRINTED = ("mould_cup", "mould_lid", "pad", "weigh_cap", "weigh_stand")
+STANDS = {f"weigh_stand_{a:g}": partial(stand_solid, angle_deg=a) for a in ANGLES_DEG}
+PRINTED = ("mould_cup", "mould_lid", "pad", "weigh_cap", *STANDS)
 SOLIDS = {"elastomer": elastomer_solid, "mould_cup": cup_solid, "mould_lid": lid_solid, "pad": pad_solid,
-          "weigh_cap": cap_solid, "weigh_stand": stand_solid}
+          "weigh_cap": cap_solid, **STANDS}
 
 
 def _mesh(result, stem):

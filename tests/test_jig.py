@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 
 from magfab import derive, load_spec
 from magfab.errors import ScanError
-from magfab.jig import ANGLES_DEG, REACH, coin_layout, jig_of, platforms
+from magfab.jig import ANGLES_DEG, BASE_CLEARANCE_MM, REACH, coin_layout, jig_of, platform
 from magfab.models import predict as predict_module
 from magfab.models import weighing
 from magfab.recipes import catalogue
@@ -50,18 +50,19 @@ def _holds(design, prediction=None) -> None:
     connector = catalogue("parts")["jst-sh-4"]["height_mm"].nominal
     tallest = max(design.z_pad_top_mm + design.lip_height_mm, connector)
     assert j.z_under_mm - j.sink_mm >= tallest + 0.999
-    assert j.sink_mm == pytest.approx(REACH * predict_module.travel_to_d_min(design))
+    assert j.sink_mm == pytest.approx(min(REACH * predict_module.travel_to_d_min(design),
+                                          design.spec.calibration.scan_z_mm))
     # the pockets stand clear of the skirt and of each other
     assert j.pocket_ring_mm - j.pocket_radius_mm - j.wall_mm > j.face_radius_mm + j.wall_mm
     gap = 2 * j.pocket_ring_mm * math.sin(math.pi / j.pockets)
     assert gap > 2 * (j.pocket_radius_mm + j.wall_mm)
-    # the stand: every platform's load falls well inside the base plate
-    plates, (_, size_y) = platforms(design)
-    for p in plates:
-        a = math.radians(p.angle_deg)
+    # the stand: the loaded cap clears its base plate, and its load falls well inside the base
+    for angle in ANGLES_DEG:
+        p = platform(design, angle)
+        assert p.cap_clearance_mm >= BASE_CLEARANCE_MM - 1e-9 and p.low_mm > p.depth_mm, p
+        a = math.radians(angle)
         lever = j.board_thickness_mm - p.depth_mm + j.z_face_mm + j.rim_mm
-        assert lever * math.sin(a) <= size_y / 2.0 - 10.0, p
-        assert p.low_mm > p.depth_mm
+        assert lever * math.sin(a) <= p.base_mm[1] / 2.0 - 10.0, p
     if prediction is None:
         return
     try:
@@ -74,6 +75,7 @@ def _holds(design, prediction=None) -> None:
     assert np.all(loads[:, 1] <= 0.9 * prediction.shear.range_N + 1e-9)
     for _, angle, coins in plan:
         assert coins % 2 == 0
+        assert j.moment_arm_mm(coins) <= j.steady_arm_mm  # the loaded cap stays steady on a rounded tip
         if angle > 0:  # a tilted stack stays below the pockets' rim
             assert max(coin_layout(coins, j.pockets)) * j.coin_mm <= j.rim_mm
 
@@ -95,16 +97,43 @@ def test_the_jig_and_its_plan_hold_across_the_design_box_densely():
         _holds(design, predict_module.predict(design))
 
 
-def test_the_caps_volume_is_its_solids():
+def test_the_caps_volume_is_its_solids(monkeypatch):
     """The cap's mass bound (the plan's range check, made without the CAD kernel) is its solid's volume: MagOne's,
-    and a short tip's whose tray must sit above its top, both on the bed."""
-    from magfab.jig import cap_solid  # lazy: CadQuery
+    and a short tip's whose tray must sit above its top (its tray raised past the face), both on the bed."""
+    import dataclasses
 
-    short = next(d for d in box_designs(40, 5) if jig_of(d).z_under_mm > jig_of(d).z_face_mm)
-    for design in (derive(load_spec(None)), short):
-        solid = cap_solid(design).val()
+    from magfab import jig as jig_module
+
+    design = derive(load_spec(None))
+    nominal = jig_of(design)
+    short = dataclasses.replace(nominal, z_under_mm=nominal.z_face_mm + 0.7)
+    for j in (nominal, short):
+        monkeypatch.setattr(jig_module, "jig_of", lambda _design, j=j: j)
+        solid = jig_module.cap_solid(design).val()
         assert solid.isValid() and solid.BoundingBox().zmin == pytest.approx(0.0, abs=1e-9)
-        assert solid.Volume() == pytest.approx(jig_of(design).cap_volume_mm3(), rel=1e-6)
+        assert solid.Volume() == pytest.approx(j.cap_volume_mm3(), rel=1e-6)
+
+
+def test_the_loaded_cap_clears_its_stand(magone_design):
+    """The cap in its use pose on each stand, sunk to the normal curve's end, and the stand share no volume (the
+    cap's tray overhangs the platform and hangs over the base plate on the downhill side)."""
+    import cadquery as cq
+
+    from magfab.jig import cap_solid, stand_solid
+
+    j = jig_of(magone_design)
+    for angle in ANGLES_DEG:
+        p = platform(magone_design, angle)
+        lo, _ = j.skirt_span_mm
+        # the cap from its print pose to its use pose on the board, sunk, then onto the platform's tilted face
+        on_board = lo - j.sink_mm + j.board_thickness_mm - p.depth_mm
+        cap = (cap_solid(magone_design).translate((0, 0, on_board)).rotate((0, 0, 0), (1, 0, 0), -angle)
+               .translate((0, 0, p.centre_z_mm)))
+        common = cap.intersect(stand_solid(magone_design, angle))
+        volume = sum(s.Volume() for s in common.solids().vals()) if common.solids().size() else 0.0
+        assert volume == pytest.approx(0.0, abs=1e-6), (angle, volume)
+        assert cap.val().BoundingBox().zmin >= 0.0
+    assert cq is not None
 
 
 def test_an_array_has_no_jig(array_builds):

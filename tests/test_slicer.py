@@ -12,7 +12,7 @@ from conftest import require_tool
 from magfab import build, parse_spec
 
 PRINTED = ("mould_cup", "mould_lid", "pad")
-JIG = ("weigh_cap", "weigh_stand")
+JIG = ("weigh_cap", "weigh_stand_0", "weigh_stand_20", "weigh_stand_40")
 
 
 def _slice(slicer: str, stl, technology: str, tmp_path):

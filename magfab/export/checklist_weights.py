@@ -26,8 +26,10 @@ def weights_steps(design: Design, plan: Mapping[str, Any] | None, sensor: str) -
     coin = plan["coin"]
     return [
         "No force sensor? Calibrate from known weights instead of the scan (README, 'Calibration without a force "
-        "sensor'; docs/bundle.md section 1b). Print weigh_cap.stl and weigh_stand.stl on any filament printer (PLA, "
-        "0.2 mm layers), in the poses they are saved in.",
+        "sensor'; docs/bundle.md section 1b). Print weigh_cap.stl and the stands weigh_stand_0.stl, weigh_stand_20.stl "
+        "and weigh_stand_40.stl on any filament printer (PLA, 0.2 mm layers), in the poses they are saved in, with "
+        "supports under the cap's plate: its underside is the face that rests on the tip, and must come out flat "
+        "(check it with a straightedge). Number the cap's pockets 1 to 6 round it with a marker, from any one.",
         f"Weigh the printed cap on a balance (0.1 g or finer): it is part of every load (at most "
         f"{plan['cap_mass_bound_g']:.1f} g in the densest filament). Have {most} coins ready: {coin['name']} "
         f"({coin['mass_g']:g} g each; another coin of known mass up to {2 * j.pocket_radius_mm:.1f} mm across fits "
@@ -55,8 +57,9 @@ def jig_rows(design: Design, plan: Mapping[str, Any] | None, row) -> list[dict[s
     most = max(s["coins"] for s in plan["steps"])
     coin = plan["coin"]
     return [
-        row("Printed weight jig", "weigh_cap.stl + weigh_stand.stl", "any filament printer (PLA); the calibration "
-            "without a force sensor", 1, "set", "this build; magfab/jig.py, recipes/bench.toml weigh-jig"),
+        row("Printed weight jig", "weigh_cap.stl + weigh_stand_0/20/40.stl", "any filament printer (PLA); the "
+            "calibration without a force sensor, instead of the reference sensor, indenter and stage", 1, "set",
+            "this build; magfab/jig.py, recipes/bench.toml weigh-jig"),
         row("Coins", coin["name"], f"the weight plan's loads, {coin['mass_g']:g} g each (calibration/weigh_plan.json)",
             most, "pcs", "recipes/bench.toml weigh-coin (" + coin["source"] + ")"),
         row("Balance", "kitchen or lab balance, 0.1 g or finer", "weighs the printed cap once", 1, "pcs",

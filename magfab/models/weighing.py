@@ -107,6 +107,8 @@ MAX_PRIOR_SIGMAS = 4.0
 DRAWS = 64
 #: The share of posterior draws whose region RMS the stated error bound covers.
 BOUND_QUANTILE = 0.9
+#: Fewest weighings a first calibration takes (a new skin with the magnet's parameters kept takes three).
+MIN_FIRST = 6
 #: Standard weights (g) a bench has: the usual 1-2-5 series of a calibration weight set (OIML R 111 nominal values).
 STANDARD_WEIGHTS_G = (1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0, 1000.0)
 #: The weights of a plan stay at or below this fraction of the predicted normal range.
@@ -436,7 +438,8 @@ def weight_plan(prediction: Prediction, cap_g: float = 0.0, stiffness: float = 1
         a = math.radians(angle)
         limit_N = scale * min(prediction.normal.range_N / math.cos(a),
                               prediction.shear.range_N / math.sin(a) if angle > 0 else math.inf)
-        limit_g = min(limit_N * 1000.0 / G0 - cap_g, tilted_max_g if angle > 0 else math.inf)
+        # the fractions of what the loads reach: the range, or the heaviest load the jig carries steadily there
+        limit_g = min(limit_N * 1000.0 / G0 - cap_g, tilted_max_g if angle > 0 else max(loads_g))
         picked: list[float] = []
         for fraction in (1.0, 0.5, 0.25):
             below = [w for w in loads_g if w <= limit_g * fraction and (not picked or w < picked[-1])]
@@ -477,6 +480,7 @@ def calibration_scan(design: Design, prediction: Prediction, weighings: Sequence
     this scan); ``source`` and ``sha256`` name the weighings file."""
     model = SensorModel.of(design, prediction)
     _check_loads(model, weighings, source)
+    _check_coverage(weighings, fixed, source)
     fit = fit_weights(model, weighings, fixed=fixed)
     if not fit.chi2 <= MAX_CHI2:
         worst = int(np.argmax(np.abs(fit.residual_uT).max(axis=1)))
@@ -521,6 +525,18 @@ def _check_loads(model: SensorModel, weighings: Sequence[Weighing], source: str)
         raise ScanError(f"{source}: weighing {k + 1}, {w.mass_g:g} g at {w.angle_deg:g} deg, pushes {fz[k]:.3g} N; "
                         f"this design's stiffest skin carries at most {stiffest:.3g} N over its calibrated depth "
                         "(docs/models.md, M25: the plan's weights)")
+
+
+def _check_coverage(weighings: Sequence[Weighing], fixed: Mapping[str, float] | None, source: str) -> None:
+    """ScanError for a first calibration (nothing kept from an earlier skin) whose weighings cannot tell the shear
+    from the normal: fewer than :data:`MIN_FIRST` weighings, or none on a tilted stand."""
+    if fixed:
+        return
+    tilted = sum(1 for w in weighings if w.angle_deg > 0)
+    if len(weighings) < MIN_FIRST or not tilted:
+        raise ScanError(f"{source}: {len(weighings)} weighings, {tilted} of them tilted: a first weight calibration "
+                        f"needs at least {MIN_FIRST}, flat and tilted (the plan's twelve on three angles); three do "
+                        "for a new skin on a board whose record keeps a weight calibration")
 
 
 def _check_bands(model: SensorModel, fit: WeightFit, source: str) -> None:

@@ -452,7 +452,7 @@ class Bench:
         on the stand at the step's angle, the step's mass on the tip (:attr:`skin`'s field); else at rest."""
         # the prompt's own text: a piped stderr gets no newline from the Enter, so earlier prompts share its line
         text = prompt.removesuffix("press Enter: ").rpartition("press Enter: ")[2]
-        step = re.search(r"stand's ([\d.]+) deg platform.*\(([\d.]+) g on the tip\)", text)
+        step = re.search(r"in the ([\d.]+) deg stand.*\(([\d.]+) g on the tip\)", text)
         if step:
             assert self.skin is not None, "the weights walk needs Bench.skin: the sensor the board reads"
             self.rig.set_field(*self.skin.field(float(step[2]), float(step[1])))

@@ -29,7 +29,9 @@ PART_VIEWS = {
     "mould_lid": ("Mould lid (print pose)", "#c9b48a"),
     "pad": ("Mounting pad (print pose, board frame)", "#9e9e9e"),
     "weigh_cap": ("Weight jig's cap (print pose)", "#d8c38f"),
-    "weigh_stand": ("Weight jig's stand (print pose)", "#a9c4a0"),
+    "weigh_stand_0": ("Weight jig's stand, flat (print pose)", "#a9c4a0"),
+    "weigh_stand_20": ("Weight jig's stand, 20 degrees (print pose)", "#a9c4a0"),
+    "weigh_stand_40": ("Weight jig's stand, 40 degrees (print pose)", "#a9c4a0"),
 }
 CUT_COLOUR = "#d9534f"
 VIEW_ELEV_DEG, VIEW_AZIM_DEG = 28.0, -58.0  # one fixed view for every part: looking at the y = 0 cut

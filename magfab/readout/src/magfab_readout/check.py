@@ -181,7 +181,8 @@ def ask(prompt: str, yes: bool) -> None:
     sys.stderr.write(prompt + (" (--yes: not waiting)\n" if yes else ", then press Enter: "))
     sys.stderr.flush()
     if not yes and not sys.stdin.readline():
-        raise DeviceError("no answer on stdin (end of input): run the check at a terminal, or pass --yes")
+        sys.stderr.write("\n")  # the error's line starts on a line of its own, after the prompt's
+        raise DeviceError("no answer on stdin (end of input): run the command at a terminal, or pass --yes")
 
 
 class Steps:

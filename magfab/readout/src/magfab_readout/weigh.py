@@ -1,11 +1,12 @@
 """``magfab-readout weigh``: the bench side of a calibration with known weights (docs/bundle.md section 1b).
 
 It walks the build's weight plan (``weigh_plan.json``, which magfab made for this design and the weight jig it
-printed): for each step it asks for the board on the stand's platform at the step's angle and for the coins in the
-cap's pockets, waits until the reading is steady (two windows of ``--samples`` readings whose means agree within
-their noise), and writes the mean field and its spread as one row of the weighings CSV, which ``magfab calibrate
---weights`` fits. The mass on the tip is the cap's (``--cap-g``: weigh it once) plus the coins'. Each row is written
-and flushed as it is measured, so an interrupted session keeps the weighings made.
+printed): for each step it asks for the board in the stand of the step's angle and for the coins in the cap's
+pockets, waits until the reading is steady (after ``--dwell-s``, two windows of ``--samples`` readings whose means
+agree within their noise), and writes the mean field and its spread as one row of the weighings CSV, which ``magfab
+calibrate --weights`` fits. The mass on the tip is the cap's (``--cap-g``: weigh it once) plus the coins'. Each row
+is written and flushed as it is measured, so an interrupted session keeps the weighings made; one that ends before
+its first leaves no file, and an existing file is not overwritten without ``--force``.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import pkgutil
 import sys
 from typing import Any, Dict, List, Optional, Tuple
@@ -36,7 +38,7 @@ def add_parser(commands, common: argparse.ArgumentParser) -> argparse.ArgumentPa
     weigh = commands.add_parser(
         "weigh", parents=[common], help="walk the weight plan: the field under known weights on the weight jig",
         description="Calibration without a force sensor (docs/bundle.md section 1b). For each step of this build's "
-        "weight plan, put the board on the stand's platform at the step's angle (connector uphill), the cap on the "
+        "weight plan, put the board in the stand of the step's angle (connector uphill), the cap on the "
         "tip and the step's coins in the cap's pockets as listed, and press Enter; the command waits until the "
         "reading is steady and writes its mean field and spread to OUT.csv. Then: magfab calibrate --weights OUT.csv.")
     weigh.add_argument("out", metavar="OUT.csv", help="the weighings file to write")
@@ -52,6 +54,10 @@ def add_parser(commands, common: argparse.ArgumentParser) -> argparse.ArgumentPa
                        "%(default)s)")
     weigh.add_argument("--settle-s", type=float, default=60.0, metavar="S",
                        help="longest wait for a steady reading, seconds of device time (default: %(default)s)")
+    weigh.add_argument("--dwell-s", type=float, default=2.0, metavar="S",
+                       help="seconds of device time after Enter before the first window, while the silicone creeps "
+                       "(default: %(default)s)")
+    weigh.add_argument("--force", action="store_true", help="overwrite OUT.csv when it exists")
     weigh.add_argument("--yes", "-y", action="store_true",
                        help="do not wait for Enter (non-interactive): each load is on the tip when the step asks")
     return weigh
@@ -77,25 +83,35 @@ def _positive(value: Optional[float], name: str, unit: str) -> None:
         raise UsageError(f"{name} {value}: must be a positive number of {unit}")
 
 
-def steady_mean(device, samples: int, settle_s: float) -> Tuple[List[float], List[float], int]:
+def steady_mean(device, samples: int, settle_s: float, dwell_s: float = 0.0
+                ) -> Tuple[List[float], List[float], int]:
     """The field's mean and standard deviation (uT, per axis) over the first window of ``samples`` readings whose
-    mean agrees with the window before it within :data:`STEADY_SIGMAS` standard errors (or a count) on every axis;
-    DeviceError when none does within ``settle_s`` seconds of device time, or when an axis is at the chip's full
-    scale (a load the chip cannot read)."""
+    mean agrees with the window before it within :data:`STEADY_SIGMAS` standard errors of their difference on every
+    axis (floored at the quantisation of a mean, one count over sqrt(12 n)), the first window starting ``dwell_s``
+    after the load went on (the silicone's creep). A window with a chip error or an axis at the chip's full scale
+    starts again; DeviceError when no window settles within ``settle_s`` seconds of device time, naming what kept
+    it from settling."""
     device.drain()
     previous: Optional[Tuple[List[float], List[float]]] = None
     window: List[Tuple[float, float, float]] = []
     start: Optional[float] = None
-    lsb = (_build.LSB_XY_UT, _build.LSB_XY_UT, _build.LSB_Z_UT)
+    full = errors = 0
+    floor = [lsb / math.sqrt(12.0 * samples) for lsb in (_build.LSB_XY_UT, _build.LSB_XY_UT, _build.LSB_Z_UT)]
     for sample in device.samples():
         start = sample.time_s if start is None else start
         if sample.time_s - start > settle_s:
-            raise DeviceError(f"the reading did not settle within {settle_s:g} s (--settle-s): something touches the "
-                              "cap or the stand, or the tip is still creeping; take the load off and try again")
-        if sample.full_scale:
-            raise DeviceError("an axis is at the chip's full scale: the load is past what this chip setting reads "
-                              "(the wrong plan, or the wrong coins)")
-        if sample.chip_error:
+            why = (f"an axis was at the chip's full scale in {full} readings (a load past what this chip setting "
+                   "reads: the wrong plan or the wrong coins)" if full else
+                   f"the chip reported {errors} errors" if errors else
+                   "something touches the cap or the stand, or the tip is still creeping")
+            raise DeviceError(f"the reading did not settle within {settle_s:g} s (--settle-s): {why}; take the load "
+                              "off and try again")
+        if sample.time_s - start < dwell_s:
+            continue
+        if sample.full_scale or sample.chip_error:
+            full += bool(sample.full_scale)
+            errors += bool(sample.chip_error and not sample.full_scale)
+            previous, window = None, []
             continue
         window.append(tuple(sample.B_uT))
         if len(window) < samples:
@@ -104,7 +120,7 @@ def steady_mean(device, samples: int, settle_s: float) -> Tuple[List[float], Lis
         sd = [math.sqrt(sum((b[k] - mean[k]) ** 2 for b in window) / max(samples - 1, 1)) for k in range(3)]
         if previous is not None and all(
                 abs(mean[k] - previous[0][k]) <= max(STEADY_SIGMAS * math.hypot(sd[k], previous[1][k])
-                                                     / math.sqrt(samples), lsb[k]) for k in range(3)):
+                                                     / math.sqrt(samples), floor[k]) for k in range(3)):
             return mean, sd, samples
         previous, window = (mean, sd), []
     raise DeviceError("the board stopped sending samples")
@@ -123,44 +139,80 @@ def _load_text(step: Dict[str, Any]) -> str:
     return f"{coins} coins: {stacks}"
 
 
-def run(args: argparse.Namespace, out, open_device) -> int:
-    """The weighings as the command line asks them; ``open_device(args, text, pattern)`` opens the board (or the
-    simulated one, which then serves the nominal sensor's field under each load)."""
-    plan = load_plan()
-    if plan is None:
-        raise UsageError("this build has no weight plan (an array, or a design whose range the weight jig's cap and "
-                         "two coins already pass): calibrate it from a scan")
+def _nominal(plan: Dict[str, Any], mass_g: float, angle_deg: float) -> Tuple[float, float, float]:
+    """The nominal sensor's field under ``mass_g`` at ``angle_deg`` (the plan's tables), for a reading's comparison."""
+    tip = WeighedTip(plan["nominal"])
+    tip.place_load(mass_g, angle_deg)
+    return tip.field(0.0)
+
+
+def _check(args: argparse.Namespace, plan: Dict[str, Any]) -> float:
+    """UsageError for an option the plan cannot take; the coin's mass."""
     if args.cap_g is None:
         raise UsageError("--cap-g G is needed: the printed cap's mass in grams (weigh it once on a balance)")
     _positive(args.cap_g, "--cap-g", "grams")
     _positive(args.coin_g, "--coin-g", "grams")
     _positive(args.settle_s, "--settle-s", "seconds")
+    if not (math.isfinite(args.dwell_s) and args.dwell_s >= 0):
+        raise UsageError(f"--dwell-s {args.dwell_s}: must be zero or a positive number of seconds")
     if args.samples < 2:
         raise UsageError("--samples must be at least 2 (a window's spread needs two readings)")
-    coin_g = float(plan["coin"]["mass_g"]) if args.coin_g is None else float(args.coin_g)
+    bound = float(plan["cap_mass_bound_g"])
+    if args.cap_g > 2.0 * bound:
+        raise UsageError(f"--cap-g {args.cap_g:g}: this build's cap weighs at most about {bound:g} g (printed solid in "
+                         "the densest filament); weigh the cap alone")
+    coin_g = float(plan["coin"]["mass_g"])
+    if args.coin_g is not None and args.coin_g > coin_g:
+        raise UsageError(f"--coin-g {args.coin_g:g}: at most the plan's coin, {coin_g:g} g (a heavier coin would push "
+                         "the plan's loads past the sensor's range)")
+    need = args.dwell_s + 2.0 * args.samples / _build.SAMPLE_RATE_HZ
+    if need > args.settle_s:
+        raise UsageError(f"--settle-s {args.settle_s:g}: two windows of {args.samples} readings after the "
+                         f"{args.dwell_s:g} s dwell take {need:.3g} s at the chip's {_build.SAMPLE_RATE_HZ:g} Hz")
+    if os.path.exists(args.out) and not args.force:
+        raise UsageError(f"{args.out} exists: weighings are not overwritten (another name, or --force)")
+    return coin_g if args.coin_g is None else float(args.coin_g)
+
+
+def run(args: argparse.Namespace, out, open_device) -> int:
+    """The weighings as the command line asks them; ``open_device(args, text, pattern)`` opens the board (or the
+    simulated one, which then serves the nominal sensor's field under each load). A session that ends before its
+    first weighing leaves no file."""
+    plan = load_plan()
+    if plan is None:
+        raise UsageError("this build has no weight plan (an array, or a design whose range the weight jig's cap and "
+                         "two coins already pass): calibrate it from a scan")
+    coin_g = _check(args, plan)
     steps = _steps(plan, args.reskin)
-    pattern = None
-    if args.simulate:
-        pattern = WeighedTip(plan["nominal"])
-    with open_device(args, text=None, pattern=pattern) as device, \
-            open(args.out, "w", encoding="utf-8", newline="") as f:
-        f.write(f"# magfab-readout {_build.VERSION} weigh: spec {json.dumps(_build.SPEC_NAME)}, cap {args.cap_g:g} g, "
-                f"coin {coin_g:g} g, {'re-skin ' if args.reskin else ''}plan of {len(steps)} steps\n")
-        f.write(",".join(WEIGHT_COLUMNS) + "\n")
-        f.flush()
-        for k, step in enumerate(steps):
-            angle, mass = float(step["angle_deg"]), args.cap_g + int(step["coins"]) * coin_g
-            ask(f"step {k + 1} of {len(steps)}: the board on the stand's {angle:g} deg platform, connector uphill, "
-                f"the cap on the tip; {_load_text(step)} ({mass:.2f} g on the tip)", args.yes)
-            if args.simulate:
-                device.transport.place_load(mass, angle)
-            mean, sd, n = steady_mean(device, args.samples, args.settle_s)
-            f.write(",".join([f"{mass:.4f}", f"{angle:g}", *(f"{b:.3f}" for b in mean), *(f"{s:.3f}" for s in sd),
-                              str(n)]) + "\n")
+    pattern = WeighedTip(plan["nominal"]) if args.simulate else None
+    written = 0
+    try:
+        with open_device(args, text=None, pattern=pattern) as device, \
+                open(args.out, "w", encoding="utf-8", newline="") as f:
+            f.write(f"# magfab-readout {_build.VERSION} weigh: spec {json.dumps(_build.SPEC_NAME)}, cap "
+                    f"{args.cap_g:g} g, coin {coin_g:g} g, {'re-skin ' if args.reskin else ''}plan of {len(steps)} "
+                    "steps\n")
+            f.write(",".join(WEIGHT_COLUMNS) + "\n")
             f.flush()
-            out.write("step {} of {}: {:.2f} g at {:g} deg: B = ({:.1f}, {:.1f}, {:.1f}) uT, sd ({:.1f}, {:.1f}, "
-                      "{:.1f})\n".format(k + 1, len(steps), mass, angle, *mean, *sd))
-            out.flush()
+            for k, step in enumerate(steps):
+                angle, mass = float(step["angle_deg"]), args.cap_g + int(step["coins"]) * coin_g
+                ask(f"step {k + 1} of {len(steps)}: the board in the {angle:g} deg stand (weigh_stand_{angle:g}), "
+                    f"connector uphill, the cap on the tip; {_load_text(step)} ({mass:.2f} g on the tip)", args.yes)
+                if args.simulate:
+                    device.transport.place_load(mass, angle)
+                mean, sd, n = steady_mean(device, args.samples, args.settle_s, args.dwell_s)
+                f.write(",".join([f"{mass:.4f}", f"{angle:g}", *(f"{b:.3f}" for b in mean),
+                                  *(f"{s:.3f}" for s in sd), str(n)]) + "\n")
+                f.flush()
+                written += 1
+                out.write("step {} of {}: {:.2f} g at {:g} deg: B = ({:.1f}, {:.1f}, {:.1f}) uT, sd ({:.1f}, {:.1f}, "
+                          "{:.1f}); the nominal sensor reads ({:.0f}, {:.0f}, {:.0f})\n".format(
+                              k + 1, len(steps), mass, angle, *mean, *sd, *_nominal(plan, mass, angle)))
+                out.flush()
+    except BaseException:
+        if written == 0 and os.path.exists(args.out):
+            os.remove(args.out)  # nothing measured: no file that looks like a session
+        raise
     sys.stderr.write(f"magfab-readout: wrote {len(steps)} weighings to {args.out}; next: magfab calibrate --weights "
                      f"{args.out}\n")
     return 0
