@@ -222,6 +222,9 @@ class Platform:
     depth_mm: float
     base_mm: tuple[float, float]
     cap_clearance_mm: float
+    base_thickness_mm: float
+    pocket_mm: tuple[float, float]  # the board's pocket (x, y), clearance included
+    relief_mm: tuple[float, float, float]  # the relief under the board (x, y, depth below the pocket)
 
 
 def platform(design: Design, angle_deg: float) -> Platform:
@@ -242,29 +245,25 @@ def platform(design: Design, angle_deg: float) -> Platform:
     lowest = -j.outer_radius_mm * math.sin(a) + tray * math.cos(a)  # the tray's downhill edge, from the face's centre
     centre = max(base + depth + relief + wall + half * math.tan(a), base + BASE_CLEARANCE_MM - lowest)
     return Platform(angle_deg, centre, half, centre - half * math.tan(a), width, length, depth,
-                    (width + 2 * wall, 2 * (half + apron)), centre + lowest - base)
+                    (width + 2 * wall, 2 * (half + apron)), centre + lowest - base, base,
+                    (x1 - x0 + 2 * clear, y1 - y0 + 2 * clear), (x1 - x0 - 2 * wall, y1 - y0 - 2 * wall, relief))
 
 
 def stand_solid(design: Design, angle_deg: float) -> cq.Workplane:
     """The stand for ``angle_deg`` as it prints and stands: the pocketed platform on its base plate."""
     import cadquery as cq
 
-    j = jig_of(design)
-    jig = catalogue("bench")["weigh-jig"]
-    relief, clear = jig["stand_relief_mm"].nominal, jig["stand_clearance_mm"].nominal
-    x0, y0, x1, y1 = j.board_mm
-    wall = 2.0 * j.wall_mm
     p = platform(design, angle_deg)
-    stand = cq.Workplane("XY").rect(*p.base_mm).extrude(jig["stand_base_mm"].nominal)
+    stand = cq.Workplane("XY").rect(*p.base_mm).extrude(p.base_thickness_mm)
     slope = math.tan(math.radians(angle_deg))
     wedge = (cq.Workplane("YZ", origin=(-p.width_mm / 2.0, 0, 0))
              .polyline([(-p.half_run_mm, 0.0), (p.half_run_mm, 0.0), (p.half_run_mm, p.low_mm),
                         (-p.half_run_mm, p.centre_z_mm + p.half_run_mm * slope)]).close()
              .extrude(p.width_mm))
     # the pocket in the platform's own frame (top face z = 0, the board centred), open uphill (-y)
+    (px, py), (rx, ry, relief) = p.pocket_mm, p.relief_mm
     pocket = (cq.Workplane("XY", origin=(0, 0, -p.depth_mm)).center(0.0, -p.length_mm / 2.0)
-              .rect(x1 - x0 + 2 * clear, y1 - y0 + 2 * clear + p.length_mm).extrude(p.depth_mm + 1.0))
-    under = (cq.Workplane("XY", origin=(0, 0, -p.depth_mm - relief))
-             .rect(x1 - x0 - 2 * wall, y1 - y0 - 2 * wall).extrude(relief + 0.5))
+              .rect(px, py + p.length_mm).extrude(p.depth_mm + 1.0))
+    under = cq.Workplane("XY", origin=(0, 0, -p.depth_mm - relief)).rect(rx, ry).extrude(relief + 0.5)
     tool = pocket.union(under).rotate((0, 0, 0), (1, 0, 0), -angle_deg).translate((0, 0, p.centre_z_mm))
     return stand.union(wedge.cut(tool)).clean()

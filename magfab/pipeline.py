@@ -301,7 +301,7 @@ def bundle_stage(design: Design, prediction: Prediction | None, scan: Scan | dic
                         f"settings and calibration from the .eep; flash {made['flash_bytes']} B, RAM "
                         f"{made['ram_bytes']} B ({made['toolchain']['avr-gcc']}, "
                         f"avr-libc {made['toolchain']['avr-libc']})"))
-    return BundleStage(artifacts=out, findings=found, fit=result)
+    return BundleStage(artifacts=out, findings=found, fit=result, weighing=plan)
 
 
 def _artifact_json(artifacts, path: str) -> dict[str, Any] | None:
@@ -351,14 +351,14 @@ def _taxel_calibrations(design: Design, prediction: Prediction, scans: dict[int,
     return ArrayStage(artifacts=out, findings=found, fits=tuple(arrayed.fits), doc=doc)
 
 
-def _fabrication(design: Design, prediction: Prediction, acceptance: dict[str, Any] | None, say: Progress,
-                 timings: dict[str, float]) -> Stage:
+def _fabrication(design: Design, prediction: Prediction, acceptance: dict[str, Any] | None,
+                 weighing: dict[str, Any] | None, say: Progress, timings: dict[str, float]) -> Stage:
     """The bench papers: checklist.md, checklist.html (tick boxes, printable) and bom.csv. The checklist's scan
-    step spans the simulated scan's extent (one depth for the scan, the checklist and the predicted range)."""
+    step spans the simulated scan's extent (one depth for the scan, the checklist and the predicted range);
+    ``weighing`` is the bundle's weight plan."""
     say("writing the checklist and the bill of materials")
     t = time.perf_counter()
     plan = scan_plan(design, prediction)
-    weighing = weigh_plan(design, prediction)
     out = [
         Artifact("checklist.md", checklist.checklist_md(design, acceptance, plan, weighing).encode(),
                  "fabrication checklist with the quantities filled in (Markdown)"),
@@ -373,7 +373,7 @@ def _fabrication(design: Design, prediction: Prediction, acceptance: dict[str, A
 
 def model_bench() -> list[dict[str, object]]:
     """The speed-accuracy table bench/models.py last measured (shipped with the package), or []."""
-    return weights_figures.packaged_rows("model_bench.json")
+    return figures.packaged_rows("model_bench.json")
 
 
 def plan(spec: Spec, progress: Progress | None = None, scan=None, parallel: bool | None = None) -> BuildResult:
@@ -543,7 +543,7 @@ def _physics(design: Design, scan: Scan | dict[int, Scan] | None, parallel: bool
         timings["plots"] = time.perf_counter() - t  # the worker's plots too where they were drawn in-process
         accepted = acceptance_stage(design, prediction)
         bundle = bundle_stage(design, prediction, scan, accepted.bands, say, timings)
-        papers = _fabrication(design, prediction, accepted.bands, say, timings)
+        papers = _fabrication(design, prediction, accepted.bands, bundle.weighing, say, timings)
         t = time.perf_counter()
         drawn |= worker.result()
         if worker.forked:

@@ -83,6 +83,7 @@ class ArrayStage(Stage):
 @dataclass(frozen=True, kw_only=True)
 class BundleStage(Stage):
     fit: FitResult  # the single taxel's calibration (an array's taxel 0)
+    weighing: dict[str, Any] | None = None  # the weight plan (calibration/weigh_plan.json), which the papers list too
 
 
 @dataclass

@@ -6,10 +6,12 @@ matplotlib is imported inside :func:`figures`, so importing this module is cheap
 from __future__ import annotations
 
 import io
+import json
 import math
 import re
 import textwrap
 from collections.abc import Callable, Collection, Mapping, Sequence
+from importlib.resources import files
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -441,6 +443,16 @@ def draw(design: Design, pred: Prediction, bench_table: Sequence[Mapping[str, ob
     if bench_table and (names is None or "speed_accuracy" in names):
         out["speed_accuracy"] = _speed_accuracy(plt, design, pred, bench_table)
     return out
+
+
+def packaged_rows(name: str) -> list[dict[str, Any]]:
+    """The ``rows`` of a bench's table shipped in the package (magfab/NAME: bench/models.py's, bench/weights.py's),
+    or [] where it is not there."""
+    try:
+        text = files("magfab").joinpath(name).read_text()
+    except FileNotFoundError:
+        return []
+    return list(json.loads(text)["rows"])
 
 
 def figures(design: Design, pred: Prediction, bench_table: Sequence[Mapping[str, object]] = (),

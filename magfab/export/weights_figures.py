@@ -6,19 +6,17 @@ the same bytes."""
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping, Sequence
-from importlib.resources import files
 from typing import Any
 
 import numpy as np
 
-from .figures import RC, _render
+from .figures import RC, _render, packaged_rows
 
 # Imported lazily, inside the functions that use it, for speed: matplotlib takes a noticeable time to import, and
 # importing this module should not.
 
-__all__ = ["bench_rows", "packaged_rows", "figures", "CAPTIONS", "FOLDER"]
+__all__ = ["bench_rows", "figures", "CAPTIONS", "FOLDER"]
 
 FOLDER = "calibration/"
 #: The goal the ratios are held to (docs/models.md M25): within twice the full scan's error.
@@ -39,15 +37,6 @@ CAPTIONS = {
 def bench_rows() -> list[dict[str, Any]]:
     """The rows bench/weights.py saved into the package (magfab/weights_bench.json), or []."""
     return packaged_rows("weights_bench.json")
-
-
-def packaged_rows(name: str) -> list[dict[str, Any]]:
-    """The ``rows`` of a bench's table shipped in the package (magfab/NAME), or [] where it is not there."""
-    try:
-        text = files("magfab").joinpath(name).read_text()
-    except FileNotFoundError:
-        return []
-    return list(json.loads(text)["rows"])
 
 
 def figures(rows: Sequence[Mapping[str, Any]]) -> dict[str, bytes]:

@@ -139,13 +139,6 @@ def _load_text(step: Dict[str, Any]) -> str:
     return f"{coins} coins: {stacks}"
 
 
-def _nominal(plan: Dict[str, Any], mass_g: float, angle_deg: float) -> Tuple[float, float, float]:
-    """The nominal sensor's field under ``mass_g`` at ``angle_deg`` (the plan's tables), for a reading's comparison."""
-    tip = WeighedTip(plan["nominal"])
-    tip.place_load(mass_g, angle_deg)
-    return tip.field(0.0)
-
-
 def _check(args: argparse.Namespace, plan: Dict[str, Any]) -> float:
     """UsageError for an option the plan cannot take; the coin's mass."""
     if args.cap_g is None:
@@ -185,6 +178,7 @@ def run(args: argparse.Namespace, out, open_device) -> int:
     coin_g = _check(args, plan)
     steps = _steps(plan, args.reskin)
     pattern = WeighedTip(plan["nominal"]) if args.simulate else None
+    nominal = WeighedTip(plan["nominal"])  # the nominal sensor's field under each load, printed beside the reading
     written = 0
     try:
         with open_device(args, text=None, pattern=pattern) as device, \
@@ -198,6 +192,7 @@ def run(args: argparse.Namespace, out, open_device) -> int:
                 angle, mass = float(step["angle_deg"]), args.cap_g + int(step["coins"]) * coin_g
                 ask(f"step {k + 1} of {len(steps)}: the board in the {angle:g} deg stand (weigh_stand_{angle:g}), "
                     f"connector uphill, the cap on the tip; {_load_text(step)} ({mass:.2f} g on the tip)", args.yes)
+                nominal.place_load(mass, angle)
                 if args.simulate:
                     device.transport.place_load(mass, angle)
                 mean, sd, n = steady_mean(device, args.samples, args.settle_s, args.dwell_s)
@@ -207,7 +202,7 @@ def run(args: argparse.Namespace, out, open_device) -> int:
                 written += 1
                 out.write("step {} of {}: {:.2f} g at {:g} deg: B = ({:.1f}, {:.1f}, {:.1f}) uT, sd ({:.1f}, {:.1f}, "
                           "{:.1f}); the nominal sensor reads ({:.0f}, {:.0f}, {:.0f})\n".format(
-                              k + 1, len(steps), mass, angle, *mean, *sd, *_nominal(plan, mass, angle)))
+                              k + 1, len(steps), mass, angle, *mean, *sd, *nominal.field(0.0)))
                 out.flush()
     except BaseException:
         if written == 0 and os.path.exists(args.out):
