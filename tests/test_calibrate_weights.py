@@ -10,10 +10,13 @@ import os
 import subprocess
 import sys
 from dataclasses import replace
+from unittest.mock import patch
 
 import numpy as np
 import pytest
 from calibrate_support import add, tree
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from magfab.formats.weights_csv import read_weights_csv, weights_csv
 from magfab.models.weighing import RESKIN_KEPT, SensorModel, noise_uT, reskin_plan, weight_plan
@@ -81,7 +84,8 @@ def test_a_build_is_handed_the_models_scan(bench, sensor_and_plan):
     (("--weights", "bad.csv"), "bad.csv: line 3 (row 2), column 'angle_deg'"),
     (("--weights", "heavy.csv"), "heavy.csv: weighing 4, 5005 g at 0 deg, pushes 49.1 N"),
     (("--weights", "n52.csv"), "n52.csv (weight calibration, 12 weighings): its field at rest"),
-    (("--weights", "flat.csv"), "flat.csv: 4 weighings, 0 of them tilted: a first weight calibration needs at least 6"),
+    (("--weights", "flat.csv"),
+     "flat.csv: 4 weighings, 0 of them on a stand tilted 10 deg or more: a first weight calibration needs at least 6"),
 ])
 def test_a_wrong_use_is_one_line_and_writes_nothing(bench, sensor_and_plan, args, says):
     project, out, calls, run = bench
@@ -205,3 +209,113 @@ def test_the_report_charts_the_study(default_build):
     assert {"calibration/weights_study.svg", "calibration/weights_study.png"} <= paths
     report = (default_build.out_dir / "report.html").read_text()
     assert "fig-calibration-weights_study" in report
+
+
+# --- the guards against generated variants of their mistakes -----------------------------------------------------
+
+#: A factor on an option's limit: just inside or just past it (by a drawn margin, from a billionth to nearly all of
+#: it), or zero, negative, far too large, not finite.
+_FACTOR = st.one_of(
+    st.builds(lambda margin, past: 1.0 + margin if past else 1.0 - margin,
+              st.sampled_from([1e-9, 1e-3, 0.05, 0.25, 0.5, 0.99]), st.booleans()),
+    st.sampled_from([0.0, -0.0, -1.0, 1e6, math.inf, -math.inf, math.nan]))
+
+
+_OPTIONS = ("--cap-g", "--coin-g", "--dwell-s", "--settle-s", "--samples")
+
+
+@settings(max_examples=300, deadline=None)
+@given(mistaken=st.lists(st.sampled_from(_OPTIONS), max_size=2).map(set), data=st.data(), exists=st.booleans(),
+       force=st.booleans())
+def test_weighs_options_are_refused_exactly_when_the_plan_cannot_take_them(
+        default_build, tmp_path_factory, mistaken, data, exists, force):
+    """``magfab-readout weigh``'s options, sound (left out, or inside their limits) but for one or two, each of those
+    its limit scaled about 1, or zero, negative, not finite, far too large: refused in one UsageError exactly when
+    one of them breaks its rule (the cap within twice its printed bound, the coin no heavier than the plan's, two
+    windows inside the settle time at the chip's rate, no existing file overwritten without --force), naming an
+    option that broke it."""
+    from readout_support import imported
+
+    sound = st.one_of(st.none(), st.floats(0.05, 1.0))
+    cap, coin, dwell, settle = (data.draw(_FACTOR if flag in mistaken else sound, label=flag) for flag in _OPTIONS[:4])
+    cap = 0.5 if cap is None and "--cap-g" not in mistaken else cap  # the cap's mass has no default
+    mistakes = st.one_of(st.integers(-5, 3), st.integers(4, 20000))
+    samples = data.draw(mistakes if "--samples" in mistaken else st.one_of(st.none(), st.integers(2, 400)),
+                        label="--samples")
+    if "--settle-s" not in mistaken and settle is not None:
+        settle = 1.0 / settle  # at or past the two windows' and the dwell's time
+    out = tmp_path_factory.mktemp("weigh") / "w.csv"
+    if exists:
+        out.write_text("kept\n")
+    with imported({}, default_build.out_dir) as pkg:
+        from magfab_readout import _build, cli, weigh
+        from magfab_readout.cli_shared import UsageError
+
+        plan = weigh.load_plan()
+        bound, coin_g, rate = plan["cap_mass_bound_g"], plan["coin"]["mass_g"], _build.SAMPLE_RATE_HZ
+        argv = ["weigh", str(out)]
+        if samples is not None:
+            argv += [f"--samples={samples}"]
+        n = 200 if samples is None else samples
+        # each factor scales the option's limit: the cap's (twice its bound), the coin's, the settle time two windows
+        # and the dwell take, and a dwell of 2 s
+        dwell_s = None if dwell is None else 2.0 * dwell
+        need = (2.0 if dwell_s is None or not math.isfinite(dwell_s) else dwell_s) + 2.0 * max(n, 0) / rate
+        for flag, factor, limit in (("--cap-g", cap, 2.0 * bound), ("--coin-g", coin, coin_g),
+                                    ("--dwell-s", dwell, 2.0), ("--settle-s", settle, need)):
+            if factor is not None:
+                argv += [f"{flag}={factor * limit!r}"]
+        argv += ["--force"] if force else []
+        args = cli._parser().parse_args(argv)
+        ok = lambda x: math.isfinite(x) and x > 0
+        broken = [flag for flag, bad in (
+            ("--cap-g", args.cap_g is None or not ok(args.cap_g) or args.cap_g > 2 * bound),
+            ("--coin-g", args.coin_g is not None and (not ok(args.coin_g) or args.coin_g > coin_g)),
+            ("--settle-s", not ok(args.settle_s)),
+            ("--dwell-s", not (math.isfinite(args.dwell_s) and args.dwell_s >= 0)),
+            ("--samples", args.samples < 2)) if bad]
+        if not broken and args.dwell_s + 2 * args.samples / rate > args.settle_s:
+            broken = ["--settle-s"]
+        if not broken and exists and not force:
+            broken = [str(out)]
+        try:
+            coin_used = weigh._check(args, plan)
+        except UsageError as e:
+            message = str(e)
+            assert broken and "\n" not in message and any(flag in message for flag in broken), (message, broken)
+        else:
+            assert not broken and coin_used == (coin_g if args.coin_g is None else args.coin_g)
+        assert pkg is not None
+    assert not exists or out.read_text() == "kept\n"  # nothing overwritten by the check
+
+
+@settings(max_examples=150, deadline=None)
+@given(picks=st.lists(st.integers(0, 11), min_size=1, max_size=16),
+       tilt=st.sampled_from([None, 0.5, 2.0, 5.0, 9.9, 10.0, 15.0]),
+       reskin=st.booleans())
+def test_too_few_or_too_flat_weighings_are_refused_before_any_fit(
+        magone_design, magone_prediction, sensor_and_plan, picks, tilt, reskin):
+    """Weighings drawn from the plan's twelve (any number, repeated, in any order), their tilted stands turned down
+    to a few degrees: a first calibration is refused, before any fit, exactly when there are fewer than
+    MIN_FIRST weighings or none on a stand tilted by MIN_TILT_DEG or more (too little shear to tell the shear
+    stiffness from the normal); a new skin, exactly when it has fewer than RESKIN_MIN."""
+    from magfab.errors import ScanError
+    from magfab.models import weighing
+
+    sensor, plan, noise, rng = sensor_and_plan
+    steps = [(m, a if a == 0.0 or tilt is None else tilt * a / max(q[1] for q in plan)) for m, a in plan]
+    drawn = weighings(sensor, [steps[k] for k in picks], noise, rng)
+    fixed = dict.fromkeys(RESKIN_KEPT, 0.0) if reskin else None
+
+    class Fitted(Exception):
+        pass
+
+    def stop(*args, **kwargs):
+        raise Fitted
+
+    tilted = sum(1 for w in drawn if w.angle_deg >= weighing.MIN_TILT_DEG)
+    refused = len(drawn) < weighing.RESKIN_MIN if reskin else (len(drawn) < weighing.MIN_FIRST or not tilted)
+    with patch.object(weighing, "fit_weights", stop), pytest.raises(ScanError if refused else Fitted) as caught:
+        weighing.calibration_scan(magone_design, magone_prediction, drawn, fixed=fixed, source="w.csv")
+    if refused:
+        assert str(caught.value).startswith(f"w.csv: {len(drawn)} weighings")
