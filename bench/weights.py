@@ -65,7 +65,7 @@ def run(name: str, sensors: int, seed: int, centred: bool, standard: bool = Fals
     rng = np.random.default_rng(seed)
     jig = jig_of(design)
     # the weight jig's coins and its heaviest printed cap, as the build's plan (--standard: 1-2-5 weights, a 5 g cap)
-    loads = {} if standard else {"cap_g": jig.cap_mass_bound_g(), "loads": jig.plan_loads()}
+    loads = {} if standard else {"cap_g": jig.cap_mass_bound_g(), "loads": jig.plan_loads(prediction)}
     rows = []
     t0 = time.perf_counter()
     for _ in range(sensors):

@@ -26,11 +26,14 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+
 from .board.placement import ORIGIN, place
 from .design import Design
 from .models.weighing import weight_plan
 from .recipes import catalogue
 from .spec import Tip
+from .units import G0
 
 if TYPE_CHECKING:
     import cadquery as cq
@@ -54,6 +57,14 @@ FLAT_STACK_RIMS = 4
 #: patch adds a restoring moment of its own, not counted. The coins' centre is kept within this share of the tip's
 #: radius above the face; a flat tip carries the plate flat on flat.
 STEADY_FRACTION = 1.0
+#: On a flat tip, which has no rolling geometry to right the cap, only the silicone resists the cap's tipping: the
+#: contact's rotational stiffness, estimated as a bed of independent springs under the flat face over the tip's top,
+#: k_theta = k_n a^2 / 4 for the normal tangent stiffness k_n at the load (the softest skin's curve) and the tip's
+#: radius a. The cap stays steady on the flat stand while the load's tipping moment per radian, W h (h the coins'
+#: centre above the face), stays within this share of k_theta. An estimate, not a solved model (the tip's own
+#: bending softens it; nothing here counts that), so the share is at most one. A rounded tip keeps the rolling rule
+#: (:data:`STEADY_FRACTION`), which leaves the contact's own stiffness out.
+CONTACT_STEADY_SHARE = 1.0
 #: How far the loaded cap's lowest point stays above the stand's base plate, mm (our choice: room for a finger).
 BASE_CLEARANCE_MM = 5.0
 
@@ -79,6 +90,7 @@ class Jig:
     board_mm: tuple[float, float, float, float]  # the board's outline in the sensor's frame: x0, y0, x1, y1
     board_thickness_mm: float
     steady_arm_mm: float  # the highest the coins' centre may sit above the face and the cap stay steady on the tip
+    tip_radius_mm: float
 
     @property
     def z_floor_mm(self) -> float:
@@ -105,9 +117,24 @@ class Jig:
         most = self.pockets * self._stack_max(FLAT_STACK_RIMS * self.rim_mm)
         return tuple(round(n * self.coin_g, 6) for n in range(2, most + 1, 2))
 
-    def plan_loads(self) -> dict[str, Any]:
-        """What :func:`magfab.models.weighing.weight_plan` takes of this jig: its loads and a tilted stand's most."""
-        return {"loads_g": self.loads_g(), "tilted_max_g": self.tilted_coins_max * self.coin_g}
+    def contact_steady(self, coins: int, prediction: Prediction, cap_g: float | None = None) -> bool:
+        """Whether the cap with ``coins`` stays steady on the softest skin's flat tip against its contact's rotational
+        stiffness (:data:`CONTACT_STEADY_SHARE`; the whole load counted at the coins' centre, which overstates the
+        moment of the cap's own mass, whose centre is lower). A rounded tip: True (the rolling rule bounds its
+        stacks, :attr:`steady_arm_mm`)."""
+        if math.isfinite(self.steady_arm_mm):
+            return True
+        cap = self.cap_mass_bound_g() if cap_g is None else cap_g
+        weight_N = (cap + coins * self.coin_g) * G0 / 1000.0
+        curve = prediction.curves["soft"]
+        k_n = float(np.interp(weight_N, curve.force_N, curve.stiffness_N_per_mm))
+        return weight_N * self.moment_arm_mm(coins) <= CONTACT_STEADY_SHARE * k_n * self.tip_radius_mm**2 / 4.0
+
+    def plan_loads(self, prediction: Prediction) -> dict[str, Any]:
+        """What :func:`magfab.models.weighing.weight_plan` takes of this jig for ``prediction``'s design: its loads
+        on which the cap stays steady (:meth:`contact_steady`) and a tilted stand's most."""
+        loads = tuple(w for w in self.loads_g() if self.contact_steady(round(w / self.coin_g), prediction))
+        return {"loads_g": loads, "tilted_max_g": self.tilted_coins_max * self.coin_g}
 
     def plan(self, prediction: Prediction, cap_g: float | None = None, stiffness: float = 1.0
              ) -> list[tuple[float, float, int]]:
@@ -115,7 +142,7 @@ class Jig:
         stand angle in degrees, coins), the cap's mass ``cap_g`` (default: :meth:`cap_mass_bound_g`, the heaviest a
         printed cap may be)."""
         cap = self.cap_mass_bound_g() if cap_g is None else cap_g
-        plan = weight_plan(prediction, cap, stiffness, **self.plan_loads())
+        plan = weight_plan(prediction, cap, stiffness, **self.plan_loads(prediction))
         return [(m, a, round((m - cap) / self.coin_g)) for m, a in plan]
 
     @property
@@ -171,7 +198,7 @@ def jig_of(design: Design) -> Jig:
                pocket_radius_mm=r_pocket, pocket_ring_mm=ring, pockets=pockets, coin_g=coin["mass_g"].nominal,
                coin_mm=coin["thickness_mm"].nominal, sink_mm=sink, density_g_cm3=jig["density_g_cm3"].nominal,
                board_mm=(x0 - ox, oy - y1, x1 - ox, oy - y0), board_thickness_mm=design.spec.pcb.thickness_mm,
-               steady_arm_mm=STEADY_FRACTION * r_e if design.tip is Tip.HEMISPHERE else math.inf)
+               steady_arm_mm=STEADY_FRACTION * r_e if design.tip is Tip.HEMISPHERE else math.inf, tip_radius_mm=r_e)
 
 
 def coin_layout(coins: int, pockets: int) -> list[int]:

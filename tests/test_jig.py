@@ -76,12 +76,36 @@ def _holds(design, prediction=None) -> None:
     for _, angle, coins in plan:
         assert coins % 2 == 0
         assert j.moment_arm_mm(coins) <= j.steady_arm_mm  # the loaded cap stays steady on a rounded tip
+        assert j.contact_steady(coins, prediction)  # and on a flat one
         if angle > 0:  # a tilted stack stays below the pockets' rim
             assert max(coin_layout(coins, j.pockets)) * j.coin_mm <= j.rim_mm
 
 
 def test_the_jig_holds_for_magone(magone_design, magone_prediction):
     _holds(magone_design, magone_prediction)
+
+
+def test_a_flat_tip_carries_only_what_its_contact_keeps_steady():
+    """A flat tip has no rolling geometry to right the cap: its flat-stand loads stop where the load's tipping moment
+    per radian, W h, passes the contact's rotational stiffness (k_n a^2 / 4, the softest skin), and that bound falls
+    as stacks grow. MagOne's flat tip stops at 48 coins (at 72, the four-rim stacks the jig holds, W h is 1.8x its
+    k_theta); the rolling rule, not the contact, bounds a rounded tip."""
+    from magfab.spec import parse_spec
+
+    design = derive(parse_spec('[elastomer]\ntip = "flat"'))
+    prediction = predict_module.predict(design)
+    j = jig_of(design)
+    steady = [j.contact_steady(coins, prediction) for coins in range(0, 74, 2)]
+    assert steady == sorted(steady, reverse=True)  # once unsteady, heavier stays so
+    loads = j.plan_loads(prediction)["loads_g"]
+    assert round(max(loads) / j.coin_g) == 48 and round(max(j.loads_g()) / j.coin_g) == 72
+    curve = prediction.curves["soft"]
+    weight = (j.cap_mass_bound_g() + 72 * j.coin_g) * G0 / 1000.0
+    k_theta = np.interp(weight, curve.force_N, curve.stiffness_N_per_mm) * j.tip_radius_mm**2 / 4.0
+    assert weight * j.moment_arm_mm(72) / k_theta == pytest.approx(1.8, abs=0.1)
+    assert all(jig_of(derive(load_spec(None))).contact_steady(c, predict_module.predict(derive(load_spec(None))))
+               for c in (0, 48, 72))
+    _holds(design, prediction)
 
 
 def test_the_jig_holds_across_the_design_box():
@@ -114,26 +138,34 @@ def test_the_caps_volume_is_its_solids(monkeypatch):
         assert solid.Volume() == pytest.approx(j.cap_volume_mm3(), rel=1e-6)
 
 
-def test_the_loaded_cap_clears_its_stand(magone_design):
+def _cap_clears_its_stands(design) -> None:
     """The cap in its use pose on each stand, sunk to the normal curve's end, and the stand share no volume (the
     cap's tray overhangs the platform and hangs over the base plate on the downhill side)."""
-    import cadquery as cq
-
     from magfab.jig import cap_solid, stand_solid
 
-    j = jig_of(magone_design)
+    j = jig_of(design)
     for angle in ANGLES_DEG:
-        p = platform(magone_design, angle)
+        p = platform(design, angle)
         lo, _ = j.skirt_span_mm
         # the cap from its print pose to its use pose on the board, sunk, then onto the platform's tilted face
         on_board = lo - j.sink_mm + j.board_thickness_mm - p.depth_mm
-        cap = (cap_solid(magone_design).translate((0, 0, on_board)).rotate((0, 0, 0), (1, 0, 0), -angle)
+        cap = (cap_solid(design).translate((0, 0, on_board)).rotate((0, 0, 0), (1, 0, 0), -angle)
                .translate((0, 0, p.centre_z_mm)))
-        common = cap.intersect(stand_solid(magone_design, angle))
+        common = cap.intersect(stand_solid(design, angle))
         volume = sum(s.Volume() for s in common.solids().vals()) if common.solids().size() else 0.0
-        assert volume == pytest.approx(0.0, abs=1e-6), (angle, volume)
-        assert cap.val().BoundingBox().zmin >= 0.0
-    assert cq is not None
+        assert volume == pytest.approx(0.0, abs=1e-6), (design.spec.name, angle, volume)
+        assert cap.val().BoundingBox().zmin >= 0.0, (design.spec.name, angle)
+
+
+def test_the_loaded_cap_clears_its_stand(magone_design):
+    _cap_clears_its_stands(magone_design)
+
+
+def test_the_loaded_cap_clears_its_stand_across_the_design_box():
+    """The same over designs drawn from the inverse search's default box (every silicone, tip and stock magnet; tips
+    and boards of every size the search makes)."""
+    for design in box_designs(12, 11):
+        _cap_clears_its_stands(design)
 
 
 def test_an_array_has_no_jig(array_builds):
