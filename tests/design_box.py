@@ -3,7 +3,7 @@ claim over the design space rather than at the fixtures' designs."""
 
 from __future__ import annotations
 
-__all__ = ["box_designs"]
+__all__ = ["box_designs", "plan_or_refusal"]
 
 
 def box_designs(n: int, seed: int) -> list:
@@ -26,3 +26,13 @@ def box_designs(n: int, seed: int) -> list:
         if len(out) == n:
             break
     return out
+
+
+def plan_or_refusal(jig, prediction) -> tuple[list | None, str]:
+    """``jig``'s weight plan for ``prediction`` and "", or None and the one line that refuses it."""
+    from magfab.errors import ScanError
+
+    try:
+        return jig.plan(prediction), ""
+    except ScanError as e:
+        return None, str(e)

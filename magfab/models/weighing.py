@@ -431,8 +431,10 @@ def weight_plan(prediction: Prediction, cap_g: float = 0.0, stiffness: float = 1
     than it within half that, and within a quarter (fewer where fewer fit). A tilted stand carries at most
     ``tilted_max_g`` (what stays in the jig's pockets). The ranges are the softest material's, times ``stiffness``:
     the skin's shear modulus over the softest (:func:`first_weighings` and :func:`stiffness_of` find it, so a stiff
-    skin is weighed over its whole range, not a soft one's). ScanError for a design whose range the cap and the
-    lightest load already pass."""
+    skin is weighed over its whole range, not a soft one's). A stand on which the cap alone pushes past the range
+    has no weighings. ScanError for a design whose range the cap and the lightest load already pass, or whose shear
+    range the cap alone passes on every stand tilted :data:`MIN_TILT_DEG` or more, or whose ranges leave fewer than
+    :data:`MIN_FIRST` weighings."""
     scale = PLAN_RANGE_FRACTION * max(stiffness, 1.0)
     flat_N = scale * prediction.normal.range_N
     lightest = min(loads_g) + cap_g
@@ -446,6 +448,8 @@ def weight_plan(prediction: Prediction, cap_g: float = 0.0, stiffness: float = 1
         a = math.radians(angle)
         limit_N = scale * min(prediction.normal.range_N / math.cos(a),
                               prediction.shear.range_N / math.sin(a) if angle > 0 else math.inf)
+        if cap_g * G0 / 1000.0 > limit_N:  # the cap alone pushes past the range here: no weighing on this stand
+            continue
         # the fractions of what the loads reach: the range, or the heaviest load the jig carries steadily there
         limit_g = min(limit_N * 1000.0 / G0 - cap_g, tilted_max_g if angle > 0 else max(loads_g))
         picked: list[float] = []
@@ -454,6 +458,15 @@ def weight_plan(prediction: Prediction, cap_g: float = 0.0, stiffness: float = 1
             if below:
                 picked.append(max(below))
         out += [(cap_g + w, angle) for w in (0.0, *sorted(picked))]
+    if not any(angle >= MIN_TILT_DEG for _, angle in out):
+        raise ScanError(f"the cap alone ({cap_g:g} g) pushes past {PLAN_RANGE_FRACTION:.0%} of this design's shear "
+                        f"range ({1000.0 * prediction.shear.range_N:.3g} mN) on every tilted stand: no weight plan "
+                        "tells its shear; calibrate it from a scan")
+    if len(out) < MIN_FIRST:
+        raise ScanError(f"only {len(out)} weighings fit this design's ranges (normal "
+                        f"{1000.0 * prediction.normal.range_N:.3g} mN, shear {1000.0 * prediction.shear.range_N:.3g} "
+                        "mN) with the cap and its loads, fewer than "
+                        f"the {MIN_FIRST} a first weight calibration needs; calibrate it from a scan")
     return out
 
 
