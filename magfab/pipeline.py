@@ -32,7 +32,7 @@ from .check import (
 )
 from .design import Design, derive
 from .elastomer import elastomer_solid
-from .errors import BuildError, Finding, ModelLimitError, OutputError, Severity
+from .errors import BuildError, Finding, ModelLimitError, OutputError, ScanError, Severity
 from .export import (
     bom,
     calibration_chart,
@@ -275,7 +275,11 @@ def bundle_stage(design: Design, prediction: Prediction | None, scan: Scan | dic
     if acceptance is not None:
         out.append(Artifact("calibration/acceptance.json", _json_bytes(acceptance),
                             "acceptance-test bands: field at rest and the rise under a known weight, with assumptions"))
-    plan = None if prediction is None else weigh_plan(design, prediction)
+    plan = None
+    try:
+        plan = None if prediction is None else weigh_plan(design, prediction)
+    except ScanError as e:  # the design's ranges take no plan of the weight jig: the report says why
+        found.append(Finding(Severity.INFO, "weigh-plan", f"no weight plan (calibrate from a scan): {e}"))
     if plan is not None:
         out.append(Artifact("calibration/weigh_plan.json", _json_bytes(plan), "the weighings of a calibration with "
                             "known weights on the weight jig: stand angles and coins (magfab-readout weigh)"))

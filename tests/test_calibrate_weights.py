@@ -85,7 +85,8 @@ def test_a_build_is_handed_the_models_scan(bench, sensor_and_plan):
     (("--weights", "heavy.csv"), "heavy.csv: weighing 4, 5005 g at 0 deg, pushes 49.1 N"),
     (("--weights", "n52.csv"), "n52.csv (weight calibration, 12 weighings): its field at rest"),
     (("--weights", "flat.csv"),
-     "flat.csv: 4 weighings, 0 of them on a stand tilted 10 deg or more: a first weight calibration needs at least 6"),
+     "flat.csv: 4 weighings of 4 distinct loads, 0 of them on a stand tilted 10 deg or more: a first weight "
+     "calibration needs at least 6"),
 ])
 def test_a_wrong_use_is_one_line_and_writes_nothing(bench, sensor_and_plan, args, says):
     project, out, calls, run = bench
@@ -239,6 +240,8 @@ def test_weighs_options_are_refused_exactly_when_the_plan_cannot_take_them(
     sound = st.one_of(st.none(), st.floats(0.05, 1.0))
     cap, coin, dwell, settle = (data.draw(_FACTOR if flag in mistaken else sound, label=flag) for flag in _OPTIONS[:4])
     cap = 0.5 if cap is None and "--cap-g" not in mistaken else cap  # the cap's mass has no default
+    if "--cap-g" in mistaken and data.draw(st.booleans(), label="--cap-g left out"):
+        cap = None
     mistakes = st.one_of(st.integers(-5, 3), st.integers(4, 20000))
     samples = data.draw(mistakes if "--samples" in mistaken else st.one_of(st.none(), st.integers(2, 400)),
                         label="--samples")
@@ -247,7 +250,7 @@ def test_weighs_options_are_refused_exactly_when_the_plan_cannot_take_them(
     out = tmp_path_factory.mktemp("weigh") / "w.csv"
     if exists:
         out.write_text("kept\n")
-    with imported({}, default_build.out_dir) as pkg:
+    with imported({}, default_build.out_dir):
         from magfab_readout import _build, cli, weigh
         from magfab_readout.cli_shared import UsageError
 
@@ -285,7 +288,6 @@ def test_weighs_options_are_refused_exactly_when_the_plan_cannot_take_them(
             assert broken and "\n" not in message and any(flag in message for flag in broken), (message, broken)
         else:
             assert not broken and coin_used == (coin_g if args.coin_g is None else args.coin_g)
-        assert pkg is not None
     assert not exists or out.read_text() == "kept\n"  # nothing overwritten by the check
 
 
@@ -296,9 +298,9 @@ def test_weighs_options_are_refused_exactly_when_the_plan_cannot_take_them(
 def test_too_few_or_too_flat_weighings_are_refused_before_any_fit(
         magone_design, magone_prediction, sensor_and_plan, picks, tilt, reskin):
     """Weighings drawn from the plan's twelve (any number, repeated, in any order), their tilted stands turned down
-    to a few degrees: a first calibration is refused, before any fit, exactly when there are fewer than
-    MIN_FIRST weighings or none on a stand tilted by MIN_TILT_DEG or more (too little shear to tell the shear
-    stiffness from the normal); a new skin, exactly when it has fewer than RESKIN_MIN."""
+    to a few degrees: a first calibration is refused, before any fit, exactly when they hold fewer than six distinct
+    loads or none on a stand tilted 10 degrees or more (too little shear to tell the shear stiffness from the
+    normal); a new skin, exactly when they hold fewer than three distinct loads."""
     from magfab.errors import ScanError
     from magfab.models import weighing
 
@@ -313,9 +315,10 @@ def test_too_few_or_too_flat_weighings_are_refused_before_any_fit(
     def stop(*args, **kwargs):
         raise Fitted
 
-    tilted = sum(1 for w in drawn if w.angle_deg >= weighing.MIN_TILT_DEG)
-    refused = len(drawn) < weighing.RESKIN_MIN if reskin else (len(drawn) < weighing.MIN_FIRST or not tilted)
+    loads = {steps[k] for k in picks}
+    tilted = sum(1 for _, angle in loads if angle >= 10.0)
+    refused = len(loads) < 3 if reskin else (len(loads) < 6 or not tilted)
     with patch.object(weighing, "fit_weights", stop), pytest.raises(ScanError if refused else Fitted) as caught:
         weighing.calibration_scan(magone_design, magone_prediction, drawn, fixed=fixed, source="w.csv")
     if refused:
-        assert str(caught.value).startswith(f"w.csv: {len(drawn)} weighings")
+        assert str(caught.value).startswith(f"w.csv: {len(drawn)} weighings of {len(loads)} distinct loads")

@@ -16,7 +16,7 @@ __all__ = ["weights_steps", "jig_rows"]
 
 def weights_steps(design: Design, plan: Mapping[str, Any] | None, sensor: str) -> list[str]:
     """The checklist's steps of a calibration with known weights for the sensor ``sensor`` (none without a plan: an
-    array, a design too soft for the jig's lightest load)."""
+    array, or a design whose ranges the jig's loads do not fit)."""
     if plan is None:
         return []
     j = jig_of(design)
@@ -29,7 +29,8 @@ def weights_steps(design: Design, plan: Mapping[str, Any] | None, sensor: str) -
         "sensor'; docs/bundle.md section 1b). Print weigh_cap.stl and the stands weigh_stand_0.stl, weigh_stand_20.stl "
         "and weigh_stand_40.stl on any filament printer (PLA, 0.2 mm layers), in the poses they are saved in, with "
         "supports under the cap's plate: its underside is the face that rests on the tip, and must come out flat "
-        "(check it with a straightedge). Number the cap's pockets 1 to 6 round it with a marker, from any one.",
+        f"(check it with a straightedge). Number the cap's pockets 1 to {plan['pockets']} round it with a marker, "
+        "from any one.",
         f"Weigh the printed cap on a balance (0.1 g or finer): it is part of every load (at most "
         f"{plan['cap_mass_bound_g']:.1f} g in the densest filament). Have {most} coins ready: {coin['name']} "
         f"({coin['mass_g']:g} g each; another coin of known mass up to {2 * j.pocket_radius_mm:.1f} mm across fits "

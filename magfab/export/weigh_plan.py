@@ -17,7 +17,6 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..errors import ScanError
 from ..jig import ANGLES_DEG, coin_layout, jig_of
 from ..models.weighing import SensorModel, reskin_plan
 from ..recipes import catalogue
@@ -34,15 +33,12 @@ NOMINAL_POINTS = 25
 
 
 def weigh_plan(design: Design, prediction: Prediction) -> dict[str, Any] | None:
-    """The plan for a single taxel, or None where there is none (an array; a design whose range the cap and two
-    coins already pass, which :class:`ScanError` from the plan says)."""
+    """The plan for a single taxel, or None for an array. :class:`ScanError` (from
+    :func:`magfab.models.weighing.weight_plan`) for a design no plan fits, saying why."""
     if design.array is not None:
         return None
     jig = jig_of(design)
-    try:
-        plan = jig.plan(prediction)
-    except ScanError:
-        return None
+    plan = jig.plan(prediction)
     cap = jig.cap_mass_bound_g()
     pairs = [(m, a) for m, a, _ in plan]
     reskin = [pairs.index(p) for p in reskin_plan(pairs)]
@@ -50,7 +46,7 @@ def weigh_plan(design: Design, prediction: Prediction) -> dict[str, Any] | None:
     model = SensorModel.of(design, prediction)
     theta = np.concatenate([model.prior.mean, np.zeros(3 * len(ANGLES_DEG))])
     nominal = []
-    for angle in ANGLES_DEG:
+    for angle in sorted({a for _, a, _ in plan}):  # a stand the cap alone overloads has no weighings
         top = 1.2 * max(m for m, a, _ in plan if a == angle)
         masses = np.linspace(0.0, top, NOMINAL_POINTS)
         field = model.predict(theta, masses, np.full_like(masses, angle), ANGLES_DEG)

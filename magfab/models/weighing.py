@@ -51,7 +51,7 @@ from numpy.typing import ArrayLike
 
 from ..errors import ScanError
 from ..formats.scan_csv import Scan, scan_csv
-from ..formats.weights_csv import Weighing
+from ..formats.weights_csv import MIN_WEIGHINGS, Weighing
 from ..units import G0, UT_PER_GAUSS
 from . import acceptance
 from . import field as fieldmod
@@ -110,9 +110,10 @@ BOUND_QUANTILE = 0.9
 #: Fewest weighings a first calibration takes (a new skin with the magnet's parameters kept takes
 #: :data:`RESKIN_MIN`).
 MIN_FIRST = 6
-#: Fewest weighings a new skin takes: the cap alone flat, the heaviest weight flat and at the steepest angle
-#: (:func:`reskin_plan`), for a shear modulus, a rest distance and a background per stand.
-RESKIN_MIN = 3
+#: Fewest distinct loads a new skin takes: the cap alone flat, the heaviest weight flat and at the steepest angle
+#: (:func:`reskin_plan`), for a shear modulus, a rest distance and a background per stand; the fewest rows a
+#: weighings file holds.
+RESKIN_MIN = MIN_WEIGHINGS
 #: The least stand angle a first calibration's tilted weighings need, degrees (our choice: half the plan's least
 #: tilt). Below it a load's shear part (sin 10 deg = 17 % of it) tells the shear stiffness too little: on eight
 #: centred MagOne sensors the stated shear bound grew from 1.0-1.2x the plan's at 10 deg to 1.3-3.6x at 0.5 deg.
@@ -460,12 +461,13 @@ def weight_plan(prediction: Prediction, cap_g: float = 0.0, stiffness: float = 1
         out += [(cap_g + w, angle) for w in (0.0, *sorted(picked))]
     if not any(angle >= MIN_TILT_DEG for _, angle in out):
         raise ScanError(f"the cap alone ({cap_g:g} g) pushes past {PLAN_RANGE_FRACTION:.0%} of this design's shear "
-                        f"range ({1000.0 * prediction.shear.range_N:.3g} mN) on every tilted stand: no weight plan "
-                        "tells its shear; calibrate it from a scan")
+                        f"range ({1000.0 * scale * prediction.shear.range_N / PLAN_RANGE_FRACTION:.3g} mN) on every "
+                        "tilted stand: no weight plan tells its shear; calibrate it from a scan")
     if len(out) < MIN_FIRST:
-        raise ScanError(f"only {len(out)} weighings fit this design's ranges (normal "
-                        f"{1000.0 * prediction.normal.range_N:.3g} mN, shear {1000.0 * prediction.shear.range_N:.3g} "
-                        "mN) with the cap and its loads, fewer than "
+        ranges = [1000.0 * scale / PLAN_RANGE_FRACTION * r for r in (prediction.normal.range_N,
+                                                                      prediction.shear.range_N)]
+        raise ScanError(f"only {len(out)} weighings fit this design's ranges (normal {ranges[0]:.3g} mN, shear "
+                        f"{ranges[1]:.3g} mN) with the cap and its loads, fewer than "
                         f"the {MIN_FIRST} a first weight calibration needs; calibrate it from a scan")
     return out
 
@@ -549,20 +551,24 @@ def _check_loads(model: SensorModel, weighings: Sequence[Weighing], source: str)
 
 
 def _check_coverage(weighings: Sequence[Weighing], fixed: Mapping[str, float] | None, source: str) -> None:
-    """ScanError for weighings that cannot give the fit what it takes: a first calibration (nothing kept from an
-    earlier skin) with fewer than :data:`MIN_FIRST` weighings or none on a stand tilted :data:`MIN_TILT_DEG` or more
-    (the shear cannot be told from the normal); a new skin with fewer than :data:`RESKIN_MIN`."""
+    """ScanError for weighings that cannot give the fit what it takes, counting distinct loads (a weighing repeated
+    adds none): a first calibration (nothing kept from an earlier skin) of fewer than :data:`MIN_FIRST` loads or none
+    on a stand tilted :data:`MIN_TILT_DEG` or more (the shear cannot be told from the normal); a new skin of fewer
+    than :data:`RESKIN_MIN`."""
+    loads = {(round(w.mass_g, 3), w.angle_deg) for w in weighings}
     if fixed:
-        if len(weighings) < RESKIN_MIN:
-            raise ScanError(f"{source}: {len(weighings)} weighings: a new skin needs at least {RESKIN_MIN} (the cap "
-                            "alone and the heaviest weight flat, the heaviest on the steepest stand)")
+        if len(loads) < RESKIN_MIN:
+            raise ScanError(f"{source}: {len(weighings)} weighings of {len(loads)} distinct loads: a new skin needs at "
+                            f"least {RESKIN_MIN} (the cap alone and the heaviest weight flat, the heaviest on the "
+                            "steepest stand)")
         return
-    tilted = sum(1 for w in weighings if w.angle_deg >= MIN_TILT_DEG)
-    if len(weighings) < MIN_FIRST or not tilted:
-        raise ScanError(f"{source}: {len(weighings)} weighings, {tilted} of them on a stand tilted {MIN_TILT_DEG:g} "
-                        f"deg or more: a first weight calibration needs at least {MIN_FIRST}, flat and tilted (the "
-                        f"plan's twelve on three angles); {RESKIN_MIN} do for a new skin on a board whose record "
-                        "keeps a weight calibration")
+    tilted = sum(1 for _, angle in loads if angle >= MIN_TILT_DEG)
+    if len(loads) < MIN_FIRST or not tilted:
+        raise ScanError(f"{source}: {len(weighings)} weighings of {len(loads)} distinct loads, {tilted} of them on a "
+                        f"stand tilted {MIN_TILT_DEG:g} deg or more: a first weight calibration needs at least "
+                        f"{MIN_FIRST}, one or more of them tilted that far (the build's plan, calibration/"
+                        f"weigh_plan.json); {RESKIN_MIN} do for a new skin on a board whose record keeps a weight "
+                        "calibration")
 
 
 def _check_bands(model: SensorModel, fit: WeightFit, source: str) -> None:

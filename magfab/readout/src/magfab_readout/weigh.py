@@ -64,7 +64,8 @@ def add_parser(commands, common: argparse.ArgumentParser) -> argparse.ArgumentPa
 
 
 def load_plan() -> Optional[Dict[str, Any]]:
-    """The package's weight plan, or None when the build made none (an array; a design too soft for the jig)."""
+    """The package's weight plan, or None when the build made none (an array; a design whose ranges the jig's loads
+    do not fit)."""
     try:
         raw = pkgutil.get_data("magfab_readout", "weigh_plan.json")
     except OSError:
@@ -173,8 +174,8 @@ def run(args: argparse.Namespace, out, open_device) -> int:
     first weighing leaves no file."""
     plan = load_plan()
     if plan is None:
-        raise UsageError("this build has no weight plan (an array, or a design whose range the weight jig's cap and "
-                         "two coins already pass): calibrate it from a scan")
+        raise UsageError("this build has no weight plan (an array, or a design whose ranges the weight jig's loads "
+                         "do not fit; the build's report says why): calibrate it from a scan")
     coin_g = _check(args, plan)
     steps = _steps(plan, args.reskin)
     pattern = WeighedTip(plan["nominal"]) if args.simulate else None
