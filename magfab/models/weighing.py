@@ -116,7 +116,7 @@ MIN_FIRST = 6
 RESKIN_MIN = MIN_WEIGHINGS
 #: The least stand angle a first calibration's tilted weighings need, degrees (our choice: half the plan's least
 #: tilt). Below it a load's shear part (sin 10 deg = 17 % of it) tells the shear stiffness too little: on eight
-#: centred MagOne sensors the stated shear bound grew from 1.0-1.2x the plan's at 10 deg to 1.3-3.6x at 0.5 deg.
+#: centred MagOne sensors the stated shear bound was 1.04-1.12x the plan's at 10 deg, 1.1-1.5x at 2, 1.5-4.3x at 0.5.
 MIN_TILT_DEG = 10.0
 #: Standard weights (g) a bench has: the usual 1-2-5 series of a calibration weight set (OIML R 111 nominal values).
 STANDARD_WEIGHTS_G = (1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0, 1000.0)
