@@ -30,6 +30,7 @@ import numpy as np
 
 from .board.placement import ORIGIN, place
 from .design import Design
+from .models.predict import travel_to_d_min
 from .models.weighing import weight_plan
 from .recipes import catalogue
 from .spec import Tip
@@ -89,8 +90,14 @@ class Jig:
     density_g_cm3: float
     board_mm: tuple[float, float, float, float]  # the board's outline in the sensor's frame: x0, y0, x1, y1
     board_thickness_mm: float
-    steady_arm_mm: float  # the highest the coins' centre may sit above the face and the cap stay steady on the tip
     tip_radius_mm: float
+    rounded_tip: bool  # a hemispherical tip (the rolling rule) or a flat one (the contact rule)
+
+    @property
+    def steady_arm_mm(self) -> float:
+        """The highest the coins' centre may sit above the face and the cap stay steady on a rounded tip (the rolling
+        rule, :data:`STEADY_FRACTION`); unbounded on a flat tip, whose loads :meth:`contact_steady` bounds."""
+        return STEADY_FRACTION * self.tip_radius_mm if self.rounded_tip else math.inf
 
     @property
     def z_floor_mm(self) -> float:
@@ -117,15 +124,14 @@ class Jig:
         most = self.pockets * self._stack_max(FLAT_STACK_RIMS * self.rim_mm)
         return tuple(round(n * self.coin_g, 6) for n in range(2, most + 1, 2))
 
-    def contact_steady(self, coins: int, prediction: Prediction, cap_g: float | None = None) -> bool:
-        """Whether the cap with ``coins`` stays steady on the softest skin's flat tip against its contact's rotational
-        stiffness (:data:`CONTACT_STEADY_SHARE`; the whole load counted at the coins' centre, which overstates the
-        moment of the cap's own mass, whose centre is lower). A rounded tip: True (the rolling rule bounds its
-        stacks, :attr:`steady_arm_mm`)."""
-        if math.isfinite(self.steady_arm_mm):
+    def contact_steady(self, coins: int, prediction: Prediction) -> bool:
+        """Whether the heaviest printed cap with ``coins`` stays steady on the softest skin's flat tip against its
+        contact's rotational stiffness (:data:`CONTACT_STEADY_SHARE`; the whole load counted at the coins' centre,
+        which overstates the moment of the cap's own mass, whose centre is lower). A rounded tip: True (the rolling
+        rule bounds its stacks, :attr:`steady_arm_mm`)."""
+        if self.rounded_tip:
             return True
-        cap = self.cap_mass_bound_g() if cap_g is None else cap_g
-        weight_N = (cap + coins * self.coin_g) * G0 / 1000.0
+        weight_N = (self.cap_mass_bound_g() + coins * self.coin_g) * G0 / 1000.0
         curve = prediction.curves["soft"]
         k_n = float(np.interp(weight_N, curve.force_N, curve.stiffness_N_per_mm))
         return weight_N * self.moment_arm_mm(coins) <= CONTACT_STEADY_SHARE * k_n * self.tip_radius_mm**2 / 4.0
@@ -183,7 +189,7 @@ def jig_of(design: Design) -> Jig:
     z_face = design.z_elastomer_base_mm + design.elastomer_height_mm
     face = 1.5 * r_e + bulge  # the tip, half its radius of lateral travel, and the bulge
     # the normal curve's end: the indentation grid's reach, or the scan depth the FE stops at (predict._fe_curve)
-    sink = min(REACH * (design.d_rest_mm - design.spec.sensor.d_min_mm), float(design.spec.calibration.scan_z_mm))
+    sink = min(REACH * travel_to_d_min(design), float(design.spec.calibration.scan_z_mm))
     connector = catalogue("parts")["jst-sh-4"]["height_mm"].nominal
     tallest = max(design.z_pad_top_mm + design.lip_height_mm, connector)
     r_pocket = coin["diameter_mm"].nominal / 2.0 + jig["pocket_clearance_mm"].nominal / 2.0
@@ -198,7 +204,7 @@ def jig_of(design: Design) -> Jig:
                pocket_radius_mm=r_pocket, pocket_ring_mm=ring, pockets=pockets, coin_g=coin["mass_g"].nominal,
                coin_mm=coin["thickness_mm"].nominal, sink_mm=sink, density_g_cm3=jig["density_g_cm3"].nominal,
                board_mm=(x0 - ox, oy - y1, x1 - ox, oy - y0), board_thickness_mm=design.spec.pcb.thickness_mm,
-               steady_arm_mm=STEADY_FRACTION * r_e if design.tip is Tip.HEMISPHERE else math.inf, tip_radius_mm=r_e)
+               tip_radius_mm=r_e, rounded_tip=design.tip is Tip.HEMISPHERE)
 
 
 def coin_layout(coins: int, pockets: int) -> list[int]:

@@ -225,18 +225,30 @@ _FACTOR = st.one_of(
 _OPTIONS = ("--cap-g", "--coin-g", "--dwell-s", "--settle-s", "--samples")
 
 
+@pytest.fixture(scope="module")
+def weigh_package(default_build):
+    """The default build's readout package imported in this process, and its weight plan, once for the module."""
+    from types import SimpleNamespace
+
+    from readout_support import imported
+
+    with imported({}, default_build.out_dir):
+        from magfab_readout import _build, cli, weigh
+        from magfab_readout.cli_shared import UsageError
+
+        yield SimpleNamespace(build=_build, cli=cli, weigh=weigh, UsageError=UsageError, plan=weigh.load_plan())
+
+
 @settings(max_examples=300, deadline=None)
 @given(mistaken=st.lists(st.sampled_from(_OPTIONS), max_size=2).map(set), data=st.data(), exists=st.booleans(),
        force=st.booleans())
 def test_weighs_options_are_refused_exactly_when_the_plan_cannot_take_them(
-        default_build, tmp_path_factory, mistaken, data, exists, force):
+        weigh_package, tmp_path_factory, mistaken, data, exists, force):
     """``magfab-readout weigh``'s options, sound (left out, or inside their limits) but for one or two, each of those
     its limit scaled about 1, or zero, negative, not finite, far too large: refused in one UsageError exactly when
     one of them breaks its rule (the cap within twice its printed bound, the coin no heavier than the plan's, two
     windows inside the settle time at the chip's rate, no existing file overwritten without --force), naming an
     option that broke it."""
-    from readout_support import imported
-
     sound = st.one_of(st.none(), st.floats(0.05, 1.0))
     cap, coin, dwell, settle = (data.draw(_FACTOR if flag in mistaken else sound, label=flag) for flag in _OPTIONS[:4])
     cap = 0.5 if cap is None and "--cap-g" not in mistaken else cap  # the cap's mass has no default
@@ -250,44 +262,40 @@ def test_weighs_options_are_refused_exactly_when_the_plan_cannot_take_them(
     out = tmp_path_factory.mktemp("weigh") / "w.csv"
     if exists:
         out.write_text("kept\n")
-    with imported({}, default_build.out_dir):
-        from magfab_readout import _build, cli, weigh
-        from magfab_readout.cli_shared import UsageError
-
-        plan = weigh.load_plan()
-        bound, coin_g, rate = plan["cap_mass_bound_g"], plan["coin"]["mass_g"], _build.SAMPLE_RATE_HZ
-        argv = ["weigh", str(out)]
-        if samples is not None:
-            argv += [f"--samples={samples}"]
-        n = 200 if samples is None else samples
-        # each factor scales the option's limit: the cap's (twice its bound), the coin's, the settle time two windows
-        # and the dwell take, and a dwell of 2 s
-        dwell_s = None if dwell is None else 2.0 * dwell
-        need = (2.0 if dwell_s is None or not math.isfinite(dwell_s) else dwell_s) + 2.0 * max(n, 0) / rate
-        for flag, factor, limit in (("--cap-g", cap, 2.0 * bound), ("--coin-g", coin, coin_g),
-                                    ("--dwell-s", dwell, 2.0), ("--settle-s", settle, need)):
-            if factor is not None:
-                argv += [f"{flag}={factor * limit!r}"]
-        argv += ["--force"] if force else []
-        args = cli._parser().parse_args(argv)
-        ok = lambda x: math.isfinite(x) and x > 0
-        broken = [flag for flag, bad in (
-            ("--cap-g", args.cap_g is None or not ok(args.cap_g) or args.cap_g > 2 * bound),
-            ("--coin-g", args.coin_g is not None and (not ok(args.coin_g) or args.coin_g > coin_g)),
-            ("--settle-s", not ok(args.settle_s)),
-            ("--dwell-s", not (math.isfinite(args.dwell_s) and args.dwell_s >= 0)),
-            ("--samples", args.samples < 2)) if bad]
-        if not broken and args.dwell_s + 2 * args.samples / rate > args.settle_s:
-            broken = ["--settle-s"]
-        if not broken and exists and not force:
-            broken = [str(out)]
-        try:
-            coin_used = weigh._check(args, plan)
-        except UsageError as e:
-            message = str(e)
-            assert broken and "\n" not in message and any(flag in message for flag in broken), (message, broken)
-        else:
-            assert not broken and coin_used == (coin_g if args.coin_g is None else args.coin_g)
+    plan = weigh_package.plan
+    bound, coin_g, rate = plan["cap_mass_bound_g"], plan["coin"]["mass_g"], weigh_package.build.SAMPLE_RATE_HZ
+    argv = ["weigh", str(out)]
+    if samples is not None:
+        argv += [f"--samples={samples}"]
+    n = 200 if samples is None else samples
+    # each factor scales the option's limit: the cap's (twice its bound), the coin's, the settle time two windows
+    # and the dwell take, and a dwell of 2 s
+    dwell_s = None if dwell is None else 2.0 * dwell
+    need = (2.0 if dwell_s is None or not math.isfinite(dwell_s) else dwell_s) + 2.0 * max(n, 0) / rate
+    for flag, factor, limit in (("--cap-g", cap, 2.0 * bound), ("--coin-g", coin, coin_g),
+                                ("--dwell-s", dwell, 2.0), ("--settle-s", settle, need)):
+        if factor is not None:
+            argv += [f"{flag}={factor * limit!r}"]
+    argv += ["--force"] if force else []
+    args = weigh_package.cli._parser().parse_args(argv)
+    ok = lambda x: math.isfinite(x) and x > 0
+    broken = [flag for flag, bad in (
+        ("--cap-g", args.cap_g is None or not ok(args.cap_g) or args.cap_g > 2 * bound),
+        ("--coin-g", args.coin_g is not None and (not ok(args.coin_g) or args.coin_g > coin_g)),
+        ("--settle-s", not ok(args.settle_s)),
+        ("--dwell-s", not (math.isfinite(args.dwell_s) and args.dwell_s >= 0)),
+        ("--samples", args.samples < 2)) if bad]
+    if not broken and args.dwell_s + 2 * args.samples / rate > args.settle_s:
+        broken = ["--settle-s"]
+    if not broken and exists and not force:
+        broken = [str(out)]
+    try:
+        coin_used = weigh_package.weigh._check(args, plan)
+    except weigh_package.UsageError as e:
+        message = str(e)
+        assert broken and "\n" not in message and any(flag in message for flag in broken), (message, broken)
+    else:
+        assert not broken and coin_used == (coin_g if args.coin_g is None else args.coin_g)
     assert not exists or out.read_text() == "kept\n"  # nothing overwritten by the check
 
 

@@ -169,7 +169,7 @@ def bom_rows(design: Design, acceptance: Mapping[str, object] | None = None,
     """The bill of materials: one row per item (:data:`FIELDS`), quantities for ``fabrication.sensors``;
     ``acceptance`` (acceptance.json's content) adds the acceptance test's weight, ``weighing`` (the weight plan,
     calibration/weigh_plan.json) the weight jig, its coins and a balance."""
-    return _sensor_rows(design) + _bench_rows(design, acceptance) + jig_rows(design, weighing, _row)
+    return _sensor_rows(design) + _bench_rows(design, acceptance) + jig_rows(weighing, _row)
 
 
 def bom_csv(design: Design, acceptance: Mapping[str, object] | None = None,

@@ -51,7 +51,7 @@ def weights_steps(design: Design, plan: Mapping[str, Any] | None, sensor: str) -
     ]
 
 
-def jig_rows(design: Design, plan: Mapping[str, Any] | None, row) -> list[dict[str, object]]:
+def jig_rows(plan: Mapping[str, Any] | None, row) -> list[dict[str, object]]:
     """The weight jig's rows of the bill of materials (``row`` builds one, as bom.py's), none without a plan."""
     if plan is None:
         return []

@@ -436,19 +436,17 @@ def weight_plan(prediction: Prediction, cap_g: float = 0.0, stiffness: float = 1
     has no weighings. ScanError for a design whose range the cap and the lightest load already pass, or whose shear
     range the cap alone passes on every stand tilted :data:`MIN_TILT_DEG` or more, or whose ranges leave fewer than
     :data:`MIN_FIRST` weighings."""
-    scale = PLAN_RANGE_FRACTION * max(stiffness, 1.0)
-    flat_N = scale * prediction.normal.range_N
+    # the skin's ranges: the softest material's, times its stiffness
+    normal_N, shear_N = (max(stiffness, 1.0) * r for r in (prediction.normal.range_N, prediction.shear.range_N))
     lightest = min(loads_g) + cap_g
-    if lightest * G0 / 1000.0 > flat_N:
-        range_mN = 1000.0 * flat_N / PLAN_RANGE_FRACTION
+    if lightest * G0 / 1000.0 > PLAN_RANGE_FRACTION * normal_N:
         raise ScanError(f"the cap with the lightest load ({lightest:g} g, {lightest * G0:.3g} mN) is past "
-                        f"{PLAN_RANGE_FRACTION:.0%} of this design's normal range ({range_mN:.3g} mN): no weight plan "
-                        "fits it; calibrate it from a scan")
+                        f"{PLAN_RANGE_FRACTION:.0%} of this design's normal range ({1000.0 * normal_N:.3g} mN): no "
+                        "weight plan fits it; calibrate it from a scan")
     out = []
     for angle in ANGLES_DEG:
         a = math.radians(angle)
-        limit_N = scale * min(prediction.normal.range_N / math.cos(a),
-                              prediction.shear.range_N / math.sin(a) if angle > 0 else math.inf)
+        limit_N = PLAN_RANGE_FRACTION * min(normal_N / math.cos(a), shear_N / math.sin(a) if angle > 0 else math.inf)
         if cap_g * G0 / 1000.0 > limit_N:  # the cap alone pushes past the range here: no weighing on this stand
             continue
         # the fractions of what the loads reach: the range, or the heaviest load the jig carries steadily there
@@ -461,14 +459,12 @@ def weight_plan(prediction: Prediction, cap_g: float = 0.0, stiffness: float = 1
         out += [(cap_g + w, angle) for w in (0.0, *sorted(picked))]
     if not any(angle >= MIN_TILT_DEG for _, angle in out):
         raise ScanError(f"the cap alone ({cap_g:g} g) pushes past {PLAN_RANGE_FRACTION:.0%} of this design's shear "
-                        f"range ({1000.0 * scale * prediction.shear.range_N / PLAN_RANGE_FRACTION:.3g} mN) on every "
-                        "tilted stand: no weight plan tells its shear; calibrate it from a scan")
+                        f"range ({1000.0 * shear_N:.3g} mN) on every tilted stand: no weight plan tells its shear; "
+                        "calibrate it from a scan")
     if len(out) < MIN_FIRST:
-        ranges = [1000.0 * scale / PLAN_RANGE_FRACTION * r for r in (prediction.normal.range_N,
-                                                                      prediction.shear.range_N)]
-        raise ScanError(f"only {len(out)} weighings fit this design's ranges (normal {ranges[0]:.3g} mN, shear "
-                        f"{ranges[1]:.3g} mN) with the cap and its loads, fewer than "
-                        f"the {MIN_FIRST} a first weight calibration needs; calibrate it from a scan")
+        raise ScanError(f"only {len(out)} weighings fit this design's ranges (normal {1000.0 * normal_N:.3g} mN, shear "
+                        f"{1000.0 * shear_N:.3g} mN) with the cap and its loads, fewer than the {MIN_FIRST} a first "
+                        "weight calibration needs; calibrate it from a scan")
     return out
 
 

@@ -501,13 +501,6 @@ class SimulatedDevice:
         self.temperature = TemperatureRamp(start, start + by_C, duration_s=max(abs(by_C), 1e-3) / rate_C_per_s,
                                            delay_s=now_s)
 
-    def place_load(self, mass_g: float, angle_deg: float) -> None:
-        """Put ``mass_g`` on the simulated tip with the board at ``angle_deg`` (a :class:`WeighedTip` pattern only)."""
-        place = getattr(self.pattern, "place_load", None)
-        if place is None:
-            raise ValueError("this simulated device has no weight jig; a load needs pattern=WeighedTip(...)")
-        place(mass_g, angle_deg)
-
     def place_weight(self, grams: float) -> None:
         """Put a weight on the simulated tip (a :class:`RestTip` pattern only): later samples carry its field."""
         place = getattr(self.pattern, "place_weight", None)

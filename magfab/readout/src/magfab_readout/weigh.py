@@ -178,8 +178,8 @@ def run(args: argparse.Namespace, out, open_device) -> int:
                          "do not fit; the build's report says why): calibrate it from a scan")
     coin_g = _check(args, plan)
     steps = _steps(plan, args.reskin)
-    pattern = WeighedTip(plan["nominal"]) if args.simulate else None
     nominal = WeighedTip(plan["nominal"])  # the nominal sensor's field under each load, printed beside the reading
+    pattern = nominal if args.simulate else None  # which the simulated board serves
     written = 0
     try:
         with open_device(args, text=None, pattern=pattern) as device, \
@@ -194,8 +194,6 @@ def run(args: argparse.Namespace, out, open_device) -> int:
                 ask(f"step {k + 1} of {len(steps)}: the board in the {angle:g} deg stand (weigh_stand_{angle:g}), "
                     f"connector uphill, the cap on the tip; {_load_text(step)} ({mass:.2f} g on the tip)", args.yes)
                 nominal.place_load(mass, angle)
-                if args.simulate:
-                    device.transport.place_load(mass, angle)
                 mean, sd, n = steady_mean(device, args.samples, args.settle_s, args.dwell_s)
                 f.write(",".join([f"{mass:.4f}", f"{angle:g}", *(f"{b:.3f}" for b in mean),
                                   *(f"{s:.3f}" for s in sd), str(n)]) + "\n")
