@@ -53,23 +53,21 @@ def _stats(values: list[float]) -> dict[str, float]:
 
 
 def run(name: str, sensors: int, seed: int, centred: bool, standard: bool = False, adaptive: bool = True) -> dict:
-    from magfab.jig import jig_of
     from magfab.models.predict import predict
     from magfab.models.weighing import PARAMS, SensorModel
-    from magfab.models.weighing_study import trial, truth_model
+    from magfab.models.weighing_study import jig_plans, trial, truth_model
 
     design = _design(name)
     prediction = predict(design)
     model = SensorModel.of(design, prediction)
     truth = truth_model(design, prediction, model)
     rng = np.random.default_rng(seed)
-    jig = jig_of(design)
     # the weight jig's coins and its heaviest printed cap, as the build's plan (--standard: 1-2-5 weights, a 5 g cap)
-    loads = {} if standard else {"cap_g": jig.cap_mass_bound_g(), "loads": jig.plan_loads(prediction)}
+    plan_of = None if standard else jig_plans(design, prediction)
     rows = []
     t0 = time.perf_counter()
     for _ in range(sensors):
-        rows.append(trial(design, prediction, model, truth, rng, centred=centred, adaptive=adaptive, **loads))
+        rows.append(trial(design, prediction, model, truth, rng, centred=centred, adaptive=adaptive, plan_of=plan_of))
     elapsed = time.perf_counter() - t0
     ratio = [r.weights["fz_rms_N"] / r.full["fz_rms_N"] for r in rows]
     worst = sorted(range(sensors), key=lambda k: -ratio[k])[:3]
@@ -89,6 +87,7 @@ def run(name: str, sensors: int, seed: int, centred: bool, standard: bool = Fals
         "coverage_fz": float(np.mean([r.weights["fz_rms_N"] <= r.bound_fz_rms_N for r in rows])),
         "coverage_shear": float(np.mean([r.weights["shear_rms_N"] <= r.bound_shear_rms_N for r in rows])),
         "seconds_per_sensor": elapsed / sensors,
+        "reach": _stats([r.reach for r in rows]),
         "ratios": [round(x, 4) for x in ratio],
         "reskin_ratios": [round(r.reskin["fz_rms_N"] / r.reskin_full["fz_rms_N"], 4) for r in rows],
         "worst_sensors": [{"ratio": ratio[k], "truth": dict(zip(PARAMS, map(float, rows[k].sensor.theta))),
@@ -105,7 +104,7 @@ def _line(r: dict) -> str:
                             ("fixed plan", not r["adaptive"])) if on]
     return (f"| {r['design']}{''.join(f' ({t})' for t in tags)} | {r['sensors']} | {g(r['weights_fz_rms_mN'])} | "
             f"{g(r['full_fz_rms_mN'])} | {f(r['fz_ratio'])} | {f(r['reskin_fz_ratio'])} | {f(r['shear_ratio'])} | "
-            f"{r['coverage_fz']:.2f} / {r['coverage_shear']:.2f} |")
+            f"{r['coverage_fz']:.2f} / {r['coverage_shear']:.2f} | {r['reach']['worst']:.2f} |")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -124,8 +123,8 @@ def main(argv: list[str] | None = None) -> int:
                    "build's report charts (a row of the same design, draw and plan is replaced)")
     a = p.parse_args(argv)
     print("| design | sensors | weights Fz RMS mN (median/p90/worst) | full scan Fz RMS mN | Fz ratio | re-skin Fz "
-          "ratio | shear ratio | bound coverage Fz / shear |")
-    print("|---|---|---|---|---|---|---|---|")
+          "ratio | shear ratio | bound coverage Fz / shear | heaviest load over the skin's range (worst) |")
+    print("|---|---|---|---|---|---|---|---|---|")
     results = []
     for name in a.designs.split(","):
         r = run(name, a.sensors, a.seed, a.centred, a.standard, not a.fixed_plan)

@@ -124,31 +124,36 @@ class Jig:
         most = self.pockets * self._stack_max(FLAT_STACK_RIMS * self.rim_mm)
         return tuple(round(n * self.coin_g, 6) for n in range(2, most + 1, 2))
 
-    def contact_steady(self, coins: int, prediction: Prediction) -> bool:
-        """Whether the heaviest printed cap with ``coins`` stays steady on the softest skin's flat tip against its
-        contact's rotational stiffness (:data:`CONTACT_STEADY_SHARE`; the whole load counted at the coins' centre,
-        which overstates the moment of the cap's own mass, whose centre is lower). A rounded tip: True (the rolling
-        rule bounds its stacks, :attr:`steady_arm_mm`)."""
+    def contact_steady(self, coins: int, prediction: Prediction, stiffness: float = 1.0) -> bool:
+        """Whether the heaviest printed cap with ``coins`` stays steady on a flat tip against its contact's
+        rotational stiffness (:data:`CONTACT_STEADY_SHARE`; the whole load counted at the coins' centre, which
+        overstates the moment of the cap's own mass, whose centre is lower). The skin is the softest of the band
+        times ``stiffness`` (its normal curve's force scaled by it, :func:`magfab.models.weighing.stiffness_of`), so
+        k_n at the load W is ``stiffness`` times the softest curve's tangent where it carries W / ``stiffness``. A
+        rounded tip: True (the rolling rule bounds its stacks, :attr:`steady_arm_mm`)."""
         if self.rounded_tip:
             return True
         weight_N = (self.cap_mass_bound_g() + coins * self.coin_g) * G0 / 1000.0
         curve = prediction.curves["soft"]
-        k_n = float(np.interp(weight_N, curve.force_N, curve.stiffness_N_per_mm))
+        k_n = stiffness * float(np.interp(weight_N / stiffness, curve.force_N, curve.stiffness_N_per_mm))
         return weight_N * self.moment_arm_mm(coins) <= CONTACT_STEADY_SHARE * k_n * self.tip_radius_mm**2 / 4.0
 
-    def plan_loads(self, prediction: Prediction) -> dict[str, Any]:
-        """What :func:`magfab.models.weighing.weight_plan` takes of this jig for ``prediction``'s design: its loads
-        on which the cap stays steady (:meth:`contact_steady`) and a tilted stand's most."""
-        loads = tuple(w for w in self.loads_g() if self.contact_steady(round(w / self.coin_g), prediction))
+    def plan_loads(self, prediction: Prediction, stiffness: float = 1.0) -> dict[str, Any]:
+        """What :func:`magfab.models.weighing.weight_plan` takes of this jig for ``prediction``'s design and a skin
+        ``stiffness`` times the softest: its loads on which the cap stays steady (:meth:`contact_steady`) and a tilted
+        stand's most."""
+        loads = tuple(w for w in self.loads_g()
+                      if self.contact_steady(round(w / self.coin_g), prediction, stiffness))
         return {"loads_g": loads, "tilted_max_g": self.tilted_coins_max * self.coin_g}
 
     def plan(self, prediction: Prediction, cap_g: float | None = None, stiffness: float = 1.0
              ) -> list[tuple[float, float, int]]:
         """The weight plan (:func:`magfab.models.weighing.weight_plan`) in this jig's coins: (mass on the tip in g,
         stand angle in degrees, coins), the cap's mass ``cap_g`` (default: :meth:`cap_mass_bound_g`, the heaviest a
-        printed cap may be)."""
+        printed cap may be), for a skin ``stiffness`` times the softest of the band (default: the softest, whose plan
+        is safe for every skin)."""
         cap = self.cap_mass_bound_g() if cap_g is None else cap_g
-        plan = weight_plan(prediction, cap, stiffness, **self.plan_loads(prediction))
+        plan = weight_plan(prediction, cap, stiffness, **self.plan_loads(prediction, stiffness))
         return [(m, a, round((m - cap) / self.coin_g)) for m, a in plan]
 
     @property

@@ -51,7 +51,7 @@ from numpy.typing import ArrayLike
 
 from ..errors import ScanError
 from ..formats.scan_csv import Scan, scan_csv
-from ..formats.weights_csv import MIN_WEIGHINGS, Weighing
+from ..formats.weights_csv import Weighing
 from ..units import G0, UT_PER_GAUSS
 from . import acceptance
 from . import field as fieldmod
@@ -59,6 +59,16 @@ from .calibration import fit as calibration_fit
 from .calibration import fits_mls
 from .chip import chip_setting, noise
 from .scan import scan_plan, scan_track
+from .weight_plan import (
+    ANGLES_DEG,
+    MIN_FIRST,
+    MIN_TILT_DEG,
+    RESKIN_MIN,
+    first_weighings,
+    reskin_plan,
+    stiffness_of,
+    weight_plan,
+)
 
 if TYPE_CHECKING:
     from ..design import Design
@@ -68,7 +78,7 @@ if TYPE_CHECKING:
 __all__ = ["Weighing", "SensorModel", "WeightFit", "PARAMS", "fit_weights", "model_scan", "predicted_error",
            "weight_plan", "load_of", "region_points", "region_errors", "force_errors", "noise_uT",
            "calibration_scan", "ErrorBound", "RESKIN_KEPT", "reskin_plan", "first_weighings", "stiffness_of",
-           "stated_error", "weight_fit_of"]
+           "stated_error", "weight_fit_of", "ANGLES_DEG", "MIN_FIRST"]
 
 #: The fitted parameters, in order (module doc); then one background vector per stand angle.
 PARAMS = ("log_mu", "log_br", "d_mm", "tilt_x_deg", "tilt_y_deg", "offset_x_mm", "offset_y_mm", "shape_1", "shape_2",
@@ -107,23 +117,6 @@ MAX_PRIOR_SIGMAS = 4.0
 DRAWS = 64
 #: The share of posterior draws whose region RMS the stated error bound covers.
 BOUND_QUANTILE = 0.9
-#: Fewest weighings a first calibration takes (a new skin with the magnet's parameters kept takes
-#: :data:`RESKIN_MIN`).
-MIN_FIRST = 6
-#: Fewest distinct loads a new skin takes: the cap alone flat, the heaviest weight flat and at the steepest angle
-#: (:func:`reskin_plan`), for a shear modulus, a rest distance and a background per stand; the fewest rows a
-#: weighings file holds.
-RESKIN_MIN = MIN_WEIGHINGS
-#: The least stand angle a first calibration's tilted weighings need, degrees (our choice: half the plan's least
-#: tilt). Below it a load's shear part (sin 10 deg = 17 % of it) tells the shear stiffness too little: on eight
-#: centred MagOne sensors the stated shear bound was 1.04-1.12x the plan's at 10 deg, 1.1-1.5x at 2, 1.5-4.3x at 0.5.
-MIN_TILT_DEG = 10.0
-#: Standard weights (g) a bench has: the usual 1-2-5 series of a calibration weight set (OIML R 111 nominal values).
-STANDARD_WEIGHTS_G = (1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0, 1000.0)
-#: The weights of a plan stay at or below this fraction of the predicted normal range.
-PLAN_RANGE_FRACTION = 0.9
-#: The stand's angles, degrees.
-ANGLES_DEG = (0.0, 20.0, 40.0)
 
 
 def load_of(mass_g: ArrayLike, angle_deg: ArrayLike) -> np.ndarray:
@@ -420,74 +413,6 @@ def predicted_error(model: SensorModel, fit: WeightFit, calibration: Calibration
 def _sqrt_psd(cov: np.ndarray) -> np.ndarray:
     w, v = np.linalg.eigh((cov + cov.T) / 2.0)
     return v * np.sqrt(np.clip(w, 0.0, None))
-
-
-def weight_plan(prediction: Prediction, cap_g: float = 0.0, stiffness: float = 1.0, *,
-                loads_g: Sequence[float] = STANDARD_WEIGHTS_G, tilted_max_g: float = math.inf
-                ) -> list[tuple[float, float]]:
-    """The weighings to make, as (mass on the tip in g, stand angle): at each of :data:`ANGLES_DEG` the cap alone and
-    three of the loads ``loads_g`` put on it (the standard 1-2-5 weights, or the weight jig's coin pairs,
-    :func:`magfab.jig.Jig.loads_g`): the heaviest whose load stays within :data:`PLAN_RANGE_FRACTION` of the predicted
-    normal range (its normal part) and of the predicted shear range (its shear part), then the heaviest lighter
-    than it within half that, and within a quarter (fewer where fewer fit). A tilted stand carries at most
-    ``tilted_max_g`` (what stays in the jig's pockets). The ranges are the softest material's, times ``stiffness``:
-    the skin's shear modulus over the softest (:func:`first_weighings` and :func:`stiffness_of` find it, so a stiff
-    skin is weighed over its whole range, not a soft one's). A stand on which the cap alone pushes past the range
-    has no weighings. ScanError for a design whose range the cap and the lightest load already pass, or whose shear
-    range the cap alone passes on every stand tilted :data:`MIN_TILT_DEG` or more, or whose ranges leave fewer than
-    :data:`MIN_FIRST` weighings."""
-    # the skin's ranges: the softest material's, times its stiffness
-    normal_N, shear_N = (max(stiffness, 1.0) * r for r in (prediction.normal.range_N, prediction.shear.range_N))
-    lightest = min(loads_g) + cap_g
-    if lightest * G0 / 1000.0 > PLAN_RANGE_FRACTION * normal_N:
-        raise ScanError(f"the cap with the lightest load ({lightest:g} g, {lightest * G0:.3g} mN) is past "
-                        f"{PLAN_RANGE_FRACTION:.0%} of this design's normal range ({1000.0 * normal_N:.3g} mN): no "
-                        "weight plan fits it; calibrate it from a scan")
-    out = []
-    for angle in ANGLES_DEG:
-        a = math.radians(angle)
-        limit_N = PLAN_RANGE_FRACTION * min(normal_N / math.cos(a), shear_N / math.sin(a) if angle > 0 else math.inf)
-        if cap_g * G0 / 1000.0 > limit_N:  # the cap alone pushes past the range here: no weighing on this stand
-            continue
-        # the fractions of what the loads reach: the range, or the heaviest load the jig carries steadily there
-        limit_g = min(limit_N * 1000.0 / G0 - cap_g, tilted_max_g if angle > 0 else max(loads_g))
-        picked: list[float] = []
-        for fraction in (1.0, 0.5, 0.25):
-            below = [w for w in loads_g if w <= limit_g * fraction and (not picked or w < picked[-1])]
-            if below:
-                picked.append(max(below))
-        out += [(cap_g + w, angle) for w in (0.0, *sorted(picked))]
-    if not any(angle >= MIN_TILT_DEG for _, angle in out):
-        raise ScanError(f"the cap alone ({cap_g:g} g) pushes past {PLAN_RANGE_FRACTION:.0%} of this design's shear "
-                        f"range ({1000.0 * shear_N:.3g} mN) on every tilted stand: no weight plan tells its shear; "
-                        "calibrate it from a scan")
-    if len(out) < MIN_FIRST:
-        raise ScanError(f"only {len(out)} weighings fit this design's ranges (normal {1000.0 * normal_N:.3g} mN, shear "
-                        f"{1000.0 * shear_N:.3g} mN) with the cap and its loads, fewer than the {MIN_FIRST} a first "
-                        "weight calibration needs; calibrate it from a scan")
-    return out
-
-
-def first_weighings(prediction: Prediction, cap_g: float = 0.0, **loads: Any) -> list[tuple[float, float]]:
-    """The two weighings that come first, flat: the cap alone and the heaviest load of the plan for the softest skin
-    (safe for any skin); their fit gives the skin's stiffness (:func:`stiffness_of`) and with it the rest of the
-    plan. ``loads`` as :func:`weight_plan`'s."""
-    flat = [p for p in weight_plan(prediction, cap_g, **loads) if p[1] == 0.0]
-    return [min(flat), max(flat)]
-
-
-def stiffness_of(fit: WeightFit, model: SensorModel, prediction: Prediction) -> float:
-    """The fitted skin's shear modulus over the softest of the material band (at least 1)."""
-    soft = float(prediction.curves["soft"].mu_kPa) / float(prediction.curves["nominal"].mu_kPa)
-    return max(1.0, math.exp(float(fit.theta[0])) / soft)
-
-
-def reskin_plan(plan: Sequence[tuple[float, float]]) -> list[tuple[float, float]]:
-    """A new skin's three weighings from a plan: the cap alone flat, the heaviest weight flat and the heaviest at the
-    steepest angle."""
-    flat = [p for p in plan if p[1] == 0.0]
-    steep = [p for p in plan if p[1] == max(q[1] for q in plan)]
-    return [min(flat), max(flat), max(steep)]
 
 
 def calibration_scan(design: Design, prediction: Prediction, weighings: Sequence[Weighing], *,

@@ -21,9 +21,9 @@ region (not the track's points), with the chip's noise: RMS and worst of Fz and 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -57,7 +57,7 @@ if TYPE_CHECKING:
     from .calibration import Calibration
     from .predict import Prediction
 
-__all__ = ["Truth", "draw_sensor", "trial", "TrialResult", "truth_model"]
+__all__ = ["Truth", "draw_sensor", "trial", "TrialResult", "truth_model", "jig_plans"]
 
 #: Readings averaged per weighing (half a second at the chip's ~540 Hz).
 SAMPLES = 250
@@ -185,27 +185,40 @@ class TrialResult:
     bound_shear_rms_N: float
     fit: WeightFit
     sensor: Truth
+    reach: float  # the plan's heaviest normal load over the drawn skin's normal range (:func:`_reach`)
 
 
 def _calibrate(scan: Scan, design: Design) -> Calibration:
     return calmod.fit(scan, design, mls=False).calibration
 
 
+def jig_plans(design: Design, prediction: Prediction) -> Callable[[float], list[tuple[float, float]]]:
+    """The plan in the weight jig's coins on its heaviest printed cap (:meth:`magfab.jig.Jig.plan`, as the build
+    ships it), as a function of the skin's stiffness over the softest of the band."""
+    from ..jig import jig_of
+
+    jig = jig_of(design)
+    return lambda stiffness: [(m, a) for m, a, _ in jig.plan(prediction, stiffness=stiffness)]
+
+
 def trial(design: Design, prediction: Prediction, model: SensorModel, truth: SensorModel, rng: np.random.Generator,
-          *, cap_g: float = CAP_G, centred: bool = False, loads: Mapping[str, Any] | None = None,
+          *, centred: bool = False, plan_of: Callable[[float], Sequence[tuple[float, float]]] | None = None,
           adaptive: bool = True) -> TrialResult:
-    """One drawn sensor (:func:`draw_sensor`) through both calibrations and a re-skin (module doc); ``loads`` as
-    :func:`~magfab.models.weighing.weight_plan` takes them (the weight jig's coins: ``loads_g`` and
-    ``tilted_max_g``; default the standard 1-2-5 weights). ``adaptive``: the first two weighings' fit sets the
-    skin's stiffness and with it the plan; without, the plan is the softest skin's (as the build ships it)."""
+    """One drawn sensor (:func:`draw_sensor`) through both calibrations and a re-skin (module doc). ``plan_of``: the
+    plan for a skin of a given stiffness over the softest (:func:`jig_plans`: the weight jig's coins; default the
+    standard 1-2-5 weights on a :data:`CAP_G` cap). ``adaptive``: the first two weighings of the softest skin's plan
+    (:func:`~magfab.models.weighing.first_weighings`) are fitted, and the plan is the one for the stiffness they
+    give (:func:`~magfab.models.weighing.stiffness_of`), as the two-stage bench makes it; without, the plan is the
+    softest skin's. A new skin's three weighings are the softest skin's plan's re-skin steps (safe for any skin)."""
     noise = noise_uT(design)
     sensor = draw_sensor(model, truth, rng, centred)
-    loads = dict(loads or {})
-    stiffness = 1.0
-    if adaptive:  # the bench's first two: the skin's stiffness sets the rest
-        first = first_weighings(prediction, cap_g, **loads)
-        stiffness = stiffness_of(fit_weights(model, weighings(sensor, first, noise, rng)), model, prediction)
-    plan = weight_plan(prediction, cap_g, stiffness, **loads)
+    plans = plan_of or (lambda stiffness: weight_plan(prediction, CAP_G, stiffness))
+
+    soft = list(plans(1.0))
+    plan = soft
+    if adaptive:
+        first = weighings(sensor, first_weighings(soft), noise, rng)
+        plan = list(plans(stiffness_of(fit_weights(model, first), model, prediction)))
     fit = fit_weights(model, weighings(sensor, plan, noise, rng))
     cal_w = _calibrate(model_scan(model, fit, design, prediction), design)
     cal_f = _calibrate(full_scan(sensor, design, prediction, noise, rng), design)
@@ -213,10 +226,19 @@ def trial(design: Design, prediction: Prediction, model: SensorModel, truth: Sen
     test = held_out(sensor, design, prediction, noise, rng)
     new = sensor.reskinned(rng)  # a new skin on the same board and magnet
     kept = {name: float(fit.theta[PARAMS.index(name)]) for name in RESKIN_KEPT}
-    refit = fit_weights(model, weighings(new, reskin_plan(plan), noise, rng), fixed=kept)
+    refit = fit_weights(model, weighings(new, reskin_plan(soft), noise, rng), fixed=kept)
     cal_r = _calibrate(model_scan(model, refit, design, prediction), design)
     cal_rf = _calibrate(full_scan(new, design, prediction, noise, rng), design)
     test_r = held_out(new, design, prediction, noise, rng)
     return TrialResult(force_errors(cal_w, *test), force_errors(cal_f, *test), force_errors(cal_r, *test_r),
-                       force_errors(cal_rf, *test_r),
-                       bound.fz_rms_N[1], bound.shear_rms_N[1], fit, sensor)
+                       force_errors(cal_rf, *test_r), bound.fz_rms_N[1], bound.shear_rms_N[1], fit, sensor,
+                       _reach(sensor, plan, prediction))
+
+
+def _reach(sensor: Truth, plan: Sequence[tuple[float, float]], prediction: Prediction) -> float:
+    """The plan's heaviest normal load over the drawn skin's normal range (the softest skin's, times the skin's
+    stiffness over the softest): past 1 the plan would press the skin past its range."""
+    soft = float(prediction.curves["soft"].mu_kPa) / float(prediction.curves["nominal"].mu_kPa)
+    stiffness = math.exp(float(sensor.theta[0])) / soft
+    fz = load_of([m for m, _ in plan], [a for _, a in plan])[:, 2]
+    return float(fz.max() / (stiffness * prediction.normal.range_N))

@@ -29,7 +29,7 @@ from magfab.models.weighing import (
     reskin_plan,
     weight_plan,
 )
-from magfab.models.weighing_study import draw_sensor, trial, truth_model, weighings
+from magfab.models.weighing_study import draw_sensor, jig_plans, trial, truth_model, weighings
 from magfab.units import G0
 
 
@@ -76,10 +76,9 @@ def test_the_weight_calibration_holds_against_a_full_scan_on_sensors_of_the_othe
 
 
 def _shipped(design, prediction) -> dict:
-    """The plan as the build ships it (:meth:`magfab.jig.Jig.plan`): the jig's coins on its heaviest cap, the softest
-    skin's plan for every sensor."""
-    jig = jig_of(design)
-    return {"cap_g": jig.cap_mass_bound_g(), "adaptive": False, "loads": jig.plan_loads(prediction)}
+    """The plan as the README's two-stage bench walks it (:meth:`magfab.jig.Jig.plan`): the jig's coins on its
+    heaviest cap, for the stiffness the softest skin's first two weighings give."""
+    return {"plan_of": jig_plans(design, prediction), "adaptive": True}
 
 
 @pytest.mark.slow
@@ -109,7 +108,7 @@ def test_the_plan_stays_inside_the_ranges_of_the_skin_it_is_for(magone_predictio
     assert np.all(f[:, 2] <= 0.9 * stiffness * magone_prediction.normal.range_N + 1e-9)
     assert np.all(f[:, 1] <= 0.9 * stiffness * magone_prediction.shear.range_N + 1e-9)
     assert all(min(m for m, b in plan if b == a) == cap for a in angles)
-    first = first_weighings(magone_prediction, cap)
+    first = first_weighings(weight_plan(magone_prediction, cap))
     assert first == [p for p in weight_plan(magone_prediction, cap) if p[1] == 0.0][::3]
     assert set(reskin_plan(plan)) <= set(plan) and len(reskin_plan(plan)) == 3
     assert math.isclose(load_of(1000.0, 0.0)[0, 2], G0)
