@@ -581,8 +581,10 @@ def schema() -> None:
 
 
 from .sensor_cli import register as _register_sensor  # noqa: E402  (the commands beside their engine, magfab.sensors)
+from .weigh_cli import register as _register_weigh  # noqa: E402  (as the sensor commands)
 
 _register_sensor(main, _handled)
+_register_weigh(main, _handled, _calibration_target)
 
 if __name__ == "__main__":  # pragma: no cover
     main()

@@ -7,7 +7,10 @@ from __future__ import annotations
 import dataclasses
 import importlib
 import json
+import os
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -69,3 +72,25 @@ def bench(default_build, tmp_path, monkeypatch):
 def n52(magone_design, magone_prediction):
     """MagOne's simulated scan with an N52 magnet (:func:`n52_scan`)."""
     return n52_scan(magone_design, magone_prediction)
+
+
+def weigh_simulated(cwd, out, *args):
+    """``magfab-readout weigh ARGS --simulate --yes`` from the package of the build in ``out``."""
+    env = {k: v for k, v in os.environ.items() if k != "MAGFAB_SENSORS"}
+    env["PYTHONPATH"] = str(out / "readout" / "src")
+    return subprocess.run([sys.executable, "-m", "magfab_readout", "weigh", *args, "--simulate", "--yes"],
+                          capture_output=True, text=True, timeout=300, env=env, cwd=cwd)
+
+
+@pytest.fixture(scope="module")
+def weigh_package(default_build):
+    """The default build's readout package imported in this process, and its weight plan, once for the module."""
+    from types import SimpleNamespace
+
+    from readout_support import imported
+
+    with imported({}, default_build.out_dir):
+        from magfab_readout import _build, cli, weigh
+        from magfab_readout.cli_shared import UsageError
+
+        yield SimpleNamespace(build=_build, cli=cli, weigh=weigh, UsageError=UsageError, plan=weigh.load_plan())

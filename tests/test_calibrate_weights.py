@@ -14,7 +14,7 @@ from unittest.mock import patch
 
 import numpy as np
 import pytest
-from calibrate_support import add, tree
+from calibrate_support import add, tree, weigh_simulated
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -149,21 +149,13 @@ def test_the_report_lists_a_weight_calibrations_fit(magone_design, magone_predic
                                5.0)["weights"] is None
 
 
-def _weigh(cwd, out, *args):
-    """``magfab-readout weigh ARGS --simulate --yes`` from the package of the build in ``out``."""
-    env = {k: v for k, v in os.environ.items() if k != "MAGFAB_SENSORS"}
-    env["PYTHONPATH"] = str(out / "readout" / "src")
-    return subprocess.run([sys.executable, "-m", "magfab_readout", "weigh", *args, "--simulate", "--yes"],
-                          capture_output=True, text=True, timeout=300, env=env, cwd=cwd)
-
-
 def test_the_readouts_weighings_calibrate_the_sensor(bench):
     """The bench's path end to end: ``magfab-readout weigh`` walks the build's plan on the simulated board (the nominal
     sensor under the jig's loads, with the chip's noise), and ``magfab calibrate --weights`` fits its file; the
     re-skin walks the plan's three steps; a wrong option is one line, exit 2, no file."""
     project, out, calls, run = bench
     plan = json.loads((out / "calibration" / "weigh_plan.json").read_text())
-    proc = _weigh(project, out, "w.csv", "--cap-g", "10.5", "--samples", "40", "--dwell-s", "0.1")
+    proc = weigh_simulated(project, out, "w.csv", "--cap-g", "10.5", "--samples", "40", "--dwell-s", "0.1")
     assert proc.returncode == 0, proc.stderr[-2000:]
     rows = read_weights_csv(project / "w.csv")
     assert [(r.angle_deg, round(r.mass_g - 10.5, 6)) for r in rows] == [
@@ -172,7 +164,7 @@ def test_the_readouts_weighings_calibrate_the_sensor(bench):
     assert result.exit_code == 0, result.output
     (_, scan), = calls
     assert scan.model["weighings"] == len(plan["steps"]) and scan.model["chi2_per_reading"] < 5
-    proc = _weigh(project, out, "skin.csv", "--cap-g", "9.8", "--coin-g", "4.1", "--reskin", "--samples", "40",
+    proc = weigh_simulated(project, out, "skin.csv", "--cap-g", "9.8", "--coin-g", "4.1", "--reskin", "--samples", "40",
                   "--dwell-s", "0.1")
     assert proc.returncode == 0, proc.stderr[-2000:]
     steps = [plan["steps"][k] for k in plan["reskin"]]
@@ -185,7 +177,7 @@ def test_the_readouts_weighings_calibrate_the_sensor(bench):
                        (("bad.csv", "--cap-g", "10", "--coin-g", "7.8"), "at most the plan's coin, 5 g"),
                        (("bad.csv", "--cap-g", "10", "--samples", "5000", "--settle-s", "5"), "two windows of 5000"),
                        (("w.csv", "--cap-g", "10"), "w.csv exists: weighings are not overwritten")):
-        proc = _weigh(project, out, *args)
+        proc = weigh_simulated(project, out, *args)
         assert proc.returncode == 2 and proc.stderr.count("\n") == 1 and says in proc.stderr, proc.stderr
         assert not (project / "bad.csv").exists() and (project / "w.csv").read_bytes() == before
     # no answer at the first prompt (end of input): one line, and no file that looks like a session
@@ -203,7 +195,8 @@ def test_the_report_charts_the_study(default_build):
     from magfab.export import weights_figures
 
     rows = weights_figures.bench_rows()
-    assert len(rows) == 6 and all(len(r["ratios"]) == len(r["reskin_ratios"]) == r["sensors"] == 50 for r in rows)
+    assert len(rows) == 12 and {r["adaptive"] for r in rows} == {True, False}
+    assert all(len(r["ratios"]) == len(r["reskin_ratios"]) == r["sensors"] == 50 for r in rows)
     assert all(r["command"].startswith("python bench/weights.py") and "--out" not in r["command"] for r in rows)
     assert weights_figures.figures(rows) == weights_figures.figures(rows)
     paths = {a.path for a in default_build.artifacts}
@@ -223,20 +216,6 @@ _FACTOR = st.one_of(
 
 
 _OPTIONS = ("--cap-g", "--coin-g", "--dwell-s", "--settle-s", "--samples")
-
-
-@pytest.fixture(scope="module")
-def weigh_package(default_build):
-    """The default build's readout package imported in this process, and its weight plan, once for the module."""
-    from types import SimpleNamespace
-
-    from readout_support import imported
-
-    with imported({}, default_build.out_dir):
-        from magfab_readout import _build, cli, weigh
-        from magfab_readout.cli_shared import UsageError
-
-        yield SimpleNamespace(build=_build, cli=cli, weigh=weigh, UsageError=UsageError, plan=weigh.load_plan())
 
 
 @settings(max_examples=300, deadline=None)

@@ -21,7 +21,7 @@ def weights_steps(design: Design, plan: Mapping[str, Any] | None, sensor: str) -
         return []
     j = jig_of(design)
     steps = plan["steps"]
-    most = max(s["coins"] for s in steps)
+    most = plan["coins_most"]
     arm = max(s["moment_arm_mm"] for s in steps if s["angle_deg"] > 0)
     coin = plan["coin"]
     return [
@@ -41,8 +41,11 @@ def weights_steps(design: Design, plan: Mapping[str, Any] | None, sensor: str) -
         "Put each step's coins in the pockets it lists: equal stacks in opposite pockets keep the load on the axis. "
         f"On the tilted platforms a stack stays below the pockets' rim ({j.rim_mm:g} mm); the load's centre sits at "
         f"most {arm:.1f} mm above the tip's top there, which the model does not include.",
-        f"From the build folder, run magfab-readout weigh weighings.csv --cap-g G, G the cap's mass in grams: it walks "
-        f"the {len(steps)} steps, waits at each until the reading is steady and writes the weighings. Then magfab "
+        "From the build folder, run magfab-readout weigh first.csv --cap-g G --first, G the cap's mass in grams: it "
+        f"walks the plan's first {len(plan['first'])} steps (flat), waits at each until the reading is steady and "
+        "writes the weighings. magfab weigh-plan first.csv plan.json fits them and writes the plan for this skin's "
+        "stiffness, and magfab-readout weigh weighings.csv --cap-g G --plan plan.json walks it (without --plan, "
+        f"weigh walks this build's {len(steps)} steps, the softest skin's plan, in one stage). Then magfab "
         f"calibrate --weights weighings.csv --sensor {sensor} fits the sensor's model to them, states the "
         "calibration's predicted error over the region and keeps it in the sensor's record, and magfab-readout upload "
         f"--sensor {sensor} writes it into the board (the README's block shows the whole path). A new skin "
@@ -55,13 +58,14 @@ def jig_rows(plan: Mapping[str, Any] | None, row) -> list[dict[str, object]]:
     """The weight jig's rows of the bill of materials (``row`` builds one, as bom.py's), none without a plan."""
     if plan is None:
         return []
-    most = max(s["coins"] for s in plan["steps"])
+    most = plan["coins_most"]
     coin = plan["coin"]
     return [
         row("Printed weight jig", "weigh_cap.stl + weigh_stand_0/20/40.stl", "any filament printer (PLA); the "
             "calibration without a force sensor, instead of the reference sensor, indenter and stage", 1, "set",
             "this build; magfab/jig.py, recipes/bench.toml weigh-jig"),
-        row("Coins", coin["name"], f"the weight plan's loads, {coin['mass_g']:g} g each (calibration/weigh_plan.json)",
+        row("Coins", coin["name"], f"the weight plan's loads for the stiffest skin, {coin['mass_g']:g} g each "
+            "(calibration/weigh_plan.json)",
             most, "pcs", "recipes/bench.toml weigh-coin (" + coin["source"] + ")"),
         row("Balance", "kitchen or lab balance, 0.1 g or finer", "weighs the printed cap once", 1, "pcs",
             "the cap's mass enters every load; 0.1 g is 1 mN"),

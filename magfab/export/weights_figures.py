@@ -28,9 +28,10 @@ CAPTIONS = {
                      "the other hyperelastic law than the fit's, with the Earth's field turning on the stand and the "
                      "chip's noise: each dot is one sensor's held-out Fz RMS from the twelve weighings over its full "
                      "scan's (circles) and a new skin's from three weighings over its own full scan's (crosses); bars "
-                     "mark the median and the 90th percentile, the dashed line the goal of 2; rows name the design and "
-                     "whether the magnet was drawn tilted and offset or centred (bench/weights.py, the plan as the "
-                     "build ships it; the command is in magfab/weights_bench.json)",
+                     "mark the median and the 90th percentile, the dashed line the goal of 2; rows name the design, "
+                     "whether the magnet was drawn tilted and offset or centred, and the plan: the build's plan for "
+                     "the softest skin walked in one stage, or the two-stage bench's plan for the stiffness the first "
+                     "two weighings give (bench/weights.py; the command is in magfab/weights_bench.json)",
 }
 
 
@@ -63,7 +64,8 @@ def figures(rows: Sequence[Mapping[str, Any]]) -> dict[str, bytes]:
                     ax.plot([np.quantile(v, q)] * 2, [y + dy - 0.1, y + dy + 0.1], color="k", lw=1.4 if q == 0.5
                             else 0.8)
             where = "centred" if row["centred"] else "tilted and offset"
-            labels.append(f"{row['design']}, magnet {where} ({row['sensors']})")
+            plan = "two-stage plan" if row.get("adaptive") else "softest skin's plan"
+            labels.append(f"{row['design']}, magnet {where}, {plan} ({row['sensors']})")
         ax.axvline(GOAL, ls="--", color="k", lw=0.8)
         ax.set_xscale("log")
         top = max(max(r["ratios"] + r["reskin_ratios"]) for r in rows)

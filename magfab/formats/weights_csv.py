@@ -54,20 +54,21 @@ class Weighing:
         return np.asarray(self.sd_uT, float) / math.sqrt(max(self.samples, 1))
 
 
-def read_weights_csv(source: str | os.PathLike[str] | bytes) -> list[Weighing]:
+def read_weights_csv(source: str | os.PathLike[str] | bytes, least: int = MIN_WEIGHINGS) -> list[Weighing]:
     """The weighings of a CSV file (path), CSV text or bytes.
 
     Raises :class:`ScanError` (one line: file, line, column, what is allowed) for a missing file or column, a value
     that is not an ASCII decimal number or lies outside its column's :data:`BANDS`, a count of samples that is not a
-    whole number, a row of the wrong length, or fewer than :data:`MIN_WEIGHINGS` or more than :data:`MAX_WEIGHINGS`
-    rows."""
+    whole number, a row of the wrong length, or fewer than ``least`` (:data:`MIN_WEIGHINGS`; the two-stage bench's
+    first weighings are two) or more than :data:`MAX_WEIGHINGS` rows."""
     lines, name, _ = _lines(source, "weighings CSV")
     hline, names = _header(lines, name)
     _require(names, WEIGHT_COLUMNS, name, hline, "any order; others ignored")
     rows = len(lines) - 1
-    if not MIN_WEIGHINGS <= rows <= MAX_WEIGHINGS:
-        raise ScanError(f"{name}: {rows} weighings; a weight calibration takes {MIN_WEIGHINGS} to {MAX_WEIGHINGS} "
-                        "(twelve on three stand angles for a first calibration, three for a new skin)")
+    if not least <= rows <= MAX_WEIGHINGS:
+        what = "a weight calibration takes" if least == MIN_WEIGHINGS else "a skin's plan takes"
+        raise ScanError(f"{name}: {rows} weighings; {what} {least} to {MAX_WEIGHINGS} (twelve on three stand angles "
+                        "for a first calibration, three for a new skin, two for the plan of a skin)")
     index = {c: names.index(c) for c in WEIGHT_COLUMNS}
     out = []
     for row, (number, text) in enumerate(lines[1:], 1):

@@ -78,7 +78,7 @@ if TYPE_CHECKING:
 __all__ = ["Weighing", "SensorModel", "WeightFit", "PARAMS", "fit_weights", "model_scan", "predicted_error",
            "weight_plan", "load_of", "region_points", "region_errors", "force_errors", "noise_uT",
            "calibration_scan", "ErrorBound", "RESKIN_KEPT", "reskin_plan", "first_weighings", "stiffness_of",
-           "stated_error", "weight_fit_of", "ANGLES_DEG", "MIN_FIRST"]
+           "stated_error", "weight_fit_of", "ANGLES_DEG", "MIN_FIRST", "checked_fit"]
 
 #: The fitted parameters, in order (module doc); then one background vector per stand angle.
 PARAMS = ("log_mu", "log_br", "d_mm", "tilt_x_deg", "tilt_y_deg", "offset_x_mm", "offset_y_mm", "shape_1", "shape_2",
@@ -423,17 +423,8 @@ def calibration_scan(design: Design, prediction: Prediction, weighings: Sequence
     calibration's predicted error over the region (:func:`predicted_error`, of the calibration the build fits to
     this scan); ``source`` and ``sha256`` name the weighings file."""
     model = SensorModel.of(design, prediction)
-    _check_loads(model, weighings, source)
     _check_coverage(weighings, fixed, source)
-    fit = fit_weights(model, weighings, fixed=fixed)
-    if not fit.chi2 <= MAX_CHI2:
-        worst = int(np.argmax(np.abs(fit.residual_uT).max(axis=1)))
-        raise ScanError(f"{source}: the weighings do not fit this design's model (mean squared residual "
-                        f"{fit.chi2:.3g} per reading, at most {MAX_CHI2:g}; worst: weighing {worst + 1}, "
-                        f"{weighings[worst].mass_g:g} g at {weighings[worst].angle_deg:g} deg, off by "
-                        f"{np.abs(fit.residual_uT[worst]).max():.0f} uT): the wrong sensor, magnet grade, masses or "
-                        "angles")
-    _check_bands(model, fit, source)
+    fit = checked_fit(model, weighings, fixed=fixed, source=source)
     scan = model_scan(model, fit, design, prediction)
     cal = calibration_fit(scan, design, mls=fits_mls(design)).calibration  # as the build will fit it
     bound = predicted_error(model, fit, cal, design, prediction)
@@ -456,6 +447,24 @@ def calibration_scan(design: Design, prediction: Prediction, weighings: Sequence
     }
     scan = replace(scan, source=f"{source} (weight calibration, {len(weighings)} weighings)", model=info)
     return replace(scan, sha256=hashlib.sha256(scan_csv(scan).encode("utf-8")).hexdigest()), fit, bound
+
+
+def checked_fit(model: SensorModel, weighings: Sequence[Weighing], *, fixed: Mapping[str, float] | None = None,
+                source: str = "weighings") -> WeightFit:
+    """:func:`fit_weights`, refused (:class:`ScanError`, one line naming ``source``) for a load no skin of the design
+    carries, weighings the fitted model does not explain (:data:`MAX_CHI2`) and a parameter fitted outside its band
+    (:data:`MAX_PRIOR_SIGMAS`)."""
+    _check_loads(model, weighings, source)
+    fit = fit_weights(model, weighings, fixed=fixed)
+    if not fit.chi2 <= MAX_CHI2:
+        worst = int(np.argmax(np.abs(fit.residual_uT).max(axis=1)))
+        raise ScanError(f"{source}: the weighings do not fit this design's model (mean squared residual "
+                        f"{fit.chi2:.3g} per reading, at most {MAX_CHI2:g}; worst: weighing {worst + 1}, "
+                        f"{weighings[worst].mass_g:g} g at {weighings[worst].angle_deg:g} deg, off by "
+                        f"{np.abs(fit.residual_uT[worst]).max():.0f} uT): the wrong sensor, magnet grade, masses or "
+                        "angles")
+    _check_bands(model, fit, source)
+    return fit
 
 
 def _check_loads(model: SensorModel, weighings: Sequence[Weighing], source: str) -> None:

@@ -134,8 +134,9 @@ def test_the_readme_walk_reaches_a_passing_acceptance_test(walked):
 
 def test_a_sensor_calibrated_with_weights_passes_its_check(walked):
     """The README's weights path on its own board, whose chip reads a sensor drawn across the bands (not the nominal
-    one: another hyperelastic law, its magnet tilted and offset, the Earth's field turning with the stand): the twelve
-    weighings, the model's calibration into the record, its upload, and the acceptance check passes. The calibration
+    one: another hyperelastic law, its magnet tilted and offset, the Earth's field turning with the stand): the first
+    two weighings, the plan they give for its skin, its weighings, the model's calibration into the record, its
+    upload, and the acceptance check passes. The calibration
     reads the drawn sensor's flat loads within twice the error it states; the re-skin's three weighings keep the
     magnet's parameters."""
     from magfab.models.weighing import RESKIN_KEPT
@@ -144,7 +145,10 @@ def test_a_sensor_calibrated_with_weights_passes_its_check(walked):
     weighed = walked.weighed
     ran = walked.ran[weighed["first"]:]
     weighs = [r for r in ran if r.line.startswith("magfab-readout weigh")]
-    assert [r.stdout.count("step ") for r in weighs] == [12, 3], [r.stdout for r in weighs]
+    planned = json.loads((walked.cwd / "plan.json").read_text())  # the plan weigh-plan made for the drawn skin
+    steps = len(planned["steps"])
+    assert [r.stdout.count("step ") for r in weighs] == [2, steps, 3], [r.stdout for r in weighs]
+    assert planned["stiffness"] >= 1.0 and planned["adapted"]["weighings"] == "first.csv"
     check = next(r for r in ran if r.line.startswith("magfab-readout check"))
     assert "FAIL" not in check.stdout and "verdict: PASS" in check.stdout, check.stdout
     print("\n".join(line for line in check.stdout.splitlines() if line.startswith("step ")))  # with -s
@@ -152,7 +156,7 @@ def test_a_sensor_calibrated_with_weights_passes_its_check(walked):
     fits = [e for e in sensor.events() if e["kind"] == "calibration"]
     first, skin = (json.loads(sensor.file(e["files"]["calibration.json"])) for e in fits)
     model = first["scan"]["model"]
-    assert model["weighings"] == 12 and skin["scan"]["model"]["kept"] == sorted(RESKIN_KEPT)
+    assert model["weighings"] == steps and skin["scan"]["model"]["kept"] == sorted(RESKIN_KEPT)
     # the first calibration against the drawn sensor it was made on (the skin before its re-skin): flat loads
     truth = weighed["skin"].first
     cal = Calibration(first)

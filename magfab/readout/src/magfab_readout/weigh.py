@@ -19,7 +19,7 @@ import pkgutil
 import sys
 from typing import Any, Dict, List, Optional, Tuple
 
-from . import _build
+from . import _build, bounded
 from .check import ask
 from .cli_shared import UsageError
 from .device import DeviceError
@@ -46,6 +46,11 @@ def add_parser(commands, common: argparse.ArgumentParser) -> argparse.ArgumentPa
                        help="the printed cap's mass in grams, weighed on a balance (needed)")
     weigh.add_argument("--coin-g", type=float, metavar="G",
                        help="one coin's mass in grams (default: the plan's coin, the US 5-cent piece, 5.000 g)")
+    weigh.add_argument("--first", action="store_true",
+                       help="only the plan's first two steps, flat: their fit tells how stiff this skin is; then "
+                       "magfab weigh-plan OUT.csv PLAN.json makes the plan for it")
+    weigh.add_argument("--plan", metavar="PLAN.json",
+                       help="walk this plan (from magfab weigh-plan) instead of the build's plan for the softest skin")
     weigh.add_argument("--reskin", action="store_true",
                        help="only the three steps a new skin on a calibrated board needs (magfab calibrate --weights "
                        "with --sensor keeps the rest)")
@@ -127,9 +132,52 @@ def steady_mean(device, samples: int, settle_s: float, dwell_s: float = 0.0
     raise DeviceError("the board stopped sending samples")
 
 
-def _steps(plan: Dict[str, Any], reskin: bool) -> List[Dict[str, Any]]:
+def _steps(plan: Dict[str, Any], args: argparse.Namespace) -> List[Dict[str, Any]]:
     steps = plan["steps"]
-    return [steps[k] for k in plan["reskin"]] if reskin else list(steps)
+    which = "first" if args.first else "reskin" if args.reskin else None
+    return [steps[k] for k in plan[which]] if which else list(steps)
+
+
+def skin_plan(path: str, shipped: Dict[str, Any]) -> Dict[str, Any]:
+    """The plan of ``--plan PATH`` (``magfab weigh-plan``'s), checked against the package's own: the same format,
+    design, coin and cap; steps on the printed stands with whole coins in the cap's pockets, no more than the build's
+    plans take; the first, re-skin and nominal entries whole. UsageError (one line) for anything else."""
+    def bad(what: str) -> UsageError:
+        return UsageError(f"--plan {path}: {what}; make it with magfab weigh-plan FIRST.csv PLAN.json from this "
+                          "build's folder")
+
+    try:
+        plan = bounded.loads_json(bounded.read_text(path, "JSON"), "weight plan", path)
+    except (OSError, ValueError) as exc:
+        raise bad(f"not a readable JSON file ({exc})") from None
+    if not isinstance(plan, dict) or plan.get("format") != shipped["format"]:
+        raise bad(f"not a weight plan ({shipped['format']})")
+    for key in ("spec", "coin", "pockets", "cap_mass_bound_g", "stands_deg"):
+        if plan.get(key) != shipped.get(key):
+            raise bad(f"its {key} is {json.dumps(plan.get(key))}, this build's {json.dumps(shipped.get(key))}")
+    steps, pockets = plan.get("steps"), int(shipped["pockets"])
+    if not isinstance(steps, list) or not 1 <= len(steps) <= 100:
+        raise bad("its steps are not a list of 1 to 100")
+    for k, step in enumerate(steps):
+        step = step if isinstance(step, dict) else {}
+        coins, layout = step.get("coins"), step.get("layout")
+        if (not isinstance(coins, int) or isinstance(coins, bool) or not 0 <= coins <= int(shipped["coins_most"])
+                or step.get("angle_deg") not in shipped["stands_deg"] or not isinstance(layout, list)
+                or len(layout) != pockets or not all(isinstance(n, int) and n >= 0 for n in layout)
+                or sum(layout) != coins):
+            raise bad(f"step {k + 1} is not a stand of {shipped['stands_deg']} deg with 0 to "
+                      f"{shipped['coins_most']} coins laid in the cap's {pockets} pockets")
+    for key in ("first", "reskin"):
+        index = plan.get(key)
+        if not isinstance(index, list) or not all(isinstance(i, int) and 0 <= i < len(steps) for i in index):
+            raise bad(f"its {key} steps are not indices of its steps")
+    try:
+        tip = WeighedTip(plan["nominal"])
+        for step in steps:
+            tip.place_load(0.0, float(step["angle_deg"]))
+    except (KeyError, TypeError, ValueError, IndexError):
+        raise bad("its nominal field tables do not cover its steps' stands") from None
+    return plan
 
 
 def _load_text(step: Dict[str, Any]) -> str:
@@ -176,8 +224,12 @@ def run(args: argparse.Namespace, out, open_device) -> int:
     if plan is None:
         raise UsageError("this build has no weight plan (an array, or a design whose ranges the weight jig's loads "
                          "do not fit; the build's report says why): calibrate it from a scan")
+    if args.first and (args.plan or args.reskin):
+        raise UsageError("--first walks the build's plan's first two steps: give it without --plan and --reskin")
+    if args.plan:
+        plan = skin_plan(args.plan, plan)
     coin_g = _check(args, plan)
-    steps = _steps(plan, args.reskin)
+    steps = _steps(plan, args)
     nominal = WeighedTip(plan["nominal"])  # the nominal sensor's field under each load, printed beside the reading
     pattern = nominal if args.simulate else None  # which the simulated board serves
     written = 0
@@ -185,8 +237,7 @@ def run(args: argparse.Namespace, out, open_device) -> int:
         with open_device(args, text=None, pattern=pattern) as device, \
                 open(args.out, "w", encoding="utf-8", newline="") as f:
             f.write(f"# magfab-readout {_build.VERSION} weigh: spec {json.dumps(_build.SPEC_NAME)}, cap "
-                    f"{args.cap_g:g} g, coin {coin_g:g} g, {'re-skin ' if args.reskin else ''}plan of {len(steps)} "
-                    "steps\n")
+                    f"{args.cap_g:g} g, coin {coin_g:g} g, {_which(args, len(steps))}\n")
             f.write(",".join(WEIGHT_COLUMNS) + "\n")
             f.flush()
             for k, step in enumerate(steps):
@@ -207,6 +258,15 @@ def run(args: argparse.Namespace, out, open_device) -> int:
         if written == 0 and os.path.exists(args.out):
             os.remove(args.out)  # nothing measured: no file that looks like a session
         raise
-    sys.stderr.write(f"magfab-readout: wrote {len(steps)} weighings to {args.out}; next: magfab calibrate --weights "
-                     f"{args.out}\n")
+    after = (f"magfab weigh-plan {args.out} PLAN.json (the plan for this skin)" if args.first else
+             f"magfab calibrate --weights {args.out}")
+    sys.stderr.write(f"magfab-readout: wrote {len(steps)} weighings to {args.out}; next: {after}\n")
     return 0
+
+
+def _which(args: argparse.Namespace, steps: int) -> str:
+    """The header's name of the steps walked."""
+    if args.first:
+        return f"the build's plan's first {steps} steps"
+    plan = f"the plan {json.dumps(args.plan)}" if args.plan else "the build's plan"
+    return f"{plan}'s {steps} re-skin steps" if args.reskin else f"{plan} of {steps} steps"

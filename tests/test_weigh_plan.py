@@ -1,0 +1,179 @@
+"""The two-stage weights bench: ``magfab-readout weigh --first`` weighs the build's plan's first two steps,
+``magfab weigh-plan`` fits them and writes the plan for the skin's own stiffness, and ``magfab-readout weigh --plan``
+walks it. The plan stays inside every drawn skin's range, a stiff skin gets a heavier plan than a soft one, and every
+wrong use is one line, exit 2, nothing written."""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+
+import numpy as np
+import pytest
+from calibrate_support import tree, weigh_simulated
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from magfab.export.weigh_plan import adapted_plan, stiffest_skin
+from magfab.formats.weights_csv import read_weights_csv, weights_csv
+from magfab.jig import jig_of
+from magfab.models.weighing import SensorModel, first_weighings, load_of, noise_uT
+from magfab.models.weighing_study import draw_sensor, jig_plans, truth_model, weighings
+
+
+@pytest.fixture(scope="module")
+def drawn(magone_design, magone_prediction, magone_neo_hookean):
+    """MagOne's model, a truth of the other law, the build's plan's first two weighings and the chip's noise."""
+    model = SensorModel.of(magone_design, magone_prediction)
+    truth = truth_model(magone_design, magone_prediction, model, magone_neo_hookean[1])
+    first = first_weighings(jig_plans(magone_design, magone_prediction)(1.0))
+    return model, truth, first, noise_uT(magone_design)
+
+
+def _sensor(drawn, seed: int, log_mu: float | None = None, centred: bool = False):
+    model, truth, _, _ = drawn
+    sensor = draw_sensor(model, truth, np.random.default_rng(seed), centred)
+    if log_mu is not None:
+        sensor.theta[0] = log_mu
+    return sensor
+
+
+@settings(max_examples=20, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), centred=st.booleans(), edge=st.sampled_from([None, -2.0, 2.0]))
+def test_a_skins_plan_stays_inside_its_range(magone_design, magone_prediction, drawn, seed, centred, edge):
+    """Sensors drawn across the bands (the other law, the magnet tilted and offset or centred, the Earth's field,
+    the chip's noise; the skin also at either end of its band): the plan made from their first two weighings keeps
+    every load's normal and shear parts inside the drawn skin's ranges (the softest skin's times its stiffness),
+    and is never lighter than the softest skin's plan."""
+    model, _, first, noise = drawn
+    mean, sigma = model.prior.mean[0], model.prior.sigma[0]
+    sensor = _sensor(drawn, seed, None if edge is None else mean + edge * sigma, centred)
+    rng = np.random.default_rng(seed)
+    doc = adapted_plan(magone_design, magone_prediction, weighings(sensor, first, noise, rng), "first.csv", "")
+    soft = float(magone_prediction.curves["soft"].mu_kPa) / float(magone_prediction.curves["nominal"].mu_kPa)
+    stiffness = math.exp(float(sensor.theta[0])) / soft
+    jig = jig_of(magone_design)
+    cap = jig.cap_mass_bound_g()
+    masses = [cap + s["coins"] * jig.coin_g for s in doc["steps"]]
+    f = load_of(masses, [s["angle_deg"] for s in doc["steps"]])
+    assert np.all(f[:, 2] <= stiffness * magone_prediction.normal.range_N), (doc["stiffness"], stiffness)
+    assert np.all(f[:, 1] <= stiffness * magone_prediction.shear.range_N), (doc["stiffness"], stiffness)
+    assert 1.0 <= doc["stiffness"] <= stiffest_skin(magone_prediction) * 1.5
+    assert max(masses) >= max(m for m, _, _ in jig.plan(magone_prediction))
+    assert doc["coins_most"] >= max(s["coins"] for s in doc["steps"])
+
+
+def test_the_plan_is_made_and_walked_as_the_readme_runs_it(bench, drawn):
+    """``magfab weigh-plan`` on a stiff skin's first two weighings writes the jig's plan for the stiffness it states
+    (heavier than a soft skin's), which ``magfab-readout weigh --plan`` walks on the simulated board; ``--first``
+    walks the build's plan's first two steps."""
+    project, out, calls, run = bench
+    _, _, first, noise = drawn
+    model = drawn[0]
+    mean, sigma = model.prior.mean[0], model.prior.sigma[0]
+    docs = {}
+    for name, log_mu in (("soft", mean - 2 * sigma), ("stiff", mean + 2 * sigma)):
+        rng = np.random.default_rng(11)
+        (project / f"{name}.csv").write_text(weights_csv(weighings(_sensor(drawn, 11, log_mu), first, noise, rng)))
+        result = run("weigh-plan", f"{name}.csv", f"{name}.json", "--out", str(out))
+        assert result.exit_code == 0, result.output
+        assert f"written to {name}.json" in result.output and calls == []
+        docs[name] = json.loads((project / f"{name}.json").read_text())
+    soft, stiff = docs["soft"], docs["stiff"]
+    assert stiff["stiffness"] > soft["stiffness"] >= 1.0
+    heaviest = lambda doc: max(s["coins"] for s in doc["steps"] if s["angle_deg"] == 0.0)
+    assert heaviest(stiff) > heaviest(soft)
+    from magfab import derive
+    from magfab.models.predict import predict
+    from magfab.spec import load_build_spec
+
+    design = derive(load_build_spec(out))
+    plan = jig_of(design).plan(predict(design), stiffness=stiff["stiffness"])
+    assert [(s["angle_deg"], s["coins"]) for s in stiff["steps"]] == [(a, n) for _, a, n in plan]
+    # the readout walks it, and the build's plan's first two steps with --first
+    proc = weigh_simulated(project, out, "w.csv", "--cap-g", "10.5", "--plan", "stiff.json", "--samples", "40",
+                  "--dwell-s", "0.1")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    rows = read_weights_csv(project / "w.csv")
+    assert [(r.angle_deg, round(r.mass_g - 10.5, 6)) for r in rows] == [
+        (s["angle_deg"], s["coins"] * stiff["coin"]["mass_g"]) for s in stiff["steps"]]
+    proc = weigh_simulated(project, out, "f.csv", "--cap-g", "10.5", "--first", "--samples", "40", "--dwell-s", "0.1")
+    assert proc.returncode == 0 and "next: magfab weigh-plan f.csv" in proc.stderr, proc.stderr[-2000:]
+    shipped = json.loads((out / "calibration" / "weigh_plan.json").read_text())
+    assert [(r.angle_deg, round(r.mass_g - 10.5, 6)) for r in read_weights_csv(project / "f.csv", least=2)] == [
+        (shipped["steps"][k]["angle_deg"], shipped["steps"][k]["coins"] * 5.0) for k in shipped["first"]]
+
+
+@pytest.mark.parametrize("name, says", [
+    ("one.csv", "one.csv: 1 weighings; a skin's plan takes 2 to 500"),
+    ("same.csv", "same.csv: 2 weighings of 1 distinct masses, 0 of them tilted"),
+    ("tilted.csv", "tilted.csv: 2 weighings of 2 distinct masses, 1 of them tilted"),
+    ("heavy.csv", "the plan's first weighings are flat, two or more distinct masses up to the shipped plan's"),
+    ("n52.csv", "n52.csv: the weighings"),
+    ("kept.csv", "kept.json exists: a plan is not overwritten"),
+])
+def test_a_wrong_first_file_is_one_line_and_writes_nothing(bench, drawn, name, says):
+    project, out, calls, run = bench
+    _, _, first, noise = drawn
+    rng = np.random.default_rng(5)
+    sensor = _sensor(drawn, 5)
+    rows = weighings(sensor, first, noise, rng)
+    n52 = copy.deepcopy(sensor)
+    n52.theta[1] = math.log(1.5)  # a far stronger magnet than the design's grade
+    files = {"one.csv": rows[:1], "same.csv": [rows[0], rows[0]],
+             "tilted.csv": [rows[0], weighings(sensor, [(first[1][0], 20.0)], noise, rng)[0]],
+             "heavy.csv": weighings(sensor, [first[0], (first[1][0] + 60.0, 0.0)], noise, rng),
+             "n52.csv": weighings(n52, first, noise, rng), "kept.csv": rows}
+    (project / name).write_text(weights_csv(files[name]))
+    (project / "kept.json").write_text("{}\n")
+    before = tree(project)
+    result = run("weigh-plan", name, "kept.json" if name == "kept.csv" else "plan.json", "--out", str(out))
+    assert result.exit_code == 2, result.output
+    assert says in result.output and len(result.output.strip().splitlines()) == 1, result.output
+    assert tree(project) == before and calls == []
+
+
+def _mutations(plan: dict) -> list[tuple[str, dict]]:
+    """A valid plan each broken one way, with what the refusal names."""
+    out = []
+
+    def broken(what, change):
+        doc = copy.deepcopy(plan)
+        change(doc)
+        out.append((what, doc))
+
+    broken("not a weight plan", lambda d: d.update(format="magfab-weigh-plan/2"))
+    broken("its spec is", lambda d: d.update(spec="other"))
+    broken("its coin is", lambda d: d["coin"].update(mass_g=6.0))
+    broken("its pockets is", lambda d: d.update(pockets=d["pockets"] + 1))
+    broken("its cap_mass_bound_g is", lambda d: d.update(cap_mass_bound_g=d["cap_mass_bound_g"] / 2))
+    broken("its steps are not a list", lambda d: d.update(steps=[]))
+    broken("step 2 is not a stand", lambda d: d["steps"][1].update(angle_deg=30.0))
+    broken("step 2 is not a stand", lambda d: d["steps"][1].update(coins=d["coins_most"] + 2))
+    broken("step 2 is not a stand", lambda d: d["steps"][1].update(coins=d["steps"][1]["coins"] + 1))
+    broken("step 2 is not a stand", lambda d: d["steps"][1].update(coins=True))
+    broken("step 2 is not a stand", lambda d: d["steps"][1]["layout"].pop())
+    broken("step 2 is not a stand", lambda d: d["steps"].__setitem__(1, "ten coins"))
+    broken("its first steps are not indices", lambda d: d.update(first=[0, len(d["steps"])]))
+    broken("its reskin steps are not indices", lambda d: d.update(reskin=None))
+    broken("its nominal field tables do not cover", lambda d: d["nominal"].pop())
+    broken("its nominal field tables do not cover", lambda d: d.pop("nominal"))
+    return out
+
+
+def test_a_plan_file_that_is_not_this_builds_is_refused(weigh_package, tmp_path):
+    """``weigh --plan``: the build's own plan passes; each of its keys broken one way (another format, design,
+    coin, pocket count or cap; a step off the stands, past the coins the build's plans take, with coins not laid in
+    the pockets; first or re-skin steps that are not steps; a stand without its nominal table), or a file that is
+    not JSON, is one UsageError line naming --plan and what is wrong."""
+    shipped = weigh_package.plan
+    path = tmp_path / "plan.json"
+    path.write_text(json.dumps(shipped))
+    assert weigh_package.weigh.skin_plan(str(path), shipped)["steps"] == shipped["steps"]
+    for what, doc in [*_mutations(shipped), ("not a readable JSON file", None)]:
+        path.write_text("{not json" if doc is None else json.dumps(doc))
+        with pytest.raises(weigh_package.UsageError) as e:
+            weigh_package.weigh.skin_plan(str(path), shipped)
+        message = str(e.value)
+        assert message.startswith(f"--plan {path}: ") and what in message and "\n" not in message, (what, message)
