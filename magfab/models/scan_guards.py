@@ -38,6 +38,7 @@ from ..formats.scan_csv import (
     read_reference,
     scan_csv,
 )
+from ..readout.src.magfab_readout.clock import clock_map
 from ..spec import Calibration as CalibrationSpec
 from .calibration import Calibration
 
@@ -191,39 +192,14 @@ def _travel(scan: Scan, doc: Mapping[str, Any]) -> tuple[float, float, int] | No
 
 def host_clock(recording: Recording) -> np.ndarray:
     """The host-clock time (Unix time, s) of each recorded sample, (N,): the device's time_s mapped onto the host
-    clock by the line under every (time_s, host_time_s) pair that hugs them closest (least total gap: the edge of
-    their lower convex hull over the mean time_s, as in network clock-skew estimation). host_time_s is when the
-    host read a sample, late by the serial link's buffering (a batch of samples read at once: up to tens of ms),
-    while the device's clock spaces the samples exactly; the line's slope takes the two clocks' rate difference
-    (a ceramic resonator's 0.5 %) and it passes through the least-delayed reads. A recording whose device time
-    does not advance keeps host_time_s."""
+    clock by the readout's :func:`~magfab.readout.src.magfab_readout.clock.clock_map` (the line under every
+    (time_s, host_time_s) pair that hugs them closest: the edge of their lower convex hull over the mean time_s).
+    A recording whose device time does not advance keeps host_time_s."""
     t, h = recording.scan.time_s, recording.host_time_s
     if len(t) < 2 or not float(t[-1] - t[0]) > 0.0:
         return h.copy()
-    x, y = t - t[0], h - h[0]  # small numbers: Unix time's 1.7e9 would eat the cross products' precision
-    hull = _lower_hull(x, y)
-    k = min(int(np.searchsorted(x[hull], float(np.mean(x)))), len(hull) - 1)
-    i, j = hull[max(k - 1, 0)], hull[max(k, 1)]
-    slope = (y[j] - y[i]) / (x[j] - x[i])
-    return h[0] + y[i] + slope * (x - x[i])
-
-
-def _lower_hull(x: np.ndarray, y: np.ndarray) -> list[int]:
-    """Indices of the lower convex hull of the points (x, y), x non-decreasing, from left to right (Andrew's
-    monotone chain; of points with equal x only the lowest can be on it)."""
-    hull: list[int] = []
-    for k in range(len(x)):
-        if hull and x[hull[-1]] == x[k]:
-            if y[k] >= y[hull[-1]]:
-                continue
-            hull.pop()
-        while len(hull) >= 2:
-            i, j = hull[-2], hull[-1]
-            if (x[j] - x[i]) * (y[k] - y[i]) - (y[j] - y[i]) * (x[k] - x[i]) > 0:
-                break
-            hull.pop()
-        hull.append(k)
-    return hull
+    t0, h0, slope = clock_map(t.tolist(), h.tolist())
+    return h0 + slope * (t - t0)
 
 
 def _period(recording: Recording) -> float:

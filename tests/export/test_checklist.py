@@ -130,8 +130,8 @@ def test_the_build_quotes_its_own_acceptance_bands_and_bom(default_build):
 
 def test_the_weights_section_follows_the_scan_and_names_the_plans_load(default_build):
     """With the build's weight plan the checklist gains "Calibrate with weights" between the scan's calibration and
-    the acceptance test, naming the coins the stiffest skin's plan needs and the cap's bound; the BOM lists the jig, the coins and a
-    balance; an array's build has neither."""
+    the acceptance test, naming the coins the stiffest skin's plan needs and the cap's bound; the BOM lists the jig,
+    the coins and a balance; an array's build has neither."""
     import json
 
     out = default_build.out_dir

@@ -19,7 +19,7 @@ import sys
 import time
 from typing import List
 
-from . import _build, array_check, array_sensor, board_sensor, eeprom, identity
+from . import _build, array_check, array_sensor, board_sensor, eeprom, identity, record_formats
 from .array_sim import SimulatedArray
 from .cli_shared import (
     CSV_COLUMNS,
@@ -120,6 +120,9 @@ def _summary(reader: ArrayReader, span: Span) -> None:
 def record(args: argparse.Namespace, array: ArrayCalibration) -> int:
     if args.seconds is not None and not args.seconds > 0:
         raise DeviceError("--seconds must be positive")
+    fmt = record_formats.format_of(args.format, args.out)
+    record_formats.require(fmt)
+    path = args.out if fmt == "csv" else record_formats.partial_path(args.out)
     with _device(args, array, bool(args.text)) as device:
         info = device.info()
         linked = array_sensor.link(device, info, args, array)
@@ -137,7 +140,7 @@ def record(args: argparse.Namespace, array: ArrayCalibration) -> int:
                  "magnets' field included); F*_sensor_N that taxel's force after the compensation of array.json"]
         extra += [f"# taxel {k} calibration_sha256: {c.sha256}" for k, c in enumerate(array.calibrations)]
         extra += [] if linked.sensor is None else [f"# sensor: {linked.sensor.id}"]
-        with open(args.out, "w", encoding="utf-8", newline="") as f:
+        with open(path, "w", encoding="utf-8", newline="") as f:
             record_header(f, device, info, columns, extra)
             with stop:
                 for cycle in reader.cycles(seconds=args.seconds):
@@ -155,6 +158,8 @@ def record(args: argparse.Namespace, array: ArrayCalibration) -> int:
                               file=sys.stderr)
                     if stop.requested:
                         break
+        if fmt != "csv":
+            record_formats.convert(path, args.out, fmt, {str(k): c.to_dict() for k, c in enumerate(array.calibrations)})
         print("magfab-readout: wrote {} rows to {}{} ({} chip-error, missing or full-scale readings left out)".format(
             written, args.out, " (Ctrl-C)" if stop.requested else "", skipped), file=sys.stderr)
         _summary(reader, span)

@@ -19,7 +19,7 @@ import sys
 import time
 from typing import List, NoReturn, Optional
 
-from . import _build, array_cli, board_sensor, bounded, check, identity, records, weigh
+from . import _build, array_cli, board_sensor, bounded, check, identity, record_formats, records, weigh
 from .calibration import Calibration, CalibrationError, calibration_sha256
 from .cli_shared import (
     CSV_COLUMNS,
@@ -112,7 +112,11 @@ def _parser() -> argparse.ArgumentParser:
                                  "Samples with a chip error or an axis at the chip's full scale are left out. To "
                                  "calibrate, log a reference force sensor on this computer's clock during the scan "
                                  "and pass its log to magfab calibrate --reference.")
-    record.add_argument("out", metavar="OUT.csv", help="file to write")
+    record.add_argument("out", metavar="OUT", help="file to write")
+    record.add_argument("--format", choices=record_formats.FORMATS,
+                        help="csv (default), parquet (units and the calibration in its metadata) or mcap (ROS 2 "
+                        "messages: WrenchStamped, MagneticField, Temperature); default: from OUT's suffix "
+                        "(.parquet, .mcap), else csv. parquet and mcap need the package's extra of that name")
     record.add_argument("--seconds", type=float, metavar="S",
                         help="stop after S seconds of device time (default: record until Ctrl-C)")
     record.add_argument("--text", action="store_true", help="ask the firmware for text lines instead of binary frames")
@@ -248,6 +252,9 @@ def _summary(device: Device, span: Span, worst: Optional[float], rest: Optional[
 def _record(args: argparse.Namespace) -> int:
     if args.seconds is not None and not args.seconds > 0:
         raise DeviceError("--seconds must be positive")
+    fmt = record_formats.format_of(args.format, args.out)
+    record_formats.require(fmt)
+    path = args.out if fmt == "csv" else record_formats.partial_path(args.out)
     with _device(args, text=bool(args.text)) as device:
         info = device.info()
         linked = board_sensor.link(device, info, args)
@@ -261,7 +268,7 @@ def _record(args: argparse.Namespace) -> int:
         stop = Interrupt()
         rest = _rest_tracker(device)
         span = Span()
-        with open(args.out, "w", encoding="utf-8", newline="") as f:
+        with open(path, "w", encoding="utf-8", newline="") as f:
             record_header(f, device, info, columns, sensor)
             with stop:
                 for sample in device.samples(seconds=args.seconds):
@@ -286,6 +293,8 @@ def _record(args: argparse.Namespace) -> int:
                     stop.writing = False
                     if stop.requested:
                         break
+        if fmt != "csv":
+            record_formats.convert(path, args.out, fmt, device.calibration.to_dict())
         print("magfab-readout: wrote {} rows to {}{} ({} chip-error samples and {} with an axis at the chip's full "
               "scale left out)".format(written, args.out, " (Ctrl-C)" if stop.requested else "", skipped, full),
               file=sys.stderr)
