@@ -351,7 +351,9 @@ def _disturbance(pred: Prediction, what: str, field_G: float, normal: Channel | 
     def worst(ch: Channel, f: float) -> float:
         b = ch.field_at(f)
         e = force_error_mN(ch, f, np.array([b - field_G, b + field_G]))
-        return float(e[np.argmax(np.abs(e))])
+        # the larger error; on a tie (a linear channel: equal to the last bit, which rounding decides) the one the
+        # field's fall makes, so a figure's sign does not turn with the numerical library's rounding
+        return float(e[1] if abs(e[1]) > abs(e[0]) * (1.0 + 1e-9) else e[0])
 
     return Disturbance(what, float(field_G), worst(normal, 0.0), worst(normal, normal.end_N), worst(shear, 0.0))
 
