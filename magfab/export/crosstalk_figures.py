@@ -45,6 +45,8 @@ def _map(plt, xt: Crosstalk):
     ax.set_yticks(range(n))
     ax.set_xlabel("neighbour j (moves)")
     ax.set_ylabel("taxel i (misreads)")
+    raw = float((xt.field_mN + xt.mechanical_mN).max())
+    ax.set_title(f"misreading after the host's compensation\n(without it: up to {raw:.0f} mN)", fontsize=9)
     fig.colorbar(im, ax=ax, label="mN")
     return fig
 

@@ -65,12 +65,12 @@ def _bars_panel(ax, d: Drift) -> list:
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
-    rows = [(f"turned over, {b.field_G / 2:g} G", b) for b in d.rotation_band]
+    rows = [(f"turned over,\n{b.field_G / 2:g} G", b) for b in d.rotation_band]
     stated = d.rotation
     if all(abs(stated.field_G - b.field_G) > 1e-12 for b in d.rotation_band):
-        rows.append((f"this place and turn ({stated.field_G:.2g} G on an axis)", stated))
+        rows.append((f"this place and turn\n({stated.field_G:.2g} G on an axis)", stated))
     if d.stray is not None:
-        rows.append((f"stray dipole ({d.stray.field_G:.2g} G)", d.stray))
+        rows.append((f"stray dipole\n({d.stray.field_G:.2g} G)", d.stray))
     y = np.arange(len(rows))
     h = 0.26
     for k, colour in enumerate(_BAR_COLOUR.values()):
@@ -81,14 +81,14 @@ def _bars_panel(ax, d: Drift) -> list:
     ax.set_yticks(y, [label for label, _ in rows], fontsize=7.5)
     ax.invert_yaxis()
     ax.set_xlabel("force error, mN")
-    ax.set_title("Earth's field and stray source", fontsize=9)
+    ax.set_title("Earth's field" + (" and stray source" if d.stray is not None else ""), fontsize=9)
     return [Patch(color=c, label=k) for k, c in _BAR_COLOUR.items()] + [
         Line2D([], [], color="k", lw=0.8, ls=":", label=f"shear resolution {d.resolution_mN['shear']:.2f} mN")]
 
 
 def _drift(plt, d: Drift):
     fig, (left, right) = plt.subplots(1, 2, figsize=(9.6, 4.4), layout="constrained",
-                                      gridspec_kw={"width_ratios": (1.1, 1.0)})
+                                      gridspec_kw={"width_ratios": (1.1, 1.0), "wspace": 0.12})
     handles = _temperature_panel(left, d) + _bars_panel(right, d)
     _legend_below(fig, handles, ncol=4, fontsize=7)
     return fig
