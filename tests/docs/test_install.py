@@ -34,3 +34,4 @@ def test_readme_install_command_builds_the_default(tmp_path):
     out = clone / "build" / "magone"
     assert (out / "manifest.json").is_file() and (out / "firmware" / "magfab-atmega328p.hex").is_file()
     assert "built magone into" in proc.stdout
+    assert sorted(p.name for p in (clone / "build").iterdir()) == ["magone"]  # no setuptools build/lib beside it
