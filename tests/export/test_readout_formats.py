@@ -170,3 +170,40 @@ def test_the_clock_map_lies_under_every_read_and_over_the_true_clock_at_the_midd
     mean = sum(t) / n
     assert h0 + slope * (mean - t0) >= offset + (1.0 + rate) * mean - eps
     assert math.isfinite(slope)
+
+
+@pytest.mark.parametrize("which, command", [("default", ("stream",)), ("default", ("record", "ctrl_c.mcap")),
+                                            ("strip_1x5", ("stream",))])
+def test_ctrl_c_ends_on_a_whole_line_and_the_summary_follows(default_build, array_builds, tmp_path, which,
+                                                             command):
+    """Ctrl-C, the documented way to stop ``stream`` and ``record``: the output ends on a whole row, the summary of
+    samples, losses and rate is printed, the exit status is 0, and a Parquet or MCAP recording is converted."""
+    import signal
+
+    build = default_build if which == "default" else array_builds[which]
+    src = str(build.out_dir / "readout" / "src")
+    proc = subprocess.Popen([sys.executable, "-c", f"import sys; sys.path.insert(0, {src!r}); "
+                             "from magfab_readout.cli import main; sys.exit(main())", *command, "--simulate"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
+    assert proc.stdout is not None and proc.stderr is not None
+    seen = ""
+    if command[0] == "stream":
+        for _ in range(40):  # rows are coming
+            seen += proc.stdout.readline()
+    else:
+        import time
+
+        deadline = time.monotonic() + 60
+        partial = tmp_path / "ctrl_c.mcap.partial.csv"
+        while time.monotonic() < deadline and (not partial.exists() or partial.stat().st_size < 5000):
+            time.sleep(0.05)
+    proc.send_signal(signal.SIGINT)
+    out = seen + proc.stdout.read()  # what the reader's own buffer holds too (communicate would read past it)
+    err = proc.stderr.read()
+    assert proc.wait(timeout=120) == 0, err
+    assert "lost (sequence gaps)" in err and "Traceback" not in err, err
+    if command[0] == "stream":
+        assert out.endswith("\n") and len(out.splitlines()[-1].split()) >= 11, out[-500:]
+    else:
+        assert "(Ctrl-C)" in err and len(_mcap(tmp_path / "ctrl_c.mcap")["/magfab/wrench"]) > 10
+        assert not (tmp_path / "ctrl_c.mcap.partial.csv").exists()

@@ -95,9 +95,15 @@ def stream(args: argparse.Namespace, array: ArrayCalibration, out) -> int:
             columns += ["Bx_lsb", "By_lsb", "Bz_lsb", "T_raw"]
         out.write("# " + " ".join(columns) + "\n")
         span = Span()
-        for cycle in reader.cycles(count=args.count, seconds=args.seconds, keep_up=True):
-            out.write("".join(_row(cycle, t, args.raw) + "\n" for t in cycle))
-            span.add(cycle.time_s)
+        stop = Interrupt()  # Ctrl-C ends the stream on a whole cycle, and the summary follows it
+        with stop:
+            for cycle in reader.cycles(count=args.count, seconds=args.seconds, keep_up=True):
+                stop.writing = True
+                out.write("".join(_row(cycle, t, args.raw) + "\n" for t in cycle))
+                span.add(cycle.time_s)
+                stop.writing = False
+                if stop.requested:
+                    break
         _summary(reader, span)
     return 0
 

@@ -208,27 +208,41 @@ def _stream(args: argparse.Namespace, out) -> int:
         if args.check:
             columns.append("dF_N")
         out.write("# " + " ".join(columns) + "\n")
-        worst = 0.0
         rest = _rest_tracker(device)
         span = Span()
-        for sample in device.samples(count=args.count, seconds=args.seconds):
-            rest.add(sample)
-            span.add(sample.time_s)
-            row = [format_number(sample.time_s, 10, 4, False), f"{sample.seq:3d}"]
-            row += [format_number(f, 8, 4) for f in sample.force_N]
-            row += [format_number(b, 9, 2) for b in sample.B_uT]
-            row += [format_number(sample.temperature_C, 6, 2, False), sample.flags,
-                    (sample.fault_name or "-").replace(" ", "_")]
-            if args.raw:
-                counts = sample.counts or (0, 0, 0)
-                row += [f"{c:6d}" for c in counts] + [f"{sample.temperature_raw or 0:5d}"]
-            if args.check:
-                diff = cross_check(sample, device.calibration)
-                worst = max(worst, diff) if not math.isnan(diff) else worst
-                row.append(f"{diff:.2e}" if not math.isnan(diff) else "nan")
-            out.write("  ".join(row) + "\n")
+        stop = Interrupt()  # Ctrl-C ends the stream on a whole line, and the summary follows it
+        with stop:
+            worst = _stream_rows(args, device, out, rest, span, stop)
         _summary(device, span, worst if args.check else None, rest)
     return 0
+
+
+def _stream_rows(args: argparse.Namespace, device: Device, out, rest: RestTracker, span: Span,
+                 stop: Interrupt) -> float:
+    """``stream``'s rows until ``--count``, ``--seconds`` or Ctrl-C (``stop``), each written whole; the largest
+    host-firmware force difference (``--check``, else 0)."""
+    worst = 0.0
+    for sample in device.samples(count=args.count, seconds=args.seconds):
+        stop.writing = True
+        rest.add(sample)
+        span.add(sample.time_s)
+        row = [format_number(sample.time_s, 10, 4, False), f"{sample.seq:3d}"]
+        row += [format_number(f, 8, 4) for f in sample.force_N]
+        row += [format_number(b, 9, 2) for b in sample.B_uT]
+        row += [format_number(sample.temperature_C, 6, 2, False), sample.flags,
+                (sample.fault_name or "-").replace(" ", "_")]
+        if args.raw:
+            counts = sample.counts or (0, 0, 0)
+            row += [f"{c:6d}" for c in counts] + [f"{sample.temperature_raw or 0:5d}"]
+        if args.check:
+            diff = cross_check(sample, device.calibration)
+            worst = max(worst, diff) if not math.isnan(diff) else worst
+            row.append(f"{diff:.2e}" if not math.isnan(diff) else "nan")
+        out.write("  ".join(row) + "\n")
+        stop.writing = False
+        if stop.requested:
+            break
+    return worst
 
 
 def _rest_tracker(device: Device) -> RestTracker:
