@@ -172,8 +172,8 @@ def test_the_clock_map_lies_under_every_read_and_over_the_true_clock_at_the_midd
     assert math.isfinite(slope)
 
 
-@pytest.mark.parametrize("which, command", [("default", ("stream",)), ("default", ("record", "ctrl_c.mcap")),
-                                            ("strip_1x5", ("stream",))])
+@pytest.mark.parametrize("which, command", [("default", ("stream",)), ("default", ("stream", "--text", "--check")),
+                                            ("default", ("record", "ctrl_c.mcap")), ("strip_1x5", ("stream",))])
 def test_ctrl_c_ends_on_a_whole_line_and_the_summary_follows(default_build, array_builds, tmp_path, which,
                                                              command):
     """Ctrl-C, the documented way to stop ``stream`` and ``record``: the output ends on a whole row, the summary of
@@ -204,6 +204,7 @@ def test_ctrl_c_ends_on_a_whole_line_and_the_summary_follows(default_build, arra
     assert "lost (sequence gaps)" in err and "Traceback" not in err, err
     if command[0] == "stream":
         assert out.endswith("\n") and len(out.splitlines()[-1].split()) >= 11, out[-500:]
+        assert ("host vs firmware force: max |dF|" in err) == ("--check" in command), err
     else:
         assert "(Ctrl-C)" in err and len(_mcap(tmp_path / "ctrl_c.mcap")["/magfab/wrench"]) > 10
         assert not (tmp_path / "ctrl_c.mcap.partial.csv").exists()

@@ -211,17 +211,17 @@ def _stream(args: argparse.Namespace, out) -> int:
         rest = _rest_tracker(device)
         span = Span()
         stop = Interrupt()  # Ctrl-C ends the stream on a whole line, and the summary follows it
+        worst = [0.0]  # kept however the rows end
         with stop:
-            worst = _stream_rows(args, device, out, rest, span, stop)
-        _summary(device, span, worst if args.check else None, rest)
+            _stream_rows(args, device, out, rest, span, stop, worst)
+        _summary(device, span, worst[0] if args.check else None, rest)
     return 0
 
 
 def _stream_rows(args: argparse.Namespace, device: Device, out, rest: RestTracker, span: Span,
-                 stop: Interrupt) -> float:
+                 stop: Interrupt, worst: List[float]) -> None:
     """``stream``'s rows until ``--count``, ``--seconds`` or Ctrl-C (``stop``), each written whole; the largest
-    host-firmware force difference (``--check``, else 0)."""
-    worst = 0.0
+    host-firmware force difference so far (``--check``) in ``worst[0]``."""
     for sample in device.samples(count=args.count, seconds=args.seconds):
         stop.writing = True
         rest.add(sample)
@@ -236,13 +236,12 @@ def _stream_rows(args: argparse.Namespace, device: Device, out, rest: RestTracke
             row += [f"{c:6d}" for c in counts] + [f"{sample.temperature_raw or 0:5d}"]
         if args.check:
             diff = cross_check(sample, device.calibration)
-            worst = max(worst, diff) if not math.isnan(diff) else worst
+            worst[0] = max(worst[0], diff) if not math.isnan(diff) else worst[0]
             row.append(f"{diff:.2e}" if not math.isnan(diff) else "nan")
         out.write("  ".join(row) + "\n")
         stop.writing = False
         if stop.requested:
             break
-    return worst
 
 
 def _rest_tracker(device: Device) -> RestTracker:
