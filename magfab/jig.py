@@ -32,6 +32,7 @@ from .board.placement import ORIGIN, place
 from .design import Design
 from .models.predict import travel_to_d_min
 from .models.weighing import weight_plan
+from .readout.src.magfab_readout.coins import coin_layout
 from .recipes import catalogue
 from .spec import Tip
 from .units import G0
@@ -128,7 +129,7 @@ class Jig:
         """Whether the heaviest printed cap with ``coins`` stays steady on a flat tip against its contact's
         rotational stiffness (:data:`CONTACT_STEADY_SHARE`; the whole load counted at the coins' centre, which
         overstates the moment of the cap's own mass, whose centre is lower). The skin is the softest of the band
-        times ``stiffness`` (its normal curve's force scaled by it, :func:`magfab.models.weighing.stiffness_of`), so
+        times ``stiffness`` (its normal curve's force scaled by it, :func:`magfab.models.weight_plan.stiffness_of`), so
         k_n at the load W is ``stiffness`` times the softest curve's tangent where it carries W / ``stiffness``. A
         rounded tip: True (the rolling rule bounds its stacks, :attr:`steady_arm_mm`)."""
         if self.rounded_tip:
@@ -139,7 +140,7 @@ class Jig:
         return weight_N * self.moment_arm_mm(coins) <= CONTACT_STEADY_SHARE * k_n * self.tip_radius_mm**2 / 4.0
 
     def plan_loads(self, prediction: Prediction, stiffness: float = 1.0) -> dict[str, Any]:
-        """What :func:`magfab.models.weighing.weight_plan` takes of this jig for ``prediction``'s design and a skin
+        """What :func:`magfab.models.weight_plan.weight_plan` takes of this jig for ``prediction``'s design and a skin
         ``stiffness`` times the softest: its loads on which the cap stays steady (:meth:`contact_steady`) and a tilted
         stand's most."""
         loads = tuple(w for w in self.loads_g()
@@ -148,7 +149,7 @@ class Jig:
 
     def plan(self, prediction: Prediction, cap_g: float | None = None, stiffness: float = 1.0
              ) -> list[tuple[float, float, int]]:
-        """The weight plan (:func:`magfab.models.weighing.weight_plan`) in this jig's coins: (mass on the tip in g,
+        """The weight plan (:func:`magfab.models.weight_plan.weight_plan`) in this jig's coins: (mass on the tip in g,
         stand angle in degrees, coins), the cap's mass ``cap_g`` (default: :meth:`cap_mass_bound_g`, the heaviest a
         printed cap may be), for a skin ``stiffness`` times the softest of the band (default: the softest, whose plan
         is safe for every skin)."""
@@ -210,19 +211,6 @@ def jig_of(design: Design) -> Jig:
                coin_mm=coin["thickness_mm"].nominal, sink_mm=sink, density_g_cm3=jig["density_g_cm3"].nominal,
                board_mm=(x0 - ox, oy - y1, x1 - ox, oy - y0), board_thickness_mm=design.spec.pcb.thickness_mm,
                tip_radius_mm=r_e, rounded_tip=design.tip is Tip.HEMISPHERE)
-
-
-def coin_layout(coins: int, pockets: int) -> list[int]:
-    """How many coins go in each pocket (in order round the cap) for an even number of ``coins``: pairs dealt to the
-    opposite pockets in turn, so each opposite pair holds equal stacks."""
-    if coins % 2:
-        raise ValueError(f"coins go in opposite pairs: {coins} is odd")
-    half = pockets // 2
-    out = [0] * pockets
-    for k in range(coins // 2):
-        out[k % half] += 1
-        out[k % half + half] += 1
-    return out
 
 
 def cap_solid(design: Design) -> cq.Workplane:

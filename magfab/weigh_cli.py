@@ -66,9 +66,14 @@ def weigh_plan(first: Path, plan_out: Path, spec: Path | None, out_dir: Path | N
         design = preflight(derive(loaded))
         doc = adapted_plan(design, predict(design), weighings, first.name, hashlib.sha256(raw).hexdigest())
         text = json.dumps(doc, indent=1, sort_keys=True) + "\n"
+        if not plan_out.parent.is_dir():
+            raise ScanError(f"{plan_out}: its folder {plan_out.parent} does not exist")
         partial = plan_out.with_name(plan_out.name + ".partial")
-        partial.write_text(text, encoding="utf-8")
-        os.replace(partial, plan_out)  # whole or not at all
+        try:
+            partial.write_text(text, encoding="utf-8")
+            os.replace(partial, plan_out)  # whole or not at all
+        finally:
+            partial.unlink(missing_ok=True)
         mu = doc["adapted"]["mu_ratio"]
         heaviest = max(s["coins"] for s in doc["steps"])
         click.echo(f"plan for {loaded.name}'s skin: shear modulus {mu['value']:.2f} +/- {mu['sd']:.2f} of nominal, "

@@ -75,6 +75,9 @@ def plan_document(design: Design, prediction: Prediction, stiffness: float = 1.0
         "cap_mass_bound_g": round(cap, 3),
         "coins_most": max(n for plan_ in (plan, stiffest) for _, _, n in plan_),
         "stands_deg": list(ANGLES_DEG),
+        # per stand, the most coins any skin's plan puts there (the stiffest skin's): a skin's plan stays within it
+        "stand_coins_most": [max((n for plan_ in (plan, stiffest) for _, a, n in plan_ if a == angle), default=0)
+                             for angle in ANGLES_DEG],
         "stiffness": round(stiffness, 4),
         "steps": [{"angle_deg": a, "coins": n, "layout": coin_layout(n, jig.pockets),
                    "moment_arm_mm": round(jig.moment_arm_mm(n), 3)} for _, a, n in plan],
@@ -100,14 +103,17 @@ def adapted_plan(design: Design, prediction: Prediction, weighings: Sequence[Wei
     stiffest). :class:`ScanError` for weighings that are not the first two: flat, the cap alone and the heaviest of
     the shipped plan's flat loads or lighter."""
     jig = jig_of(design)
-    heaviest = max(m for m, a, _ in jig.plan(prediction) if a == 0.0)
+    cap = jig.cap_mass_bound_g()
+    coins_g = max(m for m, a, _ in jig.plan(prediction) if a == 0.0) - cap  # the shipped plan's heaviest flat coins
     loads = {round(w.mass_g, 3) for w in weighings}
     tilted = [w for w in weighings if w.angle_deg != 0.0]
-    if tilted or len(loads) < 2 or max(loads) > heaviest + 0.5 * jig.coin_g:
+    # the cap is the lightest load (weigh takes a cap up to twice its printed bound); the coins on it, the rest
+    if (tilted or len(loads) < 2 or min(loads) > 2.0 * cap
+            or max(loads) - min(loads) > coins_g + 0.5 * jig.coin_g):
         raise ScanError(f"{source}: {len(weighings)} weighings of {len(loads)} distinct masses, {len(tilted)} of them "
-                        f"tilted, heaviest {max(loads):g} g: the plan's first weighings are flat, two or more "
-                        f"distinct masses up to the shipped plan's heaviest flat load ({heaviest:.1f} g with the "
-                        "heaviest cap): magfab-readout weigh FIRST.csv --first")
+                        f"tilted, {min(loads):g} to {max(loads):g} g: the plan's first weighings are flat, the cap "
+                        f"alone (at most {2.0 * cap:.1f} g) and with up to {coins_g:.1f} g of coins: "
+                        "magfab-readout weigh FIRST.csv --first")
     model = SensorModel.of(design, prediction)
     fit = checked_fit(model, weighings, source=source)
     stiffness = min(stiffness_of(fit, model, prediction), stiffest_skin(prediction))  # no stiffer than the band

@@ -126,9 +126,7 @@ def _summary(reader: ArrayReader, span: Span) -> None:
 def record(args: argparse.Namespace, array: ArrayCalibration) -> int:
     if args.seconds is not None and not args.seconds > 0:
         raise DeviceError("--seconds must be positive")
-    fmt = record_formats.format_of(args.format, args.out)
-    record_formats.require(fmt)
-    path = args.out if fmt == "csv" else record_formats.partial_path(args.out)
+    fmt, path = record_formats.prepare(args.format, args.out)
     with _device(args, array, bool(args.text)) as device:
         info = device.info()
         linked = array_sensor.link(device, info, args, array)
@@ -164,11 +162,11 @@ def record(args: argparse.Namespace, array: ArrayCalibration) -> int:
                               file=sys.stderr)
                     if stop.requested:
                         break
-        if fmt != "csv":
-            record_formats.convert(path, args.out, fmt, {str(k): c.to_dict() for k, c in enumerate(array.calibrations)})
         print("magfab-readout: wrote {} rows to {}{} ({} chip-error, missing or full-scale readings left out)".format(
-            written, args.out, " (Ctrl-C)" if stop.requested else "", skipped), file=sys.stderr)
+            written, path, " (Ctrl-C)" if stop.requested else "", skipped), file=sys.stderr)
         _summary(reader, span)
+    record_formats.finish(path, args.out, fmt, {str(k): c.to_dict() for k, c in enumerate(array.calibrations)},
+                          written)
     return 0
 
 

@@ -265,9 +265,7 @@ def _summary(device: Device, span: Span, worst: Optional[float], rest: Optional[
 def _record(args: argparse.Namespace) -> int:
     if args.seconds is not None and not args.seconds > 0:
         raise DeviceError("--seconds must be positive")
-    fmt = record_formats.format_of(args.format, args.out)
-    record_formats.require(fmt)
-    path = args.out if fmt == "csv" else record_formats.partial_path(args.out)
+    fmt, path = record_formats.prepare(args.format, args.out)
     with _device(args, text=bool(args.text)) as device:
         info = device.info()
         linked = board_sensor.link(device, info, args)
@@ -306,12 +304,12 @@ def _record(args: argparse.Namespace) -> int:
                     stop.writing = False
                     if stop.requested:
                         break
-        if fmt != "csv":
-            record_formats.convert(path, args.out, fmt, device.calibration.to_dict())
         print("magfab-readout: wrote {} rows to {}{} ({} chip-error samples and {} with an axis at the chip's full "
-              "scale left out)".format(written, args.out, " (Ctrl-C)" if stop.requested else "", skipped, full),
+              "scale left out)".format(written, path, " (Ctrl-C)" if stop.requested else "", skipped, full),
               file=sys.stderr)
         _summary(device, span, None, rest)
+        calibration = device.calibration.to_dict()
+    record_formats.finish(path, args.out, fmt, calibration, written)
     return 0
 
 

@@ -13,6 +13,7 @@ Standard library only (the readout runs on Python 3.8 with pyserial alone).
 from __future__ import annotations
 
 import bisect
+from array import array
 from typing import List, Sequence, Tuple
 
 __all__ = ["clock_map", "lower_hull"]
@@ -26,8 +27,9 @@ def clock_map(time_s: Sequence[float], host_s: Sequence[float]) -> Tuple[float, 
     if n < 2 or not time_s[-1] - time_s[0] > 0.0:
         return (float(time_s[0]), float(host_s[0]), 1.0) if n else (0.0, 0.0, 1.0)
     t0, h0 = float(time_s[0]), float(host_s[0])
-    x = [float(t) - t0 for t in time_s]  # small numbers: Unix time's 1.7e9 would eat the cross products' precision
-    y = [float(h) - h0 for h in host_s]
+    # small numbers: Unix time's 1.7e9 would eat the cross products' precision; doubles, 8 bytes a sample
+    x = array("d", (float(t) - t0 for t in time_s))
+    y = array("d", (float(h) - h0 for h in host_s))
     hull = lower_hull(x, y)
     mean = sum(x) / n
     k = min(bisect.bisect_left([x[i] for i in hull], mean), len(hull) - 1)

@@ -1,4 +1,4 @@
-"""``record --format``: a recording as robot stacks read it (docs/bundle.md section 5b).
+"""``record --format``: a recording as robot stacks read it (docs/bundle.md section 1, "The recording").
 
 ``record`` always streams its rows to a CSV first (each row flushed as it comes, so Ctrl-C or a lost board keeps
 what was read). For ``parquet`` and ``mcap`` that CSV is ``OUT.partial.csv``, converted into OUT when the recording
@@ -27,12 +27,13 @@ import importlib
 import json
 import os
 import re
+import sys
 from array import array
 from typing import Any, Dict, Iterator, List, Optional, Tuple
 
 from .clock import clock_map
 
-__all__ = ["FORMATS", "UNITS", "format_of", "require", "convert", "partial_path"]
+__all__ = ["FORMATS", "UNITS", "format_of", "require", "convert", "partial_path", "prepare", "finish"]
 
 FORMATS = ("csv", "parquet", "mcap")
 #: Each recorded column's unit (stamp_s is added by the conversion).
@@ -87,19 +88,48 @@ def partial_path(out: str) -> str:
     return out + ".partial.csv"
 
 
+def prepare(requested: Optional[str], out: str) -> Tuple[str, str]:
+    """(format, the file ``record`` streams its rows to), refused (UsageError, one line) before the board is opened:
+    a format whose library is missing, and a partial file an earlier recording left (its rows, which a new
+    recording would overwrite)."""
+    from .cli_shared import UsageError
+
+    fmt = format_of(requested, out)
+    if fmt == "csv":
+        return fmt, out
+    require(fmt)
+    partial = partial_path(out)
+    if os.path.exists(partial):
+        raise UsageError(f"{partial} exists: the rows of an earlier recording that was not converted (it is a CSV "
+                         "recording); move it away first")
+    return fmt, partial
+
+
+def finish(partial: str, out: str, fmt: str, calibration: Dict[str, Any], rows: int) -> None:
+    """After the board is closed: the recording's rows converted into OUT (:func:`convert`), saying so on stderr (an
+    hour's MCAP takes minutes); a CSV recording is already in place."""
+    if fmt == "csv":
+        return
+    print(f"magfab-readout: converting {rows} rows from {partial} to {out} ({fmt})", file=sys.stderr, flush=True)
+    convert(partial, out, fmt, calibration)
+    print(f"magfab-readout: wrote {out}", file=sys.stderr)
+
+
 def convert(partial: str, out: str, fmt: str, calibration: Dict[str, Any]) -> int:
     """The recording's CSV ``partial`` (``record``'s header and rows) written to ``out`` in ``fmt``, whole or not at
     all; ``calibration``: the calibration.json the forces were made with (an array: {taxel: document}). Returns the
-    rows written. ``partial`` is removed once ``out`` is in place. Two passes over the file, so an hour's recording
-    is never held in memory: the device times and host times first (for the clock map), then the rows."""
+    rows written. ``partial`` is removed once ``out`` is in place. Two passes over the file, so an hour's rows are
+    never held in memory: the device and host times first, as arrays of doubles (for the clock map), then the rows."""
     header, columns = _head(partial)
     t, h = columns.index("time_s"), columns.index("host_time_s")
     times, hosts = array("d"), array("d")
     for row in _rows(partial, columns):
         times.append(row[t])
         hosts.append(row[h])
-    order = sorted(range(len(times)), key=times.__getitem__)  # an array's taxels of one cycle may interleave
-    t0, h0, slope = clock_map([times[k] for k in order], [hosts[k] for k in order])
+    if any(b < a for a, b in zip(times, times[1:])):  # an array's taxels of one cycle may interleave
+        order = sorted(range(len(times)), key=times.__getitem__)
+        times, hosts = array("d", (times[k] for k in order)), array("d", (hosts[k] for k in order))
+    t0, h0, slope = clock_map(times, hosts)
     stamped = ((row, h0 + slope * (row[t] - t0)) for row in _rows(partial, columns))
     tmp = out + ".tmp"
     try:

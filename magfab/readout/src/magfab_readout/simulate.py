@@ -279,6 +279,10 @@ class WeighedTip:
                        for t in nominal}
         if not self.tables or any(len(m) < 2 or len(m) != len(b) for m, b in self.tables.values()):
             raise ValueError("each angle's table needs two or more masses, one field row each")
+        for masses, rows in self.tables.values():
+            rising = all(math.isfinite(m) for m in masses) and all(a < b for a, b in zip(masses, masses[1:]))
+            if not rising or not all(len(row) == 3 and all(math.isfinite(v) for v in row) for row in rows):
+                raise ValueError("each angle's masses must rise and each field row be three finite numbers")
         self.mass_g, self.angle_deg = 0.0, min(self.tables)
 
     def place_load(self, mass_g: float, angle_deg: float) -> None:

@@ -22,6 +22,7 @@ from typing import Any, Dict, List, Optional, Tuple
 from . import _build, bounded
 from .check import ask
 from .cli_shared import UsageError
+from .coins import coin_layout
 from .device import DeviceError
 from .simulate import WeighedTip
 
@@ -152,24 +153,25 @@ def skin_plan(path: str, shipped: Dict[str, Any]) -> Dict[str, Any]:
         raise bad(f"not a readable JSON file ({exc})") from None
     if not isinstance(plan, dict) or plan.get("format") != shipped["format"]:
         raise bad(f"not a weight plan ({shipped['format']})")
-    for key in ("spec", "coin", "pockets", "cap_mass_bound_g", "stands_deg"):
+    for key in ("spec", "coin", "pockets", "cap_mass_bound_g", "stands_deg", "stand_coins_most"):
         if plan.get(key) != shipped.get(key):
             raise bad(f"its {key} is {json.dumps(plan.get(key))}, this build's {json.dumps(shipped.get(key))}")
     steps, pockets = plan.get("steps"), int(shipped["pockets"])
     if not isinstance(steps, list) or not 1 <= len(steps) <= 100:
         raise bad("its steps are not a list of 1 to 100")
+    most = dict(zip(shipped["stands_deg"], shipped["stand_coins_most"]))  # any skin's plan, per stand
     for k, step in enumerate(steps):
         step = step if isinstance(step, dict) else {}
-        coins, layout = step.get("coins"), step.get("layout")
-        if (not isinstance(coins, int) or isinstance(coins, bool) or not 0 <= coins <= int(shipped["coins_most"])
-                or step.get("angle_deg") not in shipped["stands_deg"] or not isinstance(layout, list)
-                or len(layout) != pockets or not all(isinstance(n, int) and n >= 0 for n in layout)
-                or sum(layout) != coins):
-            raise bad(f"step {k + 1} is not a stand of {shipped['stands_deg']} deg with 0 to "
-                      f"{shipped['coins_most']} coins laid in the cap's {pockets} pockets")
+        coins, angle = step.get("coins"), step.get("angle_deg")
+        if (not _whole(coins) or not isinstance(angle, (int, float)) or isinstance(angle, bool) or angle not in most
+                or not 0 <= coins <= most[angle]
+                or coins % 2 or step.get("layout") != coin_layout(coins, pockets)):
+            raise bad(f"step {k + 1} is not a stand of {shipped['stands_deg']} deg with an even number of coins up "
+                      f"to that stand's most ({shipped['stand_coins_most']}), laid in opposite pairs round the cap's "
+                      f"{pockets} pockets")
     for key in ("first", "reskin"):
         index = plan.get(key)
-        if not isinstance(index, list) or not all(isinstance(i, int) and 0 <= i < len(steps) for i in index):
+        if not isinstance(index, list) or not index or not all(_whole(i) and 0 <= i < len(steps) for i in index):
             raise bad(f"its {key} steps are not indices of its steps")
     try:
         tip = WeighedTip(plan["nominal"])
@@ -178,6 +180,11 @@ def skin_plan(path: str, shipped: Dict[str, Any]) -> Dict[str, Any]:
     except (KeyError, TypeError, ValueError, IndexError):
         raise bad("its nominal field tables do not cover its steps' stands") from None
     return plan
+
+
+def _whole(value: Any) -> bool:
+    """An int of JSON's, not a boolean."""
+    return isinstance(value, int) and not isinstance(value, bool)
 
 
 def _load_text(step: Dict[str, Any]) -> str:
@@ -224,9 +231,12 @@ def run(args: argparse.Namespace, out, open_device) -> int:
     if plan is None:
         raise UsageError("this build has no weight plan (an array, or a design whose ranges the weight jig's loads "
                          "do not fit; the build's report says why): calibrate it from a scan")
-    if args.first and (args.plan or args.reskin):
+    if args.first and (args.plan is not None or args.reskin):
         raise UsageError("--first walks the build's plan's first two steps: give it without --plan and --reskin")
-    if args.plan:
+    if args.reskin and args.plan is not None:
+        raise UsageError("--reskin walks the build's plan's re-skin steps, safe for any new skin: give it without "
+                         "--plan (a skin's plan is the old skin's, and may press a softer new one past its range)")
+    if args.plan is not None:
         plan = skin_plan(args.plan, plan)
     coin_g = _check(args, plan)
     steps = _steps(plan, args)
@@ -268,5 +278,8 @@ def _which(args: argparse.Namespace, steps: int) -> str:
     """The header's name of the steps walked."""
     if args.first:
         return f"the build's plan's first {steps} steps"
-    plan = f"the plan {json.dumps(args.plan)}" if args.plan else "the build's plan"
-    return f"{plan}'s {steps} re-skin steps" if args.reskin else f"{plan} of {steps} steps"
+    if args.reskin:
+        return f"the build's plan's {steps} re-skin steps"
+    if args.plan is not None:
+        return f"the plan {json.dumps(args.plan)} of {steps} steps"
+    return f"the build's plan of {steps} steps"
