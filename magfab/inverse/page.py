@@ -210,7 +210,7 @@ def plot_front(result: DesignResult, ext: str) -> bytes:
             if label not in labels:
                 handles.append(h)
                 labels.append(label)
-    ncol = 2 if len(pairs) == 1 else 4
+    ncol = 2 if len(pairs) == 1 else 3  # four columns ran the margin bands' labels past the figure's edge
     fig.legend(handles, labels, loc="lower center", ncol=ncol, fontsize=8, frameon=False)
     rows = -(-len(labels) // ncol)  # the legend's rows: room kept below the axes for them
     fig.suptitle(f"{result.targets.name}: {len(result.trials)} designs searched, {len(result.verified)} verified",
@@ -218,7 +218,7 @@ def plot_front(result: DesignResult, ext: str) -> bytes:
     fig.tight_layout(rect=(0, (0.045 if len(pairs) == 1 else 0.05) * rows + 0.02, 1, 0.95))
     buf = io.BytesIO()
     meta = {"svg": {"Date": None}, "png": {"Software": None}}[ext]
-    fig.savefig(buf, format=ext, dpi=130, metadata=meta)
+    fig.savefig(buf, format=ext, dpi=130, metadata=meta, bbox_inches="tight", pad_inches=0.1)  # the legend whole
     plt.close(fig)
     return buf.getvalue()
 
@@ -358,6 +358,15 @@ def _html(result: DesignResult) -> str:
             head, rows = c
             cells = ["<tr>" + "".join(f"<th>{html.escape(h)}</th>" for h in head) + "</tr>"]
             cells += ["<tr>" + "".join(f"<td>{html.escape(x)}</td>" for x in row) + "</tr>" for row in rows]
-            out.append('<table border="1" cellspacing="0" cellpadding="3">' + "".join(cells) + "</table>")
-    return ('<!doctype html>\n<html><head><meta charset="utf-8"><title>' + html.escape(result.targets.name)
-            + "</title></head><body>\n" + "\n".join(out) + "\n</body></html>\n")
+            out.append('<div class="wide"><table>' + "".join(cells) + "</table></div>")  # scrolls, not the page
+    return ('<!doctype html>\n<html><head><meta charset="utf-8"><meta name="viewport" content="width=device-width">'
+            "<title>" + html.escape(result.targets.name) + "</title><style>" + _STYLE + "</style></head><body>\n"
+            + "\n".join(out) + "\n</body></html>\n")
+
+
+#: The page's look: a readable column, and a table that scrolls inside it rather than running past the page.
+_STYLE = ("body{font-family:system-ui,sans-serif;max-width:60rem;margin:2rem auto;padding:0 1rem;line-height:1.45;"
+          "color:#222}h1{font-size:1.5rem}pre{background:#f4f4f4;padding:.6rem;overflow-x:auto}"
+          ".wide{overflow-x:auto;margin:1rem 0}table{border-collapse:collapse;font-size:.85rem;"
+          "font-variant-numeric:tabular-nums}th,td{border:1px solid #ccc;padding:.25rem .5rem;text-align:right;"
+          "white-space:nowrap}th{background:#f0f0f0}td:first-child,th:first-child{text-align:left}")

@@ -80,6 +80,8 @@ def test_the_files_a_user_gets(study):
     import pyarrow.parquet as pq
 
     assert pq.read_table(folder / "trials.parquet").num_rows == 120
+    index = (folder / "index.html").read_text()  # styled, its table scrolling inside the page's column
+    assert "<style>" in index and index.count('<div class="wide"><table>') == 1 and "max-width" in index
     page = (folder / "README.md").read_text()
     chosen = run.stdout.split("chosen: ")[1].split(";")[0]
     assert f"magfab build designs/{chosen}.toml" in page
