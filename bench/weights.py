@@ -53,9 +53,10 @@ def _stats(values: list[float]) -> dict[str, float]:
 
 
 def run(name: str, sensors: int, seed: int, centred: bool, standard: bool = False, adaptive: bool = True) -> dict:
+    from magfab.jig import jig_plans
     from magfab.models.predict import predict
     from magfab.models.weighing import PARAMS, SensorModel
-    from magfab.models.weighing_study import jig_plans, trial, truth_model
+    from magfab.models.weighing_study import trial, truth_model
 
     design = _design(name)
     prediction = predict(design)

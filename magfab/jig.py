@@ -23,6 +23,7 @@ it); each stand's is as it stands.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -45,7 +46,8 @@ if TYPE_CHECKING:
 # Imported lazily, inside the functions that use it, for speed: CadQuery takes a noticeable time to import, and
 # importing this module should not.
 
-__all__ = ["Jig", "jig_of", "cap_solid", "stand_solid", "ANGLES_DEG", "REACH", "coin_layout", "Platform", "platform"]
+__all__ = ["Jig", "jig_of", "jig_plans", "cap_solid", "stand_solid", "ANGLES_DEG", "REACH", "coin_layout", "Platform",
+           "platform"]
 
 #: The stand's angles, degrees: the weight plan's (magfab.models.weighing.ANGLES_DEG, which a test holds equal).
 ANGLES_DEG = (0.0, 20.0, 40.0)
@@ -183,6 +185,14 @@ class Jig:
         load about the tip's top by this arm times the load's downhill part."""
         per_pocket = math.ceil(coins / self.pockets)
         return self.z_floor_mm + per_pocket * self.coin_mm / 2.0 - self.z_face_mm
+
+
+def jig_plans(design: Design, prediction: Prediction) -> Callable[[float], list[tuple[float, float]]]:
+    """The plan in the weight jig's coins on its heaviest printed cap (:meth:`Jig.plan`, as the build ships it), as
+    (mass on the tip, stand angle) pairs, as a function of the skin's stiffness over the softest of the band (the
+    simulated study's :func:`magfab.models.weighing_study.trial` takes it)."""
+    jig = jig_of(design)
+    return lambda stiffness: [(m, a) for m, a, _ in jig.plan(prediction, stiffness=stiffness)]
 
 
 def jig_of(design: Design) -> Jig:

@@ -28,7 +28,7 @@ FORBIDDEN = {
 }
 PRINTING = ("click", "rich")  # only the CLI prints
 #: The command line: magfab.cli and the command groups it registers, each beside the engine it calls.
-CLI_MODULES = {"magfab.cli", "magfab.sensor_cli", "magfab.cli_usage", "magfab.calibration_input"}
+CLI_MODULES = {"magfab.cli", "magfab.sensor_cli", "magfab.weigh_cli", "magfab.cli_usage", "magfab.calibration_input"}
 
 
 def _modules():
@@ -109,7 +109,7 @@ LAYERS = (
     ("magfab.inverse",),
     ("magfab.cli_usage", "magfab.calibration_input"),  # the command line's group class and its one-line refusal;
     # what `magfab calibrate` fits, read as the command line defers it
-    ("magfab.sensor_cli",),
+    ("magfab.sensor_cli", "magfab.weigh_cli"),
     ("magfab.cli",),
 )
 #: Libraries slow enough to import that a function may import them where it needs them (with the reason in a comment
@@ -118,7 +118,7 @@ HEAVY = {"cadquery", "OCP", "trimesh", "manifold3d", "matplotlib", "mpl_toolkits
          "dask", "distributed", "pyarrow", "pcbnew", "scipy", "sqlalchemy", "PIL", "jinja2", "rich", "qdldl",
          "triangle"}
 #: Optional dependencies, imported where they are needed so that the package works without them.
-OPTIONAL = {"serial"}
+OPTIONAL = {"serial", "mcap", "mcap_ros2"}  # pyserial; the readout's record --format mcap
 #: The entry point may defer anything, magfab's own modules included, so that ``magfab --help`` stays fast.
 ENTRY_POINTS = CLI_MODULES
 _LAZY = re.compile(r"\blaz(y|ily)\b", re.IGNORECASE)

@@ -19,9 +19,9 @@ from hypothesis import strategies as st
 
 from magfab.export.weigh_plan import adapted_plan, stiffest_skin
 from magfab.formats.weights_csv import read_weights_csv, weights_csv
-from magfab.jig import coin_layout, jig_of
+from magfab.jig import coin_layout, jig_of, jig_plans
 from magfab.models.weighing import SensorModel, first_weighings, load_of, noise_uT
-from magfab.models.weighing_study import draw_sensor, jig_plans, truth_model, weighings
+from magfab.models.weighing_study import draw_sensor, truth_model, weighings
 
 
 @pytest.fixture(scope="module")

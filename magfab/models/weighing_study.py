@@ -57,7 +57,7 @@ if TYPE_CHECKING:
     from .calibration import Calibration
     from .predict import Prediction
 
-__all__ = ["Truth", "draw_sensor", "trial", "TrialResult", "truth_model", "jig_plans"]
+__all__ = ["Truth", "draw_sensor", "trial", "TrialResult", "truth_model"]
 
 #: Readings averaged per weighing (half a second at the chip's ~540 Hz).
 SAMPLES = 250
@@ -192,24 +192,16 @@ def _calibrate(scan: Scan, design: Design) -> Calibration:
     return calmod.fit(scan, design, mls=False).calibration
 
 
-def jig_plans(design: Design, prediction: Prediction) -> Callable[[float], list[tuple[float, float]]]:
-    """The plan in the weight jig's coins on its heaviest printed cap (:meth:`magfab.jig.Jig.plan`, as the build
-    ships it), as a function of the skin's stiffness over the softest of the band."""
-    from ..jig import jig_of
-
-    jig = jig_of(design)
-    return lambda stiffness: [(m, a) for m, a, _ in jig.plan(prediction, stiffness=stiffness)]
-
-
 def trial(design: Design, prediction: Prediction, model: SensorModel, truth: SensorModel, rng: np.random.Generator,
           *, centred: bool = False, plan_of: Callable[[float], Sequence[tuple[float, float]]] | None = None,
           adaptive: bool = True) -> TrialResult:
     """One drawn sensor (:func:`draw_sensor`) through both calibrations and a re-skin (module doc). ``plan_of``: the
-    plan for a skin of a given stiffness over the softest (:func:`jig_plans`: the weight jig's coins; default the
-    standard 1-2-5 weights on a :data:`CAP_G` cap). ``adaptive``: the first two weighings of the softest skin's plan
-    (:func:`~magfab.models.weighing.first_weighings`) are fitted, and the plan is the one for the stiffness they
-    give (:func:`~magfab.models.weighing.stiffness_of`), as the two-stage bench makes it; without, the plan is the
-    softest skin's. A new skin's three weighings are the softest skin's plan's re-skin steps (safe for any skin)."""
+    plan for a skin of a given stiffness over the softest (:func:`magfab.jig.jig_plans`: the weight jig's coins;
+    default the standard 1-2-5 weights on a :data:`CAP_G` cap). ``adaptive``: the first two weighings of the
+    softest skin's plan (:func:`~magfab.models.weight_plan.first_weighings`) are fitted, and the plan is the one for
+    the stiffness they give (:func:`~magfab.models.weight_plan.stiffness_of`), as the two-stage bench makes it;
+    without, the plan is the softest skin's. A new skin's three weighings are the softest skin's plan's re-skin steps
+    (safe for any skin)."""
     noise = noise_uT(design)
     sensor = draw_sensor(model, truth, rng, centred)
     plans = plan_of or (lambda stiffness: weight_plan(prediction, CAP_G, stiffness))

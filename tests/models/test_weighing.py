@@ -14,7 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from magfab.errors import ScanError
-from magfab.jig import jig_of
+from magfab.jig import jig_of, jig_plans
 from magfab.models import acceptance
 from magfab.models.weighing import (
     MIN_FIRST,
@@ -29,7 +29,7 @@ from magfab.models.weighing import (
     reskin_plan,
     weight_plan,
 )
-from magfab.models.weighing_study import draw_sensor, jig_plans, trial, truth_model, weighings
+from magfab.models.weighing_study import draw_sensor, trial, truth_model, weighings
 from magfab.units import G0
 
 

@@ -11,6 +11,7 @@ from typing import Any, List, Optional, Sequence
 
 from . import _build, eeprom
 from .device import NoData
+from .usage import UsageError
 
 __all__ = ["FAILED", "CSV_COLUMNS", "Interrupt", "Span", "UsageError", "at_fallback_baud", "format_csv",
            "format_number", "record_header"]
@@ -22,10 +23,6 @@ CSV_COLUMNS = ("time_s", "host_time_s", "Bx_uT", "By_uT", "Bz_uT", "temperature_
 
 #: ``check``'s exit status when the sensor failed a step (its verdict, not an error: 1 is kept for a bug of ours).
 FAILED = 3
-
-
-class UsageError(ValueError):
-    """A bad option value, or a command that would write the wrong thing (exit status 2, nothing written)."""
 
 
 def check_link(args: argparse.Namespace) -> None:

@@ -32,6 +32,7 @@ from array import array
 from typing import Any, Dict, Iterator, List, Optional, Tuple
 
 from .clock import clock_map
+from .usage import UsageError
 
 __all__ = ["FORMATS", "UNITS", "format_of", "require", "convert", "partial_path", "prepare", "finish"]
 
@@ -73,8 +74,6 @@ def format_of(requested: Optional[str], out: str) -> str:
 
 def require(fmt: str) -> None:
     """UsageError (one line) when the format's library is not installed."""
-    from .cli_shared import UsageError  # here: the module is magfab's too, and cli_shared needs a build's data
-
     try:
         for module in _MODULES.get(fmt, ()):
             importlib.import_module(module)
@@ -92,8 +91,6 @@ def prepare(requested: Optional[str], out: str) -> Tuple[str, str]:
     """(format, the file ``record`` streams its rows to), refused (UsageError, one line) before the board is opened:
     a format whose library is missing, and a partial file an earlier recording left (its rows, which a new
     recording would overwrite)."""
-    from .cli_shared import UsageError
-
     fmt = format_of(requested, out)
     if fmt == "csv":
         return fmt, out
@@ -172,6 +169,7 @@ BATCH = 65536
 
 
 def _parquet(path, header, columns, stamped, calibration) -> None:
+    # imported lazily: an optional extra of the readout, and slow to import
     import pyarrow as pa
     import pyarrow.parquet as pq
 
@@ -198,6 +196,7 @@ def _parquet(path, header, columns, stamped, calibration) -> None:
 
 
 def _mcap(path, header, columns, stamped, calibration) -> None:
+    # imported lazily: an optional extra of the readout
     from mcap_ros2.writer import Writer
 
     col = {c: i for i, c in enumerate(columns)}

@@ -163,9 +163,10 @@ def skin_plan(path: str, shipped: Dict[str, Any]) -> Dict[str, Any]:
     for k, step in enumerate(steps):
         step = step if isinstance(step, dict) else {}
         coins, angle = step.get("coins"), step.get("angle_deg")
-        if (not _whole(coins) or not isinstance(angle, (int, float)) or isinstance(angle, bool) or angle not in most
-                or not 0 <= coins <= most[angle]
-                or coins % 2 or step.get("layout") != coin_layout(coins, pockets)):
+        laid = (isinstance(coins, int) and not isinstance(coins, bool) and isinstance(angle, (int, float))
+                and not isinstance(angle, bool) and angle in most and 0 <= coins <= most[angle] and coins % 2 == 0
+                and step.get("layout") == coin_layout(coins, pockets))
+        if not laid:
             raise bad(f"step {k + 1} is not a stand of {shipped['stands_deg']} deg with an even number of coins up "
                       f"to that stand's most ({shipped['stand_coins_most']}), laid in opposite pairs round the cap's "
                       f"{pockets} pockets")
