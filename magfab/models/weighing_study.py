@@ -51,6 +51,7 @@ from .weighing import (
     stiffness_of,
     weight_plan,
 )
+from .weight_plan import over_softest
 
 if TYPE_CHECKING:
     from ..design import Design
@@ -230,7 +231,6 @@ def trial(design: Design, prediction: Prediction, model: SensorModel, truth: Sen
 def _reach(sensor: Truth, plan: Sequence[tuple[float, float]], prediction: Prediction) -> float:
     """The plan's heaviest normal load over the drawn skin's normal range (the softest skin's, times the skin's
     stiffness over the softest): past 1 the plan would press the skin past its range."""
-    soft = float(prediction.curves["soft"].mu_kPa) / float(prediction.curves["nominal"].mu_kPa)
-    stiffness = math.exp(float(sensor.theta[0])) / soft
+    stiffness = over_softest(float(sensor.theta[0]), prediction)
     fz = load_of([m for m, _ in plan], [a for _, a in plan])[:, 2]
     return float(fz.max() / (stiffness * prediction.normal.range_N))

@@ -21,8 +21,8 @@ if TYPE_CHECKING:
     from .predict import Prediction
     from .weighing import SensorModel, WeightFit
 
-__all__ = ["weight_plan", "first_weighings", "stiffness_of", "reskin_plan", "ANGLES_DEG", "MIN_FIRST", "MIN_TILT_DEG",
-           "RESKIN_MIN", "STANDARD_WEIGHTS_G", "PLAN_RANGE_FRACTION", "STIFFNESS_SIGMAS"]
+__all__ = ["weight_plan", "first_weighings", "stiffness_of", "over_softest", "reskin_plan", "ANGLES_DEG", "MIN_FIRST",
+           "MIN_TILT_DEG", "RESKIN_MIN", "STANDARD_WEIGHTS_G", "PLAN_RANGE_FRACTION", "STIFFNESS_SIGMAS"]
 
 #: Fewest weighings a first calibration takes (a new skin with the magnet's parameters kept takes
 #: :data:`RESKIN_MIN`).
@@ -106,9 +106,14 @@ def stiffness_of(fit: WeightFit, model: SensorModel, prediction: Prediction) -> 
     """The fitted skin's shear modulus over the softest of the material band (at least 1), taken
     :data:`STIFFNESS_SIGMAS` posterior sigmas below the fit, so that a plan made for it stays inside the skin's
     range."""
-    soft = float(prediction.curves["soft"].mu_kPa) / float(prediction.curves["nominal"].mu_kPa)
     low = float(fit.theta[0]) - STIFFNESS_SIGMAS * math.sqrt(max(float(fit.covariance[0, 0]), 0.0))
-    return max(1.0, math.exp(low) / soft)
+    return max(1.0, over_softest(low, prediction))
+
+
+def over_softest(log_mu: float, prediction: Prediction) -> float:
+    """A skin's shear modulus over the softest of the material band, from its log ratio to the nominal (the fit's
+    ``log_mu``)."""
+    return math.exp(log_mu) * float(prediction.curves["nominal"].mu_kPa) / float(prediction.curves["soft"].mu_kPa)
 
 
 def reskin_plan(plan: Sequence[tuple[float, float]]) -> list[tuple[float, float]]:

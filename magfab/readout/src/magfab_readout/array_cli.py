@@ -165,7 +165,7 @@ def record(args: argparse.Namespace, array: ArrayCalibration) -> int:
         print("magfab-readout: wrote {} rows to {}{} ({} chip-error, missing or full-scale readings left out)".format(
             written, path, " (Ctrl-C)" if stop.requested else "", skipped), file=sys.stderr)
         _summary(reader, span)
-    record_formats.finish(path, args.out, fmt, {str(k): c.to_dict() for k, c in enumerate(array.calibrations)},
+    record_formats.finish(path, args.out, fmt, lambda: {str(k): c.to_dict() for k, c in enumerate(array.calibrations)},
                           written)
     return 0
 

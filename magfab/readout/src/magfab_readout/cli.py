@@ -308,8 +308,8 @@ def _record(args: argparse.Namespace) -> int:
               "scale left out)".format(written, path, " (Ctrl-C)" if stop.requested else "", skipped, full),
               file=sys.stderr)
         _summary(device, span, None, rest)
-        calibration = device.calibration.to_dict()
-    record_formats.finish(path, args.out, fmt, calibration, written)
+        calibration = device.calibration
+    record_formats.finish(path, args.out, fmt, calibration.to_dict, written)
     return 0
 
 

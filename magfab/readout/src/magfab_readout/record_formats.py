@@ -29,7 +29,7 @@ import os
 import re
 import sys
 from array import array
-from typing import Any, Dict, Iterator, List, Optional, Tuple
+from typing import Any, Callable, Dict, Iterator, List, Optional, Tuple
 
 from .clock import clock_map
 from .usage import UsageError
@@ -102,13 +102,14 @@ def prepare(requested: Optional[str], out: str) -> Tuple[str, str]:
     return fmt, partial
 
 
-def finish(partial: str, out: str, fmt: str, calibration: Dict[str, Any], rows: int) -> None:
-    """After the board is closed: the recording's rows converted into OUT (:func:`convert`), saying so on stderr (an
-    hour's MCAP takes minutes); a CSV recording is already in place."""
+def finish(partial: str, out: str, fmt: str, calibration: Callable[[], Dict[str, Any]], rows: int) -> None:
+    """After the board is closed: the recording's rows converted into OUT (:func:`convert`; ``calibration()`` the
+    calibration.json the forces were made with, read only then), saying so on stderr (an hour's MCAP takes minutes);
+    a CSV recording is already in place."""
     if fmt == "csv":
         return
     print(f"magfab-readout: converting {rows} rows from {partial} to {out} ({fmt})", file=sys.stderr, flush=True)
-    convert(partial, out, fmt, calibration)
+    convert(partial, out, fmt, calibration())
     print(f"magfab-readout: wrote {out}", file=sys.stderr)
 
 
