@@ -93,7 +93,7 @@ CORE_SOURCES = ("mlx90393.c", "mf_sample.c", "mf_nv.c", "mf_calib.c", "mf_frame.
                 "mf_reference.c")
 CORE_DIR = "magfab_readout/src"
 AVR_CFLAGS = ("-mmcu=" + MCU, f"-DF_CPU={F_CPU_HZ}UL", "-Os", "-std=gnu99", "-Wall", "-Wextra",
-              "-ffunction-sections", "-fdata-sections")
+              "-ffunction-sections", "-fdata-sections", "-flto")
 AVR_LDFLAGS = ("-Wl,--gc-sections", "-lm")
 HOST_CFLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-Wshadow", "-Wstrict-prototypes",
                "-Wdouble-promotion", "-O1")
@@ -117,8 +117,8 @@ READ_MARGIN = 0.05
 #: 10 ms. Only recovery pays it.
 RESET_WAIT_US = 5000
 #: A read the chip rejects while it is still in its measuring mode (burst, or a single measurement not done) is
-#: tried once more after this fraction of the conversion: a slow oscillator, not a fault, until it fails
-#: twice.
+#: tried again after this fraction of the conversion: a slow oscillator, not a fault, until a single taxel's fails
+#: twice (an array chip's is tried until a conversion's time has passed: mf_app_read_measurement).
 RETRY_FRACTION = 0.25
 START_TRIES = 3
 #: While the chip does not answer: one error frame and one recovery attempt per interval.

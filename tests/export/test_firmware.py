@@ -422,8 +422,8 @@ def test_out_of_region_flag(host):
 ])
 def test_fault_gives_error_frame_then_recovery(host, fault, code):
     """Each injected fault: that sample's error code, the chip-error flag, NaN forces and zero counts; then a
-    reset and re-configuration, and the next frame is good again with the recovered flag. (A read rejected
-    with the ERROR bit is retried once, so the ERROR fault is injected twice.)"""
+    reset and re-configuration, and the next frame is good again with the recovered flag. (A single taxel's read
+    rejected with the ERROR bit is retried once, so the ERROR fault is injected twice.)"""
     out, events = host.run(f"B 900 -400 -2800 25\nS 3\nF {fault}\nS 1\nS 3\nQ\n")
     frames, p = frames_of(out), polls(events)
     assert [e for _, e, _, _ in p] == [0, 0, 0, code, 0, 0, 0]

@@ -245,12 +245,17 @@ PROFILE_WORDS = 16384
 PROFILE_GROUPS = (
     ("float arithmetic (avr-libc)", re.compile(r"__(add|sub|mul|div)sf3.*|__fp_.*|__float.*|__fix.*|sqrt.*")),
     ("calibration (Horner, direction, region test)", re.compile(r"mf_calib_.*|fan_side|eeprom_.*|mf_nv_.*")),
-    ("sample conversion", re.compile(r"mf_sample_.*|fill_counts|counts|clamp16|mf_app_process|mf_app_field_sample|"
-                                     r"mf_ref_.*")),
-    ("frame, CRC and queueing", re.compile(r"mf_frame_.*|mf_crc16_.*|avr_serial_write|mf_app_emit.*|mf_app_flush")),
+    ("sample conversion", re.compile(r"mf_sample_.*|fill_counts|count_of|counts|clamp16|mf_app_process|"
+                                     r"mf_app_field_sample|mf_ref_.*")),
+    ("frame, CRC and queueing", re.compile(r"mf_frame_.*|mf_crc16_.*|avr_serial_write|mf_app_emit.*|mf_app_flush|"
+                                           r"send_frame|send_cycle_piece")),
     ("UART interrupts", re.compile(r"__vector_(18|19|20)")),
     ("I2C driver and its interrupt",
-     re.compile(r"twi_.*|avr_i2c_.*|mlx_.*|measurement_reply|read_first|mf_app_read_measurement|__vector_24")),
+     re.compile(r"twi_.*|avr_i2c_.*|mlx_.*|measurement_reply|status_rc|read_first|read_rest|mf_app_read_measurement|"
+                r"mf_app_queue|mf_app_take_chained|mf_app_settle|__vector_24")),
+    ("the readout loop (its steps, inlined into main)",
+     re.compile(r"main|mf_app_poll|acquire|mf_array_.*|poll_taxel|read_taxel|channels|mf_app_commands|"
+                r"avr_serial_read")),
     ("idle until the next conversion, clock reads",
      re.compile(r"avr_micros|avr_delay_us|__vector_13|mf_app_wait_until|mf_app_now")),
 )
@@ -265,8 +270,8 @@ def functions(elf: Path) -> list[tuple[int, int, str]]:
     out = []
     for line in text.splitlines():
         parts = line.split()
-        if len(parts) == 4 and parts[2] in "tTwW":
-            out.append((int(parts[0], 16), int(parts[1], 16), parts[3]))
+        if len(parts) == 4 and parts[2] in "tTwW":  # a link-time optimised clone by its function's name
+            out.append((int(parts[0], 16), int(parts[1], 16), parts[3].split(".")[0]))
     return out
 
 

@@ -78,6 +78,7 @@ static void eeprom_write_command(mf_app_t *a)
     uint16_t crc = (uint16_t)(a->cmd[4 + len] | (uint16_t)a->cmd[5 + len] << 8);
     uint8_t rc = 0;
     uint8_t n;
+    mf_app_settle(a); /* the record may change: nothing of the chip's left on the bus */
     if (mf_crc16(a->cmd, (uint8_t)(4 + len)) != crc) {
         rc = 1;
     } else if ((uint32_t)addr + len > MF_NV_SIZE) {
@@ -228,34 +229,100 @@ int mf_app_start_at(mf_app_t *a, uint8_t addr7)
 /* The channels an RM reads: an array's subset, or all the record's. */
 #define RM_ZYXT(a) ((a)->rm_zyxt != 0 ? (a)->rm_zyxt : (uint8_t)MF_ZYXT)
 
-/* The first RM of a read: with a sample held, on the bus's own time while the held one is processed and sent
- * (*overlapped = 1). */
-static int read_first(mf_app_t *a, mlx_raw_t *raw, uint8_t *overlapped)
+void mf_app_queue(mf_app_t *a, uint8_t addr7, uint8_t zyxt, uint32_t not_before)
 {
-    uint8_t zyxt = RM_ZYXT(a);
-    *overlapped = (uint8_t)(a->held && mlx_measurement_begin(&a->chip, zyxt) == MF_OK);
-    mf_app_flush(a);
-    return *overlapped ? mlx_measurement_end(&a->chip, zyxt, raw) : mlx_read_measurement(&a->chip, zyxt, raw);
+    a->queue_addr = addr7;
+    a->queue_zyxt = zyxt;
+    a->queue_not_before = not_before;
 }
 
-int mf_app_read_measurement(mf_app_t *a, mlx_raw_t *raw, uint8_t mode_bit, uint32_t *t_us, uint8_t *retried)
+/* The rest of a read on the bus's own time (rm[rm_i], a chip in mode_bit's mode): the RM mf_app_queue asked for queued
+ * behind it, the held sample processed and sent meanwhile, then its reply; a->chained when the queued one started. */
+static int read_rest(mf_app_t *a, mlx_raw_t *raw, uint8_t mode_bit)
+{
+    mlx_rm_t *next = &a->rm[a->rm_i ^ 1U];
+    uint8_t queued = 0;
+    int rc;
+    if (a->queue_zyxt != 0U) {
+        next->addr = a->queue_addr;
+        next->zyxt = a->queue_zyxt;
+        queued = (uint8_t)(mlx_measurement_chain(&a->chip, next, &a->rm[a->rm_i], mode_bit,
+                                                 a->queue_not_before) == MF_OK);
+    }
+    mf_app_flush(a);
+    rc = mlx_measurement_end(&a->chip, &a->rm[a->rm_i], raw);
+    if (queued) {
+        a->chained = a->hal->i2c_chained(a->hal->ctx, &a->chain_t);
+    }
+    return rc;
+}
+
+/* The first RM of a read: with a sample held or one to queue behind it, on the bus's own time (*overlapped = 1);
+ * when the RM started behind the read before (a->chained), that one. */
+static int read_first(mf_app_t *a, mlx_raw_t *raw, uint8_t mode_bit, uint8_t *overlapped, uint32_t *t_us)
+{
+    uint8_t zyxt = RM_ZYXT(a);
+    if (a->chained) {
+        a->rm_i ^= 1U;
+        a->chip.addr = a->rm[a->rm_i].addr;
+        a->chained = 0;
+        *t_us = a->chain_t;
+        *overlapped = 1;
+        return read_rest(a, raw, mode_bit);
+    }
+    *t_us = mf_app_now(a);
+    *overlapped = (uint8_t)((a->held || a->queue_zyxt)
+                            && mlx_measurement_begin(&a->chip, &a->rm[a->rm_i], zyxt) == MF_OK);
+    if (*overlapped) {
+        return read_rest(a, raw, mode_bit);
+    }
+    mf_app_flush(a);
+    return mlx_read_measurement(&a->chip, zyxt, raw);
+}
+
+void mf_app_settle(mf_app_t *a)
+{
+    mlx_raw_t raw;
+    if (a->chained) {
+        (void)mf_app_take_chained(a, &raw);
+    }
+}
+
+int mf_app_take_chained(mf_app_t *a, mlx_raw_t *raw)
+{
+    if (!a->chained) {
+        return MF_E_ARG;
+    }
+    a->chained = 0;
+    a->rm_i ^= 1U;
+    a->chip.addr = a->rm[a->rm_i].addr;
+    return mlx_measurement_end(&a->chip, &a->rm[a->rm_i], raw);
+}
+
+int mf_app_read_measurement(mf_app_t *a, mlx_raw_t *raw, uint8_t mode_bit, uint32_t patience_us, uint32_t *t_us,
+                            uint8_t *retried)
 {
     int rc;
     uint8_t overlapped;
-    *t_us = mf_app_now(a);
     *retried = 0;
-    rc = read_first(a, raw, &overlapped);
+    rc = read_first(a, raw, mode_bit, &overlapped, t_us);
     if (rc == MF_E_CHIP && (a->chip.status & mode_bit)) {
+        /* rejected while still measuring: the conversion is not done yet. Tried again MF_RETRY_US later, and
+         * again until patience_us has passed since the first try (mf_app.h) */
+        uint32_t first = *t_us;
         *retried = 1;
-        if (overlapped) { /* due MF_RETRY_US after the first started: the held sample's frame took longer than that */
-            *t_us += MF_RETRY_US;
-            mf_app_wait_until(a, *t_us);
-        } else {
-            a->hal->delay_us(a->hal->ctx, MF_RETRY_US);
-            *t_us = mf_app_now(a);
-        }
-        rc = mlx_read_measurement(&a->chip, RM_ZYXT(a), raw);
+        do {
+            if (overlapped) { /* due MF_RETRY_US after the one before started: the held sample's frame took longer */
+                *t_us += MF_RETRY_US;
+                mf_app_wait_until(a, *t_us);
+            } else {
+                a->hal->delay_us(a->hal->ctx, MF_RETRY_US);
+                *t_us = mf_app_now(a);
+            }
+            rc = mlx_read_measurement(&a->chip, RM_ZYXT(a), raw);
+        } while (rc == MF_E_CHIP && (a->chip.status & mode_bit) && (uint32_t)(*t_us - first) < patience_us);
     }
+    a->queue_zyxt = 0; /* the request held for this read */
     return rc;
 }
 
@@ -271,13 +338,16 @@ static int acquire(mf_app_t *a, mlx_raw_t *raw, uint32_t *t_us)
             return rc;
         }
         a->hal->delay_us(a->hal->ctx, MF_TCONV_US + MF_READ_MARGIN_US);
-        return mf_app_read_measurement(a, raw, MLX_ST_SM, t_us, &retried);
+        return mf_app_read_measurement(a, raw, MLX_ST_SM, 0, t_us, &retried);
     }
     if ((int32_t)(mf_app_now(a) - a->t_next) > (int32_t)MF_TCONV_US) {
         a->t_next = mf_app_now(a); /* fell behind by more than a conversion (a stalled host link): catch up, not burst */
     }
     mf_app_wait_until(a, a->t_next);
-    rc = mf_app_read_measurement(a, raw, MLX_ST_BURST, t_us, &retried);
+    if (mf_ref_due() != 0U) { /* the reference chip's RM behind this one: read while the sample before is sent */
+        mf_app_queue(a, mf_ref_due(), MF_ZYXT, mf_app_now(a));
+    }
+    rc = mf_app_read_measurement(a, raw, MLX_ST_BURST, 0, t_us, &retried);
     /* the grid: one conversion on from the scheduled read, or from the retry that found a late conversion */
     a->t_next = (retried ? *t_us : a->t_next) + MF_TCONV_US;
     if (rc == MF_OK && !(a->chip.status & MLX_ST_BURST)) {
@@ -295,7 +365,8 @@ void mf_app_process(const mlx_raw_t *raw, mf_sample_t *s)
 
 /* An array chip's piece of the cycle frame: after the frame's head when it is the cycle's first chip, and before
  * the frame's CRC when it is the last. */
-static void send_cycle_piece(mf_app_t *a, uint8_t taxel, uint8_t seq, const mf_sample_t *s, uint32_t t_us)
+static void send_cycle_piece(mf_app_t *a, uint8_t taxel, uint8_t seq, uint8_t flags, const int16_t *counts,
+                             uint16_t word, uint32_t t_us)
 {
     uint8_t out[MF_CYCLE_HEAD_LEN + MF_CYCLE_CHIP_LEN + 2];
     uint8_t n = 0;
@@ -306,7 +377,8 @@ static void send_cycle_piece(mf_app_t *a, uint8_t taxel, uint8_t seq, const mf_s
         a->cycle_crc = mf_crc16(&out[2], (uint8_t)(n - 2U));
         a->cycle_open = 1;
     }
-    m = mf_frame_cycle_chip(&out[n], (int32_t)(t_us - a->cycle_t) > 0 ? t_us - a->cycle_t : 0UL, s);
+    m = mf_frame_cycle_chip(&out[n], (int32_t)(t_us - a->cycle_t) > 0 ? t_us - a->cycle_t : 0UL, flags, counts,
+                            word);
     a->cycle_crc = mf_crc16_update(a->cycle_crc, &out[n], m);
     n = (uint8_t)(n + m);
     if (taxel + 1U >= mf_calib_taxels()) {
@@ -326,7 +398,8 @@ static void send_frame(mf_app_t *a, int16_t taxel, uint8_t seq, const mf_sample_
                               : mf_frame_field_text(line, (uint8_t)taxel, seq, t_us - a->t0, s);
         a->hal->serial_write(a->hal->ctx, (const uint8_t *)line, n);
     } else if (taxel >= 0) {
-        send_cycle_piece(a, (uint8_t)taxel, seq, s, t_us);
+        send_cycle_piece(a, (uint8_t)taxel, seq, s->flags, s->b_counts,
+                         (s->flags & MF_FLAG_CHIP_ERROR) ? s->fault : s->t_raw, t_us);
     } else {
         uint8_t frame[MF_FRAME_LEN];
         uint8_t n = mf_frame_binary(frame, seq, t_us - a->t0, s);
@@ -358,6 +431,13 @@ void mf_app_flush(mf_app_t *a)
         return;
     }
     a->held = 0;
+    if (held == MF_HELD_FIELD && !a->text_mode) { /* its counts straight into its piece: no sample, no float */
+        int16_t counts[3];
+        uint8_t flags = (uint8_t)(mf_sample_words(&a->held_raw, counts) | a->held_flags);
+        send_cycle_piece(a, a->held_taxel, a->held_seq, flags, counts, MF_TEMPERATURE ? a->held_raw.t : 0U,
+                         a->held_t);
+        return;
+    }
     if (held == MF_HELD_FIELD) {
         mf_app_field_sample(a, &a->held_raw, &s);
         s.flags |= a->held_flags;
@@ -394,6 +474,9 @@ void mf_app_init(mf_app_t *a, const mf_hal_t *hal)
     a->cmd_len = 0;
     a->held = 0;
     a->rm_zyxt = 0;
+    a->queue_zyxt = 0;
+    a->chained = 0;
+    a->rm_i = 0;
     a->cycle_open = 0;
     a->t0 = mf_app_now(a);
     a->t_next = a->t0;

@@ -46,6 +46,13 @@ typedef struct mf_app {
     uint32_t held_t;
     mlx_raw_t held_raw;
     uint8_t rm_zyxt;           /* the channels the next RM reads (mf_app_read_measurement): an array's subset, 0 all */
+    uint8_t queue_addr;        /* the RM to queue behind the next read (mf_app_queue; 0 channels: none) */
+    uint8_t queue_zyxt;
+    uint32_t queue_not_before;
+    mlx_rm_t rm[2];            /* the RMs on the bus's own time: rm[rm_i] the read's, rm[rm_i ^ 1] the one queued */
+    uint8_t rm_i;              /* behind it, which started when chained (when: chain_t): the next read's, or the */
+    uint8_t chained;           /* reference chip's (mf_app_take_chained) */
+    uint32_t chain_t;
     uint8_t cycle_open;        /* an array's binary cycle frame: its head sent, its last chip's piece and CRC not yet */
     uint16_t cycle_crc;        /* its CRC so far */
     uint32_t cycle_t;          /* its head's time: the first chip's read */
@@ -61,10 +68,24 @@ int mf_app_start_chip(mf_app_t *a);
 int mf_app_start_at(mf_app_t *a, uint8_t addr7);
 /* RM (of the a->rm_zyxt channels) of the chip at a->chip.addr, once more MF_RETRY_US later if the chip rejects it
  * while still in the measuring mode (mode_bit: MLX_ST_BURST or MLX_ST_SM): the conversion ran late (the chip's
- * oscillator is slower than the table). A second rejection is an error. *t_us is when the last attempt started (a
- * first attempt on the bus's own time, a held sample sent meanwhile: the second is due MF_RETRY_US after the first
- * started, and *t_us says so); *retried says whether there was a second. */
-int mf_app_read_measurement(mf_app_t *a, mlx_raw_t *raw, uint8_t mode_bit, uint32_t *t_us, uint8_t *retried);
+ * oscillator is slower than the table), and again every MF_RETRY_US while patience_us has not passed since the first
+ * attempt. The rejection after that is an error: a single taxel's reads come on its conversions' grid and wait no
+ * longer than one retry (patience 0), so a chip much slower than the table shows as errors; an array chip's read
+ * comes when the chips before it are read, however late in its conversion, and may have taken the conversion its next
+ * read is scheduled for, so that one waits for up to a conversion. *t_us is when the last attempt started (a first
+ * attempt on the bus's own time, a held sample sent meanwhile: the next is due MF_RETRY_US after it started, and
+ * *t_us says so); *retried says whether there was more than one. */
+int mf_app_read_measurement(mf_app_t *a, mlx_raw_t *raw, uint8_t mode_bit, uint32_t patience_us, uint32_t *t_us,
+                            uint8_t *retried);
+/* Ask the next mf_app_read_measurement to queue the RM of zyxt at addr7 behind its own (a HAL with i2c_next), to
+ * start with no time between them when its reply is good and not before not_before: the bus then runs the two back
+ * to back. When it starts (a->chained), the next mf_app_read_measurement is that RM's, at that address (a->chip
+ * becomes it, waiting for nothing), or mf_app_take_chained takes it. The request holds for one read. */
+void mf_app_queue(mf_app_t *a, uint8_t addr7, uint8_t zyxt, uint32_t not_before);
+/* The chained RM's reading, checked as mlx_read_measurement checks it (MF_E_ARG when none started). */
+int mf_app_take_chained(mf_app_t *a, mlx_raw_t *raw);
+/* A chained RM still on the bus waited for and dropped: before anything else uses the bus. */
+void mf_app_settle(mf_app_t *a);
 /* Act on every byte the host has sent: 'b' binary, 't' text, 'i' the info line, and the EEPROM commands of
  * docs/bundle.md section 4: 'w' <addr:u16> <n:u8, 1..16> <n bytes> <crc:u16> writes (answered by a W line, the
  * calibration record reloaded), 'r' <addr:u16> <n:u8, 1..32> reads (answered by an R line). */

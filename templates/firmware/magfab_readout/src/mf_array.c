@@ -49,25 +49,43 @@ void mf_array_start(mf_app_t *a, uint8_t recovered)
     a->t_next = mf_app_now(a);
 }
 
-/* RM of chip k (after the SM of this cycle in single mode); *t_us when it was read. */
-static int read_taxel(mf_app_t *a, uint8_t k, mlx_raw_t *raw, uint32_t *t_us)
+/* The channels of chip k's RM this cycle: the temperature word (two of the reply's nine bytes) of one chip a cycle,
+ * in turn (t_turn), and of a chip just started; the others' field goes out with their latest (a chip's temperature
+ * moves over seconds, a cycle is milliseconds); mf_array.h */
+static uint8_t channels(uint8_t k, uint8_t t_turn)
+{
+    uint8_t read_t = (uint8_t)((MF_ZYXT & MLX_T) && (!taxel[k].t_known || t_turn == k));
+    return (uint8_t)(read_t ? MF_ZYXT : MF_ZYXT & (uint8_t)~MLX_T);
+}
+
+/* RM of chip k (after the SM of this cycle in single mode); *t_us when it was read. In burst mode the next chip's RM
+ * is queued behind it (mf_app_queue), so the bus reads the cycle's chips back to back, each from its conversion on. */
+static int read_taxel(mf_app_t *a, uint8_t k, uint8_t t_turn, mlx_raw_t *raw, uint32_t *t_us)
 {
     uint8_t mode = MF_BURST ? MLX_ST_BURST : MLX_ST_SM;
     uint8_t retried;
     uint8_t read_t;
+    uint8_t j = (uint8_t)(k + 1U);
     int rc;
     if (!MF_BURST && taxel[k].sm_rc != MF_OK) {
         *t_us = mf_app_now(a);
         return taxel[k].sm_rc;
     }
-    mf_app_wait_until(a, taxel[k].t_ready); /* started or read late: a new conversion first */
-    a->chip.addr = mf_calib_address(k);
-    /* the temperature word (two of the reply's nine bytes) of one chip a cycle, in turn, and of a chip just started:
-     * the others' field goes out with their latest (a chip's temperature moves over seconds, a cycle is
-     * milliseconds); mf_array.h */
-    read_t = (uint8_t)((MF_ZYXT & MLX_T) && (!taxel[k].t_known || a->seq % mf_calib_taxels() == k));
-    a->rm_zyxt = (uint8_t)(read_t ? MF_ZYXT : MF_ZYXT & (uint8_t)~MLX_T);
-    rc = mf_app_read_measurement(a, raw, mode, t_us, &retried);
+    if (!a->chained) { /* else its RM is on the bus already, started behind chip k - 1's */
+        mf_app_wait_until(a, taxel[k].t_ready); /* started or read late: a new conversion first */
+        a->chip.addr = mf_calib_address(k);
+    }
+    a->rm_zyxt = channels(k, t_turn);
+    read_t = (uint8_t)((a->rm_zyxt & MLX_T) != 0U);
+    if (MF_BURST && j < mf_calib_taxels() && !taxel[j].lost) {
+        mf_app_queue(a, mf_calib_address(j), channels(j, t_turn), taxel[j].t_ready);
+    } else if (MF_BURST && j == mf_calib_taxels() && j > 1U && !taxel[0].lost) {
+        /* the next cycle's first chip, from its start (a->t_next, set for it) or its conversion, the later (read
+         * this cycle: one chip alone would be queued behind itself before its next conversion is known) */
+        uint32_t t = (int32_t)(taxel[0].t_ready - a->t_next) > 0 ? taxel[0].t_ready : a->t_next;
+        mf_app_queue(a, mf_calib_address(0), channels(0, (uint8_t)(t_turn + 1U == j ? 0U : t_turn + 1U)), t);
+    }
+    rc = mf_app_read_measurement(a, raw, mode, MF_TCONV_US, t_us, &retried);
     a->rm_zyxt = 0;
     if (rc == MF_OK && read_t) {
         taxel[k].t_raw = raw->t;
@@ -84,7 +102,7 @@ static int read_taxel(mf_app_t *a, uint8_t k, mlx_raw_t *raw, uint32_t *t_us)
          * or late finds the conversion after the last one read, so every read finds a new one and none is skipped
          * that a read could have taken; far behind (a stalled link), the grid starts again from this read. */
         uint32_t next = (retried ? *t_us : taxel[k].t_ready) + MF_TCONV_US;
-        if ((int32_t)(*t_us - next) >= (int32_t)(8UL * MF_TCONV_US)) {
+        if ((int32_t)(*t_us - next) >= (int32_t)((uint32_t)MF_TCONV_US << 3)) { /* 8 conversions (no multiply) */
             next = *t_us + MF_TCONV_US;
         }
         while ((int32_t)(*t_us - next) >= 0) {
@@ -96,7 +114,7 @@ static int read_taxel(mf_app_t *a, uint8_t k, mlx_raw_t *raw, uint32_t *t_us)
 }
 
 /* Chip k's frame of this cycle: its field, or its fault (then a restart, as a single taxel's chip). */
-static void poll_taxel(mf_app_t *a, uint8_t k)
+static void poll_taxel(mf_app_t *a, uint8_t k, uint8_t t_turn)
 {
     mf_taxel_t *x = &taxel[k];
     mf_sample_t s;
@@ -112,7 +130,7 @@ static void poll_taxel(mf_app_t *a, uint8_t k)
         mf_app_emit_field(a, k, &s, mf_app_now(a));
         return;
     }
-    rc = read_taxel(a, k, &raw, &t);
+    rc = read_taxel(a, k, t_turn, &raw, &t);
     if (rc == MF_OK && a->hal->i2c_begin != 0) { /* held: its frame sent while the next chip's read is on the bus */
         a->held_raw = raw;
         a->held_t = t;
@@ -143,15 +161,19 @@ static void poll_taxel(mf_app_t *a, uint8_t k)
 void mf_array_poll(mf_app_t *a)
 {
     uint8_t n = mf_calib_taxels();
-    uint8_t k;
+    uint8_t k, t_turn;
     if (a->lost) {
+        mf_app_settle(a);
         mf_array_start(a, 1); /* a new record was written: every chip with its settings */
     }
     if (MF_BURST) {
-        if ((int32_t)(mf_app_now(a) - a->t_next) > (int32_t)MF_TCONV_US) {
-            a->t_next = mf_app_now(a); /* behind by more than a conversion (frames or bus slower): no burst of reads */
+        uint32_t now = mf_app_now(a);
+        if ((int32_t)(now - a->t_next) > (int32_t)MF_TCONV_US) {
+            a->t_next = now; /* behind by more than a conversion (frames or bus slower): no burst of reads */
         }
-        mf_app_wait_until(a, a->t_next);
+        if (!a->chained) { /* else the first chip's read started behind the last cycle's, from a->t_next on */
+            mf_app_wait_until(a, a->t_next);
+        }
         a->t_next += MF_TCONV_US;
     } else {
         for (k = 0; k < n; ++k) { /* the conversions run in parallel */
@@ -163,8 +185,9 @@ void mf_array_poll(mf_app_t *a)
         a->hal->delay_us(a->hal->ctx, MF_TCONV_US + MF_READ_MARGIN_US);
     }
     a->poll_error = MF_OK;
+    t_turn = (uint8_t)(a->seq % n);
     for (k = 0; k < n; ++k) {
-        poll_taxel(a, k);
+        poll_taxel(a, k, t_turn);
     }
     /* the cycle's last chip, when held, goes out during the next cycle's first read (or before a command's reply),
      * in this cycle's frame: its head carries this cycle's sequence number */

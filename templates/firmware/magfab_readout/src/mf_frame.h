@@ -37,8 +37,8 @@ uint8_t mf_frame_text(char *out, uint8_t seq, uint32_t t_us, const mf_sample_t *
  * word on a chip error), then the CRC-16 of every byte from the type on (mf_crc16_update over the pieces). The head's
  * bytes: returns MF_CYCLE_HEAD_LEN. */
 uint8_t mf_frame_cycle_head(uint8_t *out, uint8_t seq, uint32_t t_us, uint8_t chips);
-/* One chip's piece: returns MF_CYCLE_CHIP_LEN. */
-uint8_t mf_frame_cycle_chip(uint8_t *out, uint32_t dt_us, const mf_sample_t *s);
+/* One chip's piece (its flags, counts, and temperature or fault word): returns MF_CYCLE_CHIP_LEN. */
+uint8_t mf_frame_cycle_chip(uint8_t *out, uint32_t dt_us, uint8_t flags, const int16_t *counts, uint16_t word);
 /* The closing CRC (little-endian): returns 2. */
 uint8_t mf_frame_cycle_end(uint8_t *out, uint16_t crc);
 /* Its text line: B,<taxel>,<seq>,<t_us>,<status>,<Bx_uT>,<By_uT>,<Bz_uT>,<T_C>[,<fault>]*XXXX\n (as mf_frame_text

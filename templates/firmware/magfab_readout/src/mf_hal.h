@@ -9,6 +9,9 @@
 extern "C" {
 #endif
 
+/* How far ahead of now a chained transfer's not_before may be (mf_hal_t.i2c_next). */
+#define MF_CHAIN_AHEAD_US 8000UL
+
 typedef struct mf_hal {
     void *ctx; /* handed back to every function */
     /* Write len bytes to the 7-bit address. stop = 0 leaves the bus claimed so that the next i2c_read
@@ -28,6 +31,15 @@ typedef struct mf_hal {
      * included. tx and rx stay the caller's, untouched, until i2c_done no longer gives MF_BUSY. */
     int (*i2c_begin)(void *ctx, uint8_t addr7, const uint8_t *tx, uint8_t ntx, uint8_t *rx, uint8_t nrx);
     int (*i2c_done)(void *ctx);
+    /* Optional (0: every transfer of i2c_begin ends with a STOP): while one runs, queue the next (the same
+     * arguments), to start behind it with a repeated START and no time between them, when the running transfer
+     * ends well, the first byte it read masked by mask equals want, and micros() has reached not_before by then
+     * (at most MF_CHAIN_AHEAD_US ahead: MF_E_ARG beyond). i2c_done gives the running transfer's result; once it
+     * gives one, i2c_chained says whether the queued transfer started (1, *t_us when; i2c_done then gives its
+     * state) or was dropped (0: nothing is on the bus). */
+    int (*i2c_next)(void *ctx, uint8_t addr7, const uint8_t *tx, uint8_t ntx, uint8_t *rx, uint8_t nrx,
+                    uint8_t mask, uint8_t want, uint32_t not_before);
+    uint8_t (*i2c_chained)(void *ctx, uint32_t *t_us);
 } mf_hal_t;
 
 #ifdef __cplusplus

@@ -35,6 +35,11 @@ void mf_ref_reset(const mf_app_t *a)
     ref.t_retry = mf_app_now(a);
 }
 
+uint8_t mf_ref_due(void)
+{
+    return (uint8_t)(MF_BURST && ref.started && ref.phase == 0U ? mf_calib_reference() : 0U);
+}
+
 void mf_ref_update(mf_app_t *a)
 {
     mlx_raw_t raw;
@@ -64,7 +69,7 @@ void mf_ref_update(mf_app_t *a)
         }
         return;
     }
-    rc = mlx_read_measurement(&a->chip, MF_ZYXT, &raw);
+    rc = a->chained ? mf_app_take_chained(a, &raw) : mlx_read_measurement(&a->chip, MF_ZYXT, &raw);
     if (rc == MF_OK && MF_BURST && !(a->chip.status & MLX_ST_BURST)) {
         rc = MF_E_MODE;
     }

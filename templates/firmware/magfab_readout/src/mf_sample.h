@@ -36,6 +36,9 @@ void mf_sample_convert(const mlx_raw_t *raw, mf_sample_t *s);
 /* The same without floating point: the counts, the flag and the temperature word, NaN microtesla and temperature
  * (what an array's binary field frame and the reference chip's average use: about 60 us less on the AVR). */
 void mf_sample_counts(const mlx_raw_t *raw, mf_sample_t *s);
+/* The X, Y, Z counts of raw's words (RES offsets removed, clamped to 16 bits) into b, and MF_FLAG_SATURATED when one
+ * is at the chip's output limit (else 0): the counts an array's binary cycle frame carries, without a sample. */
+uint8_t mf_sample_words(const mlx_raw_t *raw, int16_t *b);
 /* A sample that failed with error rc (MF_E_*) at stage (MF_STAGE_*): chip-error flag, the fault word, zero
  * counts, NaN everywhere else. */
 void mf_sample_fail(mf_sample_t *s, int rc, uint8_t stage);

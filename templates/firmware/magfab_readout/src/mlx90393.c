@@ -12,14 +12,8 @@ void mlx_init(mlx_t *m, const mf_hal_t *hal, uint8_t addr7)
 
 uint8_t mlx_words(uint8_t zyxt)
 {
-    uint8_t n = 0;
-    uint8_t bit;
-    for (bit = 1; bit <= MLX_Z; bit = (uint8_t)(bit << 1)) {
-        if (zyxt & bit) {
-            ++n;
-        }
-    }
-    return n;
+    /* the channel bits counted without a loop: every read asks it */
+    return (uint8_t)((zyxt & 1U) + ((zyxt >> 1) & 1U) + ((zyxt >> 2) & 1U) + ((zyxt >> 3) & 1U));
 }
 
 /* Command out, repeated START, reply in; the reply's first byte is the status. */
@@ -128,10 +122,7 @@ int mlx_update_register(mlx_t *m, uint8_t reg, uint16_t mask, uint16_t value)
 /* An RM's reply (status, then the zyxt channels' words), checked: RS, ERROR, D. */
 static int measurement_reply(const uint8_t *rx, uint8_t zyxt, mlx_raw_t *raw)
 {
-    uint16_t words[4] = {0, 0, 0, 0};
-    uint8_t bit;
-    uint8_t k = 0;
-    uint8_t i = 1;
+    const uint8_t *p = &rx[1];
     int rc = status_rc(rx[0]);
     if (rc != MF_OK) {
         return rc;
@@ -139,16 +130,14 @@ static int measurement_reply(const uint8_t *rx, uint8_t zyxt, mlx_raw_t *raw)
     if (check_count(rx[0], mlx_words(zyxt)) != MF_OK) {
         return MF_E_COUNT;
     }
-    for (bit = MLX_T; bit <= MLX_Z; bit = (uint8_t)(bit << 1), ++k) {
-        if (zyxt & bit) {
-            words[k] = (uint16_t)(((uint16_t)rx[i] << 8) | rx[i + 1]);
-            i = (uint8_t)(i + 2);
-        }
-    }
-    raw->t = words[0];
-    raw->x = words[1];
-    raw->y = words[2];
-    raw->z = words[3];
+    /* the reply's order: T, X, Y, Z, each only if asked (0 if not); written out, as every read comes here */
+    raw->t = (zyxt & MLX_T) ? (uint16_t)(((uint16_t)p[0] << 8) | p[1]) : 0U;
+    p += (zyxt & MLX_T) ? 2 : 0;
+    raw->x = (zyxt & MLX_X) ? (uint16_t)(((uint16_t)p[0] << 8) | p[1]) : 0U;
+    p += (zyxt & MLX_X) ? 2 : 0;
+    raw->y = (zyxt & MLX_Y) ? (uint16_t)(((uint16_t)p[0] << 8) | p[1]) : 0U;
+    p += (zyxt & MLX_Y) ? 2 : 0;
+    raw->z = (zyxt & MLX_Z) ? (uint16_t)(((uint16_t)p[0] << 8) | p[1]) : 0U;
     return MF_OK;
 }
 
@@ -165,17 +154,35 @@ int mlx_read_measurement(mlx_t *m, uint8_t zyxt, mlx_raw_t *raw)
     return rc == MF_OK ? measurement_reply(rx, zyxt, raw) : rc;
 }
 
-int mlx_measurement_begin(mlx_t *m, uint8_t zyxt)
+int mlx_measurement_begin(const mlx_t *m, mlx_rm_t *rm, uint8_t zyxt)
 {
     uint8_t n = mlx_words(zyxt);
     if (n == 0 || m->hal->i2c_begin == 0 || m->hal->i2c_done == 0) {
         return MF_E_ARG;
     }
-    m->tx = (uint8_t)(MLX_CMD_RM | (zyxt & 0x0F));
-    return m->hal->i2c_begin(m->hal->ctx, m->addr, &m->tx, 1, m->rx, (uint8_t)(1 + 2 * n));
+    rm->addr = m->addr;
+    rm->zyxt = zyxt;
+    rm->tx = (uint8_t)(MLX_CMD_RM | (zyxt & 0x0F));
+    return m->hal->i2c_begin(m->hal->ctx, rm->addr, &rm->tx, 1, rm->rx, (uint8_t)(1 + 2 * n));
 }
 
-int mlx_measurement_end(mlx_t *m, uint8_t zyxt, mlx_raw_t *raw)
+int mlx_measurement_chain(const mlx_t *m, mlx_rm_t *next, const mlx_rm_t *running, uint8_t mode_bit,
+                          uint32_t not_before)
+{
+    uint8_t n = mlx_words(next->zyxt);
+    uint8_t before = mlx_words(running->zyxt);
+    /* the running reply's status: this mode alone, no RS, no ERROR, its words' count (SED, a corrected error, is
+     * no fault: status_rc and check_count) */
+    uint8_t mask = (uint8_t)(MLX_ST_BURST | MLX_ST_WOC | MLX_ST_SM | MLX_ST_ERROR | MLX_ST_RS | MLX_ST_D);
+    if (n == 0 || before == 0 || m->hal->i2c_next == 0 || m->hal->i2c_chained == 0) {
+        return MF_E_ARG;
+    }
+    next->tx = (uint8_t)(MLX_CMD_RM | (next->zyxt & 0x0F));
+    return m->hal->i2c_next(m->hal->ctx, next->addr, &next->tx, 1, next->rx, (uint8_t)(1 + 2 * n), mask,
+                            (uint8_t)(mode_bit | (uint8_t)(before - 1U)), not_before);
+}
+
+int mlx_measurement_end(mlx_t *m, const mlx_rm_t *rm, mlx_raw_t *raw)
 {
     int rc;
     while ((rc = m->hal->i2c_done(m->hal->ctx)) == MF_BUSY) {
@@ -183,6 +190,6 @@ int mlx_measurement_end(mlx_t *m, uint8_t zyxt, mlx_raw_t *raw)
     if (rc != MF_OK) {
         return rc;
     }
-    m->status = m->rx[0];
-    return measurement_reply(m->rx, zyxt, raw);
+    m->status = rm->rx[0];
+    return measurement_reply(rm->rx, rm->zyxt, raw);
 }

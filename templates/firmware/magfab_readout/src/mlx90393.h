@@ -46,9 +46,16 @@ typedef struct mlx {
     const mf_hal_t *hal;
     uint8_t addr;   /* 7-bit I2C address */
     uint8_t status; /* status byte of the last reply */
-    uint8_t tx;     /* an RM on the bus (mlx_measurement_begin): its command and its reply */
-    uint8_t rx[MLX_REPLY_MAX];
 } mlx_t;
+
+/* An RM on the bus's own time (mlx_measurement_begin, mlx_measurement_chain): its chip, channels, command and reply;
+ * the HAL writes the reply from its interrupt, so the buffer stays where it is until the RM has ended. */
+typedef struct mlx_rm {
+    uint8_t addr;
+    uint8_t zyxt;
+    uint8_t tx;
+    uint8_t rx[MLX_REPLY_MAX];
+} mlx_rm_t;
 
 typedef struct mlx_raw {
     uint16_t t, x, y, z; /* raw words as the chip sends them; channels not selected are 0 */
@@ -69,10 +76,17 @@ int mlx_write_register(mlx_t *m, uint8_t reg, uint16_t value);
 int mlx_update_register(mlx_t *m, uint8_t reg, uint16_t mask, uint16_t value);
 /* RM of the zyxt channels, checked in this order: RS (MF_E_RESET), ERROR (MF_E_CHIP), D (MF_E_COUNT). */
 int mlx_read_measurement(mlx_t *m, uint8_t zyxt, mlx_raw_t *raw);
-/* The same RM on the bus's own time (the HAL's i2c_begin): MF_OK once it is under way, MF_E_ARG without channels or
- * an asynchronous HAL; mlx_measurement_end waits for it and checks it as mlx_read_measurement does. */
-int mlx_measurement_begin(mlx_t *m, uint8_t zyxt);
-int mlx_measurement_end(mlx_t *m, uint8_t zyxt, mlx_raw_t *raw);
+/* The same RM of m's chip on the bus's own time (the HAL's i2c_begin), in rm: MF_OK once it is under way, MF_E_ARG
+ * without channels or an asynchronous HAL; mlx_measurement_end waits for it and checks it as mlx_read_measurement
+ * does, m->status its status. */
+int mlx_measurement_begin(const mlx_t *m, mlx_rm_t *rm, uint8_t zyxt);
+int mlx_measurement_end(mlx_t *m, const mlx_rm_t *rm, mlx_raw_t *raw);
+/* next's RM (its addr and zyxt) queued behind running, the RM on the bus (the HAL's i2c_next), to start when
+ * running's reply passes every check of mlx_read_measurement for a chip in mode_bit's mode, and not before
+ * not_before: MF_OK once queued, MF_E_ARG when the HAL cannot queue it. Once the HAL says it started
+ * (mf_hal_t.i2c_chained), mlx_measurement_end(m, next, ...) waits for it. */
+int mlx_measurement_chain(const mlx_t *m, mlx_rm_t *next, const mlx_rm_t *running, uint8_t mode_bit,
+                          uint32_t not_before);
 
 #ifdef __cplusplus
 }
