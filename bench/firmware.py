@@ -32,9 +32,10 @@ What it measures:
    spare time until the next conversion; the bus's busy time apart, as it overlaps them). The worst field is the
    one where the processor is busiest (a 1 s window's count can differ by one frame at the edge).
    ``--build`` names an existing build folder; without it the spec is built into a temporary one (a minute).
-   ``--no-rate`` skips this part; ``--record-rate`` writes it (worst, median, best) beside the generic image,
-   ``magfab/export/generic_image/rate.json``, where every build's firmware README, report and predictions.json
-   quote it (``firmware.measured_rate``), and tests/export/test_simbus_timing.py holds it to a new measurement.
+   ``--no-rate`` skips this part; ``--record-rate`` writes it (worst, median, best, and the settings it ran with)
+   beside the generic image, ``magfab/export/generic_image/rate.json``, where every build with those settings quotes it
+   in its firmware README, report and predictions.json (``firmware.measured_rate_for``; a build with others says how
+   it differs, and no figure), and tests/export/test_simbus_timing.py holds it to a new measurement.
 
 A synthetic calibration per order (random coefficients, an elliptical hull of N points) stands in unless
 ``--calibration`` gives a real one. Prints a table and writes ``<out>/firmware_bench.json``. Nothing here
@@ -151,8 +152,9 @@ def shipped(spec_path: Path | None, build_dir: Path | None) -> dict:
         image_sha256 = hashlib.sha256(hex_path.read_bytes()).hexdigest()  # read before a temporary build goes
     rows.sort(key=lambda r: -r["busy_us"])  # the busiest processor first (the share delivered is printed beside it)
     return {"sample_cycles": max(cycles["sample_binary"].values()), "fields": rows, "image_sha256": image_sha256,
-            "calibration": {"spec": design.spec.name, "order": cal["order"],
+            "calibration": {"spec": design.spec.name, "method": cal["method"], "order": cal["order"],
                             "hull_points": len(cal["valid_region"]["hull"])},
+            "settings": firmware.rate_settings(design),
             "worst": rows[0], "median": rows[len(rows) // 2], "best": rows[-1], "seconds": RATE_SECONDS,
             "cycle_at_worst_us": rows[0]["cycle_us"], "budget_at_worst_us": rows[0]["budget_us"]}
 
@@ -170,6 +172,7 @@ def record_rate(m: dict, i2c_hz: float) -> Path:
                 "cycle_us": round(r["cycle_us"], 1)}
 
     record = {"image_sha256": hashlib.sha256(image).hexdigest(), "calibration": m["calibration"],
+              "settings": m["settings"],
               "fields": len(m["fields"]), "seconds": m["seconds"], "i2c_Hz": i2c_hz,
               "chip_Hz": round(m["worst"]["chip_Hz"], 3), **{k: row(m[k]) for k in ("worst", "median", "best")}}
     path = BENCH_DIR.parent / "magfab" / "export" / firmware.GENERIC_DIR / firmware.GENERIC_RATE

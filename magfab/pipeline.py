@@ -172,7 +172,7 @@ def _predictions(design: Design, say: Progress, timings: dict[str, float]) -> Pr
     timings["predict"] = time.perf_counter() - t
     if pred is None:
         raise BuildError(found)
-    measured = firmware.measured_rate() if design.array is None else None  # a single taxel's, beside the models'
+    measured = firmware.measured_rate_for(design, None)  # the calibration, not made yet, the report's to check
     out = [Artifact("predictions.json", _json_bytes({**pred.as_json(), **({} if measured is None else {
         "readout_measured": measured})}), "predicted field, force curve, sensitivity, resolution, range and noise, "
                     "with the models used; the readout's rate as the shipped image measured it")]

@@ -390,7 +390,7 @@ def _context(design: Design, calibration: Mapping[str, Any], generic: bool) -> d
         "tconv_us": chip.tconv_us, "read_margin_us": chip.read_margin_us, "margin_pct": round(READ_MARGIN * 100),
         "tconv_ms": f"{chip.tconv_us / 1000:.3f}",
         "array": design.array is not None,  # an array's image reads its chips in turn, each read waited for
-        "measured_rate": "" if design.array is not None else _measured_line(int(calibration.get("order", 0))),
+        "measured_rate": "" if design.array is not None else _measured_line(design, calibration),
         "float32_bound": "" if design.array is not None else _float32_line(checked),
         "retry_us": settings["retry_us"], "exit_wait_us": settings["exit_wait_us"],
         "board_pullups": bool(spec.pcb.pullups),
@@ -470,8 +470,9 @@ def measured_rate() -> dict[str, Any] | None:
     """What the shipped image delivered on the simulated bus timed like a real one (:data:`GENERIC_RATE`): the
     chip's conversion rate, and at the worst, median and best of the fields measured across the calibrated region of
     the build it names, the frames a second, the share of the chip's conversions and the processor's busy time a
-    frame. None when the package holds no record, or one of another image (the image was rebuilt since). Read once
-    a process (a build quotes it three times: the firmware README, the report, predictions.json)."""
+    frame, and the settings it ran with (:func:`rate_settings`). None when the package holds no record, or one of
+    another image (the image was rebuilt since). Read once a process (a build quotes it three times: the firmware
+    README, the report, predictions.json)."""
     folder = files("magfab.export").joinpath(GENERIC_DIR)
     record = folder.joinpath(GENERIC_RATE)
     if not record.is_file():
@@ -479,6 +480,57 @@ def measured_rate() -> dict[str, Any] | None:
     data = json.loads(record.read_text())
     image, _ = shipped_image()
     return data if data.get("image_sha256") == hashlib.sha256(image).hexdigest() else None
+
+
+def rate_settings(design: Design) -> dict[str, Any]:
+    """What a single taxel's rate depends on besides its calibration: the conversion time the reads are paced by,
+    burst or single measurements, the frames' transport and baud, the I2C clock, and a reference chip (its read every
+    other sample)."""
+    fw = design.spec.firmware
+    return {"tconv_us": chip_config(design).tconv_us, "acquisition": _value(fw.acquisition),
+            "output": _value(fw.output), "baud": int(fw.baud), "i2c_hz": int(fw.i2c_hz),
+            "reference": reference_chip(design) is not None}
+
+
+def rate_mismatch(design: Design, calibration: Mapping[str, Any] | None, measured: Mapping[str, Any]) -> list[str]:
+    """How this build differs from the one :func:`measured_rate` measured, setting by setting ([] when it does not):
+    an array, another :func:`rate_settings`, or (``calibration``: its ``method`` and ``order``, None when not yet
+    made) another method or a higher order, whose cost a sample is more."""
+    if design.array is not None:
+        return ["an array (its rate: docs/bundle.md section 3)"]
+    ran, mine = measured.get("settings") or {}, rate_settings(design)
+    out = [f"{k} {mine[k]} (measured: {ran.get(k)})" for k in mine if ran.get(k) != mine[k]]
+    cal = measured["calibration"]
+    if calibration is not None and calibration.get("method") != cal.get("method"):
+        out.append(f"a {calibration.get('method')} calibration (measured: {cal.get('method')})")
+    if calibration is not None and int(calibration.get("order", 0)) > int(cal["order"]):
+        out.append(f"calibration order {calibration.get('order')} (measured: {cal['order']})")
+    return out
+
+
+def measured_rate_for(design: Design, calibration: Mapping[str, Any] | None) -> dict[str, Any] | None:
+    """:func:`measured_rate` when it is this build's (no :func:`rate_mismatch`), else None: a build quotes the measured
+    rate only where it was measured with the build's own settings and a calibration like its own."""
+    measured = measured_rate()
+    return measured if measured is not None and not rate_mismatch(design, calibration, measured) else None
+
+
+def _measured_line(design: Design, calibration: Mapping[str, Any]) -> str:
+    """The firmware README's sentence on the measured rate (:func:`measured_rate_for`), "" without a record; a build
+    the record does not apply to is told how it differs, and no figure."""
+    measured = measured_rate()
+    if measured is None:
+        return ""
+    w, cal = measured["worst"], measured["calibration"]
+    differs = rate_mismatch(design, calibration, measured)
+    if differs:
+        return (f"Not measured for this build: the shipped image's rate was measured with {cal['spec']}'s settings "
+                f"and calibration, and this build has {'; '.join(differs)}.")
+    return (f"Measured: {w['rate_Hz']:.0f} frames/s, {w['delivered']:.1%} of the chip's {measured['chip_Hz']:.1f} "
+            f"conversions/s at the busiest of {measured['fields']} fields across {cal['spec']}'s calibrated region "
+            f"(the processor busy {w['busy_us']:.0f} of {w['cycle_us']:.0f} us a frame), the shipped image with that "
+            f"calibration (order {cal['order']}, {cal['hull_points']}-point region) on a simulated bus timed like a "
+            f"real {measured['i2c_Hz'] / 1000:.0f} kHz one.")
 
 
 def _float32_line(checked: calibration_json.Checked) -> str:
@@ -493,18 +545,3 @@ def _float32_line(checked: calibration_json.Checked) -> str:
             "temperature: a bound worked out from this calibration's own numbers, each float32 operation allowed one "
             f"unit in the last place (the readout package's `float32_bound.py`, docs/bundle.md section 2){near}.")
 
-
-def _measured_line(order: int) -> str:
-    """The firmware README's sentence on the measured rate (:func:`measured_rate`), "" without a record; a build
-    whose calibration is of higher order than the measured one is told it costs more a sample."""
-    measured = measured_rate()
-    if measured is None:
-        return ""
-    w, cal = measured["worst"], measured["calibration"]
-    above = (f"; this build's calibration is of order {order}, which costs more a sample than order {cal['order']}: "
-             "docs/bundle.md section 2 says how much") if order > cal["order"] else ""
-    return (f"Measured: {w['rate_Hz']:.0f} frames/s, {w['delivered']:.1%} of the chip's {measured['chip_Hz']:.1f} "
-            f"conversions/s at the busiest of {measured['fields']} fields across {cal['spec']}'s calibrated region "
-            f"(the processor busy {w['busy_us']:.0f} of {w['cycle_us']:.0f} us a frame), the shipped image with that "
-            f"calibration (order {cal['order']}, {cal['hull_points']}-point region) on a simulated bus timed like a "
-            f"real {measured['i2c_Hz'] / 1000:.0f} kHz one{above}.")

@@ -31,7 +31,7 @@ from ..formats import acceptance_json, calibration_json
 from ..formats.json_checks import FormatError
 
 # TEMPERATURE_*, re-exported: MLX90393 temperature (TCMP off), T = 25 C + (raw - T25) / TRES, from recipes/chips.toml.
-from .firmware import TEMPERATURE_LSB_PER_C, TEMPERATURE_RAW_25C, chip_config, image_settings, measured_rate
+from .firmware import TEMPERATURE_LSB_PER_C, TEMPERATURE_RAW_25C, chip_config, image_settings, measured_rate_for
 from .templating import environment
 
 __all__ = ["PACKAGE", "SOURCE", "TEMPLATE_SUFFIX", "TREE_FILES", "render", "source_files", "data_files",
@@ -123,9 +123,10 @@ def _build_data(design, checked: calibration_json.Checked) -> dict[str, object]:
         "temperature_lsb_per_C": TEMPERATURE_LSB_PER_C,
         "calibration_sha256": checked.sha256,
         "image_settings": image_settings(design),
-        # what the shipped image delivered on the simulated bus timed like a real one, as predictions.json says it
-        # (a single taxel's: an array's rate is docs/bundle.md section 3's table)
-        "readout_measured": measured_rate() if design.array is None else None,
+        # what the shipped image delivered on the simulated bus timed like a real one, as predictions.json says it,
+        # where it was measured with this build's settings (a single taxel's: an array's rate is docs/bundle.md
+        # section 3's table)
+        "readout_measured": measured_rate_for(design, {"method": checked.method, "order": checked.order}),
     }
 
 

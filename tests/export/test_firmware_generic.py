@@ -15,7 +15,7 @@ from test_firmware import make_calibration, spec_variant
 
 from magfab import derive, load_spec
 from magfab.export import firmware, toolchain
-from magfab.spec import Acquisition, Transport
+from magfab.spec import Acquisition, Reference, Transport
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -61,13 +61,39 @@ def test_the_wheel_takes_the_shipped_image():
     assert all(any(fnmatch.fnmatch(rel, pattern) for pattern in data) for rel in shipped)
 
 
+#: One setting of MagOne's changed at a time (spec_variant's section_key form) and the setting the build then differs
+#: in: another conversion time (OSR, digital filter, no temperature), single measurements, text frames, another baud
+#: or I2C clock. Each a build the recorded rate is not of.
+OTHER_SETTINGS = {
+    "sensor_osr": (1, "tconv_us"), "sensor_dig_filt": (3, "tconv_us"), "firmware_temperature": (False, "tconv_us"),
+    "firmware_acquisition": (Acquisition.SINGLE, "acquisition"), "firmware_output": (Transport.TEXT, "output"),
+    "firmware_baud": (115200, "baud"), "firmware_i2c_hz": (100000, "i2c_hz"),
+}
+
+
 def test_every_build_quotes_the_measured_rate_and_its_calibration():
     """The shipped image's recorded rate (generic_image/rate.json, held to a new measurement by
-    test_simbus_timing.py) is the one firmware.measured_rate gives: a build's firmware README says it with the
-    calibration it was measured with, and warns a build whose calibration is of higher order."""
+    test_simbus_timing.py) is the one firmware.measured_rate gives, with the settings it ran with: a build with those
+    settings and a calibration like the measured one quotes it (its firmware README with the calibration it was
+    measured with); a build with any one setting otherwise, a calibration of higher order or of another method, or
+    an array, quotes no figure and says how it differs (in its firmware README; its build.json, report and
+    predictions.json quote none: firmware.measured_rate_for)."""
     measured = firmware.measured_rate()
     assert measured is not None and measured["worst"]["delivered"] >= 0.99
-    order = measured["calibration"]["order"]
-    same, higher = firmware._measured_line(order), firmware._measured_line(order + 2)
-    assert same.startswith("Measured: ") and f"(order {order}," in same and "this build's" not in same
-    assert f"this build's calibration is of order {order + 2}" in higher
+    cal = measured["calibration"]
+    magone = derive(load_spec(None))
+    assert measured["settings"] == firmware.rate_settings(magone) and cal["spec"] == "magone"
+    same = {"method": cal["method"], "order": cal["order"]}
+    line = firmware._measured_line(magone, same)
+    assert line.startswith("Measured: ") and f"(order {cal['order']}," in line
+    assert firmware.measured_rate_for(magone, same) == measured == firmware.measured_rate_for(magone, None)
+    lower = {"method": cal["method"], "order": cal["order"] - 1}
+    assert firmware.measured_rate_for(magone, lower) == measured  # a lower order costs less a sample
+    others = [(magone, {"method": cal["method"], "order": cal["order"] + 2}, "calibration order"),
+              (magone, {"method": "mls", "order": cal["order"]}, "a mls calibration"),
+              (derive(load_spec(None).model_copy(update={"reference": Reference()})), same, "reference"),
+              *((derive(spec_variant(**{key: value})), same, named) for key, (value, named) in OTHER_SETTINGS.items())]
+    for design, calibration, named in others:
+        assert firmware.measured_rate_for(design, calibration) is None, named
+        text = firmware._measured_line(design, calibration)
+        assert text.startswith("Not measured for this build") and named in text and "frames/s" not in text, text

@@ -18,6 +18,8 @@ from simbus import BUS_BUSY, Bus, functions, grouped, region_fields, steady
 from test_simbus import FIELD_UT, SETTLE_US, sim  # noqa: F401  (the harness and the build, made once)
 from test_simbus_reference import REF_ADDR, REF_FIELD, setup  # noqa: F401  (the records with a reference chip)
 
+from magfab import derive, load_spec
+
 F_SCL_HZ = 400_000  # the image's TWI clock (mf_i2c: TWBR for 400 kHz at 16 MHz)
 RUN_S = 0.5  # simulated seconds per field: one lost conversion in 270 is under 0.4 %
 
@@ -76,8 +78,9 @@ def test_every_conversion_arrives_at_every_field_of_the_region(sim, tmp_path):  
     assert min(r["delivered"] for _, r in rows) >= 0.99
     recorded = firmware.measured_rate()
     assert recorded is not None, "rate.json is missing or of another image: python bench/firmware.py --record-rate"
-    assert recorded["calibration"] == {"spec": "magone", "order": sim.cal["order"],
+    assert recorded["calibration"] == {"spec": "magone", "method": sim.cal["method"], "order": sim.cal["order"],
                                        "hull_points": len(sim.cal["valid_region"]["hull"])}
+    assert recorded["settings"] == firmware.rate_settings(derive(load_spec(None)))
     assert recorded["fields"] == len(rows) and recorded["i2c_Hz"] == F_SCL_HZ
     busiest = max(r["busy_us"] for _, r in rows)
     assert recorded["worst"]["busy_us"] == pytest.approx(busiest, rel=0.01)

@@ -27,6 +27,7 @@ import numpy as np
 
 from ... import __version__
 from ...errors import Finding
+from ..firmware import measured_rate_for
 from ..templating import render
 from . import tables
 from .array import array_context
@@ -192,7 +193,7 @@ def render_report(spec: Spec, design: Design, findings: Sequence[Finding], artif
         parts=pictures.parts, board=pictures.board,
         board_parts=tables.board_parts(board),
         array=array_context(design, artifacts, lambda folder: _plot_figures(artifacts, folder)),
-        tables=tables.prediction_tables(prediction, measured=design.array is None),
+        tables=tables.prediction_tables(prediction, measured=measured_rate_for(design, calibration)),
         plots=_plot_figures(artifacts, "plots/"),
         drift=drift_context(prediction, lambda folder: _plot_figures(artifacts, folder)),
         models=tables.model_rows(prediction),

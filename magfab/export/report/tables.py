@@ -13,7 +13,6 @@ from urllib.parse import quote
 from ...errors import Finding, Severity
 from ...models.weighing import weight_fit_of
 from ...spec import Spec
-from ..firmware import measured_rate
 
 if TYPE_CHECKING:
     from ...board.layout import Board
@@ -95,9 +94,9 @@ def heights(design: Design) -> list[tuple[str, str]]:
         ("elastomer top", d.z_elastomer_base_mm + d.elastomer_height_mm)], key=lambda r: r[1])]
 
 
-def _measured_rows() -> list[tuple[str, str]]:
-    """The readout's rate as the shipped image measured it (firmware.measured_rate), where the package records it."""
-    m = measured_rate()
+def _measured_rows(m: Mapping[str, Any] | None) -> list[tuple[str, str]]:
+    """The readout's rate as the shipped image measured it (firmware.measured_rate_for: this build's settings and a
+    calibration like its own), where there is one."""
     if m is None:
         return []
     w, cal = m["worst"], m["calibration"]
@@ -107,9 +106,9 @@ def _measured_rows() -> list[tuple[str, str]]:
              f"{m['i2c_Hz'] / 1000:.0f} kHz timing)")]
 
 
-def prediction_tables(pred: Prediction, measured: bool = True) -> dict[str, list[tuple[str, str]]]:
-    """The prediction's tables for the report; ``measured``: the chip's with the single taxel's measured readout rate
-    (an array's image reads every chip in turn: not the figure measured)."""
+def prediction_tables(pred: Prediction, measured: Mapping[str, Any] | None = None) -> dict[str, list[tuple[str, str]]]:
+    """The prediction's tables for the report; ``measured``: the measured readout rate the chip's table quotes
+    (firmware.measured_rate_for the build: None for another build's settings, or an array's)."""
     n, s, f, c, nz = pred.normal, pred.shear, pred.field, pred.chip, pred.noise
     band = lambda m, fmt: ", ".join(f"{k} {format(v, fmt)}" for k, v in m.items())
     return {
@@ -146,7 +145,7 @@ def prediction_tables(pred: Prediction, measured: bool = True) -> dict[str, list
             ("full scale, xy / z", f"{c.full_scale_xy_G:.1f} / {c.full_scale_z_G:.1f} G"),
             ("saturation onset", f"{c.saturation_onset_G:.0f} G"),
             ("conversion (T+X+Y+Z)", f"{c.conversion_ms:.3f} ms ({c.rate_Hz:.0f} Hz)"),
-            *(_measured_rows() if measured else []),
+            *_measured_rows(measured),
         ],
         "noise": [
             ("environment", f"{nz.environment_G:.3f} G"),
