@@ -290,6 +290,44 @@ def test_a_fault_on_one_chip_flags_only_that_taxel_and_it_recovers(harness, name
     assert decoder.stats.lost == 0 and decoder.stats.crc_errors == 0
 
 
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("name", ARRAYS)
+def test_drawn_faults_on_a_real_timed_bus_touch_only_their_chips(harness, name, seed):
+    """Faults drawn at random (seeded): six NACKed reads and chip resets, each on a drawn chip at a drawn time, 12 to
+    20 ms apart (a chip's restart, about 8 ms, done before the next: a fault during a restart fails the start, and
+    the chip is tried again 100 ms later), on the bus timed like a real one, where every read is chained behind the
+    one before and the last chip's behind the next cycle's first. No frame is lost or corrupt, every cycle has every
+    chip, every good reading has its chip's own counts, only the chips struck give error readings (at most one a
+    fault), and each comes back (a reading flagged recovered, then no more errors)."""
+    import numpy as np
+
+    sim = harness[name]
+    n = len(sim.addresses)
+    rng = np.random.default_rng([seed, n])
+    struck: dict[int, int] = {}
+    with sim.boot() as bus:
+        bus.real_timing(True)
+        decoder = sim.decoder()
+        samples_of(decoder, bus.run_us(SETTLE_US))
+        got = []
+        for _ in range(6):
+            k = int(rng.integers(n))
+            target = bus.target(k)
+            target.nack(addr_phases=1) if rng.random() < 0.5 else target.chip_fault("reset")
+            struck[k] = struck.get(k, 0) + 1
+            got += samples_of(decoder, bus.run_us(float(rng.uniform(12_000, 20_000))))
+        got += samples_of(decoder, bus.run_us(30_000))
+    errors = [s for s in got if s.chip_error]
+    assert {s.taxel for s in errors} <= set(struck)
+    assert all(sum(s.taxel == k for s in errors) <= m for k, m in struck.items())
+    assert all(s.counts == sim.counts(s.taxel) for s in got if not s.chip_error)
+    assert all([s.taxel for s in c] == list(range(n)) for c in cycles(got))
+    for k in {s.taxel for s in errors}:
+        back = [s for s in got[max(i for i, s in enumerate(got) if s.chip_error and s.taxel == k):] if s.taxel == k]
+        assert back[1].recovered and not any(s.chip_error for s in back[1:]), k
+    assert decoder.stats.lost == 0 and decoder.stats.crc_errors == 0
+
+
 # ---- the rate, in simulated time ---------------------------------------------------------------------------------
 
 #: (chips, baud): the 1x1, 2x2 and 1x5 arrays at the default baud, where the UART binds from 3 chips on; five and
