@@ -164,15 +164,15 @@ def _board(design: Design, say: Progress = lambda _stage: None) -> BoardStage:
 
 
 def _predictions(design: Design, say: Progress, timings: dict[str, float]) -> PredictionStage:
-    """predictions.json and the prediction's design checks (docs/models.md, M9 and M18); its plots are
-    :func:`_plots`'."""
+    """predictions.json and the prediction's design checks (docs/models.md, M9, M18); its plots are :func:`_plots`'."""
     say("predicting sensitivity, resolution and range")
     t = time.perf_counter()
     pred, found = predict_with_findings(design)
     timings["predict"] = time.perf_counter() - t
     if pred is None:
         raise BuildError(found)
-    measured = firmware.measured_rate_for(design, None)  # the calibration, not made yet, the report's to check
+    c = design.spec.calibration  # not fitted yet: what the spec asks for ('auto' may fit either method)
+    measured = firmware.measured_rate_for(design, {"method": c.method.value, "order": c.order})
     out = [Artifact("predictions.json", _json_bytes({**pred.as_json(), **({} if measured is None else {
         "readout_measured": measured})}), "predicted field, force curve, sensitivity, resolution, range and noise, "
                     "with the models used; the readout's rate as the shipped image measured it")]

@@ -2,7 +2,8 @@
  * from fixed generous delays: in burst mode the reads follow a fixed grid one conversion apart, the first a small
  * margin after the first conversion is due, so every read finds a fresh conversion and none is skipped (the
  * grid does not drift with the time a read or a frame takes). A read the chip rejects as too early is retried
- * once, and the grid re-anchors on the retry: the safety net for a chip slower than the table. */
+ * (a single taxel's once, an array chip's for up to a conversion: mf_app_read_measurement), and the grid re-anchors
+ * on the retry: the safety net for a chip slower than the table. */
 #include "mf_app.h"
 
 #include "mf_array.h"
@@ -78,12 +79,12 @@ static void eeprom_write_command(mf_app_t *a)
     uint16_t crc = (uint16_t)(a->cmd[4 + len] | (uint16_t)a->cmd[5 + len] << 8);
     uint8_t rc = 0;
     uint8_t n;
-    mf_app_settle(a); /* the record may change: nothing of the chip's left on the bus */
     if (mf_crc16(a->cmd, (uint8_t)(4 + len)) != crc) {
         rc = 1;
     } else if ((uint32_t)addr + len > MF_NV_SIZE) {
         rc = 2;
     } else {
+        mf_app_settle(a); /* the record may change: nothing of the chip's left on the bus */
         mf_app_flush(a); /* the held sample's forces from the record it was read under */
         mf_nv_write(addr, &a->cmd[4], len);
         if (mf_calib_load() == MF_OK) {
@@ -253,6 +254,9 @@ static int read_rest(mf_app_t *a, mlx_raw_t *raw, uint8_t mode_bit)
     rc = mlx_measurement_end(&a->chip, &a->rm[a->rm_i], raw);
     if (queued) {
         a->chained = a->hal->i2c_chained(a->hal->ctx, &a->chain_t);
+    }
+    if (a->chained && rc != MF_OK) {
+        mf_app_settle(a); /* (the HAL chains only behind a good reply: never, but nothing left on the bus) */
     }
     return rc;
 }

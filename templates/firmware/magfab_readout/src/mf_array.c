@@ -81,9 +81,10 @@ static int read_taxel(mf_app_t *a, uint8_t k, uint8_t t_turn, mlx_raw_t *raw, ui
         mf_app_queue(a, mf_calib_address(j), channels(j, t_turn), taxel[j].t_ready);
     } else if (MF_BURST && j == mf_calib_taxels() && j > 1U && !taxel[0].lost) {
         /* the next cycle's first chip, from its start (a->t_next, set for it) or its conversion, the later (read
-         * this cycle: one chip alone would be queued behind itself before its next conversion is known) */
+         * this cycle: one chip alone would be queued behind itself before its next conversion is known), with the
+         * next cycle's channels (its turn from the sequence number as it will be, wrapping at 256) */
         uint32_t t = (int32_t)(taxel[0].t_ready - a->t_next) > 0 ? taxel[0].t_ready : a->t_next;
-        mf_app_queue(a, mf_calib_address(0), channels(0, (uint8_t)(t_turn + 1U == j ? 0U : t_turn + 1U)), t);
+        mf_app_queue(a, mf_calib_address(0), channels(0, (uint8_t)((uint8_t)(a->seq + 1U) % j)), t);
     }
     rc = mf_app_read_measurement(a, raw, mode, MF_TCONV_US, t_us, &retried);
     a->rm_zyxt = 0;
