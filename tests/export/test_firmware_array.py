@@ -411,6 +411,22 @@ def test_the_real_bus_bounds_hold_the_goals():
 REAL_BUS_CASES = [(1, 250_000, 0.99), *((n, 1_000_000, real_bus_share(n)) for n in range(1, 17))]
 
 
+@pytest.mark.parametrize("chips", [3, 5, 7])
+def test_every_reading_carries_its_chips_temperature_word_past_the_sequence_wrap(harness, designs, tmp_path, chips):
+    """Over more than 256 cycles (the sequence number wraps; a cycle reads the temperature word of one chip in turn,
+    the turn from the sequence number, and the next cycle's first chip is queued with its turn's channels), every
+    reading of every chip carries its chip's temperature word (25 C here), for chip counts that do not divide 256."""
+    sim = _array_sim(harness, designs, tmp_path, chips, 1_000_000)
+    with sim.boot() as bus:
+        bus.real_timing(True)
+        decoder = sim.decoder()
+        samples_of(decoder, bus.run_us(SETTLE_US + 10_000 * chips))
+        got = samples_of(decoder, bus.run_us(270 * max(1840, chips * 320)))  # 270 cycles or more
+    assert len({s.seq for s in got}) == 256 and len(got) > 256 * chips
+    assert not any(s.chip_error for s in got)
+    assert {s.temperature_raw for s in got} == {sim.settings["t_raw_25c"]}
+
+
 @pytest.mark.parametrize("chips, baud, share", REAL_BUS_CASES)
 def test_the_share_of_conversions_read_on_a_real_timed_bus(harness, designs, tmp_path, chips, baud, share):
     """On the bus timed like a real 400 kHz one (9 SCL periods a byte, START, repeated START, STOP and the bus's free
