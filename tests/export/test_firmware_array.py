@@ -255,6 +255,19 @@ ONE_CHIP_FAULTS = {
 }
 
 
+def assert_whole_and_back(got: list, sim: ArraySim, decoder, chips) -> None:
+    """After faults on ``chips``: every good reading has its chip's own counts, every cycle has every chip, each of
+    ``chips`` comes back after its last error (a reading flagged recovered, then no more errors), and no frame was
+    lost or corrupt."""
+    n = len(sim.addresses)
+    assert all(s.counts == sim.counts(s.taxel) for s in got if not s.chip_error)
+    assert all([s.taxel for s in c] == list(range(n)) for c in cycles(got))
+    for k in chips:
+        back = [s for s in got[max(i for i, s in enumerate(got) if s.chip_error and s.taxel == k):] if s.taxel == k]
+        assert back[1].recovered and not any(s.chip_error for s in back[1:]), k
+    assert decoder.stats.lost == 0 and decoder.stats.crc_errors == 0
+
+
 @pytest.mark.parametrize("real", [False, True], ids=["simavr's bus", "real-timed bus"])
 @pytest.mark.parametrize("which", ["first", "middle", "last"])
 @pytest.mark.parametrize("fault", list(ONE_CHIP_FAULTS))
@@ -282,12 +295,8 @@ def test_a_fault_on_one_chip_flags_only_that_taxel_and_it_recovers(harness, name
     got = during + after
     errors = [s for s in got if s.chip_error]
     assert errors and {s.taxel for s in errors} == {k} and errors[0].fault_name == named
-    assert all(s.counts == sim.counts(s.taxel) for s in got if not s.chip_error)
-    assert all([s.taxel for s in c] == list(range(n)) for c in cycles(got))
-    back = [s for s in got[got.index(errors[-1]):] if s.taxel == k]
-    assert back[1].recovered and not back[1].chip_error and not any(s.chip_error for s in back[1:])
+    assert_whole_and_back(got, sim, decoder, [k])
     assert not any(s.recovered for s in got if s.taxel != k)
-    assert decoder.stats.lost == 0 and decoder.stats.crc_errors == 0
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -320,12 +329,7 @@ def test_drawn_faults_on_a_real_timed_bus_touch_only_their_chips(harness, name, 
     errors = [s for s in got if s.chip_error]
     assert {s.taxel for s in errors} <= set(struck)
     assert all(sum(s.taxel == k for s in errors) <= m for k, m in struck.items())
-    assert all(s.counts == sim.counts(s.taxel) for s in got if not s.chip_error)
-    assert all([s.taxel for s in c] == list(range(n)) for c in cycles(got))
-    for k in {s.taxel for s in errors}:
-        back = [s for s in got[max(i for i, s in enumerate(got) if s.chip_error and s.taxel == k):] if s.taxel == k]
-        assert back[1].recovered and not any(s.chip_error for s in back[1:]), k
-    assert decoder.stats.lost == 0 and decoder.stats.crc_errors == 0
+    assert_whole_and_back(got, sim, decoder, {s.taxel for s in errors})
 
 
 # ---- the rate, in simulated time ---------------------------------------------------------------------------------
