@@ -165,14 +165,15 @@ def _params(space: Space, axes, u: np.ndarray, pair: int) -> dict[str, Any]:
 def propose(space: Space, directions: Sequence[str], params: Sequence[Mapping[str, Any]],
             values: Sequence[Sequence[float]], constraints: Sequence[Sequence[float]],
             parents: Sequence[Mapping[str, Any]], is_new: Callable[[dict[str, Any]], bool],
-            seed: Sequence[int]) -> dict[str, Any] | None:
+            seed: Sequence[int], pair: int | None = None) -> dict[str, Any] | None:
     """The params of the next design to evaluate (module doc), or None: fewer than :data:`MIN_DESIGNS` designs, a
     design without the magnet's fraction (a study stored before it), a fit that fails, or no new design among the
     best-scored.
 
     ``params``, ``values`` (objective values, in ``directions``), ``constraints`` (<= 0 feasible): the evaluated
     designs; ``parents``: the params local steps start from (the study's best designs); ``is_new``: whether a
-    candidate's design is not yet evaluated (or in flight); ``seed``: the random draws' seed."""
+    candidate's design is not yet evaluated (or in flight); ``seed``: the random draws' seed; ``pair``: every
+    candidate held to this (material, tip) pair (an index into :meth:`Space.pairs`), the local steps' included."""
     from scipy.interpolate import RBFInterpolator  # lazy: scipy is slow to import and only a running study needs it
 
     if len(params) < MIN_DESIGNS or any(MAGNET_FRACTION not in p for p in (*params, *parents)):
@@ -201,6 +202,8 @@ def propose(space: Space, directions: Sequence[str], params: Sequence[Mapping[st
         pick = rng.integers(len(parents), size=CANDIDATES)
         steps = np.clip(pu[pick] + LOCAL_SIGMA * rng.standard_normal((CANDIDATES, pu.shape[1])), 0.0, 1.0)
         cu, cp = np.vstack([cu, steps]), np.concatenate([cp, pp[pick]])
+    if pair is not None:
+        cp = np.full(len(cu), pair, dtype=int)
     cu = _snap(axes, cu)
     candidates = [_params(space, axes, cu[i], int(cp[i])) for i in range(len(cu))]
     predicted = model(_physical(space, candidates)[:, columns])

@@ -112,12 +112,23 @@ def test_the_base_point_round_trips():
     assert point is not None and _close(space.point(space.params(point)), point)
 
 
+#: The stiff pad's known failures over twenty seeds (bench/design_search.py, this code): seed 17's front holds 0.827
+#: of the sweep's hypervolume, and at seeds 0, 4, 16 and 17 one sweep design dominates the chosen one (the sweep's
+#: highest range, 43.0 N at 17.5 mN: Dragon Skin 20, flat, 8 x 3 mm N45, a 0.6 mm cover; the studies stop at
+#: 35.0-42.3 N); and Ecoflex 00-50 with a flat tip, one feasible design in the sweep's 3,000, is missed at most seeds.
+STIFF_PAD_SEEDS = "stiff pad, 20 seeds: seed 17 at 0.827 of the sweep, the chosen design dominated at 0, 4, 16, 17"
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize("name", ["fingertip", "taxel", "stiff_pad"])
-def test_the_study_finds_the_sweeps_front_at_every_seed(name):
+@pytest.mark.parametrize(("name", "seeds", "whole"), [
+    ("fingertip", 20, True), ("taxel", 20, True), ("stiff_pad", 5, False),
+    pytest.param("stiff_pad", 20, True, marks=pytest.mark.xfail(strict=True, reason=STIFF_PAD_SEEDS))])
+def test_the_study_finds_the_sweeps_front_at_every_seed(name, seeds, whole):
     """bench/design_search.py on each bench set at the study's default size: 300 trials against a 3,000-design sweep,
-    seeds 0-4; every seed's feasible front holds 0.95 of the sweep's hypervolume or more (about 2 minutes a set on
-    two cores)."""
+    seeds 0 to ``seeds`` - 1; every seed's feasible front holds 0.95 of the sweep's hypervolume or more and, with
+    ``whole``, no sweep design dominates the chosen one and every (material, tip) pair with a feasible sweep design
+    has one in the study (the fingertip and taxel sets over 20 seeds; the stiff pad over its first five seeds, on
+    hypervolume: about 40 s a seed on two cores)."""
     sys.path.insert(0, str(BENCH))
     import design_search as ds
 
@@ -129,8 +140,11 @@ def test_the_study_finds_the_sweeps_front_at_every_seed(name):
         sweep = evaluate_all([space.point(p) for p in space.latin_hypercube(3000, 12345)], targets, base, c,
                              "surrogate")
         rows = []
-        for seed in range(5):
+        for seed in range(seeds):
             t = targets.model_copy(update={"study": targets.study.model_copy(update={"seed": seed})})
             recs = records(run_study(t, base, Path(ds.tempfile.mkdtemp()) / "study.log", c))
             rows.append(ds.compare(recs, sweep, t))
     assert min(r["hypervolume_ratio"] for r in rows) >= 0.95, [r["hypervolume_ratio"] for r in rows]
+    if whole:
+        assert all(r["sweep_dominating_chosen"] == 0 for r in rows), [r["sweep_dominating_chosen"] for r in rows]
+        assert not any(r["pairs_missed"] for r in rows), [r["pairs_missed"] for r in rows]
