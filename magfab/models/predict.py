@@ -545,9 +545,12 @@ def _normal(design: Design, chip: ChipSetting, nz: Mapping[str, float], magnets:
     u_max = limits[binding]
     in_range = (u <= u_max + 1e-9) & keep
     f_range = {k: float(np.interp(u_max, u, c.force_N)) for k, c in curves.items()}
-    s_f = {(k, b): s_b[b] / k_e[k] for k in curves for b in magnets}
+    # A travel point with no stiffness (past where the curve turns) or no field slope divides by zero: its figure
+    # there is infinite, the same values as before without a warning on the study's workers.
+    with np.errstate(divide="ignore"):
+        s_f = {(k, b): s_b[b] / k_e[k] for k in curves for b in magnets}
+        res_mN = {kb: MN_PER_N * nz["total_z_G"] / v for kb, v in s_f.items()}
     sens_in = np.array([s_f[kb][in_range] for kb in s_f])
-    res_mN = {kb: MN_PER_N * nz["total_z_G"] / v for kb, v in s_f.items()}
     figures = NormalFigures(
         curves=curves,
         magnet_displacement_mm=tuple(float(x) for x in u),
