@@ -23,15 +23,16 @@ try:  # Ctrl-C while these load is Python's KeyboardInterrupt, ended here as exi
     import json
     import os
     import warnings
-    from collections.abc import Callable, Iterator, Mapping
+    from collections.abc import Iterator, Mapping
     from contextlib import contextmanager
     from pathlib import Path
-    from typing import TYPE_CHECKING, Any, cast
+    from typing import Any, cast
 
     import click
 
     from . import __version__
     from .calibration_input import kept_from_record, read_scan
+    from .cli_progress import QUIET, phases, stages, way
     from .cli_usage import EXIT_INTERRUPTED, OneLineErrors
     from .cli_usage import fail as _fail
     from .errors import InputError, SpecError, shown
@@ -39,9 +40,6 @@ try:  # Ctrl-C while these load is Python's KeyboardInterrupt, ended here as exi
 except KeyboardInterrupt:
     sys.stderr.write("magfab: error: interrupted; nothing was written\n")
     raise SystemExit(130) from None
-
-if TYPE_CHECKING:
-    from rich.progress import TaskID
 
 # Imported lazily, inside the commands that use them, for speed: ``magfab --help`` and every command load only what
 # they run. magfab's own modules (the pipeline, the checks, the design search) pull in numpy, pydantic and the
@@ -80,22 +78,6 @@ def _handled() -> Iterator[None]:
         _fail(f"internal error: {type(exc).__name__}: {exc} (set MAGFAB_DEBUG=1 for a traceback)", EXIT_INTERNAL)
 
 
-@contextmanager
-def _progress(enabled: bool) -> Iterator[Callable[[str], None] | None]:
-    """The current build stage on one line of a terminal; silent otherwise. Redrawn only when the stage
-    changes, so no refresh thread runs while the build forks its worker process."""
-    if not enabled:
-        yield None
-        return
-    from rich.console import Console
-    from rich.live import Live
-    from rich.text import Text
-
-    console = Console(stderr=True)
-    with Live(Text("starting"), console=console, auto_refresh=False, transient=True) as live:
-        yield lambda stage: live.update(Text(f"magfab: {stage}..."), refresh=True)
-
-
 def _catch_interrupts(ctx: click.Context) -> None:
     """Ctrl-C is exit 130 and one line for the command's run, never a traceback: installed when a command runs
     (importing this module leaves the process's handlers alone), the previous handler back when it ends."""
@@ -129,11 +111,12 @@ def _one_line_warning(message, category, filename, lineno, file=None, line=None)
 @click.option("--discard-calibration", is_flag=True,
               help="Replace a measured calibration the build folder holds though no sensor record keeps it (by "
                    "default the build refuses: keep it first with `magfab sensor add ID --build DIR`).")
-def build(spec: Path | None, out_dir: Path | None, as_json: bool, discard_calibration: bool) -> None:
-    """Build SPEC (default: the embedded MagOne reference design)."""
+@QUIET
+def build(spec: Path | None, out_dir: Path | None, as_json: bool, discard_calibration: bool, quiet: bool) -> None:
+    """Build SPEC (default: the embedded MagOne reference design). Its stages go to stderr as it runs (--quiet: not)."""
     with _handled():
         check_out(out_dir)
-    _run_build(spec, out_dir, as_json, None, discard=discard_calibration)
+    _run_build(spec, out_dir, as_json, None, discard=discard_calibration, quiet=quiet)
 
 
 @main.command()
@@ -159,9 +142,10 @@ def build(spec: Path | None, out_dir: Path | None, as_json: bool, discard_calibr
 @click.option("--date", help="With --sensor: when the scan was taken (ISO 8601, UTC unless it names a zone; default: "
                              "now).")
 @click.option("--json", "as_json", is_flag=True, help="Print a machine-readable summary on stdout.")
+@QUIET
 def calibrate(scan: Path | None, weights: Path | None, reference: Path | None, spec: Path | None, out_dir: Path | None,
               taxel: int | None, sensor_id: str | None, sensors_root: Path | None, date: str | None,
-              as_json: bool) -> None:
+              as_json: bool, quiet: bool) -> None:
     """Fit the force calibration to SCAN (a CSV, see docs/bundle.md). With --sensor ID, append it to that
     sensor's record, which no build touches; without, update the build with it: calibration.json, the firmware's
     EEPROM record and the readout package carry the new coefficients.
@@ -183,7 +167,7 @@ def calibrate(scan: Path | None, weights: Path | None, reference: Path | None, s
     if sensor_id is None:
         if date is not None:
             _fail("--date dates a sensor's calibration: give it with --sensor ID", EXIT_BAD_INPUT)
-        _run_build(spec, out_dir, as_json, path, reference, taxel, weights=weights is not None)
+        _run_build(spec, out_dir, as_json, path, reference, taxel, weights=weights is not None, quiet=quiet)
         return
     _calibrate_sensor(path, reference, spec, out_dir, taxel, sensor_id, sensors_root, date, as_json,
                       weights is not None)
@@ -221,7 +205,7 @@ def _calibration_target(spec_path: Path | None, out_dir: Path | None, scan_path:
 
 def _run_build(spec: Path | None, out_dir: Path | None, as_json: bool, scan_path: Path | None = None,
                reference: Path | None = None, taxel: int | None = None, discard: bool = False,
-               weights: bool = False) -> None:
+               weights: bool = False, quiet: bool = False) -> None:
     with _handled():  # every import inside: Ctrl-C while a heavy library loads is still exit 130
         from .output import is_build
         from .pipeline import build as run_build
@@ -240,7 +224,7 @@ def _run_build(spec: Path | None, out_dir: Path | None, as_json: bool, scan_path
             loaded, out_dir = _calibration_target(spec, out_dir, scan_path)
             scan = read_scan(scan_path, reference, out_dir, loaded, taxel, weights)
             _check_rest(scan, loaded, out_dir if out_dir is not None and is_build(out_dir) else None, taxel)
-        with _progress(sys.stderr.isatty() and not as_json) as progress:
+        with stages("off" if as_json else way(quiet)) as progress:
             result = run_build(loaded, out_dir, progress, scan)
         summary: Mapping[str, Any] = result.summary()  # JSON values, read by key below
         if as_json:
@@ -471,32 +455,13 @@ def init(path: Path | None, force: bool, targets: bool, example: str) -> None:
         click.echo(f"wrote {path}; edit it, then: magfab build {path}")
 
 
-@contextmanager
-def _bar(enabled: bool) -> Iterator[Callable[[str, int, int], None] | None]:
-    """A progress bar per phase of a study (search, verify, sweep) on a terminal's stderr; silent otherwise."""
-    if not enabled:
-        yield None
-        return
-    from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
-
-    tasks: dict[str, TaskID] = {}
-    with Progress(TextColumn("magfab: {task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
-                  console=Console(stderr=True), transient=True) as bar:
-        def update(phase: str, done: int, total: int) -> None:
-            if phase not in tasks:
-                tasks[phase] = bar.add_task(phase, total=total)
-            bar.update(tasks[phase], completed=done, total=total)
-
-        yield update
-
-
 _STUDY_OPTIONS = [
     click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path),
                  help="Study folder (default: ./design/<targets name>); running again resumes its study."),
     click.option("--scheduler", help="Address of an existing Dask scheduler (default: a local cluster)."),
     click.option("--workers", type=click.IntRange(1, 256),
                  help="Local cluster's worker processes (default: the cores)."),
+    QUIET,
 ]
 
 
@@ -514,11 +479,11 @@ def _study_options(f):
 @main.command()
 @click.argument("targets", type=click.Path(dir_okay=False, path_type=Path))
 @_study_options
-def design(targets: Path, out_dir: Path | None, scheduler: str | None, workers: int | None) -> None:
+def design(targets: Path, out_dir: Path | None, scheduler: str | None, workers: int | None, quiet: bool) -> None:
     """Search for designs that meet TARGETS (a TOML file: requirements, variables, objectives) and write the Pareto
     front, its page and plot, and each verified design as a spec `magfab build` accepts. Every requirement is met by
     a margin (the models' own error, or [require] margin); exits 3 when no design meets them so."""
-    with _handled(), _bar(sys.stderr.isatty()) as bar:
+    with _handled(), phases(way(quiet)) as bar:
         check_out(out_dir)
         from .inverse.run import design as run_design
 
@@ -556,9 +521,9 @@ def design(targets: Path, out_dir: Path | None, scheduler: str | None, workers: 
               help="'surrogate' (the cheap models: the elastomer surrogate) or 'fe' (the full chain).")
 @_study_options
 def sweep(targets: Path, levels: int | None, samples: int | None, fidelity: str, out_dir: Path | None,
-          scheduler: str | None, workers: int | None) -> None:
+          scheduler: str | None, workers: int | None, quiet: bool) -> None:
     """Evaluate every design of a grid or Latin hypercube of TARGETS' variables; write sweep.csv (and .parquet)."""
-    with _handled(), _bar(sys.stderr.isatty()) as bar:
+    with _handled(), phases(way(quiet)) as bar:
         check_out(out_dir)
         from .inverse.run import sweep as run_sweep
 

@@ -28,7 +28,8 @@ FORBIDDEN = {
 }
 PRINTING = ("click", "rich")  # only the CLI prints
 #: The command line: magfab.cli and the command groups it registers, each beside the engine it calls.
-CLI_MODULES = {"magfab.cli", "magfab.sensor_cli", "magfab.weigh_cli", "magfab.cli_usage", "magfab.calibration_input"}
+CLI_MODULES = {"magfab.cli", "magfab.sensor_cli", "magfab.weigh_cli", "magfab.cli_usage", "magfab.calibration_input",
+               "magfab.cli_progress"}
 
 
 def _modules():
@@ -107,7 +108,8 @@ LAYERS = (
     ("magfab.export", "magfab.output", "magfab.exchange", "magfab.array_bench", "magfab.sensor_calibration"),
     ("magfab.pipeline", "magfab.stages", "magfab.sensors", "magfab.verdict"),
     ("magfab.inverse",),
-    ("magfab.cli_usage", "magfab.calibration_input"),  # the command line's group class and its one-line refusal;
+    ("magfab.cli_usage", "magfab.calibration_input", "magfab.cli_progress"),  # the command line's group class and its
+    # one-line refusal; its progress on stderr;
     # what `magfab calibrate` fits, read as the command line defers it
     ("magfab.sensor_cli", "magfab.weigh_cli"),
     ("magfab.cli",),

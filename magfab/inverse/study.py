@@ -556,6 +556,8 @@ def evaluate_all(points: Iterable[dict[str, Any]], targets: Targets, base: Spec,
             futures[fut] = i
             queue.add(fut)
 
+    if progress:  # the phase's start: its time and count are taken from here
+        progress(0, len(points))
     for _ in range(IN_FLIGHT_PER_WORKER * workers):
         submit()
     results: dict[int, dict[str, Any]] = {}

@@ -102,6 +102,16 @@ def test_the_files_a_user_gets(study):
             assert all(used[k] == spec.dump()[k] for k in ("magnet", "elastomer", "sensor", "pad")), spec_file.stem
 
 
+def test_progress_is_written_as_lines_when_not_a_terminal(study):
+    """The study's stderr (a pipe here, as in a CI log): the search at each tenth of its 120 trials with the time
+    left, ending at 120/120; the verification's phases too; nothing else but the build's findings."""
+    _, _, run = study
+    search = [line for line in run.stderr.splitlines() if line.startswith("magfab: search ")]
+    assert 1 <= len(search) <= 10 and search[-1].startswith("magfab: search 120/120 (100 %) in "), run.stderr
+    assert all(", about " in line and line.endswith(" left") for line in search[:-1]), search
+    assert any(line.startswith("magfab: verify (full chain) ") for line in run.stderr.splitlines()), run.stderr
+
+
 def test_running_again_resumes(study):
     cwd, _folder, run = study
     again = magfab("design", "targets.toml", "--workers", "2", cwd=cwd)
