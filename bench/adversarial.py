@@ -438,6 +438,14 @@ def _lines(text: str) -> list[str]:
     return [line for line in text.splitlines() if line.strip()]
 
 
+def _said(stderr: str) -> list[str]:
+    """The lines of a run's stderr that say something: its progress lines (a build's stages done, a study's share of
+    a phase, written where stderr is not a terminal) apart."""
+    from magfab.cli_progress import PROGRESS_LINE
+
+    return [line for line in _lines(stderr) if not PROGRESS_LINE.fullmatch(line)]
+
+
 def usage_block(lines: list[str]) -> bool:
     """The argument parser's own refusal: click's "Usage: ..." / "Try ..." / "Error: ...", argparse's "usage: ..." /
     "PROG: error: ..." (a usage line may wrap)."""
@@ -451,7 +459,7 @@ def usage_block(lines: list[str]) -> bool:
 def judge(case: Case, res: Result, before: dict, after: dict) -> tuple[str, str, bool]:
     """(label, why, usage block) of one run, by the rules in the module's docstring (lost data apart)."""
     text = res.stdout + "\n" + res.stderr
-    lines = _lines(res.stderr)
+    lines = _said(res.stderr)
     last = lines[-1][:300] if lines else ""
     if res.timed_out:
         return "over budget", f"killed after {case.timeout_s:.0f} s of wall time, {res.cpu_s:.0f} s of CPU", False

@@ -55,6 +55,19 @@ def test_a_refusal_that_writes_or_says_two_lines_is_not_clean(runner):
     assert two.label == "unclean"
 
 
+def test_progress_lines_before_a_refusal_or_an_interrupt_are_set_apart(runner):
+    """magfab writes a build's stages done (and a study's progress) on stderr when it is not a terminal: those lines
+    before the one that says what went wrong keep a refusal (or a stop) clean; any other line does not."""
+    progress = ("magfab: deriving the design: done in 0.1 s\\nmagfab: modelling pad: done in 1 min 02 s\\n"
+                "magfab: search 30/300 (10 %) in 10.6 s, about 1 min 36 s left\\n")
+    said = f"import sys; sys.stderr.write('{progress}x: error: no such file\\n'); sys.exit(2)"
+    assert fake(runner, said, words=("no such",)).label == "refused"
+    stop = f"import sys; sys.stderr.write('{progress}x: error: interrupted\\n'); sys.exit(130)"
+    assert fake(runner, stop, expect="stop").label == "stopped"
+    other = "import sys; sys.stderr.write('magfab: deriving the design\\nx: error: no such file\\n'); sys.exit(2)"
+    assert fake(runner, other).label == "unclean"
+
+
 def test_the_parsers_usage_block_is_a_refusal_reported_apart(runner):
     code = ("import sys; sys.stderr.write('Usage: magfab check [OPTIONS]\\nTry \\'magfab check -h\\' for help.\\n\\n"
             "Error: No such option: --bogus\\n'); sys.exit(2)")
