@@ -60,27 +60,22 @@ def stages(how: str) -> Iterator[Callable[[str], None] | None]:
     if how == "off":
         yield None
         return
-    began = time.perf_counter()
     if how == "lines":
-        current: list[tuple[str, float]] = []
+        current: tuple[str, float] | None = None  # the stage under way and when it began
 
         def done() -> None:
-            if current:
-                stage, since = current.pop()
-                click.echo(f"magfab: {stage}: done in {duration(time.perf_counter() - since)}", err=True)
+            if current is not None:
+                click.echo(f"magfab: {current[0]}: done in {duration(time.perf_counter() - current[1])}", err=True)
 
         def say(stage: str) -> None:
+            nonlocal current
             done()
-            current.append((stage, time.perf_counter()))
+            current = (stage, time.perf_counter())
 
-        ok = False
-        try:
-            yield say
-            ok = True
-        finally:
-            if ok:
-                done()
+        yield say  # a refusal or an interrupt raises here: the stage under way is not written
+        done()
         return
+    began = time.perf_counter()
     from rich.console import Console  # lazy: rich draws only on a terminal
     from rich.live import Live
     from rich.text import Text
@@ -105,14 +100,14 @@ def phases(how: str) -> Iterator[Callable[[str, int, int], None] | None]:
         def line(phase: str, done: int, total: int) -> None:
             now = time.perf_counter()
             since, first = began.setdefault(phase, (now, done))  # a resumed study starts part way
-            step = STEPS * done // max(total, 1)
-            if done <= first or step <= written.get(phase, STEPS * first // max(total, 1)):
+            whole = max(total, 1)
+            step = STEPS * done // whole
+            if done <= first or step <= written.get(phase, STEPS * first // whole):
                 return
             written[phase] = step
             took = now - since
             left = "" if done >= total else f", about {duration(took * (total - done) / (done - first))} left"
-            click.echo(f"magfab: {phase} {done}/{total} ({100 * done // max(total, 1)} %) in {duration(took)}{left}",
-                       err=True)
+            click.echo(f"magfab: {phase} {done}/{total} ({100 * done // whole} %) in {duration(took)}{left}", err=True)
 
         yield line
         return
