@@ -4,6 +4,7 @@ CI runs the README's second command, which this suite is."""
 
 from __future__ import annotations
 
+import os
 import shutil
 import subprocess
 import sys
@@ -29,8 +30,11 @@ def test_readme_install_command_builds_the_default(tmp_path):
             continue
         (clone / changed).parent.mkdir(parents=True, exist_ok=True)
         shutil.copy2(ROOT / changed, clone / changed)
-    proc = subprocess.run(["bash", "-c", command], cwd=clone, capture_output=True, text=True, timeout=1800)
+    # then, in the same shell, a bare `magfab` as the README's "Using it" types it: the venv's own
+    proc = subprocess.run(["bash", "-c", f"{command} && command -v magfab"], cwd=clone, capture_output=True, text=True,
+                          timeout=1800, env={k: v for k, v in os.environ.items() if k != "VIRTUAL_ENV"})
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    assert Path(proc.stdout.splitlines()[-1]) == clone / ".venv" / "bin" / "magfab", proc.stdout[-500:]
     out = clone / "build" / "magone"
     assert (out / "manifest.json").is_file() and (out / "firmware" / "magfab-atmega328p.hex").is_file()
     assert "built magone into" in proc.stdout
