@@ -14,7 +14,7 @@ from optuna.trial import TrialState
 from magfab.inverse.pareto import front_mask
 from magfab.inverse.propose import MIN_DESIGNS, propose
 from magfab.inverse.space import FRACTIONS, MAGNET_FRACTION, Space
-from magfab.inverse.study import PAIR_TRIES, _pair_to_search
+from magfab.inverse.study import OPTIMISM, PAIR_TRIES, _pair_to_search
 from magfab.inverse.targets import parse_targets
 from magfab.spec import load_spec
 
@@ -190,3 +190,38 @@ def test_the_pair_an_exploration_searches(drawn, n_first):
     else:
         assert chosen in open_pairs and count[chosen] == min(count[p] for p in open_pairs)
         assert chosen == next(p for p in open_pairs if count[p] == count[chosen])
+
+
+def _cliff_problem(rng: np.random.Generator):
+    """A drawn problem whose best designs sit past a cliff the evaluated designs never reached: both objectives fall
+    with f_cover, the constraint rises as f_cover falls toward a drawn ``cliff`` (what the designs show) and drops
+    to feasible past it (the stiff pad's resolution at the thinnest covers); Ecoflex only, a flat tip."""
+    cliff = rng.uniform(0.25, 0.35)
+
+    def truth(p):
+        x, c = p[FRACTIONS[1]], p[FRACTIONS[2]]
+        values = (0.1 + x + c, 1.1 - x + c)
+        return values, [0.5 - c if c >= cliff else -0.1]
+
+    return truth, cliff
+
+
+def test_optimism_steps_past_what_the_designs_show():
+    """On eight drawn cliff problems with forty designs evaluated above the cliff (the model, extrapolating them,
+    predicts every design past it infeasible): with OPTIMISM, the proposal goes past the cliff, where every design
+    is feasible and the objectives better, at half the seeds or more (measured: 48 of 80); without it, at none."""
+    found = {0.0: 0, OPTIMISM: 0}
+    for draw in range(8):
+        rng = np.random.default_rng(200 + draw)
+        truth, cliff = _cliff_problem(rng)
+        params = [_uniform(rng) | {"material": "ecoflex-00-30", "tip": "flat",
+                                   FRACTIONS[2]: float(rng.uniform(cliff + 0.05, 1.0))} for _ in range(40)]
+        values, constraints = map(list, zip(*(truth(p) for p in params)))
+        parents = _best(params, values, constraints)
+        for seed in range(10):
+            for optimism in found:
+                p = propose(SPACE, DIRECTIONS, params, values, constraints, parents, lambda _: True, (draw, seed),
+                            pair=SPACE.pairs().index(("ecoflex-00-30", "flat")), optimism=optimism)
+                assert p is not None
+                found[optimism] += p[FRACTIONS[2]] < cliff
+    assert found[0.0] == 0 and found[OPTIMISM] >= 0.5 * 80, found  # measured: 0 and 48

@@ -112,11 +112,12 @@ def test_the_base_point_round_trips():
     assert point is not None and _close(space.point(space.params(point)), point)
 
 
-#: The stiff pad's known failures over twenty seeds (bench/design_search.py, this code): seed 17's front holds 0.827
-#: of the sweep's hypervolume, and at seeds 0, 4, 16 and 17 one sweep design dominates the chosen one (the sweep's
-#: highest range, 43.0 N at 17.5 mN: Dragon Skin 20, flat, 8 x 3 mm N45, a 0.6 mm cover; the studies stop at
-#: 35.0-42.3 N); and Ecoflex 00-50 with a flat tip, one feasible design in the sweep's 3,000, is missed at most seeds.
-STIFF_PAD_SEEDS = "stiff pad, 20 seeds: seed 17 at 0.827 of the sweep, the chosen design dominated at 0, 4, 16, 17"
+#: The stiff pad's known failures over twenty seeds (bench/design_search.py, this code): at seeds 4 and 11 one sweep
+#: design dominates the chosen one (the sweep's highest range, 43.0 N at 17.5 mN: Dragon Skin 20, flat, 8 x 3 mm N45,
+#: a 0.6 mm cover; those studies stop at 38.4 and 37.7 N, their fronts at 1.014 and 0.977 of the sweep's
+#: hypervolume); and Ecoflex 00-50 with a flat tip, one feasible design in the sweep's 3,000, is missed at 10 seeds
+#: of 20 (Dragon Skin 30 with a flat tip too at seed 4). Every seed's front holds 0.977 of the sweep's or more.
+STIFF_PAD_SEEDS = "stiff pad, 20 seeds: the chosen design dominated by the sweep's one 43.0 N design at seeds 4, 11"
 
 
 @pytest.mark.slow
