@@ -14,7 +14,7 @@ import sys
 import numpy as np
 import pytest
 from calibrate_support import tree, weigh_simulated
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from magfab.export.weigh_plan import adapted_plan, stiffest_skin
@@ -233,3 +233,127 @@ def test_weigh_refuses_a_plan_with_first_or_reskin_and_never_overwrites_a_partia
                           cwd=project)
     assert proc.returncode == 2 and "r.parquet.partial.csv exists" in proc.stderr, proc.stderr
     assert (project / "r.parquet.partial.csv").read_text() == "kept\n" and not (project / "r.parquet").exists()
+
+
+#: The plan's keys that must be this build's, as the guard compares them (the refusal names the key).
+BUILD_KEYS = ("format", "spec", "coin", "pockets", "cap_mass_bound_g", "stands_deg", "stand_coins_most")
+
+
+def _leaves(value, path=()):
+    """Every leaf of a JSON value, with its path of keys and indices."""
+    if isinstance(value, dict):
+        for k, v in value.items():
+            yield from _leaves(v, (*path, k))
+    elif isinstance(value, list):
+        for i, v in enumerate(value):
+            yield from _leaves(v, (*path, i))
+    else:
+        yield path, value
+
+
+def _at(doc, path):
+    for k in path[:-1]:
+        doc = doc[k]
+    return doc, path[-1]
+
+
+def _changed_value(data, value):
+    """A drawn other value for a leaf: a number scaled or shifted, any value turned into another JSON type."""
+    kinds = ["string", "null", "list"] + (["scale", "shift"] if isinstance(value, (int, float))
+                                          and not isinstance(value, bool) else ["longer"])
+    kind = data.draw(st.sampled_from(kinds))
+    if kind == "scale":
+        return value * data.draw(st.floats(0.25, 4.0).filter(lambda f: abs(f - 1.0) > 1e-3))
+    if kind == "shift":
+        return value + data.draw(st.sampled_from([-1, 1])) * data.draw(st.floats(1e-3, 100.0))
+    return {"string": str(value), "null": None, "list": [value], "longer": f"{value}x"}[kind]
+
+
+def _broken_plan(data, plan):
+    """(the plan with one drawn mistake of a drawn class, what its refusal must name; None: the mistake leaves a
+    plan the guard must take). The classes: a build key's leaf changed or removed; a step off its stand (an angle
+    of no stand, an odd count, more coins than the stand takes, a count of another type, coins laid another way);
+    a first or re-skin index that is not one of the steps; a nominal table dropped, cut short or out of order."""
+    doc = copy.deepcopy(plan)
+    steps = doc["steps"]
+    cls = data.draw(st.sampled_from(["build", "step", "index", "nominal"]))
+    if cls == "build":
+        key = data.draw(st.sampled_from(BUILD_KEYS))
+        path, _ = data.draw(st.sampled_from(list(_leaves(doc[key], (key,)))))
+        parent, last = _at(doc, path)
+        if data.draw(st.booleans()):
+            del parent[last]
+        else:
+            old = parent[last]
+            parent[last] = _changed_value(data, old)
+            assume(parent[last] != old)
+        return doc, "not a weight plan" if key == "format" else f"its {key} is"
+    if cls == "step":
+        k = data.draw(st.integers(0, len(steps) - 1))
+        step, most = steps[k], dict(zip(plan["stands_deg"], plan["stand_coins_most"]))[steps[k]["angle_deg"]]
+        how = data.draw(st.sampled_from(["angle", "odd", "past", "negative", "type", "layout"]))
+        if how == "angle":
+            step["angle_deg"] = data.draw(st.floats(-90, 90).filter(lambda a: a not in plan["stands_deg"]))
+        elif how in ("odd", "past", "negative"):
+            n = {"odd": data.draw(st.integers(0, most // 2)) * 2 + 1,
+                 "past": most + 2 * data.draw(st.integers(1, 50)), "negative": -2 * data.draw(st.integers(1, 50))}[how]
+            layout = coin_layout(abs(n) - n % 2, plan["pockets"])  # an odd count: its extra coin in the first pocket
+            layout[0] += n % 2
+            step.update(coins=n, layout=layout)
+        elif how == "type":
+            step["coins"] = data.draw(st.sampled_from([float(step["coins"]) + 0.5, str(step["coins"]), True, None]))
+        else:
+            shift = data.draw(st.integers(1, plan["pockets"] - 1))
+            step["layout"] = step["layout"][shift:] + step["layout"][:shift]
+            assume(step["layout"] != plan["steps"][k]["layout"])
+        return doc, f"step {k + 1} is not a stand"
+    if cls == "index":
+        key = data.draw(st.sampled_from(["first", "reskin"]))
+        wrong = data.draw(st.one_of(st.integers(len(steps), len(steps) + 100), st.integers(-100, -1),
+                                    st.just(True), st.floats(0.5, len(steps) - 0.5).filter(lambda f: f != int(f)),
+                                    st.just("0")))
+        if data.draw(st.booleans()):
+            doc[key] = data.draw(st.sampled_from([[], None, {}, 0]))
+        else:
+            doc[key].insert(data.draw(st.integers(0, len(doc[key]))), wrong)
+        return doc, f"its {key} steps are not indices"
+    used = {s["angle_deg"] for s in steps}
+    t = data.draw(st.integers(0, len(doc["nominal"]) - 1))
+    table = doc["nominal"][t]
+    how = data.draw(st.sampled_from(["drop", "short", "row", "order", "value"]))
+    if how == "drop":
+        doc["nominal"].pop(t)
+        if table["angle_deg"] not in used:
+            return doc, None  # a table no step needs: still a plan
+    elif how == "short":
+        column = table[data.draw(st.sampled_from(["mass_g", "field_uT"]))]
+        column.pop(data.draw(st.integers(0, len(column) - 1)))
+    elif how == "row":
+        table["field_uT"][data.draw(st.integers(0, len(table["field_uT"]) - 1))].pop()
+    elif how == "order":
+        i = data.draw(st.integers(0, len(table["mass_g"]) - 2))
+        table["mass_g"][i], table["mass_g"][i + 1] = table["mass_g"][i + 1], table["mass_g"][i]
+    else:
+        row = table["field_uT"][data.draw(st.integers(0, len(table["field_uT"]) - 1))]
+        row[data.draw(st.integers(0, 2))] = data.draw(st.sampled_from(["1.0x", None, [1.0]]))
+    return doc, "its nominal field tables do not cover"
+
+
+@settings(max_examples=300, deadline=None)
+@given(data=st.data())
+def test_generated_mistakes_in_a_plan_file_are_refused(weigh_package, tmp_path_factory, data):
+    """``weigh --plan`` against a generator of the mistakes it guards (:func:`_broken_plan`: any leaf of the build's
+    keys changed by a drawn scale, shift or type, or removed; a drawn step moved off its stand; a drawn index out of
+    the steps; a nominal table dropped, cut or disordered): each is refused in one line naming --plan and what is
+    wrong; a table no step needs may go."""
+    shipped = weigh_package.plan
+    doc, what = _broken_plan(data, shipped)
+    path = tmp_path_factory.mktemp("plan") / "plan.json"
+    path.write_text(json.dumps(doc))
+    if what is None:
+        assert weigh_package.weigh.skin_plan(str(path), shipped)["steps"] == shipped["steps"]
+        return
+    with pytest.raises(weigh_package.UsageError) as e:
+        weigh_package.weigh.skin_plan(str(path), shipped)
+    message = str(e.value)
+    assert message.startswith(f"--plan {path}: ") and what in message and "\n" not in message, (what, message)
