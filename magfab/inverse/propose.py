@@ -192,6 +192,7 @@ def propose(space: Space, directions: Sequence[str], params: Sequence[Mapping[st
     candidate held to this (material, tip) pair (an index into :meth:`Space.pairs`), the local steps' included;
     ``optimism``: the local steps' allowance on each constraint per unit of distance from the designs (module doc)."""
     from scipy.interpolate import RBFInterpolator  # lazy: scipy is slow to import and only a running study needs it
+    from scipy.spatial import cKDTree
 
     if len(params) < MIN_DESIGNS or any(MAGNET_FRACTION not in p for p in (*params, *parents)):
         return None
@@ -206,8 +207,9 @@ def propose(space: Space, directions: Sequence[str], params: Sequence[Mapping[st
     kept = [params[i] for i in keep]
     x = _physical(space, kept)
     columns = _independent(x)
+    designs = x[:, columns]
     try:
-        model = RBFInterpolator(x[:, columns], np.hstack([objectives, c]), kernel="thin_plate_spline",
+        model = RBFInterpolator(designs, np.hstack([objectives, c]), kernel="thin_plate_spline",
                                 smoothing=SMOOTHING, degree=1)
     except (np.linalg.LinAlgError, ValueError):
         return None
@@ -227,8 +229,7 @@ def propose(space: Space, directions: Sequence[str], params: Sequence[Mapping[st
     predicted = model(xs)
     allowance = np.zeros(len(cu))
     if optimism > 0.0 and parents:  # the local steps: each constraint met within optimism x distance to the nearest
-        near = np.sqrt(((xs[CANDIDATES:, None, :] - x[None, :, columns]) ** 2).sum(axis=2)).min(axis=1)
-        allowance[CANDIDATES:] = optimism * near
+        allowance[CANDIDATES:] = optimism * cKDTree(designs).query(xs[CANDIDATES:])[0]
     o = predicted[:, :len(directions)]
     miss = np.maximum(predicted[:, len(directions):] - allowance[:, None], 0.0).sum(axis=1)
     weight = rng.dirichlet(np.ones(len(directions)))
