@@ -16,6 +16,7 @@ import pytest
 from calibrate_support import tree, weigh_simulated
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
+from test_fuzz_readers import paths
 
 from magfab.export.weigh_plan import adapted_plan, stiffest_skin
 from magfab.formats.weights_csv import read_weights_csv, weights_csv
@@ -239,19 +240,8 @@ def test_weigh_refuses_a_plan_with_first_or_reskin_and_never_overwrites_a_partia
 BUILD_KEYS = ("format", "spec", "coin", "pockets", "cap_mass_bound_g", "stands_deg", "stand_coins_most")
 
 
-def _leaves(value, path=()):
-    """Every leaf of a JSON value, with its path of keys and indices."""
-    if isinstance(value, dict):
-        for k, v in value.items():
-            yield from _leaves(v, (*path, k))
-    elif isinstance(value, list):
-        for i, v in enumerate(value):
-            yield from _leaves(v, (*path, i))
-    else:
-        yield path, value
-
-
 def _at(doc, path):
+    """The container holding ``path``'s value, and its key there."""
     for k in path[:-1]:
         doc = doc[k]
     return doc, path[-1]
@@ -279,7 +269,8 @@ def _broken_plan(data, plan):
     cls = data.draw(st.sampled_from(["build", "step", "index", "nominal"]))
     if cls == "build":
         key = data.draw(st.sampled_from(BUILD_KEYS))
-        path, _ = data.draw(st.sampled_from(list(_leaves(doc[key], (key,)))))
+        leaves = [p for p in paths(doc[key], (key,)) if not isinstance(_at(doc, p)[0][p[-1]], (dict, list))]
+        path = data.draw(st.sampled_from(leaves))
         parent, last = _at(doc, path)
         if data.draw(st.booleans()):
             del parent[last]
