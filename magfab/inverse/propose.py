@@ -112,28 +112,42 @@ def _scaled(values: list[float], v: float) -> float:
 
 def _nearest(values: list[float], x: float) -> float:
     """The listed value whose scaled coordinate is nearest ``x`` (ties: the smaller)."""
-    return min(values, key=lambda v: (abs(_scaled(values, v) - x), v))
+    return values[int(_nearest_index(values, np.array([x]))[0])]
 
 
-def _physical(space: Space, rows: Sequence[Mapping[str, Any]]) -> np.ndarray:
-    """The model's coordinates of designs given by their params (module doc): each design's mm point
-    (:meth:`Space.point`) as its magnet's log moment, disc diameter and height, and its numeric variables, each scaled
-    over what the space spans (:func:`_spans`); then indicators of every silicone and tip but the first (a linear term
-    in the fit makes the first redundant), each :data:`CATEGORY_SCALE`."""
+def _nearest_index(values: list[float], x: np.ndarray) -> np.ndarray:
+    """:func:`_nearest` for many, as indices into ``values`` (sorted, so the first of a tie is the smaller)."""
+    grid = np.array([_scaled(values, v) for v in values])
+    return np.argmin(np.abs(x[:, None] - grid[None, :]), axis=1)
+
+
+def _physical(space: Space, pair: np.ndarray, f_magnet: np.ndarray, numeric: dict[str, np.ndarray]) -> np.ndarray:
+    """The model's coordinates of designs given by their pair index (into :meth:`Space.pairs`), magnet fraction and
+    numeric params (:meth:`Space.numeric_params`, one array each; module doc): each design's mm point
+    (:meth:`Space.mm`, the mapping :meth:`Space.point` makes, for all at once) as its magnet's log moment, disc
+    diameter and height, and its numeric variables, each scaled over what the space spans (:func:`_spans`); then
+    indicators of every silicone and tip but the first (a linear term in the fit makes the first redundant), each
+    :data:`CATEGORY_SCALE`."""
     lo, width = _spans(space)
-    x = np.empty((len(rows), len(lo)))
-    for i, params in enumerate(rows):
-        point = space.point(dict(params))
-        d, h, _ = stock_disc(point["magnet"])
-        x[i, :3] = math.log(magnet_moment(f"{point['magnet']}:{point['grade']}")), d, h
-        x[i, 3:] = [point[name] for name in NUMERIC]
-    pairs = space.pairs()
-    pair = np.array([pairs.index((p["material"], p["tip"])) for p in rows], dtype=int)
-    n_tips = len(space.choices["tip"])
+    magnets, tips = space.choices["magnet"], space.choices["tip"]
+    n_tips = len(tips)
     material, tip = pair // n_tips, pair % n_tips
+    magnet = space.magnets_at(tip, f_magnet)
+    discs = [stock_disc(m.split(":")[0]) for m in magnets]
+    per_magnet = np.array([[math.log(magnet_moment(m)), d, h] for m, (d, h, _) in zip(magnets, discs)])
+    mm = space.mm([(m, t) for m in magnets for t in tips], magnet * n_tips + tip, numeric)
+    x = np.hstack([per_magnet[magnet], mm])
     ind_m = (material[:, None] == np.arange(1, len(space.choices["material"]))[None, :])
     ind_t = (tip[:, None] == np.arange(1, n_tips)[None, :])
     return np.hstack([(x - lo) / width, CATEGORY_SCALE * ind_m, CATEGORY_SCALE * ind_t])
+
+
+def _physical_of(space: Space, rows: Sequence[Mapping[str, Any]]) -> np.ndarray:
+    """:func:`_physical` of designs given by their params."""
+    pairs = space.pairs()
+    return _physical(space, np.array([pairs.index((p["material"], p["tip"])) for p in rows], dtype=int),
+                     np.array([float(p[MAGNET_FRACTION]) for p in rows]),
+                     {k: np.array([float(p[k]) for p in rows]) for k in space.numeric_params()})
 
 
 def _independent(x: np.ndarray) -> list[int]:
@@ -205,7 +219,7 @@ def propose(space: Space, directions: Sequence[str], params: Sequence[Mapping[st
     objectives = (logged - lo) / np.where(hi > lo, hi - lo, 1.0)
     c = np.clip(np.asarray(constraints, dtype=float).reshape(len(params), -1)[keep], *CLIP)
     kept = [params[i] for i in keep]
-    x = _physical(space, kept)
+    x = _physical_of(space, kept)
     columns = _independent(x)
     designs = x[:, columns]
     try:
@@ -224,8 +238,9 @@ def propose(space: Space, directions: Sequence[str], params: Sequence[Mapping[st
     if pair is not None:
         cp = np.full(len(cu), pair, dtype=int)
     cu = _snap(axes, cu)
-    candidates = [_params(space, axes, cu[i], int(cp[i])) for i in range(len(cu))]
-    xs = _physical(space, candidates)[:, columns]
+    numeric = {param: cu[:, j] if values is None else np.asarray(values)[_nearest_index(values, cu[:, j])]
+               for j, (param, values) in enumerate(axes.values(), start=1)}
+    xs = _physical(space, cp, cu[:, 0], numeric)[:, columns]
     predicted = model(xs)
     allowance = np.zeros(len(cu))
     if optimism > 0.0 and parents:  # the local steps: each constraint met within optimism x distance to the nearest
@@ -240,7 +255,7 @@ def propose(space: Space, directions: Sequence[str], params: Sequence[Mapping[st
     else:
         order = [int(i) for i in np.argsort(miss, kind="stable")]
     for i in order[:TRIES]:
-        candidate = candidates[i]
+        candidate = _params(space, axes, cu[i], int(cp[i]))
         if is_new(candidate):
             return candidate
     return None

@@ -256,8 +256,20 @@ class Space:
 
     def magnet_at(self, tip: str, fraction: float) -> str:
         """The magnet at ``fraction`` of the tip's buildable magnets in order of moment (equal strata)."""
-        order = self.magnet_order[tip]
-        return order[min(int(min(max(fraction, 0.0), 1.0) * len(order)), len(order) - 1)]
+        tips = self.choices["tip"]
+        return self.choices["magnet"][int(self.magnets_at(np.array([tips.index(tip)]), np.array([fraction]))[0])]
+
+    def magnets_at(self, tip: np.ndarray, fraction: np.ndarray) -> np.ndarray:
+        """:meth:`magnet_at` for many: ``tip`` indexes self.choices["tip"]; indices into self.choices["magnet"]."""
+        out = np.empty(len(tip), dtype=int)
+        magnets = self.choices["magnet"]
+        for i, name in enumerate(self.choices["tip"]):
+            rows = tip == i
+            order = np.array([magnets.index(m) for m in self.magnet_order.get(name, [])], dtype=int)
+            if rows.any():
+                stratum = (np.clip(fraction[rows], 0.0, 1.0) * len(order)).astype(int)
+                out[rows] = order[np.minimum(stratum, len(order) - 1)]
+        return out
 
     def magnet_fraction(self, tip: str, magnet: str) -> float:
         """The middle of ``magnet``'s stratum among the tip's buildable magnets (the inverse of :meth:`magnet_at`)."""
@@ -279,14 +291,14 @@ class Space:
             self._saturation[magnet] = _saturation_floor(disc, grade, self.full_scale_G)
         return self._saturation[magnet]
 
-    def _cover_floor(self, r_e: float, r_p: float, tip: str) -> float:
-        """The least cover the skin allows (over a hemisphere tip, the dome's skin above the pocket's rim)."""
-        floor = self.skin
+    def _cover_floor(self, r_e: Any, r_p: float, tip: str) -> Any:
+        """The least cover the skin allows (over a hemisphere tip, the dome's skin above the pocket's rim). Here and in
+        the bounds below the elastomer's radius and the rest distance may be arrays (:meth:`mm`), element by element."""
         if tip == "hemisphere":
-            floor = max(floor, r_e - math.sqrt(max((r_e - self.skin) ** 2 - r_p**2, 0.0)))
-        return floor
+            return np.maximum(self.skin, r_e - np.sqrt(np.maximum((r_e - self.skin) ** 2 - r_p**2, 0.0)))
+        return self.skin
 
-    def d_max_bounds(self, magnet: str, tip: str, d_e: float) -> tuple[float, float]:
+    def d_max_bounds(self, magnet: str, tip: str, d_e: Any) -> tuple[Any, Any]:
         r_m, h_m = self._magnet(magnet)
         r_p, r_e, s = r_m + self.clearance, d_e / 2.0, self.stack
         cover_lo = _lowest_at_least(self.variables.cover_mm, self._cover_floor(r_e, r_p, tip))
@@ -294,20 +306,20 @@ class Space:
         lo = max(s + self.skin + self.clearance, _lowest_at_least(self.variables.d_min_mm, d_min_floor) + _GAP_MM)
         # the pocket's floor high enough that the channel's funnel, clipped at the base, leaves the mould's fill and
         # vent holes their annulus (design: the core's base radius is R_p less the floor's height when it is low)
-        lo = max(lo, s + self.clearance + r_p + self.annulus - r_e)
+        lo = np.maximum(lo, s + self.clearance + r_p + self.annulus - r_e)
         if tip == "hemisphere":  # the elastomer at least as tall as the dome's radius, with the most cover allowed
-            lo = max(lo, r_e - float(max(self.variables.cover_mm)) + s - h_m + 2 * _EDGE_MM)
+            lo = np.maximum(lo, r_e - float(max(self.variables.cover_mm)) + s - h_m + 2 * _EDGE_MM)
         return lo, self.max_height + s - h_m - cover_lo
 
-    def cover_bounds(self, magnet: str, tip: str, d_e: float, d_max: float) -> tuple[float, float]:
+    def cover_bounds(self, magnet: str, tip: str, d_e: Any, d_max: Any) -> tuple[Any, Any]:
         r_m, h_m = self._magnet(magnet)
         r_e, roof = d_e / 2.0, d_max + h_m - self.stack
         lo = self._cover_floor(r_e, r_m + self.clearance, tip)
         if tip == "hemisphere":
-            lo = max(lo, r_e - roof + _EDGE_MM)
+            lo = np.maximum(lo, r_e - roof + _EDGE_MM)
         return lo, self.max_height - roof
 
-    def d_min_bounds(self, magnet: str, d_max: float) -> tuple[float, float]:
+    def d_min_bounds(self, magnet: str, d_max: Any) -> tuple[Any, Any]:
         return max(self.stack + _GAP_MM, self.saturation_floor(magnet)), d_max - _GAP_MM
 
     def _d_ok(self, magnet: str, tip: str, d_e: float) -> bool:
@@ -353,22 +365,44 @@ class Space:
         tip = str(params["tip"])
         # a study stored before the magnet's fraction names the magnet itself
         magnet = str(params["magnet"]) if "magnet" in params else self.magnet_at(tip, float(params[MAGNET_FRACTION]))
+        numeric = {k: np.array([float(params[k])]) for k in self.numeric_params()}
+        row = self.mm([(magnet, tip)], np.zeros(1, dtype=int), numeric)[0]
+        return point_of({"magnet": magnet, "material": params["material"], "tip": tip,
+                         **{name: float(x) for name, x in zip(NUMERIC, row)}})
+
+    def numeric_params(self) -> list[str]:
+        """Each numeric variable's param, in :data:`NUMERIC`'s order: its fraction, or a listed variable's name."""
+        return [name if isinstance(getattr(self.variables, name), list) else FRACTION_OF[name] for name in NUMERIC]
+
+    def mm(self, combos: list[tuple[str, str]], which: np.ndarray, numeric: dict[str, np.ndarray]) -> np.ndarray:
+        """The numeric variables in mm (an array of rows in :data:`NUMERIC`'s order) of many designs at once:
+        ``combos`` lists (magnet, tip) combinations and ``which`` each design's index into it; ``numeric`` holds each
+        :meth:`numeric_params` param's values, one per design. Each variable is resolved after the ones it depends on
+        (the elastomer's diameter, the rest distance, the cover, the closest distance), each within the bounds the
+        choices before it leave, by :meth:`point`'s rules, element by element: the search's model step maps its
+        ~2,000 candidates a proposal with this (bench: the mapping had taken half a study's main loop)."""
         v = self.variables
+        out = np.empty((len(which), len(NUMERIC)))
 
-        def value(name: str, lo: float, hi: float) -> float:
+        def value(name: str, rows: np.ndarray, lo: Any, hi: Any) -> np.ndarray:
             c = getattr(v, name)
+            x = numeric[name if isinstance(c, list) else FRACTION_OF[name]][rows]
             if isinstance(c, list):
-                values = _allowed(c, lo, hi)[0] or c
-                x = float(params[name])
-                return float(min(values, key=lambda y: (abs(y - x), y)))
-            return _pick(c, lo, hi, min(max(float(params[FRACTION_OF[name]]), 0.0), 1.0))
+                return _nearest_allowed(c, lo, hi, x)
+            a, b = _range_within(c, lo, hi)
+            return a + np.clip(x, 0.0, 1.0) * (b - a)
 
-        d_e = value("elastomer_diameter_mm", *(self.diameter_range(magnet, tip) or _span(v.elastomer_diameter_mm)))
-        d_max = value("d_max_mm", *self.d_max_bounds(magnet, tip, d_e))
-        cover = value("cover_mm", *self.cover_bounds(magnet, tip, d_e, d_max))
-        d_min = value("d_min_mm", *self.d_min_bounds(magnet, d_max))
-        return point_of({"magnet": magnet, "material": params["material"], "tip": tip, "d_max_mm": d_max,
-                         "d_min_mm": d_min, "elastomer_diameter_mm": d_e, "cover_mm": cover})
+        with np.errstate(invalid="ignore"):  # no height limit less an infinite cover: not a number (_range_within)
+            for k in np.unique(which):
+                magnet, tip = combos[int(k)]
+                rows = np.flatnonzero(which == k)
+                d_e = value("elastomer_diameter_mm", rows,
+                            *(self.diameter_range(magnet, tip) or _span(v.elastomer_diameter_mm)))
+                d_max = value("d_max_mm", rows, *self.d_max_bounds(magnet, tip, d_e))
+                cover = value("cover_mm", rows, *self.cover_bounds(magnet, tip, d_e, d_max))
+                d_min = value("d_min_mm", rows, *self.d_min_bounds(magnet, d_max))
+                out[rows] = np.column_stack([d_max, d_min, d_e, cover])
+        return out
 
     def params(self, point: dict[str, Any]) -> dict[str, Any]:
         """A trial's params for a mm point (the inverse of :meth:`point` for a point inside the bounds)."""
@@ -487,12 +521,17 @@ def _span(c: Any) -> tuple[float, float]:
     return float(min(c)), float(max(c))
 
 
-def _lowest_at_least(c: Any, floor: float) -> float:
+def _lowest_at_least(c: Any, floor: Any) -> Any:
     """The lowest value of a choice at or above ``floor`` (a range's: the larger of its low end and the floor); inf
-    when none is."""
+    when none is. ``floor`` may be an array (element by element)."""
+    f = np.asarray(floor, dtype=float)
     if isinstance(c, list):
-        return min((x for x in c if x >= floor - 1e-9), default=math.inf)
-    return max(c[0], floor) if floor <= c[1] + 1e-12 else math.inf
+        values = np.sort(np.asarray(c, dtype=float))
+        i = np.searchsorted(values, f - 1e-9, side="left")
+        out = np.where(i < len(values), values[np.minimum(i, len(values) - 1)], math.inf)
+    else:
+        out = np.where(f <= c[1] + 1e-12, np.maximum(c[0], f), math.inf)
+    return out if out.ndim else float(out)
 
 
 def _has(c: Any, lo: float, hi: float) -> bool:
@@ -501,28 +540,36 @@ def _has(c: Any, lo: float, hi: float) -> bool:
     return max(c[0], lo) <= min(c[1], hi) + 1e-12
 
 
-def _allowed(c: Any, lo: float, hi: float) -> tuple[list[float] | None, float, float]:
-    """(the listed values within [lo, hi] or, when none is, the one nearest it; or None for a range, and the range
-    within [lo, hi]: a range with none gives the bound nearest the user's range)."""
-    if isinstance(c, list):
-        inside = [x for x in c if lo - 1e-9 <= x <= hi + 1e-9]
-        return inside or [min(c, key=lambda x: max(lo - x, x - hi))], lo, hi
-    a, b = max(c[0], lo), min(c[1], hi)
-    if a > b:  # nothing of the range is buildable: the nearest end (the design then fails with its reason)
-        a = b = min(max(c[0], min(lo, hi)), c[1])
-    return None, a, b
+def _listed_mask(c: list[float], lo: Any, hi: Any) -> np.ndarray:
+    """Which listed values are allowed within [lo, hi] (the last axis; ``lo`` and ``hi`` may be arrays): those inside,
+    or where none is, the one nearest the interval."""
+    values = np.asarray(c, dtype=float)
+    lo, hi = np.asarray(lo, dtype=float)[..., None], np.asarray(hi, dtype=float)[..., None]
+    inside = (values >= lo - 1e-9) & (values <= hi + 1e-9)
+    nearest = np.argmin(np.fmax(lo - values, values - hi), axis=-1)
+    return np.where(inside.any(axis=-1, keepdims=True), inside, np.arange(len(values)) == nearest[..., None])
 
 
-def _pick(c: Any, lo: float, hi: float, f: float) -> float:
-    values, a, b = _allowed(c, lo, hi)
-    if values is not None:
-        return float(values[min(int(f * len(values)), len(values) - 1)])
-    return float(a + f * (b - a))
+def _nearest_allowed(c: list[float], lo: Any, hi: Any, x: np.ndarray) -> np.ndarray:
+    """Listed values: the allowed one (:func:`_listed_mask`) nearest each ``x`` (ties: the smaller)."""
+    values = np.asarray(c, dtype=float)
+    d = np.where(_listed_mask(c, lo, hi), np.abs(values - x[:, None]), math.inf)
+    return np.where(d == d.min(axis=-1, keepdims=True), values, math.inf).min(axis=-1)
+
+
+def _range_within(c: Any, lo: Any, hi: Any) -> tuple[Any, Any]:
+    """A range's part within [lo, hi] (arrays allowed); where none of it is buildable, the end nearest (the design
+    then fails with its reason). A bound that is not a number (no height limit less an infinite cover) leaves the
+    range's end: fmax and fmin, as Python's max and min with the bound second."""
+    a, b = np.fmax(c[0], lo), np.fmin(c[1], hi)
+    nearest = np.fmin(np.fmax(c[0], np.fmin(lo, hi)), c[1])
+    return np.where(a > b, nearest, a), np.where(a > b, nearest, b)
 
 
 def _fraction(c: Any, lo: float, hi: float, x: float) -> float:
-    values, a, b = _allowed(c, lo, hi)
-    if values is not None:
+    if isinstance(c, list):
+        values = [y for y, ok in zip(c, _listed_mask(c, lo, hi)) if ok]
         i = min(range(len(values)), key=lambda j: abs(values[j] - x))
         return (i + 0.5) / len(values)
+    a, b = (float(y) for y in _range_within(c, lo, hi))
     return 0.5 if b <= a else min(max((x - a) / (b - a), 0.0), 1.0)

@@ -478,7 +478,7 @@ def _model_step(study, space: Space, targets: Targets, n_first: int, trials: lis
         parents = [t.params for t in sorted(mine, key=lambda t: (_violation(t), t.number))[:3]] + parents
         held, seed = space.pairs().index(pair), (*seed, PAIR_SEED)
     params = propose(space, targets.directions(), [t.params for t in done], [t.values for t in done],
-                     [[float(t.constraints.get(n, 0.0)) for n in names] for t in done],
+                     [[float(c.get(n, 0.0)) for n in names] for c in (t.constraints for t in done)],
                      parents, lambda p: design_key(space.point(p)) not in seen, seed, pair=held,
                      optimism=OPTIMISM if pair is None and len(trials) % OPTIMISTIC_EVERY == 0 else 0.0)
     if params is None:
