@@ -45,6 +45,8 @@ SOURCE = "readout"
 TEMPLATE_SUFFIX = ".j2"
 #: The tree's files beside ``src/magfab_readout/*.py`` (pyproject.toml's package-data of magfab.readout lists both).
 TREE_FILES = ("pyproject.toml", "README.md.j2")
+#: The package's own files: its modules, and the page ``magfab-readout view`` serves (view.html).
+MODULE_SUFFIXES = (".py", ".html")
 
 
 def _plain(value: object) -> object:
@@ -149,13 +151,13 @@ def _context(build: Mapping[str, object], acceptance: Mapping[str, Any] | None) 
 
 def source_files() -> dict[str, bytes]:
     """The package's source tree as every build ships it, ``{path relative to the tree: bytes}``, sorted: its
-    top-level :data:`TREE_FILES` and every module of ``src/magfab_readout/`` (what magfab's wheel ships of the
+    top-level :data:`TREE_FILES` and every module and page of ``src/magfab_readout/`` (what magfab's wheel ships of the
     folder; a tool's cache or a local build beside them is not the package)."""
     root = resources.files("magfab").joinpath(SOURCE)
     out = {name: root.joinpath(name).read_bytes() for name in TREE_FILES}
     modules = root.joinpath("src", PACKAGE)
     out.update({f"src/{PACKAGE}/{entry.name}": entry.read_bytes() for entry in modules.iterdir()
-                if entry.name.endswith(".py") and entry.is_file()})
+                if entry.name.endswith(MODULE_SUFFIXES) and entry.is_file()})
     return dict(sorted(out.items()))
 
 

@@ -11,6 +11,8 @@ installs into) and whose ``magfab`` is the one under test. Where a person would 
   0's scan``);
 * ``magfab-readout stream --zero N`` (Ctrl-C'd), when the test gave :attr:`Bench.press`, zeroes at rest, then the
   press comes on and goes, and the stream runs until it has printed the rest after it (:attr:`Bench.after_press`);
+* ``magfab-readout view`` (Ctrl-C'd): the person opens the address it prints in a browser (the walk's headless
+  Chromium; ``BROWSER=true`` in the shell makes the readout's own opening of it a no-op), watches, presses Zero;
 * ``magfab-readout check`` waits for each prompt, then the known weight goes on the tip, the board is turned over or
   warmed as the prompt asks (:meth:`Bench._do`), and Enter is pressed;
 * ``magfab-readout weigh`` likewise: at each step the board goes onto the stand at the step's angle with the step's
@@ -40,6 +42,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from cdp import Chromium
+from conftest import require_tool
 
 import magfab
 from magfab.units import G0 as G
@@ -356,6 +360,8 @@ class Bench:
                                 lambda _: _recorded_s(path) >= until)
                 elif " stream " in f" {line} " and "--zero" in line and self.press is not None:
                     self._press_while_streaming(line, proc, out, err)
+                elif " view " in f" {line} ":
+                    self._look_at_view(line, proc, out, err)
                 time.sleep(0.5)
                 proc.send_signal(signal.SIGINT)
                 proc.wait(timeout_s)
@@ -366,6 +372,20 @@ class Bench:
             out.seek(0)
             err.seek(0)
             return Ran(line, self.cwd, proc.returncode, out.read(), err.read())
+
+    def _look_at_view(self, line: str, proc: subprocess.Popen, out, err) -> None:
+        """``view``: the person opens the address it prints (headless Chromium, in real time), watches for 2 s,
+        presses Zero, watches 1.5 s more; the page must have drawn frames, logged the zero and thrown nothing."""
+        self._await(line, proc, err, out, "the address it serves", lambda text: "view at http://" in text)
+        url = re.search(r"view at (http://127\.0\.0\.1:\d+/)", _text(err))[1]
+        with tempfile.TemporaryDirectory() as profile, Chromium(require_tool("chromium"), Path(profile)) as browser:
+            browser.open(url)
+            browser.wait(2.0)
+            browser.evaluate("document.getElementById('zero').click()")
+            browser.wait(1.5)
+            seen = browser.evaluate("({frames: frames.length, log: document.getElementById('log').textContent})")
+            assert seen["frames"] > 0 and "zero: offset" in seen["log"] and not browser.errors, (line, seen,
+                                                                                                 browser.errors)
 
     def _press_while_streaming(self, line: str, proc: subprocess.Popen, out, err) -> None:
         """Once ``stream`` has zeroed (its ``# zero:`` lines out): 0.3 s at rest, :attr:`press` held for
@@ -493,7 +513,8 @@ def bench_env(venv: Path, port: str | None = None) -> dict:
     path = [str(venv / "bin"), str(Path(sys.executable).parent), os.environ.get("PATH", "")]
     env = {k: v for k, v in os.environ.items() if k not in {"PYTHONPATH", "VIRTUAL_ENV", "PYTHONHOME"}}
     env.update(PATH=os.pathsep.join(path), VIRTUAL_ENV=str(venv), PIP_DISABLE_PIP_VERSION_CHECK="1",
-               PYTHONPATH=str(Path(magfab.__file__).resolve().parents[1]))
+               PYTHONPATH=str(Path(magfab.__file__).resolve().parents[1]),
+               BROWSER="true")  # `view` opens its page with `true URL`: the walk's own Chromium is the person's browser
     if port:
         env["MAGFAB_READOUT_PORT"] = port
     return env

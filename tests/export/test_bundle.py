@@ -232,7 +232,7 @@ def _commands(text: str) -> list:
 
 def _runs_until_ctrl_c(line: str) -> bool:
     words = shlex.split(line, comments=True)
-    if words[:2] in (["magfab-readout", "stream"], ["magfab-readout", "record"]):
+    if words[:2] in (["magfab-readout", "stream"], ["magfab-readout", "record"], ["magfab-readout", "view"]):
         return not {"--count", "--seconds"} & set(words)
     return False
 

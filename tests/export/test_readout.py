@@ -95,7 +95,8 @@ def test_render_is_complete_deterministic_and_embeds_the_calibration(design, cal
                                      "taxels.py", "array_sim.py", "array_cli.py", "array_json.py",
                                      "cli_shared.py", "identity.py", "records.py", "board_sensor.py", "bounded.py",
                                      "array_check.py", "array_sensor.py", "float32_bound.py", "readings.py",
-                                     "weigh.py", "clock.py", "record_formats.py", "coins.py", "usage.py")}
+                                     "weigh.py", "clock.py", "record_formats.py", "coins.py", "usage.py", "view.py",
+                                     "view.html")}
     assert set(rendered) == expected and "## An array" not in rendered["readout/README.md"].decode()
     for path, data in rendered.items():
         assert isinstance(data, bytes) and not Path(path).is_absolute()

@@ -43,7 +43,7 @@ RECORD_COLUMNS = (*CSV_COLUMNS[:2], "taxel", *CSV_COLUMNS[2:])
 RECORD_LAG_WARNING_S = 2.0
 
 
-def _device(args: argparse.Namespace, array: ArrayCalibration, text, pattern=None) -> Device:
+def open_device(args: argparse.Namespace, array: ArrayCalibration, text, pattern=None) -> Device:
     check_link(args)
     transport = None
     if args.simulate:
@@ -80,7 +80,7 @@ def stream(args: argparse.Namespace, array: ArrayCalibration, out) -> int:
     if args.check:
         raise DeviceError("--check compares the firmware's forces with the host's: an array's firmware sends only "
                           "fields, and every force is the host's")
-    with _device(args, array, bool(args.text)) as device:
+    with open_device(args, array, bool(args.text)) as device:
         linked = array_sensor.link(device, device.info(), args, array)
         array = linked.array
         reader = ArrayReader(device, array)
@@ -127,7 +127,7 @@ def record(args: argparse.Namespace, array: ArrayCalibration) -> int:
     if args.seconds is not None and not args.seconds > 0:
         raise DeviceError("--seconds must be positive")
     fmt, path = record_formats.prepare(args.format, args.out)
-    with _device(args, array, bool(args.text)) as device:
+    with open_device(args, array, bool(args.text)) as device:
         info = device.info()
         linked = array_sensor.link(device, info, args, array)
         array = linked.array
@@ -191,7 +191,7 @@ def _sensor_note(linked: array_sensor.ArrayLink) -> str:
 
 
 def info(args: argparse.Namespace, array: ArrayCalibration, out) -> int:
-    with _device(args, array, None) as device:
+    with open_device(args, array, None) as device:
         line = device.info()
         linked = array_sensor.link(device, line, args, array)
         out.write(f"device:  {line.line}\n")
@@ -260,7 +260,7 @@ def upload(args: argparse.Namespace, array: ArrayCalibration, out) -> int:
         if ident is not None:
             device.write_identity(ident)
         return array_sensor.checked_info(device, array), found
-    info, found = at_fallback_baud(args, out, lambda a: _device(a, array, None), write)
+    info, found = at_fallback_baud(args, out, lambda a: open_device(a, array, None), write)
     out.write(f"uploaded {len(record)} bytes, read back equal; the board reads {info.taxels} chips "
               f"(spec {json.dumps(info.spec_name)}, calibration {info.calibration_hash})")
     if sensor is None or current is None:
@@ -285,5 +285,5 @@ def run(args: argparse.Namespace, array: ArrayCalibration, out) -> int:
     if args.command == "upload":
         return upload(args, array, out)
     if args.command == "check":
-        return array_check.run(args, array, out, lambda a, text, pattern: _device(a, array, text, pattern))
+        return array_check.run(args, array, out, lambda a, text, pattern: open_device(a, array, text, pattern))
     return info(args, array, out)

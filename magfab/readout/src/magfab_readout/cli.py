@@ -19,7 +19,7 @@ import sys
 import time
 from typing import List, NoReturn, Optional
 
-from . import _build, array_cli, board_sensor, bounded, check, identity, record_formats, records, weigh
+from . import _build, array_cli, board_sensor, bounded, check, identity, record_formats, records, view, weigh
 from .calibration import Calibration, CalibrationError, calibration_sha256
 from .cli_shared import (
     CSV_COLUMNS,
@@ -38,7 +38,7 @@ from .identity import Identity
 from .json_checks import FormatError
 from .rest import RestTracker
 from .simulate import WARM_RATE_C_PER_S, SimulatedDevice, TemperatureRamp
-from .taxels import ArrayCalibration
+from .taxels import ArrayCalibration, ArrayReader
 
 
 class _Parser(argparse.ArgumentParser):
@@ -145,6 +145,7 @@ def _parser() -> argparse.ArgumentParser:
     board_sensor.add_options(check.add_parser(commands, common), _SENSOR_HELP + "; the check's result is appended "
                              "to its record")
     weigh.add_parser(commands, common)
+    view.add_parser(commands, common)
     return parser
 
 
@@ -405,7 +406,12 @@ def main(argv: Optional[List[str]] = None) -> int:
             if args.simulate_warm is not None or args.simulate_no_thermal:
                 raise UsageError("--simulate-warm and --simulate-no-thermal simulate a single taxel's board; this "
                                  "package reads an array")
+            if args.command == "view":
+                return view.array(args, array, lambda a, text: array_cli.open_device(a, array, text),
+                                  lambda device: ArrayReader(device, array))
             return array_cli.run(args, array, sys.stdout)
+        if args.command == "view":
+            return view.single(args, _device)
         if args.command == "stream":
             return _stream(args, sys.stdout)
         if args.command == "record":
