@@ -324,10 +324,18 @@ class Bench:
             if path.is_file():
                 self.produced.append((len(self.ran) - 1, path, hashlib.sha256(path.read_bytes()).hexdigest()))
 
-    def python(self, source: str, timeout_s: float = 120) -> Ran:
+    def python(self, source: str, timeout_s: float = 300) -> Ran:
+        """A ```python block, in the bench venv's Python. A block that uses LeRobot runs in the tests' Python, which
+        has LeRobot's datasets part (tests/lerobot_loader.py), with this build's readout package on its path: the
+        bench venv holds only what ``pip install ./readout`` installs."""
         self._started = time.monotonic()
-        proc = subprocess.run(["python", "-c", source], cwd=self.cwd, env=self.env, capture_output=True, text=True,
-                              timeout=timeout_s)
+        argv, env = ["python", "-c", source], self.env
+        if "from lerobot" in source:
+            tests, src = str(Path(__file__).resolve().parents[1]), str(self.cwd / "readout" / "src")
+            argv = [sys.executable, "-c", f"import sys; sys.path[:0] = [{tests!r}, {src!r}]; import lerobot_loader; "
+                    f"lerobot_loader.install()\n{source}"]
+            env = {**env, "HF_HUB_OFFLINE": "1"}
+        proc = subprocess.run(argv, cwd=self.cwd, env=env, capture_output=True, text=True, timeout=timeout_s)
         return self._log(Ran("python: " + source.splitlines()[0], self.cwd, proc.returncode, proc.stdout, proc.stderr))
 
     def _log(self, ran: Ran) -> Ran:

@@ -96,7 +96,7 @@ def test_render_is_complete_deterministic_and_embeds_the_calibration(design, cal
                                      "cli_shared.py", "identity.py", "records.py", "board_sensor.py", "bounded.py",
                                      "array_check.py", "array_sensor.py", "float32_bound.py", "readings.py",
                                      "weigh.py", "clock.py", "record_formats.py", "coins.py", "usage.py", "view.py",
-                                     "view.html")}
+                                     "view.html", "lerobot.py")}
     assert set(rendered) == expected and "## An array" not in rendered["readout/README.md"].decode()
     for path, data in rendered.items():
         assert isinstance(data, bytes) and not Path(path).is_absolute()
