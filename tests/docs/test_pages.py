@@ -11,6 +11,7 @@ import csv
 import hashlib
 import json
 import math
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -130,6 +131,18 @@ def test_the_readme_walk_reaches_a_passing_acceptance_test(walked):
         header = next(csv.reader(line for line in f if not line.startswith("#")))
     assert "Fz_sensor_N" in header and "Fz_N" not in header  # the recording keeps the sensor's own forces apart
     assert (walked.cwd / "finger-01.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"  # sensor show's chart
+
+
+def test_the_live_view_of_the_board(walked):
+    """The README's `magfab-readout view`, on the rig (the shipped image on the simulated board and bus): the page
+    the walk opened drew the frames and its latency reached the summary, with the rate the board delivered."""
+    view = _ran(walked, "magfab-readout view")
+    m = re.search(r"view: (\d+) samples.*?; ([\d.]+) samples/s .*?the page drew (\d+) updates.*?from read to drawn "
+                  r"median ([\d.]+) ms, p95 ([\d.]+) ms", view.stderr)
+    assert m, view.stderr
+    samples, rate, drawn, median, p95 = map(float, m.groups())
+    assert samples > 100 and rate > 0 and drawn > 10 and 0 < median <= p95 < 2000, view.stderr
+    print(view.stderr.strip().splitlines()[-1])  # with -s
 
 
 def test_a_sensor_calibrated_with_weights_passes_its_check(walked):
