@@ -195,6 +195,13 @@ def test_the_page_s_requests_are_checked(default_build, tmp_path):
     assert view.post("/stats", b"[1, 2]") == 400
     assert view.post("/stats", b"{" + b" " * 5000 + b"}") == 413
     assert view.post("/elsewhere") == 404
+    # another site's page in the same browser (its Origin), or a host name rebound to 127.0.0.1, is refused
+    port = view.url.rsplit(":", 1)[1].strip("/")
+    for headers in ({"Origin": "http://evil.example"}, {"Host": f"evil.example:{port}"}):
+        request = urllib.request.Request(view.url + "zero", data=b"", method="POST", headers=headers)
+        with pytest.raises(urllib.error.HTTPError) as refused:
+            urllib.request.urlopen(request, timeout=10)
+        assert refused.value.code == 403
     with pytest.raises(urllib.error.HTTPError):
         view.get("/../etc/passwd")
     assert view.post("/stats", json.dumps({"drawn": 5, "frames": 40, "latency_median_ms": 3.0,

@@ -92,6 +92,7 @@ class Hub:
         self.tare = threading.Event()
         self.page: Dict[str, float] = {}
         self.pages = 0  # event streams opened
+        self.port = 0  # the server's, once it is bound
 
     def push(self, frame: str) -> None:
         with self._changed:
@@ -133,6 +134,14 @@ class Hub:
                      if isinstance(data.get(k), (int, float)) and math.isfinite(data[k])}
 
 
+def _foreign(headers, port: int) -> bool:
+    """A request another site made the browser send (its Origin), or one addressed to another host name that
+    resolves here (DNS rebinding): refused, so only the page this server serves talks to it."""
+    hosts = {f"127.0.0.1:{port}", f"localhost:{port}"}
+    origin = headers.get("Origin")
+    return headers.get("Host") not in hosts or (origin is not None and origin not in {f"http://{h}" for h in hosts})
+
+
 def _handler(hub: Hub, page: bytes) -> type:
     class Handler(BaseHTTPRequestHandler):
         protocol_version = "HTTP/1.1"
@@ -149,6 +158,9 @@ def _handler(hub: Hub, page: bytes) -> type:
             self.wfile.write(body)
 
         def do_GET(self) -> None:
+            if _foreign(self.headers, hub.port):
+                self._send(403, "text/plain; charset=utf-8", b"only the view's own page may ask\n")
+                return
             path = urllib.parse.urlsplit(self.path).path
             if path == "/":
                 self._send(200, "text/html; charset=utf-8", page)
@@ -160,6 +172,9 @@ def _handler(hub: Hub, page: bytes) -> type:
                 self._send(404, "text/plain; charset=utf-8", b"not found\n")
 
         def do_POST(self) -> None:
+            if _foreign(self.headers, hub.port):
+                self._send(403, "text/plain; charset=utf-8", b"only the view's own page may ask\n")
+                return
             length = int(self.headers.get("Content-Length") or 0)
             if not 0 <= length <= MAX_STATS_BYTES:
                 self._send(413, "text/plain; charset=utf-8", b"too large\n")
@@ -218,7 +233,8 @@ class Server:
                              "free one") from None
         self.httpd.daemon_threads = True
         self.hub = hub
-        self.url = f"http://127.0.0.1:{self.httpd.server_address[1]}/"
+        hub.port = self.httpd.server_port
+        self.url = f"http://127.0.0.1:{hub.port}/"
         self._thread = threading.Thread(target=self.httpd.serve_forever, name="view", daemon=True)
 
     def __enter__(self) -> Server:
