@@ -1,4 +1,4 @@
-"""The sensor in a LeRobot dataset (issue 31, item 3): the readout README's block, run as written with the build's
+"""The sensor in a LeRobot dataset: the readout README's block, run as written with the build's
 readout package on the simulated board (a single taxel's and the strip's), makes a dataset that LeRobot's own loader
 reads back value for value; and the feed's alignment (:class:`TactileFeed`), over drawn rates, frame rates, clock
 skews and read delays, puts every sample in exactly one frame, the one at its time."""

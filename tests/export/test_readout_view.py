@@ -1,4 +1,4 @@
-"""``magfab-readout view`` (issue 31, item 1): the build's readout package, run as a user runs it on the simulated
+"""``magfab-readout view``: the build's readout package, run as a user runs it on the simulated
 board, serves the live page on 127.0.0.1; its frames carry every taxel's force, field and flags at the board's rate;
 Zero tares from the page's request; the page itself, opened in headless Chromium in real time, draws the frames and
 reports its read-to-drawn latency back to the readout's summary; a screenshot under virtual time shows the layout,
