@@ -52,11 +52,6 @@ def _readout(build: Path, *args: str, **kw) -> subprocess.Popen:
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, **kw)
 
 
-def _cpu_share(summary: str) -> float:
-    m = re.search(r"this readout used (\d+)% of a core", summary)
-    return float(m[1]) / 100 if m else float("nan")
-
-
 def _session_cpu_s(session: int) -> float:
     """utime + stime of every process in session ``session`` (a browser and its children), s."""
     total = 0

@@ -118,7 +118,9 @@ LAYERS = (
 #: saying "lazy" or "lazily", in the function or at module level); any other function-level import goes to the top.
 HEAVY = {"cadquery", "OCP", "trimesh", "manifold3d", "matplotlib", "mpl_toolkits", "skfem", "magpylib", "optuna",
          "dask", "distributed", "pyarrow", "pcbnew", "scipy", "sqlalchemy", "PIL", "jinja2", "rich", "qdldl",
-         "triangle"}
+         "triangle",
+         # the readout's live view: its server and browser, 25 ms of every other readout command's start
+         "http", "webbrowser"}
 #: Optional dependencies, imported where they are needed so that the package works without them.
 OPTIONAL = {"serial", "mcap", "mcap_ros2"}  # pyserial; the readout's record --format mcap
 #: The entry point may defer anything, magfab's own modules included, so that ``magfab --help`` stays fast.

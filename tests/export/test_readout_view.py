@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 from cdp import Chromium
 from conftest import require_tool
+from test_readout_formats import readout
 
 
 class View:
@@ -167,10 +168,7 @@ def test_the_page_in_a_browser(default_build, array_builds, tmp_path, which):
     (["--zero", "-3"], "--zero needs a positive number"),
 ])
 def test_bad_options_are_one_line(default_build, tmp_path, args, says):
-    src = str(default_build.out_dir / "readout" / "src")
-    run = subprocess.run([sys.executable, "-c", f"import sys; sys.path.insert(0, {src!r}); "
-                          "from magfab_readout.cli import main; sys.exit(main())", "view", "--simulate",
-                          "--no-browser", *args], cwd=tmp_path, capture_output=True, text=True, timeout=60)
+    run = readout(default_build, tmp_path, "view", "--simulate", "--no-browser", *args, timeout=60)
     assert run.returncode == 2 and run.stderr.count("\n") == 1 and says in run.stderr, run.stderr
     assert list(tmp_path.iterdir()) == []
 
@@ -178,11 +176,7 @@ def test_bad_options_are_one_line(default_build, tmp_path, args, says):
 def test_a_port_in_use_is_one_line(default_build, tmp_path):
     view = View(default_build, tmp_path, "--seconds", "3")
     port = view.url.rsplit(":", 1)[1].strip("/")
-    src = str(default_build.out_dir / "readout" / "src")
-    run = subprocess.run([sys.executable, "-c", f"import sys; sys.path.insert(0, {src!r}); "
-                          "from magfab_readout.cli import main; sys.exit(main())", "view", "--simulate",
-                          "--no-browser", "--http-port", port], cwd=tmp_path, capture_output=True, text=True,
-                         timeout=60)
+    run = readout(default_build, tmp_path, "view", "--simulate", "--no-browser", "--http-port", port, timeout=60)
     assert run.returncode == 2 and run.stderr.count("\n") == 1 and f"--http-port {port}: cannot serve" in run.stderr
     assert view.finish()[0] == 0
 

@@ -65,7 +65,7 @@ class TactileFeed:
     def __init__(self, device, fps: float, rate_Hz: float, reader=None, taxels: int = 1) -> None:
         if not (math.isfinite(fps) and fps > 0):
             raise ValueError(f"fps must be a positive number of frames a second; instead received {fps!r}")
-        self.device, self.reader, self.taxels, self.fps = device, reader, int(taxels), float(fps)
+        self.device, self.reader, self.taxels = device, reader, int(taxels)
         # a frame late by the scheduler's jitter still fits; a later one keeps the newest samples
         self.window = math.ceil(rate_Hz / fps) + 4
         self._samples: Deque[Tuple[float, float, Tuple[float, ...]]] = collections.deque()  # device t, host, force

@@ -21,14 +21,15 @@ import sys
 import threading
 import time
 import urllib.parse
-import webbrowser
-from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
-from typing import Any, Callable, Deque, Dict, Iterator, List, Optional, Sequence, Tuple
+from typing import TYPE_CHECKING, Any, Callable, Deque, Dict, Iterator, List, Optional, Sequence, Tuple
 
 from . import _build
 from .cli_shared import Interrupt, Span
 from .device import DeviceError
 from .usage import UsageError
+
+if TYPE_CHECKING:
+    from http.server import ThreadingHTTPServer
 
 #: Batches a second the page is sent at most (a display's refresh: more would not be seen).
 SEND_HZ = 60.0
@@ -143,6 +144,8 @@ def _foreign(headers, port: int) -> bool:
 
 
 def _handler(hub: Hub, page: bytes) -> type:
+    from http.server import BaseHTTPRequestHandler  # lazy: 18 ms that every other readout command would pay
+
     class Handler(BaseHTTPRequestHandler):
         protocol_version = "HTTP/1.1"
 
@@ -226,8 +229,10 @@ class Server:
         raw = pkgutil.get_data("magfab_readout", "view.html")
         if raw is None:
             raise DeviceError("this readout package has no view.html: reinstall it from the build's readout folder")
+        from http.server import ThreadingHTTPServer  # lazy: as in _handler
+
         try:
-            self.httpd = ThreadingHTTPServer(("127.0.0.1", port), _handler(hub, raw))
+            self.httpd: ThreadingHTTPServer = ThreadingHTTPServer(("127.0.0.1", port), _handler(hub, raw))
         except OSError as exc:
             raise UsageError(f"--http-port {port}: cannot serve on it ({exc.strerror}); give another, or 0 for a "
                              "free one") from None
@@ -284,6 +289,8 @@ def run(args: argparse.Namespace, meta: dict, frames: Callable[[], Iterator[Tupl
         if args.zero:
             hub.note(_offsets(tare(args.zero), args.zero))
         if not args.no_browser:
+            import webbrowser  # lazy: 6 ms, only when a browser is opened
+
             webbrowser.open(server.url)
         with stop:
             for time_s, taxels in frames():
