@@ -21,15 +21,12 @@ import sys
 import threading
 import time
 import urllib.parse
-from typing import TYPE_CHECKING, Any, Callable, Deque, Dict, Iterator, List, Optional, Sequence, Tuple
+from typing import Any, Callable, Deque, Dict, Iterator, List, Optional, Sequence, Tuple
 
 from . import _build
 from .cli_shared import Interrupt, Span
 from .device import DeviceError
 from .usage import UsageError
-
-if TYPE_CHECKING:
-    from http.server import ThreadingHTTPServer
 
 #: Batches a second the page is sent at most (a display's refresh: more would not be seen).
 SEND_HZ = 60.0
@@ -232,7 +229,7 @@ class Server:
         from http.server import ThreadingHTTPServer  # lazy: as in _handler
 
         try:
-            self.httpd: ThreadingHTTPServer = ThreadingHTTPServer(("127.0.0.1", port), _handler(hub, raw))
+            self.httpd = ThreadingHTTPServer(("127.0.0.1", port), _handler(hub, raw))
         except OSError as exc:
             raise UsageError(f"--http-port {port}: cannot serve on it ({exc.strerror}); give another, or 0 for a "
                              "free one") from None
