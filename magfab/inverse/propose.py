@@ -15,7 +15,7 @@ Each proposal:
    Comput. 10(1):50-66), or, while it predicts none feasible, by how far it predicts they miss;
 3. returns the best-scored candidate the study has not evaluated.
 
-An optimistic proposal (``optimism`` > 0: every second model step of a study, :data:`magfab.inverse.study.OPTIMISM`)
+An optimistic proposal (``optimism`` > 0: every second model step of a study, :data:`magfab.inverse.steps.OPTIMISM`)
 lets each local step miss each constraint by ``optimism`` times its distance, in the model's coordinates, to the
 nearest design evaluated. The fit has no error estimate of its own, and far from its data it is often wrong on the
 side of caution: on the stiff pad bench set it predicted 38 mN of resolution at a thin-cover design that gave 19.2
@@ -143,11 +143,20 @@ def _physical(space: Space, pair: np.ndarray, f_magnet: np.ndarray, numeric: dic
 
 
 def _physical_of(space: Space, rows: Sequence[Mapping[str, Any]]) -> np.ndarray:
-    """:func:`_physical` of designs given by their params."""
-    pairs = space.pairs()
-    return _physical(space, np.array([pairs.index((p["material"], p["tip"])) for p in rows], dtype=int),
-                     np.array([float(p[MAGNET_FRACTION]) for p in rows]),
-                     {k: np.array([float(p[k]) for p in rows]) for k in space.numeric_params()})
+    """:func:`_physical` of designs given by their params. Each design's row is kept in ``space.memo`` by its params:
+    a study fits every proposal to the designs it has evaluated, and all but the latest were mapped before (a row
+    depends on its design alone, so a memo's row is the row :func:`_physical` gives in any company)."""
+    memo = space.memo.setdefault("physical", {})
+    keys = [tuple(sorted(p.items())) for p in rows]
+    todo = list(dict.fromkeys(k for k in keys if k not in memo))
+    if todo:
+        pairs = space.pairs()
+        fresh = [dict(k) for k in todo]
+        x = _physical(space, np.array([pairs.index((p["material"], p["tip"])) for p in fresh], dtype=int),
+                      np.array([float(p[MAGNET_FRACTION]) for p in fresh]),
+                      {k: np.array([float(p[k]) for p in fresh]) for k in space.numeric_params()})
+        memo.update(zip(todo, x))
+    return np.array([memo[k] for k in keys])
 
 
 def _independent(x: np.ndarray) -> list[int]:

@@ -240,6 +240,9 @@ class Space:
         self.max_diameter = r.max_diameter_mm if r.max_diameter_mm is not None else math.inf
         self.max_diameter = min(self.max_diameter, _board_limit(base, float(max(v.elastomer_diameter_mm))))
         self.full_scale_G = _full_scale_z_G(base, targets)
+        #: Memos of pure functions of this space's designs, by name (the model step's coordinates of each design
+        #: evaluated: magfab.inverse.propose._physical_of).
+        self.memo: dict[str, dict[Any, Any]] = {}
         self._saturation: dict[str, float] = {}
         self.all_choices = choices(v)
         self._d_range: dict[tuple[str, str], tuple[float, float] | None] = {}
@@ -421,17 +424,34 @@ class Space:
                        else {FRACTION_OF[name]: _fraction(c, lo, hi, float(point[name]))})
         return out
 
-    def suggest(self, trial) -> dict[str, Any]:
-        """The mm point an Optuna trial draws (ask-and-tell): the material and the tip, the magnet's fraction
-        (:data:`MAGNET_FRACTION`), then each numeric variable's fraction (or, for listed values, the value). The trial
-        keeps the point as its user attribute :data:`POINT` (what tables and the front read)."""
-        params: dict[str, Any] = {k: trial.suggest_categorical(k, self.choices[k]) for k in ("material", "tip")}
-        params[MAGNET_FRACTION] = trial.suggest_float(MAGNET_FRACTION, 0.0, 1.0)
+    def param_names(self) -> list[str]:
+        """A trial's params, in :meth:`suggest`'s order: the material, the tip, the magnet's fraction, then
+        :meth:`numeric_params`."""
+        return ["material", "tip", MAGNET_FRACTION, *self.numeric_params()]
+
+    def distributions(self) -> dict[str, Any]:
+        """Each param's Optuna distribution (:meth:`param_names`): the choices', the listed values', and [0, 1] for
+        every fraction."""
+        from optuna.distributions import CategoricalDistribution, FloatDistribution
+
+        out: dict[str, Any] = {k: CategoricalDistribution(self.choices[k]) for k in ("material", "tip")}
+        out[MAGNET_FRACTION] = FloatDistribution(0.0, 1.0)
         for name in NUMERIC:
             c = getattr(self.variables, name)
-            params.update({name: float(trial.suggest_categorical(name, list(c)))} if isinstance(c, list)
-                          else {FRACTION_OF[name]: trial.suggest_float(FRACTION_OF[name], 0.0, 1.0)})
-        point = self.point(params)
+            out.update({name: CategoricalDistribution(list(c))} if isinstance(c, list)
+                       else {FRACTION_OF[name]: FloatDistribution(0.0, 1.0)})
+        return out
+
+    def suggest(self, trial) -> dict[str, Any]:
+        """The mm point an Optuna trial draws (ask-and-tell), each of :meth:`distributions` in turn. The trial keeps
+        the point as its user attribute :data:`POINT` (what tables and the front read)."""
+        from optuna.distributions import CategoricalDistribution
+
+        params: dict[str, Any] = {}
+        for name, d in self.distributions().items():
+            params[name] = (trial.suggest_categorical(name, d.choices) if isinstance(d, CategoricalDistribution)
+                            else trial.suggest_float(name, d.low, d.high))
+        point = self.point({k: float(v) if k in NUMERIC else v for k, v in params.items()})
         trial.set_user_attr(POINT, point)
         return point
 

@@ -21,6 +21,7 @@ import socket
 import warnings
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -28,10 +29,9 @@ import numpy as np
 
 from ..errors import InputError
 from ..spec import Spec
-from .evaluate import SURROGATE, constraint_names, evaluate
-from .pareto import front_mask
-from .propose import propose
-from .space import FRACTIONS, MAGNET_FRACTION, POINT, Space, base_point, point_of
+from .evaluate import SURROGATE, evaluate
+from .space import POINT, Space, base_point, point_of
+from .steps import asked_designs, design_key, explore, model_step, refine
 from .targets import Sampler, Targets
 
 # Imported lazily, inside the functions that use them, for speed: Dask, Optuna and SQLAlchemy take a
@@ -116,34 +116,6 @@ def _sigint_blocked() -> Iterator[None]:
         signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
 
-#: Of the trials after the first phase, one in this many has its (material, tip) fixed to the pair the study has
-#: tried least (the sampler draws the rest of it): the categories stay explored however the models narrow.
-EXPLORE_EVERY = 4
-#: A refinement's step over the unit fractions (the magnet's and each numeric variable's), when the model step
-#: (:mod:`magfab.inverse.propose`) has no proposal: this much right after the first phase, narrowing to a fifth of it
-#: by the study's last trial.
-REFINE_SIGMA = 0.2
-#: Steps drawn for one refinement before it gives up on finding a design the study has not evaluated (a space of
-#: listed values or few magnets has few neighbours); the sampler then draws that trial.
-REFINE_DRAWS = 8
-#: Trials past its share of the first phase that a (material, tip) pair with no feasible design yet may take from
-#: the exploration trials (:func:`_pair_to_search`): enough for the model to step from its near misses into a thin
-#: feasible region, few enough that a pair with none leaves the rest of the study its trials.
-PAIR_TRIES = 8
-#: The last entry of a pair-held proposal's seed, so that its draws are not the model step's of the same trial.
-PAIR_SEED = 7
-#: Of the model steps (not held to a pair), those asked at a trial number divisible by this are optimistic: their
-#: proposal's local steps may miss a constraint by :data:`OPTIMISM` times their distance from the designs evaluated
-#: (:func:`magfab.inverse.propose.propose`); the others by nothing.
-OPTIMISTIC_EVERY = 2
-#: The optimistic model steps' allowance per unit of distance in the model's coordinates (the constraints are
-#: relative: 2 lets a step 0.1 from every design evaluated miss a requirement by 20 % of it). Chosen on
-#: bench/design_search.py's stiff pad, 300 trials against a 3,000-design sweep (figures: propose's module doc): 2 at
-#: every second model step over seeds 0-19; 4 at every third failed five seeds of twenty, 4 at every second each of
-#: the four seeds it was tried on.
-OPTIMISM = 2.0
-
-
 def first_phase(targets: Targets) -> int:
     """Trials of the space-filling first phase (:meth:`Space.latin_hypercube`): a third of the study, 10 to 100, and
     at least two per (material, tip) pair; never more than the study."""
@@ -201,8 +173,13 @@ def open_study(targets: Targets, where: str | Path):
     return study
 
 
-#: The study's user attribute saying its first phase is enqueued (once, by the run that starts it).
+#: The study's user attribute saying its first phase is enqueued in the storage (by an earlier version of this module:
+#: the first phase is now planned in memory from the seed, :func:`_plan`).
 PLANNED = "first_phase_enqueued"
+#: The system attribute Optuna's constrained samplers read a trial's constraints from, as a list (each feasible when
+#: <= 0; optuna.study._constrained_optimization), here in
+#: :func:`~magfab.inverse.evaluate.constraint_names`' order (:func:`~magfab.inverse.steps.constraint_row`).
+CONSTRAINTS = "constraints"
 #: The user attribute naming the run (host:pid) that asked a trial.
 RUNNER = "runner"
 
@@ -235,8 +212,8 @@ def _recover(study) -> int:
     for t in stale:
         study._storage.set_trial_user_attr(t._trial_id, RESULT, {"state": "failed", "reason": "interrupted"})
         study._storage.set_trial_state_values(t._trial_id, state=TrialState.FAIL)
-        if t.params:
-            study.enqueue_trial(t.params, skip_if_exists=True)
+        if t.params:  # not skip_if_exists: the stale trial itself has these params, so it would always skip
+            study.enqueue_trial(t.params)
     return len(stale)
 
 
@@ -253,8 +230,8 @@ def tell(study, trial, result: dict[str, Any], targets: Targets) -> None:
     if kept["state"] == "failed":
         study.tell(trial, state=TrialState.FAIL)
         return
-    for name, value in zip(constraint_names(targets), result["constraints"]):
-        trial.set_constraint(name, float(value))
+    # one write for all: a list, in constraint_names' order (trial.set_constraint takes a read and a write for each)
+    study._storage.set_trial_system_attr(trial._trial_id, CONSTRAINTS, [float(v) for v in result["constraints"]])
     study.tell(trial, values)
 
 
@@ -263,20 +240,17 @@ def run_study(targets: Targets, base: Spec, storage: str | Path, dask_client,
     """Run the study to ``targets.study.trials`` evaluated designs (counting those a previous run stored, not repeats:
     :data:`REPEAT`); ``study``: the one :func:`open_study` opened at ``storage`` already.
 
-    A new study starts with :func:`_plan`'s trials (the base design, a space-filling first phase over every pair);
-    then one trial in :data:`EXPLORE_EVERY` held to the least-tried (material, tip) pair (the sampler draws the rest)
-    and every other one the model's proposal (:func:`_model_step`), or where it has none a step from the study's best
-    designs (:func:`_refine`). Repeatable: results are told in ask order, whatever order the workers finish in, and
-    the next trial is asked right after each is told: the same targets, seed and workers give the same trials."""
+    A new study starts with :func:`_plan`'s trials (the base design, a space-filling first phase over every pair),
+    then asks what :func:`_next_params` gives. Repeatable: results are told in ask order, whatever order the workers
+    finish in, and the next trial is asked right after each is told: the same targets, seed and workers give the same
+    trials."""
     from distributed import as_completed
-    from optuna.trial import TrialState
 
     study = study if study is not None else open_study(targets, storage)
     space = Space(targets, base)
     _recover(study)
     done = _counted(study)
-    if done == 0 and not study.user_attrs.get(PLANNED):
-        _plan(study, space, targets, base)
+    pending = _plan(study, space, targets, base)  # the first phase's trials not yet asked, then draws (_draw_next)
     total = targets.study.trials
     args = (base.model_dump_json(), targets.model_dump_json())
     workers = max(1, len(dask_client.scheduler_info().get("workers", {})) or 1)
@@ -290,20 +264,15 @@ def run_study(targets: Targets, base: Spec, storage: str | Path, dask_client,
 
     def submit() -> None:
         nonlocal repeats
-        trials = study.get_trials(deepcopy=False)  # once per ask: both read the same list
-        if len(trials) >= n_first and not any(t.state is TrialState.WAITING for t in trials):  # first phase done
-            steps = (_explore, _model_step, _refine)  # the first that enqueues a trial
-            any(step(study, space, targets, n_first, trials) for step in steps)
-        trial = study.ask()
-        trial.set_user_attr(RUNNER, runner)
-        point = space.suggest(trial)
+        params = _next_params(study, space, targets, n_first, pending)
+        trial, point = _ask(study, space, params, runner)
         key = design_key(point)
         earlier = next((a.source for a in order if a.key == key), key if key in known else None)
         if earlier is not None and repeats < REPEATS_PER_TRIAL * total:  # a design asked before: its result
             repeats += 1
             trial.set_user_attr(REPEAT, True)
             order.append(_Asked(trial, earlier, key, counts=False))
-            _draw_next(study, space, targets, trial.number)
+            pending.append(_draw_next(space, targets, trial.number))
             return
         fut = dask_client.submit(evaluate, point, *args, targets.study.models.value, f"{targets.name}-{trial.number}",
                                  pure=False)
@@ -339,6 +308,27 @@ def run_study(targets: Targets, base: Spec, storage: str | Path, dask_client,
     return study
 
 
+def _next_params(study, space: Space, targets: Targets, n_first: int,
+                 pending: list[dict[str, Any]]) -> dict[str, Any] | None:
+    """The next trial's params (all, a pair's, or None for the sampler's draw): a trial waiting in the storage first
+    (enqueued by :func:`_recover`: None, ``study.ask`` takes it), then ``pending`` (:func:`_plan`'s and
+    :func:`_draw_next`'s), then past the first phase the first of :mod:`magfab.inverse.steps` with a trial to give:
+    one in :data:`~magfab.inverse.steps.EXPLORE_EVERY` held to a pair (:func:`~magfab.inverse.steps.explore`), the
+    model's proposal (:func:`~magfab.inverse.steps.model_step`), a step from the best designs
+    (:func:`~magfab.inverse.steps.refine`)."""
+    from optuna.trial import TrialState
+
+    trials = study.get_trials(deepcopy=False)  # once per ask: every step reads the same list
+    if any(t.state is TrialState.WAITING for t in trials):
+        return None
+    if pending:
+        return pending.pop(0)
+    if len(trials) < n_first:
+        return None
+    steps = (explore, model_step, refine)
+    return next((p for p in (step(study, space, targets, n_first, trials) for step in steps) if p is not None), None)
+
+
 def _counted(study) -> int:
     """The study's told trials that count against study.trials: all but the repeats (:data:`REPEAT`)."""
     from optuna.trial import TrialState
@@ -347,22 +337,52 @@ def _counted(study) -> int:
     return sum(not t.user_attrs.get(REPEAT) for t in told)
 
 
-def _plan(study, space: Space, targets: Targets, base: Spec) -> None:
-    """A new study's first trials, enqueued: the base spec's design (when it is a point of the space), then the first
-    phase's Latin hypercube."""
+def _plan(study, space: Space, targets: Targets, base: Spec) -> list[dict[str, Any]]:
+    """A study's first trials not yet asked, in order: the base spec's design (when it is a point of the space), then
+    the first phase's Latin hypercube (drawn from the seed, so a resumed study plans the same); none for a study
+    whose first phase an earlier version enqueued in the storage (:data:`PLANNED`)."""
+    from optuna.trial import TrialState
+
+    if study.user_attrs.get(PLANNED):
+        return []
     start = base_point(base, targets.variables)
-    if start is not None:
-        study.enqueue_trial(space.params(start))
-    for params in space.latin_hypercube(first_phase(targets), targets.study.seed):
-        study.enqueue_trial(params)
-    study.set_user_attr(PLANNED, True)
+    plan = ([space.params(start)] if start is not None else []) + space.latin_hypercube(first_phase(targets),
+                                                                                        targets.study.seed)
+    asked = asked_designs(study.get_trials(deepcopy=False))
+    asked |= {design_key(space.point(t.system_attrs["fixed_params"])) for t in study.get_trials(
+        deepcopy=False, states=(TrialState.WAITING,)) if set(space.param_names()) <= t.system_attrs.get(
+            "fixed_params", {}).keys()}
+    return [p for p in plan if design_key(space.point(p)) not in asked]
 
 
-def _draw_next(study, space: Space, targets: Targets, number: int) -> None:
-    """After trial ``number`` asked a repeat, the next ask a uniform draw, seeded with the study's seed and that
-    number (the sampler, converged on a small space, would ask the same design again)."""
+def _draw_next(space: Space, targets: Targets, number: int) -> dict[str, Any]:
+    """After trial ``number`` asked a repeat, the params of a uniform draw, seeded with the study's seed and that
+    number (the sampler, converged on a small space, would ask the same design again): what the study asks next."""
     draw = int(np.random.default_rng([targets.study.seed, number]).integers(2**31))
-    study.enqueue_trial(space.latin_hypercube(1, draw)[0])
+    return space.latin_hypercube(1, draw)[0]
+
+
+def _ask(study, space: Space, params: dict[str, Any] | None, runner: str) -> tuple[Any, dict[str, Any]]:
+    """A new trial and its mm point: with every param given, made in one storage write, running, its params and
+    point (:data:`POINT`) in it (what ``study.ask`` and a suggest a param would take a dozen writes for, each a lock and
+    an fsync in the journal file); with some (a pair held, the sampler drawing the rest: :func:`explore`) or none,
+    asked of the sampler, the trials waiting in the storage first."""
+    from optuna.trial import FrozenTrial, Trial, TrialState
+
+    names = space.param_names()
+    if params is None or not set(names) <= params.keys():
+        if params is not None:
+            study.enqueue_trial(params)
+        trial = study.ask()
+        trial.set_user_attr(RUNNER, runner)
+        return trial, space.suggest(trial)
+    point = space.point(params)
+    distributions = space.distributions()
+    template = FrozenTrial(number=0, state=TrialState.RUNNING, value=None, datetime_start=datetime.now(UTC),
+                           datetime_complete=None, params={k: params[k] for k in names}, distributions=distributions,
+                           user_attrs={RUNNER: runner, POINT: point}, system_attrs={}, intermediate_values={},
+                           trial_id=0)
+    return Trial(study, study._storage.create_new_trial(study._study_id, template_trial=template)), point
 
 
 #: The user attribute marking a trial that asked a design the study had already asked: told that design's result,
@@ -392,130 +412,6 @@ def _told(study) -> dict[tuple, dict[str, Any]]:
     return {design_key(t.user_attrs[POINT]): t.user_attrs[RESULT] for t in study.get_trials(
         deepcopy=False, states=(TrialState.COMPLETE, TrialState.FAIL))
         if POINT in t.user_attrs and RESULT in t.user_attrs and t.user_attrs[RESULT].get("reason") != "interrupted"}
-
-
-def _explore(study, space: Space, targets: Targets, n_first: int, trials: list) -> bool:
-    """Before an ask past the first phase (none waiting): one trial in :data:`EXPLORE_EVERY` goes to a (material,
-    tip) pair on purpose; True when it enqueued one. ``trials``: the study's trials, as asked.
-
-    - While a pair has no feasible design and fewer trials than :func:`_pair_to_search` allows, the least-tried
-      such pair gets the model's proposal held to it (:func:`magfab.inverse.propose.propose`'s ``pair``): its local
-      steps start from the pair's designs that miss by least and from the study's best designs carried into the
-      pair, and it is ranked by how far the model predicts it misses until the model predicts a feasible design
-      there. A thin feasible region (the fingertip bench set's Dragon Skin 10 hemisphere: 13 feasible designs in a
-      500-design sweep of the pair) is found from its near misses, where a draw would hit it by chance.
-    - Otherwise (every pair feasible or given up, or no proposal), the pair the study has tried least (ties: the
-      choices' order), its magnet and fractions left to the sampler.
-
-    bench/design_search.py (300 trials against a 3,000-design sweep, seeds 0-19, 2 workers), against the least-tried
-    pair with the sampler's draw alone: the fingertip set's worst seed rose from 0.753 of the sweep's hypervolume to
-    1.011 (the pair it missed is found at every seed), the stiff pad's from 0.763 to 0.827, with seeds below 0.95
-    from 1 and 2 to 0 and 1, and the stiff pad's seeds where a sweep design dominates the chosen one from 5 to 4; the
-    taxel set's worst is 1.026. Medians moved from 1.302 to 1.242 (fingertip) and 1.239 to 1.193 (stiff pad)."""
-    if (len(trials) - n_first) % EXPLORE_EVERY != EXPLORE_EVERY - 1:
-        return False
-    pair = _pair_to_search(space, trials, n_first)
-    if pair is not None and _model_step(study, space, targets, n_first, trials, pair=pair):
-        return True
-    tried = [(t.params.get("material"), t.params.get("tip")) for t in trials]
-    material, tip = min(space.pairs(), key=lambda p: tried.count(p))
-    study.enqueue_trial({"material": material, "tip": tip})
-    return True
-
-
-def _pair_to_search(space: Space, trials: list, n_first: int) -> tuple[str, str] | None:
-    """The (material, tip) pair an exploration trial searches with the model (:func:`_explore`): the least-tried
-    (ties: the choices' order) of those with no feasible design among the told trials and fewer trials than their
-    share of the first phase plus :data:`PAIR_TRIES`; None when there is none. The cap keeps a pair with no feasible
-    design at all (the stiff pad's Ecoflex 00-50 with a hemisphere tip) from taking every exploration trial."""
-    from optuna.trial import TrialState
-
-    pairs = space.pairs()
-    tried = [(t.params.get("material"), t.params.get("tip")) for t in trials]
-    feasible = {p for p, t in zip(tried, trials) if t.state is TrialState.COMPLETE and _violation(t) <= 0.0}
-    cap = n_first / len(pairs) + PAIR_TRIES
-    open_pairs = [p for p in pairs if p not in feasible and tried.count(p) < cap]
-    return min(open_pairs, key=lambda p: tried.count(p)) if open_pairs else None
-
-
-def _violation(trial) -> float:
-    """How far a told trial misses its constraints: the sum of their positive values."""
-    return sum(max(float(v), 0.0) for v in (trial.constraints or {}).values())
-
-
-def _elite(trials: list, targets: Targets) -> list:
-    """The study's best designs so far: its feasible front (no feasible design better on every objective), or, while
-    none is feasible, the three that miss their constraints by least (the sum of their violations)."""
-    feasible = [t for t in trials if _violation(t) <= 0.0]
-    if feasible:
-        return [t for t, keep in zip(feasible, front_mask(np.array([t.values for t in feasible]),
-                                                          targets.directions())) if keep]
-    return sorted(trials, key=lambda t: (_violation(t), t.number))[:3]
-
-
-def _seen(trials: list) -> set:
-    """The designs the study has asked (evaluated or in flight), as :func:`design_key` s."""
-    return {design_key(t.user_attrs[POINT]) for t in trials if POINT in t.user_attrs}
-
-
-def _model_step(study, space: Space, targets: Targets, n_first: int, trials: list,
-                pair: tuple[str, str] | None = None) -> bool:
-    """Before an ask past the first phase (none waiting): each trial that :func:`_explore` leaves is enqueued as the
-    model's proposal (:func:`magfab.inverse.propose.propose`: from every design the study has evaluated, its local
-    steps from the study's best designs, seeded with the study's seed and the trial's number); True when it enqueued
-    one. ``pair``: the proposal held to this (material, tip) pair, its local steps also from the pair's three designs
-    that miss by least (:func:`_explore`; another seed stream)."""
-    from optuna.trial import TrialState
-
-    done = [t for t in trials if t.state is TrialState.COMPLETE]
-    names = constraint_names(targets)
-    seen = _seen(trials)
-    parents = [t.params for t in _elite(done, targets)]
-    held: int | None = None
-    seed: tuple[int, ...] = (targets.study.seed, len(trials))
-    if pair is not None:
-        mine = [t for t in done if (t.params.get("material"), t.params.get("tip")) == pair]
-        parents = [t.params for t in sorted(mine, key=lambda t: (_violation(t), t.number))[:3]] + parents
-        held, seed = space.pairs().index(pair), (*seed, PAIR_SEED)
-    params = propose(space, targets.directions(), [t.params for t in done], [t.values for t in done],
-                     [[float(c.get(n, 0.0)) for n in names] for c in (t.constraints for t in done)],
-                     parents, lambda p: design_key(space.point(p)) not in seen, seed, pair=held,
-                     optimism=OPTIMISM if pair is None and len(trials) % OPTIMISTIC_EVERY == 0 else 0.0)
-    if params is None:
-        return False
-    study.enqueue_trial(params)
-    return True
-
-
-def _refine(study, space: Space, targets: Targets, n_first: int, trials: list) -> bool:
-    """Before an ask the model step left (past the first phase, none waiting): a step from one of the study's best
-    designs (:func:`_elite`, drawn with the study's seed and the trial's number) is enqueued: its categories kept, its
-    magnet's and numeric fractions moved by a normal step of :data:`REFINE_SIGMA` (narrowing as the study goes on),
-    clipped to the unit interval: the step is buildable too. A step onto a design the study has asked is drawn again,
-    up to :data:`REFINE_DRAWS` times; then the sampler draws the trial. True when it enqueued one."""
-    from optuna.trial import TrialState
-
-    number, past = len(trials), len(trials) - n_first
-    elite = _elite([t for t in trials if t.state is TrialState.COMPLETE], targets)
-    if not elite:
-        return False
-    seen = _seen(trials)
-    rng = np.random.default_rng([targets.study.seed, number])
-    sigma = REFINE_SIGMA * (1.0 - 0.8 * min(1.0, past / max(1, targets.study.trials - n_first)))
-    for _ in range(REFINE_DRAWS):
-        params = dict(elite[int(rng.integers(len(elite)))].params)
-        for name in (MAGNET_FRACTION, *FRACTIONS):
-            if name in params:
-                params[name] = float(np.clip(float(params[name]) + sigma * rng.standard_normal(), 0.0, 1.0))
-        if design_key(space.point(params)) not in seen:
-            study.enqueue_trial(params)
-            return True
-    return False
-
-
-def design_key(point: Mapping[str, Any]) -> tuple:
-    """A design's identity: its point's items, in name order."""
-    return tuple(sorted(point.items()))
 
 
 def records(study) -> list[Record]:

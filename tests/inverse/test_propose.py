@@ -14,7 +14,7 @@ from optuna.trial import TrialState
 from magfab.inverse.pareto import front_mask
 from magfab.inverse.propose import MIN_DESIGNS, propose
 from magfab.inverse.space import FRACTIONS, MAGNET_FRACTION, Space
-from magfab.inverse.study import OPTIMISM, PAIR_TRIES, _pair_to_search
+from magfab.inverse.steps import OPTIMISM, PAIR_TRIES, pair_to_search
 from magfab.inverse.targets import parse_targets
 from magfab.spec import load_spec
 
@@ -184,7 +184,7 @@ def test_the_pair_an_exploration_searches(drawn, n_first):
     feasible = {pairs[k] for k, s in drawn if s == "ok"}
     cap = n_first / len(pairs) + PAIR_TRIES
     open_pairs = [p for p in pairs if p not in feasible and count[p] < cap]
-    chosen = _pair_to_search(SPACE, trials, n_first)
+    chosen = pair_to_search(SPACE, trials, n_first)
     if chosen is None:
         assert not open_pairs
     else:
@@ -225,3 +225,24 @@ def test_optimism_steps_past_what_the_designs_show():
                 assert p is not None
                 found[optimism] += p[FRACTIONS[2]] < cliff
     assert found[0.0] == 0 and found[OPTIMISM] >= 0.5 * 80, found  # measured: 0 and 48
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.integers(1, 60), st.integers(0, 60))
+def test_a_designs_coordinates_do_not_depend_on_its_company(seed, n, cached):
+    """The model step keeps each evaluated design's coordinates (propose._physical_of's memo): a row mapped alone,
+    in a batch or from the memo is the row the whole batch gives, bit for bit, in any order and with repeats."""
+    from magfab.inverse.propose import _physical_of
+
+    rng = np.random.default_rng(seed)
+    rows = SPACE.latin_hypercube(n, seed)
+    rows += [rows[int(i)] for i in rng.integers(n, size=n // 3)]  # repeats
+    rows = [rows[int(i)] for i in rng.permutation(len(rows))]
+    space = Space(TARGETS, load_spec(None))
+    fresh = _physical_of(space, rows)
+    assert fresh.shape[0] == len(rows)
+    again = Space(TARGETS, load_spec(None))
+    _physical_of(again, rows[:cached])  # some already in the memo, mapped in other company
+    for i in rng.permutation(len(rows))[:5]:  # some alone
+        _physical_of(again, [rows[int(i)]])
+    np.testing.assert_array_equal(_physical_of(again, rows), fresh)

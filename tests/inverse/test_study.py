@@ -150,8 +150,7 @@ def test_failed_designs_are_recorded_and_the_study_goes_on(cluster, tmp_path, mo
 def test_the_same_seed_gives_the_same_study(cluster, tmp_path):
     """Twice with one seed on two workers (who finish in whatever order): the same trials in the same order, the same
     figures and the same best design; another seed, another study."""
-    text = SMALL.replace("d_max_mm = {values = [4.5, 6.0, 7.5]}", "d_max_mm = [4.0, 8.0]").replace(
-        "elastomer_diameter_mm = {values = [10.0, 12.0]}", "elastomer_diameter_mm = [9.0, 13.0]") % 24
+    text = _continuous(24)
     targets = parse_targets(text)
 
     def run(where: str, t=targets):
@@ -164,3 +163,77 @@ def test_the_same_seed_gives_the_same_study(cluster, tmp_path):
     assert len(first[0]) == 24 and first == again
     other = run("c.log", parse_targets(text.replace("seed = 3", "seed = 4")))
     assert other[0] != first[0]
+
+
+def _continuous(trials: int) -> str:
+    """SMALL with two ranges in place of listed values: a space the model step proposes in."""
+    return SMALL.replace("d_max_mm = {values = [4.5, 6.0, 7.5]}", "d_max_mm = [4.0, 8.0]").replace(
+        "elastomer_diameter_mm = {values = [10.0, 12.0]}", "elastomer_diameter_mm = [9.0, 13.0]") % trials
+
+
+def test_a_trial_costs_a_few_storage_writes(cluster, tmp_path):
+    """Each write to the journal file is a lock and an fsync: a trial whose params the study chose itself (the first
+    phase, the model's proposals) is made in one write with its params and point, and told in three (its result, its
+    constraints, its values); one the sampler draws takes a write a param. An earlier loop took about 18 a trial."""
+    import json
+
+    from optuna.trial import TrialState
+
+    from magfab.inverse.evaluate import constraint_names
+    from magfab.inverse.steps import constraint_row
+    from magfab.inverse.study import CONSTRAINTS
+
+    storage = tmp_path / "study.log"
+    targets = parse_targets(_continuous(30))
+    study = run_study(targets, BASE, storage, cluster)
+    trials = study.get_trials(deepcopy=False)
+    lines = storage.read_text(encoding="utf-8").splitlines()
+    assert len(trials) >= 30 and all(json.loads(line)["op_code"] is not None for line in lines)
+    assert len(lines) <= 6 * len(trials), (len(lines), len(trials))
+    names = constraint_names(targets)
+    for t in trials:
+        if t.state is TrialState.COMPLETE:  # the constraints as one list, read back in the names' order
+            assert len(t.system_attrs[CONSTRAINTS]) == len(names)
+            assert constraint_row(t, names) == [float(v) for v in t.user_attrs["result"]["constraints"]]
+
+
+def test_a_study_an_earlier_version_stored_resumes(cluster, tmp_path):
+    """A study stored the earlier way (its first phase enqueued in the storage, each constraint set by name) runs on
+    to its new total: its waiting trials are asked, its named constraints read in order, no first phase planned
+    again."""
+    from optuna.trial import TrialState
+
+    from magfab.inverse.evaluate import constraint_names, evaluate
+    from magfab.inverse.space import Space
+    from magfab.inverse.steps import constraint_row
+    from magfab.inverse.study import PLANNED, RESULT
+
+    storage = tmp_path / "study.log"
+    old = parse_targets(_continuous(12))
+    space, study = Space(old, BASE), open_study(old, storage)
+    plan = space.latin_hypercube(14, 5)
+    for params in plan:
+        study.enqueue_trial(params)
+    study.set_user_attr(PLANNED, True)
+    args = (BASE.model_dump_json(), old.model_dump_json())
+    names = constraint_names(old)
+    for _ in range(12):  # told as the earlier loop told them: a named constraint each
+        trial = study.ask()
+        result = evaluate(space.suggest(trial), *args, "surrogate", "old")
+        trial.set_user_attr(RESULT, {k: result.get(k) for k in ("state", "reason", "model", "metrics",
+                                                                 "constraints", "errors")})
+        if result["state"] == "failed":
+            study.tell(trial, state=TrialState.FAIL)
+            continue
+        for name, value in zip(names, result["constraints"]):
+            trial.set_constraint(name, float(value))
+        study.tell(trial, [float(result["metrics"][o.value]) for o in old.objectives])
+    told = [t for t in study.get_trials(deepcopy=False) if t.state is TrialState.COMPLETE]
+    assert told and all(constraint_row(t, names) == [float(v) for v in t.user_attrs[RESULT]["constraints"]]
+                        for t in told)
+    study = run_study(parse_targets(_continuous(24)), BASE, storage, cluster)
+    recs = records(study)
+    assert len(recs) == 24
+    waiting = {_key(space.point(p)) for p in plan[12:]}
+    assert waiting <= {_key(r.point) for r in recs}, "the earlier plan's waiting trials were not asked"
+    assert not any(t.state is TrialState.WAITING for t in study.get_trials(deepcopy=False))
