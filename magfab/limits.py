@@ -259,7 +259,21 @@ def check_limits(design: Design) -> Cost:
             need = _bisect(lambda x, name=name: triangles(_with(design, mould=m.model_copy(update={name: x}))), lo, hi)
             if need is not None:
                 raise SpecError(key, getattr(m, name), what, f"raise {key} to at least {_fmt(_round_up(need))}")
-        raise SpecError("mould.cavities", design.cavities, what, "use fewer cavities per mould")
+        # neither alone: the kernel honours the finer of the two, so both coarsen together, each along its own range
+        # (geometrically, from its value to its coarsest) by one shared share
+        def both(share: float) -> dict[str, float]:
+            return {name: _round_up(max(getattr(m, name), lo) * (hi / max(getattr(m, name), lo)) ** share)
+                    for _, name, lo, hi in knobs}
+
+        share = _bisect(lambda x: triangles(_with(design, mould=m.model_copy(update=both(x)))), 0.0, 1.0)
+        if share is not None:
+            coarser = both(share)
+            raise SpecError(knobs[0][0], getattr(m, knobs[0][1]), what, " and ".join(
+                f"raise {key} to at least {_fmt(coarser[name])}" for key, name, _, _ in knobs))
+        if design.cavities > 1:
+            raise SpecError("mould.cavities", design.cavities, what, "use fewer cavities per mould")
+        raise SpecError("array.rows", design.spec.array.rows if design.spec.array else 1, what,
+                        "fewer taxels: even the coarsest tolerances leave too many domes to mesh")
     if routing_s(cost.chips) > MAX_BOARD_S:
         _too_many_chips(design, cost, MAX_BOARD_S, f"limit {MAX_BOARD_S:g} s")
     if cost.fe_work > MAX_FE_WORK:

@@ -214,3 +214,37 @@ def test_generated_arrays_and_tolerances_are_refused_with_a_key_or_within_budget
     cost = estimate(design)
     assert cost.seconds <= BUDGET_S and cost.megabytes <= BUDGET_MB
     assert cost.parts_s["routing"] == limits.routing_s(rows * cols if rows * cols > 1 else 0)
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(rows=st.integers(1, 4), cols=st.integers(1, 4), skin=st.sampled_from(["separate", "continuous"]),
+       tip=st.sampled_from(["hemisphere", "flat"]), cavities=st.integers(1, 4),
+       tolerance=st.floats(1e-4, 0.2), angle=st.floats(0.5, 20.0, exclude_min=True))
+def test_the_triangle_advice_when_followed_fits(rows, cols, skin, tip, cavities, tolerance, angle):
+    """A mould refused for its triangles names what would fit: each "raise KEY to at least VALUE" it gives, applied
+    together, brings the estimate within the limit; where no tolerance can, it names the cavities (more than one) or
+    the taxels. Drawn over arrays of either skin, both tips, several cavities and fine tolerances (a 3 x 3 and a 4 x 4
+    array once got "use fewer cavities per mould" at one cavity, and neither tolerance alone would do)."""
+    import re
+
+    array = f"[array]\nrows = {rows}\ncols = {cols}\npitch_mm = 14.0\nskin = \"{skin}\"\n" if rows * cols > 1 else ""
+    mould = (f"[mould]\ncavities = {cavities}\ntessellation_tolerance_mm = {tolerance!r}\n"
+             f"angular_tolerance_deg = {angle!r}\n")
+    text = f"[elastomer]\ntip = \"{tip}\"\n" + array + mould
+    try:
+        design = derive(parse_spec(text))
+    except SpecError:
+        return  # refused for another reason (the board, the pitch): not this test's
+    if estimate(design).triangles <= MAX_TRIANGLES:
+        return
+    with pytest.raises(SpecError) as info:
+        limits.check_limits(design)
+    message = str(info.value)
+    assert "triangles" in message and "\n" not in message
+    advice = dict(re.findall(r"raise mould\.(\w+) to at least ([0-9.,]+)", message))
+    if not advice:
+        assert info.value.key == ("mould.cavities" if cavities > 1 else "array.rows") and "fewer" in message
+        return
+    followed = {**dict(re.findall(r"(\w+) = (\S+)", mould)), **{k: v.replace(",", "") for k, v in advice.items()}}
+    mould = "[mould]\n" + "".join(f"{k} = {v}\n" for k, v in followed.items())
+    assert estimate(derive(parse_spec(f"[elastomer]\ntip = \"{tip}\"\n" + array + mould))).triangles <= MAX_TRIANGLES
