@@ -55,8 +55,7 @@ OPTIMISTIC_EVERY = 2
 OPTIMISM = 2.0
 
 
-
-def explore(study, space: Space, targets: Targets, n_first: int, trials: list) -> dict[str, Any] | None:
+def explore(space: Space, targets: Targets, n_first: int, trials: list) -> dict[str, Any] | None:
     """Before an ask past the first phase (none waiting): one trial in :data:`EXPLORE_EVERY` goes to a (material,
     tip) pair on purpose: its params (all of them, or only the pair's for the sampler to draw the rest), or None.
     ``trials``: the study's trials, as asked.
@@ -78,7 +77,7 @@ def explore(study, space: Space, targets: Targets, n_first: int, trials: list) -
     if (len(trials) - n_first) % EXPLORE_EVERY != EXPLORE_EVERY - 1:
         return None
     pair = pair_to_search(space, trials, n_first)
-    params = model_step(study, space, targets, n_first, trials, pair=pair) if pair is not None else None
+    params = model_step(space, targets, n_first, trials, pair=pair) if pair is not None else None
     if params is not None:
         return params
     tried = [(t.params.get("material"), t.params.get("tip")) for t in trials]
@@ -128,7 +127,7 @@ def asked_designs(trials: list) -> set:
     return {design_key(t.user_attrs[POINT]) for t in trials if POINT in t.user_attrs}
 
 
-def model_step(study, space: Space, targets: Targets, n_first: int, trials: list,
+def model_step(space: Space, targets: Targets, n_first: int, trials: list,
                pair: tuple[str, str] | None = None) -> dict[str, Any] | None:
     """Before an ask past the first phase (none waiting): each trial that :func:`explore` leaves is the model's
     proposal (:func:`magfab.inverse.propose.propose`: from every design the study has evaluated, its local steps from
@@ -153,7 +152,7 @@ def model_step(study, space: Space, targets: Targets, n_first: int, trials: list
                    optimism=OPTIMISM if pair is None and len(trials) % OPTIMISTIC_EVERY == 0 else 0.0)
 
 
-def refine(study, space: Space, targets: Targets, n_first: int, trials: list) -> dict[str, Any] | None:
+def refine(space: Space, targets: Targets, n_first: int, trials: list) -> dict[str, Any] | None:
     """Before an ask the model step left (past the first phase, none waiting): a step from one of the study's best
     designs (:func:`elite`, drawn with the study's seed and the trial's number): its categories kept, its
     magnet's and numeric fractions moved by a normal step of :data:`REFINE_SIGMA` (narrowing as the study goes on),

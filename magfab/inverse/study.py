@@ -326,7 +326,7 @@ def _next_params(study, space: Space, targets: Targets, n_first: int,
     if len(trials) < n_first:
         return None
     steps = (explore, model_step, refine)
-    return next((p for p in (step(study, space, targets, n_first, trials) for step in steps) if p is not None), None)
+    return next((p for p in (step(space, targets, n_first, trials) for step in steps) if p is not None), None)
 
 
 def _counted(study) -> int:
