@@ -36,7 +36,7 @@ from .page import write_outputs
 from .pareto import front_mask, pick_for_verification, values_of
 from .result import DesignResult
 from .space import grid, latin_hypercube
-from .study import KEPT, Record, client, design_key, evaluate_all, open_study, records, run_study
+from .study import KEPT, Record, client, design_key, evaluate_all, open_study, records, run_study, warm
 from .tables import rows, write_table
 from .targets import Models, Targets, load_targets
 from .verify import built
@@ -94,10 +94,11 @@ def design(targets_path: Path, out: Path | None = None, scheduler: str | None = 
     check_trials(targets, workers or 0)
     folder = out or default_folder(targets)
     _check_folder(folder)
-    if estimate:  # the search's points are its own: priced on a sample of the space it searches
-        estimate(search_cost(targets, base, workers or 0))
     say = progress or (lambda *_: None)
     with client(scheduler, workers) as c:
+        warming = warm(c, targets)  # the workers load while this process prices the search
+        if estimate:  # the search's points are its own: priced on a sample of the space it searches
+            estimate(search_cost(targets, base, workers or 0))
         with _made(folder):  # once the cluster is there (a bad --scheduler writes nothing); a refused storage: none
             opened = open_study(targets, _storage(targets, folder))
         study = run_study(targets, base, _storage(targets, folder), c, lambda n, t: say("search", n, t), opened)
@@ -108,6 +109,7 @@ def design(targets_path: Path, out: Path | None = None, scheduler: str | None = 
             verified = screened
         else:
             verified = _verified(study, screened, targets, base, c, lambda n, t: say("verify (full chain)", n, t))
+        del warming
     names = [f"{targets.name}-{r.number}" for r in screened]
     # each design that meets the requirements is built (CAD, board, bundle): a refused build is a failed verification
     verified = built(study, verified, names, targets, base, folder, lambda n, t: say("verify (build)", n, t))

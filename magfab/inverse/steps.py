@@ -23,10 +23,14 @@ from .targets import Targets
 # Optuna's trial states are imported lazily, inside the functions that use them: importing Optuna takes a noticeable
 # time, and importing this module should not.
 
-__all__ = ["explore", "model_step", "refine", "pair_to_search", "constraint_row", "violation", "elite",
+__all__ = ["CONSTRAINTS", "explore", "model_step", "refine", "pair_to_search", "constraint_row", "violation", "elite",
            "asked_designs", "design_key", "EXPLORE_EVERY", "OPTIMISM", "OPTIMISTIC_EVERY", "PAIR_TRIES"]
 
 
+#: The system attribute Optuna's constrained samplers read a trial's constraints from, as a list (each feasible when
+#: <= 0; optuna.study._constrained_optimization), here in
+#: :func:`~magfab.inverse.evaluate.constraint_names`' order (:func:`~magfab.inverse.study.tell` stores it).
+CONSTRAINTS = "constraints"
 #: Of the trials after the first phase, one in this many has its (material, tip) fixed to the pair the study has
 #: tried least (the sampler draws the rest of it): the categories stay explored however the models narrow.
 EXPLORE_EVERY = 4
@@ -103,13 +107,19 @@ def pair_to_search(space: Space, trials: list, n_first: int) -> tuple[str, str] 
 def constraint_row(trial, names: list[str]) -> list[float]:
     """A told trial's constraints in ``names``' order: from the list :func:`tell` stores, or by name (a study an earlier
     version stored with ``trial.set_constraint``); 0 for one it lacks."""
+    listed = trial.system_attrs.get(CONSTRAINTS)
+    if listed is not None:
+        return [float(listed[i]) if i < len(listed) else 0.0 for i in range(len(names))]
     c = trial.constraints
     return [float(c[n]) if n in c else float(c.get(str(i), 0.0)) for i, n in enumerate(names)]
 
 
 def violation(trial) -> float:
-    """How far a told trial misses its constraints: the sum of their positive values."""
-    return sum(max(float(v), 0.0) for v in (trial.constraints or {}).values())
+    """How far a told trial misses its constraints: the sum of their positive values. The list :data:`CONSTRAINTS` is
+    read directly: Optuna's ``trial.constraints`` parses every system attribute at each read, and the steps read every
+    trial's at every ask (0.38 s of an 11 s profiled study of the example targets, 58,000 reads)."""
+    listed = trial.system_attrs.get(CONSTRAINTS)
+    return sum(max(float(v), 0.0) for v in (listed if listed is not None else (trial.constraints or {}).values()))
 
 
 def elite(trials: list, targets: Targets) -> list:

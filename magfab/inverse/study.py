@@ -29,15 +29,16 @@ import numpy as np
 
 from ..errors import InputError
 from ..spec import Spec
-from .evaluate import SURROGATE, evaluate
+from .evaluate import SURROGATE, evaluate, warm_up
 from .space import POINT, Space, base_point, point_of
-from .steps import asked_designs, design_key, explore, model_step, refine
+from .steps import CONSTRAINTS, asked_designs, design_key, explore, model_step, refine
 from .targets import Sampler, Targets
 
 # Imported lazily, inside the functions that use them, for speed: Dask, Optuna and SQLAlchemy take a
 # noticeable time to import, and importing this module should not.
 
-__all__ = ["Record", "tally", "StudyError", "client", "open_study", "run_study", "tell", "evaluate_all", "records"]
+__all__ = ["Record", "tally", "StudyError", "client", "open_study", "run_study", "warm", "tell", "evaluate_all",
+           "records"]
 
 #: Designs kept in flight per worker: enough to hide the scheduler's round trip, few enough that the sampler sees
 #: recent results.
@@ -176,10 +177,6 @@ def open_study(targets: Targets, where: str | Path):
 #: The study's user attribute saying its first phase is enqueued in the storage (by an earlier version of this module:
 #: the first phase is now planned in memory from the seed, :func:`_plan`).
 PLANNED = "first_phase_enqueued"
-#: The system attribute Optuna's constrained samplers read a trial's constraints from, as a list (each feasible when
-#: <= 0; optuna.study._constrained_optimization), here in
-#: :func:`~magfab.inverse.evaluate.constraint_names`' order (:func:`~magfab.inverse.steps.constraint_row`).
-CONSTRAINTS = "constraints"
 #: The user attribute naming the run (host:pid) that asked a trial.
 RUNNER = "runner"
 
@@ -246,6 +243,7 @@ def run_study(targets: Targets, base: Spec, storage: str | Path, dask_client,
     trials."""
     from distributed import as_completed
 
+    warming = warm(dask_client, targets)  # first: the workers load while this process plans
     study = study if study is not None else open_study(targets, storage)
     space = Space(targets, base)
     _recover(study)
@@ -305,7 +303,17 @@ def run_study(targets: Targets, base: Spec, storage: str | Path, dask_client,
     for fut in queue:
         results[fut] = fut.result()
         flush()
+    del warming
     return study
+
+
+def warm(dask_client, targets: Targets) -> list:
+    """Each worker's once-a-process loads for the targets' designs (:func:`~magfab.inverse.evaluate.warm_up`), sent
+    to every worker now, ahead of any design; the futures, which the caller keeps until its designs are in (a released
+    future's task may be dropped)."""
+    tips = [t.value for t in targets.variables.tips]
+    return [dask_client.submit(warm_up, tips, workers=[w], pure=False)
+            for w in dask_client.scheduler_info().get("workers", {})]
 
 
 def _next_params(study, space: Space, targets: Targets, n_first: int,

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from magfab.inverse.pareto import front_mask
 from magfab.inverse.space import grid
@@ -237,3 +239,35 @@ def test_a_study_an_earlier_version_stored_resumes(cluster, tmp_path):
     waiting = {_key(space.point(p)) for p in plan[12:]}
     assert waiting <= {_key(r.point) for r in recs}, "the earlier plan's waiting trials were not asked"
     assert not any(t.state is TrialState.WAITING for t in study.get_trials(deepcopy=False))
+
+
+def test_the_workers_load_before_the_first_design(cluster):
+    """warm sends each worker the once-a-process loads of the targets' tips (both laws' surrogate tables) ahead of any
+    design, so a study's first designs do not wait for them."""
+    from distributed import wait
+
+    from magfab.inverse.study import warm
+    from magfab.models.mechanics import fe_surrogate
+
+    targets = parse_targets(SMALL.replace('tips = ["hemisphere"]', 'tips = ["flat"]') % 10)
+    cluster.run(fe_surrogate._loaded.cache_clear)
+    futures = warm(cluster, targets)
+    wait(futures)
+    assert len(futures) == len(cluster.scheduler_info()["workers"]) == 2
+    assert all(n == 2 for n in cluster.run(lambda: fe_surrogate._loaded.cache_info().currsize).values())
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.floats(-1e6, 1e6), min_size=1, max_size=8), st.integers(0, 3))
+def test_a_trials_constraints_read_directly_are_optunas(values, extra):
+    """violation and constraint_row read the list tell stores straight from the trial's system attributes; they give
+    what Optuna's own reading of it gives (and a row of more names than values is padded with 0 as before)."""
+    import optuna
+
+    from magfab.inverse.steps import CONSTRAINTS, constraint_row, violation
+
+    t = optuna.trial.create_trial(value=0.0, system_attrs={CONSTRAINTS: values})
+    names = [f"c{i}" for i in range(len(values) + extra)]
+    c = t.constraints
+    assert violation(t) == sum(max(float(v), 0.0) for v in c.values())
+    assert constraint_row(t, names) == [float(c.get(str(i), 0.0)) for i in range(len(names))]

@@ -62,7 +62,7 @@ from .shear_surface import ShearProbe, ShearResponse
 # Imported lazily, inside the functions that use it, for speed: scipy takes a
 # noticeable time to import, and importing this module should not.
 
-__all__ = ["OutsideRegion", "BOX", "FLAT_BOX", "BOXES", "GRID", "in_region", "curve", "normal_and_shear",
+__all__ = ["OutsideRegion", "load", "BOX", "FLAT_BOX", "BOXES", "GRID", "in_region", "curve", "normal_and_shear",
            "held_out_error", "description", "ratios", "body_of", "run", "fit_data", "fit_yeoh_data", "YEOH_K2"]
 
 #: The box of ratios the table covers (a, h, z, c), and so the surrogate's validated region: the example targets'
@@ -268,6 +268,13 @@ def _inverse(key: str, v: float) -> float:
 def _shipped(tip: Tip = Tip.HEMISPHERE, yeoh: bool = False) -> tuple[_Model, dict]:
     """Tip ``tip``'s shipped table (the Yeoh one with ``yeoh``) and its model, built once per process."""
     return _loaded(Tip(tip), bool(yeoh))
+
+
+def load(tip: Tip) -> None:
+    """Build tip ``tip``'s models (both laws' tables) now, as its first design would otherwise (about 0.2 s each): a
+    study's workers do this while the study plans its first phase (:func:`magfab.inverse.evaluate.warm_up`)."""
+    for yeoh in (False, True):
+        _shipped(tip, yeoh)
 
 
 @cache  # one entry per (tip, law): four in all
