@@ -125,9 +125,9 @@ def first_phase(targets: Targets) -> int:
 
 
 def _sampler(targets: Targets):
-    """The study's sampler, seeded with study.seed. Its startup is the enqueued first phase (and the base point),
-    so it models from the start; constraints (trial.set_constraint) are read from each trial by both samplers, an
-    infeasible design ranked by how far it misses."""
+    """The study's sampler, seeded with study.seed. Its startup is the first phase (and the base point), so it
+    models from the start; both samplers read each trial's constraints (the list :func:`tell` stores under
+    :data:`~magfab.inverse.steps.CONSTRAINTS`), an infeasible design ranked by how far it misses."""
     import optuna
 
     s = targets.study
