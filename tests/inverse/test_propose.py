@@ -14,7 +14,7 @@ from optuna.trial import TrialState
 from magfab.inverse.pareto import front_mask
 from magfab.inverse.propose import MIN_DESIGNS, propose
 from magfab.inverse.space import FRACTIONS, MAGNET_FRACTION, Space
-from magfab.inverse.steps import OPTIMISM, PAIR_TRIES, pair_to_search
+from magfab.inverse.steps import CONSTRAINTS, OPTIMISM, PAIR_TRIES, pair_to_search
 from magfab.inverse.targets import parse_targets
 from magfab.spec import load_spec
 
@@ -177,8 +177,10 @@ def test_the_pair_an_exploration_searches(drawn, n_first):
     pairs = SPACE.pairs()
     states = {"ok": TrialState.COMPLETE, "miss": TrialState.COMPLETE, "failed": TrialState.FAIL,
               "running": TrialState.RUNNING}
+    listed = {"ok": [-1.0], "miss": [0.5]}  # the list tell stores, and Optuna's reading of it
     trials = [SimpleNamespace(params={"material": pairs[k][0], "tip": pairs[k][1]}, state=states[s],
-                              constraints={"c": -1.0 if s == "ok" else 0.5} if s in ("ok", "miss") else None)
+                              system_attrs={CONSTRAINTS: listed[s]} if s in listed else {},
+                              constraints={"0": listed[s][0]} if s in listed else {})
               for k, s in drawn]
     count = {p: sum(pairs[k] == p for k, _ in drawn) for p in pairs}
     feasible = {pairs[k] for k, s in drawn if s == "ok"}
