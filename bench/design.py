@@ -190,13 +190,14 @@ def _study_overhead(targets, n: int, where) -> dict[str, float]:
     ``where`` with the targets' sampler, evaluating nothing: the mean up to N trials, since a sampler's ask grows with
     history."""
     from magfab.inverse import study as st
+    from magfab.inverse.evaluate import constraint_names
     from magfab.inverse.space import Space
     from magfab.spec import load_spec
 
     t = targets.model_copy(update={"name": "overhead"})
     study = st.open_study(t, where)
     fake = {"state": "ok", "reason": "", "model": "none", "errors": [],
-            "constraints": [0.0] * len(st.constraint_names(t))}
+            "constraints": [0.0] * len(constraint_names(t))}
     space = Space(t, load_spec(None))
     out, t0, rng = {}, time.perf_counter(), np.random.default_rng(0)
     for i in range(1, n + 1):
