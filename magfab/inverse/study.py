@@ -310,9 +310,11 @@ def run_study(targets: Targets, base: Spec, storage: str | Path, dask_client,
 def warm(dask_client, targets: Targets) -> list:
     """Each worker's once-a-process loads for the targets' designs (:func:`~magfab.inverse.evaluate.warm_up`), sent
     to every worker now, ahead of any design; the futures, which the caller keeps until its designs are in (a released
-    future's task may be dropped)."""
+    future's task may be dropped). Each task's key names its tips and worker, so a second call while the first's
+    futures are held (``magfab design`` warms before it prices the search, then :func:`run_study` warms) is given the
+    same tasks, not new ones."""
     tips = [t.value for t in targets.variables.tips]
-    return [dask_client.submit(warm_up, tips, workers=[w], pure=False)
+    return [dask_client.submit(warm_up, tips, workers=[w], key=f"magfab-warm-up-{'-'.join(tips)}-{w}")
             for w in dask_client.scheduler_info().get("workers", {})]
 
 
