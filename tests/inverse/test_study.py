@@ -174,7 +174,7 @@ def _continuous(trials: int) -> str:
 
 
 def test_a_trial_costs_a_few_storage_writes(cluster, tmp_path):
-    """Each write to the journal file is a lock and an fsync: a trial whose params the study chose itself (the first
+    """Each write to the journal file is a lock and an append: a trial whose params the study chose itself (the first
     phase, the model's proposals) is made in one write with its params and point, and told in three (its result, its
     constraints, its values); one the sampler draws takes a write a param. An earlier loop took about 18 a trial."""
     import json
@@ -197,6 +197,63 @@ def test_a_trial_costs_a_few_storage_writes(cluster, tmp_path):
         if t.state is TrialState.COMPLETE:  # the constraints as one list, read back in the names' order
             assert len(t.system_attrs[CONSTRAINTS]) == len(names)
             assert constraint_row(t, names) == [float(v) for v in t.user_attrs["result"]["constraints"]]
+
+
+def test_each_told_trial_is_synced_once_and_optuna_reads_the_file(cluster, tmp_path, monkeypatch):
+    """The journal file takes an fsync per told trial, not per write: when a trial is told its every write is on the
+    disk, and the trials asked since the last tell are not synced yet. What it writes is Optuna's journal: Optuna's
+    own file backend reads the same trials back."""
+    import os
+
+    import optuna
+    from optuna.storages import JournalStorage
+    from optuna.storages.journal import JournalFileBackend
+
+    from magfab.inverse import journal
+    from magfab.inverse import study as study_module
+
+    synced: list[int] = []
+    real_fsync = os.fsync
+    monkeypatch.setattr(journal.os, "fsync", lambda fd: (synced.append(fd), real_fsync(fd))[1])
+    told: list[bool] = []
+    real_tell = study_module.tell
+
+    def tell(study, trial, result, targets):  # the backend's state right after each tell
+        real_tell(study, trial, result, targets)
+        told.append(study._storage._backend._unsynced)
+
+    monkeypatch.setattr(study_module, "tell", tell)
+    storage = tmp_path / "study.log"
+    targets = parse_targets(_continuous(30))
+    study = run_study(targets, BASE, storage, cluster)
+    trials = study.get_trials(deepcopy=False)
+    lines = storage.read_text(encoding="utf-8").splitlines()
+    assert len(told) == len(trials) >= 30 and not any(told), "a told trial's writes were left unsynced"
+    assert len(synced) == len(told) < len(lines), (len(synced), len(told), len(lines))
+    again = optuna.load_study(study_name=targets.name, storage=JournalStorage(JournalFileBackend(str(storage))))
+    theirs = again.get_trials(deepcopy=False)
+    assert [(t.number, t.state, t.params, t.values, t.user_attrs, t.system_attrs) for t in theirs] == \
+        [(t.number, t.state, t.params, t.values, t.user_attrs, t.system_attrs) for t in trials]
+
+
+def test_the_loop_runs_on_one_blas_thread(cluster, tmp_path):
+    """While the search loop runs (its model step's fits beside the workers on the same cores), every OpenBLAS this
+    process loaded runs one thread, and after it the counts are as they were: OpenBLAS's spare threads spin while
+    they wait, which took as much CPU as the loop itself (the example targets on 2 workers: the main process's CPU
+    time 8.7 s with the spinning threads, 4.7 s on one)."""
+    from magfab.fork import _BLAS_GETTERS, _call_first, _loaded_blas
+
+    def counts() -> list[int | None]:
+        return [_call_first(lib, _BLAS_GETTERS) for lib in _loaded_blas()]
+
+    import scipy.linalg  # noqa: F401  (its OpenBLAS loaded before the loop, as a study's fits load it)
+
+    before = counts()
+    seen: list[list[int | None]] = []
+    run_study(parse_targets(_continuous(14)), BASE, tmp_path / "study.log", cluster,
+              progress=lambda done, total: seen.append(counts()))
+    assert before and seen and all(c == [1] * len(before) for c in seen), (before, seen[:3])
+    assert counts() == before
 
 
 def test_a_study_an_earlier_version_stored_resumes(cluster, tmp_path):
