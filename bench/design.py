@@ -24,6 +24,10 @@ on local Dask clusters started here (wall clock, :func:`time.perf_counter`):
    full chain (median, 90th percentile, max), apart for the designs whose range either chain ends at a model's reach
    (:func:`_errors`), and the speed ratio between the two chains in the same run.
 4. **On paper**: a study of 10^6 designs on N workers, from the measured per-design cost and per-task overhead.
+5. **The search as a user runs it**: :func:`magfab.inverse.study.run_study` (what ``magfab design`` runs) over the whole
+   box on a 2-worker cluster, one study per seed (``--study-seeds``): designs per second from its progress
+   callback's first call to its last (``magfab design``'s search line), the designs that fell back to the FE, and
+   the ratio to the evaluation alone (item 1's 2-worker rate; with ``--only-study``, measured here first).
 
 A table on stdout and ``<out>/design_bench.json``. Nothing here asserts on a time.
 """
@@ -39,6 +43,7 @@ import tempfile
 import time
 from importlib import resources
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -153,7 +158,7 @@ def before_after(points, fe_points, targets, base, workers: int = 2) -> dict[str
     return out
 
 
-def _rate(points, targets, base, workers: int, fidelity: str) -> tuple[float, list]:
+def _rate(points, targets, base, workers: int, fidelity: str) -> tuple[float, list, float]:
     """Designs per second over ``points`` on a fresh local cluster of ``workers`` (after one warm-up design per
     worker, so imports and first-call caches are not counted)."""
     from magfab.inverse.study import client, evaluate_all
@@ -168,6 +173,30 @@ def _rate(points, targets, base, workers: int, fidelity: str) -> tuple[float, li
         c.gather(c.map(lambda i: i, range(n_noop), pure=False))
         overhead = (time.perf_counter() - t1) / n_noop
     return len(points) / dt, recs, overhead
+
+
+def study_rates(targets, base, seeds: list[int], workers: int = 2) -> list[dict[str, Any]]:
+    """Item 5 of the module doc: each seed's study over ``targets`` on one fresh cluster of ``workers``."""
+    from magfab.inverse.study import client, first_phase, records, run_study
+
+    out = []
+    with client(None, workers) as c:
+        for seed in seeds:
+            t = targets.model_copy(update={"study": targets.study.model_copy(update={"seed": seed})})
+            marks: list[tuple[int, float]] = []
+
+            def mark(done: int, total: int, m: list[tuple[int, float]] = marks) -> None:
+                m.append((done, time.perf_counter()))
+
+            with tempfile.TemporaryDirectory() as d:
+                study = run_study(t, base, Path(d) / "study.log", c, progress=mark)
+                recs = records(study)
+            (n0, t0), (n1, t1) = marks[0], marks[-1]
+            out.append({"seed": seed, "designs": n1 - n0, "designs_per_s": (n1 - n0) / (t1 - t0),
+                        "first_phase": first_phase(t), "fe_fallbacks": sum(r.model.startswith("fe") for r in recs)})
+            print(f"study seed {seed}: {out[-1]['designs_per_s']:.1f} designs/s over {n1 - n0} designs of the whole "
+                  f"box on {workers} workers, {out[-1]['fe_fallbacks']} fell back to the FE", flush=True)
+    return out
 
 
 def _modelled(points, targets, base) -> list:
@@ -237,11 +266,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--overhead-trials", type=int, default=800)
     ap.add_argument("--out", type=Path, default=Path(tempfile.gettempdir()) / "magfab-bench")
     ap.add_argument("--only-before-after", action="store_true", help="item 0 only")
+    ap.add_argument("--study-seeds", type=int, default=5, help="item 5: studies of seeds 0 to N-1")
+    ap.add_argument("--only-study", action="store_true", help="item 5 only, with item 1's 2-worker rate")
     a = ap.parse_args(argv)
     from magfab.inverse.space import latin_hypercube
 
     targets, base = whole_box()
     points = latin_hypercube(targets.variables, a.surrogate_designs, seed=7)
+    if a.only_study:
+        return _only_study(points, targets, base, a)
     by_tip = [[p for p in _modelled(points, targets, base) if p["tip"] == t] for t in ("flat", "hemisphere")]
     fe_points = [p for pair in zip(*by_tip) for p in pair][:a.fe_designs]  # the two tips in turn
     result: dict[str, object] = {"cores": os.cpu_count(), "surrogate_designs": len(points),
@@ -309,9 +342,31 @@ def main(argv: list[str] | None = None) -> int:
     for n, p in paper.items():
         print(f"  10^6 designs on {n:>3s} workers: sweep {p['sweep_hours']:.2f} h ({p['sweep_bound']}-bound), "
               f"search at least {p['search_hours']:.2f} h (the client's loop)")
+    result["study"] = _with_ratio(study_rates(targets, base, list(range(a.study_seeds))), rates["surrogate"][2])
     a.out.mkdir(parents=True, exist_ok=True)
     (a.out / "design_bench.json").write_text(json.dumps(result, indent=1, sort_keys=True) + "\n")
     print(f"wrote {a.out / 'design_bench.json'}")
+    return 0
+
+
+def _with_ratio(studies: list[dict[str, Any]], evaluation_rate: float) -> dict[str, object]:
+    """Item 5's studies with each one's rate over the evaluation alone's (same run), printed."""
+    for s in studies:
+        s["over_evaluation_alone"] = s["designs_per_s"] / evaluation_rate
+    rates = sorted(s["designs_per_s"] for s in studies)
+    print(f"the search: {rates[0]:.1f}-{rates[-1]:.1f} designs/s (median {statistics.median(rates):.1f}) against "
+          f"{evaluation_rate:.1f} for the evaluation alone on 2 workers (x{rates[0] / evaluation_rate:.2f}-"
+          f"{rates[-1] / evaluation_rate:.2f})", flush=True)
+    return {"evaluation_alone_designs_per_s": evaluation_rate, "studies": studies}
+
+
+def _only_study(points, targets, base, a) -> int:
+    """``--only-study``: item 1's 2-worker rate of the cheap models, then item 5."""
+    rate, _, _ = _rate(points, targets, base, 2, "surrogate")
+    result = {"study": _with_ratio(study_rates(targets, base, list(range(a.study_seeds))), rate)}
+    a.out.mkdir(parents=True, exist_ok=True)
+    (a.out / "design_study_bench.json").write_text(json.dumps(result, indent=1, sort_keys=True) + "\n")
+    print(f"wrote {a.out / 'design_study_bench.json'}")
     return 0
 
 
