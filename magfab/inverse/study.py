@@ -228,11 +228,9 @@ def tell(study, trial, result: dict[str, Any], targets: Targets) -> None:
     trial.set_user_attr(RESULT, kept)
     if kept["state"] == "failed":
         study.tell(trial, state=TrialState.FAIL)
-        _sync(study)
-        return
-    # one write for all: a list, in constraint_names' order (trial.set_constraint takes a read and a write for each)
-    study._storage.set_trial_system_attr(trial._trial_id, CONSTRAINTS, [float(v) for v in result["constraints"]])
-    study.tell(trial, values)
+    else:  # one write for all: a list, in constraint_names' order (trial.set_constraint: a read and a write for each)
+        study._storage.set_trial_system_attr(trial._trial_id, CONSTRAINTS, [float(v) for v in result["constraints"]])
+        study.tell(trial, values)
     _sync(study)
 
 
