@@ -20,7 +20,7 @@ ends too. Its error is measured on held-out runs of another hypercube (``held_ou
 
 A flat tip is a second family with its own table (``fe_surrogate_flat.json``, :data:`FLAT_BOX`): the same four
 ratios (``c`` the silicone above the magnet to the flat top; the body's height is z + h + c), the same grid, fit and
-scaling, from 163 FE runs (the hemispherical tip's: 478; the held-out errors of both are in their files and
+scaling, from 203 FE runs (the hemispherical tip's: 478; the held-out errors of both are in their files and
 bench/fe_surrogate.py's doc). Its box is the example targets' and the bench target sets' flat-tip designs with a
 margin, and its held-out runs are the ratios of designs drawn over the example targets' box and a hypercube over
 what the bench sets added.
