@@ -168,6 +168,9 @@ def _independent(x: np.ndarray) -> list[int]:
     """The columns of ``x`` that the fit's linear term can tell apart: each kept when it raises the rank of a constant
     and the columns kept before it (a disc size the same for every magnet, or a choice that fixes another, would
     leave the fit singular)."""
+    whole = np.column_stack([np.ones(len(x)), x])
+    if np.linalg.matrix_rank(whole) == whole.shape[1]:  # all: a set of columns has no smaller least singular value
+        return list(range(x.shape[1]))  # than the whole, nor a larger tolerance (one SVD, not one per column)
     kept: list[int] = []
     for j in range(x.shape[1]):
         trial = np.column_stack([np.ones(len(x)), x[:, [*kept, j]]])
