@@ -44,6 +44,15 @@ def require_tool(name: str) -> str:
     _missing(f"{name} is not installed (Debian package; .ci/run installs it)")
 
 
+def require_node_package(harness: Path, package: str) -> str:
+    """Node, with ``package`` installed in ``harness`` (its package.json pins it; .ci/run runs ``npm install
+    --no-package-lock`` there): node's path (skip, or fail under MAGFAB_REQUIRE_TOOLS=1)."""
+    node = require_tool("node")
+    if not (harness / "node_modules" / package / "package.json").is_file():
+        _missing(f"{package} is not installed in {harness.name} (npm install --no-package-lock there; .ci/run does)")
+    return node
+
+
 def require_kicad() -> str:
     """The interpreter that imports KiCad's pcbnew (skip, or fail under MAGFAB_REQUIRE_TOOLS=1)."""
     from magfab.export.kicad import kicad_python

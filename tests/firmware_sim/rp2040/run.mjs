@@ -1,0 +1,65 @@
+// Runs an RP2040 image on rp2040js (tests/firmware_sim/rp2040): node run.mjs IMAGE.uf2 [--until TEXT] [--ms N]
+//
+// The image comes as the build's .uf2. Each block is checked as the RP2040 bootrom would take it (UF2's magic
+// numbers, the RP2040 family 0xE48BFF56, a 256-byte payload on a page in flash) and written into the emulated flash;
+// boot2's checksum (CRC-32/MPEG-2 of its first 252 bytes, little-endian after them) is checked here too, in a second
+// implementation beside magfab's, because rp2040js has no bootrom to check it: the emulated core starts at the
+// vector table after boot2 (0x10000100) directly. UART0's bytes are collected until TEXT has been seen or N ms of
+// host time pass. Prints one JSON line: {"boot2_crc_ok", "blocks", "uart", "nanos"}; exit 2 on a refused image.
+import { Simulator } from 'rp2040js';
+import { readFileSync } from 'fs';
+
+const FLASH = 0x10000000, FLASH_END = 0x11000000, FAMILY = 0xe48bff56;
+
+function crc32mpeg2(bytes) {
+  let c = 0xffffffff;
+  for (const b of bytes) {
+    c ^= b << 24;
+    for (let k = 0; k < 8; k++) c = (c & 0x80000000) ? ((c << 1) ^ 0x04c11db7) : (c << 1);
+    c >>>= 0;
+  }
+  return c >>> 0;
+}
+
+function refuse(why) {
+  console.log(JSON.stringify({ refused: why }));
+  process.exit(2);
+}
+
+const args = process.argv.slice(2);
+const until = args.includes('--until') ? args[args.indexOf('--until') + 1] : null;
+const ms = args.includes('--ms') ? Number(args[args.indexOf('--ms') + 1]) : 2000;
+const data = readFileSync(args[0]);
+if (data.length === 0 || data.length % 512) refuse(`not whole 512-byte blocks: ${data.length} bytes`);
+
+const sim = new Simulator();
+const mcu = sim.rp2040;
+const blocks = data.length / 512;
+for (let i = 0; i < blocks; i++) {
+  const at = 512 * i;
+  const word = (k) => data.readUInt32LE(at + k);
+  if (word(0) !== 0x0a324655 || word(4) !== 0x9e5d5157 || word(508) !== 0x0ab16f30) refuse(`block ${i}: magic`);
+  if (!(word(8) & 0x2000) || word(28) !== FAMILY) refuse(`block ${i}: family`);
+  const addr = word(12), size = word(16);
+  if (size !== 256 || addr % 256 || addr < FLASH || addr + 256 > FLASH_END) refuse(`block ${i}: payload`);
+  if (word(20) !== i || word(24) !== blocks) refuse(`block ${i}: numbering`);
+  mcu.flash.set(data.subarray(at + 32, at + 32 + 256), addr - FLASH);
+}
+const boot2 = mcu.flash.subarray(0, 256);
+const boot2_crc_ok = crc32mpeg2(boot2.subarray(0, 252)) === (boot2[252] | (boot2[253] << 8) | (boot2[254] << 16) | (boot2[255] << 24)) >>> 0;
+if (!boot2_crc_ok) refuse('boot2 checksum');
+
+let uart = '';
+const done = () => {
+  sim.stop();
+  console.log(JSON.stringify({ boot2_crc_ok, blocks, uart, nanos: sim.clock.nanos }));
+  process.exit(0);
+};
+mcu.uart[0].onByte = (b) => {
+  uart += String.fromCharCode(b);
+  if (until !== null && uart.includes(until)) setImmediate(done);
+};
+mcu.core.VTOR = FLASH + 0x100;
+mcu.core.reset();
+sim.execute();
+setTimeout(done, ms);
