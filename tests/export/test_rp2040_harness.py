@@ -1,7 +1,8 @@
-"""The RP2040 emulator harness (tests/firmware_sim/rp2040): arm-none-eabi-gcc builds its smoke image, magfab writes it
-as a UF2 file behind a sealed boot2 (magfab.formats.uf2), and rp2040js runs it from the vector table after boot2:
-the line it sends on UART0 arrives. The harness checks each block and boot2's checksum in its own implementation
-and refuses a file whose boot2 or family is wrong."""
+"""The RP2040 emulator harness (tests/firmware_sim/rp2040): arm-none-eabi-gcc builds its smoke images, magfab writes
+them as UF2 files behind a sealed boot2 (magfab.formats.uf2), and rp2040js runs them from the vector table after
+boot2: the line one sends on UART0 arrives, and the other enumerates as a USB CDC device and its lines arrive. The
+harness checks each block and boot2's checksum in its own implementation and refuses a file whose boot2 or family
+is wrong."""
 
 from __future__ import annotations
 
@@ -22,18 +23,23 @@ def _run(node: str, uf2: Path, *args: str) -> subprocess.CompletedProcess:
                           timeout=60, cwd=HARNESS)
 
 
-@pytest.fixture(scope="module")
-def smoke(tmp_path_factory):
-    """The smoke image: (node, its flash contents, the .uf2's path)."""
+def _build(out: Path, source: str) -> bytes:
+    """The flash contents of one harness image: a sealed empty boot2, then ``source`` built for the Cortex-M0+."""
     gcc = require_tool("arm-none-eabi-gcc")
     objcopy = require_tool("arm-none-eabi-objcopy")
+    elf, binary = out / f"{source}.elf", out / f"{source}.bin"
+    subprocess.run([gcc, "-mcpu=cortex-m0plus", "-mthumb", "-Os", "-ffreestanding", "-nostdlib", "-Wall", "-Wextra",
+                    "-Werror", "-T", str(HARNESS / "smoke.ld"), "-o", str(elf), str(HARNESS / source)], check=True)
+    subprocess.run([objcopy, "-O", "binary", str(elf), str(binary)], check=True)
+    return seal_boot2(b"") + binary.read_bytes()
+
+
+@pytest.fixture(scope="module")
+def smoke(tmp_path_factory):
+    """The UART smoke image: (node, its flash contents, the .uf2's path)."""
     node = require_node_package(HARNESS, "rp2040js")
     out = tmp_path_factory.mktemp("rp2040")
-    elf = out / "smoke.elf"
-    subprocess.run([gcc, "-mcpu=cortex-m0plus", "-mthumb", "-Os", "-ffreestanding", "-nostdlib", "-Wall", "-Werror",
-                    "-T", str(HARNESS / "smoke.ld"), "-o", str(elf), str(HARNESS / "smoke.c")], check=True)
-    subprocess.run([objcopy, "-O", "binary", str(elf), str(out / "smoke.bin")], check=True)
-    flash = seal_boot2(b"") + (out / "smoke.bin").read_bytes()
+    flash = _build(out, "smoke.c")
     uf2 = out / "smoke.uf2"
     uf2.write_bytes(write(flash))
     return node, flash, uf2
@@ -48,6 +54,19 @@ def test_the_smoke_image_runs_on_the_emulated_rp2040(smoke):
     report = json.loads(run.stdout)
     assert report["boot2_crc_ok"] and report["blocks"] == -(-len(flash) // 256)
     assert report["uart"] == "magfab rp2040 smoke\n"
+
+
+def test_a_cdc_device_enumerates_and_sends_on_the_emulated_usb(smoke, tmp_path):
+    """usb_smoke.c, a CDC-ACM device from the datasheet: rp2040js's host sets its address, reads its configuration
+    (67 bytes, in two packets), configures it and sets the control lines; the two lines it then sends on its bulk IN
+    endpoint arrive whole and in order."""
+    node = smoke[0]
+    uf2 = tmp_path / "usb.uf2"
+    uf2.write_bytes(write(_build(tmp_path, "usb_smoke.c")))
+    run = _run(node, uf2, "--until", "second packet\n")
+    assert run.returncode == 0, run.stdout + run.stderr
+    report = json.loads(run.stdout)
+    assert report["usb_connected"] and report["usb"] == "magfab rp2040 usb\nsecond packet\n"
 
 
 @pytest.mark.parametrize(("change", "refusal"), [("boot2", "boot2 checksum"), ("family", "block 0: family")])

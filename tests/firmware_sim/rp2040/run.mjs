@@ -4,9 +4,11 @@
 // numbers, the RP2040 family 0xE48BFF56, a 256-byte payload on a page in flash) and written into the emulated flash;
 // boot2's checksum (CRC-32/MPEG-2 of its first 252 bytes, little-endian after them) is checked here too, in a second
 // implementation beside magfab's, because rp2040js has no bootrom to check it: the emulated core starts at the
-// vector table after boot2 (0x10000100) directly. UART0's bytes are collected until TEXT has been seen or N ms of
-// host time pass. Prints one JSON line: {"boot2_crc_ok", "blocks", "uart", "nanos"}; exit 2 on a refused image.
-import { Simulator } from 'rp2040js';
+// vector table after boot2 (0x10000100) directly. rp2040js's USB CDC host is attached: it enumerates a device the
+// image brings up and takes what the device sends on its bulk IN endpoint. UART0's bytes and the CDC's are collected
+// until TEXT has been seen in either or N ms of host time pass. Prints one JSON line: {"boot2_crc_ok", "blocks",
+// "uart", "usb", "usb_connected", "nanos"}; exit 2 on a refused image.
+import { ConsoleLogger, LogLevel, Simulator, USBCDC } from 'rp2040js';
 import { readFileSync } from 'fs';
 
 const FLASH = 0x10000000, FLASH_END = 0x11000000, FAMILY = 0xe48bff56;
@@ -34,6 +36,7 @@ if (data.length === 0 || data.length % 512) refuse(`not whole 512-byte blocks: $
 
 const sim = new Simulator();
 const mcu = sim.rp2040;
+mcu.logger = new ConsoleLogger(LogLevel.Error); // stdout is the report's: the peripherals' debug lines stay out
 const blocks = data.length / 512;
 for (let i = 0; i < blocks; i++) {
   const at = 512 * i;
@@ -49,15 +52,24 @@ const boot2 = mcu.flash.subarray(0, 256);
 const boot2_crc_ok = crc32mpeg2(boot2.subarray(0, 252)) === (boot2[252] | (boot2[253] << 8) | (boot2[254] << 16) | (boot2[255] << 24)) >>> 0;
 if (!boot2_crc_ok) refuse('boot2 checksum');
 
-let uart = '';
+let uart = '', usb = '', usb_connected = false;
 const done = () => {
   sim.stop();
-  console.log(JSON.stringify({ boot2_crc_ok, blocks, uart, nanos: sim.clock.nanos }));
+  console.log(JSON.stringify({ boot2_crc_ok, blocks, uart, usb, usb_connected, nanos: sim.clock.nanos }));
   process.exit(0);
+};
+const seen = () => {
+  if (until !== null && (uart.includes(until) || usb.includes(until))) setImmediate(done);
 };
 mcu.uart[0].onByte = (b) => {
   uart += String.fromCharCode(b);
-  if (until !== null && uart.includes(until)) setImmediate(done);
+  seen();
+};
+const cdc = new USBCDC(mcu.usbCtrl);
+cdc.onDeviceConnected = () => { usb_connected = true; };
+cdc.onSerialData = (buffer) => {
+  usb += Buffer.from(buffer).toString('latin1');
+  seen();
 };
 mcu.core.VTOR = FLASH + 0x100;
 mcu.core.reset();
