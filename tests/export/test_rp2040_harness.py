@@ -23,13 +23,14 @@ def _run(node: str, uf2: Path, *args: str) -> subprocess.CompletedProcess:
                           timeout=60, cwd=HARNESS)
 
 
-def _build(out: Path, source: str) -> bytes:
-    """The flash contents of one harness image: a sealed empty boot2, then ``source`` built for the Cortex-M0+."""
+def _build(out: Path, *sources: str) -> bytes:
+    """The flash contents of one harness image: a sealed empty boot2, then ``sources`` built for the Cortex-M0+."""
     gcc = require_tool("arm-none-eabi-gcc")
     objcopy = require_tool("arm-none-eabi-objcopy")
-    elf, binary = out / f"{source}.elf", out / f"{source}.bin"
+    elf, binary = out / f"{sources[0]}.elf", out / f"{sources[0]}.bin"
     subprocess.run([gcc, "-mcpu=cortex-m0plus", "-mthumb", "-Os", "-ffreestanding", "-nostdlib", "-Wall", "-Wextra",
-                    "-Werror", "-T", str(HARNESS / "smoke.ld"), "-o", str(elf), str(HARNESS / source)], check=True)
+                    "-Werror", "-T", str(HARNESS / "smoke.ld"), "-o", str(elf), *(str(HARNESS / s) for s in sources)],
+                   check=True)
     subprocess.run([objcopy, "-O", "binary", str(elf), str(binary)], check=True)
     return seal_boot2(b"") + binary.read_bytes()
 
@@ -56,17 +57,18 @@ def test_the_smoke_image_runs_on_the_emulated_rp2040(smoke):
     assert report["uart"] == "magfab rp2040 smoke\n"
 
 
-def test_a_cdc_device_enumerates_and_sends_on_the_emulated_usb(smoke, tmp_path):
-    """usb_smoke.c, a CDC-ACM device from the datasheet: rp2040js's host sets its address, reads its configuration
-    (67 bytes, in two packets), configures it and sets the control lines; the two lines it then sends on its bulk IN
-    endpoint arrive whole and in order."""
+def test_a_cdc_device_enumerates_and_echoes_on_the_emulated_usb(smoke, tmp_path):
+    """usb_smoke.c on usb_cdc.c, a CDC-ACM device from the datasheet: rp2040js's host sets its address, reads its
+    configuration (67 bytes, in two packets), configures it and sets the control lines; its greeting arrives, and a
+    line sent to it, longer than a packet, comes back in capitals, whole and in order."""
     node = smoke[0]
     uf2 = tmp_path / "usb.uf2"
-    uf2.write_bytes(write(_build(tmp_path, "usb_smoke.c")))
-    run = _run(node, uf2, "--until", "second packet\n")
+    uf2.write_bytes(write(_build(tmp_path, "usb_smoke.c", "usb_cdc.c")))
+    line = "ping " + "abcdefghij" * 10 + "\n"
+    run = _run(node, uf2, "--send", line, "--until", line.upper())
     assert run.returncode == 0, run.stdout + run.stderr
     report = json.loads(run.stdout)
-    assert report["usb_connected"] and report["usb"] == "magfab rp2040 usb\nsecond packet\n"
+    assert report["usb_connected"] and report["usb"] == "magfab rp2040 usb\n" + line.upper()
 
 
 @pytest.mark.parametrize(("change", "refusal"), [("boot2", "boot2 checksum"), ("family", "block 0: family")])

@@ -1,11 +1,13 @@
-// Runs an RP2040 image on rp2040js (tests/firmware_sim/rp2040): node run.mjs IMAGE.uf2 [--until TEXT] [--ms N]
+// Runs an RP2040 image on rp2040js (tests/firmware_sim/rp2040):
+//   node run.mjs IMAGE.uf2 [--until TEXT] [--ms N] [--send TEXT]
 //
 // The image comes as the build's .uf2. Each block is checked as the RP2040 bootrom would take it (UF2's magic
 // numbers, the RP2040 family 0xE48BFF56, a 256-byte payload on a page in flash) and written into the emulated flash;
 // boot2's checksum (CRC-32/MPEG-2 of its first 252 bytes, little-endian after them) is checked here too, in a second
 // implementation beside magfab's, because rp2040js has no bootrom to check it: the emulated core starts at the
 // vector table after boot2 (0x10000100) directly. rp2040js's USB CDC host is attached: it enumerates a device the
-// image brings up and takes what the device sends on its bulk IN endpoint. UART0's bytes and the CDC's are collected
+// image brings up and takes what the device sends on its bulk IN endpoint; --send's TEXT goes to the device once it
+// is connected. UART0's bytes and the CDC's are collected
 // until TEXT has been seen in either or N ms of host time pass. Prints one JSON line: {"boot2_crc_ok", "blocks",
 // "uart", "usb", "usb_connected", "nanos"}; exit 2 on a refused image.
 import { ConsoleLogger, LogLevel, Simulator, USBCDC } from 'rp2040js';
@@ -31,6 +33,7 @@ function refuse(why) {
 const args = process.argv.slice(2);
 const until = args.includes('--until') ? args[args.indexOf('--until') + 1] : null;
 const ms = args.includes('--ms') ? Number(args[args.indexOf('--ms') + 1]) : 2000;
+const send = args.includes('--send') ? args[args.indexOf('--send') + 1] : '';
 const data = readFileSync(args[0]);
 if (data.length === 0 || data.length % 512) refuse(`not whole 512-byte blocks: ${data.length} bytes`);
 
@@ -66,7 +69,10 @@ mcu.uart[0].onByte = (b) => {
   seen();
 };
 const cdc = new USBCDC(mcu.usbCtrl);
-cdc.onDeviceConnected = () => { usb_connected = true; };
+cdc.onDeviceConnected = () => {
+  usb_connected = true;
+  for (const b of Buffer.from(send, 'latin1')) cdc.sendSerialByte(b);
+};
 cdc.onSerialData = (buffer) => {
   usb += Buffer.from(buffer).toString('latin1');
   seen();
