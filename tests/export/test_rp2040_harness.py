@@ -6,14 +6,19 @@ is wrong."""
 
 from __future__ import annotations
 
+import importlib
 import json
 import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 from conftest import require_node_package, require_tool
+from readout_support import ref_forces
 
 from magfab.formats.uf2 import boot2_sealed, read, seal_boot2, write
+from magfab.readout.src.magfab_readout import calibration_json
+from magfab.readout.src.magfab_readout.float32_bound import float32_error_N
 
 HARNESS = Path(__file__).resolve().parent.parent / "firmware_sim" / "rp2040"
 
@@ -29,7 +34,8 @@ def _build(out: Path, *sources: str) -> bytes:
     objcopy = require_tool("arm-none-eabi-objcopy")
     elf, binary = out / f"{sources[0]}.elf", out / f"{sources[0]}.bin"
     subprocess.run([gcc, "-mcpu=cortex-m0plus", "-mthumb", "-Os", "-ffreestanding", "-nostdlib", "-Wall", "-Wextra",
-                    "-Werror", "-T", str(HARNESS / "smoke.ld"), "-o", str(elf), *(str(HARNESS / s) for s in sources)],
+                    "-Werror", "-T", str(HARNESS / "smoke.ld"), "-o", str(elf),
+                    *(str(HARNESS / s) for s in ("start.c", *sources))],
                    check=True)
     subprocess.run([objcopy, "-O", "binary", str(elf), str(binary)], check=True)
     return seal_boot2(b"") + binary.read_bytes()
@@ -79,3 +85,83 @@ def test_the_harness_refuses_what_the_bootrom_would(smoke, tmp_path, change, ref
     bad.write_bytes(data)
     run = _run(node, bad)
     assert run.returncode == 2 and json.loads(run.stdout) == {"refused": refusal}
+
+
+CORE = ("mlx90393.c", "mf_sample.c", "mf_nv.c", "mf_calib.c", "mf_frame.c", "mf_app.c", "mf_array.c", "mf_reference.c")
+FIELD_UT = (1200.0, -800.0, 20000.0)  # inside MagOne's calibrated region (as tests/export/test_simbus.py)
+
+
+@pytest.fixture(scope="module")
+def readout_image(smoke, default_build, tmp_path_factory):
+    """The build's own readout core (firmware/magfab_readout/src, the AVR image's C) on mf_rp2040.c's hardware layer
+    and usb_cdc.c, as a .uf2, and the build's MLX90393 model (its sim_mlx90393.c) served by mlxd.c: (node, uf2,
+    mlxd, the build's folder)."""
+    node = smoke[0]
+    cc = require_tool("cc")
+    out = tmp_path_factory.mktemp("rp2040-readout")
+    fw = default_build.out_dir / "firmware"
+    src = fw / "magfab_readout" / "src"
+    mlxd = out / "mlxd"
+    subprocess.run([cc, "-std=gnu99", "-O2", "-Wall", "-Wextra", "-Werror", f"-I{fw / 'host'}", f"-I{src}", "-o",
+                    str(mlxd), str(HARNESS / "mlxd.c"), str(fw / "host" / "sim_mlx90393.c"), "-lm"], check=True)
+    gcc = require_tool("arm-none-eabi-gcc")
+    elf = out / "readout.elf"
+    subprocess.run([gcc, "-mcpu=cortex-m0plus", "-mthumb", "-Os", "-std=gnu99", "-Wall", "-Wextra", "-Werror",
+                    "-ffunction-sections", "-fdata-sections", "-nostartfiles", "--specs=nano.specs",
+                    "--specs=nosys.specs", "-Wl,--gc-sections", "-T", str(HARNESS / "smoke.ld"), f"-I{src}",
+                    f"-I{HARNESS}", "-o", str(elf), str(HARNESS / "start.c"), str(HARNESS / "mf_rp2040.c"),
+                    str(HARNESS / "usb_cdc.c"),
+                    *(str(src / name) for name in CORE), "-lm"], check=True)
+    binary = out / "readout.bin"
+    subprocess.run([require_tool("arm-none-eabi-objcopy"), "-O", "binary", str(elf), str(binary)], check=True)
+    uf2 = out / "readout.uf2"
+    uf2.write_bytes(write(seal_boot2(b"") + binary.read_bytes()))
+    return node, uf2, mlxd, default_build.out_dir
+
+
+def _stream(readout_image, addr_offset: int = 0) -> tuple[list, object, dict]:
+    """1.5 s of host time of the readout image against the model at the build's address (plus ``addr_offset``):
+    (the samples the build's readout package decodes from what came over USB, its decoder, build.json)."""
+    node, uf2, mlxd, out = readout_image
+    readout = out / "readout" / "src"
+    info = json.loads((readout / "magfab_readout" / "build.json").read_text())
+    run = _run(node, uf2, "--mlx", str(mlxd), "--addr", str(info["image_settings"]["i2c_address"] + addr_offset),
+               "--field", ",".join(str(b) for b in (*FIELD_UT, 25.0)), "--hex", "--ms", "1500")
+    assert run.returncode == 0, run.stdout + run.stderr
+    report = json.loads(run.stdout)
+    assert report["usb_connected"]
+    sys.path.insert(0, str(readout))
+    try:
+        frames = importlib.import_module("magfab_readout.frames")
+        decoder = frames.Decoder()
+        samples = [s for s in decoder.feed(bytes.fromhex(report["usb_hex"])) if isinstance(s, frames.Sample)]
+    finally:
+        sys.path.remove(str(readout))
+        for name in [n for n in sys.modules if n == "magfab_readout" or n.startswith("magfab_readout.")]:
+            del sys.modules[name]
+    assert decoder.stats.crc_errors == 0 and decoder.stats.lost == 0
+    return samples, decoder, info
+
+
+def test_the_readout_core_streams_true_forces_over_usb_from_the_emulated_rp2040(readout_image):
+    """The frames that come over USB decode with the build's readout package, and each carries the model's field at
+    the build's gain and resolution and the force the build's calibration.json gives for it (float64,
+    docs/bundle.md written out) within the float32 bound the firmware README states."""
+    samples, _, info = _stream(readout_image)
+    cal = json.loads((readout_image[3] / "calibration" / "calibration.json").read_text())
+    assert len(samples) > 50
+    lsb = (info["lsb_xy_uT"], info["lsb_xy_uT"], info["lsb_z_uT"])
+    counts = tuple(round(b / q) for b, q in zip(FIELD_UT, lsb))
+    truth = ref_forces(cal, *(c * q for c, q in zip(counts, lsb)))
+    bound_z, bound_xy = float32_error_N(calibration_json.validate(cal))
+    for s in samples:
+        assert not s.chip_error and s.counts == counts, s
+        assert all(abs(f - t) <= b for f, t, b in zip(s.force_N, truth, (bound_xy, bound_xy, bound_z))), s
+
+
+def test_no_chip_on_the_bus_gives_error_frames_never_a_force(readout_image):
+    """The model at another address: every address phase goes unanswered, and what comes over USB is error frames
+    (the chip-error flag, no field, no force), never a force."""
+    samples, _, _ = _stream(readout_image, addr_offset=1)
+    assert samples and all(s.chip_error for s in samples)
+    assert all(all(f != f for f in s.force_N) for s in samples)  # NaN

@@ -1,5 +1,5 @@
 // Runs an RP2040 image on rp2040js (tests/firmware_sim/rp2040):
-//   node run.mjs IMAGE.uf2 [--until TEXT] [--ms N] [--send TEXT]
+//   node run.mjs IMAGE.uf2 [--until TEXT] [--ms N] [--send TEXT] [--mlx MLXD --addr A --field BX,BY,BZ,T]
 //
 // The image comes as the build's .uf2. Each block is checked as the RP2040 bootrom would take it (UF2's magic
 // numbers, the RP2040 family 0xE48BFF56, a 256-byte payload on a page in flash) and written into the emulated flash;
@@ -7,11 +7,17 @@
 // implementation beside magfab's, because rp2040js has no bootrom to check it: the emulated core starts at the
 // vector table after boot2 (0x10000100) directly. rp2040js's USB CDC host is attached: it enumerates a device the
 // image brings up and takes what the device sends on its bulk IN endpoint; --send's TEXT goes to the device once it
-// is connected. UART0's bytes and the CDC's are collected
+// is connected. With --mlx, the build's MLX90393 model (mlxd, compiled from its sim_mlx90393.c) answers at address A
+// on I2C0, serving the field BX, BY, BZ (uT) at T (C): each callback of rp2040js's I2C asks it synchronously over a
+// FIFO pair (a write is handed over whole at its STOP or repeated START; a read's bytes are fixed at its address
+// phase, as the AVR harness does). The bus takes no time here. UART0's bytes and the CDC's are collected
 // until TEXT has been seen in either or N ms of host time pass. Prints one JSON line: {"boot2_crc_ok", "blocks",
 // "uart", "usb", "usb_connected", "nanos"}; exit 2 on a refused image.
 import { ConsoleLogger, LogLevel, Simulator, USBCDC } from 'rp2040js';
-import { readFileSync } from 'fs';
+import { execFileSync, spawn } from 'child_process';
+import { closeSync, mkdtempSync, openSync, readFileSync, readSync, rmSync, writeSync } from 'fs';
+import { tmpdir } from 'os';
+import { join } from 'path';
 
 const FLASH = 0x10000000, FLASH_END = 0x11000000, FAMILY = 0xe48bff56;
 
@@ -34,6 +40,7 @@ const args = process.argv.slice(2);
 const until = args.includes('--until') ? args[args.indexOf('--until') + 1] : null;
 const ms = args.includes('--ms') ? Number(args[args.indexOf('--ms') + 1]) : 2000;
 const send = args.includes('--send') ? args[args.indexOf('--send') + 1] : '';
+const option = (name, fallback) => (args.includes(name) ? args[args.indexOf(name) + 1] : fallback);
 const data = readFileSync(args[0]);
 if (data.length === 0 || data.length % 512) refuse(`not whole 512-byte blocks: ${data.length} bytes`);
 
@@ -55,10 +62,52 @@ const boot2 = mcu.flash.subarray(0, 256);
 const boot2_crc_ok = crc32mpeg2(boot2.subarray(0, 252)) === (boot2[252] | (boot2[253] << 8) | (boot2[254] << 16) | (boot2[255] << 24)) >>> 0;
 if (!boot2_crc_ok) refuse('boot2 checksum');
 
-let uart = '', usb = '', usb_connected = false;
+let mlx = null;
+if (args.includes('--mlx')) {
+  const dir = mkdtempSync(join(tmpdir(), 'mlxd-'));
+  const req = join(dir, 'req'), rep = join(dir, 'rep');
+  execFileSync('mkfifo', [req, rep]);
+  const child = spawn(option('--mlx'), [req, rep, option('--addr', '12')], { stdio: 'inherit' });
+  const w = openSync(req, 'w'), r = openSync(rep, 'r');
+  const one = Buffer.alloc(1);
+  const ask = (line) => {
+    writeSync(w, line + '\n');
+    let out = '';
+    while (readSync(r, one, 0, 1) === 1 && one[0] !== 10) out += String.fromCharCode(one[0]);
+    return out;
+  };
+  mlx = { ask, close: () => { closeSync(w); closeSync(r); child.kill(); rmSync(dir, { recursive: true }); } };
+  const [bx, by, bz, t] = option('--field', '0,0,0,25').split(',').map(Number);
+  ask(`F ${bx} ${by} ${bz} ${t}`);
+  const i2c = mcu.i2c[0];
+  const now = () => Math.floor(sim.clock.nanos / 1000);
+  let addr = -1, writing = false, wbuf = [], rbuf = [];
+  const flush = () => {
+    if (addr >= 0 && writing && wbuf.length) ask(`W ${addr} ${now()} ${Buffer.from(wbuf).toString('hex')}`);
+    wbuf = [];
+  };
+  i2c.onStart = () => { flush(); i2c.completeStart(); };
+  i2c.onConnect = (address, mode) => {
+    flush();
+    addr = address;
+    writing = mode === 0;
+    const present = ask(`A ${address}`) === '1';
+    if (present && !writing) {
+      const [, hex] = ask(`R ${address} ${now()} 9`).split(' ');
+      rbuf = [...Buffer.from(hex, 'hex')];
+    }
+    i2c.completeConnect(present);
+  };
+  i2c.onWriteByte = (value) => { wbuf.push(value); i2c.completeWrite(true); };
+  i2c.onReadByte = () => { i2c.completeRead(rbuf.length ? rbuf.shift() : 0xff); };
+  i2c.onStop = () => { flush(); addr = -1; i2c.completeStop(); };
+}
+
+let uart = '', usb = '', usb_hex = '', usb_connected = false;
 const done = () => {
   sim.stop();
-  console.log(JSON.stringify({ boot2_crc_ok, blocks, uart, usb, usb_connected, nanos: sim.clock.nanos }));
+  if (mlx) mlx.close();
+  console.log(JSON.stringify({ boot2_crc_ok, blocks, uart, usb, usb_hex, usb_connected, nanos: sim.clock.nanos }));
   process.exit(0);
 };
 const seen = () => {
@@ -75,6 +124,7 @@ cdc.onDeviceConnected = () => {
 };
 cdc.onSerialData = (buffer) => {
   usb += Buffer.from(buffer).toString('latin1');
+  if (args.includes('--hex')) usb_hex += Buffer.from(buffer).toString('hex');
   seen();
 };
 mcu.core.VTOR = FLASH + 0x100;

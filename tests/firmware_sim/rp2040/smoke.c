@@ -1,8 +1,8 @@
 /* The RP2040 harness's smoke image (tests/export/test_rp2040_harness.py): the toolchain, the UF2 file and the
  * emulator proven end to end before any readout firmware runs on them. After boot2 the core starts at the vector
- * table (0x10000100): the reset handler takes UART0 out of reset (RP2040 datasheet 2.14, RESETS; the atomic clear
- * alias at +0x3000, 2.1.2), sets it to 115200 baud 8N1 (4.2, the PL011's IBRD/FBRD at 125 MHz, LCR_H, CR) and sends
- * one line. */
+ * table (0x10000100) and start.c runs main, which takes UART0 out of reset (RP2040 datasheet 2.14, RESETS; the
+ * atomic clear alias at +0x3000, 2.1.2), sets it to 115200 baud 8N1 (4.2, the PL011's IBRD/FBRD at 125 MHz, LCR_H,
+ * CR) and sends one line. */
 #include <stdint.h>
 
 #define REG(a) (*(volatile uint32_t *)(a))
@@ -12,18 +12,13 @@
 #define UART0 0x40034000u
 #define UART0_RESET (1u << 22)
 
-extern uint32_t __stack_top;
-void reset_handler(void);
-
-__attribute__((section(".vectors"), used)) const void *const vectors[16] = {&__stack_top, (void *)reset_handler};
-
 static void put(char c) {
     while (REG(UART0 + 0x18u) & (1u << 5)) { /* TXFF: the FIFO is full */
     }
     REG(UART0) = (uint8_t)c;
 }
 
-void reset_handler(void) {
+int main(void) {
     REG(RESETS_CLR) = UART0_RESET;
     while (!(REG(RESET_DONE) & UART0_RESET)) {
     }

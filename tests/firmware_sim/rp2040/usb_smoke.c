@@ -4,14 +4,7 @@
 
 #include "usb_cdc.h"
 
-extern uint32_t __stack_top, __data_start, __data_end, __data_load, __bss_start, __bss_end;
-void reset_handler(void);
-
-__attribute__((section(".vectors"), used)) const void *const vectors[16] = {&__stack_top, (void *)reset_handler};
-
-void reset_handler(void) {
-    for (uint32_t *d = &__data_start, *s = &__data_load; d < &__data_end;) *d++ = *s++;
-    for (uint32_t *b = &__bss_start; b < &__bss_end;) *b++ = 0u;
+int main(void) {
     cdc_init();
     int announced = 0;
     for (;;) {
