@@ -5,6 +5,7 @@
  *   A addr7                whether a chip answers at the address                 -> 1 or 0
  *   W addr7 t_us hex       a write (the command), at the emulator's time t_us    -> rc
  *   R addr7 t_us n         a read of n bytes (the reply)                         -> rc hex
+ *   X fault count t_us     a fault inside the chip (enum sim_fault), from now on  -> 0
  * rc is the model's MF_OK or MF_E_*. */
 #include <stdint.h>
 #include <stdio.h>
@@ -46,6 +47,10 @@ int main(int argc, char **argv) {
         char hex[256];
         if (line[0] == 'F' && sscanf(line + 1, "%lf %lf %lf %lf", &bx, &by, &bz, &tc) == 4) {
             sim_set_field(&chip, bx, by, bz, tc);
+            fputs("0\n", out);
+        } else if (line[0] == 'X' && sscanf(line + 1, "%u %u %llu", &addr, &n, &t) == 3 && addr <= SIM_FAULT_RESET) {
+            now_us = t;
+            sim_fault(&chip, (enum sim_fault)addr, (uint16_t)n);
             fputs("0\n", out);
         } else if (line[0] == 'A' && sscanf(line + 1, "%u", &addr) == 1) {
             fprintf(out, "%d\n", addr == chip.addr);

@@ -1,5 +1,6 @@
 // Runs an RP2040 image on rp2040js (tests/firmware_sim/rp2040):
-//   node run.mjs IMAGE.uf2 [--until TEXT] [--ms N] [--send TEXT] [--mlx MLXD --addr A --field BX,BY,BZ,T]
+//   node run.mjs IMAGE.uf2 [--until TEXT] [--ms N] [--us N] [--send TEXT]
+//                [--mlx MLXD --addr A --field BX,BY,BZ,T [--inject FAULT@US]]
 //
 // The image comes as the build's .uf2. Each block is checked as the RP2040 bootrom would take it (UF2's magic
 // numbers, the RP2040 family 0xE48BFF56, a 256-byte payload on a page in flash) and written into the emulated flash;
@@ -10,9 +11,13 @@
 // is connected. With --mlx, the build's MLX90393 model (mlxd, compiled from its sim_mlx90393.c) answers at address A
 // on I2C0, serving the field BX, BY, BZ (uT) at T (C): each callback of rp2040js's I2C asks it synchronously over a
 // FIFO pair (a write is handed over whole at its STOP or repeated START; a read's bytes are fixed at its address
-// phase, as the AVR harness does). The bus takes no time here. UART0's bytes and the CDC's are collected
-// until TEXT has been seen in either or N ms of host time pass. Prints one JSON line: {"boot2_crc_ok", "blocks",
-// "uart", "usb", "usb_connected", "nanos"}; exit 2 on a refused image.
+// phase, as the AVR harness does). The bus takes no time here. --inject FAULT@US injects a fault at US microseconds of
+// emulated time: on the bus, nack-addr (the next address phase), nack-data (the next byte written) or all-ff (the
+// next read's bytes); inside the chip, chip:NAME (NAME a sim_fault of sim_mlx90393.h: error, short, trunc, stuck,
+// reset), as the AVR harness injects them (tests/export/simbus). UART0's bytes and the CDC's are collected until
+// TEXT has been seen in either, N us of emulated time (--us) or N ms of host time (--ms) pass. Prints one JSON
+// line: {"boot2_crc_ok", "blocks", "uart", "usb", "usb_hex" (with --hex), "usb_connected", "nanos"}; exit 2 on a
+// refused image.
 import { ConsoleLogger, LogLevel, Simulator, USBCDC } from 'rp2040js';
 import { execFileSync, spawn } from 'child_process';
 import { closeSync, mkdtempSync, openSync, readFileSync, readSync, rmSync, writeSync } from 'fs';
@@ -86,19 +91,48 @@ if (args.includes('--mlx')) {
     if (addr >= 0 && writing && wbuf.length) ask(`W ${addr} ${now()} ${Buffer.from(wbuf).toString('hex')}`);
     wbuf = [];
   };
+  const pending = { 'nack-addr': 0, 'nack-data': 0, 'all-ff': 0 };
+  const CHIP_FAULTS = { error: 1, short: 2, trunc: 3, timeout: 4, stuck: 5, reset: 6 };
+  if (args.includes('--inject')) {
+    const [fault, at] = option('--inject').split('@');
+    sim.clock.createAlarm(() => {
+      if (fault.startsWith('chip:')) ask(`X ${CHIP_FAULTS[fault.slice(5)]} 1 ${now()}`);
+      else pending[fault] += 1;
+    }).schedule(Number(at) * 1000);
+  }
   i2c.onStart = () => { flush(); i2c.completeStart(); };
   i2c.onConnect = (address, mode) => {
     flush();
     addr = address;
     writing = mode === 0;
-    const present = ask(`A ${address}`) === '1';
-    if (present && !writing) {
-      const [, hex] = ask(`R ${address} ${now()} 9`).split(' ');
-      rbuf = [...Buffer.from(hex, 'hex')];
+    let present = ask(`A ${address}`) === '1';
+    if (present && pending['nack-addr']) {
+      pending['nack-addr'] -= 1;
+      present = false;
     }
+    if (present && !writing) {
+      if (pending['all-ff']) {
+        pending['all-ff'] -= 1;
+        rbuf = new Array(9).fill(0xff);
+      } else {
+        const [, hex] = ask(`R ${address} ${now()} 9`).split(' ');
+        rbuf = [...Buffer.from(hex, 'hex')];
+      }
+    }
+    if (!present) addr = -1;
     i2c.completeConnect(present);
   };
-  i2c.onWriteByte = (value) => { wbuf.push(value); i2c.completeWrite(true); };
+  i2c.onWriteByte = (value) => {
+    if (pending['nack-data']) {
+      pending['nack-data'] -= 1;
+      wbuf = [];
+      addr = -1;
+      i2c.completeWrite(false);
+      return;
+    }
+    wbuf.push(value);
+    i2c.completeWrite(true);
+  };
   i2c.onReadByte = () => { i2c.completeRead(rbuf.length ? rbuf.shift() : 0xff); };
   i2c.onStop = () => { flush(); addr = -1; i2c.completeStop(); };
 }
@@ -127,6 +161,7 @@ cdc.onSerialData = (buffer) => {
   if (args.includes('--hex')) usb_hex += Buffer.from(buffer).toString('hex');
   seen();
 };
+if (args.includes('--us')) sim.clock.createAlarm(() => setImmediate(done)).schedule(Number(option('--us')) * 1000);
 mcu.core.VTOR = FLASH + 0x100;
 mcu.core.reset();
 sim.execute();
