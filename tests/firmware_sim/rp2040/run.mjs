@@ -1,6 +1,6 @@
 // Runs an RP2040 image on rp2040js (tests/firmware_sim/rp2040):
 //   node run.mjs IMAGE.uf2 [--until TEXT] [--ms N] [--us N] [--send TEXT]
-//                [--mlx MLXD --addr A --field BX,BY,BZ,T [--inject FAULT@US]]
+//                [--mlx MLXD --addr A --field BX,BY,BZ,T [--inject FAULT@US] [--bus-timing]]
 //
 // The image comes as the build's .uf2. Each block is checked as the RP2040 bootrom would take it (UF2's magic
 // numbers, the RP2040 family 0xE48BFF56, a 256-byte payload on a page in flash) and written into the emulated flash;
@@ -11,7 +11,10 @@
 // is connected. With --mlx, the build's MLX90393 model (mlxd, compiled from its sim_mlx90393.c) answers at address A
 // on I2C0, serving the field BX, BY, BZ (uT) at T (C): each callback of rp2040js's I2C asks it synchronously over a
 // FIFO pair (a write is handed over whole at its STOP or repeated START; a read's bytes are fixed at its address
-// phase, as the AVR harness does). The bus takes no time here. --inject FAULT@US injects a fault at US microseconds of
+// phase, as the AVR harness does). The bus takes no time, or with --bus-timing the time it takes at the SCL clock the
+// image sets (IC_*_SCL_HCNT/LCNT at 125 MHz): each step's completion is held, on the emulated clock, for 9 SCL periods
+// for an address or data byte with its ACK bit, one for a START, two for a STOP and the bus-free time after it (as
+// the AVR harness times simavr's TWI). --inject FAULT@US injects a fault at US microseconds of
 // emulated time: on the bus, nack-addr (the next address phase), nack-data (the next byte written) or all-ff (the
 // next read's bytes); inside the chip, chip:NAME (NAME a sim_fault of sim_mlx90393.h: error, short, trunc, stuck,
 // reset), as the AVR harness injects them (tests/export/simbus). UART0's bytes and the CDC's are collected until
@@ -100,7 +103,12 @@ if (args.includes('--mlx')) {
       else pending[fault] += 1;
     }).schedule(Number(at) * 1000);
   }
-  i2c.onStart = () => { flush(); i2c.completeStart(); };
+  const timed = args.includes('--bus-timing');
+  const later = (bits, fn) => {
+    if (!timed) return fn();
+    sim.clock.createAlarm(fn).schedule(bits * (i2c.sclLowPeriod + i2c.sclHighPeriod) * 8); // 8 ns a cycle
+  };
+  i2c.onStart = () => { flush(); later(1, () => i2c.completeStart()); };
   i2c.onConnect = (address, mode) => {
     flush();
     addr = address;
@@ -120,21 +128,24 @@ if (args.includes('--mlx')) {
       }
     }
     if (!present) addr = -1;
-    i2c.completeConnect(present);
+    later(9, () => i2c.completeConnect(present));
   };
   i2c.onWriteByte = (value) => {
     if (pending['nack-data']) {
       pending['nack-data'] -= 1;
       wbuf = [];
       addr = -1;
-      i2c.completeWrite(false);
+      later(9, () => i2c.completeWrite(false));
       return;
     }
     wbuf.push(value);
-    i2c.completeWrite(true);
+    later(9, () => i2c.completeWrite(true));
   };
-  i2c.onReadByte = () => { i2c.completeRead(rbuf.length ? rbuf.shift() : 0xff); };
-  i2c.onStop = () => { flush(); addr = -1; i2c.completeStop(); };
+  i2c.onReadByte = () => {
+    const value = rbuf.length ? rbuf.shift() : 0xff;
+    later(9, () => i2c.completeRead(value));
+  };
+  i2c.onStop = () => { flush(); addr = -1; later(2, () => i2c.completeStop()); };
 }
 
 let uart = '', usb = '', usb_hex = '', usb_connected = false;
