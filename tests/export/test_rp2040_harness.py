@@ -120,16 +120,18 @@ def readout_image(smoke, default_build, tmp_path_factory):
 
 
 def _stream(readout_image, addr_offset: int = 0, inject: str = "", us: int = 250_000,
-            timed: bool = False) -> tuple[list, object, dict]:
+            timed: bool = False, send: str = "") -> tuple[list, list, dict]:
     """``us`` of emulated time of the readout image against the model at the build's address (plus ``addr_offset``),
-    ``inject`` the harness's --inject (FAULT@US), ``timed`` its --bus-timing: (the samples the build's readout package
-    decodes from what came over USB, its decoder, build.json)."""
+    ``inject`` the harness's --inject (FAULT@US), ``timed`` its --bus-timing, ``send`` what the host sends once the
+    device is connected: (the samples the build's readout package decodes from what came over USB and every other
+    item it decodes, build.json)."""
     node, uf2, mlxd, out = readout_image
     readout = out / "readout" / "src"
     info = json.loads((readout / "magfab_readout" / "build.json").read_text())
     run = _run(node, uf2, "--mlx", str(mlxd), "--addr", str(info["image_settings"]["i2c_address"] + addr_offset),
                "--field", ",".join(str(b) for b in (*FIELD_UT, 25.0)), "--hex", "--us", str(us), "--ms", "20000",
-               *(("--inject", inject) if inject else ()), *(("--bus-timing",) if timed else ()))
+               *(("--inject", inject) if inject else ()), *(("--bus-timing",) if timed else ()),
+               *(("--send", send) if send else ()))
     assert run.returncode == 0, run.stdout + run.stderr
     report = json.loads(run.stdout)
     assert report["usb_connected"]
@@ -137,13 +139,15 @@ def _stream(readout_image, addr_offset: int = 0, inject: str = "", us: int = 250
     try:
         frames = importlib.import_module("magfab_readout.frames")
         decoder = frames.Decoder()
-        samples = [s for s in decoder.feed(bytes.fromhex(report["usb_hex"])) if isinstance(s, frames.Sample)]
+        items = list(decoder.feed(bytes.fromhex(report["usb_hex"])))
+        samples = [s for s in items if isinstance(s, frames.Sample)]
+        others = [s for s in items if not isinstance(s, frames.Sample)]
     finally:
         sys.path.remove(str(readout))
         for name in [n for n in sys.modules if n == "magfab_readout" or n.startswith("magfab_readout.")]:
             del sys.modules[name]
     assert decoder.stats.crc_errors == 0 and decoder.stats.lost == 0
-    return samples, decoder, info
+    return samples, others, info
 
 
 def _wrong(readout_image, samples: list, info: dict) -> list:
@@ -186,7 +190,7 @@ def test_fault_gives_error_frames_never_a_wrong_force(readout_image, fault):
     names the fault; the stream recovers (the first good frame after an error is flagged recovered) and ends with
     good frames."""
     inject, named = FAULTS[fault]
-    samples, _, info = _stream(readout_image, inject=f"{inject}@{INJECT_US}")
+    samples, _, info = _stream(readout_image, inject=f"{inject}@{INJECT_US}", timed=True)
     # from the last sample stamped before the fault: a sample carries its conversion's time, so the one whose read
     # meets the fault is stamped before it
     after = samples[next(i for i, s in enumerate(samples) if s.t_us >= INJECT_US) - 1:]
@@ -225,3 +229,15 @@ def test_the_rate_on_a_timed_bus_is_every_conversion_of_the_chip(readout_image):
     conversions = span_us / chip_config(derive(load_spec(None))).tconv_us
     assert len(steady) - 1 <= conversions + 1  # every frame a distinct conversion
     assert (len(steady) - 1) / conversions >= 0.99
+
+
+def test_the_host_asks_the_board_what_it_runs_over_usb(readout_image):
+    """The host's 'i' over USB (what ``magfab-readout info`` sends): the board answers with the build's spec name,
+    calibration hash and chip settings, between its frames."""
+    samples, others, info = _stream(readout_image, send="i", us=60_000)
+    answers = [x for x in others if type(x).__name__ == "DeviceInfo"]
+    assert samples and len(answers) == 1
+    answer = answers[0]
+    assert answer.spec_name == info["spec_name"] and answer.calibration_hash == info["calibration_sha256"][:16]
+    assert (answer.gain_sel, answer.resolution, answer.osr, answer.dig_filt) == tuple(
+        info[k] for k in ("gain_sel", "resolution", "osr", "dig_filt"))

@@ -3,7 +3,9 @@
  *   TIMER (4.6): micros() is the raw low word of the 1 MHz count (TIMERAWL).
  *   I2C0 (4.3, the DW_apb_i2c): master, fast mode, polled; a transfer's bytes go through IC_DATA_CMD with STOP on
  *   the last and RESTART on the first of a read that follows a write left open; an abort (no ACK) is read from
- *   IC_TX_ABRT_SOURCE; every wait is bounded by the record's I2C timeout.
+ *   IC_TX_ABRT_SOURCE, and the STOP the block then sends is waited for (a STOP_DET left set after an abort ended the
+ *   next transfer before its time once the bus took time: every recovery after an address NACK failed); every wait
+ *   is bounded by the record's I2C timeout.
  *   The serial link is the USB CDC-ACM device (usb_cdc.c), polled between the core's steps.
  * Not yet here: the crystal and PLLs (the emulator runs at 125 MHz whatever they say), the pins' function select
  * and pads, the asynchronous transfers (i2c_begin and the rest: 0, so every transfer waits), the flash record. */
@@ -71,16 +73,23 @@ static void i2c_target(uint8_t addr7) {
     }
 }
 
+/* After an abort (no ACK): the block ends the transfer with a STOP of its own; wait for it (bounded), so that the
+ * next transfer's STOP_DET is its own. MF_E_NACK. */
+static int i2c_aborted(uint32_t start) {
+    (void)REG(IC_TX_ABRT_SOURCE);
+    (void)REG(IC_CLR_TX_ABRT);
+    i2c_open = 0;
+    while (!(REG(IC_RAW_INTR_STAT) & INTR_STOP_DET) && (uint32_t)(rp_micros(0) - start) <= MF_I2C_TIMEOUT_US) {
+    }
+    (void)REG(IC_CLR_STOP_DET);
+    return MF_E_NACK;
+}
+
 /* The transfer's end: MF_OK, MF_E_NACK after an abort, MF_E_TIMEOUT past the record's bound. */
 static int i2c_finish(uint32_t start, int stop) {
     for (;;) {
         uint32_t raw = REG(IC_RAW_INTR_STAT);
-        if (raw & INTR_TX_ABRT) {
-            (void)REG(IC_TX_ABRT_SOURCE);
-            (void)REG(IC_CLR_TX_ABRT);
-            i2c_open = 0;
-            return MF_E_NACK;
-        }
+        if (raw & INTR_TX_ABRT) return i2c_aborted(start);
         if (stop ? (raw & INTR_STOP_DET) != 0u : (REG(IC_STATUS) & STATUS_TFE) != 0u) {
             if (stop) (void)REG(IC_CLR_STOP_DET);
             return MF_OK;
@@ -99,6 +108,7 @@ static int rp_i2c_write(void *ctx, uint8_t addr7, const uint8_t *data, uint8_t l
     if (len == 0u) return MF_E_ARG;
     uint32_t start = rp_micros(0);
     i2c_target(addr7);
+    (void)REG(IC_CLR_STOP_DET); /* a STOP_DET from before is not this transfer's */
     for (uint8_t i = 0; i < len; i++) {
         while (!(REG(IC_STATUS) & STATUS_TFNF)) {
         }
@@ -114,6 +124,7 @@ static int rp_i2c_read(void *ctx, uint8_t addr7, uint8_t *data, uint8_t len) {
     if (len == 0u) return MF_E_ARG;
     uint32_t start = rp_micros(0);
     i2c_target(addr7);
+    (void)REG(IC_CLR_STOP_DET);
     uint8_t got = 0;
     for (uint8_t i = 0; i < len; i++) {
         while (!(REG(IC_STATUS) & STATUS_TFNF)) {
@@ -125,11 +136,7 @@ static int rp_i2c_read(void *ctx, uint8_t addr7, uint8_t *data, uint8_t len) {
     for (;;) {
         while (got < len && REG(IC_RXFLR) != 0u) data[got++] = (uint8_t)REG(IC_DATA_CMD);
         uint32_t raw = REG(IC_RAW_INTR_STAT);
-        if (raw & INTR_TX_ABRT) {
-            (void)REG(IC_TX_ABRT_SOURCE);
-            (void)REG(IC_CLR_TX_ABRT);
-            return MF_E_NACK;
-        }
+        if (raw & INTR_TX_ABRT) return i2c_aborted(start);
         if (got == len && (raw & INTR_STOP_DET)) {
             (void)REG(IC_CLR_STOP_DET);
             return MF_OK;

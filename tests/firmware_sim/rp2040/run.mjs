@@ -79,6 +79,7 @@ if (args.includes('--mlx')) {
   const w = openSync(req, 'w'), r = openSync(rep, 'r');
   const one = Buffer.alloc(1);
   const ask = (line) => {
+    if (process.env.HARNESS_DEBUG) process.stderr.write(`${Math.floor(sim.clock.nanos / 1000)} ${line}\n`);
     writeSync(w, line + '\n');
     let out = '';
     while (readSync(r, one, 0, 1) === 1 && one[0] !== 10) out += String.fromCharCode(one[0]);
