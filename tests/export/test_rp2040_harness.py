@@ -56,7 +56,7 @@ def test_the_smoke_image_runs_on_the_emulated_rp2040(smoke):
     node, flash, uf2 = smoke
     start, image = read(uf2.read_bytes())
     assert start == 0x10000000 and image[:len(flash)] == flash and boot2_sealed(image)
-    run = _run(node, uf2, "--until", "\n")
+    run = _run(node, uf2, "--until", "\n", "--ms", "30000")
     assert run.returncode == 0, run.stdout + run.stderr
     report = json.loads(run.stdout)
     assert report["boot2_crc_ok"] and report["blocks"] == -(-len(flash) // 256)
@@ -71,7 +71,7 @@ def test_a_cdc_device_enumerates_and_echoes_on_the_emulated_usb(smoke, tmp_path)
     uf2 = tmp_path / "usb.uf2"
     uf2.write_bytes(write(_build(tmp_path, "usb_smoke.c", "usb_cdc.c")))
     line = "ping " + "abcdefghij" * 10 + "\n"
-    run = _run(node, uf2, "--send", line, "--until", line.upper())
+    run = _run(node, uf2, "--send", line, "--until", line.upper(), "--ms", "30000")
     assert run.returncode == 0, run.stdout + run.stderr
     report = json.loads(run.stdout)
     assert report["usb_connected"] and report["usb"] == "magfab rp2040 usb\n" + line.upper()
@@ -129,7 +129,7 @@ def _stream(readout_image, addr_offset: int = 0, inject: str = "", us: int = 250
     readout = out / "readout" / "src"
     info = json.loads((readout / "magfab_readout" / "build.json").read_text())
     run = _run(node, uf2, "--mlx", str(mlxd), "--addr", str(info["image_settings"]["i2c_address"] + addr_offset),
-               "--field", ",".join(str(b) for b in (*FIELD_UT, 25.0)), "--hex", "--us", str(us), "--ms", "20000",
+               "--field", ",".join(str(b) for b in (*FIELD_UT, 25.0)), "--hex", "--us", str(us), "--ms", "50000",
                *(("--inject", inject) if inject else ()), *(("--bus-timing",) if timed else ()),
                *(("--send", send) if send else ()))
     assert run.returncode == 0, run.stdout + run.stderr
