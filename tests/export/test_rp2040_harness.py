@@ -261,3 +261,60 @@ def test_the_host_asks_the_board_what_it_runs_over_usb(readout_image):
     assert answer.spec_name == info["spec_name"] and answer.calibration_hash == info["calibration_sha256"][:16]
     assert (answer.gain_sel, answer.resolution, answer.osr, answer.dig_filt) == tuple(
         info[k] for k in ("gain_sel", "resolution", "osr", "dig_filt"))
+
+
+class HarnessTransport:
+    """The emulated board as the serial port of the build's ``magfab_readout.Device`` (run.mjs --interactive): each
+    read runs 2 ms of emulated time and returns what the device sent over USB meanwhile; each write is sent by the
+    emulated USB host."""
+
+    port = "the emulated RP2040"
+
+    def __init__(self, node: str, uf2: Path, *harness_args: str) -> None:
+        self.proc = subprocess.Popen([node, str(HARNESS / "run.mjs"), str(uf2), "--interactive", *harness_args],
+                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=HARNESS)
+
+    def _ask(self, line: str) -> str:
+        assert self.proc.stdin is not None and self.proc.stdout is not None
+        self.proc.stdin.write(line + "\n")
+        self.proc.stdin.flush()
+        return self.proc.stdout.readline().strip() if line.startswith("run") else ""
+
+    def read(self, size: int = 4096, timeout_s: float = 0.05) -> bytes:
+        return bytes.fromhex(self._ask("run 2000"))
+
+    def write(self, data: bytes) -> int:
+        self._ask("send " + data.hex())
+        return len(data)
+
+    def close(self) -> None:
+        if self.proc.poll() is None:
+            self._ask("quit")
+            self.proc.wait(timeout=30)
+
+
+def test_the_readout_package_reads_the_emulated_board(readout_image):
+    """The real client: the build's ``magfab_readout.Device`` on the emulated board's USB. It asks what the board runs
+    (``magfab-readout info``'s 'i') and finds the build's spec and calibration, with nothing to complain of
+    (``check_info``), then takes 50 samples (``stream``'s path): each a true force."""
+    node, uf2, mlxd, out = readout_image
+    readout = out / "readout" / "src"
+    info = json.loads((readout / "magfab_readout" / "build.json").read_text())
+    transport = HarnessTransport(node, uf2, "--mlx", str(mlxd), "--addr", str(info["image_settings"]["i2c_address"]),
+                                 "--field", ",".join(str(b) for b in (*FIELD_UT, 25.0)), "--bus-timing")
+    sys.path.insert(0, str(readout))
+    try:
+        device_module = importlib.import_module("magfab_readout.device")
+        device = device_module.Device(transport=transport, timeout_s=20.0)
+        try:
+            answer = device.info()
+            problems = device.check_info(answer)
+            samples = list(device.samples(count=50))
+        finally:
+            device.close()
+    finally:
+        sys.path.remove(str(readout))
+        for name in [n for n in sys.modules if n == "magfab_readout" or n.startswith("magfab_readout.")]:
+            del sys.modules[name]
+    assert answer.spec_name == info["spec_name"] and problems == [], problems
+    assert len(samples) == 50 and _wrong(readout_image, samples, info) == []

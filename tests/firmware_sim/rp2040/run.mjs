@@ -1,5 +1,5 @@
 // Runs an RP2040 image on rp2040js (tests/firmware_sim/rp2040):
-//   node run.mjs IMAGE.uf2 [--until TEXT] [--ms N] [--us N] [--send TEXT]
+//   node run.mjs IMAGE.uf2 [--until TEXT] [--ms N] [--us N] [--send TEXT] [--interactive]
 //                [--mlx MLXD --addr A --field BX,BY,BZ,T [--inject FAULT@US] [--bus-timing]]
 //
 // The image comes as the build's .uf2. Each block is checked as the RP2040 bootrom would take it (UF2's magic
@@ -20,7 +20,11 @@
 // reset), as the AVR harness injects them (tests/export/simbus). UART0's bytes and the CDC's are collected until
 // TEXT has been seen in either, N us of emulated time (--us) or N ms of host time (--ms) pass. Prints one JSON
 // line: {"boot2_crc_ok", "blocks", "uart", "usb", "usb_hex" (with --hex), "usb_connected", "nanos"}; exit 2 on a
-// refused image.
+// refused image. --interactive instead takes commands on stdin, one a line, and runs the emulation only when asked,
+// so that a host program can be the board's USB host (tests/export/test_rp2040_harness.py's HarnessTransport):
+//   run US      run US microseconds of emulated time; answers with the hex of what the device sent over USB meanwhile
+//   send HEX    bytes for the host to send the device (once it is connected)
+//   quit
 import { ConsoleLogger, LogLevel, Simulator, USBCDC } from 'rp2040js';
 import { execFileSync, spawn } from 'child_process';
 import { closeSync, mkdtempSync, openSync, readFileSync, readSync, rmSync, writeSync } from 'fs';
@@ -164,17 +168,46 @@ mcu.uart[0].onByte = (b) => {
   seen();
 };
 const cdc = new USBCDC(mcu.usbCtrl);
+let toSend = [...Buffer.from(send, 'latin1')];
 cdc.onDeviceConnected = () => {
   usb_connected = true;
-  for (const b of Buffer.from(send, 'latin1')) cdc.sendSerialByte(b);
+  for (const b of toSend) cdc.sendSerialByte(b);
+  toSend = [];
 };
 cdc.onSerialData = (buffer) => {
   usb += Buffer.from(buffer).toString('latin1');
-  if (args.includes('--hex')) usb_hex += Buffer.from(buffer).toString('hex');
+  if (args.includes('--hex') || args.includes('--interactive')) usb_hex += Buffer.from(buffer).toString('hex');
   seen();
 };
 if (args.includes('--us')) sim.clock.createAlarm(() => setImmediate(done)).schedule(Number(option('--us')) * 1000);
 mcu.core.VTOR = FLASH + 0x100;
 mcu.core.reset();
-sim.execute();
-setTimeout(done, ms);
+if (args.includes('--interactive')) {
+  const { createInterface } = await import('readline');
+  let sent = 0; // usb_hex's characters already answered
+  const runFor = (us) => { // Simulator.execute's loop, bounded by emulated time
+    const target = sim.clock.nanos + us * 1000;
+    while (sim.clock.nanos < target) {
+      if (mcu.core.waiting) sim.clock.tick(Math.min(sim.clock.nanosToNextAlarm, target - sim.clock.nanos));
+      else sim.clock.tick(mcu.core.executeInstruction() * 8); // 125 MHz
+    }
+  };
+  createInterface({ input: process.stdin }).on('line', (line) => {
+    const [command, value] = line.trim().split(' ');
+    if (command === 'run') {
+      runFor(Number(value));
+      process.stdout.write(usb_hex.slice(sent) + '\n');
+      sent = usb_hex.length;
+    } else if (command === 'send') {
+      const bytes = [...Buffer.from(value || '', 'hex')];
+      if (usb_connected) for (const b of bytes) cdc.sendSerialByte(b);
+      else toSend.push(...bytes);
+    } else {
+      if (mlx) mlx.close();
+      process.exit(0);
+    }
+  });
+} else {
+  sim.execute();
+  setTimeout(done, ms);
+}
