@@ -1,12 +1,14 @@
 // Runs an RP2040 image on rp2040js (tests/firmware_sim/rp2040):
-//   node run.mjs IMAGE.uf2 [--until TEXT] [--ms N] [--us N] [--send TEXT] [--interactive]
+//   node run.mjs IMAGE.uf2 [--boot2] [--until TEXT] [--ms N] [--us N] [--send TEXT] [--interactive]
 //                [--mlx MLXD --addr A --field BX,BY,BZ,T [--inject FAULT@US] [--bus-timing]]
 //
 // The image comes as the build's .uf2. Each block is checked as the RP2040 bootrom would take it (UF2's magic
 // numbers, the RP2040 family 0xE48BFF56, a 256-byte payload on a page in flash) and written into the emulated flash;
 // boot2's checksum (CRC-32/MPEG-2 of its first 252 bytes, little-endian after them) is checked here too, in a second
 // implementation beside magfab's, because rp2040js has no bootrom to check it: the emulated core starts at the
-// vector table after boot2 (0x10000100) directly. rp2040js's USB CDC host is attached: it enumerates a device the
+// vector table after boot2 (0x10000100) directly, or with --boot2 as the bootrom starts it, boot2 copied to the top
+// of SRAM (0x20041f00) and run there (rp2040js's SSI takes boot2's settings without acting on them: this proves
+// boot2 fits, runs where the bootrom puts it and starts the image, not that a flash chip answers). rp2040js's USB CDC host is attached: it enumerates a device the
 // image brings up and takes what the device sends on its bulk IN endpoint; --send's TEXT goes to the device once it
 // is connected. With --mlx, the build's MLX90393 model (mlxd, compiled from its sim_mlx90393.c) answers at address A
 // on I2C0, serving the field BX, BY, BZ (uT) at T (C): each callback of rp2040js's I2C asks it synchronously over a
@@ -182,6 +184,13 @@ cdc.onSerialData = (buffer) => {
 if (args.includes('--us')) sim.clock.createAlarm(() => setImmediate(done)).schedule(Number(option('--us')) * 1000);
 mcu.core.VTOR = FLASH + 0x100;
 mcu.core.reset();
+if (args.includes('--boot2')) {
+  mcu.core.VTOR = 0;
+  mcu.sram.set(mcu.flash.subarray(0, 256), 0x41f00);
+  mcu.core.SP = 0x20042000;
+  mcu.core.LR = 0;
+  mcu.core.PC = 0x20041f00;
+}
 if (args.includes('--interactive')) {
   const { createInterface } = await import('readline');
   let sent = 0; // usb_hex's characters already answered
