@@ -99,7 +99,7 @@ def test_a_cdc_device_enumerates_and_echoes_on_the_emulated_usb(smoke, tmp_path)
     line sent to it, longer than a packet, comes back in capitals, whole and in order."""
     node = smoke[0]
     uf2 = tmp_path / "usb.uf2"
-    uf2.write_bytes(write(_build(tmp_path, "usb_smoke.c", "usb_cdc.c")))
+    uf2.write_bytes(write(_build(tmp_path, "usb_smoke.c", "usb_cdc.c", "clocks.c")))
     line = "ping " + "abcdefghij" * 10 + "\n"
     run = _run(node, uf2, "--send", line, "--until", line.upper(), "--ms", "30000")
     assert run.returncode == 0, run.stdout + run.stderr
@@ -129,7 +129,8 @@ def _readout_uf2(src: Path, out: Path) -> Path:
                     "-Wextra", "-Werror", "-ffunction-sections", "-fdata-sections", "-nostartfiles",
                     "--specs=nano.specs", "--specs=nosys.specs", "-Wl,--gc-sections", "-T", str(HARNESS / "smoke.ld"),
                     f"-I{src}", f"-I{HARNESS}", "-o", str(elf), str(HARNESS / "start.c"), str(HARNESS / "mf_rp2040.c"),
-                    str(HARNESS / "usb_cdc.c"), *(str(src / name) for name in CORE), "-lm"], check=True)
+                    str(HARNESS / "usb_cdc.c"), str(HARNESS / "clocks.c"), *(str(src / name) for name in CORE), "-lm"],
+                   check=True)
     binary = out / "readout.bin"
     subprocess.run([require_tool("arm-none-eabi-objcopy"), "-O", "binary", str(elf), str(binary)], check=True)
     uf2 = out / "readout.uf2"

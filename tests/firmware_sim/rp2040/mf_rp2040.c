@@ -7,13 +7,14 @@
  *   next transfer before its time once the bus took time: every recovery after an address NACK failed); every wait
  *   is bounded by the record's I2C timeout.
  *   The serial link is the USB CDC-ACM device (usb_cdc.c), polled between the core's steps.
- * Not yet here: the crystal and PLLs (the emulator runs at 125 MHz whatever they say), the pins' function select
- * and pads, the asynchronous transfers (i2c_begin and the rest: 0, so every transfer waits), the flash record. */
+ * The clocks come from clocks.c (the crystal, 125 MHz, USB's 48 MHz, the timer's 1 us tick).
+ * Not yet here: the pins' function select and pads, the asynchronous transfers (i2c_begin and the rest: 0, so every transfer waits), the flash record. */
 #include <stdint.h>
 
 #include "mf_app.h"
 #include "mf_calib.h"
 #include "mf_config.h"
+#include "clocks.h"
 #include "mf_errors.h"
 #include "usb_cdc.h"
 
@@ -171,6 +172,7 @@ static const mf_hal_t rp_hal = {
 static mf_app_t app;
 
 int main(void) {
+    (void)clocks_init(); /* a failure leaves the ring oscillator: no USB then, and the host sees no board */
     REG(RESETS_CLR) = RESET_I2C0 | RESET_TIMER;
     while ((REG(RESET_DONE) & (RESET_I2C0 | RESET_TIMER)) != (RESET_I2C0 | RESET_TIMER)) {
     }

@@ -2,9 +2,11 @@
  * enumerates on rp2040js's host, announces itself, and echoes each line it receives in capitals. */
 #include <stdint.h>
 
+#include "clocks.h"
 #include "usb_cdc.h"
 
 int main(void) {
+    if (clocks_init() != 0) return 1;
     cdc_init();
     int announced = 0;
     for (;;) {
