@@ -85,7 +85,7 @@ int clocks_init(void) {
     if (pll_start(PLL_USB, RESET_PLL_USB, 100u, 5u, 5u)) return -1; /* VCO 1200 MHz, 48 MHz out */
 
     REG(CLK_SYS_DIV) = 1u << 8;
-    REG(CLK_SYS_CTRL) = 0u << 5;                             /* AUXSRC pll_sys, while the glitchless mux holds clk_ref */
+    REG(CLK_SYS_CTRL) = 0u << 5;                             /* AUXSRC pll_sys; the glitchless mux holds clk_ref */
     REG(CLK_SYS_CTRL) = (0u << 5) | 1u;                      /* SRC aux */
     if (wait_set(CLK_SYS_SELECTED, 0x3u, 0x2u)) return -1;
     REG(CLK_USB_DIV) = 1u << 8;

@@ -8,7 +8,8 @@
  *   is bounded by the record's I2C timeout.
  *   The serial link is the USB CDC-ACM device (usb_cdc.c), polled between the core's steps.
  * The clocks come from clocks.c (the crystal, 125 MHz, USB's 48 MHz, the timer's 1 us tick).
- * Not yet here: the pins' function select and pads, the asynchronous transfers (i2c_begin and the rest: 0, so every transfer waits), the flash record. */
+ * Not yet here: the pins' function select and pads, the asynchronous transfers (i2c_begin and the rest: 0, so every
+ * transfer waits), the flash record. */
 #include <stdint.h>
 
 #include "mf_app.h"
@@ -113,7 +114,8 @@ static int rp_i2c_write(void *ctx, uint8_t addr7, const uint8_t *data, uint8_t l
     for (uint8_t i = 0; i < len; i++) {
         while (!(REG(IC_STATUS) & STATUS_TFNF)) {
         }
-        REG(IC_DATA_CMD) = data[i] | (i == 0u && i2c_open ? CMD_RESTART : 0u) | (i + 1u == len && stop ? CMD_STOP : 0u);
+        REG(IC_DATA_CMD) = data[i] | (i == 0u && i2c_open ? CMD_RESTART : 0u)
+                           | (i + 1u == len && stop ? CMD_STOP : 0u);
     }
     int rc = i2c_finish(start, stop);
     i2c_open = (uint8_t)(rc == MF_OK && !stop);

@@ -8,9 +8,9 @@
 // implementation beside magfab's, because rp2040js has no bootrom to check it: the emulated core starts at the
 // vector table after boot2 (0x10000100) directly, or with --boot2 as the bootrom starts it, boot2 copied to the top
 // of SRAM (0x20041f00) and run there (rp2040js's SSI takes boot2's settings without acting on them: this proves
-// boot2 fits, runs where the bootrom puts it and starts the image, not that a flash chip answers). rp2040js's USB CDC host is attached: it enumerates a device the
-// image brings up and takes what the device sends on its bulk IN endpoint; --send's TEXT goes to the device once it
-// is connected. With --mlx, the build's MLX90393 model (mlxd, compiled from its sim_mlx90393.c) answers at address A
+// boot2 fits, runs where the bootrom puts it and starts the image, not that a flash chip answers). rp2040js's USB
+// CDC host is attached: it enumerates a device the image brings up and takes what the device sends on its bulk IN
+// endpoint; --send's TEXT goes to the device once it is connected. With --mlx, the build's MLX90393 model (mlxd, compiled from its sim_mlx90393.c) answers at address A
 // on I2C0, serving the field BX, BY, BZ (uT) at T (C): each callback of rp2040js's I2C asks it synchronously over a
 // FIFO pair (a write is handed over whole at its STOP or repeated START; a read's bytes are fixed at its address
 // phase, as the AVR harness does). The bus takes no time, or with --bus-timing the time it takes at the SCL clock the
@@ -73,7 +73,8 @@ for (let i = 0; i < blocks; i++) {
   mcu.flash.set(data.subarray(at + 32, at + 32 + 256), addr - FLASH);
 }
 const boot2 = mcu.flash.subarray(0, 256);
-const boot2_crc_ok = crc32mpeg2(boot2.subarray(0, 252)) === (boot2[252] | (boot2[253] << 8) | (boot2[254] << 16) | (boot2[255] << 24)) >>> 0;
+const stored = (boot2[252] | (boot2[253] << 8) | (boot2[254] << 16) | (boot2[255] << 24)) >>> 0;
+const boot2_crc_ok = crc32mpeg2(boot2.subarray(0, 252)) === stored;
 if (!boot2_crc_ok) refuse('boot2 checksum');
 
 let mlx = null;

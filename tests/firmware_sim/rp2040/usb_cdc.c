@@ -94,6 +94,7 @@ static void ep0_send(const uint8_t *p, uint32_t n, uint32_t asked) {
     ep0_data = p;
     ep0_left = n < asked ? n : asked;
     ep0_pid = 1u; /* the first packet after SETUP is DATA1 */
+    if (ep0_left) arm(BUF_CTRL_OUT(0), BUF_DATA1); /* a data stage IN: the host's zero-length status OUT taken */
     ep0_next();
 }
 
@@ -172,7 +173,8 @@ void cdc_poll(void) {
     if (done & (1u << 2)) ep1_busy = 0; /* EP1 IN: the packet went */
     if (done & (1u << 5)) {             /* EP2 OUT: the host's bytes, into the receive ring (armed only with room) */
         uint32_t n = REG(BUF_CTRL_OUT(2)) & 0x3ffu;
-        for (uint32_t i = 0; i < n; i++) rx_ring[rx_head++ & (RING - 1u)] = ((volatile uint8_t *)(DPRAM + EP2_BUF))[i];
+        volatile uint8_t *buf = (volatile uint8_t *)(DPRAM + EP2_BUF);
+        for (uint32_t i = 0; i < n; i++) rx_ring[rx_head++ & (RING - 1u)] = buf[i];
         ep2_armed = 0;
     }
     if (!configured) return;
@@ -183,7 +185,8 @@ void cdc_poll(void) {
     }
     if (!ep1_busy && tx_head != tx_tail) { /* the next packet: up to 64 queued bytes */
         uint32_t n = 0;
-        for (; n < 64u && tx_tail != tx_head; n++) ((volatile uint8_t *)(DPRAM + EP1_BUF))[n] = tx_ring[tx_tail++ & (RING - 1u)];
+        volatile uint8_t *buf = (volatile uint8_t *)(DPRAM + EP1_BUF);
+        for (; n < 64u && tx_tail != tx_head; n++) buf[n] = tx_ring[tx_tail++ & (RING - 1u)];
         ep1_busy = 1;
         arm(BUF_CTRL_IN(1), n | BUF_FULL | (ep1_pid ? BUF_DATA1 : 0u));
         ep1_pid ^= 1u;
