@@ -10,8 +10,8 @@
 // of SRAM (0x20041f00) and run there (rp2040js's SSI takes boot2's settings without acting on them: this proves
 // boot2 fits, runs where the bootrom puts it and starts the image, not that a flash chip answers). rp2040js's USB
 // CDC host is attached: it enumerates a device the image brings up and takes what the device sends on its bulk IN
-// endpoint; --send's TEXT goes to the device once it is connected. With --mlx, the build's MLX90393 model (mlxd, compiled from its sim_mlx90393.c) answers at address A
-// on I2C0, serving the field BX, BY, BZ (uT) at T (C): each callback of rp2040js's I2C asks it synchronously over a
+// endpoint; --send's TEXT goes to the device once it is connected. With --mlx, the build's MLX90393 model (mlxd,
+// compiled from its sim_mlx90393.c) answers at address A on I2C0, serving the field BX, BY, BZ (uT) at T (C): each callback of rp2040js's I2C asks it synchronously over a
 // FIFO pair (a write is handed over whole at its STOP or repeated START; a read's bytes are fixed at its address
 // phase, as the AVR harness does). The bus takes no time, or with --bus-timing the time it takes at the SCL clock the
 // image sets (IC_*_SCL_HCNT/LCNT at 125 MHz): each step's completion is held, on the emulated clock, for 9 SCL periods
