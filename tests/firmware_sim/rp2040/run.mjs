@@ -1,29 +1,29 @@
 // Runs an RP2040 image on rp2040js (tests/firmware_sim/rp2040):
-//   node run.mjs IMAGE.uf2 [--boot2] [--until TEXT] [--ms N] [--us N] [--send TEXT] [--interactive]
+//   node run.mjs IMAGE.uf2 [--boot2] [--until TEXT] [--ms N] [--us N] [--send TEXT] [--hex] [--interactive]
 //                [--mlx MLXD --addr A --field BX,BY,BZ,T [--inject FAULT@US] [--bus-timing]]
 //
-// The image comes as the build's .uf2. Each block is checked as the RP2040 bootrom would take it (UF2's magic
-// numbers, the RP2040 family 0xE48BFF56, a 256-byte payload on a page in flash) and written into the emulated flash;
-// boot2's checksum (CRC-32/MPEG-2 of its first 252 bytes, little-endian after them) is checked here too, in a second
-// implementation beside magfab's, because rp2040js has no bootrom to check it: the emulated core starts at the
-// vector table after boot2 (0x10000100) directly, or with --boot2 as the bootrom starts it, boot2 copied to the top
-// of SRAM (0x20041f00) and run there (rp2040js's SSI takes boot2's settings without acting on them: this proves
-// boot2 fits, runs where the bootrom puts it and starts the image, not that a flash chip answers). rp2040js's USB
-// CDC host is attached: it enumerates a device the image brings up and takes what the device sends on its bulk IN
-// endpoint; --send's TEXT goes to the device once it is connected. With --mlx, the build's MLX90393 model (mlxd,
-// compiled from its sim_mlx90393.c) answers at address A on I2C0, serving the field BX, BY, BZ (uT) at T (C): each callback of rp2040js's I2C asks it synchronously over a
-// FIFO pair (a write is handed over whole at its STOP or repeated START; a read's bytes are fixed at its address
-// phase, as the AVR harness does). The bus takes no time, or with --bus-timing the time it takes at the SCL clock the
-// image sets (IC_*_SCL_HCNT/LCNT at 125 MHz): each step's completion is held, on the emulated clock, for 9 SCL periods
-// for an address or data byte with its ACK bit, one for a START, two for a STOP and the bus-free time after it (as
-// the AVR harness times simavr's TWI). --inject FAULT@US injects a fault at US microseconds of
-// emulated time: on the bus, nack-addr (the next address phase), nack-data (the next byte written) or all-ff (the
-// next read's bytes); inside the chip, chip:NAME (NAME a sim_fault of sim_mlx90393.h: error, short, trunc, stuck,
-// reset), as the AVR harness injects them (tests/export/simbus). UART0's bytes and the CDC's are collected until
-// TEXT has been seen in either, N us of emulated time (--us) or N ms of host time (--ms) pass. Prints one JSON
-// line: {"boot2_crc_ok", "blocks", "uart", "usb", "usb_hex" (with --hex), "usb_connected", "nanos"}; exit 2 on a
-// refused image. --interactive instead takes commands on stdin, one a line, and runs the emulation only when asked,
-// so that a host program can be the board's USB host (tests/export/test_rp2040_harness.py's HarnessTransport):
+// The image comes as the build's .uf2. Each block is checked as the RP2040 bootrom would take it (UF2's magic numbers,
+// the RP2040 family 0xE48BFF56, a 256-byte payload on a page in flash) and written into the emulated flash; boot2's
+// checksum (CRC-32/MPEG-2 of its first 252 bytes, little-endian after them) is checked here too, in a second
+// implementation beside magfab's, because rp2040js has no bootrom to check it: the emulated core starts at the vector
+// table after boot2 (0x10000100) directly, or with --boot2 as the bootrom starts it, boot2 copied to the top of SRAM
+// (0x20041f00) and run there (rp2040js's SSI takes boot2's settings without acting on them: this proves boot2 fits,
+// runs where the bootrom puts it and starts the image, not that a flash chip answers). rp2040js's USB CDC host is
+// attached: it enumerates a device the image brings up and takes what the device sends on its bulk IN endpoint;
+// --send's TEXT goes to the device once it is connected. With --mlx, the build's MLX90393 model (mlxd, compiled from
+// its sim_mlx90393.c) answers at address A on I2C0, serving the field BX, BY, BZ (uT) at T (C): each callback of
+// rp2040js's I2C asks it synchronously over a FIFO pair (a write is handed over whole at its STOP or repeated START; a
+// read's bytes are fixed at its address phase, as the AVR harness does). The bus takes no time, or with --bus-timing
+// the time it takes at the SCL clock the image sets (IC_*_SCL_HCNT/LCNT at 125 MHz): each step's completion is held, on
+// the emulated clock, for 9 SCL periods for an address or data byte with its ACK bit, one for a START, two for a STOP
+// and the bus-free time after it (as the AVR harness times simavr's TWI). --inject FAULT@US injects a fault at US
+// microseconds of emulated time: on the bus, nack-addr (the next address phase), nack-data (the next byte written) or
+// all-ff (the next read's bytes); inside the chip, chip:NAME (NAME a sim_fault of sim_mlx90393.h: error, short, trunc,
+// stuck, reset), as the AVR harness injects them (tests/export/simbus). UART0's bytes and the CDC's are collected until
+// TEXT has been seen in either, N us of emulated time (--us) or N ms of host time (--ms) pass. Prints one JSON line:
+// {"boot2_crc_ok", "blocks", "uart", "usb", "usb_hex" (with --hex), "usb_connected", "nanos"}; exit 2 on a refused
+// image. --interactive instead takes commands on stdin, one a line, and runs the emulation only when asked, so that a
+// host program can be the board's USB host (tests/export/test_rp2040_harness.py's HarnessTransport):
 //   run US      run US microseconds of emulated time; answers with the hex of what the device sent over USB meanwhile
 //   send HEX    bytes for the host to send the device (once it is connected)
 //   quit
