@@ -6,6 +6,7 @@ is wrong."""
 
 from __future__ import annotations
 
+import bisect
 import functools
 import importlib
 import json
@@ -349,3 +350,44 @@ def test_the_readout_package_reads_the_emulated_board(readout_image):
             del sys.modules[name]
     assert answer.spec_name == info["spec_name"] and problems == [], problems
     assert len(samples) == 50 and _wrong(readout_image, samples, info) == []
+
+
+#: The hardware layer's functions that wait (for USB, the bus, a delay): a sample's cycles outside them are the work.
+WAITING = {"cdc_poll", "arm", "rp_i2c_read", "rp_i2c_write", "rp_delay_us", "i2c_finish", "i2c_aborted", "wait_set"}
+
+
+def test_the_cycle_budget_leaves_the_core_most_of_a_sample(readout_image):
+    """The CPU's cycles over 100 samples at MagOne's settings on the timed bus (run.mjs's 'profile': cycles by
+    instruction address, mapped to the image's functions with arm-none-eabi-nm): a sample's period is 230,000 cycles
+    at 125 MHz, and the work outside the hardware layer's waits (the driver, the calibration in soft float, the frame
+    and its CRC) takes under a fifth of it; the closing note gives the figures."""
+    node, uf2, mlxd, out = readout_image
+    info = json.loads((out / "readout" / "src" / "magfab_readout" / "build.json").read_text())
+    transport = HarnessTransport(node, uf2, "--mlx", str(mlxd), "--addr", str(info["image_settings"]["i2c_address"]),
+                                 "--field", ",".join(str(b) for b in (*FIELD_UT, 25.0)), "--bus-timing")
+    try:
+        transport._ask("run 50000")
+        transport._ask("profile")
+        transport._ask("run 184000")  # 100 conversions of 1840 us
+        assert transport.proc.stdin is not None and transport.proc.stdout is not None
+        transport.proc.stdin.write("profile\n")
+        transport.proc.stdin.flush()
+        cycles = {int(pc) & ~1: n for pc, n in json.loads(transport.proc.stdout.readline()).items()}
+    finally:
+        transport.close()
+    nm = subprocess.run([require_tool("arm-none-eabi-nm"), "-S", "--defined-only", "-n", str(uf2.with_suffix(".elf"))],
+                        capture_output=True, text=True, check=True).stdout
+    functions = sorted((int(a, 16), int(size, 16), name) for a, size, kind, name in
+                       (line.split() for line in nm.splitlines() if len(line.split()) == 4) if kind in "tTwW")
+    starts = [f[0] for f in functions]
+    by_function: dict[str, int] = {}
+    for pc, n in cycles.items():
+        i = bisect.bisect_right(starts, pc) - 1
+        name = functions[i][2] if i >= 0 and pc < functions[i][0] + functions[i][1] else "?"
+        by_function[name] = by_function.get(name, 0) + n
+    total = sum(by_function.values())
+    work = sum(n for name, n in by_function.items() if name not in WAITING)
+    print(f"cycles per sample: {total / 100:.0f}, of which the work {work / 100:.0f} ({work / total:.1%}); "
+          + ", ".join(f"{k} {v / 100:.0f}" for k, v in sorted(by_function.items(), key=lambda kv: -kv[1])[:8]))
+    assert total == pytest.approx(100 * 230_000, rel=1e-3)
+    assert "?" not in by_function and work < 0.2 * total

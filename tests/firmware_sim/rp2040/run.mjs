@@ -26,6 +26,7 @@
 // host program can be the board's USB host (tests/export/test_rp2040_harness.py's HarnessTransport):
 //   run US      run US microseconds of emulated time; answers with the hex of what the device sent over USB meanwhile
 //   send HEX    bytes for the host to send the device (once it is connected)
+//   profile     start counting the CPU's cycles by instruction address; the next 'profile' answers with them (JSON)
 //   quit
 import { ConsoleLogger, LogLevel, Simulator, USBCDC } from 'rp2040js';
 import { execFileSync, spawn } from 'child_process';
@@ -195,11 +196,19 @@ if (args.includes('--boot2')) {
 if (args.includes('--interactive')) {
   const { createInterface } = await import('readline');
   let sent = 0; // usb_hex's characters already answered
+  const cycles = new Map(); // with 'profile': cycles by the address of the instruction that took them
+  let profiling = false;
   const runFor = (us) => { // Simulator.execute's loop, bounded by emulated time
     const target = sim.clock.nanos + us * 1000;
     while (sim.clock.nanos < target) {
-      if (mcu.core.waiting) sim.clock.tick(Math.min(sim.clock.nanosToNextAlarm, target - sim.clock.nanos));
-      else sim.clock.tick(mcu.core.executeInstruction() * 8); // 125 MHz
+      if (mcu.core.waiting) {
+        sim.clock.tick(Math.min(sim.clock.nanosToNextAlarm, target - sim.clock.nanos));
+        continue;
+      }
+      const pc = mcu.core.PC;
+      const n = mcu.core.executeInstruction();
+      if (profiling) cycles.set(pc, (cycles.get(pc) || 0) + n);
+      sim.clock.tick(n * 8); // 125 MHz
     }
   };
   createInterface({ input: process.stdin }).on('line', (line) => {
@@ -208,6 +217,10 @@ if (args.includes('--interactive')) {
       runFor(Number(value));
       process.stdout.write(usb_hex.slice(sent) + '\n');
       sent = usb_hex.length;
+    } else if (command === 'profile') { // from now on, cycles by instruction address; 'profile' again reports them
+      if (profiling) process.stdout.write(JSON.stringify(Object.fromEntries(cycles)) + '\n');
+      profiling = !profiling;
+      cycles.clear();
     } else if (command === 'send') {
       const bytes = [...Buffer.from(value || '', 'hex')];
       if (usb_connected) for (const b of bytes) cdc.sendSerialByte(b);
