@@ -411,8 +411,9 @@ class Space:
             return a + np.clip(x, 0.0, 1.0) * (b - a)
 
         kinds = np.unique(which)  # each (magnet, tip) the designs use: its figures, then each design's
-        per = np.array([[*self._of(*combos[int(k)]), *(self.diameter_range(*combos[int(k)])
-                                                       or span_of(v.elastomer_diameter_mm))] for k in kinds])
+        span = span_of(v.elastomer_diameter_mm)
+        per = np.array([[*self._of(magnet, tip), *(self.diameter_range(magnet, tip) or span)]
+                        for magnet, tip in (combos[int(k)] for k in kinds)])
         r_m, h_m, floor, hemi, d_lo, d_hi = per[np.searchsorted(kinds, which)].T
         hemi = hemi.astype(bool)
         with np.errstate(invalid="ignore"):  # no height limit less an infinite cover: not a number (range_within)

@@ -7,18 +7,21 @@ is wrong."""
 from __future__ import annotations
 
 import bisect
+import contextlib
 import functools
 import importlib
 import json
 import subprocess
 import sys
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 from conftest import require_node_package, require_tool
 from readout_support import ref_forces
 
+from magfab.export import firmware
 from magfab.formats.uf2 import boot2_sealed, read, seal_boot2, write
 from magfab.readout.src.magfab_readout import calibration_json
 from magfab.readout.src.magfab_readout.float32_bound import float32_error_N
@@ -31,28 +34,32 @@ def _run(node: str, uf2: Path, *args: str) -> subprocess.CompletedProcess:
                           timeout=60, cwd=HARNESS)
 
 
+ARM = ("-mcpu=cortex-m0plus", "-mthumb", "-Os", "-Wall", "-Wextra", "-Werror")
+
+
+def _compile(out: Path, name: str, linker: str, sources: list[Path], *flags: str) -> Path:
+    """``sources`` built for the Cortex-M0+ with ``linker`` (a file of the harness) into ``out``/``name``.bin: its
+    path (``name``.elf beside it, for arm-none-eabi-nm)."""
+    elf = out / f"{name}.elf"
+    subprocess.run([require_tool("arm-none-eabi-gcc"), *ARM, "-T", str(HARNESS / linker), "-o", str(elf),
+                    *map(str, sources), *flags], check=True)  # flags last: a library (-lm) follows the objects
+    binary = elf.with_suffix(".bin")
+    subprocess.run([require_tool("arm-none-eabi-objcopy"), "-O", "binary", str(elf), str(binary)], check=True)
+    return binary
+
+
 @functools.cache
 def _boot2() -> bytes:
     """boot2.c built alone (position-independent, at most 252 bytes) and sealed with its checksum."""
     out = Path(tempfile.mkdtemp(prefix="boot2-"))
-    elf, binary = out / "boot2.elf", out / "boot2.bin"
-    subprocess.run([require_tool("arm-none-eabi-gcc"), "-mcpu=cortex-m0plus", "-mthumb", "-Os", "-ffreestanding",
-                    "-nostdlib", "-fPIC", "-Wall", "-Wextra", "-Werror", "-T", str(HARNESS / "boot2.ld"), "-o",
-                    str(elf), str(HARNESS / "boot2.c")], check=True)
-    subprocess.run([require_tool("arm-none-eabi-objcopy"), "-O", "binary", str(elf), str(binary)], check=True)
-    return seal_boot2(binary.read_bytes())
+    return seal_boot2(_compile(out, "boot2", "boot2.ld", [HARNESS / "boot2.c"], "-ffreestanding", "-nostdlib",
+                               "-fPIC").read_bytes())
 
 
 def _build(out: Path, *sources: str) -> bytes:
     """The flash contents of one harness image: boot2.c's boot2, then ``sources`` built for the Cortex-M0+."""
-    gcc = require_tool("arm-none-eabi-gcc")
-    objcopy = require_tool("arm-none-eabi-objcopy")
-    elf, binary = out / f"{sources[0]}.elf", out / f"{sources[0]}.bin"
-    subprocess.run([gcc, "-mcpu=cortex-m0plus", "-mthumb", "-Os", "-ffreestanding", "-nostdlib", "-Wall", "-Wextra",
-                    "-Werror", "-T", str(HARNESS / "smoke.ld"), "-o", str(elf),
-                    *(str(HARNESS / s) for s in ("start.c", *sources))],
-                   check=True)
-    subprocess.run([objcopy, "-O", "binary", str(elf), str(binary)], check=True)
+    binary = _compile(out, Path(sources[0]).stem, "smoke.ld", [HARNESS / s for s in ("start.c", *sources)],
+                      "-ffreestanding", "-nostdlib")
     return _boot2() + binary.read_bytes()
 
 
@@ -118,22 +125,16 @@ def test_the_harness_refuses_what_the_bootrom_would(smoke, tmp_path, change, ref
     assert run.returncode == 2 and json.loads(run.stdout) == {"refused": refusal}
 
 
-CORE = ("mlx90393.c", "mf_sample.c", "mf_nv.c", "mf_calib.c", "mf_frame.c", "mf_app.c", "mf_array.c", "mf_reference.c")
 FIELD_UT = (1200.0, -800.0, 20000.0)  # inside MagOne's calibrated region (as tests/export/test_simbus.py)
 
 
 def _readout_uf2(src: Path, out: Path) -> Path:
-    """The readout core in ``src`` (a build's firmware/magfab_readout/src) on mf_rp2040.c and usb_cdc.c, as a .uf2
-    behind boot2.c's boot2."""
-    elf = out / "readout.elf"
-    subprocess.run([require_tool("arm-none-eabi-gcc"), "-mcpu=cortex-m0plus", "-mthumb", "-Os", "-std=gnu99", "-Wall",
-                    "-Wextra", "-Werror", "-ffunction-sections", "-fdata-sections", "-nostartfiles",
-                    "--specs=nano.specs", "--specs=nosys.specs", "-Wl,--gc-sections", "-T", str(HARNESS / "smoke.ld"),
-                    f"-I{src}", f"-I{HARNESS}", "-o", str(elf), str(HARNESS / "start.c"), str(HARNESS / "mf_rp2040.c"),
-                    str(HARNESS / "usb_cdc.c"), str(HARNESS / "clocks.c"), *(str(src / name) for name in CORE), "-lm"],
-                   check=True)
-    binary = out / "readout.bin"
-    subprocess.run([require_tool("arm-none-eabi-objcopy"), "-O", "binary", str(elf), str(binary)], check=True)
+    """The readout core in ``src`` (a build's firmware/magfab_readout/src: firmware.CORE_SOURCES) on mf_rp2040.c
+    and usb_cdc.c, as a .uf2 behind boot2.c's boot2 (readout.elf beside it)."""
+    binary = _compile(out, "readout", "smoke.ld", [HARNESS / "start.c", HARNESS / "mf_rp2040.c", HARNESS / "usb_cdc.c",
+                                                   HARNESS / "clocks.c", *(src / n for n in firmware.CORE_SOURCES)],
+                      "-std=gnu99", "-ffunction-sections", "-fdata-sections", "-nostartfiles", "--specs=nano.specs",
+                      "--specs=nosys.specs", "-Wl,--gc-sections", f"-I{src}", f"-I{HARNESS}", "-lm")
     uf2 = out / "readout.uf2"
     uf2.write_bytes(write(_boot2() + binary.read_bytes()))
     return uf2
@@ -154,33 +155,49 @@ def readout_image(smoke, default_build, tmp_path_factory):
     return node, _readout_uf2(fw / "magfab_readout" / "src", out), mlxd, default_build.out_dir
 
 
+@contextlib.contextmanager
+def _readout_package(out: Path) -> Iterator[str]:
+    """The build's readout package (``out``/readout/src) importable as ``magfab_readout`` inside the block, and
+    forgotten after it (another build's may follow)."""
+    readout = str(out / "readout" / "src")
+    sys.path.insert(0, readout)
+    try:
+        yield "magfab_readout"
+    finally:
+        sys.path.remove(readout)
+        for name in [n for n in sys.modules if n == "magfab_readout" or n.startswith("magfab_readout.")]:
+            del sys.modules[name]
+
+
+def _model(readout_image, addr_offset: int = 0) -> tuple[list[str], dict]:
+    """The harness's arguments for the build's MLX90393 model at the build's address (plus ``addr_offset``) serving
+    FIELD_UT at 25 C, and the build's build.json."""
+    _, _, mlxd, out = readout_image
+    info = json.loads((out / "readout" / "src" / "magfab_readout" / "build.json").read_text())
+    return ["--mlx", str(mlxd), "--addr", str(info["image_settings"]["i2c_address"] + addr_offset),
+            "--field", ",".join(str(b) for b in (*FIELD_UT, 25.0))], info
+
+
 def _stream(readout_image, addr_offset: int = 0, inject: str = "", us: int = 250_000,
             timed: bool = False, send: str = "") -> tuple[list, list, dict]:
     """``us`` of emulated time of the readout image against the model at the build's address (plus ``addr_offset``),
     ``inject`` the harness's --inject (FAULT@US), ``timed`` its --bus-timing, ``send`` what the host sends once the
     device is connected: (the samples the build's readout package decodes from what came over USB and every other
     item it decodes, build.json)."""
-    node, uf2, mlxd, out = readout_image
-    readout = out / "readout" / "src"
-    info = json.loads((readout / "magfab_readout" / "build.json").read_text())
-    run = _run(node, uf2, "--mlx", str(mlxd), "--addr", str(info["image_settings"]["i2c_address"] + addr_offset),
-               "--field", ",".join(str(b) for b in (*FIELD_UT, 25.0)), "--hex", "--us", str(us), "--ms", "50000",
+    node, uf2, _, out = readout_image
+    model, info = _model(readout_image, addr_offset)
+    run = _run(node, uf2, *model, "--hex", "--us", str(us), "--ms", "50000",
                *(("--inject", inject) if inject else ()), *(("--bus-timing",) if timed else ()),
                *(("--send", send) if send else ()))
     assert run.returncode == 0, run.stdout + run.stderr
     report = json.loads(run.stdout)
     assert report["usb_connected"]
-    sys.path.insert(0, str(readout))
-    try:
-        frames = importlib.import_module("magfab_readout.frames")
+    with _readout_package(out) as package:
+        frames = importlib.import_module(f"{package}.frames")
         decoder = frames.Decoder()
         items = list(decoder.feed(bytes.fromhex(report["usb_hex"])))
         samples = [s for s in items if isinstance(s, frames.Sample)]
         others = [s for s in items if not isinstance(s, frames.Sample)]
-    finally:
-        sys.path.remove(str(readout))
-        for name in [n for n in sys.modules if n == "magfab_readout" or n.startswith("magfab_readout.")]:
-            del sys.modules[name]
     assert decoder.stats.crc_errors == 0 and decoder.stats.lost == 0
     return samples, others, info
 
@@ -258,7 +275,6 @@ def test_the_rate_on_a_timed_bus_is_every_conversion_of_the_chip(readout_image, 
     for them): over 200 conversions after the start, every frame a distinct conversion and at least 99 % of the chip's
     conversions delivered as true forces (the AVR image's goal; the closing note gives the measured share)."""
     from magfab import derive, load_spec
-    from magfab.export import firmware
 
     default = load_spec(None)
     design = derive(default.model_copy(update={"sensor": default.sensor.model_copy(
@@ -306,22 +322,23 @@ class HarnessTransport:
         self.proc = subprocess.Popen([node, str(HARNESS / "run.mjs"), str(uf2), "--interactive", *harness_args],
                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=HARNESS)
 
-    def _ask(self, line: str) -> str:
+    def ask(self, line: str, answered: bool = False) -> str:
+        """Send run.mjs one command; ``answered``: it answers with a line ('run', the second 'profile'), returned."""
         assert self.proc.stdin is not None and self.proc.stdout is not None
         self.proc.stdin.write(line + "\n")
         self.proc.stdin.flush()
-        return self.proc.stdout.readline().strip() if line.startswith("run") else ""
+        return self.proc.stdout.readline().strip() if answered else ""
 
     def read(self, size: int = 4096, timeout_s: float = 0.05) -> bytes:
-        return bytes.fromhex(self._ask("run 2000"))
+        return bytes.fromhex(self.ask("run 2000", answered=True))
 
     def write(self, data: bytes) -> int:
-        self._ask("send " + data.hex())
+        self.ask("send " + data.hex())
         return len(data)
 
     def close(self) -> None:
         if self.proc.poll() is None:
-            self._ask("quit")
+            self.ask("quit")
             self.proc.wait(timeout=30)
 
 
@@ -329,25 +346,17 @@ def test_the_readout_package_reads_the_emulated_board(readout_image):
     """The real client: the build's ``magfab_readout.Device`` on the emulated board's USB. It asks what the board runs
     (``magfab-readout info``'s 'i') and finds the build's spec and calibration, with nothing to complain of
     (``check_info``), then takes 50 samples (``stream``'s path): each a true force."""
-    node, uf2, mlxd, out = readout_image
-    readout = out / "readout" / "src"
-    info = json.loads((readout / "magfab_readout" / "build.json").read_text())
-    transport = HarnessTransport(node, uf2, "--mlx", str(mlxd), "--addr", str(info["image_settings"]["i2c_address"]),
-                                 "--field", ",".join(str(b) for b in (*FIELD_UT, 25.0)), "--bus-timing")
-    sys.path.insert(0, str(readout))
-    try:
-        device_module = importlib.import_module("magfab_readout.device")
-        device = device_module.Device(transport=transport, timeout_s=20.0)
+    node, uf2, _, out = readout_image
+    model, info = _model(readout_image)
+    transport = HarnessTransport(node, uf2, *model, "--bus-timing")
+    with _readout_package(out) as package:
+        device = importlib.import_module(f"{package}.device").Device(transport=transport, timeout_s=20.0)
         try:
             answer = device.info()
             problems = device.check_info(answer)
             samples = list(device.samples(count=50))
         finally:
             device.close()
-    finally:
-        sys.path.remove(str(readout))
-        for name in [n for n in sys.modules if n == "magfab_readout" or n.startswith("magfab_readout.")]:
-            del sys.modules[name]
     assert answer.spec_name == info["spec_name"] and problems == [], problems
     assert len(samples) == 50 and _wrong(readout_image, samples, info) == []
 
@@ -361,18 +370,13 @@ def test_the_cycle_budget_leaves_the_core_most_of_a_sample(readout_image):
     instruction address, mapped to the image's functions with arm-none-eabi-nm): a sample's period is 230,000 cycles
     at 125 MHz, and the work outside the hardware layer's waits (the driver, the calibration in soft float, the frame
     and its CRC) takes under a fifth of it; the closing note gives the figures."""
-    node, uf2, mlxd, out = readout_image
-    info = json.loads((out / "readout" / "src" / "magfab_readout" / "build.json").read_text())
-    transport = HarnessTransport(node, uf2, "--mlx", str(mlxd), "--addr", str(info["image_settings"]["i2c_address"]),
-                                 "--field", ",".join(str(b) for b in (*FIELD_UT, 25.0)), "--bus-timing")
+    node, uf2, _, _ = readout_image
+    transport = HarnessTransport(node, uf2, *_model(readout_image)[0], "--bus-timing")
     try:
-        transport._ask("run 50000")
-        transport._ask("profile")
-        transport._ask("run 184000")  # 100 conversions of 1840 us
-        assert transport.proc.stdin is not None and transport.proc.stdout is not None
-        transport.proc.stdin.write("profile\n")
-        transport.proc.stdin.flush()
-        cycles = {int(pc) & ~1: n for pc, n in json.loads(transport.proc.stdout.readline()).items()}
+        transport.ask("run 50000", answered=True)
+        transport.ask("profile")
+        transport.ask("run 184000", answered=True)  # 100 conversions of 1840 us
+        cycles = {int(pc) & ~1: n for pc, n in json.loads(transport.ask("profile", answered=True)).items()}
     finally:
         transport.close()
     nm = subprocess.run([require_tool("arm-none-eabi-nm"), "-S", "--defined-only", "-n", str(uf2.with_suffix(".elf"))],

@@ -52,10 +52,10 @@ function refuse(why) {
 }
 
 const args = process.argv.slice(2);
-const until = args.includes('--until') ? args[args.indexOf('--until') + 1] : null;
-const ms = args.includes('--ms') ? Number(args[args.indexOf('--ms') + 1]) : 2000;
-const send = args.includes('--send') ? args[args.indexOf('--send') + 1] : '';
 const option = (name, fallback) => (args.includes(name) ? args[args.indexOf(name) + 1] : fallback);
+const until = option('--until', null);
+const ms = Number(option('--ms', 2000));
+const send = option('--send', '');
 const data = readFileSync(args[0]);
 if (data.length === 0 || data.length % 512) refuse(`not whole 512-byte blocks: ${data.length} bytes`);
 
