@@ -288,8 +288,7 @@ def bundle_stage(design: Design, prediction: Prediction | None, scan: Scan | dic
     say("rendering the firmware and the readout package")
     t = time.perf_counter()
     fw = firmware.render(design, cal)
-    out += [Artifact(f"firmware/{rel}", data, "EEPROM image beside the .hex: the calibration record the image reads "
-                     "(docs/bundle.md section 4)" if rel == firmware.EEP_NAME else "firmware source")
+    out += [Artifact(f"firmware/{rel}", data, firmware.RECORD_CAPTIONS.get(rel, "firmware source"))
             for rel, data in sorted(fw.items())]
     rd = readout.render(design, cal, acceptance, array_doc,
                         () if array_doc is None else tuple(f.calibration.to_json() for f in arrayed.fits),
@@ -297,14 +296,9 @@ def bundle_stage(design: Design, prediction: Prediction | None, scan: Scan | dic
                         weigh_plan=plan)
     out += [Artifact(rel, data, "readout package (pip install ./readout)") for rel, data in sorted(rd.items())]
     timings["render"] = time.perf_counter() - t
-    # the generic image shipped in the package, on every machine (avr-gcc or not): its settings and calibration
-    # are the .eep's record (firmware.shipped_image; bench/firmware.py measured it against a build-specific one)
-    hex_bytes, made = firmware.shipped_image()
-    out.append(Artifact(f"firmware/{firmware.HEX_NAME}", hex_bytes,
-                        f"ready-to-flash image for Arduino Uno/Nano (ATmega328P, 16 MHz), the same for every build: "
-                        f"settings and calibration from the .eep; flash {made['flash_bytes']} B, RAM "
-                        f"{made['ram_bytes']} B ({made['toolchain']['avr-gcc']}, "
-                        f"avr-libc {made['toolchain']['avr-libc']})"))
+    # the ready-to-flash image, the same on every machine (a compiler or not): the generic image shipped in the
+    # package, its settings and calibration the record's (bench/firmware.py measured it against a build-specific one)
+    out.append(Artifact(*firmware.ready_image(design, cal)))
     return BundleStage(artifacts=out, findings=found, fit=result, weighing=plan)
 
 

@@ -19,16 +19,19 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator, model_validator
+from pydantic import Field, ValidationError, field_validator, model_validator
 
 from .errors import SpecError, shorten, shown
 from .readout.src.magfab_readout import bounded
 from .recipes import catalogue
 from .spec_errors import did_you_mean, translate_error
 from .spec_options import CalibrationMethod, FieldModel, MaterialLaw, MaterialLawChoice, MechanicsModel
+from .spec_sections import Board, Environment, Reference
+from .spec_sections import Section as _Section
 from .toml_input import loads_toml, read_toml
 
-__all__ = ["Spec", "Tip", "Density", "Printer", "Array", "Environment", "Skin", "Polarity", "MAX_TAXELS", "load_spec",
+__all__ = ["Spec", "Board", "Tip", "Density", "Printer", "Array", "Environment", "Skin", "Polarity", "MAX_TAXELS",
+           "load_spec",
            "spec_from_json", "parse_spec", "spec_from_dict", "default_spec_text", "translate_error", "spec_schema",
            "NAME_PATTERN", "is_valid_name", "FieldModel", "MechanicsModel", "MaterialLaw", "MaterialLawChoice",
            "CalibrationMethod"]
@@ -67,21 +70,6 @@ def _mm(default: float, description: str, *, gt: float | None = 0.0, ge: float |
     if ge is not None:
         gt = None
     return Field(default, gt=gt, ge=ge, le=le, description=description)
-
-
-class _Section(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True, strict=True, allow_inf_nan=False)
-
-    @field_validator("*", mode="before")
-    @classmethod
-    def _integral_float(cls, value: Any, info: ValidationInfo) -> Any:
-        """An integer key accepts a float with no fractional part (``12.0`` is 12: TOML writes both, and a
-        user converting units gets floats); anything else (2.5, 1e300) still fails as "must be an integer"."""
-        field = cls.model_fields.get(info.field_name or "")
-        if field is not None and field.annotation is int and isinstance(value, float) and value.is_integer() \
-                and abs(value) <= 2.0**53:
-            return int(value)
-        return value
 
 
 class Magnet(_Section):
@@ -382,53 +370,6 @@ class Array(_Section):
         return len(self.positions_mm) if self.positions_mm is not None else self.rows * self.cols
 
 
-class Environment(_Section):
-    """Where the sensor is used, for the drift prediction (magfab.models.drift): the temperature span, how far the
-    sensor turns in the Earth's field and a stray magnetic source nearby. Omit the section for a lab bench (these
-    defaults)."""
-
-    temperature_min_C: float = Field(20.0, ge=-40.0, le=125.0, description="Coldest the sensor gets in use, C.")
-    temperature_max_C: float = Field(30.0, ge=-40.0, le=125.0, description="Warmest the sensor gets in use, C.")
-    calibration_temperature_C: float = Field(
-        25.0, ge=-40.0, le=125.0, description="Temperature the sensor is calibrated at (within the span), C.")
-    temperature_lag_C: float = Field(
-        1.0, ge=0.0, le=50.0, description="Largest difference between the magnet's and the chip's temperature while "
-        "the temperature changes (the compensation reads the chip's), C.")
-    earth_field_G: float | None = Field(
-        None, gt=0.0, le=1.0, description="Local total intensity of the Earth's field (NOAA NCEI's calculator), "
-        "gauss; omit: the strongest on Earth, 0.65 G.")
-    rotation_deg: float = Field(
-        180.0, ge=0.0, le=180.0,
-        description="Largest change of the sensor's orientation in use, deg (180: turned over).")
-    stray_moment_Am2: float = Field(
-        0.0, ge=0.0, le=1.0e4, description="Dipole moment of a stray source nearby (a motor, a magnetised steel part), "
-        "A m^2; 0: none.")
-    stray_distance_mm: float = Field(
-        100.0, ge=10.0, le=1.0e5, description="Distance from the stray source to the chip, mm (a dipole estimate: "
-        "the source much smaller than this).")
-
-    @model_validator(mode="after")
-    def _span(self) -> Environment:
-        if self.temperature_max_C <= self.temperature_min_C:
-            raise ValueError(f"temperature_max_C {self.temperature_max_C:g} C must be above temperature_min_C "
-                             f"{self.temperature_min_C:g} C")
-        if not self.temperature_min_C <= self.calibration_temperature_C <= self.temperature_max_C:
-            raise ValueError(f"calibration_temperature_C {self.calibration_temperature_C:g} C must lie within the "
-                             f"span {self.temperature_min_C:g}..{self.temperature_max_C:g} C")
-        return self
-
-
-class Reference(_Section):
-    """A reference MLX90393 on the board that no magnet moves: its reading subtracted in the firmware rejects a
-    stray field that is the same at both chips (the Earth's as the sensor turns, a far motor's). Omit the section
-    for none."""
-
-    distance_mm: float | None = Field(
-        None, gt=0.0, le=200.0, description="From the taxels (the hull's edge) to the reference chip along +y, mm; "
-        "omit: the nearest point where no magnet's press or slide moves the field there by more than the chip's "
-        "noise (computed; MagOne: 42.5 mm), the board made taller to hold it.")
-
-
 class Build(_Section):
     """Build options."""
 
@@ -453,6 +394,7 @@ class Spec(_Section):
     fabrication: Fabrication = Field(default_factory=Fabrication)
     build: Build = Field(default_factory=Build)
     array: Array | None = Field(None, description="Several taxels on one board (omit for one).")
+    board: Board | None = Field(None, description="The readout board (omit: an Arduino Uno).")
     environment: Environment | None = Field(
         None, description="Where the sensor is used, for the drift prediction (omit: a lab bench).")
     reference: Reference | None = Field(
@@ -461,7 +403,7 @@ class Spec(_Section):
     def dump(self) -> dict[str, Any]:
         """Every key, defaults included, as JSON values (spec.json); a single taxel has no ``array`` key and a spec
         without ``[environment]`` none either, so its spec, hash and build are what they were before those existed."""
-        unset = {name for name in ("array", "environment", "reference") if getattr(self, name) is None}
+        unset = {name for name in ("array", "board", "environment", "reference") if getattr(self, name) is None}
         return self.model_dump(mode="json", exclude=unset or None)
 
     def canonical_json(self) -> str:

@@ -6,7 +6,8 @@ from __future__ import annotations
 
 from enum import Enum
 
-__all__ = ["FieldModel", "MechanicsModel", "CLOSED_FORMS", "MaterialLaw", "MaterialLawChoice", "CalibrationMethod"]
+__all__ = ["Mcu", "BoardName", "FieldModel", "MechanicsModel", "CLOSED_FORMS", "MaterialLaw", "MaterialLawChoice",
+           "CalibrationMethod"]
 
 
 class FieldModel(str, Enum):
@@ -57,3 +58,20 @@ class CalibrationMethod(str, Enum):
     AUTO = "auto"
     POLY = "poly"
     MLS = "mls"
+
+
+class Mcu(str, Enum):
+    """The readout board's microcontroller: 'atmega328p' (Arduino Uno / Nano, 5 V) or 'rp2040' (3.3 V, native USB)."""
+
+    ATMEGA328P = "atmega328p"
+    RP2040 = "rp2040"
+
+
+class BoardName(str, Enum):
+    """The readout board (recipes/boards.toml): its pins, connector and flash, and the image it runs."""
+
+    UNO = "uno"
+    NANO = "nano"
+    PICO = "pico"
+    QTPY_RP2040 = "qtpy-rp2040"
+    XIAO_RP2040 = "xiao-rp2040"

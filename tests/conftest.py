@@ -151,6 +151,13 @@ def default_build(tmp_path_factory):
     return _once_per_run(tmp_path_factory, "default", lambda folder: build(load_spec(None), folder / "magone"))
 
 
+@pytest.fixture(scope="session")
+def rp2040_build(tmp_path_factory):
+    """MagOne on an Adafruit QT Py RP2040 (examples/magone_qtpy.toml), written once per run (read only)."""
+    return _once_per_run(tmp_path_factory, "rp2040",
+                         lambda folder: build(load_spec(EXAMPLES / "magone_qtpy.toml"), folder / "magone-qtpy"))
+
+
 def ref_crc16(data: bytes) -> int:
     """CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF), bit by bit: the tests' own reference for the frames."""
     crc = 0xFFFF

@@ -96,7 +96,7 @@ def test_imports_point_down_the_pipeline(path):
 LAYERS = (
     ("magfab", "magfab.units", "magfab.errors", "magfab.recipes", "magfab.outline", "magfab.fork"),
     ("magfab.spec_errors", "magfab.spec_options"),
-    ("magfab.spec",),
+    ("magfab.spec", "magfab.spec_sections"),
     ("magfab.formats",),  # file formats: standard library (and magfab.errors), shipped in the readout package too
     ("magfab.design", "magfab.plausible"),  # the design, and the unit-mistake guard it runs first
     ("magfab.elastomer", "magfab.mould", "magfab.pad", "magfab.fit"),  # the CAD solids and the mould's fit

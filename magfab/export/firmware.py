@@ -40,6 +40,7 @@ from ..readout.src.magfab_readout import eeprom
 from ..readout.src.magfab_readout.float32_bound import direction_band, float32_error_N
 from ..recipes import resolve
 from ..reference_chip import reference_chip
+from . import rp2040
 from .templating import render as render_template
 from .templating import templates_dir
 
@@ -60,6 +61,7 @@ __all__ = [
     "image_settings",
     "info_line",
     "raw_words",
+    "ready_image",
     "render",
     "shipped_image",
     "twi_settings",
@@ -224,6 +226,12 @@ def _uart(baud: int) -> tuple[int, float]:
     return ubrr, error
 
 
+def _serial(design: Design) -> tuple[int, float]:
+    """:func:`_uart` of the spec's baud on an ATmega328P board; an RP2040 board's serial link is USB, which has no
+    baud of its own: (0, 0.0)."""
+    return (0, 0.0) if rp2040.is_rp2040(design.spec) else _uart(design.spec.firmware.baud)
+
+
 def twi_settings(hz: int) -> tuple[int, int, int]:
     """(TWBR, prescaler bits, actual Hz): the fastest TWI clock not above the spec's."""
     for bits, div in enumerate((1, 4, 16, 64)):
@@ -237,8 +245,7 @@ def twi_settings(hz: int) -> tuple[int, int, int]:
 
 
 def _eeprom_module():
-    """The readout package's ``eeprom`` module (one implementation: the build's .eep and ``magfab-readout upload``
-    both pack with it)."""
+    """The readout package's ``eeprom`` module (the build's record and ``magfab-readout upload`` both pack with it)."""
     return eeprom
 
 
@@ -266,7 +273,7 @@ def image_settings(design: Design) -> dict[str, Any]:
     :class:`~magfab.errors.SpecError` for a baud or I2C clock the board cannot make."""
     ee = _eeprom_module()
     chip, fw = chip_config(design), design.spec.firmware
-    ubrr, _ = _uart(fw.baud)
+    ubrr = _serial(design)[0]
     twbr, twps, i2c_actual = twi_settings(fw.i2c_hz)
     flags = ((ee.FLAG_BURST if chip.burst else 0) | (ee.FLAG_TEMPERATURE if chip.temperature else 0)
              | (ee.FLAG_TEXT if _value(fw.output) == "text" else 0) | (ee.FLAG_RAW_SIGNED if chip.raw_signed else 0))
@@ -354,7 +361,9 @@ def _context(design: Design, calibration: Mapping[str, Any], generic: bool) -> d
     chip = chip_config(design)
     checked = calibration_json.validate(dict(calibration))
     cal = _layout(checked)
-    ubrr, baud_error = _uart(fw.baud)
+    ubrr, baud_error = _serial(design)
+    board = rp2040.readout_board(spec)
+    on_rp2040 = board.texts["mcu"] == "rp2040"
     settings = image_settings(design)
     twbr, twps, i2c_actual = twi_settings(fw.i2c_hz)
     record = eeprom_record(design, calibration)
@@ -395,6 +404,9 @@ def _context(design: Design, calibration: Mapping[str, Any], generic: bool) -> d
         "retry_us": settings["retry_us"], "exit_wait_us": settings["exit_wait_us"],
         "board_pullups": bool(spec.pcb.pullups),
         "hex_name": HEX_NAME, "eep_name": EEP_NAME,
+        "rp2040": on_rp2040, "board_name": board.name, "board_key": rp2040.board_key(spec),
+        "uf2_name": rp2040.image_name(rp2040.board_key(spec)),
+        "calibration_uf2": rp2040.CALIBRATION_UF2,
         "avr_cflags": " ".join(AVR_CFLAGS), "avr_ldflags": " ".join(AVR_LDFLAGS),
         "host_cflags": " ".join(HOST_CFLAGS),
         "core_src_make": " ".join(f"$(CORE)/{s}" for s in CORE_SOURCES),
@@ -425,9 +437,30 @@ def render(design: Design, calibration: Mapping[str, Any], *, generic: bool = Tr
     (a baud rate the 16 MHz UART cannot make). ``*.j2`` templates are rendered (stripped of the suffix), other
     files copied; ``.bat`` files get CRLF line ends."""
     context = _context(design, calibration, generic)
-    out = _render_tree(context, lambda rel: True)
-    out[EEP_NAME] = _eeprom_module().intel_hex(bytes(context["record"]))
+    on_rp2040 = context["rp2040"]
+    out = _render_tree(context, lambda rel: _for_target(rel, on_rp2040))
+    if on_rp2040:  # the record in the board's flash sector (rp2040.calibration_uf2); the image .uf2 is the pipeline's
+        out[rp2040.CALIBRATION_UF2] = rp2040.calibration_uf2(context["board_key"], bytes(context["record"]))
+    else:
+        out[EEP_NAME] = _eeprom_module().intel_hex(bytes(context["record"]))
     return dict(sorted(out.items()))
+
+
+RECORD_CAPTIONS = {  # the record's files in a build (the rest of render's are "firmware source")
+    EEP_NAME: "EEPROM image beside the .hex: the calibration record the image reads (docs/bundle.md section 4)",
+    rp2040.CALIBRATION_UF2: "the calibration record alone, in the board's flash sector: copy it onto the RPI-RP2 drive "
+                            "of a board that runs the image, or write it with magfab-readout upload (docs/bundle.md "
+                            "section 4)",
+}
+
+#: What only an ATmega328P board's bundle holds (its image, flash scripts, sketch, PlatformIO), and an RP2040 board's.
+_AVR_ONLY = ("avr/", "flash.sh", "flash.bat", "platformio.ini", "magfab_readout/magfab_readout.ino")
+_RP2040_ONLY = (rp2040.RP2040_DIR + "/",)
+
+
+def _for_target(rel: str, on_rp2040: bool) -> bool:
+    """Whether template ``rel`` belongs in the bundle of an RP2040 board (``on_rp2040``) or an ATmega328P one."""
+    return not rel.startswith(_AVR_ONLY if on_rp2040 else _RP2040_ONLY)
 
 
 def _render_tree(context: Mapping[str, Any], wanted) -> dict[str, bytes]:
@@ -449,12 +482,32 @@ def _render_tree(context: Mapping[str, Any], wanted) -> dict[str, bytes]:
     return out
 
 
-def generic_sources() -> dict[str, bytes]:
-    """The sources of the generic image, keyed as in :func:`render` (``avr/main.c`` and the core): rendered
-    without a spec, byte-equal to every build's copies (a test holds them to it). :func:`toolchain.build_hex`
-    of these is the shipped image."""
-    return _render_tree(_image_constants(), lambda rel: (rel.startswith(CORE_DIR + "/") and "mf_nv_image" not in rel)
-                        or rel == "avr/main.c.j2")
+def generic_sources(target: str = "avr") -> dict[str, bytes]:
+    """The sources of the generic image, keyed as in :func:`render`: the core and ``avr/main.c`` (``target``
+    "avr") or ``rp2040/`` ("rp2040"), rendered without a spec, byte-equal to every build's copies (a test holds them
+    to it). :func:`toolchain.build_hex` of the AVR's is the shipped image, :func:`toolchain.build_rp2040` of the
+    RP2040's with a board's :func:`rp2040.defines` that board's."""
+    def wanted(rel: str) -> bool:
+        if rel.startswith(CORE_DIR + "/"):
+            return "mf_nv_image" not in rel
+        return rel == "avr/main.c.j2" if target == "avr" else rel.startswith(rp2040.RP2040_DIR + "/")
+    return _render_tree(_image_constants(), wanted)
+
+
+def ready_image(design: Design, calibration: Mapping[str, Any]) -> tuple[str, bytes, str]:
+    """The build's ready-to-flash file (path, bytes, caption): the shipped .hex (its record the .eep beside it), or an
+    RP2040 board's shipped image with this build's record in one .uf2 (:func:`rp2040.build_uf2`)."""
+    board, key = rp2040.readout_board(design.spec), rp2040.board_key(design.spec)
+    if board.texts["mcu"] == "rp2040":
+        _, made = rp2040.shipped_image(key)
+        return (f"firmware/{rp2040.image_name(key)}", rp2040.build_uf2(key, eeprom_record(design, calibration)),
+                f"ready-to-flash image and calibration for the {board.name}: copy it onto the RPI-RP2 drive (BOOTSEL); "
+                f"the image the same for every build, flash {made['flash_bytes']} B, RAM {made['ram_bytes']} B "
+                f"({made['toolchain']['arm-none-eabi-gcc']})")
+    image, made = shipped_image()
+    return (f"firmware/{HEX_NAME}", image, "ready-to-flash image for Arduino Uno/Nano (ATmega328P, 16 MHz), the same "
+            f"for every build: settings and calibration from the .eep; flash {made['flash_bytes']} B, RAM "
+            f"{made['ram_bytes']} B ({made['toolchain']['avr-gcc']}, avr-libc {made['toolchain']['avr-libc']})")
 
 
 def shipped_image() -> tuple[bytes, dict[str, Any]]:

@@ -27,6 +27,8 @@ from pathlib import Path, PurePosixPath
 from typing import Any
 
 from ..errors import ToolError
+from ..formats.uf2 import seal_boot2
+from . import rp2040
 from .firmware import (
     AVR_CFLAGS,
     AVR_LDFLAGS,
@@ -45,8 +47,8 @@ from .firmware import (
     generic_sources,
 )
 
-__all__ = ["CompileError", "build_avr_elf", "build_generic", "build_hex", "build_host", "run_simavr", "versions",
-           "write_generic_image", "write_tree"]
+__all__ = ["CompileError", "build_avr_elf", "build_generic", "build_hex", "build_host", "build_rp2040", "run_simavr",
+           "versions", "arm_versions", "build_generic_rp2040", "write_generic_image", "write_tree"]
 
 
 class CompileError(ToolError):
@@ -240,5 +242,91 @@ def write_generic_image(folder: Path | None = None) -> Path:
     return out
 
 
-if __name__ == "__main__":  # python -m magfab.export.toolchain: regenerate the shipped generic image
+# ---- the RP2040 images ---------------------------------------------------------------------------------------
+
+
+def _arm(tool: str) -> str:
+    path = shutil.which(f"arm-none-eabi-{tool}")
+    if path is None:
+        raise FileNotFoundError(f"arm-none-eabi-{tool} is not installed (Debian packages gcc-arm-none-eabi and "
+                                "libnewlib-arm-none-eabi)")
+    return path
+
+
+def build_rp2040(files: Mapping[str, bytes], key: str, workdir: str | Path) -> tuple[bytes, dict[str, Any]]:
+    """Board ``key``'s flash contents from the bundle's sources ``files`` (the core and ``rp2040/``), built in
+    ``workdir`` with arm-none-eabi-gcc: boot2 (``rp2040/boot2.c`` alone, sealed with its checksum) and the image
+    after it (``rp2040/build/<key>.elf``, its symbols for a profile). Returns them and the image's ``flash_bytes``
+    (boot2's 256 included), ``ram_bytes`` (static), ``warnings``. FileNotFoundError without the toolchain,
+    CompileError on failure."""
+    gcc, objcopy, size = _arm("gcc"), _arm("objcopy"), _arm("size")
+    root = Path(workdir)
+    write_tree(files, root)
+    src = root / rp2040.RP2040_DIR
+    build = src / "build"
+    build.mkdir(parents=True, exist_ok=True)
+    _run([gcc, *rp2040.BOOT2_CFLAGS, "-T", "boot2.ld", "-o", "build/boot2.elf", "boot2.c"], src)
+    _run([objcopy, "-O", "binary", "build/boot2.elf", "build/boot2.bin"], src)
+    elf = build / f"{key}.elf"
+    core = [f"../{CORE_DIR}/{s}" for s in CORE_SOURCES]
+    warnings = _run([gcc, *rp2040.ARM_CFLAGS, *rp2040.defines(key), f"-I../{CORE_DIR}", "-I.", "-T", "rp2040.ld",
+                     "-o", str(elf), *rp2040.RP2040_SOURCES, *core, *rp2040.ARM_LDFLAGS], src)
+    _run([objcopy, "-O", "binary", str(elf), str(elf.with_suffix(".bin"))], src)
+    row = _run([size, "--format=berkeley", str(elf)], src).strip().splitlines()[-1].split()
+    text_b, data_b, bss_b = (int(v) for v in row[:3])
+    flash = seal_boot2((build / "boot2.bin").read_bytes()) + elf.with_suffix(".bin").read_bytes()
+    return flash, {"flash_bytes": len(flash), "ram_bytes": data_b + bss_b, "text_bytes": text_b, "data_bytes": data_b,
+                   "bss_bytes": bss_b, "warnings": warnings.strip()}
+
+
+def arm_versions() -> dict[str, str] | None:
+    """The first lines of ``arm-none-eabi-gcc --version`` and ``arm-none-eabi-objcopy --version``; None without
+    them. Equal versions (and :data:`~magfab.export.rp2040.ARM_CFLAGS`) make the same bytes."""
+    try:
+        gcc, objcopy = _arm("gcc"), _arm("objcopy")
+    except FileNotFoundError:
+        return None
+    here = Path.cwd()
+    return {"arm-none-eabi-gcc": _run([gcc, "--version"], here).splitlines()[0].strip(),
+            "arm-none-eabi-objcopy": _run([objcopy, "--version"], here).splitlines()[0].strip()}
+
+
+def build_generic_rp2040() -> tuple[dict[str, bytes], dict[str, Any]] | None:
+    """Every RP2040 board's shipped flash contents, compiled here from the generic sources, and what
+    ``toolchain-rp2040.json`` records of them; None without the ARM toolchain."""
+    found = arm_versions()
+    if found is None:
+        return None
+    files = generic_sources("rp2040")
+    images: dict[str, bytes] = {}
+    boards: dict[str, Any] = {}
+    for key in rp2040.rp2040_boards():
+        with tempfile.TemporaryDirectory(prefix="magfab-rp2040-") as tmp:
+            flash, sizes = build_rp2040(files, key, tmp)
+        images[key] = flash
+        boards[key] = {"flash_bytes": sizes["flash_bytes"], "ram_bytes": sizes["ram_bytes"],
+                       "image_sha256": hashlib.sha256(flash).hexdigest(), "defines": " ".join(rp2040.defines(key))}
+    info = {"toolchain": found, "boards": boards, "sources_sha256": _sources_sha256(files),
+            "cflags": " ".join((*rp2040.ARM_CFLAGS, *rp2040.ARM_LDFLAGS))}
+    return images, info
+
+
+def write_generic_rp2040(folder: Path | None = None) -> Path:
+    """Rebuild the RP2040 images and write them with ``toolchain-rp2040.json`` into ``folder`` (default: the
+    package's ``generic_image``). FileNotFoundError without the ARM toolchain."""
+    built = build_generic_rp2040()
+    if built is None:
+        raise FileNotFoundError("arm-none-eabi-gcc and arm-none-eabi-objcopy are needed (Debian packages "
+                                "gcc-arm-none-eabi, libnewlib-arm-none-eabi)")
+    images, info = built
+    out = Path(folder) if folder is not None else Path(__file__).resolve().parent / GENERIC_DIR
+    out.mkdir(parents=True, exist_ok=True)
+    for key, flash in images.items():
+        (out / rp2040.binary_name(key)).write_bytes(flash)
+    (out / rp2040.TOOLCHAIN_JSON).write_text(json.dumps(info, indent=2, sort_keys=True) + "\n")
+    return out
+
+
+if __name__ == "__main__":  # python -m magfab.export.toolchain: regenerate the shipped generic images
     print(f"wrote {write_generic_image()}")
+    print(f"wrote {write_generic_rp2040()}")

@@ -30,9 +30,9 @@ import struct
 
 from ..errors import InputError
 
-__all__ = ["UF2Error", "write", "read", "crc32_mpeg2", "seal_boot2", "boot2_sealed", "MAGIC_START0", "MAGIC_START1",
-           "MAGIC_END", "FLAG_FAMILY_ID", "RP2040_FAMILY", "BLOCK_SIZE", "PAGE_SIZE", "FLASH_START", "FLASH_END",
-           "BOOT2_SIZE"]
+__all__ = ["UF2Error", "write", "read", "write_regions", "read_regions", "crc32_mpeg2", "seal_boot2", "boot2_sealed",
+           "MAGIC_START0", "MAGIC_START1", "MAGIC_END", "FLAG_FAMILY_ID", "RP2040_FAMILY", "BLOCK_SIZE", "PAGE_SIZE",
+           "FLASH_START", "FLASH_END", "BOOT2_SIZE"]
 
 MAGIC_START0, MAGIC_START1, MAGIC_END = 0x0A324655, 0x9E5D5157, 0x0AB16F30
 FLAG_FAMILY_ID = 0x00002000
@@ -93,27 +93,47 @@ def boot2_sealed(flash: bytes) -> bool:
 def write(image: bytes, address: int = FLASH_START, family: int = RP2040_FAMILY) -> bytes:
     """The UF2 file that writes ``image`` to flash at ``address`` (on a page): one block per 256-byte page, the last
     page padded with 0xFF. The same image gives the same bytes."""
-    if not image:
-        raise UF2Error("the image is empty: nothing to write")
-    if address % PAGE_SIZE or not FLASH_START <= address < FLASH_END:
-        raise UF2Error(f"address 0x{address:08X}: an image starts on a {PAGE_SIZE}-byte page in flash "
-                       f"(0x{FLASH_START:08X}-0x{FLASH_END - 1:08X})")
-    pages = -(-len(image) // PAGE_SIZE)
-    if address + pages * PAGE_SIZE > FLASH_END:
-        raise UF2Error(f"an image of {len(image)} bytes at 0x{address:08X} runs past the end of flash "
-                       f"(0x{FLASH_END:08X})")
-    padded = bytes(image).ljust(pages * PAGE_SIZE, b"\xff")
+    return write_regions([(address, image)], family)
+
+
+def write_regions(regions: list[tuple[int, bytes]], family: int = RP2040_FAMILY) -> bytes:
+    """The UF2 file that writes each ``(address, bytes)`` of ``regions`` (each on a page, none overlapping another's
+    pages): one block per page, in the order given, each region's last page padded with 0xFF. (The bootrom erases a
+    4 KB sector the first time a block writes to it: what a region's sectors held besides it is then 0xFF.)"""
+    pages: list[tuple[int, bytes]] = []
+    for address, image in regions:
+        if not image:
+            raise UF2Error("the image is empty: nothing to write")
+        if address % PAGE_SIZE or not FLASH_START <= address < FLASH_END:
+            raise UF2Error(f"address 0x{address:08X}: an image starts on a {PAGE_SIZE}-byte page in flash "
+                           f"(0x{FLASH_START:08X}-0x{FLASH_END - 1:08X})")
+        count = -(-len(image) // PAGE_SIZE)
+        if address + count * PAGE_SIZE > FLASH_END:
+            raise UF2Error(f"an image of {len(image)} bytes at 0x{address:08X} runs past the end of flash "
+                           f"(0x{FLASH_END:08X})")
+        padded = bytes(image).ljust(count * PAGE_SIZE, b"\xff")
+        pages += [(address + n * PAGE_SIZE, padded[n * PAGE_SIZE:(n + 1) * PAGE_SIZE]) for n in range(count)]
+    if len({a for a, _ in pages}) != len(pages):
+        raise UF2Error("two regions write the same page")
     out = bytearray()
-    for n in range(pages):
-        out += _HEADER.pack(MAGIC_START0, MAGIC_START1, FLAG_FAMILY_ID, address + n * PAGE_SIZE, PAGE_SIZE, n, pages,
-                            family)
-        out += padded[n * PAGE_SIZE:(n + 1) * PAGE_SIZE].ljust(DATA_SIZE, b"\0")
+    for n, (address, page) in enumerate(pages):
+        out += _HEADER.pack(MAGIC_START0, MAGIC_START1, FLAG_FAMILY_ID, address, PAGE_SIZE, n, len(pages), family)
+        out += page.ljust(DATA_SIZE, b"\0")
         out += _END.pack(MAGIC_END)
     return bytes(out)
 
 
 def read(data: bytes, family: int = RP2040_FAMILY) -> tuple[int, bytes]:
-    """The image a UF2 file writes: (its first address, its bytes), the pages in address order and contiguous.
+    """The image a UF2 file writes: (its first address, its bytes), the pages in address order and contiguous
+    (:func:`read_regions` for a file of several)."""
+    regions = read_regions(data, family)
+    if len(regions) > 1:
+        raise UF2Error(f"the pages are not contiguous: none at 0x{regions[0][0] + len(regions[0][1]):08X}")
+    return regions[0]
+
+
+def read_regions(data: bytes, family: int = RP2040_FAMILY) -> list[tuple[int, bytes]]:
+    """What a UF2 file writes, as ``(address, bytes)`` runs of contiguous pages in address order.
     Every block is checked (magics, the family flag and ``family``, a 256-byte payload on a page in flash, the block
     numbers 0 to n - 1 and the same count in each, the padding after the payload zero); :class:`UF2Error` names the
     first that is not."""
@@ -144,8 +164,10 @@ def read(data: bytes, family: int = RP2040_FAMILY) -> tuple[int, bytes]:
         if addr in pages:
             raise UF2Error(f"{where}: address 0x{addr:08X} is written twice")
         pages[addr] = data[at + HEADER_SIZE:at + HEADER_SIZE + PAGE_SIZE]
-    start = min(pages)
-    gaps = [a for a in range(start, start + blocks * PAGE_SIZE, PAGE_SIZE) if a not in pages]
-    if gaps:
-        raise UF2Error(f"the pages are not contiguous: none at 0x{gaps[0]:08X}")
-    return start, b"".join(pages[a] for a in sorted(pages))
+    runs: list[list[int]] = []  # [first page, last page]
+    for addr in sorted(pages):
+        if runs and runs[-1][1] + PAGE_SIZE == addr:
+            runs[-1][1] = addr
+        else:
+            runs.append([addr, addr])
+    return [(a, b"".join(pages[p] for p in range(a, b + PAGE_SIZE, PAGE_SIZE))) for a, b in runs]

@@ -20,7 +20,8 @@ from typing import TypeGuard
 
 __all__ = ["Quantity", "Recipe", "catalogue", "KINDS"]
 
-KINDS = ("materials", "magnets", "magnet_stock", "printers", "chips", "land", "parts", "adhesives", "assembly", "bench")
+KINDS = ("materials", "magnets", "magnet_stock", "printers", "chips", "land", "parts", "adhesives", "assembly", "bench",
+         "boards")
 
 
 @dataclass(frozen=True)

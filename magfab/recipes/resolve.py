@@ -16,7 +16,7 @@ from functools import cache
 
 from . import Quantity, Recipe, RecipeError, catalogue
 
-__all__ = ["MagnetGrade", "Material", "YeohLaw", "yeoh_fitted", "magnet_grade", "material", "chip", "printer",
+__all__ = ["MagnetGrade", "Material", "YeohLaw", "yeoh_fitted", "magnet_grade", "material", "chip", "board", "printer",
            "adhesive"]
 
 
@@ -136,6 +136,12 @@ def chip(key: str) -> Recipe:
     """The chip ``key`` of recipes/chips.toml. Left a :class:`Recipe`: its readers (footprint, firmware, noise) take
     families of keys by pattern (``sensitivity_z_gain<n>``, ``i2c_base_address_<code>``, ``pin_<n>``)."""
     return _entry("chips", key)
+
+
+@cache
+def board(key: str) -> Recipe:
+    """The readout board ``key`` of recipes/boards.toml (its microcontroller, pins, flash, connector)."""
+    return _entry("boards", key)
 
 
 @cache

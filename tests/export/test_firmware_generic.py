@@ -8,13 +8,15 @@ from __future__ import annotations
 
 import fnmatch
 import hashlib
+import struct
 import tomllib
 from pathlib import Path
 
 from test_firmware import make_calibration, spec_variant
 
 from magfab import derive, load_spec
-from magfab.export import firmware, toolchain
+from magfab.export import firmware, rp2040, toolchain
+from magfab.formats.uf2 import boot2_sealed
 from magfab.spec import Acquisition, Reference, Transport
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -50,6 +52,27 @@ def test_the_shipped_image_is_made_from_todays_sources():
     assert lines[-1] == ":00000001FF" and all(sum(bytes.fromhex(x[1:])) & 0xFF == 0 for x in lines)
 
 
+def test_the_shipped_rp2040_images_are_made_from_todays_sources():
+    """toolchain-rp2040.json records the sha256 of the sources the RP2040 images were built from and of each board's
+    image: a source changed without ``python -m magfab.export.toolchain`` fails here. Each image starts with a sealed
+    boot2 and the vector table after it (the stack in SRAM, the reset handler in flash, a Thumb address); with
+    arm-none-eabi-gcc of the recorded version, today's sources give the same bytes for every board."""
+    made = rp2040.shipped_image("pico")[1]
+    assert made["sources_sha256"] == toolchain._sources_sha256(firmware.generic_sources("rp2040"))
+    assert made["cflags"] == " ".join((*rp2040.ARM_CFLAGS, *rp2040.ARM_LDFLAGS))
+    assert sorted(made["boards"]) == sorted(rp2040.rp2040_boards())
+    same_compiler = toolchain.arm_versions() == made["toolchain"]
+    built = toolchain.build_generic_rp2040() if same_compiler else None
+    for key in rp2040.rp2040_boards():
+        image, info = rp2040.shipped_image(key)
+        assert info["image_sha256"] == hashlib.sha256(image).hexdigest() and info["flash_bytes"] == len(image)
+        assert info["defines"] == " ".join(rp2040.defines(key))
+        sp, reset = struct.unpack_from("<II", image, 256)
+        assert boot2_sealed(image) and 0x20000000 < sp <= 0x20042000 and 0x10000100 < reset < 0x10100000 and reset & 1
+        if built is not None:
+            assert built[0][key] == image, key
+
+
 def test_the_wheel_takes_the_shipped_image():
     """pyproject.toml's package data matches every file of magfab/export/generic_image (the wheel test,
     tests/test_packaging.py, checks the built wheel itself)."""
@@ -57,7 +80,8 @@ def test_the_wheel_takes_the_shipped_image():
     folder = ROOT / "magfab" / "export" / firmware.GENERIC_DIR
     shipped = sorted(p.relative_to(folder.parent).as_posix() for p in folder.iterdir() if p.is_file())
     assert shipped == sorted(f"{firmware.GENERIC_DIR}/{name}" for name in (
-        firmware.HEX_NAME, firmware.GENERIC_RATE, firmware.GENERIC_TOOLCHAIN))
+        firmware.HEX_NAME, firmware.GENERIC_RATE, firmware.GENERIC_TOOLCHAIN, rp2040.TOOLCHAIN_JSON,
+        *(rp2040.binary_name(key) for key in rp2040.rp2040_boards())))
     assert all(any(fnmatch.fnmatch(rel, pattern) for pattern in data) for rel in shipped)
 
 

@@ -1,8 +1,9 @@
-"""The RP2040 emulator harness (tests/firmware_sim/rp2040): arm-none-eabi-gcc builds its smoke images, magfab writes
-them as UF2 files behind a sealed boot2 (magfab.formats.uf2), and rp2040js runs them from the vector table after
-boot2: the line one sends on UART0 arrives, and the other enumerates as a USB CDC device and its lines arrive. The
-harness checks each block and boot2's checksum in its own implementation and refuses a file whose boot2 or family
-is wrong."""
+"""The RP2040 readout board on the emulator (tests/firmware_sim/rp2040). arm-none-eabi-gcc builds the harness's smoke
+images from the bundle's RP2040 sources (templates/firmware/rp2040), magfab writes them as UF2 files behind a sealed
+boot2 (magfab.formats.uf2), and rp2040js runs them from the vector table after boot2: the line one sends on UART0
+arrives, and the other enumerates as a USB CDC device and its lines arrive. The harness checks each block and boot2's
+checksum in its own implementation and refuses a file whose boot2 or family is wrong. Then the build's own .uf2 (an
+RP2040 build of MagOne: the image magfab ships and the build's record) streams, recovers and keeps its rate."""
 
 from __future__ import annotations
 
@@ -21,12 +22,15 @@ import pytest
 from conftest import require_node_package, require_tool
 from readout_support import ref_forces
 
-from magfab.export import firmware
+from magfab.export import firmware, rp2040, toolchain
+from magfab.export.templating import templates_dir
 from magfab.formats.uf2 import boot2_sealed, read, seal_boot2, write
 from magfab.readout.src.magfab_readout import calibration_json
 from magfab.readout.src.magfab_readout.float32_bound import float32_error_N
 
 HARNESS = Path(__file__).resolve().parent.parent / "firmware_sim" / "rp2040"
+BUNDLE = templates_dir() / "firmware" / rp2040.RP2040_DIR  # the RP2040 sources every RP2040 build's bundle holds
+KEY = "qtpy-rp2040"  # examples/magone_qtpy.toml's board: the sensor's bus is I2C1 (its STEMMA QT socket)
 
 
 def _run(node: str, uf2: Path, *args: str) -> subprocess.CompletedProcess:
@@ -38,10 +42,10 @@ ARM = ("-mcpu=cortex-m0plus", "-mthumb", "-Os", "-Wall", "-Wextra", "-Werror")
 
 
 def _compile(out: Path, name: str, linker: str, sources: list[Path], *flags: str) -> Path:
-    """``sources`` built for the Cortex-M0+ with ``linker`` (a file of the harness) into ``out``/``name``.bin: its
-    path (``name``.elf beside it, for arm-none-eabi-nm)."""
+    """``sources`` built for the Cortex-M0+ with ``linker`` (a file of the bundle's RP2040 sources) into
+    ``out``/``name``.bin: its path."""
     elf = out / f"{name}.elf"
-    subprocess.run([require_tool("arm-none-eabi-gcc"), *ARM, "-T", str(HARNESS / linker), "-o", str(elf),
+    subprocess.run([require_tool("arm-none-eabi-gcc"), *ARM, "-T", str(BUNDLE / linker), "-o", str(elf),
                     *map(str, sources), *flags], check=True)  # flags last: a library (-lm) follows the objects
     binary = elf.with_suffix(".bin")
     subprocess.run([require_tool("arm-none-eabi-objcopy"), "-O", "binary", str(elf), str(binary)], check=True)
@@ -52,13 +56,15 @@ def _compile(out: Path, name: str, linker: str, sources: list[Path], *flags: str
 def _boot2() -> bytes:
     """boot2.c built alone (position-independent, at most 252 bytes) and sealed with its checksum."""
     out = Path(tempfile.mkdtemp(prefix="boot2-"))
-    return seal_boot2(_compile(out, "boot2", "boot2.ld", [HARNESS / "boot2.c"], "-ffreestanding", "-nostdlib",
+    return seal_boot2(_compile(out, "boot2", "boot2.ld", [BUNDLE / "boot2.c"], "-ffreestanding", "-nostdlib",
                                "-fPIC").read_bytes())
 
 
-def _build(out: Path, *sources: str) -> bytes:
-    """The flash contents of one harness image: boot2.c's boot2, then ``sources`` built for the Cortex-M0+."""
-    binary = _compile(out, Path(sources[0]).stem, "smoke.ld", [HARNESS / s for s in ("start.c", *sources)],
+def _build(out: Path, smoke: str, *bundled: str) -> bytes:
+    """The flash contents of one harness image: boot2.c's boot2, then the harness's ``smoke`` program on the bundle's
+    start.c and ``bundled`` sources, built for the Cortex-M0+."""
+    binary = _compile(out, Path(smoke).stem, "rp2040.ld",
+                      [HARNESS / smoke, *(BUNDLE / s for s in ("start.c", *bundled))], f"-I{BUNDLE}",
                       "-ffreestanding", "-nostdlib")
     return _boot2() + binary.read_bytes()
 
@@ -128,31 +134,28 @@ def test_the_harness_refuses_what_the_bootrom_would(smoke, tmp_path, change, ref
 FIELD_UT = (1200.0, -800.0, 20000.0)  # inside MagOne's calibrated region (as tests/export/test_simbus.py)
 
 
-def _readout_uf2(src: Path, out: Path) -> Path:
-    """The readout core in ``src`` (a build's firmware/magfab_readout/src: firmware.CORE_SOURCES) on mf_rp2040.c
-    and usb_cdc.c, as a .uf2 behind boot2.c's boot2 (readout.elf beside it)."""
-    binary = _compile(out, "readout", "smoke.ld", [HARNESS / "start.c", HARNESS / "mf_rp2040.c", HARNESS / "usb_cdc.c",
-                                                   HARNESS / "clocks.c", *(src / n for n in firmware.CORE_SOURCES)],
-                      "-std=gnu99", "-ffunction-sections", "-fdata-sections", "-nostartfiles", "--specs=nano.specs",
-                      "--specs=nosys.specs", "-Wl,--gc-sections", f"-I{src}", f"-I{HARNESS}", "-lm")
-    uf2 = out / "readout.uf2"
-    uf2.write_bytes(write(_boot2() + binary.read_bytes()))
-    return uf2
-
-
 @pytest.fixture(scope="module")
-def readout_image(smoke, default_build, tmp_path_factory):
-    """The build's own readout core (firmware/magfab_readout/src, the AVR image's C) on mf_rp2040.c's hardware layer
-    and usb_cdc.c, as a .uf2, and the build's MLX90393 model (its sim_mlx90393.c) served by mlxd.c: (node, uf2,
-    mlxd, the build's folder)."""
+def readout_image(smoke, rp2040_build, tmp_path_factory):
+    """The RP2040 build's ready-to-flash .uf2 (the QT Py's shipped image and the build's record), and the build's
+    MLX90393 model (its sim_mlx90393.c) served by mlxd.c: (node, uf2, mlxd, the build's folder). The build's own
+    RP2040 sources, compiled here without a warning, give the shipped image byte for byte (its ELF, beside the .uf2,
+    names the functions of a profile)."""
     node = smoke[0]
     out = tmp_path_factory.mktemp("rp2040-readout")
-    fw = default_build.out_dir / "firmware"
+    fw = rp2040_build.out_dir / "firmware"
     mlxd = out / "mlxd"
     subprocess.run([require_tool("cc"), "-std=gnu99", "-O2", "-Wall", "-Wextra", "-Werror", f"-I{fw / 'host'}",
                     f"-I{fw / 'magfab_readout' / 'src'}", "-o", str(mlxd), str(HARNESS / "mlxd.c"),
                     str(fw / "host" / "sim_mlx90393.c"), "-lm"], check=True)
-    return node, _readout_uf2(fw / "magfab_readout" / "src", out), mlxd, default_build.out_dir
+    bundle = {rel: p.read_bytes() for p in fw.rglob("*") if p.is_file() and (rel := p.relative_to(fw).as_posix())
+              .startswith((firmware.CORE_DIR + "/", rp2040.RP2040_DIR + "/"))}
+    require_tool("arm-none-eabi-gcc")
+    flash, sizes = toolchain.build_rp2040(bundle, KEY, out / "src")
+    assert sizes["warnings"] == "" and flash == rp2040.shipped_image(KEY)[0]
+    uf2 = out / "readout.uf2"
+    uf2.write_bytes((fw / rp2040.image_name(KEY)).read_bytes())
+    (out / "src" / rp2040.RP2040_DIR / "build" / f"{KEY}.elf").rename(uf2.with_suffix(".elf"))
+    return node, uf2, mlxd, rp2040_build.out_dir
 
 
 @contextlib.contextmanager
@@ -174,7 +177,7 @@ def _model(readout_image, addr_offset: int = 0) -> tuple[list[str], dict]:
     FIELD_UT at 25 C, and the build's build.json."""
     _, _, mlxd, out = readout_image
     info = json.loads((out / "readout" / "src" / "magfab_readout" / "build.json").read_text())
-    return ["--mlx", str(mlxd), "--addr", str(info["image_settings"]["i2c_address"] + addr_offset),
+    return ["--mlx", str(mlxd), "--i2c", "1", "--addr", str(info["image_settings"]["i2c_address"] + addr_offset),
             "--field", ",".join(str(b) for b in (*FIELD_UT, 25.0))], info
 
 
@@ -276,18 +279,15 @@ def test_the_rate_on_a_timed_bus_is_every_conversion_of_the_chip(readout_image, 
     conversions delivered as true forces (the AVR image's goal; the closing note gives the measured share)."""
     from magfab import derive, load_spec
 
-    default = load_spec(None)
+    default = load_spec(Path(firmware.__file__).parents[1] / "examples" / "magone_qtpy.toml")
     design = derive(default.model_copy(update={"sensor": default.sensor.model_copy(
         update={"osr": osr, "dig_filt": dig_filt})}))
     image = readout_image
-    if (osr, dig_filt) != (default.sensor.osr, default.sensor.dig_filt):
+    if (osr, dig_filt) != (default.sensor.osr, default.sensor.dig_filt):  # the build's .uf2 with that record
         cal = json.loads((readout_image[3] / "calibration" / "calibration.json").read_text())
-        src = tmp_path / "src"
-        src.mkdir()
-        for rel, data in firmware.render(design, cal).items():
-            if rel.startswith(firmware.CORE_DIR + "/"):
-                (src / rel.rsplit("/", 1)[1]).write_bytes(data)
-        image = (readout_image[0], _readout_uf2(src, tmp_path), *readout_image[2:])
+        uf2 = tmp_path / "rate.uf2"
+        uf2.write_bytes(rp2040.build_uf2(KEY, firmware.eeprom_record(design, cal)))
+        image = (readout_image[0], uf2, *readout_image[2:])
     tconv = firmware.chip_config(design).tconv_us
     samples, _, info = _stream(image, us=SETTLE_US + 200 * tconv, timed=True)
     steady = [s for s in samples if s.t_us >= SETTLE_US]

@@ -1,6 +1,6 @@
 // Runs an RP2040 image on rp2040js (tests/firmware_sim/rp2040):
-//   node run.mjs IMAGE.uf2 [--boot2] [--until TEXT] [--ms N] [--us N] [--send TEXT] [--hex] [--interactive]
-//                [--mlx MLXD --addr A --field BX,BY,BZ,T [--inject FAULT@US] [--bus-timing]]
+//   node run.mjs IMAGE.uf2 [--drop FILE.uf2] [--boot2] [--until TEXT] [--ms N] [--us N] [--send TEXT] [--hex]
+//                [--interactive] [--mlx MLXD --addr A [--i2c 0|1] --field BX,BY,BZ,T [--inject FAULT@US] [--bus-timing]]
 //
 // The image comes as the build's .uf2. Each block is checked as the RP2040 bootrom would take it (UF2's magic numbers,
 // the RP2040 family 0xE48BFF56, a 256-byte payload on a page in flash) and written into the emulated flash; boot2's
@@ -10,8 +10,10 @@
 // (0x20041f00) and run there (rp2040js's SSI takes boot2's settings without acting on them: this proves boot2 fits,
 // runs where the bootrom puts it and starts the image, not that a flash chip answers). rp2040js's USB CDC host is
 // attached: it enumerates a device the image brings up and takes what the device sends on its bulk IN endpoint;
-// --send's TEXT goes to the device once it is connected. With --mlx, the build's MLX90393 model (mlxd, compiled from
-// its sim_mlx90393.c) answers at address A on I2C0, serving the field BX, BY, BZ (uT) at T (C): each callback of
+// --send's TEXT goes to the device once it is connected. --drop writes a second UF2 file after the first, as the
+// bootrom does when a second file is copied onto the drive (each sector the file writes to erased first). The flash
+// chip is modelled below the SSI (the NOR model below), so an image can program its own flash. With --mlx, the
+// build's MLX90393 model (mlxd, compiled from its sim_mlx90393.c) answers at address A on I2C0 (--i2c 1: I2C1), serving the field BX, BY, BZ (uT) at T (C): each callback of
 // rp2040js's I2C asks it synchronously over a FIFO pair (a write is handed over whole at its STOP or repeated START; a
 // read's bytes are fixed at its address phase, as the AVR harness does). The bus takes no time, or with --bus-timing
 // the time it takes at the SCL clock the image sets (IC_*_SCL_HCNT/LCNT at 125 MHz): each step's completion is held, on
@@ -21,12 +23,14 @@
 // all-ff (the next read's bytes); inside the chip, chip:NAME (NAME a sim_fault of sim_mlx90393.h: error, short, trunc,
 // stuck, reset), as the AVR harness injects them (tests/export/simbus). UART0's bytes and the CDC's are collected until
 // TEXT has been seen in either, N us of emulated time (--us) or N ms of host time (--ms) pass. Prints one JSON line:
-// {"boot2_crc_ok", "blocks", "uart", "usb", "usb_hex" (with --hex), "usb_connected", "nanos"}; exit 2 on a refused
-// image. --interactive instead takes commands on stdin, one a line, and runs the emulation only when asked, so that a
+// {"boot2_crc_ok", "blocks", "uart", "usb", "usb_hex" (with --hex), "usb_connected", "nanos", "flash" (the NOR
+// model's erases, programs, cache flushes and errors)}; exit 2 on a refused image. --interactive instead takes commands on stdin, one a line, and runs the emulation only when asked, so that a
 // host program can be the board's USB host (tests/export/test_rp2040_harness.py's HarnessTransport):
 //   run US      run US microseconds of emulated time; answers with the hex of what the device sent over USB meanwhile
 //   send HEX    bytes for the host to send the device (once it is connected)
 //   profile     start counting the CPU's cycles by instruction address; the next 'profile' answers with them (JSON)
+//   flash       the NOR model's counts and errors (JSON)
+//   peek AT,N   N bytes from AT, in hex: a flash offset, or an SRAM address (from 0x20000000)
 //   quit
 import { ConsoleLogger, LogLevel, Simulator, USBCDC } from 'rp2040js';
 import { execFileSync, spawn } from 'child_process';
@@ -57,26 +61,128 @@ const until = option('--until', null);
 const ms = Number(option('--ms', 2000));
 const send = option('--send', '');
 const data = readFileSync(args[0]);
-if (data.length === 0 || data.length % 512) refuse(`not whole 512-byte blocks: ${data.length} bytes`);
-
 const sim = new Simulator();
 const mcu = sim.rp2040;
 mcu.logger = new ConsoleLogger(LogLevel.Error); // stdout is the report's: the peripherals' debug lines stay out
-const blocks = data.length / 512;
-for (let i = 0; i < blocks; i++) {
-  const at = 512 * i;
-  const word = (k) => data.readUInt32LE(at + k);
-  if (word(0) !== 0x0a324655 || word(4) !== 0x9e5d5157 || word(508) !== 0x0ab16f30) refuse(`block ${i}: magic`);
-  if (!(word(8) & 0x2000) || word(28) !== FAMILY) refuse(`block ${i}: family`);
-  const addr = word(12), size = word(16);
-  if (size !== 256 || addr % 256 || addr < FLASH || addr + 256 > FLASH_END) refuse(`block ${i}: payload`);
-  if (word(20) !== i || word(24) !== blocks) refuse(`block ${i}: numbering`);
-  mcu.flash.set(data.subarray(at + 32, at + 32 + 256), addr - FLASH);
-}
+// A UF2 file as the bootrom takes it: every block checked first, then each page written, its 4 KB sector erased the
+// first time the file writes to it (so a file holding only a record leaves the image alone, and vice versa).
+const drop = (file, name) => {
+  if (file.length === 0 || file.length % 512) refuse(`${name}not whole 512-byte blocks: ${file.length} bytes`);
+  const n = file.length / 512, pages = [];
+  for (let i = 0; i < n; i++) {
+    const at = 512 * i;
+    const word = (k) => file.readUInt32LE(at + k);
+    if (word(0) !== 0x0a324655 || word(4) !== 0x9e5d5157 || word(508) !== 0x0ab16f30) refuse(`${name}block ${i}: magic`);
+    if (!(word(8) & 0x2000) || word(28) !== FAMILY) refuse(`${name}block ${i}: family`);
+    const addr = word(12), size = word(16);
+    if (size !== 256 || addr % 256 || addr < FLASH || addr + 256 > FLASH_END) refuse(`${name}block ${i}: payload`);
+    if (word(20) !== i || word(24) !== n) refuse(`${name}block ${i}: numbering`);
+    pages.push([addr - FLASH, file.subarray(at + 32, at + 32 + 256)]);
+  }
+  const erased = new Set();
+  for (const [offset, page] of pages) {
+    const sector = offset & ~0xfff;
+    if (!erased.has(sector)) mcu.flash.fill(0xff, sector, sector + 0x1000);
+    erased.add(sector);
+    mcu.flash.set(page, offset);
+  }
+  return n;
+};
+const blocks = drop(data, '');
+if (args.includes('--drop')) drop(readFileSync(option('--drop')), 'dropped file: ');
 const boot2 = mcu.flash.subarray(0, 256);
 const stored = (boot2[252] | (boot2[253] << 8) | (boot2[254] << 16) | (boot2[255] << 24)) >>> 0;
 const boot2_crc_ok = crc32mpeg2(boot2.subarray(0, 252)) === stored;
 if (!boot2_crc_ok) refuse('boot2 checksum');
+
+// The flash chip behind the SSI. rp2040js keeps the SSI's registers and nothing more, and lets a store write its flash
+// array. Here a SPI NOR flash answers as the images program it (flash.c), on the bytes the XIP window reads: 06h write
+// enable, 20h sector erase (4 KB), 02h page program (within its 256-byte page, bits only cleared), 05h status (BUSY
+// for the Winbond W25Q16JV datasheet's typical times, 45 ms an erase and 0.4 ms a page) and 03h read. A command is
+// the bytes sent while IO_QSPI's SS output override holds the chip select low (GPIO_QSPI_SS_CTRL.OUTOVER 2; 3 ends it).
+// What the hardware would not do is an error in the report: a command while busy (but 05h), an erase or program
+// without write enable, a read of flash (code or data) while the SSI is out of XIP mode, a store to the XIP window.
+const nor = { erases: 0, programs: 0, flushes: 0, errors: [], busyUntil: 0, wel: false, low: false, cmd: [], rx: [] };
+const ssi = { 0x00: (31 << 16) | (3 << 8), 0x04: 0, 0x08: 1, 0x10: 1, 0x14: 4, 0xf4: (0x03 << 24) | (2 << 8) | (6 << 2) };
+const xip = () => ssi[0x08] === 1 && ((ssi[0x00] >> 8) & 3) === 3; // enabled, TMOD EEPROM read: boot2's settings
+const norError = (what) => {
+  if (nor.errors.length < 20) nor.errors.push(`${what} at ${Math.floor(sim.clock.nanos / 1000)} us, pc 0x${mcu.core.PC.toString(16)}`);
+};
+const busy = () => sim.clock.nanos < nor.busyUntil;
+const norByte = (b) => {
+  const c = nor.cmd;
+  c.push(b);
+  if (c.length === 1) {
+    if (busy() && b !== 0x05) norError(`flash command 0x${b.toString(16)} while busy`);
+    if (b === 0x06) nor.wel = true;
+    return 0xff;
+  }
+  if (c[0] === 0x05) return (busy() ? 1 : 0) | (nor.wel ? 2 : 0);
+  if (c[0] === 0x03 && c.length > 4) return mcu.flash[(((c[1] << 16) | (c[2] << 8) | c[3]) + c.length - 5) & 0xffffff];
+  return 0xff;
+};
+const norEnd = () => {
+  const c = nor.cmd;
+  nor.cmd = [];
+  if ((c[0] !== 0x20 && c[0] !== 0x02) || c.length < 4) return;
+  const addr = (c[1] << 16) | (c[2] << 8) | c[3];
+  if (!nor.wel) return norError(`flash ${c[0] === 0x20 ? 'erase' : 'program'} without write enable`);
+  nor.wel = false;
+  if (c[0] === 0x20) {
+    mcu.flash.fill(0xff, addr & ~0xfff, (addr & ~0xfff) + 0x1000);
+    nor.erases += 1;
+    nor.busyUntil = sim.clock.nanos + 45e6;
+  } else {
+    const page = addr & ~0xff;
+    c.slice(4).forEach((v, k) => { mcu.flash[page + ((addr + k) & 0xff)] &= v; });
+    nor.programs += 1;
+    nor.busyUntil = sim.clock.nanos + 0.4e6;
+  }
+};
+mcu.peripherals[0x18000] = {
+  readUint32: (offset) => {
+    if (offset === 0x28) return 0x06 | (nor.rx.length ? 0x08 : 0); // SR: TFNF, TFE, RFNE
+    if (offset === 0x60) return nor.rx.length ? nor.rx.shift() : 0;
+    if (offset === 0x24) return nor.rx.length;
+    return ssi[offset] ?? 0;
+  },
+  writeUint32Atomic: (offset, value) => {
+    if (offset !== 0x60) {
+      ssi[offset] = value >>> 0;
+      return;
+    }
+    if (ssi[0x08] !== 1 || ((ssi[0x00] >> 8) & 3) !== 0) return norError('SSI data outside transmit-and-receive mode');
+    if (!nor.low) norError('SSI data with the chip select not held low');
+    nor.rx.push(norByte(value & 0xff));
+  },
+};
+mcu.peripherals[0x40018] = { // IO_QSPI: GPIO_QSPI_SS_CTRL's output override is the chip select
+  readUint32: () => 0,
+  writeUint32Atomic: (offset, value) => {
+    if (offset !== 0x0c) return;
+    const over = (value >> 8) & 3;
+    if (over === 2 && !nor.low) nor.cmd = [];
+    if (over !== 2 && nor.low) norEnd();
+    nor.low = over === 2;
+  },
+};
+mcu.peripherals[0x14000] = { // XIP_CTRL: FLUSH
+  readUint32: () => 0,
+  writeUint32Atomic: (offset) => { if (offset === 0x04) nor.flushes += 1; },
+};
+const inFlash = (a) => (a >>> 0) >= FLASH && (a >>> 0) < 0x14000000;
+for (const name of ['readUint8', 'readUint16', 'readUint32']) {
+  const read = mcu[name].bind(mcu);
+  mcu[name] = (a) => {
+    if (inFlash(a) && !xip()) norError(`read of 0x${(a >>> 0).toString(16)} with the SSI out of XIP mode`);
+    return read(a);
+  };
+}
+for (const name of ['writeUint8', 'writeUint16', 'writeUint32']) {
+  const write = mcu[name].bind(mcu);
+  mcu[name] = (a, v) => (inFlash(a) ? norError(`store to the XIP window at 0x${(a >>> 0).toString(16)}`) : write(a, v));
+}
+const flashReport = () => ({ erases: nor.erases, programs: nor.programs, flushes: nor.flushes, errors: nor.errors });
 
 let mlx = null;
 if (args.includes('--mlx')) {
@@ -96,7 +202,7 @@ if (args.includes('--mlx')) {
   mlx = { ask, close: () => { closeSync(w); closeSync(r); child.kill(); rmSync(dir, { recursive: true }); } };
   const [bx, by, bz, t] = option('--field', '0,0,0,25').split(',').map(Number);
   ask(`F ${bx} ${by} ${bz} ${t}`);
-  const i2c = mcu.i2c[0];
+  const i2c = mcu.i2c[Number(option('--i2c', '0'))];
   const now = () => Math.floor(sim.clock.nanos / 1000);
   let addr = -1, writing = false, wbuf = [], rbuf = [];
   const flush = () => {
@@ -161,7 +267,8 @@ let uart = '', usb = '', usb_hex = '', usb_connected = false;
 const done = () => {
   sim.stop();
   if (mlx) mlx.close();
-  console.log(JSON.stringify({ boot2_crc_ok, blocks, uart, usb, usb_hex, usb_connected, nanos: sim.clock.nanos }));
+  console.log(JSON.stringify({ boot2_crc_ok, blocks, uart, usb, usb_hex, usb_connected, nanos: sim.clock.nanos,
+    flash: flashReport() }));
   process.exit(0);
 };
 const seen = () => {
@@ -221,6 +328,11 @@ if (args.includes('--interactive')) {
       if (profiling) process.stdout.write(JSON.stringify(Object.fromEntries(cycles)) + '\n');
       profiling = !profiling;
       cycles.clear();
+    } else if (command === 'flash') { // the flash chip's counts and errors (JSON)
+      process.stdout.write(JSON.stringify(flashReport()) + '\n');
+    } else if (command === 'peek') { // peek OFFSET N: N bytes of flash from OFFSET, hex
+      const [at, n] = value.split(',').map(Number);
+      process.stdout.write(Buffer.from(at >= 0x20000000 ? mcu.sram.subarray(at - 0x20000000, at - 0x20000000 + n) : mcu.flash.subarray(at, at + n)).toString('hex') + '\n');
     } else if (command === 'send') {
       const bytes = [...Buffer.from(value || '', 'hex')];
       if (usb_connected) for (const b of bytes) cdc.sendSerialByte(b);

@@ -22,7 +22,9 @@ void mf_nv_write(uint16_t addr, const uint8_t *data, uint8_t len)
 }
 
 #else
+#if !defined(MF_NV_FLASH_OFFSET)
 #include "mf_nv_image.h"
+#endif
 
 static uint8_t nv[MF_NV_SIZE];
 static uint8_t nv_ready;
@@ -30,8 +32,14 @@ static uint8_t nv_ready;
 static void nv_init(void)
 {
     if (!nv_ready) {
+#if defined(MF_NV_FLASH_OFFSET) /* the two sectors through the XIP window (erased flash reads 0xFF) */
+        memcpy(nv, (const uint8_t *)(0x10000000UL + MF_NV_FLASH_OFFSET), MF_NV_IDENTITY);
+        memcpy(nv + MF_NV_IDENTITY, (const uint8_t *)(0x10000000UL + MF_NV_FLASH_OFFSET - MF_NV_SECTOR),
+               MF_NV_SIZE - MF_NV_IDENTITY);
+#else
         memset(nv, 0xFF, sizeof nv); /* erased EEPROM reads 0xFF */
         memcpy(nv, mf_nv_image, sizeof mf_nv_image);
+#endif
         nv_ready = 1;
     }
 }
@@ -59,10 +67,30 @@ float mf_nv_float(uint16_t addr)
 void mf_nv_write(uint16_t addr, const uint8_t *data, uint8_t len)
 {
     uint8_t k;
+#if defined(MF_NV_FLASH_OFFSET)
+    uint8_t record = 0, identity = 0;
+#endif
     nv_init();
     for (k = 0; k < len && (uint16_t)(addr + k) < MF_NV_SIZE; ++k) {
+#if defined(MF_NV_FLASH_OFFSET) /* which sector changes */
+        if (nv[addr + k] != data[k]) {
+            if ((uint16_t)(addr + k) < MF_NV_IDENTITY) {
+                record = 1;
+            } else {
+                identity = 1;
+            }
+        }
+#endif
         nv[addr + k] = data[k];
     }
+#if defined(MF_NV_FLASH_OFFSET) /* bytes already equal cost no erase (flash wear, as the EEPROM's update) */
+    if (record) {
+        mf_nv_flash_store(MF_NV_FLASH_OFFSET, nv, MF_NV_IDENTITY);
+    }
+    if (identity) {
+        mf_nv_flash_store(MF_NV_FLASH_OFFSET - MF_NV_SECTOR, nv + MF_NV_IDENTITY, MF_NV_SIZE - MF_NV_IDENTITY);
+    }
+#endif
 }
 #endif
 

@@ -1,4 +1,4 @@
-/* The harness images' start (smoke.ld): after boot2 the core loads the stack pointer and the reset handler from the
+/* The RP2040 images' start (rp2040.ld): after boot2 the core loads the stack pointer and the reset handler from the
  * vector table at 0x10000100; the handler copies the initialised data to SRAM, zeroes the rest, and runs main(). */
 #include <stdint.h>
 
