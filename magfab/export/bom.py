@@ -13,6 +13,7 @@ from ..board.placement import board_size_mm
 from ..models.silicone import quantities
 from ..recipes import catalogue
 from ..reference_chip import reference_chip
+from . import rp2040
 from .checklist_weights import jig_rows
 
 if TYPE_CHECKING:
@@ -129,14 +130,26 @@ def _sensor_rows(design: Design) -> list[dict[str, object]]:
     return rows
 
 
-def _bench_rows(design: Design, acceptance: Mapping[str, Any] | None) -> list[dict[str, object]]:
-    """What reads, wires and calibrates the sensor: microcontroller, level shifter, cable, the calibration rig
-    and the acceptance test's weight (when the build has acceptance bands)."""
+def _reader_rows(design: Design) -> list[dict[str, object]]:
+    """The readout board and what wires it to the breakout: an Arduino through a level shifter (the ATmega328P's
+    I2C inputs need 0.7 x 5 V), or a 3.3 V RP2040 board straight, by a Qwiic cable into its STEMMA QT socket or a
+    Qwiic-to-pins cable where it has none."""
     n = design.spec.fabrication.sensors
     bench = catalogue("bench")
-    cal = design.spec.calibration
-    disc = indenter_disc_mm(design, cal.scan_y_mm / 2.0)
-    rows = [
+    board = rp2040.readout_board(design.spec)
+    if board.texts["mcu"] == "rp2040":
+        key = rp2040.board_key(design.spec)
+        socket = board.texts["connector"] == "stemma-qt"
+        cable = bench["qwiic-cable" if socket else "qwiic-jumper"]
+        return [
+            _row("Microcontroller", board.name, f"runs firmware/{rp2040.image_name(key)}", n, "pcs",
+                 f"recipes/boards.toml {key}"),
+            _row("Cable", cable.name, "from J1 to the board's STEMMA QT socket" if socket else
+                 f"from J1 to the board's pins ({board.texts['sda_pin']}, {board.texts['scl_pin']}, 3.3 V, GND)", n,
+                 "pcs", f"recipes/bench.toml {'qwiic-cable' if socket else 'qwiic-jumper'} (SparkFun Qwiic connect "
+                 "system)"),
+        ]
+    return [
         _row("Microcontroller", bench["arduino"].name, "runs firmware/magfab-atmega328p.hex", n, "pcs",
              "recipes/bench.toml arduino (Arduino Wire reference, Uno Rev3 specifications)"),
         _row("Level shifter", bench["level-shifter"].name, "I2C between the 3.3 V breakout and the 5 V Arduino", n,
@@ -145,6 +158,17 @@ def _bench_rows(design: Design, acceptance: Mapping[str, Any] | None) -> list[di
              "recipes/bench.toml qwiic-jumper (SparkFun Qwiic connect system)"),
         _row("Jumper wires", "male-female 0.1 in jumper wires", "level shifter's high side to the Arduino", 4 * n,
              "pcs", "the wiring table in checklist.md"),
+    ]
+
+
+def _bench_rows(design: Design, acceptance: Mapping[str, Any] | None) -> list[dict[str, object]]:
+    """What reads, wires and calibrates the sensor: the readout board and its wiring, the calibration rig
+    and the acceptance test's weight (when the build has acceptance bands)."""
+    bench = catalogue("bench")
+    cal = design.spec.calibration
+    disc = indenter_disc_mm(design, cal.scan_y_mm / 2.0)
+    rows = [
+        *_reader_rows(design),
         _row("Reference force sensor", bench["reference-sensor"].name,
              f"the calibration's reference, resolution {cal.reference_resolution_mN:g} mN", 1, "pcs",
              "recipes/bench.toml reference-sensor (ATI Nano17 calibration table)"),

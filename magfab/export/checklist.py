@@ -27,7 +27,8 @@ from ..models.silicone import (
     silicone_recipe,
 )
 from ..recipes import Recipe, catalogue
-from . import firmware
+from . import checklist_rp2040 as rp2040_words
+from . import firmware, rp2040
 from .bom import bom_rows, indenter_disc_mm
 from .checklist_array import ADDRESS_HEADER, acceptance_steps, address_rows, calibrate_text, chips_text, magnets_text
 from .checklist_array import CALIBRATE_COMMANDS as ARRAY_CALIBRATE_COMMANDS
@@ -329,6 +330,9 @@ def _wiring_table() -> Table:
 
 
 def _wiring_section(design: Design) -> Section:
+    if rp2040.is_rp2040(design.spec):
+        return _section("Wire the board", rp2040_words.wiring_text(design),
+                        Table(rp2040_words.wiring_header(design), rp2040_words.wiring_rows(design)))
     bench = catalogue("bench")
     ls, uno, jumper = bench["level-shifter"], bench["arduino"], bench["qwiic-jumper"]
     vdd = _t(design.chip, "function_VDD", "supply")
@@ -344,7 +348,8 @@ def _wiring_section(design: Design) -> Section:
 
 
 def _flash_section(design: Design) -> Section:
-    flash = Step(
+    flash = Step(rp2040_words.flash_text(design), rp2040_words.flash_commands(design)) if rp2040.is_rp2040(
+        design.spec) else Step(
         "Plug the Arduino into this computer and run these from the build folder (the folder holding this "
         f"checklist). They flash firmware/{firmware.HEX_NAME} with avrdude (a Uno as shown; a Nano: nano, or nano-old "
         "for the old bootloader; the last argument is the Arduino's serial port, a COM port on Windows with "

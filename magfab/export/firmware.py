@@ -227,8 +227,7 @@ def _uart(baud: int) -> tuple[int, float]:
 
 
 def _serial(design: Design) -> tuple[int, float]:
-    """:func:`_uart` of the spec's baud on an ATmega328P board; an RP2040 board's serial link is USB, which has no
-    baud of its own: (0, 0.0)."""
+    """:func:`_uart` of the spec's baud on an ATmega328P board; (0, 0.0) on an RP2040 board (USB: no baud)."""
     return (0, 0.0) if rp2040.is_rp2040(design.spec) else _uart(design.spec.firmware.baud)
 
 
@@ -549,8 +548,9 @@ def rate_mismatch(design: Design, calibration: Mapping[str, Any] | None, measure
     """How this build differs from the one :func:`measured_rate` measured, setting by setting ([] when it does not):
     an array, another :func:`rate_settings`, or (``calibration``: its ``method`` and ``order``, None when not yet
     made) another method or a higher order, whose cost a sample is more."""
-    if design.array is not None:
-        return ["an array (its rate: docs/bundle.md section 3)"]
+    if design.array is not None or rp2040.is_rp2040(design.spec):
+        return ["an array (its rate: docs/bundle.md section 3)" if design.array is not None
+                else "an RP2040 board (the measured rate is the ATmega328P image's)"]
     ran, mine = measured.get("settings") or {}, rate_settings(design)
     out = [f"{k} {mine[k]} (measured: {ran.get(k)})" for k in mine if ran.get(k) != mine[k]]
     cal = measured["calibration"]

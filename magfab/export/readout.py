@@ -31,6 +31,8 @@ from ..formats import acceptance_json, calibration_json
 from ..formats.json_checks import FormatError
 
 # TEMPERATURE_*, re-exported: MLX90393 temperature (TCMP off), T = 25 C + (raw - T25) / TRES, from recipes/chips.toml.
+from . import checklist_rp2040 as rp2040_words
+from . import rp2040
 from .firmware import TEMPERATURE_LSB_PER_C, TEMPERATURE_RAW_25C, chip_config, image_settings, measured_rate_for
 from .templating import environment
 
@@ -132,10 +134,21 @@ def _build_data(design, checked: calibration_json.Checked) -> dict[str, object]:
     }
 
 
-def _context(build: Mapping[str, object], acceptance: Mapping[str, Any] | None) -> dict[str, object]:
-    """What the tree's templates (README.md.j2) are rendered with."""
+def _context(build: Mapping[str, object], acceptance: Mapping[str, Any] | None, design: Design) -> dict[str, object]:
+    """What the tree's templates (README.md.j2) are rendered with: build.json's values, the acceptance bands, and how
+    the board is flashed (an RP2040 board's .uf2 is copied onto its drive, an Arduino's .hex written by avrdude)."""
+    uf2 = rp2040.is_rp2040(design.spec)
     return {
         **build,
+        "flash_command": rp2040_words.flash_commands(design)[0] if uf2 else "sh firmware/flash.sh uno /dev/ttyACM0",
+        "flash_step": (f"Copy the firmware onto the {rp2040.readout_board(design.spec).name.split(' (')[0]}'s "
+                       "RPI-RP2 drive (hold BOOTSEL while you plug it in; `firmware/README.md`)." if uf2 else
+                       "Flash the firmware (a Nano: `nano` or `nano-old` instead of `uno`; Windows: "
+                       "`firmware/README.md`)."),
+        "record_step": ("Write this build's calibration into the board's flash (the .uf2 holds it already: this "
+                        "rewrites the same bytes)." if uf2 else
+                        "Write this build's calibration into the board's EEPROM (the bootloader leaves the EEPROM "
+                        "empty)."),
         "description": f"Host readout for the magfab tactile sensor {build['spec_name']}",
         "acceptance": None if acceptance is None else {
             "rest_lo": f"{acceptance['rest']['Bz_uT']['min']:.0f}",
@@ -189,7 +202,7 @@ def render(design, calibration: Mapping[str, Any], acceptance: Mapping[str, Any]
     accepted = None if acceptance is None else validate_acceptance(acceptance)
     build = _build_data(design, checked)
     files = {f"readout/{path}": data for path, data in source_files().items()}
-    context = _context(build, accepted)
+    context = _context(build, accepted, design)
     context["weigh_steps"] = len(weigh_plan["steps"]) if weigh_plan is not None else 0
     context["weigh_reskin"] = len(weigh_plan["reskin"]) if weigh_plan is not None else 0
     for path in [p for p in files if p.endswith(TEMPLATE_SUFFIX)]:  # the build's README.md in its template's place

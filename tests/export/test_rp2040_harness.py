@@ -24,7 +24,7 @@ from readout_support import ref_forces
 
 from magfab.export import firmware, rp2040, toolchain
 from magfab.export.templating import templates_dir
-from magfab.formats.uf2 import boot2_sealed, read, seal_boot2, write
+from magfab.formats.uf2 import boot2_sealed, read, seal_boot2, write, write_regions
 from magfab.readout.src.magfab_readout import calibration_json
 from magfab.readout.src.magfab_readout.float32_bound import float32_error_N
 
@@ -205,11 +205,11 @@ def _stream(readout_image, addr_offset: int = 0, inject: str = "", us: int = 250
     return samples, others, info
 
 
-def _wrong(readout_image, samples: list, info: dict) -> list:
+def _wrong(readout_image, samples: list, info: dict, cal: dict | None = None) -> list:
     """The samples that carry a force (no chip-error flag) other than the model's field at the build's gain and
-    resolution, or a force off the build's calibration.json at it (float64, docs/bundle.md written out) by more than
-    the float32 bound the firmware README states."""
-    cal = json.loads((readout_image[3] / "calibration" / "calibration.json").read_text())
+    resolution, or a force off the build's calibration.json (or ``cal``) at it (float64, docs/bundle.md written out)
+    by more than the float32 bound the firmware README states."""
+    cal = cal or json.loads((readout_image[3] / "calibration" / "calibration.json").read_text())
     lsb = (info["lsb_xy_uT"], info["lsb_xy_uT"], info["lsb_z_uT"])
     counts = tuple(round(b / q) for b, q in zip(FIELD_UT, lsb))
     truth = ref_forces(cal, *(c * q for c, q in zip(counts, lsb)))
@@ -359,6 +359,81 @@ def test_the_readout_package_reads_the_emulated_board(readout_image):
             device.close()
     assert answer.spec_name == info["spec_name"] and problems == [], problems
     assert len(samples) == 50 and _wrong(readout_image, samples, info) == []
+
+
+def _shifted(out: Path) -> dict:
+    """The build's calibration with 0.5 N more normal force everywhere: another valid calibration, another hash."""
+    cal = json.loads((out / "calibration" / "calibration.json").read_text())
+    cal["coefficients"]["Fz_N"][0] += 0.5
+    return cal
+
+
+def test_upload_programs_the_flash_and_the_board_boots_with_it(readout_image, tmp_path):
+    """The real client's upload (``magfab-readout upload``'s Device.upload): the board programs the record into its
+    flash sector from SRAM, one 'w' at a time, reads it back and reports the new hash; the flash model saw every erase
+    and program made as a SPI NOR flash takes them and nothing read from flash while the SSI was out of XIP (no
+    error). Then the new calibration's forces stream, and a board started again from that flash (a new emulator on
+    the image and the sector as the upload left it) runs the new calibration: no compiler, no reflash."""
+    node, uf2, _, out = readout_image
+    model, info = _model(readout_image)
+    new = _shifted(out)
+    offset = rp2040.record_offset(rp2040.resolve.board(KEY))
+    transport = HarnessTransport(node, uf2, *model, "--bus-timing")
+    with _readout_package(out) as package:
+        device = importlib.import_module(f"{package}.device")
+        board = device.Device(transport=transport, timeout_s=60.0)
+        record = device.calibration_record(new)
+        try:
+            answer = board.upload(new)
+            samples = list(board.samples(count=20))
+            flash = json.loads(transport.ask("flash", answered=True))
+            sector = bytes.fromhex(transport.ask(f"peek {offset},{len(record)}", answered=True))
+        finally:
+            board.close()
+    assert answer.calibration_hash == calibration_json.calibration_sha256(new)[:16]
+    assert flash["errors"] == [] and flash["erases"] >= 1 and flash["programs"] >= 4, flash
+    assert sector == record and _wrong(readout_image, samples, info, new) == []
+    again = tmp_path / "after-upload.uf2"
+    again.write_bytes(rp2040.build_uf2(KEY, sector))
+    _, others, _ = _stream((node, again, *readout_image[2:]), send="i", us=60_000)
+    assert [x.calibration_hash for x in others if type(x).__name__ == "DeviceInfo"] == [answer.calibration_hash]
+
+
+def test_calibration_uf2_dropped_on_the_drive_replaces_the_record_and_keeps_the_identity(readout_image, tmp_path):
+    """A board that runs the build's .uf2 and carries a sensor identity (written by ``upload --sensor``'s
+    write_identity, into the sector below the record's) takes a calibration.uf2 of another calibration on its drive
+    (the bootrom erases only the sectors a file writes): it then runs the new calibration, and reads back the same
+    identity."""
+    node, uf2, _, out = readout_image
+    model, _ = _model(readout_image)
+    offset = rp2040.record_offset(rp2040.resolve.board(KEY))
+    new = _shifted(out)
+    with _readout_package(out) as package:
+        device = importlib.import_module(f"{package}.device")
+        identity = importlib.import_module(f"{package}.identity")
+        ident = identity.Identity("finger-07", "2026-12-03T10:00:00Z", calibration_json.calibration_sha256(new)[:16])
+        transport = HarnessTransport(node, uf2, *model)
+        board = device.Device(transport=transport, timeout_s=60.0)
+        try:
+            board.write_identity(ident)
+            image = rp2040.shipped_image(KEY)[0]
+            held = [(at, bytes.fromhex(transport.ask(f"peek {at},{n}", answered=True)))  # what the board's flash holds
+                    for at, n in ((0, len(image)), (offset - 4096, identity.SIZE), (offset, 1024))]
+        finally:
+            board.close()
+        assert held[0][1] == image and held[1][1] == identity.pack(ident)
+        flash = tmp_path / "board.uf2"  # the same, as a file to start the emulator from
+        flash.write_bytes(write_regions([(0x10000000 + at, data) for at, data in held]))
+        dropped = tmp_path / rp2040.CALIBRATION_UF2
+        dropped.write_bytes(rp2040.calibration_uf2(KEY, device.calibration_record(new)))
+        transport = HarnessTransport(node, flash, *model, "--drop", str(dropped))
+        board = device.Device(transport=transport, timeout_s=60.0)
+        try:
+            answer = board.info()
+            kept = board.read_identity()
+        finally:
+            board.close()
+    assert answer.calibration_hash == calibration_json.calibration_sha256(new)[:16] and kept == ident
 
 
 #: The hardware layer's functions that wait (for USB, the bus, a delay): a sample's cycles outside them are the work.
