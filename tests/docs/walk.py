@@ -272,7 +272,10 @@ class Bench:
 
     @property
     def env(self) -> dict:
-        return bench_env(self.venv, self.rig.port if self.rig is not None else None)
+        """:func:`bench_env`, and what the board on the bench sets besides (an RP2040 rig's ``$USER``, which names
+        its drive's folder)."""
+        return {**bench_env(self.venv, self.rig.port if self.rig is not None else None),
+                **getattr(self.rig, "env", {})}
 
     def swap(self, rig=None):
         """Unplug the board on the bench (powered off: its image and EEPROM kept) and plug in ``rig``, a board used

@@ -29,6 +29,7 @@
 //   run US      run US microseconds of emulated time; answers with the hex of what the device sent over USB meanwhile
 //   send HEX    bytes for the host to send the device (once it is connected)
 //   profile     start counting the CPU's cycles by instruction address; the next 'profile' answers with them (JSON)
+//   field B,B,B,T  the model's field (uT) and temperature (C) from now on (with --mlx); answers ok
 //   flash       the NOR model's counts and errors (JSON)
 //   peek AT,N   N bytes from AT, in hex: a flash offset, or an SRAM address (from 0x20000000)
 //   quit
@@ -328,6 +329,9 @@ if (args.includes('--interactive')) {
       if (profiling) process.stdout.write(JSON.stringify(Object.fromEntries(cycles)) + '\n');
       profiling = !profiling;
       cycles.clear();
+    } else if (command === 'field') { // field BX,BY,BZ,T: the chip's field (uT) and temperature (C) from now on
+      if (mlx) mlx.ask(`F ${value.split(',').join(' ')}`);
+      process.stdout.write('ok\n');
     } else if (command === 'flash') { // the flash chip's counts and errors (JSON)
       process.stdout.write(JSON.stringify(flashReport()) + '\n');
     } else if (command === 'peek') { // peek OFFSET N: N bytes of flash from OFFSET, hex

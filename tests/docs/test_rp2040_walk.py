@@ -1,0 +1,78 @@
+"""The RP2040 board's pages, pasted as written on a simulated bench (tests/docs/rig_rp2040.py: the board's BOOTSEL
+drive, and the emulated RP2040 behind a serial port running whatever .uf2 lands on the drive, with the build's
+MLX90393 model). From a folder holding only the example spec: the README's build command, then the checklist's
+"Flash and read" section, copying the .uf2 onto the drive, installing the reader, asking the board what it runs and
+streaming calibrated forces, a press among them."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from conftest import _missing, require_tool
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from pages import blocks
+from rig_rp2040 import Rp2040Rig
+from walk import Bench, Scan
+
+from magfab.export import rp2040
+
+EXAMPLE = Path(__file__).resolve().parents[2] / "magfab" / "examples" / "magone_qtpy.toml"
+PRESS_N = 1.0
+
+
+def _flash_and_read(checklist: str) -> list:
+    """The checklist's blocks in its "Flash and read" section."""
+    start = re.search(r"^## \d+\. Flash and read$", checklist, re.M)
+    end = re.search(r"^## ", checklist[start.end():], re.M)
+    return blocks(checklist[start.start():start.end() + (end.start() if end else len(checklist))], "checklist.md")
+
+
+@pytest.fixture(scope="module")
+def rp2040_walked(tmp_path_factory):
+    require_tool("cc")
+    if not os.access("/media" if Path("/media").exists() else "/", os.W_OK):
+        _missing("the walk makes the board's drive under /media (the pages' Linux path), not writable here")
+    lab = tmp_path_factory.mktemp("rp2040-lab")
+    venv = lab.parent / (lab.name + "-venv")
+    subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, capture_output=True, timeout=300)
+    shutil.copyfile(EXAMPLE, lab / EXAMPLE.name)
+    with contextlib.ExitStack() as stack:
+        bench = Bench(cwd=lab, venv=venv, plug_in=None, home=lab)
+        built = bench.paste(f"magfab build {EXAMPLE.name}")
+        assert built.returncode == 0, built.stdout + built.stderr
+        build = lab / "build" / "magone-qtpy"
+        bench.cwd = build
+        bench.rig = stack.enter_context(Rp2040Rig(build, tmp_path_factory.mktemp("rp2040-board")))
+        bench.scan = Scan(build)
+        bench.scan.at_rest(bench.rig)
+        bench.press = [bench.scan.field_at(PRESS_N)]
+        for block in _flash_and_read((build / "checklist.md").read_text()):
+            for line in block.commands:
+                ran = bench.paste(line)
+                interrupted = "Ctrl-C ends it" in line and ran.returncode == 130
+                assert (ran.returncode == 0 or interrupted) and "Traceback" not in ran.stderr, (
+                    f"{block}: `{line}` exited {ran.returncode}\n{ran.stdout[-3000:]}\n{ran.stderr[-3000:]}")
+        yield bench
+
+
+def test_the_uf2_copied_onto_the_drive_runs_and_streams_forces(rp2040_walked):
+    """The board ran exactly the build's .uf2 (the copy the page made), the reader found this build's calibration
+    on it, and the stream zeroed at rest and read the press."""
+    build = rp2040_walked.cwd
+    key = rp2040_walked.rig.key
+    assert rp2040_walked.rig.flashed.read_bytes() == (build / "firmware" / rp2040.image_name(key)).read_bytes()
+    info = next(r for r in rp2040_walked.ran if r.line.startswith("magfab-readout info"))
+    assert "calibration: match" in info.stdout, info.stdout
+    stream = next(r for r in rp2040_walked.ran if r.line.startswith("magfab-readout stream"))
+    rows = [line.split() for line in stream.stdout.splitlines() if line and not line.startswith("#")]
+    fz = [float(r[4]) for r in rows if len(r) > 4 and re.fullmatch(r"[-+]?\d+\.\d+", r[4])]
+    print(f"{len(fz)} samples, Fz up to {max(fz):.3f} N")
+    assert "# zero:" in stream.stdout and max(fz) > 0.5 * PRESS_N, stream.stdout[:3000]
