@@ -21,6 +21,7 @@ import sys
 import threading
 import time
 import tomllib
+import types
 from contextlib import contextmanager, suppress
 from pathlib import Path
 
@@ -499,6 +500,29 @@ def test_the_port_defaults_to_MAGFAB_READOUT_PORT(pkg, monkeypatch):
     assert device.default_port() == "/dev/ttyUSB3"
     monkeypatch.delenv("MAGFAB_READOUT_PORT")
     assert device.default_port() == "/dev/ttyUSB3"
+
+
+def test_the_board_is_found_by_its_usb_id_among_other_serial_ports(pkg, monkeypatch):
+    """Among several USB serial ports (a USB-serial adapter, a modem), the one with a readout board's USB ID (the
+    RP2040 image's 2E8A:000A, an Uno's 2341:0043) is the board's; two boards, or several ports and no board, are
+    named and refused; a single USB port is taken whatever its ID (a Nano's bridge chip)."""
+    device = sys.modules["magfab_readout.device"]
+    monkeypatch.setattr(device, "_import_serial", lambda: None)  # the ports below stand for pyserial's list
+
+    def port(name: str, vid, pid, description: str = "n/a"):
+        return types.SimpleNamespace(device=name, vid=vid, pid=pid, description=description)
+
+    adapter, rp, uno = port("/dev/ttyUSB0", 0x0403, 0x6001), port("/dev/ttyACM1", 0x2E8A, 0x000A), port(
+        "/dev/ttyACM0", 0x2341, 0x0043)
+    serial_port = port("/dev/ttyS0", None, None)
+    for ports, found in (([adapter, rp, serial_port], "/dev/ttyACM1"), ([uno, adapter], "/dev/ttyACM0"),
+                         ([adapter], "/dev/ttyUSB0")):
+        monkeypatch.setattr(device, "_ports", lambda ports=ports: ports)
+        assert device.find_port() == found
+    for ports in ([rp, uno], [adapter, port("/dev/ttyUSB1", 0x1A86, 0x7523)]):
+        monkeypatch.setattr(device, "_ports", lambda ports=ports: ports)
+        with pytest.raises(pkg.PortNotFound, match="several USB serial ports"):
+            device.find_port()
 
 
 # --- the installed command line -----------------------------------------------------------------------------

@@ -100,11 +100,21 @@ def _import_serial():
     return serial
 
 
+#: The USB IDs (VID, PID) of the readout boards: an Arduino Uno's (ArduinoCore-avr boards.txt, uno.vid/pid .0 to .3)
+#: and the RP2040 image's (usb_cdc.c: Raspberry Pi's ID for a Pico SDK CDC serial port, 2E8A:000A).
+BOARD_IDS = ((0x2341, 0x0043), (0x2341, 0x0001), (0x2A03, 0x0043), (0x2341, 0x0243), (0x2E8A, 0x000A))
+
+
 def find_port() -> str:
-    """The one USB serial port present (the boards are USB), or :class:`PortNotFound` naming what there is."""
+    """The port of the one readout board present (a USB serial port with one of :data:`BOARD_IDS`; a Nano's USB
+    bridge has its chip maker's ID, so without one of those: the one USB serial port present), or
+    :class:`PortNotFound` naming what there is."""
     _import_serial()
     ports = _ports()
     usb = [p for p in ports if getattr(p, "vid", None) is not None]
+    boards = [p for p in usb if (p.vid, getattr(p, "pid", None)) in BOARD_IDS]
+    if len(boards) == 1:
+        return boards[0].device
     if len(usb) == 1:
         return usb[0].device
     if not usb:
