@@ -184,7 +184,7 @@ def _model(readout_image, addr_offset: int = 0, field: tuple = FIELD_UT) -> tupl
 
 
 def _stream(readout_image, addr_offset: int = 0, inject: str = "", us: int = 250_000,
-            timed: bool = False, send: str = "", field: tuple = FIELD_UT) -> tuple[list, list, dict]:
+            timed: bool = False, send: str = "", field: tuple = FIELD_UT, extra: tuple = ()) -> tuple[list, list, dict]:
     """``us`` of emulated time of the readout image against the model at the build's address (plus ``addr_offset``),
     ``inject`` the harness's --inject (FAULT@US), ``timed`` its --bus-timing, ``send`` what the host sends once the
     device is connected: (the samples the build's readout package decodes from what came over USB and every other
@@ -193,7 +193,7 @@ def _stream(readout_image, addr_offset: int = 0, inject: str = "", us: int = 250
     model, info = _model(readout_image, addr_offset, field)
     run = _run(node, uf2, *model, "--hex", "--us", str(us), "--ms", "50000",
                *(("--inject", inject) if inject else ()), *(("--bus-timing",) if timed else ()),
-               *(("--send", send) if send else ()))
+               *(("--send", send) if send else ()), *extra)
     assert run.returncode == 0, run.stdout + run.stderr
     report = json.loads(run.stdout)
     assert report["usb_connected"]
@@ -204,6 +204,7 @@ def _stream(readout_image, addr_offset: int = 0, inject: str = "", us: int = 250
         samples = [s for s in items if isinstance(s, frames.Sample)]
         others = [s for s in items if not isinstance(s, frames.Sample)]
     assert decoder.stats.crc_errors == 0 and decoder.stats.lost == 0
+    info["reset_us"] = report["reset_us"]  # when the harness restarted the chip (--reset-phase), or None
     return samples, others, info
 
 
@@ -258,6 +259,34 @@ def test_fault_gives_error_frames_never_a_wrong_force(readout_image, fault):
     assert after[-5:] and not any(s.chip_error for s in after[-5:]), marks
     if errors:
         assert next(s for s in after[after.index(errors[0]):] if not s.chip_error).recovered, marks
+
+
+STARTUP_PHASES = 28  # EX, RT, NOP, three read-modify-verify register updates, SB, the first RM: 2 phases each
+
+
+@pytest.mark.parametrize("phase", range(1, STARTUP_PHASES + 1))
+def test_chip_reset_at_every_start_up_step(readout_image, phase):
+    """A chip reset (power-on registers, RS pending) at each address phase of the start-up and the first read (as the
+    AVR image's, tests/export/test_simbus.py): never a wrong force (the counts at the build's gain and resolution: the
+    configuration re-applied), and forces streaming in the end."""
+    samples, _, info = _stream(readout_image, timed=True, us=150_000, extra=("--reset-phase", str(phase)))
+    marks = "".join("E" if s.chip_error else ("R" if s.recovered else ".") for s in samples)
+    assert info["reset_us"] is not None and (not samples or info["reset_us"] <= samples[0].t_us + 2000), marks
+    assert _wrong(readout_image, samples, info) == [], marks
+    assert samples[-3:] and not any(s.chip_error for s in samples[-3:]), marks
+
+
+@pytest.mark.parametrize("phase", range(1, STARTUP_PHASES + 1))
+def test_chip_reset_at_every_recovery_step(readout_image, phase):
+    """The same during the recovery after a fault (an address NACK at 100 ms): the reset strikes the restart's
+    ``phase``-th address phase after the NACKed one."""
+    samples, _, info = _stream(readout_image, timed=True, us=320_000, inject=f"nack-addr@{INJECT_US}",
+                               extra=("--reset-phase", str(1 + phase), "--reset-after", str(INJECT_US)))
+    after = [s for s in samples if s.t_us >= INJECT_US - 5000]
+    marks = "".join("E" if s.chip_error else ("R" if s.recovered else ".") for s in after)
+    assert info["reset_us"] is not None and INJECT_US < info["reset_us"] < after[-3].t_us, marks
+    assert _wrong(readout_image, samples, info) == [], marks
+    assert any(s.chip_error for s in after) and not any(s.chip_error for s in after[-3:]), marks
 
 
 def test_no_chip_on_the_bus_gives_error_frames_never_a_force(readout_image):

@@ -1,6 +1,7 @@
 // Runs an RP2040 image on rp2040js (tests/firmware_sim/rp2040):
 //   node run.mjs IMAGE.uf2 [--drop FILE.uf2] [--boot2] [--until TEXT] [--ms N] [--us N] [--send TEXT] [--hex]
-//                [--interactive] [--mlx MLXD --addr A [--i2c 0|1] --field BX,BY,BZ,T [--inject FAULT@US] [--bus-timing]]
+//                [--interactive] [--mlx MLXD --addr A [--i2c 0|1] --field BX,BY,BZ,T [--inject FAULT@US] [--bus-timing]
+//                 [--reset-phase N [--reset-after US]]]
 //
 // The image comes as the build's .uf2. Each block is checked as the RP2040 bootrom would take it (UF2's magic numbers,
 // the RP2040 family 0xE48BFF56, a 256-byte payload on a page in flash) and written into the emulated flash; boot2's
@@ -21,10 +22,13 @@
 // and the bus-free time after it (as the AVR harness times simavr's TWI). --inject FAULT@US injects a fault at US
 // microseconds of emulated time: on the bus, nack-addr (the next address phase), nack-data (the next byte written) or
 // all-ff (the next read's bytes); inside the chip, chip:NAME (NAME a sim_fault of sim_mlx90393.h: error, short, trunc,
-// stuck, reset), as the AVR harness injects them (tests/export/simbus). UART0's bytes and the CDC's are collected until
+// stuck, reset), as the AVR harness injects them (tests/export/simbus). --reset-phase N restarts the chip (power-on
+// registers, RS pending) at the N-th address phase (from the first at or after --reset-after US of emulated time), as
+// the AVR harness's bus.reset_in does. UART0's bytes and the CDC's are collected until
 // TEXT has been seen in either, N us of emulated time (--us) or N ms of host time (--ms) pass. Prints one JSON line:
 // {"boot2_crc_ok", "blocks", "uart", "usb", "usb_hex" (with --hex), "usb_connected", "nanos", "flash" (the NOR
-// model's erases, programs, cache flushes and errors)}; exit 2 on a refused image. --interactive instead takes commands on stdin, one a line, and runs the emulation only when asked, so that a
+// model's erases, programs, cache flushes and errors), "reset_us" (when --reset-phase struck, or null)}; exit 2 on a
+// refused image. --interactive instead takes commands on stdin, one a line, and runs the emulation only when asked, so that a
 // host program can be the board's USB host (tests/export/test_rp2040_harness.py's HarnessTransport):
 //   run US      run US microseconds of emulated time; answers with the hex of what the device sent over USB meanwhile
 //   send HEX    bytes for the host to send the device (once it is connected)
@@ -185,7 +189,7 @@ for (const name of ['writeUint8', 'writeUint16', 'writeUint32']) {
 }
 const flashReport = () => ({ erases: nor.erases, programs: nor.programs, flushes: nor.flushes, errors: nor.errors });
 
-let mlx = null;
+let mlx = null, reset_us = null; // reset_us: when --reset-phase restarted the chip
 if (args.includes('--mlx')) {
   const dir = mkdtempSync(join(tmpdir(), 'mlxd-'));
   const req = join(dir, 'req'), rep = join(dir, 'rep');
@@ -225,8 +229,15 @@ if (args.includes('--mlx')) {
     sim.clock.createAlarm(fn).schedule(bits * (i2c.sclLowPeriod + i2c.sclHighPeriod) * 8); // 8 ns a cycle
   };
   i2c.onStart = () => { flush(); later(1, () => i2c.completeStart()); };
+  let phases = 0; // address phases from --reset-after on (--reset-phase)
+  const resetPhase = Number(option('--reset-phase', '0')), resetAfter = Number(option('--reset-after', '0'));
   i2c.onConnect = (address, mode) => {
     flush();
+    if (now() >= resetAfter) phases += 1;
+    if (resetPhase && phases === resetPhase) {
+      ask(`X ${CHIP_FAULTS.reset} 1 ${now()}`);
+      reset_us = now();
+    }
     addr = address;
     writing = mode === 0;
     let present = ask(`A ${address}`) === '1';
@@ -269,7 +280,7 @@ const done = () => {
   sim.stop();
   if (mlx) mlx.close();
   console.log(JSON.stringify({ boot2_crc_ok, blocks, uart, usb, usb_hex, usb_connected, nanos: sim.clock.nanos,
-    flash: flashReport() }));
+    flash: flashReport(), reset_us }));
   process.exit(0);
 };
 const seen = () => {
