@@ -357,6 +357,47 @@ def test_the_rate_holds_across_the_calibrated_region(readout_image):
     assert worst[0] >= 0.99, shares
 
 
+@pytest.mark.parametrize("chips", [5, 16])
+def test_an_array_reads_every_chip_at_the_chips_or_the_buss_rate(readout_image, tmp_path, chips):
+    """The shipped image with an array record of ``chips`` chips (0x0C up, MagOne's settings), each chip the build's
+    model at its address on the timed bus: every chip's readings in each cycle frame, each the model's field at the
+    build's gain and resolution, no error, every chip equally often. Five chips: at least 99 % of the chip's
+    conversions a taxel. Sixteen: the bus binds (each read on the one controller, in turn); the cycles then come at
+    least 95 % as often as the bus's own busy time allows (run.mjs's bus_busy_us: every step at the image's SCL)."""
+    node, _, mlxd, out = readout_image
+    design = derive(load_spec(EXAMPLE))
+    settings = firmware.image_settings(design)
+    addresses = [0x0C + k for k in range(chips)]
+    uf2 = tmp_path / "array.uf2"
+    uf2.write_bytes(rp2040.build_uf2(KEY, firmware._eeprom_module().pack_array(addresses, "0" * 16, settings)))
+    settle, window = SETTLE_US + 10_000 * chips, 300_000
+    run = _run(node, uf2, "--mlx", str(mlxd), "--i2c", "1", "--addr", ",".join(map(str, addresses)), "--field",
+               ",".join(str(b) for b in (*FIELD_UT, 25.0)), "--hex", "--us", str(settle + window), "--ms", "120000",
+               "--bus-timing")
+    report = json.loads(run.stdout)
+    with _readout_package(out) as package:
+        frames = importlib.import_module(f"{package}.frames")
+        decoder = frames.Decoder()
+        got = [s for s in decoder.feed(bytes.fromhex(report["usb_hex"])) if isinstance(s, frames.Sample)]
+    assert decoder.stats.crc_errors == 0 and decoder.stats.lost == 0
+    lsb = (settings["lsb_xy_uT"], settings["lsb_xy_uT"], settings["lsb_z_uT"])
+    counts = tuple(round(b / q) for b, q in zip(FIELD_UT, lsb))
+    assert not any(s.chip_error for s in got) and all(s.counts == counts for s in got)
+    steady = [s for s in got if s.t_us >= settle]
+    per = [sum(s.taxel == k for s in steady) for k in range(chips)]
+    assert max(per) - min(per) <= 1
+    elapsed = (steady[-1].t_us - steady[0].t_us) / 1e6
+    tconv = firmware.chip_config(design).tconv_us
+    share = min(per) / elapsed * tconv / 1e6
+    bus_hz = (len(got) / chips) / (report["bus_busy_us"] / 1e6)  # cycles a second if the bus never rested
+    print(f"{chips} chips: {min(per) / elapsed:.1f} Hz a taxel, {share:.1%} of the chip's {1e6 / tconv:.1f} "
+          f"conversions/s; the bus's own limit {bus_hz:.1f} cycles/s ({min(per) / elapsed / bus_hz:.1%} of it)")
+    if chips <= 5:
+        assert share >= 0.99
+    else:
+        assert min(per) / elapsed >= 0.95 * bus_hz
+
+
 def test_the_host_asks_the_board_what_it_runs_over_usb(readout_image):
     """The host's 'i' over USB (what ``magfab-readout info`` sends): the board answers with the build's spec name,
     calibration hash and chip settings, between its frames."""

@@ -1,7 +1,7 @@
 // Runs an RP2040 image on rp2040js (tests/firmware_sim/rp2040):
 //   node run.mjs IMAGE.uf2 [--drop FILE.uf2] [--boot2] [--until TEXT] [--ms N] [--us N] [--send TEXT] [--hex]
-//                [--interactive] [--mlx MLXD --addr A [--i2c 0|1] --field BX,BY,BZ,T [--inject FAULT@US] [--bus-timing]
-//                 [--reset-phase N [--reset-after US]]]
+//                [--interactive] [--mlx MLXD --addr A[,A...] [--i2c 0|1] --field BX,BY,BZ,T[;...] [--inject FAULT@US]
+//                 [--bus-timing] [--reset-phase N [--reset-after US]]]
 //
 // The image comes as the build's .uf2. Each block is checked as the RP2040 bootrom would take it (UF2's magic numbers,
 // the RP2040 family 0xE48BFF56, a 256-byte payload on a page in flash) and written into the emulated flash; boot2's
@@ -27,13 +27,13 @@
 // the AVR harness's bus.reset_in does. UART0's bytes and the CDC's are collected until
 // TEXT has been seen in either, N us of emulated time (--us) or N ms of host time (--ms) pass. Prints one JSON line:
 // {"boot2_crc_ok", "blocks", "uart", "usb", "usb_hex" (with --hex), "usb_connected", "nanos", "flash" (the NOR
-// model's erases, programs, cache flushes and errors), "reset_us" (when --reset-phase struck, or null)}; exit 2 on a
-// refused image. --interactive instead takes commands on stdin, one a line, and runs the emulation only when asked, so that a
+// model's erases, programs, cache flushes and errors), "reset_us" (when --reset-phase struck, or null),
+// "bus_busy_us" (how long the bus was busy, every step timed as --bus-timing times it)}; exit 2 on a refused image. --interactive instead takes commands on stdin, one a line, and runs the emulation only when asked, so that a
 // host program can be the board's USB host (tests/export/test_rp2040_harness.py's HarnessTransport):
 //   run US      run US microseconds of emulated time; answers with the hex of what the device sent over USB meanwhile
 //   send HEX    bytes for the host to send the device (once it is connected)
 //   profile     start counting the CPU's cycles by instruction address; the next 'profile' answers with them (JSON)
-//   field B,B,B,T  the model's field (uT) and temperature (C) from now on (with --mlx); answers ok
+//   field B,B,B,T  the models' fields (uT) and temperature (C) from now on, as --field gives them; answers ok
 //   flash       the NOR model's counts and errors (JSON)
 //   peek AT,N   N bytes from AT, in hex: a flash offset, or an SRAM address (from 0x20000000)
 //   quit
@@ -190,28 +190,40 @@ for (const name of ['writeUint8', 'writeUint16', 'writeUint32']) {
 const flashReport = () => ({ erases: nor.erases, programs: nor.programs, flushes: nor.flushes, errors: nor.errors });
 
 let mlx = null, reset_us = null; // reset_us: when --reset-phase restarted the chip
+let busNs = 0; // how long the bus has been busy, at the SCL clock the image sets (--mlx)
 if (args.includes('--mlx')) {
-  const dir = mkdtempSync(join(tmpdir(), 'mlxd-'));
-  const req = join(dir, 'req'), rep = join(dir, 'rep');
-  execFileSync('mkfifo', [req, rep]);
-  const child = spawn(option('--mlx'), [req, rep, option('--addr', '12')], { stdio: 'inherit' });
-  const w = openSync(req, 'w'), r = openSync(rep, 'r');
-  const one = Buffer.alloc(1);
-  const ask = (line) => {
-    if (process.env.HARNESS_DEBUG) process.stderr.write(`${Math.floor(sim.clock.nanos / 1000)} ${line}\n`);
-    writeSync(w, line + '\n');
-    let out = '';
-    while (readSync(r, one, 0, 1) === 1 && one[0] !== 10) out += String.fromCharCode(one[0]);
-    return out;
+  // One model (an mlxd process) per chip: --addr lists their addresses, --field their fields (';' between chips, or
+  // one for all). A line about a chip goes to the model at its address; a chip's fault (X) to the first.
+  const serve = (address) => {
+    const dir = mkdtempSync(join(tmpdir(), 'mlxd-'));
+    const req = join(dir, 'req'), rep = join(dir, 'rep');
+    execFileSync('mkfifo', [req, rep]);
+    const child = spawn(option('--mlx'), [req, rep, String(address)], { stdio: 'inherit' });
+    const w = openSync(req, 'w'), r = openSync(rep, 'r');
+    const one = Buffer.alloc(1);
+    const ask = (line) => {
+      if (process.env.HARNESS_DEBUG) process.stderr.write(`${Math.floor(sim.clock.nanos / 1000)} ${line}\n`);
+      writeSync(w, line + '\n');
+      let out = '';
+      while (readSync(r, one, 0, 1) === 1 && one[0] !== 10) out += String.fromCharCode(one[0]);
+      return out;
+    };
+    return { address, ask, close: () => { closeSync(w); closeSync(r); child.kill(); rmSync(dir, { recursive: true }); } };
   };
-  mlx = { ask, close: () => { closeSync(w); closeSync(r); child.kill(); rmSync(dir, { recursive: true }); } };
-  const [bx, by, bz, t] = option('--field', '0,0,0,25').split(',').map(Number);
-  ask(`F ${bx} ${by} ${bz} ${t}`);
+  const chips = option('--addr', '12').split(',').map(Number).map(serve);
+  const setFields = (text) => {
+    const fields = text.split(';');
+    chips.forEach((c, k) => c.ask(`F ${(fields[k] ?? fields[0]).split(',').join(' ')}`));
+  };
+  const at = (address) => chips.find((c) => c.address === address);
+  const ask = (line) => chips[0].ask(line); // the first chip's (a single taxel's: the chip)
+  mlx = { ask, setFields, close: () => chips.forEach((c) => c.close()) };
+  setFields(option('--field', '0,0,0,25'));
   const i2c = mcu.i2c[Number(option('--i2c', '0'))];
   const now = () => Math.floor(sim.clock.nanos / 1000);
   let addr = -1, writing = false, wbuf = [], rbuf = [];
   const flush = () => {
-    if (addr >= 0 && writing && wbuf.length) ask(`W ${addr} ${now()} ${Buffer.from(wbuf).toString('hex')}`);
+    if (addr >= 0 && writing && wbuf.length) at(addr).ask(`W ${addr} ${now()} ${Buffer.from(wbuf).toString('hex')}`);
     wbuf = [];
   };
   const pending = { 'nack-addr': 0, 'nack-data': 0, 'all-ff': 0 };
@@ -225,6 +237,7 @@ if (args.includes('--mlx')) {
   }
   const timed = args.includes('--bus-timing');
   const later = (bits, fn) => {
+    busNs += bits * (i2c.sclLowPeriod + i2c.sclHighPeriod) * 8;
     if (!timed) return fn();
     sim.clock.createAlarm(fn).schedule(bits * (i2c.sclLowPeriod + i2c.sclHighPeriod) * 8); // 8 ns a cycle
   };
@@ -234,13 +247,13 @@ if (args.includes('--mlx')) {
   i2c.onConnect = (address, mode) => {
     flush();
     if (now() >= resetAfter) phases += 1;
-    if (resetPhase && phases === resetPhase) {
-      ask(`X ${CHIP_FAULTS.reset} 1 ${now()}`);
+    if (resetPhase && phases === resetPhase && at(address)) {
+      at(address).ask(`X ${CHIP_FAULTS.reset} 1 ${now()}`);
       reset_us = now();
     }
     addr = address;
     writing = mode === 0;
-    let present = ask(`A ${address}`) === '1';
+    let present = at(address) !== undefined && at(address).ask(`A ${address}`) === '1';
     if (present && pending['nack-addr']) {
       pending['nack-addr'] -= 1;
       present = false;
@@ -250,7 +263,7 @@ if (args.includes('--mlx')) {
         pending['all-ff'] -= 1;
         rbuf = new Array(9).fill(0xff);
       } else {
-        const [, hex] = ask(`R ${address} ${now()} 9`).split(' ');
+        const [, hex] = at(address).ask(`R ${address} ${now()} 9`).split(' ');
         rbuf = [...Buffer.from(hex, 'hex')];
       }
     }
@@ -279,9 +292,9 @@ let uart = '', usb = '', usb_hex = '', usb_connected = false;
 const done = () => {
   sim.stop();
   if (mlx) mlx.close();
-  console.log(JSON.stringify({ boot2_crc_ok, blocks, uart, usb, usb_hex, usb_connected, nanos: sim.clock.nanos,
-    flash: flashReport(), reset_us }));
-  process.exit(0);
+  const report = JSON.stringify({ boot2_crc_ok, blocks, uart, usb, usb_hex, usb_connected, nanos: sim.clock.nanos,
+    flash: flashReport(), reset_us, bus_busy_us: busNs / 1000 });
+  process.stdout.write(report + '\n', () => process.exit(0)); // exit once written: a pipe takes it in pieces
 };
 const seen = () => {
   if (until !== null && (uart.includes(until) || usb.includes(until))) setImmediate(done);
@@ -341,7 +354,7 @@ if (args.includes('--interactive')) {
       profiling = !profiling;
       cycles.clear();
     } else if (command === 'field') { // field BX,BY,BZ,T: the chip's field (uT) and temperature (C) from now on
-      if (mlx) mlx.ask(`F ${value.split(',').join(' ')}`);
+      if (mlx) mlx.setFields(value);
       process.stdout.write('ok\n');
     } else if (command === 'flash') { // the flash chip's counts and errors (JSON)
       process.stdout.write(JSON.stringify(flashReport()) + '\n');
