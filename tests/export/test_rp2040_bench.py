@@ -36,6 +36,7 @@ def test_the_build_writes_the_uf2_of_the_shipped_image_and_its_record(rp2040_bui
     offset = rp2040.record_offset(resolve.board(key))
     assert record[0] == FLASH_START + offset and record[1].rstrip(b"\xff") == _record(rp2040_build).rstrip(b"\xff")
     assert read_regions((fw / rp2040.CALIBRATION_UF2).read_bytes()) == [record]
+    assert rp2040_build.calibration["image"] == f"firmware/{rp2040.image_name(key)}"  # what the build says it wrote
     names = {p.relative_to(fw).as_posix() for p in fw.rglob("*") if p.is_file()}
     assert {f"rp2040/{s}" for s in rp2040.RP2040_SOURCES} <= names
     assert not [n for n in names if n.startswith("avr/") or n.endswith((".hex", ".eep", ".ino")) or n in (
