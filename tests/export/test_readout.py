@@ -523,6 +523,10 @@ def test_the_board_is_found_by_its_usb_id_among_other_serial_ports(pkg, monkeypa
         monkeypatch.setattr(device, "_ports", lambda ports=ports: ports)
         with pytest.raises(pkg.PortNotFound, match="several USB serial ports"):
             device.find_port()
+    rp.description, rp.serial_number = "magfab RP2040 readout", "E4630C7D2B4F3F29"  # the serial tells boards apart
+    monkeypatch.setattr(device, "_ports", lambda: [rp, uno])
+    with pytest.raises(pkg.PortNotFound, match=r"/dev/ttyACM1 \(magfab RP2040 readout, serial E4630C7D2B4F3F29\)"):
+        device.find_port()
 
 
 # --- the installed command line -----------------------------------------------------------------------------

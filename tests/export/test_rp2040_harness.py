@@ -398,6 +398,22 @@ def test_an_array_reads_every_chip_at_the_chips_or_the_buss_rate(readout_image, 
         assert min(per) / elapsed >= 0.95 * bus_hz
 
 
+def test_each_board_gives_its_flash_chips_unique_id_as_its_usb_serial_number(readout_image):
+    """The image reads its flash chip's 64-bit unique ID (4Bh, from SRAM with the SSI out of XIP, as it programs the
+    record) at start-up and gives it as the USB serial number string a host reads (GET_DESCRIPTOR string 3): two boards
+    (two flash chips) give two serial numbers, each its chip's ID; the flash model saw no read of flash meanwhile."""
+    node, uf2, _, _ = readout_image
+    for chip in ("0123456789ABCDEF", "E4630C7D2B4F3F29"):
+        transport = HarnessTransport(node, uf2, "--flash-id", chip)
+        try:
+            transport.ask("run 30000", answered=True)
+            serial = json.loads(transport.ask("usb-serial", answered=True))
+            flash = json.loads(transport.ask("flash", answered=True))
+        finally:
+            transport.close()
+        assert serial == chip and flash["errors"] == [], (serial, flash)
+
+
 def test_the_host_asks_the_board_what_it_runs_over_usb(readout_image):
     """The host's 'i' over USB (what ``magfab-readout info`` sends): the board answers with the build's spec name,
     calibration hash and chip settings, between its frames."""

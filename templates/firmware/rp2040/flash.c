@@ -10,9 +10,11 @@
  *   enable, 20h sector erase (4 KB), 02h page program (256 bytes), 05h read status register 1, whose bit 0 (BUSY) is
  *   polled until the erase or program ends.
  *   Then the SSI goes back to boot2's XIP settings and the XIP cache is flushed (2.6.3.2, XIP_CTRL FLUSH), so the XIP
- *   window shows the new bytes. */
+ *   window shows the new bytes.
+ * The flash chip's unique ID (4Bh) is read the same way once at start-up: the board's USB serial number (flash.h). */
 #include <stdint.h>
 
+#include "flash.h"
 #include "mf_nv.h"
 
 #define REG(a) (*(volatile uint32_t *)(a))
@@ -67,6 +69,18 @@ RAMFUNC static void wait_ready(void) {
     } while (status & 1u);
 }
 
+/* Back to boot2's XIP settings (boot2.c), the chip select the SSI's again, the XIP cache flushed. */
+RAMFUNC static void xip(void) {
+    REG(QSPI_SS_CTRL) = SS_NORMAL;
+    REG(SSI_SSIENR) = 0u;
+    REG(SSI_CTRLR0) = (31u << 16) | (3u << 8);
+    REG(SSI_CTRLR1) = 0u;
+    REG(SSI_SPI_CTRLR0) = (0x03u << 24) | (2u << 8) | (6u << 2);
+    REG(SSI_SSIENR) = 1u;
+    REG(XIP_FLUSH) = 1u;
+    (void)REG(XIP_FLUSH); /* the read waits for the flush to end */
+}
+
 RAMFUNC static void store(uint32_t offset, const uint8_t *data, uint16_t len) {
     REG(SSI_SSIENR) = 0u; /* out of XIP: 8-bit frames, transmit and receive, standard SPI */
     REG(SSI_CTRLR0) = (7u << 16);
@@ -81,14 +95,26 @@ RAMFUNC static void store(uint32_t offset, const uint8_t *data, uint16_t len) {
         command(0x02u, (int32_t)(offset + at), data + at, len - at < PAGE ? len - at : PAGE);
         wait_ready();
     }
-    REG(QSPI_SS_CTRL) = SS_NORMAL;
-    REG(SSI_SSIENR) = 0u; /* back to boot2's XIP settings (boot2.c) */
-    REG(SSI_CTRLR0) = (31u << 16) | (3u << 8);
-    REG(SSI_CTRLR1) = 0u;
-    REG(SSI_SPI_CTRLR0) = (0x03u << 24) | (2u << 8) | (6u << 2);
+    xip();
+}
+
+/* The flash chip's 64-bit unique ID (4Bh, four dummy bytes, then the ID: the W25Q16JV datasheet's Read Unique ID
+ * Number), out of XIP and back as store() does. */
+RAMFUNC static void unique_id(uint8_t id[8]) {
+    REG(SSI_SSIENR) = 0u;
+    REG(SSI_CTRLR0) = (7u << 16);
+    REG(SSI_SER) = 1u;
     REG(SSI_SSIENR) = 1u;
-    REG(XIP_FLUSH) = 1u;
-    (void)REG(XIP_FLUSH); /* the read waits for the flush to end */
+    REG(QSPI_SS_CTRL) = SS_LOW;
+    (void)spi_byte(0x4bu);
+    for (uint32_t k = 0; k < 4u; k++) (void)spi_byte(0u);
+    for (uint32_t k = 0; k < 8u; k++) id[k] = spi_byte(0u);
+    REG(QSPI_SS_CTRL) = SS_HIGH;
+    xip();
+}
+
+void mf_flash_unique_id(uint8_t id[8]) {
+    unique_id(id);
 }
 
 void mf_nv_flash_store(uint32_t offset, const uint8_t *data, uint16_t len) {

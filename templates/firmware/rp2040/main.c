@@ -20,6 +20,7 @@
 #include "mf_calib.h"
 #include "mf_config.h"
 #include "clocks.h"
+#include "flash.h"
 #include "mf_errors.h"
 #include "usb_cdc.h"
 
@@ -215,6 +216,9 @@ int main(void) {
     REG(PADS_GPIO(MF_RP_SCL)) = PAD_I2C;
     REG(GPIO_CTRL(MF_RP_SDA)) = FUNC_I2C;
     REG(GPIO_CTRL(MF_RP_SCL)) = FUNC_I2C;
+    uint8_t id[8];
+    mf_flash_unique_id(id); /* the flash chip's unique ID: the USB serial number */
+    cdc_serial(id);
     cdc_init();
     (void)mf_calib_load();
     i2c_setup();

@@ -60,7 +60,14 @@ static const uint8_t config_descriptor[67] = {
     7, 5, 0x02, 0x02, 64, 0, 0,                       /* EP2 OUT bulk */
     7, 5, 0x81, 0x02, 64, 0, 0};                      /* EP1 IN bulk */
 
-static const char *const strings[] = {"", "magfab", "magfab RP2040 readout", "0"};
+static char serial[17] = "0";
+static const char *const strings[] = {"", "magfab", "magfab RP2040 readout", serial};
+
+void cdc_serial(const uint8_t id[8]) {
+    static const char hex[] = "0123456789ABCDEF";
+    for (uint32_t k = 0; k < 8u; k++) serial[2u * k] = hex[id[k] >> 4], serial[2u * k + 1u] = hex[id[k] & 15u];
+    serial[16] = 0;
+}
 
 static uint8_t string_buf[64];
 static const uint8_t *ep0_data;

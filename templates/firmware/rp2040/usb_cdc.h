@@ -6,6 +6,7 @@
 #include <stdint.h>
 
 void cdc_init(void);
+void cdc_serial(const uint8_t id[8]); /* the serial number string: these 8 bytes in upper-case hex (before cdc_init) */
 void cdc_poll(void);
 int cdc_configured(void);                            /* the host has set the configuration */
 int cdc_read(void);                                  /* the next byte from the host, or -1 */

@@ -34,6 +34,7 @@
 //   send HEX    bytes for the host to send the device (once it is connected)
 //   profile     start counting the CPU's cycles by instruction address; the next 'profile' answers with them (JSON)
 //   field B,B,B,T  the models' fields (uT) and temperature (C) from now on, as --field gives them; answers ok
+//   usb-serial  the device's USB serial number string, asked as a host asks it (JSON)
 //   flash       the NOR model's counts and errors (JSON)
 //   peek AT,N   N bytes from AT, in hex: a flash offset, or an SRAM address (from 0x20000000)
 //   quit
@@ -102,11 +103,13 @@ if (!boot2_crc_ok) refuse('boot2 checksum');
 
 // The flash chip behind the SSI. rp2040js keeps the SSI's registers and nothing more, and lets a store write its flash
 // array. Here a SPI NOR flash answers as the images program it (flash.c), on the bytes the XIP window reads: 06h write
-// enable, 20h sector erase (4 KB), 02h page program (within its 256-byte page, bits only cleared), 05h status (BUSY
+// enable, 20h sector erase (4 KB), 02h page program (within its 256-byte page, bits only cleared), 4Bh unique ID (after
+// four dummy bytes, the 8 bytes of --flash-id HEX), 05h status (BUSY
 // for the Winbond W25Q16JV datasheet's typical times, 45 ms an erase and 0.4 ms a page) and 03h read. A command is
 // the bytes sent while IO_QSPI's SS output override holds the chip select low (GPIO_QSPI_SS_CTRL.OUTOVER 2; 3 ends it).
 // What the hardware would not do is an error in the report: a command while busy (but 05h), an erase or program
 // without write enable, a read of flash (code or data) while the SSI is out of XIP mode, a store to the XIP window.
+const flashId = Buffer.from(option('--flash-id', 'E4630C7D2B4F3F29'), 'hex'); // the chip's unique ID (4Bh)
 const nor = { erases: 0, programs: 0, flushes: 0, errors: [], busyUntil: 0, wel: false, low: false, cmd: [], rx: [] };
 const ssi = { 0x00: (31 << 16) | (3 << 8), 0x04: 0, 0x08: 1, 0x10: 1, 0x14: 4, 0xf4: (0x03 << 24) | (2 << 8) | (6 << 2) };
 const xip = () => ssi[0x08] === 1 && ((ssi[0x00] >> 8) & 3) === 3; // enabled, TMOD EEPROM read: boot2's settings
@@ -123,6 +126,7 @@ const norByte = (b) => {
     return 0xff;
   }
   if (c[0] === 0x05) return (busy() ? 1 : 0) | (nor.wel ? 2 : 0);
+  if (c[0] === 0x4b && c.length > 5) return flashId[(c.length - 6) % 8]; // after 4 dummy bytes, the 64-bit ID
   if (c[0] === 0x03 && c.length > 4) return mcu.flash[(((c[1] << 16) | (c[2] << 8) | c[3]) + c.length - 5) & 0xffffff];
   return 0xff;
 };
@@ -356,6 +360,17 @@ if (args.includes('--interactive')) {
     } else if (command === 'field') { // field BX,BY,BZ,T: the chip's field (uT) and temperature (C) from now on
       if (mlx) mlx.setFields(value);
       process.stdout.write('ok\n');
+    } else if (command === 'usb-serial') { // the device's serial number string (GET_DESCRIPTOR string 3, US English)
+      let got = null;
+      const onWrite = mcu.usbCtrl.onEndpointWrite;
+      mcu.usbCtrl.onEndpointWrite = (endpoint, buffer) => {
+        if (endpoint === 0 && buffer.length > 2 && buffer[1] === 3) got = Buffer.from(buffer.slice(2)).toString('utf16le');
+        else onWrite(endpoint, buffer);
+      };
+      mcu.usbCtrl.sendSetupPacket(new Uint8Array([0x80, 6, 3, 3, 0x09, 0x04, 64, 0]));
+      for (let k = 0; k < 50 && got === null; k++) runFor(100);
+      mcu.usbCtrl.onEndpointWrite = onWrite;
+      process.stdout.write(JSON.stringify(got) + '\n');
     } else if (command === 'flash') { // the flash chip's counts and errors (JSON)
       process.stdout.write(JSON.stringify(flashReport()) + '\n');
     } else if (command === 'peek') { // peek OFFSET N: N bytes of flash from OFFSET, hex

@@ -85,10 +85,15 @@ def _ports() -> list:
 
 
 def _describe(ports: list) -> str:
+    """Each port's name, with its description and USB serial number where it has them (an RP2040 board's is its
+    flash chip's unique ID: two boards tell apart)."""
     if not ports:
         return "none"
-    return ", ".join(f"{p.device} ({p.description})" if p.description and p.description != "n/a" else p.device
-                     for p in ports)
+    out = []
+    for p in ports:
+        about = [x for x in (p.description, getattr(p, "serial_number", None)) if x and x != "n/a"]
+        out.append(f"{p.device} ({', serial '.join(about)})" if about else p.device)
+    return ", ".join(out)
 
 
 def _import_serial():
