@@ -24,6 +24,7 @@ from pathlib import Path
 from conftest import require_node_package, require_tool
 
 from magfab.export import rp2040
+from magfab.formats.uf2 import write_regions
 
 HARNESS = Path(__file__).resolve().parents[1] / "firmware_sim" / "rp2040"
 STEP_US = 2000
@@ -59,6 +60,9 @@ class Rp2040Rig:
         self._sent_field: tuple | None = None
         self._us = 0
         self._proc: subprocess.Popen | None = None
+        self._kept: Path | None = None  # the flash as a board left it (bootsel), under the next .uf2 copied
+        self._pause = False
+        self._running = threading.Event()  # set while the thread is inside a step of the board
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._error: BaseException | None = None
@@ -101,6 +105,34 @@ class Rp2040Rig:
         with self._lock:
             return self._us / 1e6
 
+    def bootsel(self) -> None:
+        """The person holds BOOTSEL and plugs the board in again: the running image stops, its flash kept (the image,
+        the record's sector and the identity's), and the drive is back; the next .uf2 copied onto it is written over
+        that flash as the bootrom writes it (each sector it touches erased first: run.mjs --drop)."""
+        with self._lock:
+            self._pause = True
+        while self._running.is_set():
+            time.sleep(0.01)
+        if self._proc is not None:
+            offset = rp2040.record_offset(rp2040.resolve.board(self.key))
+            image = len(rp2040.shipped_image(self.key)[0])
+            held = [(at, bytes.fromhex(self._ask(f"peek {at},{n}"))) for at, n in
+                    ((0, image), (offset - 4096, 64), (offset, 1024))]
+            self._ask_quit()
+            self._kept = self.work / "kept.uf2"
+            self._kept.write_bytes(write_regions([(0x10000000 + at, data) for at, data in held]))
+        self.drive.mkdir(parents=True, exist_ok=True)
+        (self.drive / "INFO_UF2.TXT").write_text(INFO_UF2)
+        with self._lock:
+            self._pause = False
+
+    def _ask_quit(self) -> None:
+        assert self._proc is not None and self._proc.stdin is not None
+        self._proc.stdin.write("quit\n")
+        self._proc.stdin.flush()
+        self._proc.wait(30)
+        self._proc = None
+
     # ---- the board ----
 
     def _copied(self) -> Path | None:
@@ -122,13 +154,14 @@ class Rp2040Rig:
         return answer.strip()
 
     def _boot(self, uf2: Path) -> None:
-        self.flashed = self.work / uf2.name
+        self.flashed = self.work / f"{self.resets}-{uf2.name}"
         shutil.copyfile(uf2, self.flashed)
         shutil.rmtree(self.drive)  # the bootrom reboots into the image: the drive goes away
         with self._lock:
             field = self._field
+        files = [str(self.flashed)] if self._kept is None else [str(self._kept), "--drop", str(self.flashed)]
         self._proc = subprocess.Popen(
-            [self.node, str(HARNESS / "run.mjs"), str(self.flashed), "--interactive", "--mlx", str(self.mlxd),
+            [self.node, str(HARNESS / "run.mjs"), *files, "--interactive", "--mlx", str(self.mlxd),
              "--i2c", self.bus, "--addr", str(self.address), "--field", ",".join(map(str, field)), "--bus-timing"],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=HARNESS)
         self._sent_field = field
@@ -137,16 +170,28 @@ class Rp2040Rig:
     def _run(self) -> None:
         try:
             while not self._stop.is_set():
+                with self._lock:  # a step starts only while bootsel has not paused the board
+                    paused = self._pause
+                    if not paused:
+                        self._running.set()
+                if paused:
+                    time.sleep(0.01)
+                    continue
                 if self._proc is None:
                     uf2 = self._copied()
                     if uf2 is None:
+                        self._running.clear()
                         time.sleep(0.05)
                         continue
                     self._boot(uf2)
                     started, start_us = time.monotonic(), self._us
-                self._step(started, start_us)
+                try:
+                    self._step(started, start_us)
+                finally:
+                    self._running.clear()
         except BaseException as exc:  # kept for the walk, which reports it
             self._error = exc
+            self._running.clear()
 
     def _step(self, started: float, start_us: int) -> None:
         """Host bytes to the board, one step of the emulation, the board's bytes to the host, paced to the wall."""

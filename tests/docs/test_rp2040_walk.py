@@ -2,7 +2,10 @@
 drive, and the emulated RP2040 behind a serial port running whatever .uf2 lands on the drive, with the build's
 MLX90393 model). From a folder holding only the example spec: the README's build command, then the checklist's
 "Flash and read" section, copying the .uf2 onto the drive, installing the reader, asking the board what it runs and
-streaming calibrated forces, a press among them."""
+streaming calibrated forces, a press among them; then the firmware README's commands from firmware/ (the .uf2 copied
+again, BOOTSEL held: the board's flash kept under it; the upload; the host build of the core against the simulated
+chip). The readout README's bench block is the Uno's but for its first line, and is walked on the Uno's bench
+(tests/docs/test_pages.py)."""
 
 from __future__ import annotations
 
@@ -54,12 +57,19 @@ def rp2040_walked(tmp_path_factory):
         bench.scan = Scan(build)
         bench.scan.at_rest(bench.rig)
         bench.press = [bench.scan.field_at(PRESS_N)]
-        for block in _flash_and_read((build / "checklist.md").read_text()):
-            for line in block.commands:
-                ran = bench.paste(line)
-                interrupted = "Ctrl-C ends it" in line and ran.returncode == 130
-                assert (ran.returncode == 0 or interrupted) and "Traceback" not in ran.stderr, (
-                    f"{block}: `{line}` exited {ran.returncode}\n{ran.stdout[-3000:]}\n{ran.stderr[-3000:]}")
+        pages = [(_flash_and_read((build / "checklist.md").read_text()), build),
+                 (blocks((build / "firmware" / "README.md").read_text(), "firmware/README.md"), build / "firmware")]
+        for page, folder in pages:
+            bench.cwd = folder
+            for block in page:
+                for line in block.commands:
+                    if line.startswith("cp ") and "RPI-RP2" in line and bench.rig.flashed is not None:
+                        bench.rig.bootsel()  # a board that runs an image: BOOTSEL held while it is plugged in
+                    ran = bench.paste(line)
+                    interrupted = "Ctrl-C ends it" in line and ran.returncode == 130
+                    assert (ran.returncode == 0 or interrupted) and "Traceback" not in ran.stderr, (
+                        f"{block}: `{line}` exited {ran.returncode}\n{ran.stdout[-3000:]}\n{ran.stderr[-3000:]}")
+        bench.cwd = build
         yield bench
 
 
@@ -69,8 +79,11 @@ def test_the_uf2_copied_onto_the_drive_runs_and_streams_forces(rp2040_walked):
     build = rp2040_walked.cwd
     key = rp2040_walked.rig.key
     assert rp2040_walked.rig.flashed.read_bytes() == (build / "firmware" / rp2040.image_name(key)).read_bytes()
-    info = next(r for r in rp2040_walked.ran if r.line.startswith("magfab-readout info"))
-    assert "calibration: match" in info.stdout, info.stdout
+    upload = next(r for r in rp2040_walked.ran if r.line.startswith("magfab-readout upload"))
+    assert upload.returncode == 0, upload.stdout + upload.stderr
+    infos = [r for r in rp2040_walked.ran if r.line.startswith("magfab-readout info")]
+    assert len(infos) == 2 and all("calibration: match" in r.stdout for r in infos), [r.stdout for r in infos]
+    assert rp2040_walked.rig.resets == 2  # flashed twice: the checklist's copy and the firmware README's
     stream = next(r for r in rp2040_walked.ran if r.line.startswith("magfab-readout stream"))
     rows = [line.split() for line in stream.stdout.splitlines() if line and not line.startswith("#")]
     fz = [float(r[4]) for r in rows if len(r) > 4 and re.fullmatch(r"[-+]?\d+\.\d+", r[4])]
