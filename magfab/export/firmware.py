@@ -31,7 +31,9 @@ from functools import cache
 from importlib.resources import files
 from typing import TYPE_CHECKING, Any
 
-from ..errors import InputError, SpecError
+from ..check.links import F_CPU_HZ, twi_settings
+from ..check.links import uart_settings as _uart
+from ..errors import InputError
 from ..formats import calibration_json
 from ..formats.calibration_json import calibration_sha256
 from ..models.chip import conversion_us  # the chip's pace, shared with the prediction
@@ -69,7 +71,6 @@ __all__ = [
 
 # ---- the target -------------------------------------------------------------------------------------------
 
-F_CPU_HZ = 16_000_000
 MCU = "atmega328p"
 HEX_NAME = "magfab-atmega328p.hex"
 #: The EEPROM image beside it (Intel HEX from address 0): the calibration record the image reads.
@@ -78,8 +79,6 @@ EEP_NAME = "magfab-atmega328p.eep"
 FLASH_LIMIT_BYTES = 32 * 1024 - 2048
 #: Static RAM allowed, leaving 512 of the 2048 bytes for the stack (float routines, frame buffers).
 RAM_LIMIT_BYTES = 2048 - 512
-#: Largest UART rate error accepted (the receiver samples mid-bit; 2 to 2.5 % is the usual 8N1 budget).
-BAUD_ERROR_LIMIT = 0.025
 #: Without a valid record the image does not touch the chip (it knows neither its address nor its settings) and
 #: sends one error frame per this interval.
 NO_RECORD_US = 20_000
@@ -213,31 +212,9 @@ def raw_words(chip: ChipConfig, b_uT: tuple[float, float, float], t_C: float = 2
     return (t if chip.temperature else 0, x, y, z)
 
 
-def _uart(baud: int) -> tuple[int, float]:
-    """UBRR with U2X for the spec's baud, and the rate error; SpecError past BAUD_ERROR_LIMIT."""
-    ubrr = max(0, round(F_CPU_HZ / (8 * baud)) - 1)
-    error = F_CPU_HZ / (8 * (ubrr + 1)) / baud - 1.0
-    if ubrr > 4095 or abs(error) > BAUD_ERROR_LIMIT:
-        good = [b for b in (57600, 76800, 115200, 250000, 500000, 1000000)
-                if abs(F_CPU_HZ / (8 * round(F_CPU_HZ / (8 * b))) / b - 1) <= BAUD_ERROR_LIMIT]
-        raise SpecError("firmware.baud", baud,
-                        f"is {error * 100:+.1f} % off on a 16 MHz ATmega328P with U2X (UBRR {ubrr}); the UART "
-                        f"allows {BAUD_ERROR_LIMIT * 100:g} %", "use one of " + ", ".join(map(str, good)))
-    return ubrr, error
-
-
 def _serial(design: Design) -> tuple[int, float]:
     """:func:`_uart` of the spec's baud on an ATmega328P board; (0, 0.0) on an RP2040 board (USB: no baud)."""
     return (0, 0.0) if rp2040.is_rp2040(design.spec) else _uart(design.spec.firmware.baud)
-
-
-def twi_settings(hz: int) -> tuple[int, int, int]:
-    """(TWBR, prescaler bits, actual Hz): the fastest TWI clock not above the spec's."""
-    for bits, div in enumerate((1, 4, 16, 64)):
-        twbr = max(0, math.ceil((F_CPU_HZ / hz - 16) / (2 * div)))
-        if twbr <= 255:
-            return twbr, bits, round(F_CPU_HZ / (16 + 2 * twbr * div))
-    raise SpecError("firmware.i2c_hz", hz, "is below what the ATmega328P's TWI can divide 16 MHz down to (~490 Hz)")
 
 
 # ---- calibration: the EEPROM record --------------------------------------------------------------------------
