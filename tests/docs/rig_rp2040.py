@@ -7,7 +7,8 @@
   with the build's MLX90393 model (its ``sim_mlx90393.c``, behind mlxd.c) on the board's I2C controller at the
   build's address, the bus timed at the image's SCL clock.
 * The port: a pseudo-terminal. What the host writes there the emulated USB host sends the board; what the board sends
-  over USB comes out there. The emulation runs in 2 ms steps, no faster than the wall clock.
+  over USB comes out there. The emulation runs in 2 ms steps, no faster than the wall clock; a stage the walk moves
+  (:meth:`Rp2040Rig.follow`) sets the field at each step's middle, on the board's own clock.
 """
 
 from __future__ import annotations
@@ -57,6 +58,7 @@ class Rp2040Rig:
         self.flashed: Path | None = None
         self.resets = 0
         self._field = (0.0, 0.0, 0.0, 25.0)
+        self._track = None  # a stage moving on the board's clock (follow)
         self._sent_field: tuple | None = None
         self._us = 0
         self._proc: subprocess.Popen | None = None
@@ -95,6 +97,12 @@ class Rp2040Rig:
     def set_fields(self, fields, t_C: float = 25.0) -> None:
         (field,) = fields  # one taxel
         self.set_field(*field, t_C)
+
+    def follow(self, track) -> None:
+        """From now on the field is ``track(board_s)[0]`` (one taxel's (Bx, By, Bz), uT) at the middle of each 2 ms step
+        of the board: a stage moving on the board's own clock. None: the field keeps its last value."""
+        with self._lock:
+            self._track = track
 
     @property
     def error(self) -> BaseException | None:
@@ -196,6 +204,8 @@ class Rp2040Rig:
     def _step(self, started: float, start_us: int) -> None:
         """Host bytes to the board, one step of the emulation, the board's bytes to the host, paced to the wall."""
         with self._lock:
+            if self._track is not None:
+                self._field = (*(float(b) for b in self._track((self._us + STEP_US / 2) / 1e6)[0]), self._field[3])
             field = self._field
         if field != self._sent_field:
             self._ask("field " + ",".join(map(str, field)))

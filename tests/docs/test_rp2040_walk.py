@@ -4,8 +4,8 @@ MLX90393 model). From a folder holding only the example spec: the README's build
 "Flash and read" section, copying the .uf2 onto the drive, installing the reader, asking the board what it runs and
 streaming calibrated forces, a press among them; then the firmware README's commands from firmware/ (the .uf2 copied
 again, BOOTSEL held: the board's flash kept under it; the upload; the host build of the core against the simulated
-chip). The readout README's bench block is the Uno's but for its first line, and is walked on the Uno's bench
-(tests/docs/test_pages.py)."""
+chip); then the readout README's bench block: the .uf2 copied a third time, the scan recorded on the board's clock and
+calibrated, the calibration and the sensor's ID uploaded into the board's flash, and the acceptance test."""
 
 from __future__ import annotations
 
@@ -38,6 +38,13 @@ def _flash_and_read(checklist: str) -> list:
     return blocks(checklist[start.start():start.end() + (end.start() if end else len(checklist))], "checklist.md")
 
 
+def _bench_block(readme: str) -> list:
+    """The readout README's bench block: the board flashed, the sensor streamed, its scan recorded and calibrated,
+    the calibration and its ID uploaded, the acceptance test."""
+    return [b for b in blocks(readme, "readout/README.md") if any(c.startswith("magfab-readout check") for c in
+                                                                   b.commands) and b.lang == "sh"][:1]
+
+
 @pytest.fixture(scope="module")
 def rp2040_walked(tmp_path_factory):
     require_tool("cc")
@@ -58,7 +65,8 @@ def rp2040_walked(tmp_path_factory):
         bench.scan.at_rest(bench.rig)
         bench.press = [bench.scan.field_at(PRESS_N)]
         pages = [(_flash_and_read((build / "checklist.md").read_text()), build),
-                 (blocks((build / "firmware" / "README.md").read_text(), "firmware/README.md"), build / "firmware")]
+                 (blocks((build / "firmware" / "README.md").read_text(), "firmware/README.md"), build / "firmware"),
+                 (_bench_block((build / "readout" / "README.md").read_text()), build)]
         for page, folder in pages:
             bench.cwd = folder
             for block in page:
@@ -73,6 +81,24 @@ def rp2040_walked(tmp_path_factory):
         yield bench
 
 
+def test_the_bench_path_ends_in_a_passing_acceptance_test_on_the_rp2040(rp2040_walked):
+    """The readout README's bench block on the RP2040 board: the scan recorded on the board's clock and calibrated
+    against the reference log into the sensor's record, that calibration and the sensor's ID uploaded into the
+    board's flash over USB (the board then names the sensor), and the acceptance test passes, turned over and warmed
+    at its prompts."""
+    fitted = next(r for r in rp2040_walked.ran if r.line.startswith("magfab calibrate")).stdout
+    fit = next(line for line in fitted.splitlines() if line.startswith("calibrated sensor"))
+    print(fit)  # with -s
+    assert float(fit.split("held-out RMS Fz ")[1].split()[0]) < 50, fit  # the AVR walk's bound (test_pages.py)
+    last = [r for r in rp2040_walked.ran if r.line.startswith("magfab-readout info")][-1].stdout
+    assert "sensor:  magone-qtpy-01, calibration of " in last, last
+    check = next(r for r in rp2040_walked.ran if r.line.startswith("magfab-readout check"))
+    print("\n".join(line for line in check.stdout.splitlines() if line.startswith("step ")))  # with -s
+    assert "FAIL" not in check.stdout and check.stdout.count("PASS") >= 6, check.stdout
+    passed = [line.split()[2] for line in check.stdout.splitlines() if line.startswith("step ") and "PASS" in line]
+    assert {"turned", "warm-up"} <= set(passed), check.stdout
+
+
 def test_the_uf2_copied_onto_the_drive_runs_and_streams_forces(rp2040_walked):
     """The board ran exactly the build's .uf2 (the copy the page made), the reader found this build's calibration
     on it, and the stream zeroed at rest and read the press."""
@@ -82,8 +108,9 @@ def test_the_uf2_copied_onto_the_drive_runs_and_streams_forces(rp2040_walked):
     upload = next(r for r in rp2040_walked.ran if r.line.startswith("magfab-readout upload"))
     assert upload.returncode == 0, upload.stdout + upload.stderr
     infos = [r for r in rp2040_walked.ran if r.line.startswith("magfab-readout info")]
-    assert len(infos) == 2 and all("calibration: match" in r.stdout for r in infos), [r.stdout for r in infos]
-    assert rp2040_walked.rig.resets == 2  # flashed twice: the checklist's copy and the firmware README's
+    assert len(infos) == 4 and all("calibration: match" in r.stdout for r in infos[:3]), [r.stdout for r in infos]
+    assert rp2040_walked.rig.resets == 3  # flashed three times: the checklist's copy, the firmware and readout READMEs'
+
     stream = next(r for r in rp2040_walked.ran if r.line.startswith("magfab-readout stream"))
     rows = [line.split() for line in stream.stdout.splitlines() if line and not line.startswith("#")]
     fz = [float(r[4]) for r in rows if len(r) > 4 and re.fullmatch(r"[-+]?\d+\.\d+", r[4])]
