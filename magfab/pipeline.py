@@ -437,8 +437,7 @@ def plan(spec: Spec, progress: Progress | None = None, scan=None, parallel: bool
     artifacts.append(Artifact("manifest.json", _manifest(spec, design, artifacts, models),
                               "what made what: hashes, versions"))
     timings["total"] = time.perf_counter() - t0
-    image = next((a.path for a in artifacts
-                  if a.path.startswith("firmware/magfab-") and a.path.endswith((".hex", ".uf2"))), None)
+    image = next((a.path for a in artifacts if a.path == firmware.image_path(design)), None)
     calibration = {"source": cal["scan"]["source"], "method": cal["method"], "order": cal["order"],
                    "rms_holdout_Fz_mN": round(1000 * cal["errors"]["Fz_N"]["rms_holdout"], 2),
                    "rms_holdout_Fr_mN": round(1000 * cal["errors"]["Fr_N"]["rms_holdout"], 2), "image": image,

@@ -10,7 +10,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validat
 from .recipes import catalogue, resolve
 from .spec_options import BoardName, Mcu
 
-__all__ = ["Section", "Environment", "Reference", "Board", "boards_of"]
+__all__ = ["Section", "Environment", "Reference", "Board", "boards_of", "readout_board_key"]
 
 
 class Section(BaseModel):
@@ -101,6 +101,11 @@ class Board(Section):
         if self.board is not None:
             return self.board.value
         return "qtpy-rp2040" if self.mcu is Mcu.RP2040 else "uno"
+
+
+def readout_board_key(board: Board | None) -> str:
+    """The key in recipes/boards.toml of a spec's ``[board]`` (the Uno without the section)."""
+    return "uno" if board is None else board.key
 
 
 def boards_of(mcu: str) -> list[str]:

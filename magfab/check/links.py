@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 
 from ..errors import SpecError
 from ..recipes import resolve
+from ..spec_sections import readout_board_key
 
 if TYPE_CHECKING:
     from ..design import Design
@@ -24,8 +25,7 @@ BAUD_ERROR_LIMIT = 0.025
 def serial_links(design: Design) -> None:
     """Refuse (:class:`~magfab.errors.SpecError`) a baud or I2C clock the spec's readout board cannot make: an
     ATmega328P board's UART and TWI from 16 MHz (:func:`uart_settings`, :func:`twi_settings`)."""
-    board = "uno" if design.spec.board is None else design.spec.board.key
-    if resolve.board(board).texts["mcu"] == "atmega328p":
+    if resolve.board(readout_board_key(design.spec.board)).texts["mcu"] == "atmega328p":
         uart_settings(design.spec.firmware.baud)
         twi_settings(design.spec.firmware.i2c_hz)
 

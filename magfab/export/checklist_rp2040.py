@@ -34,7 +34,7 @@ def flash_commands(design: Design) -> tuple[str, ...]:
 def flash_text(design: Design) -> str:
     """The step before :func:`flash_commands`."""
     key, board = _board(design)
-    return (f"Hold the {board.name.split(' (')[0]}'s BOOTSEL button while you plug it into this computer: it shows up "
+    return (f"Hold the {rp2040.short_name(board)}'s BOOTSEL button while you plug it into this computer: it shows up "
             f"as a USB drive named RPI-RP2. Then run these from the build folder (the folder holding this checklist). "
             f"They copy firmware/{rp2040.image_name(key)} onto that drive (on Windows, drag it onto the drive; the "
             "board restarts into it when the copy ends), install the reader with this build's calibration "
@@ -44,7 +44,7 @@ def flash_text(design: Design) -> str:
 
 
 def wiring_header(design: Design) -> tuple[str, ...]:
-    return ("breakout J1 (Qwiic)", _board(design)[1].name.split(" (")[0])
+    return ("breakout J1 (Qwiic)", rp2040.short_name(_board(design)[1]))
 
 
 def wiring_rows(design: Design) -> tuple[tuple[str, str], ...]:
@@ -61,7 +61,7 @@ def wiring_text(design: Design) -> list[str]:
     both sides are 3.3 V, so no level shifter."""
     board = _board(design)[1]
     bench = catalogue("bench")
-    name = board.name.split(" (")[0]
+    name = rp2040.short_name(board)
     if board.texts["connector"] == "stemma-qt":
         first = (f"Plug the {bench['qwiic-cable'].name.split(',')[0]} into J1 and into the {name}'s STEMMA QT socket "
                  "(it takes the cable one way round). That is all the wiring: the table shows what each wire joins.")

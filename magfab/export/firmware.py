@@ -63,6 +63,7 @@ __all__ = [
     "image_settings",
     "info_line",
     "raw_words",
+    "image_path",
     "ready_image",
     "render",
     "shipped_image",
@@ -338,8 +339,8 @@ def _context(design: Design, calibration: Mapping[str, Any], generic: bool) -> d
     checked = calibration_json.validate(dict(calibration))
     cal = _layout(checked)
     ubrr, baud_error = _serial(design)
-    board = rp2040.readout_board(spec)
-    on_rp2040 = board.texts["mcu"] == "rp2040"
+    board, key = rp2040.readout_board(spec), rp2040.board_key(spec)
+    on_rp2040 = rp2040.is_rp2040(spec)
     settings = image_settings(design)
     twbr, twps, i2c_actual = twi_settings(fw.i2c_hz)
     record = eeprom_record(design, calibration)
@@ -380,8 +381,8 @@ def _context(design: Design, calibration: Mapping[str, Any], generic: bool) -> d
         "retry_us": settings["retry_us"], "exit_wait_us": settings["exit_wait_us"],
         "board_pullups": bool(spec.pcb.pullups),
         "hex_name": HEX_NAME, "eep_name": EEP_NAME,
-        "rp2040": on_rp2040, "board_name": board.name, "board_key": rp2040.board_key(spec),
-        "uf2_name": rp2040.image_name(rp2040.board_key(spec)),
+        "rp2040": on_rp2040, "board_name": board.name, "board_key": key,
+        "uf2_name": rp2040.image_name(key),
         "calibration_uf2": rp2040.CALIBRATION_UF2,
         "avr_cflags": " ".join(AVR_CFLAGS), "avr_ldflags": " ".join(AVR_LDFLAGS),
         "host_cflags": " ".join(HOST_CFLAGS),
@@ -470,18 +471,24 @@ def generic_sources(target: str = "avr") -> dict[str, bytes]:
     return _render_tree(_image_constants(), wanted)
 
 
+def image_path(design: Design) -> str:
+    """Where the build puts its ready-to-flash file: the .hex, or an RP2040 board's .uf2."""
+    key = rp2040.board_key(design.spec)
+    return f"firmware/{rp2040.image_name(key) if rp2040.is_rp2040(design.spec) else HEX_NAME}"
+
+
 def ready_image(design: Design, calibration: Mapping[str, Any]) -> tuple[str, bytes, str]:
-    """The build's ready-to-flash file (path, bytes, caption): the shipped .hex (its record the .eep beside it), or an
-    RP2040 board's shipped image with this build's record in one .uf2 (:func:`rp2040.build_uf2`)."""
+    """The build's ready-to-flash file (:func:`image_path`, bytes, caption): the shipped .hex (its record the .eep
+    beside it), or an RP2040 board's shipped image with this build's record in one .uf2 (:func:`rp2040.build_uf2`)."""
     board, key = rp2040.readout_board(design.spec), rp2040.board_key(design.spec)
-    if board.texts["mcu"] == "rp2040":
+    if rp2040.is_rp2040(design.spec):
         _, made = rp2040.shipped_image(key)
-        return (f"firmware/{rp2040.image_name(key)}", rp2040.build_uf2(key, eeprom_record(design, calibration)),
+        return (image_path(design), rp2040.build_uf2(key, eeprom_record(design, calibration)),
                 f"ready-to-flash image and calibration for the {board.name}: copy it onto the RPI-RP2 drive (BOOTSEL); "
                 f"the image the same for every build, flash {made['flash_bytes']} B, RAM {made['ram_bytes']} B "
                 f"({made['toolchain']['arm-none-eabi-gcc']})")
     image, made = shipped_image()
-    return (f"firmware/{HEX_NAME}", image, "ready-to-flash image for Arduino Uno/Nano (ATmega328P, 16 MHz), the same "
+    return (image_path(design), image, "ready-to-flash image for Arduino Uno/Nano (ATmega328P, 16 MHz), the same "
             f"for every build: settings and calibration from the .eep; flash {made['flash_bytes']} B, RAM "
             f"{made['ram_bytes']} B ({made['toolchain']['avr-gcc']}, avr-libc {made['toolchain']['avr-libc']})")
 

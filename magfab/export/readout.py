@@ -141,7 +141,7 @@ def _context(build: Mapping[str, object], acceptance: Mapping[str, Any] | None, 
     return {
         **build,
         "flash_command": rp2040_words.flash_commands(design)[0] if uf2 else "sh firmware/flash.sh uno /dev/ttyACM0",
-        "flash_step": (f"Copy the firmware onto the {rp2040.readout_board(design.spec).name.split(' (')[0]}'s "
+        "flash_step": (f"Copy the firmware onto the {rp2040.short_name(rp2040.readout_board(design.spec))}'s "
                        "RPI-RP2 drive (hold BOOTSEL while you plug it in; `firmware/README.md`)." if uf2 else
                        "Flash the firmware (a Nano: `nano` or `nano-old` instead of `uno`; Windows: "
                        "`firmware/README.md`)."),

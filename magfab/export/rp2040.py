@@ -23,13 +23,14 @@ from typing import TYPE_CHECKING, Any
 
 from ..formats.uf2 import FLASH_START, write_regions
 from ..recipes import Recipe, catalogue, resolve
+from ..spec_sections import readout_board_key
 
 if TYPE_CHECKING:
     from ..spec import Spec
 
 __all__ = ["RP2040_DIR", "RP2040_SOURCES", "ARM_CFLAGS", "ARM_LDFLAGS", "CALIBRATION_UF2", "TOOLCHAIN_JSON",
-           "readout_board", "board_key", "is_rp2040", "defines", "record_offset", "image_name", "binary_name",
-           "shipped_image", "build_uf2", "calibration_uf2", "rp2040_boards"]
+           "readout_board", "board_key", "short_name", "is_rp2040", "defines", "record_offset", "image_name",
+           "binary_name", "shipped_image", "build_uf2", "calibration_uf2", "rp2040_boards"]
 
 #: The RP2040 sources of the firmware bundle (templates/firmware/rp2040), beside the portable core.
 RP2040_DIR = "rp2040"
@@ -52,7 +53,12 @@ def readout_board(spec: Spec) -> Recipe:
 
 def board_key(spec: Spec) -> str:
     """The key of the spec's readout board in recipes/boards.toml."""
-    return "uno" if spec.board is None else spec.board.key
+    return readout_board_key(spec.board)
+
+
+def short_name(board: Recipe) -> str:
+    """The board's name without its parenthesis ("Adafruit QT Py RP2040"), as the bench pages call it."""
+    return board.name.split(" (")[0]
 
 
 def is_rp2040(spec: Spec) -> bool:

@@ -105,7 +105,39 @@ class Stk500:
         return bytes([_INSYNC, _OK])
 
 
-class Rig:
+class Stage:
+    """What the walk sets on a simulated board: every chip's field (``_fields``, one (Bx, By, Bz, T) per address of
+    ``addresses``) and a stage moving on the board's clock (``_track``), under ``_lock``; the board reads them."""
+
+    addresses: list[int]
+    _fields: list[tuple[float, float, float, float]]
+    _track: object
+    _lock: threading.Lock
+
+    def set_field(self, bx_uT: float, by_uT: float, bz_uT: float, t_C: float = 25.0, *, taxel: int = 0) -> None:
+        """The field at the chip (an array's: taxel ``taxel``'s) from now on (the magnets', as a press moves them)."""
+        with self._lock:
+            self._fields[taxel] = (bx_uT, by_uT, bz_uT, t_C)
+
+    def set_fields(self, fields, t_C: float = 25.0) -> None:
+        """Every chip's field at once, from now on: one (Bx, By, Bz) in uT per taxel, in taxel order."""
+        fields = [tuple(float(b) for b in f) for f in fields]
+        if len(fields) != len(self.addresses) or any(len(f) != 3 for f in fields):
+            raise ValueError(f"one (Bx, By, Bz) per chip: {len(self.addresses)} chip(s), got {fields!r}")
+        with self._lock:
+            self._fields = [(*f, t_C) for f in fields]
+
+    def follow(self, track) -> None:
+        """From now on every chip's field is ``track(board_s)`` (one (Bx, By, Bz) per taxel, uT) at the middle of each
+        simulated slice of the board (:data:`TRACK_SLICE_US` at most here): a stage moving on the board's own clock,
+        so a recording's samples see the stage where it was at their device time however loaded the machine is (a
+        stage moving on the wall clock meets a board that falls behind it, then catches up, at varying delays).
+        None: the fields keep their last values."""
+        with self._lock:
+            self._track = track
+
+
+class Rig(Stage):
     """The board on a pseudo-terminal (see the module's docstring)."""
 
     def __init__(self, build_dir: Path, lib: Path, work: Path) -> None:
@@ -144,28 +176,6 @@ class Rig:
         os.close(self._slave)
         if self._error is not None and exc[0] is None:
             raise RuntimeError("the simulated board failed") from self._error
-
-    def set_field(self, bx_uT: float, by_uT: float, bz_uT: float, t_C: float = 25.0, *, taxel: int = 0) -> None:
-        """The field at the chip (an array's: taxel ``taxel``'s) from now on (the magnets', as a press moves them)."""
-        with self._lock:
-            self._fields[taxel] = (bx_uT, by_uT, bz_uT, t_C)
-
-    def set_fields(self, fields, t_C: float = 25.0) -> None:
-        """Every chip's field at once, from now on: one (Bx, By, Bz) in uT per taxel, in taxel order."""
-        fields = [tuple(float(b) for b in f) for f in fields]
-        if len(fields) != len(self.addresses) or any(len(f) != 3 for f in fields):
-            raise ValueError(f"one (Bx, By, Bz) per chip: {len(self.addresses)} chip(s), got {fields!r}")
-        with self._lock:
-            self._fields = [(*f, t_C) for f in fields]
-
-    def follow(self, track) -> None:
-        """From now on every chip's field is ``track(board_s)`` (one (Bx, By, Bz) per taxel, uT) at the middle of each
-        simulated slice of at most :data:`TRACK_SLICE_US`: a stage moving on the board's own clock, so a recording's
-        samples see the stage where it was at their device time however loaded the machine is (a stage moving on
-        the wall clock meets a board that falls behind it, then catches up, at varying delays). None: the fields
-        keep their last values."""
-        with self._lock:
-            self._track = track
 
     @property
     def error(self) -> BaseException | None:

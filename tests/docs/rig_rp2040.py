@@ -7,8 +7,8 @@
   with the build's MLX90393 model (its ``sim_mlx90393.c``, behind mlxd.c) on the board's I2C controller at the
   build's address, the bus timed at the image's SCL clock.
 * The port: a pseudo-terminal. What the host writes there the emulated USB host sends the board; what the board sends
-  over USB comes out there. The emulation runs in 2 ms steps, no faster than the wall clock; a stage the walk moves
-  (:meth:`Rp2040Rig.follow`) sets the field at each step's middle, on the board's own clock.
+  over USB comes out there. The emulation runs in 2 ms steps, no faster than the wall clock; what the walk sets (the
+  field, a moving stage: rig.Stage, the Uno rig's) is read at each step's middle, on the board's own clock.
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ import tty
 from pathlib import Path
 
 from conftest import require_node_package, require_tool
+from rig import Stage
 
 from magfab.export import rp2040
 from magfab.formats.uf2 import write_regions
@@ -32,7 +33,7 @@ STEP_US = 2000
 INFO_UF2 = "UF2 Bootloader v3.0\nModel: Raspberry Pi RP2\nBoard-ID: RPI-RP2\n"  # the RP2040 bootrom's INFO_UF2.TXT
 
 
-class Rp2040Rig:
+class Rp2040Rig(Stage):
     """The board and its drive (see the module's docstring)."""
 
     def __init__(self, build_dir: Path, work: Path) -> None:
@@ -46,7 +47,7 @@ class Rp2040Rig:
         spec = json.loads((self.build_dir / "spec.json").read_text())
         self.key = spec["board"].get("board") or "qtpy-rp2040"  # the spec's board, or the rp2040 default
         settings = json.loads((self.build_dir / "readout" / "src" / "magfab_readout" / "build.json").read_text())
-        self.address = settings["image_settings"]["i2c_address"]
+        self.addresses = [settings["image_settings"]["i2c_address"]]
         self.bus = next(d.split("=")[1] for d in rp2040.defines(self.key) if d.startswith("-DMF_RP_I2C="))
         self.user = f"magfab-walk-{os.getpid()}"
         self.drive = Path("/media") / self.user / "RPI-RP2"
@@ -57,7 +58,7 @@ class Rp2040Rig:
         self.port = os.ttyname(self._slave)
         self.flashed: Path | None = None
         self.resets = 0
-        self._field = (0.0, 0.0, 0.0, 25.0)
+        self._fields = [(0.0, 0.0, 0.0, 25.0)]
         self._track = None  # a stage moving on the board's clock (follow)
         self._sent_field: tuple | None = None
         self._us = 0
@@ -89,20 +90,6 @@ class Rp2040Rig:
             raise RuntimeError("the emulated board failed") from self._error
 
     # ---- what the walk's bench asks of a board ----
-
-    def set_field(self, bx_uT: float, by_uT: float, bz_uT: float, t_C: float = 25.0, *, taxel: int = 0) -> None:
-        with self._lock:
-            self._field = (bx_uT, by_uT, bz_uT, t_C)
-
-    def set_fields(self, fields, t_C: float = 25.0) -> None:
-        (field,) = fields  # one taxel
-        self.set_field(*field, t_C)
-
-    def follow(self, track) -> None:
-        """From now on the field is ``track(board_s)[0]`` (one taxel's (Bx, By, Bz), uT) at the middle of each 2 ms step
-        of the board: a stage moving on the board's own clock. None: the field keeps its last value."""
-        with self._lock:
-            self._track = track
 
     @property
     def error(self) -> BaseException | None:
@@ -166,11 +153,11 @@ class Rp2040Rig:
         shutil.copyfile(uf2, self.flashed)
         shutil.rmtree(self.drive)  # the bootrom reboots into the image: the drive goes away
         with self._lock:
-            field = self._field
+            field = self._fields[0]
         files = [str(self.flashed)] if self._kept is None else [str(self._kept), "--drop", str(self.flashed)]
         self._proc = subprocess.Popen(
             [self.node, str(HARNESS / "run.mjs"), *files, "--interactive", "--mlx", str(self.mlxd),
-             "--i2c", self.bus, "--addr", str(self.address), "--field", ",".join(map(str, field)), "--bus-timing"],
+             "--i2c", self.bus, "--addr", str(self.addresses[0]), "--field", ",".join(map(str, field)), "--bus-timing"],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=HARNESS)
         self._sent_field = field
         self.resets += 1
@@ -204,9 +191,9 @@ class Rp2040Rig:
     def _step(self, started: float, start_us: int) -> None:
         """Host bytes to the board, one step of the emulation, the board's bytes to the host, paced to the wall."""
         with self._lock:
-            if self._track is not None:
-                self._field = (*(float(b) for b in self._track((self._us + STEP_US / 2) / 1e6)[0]), self._field[3])
-            field = self._field
+            if self._track is not None:  # the stage at the step's middle, 25 C (as the Uno rig's)
+                self._fields = [(*(float(b) for b in f), 25.0) for f in self._track((self._us + STEP_US / 2) / 1e6)]
+            field = self._fields[0]
         if field != self._sent_field:
             self._ask("field " + ",".join(map(str, field)))
             self._sent_field = field

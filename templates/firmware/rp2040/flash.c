@@ -69,6 +69,15 @@ RAMFUNC static void wait_ready(void) {
     } while (status & 1u);
 }
 
+/* Out of XIP: 8-bit frames, transmit and receive, standard SPI, the chip select held high between commands. */
+RAMFUNC static void out_of_xip(void) {
+    REG(SSI_SSIENR) = 0u;
+    REG(SSI_CTRLR0) = (7u << 16);
+    REG(SSI_SER) = 1u;
+    REG(SSI_SSIENR) = 1u;
+    REG(QSPI_SS_CTRL) = SS_HIGH;
+}
+
 /* Back to boot2's XIP settings (boot2.c), the chip select the SSI's again, the XIP cache flushed. */
 RAMFUNC static void xip(void) {
     REG(QSPI_SS_CTRL) = SS_NORMAL;
@@ -82,11 +91,7 @@ RAMFUNC static void xip(void) {
 }
 
 RAMFUNC static void store(uint32_t offset, const uint8_t *data, uint16_t len) {
-    REG(SSI_SSIENR) = 0u; /* out of XIP: 8-bit frames, transmit and receive, standard SPI */
-    REG(SSI_CTRLR0) = (7u << 16);
-    REG(SSI_SER) = 1u;
-    REG(SSI_SSIENR) = 1u;
-    REG(QSPI_SS_CTRL) = SS_HIGH;
+    out_of_xip();
     command(0x06u, -1, 0, 0);
     command(0x20u, (int32_t)offset, 0, 0);
     wait_ready();
@@ -101,10 +106,7 @@ RAMFUNC static void store(uint32_t offset, const uint8_t *data, uint16_t len) {
 /* The flash chip's 64-bit unique ID (4Bh, four dummy bytes, then the ID: the W25Q16JV datasheet's Read Unique ID
  * Number), out of XIP and back as store() does. */
 RAMFUNC static void unique_id(uint8_t id[8]) {
-    REG(SSI_SSIENR) = 0u;
-    REG(SSI_CTRLR0) = (7u << 16);
-    REG(SSI_SER) = 1u;
-    REG(SSI_SSIENR) = 1u;
+    out_of_xip();
     REG(QSPI_SS_CTRL) = SS_LOW;
     (void)spi_byte(0x4bu);
     for (uint32_t k = 0; k < 4u; k++) (void)spi_byte(0u);
