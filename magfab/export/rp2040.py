@@ -77,11 +77,13 @@ def record_offset(board: Recipe) -> int:
 
 
 def defines(key: str) -> tuple[str, ...]:
-    """The ``-D`` flags of board ``key``'s image (main.c and mf_nv.c read them)."""
+    """The ``-D`` flags of board ``key``'s image (main.c, mf_calib.c and mf_nv.c read them): its I2C pins, a second
+    bus on the other controller, the record's sector."""
     board = resolve.board(key)
     sda, scl = int(board["sda_gpio"].nominal), int(board["scl_gpio"].nominal)
-    return (f"-DMF_RP_I2C={(sda >> 1) & 1}", f"-DMF_RP_SDA={sda}", f"-DMF_RP_SCL={scl}",
-            f"-DMF_NV_FLASH_OFFSET=0x{record_offset(board):X}UL")
+    sda_b, scl_b = int(board["sda_b_gpio"].nominal), int(board["scl_b_gpio"].nominal)
+    return (f"-DMF_RP_I2C={(sda >> 1) & 1}", f"-DMF_RP_SDA={sda}", f"-DMF_RP_SCL={scl}", "-DMF_BUSES=2",
+            f"-DMF_RP_SDA_B={sda_b}", f"-DMF_RP_SCL_B={scl_b}", f"-DMF_NV_FLASH_OFFSET=0x{record_offset(board):X}UL")
 
 
 def image_name(key: str) -> str:

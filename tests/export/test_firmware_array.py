@@ -137,6 +137,12 @@ def test_the_array_record_carries_every_address_and_the_settings_no_calibration(
     for bad in ([], addresses + addresses[:1], [0x07], list(range(0x20, 0x31))):
         with pytest.raises(ee.EepromError):
             ee.pack_array(bad, "0" * 16, settings)
+    assert ee.buses(record) == 0  # every taxel on the one bus
+    split = ee.pack_array(addresses, "0" * 16, settings, 1 << (n - 1))
+    assert ee.buses(split) == 1 << (n - 1) and split[6:8] == (1 << (n - 1)).to_bytes(2, "little") and ee.check(split)
+    for mask in (-1, 1 << n):
+        with pytest.raises(ee.EepromError):
+            ee.pack_array(addresses, "0" * 16, settings, mask)
 
 
 # ---- the shipped image reading every chip on the simulated bus -------------------------------------------------
@@ -375,9 +381,9 @@ def test_per_taxel_and_total_rate_in_simulated_time(harness, designs, tmp_path, 
     assert all(p * elapsed <= c + 1 for p, c in zip(per_taxel, converted))  # never a conversion twice
 
 
-def _array_sim(harness, designs, tmp_path, chips: int, baud: int) -> ArraySim:
+def _array_sim(harness, designs, tmp_path, chips: int, baud: int, buses: int = 0) -> ArraySim:
     """The shipped image with an array record of ``chips`` chips (option codes 011 to 014 with every strap: 0x0C to
-    0x1B) at ``baud``, fingertip_2x2's chip settings."""
+    0x1B) at ``baud``, fingertip_2x2's chip settings; ``buses`` its mask of taxels on a second bus."""
     from magfab.export import firmware
 
     ee = firmware._eeprom_module()
@@ -386,7 +392,7 @@ def _array_sim(harness, designs, tmp_path, chips: int, baud: int) -> ArraySim:
         update={"firmware": base.firmware.model_copy(update={"baud": baud})})))
     addresses = [0x0C + k for k in range(chips)]
     eep = tmp_path / firmware.EEP_NAME
-    eep.write_bytes(ee.intel_hex(ee.pack_array(addresses, "0" * 16, settings)))
+    eep.write_bytes(ee.intel_hex(ee.pack_array(addresses, "0" * 16, settings, buses)))
     return ArraySim(harness[ARRAYS[0]].lib, harness[ARRAYS[0]].hex_path, eep, addresses, settings,
                     harness[ARRAYS[0]].frames)
 
@@ -429,6 +435,20 @@ def test_every_reading_carries_its_chips_temperature_word_past_the_sequence_wrap
     assert len({s.seq for s in got}) == 256 and len(got) > 256 * chips
     assert not any(s.chip_error for s in got)
     assert {s.temperature_raw for s in got} == {sim.settings["t_raw_25c"]}
+
+
+def test_the_one_bus_image_refuses_a_record_that_names_a_second_bus(harness, designs, tmp_path):
+    """The ATmega328P has one I2C bus: an array record with a taxel on a second (an RP2040 board's split) is refused
+    as a missing record is, so the image reads no chip and sends no reading, only its error lines (the missing
+    calibration's fault); the same record with every taxel on the one bus streams."""
+    for buses, streams in ((0b10, False), (0, True)):
+        sim = _array_sim(harness, designs, tmp_path, 2, 250_000, buses)
+        with sim.boot() as bus:
+            out = bus.run_us(SETTLE_US + 40_000)
+            got = samples_of(sim.decoder(), out)
+            reads = [bus.target(k).conversions for k in range(2)]
+        good = [s for s in got if not s.chip_error and all(math.isfinite(b) for b in s.B_uT)]
+        assert got and bool(good) == streams and (min(reads) > 0) == streams, (buses, len(good), reads, out[:80])
 
 
 @pytest.mark.parametrize("chips, baud, share", REAL_BUS_CASES)

@@ -1,6 +1,7 @@
 // Runs an RP2040 image on rp2040js (tests/firmware_sim/rp2040):
 //   node run.mjs IMAGE.uf2 [--drop FILE.uf2] [--boot2] [--until TEXT] [--ms N] [--us N] [--send TEXT] [--hex]
-//                [--interactive] [--mlx MLXD --addr A[,A...] [--i2c 0|1] --field BX,BY,BZ,T[;...] [--inject FAULT@US]
+//                [--interactive] [--mlx MLXD --addr A[,A...] [--i2c 0|1] [--addr-b A[,A...] [--i2c-b 0|1]]
+//                 --field BX,BY,BZ,T[;...] [--inject FAULT@US]
 //                 [--bus-timing] [--reset-phase N [--reset-after US]]]
 //
 // The image comes as the build's .uf2. Each block is checked as the RP2040 bootrom would take it (UF2's magic numbers,
@@ -14,7 +15,9 @@
 // --send's TEXT goes to the device once it is connected. --drop writes a second UF2 file after the first, as the
 // bootrom does when a second file is copied onto the drive (each sector the file writes to erased first). The flash
 // chip is modelled below the SSI (the NOR model below), so an image can program its own flash. With --mlx, the
-// build's MLX90393 model (mlxd, compiled from its sim_mlx90393.c) answers at address A on I2C0 (--i2c 1: I2C1), serving the field BX, BY, BZ (uT) at T (C): each callback of
+// build's MLX90393 model (mlxd, compiled from its sim_mlx90393.c) answers at address A on I2C0 (--i2c 1: I2C1), serving the field BX, BY, BZ (uT) at T (C) (--addr-b: chips on a second
+// bus, the other controller or --i2c-b's, timed apart from the first; --field then lists the first bus's chips'
+// fields before the second's): each callback of
 // rp2040js's I2C asks it synchronously over a FIFO pair (a write is handed over whole at its STOP or repeated START; a
 // read's bytes are fixed at its address phase, as the AVR harness does). The bus takes no time, or with --bus-timing
 // the time it takes at the SCL clock the image sets (IC_*_SCL_HCNT/LCNT at 125 MHz): each step's completion is held, on
@@ -28,7 +31,8 @@
 // TEXT has been seen in either, N us of emulated time (--us) or N ms of host time (--ms) pass. Prints one JSON line:
 // {"boot2_crc_ok", "blocks", "uart", "usb", "usb_hex" (with --hex), "usb_connected", "nanos", "flash" (the NOR
 // model's erases, programs, cache flushes and errors), "reset_us" (when --reset-phase struck, or null),
-// "bus_busy_us" (how long the bus was busy, every step timed as --bus-timing times it)}; exit 2 on a refused image. --interactive instead takes commands on stdin, one a line, and runs the emulation only when asked, so that a
+// "bus_busy_us" (how long the bus was busy, every step timed as --bus-timing times it, from --busy-after US of
+// emulated time on), "bus_b_busy_us" (the second bus's)}; exit 2 on a refused image. --interactive instead takes commands on stdin, one a line, and runs the emulation only when asked, so that a
 // host program can be the board's USB host (tests/export/test_rp2040_harness.py's HarnessTransport):
 //   run US      run US microseconds of emulated time; answers with the hex of what the device sent over USB meanwhile
 //   send HEX    bytes for the host to send the device (once it is connected)
@@ -194,10 +198,11 @@ for (const name of ['writeUint8', 'writeUint16', 'writeUint32']) {
 const flashReport = () => ({ erases: nor.erases, programs: nor.programs, flushes: nor.flushes, errors: nor.errors });
 
 let mlx = null, reset_us = null; // reset_us: when --reset-phase restarted the chip
-let busNs = 0; // how long the bus has been busy, at the SCL clock the image sets (--mlx)
+const busNs = [0, 0]; // how long each bus has been busy, at the SCL clock the image sets (--mlx)
 if (args.includes('--mlx')) {
-  // One model (an mlxd process) per chip: --addr lists their addresses, --field their fields (';' between chips, or
-  // one for all). A line about a chip goes to the model at its address; a chip's fault (X) to the first.
+  // One model (an mlxd process) per chip: --addr lists the first bus's chips' addresses, --addr-b the second's (on
+  // the controller --i2c-b names), --field their fields, in that order (';' between chips, or one for all). A line
+  // about a chip goes to the model at its address; a chip's fault (X) to the first.
   const serve = (address) => {
     const dir = mkdtempSync(join(tmpdir(), 'mlxd-'));
     const req = join(dir, 'req'), rep = join(dir, 'rep');
@@ -214,22 +219,18 @@ if (args.includes('--mlx')) {
     };
     return { address, ask, close: () => { closeSync(w); closeSync(r); child.kill(); rmSync(dir, { recursive: true }); } };
   };
-  const chips = option('--addr', '12').split(',').map(Number).map(serve);
+  const list = (name) => (args.includes(name) ? option(name).split(',').map(Number) : []);
+  const onA = args.includes('--addr') ? list('--addr') : [12];
+  const onB = list('--addr-b');
+  const chips = [...onA, ...onB].map(serve);
   const setFields = (text) => {
     const fields = text.split(';');
     chips.forEach((c, k) => c.ask(`F ${(fields[k] ?? fields[0]).split(',').join(' ')}`));
   };
-  const at = (address) => chips.find((c) => c.address === address);
   const ask = (line) => chips[0].ask(line); // the first chip's (a single taxel's: the chip)
   mlx = { ask, setFields, close: () => chips.forEach((c) => c.close()) };
   setFields(option('--field', '0,0,0,25'));
-  const i2c = mcu.i2c[Number(option('--i2c', '0'))];
   const now = () => Math.floor(sim.clock.nanos / 1000);
-  let addr = -1, writing = false, wbuf = [], rbuf = [];
-  const flush = () => {
-    if (addr >= 0 && writing && wbuf.length) at(addr).ask(`W ${addr} ${now()} ${Buffer.from(wbuf).toString('hex')}`);
-    wbuf = [];
-  };
   const pending = { 'nack-addr': 0, 'nack-data': 0, 'all-ff': 0 };
   const CHIP_FAULTS = { error: 1, short: 2, trunc: 3, timeout: 4, stuck: 5, reset: 6 };
   if (args.includes('--inject')) {
@@ -240,56 +241,68 @@ if (args.includes('--mlx')) {
     }).schedule(Number(at) * 1000);
   }
   const timed = args.includes('--bus-timing');
-  const later = (bits, fn) => {
-    busNs += bits * (i2c.sclLowPeriod + i2c.sclHighPeriod) * 8;
-    if (!timed) return fn();
-    sim.clock.createAlarm(fn).schedule(bits * (i2c.sclLowPeriod + i2c.sclHighPeriod) * 8); // 8 ns a cycle
-  };
-  i2c.onStart = () => { flush(); later(1, () => i2c.completeStart()); };
-  let phases = 0; // address phases from --reset-after on (--reset-phase)
+  const busyAfter = Number(option('--busy-after', '0')); // the bus's busy time counted from this emulated time, us
+  let phases = 0; // address phases from --reset-after on, on either bus (--reset-phase)
   const resetPhase = Number(option('--reset-phase', '0')), resetAfter = Number(option('--reset-after', '0'));
-  i2c.onConnect = (address, mode) => {
-    flush();
-    if (now() >= resetAfter) phases += 1;
-    if (resetPhase && phases === resetPhase && at(address)) {
-      at(address).ask(`X ${CHIP_FAULTS.reset} 1 ${now()}`);
-      reset_us = now();
-    }
-    addr = address;
-    writing = mode === 0;
-    let present = at(address) !== undefined && at(address).ask(`A ${address}`) === '1';
-    if (present && pending['nack-addr']) {
-      pending['nack-addr'] -= 1;
-      present = false;
-    }
-    if (present && !writing) {
-      if (pending['all-ff']) {
-        pending['all-ff'] -= 1;
-        rbuf = new Array(9).fill(0xff);
-      } else {
-        const [, hex] = at(address).ask(`R ${address} ${now()} 9`).split(' ');
-        rbuf = [...Buffer.from(hex, 'hex')];
-      }
-    }
-    if (!present) addr = -1;
-    later(9, () => i2c.completeConnect(present));
-  };
-  i2c.onWriteByte = (value) => {
-    if (pending['nack-data']) {
-      pending['nack-data'] -= 1;
+  // A bus: controller i2c with the chips at `addresses` on it (each bus's state and time its own).
+  const attach = (i2c, addresses, b) => {
+    const at = (address) => (addresses.includes(address) ? chips.find((c) => c.address === address) : undefined);
+    let addr = -1, writing = false, wbuf = [], rbuf = [];
+    const flush = () => {
+      if (addr >= 0 && writing && wbuf.length) at(addr).ask(`W ${addr} ${now()} ${Buffer.from(wbuf).toString('hex')}`);
       wbuf = [];
-      addr = -1;
-      later(9, () => i2c.completeWrite(false));
-      return;
-    }
-    wbuf.push(value);
-    later(9, () => i2c.completeWrite(true));
+    };
+    const later = (bits, fn) => {
+      if (now() >= busyAfter) busNs[b] += bits * (i2c.sclLowPeriod + i2c.sclHighPeriod) * 8;
+      if (!timed) return fn();
+      sim.clock.createAlarm(fn).schedule(bits * (i2c.sclLowPeriod + i2c.sclHighPeriod) * 8); // 8 ns a cycle
+    };
+    i2c.onStart = () => { flush(); later(1, () => i2c.completeStart()); };
+    i2c.onConnect = (address, mode) => {
+      flush();
+      if (now() >= resetAfter) phases += 1;
+      if (resetPhase && phases === resetPhase && at(address)) {
+        at(address).ask(`X ${CHIP_FAULTS.reset} 1 ${now()}`);
+        reset_us = now();
+      }
+      addr = address;
+      writing = mode === 0;
+      let present = at(address) !== undefined && at(address).ask(`A ${address}`) === '1';
+      if (present && pending['nack-addr']) {
+        pending['nack-addr'] -= 1;
+        present = false;
+      }
+      if (present && !writing) {
+        if (pending['all-ff']) {
+          pending['all-ff'] -= 1;
+          rbuf = new Array(9).fill(0xff);
+        } else {
+          const [, hex] = at(address).ask(`R ${address} ${now()} 9`).split(' ');
+          rbuf = [...Buffer.from(hex, 'hex')];
+        }
+      }
+      if (!present) addr = -1;
+      later(9, () => i2c.completeConnect(present));
+    };
+    i2c.onWriteByte = (value) => {
+      if (pending['nack-data']) {
+        pending['nack-data'] -= 1;
+        wbuf = [];
+        addr = -1;
+        later(9, () => i2c.completeWrite(false));
+        return;
+      }
+      wbuf.push(value);
+      later(9, () => i2c.completeWrite(true));
+    };
+    i2c.onReadByte = () => {
+      const value = rbuf.length ? rbuf.shift() : 0xff;
+      later(9, () => i2c.completeRead(value));
+    };
+    i2c.onStop = () => { flush(); addr = -1; later(2, () => i2c.completeStop()); };
   };
-  i2c.onReadByte = () => {
-    const value = rbuf.length ? rbuf.shift() : 0xff;
-    later(9, () => i2c.completeRead(value));
-  };
-  i2c.onStop = () => { flush(); addr = -1; later(2, () => i2c.completeStop()); };
+  attach(mcu.i2c[Number(option('--i2c', '0'))], onA, 0);
+  if (onB.length) attach(mcu.i2c[Number(option('--i2c-b', '1'))], onB, 1);
 }
 
 let uart = '', usb = '', usb_hex = '', usb_connected = false;
@@ -297,7 +310,7 @@ const done = () => {
   sim.stop();
   if (mlx) mlx.close();
   const report = JSON.stringify({ boot2_crc_ok, blocks, uart, usb, usb_hex, usb_connected, nanos: sim.clock.nanos,
-    flash: flashReport(), reset_us, bus_busy_us: busNs / 1000 });
+    flash: flashReport(), reset_us, bus_busy_us: busNs[0] / 1000, bus_b_busy_us: busNs[1] / 1000 });
   process.stdout.write(report + '\n', () => process.exit(0)); // exit once written: a pipe takes it in pieces
 };
 const seen = () => {

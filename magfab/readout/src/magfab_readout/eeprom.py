@@ -253,14 +253,18 @@ def pack(lay: Dict[str, Any], sha16: str, settings: Dict[str, Any]) -> bytes:
     return record + struct.pack("<H", crc16(record))
 
 
-def pack_array(addresses: Sequence[int], sha16: str, settings: Dict[str, Any]) -> bytes:
-    """An array's record (version 3): the header (byte 3 the number of taxels N, bytes 6..7 zero), the image's
-    settings as in :func:`pack` (their ``i2c_address`` taxel 0's), the N chip addresses in taxel order (uint8
-    each), the name, the CRC. ``sha16`` is the info line's hash (of the build's calibration)."""
+def pack_array(addresses: Sequence[int], sha16: str, settings: Dict[str, Any], buses: int = 0) -> bytes:
+    """An array's record (version 3): the header (byte 3 the number of taxels N, bytes 6..7 ``buses``: bit k set
+    for taxel k on the board's second I2C bus, 0 for every taxel on the first), the image's settings as in
+    :func:`pack` (their ``i2c_address`` taxel 0's), the N chip addresses in taxel order (uint8 each), the name, the
+    CRC. ``sha16`` is the info line's hash (of the build's calibration). An image of one bus (the ATmega328P's)
+    refuses a record with a second."""
     n = len(addresses)
     if not 1 <= n <= MAX_TAXELS or len(set(addresses)) != n or not all(0x08 <= a <= 0x77 for a in addresses):
         raise EepromError("taxels", list(addresses),
                           f"must be 1 to {MAX_TAXELS} distinct 7-bit addresses from 0x08 to 0x77")
+    if not 0 <= buses < 1 << n:
+        raise EepromError("buses", buses, f"must be a mask of the {n} taxels' bits (0 to {(1 << n) - 1})")
     spec_name = settings["name"].encode("utf-8")
     if len(spec_name) > NAME_MAX:
         raise EepromError("name", settings["name"], f"must be at most {NAME_MAX} bytes of UTF-8 in the record")
@@ -268,8 +272,14 @@ def pack_array(addresses: Sequence[int], sha16: str, settings: Dict[str, Any]) -
     body = block + bytes(addresses) + spec_name
     length = HEADER.size + len(body) + 2
     chip = (settings["gain_sel"], settings["resolution"], settings["osr"], settings["dig_filt"])
-    record = HEADER.pack(MAGIC, VERSION_ARRAY, n, length, 0, sha16.encode("ascii"), *chip) + body
+    record = HEADER.pack(MAGIC, VERSION_ARRAY, n, length, buses, sha16.encode("ascii"), *chip) + body
     return record + struct.pack("<H", crc16(record))
+
+
+def buses(data: bytes) -> int:
+    """An array record's buses mask (bit k: taxel k on the second I2C bus); 0 for a single taxel's."""
+    head = unpack_header(data)
+    return head["hull_points"] if head["version"] == VERSION_ARRAY else 0
 
 
 def addresses(data: bytes) -> List[int]:

@@ -29,6 +29,7 @@ static struct {
     uint16_t name_at; /* and of the spec name */
     uint8_t name_len;
     uint8_t taxels; /* an array's record (version 3): its chips; 0 for a single taxel's */
+    uint16_t buses; /* and their buses: bit k for taxel k on the second */
     uint8_t thermal; /* a version-4 record: the field is corrected for temperature before the calibration */
     uint8_t reference; /* a version-5 record: the reference chip's address (0: none) */
     uint8_t reference_shift;
@@ -36,7 +37,7 @@ static struct {
     float a_per_C[3]; /* per axis: the magnet's remanence coefficient plus the chip's sensitivity drift */
     float f[N_FLOATS];
     float coef[(MF_CAL_MAX_ORDER + 1) * (MF_CAL_MAX_ORDER + 2)]; /* the Horner rows, as in the record */
-} cal = {MF_E_CALIB, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0.0f, {0}, {0}, {0}};
+} cal = {MF_E_CALIB, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0.0f, {0}, {0}, {0}};
 
 /* What the formula computes, bounded as calibration_json.check_formula bounds it (magfab docs/bundle.md section 2):
  * the least thermal denominator 1 + a (T - T0) over the chip's rated range, the scaled inputs' reach over the valid
@@ -124,13 +125,16 @@ static int record_settings(void)
     return MF_OK;
 }
 
-/* An array's record (version 3): the settings, N chip addresses, the name; no calibration. */
+/* An array's record (version 3): the settings, N chip addresses, the name; no calibration. Its buses mask names no
+ * taxel past the N-th, and no second bus for an image of one. */
 static int load_array(uint16_t len, uint8_t name_len)
 {
     uint8_t n = mf_nv_byte(3);
+    uint16_t buses = mf_nv_u16(MF_CAL_BUSES_AT);
     uint8_t k;
     if (n == 0 || n > MF_MAX_TAXELS || len != (uint16_t)(MF_CAL_ADDR_AT + 2U + (uint16_t)n + (uint16_t)name_len)
-        || record_crc((uint16_t)(len - 2)) != mf_nv_u16((uint16_t)(len - 2)) || record_settings() != MF_OK) {
+        || record_crc((uint16_t)(len - 2)) != mf_nv_u16((uint16_t)(len - 2)) || record_settings() != MF_OK
+        || (MF_BUSES < 2 && buses != 0U) || (n < 16U && (buses >> n) != 0U)) {
         return MF_E_CALIB;
     }
     for (k = 0; k < n; ++k) {
@@ -140,6 +144,7 @@ static int load_array(uint16_t len, uint8_t name_len)
         }
     }
     cal.taxels = n;
+    cal.buses = buses;
     cal.name_at = (uint16_t)(MF_CAL_ADDR_AT + n);
     cal.name_len = name_len;
     cal.status = MF_OK;
@@ -242,6 +247,7 @@ int mf_calib_load(void)
     uint16_t k;
     cal.status = MF_E_CALIB;
     cal.taxels = 0;
+    cal.buses = 0;
     cal.thermal = 0;
     cal.reference = 0;
 #if MF_GENERIC
@@ -320,6 +326,11 @@ uint8_t mf_calib_taxels(void)
 uint8_t mf_calib_address(uint8_t k)
 {
     return mf_nv_byte((uint16_t)(MF_CAL_ADDR_AT + k));
+}
+
+uint8_t mf_calib_bus(uint8_t k)
+{
+    return (uint8_t)((cal.buses >> k) & 1U);
 }
 
 char mf_calib_sha(uint8_t k)

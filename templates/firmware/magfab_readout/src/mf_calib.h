@@ -27,6 +27,10 @@ extern "C" {
 #define MF_CAL_VERSION_REFERENCE 5 /* version 4 and a reference block after the thermal block, then the Horner rows */
 #define MF_CAL_ADDR_AT 92      /* an array record's chip addresses, one byte each in taxel order */
 #define MF_MAX_TAXELS 16
+#define MF_CAL_BUSES_AT 6 /* an array record's buses: bit k set for taxel k on the second I2C bus (uint16) */
+#ifndef MF_BUSES
+#define MF_BUSES 1 /* the I2C buses the image drives (-DMF_BUSES=2: a board with a second controller wired) */
+#endif
 #define MF_CAL_SHA_AT 8      /* 16 ASCII hex digits of the calibration's sha256 */
 #define MF_CAL_SETTINGS_AT 24 /* gain_sel, resolution, osr, dig_filt the record was made for */
 #define MF_CAL_IMAGE_AT 28   /* the image's settings: mf_settings_t's fields in order, packed */
@@ -48,6 +52,9 @@ uint8_t mf_calib_reference(void);
 uint8_t mf_calib_reference_shift(void);
 /* The 7-bit I2C address of taxel k (k < mf_calib_taxels()). */
 uint8_t mf_calib_address(uint8_t k);
+/* The I2C bus of taxel k: 0, or 1 for the second (an array record whose buses mask has bit k set; an image of one
+ * bus refuses a record that names a second). */
+uint8_t mf_calib_bus(uint8_t k);
 /* Byte k (0..15) of the record's calibration hash, for the info line ('0' without a valid record). */
 char mf_calib_sha(uint8_t k);
 /* Byte k (0..3) of the chip settings the record was made for: gain_sel, resolution, osr, dig_filt (0 without). */
