@@ -333,6 +333,9 @@ class Array(_Section):
         "pitch_mm (taxel index = order in the list).")
     skin: Skin = Field(Skin.SEPARATE, strict=False, description="'separate' fingertips or one 'continuous' skin.")
     polarity: Polarity = Field(Polarity.SAME, strict=False, description="'same' or 'alternating' magnetisation.")
+    buses: int = Field(1, ge=1, le=2, description="I2C buses the chips are split over: 1, or 2 (an RP2040 board's two "
+                       "controllers: odd taxels on the second bus, its own connector J2; the taxels then come twice as "
+                       "often).")
     crosstalk_mN: float | None = Field(
         None, gt=0.0, le=1.0e4, description="Largest force error at a taxel that its neighbours moving through "
         "their range may cause, mN; omit: the taxel's normal force resolution.")
@@ -363,6 +366,8 @@ class Array(_Section):
                              "x four A1/A0 straps on one I2C bus)")
         elif self.rows * self.cols > 1 and self.pitch_mm is None:
             raise ValueError("pitch_mm is required for a grid of more than one taxel")
+        if self.buses == 2 and self.taxels < 2:
+            raise ValueError("buses = 2 splits the taxels over two I2C buses: it needs at least two taxels")
         return self
 
     @property
@@ -401,10 +406,14 @@ class Spec(_Section):
         None, description="A reference chip for stray-field rejection (omit for none).")
 
     def dump(self) -> dict[str, Any]:
-        """Every key, defaults included, as JSON values (spec.json); a single taxel has no ``array`` key and a spec
-        without ``[environment]`` none either, so its spec, hash and build are what they were before those existed."""
-        unset = {name for name in ("array", "board", "environment", "reference") if getattr(self, name) is None}
-        return self.model_dump(mode="json", exclude=unset or None)
+        """Every key, defaults included, as JSON values (spec.json); a single taxel has no ``array`` key, an array on
+        one bus no ``array.buses`` and a spec without ``[environment]`` none either, so its spec, hash and build are
+        what they were before those existed."""
+        exclude: dict[str, Any] = {name: True for name in ("array", "board", "environment", "reference")
+                                   if getattr(self, name) is None}
+        if self.array is not None and self.array.buses == 1:  # one bus: the array's spec and hash as before buses
+            exclude["array"] = {"buses"}
+        return self.model_dump(mode="json", exclude=exclude or None)
 
     def canonical_json(self) -> str:
         """Every key, defaults included, as sorted JSON: the basis of the spec hash."""

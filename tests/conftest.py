@@ -20,7 +20,7 @@ from types import MappingProxyType
 
 import pytest
 
-from magfab import build, load_spec
+from magfab import build, load_spec, parse_spec
 
 # An xdist worker ignores SIGINT (the controller takes Ctrl-C), and every process it starts inherits that: a command
 # the tests Ctrl-C (`magfab-readout stream`, the Ctrl-C tests) would never stop. Its children get the default back.
@@ -169,6 +169,21 @@ def ref_crc16(data: bytes) -> int:
 
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "magfab" / "examples"
+
+
+@pytest.fixture(scope="session")
+def two_bus_build(tmp_path_factory):
+    """examples/fingertip_2x2.toml split over two I2C buses (``array.buses = 2``: taxels 1 and 3 on J2) on an Adafruit
+    QT Py RP2040, written once per run (read only)."""
+
+    def make(folder: Path):
+        spec = load_spec(EXAMPLES / "fingertip_2x2.toml")
+        assert spec.array is not None
+        spec = spec.model_copy(update={"name": "fingertip_2x2_buses", "array": spec.array.model_copy(
+            update={"buses": 2}), "board": parse_spec('[board]\nboard = "qtpy-rp2040"').board})
+        return build(spec, folder / "fingertip_2x2_buses")
+
+    return _once_per_run(tmp_path_factory, "two-bus", make)
 
 
 @pytest.fixture(scope="session")

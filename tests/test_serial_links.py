@@ -54,10 +54,32 @@ def test_check_and_build_give_the_same_line_and_exit_2(tmp_path, board, refused)
     if not refused:
         assert CliRunner().invoke(main, ["check", str(spec)]).exit_code == 0
         return
+    assert "firmware.baud = 1500000" in _both_refuse(spec)
+
+
+def _both_refuse(spec) -> str:
+    """``magfab check`` and ``magfab build`` of ``spec`` (alone in its folder): each exit 2 with the same last line,
+    nothing written; that line."""
     lines = []
-    for args in (["check", str(spec)], ["build", str(spec), "--out", str(tmp_path / "out")]):
+    for args in (["check", str(spec)], ["build", str(spec), "--out", str(spec.parent / "out")]):
         run = CliRunner().invoke(main, args)
         assert run.exit_code == 2, run.output
         lines.append(run.output.strip().splitlines()[-1])
-    assert lines[0] == lines[1] and "firmware.baud = 1500000" in lines[0]
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["fast.toml"]
+    assert lines[0] == lines[1]
+    assert sorted(p.name for p in spec.parent.iterdir()) == [spec.name]
+    return lines[0]
+
+
+@pytest.mark.parametrize("board", BOARDS)
+def test_a_second_i2c_bus_needs_an_rp2040_and_check_and_build_say_so_alike(tmp_path, board):
+    """``array.buses = 2`` on a board with one I2C controller (the Uno's and the Nano's ATmega328P): ``magfab check``
+    and ``magfab build`` give the same one line naming array.buses, exit 2, nothing written; an RP2040 board passes
+    the check (its two controllers: the build's test is tests/board/test_array_board.py)."""
+    spec = tmp_path / "split.toml"
+    chosen = "" if board is None else f'[board]\nboard = "{board}"\n'
+    spec.write_text(f'name = "split"\n[array]\nrows = 1\ncols = 2\npitch_mm = 14\nbuses = 2\n{chosen}')
+    if board in ("pico", "qtpy-rp2040", "xiao-rp2040"):
+        assert CliRunner().invoke(main, ["check", str(spec)]).exit_code == 0
+        return
+    line = _both_refuse(spec)
+    assert "array.buses = 2" in line and "rp2040" in line

@@ -13,7 +13,8 @@ from .route import HOLE_TO_HOLE_MM, LAYERS, Copper, Point, RouteError, Router, d
 
 __all__ = ["NETS_ROUTED", "ROUTE_GRID_MM", "RIP_UP_LIMIT", "FANOUT_MM", "route_all"]
 
-NETS_ROUTED = ("SCL", "SDA", "+3V3", "GND")  # routing order: the fine-pitch signals first
+# routing order: the fine-pitch signals first (the second bus's only on a board that has one: plan.BUS_NETS)
+NETS_ROUTED = ("SCL", "SDA", "SCL_B", "SDA_B", "+3V3", "GND")
 ROUTE_GRID_MM = 0.125  # divides the 0.5 mm pitch and the 0.25 mm pad offsets of the QFN
 RIP_UP_LIMIT = 8  # times one connection may be ripped up to make way for another
 FANOUT_MM = 0.5  # straight escape beyond a QFN land's outer end, so no route can box a pin in
@@ -138,7 +139,8 @@ def _connections(parts: list[Placed], terminals: list[Copper], order: tuple[str,
         ends = [c for c in items if c.net == net and c.kind == "rect" and c.owner.split(".")[0] not in chips]
         ends += [t for t in terminals if t.net == net]
         ends.sort(key=lambda c: (c.owner.split(".")[0] not in chips, _chip_order(c.owner)))
-        connections += [(net, new, old) for new, old in _mst(ends) if not touching(new, old)]
+        if ends:  # a net the board does not have (a second bus) has no connection
+            connections += [(net, new, old) for new, old in _mst(ends) if not touching(new, old)]
     return connections
 
 

@@ -32,7 +32,7 @@ from .layout import (
     outline_clear,
     overlap,
 )
-from .plan import ORDER_CODE
+from .plan import BUS_NETS, ORDER_CODE, taxel_bus, two_buses
 from .route import distance
 
 __all__ = ["place", "label", "wrap", "pad_hull", "pad_room_mm", "resized", "board_size_mm", "SIZE_STEP_MM",
@@ -44,11 +44,14 @@ SIZE_STEP_MM = 0.5
 SIZE_REACH_MM = 40.0
 
 
-def _chip_nets(design: Design, fp: Footprint, straps: tuple[int, int] | None = None, ref: str = "U1") -> dict[str, str]:
-    """Pad number -> net for the MLX90393, from the chip recipe's pin names and the address straps."""
+def _chip_nets(design: Design, fp: Footprint, straps: tuple[int, int] | None = None, ref: str = "U1",
+               bus: int = 0) -> dict[str, str]:
+    """Pad number -> net for the MLX90393, from the chip recipe's pin names, the address straps and its I2C bus
+    (:data:`~magfab.board.plan.BUS_NETS`)."""
     chip = design.chip
     a1, a0 = straps or design.address_straps
-    by_name = {"VSS": GROUND, "EP": GROUND, "VDD": SUPPLY, "VDDIO": SUPPLY, "CS": SUPPLY, "SCL": "SCL", "SDA": "SDA",
+    sda, scl, _ = BUS_NETS[bus]
+    by_name = {"VSS": GROUND, "EP": GROUND, "VDD": SUPPLY, "VDDIO": SUPPLY, "CS": SUPPLY, "SCL": scl, "SDA": sda,
                "A1": SUPPLY if a1 else GROUND, "A0": SUPPLY if a0 else GROUND}
     nets = {}
     ep_number = str(max(int(p.number) for p in fp.copper_pads()))
@@ -84,10 +87,17 @@ def place(design: Design, hint: bool = True) -> tuple[list[Placed], Box, tuple[f
                         f"{gap:g} mm apart, so no board could meet a larger clearance")
     chips = len(placed)
     placed += _holes(design, outline)
-    j1 = _connector(design, outline, placed, chips, hint)
-    placed.append(j1)
-    placed += _passives(design, qfn, j1, placed[:chips])
+    connectors = []
+    for bus in range(_buses(design)):  # J1, and J2 beside it for a second bus
+        connectors.append(_connector(design, outline, placed, chips, hint, bus))
+        placed.append(connectors[-1])
+    placed += _passives(design, qfn, connectors, placed[:chips])
     return placed, outline, (ox, oy, design.pad_radius_mm)
+
+
+def _buses(design: Design) -> int:
+    """The board's I2C buses: 2 for an array split over two (``array.buses``), else 1."""
+    return 2 if two_buses(design) else 1
 
 
 def pad_hull(design: Design) -> tuple[tuple[float, float], ...]:
@@ -129,7 +139,8 @@ def _chips(design: Design, qfn: Footprint) -> list[Placed]:
         return [Placed("U1", ORDER_CODE.format(design.spec.sensor.option_code), qfn, ox, oy,
                        nets=_chip_nets(design, qfn))]
     return [Placed(f"U{t.index + 1}", ORDER_CODE.format(t.option_code), qfn, round(ox + t.x_mm, 6),
-                   round(oy - t.y_mm, 6), nets=_chip_nets(design, qfn, t.address_straps, f"U{t.index + 1}"))
+                   round(oy - t.y_mm, 6),
+                   nets=_chip_nets(design, qfn, t.address_straps, f"U{t.index + 1}", taxel_bus(design, t.index)))
             for t in design.taxels]
 
 
@@ -183,16 +194,18 @@ def _holes(design: Design, outline: Box) -> list[Placed]:
     return out
 
 
-def _connector(design: Design, outline: Box, placed: list[Placed], chips: int = 1, hint: bool = True) -> Placed:
-    """The Qwiic connector on the bottom edge, mating face flush with it, as near the centre line as the
-    pad's keep-out and the holes allow."""
-    found = _find_connector(design, outline, placed, chips)
+def _connector(design: Design, outline: Box, placed: list[Placed], chips: int = 1, hint: bool = True,
+               bus: int = 0) -> Placed:
+    """Bus ``bus``'s Qwiic connector (J1, or J2 for a second bus) on the bottom edge, mating face flush with it, as
+    near the centre line as the pad's keep-out, the holes and the other connector allow."""
+    found = _find_connector(design, outline, placed, chips, bus)
     if found is not None:
         return found
     pcb = design.spec.pcb
     keep_r = design.pad_radius_mm + PAD_KEEPOUT_MARGIN_MM
+    what = "the Qwiic connector" if _buses(design) == 1 else "both Qwiic connectors (one a bus)"
     raise SpecError("pcb.width_mm", pcb.width_mm,
-                    f"leaves no room for the Qwiic connector on the bottom edge outside the mounting pad's "
+                    f"leaves no room for {what} on the bottom edge outside the mounting pad's "
                     f"{2 * keep_r:g} mm keep-out and clear of the screw holes", _larger_board(design) if hint else "")
 
 
@@ -209,7 +222,7 @@ def _larger_board(design: Design) -> str:
         outline = (ox - pcb.width_mm / 2, oy - height / 2 - _reference_room(trial), ox + pcb.width_mm / 2,
                    oy + height / 2)
         placed = _chips(trial, qfn_footprint(design.chip, pcb.density, clearance=pcb.clearance_mm))
-        if _find_connector(trial, outline, placed + _holes(trial, outline), len(placed)) is not None:
+        if _all_connectors(trial, outline, placed + _holes(trial, outline), len(placed)):
             return (f"make the board taller: {pcb.width_mm:g} x {height:g} mm (pcb.height_mm = {height:g}) holds this "
                     "array's pad and the connector below it")
     return f"make the board larger: no height up to {SIZE_REACH_MM:g} mm more holds the connector at this width"
@@ -224,8 +237,19 @@ def resized(design: Design, sizes: dict[str, float]) -> Design:
 _SURE_MM = 1e-4
 
 
-def _find_connector(design: Design, outline: Box, placed: list[Placed], chips: int) -> Placed | None:
-    """The connector where it fits (see :func:`_connector`), or None."""
+def _all_connectors(design: Design, outline: Box, placed: list[Placed], chips: int) -> bool:
+    """Whether every bus's connector finds a place, each after the ones before it."""
+    placed = list(placed)
+    for bus in range(_buses(design)):
+        found = _find_connector(design, outline, placed, chips, bus)
+        if found is None:
+            return False
+        placed.append(found)
+    return True
+
+
+def _find_connector(design: Design, outline: Box, placed: list[Placed], chips: int, bus: int = 0) -> Placed | None:
+    """Bus ``bus``'s connector where it fits (see :func:`_connector`), or None."""
     pcb = design.spec.pcb
     ox, oy = ORIGIN
     hw, hh = pcb.width_mm / 2, pcb.height_mm / 2
@@ -245,8 +269,9 @@ def _find_connector(design: Design, outline: Box, placed: list[Placed], chips: i
         inner = (x0 + dx + _SURE_MM, y0 + _SURE_MM, x1 + dx - _SURE_MM, y1 - _SURE_MM)
         if not outline_clear(inner, hull, keep_r - _SURE_MM):
             continue
-        cand = Placed("J1", "Qwiic JST-SH 4", jst, round(ox + dx, 6), jy,
-                      nets={"1": GROUND, "2": SUPPLY, "3": "SDA", "4": "SCL", "MP": GROUND})
+        sda, scl, ref = BUS_NETS[bus]
+        cand = Placed(ref, "Qwiic JST-SH 4", jst, round(ox + dx, 6), jy,
+                      nets={"1": GROUND, "2": SUPPLY, "3": sda, "4": scl, "MP": GROUND})
         cy = cand.box(jst.courtyard)
         body = cand.box(jst.body)
         if body[0] < outline[0] or body[2] > outline[2]:
@@ -261,9 +286,10 @@ def _find_connector(design: Design, outline: Box, placed: list[Placed], chips: i
     return None
 
 
-def _passives(design: Design, qfn: Footprint, j1: Placed, chips: list[Placed]) -> list[Placed]:
+def _passives(design: Design, qfn: Footprint, connectors: list[Placed], chips: list[Placed]) -> list[Placed]:
     """Decoupling right under each chip (bottom side): C1 by VDD (top row), C2 by VDDIO (bottom row), and so on
-    for the next chip; the I2C pull-ups, if asked for, behind the connector."""
+    for the next chip; each bus's I2C pull-ups, if asked for, behind its connector (R1, R2 behind J1; R3, R4 behind
+    J2)."""
     pcb = design.spec.pcb
     parts = catalogue("parts")
     cap = chip_footprint(parts["chip-0603"], pcb.density, prefix="C")
@@ -279,11 +305,14 @@ def _passives(design: Design, qfn: Footprint, j1: Placed, chips: list[Placed]) -
         res = chip_footprint(parts["chip-0603"], pcb.density, prefix="R")
         ohm = parts["jst-sh-4"]["pullup_ohm"].nominal
         value = f"{ohm / 1000:g}k"
-        ry = round(j1.y + j1.footprint.courtyard[1] - res.courtyard[3] - 0.4, 2)
-        out.append(Placed("R1", value, res, j1.x, ry, 0.0, True, {"1": SUPPLY, "2": "SDA"}))
-        # R2 above R1, far enough that R2's silk reference clears R1's pads.
-        pitch = (res.courtyard[3] - res.courtyard[1]) + 1.3
-        out.append(Placed("R2", value, res, j1.x, round(ry - pitch, 2), 180.0, True, {"1": SUPPLY, "2": "SCL"}))
+        for bus, j in enumerate(connectors):
+            sda, scl, _ = BUS_NETS[bus]
+            ry = round(j.y + j.footprint.courtyard[1] - res.courtyard[3] - 0.4, 2)
+            out.append(Placed(f"R{2 * bus + 1}", value, res, j.x, ry, 0.0, True, {"1": SUPPLY, "2": sda}))
+            # the second above the first, far enough that its silk reference clears the first's pads.
+            pitch = (res.courtyard[3] - res.courtyard[1]) + 1.3
+            out.append(Placed(f"R{2 * bus + 2}", value, res, j.x, round(ry - pitch, 2), 180.0, True,
+                              {"1": SUPPLY, "2": scl}))
     return out
 
 

@@ -23,11 +23,16 @@ BAUD_ERROR_LIMIT = 0.025
 
 
 def serial_links(design: Design) -> None:
-    """Refuse (:class:`~magfab.errors.SpecError`) a baud or I2C clock the spec's readout board cannot make: an
-    ATmega328P board's UART and TWI from 16 MHz (:func:`uart_settings`, :func:`twi_settings`)."""
-    if resolve.board(readout_board_key(design.spec.board)).texts["mcu"] == "atmega328p":
+    """Refuse (:class:`~magfab.errors.SpecError`) a baud, I2C clock or second I2C bus the spec's readout board cannot
+    make: an ATmega328P board's UART and TWI from 16 MHz (:func:`uart_settings`, :func:`twi_settings`), and its one
+    TWI (``array.buses = 2`` needs an RP2040 board's two I2C controllers)."""
+    key = readout_board_key(design.spec.board)
+    if resolve.board(key).texts["mcu"] == "atmega328p":
         uart_settings(design.spec.firmware.baud)
         twi_settings(design.spec.firmware.i2c_hz)
+        if design.spec.array is not None and design.spec.array.buses == 2:
+            raise SpecError("array.buses", 2, f"needs a board with two I2C controllers: the {key} board's ATmega328P "
+                            "has one; use buses = 1, or [board] mcu = \"rp2040\"")
 
 
 def uart_settings(baud: int) -> tuple[int, float]:

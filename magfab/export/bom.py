@@ -10,6 +10,7 @@ from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 from ..board.placement import board_size_mm
+from ..board.plan import two_buses
 from ..models.silicone import quantities
 from ..recipes import catalogue
 from ..reference_chip import reference_chip
@@ -106,12 +107,15 @@ def _sensor_rows(design: Design) -> list[dict[str, object]]:
              f"VDD and VDDIO decoupling, two per chip (C1-C{2 * chips})", 2 * chips * n, "pcs",
              "pcb/ (this build): one on each supply pin"),
     ]
+    buses = two_buses(design)
     if pcb.pullups:
         ohm = parts["jst-sh-4"]["pullup_ohm"].nominal
-        rows.append(_row("Resistor", f"{ohm / 1000:g} kOhm 0603 1 %", "R1, R2: I2C pull-ups", 2 * n, "pcs",
-                         "recipes/parts.toml jst-sh-4 pullup_ohm (SparkFun Qwiic boards)"))
+        rows.append(_row("Resistor", f"{ohm / 1000:g} kOhm 0603 1 %",
+                         "R1-R4: I2C pull-ups, two a bus" if buses else "R1, R2: I2C pull-ups", (4 if buses else 2) * n,
+                         "pcs", "recipes/parts.toml jst-sh-4 pullup_ohm (SparkFun Qwiic boards)"))
     rows += [
-        _row("Connector", "JST SM04B-SRSS-TB", "J1: Qwiic (SH 1.0 mm, 4 pins)", n, "pcs",
+        _row("Connector", "JST SM04B-SRSS-TB", "J1, J2: Qwiic (SH 1.0 mm, 4 pins), one a bus" if buses else
+             "J1: Qwiic (SH 1.0 mm, 4 pins)", (2 if buses else 1) * n, "pcs",
              "recipes/parts.toml jst-sh-4 (JST SH catalogue)"),
         _row("Dowel pins", "; ".join(f"{d:g} mm x {pcb.thickness_mm + design.pad_thickness_mm:g} mm"
                                      for _, _, d in design.alignment_holes),
@@ -141,6 +145,9 @@ def _reader_rows(design: Design) -> list[dict[str, object]]:
         key = rp2040.board_key(design.spec)
         socket = board.texts["connector"] == "stemma-qt"
         cable = bench["qwiic-cable" if socket else "qwiic-jumper"]
+        second = [_row("Cable", bench["qwiic-jumper"].name, f"from J2 (the second I2C bus) to the board's pins "
+                       f"({board.texts['sda_b_pin']}, {board.texts['scl_b_pin']}; its 3.3 V and GND wires taped off)",
+                       n, "pcs", "recipes/bench.toml qwiic-jumper (SparkFun Qwiic connect system)")]
         return [
             _row("Microcontroller", board.name, f"runs firmware/{rp2040.image_name(key)}", n, "pcs",
                  f"recipes/boards.toml {key}"),
@@ -148,6 +155,7 @@ def _reader_rows(design: Design) -> list[dict[str, object]]:
                  f"from J1 to the board's pins ({board.texts['sda_pin']}, {board.texts['scl_pin']}, 3.3 V, GND)", n,
                  "pcs", f"recipes/bench.toml {'qwiic-cable' if socket else 'qwiic-jumper'} (SparkFun Qwiic connect "
                  "system)"),
+            *(second if two_buses(design) else []),
         ]
     return [
         _row("Microcontroller", bench["arduino"].name, "runs firmware/magfab-atmega328p.hex", n, "pcs",

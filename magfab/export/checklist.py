@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from ..board.placement import board_size_mm
+from ..board.plan import two_buses
 from ..design import PRY_LIP_MM
 from ..formats import acceptance_json
 from ..models.scan import scan_plan
@@ -274,8 +275,10 @@ def _solder_section(design: Design) -> Section:
         "Inspect the chip's sides for bridges. Then solder "
         + ("C1, C2 (100 nF) on the bottom, under the chip" if design.array is None else
            f"C1-C{2 * len(design.taxels)} (100 nF) on the bottom, two under each chip")
-        + (", R1, R2 (pull-ups) behind J1" if spec.pcb.pullups else "")
-        + f", and J1 (Qwiic) on the bottom edge by hand, with {wire.name.split(',')[0].lower()}.",
+        + ((", R1-R4 (pull-ups) behind J1 and J2" if two_buses(design) else ", R1, R2 (pull-ups) behind J1")
+           if spec.pcb.pullups else "")
+        + (", and J1 and J2 (Qwiic; J2 the second I2C bus)" if two_buses(design) else ", and J1 (Qwiic)")
+        + f" on the bottom edge by hand, with {wire.name.split(',')[0].lower()}.",
         f"The board answers at I2C address 0x{design.i2c_address:02X} (A1/A0 strapped on the board)." if design.array
         is None else f"The chips answer at {', '.join(f'0x{t.i2c_address:02X}' for t in design.taxels)} (the address "
         "plan: A1/A0 strapped on the board per chip).",

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+from ..board.plan import two_buses
 from ..recipes import Recipe, catalogue
 from . import rp2040
 
@@ -44,16 +45,22 @@ def flash_text(design: Design) -> str:
 
 
 def wiring_header(design: Design) -> tuple[str, ...]:
-    return ("breakout J1 (Qwiic)", rp2040.short_name(_board(design)[1]))
+    return ("breakout J1, J2 (Qwiic)" if two_buses(design) else "breakout J1 (Qwiic)",
+            rp2040.short_name(_board(design)[1]))
 
 
 def wiring_rows(design: Design) -> tuple[tuple[str, str], ...]:
-    """J1's four pins and the board's pin each goes to."""
+    """J1's four pins and the board's pin each goes to; with a second bus, J2's SDA and SCL to the board's second
+    controller's pins (its ground and supply are J1's: those two wires stay off)."""
     board = _board(design)[1]
     qwiic = catalogue("parts")["jst-sh-4"]
     pin = {qwiic.texts[f"qwiic_pin_{k}"]: f"{qwiic.texts[f'qwiic_pin_{k}']} (pin {k})" for k in range(1, 5)}
-    return ((pin["GND"], board.texts["gnd_pin"]), (pin["3V3"], board.texts["v3_pin"]),
+    rows = ((pin["GND"], board.texts["gnd_pin"]), (pin["3V3"], board.texts["v3_pin"]),
             (pin["SDA"], board.texts["sda_pin"]), (pin["SCL"], board.texts["scl_pin"]))
+    if not two_buses(design):
+        return rows
+    return (*((f"J1 {a}", b) for a, b in rows), (f"J2 {pin['SDA']}", board.texts["sda_b_pin"]),
+            (f"J2 {pin['SCL']}", board.texts["scl_b_pin"]), (f"J2 {pin['GND']}, {pin['3V3']}", "none (taped off)"))
 
 
 def wiring_text(design: Design) -> list[str]:
@@ -64,12 +71,23 @@ def wiring_text(design: Design) -> list[str]:
     name = rp2040.short_name(board)
     if board.texts["connector"] == "stemma-qt":
         first = (f"Plug the {bench['qwiic-cable'].name.split(',')[0]} into J1 and into the {name}'s STEMMA QT socket "
-                 "(it takes the cable one way round). That is all the wiring: the table shows what each wire joins.")
+                 "(it takes the cable one way round)." + ("" if two_buses(design) else
+                                                         " That is all the wiring: the table shows what each wire "
+                                                         "joins."))
     else:
         first = (f"The {name} has no Qwiic socket: plug the {bench['qwiic-jumper'].name.split(',')[0]} into J1 and "
                  "its four pins onto the board's header pins as in the table (solder a header onto the board first).")
-    bus = ("The breakout's pull-ups (R1, R2) hold the bus." if design.spec.pcb.pullups else
-           "This breakout has no pull-ups (pcb.pullups = false): fit 2.2 kOhm from SDA and from SCL to 3.3 V, or the "
-           "bus will not reach its clock.")
-    return [first, f"The breakout and the {name} are both 3.3 V boards, so SDA and SCL run straight between them: no "
-                   f"level shifter. {bus}"]
+    two = two_buses(design)
+    bus = (("The breakout's pull-ups (R1, R2 for J1's bus, R3, R4 for J2's) hold the buses." if two else
+            "The breakout's pull-ups (R1, R2) hold the bus.") if design.spec.pcb.pullups else
+           "This breakout has no pull-ups (pcb.pullups = false): fit 2.2 kOhm from SDA and from SCL to 3.3 V"
+           + (" on each bus" if two else "") + ", or the bus will not reach its clock.")
+    steps = [first]
+    if two:
+        steps.append(f"J2 is the second I2C bus (the odd taxels' chips, read beside the even ones' on the {name}'s "
+                     "other I2C controller): plug the second Qwiic-to-pins cable (the BOM's breadboard jumper) into "
+                     f"J2 and take its SDA (blue) wire to {board.texts['sda_b_pin']} and its SCL (yellow) to "
+                     f"{board.texts['scl_b_pin']} (a header soldered on, or the board on a breadboard); tape off its "
+                     "red and black wires (J1 carries the supply and ground).")
+    return [*steps, f"The breakout and the {name} are both 3.3 V boards, so SDA and SCL run straight between them: "
+                    f"no level shifter. {bus}"]

@@ -31,6 +31,7 @@ from functools import cache
 from importlib.resources import files
 from typing import TYPE_CHECKING, Any
 
+from ..board.plan import bus_mask
 from ..check.links import F_CPU_HZ, twi_settings
 from ..check.links import uart_settings as _uart
 from ..errors import InputError
@@ -245,8 +246,9 @@ def image_settings(design: Design) -> dict[str, Any]:
     docs/bundle.md section 4): every number the build-specific sources carried in mf_config.h, computed here from
     the spec and the chip's recipe. Plain JSON values: build.json carries them for ``magfab-readout upload``.
     An array's also carry ``taxel_addresses``: every chip's 7-bit address in taxel order (``i2c_address`` is
-    taxel 0's); a build with a reference chip ``reference`` (its 7-bit address) and ``reference_shift`` (its
-    average's, :data:`magfab.models.reference.REFERENCE_SHIFT`).
+    taxel 0's), and one split over two I2C buses ``taxel_buses`` (bit k: taxel k on the second); a build with a
+    reference chip ``reference`` (its 7-bit address) and ``reference_shift`` (its average's,
+    :data:`magfab.models.reference.REFERENCE_SHIFT`).
     :class:`~magfab.errors.SpecError` for a baud or I2C clock the board cannot make."""
     ee = _eeprom_module()
     chip, fw = chip_config(design), design.spec.firmware
@@ -257,6 +259,8 @@ def image_settings(design: Design) -> dict[str, Any]:
     regs = {reg: (mask, value) for reg, mask, value in chip.registers}
     array: dict[str, object] = {} if design.array is None else {
         "taxel_addresses": [t.i2c_address for t in design.taxels]}
+    if bus_mask(design):  # taxels on a second bus (array.buses = 2): the record's mask
+        array["taxel_buses"] = bus_mask(design)
     ref = reference_chip(design)
     if ref is not None:  # the record's reference block (version 5)
         array = {"reference": ref.i2c_address, "reference_shift": REFERENCE_SHIFT}

@@ -11,6 +11,7 @@ from conftest import require_kicad
 
 from magfab import SpecError, derive, parse_spec, pcb
 from magfab.board.layout import ORIGIN
+from magfab.check import preflight
 from magfab.export.kicad import run_tool
 
 EXAMPLES = ("fingertip_2x2", "strip_1x5")
@@ -117,3 +118,37 @@ def test_no_room_for_the_connector_gives_the_height_that_fits_the_array():
     place(derive(parse_spec(strip.format(height))))
     with pytest.raises(SpecError):
         place(derive(parse_spec(strip.format(height - 0.5))))
+
+
+def test_an_array_split_over_two_buses_has_a_connector_and_pull_ups_for_each(two_bus_build, tmp_path):
+    """``array.buses = 2`` (the fingertip example on a QT Py RP2040), as KiCad reads the built board: the even taxels'
+    chips on SDA/SCL to J1, the odd ones' on SDA_B/SCL_B to J2 (the address plan's ``bus``), R1, R2 pulling the first
+    bus up and R3, R4 the second, every net connected and KiCad's DRC clean."""
+    require_kicad()
+    design = two_bus_build.design
+    path = two_bus_build.out_dir / "pcb" / f"{design.spec.name}.kicad_pcb"
+    info = json.loads(run_tool("inspect", str(path)))
+    parts = {f["ref"]: f for f in info["footprints"]}
+    pins = {v: k.removeprefix("pin_") for k, v in design.chip.texts.items() if k.startswith("pin_")}
+    plan = pcb.address_plan(design)
+    assert [r["bus"] for r in plan] == [0, 1, 0, 1]
+    for r in plan:
+        nets = {p["number"]: p["net"] for p in parts[r["designator"]]["pads"] if p["number"]}
+        assert (nets[pins["SDA"]], nets[pins["SCL"]]) == (("SDA", "SCL"), ("SDA_B", "SCL_B"))[r["bus"]]
+    for ref, (sda, scl) in (("J1", ("SDA", "SCL")), ("J2", ("SDA_B", "SCL_B"))):
+        assert {p["net"] for p in parts[ref]["pads"] if p["net"]} == {"GND", "+3V3", sda, scl}
+    pulled = {ref: {p["net"] for p in parts[ref]["pads"]} for ref in ("R1", "R2", "R3", "R4")}
+    assert pulled == {"R1": {"+3V3", "SDA"}, "R2": {"+3V3", "SCL"}, "R3": {"+3V3", "SDA_B"}, "R4": {"+3V3", "SCL_B"}}
+    assert sum(ref.startswith("J") for ref in parts) == 2
+    counts = json.loads(run_tool("drc", str(path), str(tmp_path / "drc.rpt")))["counts"]
+    assert counts["violations"] == 0 and counts["unconnected pads"] == 0, (tmp_path / "drc.rpt").read_text()
+
+
+def test_a_second_bus_is_refused_for_one_taxel_and_for_an_arduino():
+    """A second bus needs two taxels to split and a board with two I2C controllers: one line each, naming the key."""
+    with pytest.raises(SpecError) as err:
+        parse_spec("[array]\nrows = 1\ncols = 1\nbuses = 2")
+    assert "buses" in str(err.value) and "two taxels" in str(err.value)
+    with pytest.raises(SpecError) as err:
+        preflight(derive(parse_spec("[array]\nrows = 1\ncols = 2\npitch_mm = 14\nbuses = 2")))
+    assert err.value.key == "array.buses" and "rp2040" in str(err.value) and "\n" not in str(err.value)

@@ -70,6 +70,9 @@ def test_every_rp2040_board_gets_its_pins_its_sector_and_its_cable(key):
     sda, scl = int(board["sda_gpio"].nominal), int(board["scl_gpio"].nominal)
     assert rp2040.defines(key)[:3] == (f"-DMF_RP_I2C={(sda >> 1) & 1}", f"-DMF_RP_SDA={sda}", f"-DMF_RP_SCL={scl}")
     assert sda % 2 == 0 and scl == sda + 1
+    sda_b, scl_b = int(board["sda_b_gpio"].nominal), int(board["scl_b_gpio"].nominal)  # the second bus: the other
+    assert sda_b % 2 == 0 and scl_b == sda_b + 1 and (sda_b >> 1) & 1 != (sda >> 1) & 1  # controller's pair
+    assert rp2040.defines(key)[3:6] == ("-DMF_BUSES=2", f"-DMF_RP_SDA_B={sda_b}", f"-DMF_RP_SCL_B={scl_b}")
     assert rp2040.record_offset(board) == board["flash_bytes"].nominal - 4096
     assert [pin for _, pin in checklist_rp2040.wiring_rows(design)] == [board.texts[k] for k in (
         "gnd_pin", "v3_pin", "sda_pin", "scl_pin")]
@@ -95,3 +98,28 @@ def test_a_board_of_another_microcontroller_is_refused_in_one_line(board, allowe
     run = CliRunner().invoke(main, ["check", str(spec)])
     assert run.exit_code == 2 and allowed in run.output and len(run.output.strip().splitlines()) == 1, run.output
     assert sorted(p.name for p in tmp_path.iterdir()) == ["spec.toml"]
+
+
+@pytest.mark.parametrize("key", rp2040.rp2040_boards())
+def test_an_array_on_two_buses_wires_j2_to_the_boards_second_controller(key):
+    """``array.buses = 2`` on each RP2040 board: the wiring table adds J2's SDA and SCL to the board's second bus's
+    pins (its ground and supply wires taped off), the BOM a second Qwiic-to-pins cable, a second connector and four
+    pull-ups, the solder step J2 and R1-R4; and the record's mask names the odd taxels."""
+    board = resolve.board(key)
+    spec = parse_spec(f'[array]\nrows = 1\ncols = 3\npitch_mm = 14\nbuses = 2\n[board]\nboard = "{key}"\n')
+    design = derive(spec)
+    rows = checklist_rp2040.wiring_rows(design)
+    assert ("J2 SDA (pin 3)", board.texts["sda_b_pin"]) in rows and ("J2 SCL (pin 4)", board.texts["scl_b_pin"]) in rows
+    assert [pin for _, pin in rows[:4]] == [board.texts[k] for k in ("gnd_pin", "v3_pin", "sda_pin", "scl_pin")]
+    text = " ".join(checklist_rp2040.wiring_text(design))
+    assert board.texts["sda_b_pin"] in text and "J2" in text and "tape off" in text
+    items = bom.bom_rows(design)
+    cables = [r for r in items if r["item"] == "Cable"]
+    assert len(cables) == 2 and cables[1]["part"] == catalogue("bench")["qwiic-jumper"].name
+    assert "J2" in cables[1]["description"]
+    assert next(r for r in items if r["item"] == "Connector")["quantity"] == 2
+    assert next(r for r in items if r["item"] == "Resistor")["quantity"] == 4
+    settings = firmware.image_settings(design)
+    assert settings["taxel_buses"] == 0b010
+    record = firmware.eeprom_record(design, make_calibration())
+    assert int.from_bytes(record[6:8], "little") == 0b010

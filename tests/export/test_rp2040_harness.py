@@ -12,6 +12,7 @@ import contextlib
 import functools
 import importlib
 import json
+import math
 import subprocess
 import sys
 import tempfile
@@ -23,6 +24,7 @@ from conftest import require_node_package, require_tool
 from readout_support import ref_forces
 
 from magfab import derive, load_spec
+from magfab.board.plan import address_plan
 from magfab.export import firmware, rp2040, toolchain
 from magfab.export.templating import templates_dir
 from magfab.formats.uf2 import boot2_sealed, read, seal_boot2, write, write_regions
@@ -412,6 +414,46 @@ def test_an_array_reads_every_chip_at_the_chips_or_the_buss_rate(readout_image, 
     RATES[(chips, buses)] = rate
     if (16, 1) in RATES and (16, 2) in RATES:
         assert RATES[(16, 2)] >= 1.9 * RATES[(16, 1)], RATES
+
+
+def test_the_builds_two_bus_array_reads_each_chip_on_its_own_bus(readout_image, two_bus_build):
+    """The build's own .uf2 of an array split over two buses (examples/fingertip_2x2.toml with ``array.buses = 2`` on
+    a QT Py RP2040), each chip the build's model on the bus its address plan names (J1's on the STEMMA QT socket's
+    I2C1, J2's on the castellated pads' I2C0), each bus timed at 400 kHz: every taxel's readings are its chip's field,
+    at 99 % of the chip's conversions or more. Wired wrong (every chip on J1's bus), the odd taxels' frames all carry
+    the error flag and no reading, and the even ones' are still their chips' (slower: the lost chips' restarts take
+    the bus), so no reading comes from a chip the taxel does not name."""
+    node, _, mlxd, _ = readout_image
+    out, design = two_bus_build.out_dir, two_bus_build.design
+    uf2 = out / "firmware" / rp2040.image_name(KEY)
+    plan = address_plan(design)
+    settings = firmware.image_settings(design)
+    fields = [(1200.0 + 150.0 * r["taxel"], -800.0 + 90.0 * r["taxel"], 20000.0 - 700.0 * r["taxel"]) for r in plan]
+    lsb = (settings["lsb_xy_uT"], settings["lsb_xy_uT"], settings["lsb_z_uT"])
+    tconv = firmware.chip_config(design).tconv_us
+    for wired in ("right", "all on J1"):
+        on_b = [r for r in plan if r["bus"] == 1 and wired == "right"]
+        on_a = [r for r in plan if r not in on_b]
+        order = on_a + on_b  # run.mjs's --field order: the first bus's chips, then the second's
+        run = _run(node, uf2, "--mlx", str(mlxd), "--i2c", "1", "--addr", ",".join(str(r["address"]) for r in on_a),
+                   *(("--addr-b", ",".join(str(r["address"]) for r in on_b), "--i2c-b", "0") if on_b else ()),
+                   "--field", ";".join(",".join(map(str, (*fields[r["taxel"]], 25.0))) for r in order),
+                   "--hex", "--us", str(SETTLE_US + 40_000 + 200_000), "--ms", "120000", "--bus-timing")
+        with _readout_package(out) as package:
+            frames = importlib.import_module(f"{package}.frames")
+            decoder = frames.Decoder()
+            got = [x for x in decoder.feed(bytes.fromhex(json.loads(run.stdout)["usb_hex"]))
+                   if isinstance(x, frames.Sample) and x.t_us >= SETTLE_US + 40_000]
+        assert decoder.stats.crc_errors == 0 and got
+        for r in plan:
+            mine = [x for x in got if x.taxel == r["taxel"]]
+            truth = tuple(round(b / q) for b, q in zip(fields[r["taxel"]], lsb))
+            if wired == "right" or r["bus"] == 0:
+                assert mine and all(not x.chip_error and x.counts == truth for x in mine), (wired, r["taxel"])
+                share = (len(mine) - 1) / ((mine[-1].t_us - mine[0].t_us) / tconv)
+                assert share >= 0.99 or wired != "right", (r["taxel"], share)  # wrong: the lost chips' retries cost
+            else:
+                assert mine and all(x.chip_error and all(map(math.isnan, x.B_uT)) for x in mine), r["taxel"]
 
 
 def test_each_board_gives_its_flash_chips_unique_id_as_its_usb_serial_number(readout_image):

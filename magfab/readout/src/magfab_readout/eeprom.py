@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import binascii
 import struct
-from typing import Any, Dict, List, Sequence, Tuple
+from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 MAGIC = b"MF"
 VERSION = 2
@@ -253,12 +253,14 @@ def pack(lay: Dict[str, Any], sha16: str, settings: Dict[str, Any]) -> bytes:
     return record + struct.pack("<H", crc16(record))
 
 
-def pack_array(addresses: Sequence[int], sha16: str, settings: Dict[str, Any], buses: int = 0) -> bytes:
+def pack_array(addresses: Sequence[int], sha16: str, settings: Dict[str, Any], buses: Optional[int] = None) -> bytes:
     """An array's record (version 3): the header (byte 3 the number of taxels N, bytes 6..7 ``buses``: bit k set
-    for taxel k on the board's second I2C bus, 0 for every taxel on the first), the image's settings as in
-    :func:`pack` (their ``i2c_address`` taxel 0's), the N chip addresses in taxel order (uint8 each), the name, the
-    CRC. ``sha16`` is the info line's hash (of the build's calibration). An image of one bus (the ATmega328P's)
-    refuses a record with a second."""
+    for taxel k on the board's second I2C bus, 0 for every taxel on the first; None: the settings' ``taxel_buses``,
+    0 without), the image's settings as in :func:`pack` (their ``i2c_address`` taxel 0's), the N chip addresses in
+    taxel order (uint8 each), the name, the CRC. ``sha16`` is the info line's hash (of the build's calibration). An
+    image of one bus (the ATmega328P's) refuses a record with a second."""
+    if buses is None:
+        buses = int(settings.get("taxel_buses", 0))
     n = len(addresses)
     if not 1 <= n <= MAX_TAXELS or len(set(addresses)) != n or not all(0x08 <= a <= 0x77 for a in addresses):
         raise EepromError("taxels", list(addresses),
