@@ -371,8 +371,8 @@ def test_an_array_reads_every_chip_at_the_chips_or_the_buss_rate(readout_image, 
     and resolution, no error, every chip equally often. Each bus's own limit is the cycles a second it would carry
     if it never rested (run.mjs's bus_busy_us and bus_b_busy_us over the steady window: every step at the image's
     SCL). The taxels must come at 99 % of the chip's conversions where the chip's rate is the lower (five chips),
-    and at 93 % of the busiest bus's limit where a bus binds (sixteen chips; measured 94.7-95.2 %, on one bus and on
-    two: the core's own work between one chip's reply and its bus's next read, about 12 us a read at 125 MHz, is the
+    and at 93 % of the busiest bus's limit where a bus binds (sixteen chips; measured 95.8 %, on one bus and on two:
+    the core's own work between one chip's reply and its bus's next read, about 11 us a read at 125 MHz, is the
     rest); on two buses the taxels come at least 1.9 times as often as on one (measured 2.0)."""
     node, _, mlxd, out = readout_image
     design = derive(load_spec(EXAMPLE))
