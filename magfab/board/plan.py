@@ -61,7 +61,9 @@ def address_plan(design: Design) -> list[dict]:
 
 def table_lines(design: Design) -> tuple[str, ...]:
     """The address table drawn beside the board: a heading, then "T0  U1  0x0C  MLX90393SLW-ABA-011  A1=GND  A0=GND"
-    per chip."""
-    return ("address plan: taxel, chip, I2C address, order code, A1 A0 straps",
+    per chip; on a board of two buses each line ends with its bus's connector ("J1", "J2")."""
+    two = two_buses(design)
+    return ("address plan: taxel, chip, I2C address, order code, A1 A0 straps" + (", bus" if two else ""),
             *(f"T{r['taxel']}  {r['designator']}  {r['address_hex']}  {r['order_code']}  "
-              f"A1={'3V3' if r['a1'] else 'GND'}  A0={'3V3' if r['a0'] else 'GND'}" for r in address_plan(design)))
+              f"A1={'3V3' if r['a1'] else 'GND'}  A0={'3V3' if r['a0'] else 'GND'}"
+              + (f"  {BUS_NETS[r['bus']][2]}" if two else "") for r in address_plan(design)))

@@ -388,6 +388,10 @@ def _context(design: Design, calibration: Mapping[str, Any], generic: bool) -> d
         "rp2040": on_rp2040, "board_name": board.name, "board_key": key,
         "uf2_name": rp2040.image_name(key),
         "calibration_uf2": rp2040.CALIBRATION_UF2,
+        # the RP2040 Makefile's: toolchain.build_rp2040's flags and sources, in its order
+        "arm_cflags": " ".join(rp2040.ARM_CFLAGS), "arm_ldflags": " ".join(rp2040.ARM_LDFLAGS),
+        "arm_defines": " ".join(rp2040.defines(key)) if on_rp2040 else "",
+        "boot2_cflags": " ".join(rp2040.BOOT2_CFLAGS), "rp2040_sources": " ".join(rp2040.RP2040_SOURCES),
         "avr_cflags": " ".join(AVR_CFLAGS), "avr_ldflags": " ".join(AVR_LDFLAGS),
         "host_cflags": " ".join(HOST_CFLAGS),
         "core_src_make": " ".join(f"$(CORE)/{s}" for s in CORE_SOURCES),
@@ -422,6 +426,7 @@ def render(design: Design, calibration: Mapping[str, Any], *, generic: bool = Tr
     out = _render_tree(context, lambda rel: _for_target(rel, on_rp2040))
     if on_rp2040:  # the record in the board's flash sector (rp2040.calibration_uf2); the image .uf2 is the pipeline's
         out[rp2040.CALIBRATION_UF2] = rp2040.calibration_uf2(context["board_key"], bytes(context["record"]))
+        out[f"{rp2040.RP2040_DIR}/uf2.py"] = uf2_source()  # the Makefile's UF2 writer: magfab's own, verbatim
     else:
         out[EEP_NAME] = _eeprom_module().intel_hex(bytes(context["record"]))
     return dict(sorted(out.items()))
@@ -471,8 +476,15 @@ def generic_sources(target: str = "avr") -> dict[str, bytes]:
     def wanted(rel: str) -> bool:
         if rel.startswith(CORE_DIR + "/"):
             return "mf_nv_image" not in rel
-        return rel == "avr/main.c.j2" if target == "avr" else rel.startswith(rp2040.RP2040_DIR + "/")
+        if target == "avr":
+            return rel == "avr/main.c.j2"
+        return rel.startswith(rp2040.RP2040_DIR + "/") and not rel.endswith("Makefile.j2")  # the image's, not a board's
     return _render_tree(_image_constants(), wanted)
+
+
+def uf2_source() -> bytes:
+    """magfab.formats.uf2's source: an RP2040 build's ``firmware/rp2040/uf2.py``, which its Makefile runs."""
+    return files("magfab.formats").joinpath("uf2.py").read_bytes()
 
 
 def image_path(design: Design) -> str:

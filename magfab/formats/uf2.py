@@ -22,13 +22,23 @@ boot2 is the first 256 bytes of flash. The bootrom copies them to RAM and runs t
 the CRC-32 of the first 252 (polynomial 0x04C11DB7, initial value 0xFFFFFFFF, no reflection of input or output, no
 final XOR: the CRC catalogue's CRC-32/MPEG-2, check value 0x0376E6E7), little-endian (datasheet, section 2.8.1.3,
 the flash boot sequence's checksum). :func:`seal_boot2` appends it, :func:`boot2_sealed` checks it.
+
+An RP2040 build copies this file into its ``firmware/rp2040/`` as ``uf2.py``, where the Makefile runs it on the
+user's Python alone (:func:`main`: boot2 sealed, the image after it and a record's UF2 in one file).
 """
 
 from __future__ import annotations
 
+import argparse
+import os
 import struct
+import sys
+from pathlib import Path
 
-from ..errors import InputError
+if __name__.startswith("magfab."):  # magfab's import of this file: an InputError, exit 2
+    from magfab.errors import InputError as _Base
+else:  # the copy in an RP2040 build's firmware/rp2040/, run by its Makefile on the user's Python alone
+    _Base = ValueError  # type: ignore[misc, assignment]
 
 __all__ = ["UF2Error", "write", "read", "write_regions", "read_regions", "crc32_mpeg2", "seal_boot2", "boot2_sealed",
            "MAGIC_START0", "MAGIC_START1", "MAGIC_END", "FLAG_FAMILY_ID", "RP2040_FAMILY", "BLOCK_SIZE", "PAGE_SIZE",
@@ -50,7 +60,7 @@ _HEADER = struct.Struct("<8I")
 _END = struct.Struct("<I")
 
 
-class UF2Error(InputError):
+class UF2Error(_Base):
     """A file that is not an RP2040 UF2 image as :func:`read` takes it, or an image :func:`write` cannot place."""
 
 
@@ -171,3 +181,28 @@ def read_regions(data: bytes, family: int = RP2040_FAMILY) -> list[tuple[int, by
         else:
             runs.append([addr, addr])
     return [(a, b"".join(pages[p] for p in range(a, b + PAGE_SIZE, PAGE_SIZE))) for a, b in runs]
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python3 uf2.py OUT.uf2 BOOT2.bin IMAGE.bin RECORD.uf2``: boot2 (at most 252 bytes) sealed with its checksum,
+    the image after it (from 0x10000100) and what RECORD.uf2 writes (a build's calibration.uf2: the record in the
+    board's last flash sector), in one UF2 file written whole. Exit 2 with one line for a file that cannot be read
+    or is not what it should be."""
+    parser = argparse.ArgumentParser(prog="uf2.py", description=main.__doc__)
+    for name in ("out", "boot2", "image", "record"):
+        parser.add_argument(name)
+    args = parser.parse_args(argv)
+    try:
+        flash = seal_boot2(Path(args.boot2).read_bytes()) + Path(args.image).read_bytes()
+        data = write_regions([(FLASH_START, flash), *read_regions(Path(args.record).read_bytes())])
+    except (OSError, UF2Error) as exc:
+        print(f"uf2.py: {exc}", file=sys.stderr)
+        return 2
+    partial = Path(f"{args.out}.partial")
+    partial.write_bytes(data)
+    os.replace(partial, args.out)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

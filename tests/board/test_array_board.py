@@ -140,6 +140,10 @@ def test_an_array_split_over_two_buses_has_a_connector_and_pull_ups_for_each(two
     pulled = {ref: {p["net"] for p in parts[ref]["pads"]} for ref in ("R1", "R2", "R3", "R4")}
     assert pulled == {"R1": {"+3V3", "SDA"}, "R2": {"+3V3", "SCL"}, "R3": {"+3V3", "SDA_B"}, "R4": {"+3V3", "SCL_B"}}
     assert sum(ref.startswith("J") for ref in parts) == 2
+    text = path.read_text()
+    for r in plan:  # the drawing's address table names each chip's connector
+        assert f"T{r['taxel']}  {r['designator']}  {r['address_hex']}" in text
+        assert f"A0={'3V3' if r['a0'] else 'GND'}  {('J1', 'J2')[r['bus']]}" in text
     counts = json.loads(run_tool("drc", str(path), str(tmp_path / "drc.rpt")))["counts"]
     assert counts["violations"] == 0 and counts["unconnected pads"] == 0, (tmp_path / "drc.rpt").read_text()
 

@@ -107,9 +107,11 @@ class Stk500:
 
 class Stage:
     """What the walk sets on a simulated board: every chip's field (``_fields``, one (Bx, By, Bz, T) per address of
-    ``addresses``) and a stage moving on the board's clock (``_track``), under ``_lock``; the board reads them."""
+    ``addresses``) and a stage moving on the board's clock (``_track``), under ``_lock``; the board reads them. The
+    board's bytes go to the host through the pseudo-terminal's non-blocking ``master`` (:meth:`_send`)."""
 
     addresses: list[int]
+    master: int
     _fields: list[tuple[float, float, float, float]]
     _track: object
     _lock: threading.Lock
@@ -126,6 +128,12 @@ class Stage:
             raise ValueError(f"one (Bx, By, Bz) per chip: {len(self.addresses)} chip(s), got {fields!r}")
         with self._lock:
             self._fields = [(*f, t_C) for f in fields]
+
+    def _send(self, data: bytes) -> None:
+        """To the host; dropped when nobody reads the port and its buffer is full, as a USB serial line drops (a host
+        whose program runs something else for seconds, a compiler say, while the board streams)."""
+        with suppress(BlockingIOError):
+            os.write(self.master, data)
 
     def follow(self, track) -> None:
         """From now on every chip's field is ``track(board_s)`` (one (Bx, By, Bz) per taxel, uT) at the middle of each
@@ -222,11 +230,6 @@ class Rig(Stage):
         self._stop.clear()
         self._thread = threading.Thread(target=self._run, name="rig", daemon=True)
         self._thread.start()
-
-    def _send(self, data: bytes) -> None:
-        """To the host; dropped when nobody reads the port and its buffer is full, as a USB serial line drops."""
-        with suppress(BlockingIOError):
-            os.write(self.master, data)
 
     def _receive(self) -> bytes:
         try:

@@ -205,7 +205,7 @@ class Rp2040Rig(Stage):
             self._proc.stdin.write(f"send {data.hex()}\n")
         out = bytes.fromhex(self._ask(f"run {STEP_US}"))
         if out:
-            os.write(self.master, out)
+            self._send(out)
         with self._lock:
             self._us += STEP_US
             ahead = (self._us - start_us) / 1e6 - (time.monotonic() - started)

@@ -8,16 +8,20 @@ from __future__ import annotations
 import csv
 import io
 import json
+import shutil
+import subprocess
+import sys
 
 import pytest
 from click.testing import CliRunner
+from conftest import require_tool
 from readout_support import make_calibration
 
 from magfab import derive, load_spec
 from magfab.cli import main
 from magfab.errors import SpecError
-from magfab.export import bom, checklist_rp2040, firmware, rp2040
-from magfab.formats.uf2 import FLASH_START, read_regions
+from magfab.export import bom, checklist_rp2040, firmware, rp2040, toolchain
+from magfab.formats.uf2 import FLASH_START, boot2_sealed, read_regions
 from magfab.recipes import catalogue, resolve
 from magfab.spec import parse_spec
 
@@ -123,3 +127,31 @@ def test_an_array_on_two_buses_wires_j2_to_the_boards_second_controller(key):
     assert settings["taxel_buses"] == 0b010
     record = firmware.eeprom_record(design, make_calibration())
     assert int.from_bytes(record[6:8], "little") == 0b010
+
+
+def test_make_rebuilds_the_builds_uf2_from_its_sources_byte_for_byte(rp2040_build, tmp_path):
+    """The firmware README's ``make -C rp2040`` in a copy of the build's firmware folder: boot2 and the image compiled
+    from the bundle's own sources with the flags magfab uses, and the bundle's ``rp2040/uf2.py`` (magfab's UF2 writer,
+    verbatim) putting them and ``calibration.uf2``'s record in one file: the build's own .uf2, byte for byte, with the
+    arm-none-eabi-gcc that toolchain-rp2040.json names (another compiler: a sealed boot2, the record in its sector).
+    uf2.py refuses a record that is not a UF2 file in one line, exit 2, nothing written."""
+    make = require_tool("make")
+    require_tool("arm-none-eabi-gcc")
+    fw = tmp_path / "firmware"
+    shutil.copytree(rp2040_build.out_dir / "firmware", fw)
+    key = rp2040.board_key(rp2040_build.spec)
+    built = (fw / rp2040.image_name(key)).read_bytes()
+    assert (fw / "rp2040" / "uf2.py").read_bytes() == firmware.uf2_source()
+    (fw / rp2040.image_name(key)).unlink()
+    ran = subprocess.run([make, "-C", "rp2040"], cwd=fw, capture_output=True, text=True, timeout=300)
+    assert ran.returncode == 0, ran.stdout + ran.stderr
+    made = (fw / rp2040.image_name(key)).read_bytes()
+    regions = read_regions(made)
+    assert boot2_sealed(regions[0][1]) and regions[-1][0] == FLASH_START + rp2040.record_offset(rp2040.readout_board(
+        rp2040_build.spec))
+    if toolchain.arm_versions() == rp2040.shipped_image(key)[1]["toolchain"]:
+        assert made == built
+    bad = subprocess.run([sys.executable, "uf2.py", str(tmp_path / "out.uf2"), "build/boot2.bin", f"build/{key}.bin",
+                          "Makefile"], cwd=fw / "rp2040", capture_output=True, text=True, timeout=60)
+    assert bad.returncode == 2 and bad.stderr.startswith("uf2.py: ") and len(bad.stderr.strip().splitlines()) == 1
+    assert not list(tmp_path.glob("out.uf2*"))
