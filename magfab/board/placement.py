@@ -87,17 +87,10 @@ def place(design: Design, hint: bool = True) -> tuple[list[Placed], Box, tuple[f
                         f"{gap:g} mm apart, so no board could meet a larger clearance")
     chips = len(placed)
     placed += _holes(design, outline)
-    connectors = []
-    for bus in range(_buses(design)):  # J1, and J2 beside it for a second bus
-        connectors.append(_connector(design, outline, placed, chips, hint, bus))
-        placed.append(connectors[-1])
+    connectors = _connectors(design, outline, placed, chips, hint)
+    placed += connectors
     placed += _passives(design, qfn, connectors, placed[:chips])
     return placed, outline, (ox, oy, design.pad_radius_mm)
-
-
-def _buses(design: Design) -> int:
-    """The board's I2C buses: 2 for an array split over two (``array.buses``), else 1."""
-    return 2 if two_buses(design) else 1
 
 
 def pad_hull(design: Design) -> tuple[tuple[float, float], ...]:
@@ -194,16 +187,15 @@ def _holes(design: Design, outline: Box) -> list[Placed]:
     return out
 
 
-def _connector(design: Design, outline: Box, placed: list[Placed], chips: int = 1, hint: bool = True,
-               bus: int = 0) -> Placed:
-    """Bus ``bus``'s Qwiic connector (J1, or J2 for a second bus) on the bottom edge, mating face flush with it, as
-    near the centre line as the pad's keep-out, the holes and the other connector allow."""
-    found = _find_connector(design, outline, placed, chips, bus)
+def _connectors(design: Design, outline: Box, placed: list[Placed], chips: int = 1, hint: bool = True) -> list[Placed]:
+    """Each bus's Qwiic connector (J1, and J2 beside it for a second bus) on the bottom edge, mating face flush with
+    it, as near the centre line as the pad's keep-out, the holes and the connector before it allow."""
+    found = _find_connectors(design, outline, placed, chips)
     if found is not None:
         return found
     pcb = design.spec.pcb
     keep_r = design.pad_radius_mm + PAD_KEEPOUT_MARGIN_MM
-    what = "the Qwiic connector" if _buses(design) == 1 else "both Qwiic connectors (one a bus)"
+    what = "both Qwiic connectors (one a bus)" if two_buses(design) else "the Qwiic connector"
     raise SpecError("pcb.width_mm", pcb.width_mm,
                     f"leaves no room for {what} on the bottom edge outside the mounting pad's "
                     f"{2 * keep_r:g} mm keep-out and clear of the screw holes", _larger_board(design) if hint else "")
@@ -222,7 +214,7 @@ def _larger_board(design: Design) -> str:
         outline = (ox - pcb.width_mm / 2, oy - height / 2 - _reference_room(trial), ox + pcb.width_mm / 2,
                    oy + height / 2)
         placed = _chips(trial, qfn_footprint(design.chip, pcb.density, clearance=pcb.clearance_mm))
-        if _all_connectors(trial, outline, placed + _holes(trial, outline), len(placed)):
+        if _find_connectors(trial, outline, placed + _holes(trial, outline), len(placed)) is not None:
             return (f"make the board taller: {pcb.width_mm:g} x {height:g} mm (pcb.height_mm = {height:g}) holds this "
                     "array's pad and the connector below it")
     return f"make the board larger: no height up to {SIZE_REACH_MM:g} mm more holds the connector at this width"
@@ -237,19 +229,19 @@ def resized(design: Design, sizes: dict[str, float]) -> Design:
 _SURE_MM = 1e-4
 
 
-def _all_connectors(design: Design, outline: Box, placed: list[Placed], chips: int) -> bool:
-    """Whether every bus's connector finds a place, each after the ones before it."""
-    placed = list(placed)
-    for bus in range(_buses(design)):
-        found = _find_connector(design, outline, placed, chips, bus)
-        if found is None:
-            return False
-        placed.append(found)
-    return True
+def _find_connectors(design: Design, outline: Box, placed: list[Placed], chips: int) -> list[Placed] | None:
+    """Every bus's connector where it fits, each placed after the ones before it (:func:`_connectors`), or None."""
+    found: list[Placed] = []
+    for bus in range(2 if two_buses(design) else 1):
+        connector = _find_connector(design, outline, placed + found, chips, bus)
+        if connector is None:
+            return None
+        found.append(connector)
+    return found
 
 
 def _find_connector(design: Design, outline: Box, placed: list[Placed], chips: int, bus: int = 0) -> Placed | None:
-    """Bus ``bus``'s connector where it fits (see :func:`_connector`), or None."""
+    """Bus ``bus``'s connector where it fits (see :func:`_connectors`), or None."""
     pcb = design.spec.pcb
     ox, oy = ORIGIN
     hw, hh = pcb.width_mm / 2, pcb.height_mm / 2

@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
+from ..board.plan import two_buses
 from ..errors import SpecError
 from ..recipes import resolve
 from ..spec_sections import readout_board_key
@@ -30,7 +31,7 @@ def serial_links(design: Design) -> None:
     if resolve.board(key).texts["mcu"] == "atmega328p":
         uart_settings(design.spec.firmware.baud)
         twi_settings(design.spec.firmware.i2c_hz)
-        if design.spec.array is not None and design.spec.array.buses == 2:
+        if two_buses(design):
             raise SpecError("array.buses", 2, f"needs a board with two I2C controllers: the {key} board's ATmega328P "
                             "has one; use buses = 1, or [board] mcu = \"rp2040\"")
 

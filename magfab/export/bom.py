@@ -147,7 +147,8 @@ def _reader_rows(design: Design) -> list[dict[str, object]]:
         cable = bench["qwiic-cable" if socket else "qwiic-jumper"]
         second = [_row("Cable", bench["qwiic-jumper"].name, f"from J2 (the second I2C bus) to the board's pins "
                        f"({board.texts['sda_b_pin']}, {board.texts['scl_b_pin']}; its 3.3 V and GND wires taped off)",
-                       n, "pcs", "recipes/bench.toml qwiic-jumper (SparkFun Qwiic connect system)")]
+                       n, "pcs", "recipes/bench.toml qwiic-jumper (SparkFun Qwiic connect system)")
+                  ] if two_buses(design) else []
         return [
             _row("Microcontroller", board.name, f"runs firmware/{rp2040.image_name(key)}", n, "pcs",
                  f"recipes/boards.toml {key}"),
@@ -155,7 +156,7 @@ def _reader_rows(design: Design) -> list[dict[str, object]]:
                  f"from J1 to the board's pins ({board.texts['sda_pin']}, {board.texts['scl_pin']}, 3.3 V, GND)", n,
                  "pcs", f"recipes/bench.toml {'qwiic-cable' if socket else 'qwiic-jumper'} (SparkFun Qwiic connect "
                  "system)"),
-            *(second if two_buses(design) else []),
+            *second,
         ]
     return [
         _row("Microcontroller", bench["arduino"].name, "runs firmware/magfab-atmega328p.hex", n, "pcs",

@@ -261,6 +261,7 @@ def _solder_section(design: Design) -> Section:
     stencil, reflow = assembly["stencil"], assembly["reflow"]
     coverage = catalogue("land")["tolerances"]["ep_paste_coverage"].nominal
     wire = catalogue("bench")["solder-wire"]
+    two = two_buses(design)
     return _section("Solder the board", [
         f"Order the board from pcb/gerbers ({' x '.join(f'{v:g}' for v in board_size_mm(design))} mm, 2 layers, "
         f"{spec.pcb.thickness_mm:g} mm) with a {stencil['thickness_mm'].nominal:g} mm stencil for the top side (the "
@@ -275,9 +276,9 @@ def _solder_section(design: Design) -> Section:
         "Inspect the chip's sides for bridges. Then solder "
         + ("C1, C2 (100 nF) on the bottom, under the chip" if design.array is None else
            f"C1-C{2 * len(design.taxels)} (100 nF) on the bottom, two under each chip")
-        + ((", R1-R4 (pull-ups) behind J1 and J2" if two_buses(design) else ", R1, R2 (pull-ups) behind J1")
+        + ((", R1-R4 (pull-ups) behind J1 and J2" if two else ", R1, R2 (pull-ups) behind J1")
            if spec.pcb.pullups else "")
-        + (", and J1 and J2 (Qwiic; J2 the second I2C bus)" if two_buses(design) else ", and J1 (Qwiic)")
+        + (", and J1 and J2 (Qwiic; J2 the second I2C bus)" if two else ", and J1 (Qwiic)")
         + f" on the bottom edge by hand, with {wire.name.split(',')[0].lower()}.",
         f"The board answers at I2C address 0x{design.i2c_address:02X} (A1/A0 strapped on the board)." if design.array
         is None else f"The chips answer at {', '.join(f'0x{t.i2c_address:02X}' for t in design.taxels)} (the address "

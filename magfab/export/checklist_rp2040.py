@@ -69,15 +69,14 @@ def wiring_text(design: Design) -> list[str]:
     board = _board(design)[1]
     bench = catalogue("bench")
     name = rp2040.short_name(board)
+    two = two_buses(design)
     if board.texts["connector"] == "stemma-qt":
         first = (f"Plug the {bench['qwiic-cable'].name.split(',')[0]} into J1 and into the {name}'s STEMMA QT socket "
-                 "(it takes the cable one way round)." + ("" if two_buses(design) else
-                                                         " That is all the wiring: the table shows what each wire "
-                                                         "joins."))
+                 "(it takes the cable one way round)." + ("" if two else " That is all the wiring: the table shows "
+                                                          "what each wire joins."))
     else:
         first = (f"The {name} has no Qwiic socket: plug the {bench['qwiic-jumper'].name.split(',')[0]} into J1 and "
                  "its four pins onto the board's header pins as in the table (solder a header onto the board first).")
-    two = two_buses(design)
     bus = (("The breakout's pull-ups (R1, R2 for J1's bus, R3, R4 for J2's) hold the buses." if two else
             "The breakout's pull-ups (R1, R2) hold the bus.") if design.spec.pcb.pullups else
            "This breakout has no pull-ups (pcb.pullups = false): fit 2.2 kOhm from SDA and from SCL to 3.3 V"

@@ -259,8 +259,9 @@ def image_settings(design: Design) -> dict[str, Any]:
     regs = {reg: (mask, value) for reg, mask, value in chip.registers}
     array: dict[str, object] = {} if design.array is None else {
         "taxel_addresses": [t.i2c_address for t in design.taxels]}
-    if bus_mask(design):  # taxels on a second bus (array.buses = 2): the record's mask
-        array["taxel_buses"] = bus_mask(design)
+    mask = bus_mask(design)
+    if mask:  # taxels on a second bus (array.buses = 2): the record's mask
+        array["taxel_buses"] = mask
     ref = reference_chip(design)
     if ref is not None:  # the record's reference block (version 5)
         array = {"reference": ref.i2c_address, "reference_shift": REFERENCE_SHIFT}
@@ -426,7 +427,7 @@ def render(design: Design, calibration: Mapping[str, Any], *, generic: bool = Tr
     out = _render_tree(context, lambda rel: _for_target(rel, on_rp2040))
     if on_rp2040:  # the record in the board's flash sector (rp2040.calibration_uf2); the image .uf2 is the pipeline's
         out[rp2040.CALIBRATION_UF2] = rp2040.calibration_uf2(context["board_key"], bytes(context["record"]))
-        out[f"{rp2040.RP2040_DIR}/uf2.py"] = uf2_source()  # the Makefile's UF2 writer: magfab's own, verbatim
+        out[f"{rp2040.RP2040_DIR}/uf2.py"] = rp2040.uf2_source()  # the Makefile's UF2 writer: magfab's, verbatim
     else:
         out[EEP_NAME] = _eeprom_module().intel_hex(bytes(context["record"]))
     return dict(sorted(out.items()))
@@ -480,11 +481,6 @@ def generic_sources(target: str = "avr") -> dict[str, bytes]:
             return rel == "avr/main.c.j2"
         return rel.startswith(rp2040.RP2040_DIR + "/") and not rel.endswith("Makefile.j2")  # the image's, not a board's
     return _render_tree(_image_constants(), wanted)
-
-
-def uf2_source() -> bytes:
-    """magfab.formats.uf2's source: an RP2040 build's ``firmware/rp2040/uf2.py``, which its Makefile runs."""
-    return files("magfab.formats").joinpath("uf2.py").read_bytes()
 
 
 def image_path(design: Design) -> str:

@@ -30,7 +30,7 @@ if TYPE_CHECKING:
 
 __all__ = ["RP2040_DIR", "RP2040_SOURCES", "ARM_CFLAGS", "ARM_LDFLAGS", "CALIBRATION_UF2", "TOOLCHAIN_JSON",
            "readout_board", "board_key", "short_name", "is_rp2040", "defines", "record_offset", "image_name",
-           "binary_name", "shipped_image", "build_uf2", "calibration_uf2", "rp2040_boards"]
+           "binary_name", "shipped_image", "uf2_source", "build_uf2", "calibration_uf2", "rp2040_boards"]
 
 #: The RP2040 sources of the firmware bundle (templates/firmware/rp2040), beside the portable core.
 RP2040_DIR = "rp2040"
@@ -108,6 +108,11 @@ def shipped_image(key: str) -> tuple[bytes, dict[str, Any]]:
     folder = files("magfab.export").joinpath("generic_image")
     made = _toolchain()
     return folder.joinpath(binary_name(key)).read_bytes(), {**made, **made["boards"][key]}
+
+
+def uf2_source() -> bytes:
+    """magfab.formats.uf2's source: an RP2040 build's ``firmware/rp2040/uf2.py``, which its Makefile runs."""
+    return files("magfab.formats").joinpath("uf2.py").read_bytes()
 
 
 def build_uf2(key: str, record: bytes) -> bytes:

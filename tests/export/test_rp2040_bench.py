@@ -141,7 +141,7 @@ def test_make_rebuilds_the_builds_uf2_from_its_sources_byte_for_byte(rp2040_buil
     shutil.copytree(rp2040_build.out_dir / "firmware", fw)
     key = rp2040.board_key(rp2040_build.spec)
     built = (fw / rp2040.image_name(key)).read_bytes()
-    assert (fw / "rp2040" / "uf2.py").read_bytes() == firmware.uf2_source()
+    assert (fw / "rp2040" / "uf2.py").read_bytes() == rp2040.uf2_source()
     (fw / rp2040.image_name(key)).unlink()
     ran = subprocess.run([make, "-C", "rp2040"], cwd=fw, capture_output=True, text=True, timeout=300)
     assert ran.returncode == 0, ran.stdout + ran.stderr
